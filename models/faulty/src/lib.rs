@@ -1,0 +1,110 @@
+//! A deliberately faulty FMU for tests of hosts: `y` integrates `gain·u`, and at
+//! `fault_time` the model does what `fault_kind` says.
+
+use fmu_export::variables::*;
+use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, StateReader, StateWriter};
+
+fmu_export::variables! {
+    /// Variables of the faulty test model.
+    pub struct FaultyVars {
+        gain: Real = 1.0 => tunable(1).unit("1").range(-1e6, 1e6).describe("Integrator gain"),
+        fault_kind: Integer = 0 => parameter(2).range(0.0, 6.0)
+            .describe("0 none, 1 return an error, 2 panic, 3 output NaN, 4 abort the process, 5 never return, 6 error in initialization"),
+        fault_time: Real = 1.0 => parameter(3).unit("s").describe("Time from which the fault occurs"),
+        u: Real = 0.0 => input(4).unit("1").describe("Integrator input"),
+        y: Real = 0.0 => output(5).unit("s").describe("Integral of gain·u"),
+        steps: Integer = 0 => discrete_output(6).describe("Steps taken"),
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Faulty {
+    y: f64,
+    steps: i32,
+}
+
+impl Model for Faulty {
+    type Vars = FaultyVars;
+    const INFO: ModelInfo = ModelInfo {
+        name: "faulty",
+        identifier: "faulty",
+        description: "Integrator that fails on purpose, for host tests",
+        version: env!("CARGO_PKG_VERSION"),
+        default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 2.0, step_size: 1e-3 },
+        documentation: "<p>y(t) = ∫ gain·u dt. At <code>fault_time</code> the step fails as <code>fault_kind</code> says.</p>",
+        resources: &[],
+    };
+
+    fn initialize(vars: &mut FaultyVars, _ctx: &Context) -> Result<Self, ModelError> {
+        if vars.fault_kind == 6 {
+            return Err(ModelError::new("fault_kind = 6: initialization fails on purpose"));
+        }
+        vars.y = 0.0;
+        vars.steps = 0;
+        Ok(Faulty { y: 0.0, steps: 0 })
+    }
+
+    fn do_step(&mut self, vars: &mut FaultyVars, time: f64, step: f64) -> Result<(), ModelError> {
+        if time + step > vars.fault_time + 1e-12 {
+            match vars.fault_kind {
+                1 => return Err(ModelError::new("fault_kind = 1: the step fails on purpose")),
+                2 => panic!("fault_kind = 2: the model panics on purpose"),
+                3 => {
+                    vars.y = f64::NAN;
+                    return Ok(());
+                }
+                4 => std::process::abort(),
+                5 => loop {
+                    std::thread::sleep(std::time::Duration::from_secs(3600));
+                },
+                _ => {}
+            }
+        }
+        self.y += vars.gain * vars.u * step;
+        self.steps += 1;
+        vars.y = self.y;
+        vars.steps = self.steps;
+        Ok(())
+    }
+
+    fn save_state(&self, w: &mut StateWriter) {
+        w.f64(self.y);
+        w.i32(self.steps);
+    }
+
+    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        self.y = r.f64()?;
+        self.steps = r.i32()?;
+        Ok(())
+    }
+}
+
+#[cfg(feature = "fmu")]
+fmu_export::export_fmu!(crate::Faulty);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fmu_export::{NullLogger, Runtime, Value};
+
+    #[test]
+    fn table_is_consistent() {
+        fmu_export::description::validate_table::<FaultyVars>().unwrap();
+    }
+
+    #[test]
+    fn integrates_and_fails_at_fault_time() {
+        let mut rt = Runtime::<Faulty>::new("f", None, Box::new(NullLogger), false);
+        assert_eq!(rt.set_by_name("fault_kind", Value::Integer(1)).0, 0);
+        rt.setup_experiment(0.0, None);
+        rt.enter_initialization_mode();
+        rt.set_by_name("u", Value::Real(2.0));
+        assert_eq!(rt.exit_initialization_mode().0, 0);
+        for k in 0..10 {
+            assert_eq!(rt.do_step(k as f64 * 0.1, 0.1).0, 0);
+        }
+        assert!((rt.get_by_name("y").unwrap().as_f64() - 2.0).abs() < 1e-12);
+        assert_eq!(rt.do_step(1.0, 0.1).0, 3);
+        assert_eq!(rt.phase(), fmu_export::Phase::Error);
+    }
+}

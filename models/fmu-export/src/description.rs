@@ -1,0 +1,268 @@
+//! modelDescription.xml, documentation and GUID, generated from the variable table.
+
+use crate::model::Model;
+use crate::runtime::LOG_CATEGORIES;
+use crate::units;
+use crate::variables::{format_real, Causality, VarInfo, VarTable};
+
+/// FNV-1a, 128 bit: a stable hash with no dependency (not for security, only identity).
+fn fnv1a_128(data: &[u8]) -> u128 {
+    let mut h: u128 = 0x6c62272e07bb014262b821756295c58d;
+    for &b in data {
+        h ^= b as u128;
+        h = h.wrapping_mul(0x0000000001000000000000000000013B);
+    }
+    h
+}
+
+/// The canonical text of the interface: everything modelDescription.xml says of the model
+/// and its variables. Any change of it changes the GUID.
+pub fn canonical_interface<M: Model>() -> String {
+    let i = M::INFO;
+    let mut s = format!(
+        "fmi2.0|cs|{}|{}|{}|{}\n",
+        i.name, i.identifier, i.version, i.description
+    );
+    for v in M::Vars::VARIABLES {
+        s.push_str(&format!(
+            "{}|{}|{}|{}|{}|{:?}|{:?}|{}|{:?}|{:?}|{}|{:?}\n",
+            v.name,
+            v.value_reference,
+            v.var_type().xml_name(),
+            v.causality.xml_name(),
+            v.variability.xml_name(),
+            v.initial.map(|x| x.xml_name()),
+            v.unit,
+            v.start.xml_text(),
+            v.min.map(format_real),
+            v.max.map(format_real),
+            v.description,
+            v.depends_on
+        ));
+    }
+    s
+}
+
+/// GUID derived from the interface: stable across builds, changed by any interface change.
+pub fn guid<M: Model>() -> String {
+    let h = fnv1a_128(canonical_interface::<M>().as_bytes());
+    let x = format!("{h:032x}");
+    format!("{{{}-{}-{}-{}-{}}}", &x[0..8], &x[8..12], &x[12..16], &x[16..20], &x[20..32])
+}
+
+/// Consistency of a variable table; the packer refuses a model that fails it.
+pub fn validate_table<V: VarTable>() -> Result<(), String> {
+    let t = V::VARIABLES;
+    let mut errors = Vec::new();
+    for (i, a) in t.iter().enumerate() {
+        for b in &t[i + 1..] {
+            if a.name == b.name {
+                errors.push(format!("duplicate name '{}'", a.name));
+            }
+            if a.value_reference == b.value_reference {
+                errors.push(format!(
+                    "'{}' and '{}' share value reference {}",
+                    a.name, b.name, a.value_reference
+                ));
+            }
+        }
+        if let Some(u) = a.unit {
+            if units::lookup(u).is_none() {
+                errors.push(format!("'{}': unknown unit '{u}'", a.name));
+            }
+        }
+        if a.description.is_empty() {
+            errors.push(format!("'{}' has no description", a.name));
+        }
+        let x = a.start.as_f64();
+        if a.has_start() && (a.min.is_some_and(|m| x < m) || a.max.is_some_and(|m| x > m)) {
+            errors.push(format!("'{}': start {} outside [min, max]", a.name, a.start.xml_text()));
+        }
+        for d in a.depends_on {
+            match t.iter().find(|v| v.value_reference == *d) {
+                Some(v) if v.causality == Causality::Input => {}
+                _ => errors.push(format!("'{}' depends on vr {d}, which is not an input", a.name)),
+            }
+        }
+        if !a.depends_on.is_empty() && a.causality != Causality::Output {
+            errors.push(format!("'{}' declares dependencies but is not an output", a.name));
+        }
+    }
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(errors.join("; "))
+    }
+}
+
+/// Escape text for an XML attribute or element.
+pub fn xml_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+fn used_units<M: Model>() -> Vec<&'static units::UnitDef> {
+    let mut names: Vec<&str> = M::Vars::VARIABLES.iter().filter_map(|v| v.unit).collect();
+    names.sort_unstable();
+    names.dedup();
+    names.into_iter().filter_map(units::lookup).collect()
+}
+
+fn scalar_variable(v: &VarInfo) -> String {
+    let mut s = format!(
+        "    <ScalarVariable name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
+        xml_escape(v.name),
+        v.value_reference,
+        xml_escape(v.description),
+        v.causality.xml_name(),
+        v.variability.xml_name()
+    );
+    if let Some(init) = v.initial {
+        s.push_str(&format!(" initial=\"{}\"", init.xml_name()));
+    }
+    s.push_str(">\n      <");
+    s.push_str(v.var_type().xml_name());
+    if let Some(u) = v.unit {
+        s.push_str(&format!(" unit=\"{}\"", xml_escape(u)));
+    }
+    if let Some(m) = v.min {
+        s.push_str(&format!(" min=\"{}\"", format_real(m)));
+    }
+    if let Some(m) = v.max {
+        s.push_str(&format!(" max=\"{}\"", format_real(m)));
+    }
+    if v.has_start() {
+        s.push_str(&format!(" start=\"{}\"", v.start.xml_text()));
+    }
+    s.push_str("/>\n    </ScalarVariable>\n");
+    s
+}
+
+/// Fill the modelDescription.xml template (fmu-templates/modelDescription.xml).
+pub fn render_model_description<M: Model>(template: &str, generation_tool: &str) -> String {
+    let info = M::INFO;
+    let table = M::Vars::VARIABLES;
+    let index_of_vr = |vr: u32| table.iter().position(|v| v.value_reference == vr).unwrap() + 1;
+
+    let mut unit_defs = String::new();
+    for u in used_units::<M>() {
+        unit_defs.push_str(&format!(
+            "    <Unit name=\"{}\">\n      <BaseUnit{}/>\n    </Unit>\n",
+            xml_escape(u.name),
+            u.base_unit_attributes()
+        ));
+    }
+    let mut categories = String::new();
+    for (name, desc) in LOG_CATEGORIES {
+        categories.push_str(&format!(
+            "    <Category name=\"{name}\" description=\"{}\"/>\n",
+            xml_escape(desc)
+        ));
+    }
+    let variables: String = table.iter().map(scalar_variable).collect();
+
+    let mut outputs = String::new();
+    let mut initial_unknowns = String::new();
+    for (i, v) in table.iter().enumerate() {
+        if v.causality == Causality::Output {
+            let deps: Vec<String> = v.depends_on.iter().map(|d| index_of_vr(*d).to_string()).collect();
+            outputs.push_str(&format!(
+                "      <Unknown index=\"{}\" dependencies=\"{}\"/>\n",
+                i + 1,
+                deps.join(" ")
+            ));
+        }
+        let initial_unknown = (v.causality == Causality::Output
+            && matches!(
+                v.effective_initial(),
+                Some(crate::variables::Initial::Approx) | Some(crate::variables::Initial::Calculated)
+            ))
+            || v.causality == Causality::CalculatedParameter;
+        if initial_unknown {
+            initial_unknowns.push_str(&format!("      <Unknown index=\"{}\"/>\n", i + 1));
+        }
+    }
+    let mut structure = String::new();
+    if !outputs.is_empty() {
+        structure.push_str(&format!("    <Outputs>\n{outputs}    </Outputs>\n"));
+    }
+    if !initial_unknowns.is_empty() {
+        structure.push_str(&format!("    <InitialUnknowns>\n{initial_unknowns}    </InitialUnknowns>\n"));
+    }
+    let de = info.default_experiment;
+    let default_experiment = format!(
+        "<DefaultExperiment startTime=\"{}\" stopTime=\"{}\" stepSize=\"{}\"/>",
+        format_real(de.start_time),
+        format_real(de.stop_time),
+        format_real(de.step_size)
+    );
+
+    template
+        .replace("{{modelName}}", &xml_escape(info.name))
+        .replace("{{modelIdentifier}}", &xml_escape(info.identifier))
+        .replace("{{guid}}", &guid::<M>())
+        .replace("{{description}}", &xml_escape(info.description))
+        .replace("{{version}}", &xml_escape(info.version))
+        .replace("{{generationTool}}", &xml_escape(generation_tool))
+        .replace("{{numberOfVariables}}", &table.len().to_string())
+        .replace("{{unitDefinitions}}\n", &unit_defs)
+        .replace("{{logCategories}}\n", &categories)
+        .replace("{{defaultExperiment}}", &default_experiment)
+        .replace("{{modelVariables}}\n", &variables)
+        .replace("{{modelStructure}}\n", &structure)
+}
+
+/// Fill the documentation template (fmu-templates/documentation/index.html).
+pub fn render_documentation<M: Model>(template: &str) -> String {
+    let info = M::INFO;
+    let mut rows = String::new();
+    for v in M::Vars::VARIABLES {
+        let start = if v.has_start() { v.start.xml_text() } else { String::new() };
+        rows.push_str(&format!(
+            "<tr><td><code>{}</code></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
+            xml_escape(v.name),
+            v.value_reference,
+            v.causality.xml_name(),
+            v.variability.xml_name(),
+            v.var_type().xml_name(),
+            xml_escape(v.unit.unwrap_or("")),
+            start,
+            match (v.min, v.max) {
+                (None, None) => String::new(),
+                (a, b) => format!(
+                    "[{}, {}]",
+                    a.map_or("−∞".into(), format_real),
+                    b.map_or("∞".into(), format_real)
+                ),
+            },
+            xml_escape(v.description)
+        ));
+    }
+    let de = info.default_experiment;
+    template
+        .replace("{{modelName}}", &xml_escape(info.name))
+        .replace("{{description}}", &xml_escape(info.description))
+        .replace("{{version}}", &xml_escape(info.version))
+        .replace("{{guid}}", &guid::<M>())
+        .replace(
+            "{{defaultExperiment}}",
+            &format!(
+                "start {} s, stop {} s, step {} s",
+                format_real(de.start_time),
+                format_real(de.stop_time),
+                format_real(de.step_size)
+            ),
+        )
+        .replace("{{variableRows}}", &rows)
+        .replace("{{modelDocumentation}}", info.documentation)
+}

@@ -1,0 +1,256 @@
+//! FMI 2.0 C types and function signatures (fmi2TypesPlatform.h, fmi2FunctionTypes.h).
+//!
+//! Shared by the export side (our models) and the orchestrator's importer. Status and
+//! enumeration values are plain integers wrapped in `repr(transparent)` structs: a foreign
+//! FMU may return any integer, and an out-of-range Rust enum would be undefined behaviour.
+#![allow(non_camel_case_types, non_snake_case, non_upper_case_globals)]
+
+use std::os::raw::{c_char, c_int, c_uint, c_void};
+
+pub type fmi2Component = *mut c_void;
+pub type fmi2ComponentEnvironment = *mut c_void;
+pub type fmi2FMUstate = *mut c_void;
+pub type fmi2ValueReference = c_uint;
+pub type fmi2Real = f64;
+pub type fmi2Integer = c_int;
+pub type fmi2Boolean = c_int;
+pub type fmi2Char = c_char;
+pub type fmi2String = *const fmi2Char;
+pub type fmi2Byte = c_char;
+
+pub const fmi2True: fmi2Boolean = 1;
+pub const fmi2False: fmi2Boolean = 0;
+
+/// `fmi2Status`.
+#[repr(transparent)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct fmi2Status(pub c_int);
+
+impl fmi2Status {
+    pub const OK: Self = Self(0);
+    pub const WARNING: Self = Self(1);
+    pub const DISCARD: Self = Self(2);
+    pub const ERROR: Self = Self(3);
+    pub const FATAL: Self = Self(4);
+    pub const PENDING: Self = Self(5);
+
+    /// The name used in FMI log categories and messages.
+    pub fn name(self) -> &'static str {
+        match self.0 {
+            0 => "fmi2OK",
+            1 => "fmi2Warning",
+            2 => "fmi2Discard",
+            3 => "fmi2Error",
+            4 => "fmi2Fatal",
+            5 => "fmi2Pending",
+            _ => "unknown fmi2Status",
+        }
+    }
+}
+
+/// `fmi2Type`.
+#[repr(transparent)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct fmi2Type(pub c_int);
+
+impl fmi2Type {
+    pub const MODEL_EXCHANGE: Self = Self(0);
+    pub const CO_SIMULATION: Self = Self(1);
+}
+
+/// `fmi2StatusKind`.
+#[repr(transparent)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct fmi2StatusKind(pub c_int);
+
+impl fmi2StatusKind {
+    pub const DO_STEP_STATUS: Self = Self(0);
+    pub const PENDING_STATUS: Self = Self(1);
+    pub const LAST_SUCCESSFUL_TIME: Self = Self(2);
+    pub const TERMINATED: Self = Self(3);
+}
+
+/// The variadic logger; `message` is a printf format string.
+pub type fmi2CallbackLogger = unsafe extern "C" fn(
+    componentEnvironment: fmi2ComponentEnvironment,
+    instanceName: fmi2String,
+    status: fmi2Status,
+    category: fmi2String,
+    message: fmi2String,
+    ...
+);
+pub type fmi2CallbackAllocateMemory = unsafe extern "C" fn(nobj: usize, size: usize) -> *mut c_void;
+pub type fmi2CallbackFreeMemory = unsafe extern "C" fn(obj: *mut c_void);
+pub type fmi2StepFinished =
+    unsafe extern "C" fn(componentEnvironment: fmi2ComponentEnvironment, status: fmi2Status);
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct fmi2CallbackFunctions {
+    pub logger: Option<fmi2CallbackLogger>,
+    pub allocateMemory: Option<fmi2CallbackAllocateMemory>,
+    pub freeMemory: Option<fmi2CallbackFreeMemory>,
+    pub stepFinished: Option<fmi2StepFinished>,
+    pub componentEnvironment: fmi2ComponentEnvironment,
+}
+
+// Function types of every FMI 2.0 function a Co-Simulation FMU exports.
+pub type fmi2GetTypesPlatformTYPE = unsafe extern "C" fn() -> *const c_char;
+pub type fmi2GetVersionTYPE = unsafe extern "C" fn() -> *const c_char;
+pub type fmi2SetDebugLoggingTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2Boolean, usize, *const fmi2String) -> fmi2Status;
+pub type fmi2InstantiateTYPE = unsafe extern "C" fn(
+    fmi2String,
+    fmi2Type,
+    fmi2String,
+    fmi2String,
+    *const fmi2CallbackFunctions,
+    fmi2Boolean,
+    fmi2Boolean,
+) -> fmi2Component;
+pub type fmi2FreeInstanceTYPE = unsafe extern "C" fn(fmi2Component);
+pub type fmi2SetupExperimentTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    fmi2Boolean,
+    fmi2Real,
+    fmi2Real,
+    fmi2Boolean,
+    fmi2Real,
+) -> fmi2Status;
+pub type fmi2EnterInitializationModeTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
+pub type fmi2ExitInitializationModeTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
+pub type fmi2TerminateTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
+pub type fmi2ResetTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
+pub type fmi2GetRealTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *mut fmi2Real,
+) -> fmi2Status;
+pub type fmi2GetIntegerTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *mut fmi2Integer,
+) -> fmi2Status;
+pub type fmi2GetBooleanTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *mut fmi2Boolean,
+) -> fmi2Status;
+pub type fmi2GetStringTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *mut fmi2String,
+) -> fmi2Status;
+pub type fmi2SetRealTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2Real,
+) -> fmi2Status;
+pub type fmi2SetIntegerTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2Integer,
+) -> fmi2Status;
+pub type fmi2SetBooleanTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2Boolean,
+) -> fmi2Status;
+pub type fmi2SetStringTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2String,
+) -> fmi2Status;
+pub type fmi2GetFMUstateTYPE = unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status;
+pub type fmi2SetFMUstateTYPE = unsafe extern "C" fn(fmi2Component, fmi2FMUstate) -> fmi2Status;
+pub type fmi2FreeFMUstateTYPE =
+    unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status;
+pub type fmi2SerializedFMUstateSizeTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2FMUstate, *mut usize) -> fmi2Status;
+pub type fmi2SerializeFMUstateTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2FMUstate, *mut fmi2Byte, usize) -> fmi2Status;
+pub type fmi2DeSerializeFMUstateTYPE =
+    unsafe extern "C" fn(fmi2Component, *const fmi2Byte, usize, *mut fmi2FMUstate) -> fmi2Status;
+pub type fmi2GetDirectionalDerivativeTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2Real,
+    *mut fmi2Real,
+) -> fmi2Status;
+pub type fmi2SetRealInputDerivativesTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2Integer,
+    *const fmi2Real,
+) -> fmi2Status;
+pub type fmi2GetRealOutputDerivativesTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    *const fmi2ValueReference,
+    usize,
+    *const fmi2Integer,
+    *mut fmi2Real,
+) -> fmi2Status;
+pub type fmi2DoStepTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2Real, fmi2Real, fmi2Boolean) -> fmi2Status;
+pub type fmi2CancelStepTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
+pub type fmi2GetStatusTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2Status) -> fmi2Status;
+pub type fmi2GetRealStatusTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2Real) -> fmi2Status;
+pub type fmi2GetIntegerStatusTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2Integer) -> fmi2Status;
+pub type fmi2GetBooleanStatusTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2Boolean) -> fmi2Status;
+pub type fmi2GetStringStatusTYPE =
+    unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2String) -> fmi2Status;
+
+/// Names of every function a Co-Simulation FMU must export (common + CS), in the order of
+/// the standard's header. The importer resolves each once; the tests check each is present.
+pub const CO_SIMULATION_FUNCTIONS: &[&str] = &[
+    "fmi2GetTypesPlatform",
+    "fmi2GetVersion",
+    "fmi2SetDebugLogging",
+    "fmi2Instantiate",
+    "fmi2FreeInstance",
+    "fmi2SetupExperiment",
+    "fmi2EnterInitializationMode",
+    "fmi2ExitInitializationMode",
+    "fmi2Terminate",
+    "fmi2Reset",
+    "fmi2GetReal",
+    "fmi2GetInteger",
+    "fmi2GetBoolean",
+    "fmi2GetString",
+    "fmi2SetReal",
+    "fmi2SetInteger",
+    "fmi2SetBoolean",
+    "fmi2SetString",
+    "fmi2GetFMUstate",
+    "fmi2SetFMUstate",
+    "fmi2FreeFMUstate",
+    "fmi2SerializedFMUstateSize",
+    "fmi2SerializeFMUstate",
+    "fmi2DeSerializeFMUstate",
+    "fmi2GetDirectionalDerivative",
+    "fmi2SetRealInputDerivatives",
+    "fmi2GetRealOutputDerivatives",
+    "fmi2DoStep",
+    "fmi2CancelStep",
+    "fmi2GetStatus",
+    "fmi2GetRealStatus",
+    "fmi2GetIntegerStatus",
+    "fmi2GetBooleanStatus",
+    "fmi2GetStringStatus",
+];

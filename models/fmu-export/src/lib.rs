@@ -1,0 +1,24 @@
+//! FMI 2.0 Co-Simulation export framework for twinbench models.
+//!
+//! A model crate declares its variables with [`variables!`], implements the safe
+//! [`Model`] trait, and calls [`export_fmu!`] (behind its `fmu` feature) to get every
+//! `fmi2*` C entry point. Nothing else in the models touches FFI.
+//!
+//! - [`fmi2`]: the C types, shared with the orchestrator's importer.
+//! - [`variables`]: the variable table, one source of truth per variable.
+//! - [`model`]: the trait a model implements.
+//! - [`runtime`]: the safe instance and its FMI state machine (also usable natively).
+//! - [`description`]: modelDescription.xml, documentation and GUID from the table.
+//! - [`ffi`]: the panic-guarded C entry points.
+
+pub mod description;
+pub mod ffi;
+pub mod fmi2;
+pub mod model;
+pub mod runtime;
+pub mod units;
+pub mod variables;
+
+pub use model::{Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter};
+pub use runtime::{Logger, NullLogger, Phase, Runtime};
+pub use variables::{Value, VarInfo, VarTable};

@@ -1,0 +1,223 @@
+//! The safe trait a model crate implements. No FFI here: the runtime and the generated
+//! entry points call these methods.
+
+use crate::variables::VarTable;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Static facts about a model, written to modelDescription.xml and the documentation.
+#[derive(Clone, Copy, Debug)]
+pub struct ModelInfo {
+    /// `modelName` and the FMU file name (`<name>.fmu`).
+    pub name: &'static str,
+    /// `modelIdentifier`: the shared library's name and the C symbol prefix.
+    pub identifier: &'static str,
+    pub description: &'static str,
+    pub version: &'static str,
+    pub default_experiment: DefaultExperiment,
+    /// HTML fragment for documentation/index.html: equations and notes.
+    pub documentation: &'static str,
+    /// Files (relative to the model crate) shipped in the FMU's `resources/`.
+    pub resources: &'static [Resource],
+}
+
+/// A file shipped in `resources/`: its name there and its content.
+#[derive(Clone, Copy, Debug)]
+pub struct Resource {
+    pub name: &'static str,
+    pub content: &'static [u8],
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DefaultExperiment {
+    pub start_time: f64,
+    pub stop_time: f64,
+    pub step_size: f64,
+}
+
+/// An error from a model: the message names the variable, file or row at fault.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelError(pub String);
+
+impl ModelError {
+    pub fn new(msg: impl Into<String>) -> Self {
+        ModelError(msg.into())
+    }
+}
+
+impl fmt::Display for ModelError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for ModelError {}
+
+/// What a model may know of its instance.
+#[derive(Clone, Debug, Default)]
+pub struct Context {
+    pub instance_name: String,
+    /// The FMU's unpacked `resources/` folder (from `fmuResourceLocation`), if given.
+    pub resource_dir: Option<PathBuf>,
+    /// `startTime` of fmi2SetupExperiment.
+    pub start_time: f64,
+}
+
+impl Context {
+    /// Path of a resource file; a clear error when the host gave no resource location.
+    pub fn resource(&self, name: &str) -> Result<PathBuf, ModelError> {
+        match &self.resource_dir {
+            Some(dir) => Ok(dir.join(name)),
+            None => Err(ModelError::new(format!(
+                "resource '{name}' needed but the host passed no fmuResourceLocation"
+            ))),
+        }
+    }
+
+    /// A resource file's text, with the path in the error.
+    pub fn read_resource(&self, name: &str) -> Result<(PathBuf, String), ModelError> {
+        let path = self.resource(name)?;
+        let text = read_text(&path)?;
+        Ok((path, text))
+    }
+}
+
+/// Read a text file with the path in the error message.
+pub fn read_text(path: &Path) -> Result<String, ModelError> {
+    std::fs::read_to_string(path)
+        .map_err(|e| ModelError::new(format!("cannot read {}: {e}", path.display())))
+}
+
+/// A model: its variable table, and the equations.
+///
+/// The runtime owns the variables (`Self::Vars`), checks every set against causality,
+/// variability and min/max, and calls the model at initialisation and at each step.
+pub trait Model: Clone + Send + Sized + 'static {
+    type Vars: VarTable;
+    const INFO: ModelInfo;
+
+    /// Check parameters, load resources, set the initial state and write the initial outputs
+    /// into `vars`. Called in initialization mode (when outputs are read) and at
+    /// fmi2ExitInitializationMode, again whenever parameters or inputs changed in between.
+    fn initialize(vars: &mut Self::Vars, ctx: &Context) -> Result<Self, ModelError>;
+
+    /// Advance from `time` by `step` (> 0) with the inputs in `vars`; write the outputs.
+    /// Must not allocate.
+    fn do_step(&mut self, vars: &mut Self::Vars, time: f64, step: f64) -> Result<(), ModelError>;
+
+    /// Recompute outputs that depend directly on inputs (those with `depends_on`), after the
+    /// host set inputs between steps. The default does nothing (no feed-through).
+    fn update_outputs(&mut self, _vars: &mut Self::Vars) {}
+
+    /// A tunable parameter changed between steps: refresh anything derived from it.
+    fn parameters_changed(&mut self, _vars: &Self::Vars) -> Result<(), ModelError> {
+        Ok(())
+    }
+
+    /// Append the dynamic state (not the variables, not resources) to `w`.
+    fn save_state(&self, w: &mut StateWriter);
+
+    /// Read back what [`Model::save_state`] wrote, into a model initialised with the same
+    /// parameters and resources.
+    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError>;
+}
+
+/// Little-endian writer for serialized FMU states.
+#[derive(Default, Debug)]
+pub struct StateWriter {
+    pub bytes: Vec<u8>,
+}
+
+impl StateWriter {
+    pub fn f64(&mut self, x: f64) {
+        self.bytes.extend_from_slice(&x.to_le_bytes());
+    }
+    pub fn u64(&mut self, x: u64) {
+        self.bytes.extend_from_slice(&x.to_le_bytes());
+    }
+    pub fn i32(&mut self, x: i32) {
+        self.bytes.extend_from_slice(&x.to_le_bytes());
+    }
+    pub fn bool(&mut self, x: bool) {
+        self.bytes.push(x as u8);
+    }
+    pub fn bytes(&mut self, b: &[u8]) {
+        self.u64(b.len() as u64);
+        self.bytes.extend_from_slice(b);
+    }
+    /// A slice of f64, length-prefixed.
+    pub fn f64s(&mut self, xs: impl ExactSizeIterator<Item = f64>) {
+        self.u64(xs.len() as u64);
+        for x in xs {
+            self.f64(x);
+        }
+    }
+}
+
+/// Reader matching [`StateWriter`]; truncated or malformed input is an error, not a panic.
+#[derive(Debug)]
+pub struct StateReader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> StateReader<'a> {
+    pub fn new(bytes: &'a [u8]) -> Self {
+        Self { bytes, pos: 0 }
+    }
+    fn take(&mut self, n: usize) -> Result<&'a [u8], ModelError> {
+        if self.bytes.len() - self.pos < n {
+            return Err(ModelError::new(format!(
+                "serialized FMU state truncated: need {n} bytes at offset {}, have {}",
+                self.pos,
+                self.bytes.len() - self.pos
+            )));
+        }
+        let s = &self.bytes[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    pub fn f64(&mut self) -> Result<f64, ModelError> {
+        Ok(f64::from_le_bytes(self.take(8)?.try_into().unwrap()))
+    }
+    pub fn u64(&mut self) -> Result<u64, ModelError> {
+        Ok(u64::from_le_bytes(self.take(8)?.try_into().unwrap()))
+    }
+    pub fn i32(&mut self) -> Result<i32, ModelError> {
+        Ok(i32::from_le_bytes(self.take(4)?.try_into().unwrap()))
+    }
+    pub fn bool(&mut self) -> Result<bool, ModelError> {
+        match self.take(1)?[0] {
+            0 => Ok(false),
+            1 => Ok(true),
+            b => Err(ModelError::new(format!("serialized FMU state: bad boolean byte {b}"))),
+        }
+    }
+    pub fn bytes(&mut self) -> Result<&'a [u8], ModelError> {
+        let n = self.len_prefix(1)?;
+        self.take(n)
+    }
+    /// Length prefix, checked against what remains (each element at least `elem` bytes).
+    pub fn len_prefix(&mut self, elem: usize) -> Result<usize, ModelError> {
+        let n = self.u64()? as usize;
+        if n.saturating_mul(elem) > self.bytes.len() - self.pos {
+            return Err(ModelError::new(format!(
+                "serialized FMU state: length {n} at offset {} exceeds the data",
+                self.pos - 8
+            )));
+        }
+        Ok(n)
+    }
+    /// Read a length-prefixed f64 sequence into `out` (cleared first).
+    pub fn f64s_into(&mut self, out: &mut Vec<f64>) -> Result<(), ModelError> {
+        let n = self.len_prefix(8)?;
+        out.clear();
+        for _ in 0..n {
+            out.push(self.f64()?);
+        }
+        Ok(())
+    }
+    pub fn is_at_end(&self) -> bool {
+        self.pos == self.bytes.len()
+    }
+}

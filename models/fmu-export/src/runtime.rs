@@ -1,0 +1,690 @@
+//! The safe FMI 2.0 Co-Simulation instance: call-order state machine, variable access with
+//! causality/variability/range checks, stepping, FMU states. The FFI layer is a thin,
+//! panic-guarded shell around this; tests and native hosts can use it directly.
+
+use crate::fmi2::fmi2Status;
+use crate::model::{Context, Model, ModelError, StateReader, StateWriter};
+use crate::variables::{Causality, Value, VarInfo, VarTable, VarType, Variability};
+use std::path::PathBuf;
+
+/// Where an instance is in the FMI 2.0 Co-Simulation state machine (FMI 2.0 §4.2.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    Instantiated,
+    InitializationMode,
+    StepComplete,
+    Terminated,
+    Error,
+}
+
+impl Phase {
+    fn name(self) -> &'static str {
+        match self {
+            Phase::Instantiated => "instantiated",
+            Phase::InitializationMode => "initialization mode",
+            Phase::StepComplete => "step complete",
+            Phase::Terminated => "terminated",
+            Phase::Error => "error",
+        }
+    }
+}
+
+/// Log categories declared in modelDescription.xml, in bit order.
+pub const LOG_CATEGORIES: &[(&str, &str)] = &[
+    ("logStatusError", "Errors: bad calls, bad values, model failures"),
+    ("logStatusWarning", "Warnings"),
+    ("logEvents", "Information: initialisation, resets, states"),
+    ("logAll", "All of the above"),
+];
+const LOG_ERROR: u8 = 1;
+const LOG_WARNING: u8 = 2;
+const LOG_EVENTS: u8 = 4;
+const LOG_EVERYTHING: u8 = LOG_ERROR | LOG_WARNING | LOG_EVENTS;
+
+/// Receives the instance's log messages (the FFI layer forwards to the host's callback).
+pub trait Logger: Send {
+    fn log(&self, status: fmi2Status, category: &str, message: &str);
+}
+
+/// A logger that drops everything.
+pub struct NullLogger;
+impl Logger for NullLogger {
+    fn log(&self, _: fmi2Status, _: &str, _: &str) {}
+}
+
+/// A saved FMU state (fmi2GetFMUstate).
+#[derive(Clone)]
+pub struct Snapshot<M: Model> {
+    vars: M::Vars,
+    model: Option<M>,
+    phase: Phase,
+    time: f64,
+    stop_time: Option<f64>,
+    init_dirty: bool,
+    inputs_changed: bool,
+    params_changed: bool,
+}
+
+const STATE_MAGIC: &[u8; 8] = b"TBFMUST1";
+
+pub struct Runtime<M: Model> {
+    pub vars: M::Vars,
+    model: Option<M>,
+    phase: Phase,
+    time: f64,
+    stop_time: Option<f64>,
+    /// Parameters or inputs changed in initialization mode since the model was initialised.
+    init_dirty: bool,
+    /// Inputs set since the last step (feed-through outputs need recomputing).
+    inputs_changed: bool,
+    /// Tunable parameters set since the last step.
+    params_changed: bool,
+    /// A panic left the model in an unknown state: only reset, restore or free.
+    poisoned: Option<String>,
+    ctx: Context,
+    guid: String,
+    /// value reference -> table index + 1 (0: unknown).
+    vr_index: Vec<u32>,
+    has_feedthrough: bool,
+    logger: Box<dyn Logger>,
+    logging_on: bool,
+    categories: u8,
+}
+
+impl<M: Model> Runtime<M> {
+    pub fn new(
+        instance_name: &str,
+        resource_dir: Option<PathBuf>,
+        logger: Box<dyn Logger>,
+        logging_on: bool,
+    ) -> Self {
+        let table = M::Vars::VARIABLES;
+        let max_vr = table.iter().map(|v| v.value_reference).max().unwrap_or(0) as usize;
+        let mut vr_index = vec![0u32; max_vr + 1];
+        for (i, v) in table.iter().enumerate() {
+            vr_index[v.value_reference as usize] = i as u32 + 1;
+        }
+        Runtime {
+            vars: M::Vars::default(),
+            model: None,
+            phase: Phase::Instantiated,
+            time: 0.0,
+            stop_time: None,
+            init_dirty: true,
+            inputs_changed: false,
+            params_changed: false,
+            poisoned: None,
+            ctx: Context {
+                instance_name: instance_name.to_string(),
+                resource_dir,
+                start_time: 0.0,
+            },
+            guid: crate::description::guid::<M>(),
+            vr_index,
+            has_feedthrough: table.iter().any(|v| !v.depends_on.is_empty()),
+            logger,
+            logging_on,
+            categories: LOG_EVERYTHING,
+        }
+    }
+
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+    pub fn guid(&self) -> &str {
+        &self.guid
+    }
+    pub fn instance_name(&self) -> &str {
+        &self.ctx.instance_name
+    }
+    pub fn model(&self) -> Option<&M> {
+        self.model.as_ref()
+    }
+
+    // ---- logging ----
+
+    /// Log an error (always forwarded: errors are not debug output) and return fmi2Error.
+    pub fn error(&self, message: &str) -> fmi2Status {
+        self.logger.log(fmi2Status::ERROR, "logStatusError", message);
+        fmi2Status::ERROR
+    }
+
+    pub fn warning(&self, message: &str) {
+        if self.logging_on && self.categories & LOG_WARNING != 0 {
+            self.logger.log(fmi2Status::WARNING, "logStatusWarning", message);
+        }
+    }
+
+    pub fn event(&self, message: &str) {
+        if self.logging_on && self.categories & LOG_EVENTS != 0 {
+            self.logger.log(fmi2Status::OK, "logEvents", message);
+        }
+    }
+
+    /// Record a panic: log it and poison the instance.
+    pub fn poison(&mut self, function: &str, panic_message: &str) -> fmi2Status {
+        let msg = format!(
+            "{function}: the model panicked: {panic_message}; the instance is unusable until fmi2Reset or fmi2SetFMUstate"
+        );
+        self.error(&msg);
+        self.poisoned = Some(msg);
+        self.phase = Phase::Error;
+        fmi2Status::ERROR
+    }
+
+    pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> fmi2Status {
+        let mut mask = 0u8;
+        for c in categories {
+            match LOG_CATEGORIES.iter().position(|(n, _)| n == c) {
+                Some(3) => mask |= LOG_EVERYTHING,
+                Some(i) => mask |= 1 << i,
+                None => {
+                    return self.error(&format!(
+                        "fmi2SetDebugLogging: unknown log category '{c}' (known: {})",
+                        LOG_CATEGORIES.iter().map(|c| c.0).collect::<Vec<_>>().join(", ")
+                    ))
+                }
+            }
+        }
+        self.logging_on = on;
+        self.categories = if categories.is_empty() { LOG_EVERYTHING } else { mask };
+        fmi2Status::OK
+    }
+
+    // ---- state machine ----
+
+    fn require(&self, function: &str, allowed: &[Phase]) -> Result<(), fmi2Status> {
+        if let Some(p) = &self.poisoned {
+            return Err(self.error(&format!("{function} refused: {p}")));
+        }
+        if allowed.contains(&self.phase) {
+            Ok(())
+        } else {
+            Err(self.error(&format!(
+                "{function} is not allowed in state '{}' (allowed in: {})",
+                self.phase.name(),
+                allowed.iter().map(|p| p.name()).collect::<Vec<_>>().join(", ")
+            )))
+        }
+    }
+
+    fn fail(&mut self, function: &str, e: ModelError) -> fmi2Status {
+        self.phase = Phase::Error;
+        self.error(&format!("{function}: {e}"))
+    }
+
+    pub fn setup_experiment(
+        &mut self,
+        start_time: f64,
+        stop_time: Option<f64>,
+    ) -> fmi2Status {
+        if let Err(s) = self.require("fmi2SetupExperiment", &[Phase::Instantiated]) {
+            return s;
+        }
+        if !start_time.is_finite() {
+            return self.error(&format!("fmi2SetupExperiment: startTime {start_time} is not finite"));
+        }
+        if let Some(stop) = stop_time {
+            if !(stop >= start_time) {
+                return self.error(&format!(
+                    "fmi2SetupExperiment: stopTime {stop} is before startTime {start_time}"
+                ));
+            }
+        }
+        self.time = start_time;
+        self.ctx.start_time = start_time;
+        self.stop_time = stop_time;
+        fmi2Status::OK
+    }
+
+    pub fn enter_initialization_mode(&mut self) -> fmi2Status {
+        if let Err(s) = self.require("fmi2EnterInitializationMode", &[Phase::Instantiated]) {
+            return s;
+        }
+        self.phase = Phase::InitializationMode;
+        self.init_dirty = true;
+        fmi2Status::OK
+    }
+
+    /// (Re)initialise the model from the current parameters and inputs if they changed.
+    fn ensure_initialized(&mut self, function: &str) -> fmi2Status {
+        if self.model.is_some() && !self.init_dirty {
+            return fmi2Status::OK;
+        }
+        match M::initialize(&mut self.vars, &self.ctx) {
+            Ok(m) => {
+                self.model = Some(m);
+                self.init_dirty = false;
+                self.inputs_changed = false;
+                self.params_changed = false;
+                fmi2Status::OK
+            }
+            Err(e) => {
+                self.model = None;
+                self.fail(function, e)
+            }
+        }
+    }
+
+    pub fn exit_initialization_mode(&mut self) -> fmi2Status {
+        if let Err(s) = self.require("fmi2ExitInitializationMode", &[Phase::InitializationMode]) {
+            return s;
+        }
+        let s = self.ensure_initialized("fmi2ExitInitializationMode");
+        if s == fmi2Status::OK {
+            self.phase = Phase::StepComplete;
+            self.event("initialized");
+        }
+        s
+    }
+
+    pub fn terminate(&mut self) -> fmi2Status {
+        if let Err(s) = self.require("fmi2Terminate", &[Phase::StepComplete]) {
+            return s;
+        }
+        self.phase = Phase::Terminated;
+        fmi2Status::OK
+    }
+
+    /// fmi2Reset: back to freshly instantiated, start values restored.
+    pub fn reset(&mut self) -> fmi2Status {
+        self.vars = M::Vars::default();
+        self.model = None;
+        self.phase = Phase::Instantiated;
+        self.time = 0.0;
+        self.ctx.start_time = 0.0;
+        self.stop_time = None;
+        self.init_dirty = true;
+        self.inputs_changed = false;
+        self.params_changed = false;
+        self.poisoned = None;
+        self.event("reset");
+        fmi2Status::OK
+    }
+
+    pub fn do_step(&mut self, current_time: f64, step: f64) -> fmi2Status {
+        if let Err(s) = self.require("fmi2DoStep", &[Phase::StepComplete]) {
+            return s;
+        }
+        if !(step > 0.0) || !step.is_finite() {
+            return self.error(&format!(
+                "fmi2DoStep: communicationStepSize must be positive and finite, got {step}"
+            ));
+        }
+        if !current_time.is_finite() {
+            return self.error(&format!("fmi2DoStep: currentCommunicationPoint {current_time} is not finite"));
+        }
+        if let Some(stop) = self.stop_time {
+            if current_time + step > stop + 1e-9 * step.max(stop.abs() * 1e-6) {
+                return self.error(&format!(
+                    "fmi2DoStep: step from {current_time} by {step} ends after stopTime {stop}"
+                ));
+            }
+        }
+        if self.params_changed {
+            self.params_changed = false;
+            let r = match self.model.as_mut() {
+                Some(m) => m.parameters_changed(&self.vars),
+                None => Ok(()),
+            };
+            if let Err(e) = r {
+                return self.fail("fmi2DoStep", e);
+            }
+        }
+        let r = match self.model.as_mut() {
+            Some(m) => m.do_step(&mut self.vars, current_time, step),
+            None => Err(ModelError::new("model not initialised")),
+        };
+        match r {
+            Ok(()) => {
+                self.time = current_time + step;
+                self.inputs_changed = false;
+                fmi2Status::OK
+            }
+            Err(e) => {
+                let msg = format!("at t = {current_time} s: {e}");
+                self.fail("fmi2DoStep", ModelError(msg))
+            }
+        }
+    }
+
+    // ---- variables ----
+
+    fn index(&self, function: &str, vr: u32) -> Result<usize, fmi2Status> {
+        match self.vr_index.get(vr as usize) {
+            Some(&i) if i > 0 => Ok(i as usize - 1),
+            _ => Err(self.error(&format!(
+                "{function}: unknown value reference {vr} (model '{}')",
+                M::INFO.name
+            ))),
+        }
+    }
+
+    fn check_type(&self, function: &str, info: &VarInfo, ty: VarType) -> Result<(), fmi2Status> {
+        if info.var_type() == ty {
+            Ok(())
+        } else {
+            Err(self.error(&format!(
+                "{function}: variable '{}' (vr {}) is {}, not {}",
+                info.name,
+                info.value_reference,
+                info.var_type().xml_name(),
+                ty.xml_name()
+            )))
+        }
+    }
+
+    /// Read variables of type `ty` into `out`, converted by `conv`.
+    pub fn get<T>(
+        &mut self,
+        function: &str,
+        ty: VarType,
+        vrs: &[u32],
+        out: &mut [T],
+        conv: impl Fn(Value) -> T,
+    ) -> fmi2Status {
+        if let Err(s) = self.require(
+            function,
+            &[
+                Phase::Instantiated,
+                Phase::InitializationMode,
+                Phase::StepComplete,
+                Phase::Terminated,
+                Phase::Error,
+            ],
+        ) {
+            return s;
+        }
+        if vrs.len() != out.len() {
+            return self.error(&format!("{function}: {} value references but {} values", vrs.len(), out.len()));
+        }
+        match self.phase {
+            Phase::InitializationMode => {
+                let s = self.ensure_initialized(function);
+                if s != fmi2Status::OK {
+                    return s;
+                }
+            }
+            Phase::StepComplete if self.inputs_changed && self.has_feedthrough => {
+                if let Some(m) = self.model.as_mut() {
+                    m.update_outputs(&mut self.vars);
+                }
+                self.inputs_changed = false;
+            }
+            _ => {}
+        }
+        let table = M::Vars::VARIABLES;
+        for (k, &vr) in vrs.iter().enumerate() {
+            let i = match self.index(function, vr) {
+                Ok(i) => i,
+                Err(s) => return s,
+            };
+            let info = &table[i];
+            if let Err(s) = self.check_type(function, info, ty) {
+                return s;
+            }
+            if self.phase == Phase::Instantiated && !info.has_start() {
+                return self.error(&format!(
+                    "{function}: '{}' is calculated and has no value before initialization",
+                    info.name
+                ));
+            }
+            out[k] = conv(self.vars.get(i));
+        }
+        fmi2Status::OK
+    }
+
+    /// Set variables of type `ty` from `values`, each checked for causality, variability,
+    /// finiteness and declared min/max.
+    pub fn set(
+        &mut self,
+        function: &str,
+        ty: VarType,
+        vrs: &[u32],
+        values: impl ExactSizeIterator<Item = Value>,
+    ) -> fmi2Status {
+        if let Err(s) = self.require(
+            function,
+            &[Phase::Instantiated, Phase::InitializationMode, Phase::StepComplete],
+        ) {
+            return s;
+        }
+        if vrs.len() != values.len() {
+            return self.error(&format!("{function}: {} value references but {} values", vrs.len(), values.len()));
+        }
+        let table = M::Vars::VARIABLES;
+        for (&vr, value) in vrs.iter().zip(values) {
+            let i = match self.index(function, vr) {
+                Ok(i) => i,
+                Err(s) => return s,
+            };
+            let info = &table[i];
+            if let Err(s) = self.check_type(function, info, ty) {
+                return s;
+            }
+            let settable = match self.phase {
+                Phase::Instantiated | Phase::InitializationMode => {
+                    info.variability != Variability::Constant
+                        && (info.causality == Causality::Input || info.has_start())
+                }
+                _ => {
+                    info.causality == Causality::Input
+                        || (info.causality == Causality::Parameter
+                            && info.variability == Variability::Tunable)
+                }
+            };
+            if !settable {
+                return self.error(&format!(
+                    "{function}: '{}' ({} {}) cannot be set in state '{}'",
+                    info.name,
+                    info.variability.xml_name(),
+                    info.causality.xml_name(),
+                    self.phase.name()
+                ));
+            }
+            let x = value.as_f64();
+            if let Value::Real(r) = value {
+                if !r.is_finite() {
+                    return self.error(&format!("{function}: '{}' set to {r}, expected a finite number", info.name));
+                }
+            }
+            let below = info.min.is_some_and(|m| x < m);
+            let above = info.max.is_some_and(|m| x > m);
+            if below || above {
+                return self.error(&format!(
+                    "{function}: '{}' = {} is outside its range [{}, {}]{}",
+                    info.name,
+                    value.xml_text(),
+                    info.min.map_or("-inf".into(), crate::variables::format_real),
+                    info.max.map_or("inf".into(), crate::variables::format_real),
+                    info.unit.map(|u| format!(" {u}")).unwrap_or_default()
+                ));
+            }
+            self.vars.set(i, value);
+            match self.phase {
+                Phase::Instantiated | Phase::InitializationMode => self.init_dirty = true,
+                _ => {
+                    if info.causality == Causality::Input {
+                        self.inputs_changed = true;
+                    } else {
+                        self.params_changed = true;
+                    }
+                }
+            }
+        }
+        fmi2Status::OK
+    }
+
+    /// Set one variable by name (tests and native hosts).
+    pub fn set_by_name(&mut self, name: &str, value: Value) -> fmi2Status {
+        match M::Vars::vr_of(name) {
+            Some(vr) => self.set("set", value.var_type(), &[vr], std::iter::once(value)),
+            None => self.error(&format!("no variable named '{name}' in model '{}'", M::INFO.name)),
+        }
+    }
+
+    /// Read one variable by name (tests and native hosts).
+    pub fn get_by_name(&mut self, name: &str) -> Option<Value> {
+        let i = M::Vars::index_of(name)?;
+        let vr = M::Vars::VARIABLES[i].value_reference;
+        let ty = M::Vars::VARIABLES[i].var_type();
+        let mut out = [Value::Real(0.0)];
+        (self.get("get", ty, &[vr], &mut out, |v| v) == fmi2Status::OK).then_some(out[0])
+    }
+
+    // ---- FMU states ----
+
+    pub fn snapshot(&self) -> Result<Snapshot<M>, fmi2Status> {
+        if let Some(p) = &self.poisoned {
+            return Err(self.error(&format!("fmi2GetFMUstate refused: {p}")));
+        }
+        Ok(Snapshot {
+            vars: self.vars.clone(),
+            model: self.model.clone(),
+            phase: self.phase,
+            time: self.time,
+            stop_time: self.stop_time,
+            init_dirty: self.init_dirty,
+            inputs_changed: self.inputs_changed,
+            params_changed: self.params_changed,
+        })
+    }
+
+    /// Overwrite `snap` in place (reuses its allocation where the types allow).
+    pub fn snapshot_into(&self, snap: &mut Snapshot<M>) -> fmi2Status {
+        if let Some(p) = &self.poisoned {
+            return self.error(&format!("fmi2GetFMUstate refused: {p}"));
+        }
+        snap.vars.clone_from(&self.vars);
+        snap.model.clone_from(&self.model);
+        snap.phase = self.phase;
+        snap.time = self.time;
+        snap.stop_time = self.stop_time;
+        snap.init_dirty = self.init_dirty;
+        snap.inputs_changed = self.inputs_changed;
+        snap.params_changed = self.params_changed;
+        fmi2Status::OK
+    }
+
+    pub fn restore(&mut self, snap: &Snapshot<M>) -> fmi2Status {
+        if snap.phase == Phase::Error {
+            return self.error("fmi2SetFMUstate: the state was saved in the error state");
+        }
+        self.vars.clone_from(&snap.vars);
+        self.model.clone_from(&snap.model);
+        self.phase = snap.phase;
+        self.time = snap.time;
+        self.stop_time = snap.stop_time;
+        self.init_dirty = snap.init_dirty;
+        self.inputs_changed = snap.inputs_changed;
+        self.params_changed = snap.params_changed;
+        self.poisoned = None;
+        fmi2Status::OK
+    }
+
+    /// Serialize a snapshot: magic, GUID, runtime fields, variables, model state.
+    pub fn serialize(&self, snap: &Snapshot<M>) -> Vec<u8> {
+        let mut w = StateWriter::default();
+        w.bytes.extend_from_slice(STATE_MAGIC);
+        w.bytes(self.guid.as_bytes());
+        w.u64(match snap.phase {
+            Phase::Instantiated => 0,
+            Phase::InitializationMode => 1,
+            Phase::StepComplete => 2,
+            Phase::Terminated => 3,
+            Phase::Error => 4,
+        });
+        w.f64(snap.time);
+        w.bool(snap.stop_time.is_some());
+        w.f64(snap.stop_time.unwrap_or(0.0));
+        w.bool(snap.init_dirty);
+        w.bool(snap.inputs_changed);
+        w.bool(snap.params_changed);
+        for i in 0..M::Vars::VARIABLES.len() {
+            match snap.vars.get(i) {
+                Value::Real(x) => w.f64(x),
+                Value::Integer(x) => w.i32(x),
+                Value::Boolean(x) => w.bool(x),
+            }
+        }
+        w.bool(snap.model.is_some());
+        if let Some(m) = &snap.model {
+            m.save_state(&mut w);
+        }
+        w.bytes
+    }
+
+    /// Rebuild a snapshot from bytes written by [`Runtime::serialize`]. The model part is
+    /// re-initialised from the saved parameters (loading resources) and then overwritten.
+    pub fn deserialize(&self, bytes: &[u8]) -> Result<Snapshot<M>, fmi2Status> {
+        let e = |m: String| self.error(&format!("fmi2DeSerializeFMUstate: {m}"));
+        if bytes.len() < 8 || &bytes[..8] != STATE_MAGIC {
+            return Err(e("not a serialized twinbench FMU state (bad magic)".into()));
+        }
+        let mut r = StateReader::new(&bytes[8..]);
+        let mut inner = || -> Result<Snapshot<M>, ModelError> {
+            let guid = r.bytes()?;
+            if guid != self.guid.as_bytes() {
+                return Err(ModelError::new(format!(
+                    "state belongs to another model (GUID {}, this FMU is {})",
+                    String::from_utf8_lossy(guid),
+                    self.guid
+                )));
+            }
+            let phase = match r.u64()? {
+                0 => Phase::Instantiated,
+                1 => Phase::InitializationMode,
+                2 => Phase::StepComplete,
+                3 => Phase::Terminated,
+                4 => Phase::Error,
+                p => return Err(ModelError::new(format!("bad phase {p}"))),
+            };
+            let time = r.f64()?;
+            let has_stop = r.bool()?;
+            let stop = r.f64()?;
+            let init_dirty = r.bool()?;
+            let inputs_changed = r.bool()?;
+            let params_changed = r.bool()?;
+            let mut vars = M::Vars::default();
+            for (i, info) in M::Vars::VARIABLES.iter().enumerate() {
+                let v = match info.var_type() {
+                    VarType::Real => Value::Real(r.f64()?),
+                    VarType::Integer => Value::Integer(r.i32()?),
+                    VarType::Boolean => Value::Boolean(r.bool()?),
+                };
+                vars.set(i, v);
+            }
+            let model = if r.bool()? {
+                let mut scratch = vars.clone();
+                let mut ctx = self.ctx.clone();
+                ctx.start_time = time;
+                let mut m = M::initialize(&mut scratch, &ctx)?;
+                m.load_state(&mut r)?;
+                Some(m)
+            } else {
+                None
+            };
+            if !r.is_at_end() {
+                return Err(ModelError::new("trailing bytes after the model state".to_string()));
+            }
+            Ok(Snapshot {
+                vars,
+                model,
+                phase,
+                time,
+                stop_time: has_stop.then_some(stop),
+                init_dirty,
+                inputs_changed,
+                params_changed,
+            })
+        };
+        inner().map_err(|m| e(m.0))
+    }
+
+    pub fn last_successful_time(&self) -> f64 {
+        self.time
+    }
+}

@@ -1,0 +1,113 @@
+//! Units known to the export framework, with their SI base-unit exponents (FMI 2.0
+//! `unitDefinitions`). A model may only use units listed here, so that every FMU declares
+//! each of its units completely and an importer can convert between compatible ones.
+
+/// One `<Unit>`: value_in_SI = factor · value + offset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnitDef {
+    pub name: &'static str,
+    pub kg: i32,
+    pub m: i32,
+    pub s: i32,
+    pub a: i32,
+    pub k: i32,
+    pub mol: i32,
+    pub cd: i32,
+    pub rad: i32,
+    pub factor: f64,
+    pub offset: f64,
+}
+
+const fn unit(name: &'static str, kg: i32, m: i32, s: i32, rad: i32, factor: f64) -> UnitDef {
+    UnitDef { name, kg, m, s, a: 0, k: 0, mol: 0, cd: 0, rad, factor, offset: 0.0 }
+}
+
+/// Every unit a model may declare.
+pub const UNITS: &[UnitDef] = &[
+    unit("1", 0, 0, 0, 0, 1.0),
+    unit("%", 0, 0, 0, 0, 0.01),
+    unit("s", 0, 0, 1, 0, 1.0),
+    unit("Hz", 0, 0, -1, 0, 1.0),
+    unit("m", 0, 1, 0, 0, 1.0),
+    unit("1/m", 0, -1, 0, 0, 1.0),
+    unit("m2", 0, 2, 0, 0, 1.0),
+    unit("m/s", 0, 1, -1, 0, 1.0),
+    unit("km/h", 0, 1, -1, 0, 1.0 / 3.6),
+    unit("m/s2", 0, 1, -2, 0, 1.0),
+    unit("kg", 1, 0, 0, 0, 1.0),
+    unit("kg/m3", 1, -3, 0, 0, 1.0),
+    unit("kg.m2", 1, 2, 0, 0, 1.0),
+    unit("N", 1, 1, -2, 0, 1.0),
+    unit("N/m", 1, 0, -2, 0, 1.0),
+    unit("N.m", 1, 2, -2, 0, 1.0),
+    unit("N.m/rad", 1, 2, -2, -1, 1.0),
+    unit("N.m.s/rad", 1, 2, -1, -1, 1.0),
+    unit("W", 1, 2, -3, 0, 1.0),
+    unit("kW", 1, 2, -3, 0, 1000.0),
+    unit("rad", 0, 0, 0, 1, 1.0),
+    unit("rad/s", 0, 0, -1, 1, 1.0),
+    unit("rpm", 0, 0, -1, 1, std::f64::consts::PI / 30.0),
+    unit("rad/s2", 0, 0, -2, 1, 1.0),
+];
+
+/// The definition of `name`, if known.
+pub fn lookup(name: &str) -> Option<&'static UnitDef> {
+    UNITS.iter().find(|u| u.name == name)
+}
+
+impl UnitDef {
+    /// Same base-unit exponents: values convert by factor and offset.
+    pub fn compatible(&self, other: &UnitDef) -> bool {
+        (self.kg, self.m, self.s, self.a, self.k, self.mol, self.cd, self.rad)
+            == (other.kg, other.m, other.s, other.a, other.k, other.mol, other.cd, other.rad)
+    }
+
+    /// `<BaseUnit .../>` attributes, only the non-default ones (the standard's defaults are
+    /// exponent 0, factor 1, offset 0).
+    pub fn base_unit_attributes(&self) -> String {
+        let mut out = String::new();
+        for (key, exp) in [
+            ("kg", self.kg),
+            ("m", self.m),
+            ("s", self.s),
+            ("A", self.a),
+            ("K", self.k),
+            ("mol", self.mol),
+            ("cd", self.cd),
+            ("rad", self.rad),
+        ] {
+            if exp != 0 {
+                out.push_str(&format!(" {key}=\"{exp}\""));
+            }
+        }
+        if self.factor != 1.0 {
+            out.push_str(&format!(" factor=\"{}\"", crate::variables::format_real(self.factor)));
+        }
+        if self.offset != 0.0 {
+            out.push_str(&format!(" offset=\"{}\"", crate::variables::format_real(self.offset)));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_unique() {
+        for (i, a) in UNITS.iter().enumerate() {
+            for b in &UNITS[i + 1..] {
+                assert_ne!(a.name, b.name);
+            }
+        }
+    }
+
+    #[test]
+    fn rpm_converts_to_rad_per_s() {
+        let rpm = lookup("rpm").unwrap();
+        assert!(rpm.compatible(lookup("rad/s").unwrap()));
+        assert!((rpm.factor * 60.0 - 2.0 * std::f64::consts::PI).abs() < 1e-12);
+        assert!(!rpm.compatible(lookup("m/s").unwrap()));
+    }
+}

@@ -1,0 +1,387 @@
+//! The variable table: one source of truth per variable.
+//!
+//! A model declares its variables once with [`variables!`](crate::variables!). The macro
+//! generates a plain struct with one typed field per variable (what the model's equations
+//! read and write) and the table of [`VarInfo`] that drives the runtime (value references,
+//! causality checks, ranges) and generates `modelDescription.xml` and the documentation.
+
+/// Scalar type of a variable.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum VarType {
+    Real,
+    Integer,
+    Boolean,
+}
+
+impl VarType {
+    pub fn xml_name(self) -> &'static str {
+        match self {
+            VarType::Real => "Real",
+            VarType::Integer => "Integer",
+            VarType::Boolean => "Boolean",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Causality {
+    Parameter,
+    CalculatedParameter,
+    Input,
+    Output,
+    Local,
+    Independent,
+}
+
+impl Causality {
+    pub fn xml_name(self) -> &'static str {
+        match self {
+            Causality::Parameter => "parameter",
+            Causality::CalculatedParameter => "calculatedParameter",
+            Causality::Input => "input",
+            Causality::Output => "output",
+            Causality::Local => "local",
+            Causality::Independent => "independent",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Variability {
+    Constant,
+    Fixed,
+    Tunable,
+    Discrete,
+    Continuous,
+}
+
+impl Variability {
+    pub fn xml_name(self) -> &'static str {
+        match self {
+            Variability::Constant => "constant",
+            Variability::Fixed => "fixed",
+            Variability::Tunable => "tunable",
+            Variability::Discrete => "discrete",
+            Variability::Continuous => "continuous",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Initial {
+    Exact,
+    Approx,
+    Calculated,
+}
+
+impl Initial {
+    pub fn xml_name(self) -> &'static str {
+        match self {
+            Initial::Exact => "exact",
+            Initial::Approx => "approx",
+            Initial::Calculated => "calculated",
+        }
+    }
+}
+
+/// A typed scalar value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Value {
+    Real(f64),
+    Integer(i32),
+    Boolean(bool),
+}
+
+impl Value {
+    pub fn var_type(self) -> VarType {
+        match self {
+            Value::Real(_) => VarType::Real,
+            Value::Integer(_) => VarType::Integer,
+            Value::Boolean(_) => VarType::Boolean,
+        }
+    }
+
+    /// The value as a number (booleans as 0/1), for range checks and documentation.
+    pub fn as_f64(self) -> f64 {
+        match self {
+            Value::Real(x) => x,
+            Value::Integer(i) => i as f64,
+            Value::Boolean(b) => b as i32 as f64,
+        }
+    }
+
+    /// The value as written in modelDescription.xml (shortest round-trip form).
+    pub fn xml_text(self) -> String {
+        match self {
+            Value::Real(x) => format_real(x),
+            Value::Integer(i) => i.to_string(),
+            Value::Boolean(b) => b.to_string(),
+        }
+    }
+}
+
+/// Shortest decimal text that parses back to the same f64 (Rust's `Display` is round-trip
+/// exact); integral values keep a trailing ".0" out for readability.
+pub fn format_real(x: f64) -> String {
+    let s = format!("{x:?}");
+    s.strip_suffix(".0").map(str::to_string).unwrap_or(s)
+}
+
+/// Everything modelDescription.xml and the runtime know about one variable.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VarInfo {
+    pub name: &'static str,
+    pub value_reference: u32,
+    /// Start value; its type is the variable's type.
+    pub start: Value,
+    pub causality: Causality,
+    pub variability: Variability,
+    /// `None`: the standard's default for this causality/variability.
+    pub initial: Option<Initial>,
+    /// Unit name, one of [`crate::units::UNITS`]; `None` for dimensionless flags and modes.
+    pub unit: Option<&'static str>,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub description: &'static str,
+    /// For outputs: value references of the inputs it depends on directly (feed-through).
+    pub depends_on: &'static [u32],
+}
+
+const fn base(vr: u32, causality: Causality, variability: Variability) -> VarInfo {
+    VarInfo {
+        name: "",
+        value_reference: vr,
+        start: Value::Real(0.0),
+        causality,
+        variability,
+        initial: None,
+        unit: None,
+        min: None,
+        max: None,
+        description: "",
+        depends_on: &[],
+    }
+}
+
+/// A fixed parameter (set before initialisation, constant during the run).
+pub const fn parameter(vr: u32) -> VarInfo {
+    base(vr, Causality::Parameter, Variability::Fixed)
+}
+
+/// A tunable parameter (may change between steps).
+pub const fn tunable(vr: u32) -> VarInfo {
+    base(vr, Causality::Parameter, Variability::Tunable)
+}
+
+/// A continuous input.
+pub const fn input(vr: u32) -> VarInfo {
+    base(vr, Causality::Input, Variability::Continuous)
+}
+
+/// A discrete input (a mode switch, a flag).
+pub const fn discrete_input(vr: u32) -> VarInfo {
+    base(vr, Causality::Input, Variability::Discrete)
+}
+
+/// A continuous output, computed by the model (initial="calculated").
+pub const fn output(vr: u32) -> VarInfo {
+    base(vr, Causality::Output, Variability::Continuous)
+}
+
+/// A discrete output (a counter, a flag), computed by the model.
+pub const fn discrete_output(vr: u32) -> VarInfo {
+    base(vr, Causality::Output, Variability::Discrete)
+}
+
+/// A local variable exposed for inspection (a state, an internal signal).
+pub const fn local(vr: u32) -> VarInfo {
+    base(vr, Causality::Local, Variability::Continuous)
+}
+
+impl VarInfo {
+    pub const fn unit(mut self, unit: &'static str) -> Self {
+        self.unit = Some(unit);
+        self
+    }
+    pub const fn min(mut self, min: f64) -> Self {
+        self.min = Some(min);
+        self
+    }
+    pub const fn max(mut self, max: f64) -> Self {
+        self.max = Some(max);
+        self
+    }
+    pub const fn range(self, min: f64, max: f64) -> Self {
+        self.min(min).max(max)
+    }
+    pub const fn describe(mut self, description: &'static str) -> Self {
+        self.description = description;
+        self
+    }
+    pub const fn initial(mut self, initial: Initial) -> Self {
+        self.initial = Some(initial);
+        self
+    }
+    pub const fn depends_on(mut self, inputs: &'static [u32]) -> Self {
+        self.depends_on = inputs;
+        self
+    }
+    #[doc(hidden)]
+    pub const fn named(mut self, name: &'static str, start: Value) -> Self {
+        self.name = name;
+        self.start = start;
+        self
+    }
+
+    pub fn var_type(&self) -> VarType {
+        self.start.var_type()
+    }
+
+    /// The `initial` attribute in force (explicit or the standard's default, FMI 2.0 §2.2.7).
+    pub fn effective_initial(&self) -> Option<Initial> {
+        if self.initial.is_some() {
+            return self.initial;
+        }
+        match (self.causality, self.variability) {
+            (Causality::Parameter, _) => Some(Initial::Exact),
+            (Causality::CalculatedParameter, _) => Some(Initial::Calculated),
+            (Causality::Output, Variability::Constant) | (Causality::Local, Variability::Constant) => {
+                Some(Initial::Exact)
+            }
+            (Causality::Output, _) | (Causality::Local, _) => Some(Initial::Calculated),
+            (Causality::Input, _) | (Causality::Independent, _) => None,
+        }
+    }
+
+    /// Whether modelDescription.xml carries a start value for this variable.
+    pub fn has_start(&self) -> bool {
+        matches!(self.causality, Causality::Input)
+            || matches!(
+                self.effective_initial(),
+                Some(Initial::Exact) | Some(Initial::Approx)
+            )
+    }
+}
+
+/// What the generated variable struct provides to the runtime.
+pub trait VarTable: Clone + Default + Send + 'static {
+    /// The table, in declaration order.
+    const VARIABLES: &'static [VarInfo];
+
+    /// Value of the variable at `index` in [`Self::VARIABLES`].
+    fn get(&self, index: usize) -> Value;
+
+    /// Set the variable at `index`; `false` when `value` has another type.
+    fn set(&mut self, index: usize, value: Value) -> bool;
+
+    /// Index in the table of the variable named `name`.
+    fn index_of(name: &str) -> Option<usize> {
+        Self::VARIABLES.iter().position(|v| v.name == name)
+    }
+
+    /// Value reference of the variable named `name`.
+    fn vr_of(name: &str) -> Option<u32> {
+        Self::index_of(name).map(|i| Self::VARIABLES[i].value_reference)
+    }
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi_type {
+    (Real) => { f64 };
+    (Integer) => { i32 };
+    (Boolean) => { bool };
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi_value {
+    (Real, $e:expr) => { $crate::variables::Value::Real($e) };
+    (Integer, $e:expr) => { $crate::variables::Value::Integer($e) };
+    (Boolean, $e:expr) => { $crate::variables::Value::Boolean($e) };
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi_set {
+    (Real, $place:expr, $v:expr) => {
+        match $v {
+            $crate::variables::Value::Real(x) => { $place = x; true }
+            _ => false,
+        }
+    };
+    (Integer, $place:expr, $v:expr) => {
+        match $v {
+            $crate::variables::Value::Integer(x) => { $place = x; true }
+            _ => false,
+        }
+    };
+    (Boolean, $place:expr, $v:expr) => {
+        match $v {
+            $crate::variables::Value::Boolean(x) => { $place = x; true }
+            _ => false,
+        }
+    };
+}
+
+/// Declare a model's variables once: a typed struct plus its [`VarTable`].
+///
+/// ```
+/// use fmu_export::variables::*;
+/// fmu_export::variables! {
+///     /// Variables of a spring.
+///     pub struct SpringVars {
+///         /// The spring rate.
+///         stiffness: Real = 1000.0 => parameter(1).unit("N/m").range(1.0, 1e9)
+///             .describe("Spring rate"),
+///         force: Real = 0.0 => output(2).unit("N").describe("Spring force"),
+///     }
+/// }
+/// let v = SpringVars::default();
+/// assert_eq!(v.stiffness, 1000.0);
+/// assert_eq!(SpringVars::vr_of("force"), Some(2));
+/// ```
+#[macro_export]
+macro_rules! variables {
+    (
+        $(#[$meta:meta])*
+        $vis:vis struct $name:ident {
+            $(
+                $(#[$fmeta:meta])*
+                $field:ident : $ty:ident = $start:expr => $info:expr
+            ),* $(,)?
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Clone, Debug, PartialEq)]
+        $vis struct $name {
+            $( $(#[$fmeta])* pub $field: $crate::__fmi_type!($ty), )*
+        }
+
+        impl ::core::default::Default for $name {
+            fn default() -> Self {
+                Self { $( $field: $start, )* }
+            }
+        }
+
+        impl $crate::variables::VarTable for $name {
+            const VARIABLES: &'static [$crate::variables::VarInfo] = &[
+                $( ($info).named(stringify!($field), $crate::__fmi_value!($ty, $start)), )*
+            ];
+
+            #[inline]
+            fn get(&self, index: usize) -> $crate::variables::Value {
+                const GET: &[fn(&$name) -> $crate::variables::Value] =
+                    &[ $( |s: &$name| $crate::__fmi_value!($ty, s.$field), )* ];
+                GET[index](self)
+            }
+
+            #[inline]
+            fn set(&mut self, index: usize, value: $crate::variables::Value) -> bool {
+                const SET: &[fn(&mut $name, $crate::variables::Value) -> bool] =
+                    &[ $( |s: &mut $name, v: $crate::variables::Value| $crate::__fmi_set!($ty, s.$field, v), )* ];
+                SET[index](self, value)
+            }
+        }
+    };
+}
