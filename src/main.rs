@@ -1,1 +1,5 @@
-fn main() {}
+//! The `twinbench` command line: a thin shell over the library.
+
+fn main() -> std::process::ExitCode {
+    twinbench::cli::main()
+}

@@ -1,0 +1,1 @@
+//! twinbench analysis (to be written).

@@ -1,0 +1,1 @@
+//! twinbench compare (to be written).

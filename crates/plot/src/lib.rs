@@ -1,0 +1,1 @@
+//! Line plots (to be written).

@@ -1,0 +1,1 @@
+//! twinbench driver model (to be written).

@@ -1,0 +1,1 @@
+//! twinbench dyno model (to be written).

@@ -1,0 +1,1 @@
+//! twinbench edu model (to be written).

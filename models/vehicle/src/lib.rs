@@ -1,0 +1,1 @@
+//! twinbench vehicle model (to be written).

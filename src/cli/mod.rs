@@ -1,0 +1,48 @@
+//! Command-line interface: one module per subcommand, each with its clap `Args` and `run`.
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+pub mod compare;
+pub mod identify;
+pub mod modal;
+pub mod pack;
+
+#[derive(Parser, Debug)]
+#[command(name = "twinbench", version, about = "Digital twin of a powertrain test bench (FMI 2.0 Co-Simulation)")]
+pub struct Cli {
+    /// More log output (repeat for more).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Build the model crates in release mode and write target/fmu/<model>.fmu.
+    Pack(pack::PackArgs),
+    /// Compare a simulation result with a vehicle measurement on a distance basis.
+    Compare(compare::CompareArgs),
+    /// Modal analysis of a torsional drivetrain chain.
+    Modal(modal::ModalArgs),
+    /// Identify the dyno loop from a step response or a frequency sweep.
+    Identify(identify::IdentifyArgs),
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Pack(a) => pack::run(a),
+        Command::Compare(a) => compare::run(a),
+        Command::Modal(a) => modal::run(a),
+        Command::Identify(a) => identify::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,20 @@
+//! `twinbench pack`: build the models and write their FMUs.
+
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct PackArgs {
+    /// Models to pack (default: all).
+    pub models: Vec<String>,
+    /// Output folder (default: target/fmu of the workspace).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(args: PackArgs) -> anyhow::Result<()> {
+    let out = args.out.unwrap_or_else(crate::pack::default_fmu_dir);
+    for p in crate::pack::pack(&args.models, &out)? {
+        println!("{}", p.display());
+    }
+    Ok(())
+}
