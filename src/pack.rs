@@ -63,7 +63,10 @@ impl ModelSpec {
 
 /// Every model twinbench ships, and the test FMUs.
 pub fn models() -> Vec<ModelSpec> {
-    vec![ModelSpec::of::<faulty::Faulty>("faulty", true)]
+    vec![
+        ModelSpec::of::<dyno::Dyno>("dyno", false),
+        ModelSpec::of::<faulty::Faulty>("faulty", true),
+    ]
 }
 
 /// The workspace root (where `Cargo.toml` of twinbench lives).
