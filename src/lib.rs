@@ -7,4 +7,5 @@
 //! processing and comparison in `crates/compare`, bench analysis in `crates/analysis`.
 
 pub mod cli;
+pub mod fmu;
 pub mod pack;

@@ -1,0 +1,425 @@
+//! modelDescription.xml reader (FMI 2.0). Tolerant as the standard asks: unknown
+//! attributes and elements (vendor annotations, tool extensions) are ignored.
+
+use fmu_export::units::UnitDef;
+use quick_xml::events::{BytesStart, Event};
+use quick_xml::Reader;
+use std::collections::HashMap;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScalarType {
+    Real,
+    Integer,
+    Boolean,
+    String,
+    Enumeration,
+}
+
+impl ScalarType {
+    pub fn name(self) -> &'static str {
+        match self {
+            ScalarType::Real => "Real",
+            ScalarType::Integer => "Integer",
+            ScalarType::Boolean => "Boolean",
+            ScalarType::String => "String",
+            ScalarType::Enumeration => "Enumeration",
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScalarVariable {
+    pub name: String,
+    pub value_reference: u32,
+    pub description: String,
+    pub causality: String,
+    pub variability: String,
+    pub initial: Option<String>,
+    pub ty: ScalarType,
+    pub declared_type: Option<String>,
+    pub unit: Option<String>,
+    pub start: Option<String>,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub nominal: Option<f64>,
+}
+
+impl ScalarVariable {
+    pub fn start_f64(&self) -> Option<f64> {
+        let s = self.start.as_deref()?;
+        match s {
+            "true" => Some(1.0),
+            "false" => Some(0.0),
+            _ => s.trim().parse().ok(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CoSimulation {
+    pub model_identifier: String,
+    pub needs_execution_tool: bool,
+    pub can_handle_variable_communication_step_size: bool,
+    pub can_be_instantiated_only_once_per_process: bool,
+    pub can_get_and_set_fmu_state: bool,
+    pub can_serialize_fmu_state: bool,
+    pub can_interpolate_inputs: bool,
+    pub provides_directional_derivative: bool,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unknown {
+    /// 1-based index into the ScalarVariable list.
+    pub index: usize,
+    /// `None`: attribute absent (depends on everything).
+    pub dependencies: Option<Vec<usize>>,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DefaultExperiment {
+    pub start_time: Option<f64>,
+    pub stop_time: Option<f64>,
+    pub step_size: Option<f64>,
+    pub tolerance: Option<f64>,
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelDescription {
+    pub fmi_version: String,
+    pub model_name: String,
+    pub guid: String,
+    pub description: String,
+    pub generation_tool: String,
+    pub co_simulation: Option<CoSimulation>,
+    pub has_model_exchange: bool,
+    /// `<Unit>` name and its base-unit definition (the definition's own name is unused).
+    pub units: Vec<(String, UnitDef)>,
+    /// SimpleType name -> its unit.
+    pub type_units: HashMap<String, String>,
+    pub log_categories: Vec<String>,
+    pub default_experiment: Option<DefaultExperiment>,
+    pub variables: Vec<ScalarVariable>,
+    pub outputs: Vec<Unknown>,
+    pub initial_unknowns: Vec<Unknown>,
+}
+
+impl ModelDescription {
+    pub fn variable(&self, name: &str) -> Option<&ScalarVariable> {
+        self.variables.iter().find(|v| v.name == name)
+    }
+
+    /// The unit of a variable: its own, or its declared type's.
+    pub fn unit_of<'a>(&'a self, v: &'a ScalarVariable) -> Option<&'a str> {
+        v.unit
+            .as_deref()
+            .or_else(|| v.declared_type.as_ref().and_then(|t| self.type_units.get(t)).map(String::as_str))
+    }
+
+    pub fn unit_def(&self, name: &str) -> Option<&UnitDef> {
+        self.units.iter().find(|u| u.0 == name).map(|u| &u.1)
+    }
+
+    /// Up to `n` variable names closest to `name` (for "did you mean" messages).
+    pub fn closest_names(&self, name: &str, n: usize) -> Vec<&str> {
+        let mut scored: Vec<(usize, &str)> =
+            self.variables.iter().map(|v| (edit_distance(name, &v.name), v.name.as_str())).collect();
+        scored.sort();
+        scored.into_iter().take(n).map(|(_, s)| s).collect()
+    }
+}
+
+/// Levenshtein distance, case-insensitive.
+pub fn edit_distance(a: &str, b: &str) -> usize {
+    let a: Vec<char> = a.to_lowercase().chars().collect();
+    let b: Vec<char> = b.to_lowercase().chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for i in 1..=a.len() {
+        let mut cur = vec![i; b.len() + 1];
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            cur[j] = (prev[j] + 1).min(cur[j - 1] + 1).min(prev[j - 1] + cost);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
+fn attrs(e: &BytesStart) -> Result<HashMap<String, String>, String> {
+    let mut m = HashMap::new();
+    for a in e.attributes() {
+        let a = a.map_err(|e| format!("bad attribute: {e}"))?;
+        let key = String::from_utf8_lossy(a.key.as_ref()).into_owned();
+        let val = a.unescape_value().map_err(|e| format!("bad attribute value of '{key}': {e}"))?;
+        m.insert(key, val.into_owned());
+    }
+    Ok(m)
+}
+
+fn num(m: &HashMap<String, String>, key: &str, ctx: &str) -> Result<Option<f64>, String> {
+    match m.get(key) {
+        None => Ok(None),
+        Some(s) => s
+            .trim()
+            .parse()
+            .map(Some)
+            .map_err(|_| format!("{ctx}: attribute {key}=\"{s}\" is not a number")),
+    }
+}
+
+fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {
+    m.get(key).and_then(|s| s.trim().parse().ok()).unwrap_or(0)
+}
+
+fn flag(m: &HashMap<String, String>, key: &str) -> bool {
+    m.get(key).is_some_and(|s| s == "true" || s == "1")
+}
+
+fn unknown(m: &HashMap<String, String>) -> Result<Unknown, String> {
+    let index = m
+        .get("index")
+        .and_then(|s| s.trim().parse().ok())
+        .ok_or("ModelStructure: <Unknown> without a valid index")?;
+    let dependencies = match m.get("dependencies") {
+        None => None,
+        Some(s) => Some(
+            s.split_whitespace()
+                .map(|d| d.parse().map_err(|_| format!("ModelStructure: bad dependency '{d}'")))
+                .collect::<Result<Vec<usize>, String>>()?,
+        ),
+    };
+    Ok(Unknown { index, dependencies })
+}
+
+/// Parse modelDescription.xml text. Errors say what is wrong; the caller adds the file.
+pub fn parse(xml: &str) -> Result<ModelDescription, String> {
+    let mut reader = Reader::from_str(xml);
+    let mut md = ModelDescription::default();
+    let mut stack: Vec<String> = Vec::new();
+    let mut current: Option<ScalarVariable> = None;
+    let mut current_unit: Option<(String, UnitDef)> = None;
+    let mut current_type: Option<String> = None;
+    let mut saw_root = false;
+    loop {
+        let ev = reader.read_event().map_err(|e| format!("XML error at byte {}: {e}", reader.buffer_position()))?;
+        let (e, empty) = match &ev {
+            Event::Start(e) => (e.clone(), false),
+            Event::Empty(e) => (e.clone(), true),
+            Event::End(_) => {
+                let name = stack.pop().unwrap_or_default();
+                match name.as_str() {
+                    "ScalarVariable" => {
+                        if let Some(v) = current.take() {
+                            md.variables.push(v);
+                        }
+                    }
+                    "Unit" => {
+                        if let Some(u) = current_unit.take() {
+                            md.units.push(u);
+                        }
+                    }
+                    "SimpleType" => current_type = None,
+                    _ => {}
+                }
+                continue;
+            }
+            Event::Eof => break,
+            _ => continue,
+        };
+        let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
+        let m = attrs(&e)?;
+        let parent = stack.last().map(String::as_str).unwrap_or("");
+        match (parent, name.as_str()) {
+            ("", "fmiModelDescription") => {
+                saw_root = true;
+                md.fmi_version = m.get("fmiVersion").cloned().unwrap_or_default();
+                md.model_name = m.get("modelName").cloned().unwrap_or_default();
+                md.guid = m.get("guid").cloned().unwrap_or_default();
+                md.description = m.get("description").cloned().unwrap_or_default();
+                md.generation_tool = m.get("generationTool").cloned().unwrap_or_default();
+            }
+            ("", other) => return Err(format!("root element is <{other}>, expected <fmiModelDescription>")),
+            ("fmiModelDescription", "CoSimulation") => {
+                md.co_simulation = Some(CoSimulation {
+                    model_identifier: m
+                        .get("modelIdentifier")
+                        .cloned()
+                        .ok_or("<CoSimulation> has no modelIdentifier")?,
+                    needs_execution_tool: flag(&m, "needsExecutionTool"),
+                    can_handle_variable_communication_step_size: flag(&m, "canHandleVariableCommunicationStepSize"),
+                    can_be_instantiated_only_once_per_process: flag(&m, "canBeInstantiatedOnlyOncePerProcess"),
+                    can_get_and_set_fmu_state: flag(&m, "canGetAndSetFMUstate"),
+                    can_serialize_fmu_state: flag(&m, "canSerializeFMUstate"),
+                    can_interpolate_inputs: flag(&m, "canInterpolateInputs"),
+                    provides_directional_derivative: flag(&m, "providesDirectionalDerivative"),
+                })
+            }
+            ("fmiModelDescription", "ModelExchange") => md.has_model_exchange = true,
+            ("fmiModelDescription", "DefaultExperiment") => {
+                md.default_experiment = Some(DefaultExperiment {
+                    start_time: num(&m, "startTime", "DefaultExperiment")?,
+                    stop_time: num(&m, "stopTime", "DefaultExperiment")?,
+                    step_size: num(&m, "stepSize", "DefaultExperiment")?,
+                    tolerance: num(&m, "tolerance", "DefaultExperiment")?,
+                })
+            }
+            ("UnitDefinitions", "Unit") => {
+                let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
+                current_unit = Some((uname, UnitDef {
+                    name: "",
+                    kg: 0,
+                    m: 0,
+                    s: 0,
+                    a: 0,
+                    k: 0,
+                    mol: 0,
+                    cd: 0,
+                    rad: 0,
+                    factor: 1.0,
+                    offset: 0.0,
+                }));
+                if empty {
+                    md.units.push(current_unit.take().unwrap());
+                }
+            }
+            ("Unit", "BaseUnit") => {
+                if let Some((_, u)) = current_unit.as_mut() {
+                    u.kg = int_attr(&m, "kg");
+                    u.m = int_attr(&m, "m");
+                    u.s = int_attr(&m, "s");
+                    u.a = int_attr(&m, "A");
+                    u.k = int_attr(&m, "K");
+                    u.mol = int_attr(&m, "mol");
+                    u.cd = int_attr(&m, "cd");
+                    u.rad = int_attr(&m, "rad");
+                    u.factor = num(&m, "factor", "BaseUnit")?.unwrap_or(1.0);
+                    u.offset = num(&m, "offset", "BaseUnit")?.unwrap_or(0.0);
+                }
+            }
+            ("TypeDefinitions", "SimpleType") => current_type = m.get("name").cloned(),
+            ("SimpleType", "Real") => {
+                if let (Some(t), Some(u)) = (&current_type, m.get("unit")) {
+                    md.type_units.insert(t.clone(), u.clone());
+                }
+            }
+            ("LogCategories", "Category") => {
+                if let Some(n) = m.get("name") {
+                    md.log_categories.push(n.clone());
+                }
+            }
+            ("ModelVariables", "ScalarVariable") => {
+                let vname = m.get("name").cloned().ok_or("<ScalarVariable> without a name")?;
+                let vr = m
+                    .get("valueReference")
+                    .and_then(|s| s.trim().parse().ok())
+                    .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
+                current = Some(ScalarVariable {
+                    name: vname,
+                    value_reference: vr,
+                    description: m.get("description").cloned().unwrap_or_default(),
+                    causality: m.get("causality").cloned().unwrap_or_else(|| "local".into()),
+                    variability: m.get("variability").cloned().unwrap_or_else(|| "continuous".into()),
+                    initial: m.get("initial").cloned(),
+                    ty: ScalarType::Real,
+                    declared_type: None,
+                    unit: None,
+                    start: None,
+                    min: None,
+                    max: None,
+                    nominal: None,
+                });
+                if empty {
+                    return Err(format!("variable '{}' has no type element", current.unwrap().name));
+                }
+            }
+            ("ScalarVariable", t @ ("Real" | "Integer" | "Boolean" | "String" | "Enumeration")) => {
+                if let Some(v) = current.as_mut() {
+                    let ctx = format!("variable '{}'", v.name);
+                    v.ty = match t {
+                        "Real" => ScalarType::Real,
+                        "Integer" => ScalarType::Integer,
+                        "Boolean" => ScalarType::Boolean,
+                        "String" => ScalarType::String,
+                        _ => ScalarType::Enumeration,
+                    };
+                    v.declared_type = m.get("declaredType").cloned();
+                    v.unit = m.get("unit").cloned();
+                    v.start = m.get("start").cloned();
+                    v.min = num(&m, "min", &ctx)?;
+                    v.max = num(&m, "max", &ctx)?;
+                    v.nominal = num(&m, "nominal", &ctx)?;
+                }
+            }
+            ("Outputs", "Unknown") => md.outputs.push(unknown(&m)?),
+            ("InitialUnknowns", "Unknown") => md.initial_unknowns.push(unknown(&m)?),
+            _ => {}
+        }
+        if !empty {
+            stack.push(name);
+        }
+    }
+    if !saw_root {
+        return Err("no <fmiModelDescription> element".into());
+    }
+    let n = md.variables.len();
+    for u in md.outputs.iter().chain(&md.initial_unknowns) {
+        if u.index == 0 || u.index > n {
+            return Err(format!("ModelStructure refers to variable index {} of {n}", u.index));
+        }
+    }
+    Ok(md)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const XML: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="m" guid="{g}" vendorTool:extra="x" xmlns:vendorTool="urn:v" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="m" canGetAndSetFMUstate="true" vendorFlag="7"><SourceFiles><File name="a.c"/></SourceFiles></CoSimulation>
+  <UnitDefinitions><Unit name="rpm"><BaseUnit s="-1" rad="1" factor="0.10471975511965977"/></Unit><Unit name="1"/></UnitDefinitions>
+  <TypeDefinitions><SimpleType name="Speed"><Real unit="rpm"/></SimpleType></TypeDefinitions>
+  <VendorAnnotations><Tool name="t"><anything/></Tool></VendorAnnotations>
+  <ModelVariables>
+    <ScalarVariable name="n" valueReference="3" causality="output" myAttr="1">
+      <Real declaredType="Speed" min="0" max="2e4"/>
+      <Annotations><Tool name="x"/></Annotations>
+    </ScalarVariable>
+    <ScalarVariable name="p" valueReference="4" causality="parameter" variability="fixed"><Integer start="2"/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure><Outputs><Unknown index="1" dependencies=""/></Outputs><InitialUnknowns><Unknown index="1"/></InitialUnknowns></ModelStructure>
+</fmiModelDescription>"#;
+
+    #[test]
+    fn reads_tolerantly_and_keeps_units() {
+        let md = parse(XML).unwrap();
+        assert_eq!(md.fmi_version, "2.0");
+        assert!(md.co_simulation.as_ref().unwrap().can_get_and_set_fmu_state);
+        assert_eq!(md.variables.len(), 2);
+        let n = md.variable("n").unwrap();
+        assert_eq!(md.unit_of(n), Some("rpm"));
+        assert_eq!(n.max, Some(2e4));
+        let rpm = md.unit_def("rpm").unwrap();
+        assert!((rpm.factor - std::f64::consts::PI / 30.0).abs() < 1e-15);
+        assert_eq!((rpm.s, rpm.rad), (-1, 1));
+        assert_eq!(md.variable("p").unwrap().ty, ScalarType::Integer);
+        assert_eq!(md.outputs[0].dependencies, Some(vec![]));
+        assert_eq!(md.initial_unknowns[0].dependencies, None);
+    }
+
+    #[test]
+    fn bad_files_say_what_is_wrong() {
+        assert!(parse("<foo/>").unwrap_err().contains("expected <fmiModelDescription>"));
+        let bad = XML.replace("valueReference=\"3\"", "valueReference=\"x\"");
+        assert!(parse(&bad).unwrap_err().contains("variable 'n': missing or bad valueReference"));
+        let bad = XML.replace("max=\"2e4\"", "max=\"lots\"");
+        assert!(parse(&bad).unwrap_err().contains("max=\"lots\" is not a number"));
+        assert!(parse("<fmiModelDescription><broken").is_err());
+    }
+
+    #[test]
+    fn suggests_close_names() {
+        let md = parse(XML).unwrap();
+        assert_eq!(md.closest_names("N", 1), vec!["n"]);
+        assert_eq!(edit_distance("omega_rl", "omega_rr"), 1);
+    }
+}

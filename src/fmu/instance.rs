@@ -1,0 +1,311 @@
+//! A safe handle on one FMU instance: every call checked, errors carry the instance name,
+//! the simulation time and the FMU's last log lines.
+
+use super::library::Library;
+use super::logger::{fmi2_logger, log_env, LogEnv, LogSink};
+use super::FmuError;
+use fmu_export::fmi2::*;
+use std::ffi::{c_void, CString};
+use std::path::Path;
+use std::sync::Arc;
+
+extern "C" {
+    fn calloc(n: usize, size: usize) -> *mut c_void;
+    fn free(p: *mut c_void);
+}
+
+unsafe extern "C" fn allocate_memory(n: usize, size: usize) -> *mut c_void {
+    calloc(n, size)
+}
+unsafe extern "C" fn free_memory(p: *mut c_void) {
+    free(p)
+}
+
+/// `file://` URI of a folder, percent-encoded (FMI 2.0 fmuResourceLocation).
+pub fn file_uri(path: &Path) -> String {
+    let mut s = String::from("file://");
+    for b in path.to_string_lossy().bytes() {
+        if b.is_ascii_alphanumeric() || b"/-._~".contains(&b) {
+            s.push(b as char);
+        } else {
+            s.push_str(&format!("%{b:02X}"));
+        }
+    }
+    if !s.ends_with('/') {
+        s.push('/');
+    }
+    s
+}
+
+/// An opaque saved FMU state; free it with [`Instance::free_state`].
+pub struct FmuState(fmi2FMUstate);
+
+unsafe impl Send for FmuState {}
+
+pub struct Instance {
+    lib: Arc<Library>,
+    comp: fmi2Component,
+    pub name: String,
+    /// Simulation time of the last successful step (for error messages).
+    pub time: f64,
+    sink: Box<LogSink>,
+    // The FMU may keep pointers to these until fmi2FreeInstance.
+    _env: Box<LogEnv>,
+    _callbacks: Box<fmi2CallbackFunctions>,
+}
+
+// One instance is used by one thread at a time; FMI 2.0 allows moving it between threads.
+unsafe impl Send for Instance {}
+
+impl Instance {
+    pub fn instantiate(
+        lib: Arc<Library>,
+        name: &str,
+        guid: &str,
+        resource_dir: Option<&Path>,
+        logging_on: bool,
+    ) -> Result<Instance, FmuError> {
+        let sink = Box::new(LogSink::new(name));
+        let env = log_env(&sink);
+        let callbacks = Box::new(fmi2CallbackFunctions {
+            logger: Some(fmi2_logger()),
+            allocateMemory: Some(allocate_memory),
+            freeMemory: Some(free_memory),
+            stepFinished: None,
+            componentEnvironment: &*env as *const LogEnv as *mut c_void,
+        });
+        let c_name = CString::new(name).map_err(|_| FmuError::Instantiate {
+            instance: name.into(),
+            message: "instance name contains a NUL byte".into(),
+        })?;
+        let c_guid = CString::new(guid).unwrap_or_default();
+        let c_res = resource_dir.map(|d| CString::new(file_uri(d)).unwrap_or_default());
+        let comp = unsafe {
+            (lib.api.fmi2Instantiate)(
+                c_name.as_ptr(),
+                fmi2Type::CO_SIMULATION,
+                c_guid.as_ptr(),
+                c_res.as_ref().map_or(std::ptr::null(), |c| c.as_ptr()),
+                &*callbacks,
+                fmi2False,
+                if logging_on { fmi2True } else { fmi2False },
+            )
+        };
+        if comp.is_null() {
+            return Err(FmuError::Instantiate {
+                instance: name.into(),
+                message: format!(
+                    "fmi2Instantiate returned NULL ({}); FMU log: {}",
+                    lib.path.display(),
+                    sink.last_lines().join(" | ")
+                ),
+            });
+        }
+        Ok(Instance {
+            lib,
+            comp,
+            name: name.to_string(),
+            time: 0.0,
+            sink,
+            _env: env,
+            _callbacks: callbacks,
+        })
+    }
+
+    /// The raw component (for tests of FFI edge cases).
+    pub fn raw(&self) -> fmi2Component {
+        self.comp
+    }
+
+    pub fn library(&self) -> &Arc<Library> {
+        &self.lib
+    }
+
+    pub fn last_log_lines(&self) -> Vec<String> {
+        self.sink.last_lines()
+    }
+
+    /// Stop echoing OK-status messages to the `log` crate (they are still kept).
+    pub fn set_echo(&mut self, on: bool) {
+        self.sink.echo = on;
+    }
+
+    #[inline]
+    fn check(&self, function: &'static str, status: fmi2Status) -> Result<(), FmuError> {
+        if status == fmi2Status::OK || status == fmi2Status::WARNING {
+            Ok(())
+        } else {
+            Err(self.call_error(function, status))
+        }
+    }
+
+    #[cold]
+    fn call_error(&self, function: &'static str, status: fmi2Status) -> FmuError {
+        FmuError::Call {
+            instance: self.name.clone(),
+            function,
+            status: status.name(),
+            time: self.time,
+            log: self.sink.last_lines(),
+        }
+    }
+
+    pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Result<(), FmuError> {
+        let c: Vec<CString> = categories.iter().map(|s| CString::new(*s).unwrap_or_default()).collect();
+        let p: Vec<fmi2String> = c.iter().map(|s| s.as_ptr()).collect();
+        let s = unsafe {
+            (self.lib.api.fmi2SetDebugLogging)(self.comp, on as fmi2Boolean, p.len(), p.as_ptr())
+        };
+        self.check("fmi2SetDebugLogging", s)
+    }
+
+    pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+        self.time = start;
+        let s = unsafe {
+            (self.lib.api.fmi2SetupExperiment)(
+                self.comp,
+                fmi2False,
+                0.0,
+                start,
+                stop.is_some() as fmi2Boolean,
+                stop.unwrap_or(0.0),
+            )
+        };
+        self.check("fmi2SetupExperiment", s)
+    }
+
+    pub fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2EnterInitializationMode)(self.comp) };
+        self.check("fmi2EnterInitializationMode", s)
+    }
+
+    pub fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2ExitInitializationMode)(self.comp) };
+        self.check("fmi2ExitInitializationMode", s)
+    }
+
+    pub fn terminate(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2Terminate)(self.comp) };
+        self.check("fmi2Terminate", s)
+    }
+
+    pub fn reset(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2Reset)(self.comp) };
+        self.sink.clear();
+        self.time = 0.0;
+        self.check("fmi2Reset", s)
+    }
+
+    #[inline]
+    pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        debug_assert_eq!(vrs.len(), out.len());
+        let s = unsafe { (self.lib.api.fmi2GetReal)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr()) };
+        self.check("fmi2GetReal", s)
+    }
+
+    #[inline]
+    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        debug_assert_eq!(vrs.len(), values.len());
+        let s = unsafe { (self.lib.api.fmi2SetReal)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        self.check("fmi2SetReal", s)
+    }
+
+    pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2GetInteger)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr()) };
+        self.check("fmi2GetInteger", s)
+    }
+
+    pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2SetInteger)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        self.check("fmi2SetInteger", s)
+    }
+
+    pub fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2GetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr()) };
+        self.check("fmi2GetBoolean", s)
+    }
+
+    pub fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2SetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        self.check("fmi2SetBoolean", s)
+    }
+
+    /// One communication step; on success the instance's time advances.
+    #[inline]
+    pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2DoStep)(self.comp, t, h, fmi2True) };
+        if s == fmi2Status::OK {
+            self.time = t + h;
+            Ok(())
+        } else {
+            self.time = t;
+            self.check("fmi2DoStep", s).map(|_| self.time = t + h)
+        }
+    }
+
+    fn unsupported(&self, what: &'static str) -> FmuError {
+        FmuError::Unsupported { instance: self.name.clone(), what }
+    }
+
+    pub fn get_state(&mut self) -> Result<FmuState, FmuError> {
+        let f = self.lib.api.fmi2GetFMUstate.ok_or_else(|| self.unsupported("fmi2GetFMUstate"))?;
+        let mut st: fmi2FMUstate = std::ptr::null_mut();
+        let s = unsafe { f(self.comp, &mut st) };
+        self.check("fmi2GetFMUstate", s)?;
+        Ok(FmuState(st))
+    }
+
+    /// Save into an existing state (reuses its memory).
+    pub fn update_state(&mut self, state: &mut FmuState) -> Result<(), FmuError> {
+        let f = self.lib.api.fmi2GetFMUstate.ok_or_else(|| self.unsupported("fmi2GetFMUstate"))?;
+        let s = unsafe { f(self.comp, &mut state.0) };
+        self.check("fmi2GetFMUstate", s)
+    }
+
+    pub fn set_state(&mut self, state: &FmuState, time: f64) -> Result<(), FmuError> {
+        let f = self.lib.api.fmi2SetFMUstate.ok_or_else(|| self.unsupported("fmi2SetFMUstate"))?;
+        let s = unsafe { f(self.comp, state.0) };
+        self.time = time;
+        self.check("fmi2SetFMUstate", s)
+    }
+
+    pub fn free_state(&mut self, mut state: FmuState) -> Result<(), FmuError> {
+        let f = self.lib.api.fmi2FreeFMUstate.ok_or_else(|| self.unsupported("fmi2FreeFMUstate"))?;
+        let s = unsafe { f(self.comp, &mut state.0) };
+        self.check("fmi2FreeFMUstate", s)
+    }
+
+    pub fn serialize_state(&mut self, state: &FmuState) -> Result<Vec<u8>, FmuError> {
+        let size_f = self
+            .lib
+            .api
+            .fmi2SerializedFMUstateSize
+            .ok_or_else(|| self.unsupported("fmi2SerializedFMUstateSize"))?;
+        let ser = self.lib.api.fmi2SerializeFMUstate.ok_or_else(|| self.unsupported("fmi2SerializeFMUstate"))?;
+        let mut n = 0usize;
+        let s = unsafe { size_f(self.comp, state.0, &mut n) };
+        self.check("fmi2SerializedFMUstateSize", s)?;
+        let mut buf = vec![0u8; n];
+        let s = unsafe { ser(self.comp, state.0, buf.as_mut_ptr() as *mut fmi2Byte, n) };
+        self.check("fmi2SerializeFMUstate", s)?;
+        Ok(buf)
+    }
+
+    pub fn deserialize_state(&mut self, bytes: &[u8]) -> Result<FmuState, FmuError> {
+        let f = self
+            .lib
+            .api
+            .fmi2DeSerializeFMUstate
+            .ok_or_else(|| self.unsupported("fmi2DeSerializeFMUstate"))?;
+        let mut st: fmi2FMUstate = std::ptr::null_mut();
+        let s = unsafe { f(self.comp, bytes.as_ptr() as *const fmi2Byte, bytes.len(), &mut st) };
+        self.check("fmi2DeSerializeFMUstate", s)?;
+        Ok(FmuState(st))
+    }
+}
+
+impl Drop for Instance {
+    fn drop(&mut self) {
+        unsafe { (self.lib.api.fmi2FreeInstance)(self.comp) };
+    }
+}

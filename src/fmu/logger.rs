@@ -1,0 +1,105 @@
+//! Per-instance logging of FMU messages: formatted by the C shim, forwarded to the `log`
+//! crate with the instance name, and kept (the last lines) for error reports.
+
+use fmu_export::fmi2::{fmi2CallbackLogger, fmi2Status};
+use std::collections::VecDeque;
+use std::ffi::{c_char, c_int, c_void, CStr};
+use std::sync::Mutex;
+
+/// How many of an instance's last log lines an error report carries.
+pub const KEPT_LINES: usize = 20;
+
+extern "C" {
+    fn twinbench_fmi2_logger(
+        env: *mut c_void,
+        instance: *const c_char,
+        status: fmi2Status,
+        category: *const c_char,
+        message: *const c_char,
+        ...
+    );
+}
+
+/// The C shim as the FMI logger callback.
+pub fn fmi2_logger() -> fmi2CallbackLogger {
+    twinbench_fmi2_logger
+}
+
+/// Layout shared with `twinbench_log_env` in logger_shim.c.
+#[repr(C)]
+pub struct LogEnv {
+    sink: unsafe extern "C" fn(*mut c_void, *const c_char, c_int, *const c_char, *const c_char),
+    ctx: *mut c_void,
+}
+
+/// Where one instance's messages go.
+pub struct LogSink {
+    pub instance: String,
+    lines: Mutex<VecDeque<String>>,
+    /// Forward messages with status OK to `log` at debug level only (they can be many).
+    pub echo: bool,
+}
+
+impl LogSink {
+    pub fn new(instance: &str) -> Self {
+        LogSink { instance: instance.to_string(), lines: Mutex::new(VecDeque::new()), echo: true }
+    }
+
+    pub fn push(&self, status: fmi2Status, category: &str, message: &str) {
+        let line = format!("[{}] {category}: {message}", status.name());
+        let level = match status {
+            fmi2Status::OK => log::Level::Debug,
+            fmi2Status::WARNING | fmi2Status::DISCARD => log::Level::Warn,
+            _ => log::Level::Error,
+        };
+        if self.echo {
+            log::log!(target: "fmu", level, "{}: {line}", self.instance);
+        }
+        if let Ok(mut l) = self.lines.lock() {
+            if l.len() == KEPT_LINES {
+                l.pop_front();
+            }
+            l.push_back(line);
+        }
+    }
+
+    /// The last lines logged by the instance.
+    pub fn last_lines(&self) -> Vec<String> {
+        self.lines.lock().map(|l| l.iter().cloned().collect()).unwrap_or_default()
+    }
+
+    pub fn clear(&self) {
+        if let Ok(mut l) = self.lines.lock() {
+            l.clear();
+        }
+    }
+}
+
+unsafe extern "C" fn sink(
+    ctx: *mut c_void,
+    _instance: *const c_char,
+    status: c_int,
+    category: *const c_char,
+    message: *const c_char,
+) {
+    // Never unwind into the FMU's C frames.
+    let _ = std::panic::catch_unwind(|| {
+        if ctx.is_null() {
+            return;
+        }
+        let s = &*(ctx as *const LogSink);
+        let text = |p: *const c_char| {
+            if p.is_null() {
+                String::new()
+            } else {
+                CStr::from_ptr(p).to_string_lossy().into_owned()
+            }
+        };
+        s.push(fmi2Status(status), &text(category), &text(message));
+    });
+}
+
+/// A boxed environment pointing at `sink`; keep both alive as long as the instance.
+pub fn log_env(sink_ref: &LogSink) -> Box<LogEnv> {
+    Box::new(LogEnv { sink, ctx: sink_ref as *const LogSink as *mut c_void })
+}

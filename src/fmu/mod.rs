@@ -1,0 +1,47 @@
+//! FMU import: archives, modelDescription.xml, shared libraries, instances.
+
+pub mod archive;
+pub mod description;
+pub mod instance;
+pub mod library;
+pub mod logger;
+
+pub use archive::{FmuCache, LoadedFmu};
+pub use description::ModelDescription;
+pub use instance::{FmuState, Instance};
+pub use library::Library;
+
+use std::path::PathBuf;
+
+/// Errors of FMU import and calls, each naming the file or instance and what was expected.
+#[derive(Debug, thiserror::Error)]
+pub enum FmuError {
+    #[error("{path}: cannot load shared library: {message}")]
+    Load { path: PathBuf, message: String },
+    #[error("{path}: required FMI 2.0 function {symbol} is not exported")]
+    MissingSymbol { path: PathBuf, symbol: &'static str },
+    #[error("instance '{instance}': {message}")]
+    Instantiate { instance: String, message: String },
+    #[error("instance '{instance}' at t = {time} s: {function} returned {status}{}", format_log(log))]
+    Call {
+        instance: String,
+        function: &'static str,
+        status: &'static str,
+        time: f64,
+        log: Vec<String>,
+    },
+    #[error("instance '{instance}': {what} is not provided by this FMU")]
+    Unsupported { instance: String, what: &'static str },
+    #[error("{path}: {message}")]
+    Archive { path: PathBuf, message: String },
+    #[error("{path}: modelDescription.xml: {message}")]
+    Description { path: PathBuf, message: String },
+}
+
+fn format_log(lines: &[String]) -> String {
+    if lines.is_empty() {
+        String::new()
+    } else {
+        format!("; the FMU's last messages:\n  {}", lines.join("\n  "))
+    }
+}
