@@ -1,0 +1,274 @@
+//! Least-squares fit of a dead time plus a lag to an FRF, and the dyno parameters it gives.
+//!
+//! Models: `G(s) = K e^{−sT_d} / (1 + sT)` (first order, the dyno's default) or
+//! `G(s) = K e^{−sT_d} ω_n² / (s² + 2ζω_n s + ω_n²)` (second order). The residual is the
+//! complex logarithm of the ratio `G(jω)/H(jω)`: its real part is the magnitude error in
+//! nepers, its imaginary part the phase error in radians, so that decades of magnitude and
+//! the phase weigh alike. Each bin is weighted by its coherence; the gain `K` follows in
+//! closed form; the time parameters by a Nelder–Mead search started from a linear fit of
+//! the unwrapped phase.
+
+use crate::error::{AnalysisError, Result};
+use crate::frf::Frf;
+use crate::optim::nelder_mead;
+use rustfft::num_complex::Complex64;
+use serde::Serialize;
+use std::f64::consts::PI;
+
+/// Which lag follows the dead time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LagOrder {
+    First,
+    Second,
+}
+
+/// Fit settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FitConfig {
+    pub order: LagOrder,
+    /// Lowest frequency used, Hz (bins at 0 are always skipped).
+    pub f_min: f64,
+    /// Highest frequency used, Hz (`INFINITY` = up to Nyquist).
+    pub f_max: f64,
+    /// Bins with lower coherence are ignored.
+    pub min_coherence: f64,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        FitConfig {
+            order: LagOrder::First,
+            f_min: 0.0,
+            f_max: f64::INFINITY,
+            min_coherence: 0.8,
+        }
+    }
+}
+
+/// A fitted dead time + lag model.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrfFit {
+    pub order: LagOrder,
+    /// Static gain K.
+    pub gain: f64,
+    /// Dead time T_d, s.
+    pub dead_time: f64,
+    /// First order: time constant T, s.
+    pub time_constant: Option<f64>,
+    /// Second order: natural frequency ω_n, rad/s.
+    pub natural_frequency: Option<f64>,
+    /// Second order: damping ratio ζ.
+    pub damping_ratio: Option<f64>,
+    /// Frequency band actually used, Hz, and number of bins.
+    pub f_lo: f64,
+    pub f_hi: f64,
+    pub bins: usize,
+    /// Weighted RMS of the log residual (≈ relative error).
+    pub rms_residual: f64,
+}
+
+impl FrfFit {
+    /// The model's response at `f` Hz.
+    pub fn response(&self, f: f64) -> Complex64 {
+        let p = match self.order {
+            LagOrder::First => [self.dead_time, self.time_constant.unwrap_or(0.0), 0.0],
+            LagOrder::Second => [
+                self.dead_time,
+                self.natural_frequency.unwrap_or(1.0),
+                self.damping_ratio.unwrap_or(1.0),
+            ],
+        };
+        model(self.order, &p, 2.0 * PI * f) * self.gain
+    }
+
+    /// The dyno FMU's parameters as a system-file snippet for instance `instance`.
+    pub fn parameters_toml(&self, instance: &str) -> String {
+        let mut s = format!(
+            "# dyno loop identified by twinbench identify frf ({} order lag, {:.1}–{:.1} Hz, {} bins)\n[parameters]\n\"{instance}.dead_time\" = {}\n",
+            match self.order {
+                LagOrder::First => "first",
+                LagOrder::Second => "second",
+            },
+            self.f_lo,
+            self.f_hi,
+            self.bins,
+            fmt_param(self.dead_time.max(0.0)),
+        );
+        match self.order {
+            LagOrder::First => {
+                s += &format!(
+                    "\"{instance}.time_constant\" = {}\n",
+                    fmt_param(self.time_constant.unwrap_or(0.0))
+                );
+            }
+            LagOrder::Second => {
+                s += &format!(
+                    "\"{instance}.natural_frequency\" = {}\n\"{instance}.damping_ratio\" = {}\n",
+                    fmt_param(self.natural_frequency.unwrap_or(0.0)),
+                    fmt_param(self.damping_ratio.unwrap_or(0.0))
+                );
+            }
+        }
+        s
+    }
+}
+
+/// Four significant digits, plain decimal where sensible (valid TOML float either way).
+fn fmt_param(v: f64) -> String {
+    if v == 0.0 {
+        return "0.0".into();
+    }
+    let digits = (3 - v.abs().log10().floor() as i32).max(1) as usize;
+    if v.abs() >= 1e-6 && v.abs() < 1e7 {
+        let s = format!("{v:.digits$}");
+        if s.contains('.') {
+            s
+        } else {
+            s + ".0"
+        }
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// `G(jω)/K` for parameters `[T_d, T, _]` (first order) or `[T_d, ω_n, ζ]` (second).
+fn model(order: LagOrder, p: &[f64; 3], w: f64) -> Complex64 {
+    let delay = Complex64::from_polar(1.0, -w * p[0]);
+    let s = Complex64::new(0.0, w);
+    let lag = match order {
+        LagOrder::First => 1.0 / (1.0 + s * p[1]),
+        LagOrder::Second => {
+            let wn = p[1];
+            let z = p[2];
+            wn * wn / (s * s + 2.0 * z * wn * s + wn * wn)
+        }
+    };
+    delay * lag
+}
+
+/// Fit a dead time + lag to an FRF estimate.
+pub fn fit(frf: &Frf, cfg: &FitConfig) -> Result<FrfFit> {
+    let h = frf.h();
+    let sel: Vec<usize> = (0..frf.freq.len())
+        .filter(|&k| {
+            let f = frf.freq[k];
+            f > 0.0
+                && f >= cfg.f_min
+                && f <= cfg.f_max
+                && frf.coherence[k] >= cfg.min_coherence
+                && h[k].norm() > 0.0
+                && h[k].norm().is_finite()
+        })
+        .collect();
+    if sel.len() < 4 {
+        return Err(AnalysisError::Fit(format!(
+            "only {} frequency bins in {}–{} Hz with coherence ≥ {}; need at least 4 (excite more, average longer or lower --min-coherence)",
+            sel.len(),
+            cfg.f_min,
+            cfg.f_max,
+            cfg.min_coherence
+        )));
+    }
+    let w: Vec<f64> = sel.iter().map(|&k| 2.0 * PI * frf.freq[k]).collect();
+    let hs: Vec<Complex64> = sel.iter().map(|&k| h[k]).collect();
+    let wt: Vec<f64> = sel.iter().map(|&k| frf.coherence[k]).collect();
+    let wsum: f64 = wt.iter().sum();
+    // Cost for given time parameters, with the optimal log-gain in closed form.
+    let cost = |order: LagOrder, p: &[f64; 3]| -> (f64, f64) {
+        let r: Vec<Complex64> = w
+            .iter()
+            .zip(&hs)
+            .map(|(&wk, hk)| (model(order, p, wk) / hk).ln())
+            .collect();
+        let ln_k = -r.iter().zip(&wt).map(|(z, q)| z.re * q).sum::<f64>() / wsum;
+        let c = r
+            .iter()
+            .zip(&wt)
+            .map(|(z, q)| q * ((z.re + ln_k).powi(2) + z.im.powi(2)))
+            .sum::<f64>();
+        (c, ln_k)
+    };
+
+    // Start: phase of H (unwrapped over the selected bins) ≈ −ωT_d − atan(ωT).
+    let phase = crate::frf::unwrap(&hs.iter().map(|z| z.arg()).collect::<Vec<_>>());
+    // Start T from the magnitude: 1/|H|² = (1 + ω²T²)/K², linear in ω².
+    let t0 = {
+        let xs: Vec<f64> = w.iter().map(|x| x * x).collect();
+        let ys: Vec<f64> = hs.iter().map(|z| 1.0 / z.norm_sqr()).collect();
+        let (a, b) = linear_fit(&xs, &ys, &wt);
+        if a > 0.0 && b > 0.0 {
+            (b / a).sqrt()
+        } else {
+            1.0 / w[w.len() - 1]
+        }
+    };
+    let td_for = |t: f64| -> f64 {
+        // least squares through the origin of −φ − atan(ωT) against ω
+        let num: f64 = w
+            .iter()
+            .zip(&phase)
+            .zip(&wt)
+            .map(|((wk, ph), q)| q * wk * (-ph - (wk * t).atan()))
+            .sum();
+        let den: f64 = w.iter().zip(&wt).map(|(wk, q)| q * wk * wk).sum();
+        (num / den).max(0.0)
+    };
+    let first = {
+        let start = [td_for(t0), t0.max(1e-9).ln()];
+        let f = |x: &[f64]| cost(LagOrder::First, &[x[0], x[1].exp(), 0.0]).0;
+        let scale = 1.0 / w[w.len() - 1];
+        let (x, _) = nelder_mead(&f, &start, &[scale, 0.3], 4000, 1e-15);
+        let (x, _) = nelder_mead(&f, &x, &[scale * 0.1, 0.05], 4000, 1e-15);
+        [x[0], x[1].exp(), 0.0]
+    };
+    let params = match cfg.order {
+        LagOrder::First => first,
+        LagOrder::Second => {
+            let mut best: Option<([f64; 3], f64)> = None;
+            for zeta in [0.3, 0.7, 1.0, 1.5] {
+                // a second-order lag with the same low-frequency delay as the first-order fit
+                let wn = 2.0 * zeta / first[1].max(1e-9);
+                let start = [first[0], wn.ln(), f64::ln(zeta)];
+                let f = |x: &[f64]| cost(LagOrder::Second, &[x[0], x[1].exp(), x[2].exp()]).0;
+                let scale = 1.0 / w[w.len() - 1];
+                let (x, v) = nelder_mead(&f, &start, &[scale, 0.3, 0.3], 6000, 1e-15);
+                let (x, v2) = nelder_mead(&f, &x, &[scale * 0.1, 0.05, 0.05], 6000, 1e-15);
+                let v = v.min(v2);
+                if best.as_ref().map_or(true, |b| v < b.1) {
+                    best = Some(([x[0], x[1].exp(), x[2].exp()], v));
+                }
+            }
+            best.expect("at least one start").0
+        }
+    };
+    let (c, ln_k) = cost(cfg.order, &params);
+    Ok(FrfFit {
+        order: cfg.order,
+        gain: ln_k.exp(),
+        dead_time: params[0],
+        time_constant: (cfg.order == LagOrder::First).then_some(params[1]),
+        natural_frequency: (cfg.order == LagOrder::Second).then_some(params[1]),
+        damping_ratio: (cfg.order == LagOrder::Second).then_some(params[2]),
+        f_lo: frf.freq[sel[0]],
+        f_hi: frf.freq[sel[sel.len() - 1]],
+        bins: sel.len(),
+        rms_residual: (c / wsum).sqrt(),
+    })
+}
+
+/// Weighted least squares `y = a + b x`; returns `(a, b)`.
+pub(crate) fn linear_fit(x: &[f64], y: &[f64], wt: &[f64]) -> (f64, f64) {
+    let sw: f64 = wt.iter().sum();
+    let mx = x.iter().zip(wt).map(|(a, q)| a * q).sum::<f64>() / sw;
+    let my = y.iter().zip(wt).map(|(a, q)| a * q).sum::<f64>() / sw;
+    let sxx: f64 = x.iter().zip(wt).map(|(a, q)| q * (a - mx) * (a - mx)).sum();
+    let sxy: f64 = x
+        .iter()
+        .zip(y)
+        .zip(wt)
+        .map(|((a, b), q)| q * (a - mx) * (b - my))
+        .sum();
+    let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+    (my - b * mx, b)
+}
