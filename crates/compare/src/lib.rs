@@ -1,1 +1,42 @@
-//! twinbench compare (to be written).
+//! Distance-based comparison of a simulation with a vehicle measurement (paper ch. 4.2,
+//! BENCH.md §4).
+//!
+//! - [`table`]: a column table read from CSV (header of names, optional units row).
+//! - [`measurement`]: the vehicle measurement format, validated.
+//! - [`filter`]: Butterworth low-pass (bilinear transform, prewarped) as second-order
+//!   sections; zero-phase forward-backward filtering with scipy's default odd padding.
+//! - [`resample`]: linearly spaced distance grid and linear interpolation (Fig. 6).
+//! - [`metrics`]: regression slope m, intercept, R², e (Eq. 16), bias, RMS.
+//! - [`compare`]: the pipeline; [`PreparedMeasurement`] holds what depends on the
+//!   measurement only, [`Workspace`] the per-thread buffers.
+//!
+//! ```no_run
+//! use tb_compare::{CompareSettings, PreparedMeasurement, Table, Workspace};
+//! let settings = CompareSettings::default();
+//! let prepared =
+//!     PreparedMeasurement::from_path("data/spielberg_lap.csv", &["Fz_sum", "Fz_rl"], &settings)?;
+//! let mut ws = Workspace::new();
+//! let sim = Table::read_path("result.csv")?;
+//! let cmp = prepared.compare(&sim, &mut ws)?;
+//! println!("e(Fz_sum) = {}", cmp.get("Fz_sum").unwrap().e);
+//! # Ok::<(), tb_compare::Error>(())
+//! ```
+
+pub mod compare;
+pub mod error;
+pub mod filter;
+pub mod measurement;
+pub mod metrics;
+pub mod resample;
+pub mod table;
+
+pub use compare::{
+    compare_files, CompareSettings, Comparison, PreparedMeasurement, SignalComparison, Workspace,
+    DERIVED_SIGNALS,
+};
+pub use error::{Error, Result};
+pub use filter::Butterworth;
+pub use measurement::{DistanceSource, Measurement, REQUIRED_COLUMNS};
+pub use metrics::{error_measure, metrics, Metrics};
+pub use resample::DistanceGrid;
+pub use table::Table;

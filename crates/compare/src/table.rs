@@ -1,0 +1,370 @@
+//! A column table of `f64` read from CSV.
+//!
+//! Format: one header row of column names; optionally a units row right after it (detected:
+//! a row in which no field is a number, where the dimensionless unit `1` and empty fields
+//! are allowed); then one record per line, every field a number. Comma separated; fields
+//! are trimmed and may be wrapped in double quotes (no quoted commas: these are numeric
+//! files); CRLF and a UTF-8 BOM are accepted; blank lines are skipped, and line numbers in
+//! errors count them, so they point at the line an editor shows. `NaN` and `inf` parse (as Rust's `f64` parser
+//! reads them): rejecting them is the measurement's and the comparison's job, which know
+//! which columns matter.
+//!
+//! Columns are looked up by exact name, or else by the part after the last `.`, so that a
+//! signal requested as `Fz_rl` is found as `vehicle.Fz_rl` in a twinbench result file.
+
+use crate::error::{Error, Result};
+use std::io::{BufRead, BufReader, Read};
+use std::path::Path;
+
+/// Column-major table of numbers with the provenance needed for error messages.
+#[derive(Debug, Clone)]
+pub struct Table {
+    source: String,
+    names: Vec<String>,
+    units: Option<Vec<String>>,
+    columns: Vec<Vec<f64>>,
+    /// 1-based line of each record in the file; `None` for an in-memory table.
+    lines: Option<Vec<u64>>,
+}
+
+impl Table {
+    /// An in-memory table (e.g. a simulation result the orchestrator holds). `source` labels
+    /// it in error messages; rows are reported as the line they would have in a CSV file with
+    /// one header row (row index + 2).
+    pub fn from_columns(
+        source: impl Into<String>,
+        names: Vec<String>,
+        columns: Vec<Vec<f64>>,
+    ) -> Result<Self> {
+        let source = source.into();
+        if names.len() != columns.len() {
+            return Err(Error::Settings(format!(
+                "{source}: {} names for {} columns",
+                names.len(),
+                columns.len()
+            )));
+        }
+        let len = columns.first().map_or(0, Vec::len);
+        if let Some((i, c)) = columns.iter().enumerate().find(|(_, c)| c.len() != len) {
+            return Err(Error::Settings(format!(
+                "{source}: column `{}` has {} rows, the first has {len}",
+                names[i],
+                c.len()
+            )));
+        }
+        check_duplicates(&source, &names)?;
+        Ok(Self {
+            source,
+            names,
+            units: None,
+            columns,
+            lines: None,
+        })
+    }
+
+    /// Reads a CSV file.
+    pub fn read_path(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let file = std::fs::File::open(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_reader(std::io::BufReader::new(file), &path.display().to_string())
+    }
+
+    /// Reads CSV from any reader; `source` names it in error messages.
+    pub fn from_reader<R: Read>(reader: R, source: &str) -> Result<Self> {
+        let mut rdr = BufReader::new(reader);
+        let mut line = String::new();
+        let mut lineno: u64 = 0;
+        // The next non-blank line, trimmed of its terminator, and its 1-based number.
+        let mut next_line = |line: &mut String| -> Result<Option<u64>> {
+            loop {
+                line.clear();
+                let n = rdr.read_line(line).map_err(|e| Error::Io {
+                    path: source.into(),
+                    source: e,
+                })?;
+                if n == 0 {
+                    return Ok(None);
+                }
+                lineno += 1;
+                let t = line.trim_end_matches(['\n', '\r']);
+                let t = if lineno == 1 {
+                    t.trim_start_matches('\u{feff}')
+                } else {
+                    t
+                };
+                if !t.trim().is_empty() {
+                    *line = t.to_owned();
+                    return Ok(Some(lineno));
+                }
+            }
+        };
+
+        if next_line(&mut line)?.is_none() {
+            return Err(Error::Empty {
+                file: source.into(),
+                what: "no header row",
+            });
+        }
+        let names: Vec<String> = fields(&line).map(str::to_owned).collect();
+        check_duplicates(source, &names)?;
+        let ncol = names.len();
+        let mut columns: Vec<Vec<f64>> = vec![Vec::new(); ncol];
+        let mut lines = Vec::new();
+        let mut units = None;
+        let mut first = true;
+        while let Some(row) = next_line(&mut line)? {
+            let found = fields(&line).count();
+            if found != ncol {
+                return Err(Error::RaggedRow {
+                    file: source.into(),
+                    row,
+                    expected: ncol,
+                    found,
+                });
+            }
+            if first {
+                first = false;
+                if is_units_row(&line) {
+                    units = Some(fields(&line).map(str::to_owned).collect());
+                    continue;
+                }
+            }
+            for (j, field) in fields(&line).enumerate() {
+                let v: f64 = field.parse().map_err(|_| Error::Malformed {
+                    file: source.into(),
+                    row,
+                    column: names[j].clone(),
+                    value: field.to_owned(),
+                })?;
+                columns[j].push(v);
+            }
+            lines.push(row);
+        }
+        if lines.is_empty() {
+            return Err(Error::Empty {
+                file: source.into(),
+                what: "no data rows after the header",
+            });
+        }
+        Ok(Self {
+            source: source.into(),
+            names,
+            units,
+            columns,
+            lines: Some(lines),
+        })
+    }
+
+    /// The file path or label this table came from.
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// Column names in file order.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The units row, if the file had one.
+    pub fn units(&self) -> Option<&[String]> {
+        self.units.as_deref()
+    }
+
+    /// Number of data rows.
+    pub fn len(&self) -> usize {
+        self.columns.first().map_or(0, Vec::len)
+    }
+
+    /// True when the table has no data rows.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The 1-based line in the file of data row `index` (row index + 2 for in-memory tables).
+    pub fn line_of(&self, index: usize) -> u64 {
+        match &self.lines {
+            Some(l) => l[index],
+            None => index as u64 + 2,
+        }
+    }
+
+    /// Index of a column: the exact name, or else the unique column whose name ends in
+    /// `.name`. `Ok(None)` when absent; an error when several columns match.
+    pub fn find(&self, name: &str) -> Result<Option<usize>> {
+        if let Some(i) = self.names.iter().position(|n| n == name) {
+            return Ok(Some(i));
+        }
+        let mut hits = self.names.iter().enumerate().filter(|(_, n)| {
+            n.len() > name.len() + 1
+                && n.ends_with(name)
+                && n.as_bytes()[n.len() - name.len() - 1] == b'.'
+        });
+        let first = hits.next();
+        match (first, hits.next()) {
+            (None, _) => Ok(None),
+            (Some((i, _)), None) => Ok(Some(i)),
+            (Some(_), Some(_)) => Err(Error::AmbiguousColumn {
+                file: self.source.clone(),
+                column: name.into(),
+                candidates: self
+                    .names
+                    .iter()
+                    .filter(|n| n.ends_with(&format!(".{name}")))
+                    .map(|n| format!("`{n}`"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            }),
+        }
+    }
+
+    /// The column `name` (see [`Table::find`]), if present.
+    pub fn column(&self, name: &str) -> Result<Option<&[f64]>> {
+        Ok(self.find(name)?.map(|i| self.columns[i].as_slice()))
+    }
+
+    /// The column `name`, or a [`Error::MissingColumn`].
+    pub fn require(&self, name: &str) -> Result<&[f64]> {
+        self.require_index(name).map(|i| self.columns[i].as_slice())
+    }
+
+    /// Index of the column `name`, or a [`Error::MissingColumn`].
+    pub fn require_index(&self, name: &str) -> Result<usize> {
+        self.find(name)?.ok_or_else(|| Error::MissingColumn {
+            file: self.source.clone(),
+            column: name.into(),
+            available: self.names.join(", "),
+        })
+    }
+
+    /// Column by index.
+    pub fn column_at(&self, index: usize) -> &[f64] {
+        &self.columns[index]
+    }
+
+    /// Name of the column at `index`.
+    pub fn name_at(&self, index: usize) -> &str {
+        &self.names[index]
+    }
+
+    /// Appends a column (same length as the others).
+    pub fn push_column(&mut self, name: impl Into<String>, values: Vec<f64>) -> Result<()> {
+        let name = name.into();
+        if !self.names.is_empty() && values.len() != self.len() {
+            return Err(Error::Settings(format!(
+                "{}: new column `{name}` has {} rows, the table {}",
+                self.source,
+                values.len(),
+                self.len()
+            )));
+        }
+        if self.names.contains(&name) {
+            return Err(Error::DuplicateColumn {
+                file: self.source.clone(),
+                column: name,
+            });
+        }
+        self.names.push(name);
+        if let Some(u) = &mut self.units {
+            u.push(String::new());
+        }
+        self.columns.push(values);
+        Ok(())
+    }
+
+    /// First non-finite value of column `index`, as an error naming its line.
+    pub fn check_finite(&self, index: usize) -> Result<()> {
+        match self.columns[index].iter().position(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(i) => Err(self.non_finite(index, i)),
+        }
+    }
+
+    pub(crate) fn non_finite(&self, col: usize, row: usize) -> Error {
+        Error::NonFinite {
+            file: self.source.clone(),
+            row: self.line_of(row),
+            column: self.names[col].clone(),
+            value: self.columns[col][row],
+        }
+    }
+}
+
+fn check_duplicates(source: &str, names: &[String]) -> Result<()> {
+    for (i, n) in names.iter().enumerate() {
+        if names[..i].contains(n) {
+            return Err(Error::DuplicateColumn {
+                file: source.into(),
+                column: n.clone(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The comma-separated fields of a line, trimmed, surrounding double quotes removed.
+fn fields(line: &str) -> impl Iterator<Item = &str> {
+    line.split(',').map(|f| {
+        let f = f.trim();
+        f.strip_prefix('"')
+            .and_then(|g| g.strip_suffix('"'))
+            .unwrap_or(f)
+    })
+}
+
+/// A units row: no field parses as a number, except the dimensionless unit `1`; empty
+/// fields allowed; at least one field is not a number.
+fn is_units_row(line: &str) -> bool {
+    let mut any_text = false;
+    for f in fields(line) {
+        if f.is_empty() || f == "1" {
+            continue;
+        }
+        if f.parse::<f64>().is_ok() {
+            return false;
+        }
+        any_text = true;
+    }
+    any_text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(s: &str) -> Result<Table> {
+        Table::from_reader(s.as_bytes(), "t.csv")
+    }
+
+    #[test]
+    fn reads_header_units_and_suffix_lookup() {
+        let t = parse("time,vehicle.Fz_rl,pedal\ns,N,1\n0,1.5,0\n\n0.1,2.5,1\n").unwrap();
+        assert_eq!(t.len(), 2);
+        assert_eq!(t.units().unwrap()[1], "N");
+        assert_eq!(t.require("Fz_rl").unwrap(), &[1.5, 2.5]);
+        assert_eq!(t.line_of(1), 5, "blank line skipped, line numbers kept");
+        assert!(t.column("rl").unwrap().is_none());
+    }
+
+    #[test]
+    fn ambiguous_suffix_is_an_error() {
+        let t = parse("time,a.v,b.v\n0,1,2\n").unwrap();
+        let e = t.find("v").unwrap_err().to_string();
+        assert!(e.contains("ambiguous") && e.contains("`a.v`"), "{e}");
+        assert_eq!(t.find("a.v").unwrap(), Some(1));
+    }
+
+    #[test]
+    fn malformed_field_in_first_row_is_not_taken_for_units() {
+        let e = parse("time,x\n0,1.2.3\n").unwrap_err().to_string();
+        assert!(e.contains("line 2, column `x`: malformed number"), "{e}");
+    }
+
+    #[test]
+    fn ragged_row() {
+        let e = parse("time,x\n0,1\n1\n").unwrap_err().to_string();
+        assert!(e.contains("line 3: expected 2 fields"), "{e}");
+    }
+}
