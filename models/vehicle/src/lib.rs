@@ -1,1 +1,582 @@
-//! twinbench vehicle model (to be written).
+//! twinbench vehicle model: the road-load simulation (RLS) of the bench. Residual vehicle
+//! (point mass with the paper's tyre-load equations, Eq. 11–15), simulated front wheels,
+//! Magic Formula tyres with transient slip, brakes, aero and rolling resistance, and the
+//! track as distance-based data. The rear wheels are on the dynos: their speeds come in,
+//! their load torques go out as the dynos' setpoints.
+
+pub mod physics;
+pub mod track;
+
+use fmu_export::variables::*;
+use fmu_export::{
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter,
+};
+use physics::{soft_sign, wheel_loads, LoadParams, Loads, MagicFormula};
+use std::sync::Arc;
+use track::{Track, TrackPoint};
+
+/// Name of the track file in the FMU's resources.
+pub const TRACK_FILE: &str = "track.csv";
+
+fmu_export::variables! {
+    /// Variables of the vehicle model (names as in BENCH.md and the paper, hence the case).
+    #[allow(non_snake_case)]
+    pub struct VehicleVars {
+        m: Real = 880.0 => parameter(1).unit("kg").range(1.0, 1e5)
+            .describe("Vehicle mass"),
+        g: Real = 9.81 => parameter(2).unit("m/s2").range(0.0, 100.0)
+            .describe("Gravitational acceleration"),
+        x_cog: Real = 0.615 => parameter(3).unit("1").range(0.0, 1.0)
+            .describe("Share of the static weight on the rear axle"),
+        h_cog: Real = 0.345 => parameter(4).unit("m").range(0.0, 5.0)
+            .describe("Height of the centre of gravity"),
+        l: Real = 3.10 => tunable(5).unit("m").range(0.1, 20.0)
+            .describe("Wheelbase in the load-transfer equations (an optimiser may tune it as a virtual geometry)"),
+        b_front: Real = 1.55 => tunable(6).unit("m").range(0.1, 10.0)
+            .describe("Front track width in the load-transfer equations (tunable virtual geometry)"),
+        b_rear: Real = 1.50 => tunable(7).unit("m").range(0.1, 10.0)
+            .describe("Rear track width in the load-transfer equations (tunable virtual geometry)"),
+        x_rc: Real = 0.5 => parameter(8).unit("1").range(0.0, 1.0)
+            .describe("Front axle's share of the lateral load transfer (roll centre)"),
+        A: Real = 1.5 => parameter(9).unit("m2").range(0.01, 50.0)
+            .describe("Frontal area"),
+        c_drag: Real = 0.767 => parameter(10).unit("1").range(0.0, 5.0)
+            .describe("Drag coefficient"),
+        rho_air: Real = 1.18 => parameter(11).unit("kg/m3").range(0.01, 5.0)
+            .describe("Air density"),
+        f_roll: Real = 0.02 => parameter(12).unit("1").range(0.0, 0.5)
+            .describe("Rolling-resistance coefficient (force per unit of total tyre load)"),
+        wheel_radius: Real = 0.345 => parameter(13).unit("m").range(0.05, 2.0)
+            .describe("Dynamic rolling radius of all four wheels"),
+        c_lift_front: Real = 1.653 => tunable(14).unit("1").range(-2.0, 6.0)
+            .describe("Front lift coefficient, paper's sign: positive presses the car down (default is the bench's mis-set initial value)"),
+        c_lift_rear: Real = 2.027 => tunable(15).unit("1").range(-2.0, 6.0)
+            .describe("Rear lift coefficient, paper's sign: positive presses the car down (default is the bench's mis-set initial value)"),
+        chassis_time_constant: Real = 0.05 => tunable(16).unit("s").range(0.001, 5.0)
+            .describe("Time constant of the first-order low-pass on a_x, a_y used in the load equations (the rudimentary chassis)"),
+        tyre_B: Real = 12.0 => parameter(17).unit("1").range(0.1, 100.0)
+            .describe("Magic Formula stiffness factor B"),
+        tyre_C: Real = 1.65 => parameter(18).unit("1").range(1.0, 2.0)
+            .describe("Magic Formula shape factor C (1..2: the curve has a peak)"),
+        tyre_D: Real = 1.45 => parameter(19).unit("1").range(0.05, 3.0)
+            .describe("Magic Formula peak friction coefficient D (force per unit load)"),
+        tyre_E: Real = 0.3 => parameter(20).unit("1").range(-10.0, 1.0)
+            .describe("Magic Formula curvature factor E"),
+        relaxation_length: Real = 0.3 => parameter(21).unit("m").range(0.01, 5.0)
+            .describe("Tyre longitudinal relaxation length: slip lags with time constant relaxation_length/|v|"),
+        v_min: Real = 1.0 => parameter(22).unit("m/s").range(0.01, 50.0)
+            .describe("Lower bound of the speed in the slip denominator (keeps slip finite near standstill)"),
+        brake_force_max: Real = 22000.0 => parameter(23).unit("N").range(0.0, 1e6)
+            .describe("Total brake force at the contact patches at full brake pedal (brake torque = force x wheel_radius)"),
+        brake_balance_front: Real = 0.6 => parameter(24).unit("1").range(0.0, 1.0)
+            .describe("Front axle's share of the brake torque"),
+        brake_speed_threshold: Real = 1.0 => parameter(25).unit("rad/s").range(0.001, 100.0)
+            .describe("Wheel speed over which the brake torque ramps through zero (friction without chatter at standstill)"),
+        front_wheel_inertia: Real = 0.8 => parameter(26).unit("kg.m2").range(0.001, 100.0)
+            .describe("Inertia of each simulated front wheel"),
+        road_stiffness: Real = 150000.0 => parameter(27).unit("N/m").range(0.0, 1e8)
+            .describe("Road excitation gain: load added per metre of road height under the wheel (0 switches the excitation off)"),
+        road_wheelbase: Real = 3.10 => parameter(28).unit("m").range(0.0, 20.0)
+            .describe("Distance the rear wheels run behind the front ones on the road profile (the physical wheelbase, not the tuned l)"),
+        v_start: Real = 52.43 => parameter(29).unit("m/s").range(0.0, 150.0)
+            .describe("Initial speed (the default study is a flying lap)"),
+        s_start: Real = 0.0 => parameter(30).unit("m").range(0.0, 1e7)
+            .describe("Initial position along the track (less than the lap length)"),
+        substep_max: Real = 1e-4 => parameter(31).unit("s").range(1e-6, 0.01)
+            .describe("Largest internal integration step (the step is split into equal sub-steps no longer than this)"),
+
+        omega_rl: Real = 0.0 => input(50).unit("rad/s")
+            .describe("Rear left wheel speed (from the dyno speed sensor)"),
+        omega_rr: Real = 0.0 => input(51).unit("rad/s")
+            .describe("Rear right wheel speed (from the dyno speed sensor)"),
+        brake_pedal: Real = 0.0 => input(52).unit("1").range(0.0, 1.0)
+            .describe("Brake pedal position, 0 released .. 1 full"),
+
+        torque_setpoint_rl: Real = 0.0 => output(100).unit("N.m")
+            .describe("Rear left load torque for the dyno: tyre reaction Fx·r plus brake torque, positive opposes forward wheel rotation"),
+        torque_setpoint_rr: Real = 0.0 => output(101).unit("N.m")
+            .describe("Rear right load torque for the dyno: tyre reaction Fx·r plus brake torque, positive opposes forward wheel rotation"),
+        v: Real = 0.0 => output(102).unit("m/s").describe("Vehicle speed"),
+        s: Real = 0.0 => output(103).unit("m")
+            .describe("Position along the track, wraps to 0 at the lap length"),
+        distance: Real = 0.0 => output(104).unit("m")
+            .describe("Total distance driven since the start (integral of v)"),
+        lap: Integer = 0 => discrete_output(105)
+            .describe("Number of times the start/finish line (s = 0) was crossed forwards"),
+        lap_time: Real = 0.0 => output(106).unit("s")
+            .describe("Duration of the last complete lap (0 before; a start away from s = 0 gives an out-lap that is not timed)"),
+        lap_length: Real = 0.0 => output(107).unit("m")
+            .describe("Length of the lap in the track resource"),
+        a_x: Real = 0.0 => output(108).unit("m/s2")
+            .describe("Longitudinal acceleration after the chassis low-pass (used in the load equations)"),
+        a_y: Real = 0.0 => output(109).unit("m/s2")
+            .describe("Lateral acceleration after the chassis low-pass, positive in a left turn (used in the load equations)"),
+        a_x_raw: Real = 0.0 => output(110).unit("m/s2")
+            .describe("Longitudinal acceleration dv/dt before the low-pass"),
+        a_y_raw: Real = 0.0 => output(111).unit("m/s2")
+            .describe("Lateral acceleration v²·curvature before the low-pass"),
+        Fz_fl: Real = 0.0 => output(112).unit("N").describe("Tyre vertical load, front left"),
+        Fz_fr: Real = 0.0 => output(113).unit("N").describe("Tyre vertical load, front right"),
+        Fz_rl: Real = 0.0 => output(114).unit("N").describe("Tyre vertical load, rear left"),
+        Fz_rr: Real = 0.0 => output(115).unit("N").describe("Tyre vertical load, rear right"),
+        Fz_sum: Real = 0.0 => output(116).unit("N").describe("Sum of the four tyre loads (paper Eq. 17)"),
+        slip_fl: Real = 0.0 => output(117).unit("1").describe("Longitudinal slip (relaxed), front left"),
+        slip_fr: Real = 0.0 => output(118).unit("1").describe("Longitudinal slip (relaxed), front right"),
+        slip_rl: Real = 0.0 => output(119).unit("1").describe("Longitudinal slip (relaxed), rear left"),
+        slip_rr: Real = 0.0 => output(120).unit("1").describe("Longitudinal slip (relaxed), rear right"),
+        Fx_fl: Real = 0.0 => output(121).unit("N").describe("Tyre longitudinal force, front left (positive drives the car)"),
+        Fx_fr: Real = 0.0 => output(122).unit("N").describe("Tyre longitudinal force, front right (positive drives the car)"),
+        Fx_rl: Real = 0.0 => output(123).unit("N").describe("Tyre longitudinal force, rear left (positive drives the car)"),
+        Fx_rr: Real = 0.0 => output(124).unit("N").describe("Tyre longitudinal force, rear right (positive drives the car)"),
+        omega_fl: Real = 0.0 => output(125).unit("rad/s").describe("Simulated front left wheel speed"),
+        omega_fr: Real = 0.0 => output(126).unit("rad/s").describe("Simulated front right wheel speed"),
+        curvature: Real = 0.0 => output(127).unit("1/m").describe("Track curvature at s (positive: left turn)"),
+        grade: Real = 0.0 => output(128).unit("rad").describe("Track grade at s (positive: uphill)"),
+        F_resistance: Real = 0.0 => output(129).unit("N")
+            .describe("Driving resistance: aero drag + rolling resistance + grade force"),
+    }
+}
+
+/// Parameters in the form the equations use.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Params {
+    loads: LoadParams,
+    tyre: MagicFormula,
+    c_drag: f64,
+    f_roll: f64,
+    r: f64,
+    tau_chassis: f64,
+    sigma: f64,
+    v_min: f64,
+    brake_torque_max: f64,
+    brake_front: f64,
+    brake_eps: f64,
+    j_front: f64,
+    road_k: f64,
+    road_wheelbase: f64,
+    substep_max: f64,
+}
+
+impl Params {
+    fn from_vars(x: &VehicleVars) -> Params {
+        Params {
+            loads: LoadParams {
+                m: x.m,
+                g: x.g,
+                x_cog: x.x_cog,
+                h_cog: x.h_cog,
+                l: x.l,
+                b_front: x.b_front,
+                b_rear: x.b_rear,
+                x_rc: x.x_rc,
+                area: x.A,
+                rho_air: x.rho_air,
+                c_lift_front: x.c_lift_front,
+                c_lift_rear: x.c_lift_rear,
+            },
+            tyre: MagicFormula {
+                b: x.tyre_B,
+                c: x.tyre_C,
+                d: x.tyre_D,
+                e: x.tyre_E,
+            },
+            c_drag: x.c_drag,
+            f_roll: x.f_roll,
+            r: x.wheel_radius,
+            tau_chassis: x.chassis_time_constant,
+            sigma: x.relaxation_length,
+            v_min: x.v_min,
+            brake_torque_max: x.brake_force_max * x.wheel_radius,
+            brake_front: x.brake_balance_front,
+            brake_eps: x.brake_speed_threshold,
+            j_front: x.front_wheel_inertia,
+            road_k: x.road_stiffness,
+            road_wheelbase: x.road_wheelbase,
+            substep_max: x.substep_max,
+        }
+    }
+
+    /// Brake torque on one wheel [N·m], opposing its rotation (`front`: a front wheel).
+    fn brake_torque(&self, pedal: f64, front: bool, omega: f64) -> f64 {
+        let share = if front {
+            self.brake_front
+        } else {
+            1.0 - self.brake_front
+        };
+        0.5 * share * pedal * self.brake_torque_max * soft_sign(omega, self.brake_eps)
+    }
+
+    /// Aero drag + rolling resistance + grade force [N], positive opposing forward motion.
+    fn resistance(&self, v: f64, fz_sum: f64, grade: f64) -> f64 {
+        let p = &self.loads;
+        // Rolling resistance ramps through zero at standstill (0.1 m/s), like a brake.
+        0.5 * p.rho_air * self.c_drag * p.area * v * v.abs()
+            + self.f_roll * fz_sum.max(0.0) * soft_sign(v, 0.1)
+            + p.m * p.g * grade.sin()
+    }
+}
+
+/// The dynamic state; `Copy`, so save/restore is a plain copy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct State {
+    v: f64,
+    /// Position in `[0, lap length)`.
+    s: f64,
+    distance: f64,
+    lap: i32,
+    /// Time the current lap started; NaN while on an untimed out-lap.
+    lap_start: f64,
+    lap_time: f64,
+    omega_front: [f64; 2],
+    /// Relaxed slips fl, fr, rl, rr.
+    kappa: [f64; 4],
+    ax: f64,
+    ay: f64,
+    ax_raw: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct Vehicle {
+    track: Arc<Track>,
+    p: Params,
+    st: State,
+    /// Lookup cursors of the front and rear axle on the track (speed only, not results).
+    cursor_front: usize,
+    cursor_rear: usize,
+}
+
+/// Everything the equations derive from the state at one instant.
+struct Forces {
+    at: TrackPoint,
+    loads: Loads,
+    fx: [f64; 4],
+    resistance: f64,
+}
+
+impl Vehicle {
+    /// Loads (Eq. 11–15 plus road excitation) and tyre forces for the current state.
+    fn forces(&mut self) -> Forces {
+        let p = &self.p;
+        let st = &self.st;
+        let at = self.track.at(st.s, &mut self.cursor_front);
+        let rear = self
+            .track
+            .at(st.s - p.road_wheelbase, &mut self.cursor_rear);
+        let mut loads = wheel_loads(&p.loads, st.v, st.ax, st.ay);
+        loads.fl += p.road_k * at.z_left;
+        loads.fr += p.road_k * at.z_right;
+        loads.rl += p.road_k * rear.z_left;
+        loads.rr += p.road_k * rear.z_right;
+        let fz = [loads.fl, loads.fr, loads.rl, loads.rr];
+        let mut fx = [0.0; 4];
+        for i in 0..4 {
+            fx[i] = p.tyre.force(fz[i], st.kappa[i]);
+        }
+        let resistance = p.resistance(st.v, loads.sum(), at.grade);
+        Forces {
+            at,
+            loads,
+            fx,
+            resistance,
+        }
+    }
+
+    /// One explicit sub-step of length `h` starting at time `t`.
+    fn substep(&mut self, t: f64, h: f64, omega_rear: [f64; 2], pedal: f64) {
+        let f = self.forces();
+        let p = self.p;
+        let st = &mut self.st;
+        let a = (f.fx.iter().sum::<f64>() - f.resistance) / p.loads.m;
+        let v_new = st.v + a * h;
+        let mut omega_front = st.omega_front;
+        for (k, w) in omega_front.iter_mut().enumerate() {
+            let tb = p.brake_torque(pedal, true, *w);
+            *w += h * (-p.r * f.fx[k] - tb) / p.j_front;
+        }
+        // Transient slip σ·dκ/dt = (ω·r − v) − max(|v|, v_min)·κ, solved exactly over the
+        // sub-step (inputs frozen): stable however short σ/|v| gets.
+        let speed = v_new.abs().max(p.v_min);
+        let decay = (-speed * h / p.sigma).exp();
+        let omegas = [omega_front[0], omega_front[1], omega_rear[0], omega_rear[1]];
+        for (k, kappa) in st.kappa.iter_mut().enumerate() {
+            let steady = (omegas[k] * p.r - v_new) / speed;
+            *kappa = steady + (*kappa - steady) * decay;
+        }
+        // Chassis low-pass, exact for a signal held over the sub-step.
+        let alpha = 1.0 - (-h / p.tau_chassis).exp();
+        let ay_raw = v_new * v_new * f.at.curvature;
+        st.ax += alpha * (a - st.ax);
+        st.ay += alpha * (ay_raw - st.ay);
+        st.ax_raw = a;
+
+        let ds = 0.5 * (st.v + v_new) * h;
+        st.v = v_new;
+        st.omega_front = omega_front;
+        st.distance += ds;
+        let s_new = st.s + ds;
+        let length = self.track.length();
+        if s_new >= length {
+            // Crossing time interpolated inside the sub-step.
+            let t_cross = t + h * ((length - st.s) / ds).clamp(0.0, 1.0);
+            st.lap += 1;
+            if st.lap_start.is_finite() {
+                st.lap_time = t_cross - st.lap_start;
+            }
+            st.lap_start = t_cross;
+            st.s = self.track.wrap(s_new);
+        } else if s_new < 0.0 {
+            // Rolling backwards over the line: that lap no longer counts, nor is it timed.
+            st.lap -= 1;
+            st.lap_start = f64::NAN;
+            st.s = self.track.wrap(s_new);
+        } else {
+            st.s = s_new;
+        }
+    }
+
+    /// Write every output from the current state (the inputs as held over the last step).
+    fn write_outputs(&mut self, x: &mut VehicleVars) {
+        let f = self.forces();
+        let st = self.st;
+        let r = self.p.r;
+        x.v = st.v;
+        x.s = st.s;
+        x.distance = st.distance;
+        x.lap = st.lap;
+        x.lap_time = st.lap_time;
+        x.lap_length = self.track.length();
+        x.a_x = st.ax;
+        x.a_y = st.ay;
+        x.a_x_raw = st.ax_raw;
+        x.a_y_raw = st.v * st.v * f.at.curvature;
+        x.Fz_fl = f.loads.fl;
+        x.Fz_fr = f.loads.fr;
+        x.Fz_rl = f.loads.rl;
+        x.Fz_rr = f.loads.rr;
+        x.Fz_sum = f.loads.sum();
+        x.slip_fl = st.kappa[0];
+        x.slip_fr = st.kappa[1];
+        x.slip_rl = st.kappa[2];
+        x.slip_rr = st.kappa[3];
+        x.Fx_fl = f.fx[0];
+        x.Fx_fr = f.fx[1];
+        x.Fx_rl = f.fx[2];
+        x.Fx_rr = f.fx[3];
+        x.omega_fl = st.omega_front[0];
+        x.omega_fr = st.omega_front[1];
+        x.curvature = f.at.curvature;
+        x.grade = f.at.grade;
+        x.F_resistance = f.resistance;
+        x.torque_setpoint_rl = r * f.fx[2] + self.p.brake_torque(x.brake_pedal, false, x.omega_rl);
+        x.torque_setpoint_rr = r * f.fx[3] + self.p.brake_torque(x.brake_pedal, false, x.omega_rr);
+    }
+
+    /// The parsed track (for hosts and tests).
+    pub fn track(&self) -> &Track {
+        &self.track
+    }
+}
+
+impl Model for Vehicle {
+    type Vars = VehicleVars;
+    const INFO: ModelInfo = ModelInfo {
+        name: "vehicle",
+        identifier: "vehicle",
+        description: "Road-load simulation of the bench: residual vehicle, tyres (Magic Formula, relaxation length), tyre loads by Eq. 11-15, brakes, aero, track",
+        version: env!("CARGO_PKG_VERSION"),
+        default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 100.0, step_size: 1e-3 },
+        documentation: DOCUMENTATION,
+        resources: &[
+            Resource { name: TRACK_FILE, content: include_bytes!("../resources/track.csv") },
+            Resource { name: "NOTICE", content: include_bytes!("../resources/NOTICE") },
+        ],
+    };
+
+    fn initialize(vars: &mut VehicleVars, ctx: &Context) -> Result<Self, ModelError> {
+        let (path, text) = ctx.read_resource(TRACK_FILE)?;
+        let track = Track::parse(&path.display().to_string(), &text)?;
+        if vars.s_start >= track.length() {
+            return Err(ModelError::new(format!(
+                "s_start = {} m is not less than the lap length {} m of {}",
+                vars.s_start,
+                track.length(),
+                path.display()
+            )));
+        }
+        let p = Params::from_vars(vars);
+        let v0 = vars.v_start;
+        let mut cursor = 0;
+        let at = track.at(vars.s_start, &mut cursor);
+        // A consistent start: constant speed, front wheels rolling free, no slip, the
+        // chassis filter settled on the steady cornering acceleration.
+        let st = State {
+            v: v0,
+            s: vars.s_start,
+            distance: 0.0,
+            lap: 0,
+            lap_start: if vars.s_start == 0.0 {
+                ctx.start_time
+            } else {
+                f64::NAN
+            },
+            lap_time: 0.0,
+            omega_front: [v0 / p.r; 2],
+            kappa: [0.0; 4],
+            ax: 0.0,
+            ay: v0 * v0 * at.curvature,
+            ax_raw: 0.0,
+        };
+        let mut m = Vehicle {
+            track: Arc::new(track),
+            p,
+            st,
+            cursor_front: cursor,
+            cursor_rear: 0,
+        };
+        m.write_outputs(vars);
+        Ok(m)
+    }
+
+    fn do_step(&mut self, vars: &mut VehicleVars, time: f64, step: f64) -> Result<(), ModelError> {
+        let n = (step / self.p.substep_max).ceil().max(1.0);
+        let h = step / n;
+        let omega_rear = [vars.omega_rl, vars.omega_rr];
+        let pedal = vars.brake_pedal;
+        for k in 0..n as usize {
+            self.substep(time + k as f64 * h, h, omega_rear, pedal);
+        }
+        if !(self.st.v.is_finite() && self.st.kappa.iter().all(|k| k.is_finite())) {
+            return Err(ModelError::new(format!(
+                "the vehicle state diverged (v = {}, slips {:?}); check the wheel-speed inputs and substep_max",
+                self.st.v, self.st.kappa
+            )));
+        }
+        self.write_outputs(vars);
+        Ok(())
+    }
+
+    fn parameters_changed(&mut self, vars: &VehicleVars) -> Result<(), ModelError> {
+        self.p = Params::from_vars(vars);
+        Ok(())
+    }
+
+    fn save_state(&self, w: &mut StateWriter) {
+        let st = &self.st;
+        for x in [
+            st.v,
+            st.s,
+            st.distance,
+            st.lap_start,
+            st.lap_time,
+            st.ax,
+            st.ay,
+            st.ax_raw,
+        ] {
+            w.f64(x);
+        }
+        w.i32(st.lap);
+        w.f64s(st.omega_front.into_iter());
+        w.f64s(st.kappa.into_iter());
+        w.u64(self.cursor_front as u64);
+        w.u64(self.cursor_rear as u64);
+    }
+
+    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        let st = &mut self.st;
+        for x in [
+            &mut st.v,
+            &mut st.s,
+            &mut st.distance,
+            &mut st.lap_start,
+            &mut st.lap_time,
+            &mut st.ax,
+            &mut st.ay,
+            &mut st.ax_raw,
+        ] {
+            *x = r.f64()?;
+        }
+        st.lap = r.i32()?;
+        let mut read_array = |out: &mut [f64]| -> Result<(), ModelError> {
+            let n = r.len_prefix(8)?;
+            if n != out.len() {
+                return Err(ModelError::new(format!(
+                    "vehicle state: expected {} values, found {n}",
+                    out.len()
+                )));
+            }
+            for x in out.iter_mut() {
+                *x = r.f64()?;
+            }
+            Ok(())
+        };
+        read_array(&mut st.omega_front)?;
+        read_array(&mut st.kappa)?;
+        let n = self.track.rows();
+        self.cursor_front = (r.u64()? as usize).min(n - 1);
+        self.cursor_rear = (r.u64()? as usize).min(n - 1);
+        Ok(())
+    }
+}
+
+const DOCUMENTATION: &str = r#"
+<h2>Vehicle model (road-load simulation)</h2>
+<p>The residual vehicle of the bench: everything of the car that is not on the bench. The
+rear (driven) wheels turn on the dynos; their speeds <code>omega_rl</code>, <code>omega_rr</code>
+come in, and their load torques go out as <code>torque_setpoint_rl/rr</code> (tyre reaction
+F<sub>x</sub>·r plus brake torque; positive opposes forward wheel rotation, so the dyno computes
+J·dω/dt = shaft_torque − torque_dyno). Axes ISO 8855: x forward, y left.</p>
+
+<h3>Tyre vertical loads (paper Eq. 11–15)</h3>
+<pre>
+Fz_rl = m(½(x_cog·g + a_x·h_cog/l) − (1−x_rc)·a_y·h_cog/b_rear) + F_lift,rear + k_road·z_left(s − l_road)
+Fz_rr = m(½(x_cog·g + a_x·h_cog/l) + (1−x_rc)·a_y·h_cog/b_rear) + F_lift,rear + k_road·z_right(s − l_road)
+Fz_fl = m(½((1−x_cog)·g − a_x·h_cog/l) − x_rc·a_y·h_cog/b_front) + F_lift,front + k_road·z_left(s)
+Fz_fr = m(½((1−x_cog)·g − a_x·h_cog/l) + x_rc·a_y·h_cog/b_front) + F_lift,front + k_road·z_right(s)
+F_lift,front/rear = ¼·c_lift,front/rear·A·rho_air·v²      (per wheel; c_lift &gt; 0 presses down)
+Fz_sum = m·g + ½(c_lift,front + c_lift,rear)·A·rho_air·v²  (Eq. 18, without road excitation)
+</pre>
+<p>a<sub>x</sub>, a<sub>y</sub> are the chassis low-pass outputs: τ·dâ/dt = a − â with
+τ = <code>chassis_time_constant</code>, a<sub>x</sub> = dv/dt and a<sub>y</sub> = v²·κ(s).
+The road excitation k_road·z (k_road = <code>road_stiffness</code>) is a distance-based signal
+from the track; the rear wheels see the profile <code>road_wheelbase</code> later than the front
+ones. The lift coefficients default to the bench's mis-set initial values (1.653, 2.027);
+<code>c_lift_*</code>, <code>l</code>, <code>b_front</code>, <code>b_rear</code> and
+<code>chassis_time_constant</code> are tunable for the optimiser.</p>
+
+<h3>Tyres</h3>
+<pre>
+μ(κ) = D·sin(C·atan(Bκ − E(Bκ − atan Bκ)))        F_x,i = max(Fz_i, 0)·μ(κ_i)
+σ·dκ_i/dt = (ω_i·r − v) − max(|v|, v_min)·κ_i       (relaxation length σ; steady state κ = (ω·r − v)/max(|v|, v_min))
+</pre>
+
+<h3>Longitudinal dynamics and wheels</h3>
+<pre>
+m·dv/dt = Σ F_x,i − ½·rho_air·c_drag·A·v·|v| − f_roll·Σ Fz·sgn(v) − m·g·sin(grade(s))
+J_f·dω_f/dt = −r·F_x,f − T_brake,f                    (front wheels, simulated)
+T_brake = ½·share·brake_pedal·brake_force_max·r·sgn(ω)  (share: brake_balance_front or 1 − it)
+torque_setpoint_r = r·F_x,r + T_brake,r                 (rear wheels, on the dynos)
+</pre>
+<p>sgn ramps linearly over ±<code>brake_speed_threshold</code> (brakes) and ±0.1 m/s (rolling
+resistance): friction without chatter at standstill. Tyre loads below zero (a wheel lifting)
+give no tyre force; the load outputs still show the equations' value.</p>
+
+<h3>Track and laps</h3>
+<p>The track is the resource <code>track.csv</code> (columns <code>s, curvature, grade,
+z_road_left, z_road_right</code>; s starts at 0 and increases; the lap length is the last s plus
+one spacing, and the last interval interpolates back to the first row). Values are linear
+interpolations in s. <code>s</code> wraps to 0 at the lap length; <code>distance</code> is the
+integral of v; <code>lap</code> counts forward crossings of s = 0; <code>lap_time</code> is the
+duration of the last complete lap (crossing time interpolated within the sub-step). A start
+at <code>s_start</code> ≠ 0 makes the first lap an untimed out-lap.</p>
+
+<h3>Numerics and start</h3>
+<p>Each step is split into equal sub-steps of at most <code>substep_max</code> (0.1 ms by
+default: ten per 1 ms macro step). Forces are explicit; the slip relaxation and the chassis
+filter are solved exactly over each sub-step. The inputs are held over the step, and the
+outputs are those of the state at its end (no direct feed-through: the relaxation length
+breaks the wheel-speed → torque loop). The run starts at <code>v_start</code>, front wheels at
+v/r, slips zero, â<sub>x</sub> = 0 and â<sub>y</sub> = v²·κ(s_start).</p>
+"#;
+
+#[cfg(feature = "fmu")]
+fmu_export::export_fmu!(crate::Vehicle);

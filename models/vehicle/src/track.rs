@@ -1,0 +1,236 @@
+//! The track: distance-based curvature, grade and road heights, read from a CSV resource.
+
+use fmu_export::ModelError;
+
+/// Columns the track file must have (in any order; extra columns are ignored).
+pub const COLUMNS: [&str; 5] = ["s", "curvature", "grade", "z_road_left", "z_road_right"];
+
+/// One interpolated track sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TrackPoint {
+    pub curvature: f64,
+    pub grade: f64,
+    pub z_left: f64,
+    pub z_right: f64,
+}
+
+/// A closed track over `[0, length)`: rows at increasing `s`, the lap length is the last `s`
+/// plus the last spacing, and the last interval interpolates back to the first row.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Track {
+    s: Vec<f64>,
+    rows: Vec<TrackPoint>,
+    length: f64,
+}
+
+impl Track {
+    /// Parse the CSV text of `file` (the name is only used in error messages).
+    pub fn parse(file: &str, text: &str) -> Result<Track, ModelError> {
+        let err = |line: usize, msg: String| ModelError::new(format!("{file}: row {line}: {msg}"));
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| (i + 1, l.trim()))
+            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+        let (hline, header) = lines.next().ok_or_else(|| {
+            ModelError::new(format!("{file}: empty track file (expected a header row)"))
+        })?;
+        let names: Vec<&str> = header.split(',').map(str::trim).collect();
+        let mut col = [0usize; 5];
+        for (k, want) in COLUMNS.iter().enumerate() {
+            col[k] = names.iter().position(|n| n == want).ok_or_else(|| {
+                err(
+                    hline,
+                    format!(
+                        "missing column '{want}' in the header (need {})",
+                        COLUMNS.join(", ")
+                    ),
+                )
+            })?;
+        }
+        let mut s = Vec::new();
+        let mut rows = Vec::new();
+        let mut fields = Vec::with_capacity(names.len());
+        for (line, l) in lines {
+            fields.clear();
+            fields.extend(l.split(',').map(str::trim));
+            if fields.len() != names.len() {
+                return Err(err(
+                    line,
+                    format!("{} fields, the header has {}", fields.len(), names.len()),
+                ));
+            }
+            let mut x = [0.0; 5];
+            for k in 0..5 {
+                let f = fields[col[k]];
+                x[k] = f.parse::<f64>().map_err(|_| {
+                    err(
+                        line,
+                        format!("column '{}': '{f}' is not a number", COLUMNS[k]),
+                    )
+                })?;
+                if !x[k].is_finite() {
+                    return Err(err(
+                        line,
+                        format!("column '{}': {f} is not finite", COLUMNS[k]),
+                    ));
+                }
+            }
+            if let Some(&prev) = s.last() {
+                if !(x[0] > prev) {
+                    return Err(err(
+                        line,
+                        format!("s = {} does not increase (previous row s = {prev})", x[0]),
+                    ));
+                }
+            } else if x[0] != 0.0 {
+                return Err(err(
+                    line,
+                    format!("the first row must be at s = 0, found {}", x[0]),
+                ));
+            }
+            s.push(x[0]);
+            rows.push(TrackPoint {
+                curvature: x[1],
+                grade: x[2],
+                z_left: x[3],
+                z_right: x[4],
+            });
+        }
+        if s.len() < 2 {
+            return Err(ModelError::new(format!(
+                "{file}: needs at least two data rows, found {}",
+                s.len()
+            )));
+        }
+        let n = s.len();
+        let length = s[n - 1] + (s[n - 1] - s[n - 2]);
+        Ok(Track { s, rows, length })
+    }
+
+    /// Number of data rows.
+    pub fn rows(&self) -> usize {
+        self.s.len()
+    }
+
+    pub fn length(&self) -> f64 {
+        self.length
+    }
+
+    /// Map any distance into `[0, length)`.
+    pub fn wrap(&self, s: f64) -> f64 {
+        let w = s.rem_euclid(self.length);
+        // rem_euclid can round up to exactly `length`.
+        if w >= self.length {
+            0.0
+        } else {
+            w
+        }
+    }
+
+    /// Linear interpolation at `s` (any value; wrapped). `cursor` is the row index of the last
+    /// lookup: positions move little between calls, so walking from it is O(1) and allocation-free.
+    pub fn at(&self, s: f64, cursor: &mut usize) -> TrackPoint {
+        let s = self.wrap(s);
+        let n = self.s.len();
+        let mut i = (*cursor).min(n - 1);
+        // Far jumps (wrap, restore): bisect instead of walking.
+        if (self.s[i] - s).abs() > 50.0 * (self.length / n as f64) {
+            i = self.s.partition_point(|&x| x <= s).saturating_sub(1);
+        }
+        while i + 1 < n && self.s[i + 1] <= s {
+            i += 1;
+        }
+        while i > 0 && self.s[i] > s {
+            i -= 1;
+        }
+        *cursor = i;
+        let (s1, j) = if i + 1 < n {
+            (self.s[i + 1], i + 1)
+        } else {
+            (self.length, 0)
+        };
+        let t = (s - self.s[i]) / (s1 - self.s[i]);
+        let (a, b) = (&self.rows[i], &self.rows[j]);
+        let lerp = |x: f64, y: f64| x + t * (y - x);
+        TrackPoint {
+            curvature: lerp(a.curvature, b.curvature),
+            grade: lerp(a.grade, b.grade),
+            z_left: lerp(a.z_left, b.z_left),
+            z_right: lerp(a.z_right, b.z_right),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str =
+        "s,curvature,grade,z_road_left,z_road_right\n0,0.01,0,0,0\n1,0.02,0,0.1,0\n2,0.03,0,0,0\n";
+
+    #[test]
+    fn interpolates_and_wraps() {
+        let t = Track::parse("t.csv", GOOD).unwrap();
+        assert_eq!(t.length(), 3.0);
+        let mut c = 0;
+        assert!((t.at(0.5, &mut c).curvature - 0.015).abs() < 1e-15);
+        // The last interval runs back to row 0.
+        assert!((t.at(2.5, &mut c).curvature - 0.02).abs() < 1e-15);
+        assert!((t.at(3.5, &mut c).curvature - 0.015).abs() < 1e-15);
+        assert!((t.at(-0.5, &mut c).curvature - 0.02).abs() < 1e-15);
+        assert!((t.at(1.0, &mut c).z_left - 0.1).abs() < 1e-15);
+    }
+
+    #[test]
+    fn cursor_does_not_change_results() {
+        let t = Track::parse("t.csv", GOOD).unwrap();
+        for s in [0.0, 0.3, 1.7, 2.9, 1.1, 0.2] {
+            let mut c0 = 0;
+            let mut c2 = 2;
+            assert_eq!(t.at(s, &mut c0), t.at(s, &mut c2));
+        }
+    }
+
+    #[test]
+    fn bad_files_name_file_and_row() {
+        let cases = [
+            (
+                "s,curvature,grade,z_road_left\n0,0,0,0\n1,0,0,0\n",
+                "row 1: missing column 'z_road_right'",
+            ),
+            (
+                "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,0,0,0,0\n1,0,0,0,0\n",
+                "row 4: s = 1 does not increase",
+            ),
+            (
+                "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,NaN,0,0,0\n2,0,0,0,0\n",
+                "row 3: column 'curvature': NaN is not finite",
+            ),
+            (
+                "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,x,0,0,0\n",
+                "row 3: column 'curvature': 'x' is not a number",
+            ),
+            (
+                "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,0,0,0\n",
+                "row 3: 4 fields",
+            ),
+            (
+                "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n",
+                "at least two data rows",
+            ),
+        ];
+        for (text, want) in cases {
+            let e = Track::parse("bad.csv", text).unwrap_err().0;
+            assert!(e.starts_with("bad.csv: "), "{e}");
+            assert!(e.contains(want), "{e} should contain {want}");
+        }
+    }
+
+    #[test]
+    fn bundled_track_parses() {
+        let text = std::str::from_utf8(include_bytes!("../resources/track.csv")).unwrap();
+        let t = Track::parse("track.csv", text).unwrap();
+        assert!((t.length() - 4285.0).abs() < 1e-9);
+    }
+}

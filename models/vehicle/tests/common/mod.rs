@@ -1,0 +1,82 @@
+//! Helpers shared by the vehicle tests: runtimes, temporary tracks, a capturing logger.
+#![allow(dead_code)]
+
+use fmu_export::fmi2::fmi2Status;
+use fmu_export::{Logger, Model, Runtime, Value};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+/// Keeps every message, so tests can check what an error names.
+#[derive(Clone, Default)]
+pub struct Capture(pub Arc<Mutex<Vec<String>>>);
+
+impl Logger for Capture {
+    fn log(&self, _status: fmi2Status, _category: &str, message: &str) {
+        self.0.lock().unwrap().push(message.to_string());
+    }
+}
+
+impl Capture {
+    pub fn text(&self) -> String {
+        self.0.lock().unwrap().join("\n")
+    }
+}
+
+pub fn bundled_resources() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("resources")
+}
+
+/// A resource folder holding `track.csv` with `text`, unique per test.
+pub fn temp_resources(tag: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("tb-vehicle-{}-{tag}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("track.csv"), text).unwrap();
+    dir
+}
+
+/// A closed track of `length` m with constant curvature, flat, no road excitation.
+pub fn uniform_track(length: f64, curvature: f64) -> String {
+    let mut t = String::from("s,curvature,grade,z_road_left,z_road_right\n");
+    let n = (length / 0.5).round() as usize;
+    for i in 0..n {
+        t.push_str(&format!("{},{curvature},0,0,0\n", i as f64 * 0.5));
+    }
+    t
+}
+
+pub fn runtime<M: Model>(
+    resources: Option<PathBuf>,
+    params: &[(&str, Value)],
+) -> (Runtime<M>, Capture) {
+    let cap = Capture::default();
+    let mut rt = Runtime::<M>::new("test", resources, Box::new(cap.clone()), true);
+    for (name, v) in params {
+        assert_eq!(
+            rt.set_by_name(name, *v),
+            fmi2Status::OK,
+            "set {name}: {}",
+            cap.text()
+        );
+    }
+    assert_eq!(rt.setup_experiment(0.0, None), fmi2Status::OK);
+    assert_eq!(rt.enter_initialization_mode(), fmi2Status::OK);
+    (rt, cap)
+}
+
+pub fn get<M: Model>(rt: &mut Runtime<M>, name: &str) -> f64 {
+    rt.get_by_name(name)
+        .unwrap_or_else(|| panic!("cannot read {name}"))
+        .as_f64()
+}
+
+pub fn set<M: Model>(rt: &mut Runtime<M>, name: &str, x: f64) {
+    assert_eq!(
+        rt.set_by_name(name, Value::Real(x)),
+        fmi2Status::OK,
+        "set {name} = {x}"
+    );
+}
+
+pub fn r(x: f64) -> Value {
+    Value::Real(x)
+}

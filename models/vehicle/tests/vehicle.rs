@@ -1,0 +1,448 @@
+//! Acceptance tests of the vehicle model (issue 3). Each states its tolerance.
+
+mod common;
+
+use common::*;
+use fmu_export::fmi2::fmi2Status;
+use fmu_export::Value;
+use vehicle::physics::{wheel_loads, LoadParams, MagicFormula};
+use vehicle::{Vehicle, VehicleVars};
+
+const DT: f64 = 1e-3;
+
+fn nominal() -> LoadParams {
+    LoadParams {
+        m: 880.0,
+        g: 9.81,
+        x_cog: 0.615,
+        h_cog: 0.345,
+        l: 3.10,
+        b_front: 1.55,
+        b_rear: 1.50,
+        x_rc: 0.5,
+        area: 1.5,
+        rho_air: 1.18,
+        c_lift_front: 1.653,
+        c_lift_rear: 2.027,
+    }
+}
+
+fn eq18(p: &LoadParams, v: f64) -> f64 {
+    p.m * p.g + 0.5 * (p.c_lift_front + p.c_lift_rear) * p.area * p.rho_air * v * v
+}
+
+#[test]
+fn table_is_consistent() {
+    fmu_export::description::validate_table::<VehicleVars>().unwrap();
+}
+
+/// Eq. 18 at constant v, a_x = a_y = 0: relative error ≤ 1e-9.
+#[test]
+fn fz_sum_follows_eq18() {
+    let p = nominal();
+    for v in [0.0, 5.0, 20.0, 52.4, 60.0, 90.0] {
+        let sum = wheel_loads(&p, v, 0.0, 0.0).sum();
+        assert!(
+            (sum / eq18(&p, v) - 1.0).abs() < 1e-9,
+            "v {v}: {sum} vs {}",
+            eq18(&p, v)
+        );
+    }
+}
+
+/// Eq. 18 in the running model on the Spielberg track (road excitation off), every 1 ms step
+/// over 15 s of coasting into the first corners: relative error ≤ 1e-9.
+#[test]
+fn fz_sum_follows_eq18_in_the_running_model() {
+    let (mut rt, _) = runtime::<Vehicle>(Some(bundled_resources()), &[("road_stiffness", r(0.0))]);
+    let p = nominal();
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    let mut worst: f64 = 0.0;
+    let mut max_ay: f64 = 0.0;
+    for k in 0..15_000 {
+        let v = get(&mut rt, "v");
+        let w = v / 0.345;
+        set(&mut rt, "omega_rl", w);
+        set(&mut rt, "omega_rr", w);
+        assert_eq!(rt.do_step(k as f64 * DT, DT), fmi2Status::OK);
+        let (v, sum) = (get(&mut rt, "v"), get(&mut rt, "Fz_sum"));
+        worst = worst.max((sum / eq18(&p, v) - 1.0).abs());
+        max_ay = max_ay.max(get(&mut rt, "a_y").abs());
+    }
+    println!("Eq. 18 in the model: worst relative error {worst:.2e}, |a_y| up to {max_ay:.1} m/s2");
+    assert!(worst < 1e-9);
+    assert!(max_ay > 5.0, "the run should include corners");
+}
+
+/// At standstill the axle loads split by x_cog: exact to 1e-12 relative.
+#[test]
+fn static_axle_loads_follow_x_cog() {
+    for x_cog in [0.3, 0.5, 0.615, 0.8] {
+        let p = LoadParams { x_cog, ..nominal() };
+        let f = wheel_loads(&p, 0.0, 0.0, 0.0);
+        let w = p.m * p.g;
+        assert!(((f.rl + f.rr) / (x_cog * w) - 1.0).abs() < 1e-12);
+        assert!(((f.fl + f.fr) / ((1.0 - x_cog) * w) - 1.0).abs() < 1e-12);
+        assert_eq!(f.rl, f.rr);
+        assert_eq!(f.fl, f.fr);
+    }
+}
+
+/// Steady left turn: the right wheels gain exactly what the left lose (1e-9 N), front and rear
+/// moments split x_rc : 1 − x_rc (1e-12 relative).
+#[test]
+fn left_turn_transfers_load_left_to_right_split_by_x_rc() {
+    for x_rc in [0.3, 0.5, 0.7] {
+        let p = LoadParams { x_rc, ..nominal() };
+        let (v, a_y) = (40.0, 15.0);
+        let straight = wheel_loads(&p, v, 0.0, 0.0);
+        let turn = wheel_loads(&p, v, 0.0, a_y);
+        let gain_right = (turn.fr - straight.fr) + (turn.rr - straight.rr);
+        let loss_left = (straight.fl - turn.fl) + (straight.rl - turn.rl);
+        assert!(gain_right > 0.0);
+        assert!((gain_right - loss_left).abs() < 1e-9);
+        let moment = p.m * a_y * p.h_cog;
+        let front = (turn.fr - straight.fr) * p.b_front / moment;
+        let rear = (turn.rr - straight.rr) * p.b_rear / moment;
+        assert!((front / x_rc - 1.0).abs() < 1e-12, "front share {front}");
+        assert!(
+            (rear / (1.0 - x_rc) - 1.0).abs() < 1e-12,
+            "rear share {rear}"
+        );
+        assert!((turn.fl - straight.fl + turn.fr - straight.fr).abs() < 1e-9);
+    }
+}
+
+/// The running model on a constant left-hand radius (100 m): a_y settles to v²κ (0.5%) and
+/// the left/right transfer matches the filtered a_y exactly (1e-9 relative).
+#[test]
+fn steady_left_turn_in_the_running_model() {
+    let dir = temp_resources("turn", &uniform_track(1000.0, 0.01));
+    let (mut rt, _) = runtime::<Vehicle>(Some(dir), &[("v_start", r(30.0))]);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    for k in 0..1000 {
+        let w = get(&mut rt, "v") / 0.345;
+        set(&mut rt, "omega_rl", w);
+        set(&mut rt, "omega_rr", w);
+        assert_eq!(rt.do_step(k as f64 * DT, DT), fmi2Status::OK);
+    }
+    let p = nominal();
+    let (v, a_y) = (get(&mut rt, "v"), get(&mut rt, "a_y"));
+    assert!(
+        (a_y / (v * v * 0.01) - 1.0).abs() < 5e-3,
+        "a_y {a_y} vs {}",
+        v * v * 0.01
+    );
+    let front = 0.5 * (get(&mut rt, "Fz_fr") - get(&mut rt, "Fz_fl"));
+    let rear = 0.5 * (get(&mut rt, "Fz_rr") - get(&mut rt, "Fz_rl"));
+    let want_front = p.m * p.x_rc * a_y * p.h_cog / p.b_front;
+    let want_rear = p.m * (1.0 - p.x_rc) * a_y * p.h_cog / p.b_rear;
+    assert!((front / want_front - 1.0).abs() < 1e-9);
+    assert!((rear / want_rear - 1.0).abs() < 1e-9);
+}
+
+/// Magic Formula: zero at zero slip (exact), odd (exact), peak at the analytic slip
+/// (1e-7) with the value D·Fz (1e-12 relative).
+#[test]
+fn tyre_force_is_odd_and_peaks_where_the_magic_formula_says() {
+    let mf = MagicFormula {
+        b: 12.0,
+        c: 1.65,
+        d: 1.45,
+        e: 0.3,
+    };
+    let fz = 4000.0;
+    assert_eq!(mf.force(fz, 0.0), 0.0);
+    for i in 1..=2000 {
+        let k = i as f64 * 5e-4;
+        assert_eq!(mf.force(fz, -k), -mf.force(fz, k), "odd at {k}");
+    }
+    // Analytic peak: C·atan(x) = π/2 with x = Bκ − E(Bκ − atan Bκ), solved by bisection.
+    let target = (std::f64::consts::FRAC_PI_2 / mf.c).tan();
+    let (mut lo, mut hi) = (0.0, 1.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        let bk: f64 = mf.b * mid;
+        if bk - mf.e * (bk - bk.atan()) < target {
+            lo = mid
+        } else {
+            hi = mid
+        }
+    }
+    let k_peak = 0.5 * (lo + hi);
+    // Numeric maximum of the model's force by golden-section search.
+    let (mut a, mut b) = (0.0, 1.0);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..200 {
+        let (x1, x2) = (b - g * (b - a), a + g * (b - a));
+        if mf.force(fz, x1) > mf.force(fz, x2) {
+            b = x2
+        } else {
+            a = x1
+        }
+    }
+    let k_num = 0.5 * (a + b);
+    println!("tyre peak: analytic slip {k_peak:.6}, numeric {k_num:.6}");
+    assert!((k_num - k_peak).abs() < 1e-7);
+    assert!((mf.force(fz, k_peak) / (mf.d * fz) - 1.0).abs() < 1e-12);
+    assert_eq!(mf.force(-100.0, 0.1), 0.0, "no force off the ground");
+}
+
+/// Analytic coast-down deceleration: (drag + rolling resistance) / (m + 2·J_front/r²); the
+/// front wheels' rotating inertia is part of the model, the rear wheels roll free on the plant.
+fn coast_decel(v: f64) -> f64 {
+    let p = nominal();
+    let drag = 0.5 * p.rho_air * 0.767 * p.area * v * v;
+    let roll = 0.02 * eq18(&p, v);
+    (drag + roll) / (p.m + 2.0 * 0.8 / (0.345 * 0.345))
+}
+
+/// Coast-down from 50 m/s on a straight, flat track with free-rolling rear wheels:
+/// deceleration within 1% of the analytic value at every step after 0.2 s, and the speed
+/// after 20 s within 1% of the integrated analytic curve.
+#[test]
+fn coast_down_matches_drag_and_rolling_resistance() {
+    let dir = temp_resources("coast", &uniform_track(2000.0, 0.0));
+    let (mut rt, _) = runtime::<Vehicle>(Some(dir), &[("v_start", r(50.0))]);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    let mut worst: f64 = 0.0;
+    let mut v_prev = get(&mut rt, "v");
+    let steps = 20_000;
+    for k in 0..steps {
+        // Free-rolling rear wheels: speed of the car at the middle of the coming step.
+        let v = get(&mut rt, "v");
+        let a = get(&mut rt, "a_x_raw");
+        let w = (v + 0.5 * a * DT) / 0.345;
+        set(&mut rt, "omega_rl", w);
+        set(&mut rt, "omega_rr", w);
+        assert_eq!(rt.do_step(k as f64 * DT, DT), fmi2Status::OK);
+        let v_now = get(&mut rt, "v");
+        if k >= 200 {
+            let decel = (v_prev - v_now) / DT;
+            let want = coast_decel(0.5 * (v_prev + v_now));
+            worst = worst.max((decel / want - 1.0).abs());
+        }
+        v_prev = v_now;
+    }
+    // Analytic curve by RK4 at 1 ms.
+    let mut v = 50.0;
+    for _ in 0..steps {
+        let k1 = -coast_decel(v);
+        let k2 = -coast_decel(v + 0.5 * DT * k1);
+        let k3 = -coast_decel(v + 0.5 * DT * k2);
+        let k4 = -coast_decel(v + DT * k3);
+        v += DT / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+    }
+    let v_model = get(&mut rt, "v");
+    println!(
+        "coast-down: worst deceleration error {:.3}%, v(20 s) model {v_model:.4} vs analytic {v:.4} m/s ({:.3}%)",
+        worst * 100.0,
+        (v_model / v - 1.0) * 100.0
+    );
+    assert!(worst < 0.01);
+    assert!((v_model / v - 1.0).abs() < 0.01);
+}
+
+/// Laps on a 100 m track from 50 m/s: s wraps, distance is monotonic, lap counts, and
+/// lap_time equals the time between the distance crossings of k·100 m (1e-4 s).
+#[test]
+fn laps_wrap_count_and_time() {
+    let dir = temp_resources("laps", &uniform_track(100.0, 0.0));
+    let (mut rt, _) = runtime::<Vehicle>(Some(dir), &[("v_start", r(50.0))]);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    assert_eq!(get(&mut rt, "lap_length"), 100.0);
+    let mut crossings = vec![0.0];
+    let mut last_d = 0.0;
+    let mut lap_times = Vec::new();
+    for k in 0..15_000 {
+        let w = get(&mut rt, "v") / 0.345;
+        set(&mut rt, "omega_rl", w);
+        set(&mut rt, "omega_rr", w);
+        assert_eq!(rt.do_step(k as f64 * DT, DT), fmi2Status::OK);
+        let d = get(&mut rt, "distance");
+        let s = get(&mut rt, "s");
+        assert!(d >= last_d && (0.0..100.0).contains(&s));
+        assert!((d - s - 100.0 * get(&mut rt, "lap")).abs() < 1e-6);
+        let n = (d / 100.0).floor();
+        if n > (last_d / 100.0).floor() {
+            let t0 = k as f64 * DT;
+            crossings.push(t0 + DT * (n * 100.0 - last_d) / (d - last_d));
+            lap_times.push(get(&mut rt, "lap_time"));
+        }
+        last_d = d;
+    }
+    let laps = rt.get_by_name("lap").unwrap();
+    assert_eq!(laps, Value::Integer(lap_times.len() as i32));
+    assert!(lap_times.len() >= 5);
+    for (i, lt) in lap_times.iter().enumerate() {
+        let want = crossings[i + 1] - crossings[i];
+        assert!((lt - want).abs() < 1e-4, "lap {i}: {lt} vs {want}");
+    }
+}
+
+/// FMU state: restore and repeat gives bit-identical outputs (on the Spielberg track with road
+/// excitation and braking).
+#[test]
+fn state_restore_repeats_bit_for_bit() {
+    let (mut rt, _) = runtime::<Vehicle>(Some(bundled_resources()), &[]);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    let drive = |rt: &mut fmu_export::Runtime<Vehicle>, k0: usize, n: usize| -> Vec<u64> {
+        let mut out = Vec::new();
+        for k in k0..k0 + n {
+            let t = k as f64 * DT;
+            let w = 150.0 + 5.0 * (t * 3.0).sin();
+            set(rt, "omega_rl", w);
+            set(rt, "omega_rr", w * 1.01);
+            set(
+                rt,
+                "brake_pedal",
+                if (k / 300) % 2 == 1 { 0.4 } else { 0.0 },
+            );
+            assert_eq!(rt.do_step(t, DT), fmi2Status::OK);
+            for name in [
+                "v",
+                "s",
+                "Fz_fl",
+                "Fz_rr",
+                "torque_setpoint_rl",
+                "slip_fr",
+                "a_x",
+                "lap_time",
+            ] {
+                out.push(get(rt, name).to_bits());
+            }
+        }
+        out
+    };
+    drive(&mut rt, 0, 700);
+    let snap = rt.snapshot().ok().unwrap();
+    let bytes = rt.serialize(&snap);
+    let first = drive(&mut rt, 700, 900);
+    // In-memory snapshot.
+    assert_eq!(rt.restore(&snap), fmi2Status::OK);
+    assert_eq!(drive(&mut rt, 700, 900), first);
+    // Serialized and read back.
+    let back = rt.deserialize(&bytes).ok().unwrap();
+    assert_eq!(rt.restore(&back), fmi2Status::OK);
+    assert_eq!(drive(&mut rt, 700, 900), first);
+}
+
+/// Bad track files fail fmi2ExitInitializationMode with the file and row in the message.
+#[test]
+fn bad_track_files_are_refused_with_file_and_row() {
+    let header = "s,curvature,grade,z_road_left,z_road_right\n";
+    let cases = [
+        (
+            "nonincreasing",
+            format!("{header}0,0,0,0,0\n0.5,0,0,0,0\n0.5,0,0,0,0\n"),
+            "row 4",
+        ),
+        (
+            "nan",
+            format!("{header}0,0,0,0,0\n0.5,0,nan,0,0\n1,0,0,0,0\n"),
+            "row 3",
+        ),
+        (
+            "missing",
+            "s,curvature,z_road_left,z_road_right\n0,0,0,0\n1,0,0,0\n".to_string(),
+            "missing column 'grade'",
+        ),
+    ];
+    for (tag, text, want) in cases {
+        let dir = temp_resources(tag, &text);
+        let (mut rt, cap) = runtime::<Vehicle>(Some(dir.clone()), &[]);
+        assert_eq!(rt.exit_initialization_mode(), fmi2Status::ERROR);
+        let msg = cap.text();
+        assert!(msg.contains("fmi2ExitInitializationMode"), "{msg}");
+        assert!(
+            msg.contains(&dir.join("track.csv").display().to_string()),
+            "{msg}"
+        );
+        assert!(msg.contains(want), "{tag}: {msg}");
+    }
+    // No resource folder at all.
+    let (mut rt, cap) = runtime::<Vehicle>(None, &[]);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::ERROR);
+    assert!(cap.text().contains("track.csv"), "{}", cap.text());
+}
+
+/// Out-of-range parameters are refused by the setter, naming the variable.
+#[test]
+fn bad_parameters_are_refused_naming_the_variable() {
+    for (name, x) in [
+        ("m", -880.0),
+        ("wheel_radius", -0.345),
+        ("c_lift_front", 10.0),
+        ("c_lift_rear", -5.0),
+        ("chassis_time_constant", 0.0),
+        ("x_cog", 1.2),
+    ] {
+        let cap = Capture::default();
+        let mut rt = fmu_export::Runtime::<Vehicle>::new(
+            "bad",
+            Some(bundled_resources()),
+            Box::new(cap.clone()),
+            true,
+        );
+        assert_eq!(rt.set_by_name(name, r(x)), fmi2Status::ERROR, "{name}");
+        assert!(cap.text().contains(&format!("'{name}'")), "{}", cap.text());
+    }
+    // s_start beyond the lap.
+    let (mut rt, cap) = runtime::<Vehicle>(Some(bundled_resources()), &[("s_start", r(5000.0))]);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::ERROR);
+    assert!(cap.text().contains("s_start"), "{}", cap.text());
+    // A tunable lift coefficient out of range while running.
+    let (mut rt, cap) = runtime::<Vehicle>(Some(bundled_resources()), &[]);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    assert_eq!(rt.set_by_name("c_lift_rear", r(1.013)), fmi2Status::OK);
+    assert_eq!(rt.set_by_name("c_lift_front", r(7.0)), fmi2Status::ERROR);
+    assert!(cap.text().contains("'c_lift_front'"), "{}", cap.text());
+    assert_eq!(
+        rt.set_by_name("m", r(900.0)),
+        fmi2Status::ERROR,
+        "fixed after initialization"
+    );
+}
+
+/// A tuned lift coefficient takes effect at the next step (Eq. 18, 1e-9).
+#[test]
+fn tunable_lift_takes_effect() {
+    let (mut rt, _) = runtime::<Vehicle>(Some(bundled_resources()), &[("road_stiffness", r(0.0))]);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    set(&mut rt, "c_lift_front", 0.827);
+    set(&mut rt, "c_lift_rear", 1.013);
+    set(&mut rt, "omega_rl", 152.0);
+    set(&mut rt, "omega_rr", 152.0);
+    assert_eq!(rt.do_step(0.0, DT), fmi2Status::OK);
+    let p = LoadParams {
+        c_lift_front: 0.827,
+        c_lift_rear: 1.013,
+        ..nominal()
+    };
+    let v = get(&mut rt, "v");
+    assert!((get(&mut rt, "Fz_sum") / eq18(&p, v) - 1.0).abs() < 1e-9);
+}
+
+/// The consistent start: front wheels at v/r, slips zero, tyre torques zero.
+#[test]
+fn starts_in_a_consistent_state() {
+    let (mut rt, _) = runtime::<Vehicle>(Some(bundled_resources()), &[]);
+    set(&mut rt, "omega_rl", 52.43 / 0.345);
+    set(&mut rt, "omega_rr", 52.43 / 0.345);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    assert_eq!(get(&mut rt, "v"), 52.43);
+    assert_eq!(get(&mut rt, "omega_fl"), 52.43 / 0.345);
+    for n in [
+        "slip_fl",
+        "slip_fr",
+        "slip_rl",
+        "slip_rr",
+        "torque_setpoint_rl",
+        "torque_setpoint_rr",
+        "a_x",
+    ] {
+        assert_eq!(get(&mut rt, n), 0.0, "{n}");
+    }
+    // Road excitation at the start: loads differ from Eq. 18 by k·Σz only.
+    assert!(get(&mut rt, "Fz_sum") > 8000.0);
+}
