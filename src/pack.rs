@@ -65,6 +65,7 @@ impl ModelSpec {
 pub fn models() -> Vec<ModelSpec> {
     vec![
         ModelSpec::of::<dyno::Dyno>("dyno", false),
+        ModelSpec::of::<driver::Driver>("driver", false),
         ModelSpec::of::<faulty::Faulty>("faulty", true),
     ]
 }

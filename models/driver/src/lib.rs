@@ -1,1 +1,229 @@
-//! twinbench driver model (to be written).
+//! Driver of the road-load simulation: follows a distance-based target speed `v(s)`.
+//!
+//! The target comes from a resource file (`target_speed.csv`, columns `s,v`). The driver
+//! looks ahead by `preview_time`, feeds forward the target's acceleration `v·dv/ds` and
+//! the driving resistance, closes a PI loop on the speed error, and turns the force demand
+//! into exactly one pedal: the accelerator for a positive demand, the brake for a negative
+//! one.
+
+mod target;
+
+use fmu_export::variables::*;
+use fmu_export::{
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter,
+};
+use std::sync::Arc;
+pub use target::TargetSpeed;
+
+/// Name of the target speed file in the FMU's `resources/`.
+pub const TARGET_FILE: &str = "target_speed.csv";
+
+const G: f64 = 9.81;
+
+fmu_export::variables! {
+    /// Variables of the driver.
+    pub struct DriverVars {
+        v: Real = 0.0 => input(1).unit("m/s").describe("Vehicle speed"),
+        s: Real = 0.0 => input(2).unit("m")
+            .describe("Distance along the track (may grow past the lap length or wrap at it)"),
+        accel_pedal: Real = 0.0 => output(10).unit("1").range(0.0, 1.0)
+            .describe("Accelerator pedal, 0..1 (share of the available drive force)"),
+        brake_pedal: Real = 0.0 => output(11).unit("1").range(0.0, 1.0)
+            .describe("Brake pedal, 0..1 (share of the full braking deceleration); never together with the accelerator"),
+        v_target: Real = 0.0 => output(12).unit("m/s")
+            .describe("Target speed at the current distance s"),
+        preview_time: Real = 0.2 => tunable(20).unit("s").range(0.0, 5.0)
+            .describe("The driver looks ahead by v·preview_time along the target"),
+        preview_distance_min: Real = 1.0 => tunable(21).unit("m").range(0.0, 1000.0)
+            .describe("Least preview distance (at low speed)"),
+        speed_loop_bandwidth: Real = 1.5 => tunable(22).unit("Hz").range(0.01, 50.0)
+            .describe("Crossover of the speed loop: proportional gain 2π·bandwidth on the speed error, in m/s2 per m/s"),
+        integral_time: Real = 0.5 => tunable(23).unit("s").range(0.001, 1000.0)
+            .describe("Integral time of the speed PI"),
+        integral_limit: Real = 5.0 => tunable(24).unit("m/s2").range(0.0, 100.0)
+            .describe("Bound of the PI's integral part (anti-windup besides conditional integration)"),
+        feed_forward_gain: Real = 1.0 => tunable(25).unit("1").range(0.0, 2.0)
+            .describe("Scale of the feed-forward (target acceleration and driving resistance); 0 turns it off"),
+        mass: Real = 880.0 => tunable(26).unit("kg").range(1.0, 1e5)
+            .describe("Vehicle mass the driver assumes"),
+        drive_force_max: Real = 7450.0 => tunable(27).unit("N").range(1.0, 1e6)
+            .describe("Drive force at full accelerator below the power limit (150 N.m · 17.86 · 0.96 / 0.345 m)"),
+        drive_power_max: Real = 192000.0 => tunable(28).unit("W").range(1.0, 1e8)
+            .describe("Drive power at full accelerator at the wheels (200 kW · 0.96)"),
+        brake_decel_max: Real = 23.0 => tunable(29).unit("m/s2").range(0.1, 100.0)
+            .describe("Deceleration at full brake pedal"),
+        drag_area: Real = 1.1505 => tunable(30).unit("m2").range(0.0, 100.0)
+            .describe("c_drag·A for the driving-resistance feed-forward"),
+        rho_air: Real = 1.18 => tunable(31).unit("kg/m3").range(0.0, 10.0)
+            .describe("Air density for the driving-resistance feed-forward"),
+        f_roll: Real = 0.02 => tunable(32).unit("1").range(0.0, 1.0)
+            .describe("Rolling resistance coefficient for the feed-forward"),
+        v_preview: Real = 0.0 => local(50).unit("m/s")
+            .describe("Target speed at the preview point"),
+        a_target: Real = 0.0 => local(51).unit("m/s2")
+            .describe("Target acceleration at the preview point, v·dv/ds"),
+        a_demand: Real = 0.0 => local(52).unit("m/s2")
+            .describe("Acceleration demand: feed-forward plus PI, before the pedals"),
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Driver {
+    target: Arc<TargetSpeed>,
+    /// ∫ speed error dt [m], the PI's integral state.
+    error_integral: f64,
+}
+
+impl Driver {
+    /// Proportional gain [1/s] of the speed loop: for the integrator plant dv/dt = a it
+    /// puts the crossover at the bandwidth.
+    fn kp(vars: &DriverVars) -> f64 {
+        2.0 * std::f64::consts::PI * vars.speed_loop_bandwidth
+    }
+
+    fn integral_part(&self, vars: &DriverVars) -> f64 {
+        Self::kp(vars) * self.error_integral / vars.integral_time
+    }
+
+    /// Target at the preview point: (v_preview, a_target).
+    fn preview(&self, vars: &DriverVars) -> (f64, f64) {
+        let distance = (vars.v.max(0.0) * vars.preview_time).max(vars.preview_distance_min);
+        let (vp, slope) = self.target.at(vars.s + distance);
+        (vp, vp * slope)
+    }
+
+    /// Pedals from the state and the inputs in `vars`; writes every output. Returns the
+    /// pedal saturation: +1 accelerator at its stop, −1 brake at its stop, 0 neither.
+    fn write_outputs(&self, vars: &mut DriverVars) -> i32 {
+        let (vp, a_target) = self.preview(vars);
+        let v_target = self.target.at(vars.s).0;
+        let error = v_target - vars.v;
+        let a_fb = Self::kp(vars) * error + self.integral_part(vars);
+        let ff = vars.feed_forward_gain;
+        let a_demand = ff * a_target + a_fb;
+        let v = vars.v.max(0.0);
+        let resistance = 0.5 * vars.rho_air * vars.drag_area * v * v + vars.f_roll * vars.mass * G;
+        let force = vars.mass * a_demand + ff * resistance;
+        // The accelerator scales the available force, which the power limit caps.
+        let available = vars.drive_force_max.min(vars.drive_power_max / v.max(0.1));
+        let (accel, brake) = if force >= 0.0 {
+            (force / available, 0.0)
+        } else {
+            (0.0, -force / (vars.mass * vars.brake_decel_max))
+        };
+        vars.accel_pedal = accel.min(1.0);
+        vars.brake_pedal = brake.min(1.0);
+        vars.v_target = v_target;
+        vars.v_preview = vp;
+        vars.a_target = a_target;
+        vars.a_demand = a_demand;
+        if accel >= 1.0 {
+            1
+        } else if brake >= 1.0 {
+            -1
+        } else {
+            0
+        }
+    }
+}
+
+impl Model for Driver {
+    type Vars = DriverVars;
+    const INFO: ModelInfo = ModelInfo {
+        name: "driver",
+        identifier: "driver",
+        description: "Driver: follows a distance-based target speed with preview, feed-forward and PI, one pedal at a time",
+        version: env!("CARGO_PKG_VERSION"),
+        default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 10.0, step_size: 1e-3 },
+        documentation: DOCUMENTATION,
+        resources: &[
+            Resource { name: TARGET_FILE, content: include_bytes!("../resources/target_speed.csv") },
+            Resource { name: "NOTICE", content: include_bytes!("../resources/NOTICE") },
+        ],
+    };
+
+    fn initialize(vars: &mut DriverVars, ctx: &Context) -> Result<Self, ModelError> {
+        let (path, text) = ctx.read_resource(TARGET_FILE)?;
+        let target = TargetSpeed::parse(&text, &path.display().to_string())?;
+        let driver = Driver {
+            target: Arc::new(target),
+            error_integral: 0.0,
+        };
+        driver.write_outputs(vars);
+        Ok(driver)
+    }
+
+    fn do_step(&mut self, vars: &mut DriverVars, _time: f64, step: f64) -> Result<(), ModelError> {
+        if !vars.v.is_finite() || !vars.s.is_finite() {
+            return Err(ModelError::new(format!(
+                "non-finite input: v = {}, s = {}",
+                vars.v, vars.s
+            )));
+        }
+        // Conditional integration: no integrating further into a pedal's stop.
+        let saturation = self.write_outputs(vars);
+        let error = vars.v_target - vars.v;
+        let winds_up = (saturation > 0 && error > 0.0) || (saturation < 0 && error < 0.0);
+        if !winds_up {
+            self.error_integral += error * step;
+            let bound = vars.integral_limit * vars.integral_time / Self::kp(vars);
+            self.error_integral = self.error_integral.clamp(-bound, bound);
+        }
+        self.write_outputs(vars);
+        Ok(())
+    }
+
+    fn save_state(&self, w: &mut StateWriter) {
+        w.f64(self.error_integral);
+    }
+
+    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        self.error_integral = r.f64()?;
+        Ok(())
+    }
+}
+
+const DOCUMENTATION: &str = r#"
+<p>A driver for the RLS/v mode: it follows a <b>distance-based</b> target speed, so a
+stronger or weaker powertrain drives the same lap.</p>
+<h3>Target</h3>
+<p><code>resources/target_speed.csv</code>: a header naming the columns <code>s</code> [m]
+and <code>v</code> [m/s], then rows with strictly increasing s ≥ 0 (at least two; finite,
+v ≥ 0). The target is piecewise linear in s and periodic: the lap length L is the last s
+of the file and every position is taken modulo L, so the vehicle's <code>s</code> may keep
+growing over several laps or wrap at L itself. The default file is the Spielberg lap of
+<code>data/spielberg_lap.csv</code>, resampled every 1 m and smoothed over 9 m
+(<code>tools/make_target_speed.py</code>; provenance in <code>resources/NOTICE</code>). A
+missing or malformed file fails the initialisation with the file and row named.</p>
+<h3>Control law</h3>
+<p class="eq">s<sub>p</sub> = s + max(v·t<sub>p</sub>, d<sub>min</sub>),&nbsp;
+v<sub>p</sub> = v<sub>target</sub>(s<sub>p</sub>),&nbsp;
+a<sub>target</sub> = v<sub>p</sub>·dv<sub>target</sub>/ds(s<sub>p</sub>)</p>
+<p class="eq">e = v<sub>p</sub> − v,&nbsp; a<sub>demand</sub> = k<sub>ff</sub>·a<sub>target</sub> +
+k<sub>p</sub>·(e + ∫e dt / T<sub>i</sub>),&nbsp; k<sub>p</sub> = 2π·f<sub>bw</sub></p>
+<p class="eq">F = m·a<sub>demand</sub> + k<sub>ff</sub>·(½·ρ·c<sub>d</sub>A·v² + f<sub>roll</sub>·m·g)</p>
+<p class="eq">F ≥ 0: accel_pedal = min(1, F / min(F<sub>max</sub>, P<sub>max</sub>/v)), brake_pedal = 0;&nbsp;
+F &lt; 0: brake_pedal = min(1, −F / (m·a<sub>brake,max</sub>)), accel_pedal = 0</p>
+<p>t<sub>p</sub> = <code>preview_time</code> (0.2 s), d<sub>min</sub> =
+<code>preview_distance_min</code>, f<sub>bw</sub> = <code>speed_loop_bandwidth</code>
+(1.5 Hz: for the plant dv/dt = a the loop crosses over there), T<sub>i</sub> =
+<code>integral_time</code> (0.5 s), k<sub>ff</sub> = <code>feed_forward_gain</code>. The
+feed-forward gains are the car's: <code>mass</code> 880 kg, <code>drive_force_max</code>
+7450 N (150 N·m · 17.86 · 0.96 / 0.345 m), <code>drive_power_max</code> 192 kW (200 kW ·
+0.96 at the wheels; the accelerator scales the available force as the EDU's pedal scales
+its available torque), <code>brake_decel_max</code> 23 m/s², resistance with c<sub>d</sub>A =
+1.1505 m², ρ = 1.18 kg/m³, f<sub>roll</sub> = 0.02 (downforce and grade are left to the
+PI). Anti-windup: the integral stops while a pedal is at its stop and the error pushes
+further, and its part is bounded by <code>integral_limit</code>. One signed force decides
+the pedal, so the two pedals are never pressed together.</p>
+<p>Stepping: the integral advances by e·h with the inputs held over the step; the outputs
+at the end of a step use those inputs (no direct feed-through). <code>v_target</code> is
+the target at the current s (for speed-error statistics), <code>v_preview</code>,
+<code>a_target</code>, <code>a_demand</code> are exposed as locals.</p>
+"#;
+
+#[cfg(feature = "fmu")]
+fmu_export::export_fmu!(crate::Driver);
+
+#[cfg(test)]
+mod tests;

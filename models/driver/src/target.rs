@@ -1,0 +1,136 @@
+//! The distance-based target speed: a periodic, piecewise-linear `v(s)` from a CSV file.
+
+use fmu_export::ModelError;
+
+/// Target speed over distance; periodic with the lap length (the file's last `s`).
+#[derive(Debug, PartialEq)]
+pub struct TargetSpeed {
+    s: Vec<f64>,
+    v: Vec<f64>,
+}
+
+impl TargetSpeed {
+    /// Parse CSV text with a header naming the columns `s` [m] and `v` [m/s] (other
+    /// columns are ignored; blank lines and lines starting with `#` are skipped). `file`
+    /// names the source in errors; rows are counted as lines of the file, from 1.
+    pub fn parse(text: &str, file: &str) -> Result<Self, ModelError> {
+        let err = |line: usize, msg: String| ModelError::new(format!("{file}, row {line}: {msg}"));
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| (i + 1, l.trim()))
+            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+        let (header_line, header) = lines.next().ok_or_else(|| {
+            ModelError::new(format!("{file}: empty file, expected a header 's,v'"))
+        })?;
+        let names: Vec<&str> = header.split(',').map(str::trim).collect();
+        let column = |name: &str| {
+            names.iter().position(|n| *n == name).ok_or_else(|| {
+                err(
+                    header_line,
+                    format!("no column '{name}' in the header '{header}' (expected 's,v')"),
+                )
+            })
+        };
+        let (is, iv) = (column("s")?, column("v")?);
+
+        let (mut s, mut v) = (Vec::new(), Vec::new());
+        for (line, row) in lines {
+            let fields: Vec<&str> = row.split(',').map(str::trim).collect();
+            let field = |i: usize, name: &str| -> Result<f64, ModelError> {
+                let text = fields.get(i).ok_or_else(|| {
+                    err(
+                        line,
+                        format!("missing value of '{name}' ({} fields)", fields.len()),
+                    )
+                })?;
+                let x: f64 = text
+                    .parse()
+                    .map_err(|_| err(line, format!("'{name}' = '{text}' is not a number")))?;
+                if !x.is_finite() {
+                    return Err(err(line, format!("'{name}' = {x} is not finite")));
+                }
+                Ok(x)
+            };
+            let (si, vi) = (field(is, "s")?, field(iv, "v")?);
+            if let Some(&prev) = s.last() {
+                if si <= prev {
+                    return Err(err(
+                        line,
+                        format!("s = {si} m does not increase (previous row {prev} m)"),
+                    ));
+                }
+            } else if si < 0.0 {
+                return Err(err(line, format!("first s = {si} m is negative")));
+            }
+            if vi < 0.0 {
+                return Err(err(line, format!("v = {vi} m/s is negative")));
+            }
+            s.push(si);
+            v.push(vi);
+        }
+        if s.len() < 2 {
+            return Err(ModelError::new(format!(
+                "{file}: {} data rows, at least 2 needed for a target speed over distance",
+                s.len()
+            )));
+        }
+        Ok(TargetSpeed { s, v })
+    }
+
+    /// Lap length: the last `s` of the file; positions wrap modulo it.
+    pub fn lap_length(&self) -> f64 {
+        self.s[self.s.len() - 1]
+    }
+
+    /// Target speed and its slope dv/ds at distance `s` (any real; wrapped into the lap).
+    /// Before the file's first `s` the first value holds.
+    pub fn at(&self, s: f64) -> (f64, f64) {
+        let x = s.rem_euclid(self.lap_length());
+        let n = self.s.len();
+        // Index of the segment [s_k, s_{k+1}] containing x.
+        let k = self.s.partition_point(|&sk| sk <= x);
+        if k == 0 {
+            return (self.v[0], 0.0);
+        }
+        let k = (k - 1).min(n - 2);
+        let slope = (self.v[k + 1] - self.v[k]) / (self.s[k + 1] - self.s[k]);
+        (self.v[k] + slope * (x - self.s[k]), slope)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn msg(text: &str) -> String {
+        TargetSpeed::parse(text, "t.csv").unwrap_err().0
+    }
+
+    #[test]
+    fn malformed_files_name_file_and_row() {
+        assert!(
+            msg("s,v\n0,10\n5,11\n5,12\n").starts_with("t.csv, row 4: s = 5 m does not increase")
+        );
+        assert!(msg("s,v\n0,10\n5,NaN\n").starts_with("t.csv, row 3: 'v' = NaN is not finite"));
+        assert!(msg("s,v\n0,10\n5,abc\n").starts_with("t.csv, row 3: 'v' = 'abc' is not a number"));
+        assert!(msg("s,speed\n0,10\n5,11\n").starts_with("t.csv, row 1: no column 'v'"));
+        assert!(msg("s,v\n0,10\n5\n").starts_with("t.csv, row 3: missing value of 'v'"));
+        assert!(msg("s,v\n0,10\n").starts_with("t.csv: 1 data rows"));
+        assert!(msg("").starts_with("t.csv: empty file"));
+        assert!(msg("s,v\n0,10\n5,-1\n").starts_with("t.csv, row 3: v = -1 m/s is negative"));
+    }
+
+    #[test]
+    fn interpolates_and_wraps() {
+        let t = TargetSpeed::parse("# comment\nv,s,x\n10,0,1\n20,100,1\n\n10,200,1\n", "t.csv")
+            .unwrap();
+        assert_eq!(t.lap_length(), 200.0);
+        assert_eq!(t.at(50.0), (15.0, 0.1));
+        assert_eq!(t.at(150.0), (15.0, -0.1));
+        // Periodic: one lap on, and one lap back.
+        assert_eq!(t.at(250.0), t.at(50.0));
+        assert_eq!(t.at(-150.0), t.at(50.0));
+        assert_eq!(t.at(200.0).0, 10.0);
+    }
+}
