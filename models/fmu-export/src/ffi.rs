@@ -117,6 +117,10 @@ pub unsafe fn instantiate<M: Model>(
     _visible: fmi2Boolean,
     logging_on: fmi2Boolean,
 ) -> fmi2Component {
+    // This library's own copy of std: silence its default panic printing (panics are caught
+    // and reported through the FMI logger instead). The host's panic hook is not affected.
+    static QUIET_PANICS: std::sync::Once = std::sync::Once::new();
+    QUIET_PANICS.call_once(|| std::panic::set_hook(Box::new(|_| {})));
     let r = catch_unwind(AssertUnwindSafe(|| {
         let callbacks = if functions.is_null() { None } else { Some(*functions) };
         let name = opt_str(instance_name).map(|s| s.into_owned());

@@ -1,0 +1,47 @@
+//! Shared helpers of the integration tests: the packed FMUs and a cache to load them.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::sync::{Arc, OnceLock};
+use twinbench::fmu::{FmuCache, LoadedFmu};
+
+/// Pack every model once per test binary (a no-op build when nothing changed), so that the
+/// tests always run the FMUs of the current sources.
+pub fn fmu_dir() -> PathBuf {
+    static PACKED: OnceLock<PathBuf> = OnceLock::new();
+    PACKED
+        .get_or_init(|| {
+            let dir = twinbench::pack::default_fmu_dir();
+            twinbench::pack::pack(&[], &dir).expect("packing the FMUs failed");
+            dir
+        })
+        .clone()
+}
+
+/// Path of a packed FMU by model name (test FMUs under test/).
+pub fn fmu(name: &str) -> PathBuf {
+    let dir = fmu_dir();
+    let spec = twinbench::pack::models()
+        .into_iter()
+        .find(|s| s.info.name == name)
+        .unwrap_or_else(|| panic!("no model named {name}"));
+    twinbench::pack::fmu_path(&dir, &spec)
+}
+
+pub fn cache() -> &'static FmuCache {
+    static CACHE: OnceLock<FmuCache> = OnceLock::new();
+    CACHE.get_or_init(|| FmuCache::temporary(false).unwrap())
+}
+
+pub fn load(name: &str) -> Arc<LoadedFmu> {
+    cache().load(&fmu(name)).unwrap()
+}
+
+pub fn vr(fmu: &LoadedFmu, name: &str) -> u32 {
+    fmu.description
+        .variable(name)
+        .unwrap_or_else(|| panic!("{}: no variable {name}", fmu.description.model_name))
+        .value_reference
+}
+
+pub mod python;
