@@ -56,6 +56,14 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     let cmp = prepared
         .compare(&sim, &mut Workspace::new())
         .context("comparing")?;
+    match print(&args, &settings, &cmp) {
+        // `twinbench compare ... | head` is not an error.
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        r => Ok(r?),
+    }
+}
+
+fn print(args: &CompareArgs, settings: &CompareSettings, cmp: &Comparison) -> std::io::Result<()> {
     let mut out = std::io::stdout().lock();
     if args.json {
         #[derive(serde::Serialize)]
@@ -68,12 +76,12 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
         let doc = Doc {
             simulation: &args.sim,
             measurement: &args.measurement,
-            settings: &settings,
-            comparison: &cmp,
+            settings,
+            comparison: cmp,
         };
         writeln!(out, "{}", serde_json::to_string_pretty(&doc)?)?;
     } else {
-        out.write_all(render_table(&cmp, &settings).as_bytes())?;
+        out.write_all(render_table(cmp, settings).as_bytes())?;
     }
     Ok(())
 }
