@@ -33,6 +33,25 @@ pub struct FitConfig {
     pub f_max: f64,
     /// Bins with lower coherence are ignored.
     pub min_coherence: f64,
+    /// How the data were sampled; decides between the continuous and a sampled model.
+    pub sampling: Sampling,
+}
+
+/// Which form of the model is compared with the FRF.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum Sampling {
+    /// `G(jω)` itself: for an input that varies between samples. On data whose input is
+    /// held between samples the dead time then includes half a sampling step.
+    Continuous,
+    /// The input is held between samples (a setpoint sent at the sampling rate) and the
+    /// loop's delay and lag act continuously: the exact sampled model (zero-order hold,
+    /// modified z-transform for a dead time that is not a whole number of samples).
+    HeldInput,
+    /// The dyno FMU's own discrete loop: demand sampled every `cycle_time` (which must
+    /// equal the sampling step), dead time interpolated linearly between cycles, lag
+    /// discretised with a zero-order hold. Recovers the FMU's parameters exactly.
+    DynoCycle { cycle_time: f64 },
 }
 
 impl Default for FitConfig {
@@ -42,6 +61,7 @@ impl Default for FitConfig {
             f_min: 0.0,
             f_max: f64::INFINITY,
             min_coherence: 0.8,
+            sampling: Sampling::Continuous,
         }
     }
 }
@@ -66,6 +86,10 @@ pub struct FrfFit {
     pub bins: usize,
     /// Weighted RMS of the log residual (≈ relative error).
     pub rms_residual: f64,
+    /// The model form that was fitted.
+    pub sampling: Sampling,
+    /// Sampling step of the data, s (for the sampled forms).
+    pub dt: f64,
 }
 
 impl FrfFit {
@@ -79,7 +103,7 @@ impl FrfFit {
                 self.damping_ratio.unwrap_or(1.0),
             ],
         };
-        model(self.order, &p, 2.0 * PI * f) * self.gain
+        Evaluator::new(self.order, &p, self.sampling, self.dt).at(2.0 * PI * f) * self.gain
     }
 
     /// The dyno FMU's parameters as a system-file snippet for instance `instance`.
@@ -98,14 +122,15 @@ impl FrfFit {
         match self.order {
             LagOrder::First => {
                 s += &format!(
-                    "\"{instance}.time_constant\" = {}\n",
+                    "\"{instance}.lag_order\" = 1\n\"{instance}.time_constant\" = {}\n",
                     fmt_param(self.time_constant.unwrap_or(0.0))
                 );
             }
             LagOrder::Second => {
+                // The dyno's second-order lag: ω_n = 1/time_constant, ζ = damping.
                 s += &format!(
-                    "\"{instance}.natural_frequency\" = {}\n\"{instance}.damping_ratio\" = {}\n",
-                    fmt_param(self.natural_frequency.unwrap_or(0.0)),
+                    "\"{instance}.lag_order\" = 2\n\"{instance}.time_constant\" = {}\n\"{instance}.damping\" = {}\n",
+                    fmt_param(1.0 / self.natural_frequency.unwrap_or(f64::INFINITY)),
                     fmt_param(self.damping_ratio.unwrap_or(0.0))
                 );
             }
@@ -132,23 +157,154 @@ fn fmt_param(v: f64) -> String {
     }
 }
 
-/// `G(jω)/K` for parameters `[T_d, T, _]` (first order) or `[T_d, ω_n, ζ]` (second).
-fn model(order: LagOrder, p: &[f64; 3], w: f64) -> Complex64 {
-    let delay = Complex64::from_polar(1.0, -w * p[0]);
-    let s = Complex64::new(0.0, w);
-    let lag = match order {
-        LagOrder::First => 1.0 / (1.0 + s * p[1]),
-        LagOrder::Second => {
-            let wn = p[1];
-            let z = p[2];
-            wn * wn / (s * s + 2.0 * z * wn * s + wn * wn)
+/// Evaluates `G(jω)/K` for parameters `[T_d, T, _]` (first order) or `[T_d, ω_n, ζ]`
+/// (second order) in the chosen form; the discretisation is done once per parameter set.
+enum Evaluator {
+    Continuous {
+        order: LagOrder,
+        p: [f64; 3],
+    },
+    /// `H(z) = z^{−i} · C (zI − Φ)⁻¹ (Γ₀ + Γ₁ z⁻¹)` with `z = e^{jωh}` (n = 1 or 2 states).
+    Sampled {
+        h: f64,
+        whole: f64,
+        phi: nalgebra::Matrix2<f64>,
+        g0: nalgebra::Vector2<f64>,
+        g1: nalgebra::Vector2<f64>,
+        states: usize,
+    },
+}
+
+/// `(e^{Aτ}, ∫₀^τ e^{Aσ} dσ · B)` by the exponential of the augmented matrix.
+fn zoh(
+    a: &nalgebra::Matrix2<f64>,
+    b: &nalgebra::Vector2<f64>,
+    tau: f64,
+) -> (nalgebra::Matrix2<f64>, nalgebra::Vector2<f64>) {
+    let mut m = nalgebra::Matrix3::zeros();
+    m.fixed_view_mut::<2, 2>(0, 0).copy_from(&(a * tau));
+    m.fixed_view_mut::<2, 1>(0, 2).copy_from(&(b * tau));
+    let e = m.exp();
+    (
+        e.fixed_view::<2, 2>(0, 0).into_owned(),
+        e.fixed_view::<2, 1>(0, 2).into_owned(),
+    )
+}
+
+impl Evaluator {
+    fn new(order: LagOrder, p: &[f64; 3], sampling: Sampling, dt: f64) -> Evaluator {
+        use nalgebra::{Matrix2, Vector2};
+        let (h, interpolate) = match sampling {
+            Sampling::Continuous => return Evaluator::Continuous { order, p: *p },
+            Sampling::HeldInput => (dt, false),
+            Sampling::DynoCycle { cycle_time } => (cycle_time, true),
+        };
+        let d = (p[0] / h).max(0.0);
+        let whole = d.floor();
+        let frac = d - whole;
+        // State space of the lag: first order in the first component only.
+        let (a, b, states) = match order {
+            LagOrder::First => {
+                let t = p[1].max(1e-12 * h);
+                (
+                    Matrix2::new(-1.0 / t, 0.0, 0.0, -1.0),
+                    Vector2::new(1.0 / t, 0.0),
+                    1,
+                )
+            }
+            LagOrder::Second => {
+                let (wn, z) = (p[1], p[2]);
+                (
+                    Matrix2::new(0.0, 1.0, -wn * wn, -2.0 * z * wn),
+                    Vector2::new(0.0, wn * wn),
+                    2,
+                )
+            }
+        };
+        let (phi, g) = zoh(&a, &b, h);
+        let (g0, g1) = if interpolate {
+            // the dyno feeds (1−φ)u_{k−i} + φu_{k−i−1}, held for the whole cycle
+            (g * (1.0 - frac), g * frac)
+        } else {
+            // u_{k−i−1} for the first φh of the interval, u_{k−i} for the rest
+            let (phi2, g2) = zoh(&a, &b, (1.0 - frac) * h);
+            let (_, g1) = zoh(&a, &b, frac * h);
+            (g2, phi2 * g1)
+        };
+        Evaluator::Sampled {
+            h,
+            whole,
+            phi,
+            g0,
+            g1,
+            states,
         }
-    };
-    delay * lag
+    }
+
+    fn at(&self, w: f64) -> Complex64 {
+        match self {
+            Evaluator::Continuous { order, p } => {
+                let delay = Complex64::from_polar(1.0, -w * p[0]);
+                let s = Complex64::new(0.0, w);
+                let lag = match order {
+                    LagOrder::First => 1.0 / (1.0 + s * p[1]),
+                    LagOrder::Second => {
+                        let (wn, z) = (p[1], p[2]);
+                        wn * wn / (s * s + 2.0 * z * wn * s + wn * wn)
+                    }
+                };
+                delay * lag
+            }
+            Evaluator::Sampled {
+                h,
+                whole,
+                phi,
+                g0,
+                g1,
+                states,
+            } => {
+                let z = Complex64::from_polar(1.0, w * h);
+                let zi = 1.0 / z;
+                let v0 = Complex64::from(g0[0]) + zi * g1[0];
+                let lag = if *states == 1 {
+                    v0 / (z - phi[(0, 0)])
+                } else {
+                    let v1 = Complex64::from(g0[1]) + zi * g1[1];
+                    let (p00, p01, p10, p11) = (phi[(0, 0)], phi[(0, 1)], phi[(1, 0)], phi[(1, 1)]);
+                    let det = (z - p00) * (z - p11) - p01 * p10;
+                    ((z - p11) * v0 + p01 * v1) / det
+                };
+                Complex64::from_polar(1.0, -w * h * whole) * lag
+            }
+        }
+    }
 }
 
 /// Fit a dead time + lag to an FRF estimate.
 pub fn fit(frf: &Frf, cfg: &FitConfig) -> Result<FrfFit> {
+    match cfg.sampling {
+        Sampling::Continuous => {}
+        Sampling::HeldInput if !frf.fs.is_finite() || frf.fs <= 0.0 => {
+            return Err(AnalysisError::Fit(
+                "the held-input model needs the sampling frequency of the data".into(),
+            ))
+        }
+        Sampling::HeldInput => {}
+        Sampling::DynoCycle { cycle_time: c } => {
+            if !(c.is_finite() && c > 0.0) {
+                return Err(AnalysisError::Fit(format!(
+                    "cycle time must be positive, got {c} s"
+                )));
+            }
+            if !frf.fs.is_finite() || frf.fs <= 0.0 || (c * frf.fs - 1.0).abs() > 1e-6 {
+                return Err(AnalysisError::Fit(format!(
+                    "the dyno-cycle model needs data sampled at the controller cycle: cycle time {c} s, but the sampling step is {} s (fit the held-input model instead)",
+                    1.0 / frf.fs
+                )));
+            }
+        }
+    }
+    let dt = if frf.fs > 0.0 { 1.0 / frf.fs } else { 0.0 };
     let h = frf.h();
     let sel: Vec<usize> = (0..frf.freq.len())
         .filter(|&k| {
@@ -176,10 +332,11 @@ pub fn fit(frf: &Frf, cfg: &FitConfig) -> Result<FrfFit> {
     let wsum: f64 = wt.iter().sum();
     // Cost for given time parameters, with the optimal log-gain in closed form.
     let cost = |order: LagOrder, p: &[f64; 3]| -> (f64, f64) {
+        let ev = Evaluator::new(order, p, cfg.sampling, dt);
         let r: Vec<Complex64> = w
             .iter()
             .zip(&hs)
-            .map(|(&wk, hk)| (model(order, p, wk) / hk).ln())
+            .map(|(&wk, hk)| (ev.at(wk) / hk).ln())
             .collect();
         let ln_k = -r.iter().zip(&wt).map(|(z, q)| z.re * q).sum::<f64>() / wsum;
         let c = r
@@ -235,7 +392,7 @@ pub fn fit(frf: &Frf, cfg: &FitConfig) -> Result<FrfFit> {
                 let (x, v) = nelder_mead(&f, &start, &[scale, 0.3, 0.3], 6000, 1e-15);
                 let (x, v2) = nelder_mead(&f, &x, &[scale * 0.1, 0.05, 0.05], 6000, 1e-15);
                 let v = v.min(v2);
-                if best.as_ref().map_or(true, |b| v < b.1) {
+                if best.as_ref().is_none_or(|b| v < b.1) {
                     best = Some(([x[0], x[1].exp(), x[2].exp()], v));
                 }
             }
@@ -254,6 +411,8 @@ pub fn fit(frf: &Frf, cfg: &FitConfig) -> Result<FrfFit> {
         f_hi: frf.freq[sel[sel.len() - 1]],
         bins: sel.len(),
         rms_residual: (c / wsum).sqrt(),
+        sampling: cfg.sampling,
+        dt,
     })
 }
 

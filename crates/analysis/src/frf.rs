@@ -143,7 +143,7 @@ pub fn spectra(u: &[f64], y: &[f64], fs: f64, cfg: &WelchConfig, source: &str) -
         }
     }
     // One-sided: double everything but DC and, for even n, Nyquist.
-    let last_doubled = if n % 2 == 0 { nf - 1 } else { nf };
+    let last_doubled = if n.is_multiple_of(2) { nf - 1 } else { nf };
     let norm = scale / segments as f64;
     for k in 0..nf {
         let f = if k > 0 && k < last_doubled { 2.0 } else { 1.0 };
@@ -184,6 +184,8 @@ pub struct Frf {
     /// Magnitude-squared coherence |P_uy|² / (P_uu P_yy).
     pub coherence: Vec<f64>,
     pub segments: usize,
+    /// Sampling frequency of the data, Hz (0 when unknown).
+    pub fs: f64,
 }
 
 impl Frf {
@@ -208,6 +210,7 @@ impl Frf {
             freq,
             phase,
             segments: 0,
+            fs: 0.0,
         }
     }
 }
@@ -224,6 +227,7 @@ pub fn h1(u: &[f64], y: &[f64], fs: f64, cfg: &WelchConfig, source: &str) -> Res
     let mut frf = Frf::from_response(s.freq[start..].to_vec(), &h);
     frf.coherence = coherence;
     frf.segments = s.segments;
+    frf.fs = fs;
     Ok(frf)
 }
 

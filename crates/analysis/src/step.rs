@@ -4,10 +4,11 @@
 //! Conventions: the step instant `t0` is the time of the first sample at which the
 //! setpoint shows its new value. The initial level is the mean of the response before the
 //! step, the final level the mean over the last 10 % of the record (so the record must end
-//! settled). The response has *started* when it leaves the initial level by more than
-//! `max(start_threshold·|Δy|, 4σ)` (σ the noise before the step); T_d is the interpolated
-//! time of that crossing minus `t0`. Rise and band crossings are interpolated linearly
-//! between samples.
+//! settled). T_d is the dead time of a least-squares fit of dead time + first-order lag
+//! (it uses the whole response, so noise hardly moves it); the model-free *response start*
+//! is where the response first leaves the initial level by more than
+//! `max(start_threshold·|Δy|, 4σ)` (σ the noise before the step). Rise and band crossings
+//! are interpolated linearly between samples.
 
 use crate::error::{AnalysisError, Result};
 use crate::optim::nelder_mead;
@@ -60,8 +61,12 @@ pub struct StepResult {
     pub noise_std: f64,
     /// Sampling step, s.
     pub dt: f64,
-    /// Dead time T_d.
+    /// Dead time T_d: the apparent dead time of the least-squares fit of dead time +
+    /// first-order lag (robust against noise; exact for a first-order loop).
     pub dead_time: f64,
+    /// Time from the step to the response's first departure from its initial level
+    /// beyond `max(start_threshold, 4σ)`: a model-free upper bound of the dead time.
+    pub response_start: f64,
     /// Rise time (default 10–90 %).
     pub rise_time: f64,
     /// Time from the step to the response entering the settling band for good; None when the
@@ -69,6 +74,9 @@ pub struct StepResult {
     pub transient_time: Option<f64>,
     /// Overshoot beyond the final value, share of the step height (0 if none).
     pub overshoot: f64,
+    /// The noise (3σ) is wider than the settling band: the transient time is then
+    /// lengthened by noise excursions (filter the data or widen the band).
+    pub noise_limited: bool,
     pub fit: StepFit,
 }
 
@@ -170,10 +178,12 @@ pub fn analyse(
         response_after: y1,
         noise_std: sigma,
         dt: ts.dt,
-        dead_time: t_start - t0,
+        dead_time: fit.dead_time,
+        response_start: t_start - t0,
         rise_time: t_hi - t_lo,
         transient_time,
         overshoot,
+        noise_limited: 3.0 * sigma > cfg.band * dy.abs(),
         fit: StepFit {
             gain: fit.gain / (u[k] - u[k - 1]),
             ..fit
