@@ -66,6 +66,8 @@ pub fn models() -> Vec<ModelSpec> {
     vec![
         ModelSpec::of::<dyno::Dyno>("dyno", false),
         ModelSpec::of::<driver::Driver>("driver", false),
+        ModelSpec::of::<vehicle::Vehicle>("vehicle", false),
+        ModelSpec::of::<edu::Edu>("edu", false),
         ModelSpec::of::<faulty::Faulty>("faulty", true),
     ]
 }

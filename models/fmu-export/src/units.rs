@@ -39,6 +39,7 @@ pub const UNITS: &[UnitDef] = &[
     unit("kg.m2", 1, 2, 0, 0, 1.0),
     unit("N", 1, 1, -2, 0, 1.0),
     unit("N/m", 1, 0, -2, 0, 1.0),
+    unit("N.s/m", 1, 0, -1, 0, 1.0),
     unit("N.m", 1, 2, -2, 0, 1.0),
     unit("N.m/rad", 1, 2, -2, -1, 1.0),
     unit("N.m.s/rad", 1, 2, -1, -1, 1.0),

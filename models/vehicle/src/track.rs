@@ -77,7 +77,7 @@ impl Track {
                 }
             }
             if let Some(&prev) = s.last() {
-                if !(x[0] > prev) {
+                if x[0] <= prev {
                     return Err(err(
                         line,
                         format!("s = {} does not increase (previous row s = {prev})", x[0]),
