@@ -9,3 +9,4 @@
 pub mod cli;
 pub mod fmu;
 pub mod pack;
+pub mod system;

@@ -5,11 +5,17 @@ use std::process::ExitCode;
 
 pub mod compare;
 pub mod identify;
+pub mod info;
 pub mod modal;
 pub mod pack;
+pub mod run;
 
 #[derive(Parser, Debug)]
-#[command(name = "twinbench", version, about = "Digital twin of a powertrain test bench (FMI 2.0 Co-Simulation)")]
+#[command(
+    name = "twinbench",
+    version,
+    about = "Digital twin of a powertrain test bench (FMI 2.0 Co-Simulation)"
+)]
 pub struct Cli {
     /// More log output (repeat for more).
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]
@@ -22,6 +28,10 @@ pub struct Cli {
 pub enum Command {
     /// Build the model crates in release mode and write target/fmu/<model>.fmu.
     Pack(pack::PackArgs),
+    /// Run a system file (co-simulation of FMUs).
+    Run(run::RunArgs),
+    /// Show an FMU's capabilities and variables.
+    Info(info::InfoArgs),
     /// Compare a simulation result with a vehicle measurement on a distance basis.
     Compare(compare::CompareArgs),
     /// Modal analysis of a torsional drivetrain chain.
@@ -32,8 +42,18 @@ pub enum Command {
 
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
+    let level = match cli.verbose {
+        0 => "warn",
+        1 => "info",
+        _ => "debug",
+    };
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(level))
+        .format_timestamp(None)
+        .init();
     let result = match cli.command {
         Command::Pack(a) => pack::run(a),
+        Command::Run(a) => run::run(a),
+        Command::Info(a) => info::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Modal(a) => modal::run(a),
         Command::Identify(a) => identify::run(a),

@@ -31,7 +31,10 @@ impl Phase {
 
 /// Log categories declared in modelDescription.xml, in bit order.
 pub const LOG_CATEGORIES: &[(&str, &str)] = &[
-    ("logStatusError", "Errors: bad calls, bad values, model failures"),
+    (
+        "logStatusError",
+        "Errors: bad calls, bad values, model failures",
+    ),
     ("logStatusWarning", "Warnings"),
     ("logEvents", "Information: initialisation, resets, states"),
     ("logAll", "All of the above"),
@@ -59,6 +62,7 @@ pub struct Snapshot<M: Model> {
     model: Option<M>,
     phase: Phase,
     time: f64,
+    start_time: f64,
     stop_time: Option<f64>,
     init_dirty: bool,
     inputs_changed: bool,
@@ -148,13 +152,15 @@ impl<M: Model> Runtime<M> {
 
     /// Log an error (always forwarded: errors are not debug output) and return fmi2Error.
     pub fn error(&self, message: &str) -> fmi2Status {
-        self.logger.log(fmi2Status::ERROR, "logStatusError", message);
+        self.logger
+            .log(fmi2Status::ERROR, "logStatusError", message);
         fmi2Status::ERROR
     }
 
     pub fn warning(&self, message: &str) {
         if self.logging_on && self.categories & LOG_WARNING != 0 {
-            self.logger.log(fmi2Status::WARNING, "logStatusWarning", message);
+            self.logger
+                .log(fmi2Status::WARNING, "logStatusWarning", message);
         }
     }
 
@@ -184,13 +190,21 @@ impl<M: Model> Runtime<M> {
                 None => {
                     return self.error(&format!(
                         "fmi2SetDebugLogging: unknown log category '{c}' (known: {})",
-                        LOG_CATEGORIES.iter().map(|c| c.0).collect::<Vec<_>>().join(", ")
+                        LOG_CATEGORIES
+                            .iter()
+                            .map(|c| c.0)
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     ))
                 }
             }
         }
         self.logging_on = on;
-        self.categories = if categories.is_empty() { LOG_EVERYTHING } else { mask };
+        self.categories = if categories.is_empty() {
+            LOG_EVERYTHING
+        } else {
+            mask
+        };
         fmi2Status::OK
     }
 
@@ -206,7 +220,11 @@ impl<M: Model> Runtime<M> {
             Err(self.error(&format!(
                 "{function} is not allowed in state '{}' (allowed in: {})",
                 self.phase.name(),
-                allowed.iter().map(|p| p.name()).collect::<Vec<_>>().join(", ")
+                allowed
+                    .iter()
+                    .map(|p| p.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )))
         }
     }
@@ -216,19 +234,17 @@ impl<M: Model> Runtime<M> {
         self.error(&format!("{function}: {e}"))
     }
 
-    pub fn setup_experiment(
-        &mut self,
-        start_time: f64,
-        stop_time: Option<f64>,
-    ) -> fmi2Status {
+    pub fn setup_experiment(&mut self, start_time: f64, stop_time: Option<f64>) -> fmi2Status {
         if let Err(s) = self.require("fmi2SetupExperiment", &[Phase::Instantiated]) {
             return s;
         }
         if !start_time.is_finite() {
-            return self.error(&format!("fmi2SetupExperiment: startTime {start_time} is not finite"));
+            return self.error(&format!(
+                "fmi2SetupExperiment: startTime {start_time} is not finite"
+            ));
         }
         if let Some(stop) = stop_time {
-            if !(stop >= start_time) {
+            if stop < start_time || stop.is_nan() {
                 return self.error(&format!(
                     "fmi2SetupExperiment: stopTime {stop} is before startTime {start_time}"
                 ));
@@ -309,13 +325,15 @@ impl<M: Model> Runtime<M> {
         if let Err(s) = self.require("fmi2DoStep", &[Phase::StepComplete]) {
             return s;
         }
-        if !(step > 0.0) || !step.is_finite() {
+        if step <= 0.0 || !step.is_finite() {
             return self.error(&format!(
                 "fmi2DoStep: communicationStepSize must be positive and finite, got {step}"
             ));
         }
         if !current_time.is_finite() {
-            return self.error(&format!("fmi2DoStep: currentCommunicationPoint {current_time} is not finite"));
+            return self.error(&format!(
+                "fmi2DoStep: currentCommunicationPoint {current_time} is not finite"
+            ));
         }
         if let Some(stop) = self.stop_time {
             if current_time + step > stop + 1e-9 * step.max(stop.abs() * 1e-6) {
@@ -399,7 +417,11 @@ impl<M: Model> Runtime<M> {
             return s;
         }
         if vrs.len() != out.len() {
-            return self.error(&format!("{function}: {} value references but {} values", vrs.len(), out.len()));
+            return self.error(&format!(
+                "{function}: {} value references but {} values",
+                vrs.len(),
+                out.len()
+            ));
         }
         match self.phase {
             Phase::InitializationMode => {
@@ -448,12 +470,20 @@ impl<M: Model> Runtime<M> {
     ) -> fmi2Status {
         if let Err(s) = self.require(
             function,
-            &[Phase::Instantiated, Phase::InitializationMode, Phase::StepComplete],
+            &[
+                Phase::Instantiated,
+                Phase::InitializationMode,
+                Phase::StepComplete,
+            ],
         ) {
             return s;
         }
         if vrs.len() != values.len() {
-            return self.error(&format!("{function}: {} value references but {} values", vrs.len(), values.len()));
+            return self.error(&format!(
+                "{function}: {} value references but {} values",
+                vrs.len(),
+                values.len()
+            ));
         }
         let table = M::Vars::VARIABLES;
         for (&vr, value) in vrs.iter().zip(values) {
@@ -488,7 +518,10 @@ impl<M: Model> Runtime<M> {
             let x = value.as_f64();
             if let Value::Real(r) = value {
                 if !r.is_finite() {
-                    return self.error(&format!("{function}: '{}' set to {r}, expected a finite number", info.name));
+                    return self.error(&format!(
+                        "{function}: '{}' set to {r}, expected a finite number",
+                        info.name
+                    ));
                 }
             }
             let below = info.min.is_some_and(|m| x < m);
@@ -498,7 +531,8 @@ impl<M: Model> Runtime<M> {
                     "{function}: '{}' = {} is outside its range [{}, {}]{}",
                     info.name,
                     value.xml_text(),
-                    info.min.map_or("-inf".into(), crate::variables::format_real),
+                    info.min
+                        .map_or("-inf".into(), crate::variables::format_real),
                     info.max.map_or("inf".into(), crate::variables::format_real),
                     info.unit.map(|u| format!(" {u}")).unwrap_or_default()
                 ));
@@ -522,7 +556,10 @@ impl<M: Model> Runtime<M> {
     pub fn set_by_name(&mut self, name: &str, value: Value) -> fmi2Status {
         match M::Vars::vr_of(name) {
             Some(vr) => self.set("set", value.var_type(), &[vr], std::iter::once(value)),
-            None => self.error(&format!("no variable named '{name}' in model '{}'", M::INFO.name)),
+            None => self.error(&format!(
+                "no variable named '{name}' in model '{}'",
+                M::INFO.name
+            )),
         }
     }
 
@@ -546,6 +583,7 @@ impl<M: Model> Runtime<M> {
             model: self.model.clone(),
             phase: self.phase,
             time: self.time,
+            start_time: self.ctx.start_time,
             stop_time: self.stop_time,
             init_dirty: self.init_dirty,
             inputs_changed: self.inputs_changed,
@@ -562,6 +600,7 @@ impl<M: Model> Runtime<M> {
         snap.model.clone_from(&self.model);
         snap.phase = self.phase;
         snap.time = self.time;
+        snap.start_time = self.ctx.start_time;
         snap.stop_time = self.stop_time;
         snap.init_dirty = self.init_dirty;
         snap.inputs_changed = self.inputs_changed;
@@ -577,6 +616,7 @@ impl<M: Model> Runtime<M> {
         self.model.clone_from(&snap.model);
         self.phase = snap.phase;
         self.time = snap.time;
+        self.ctx.start_time = snap.start_time;
         self.stop_time = snap.stop_time;
         self.init_dirty = snap.init_dirty;
         self.inputs_changed = snap.inputs_changed;
@@ -598,6 +638,7 @@ impl<M: Model> Runtime<M> {
             Phase::Error => 4,
         });
         w.f64(snap.time);
+        w.f64(snap.start_time);
         w.bool(snap.stop_time.is_some());
         w.f64(snap.stop_time.unwrap_or(0.0));
         w.bool(snap.init_dirty);
@@ -643,6 +684,7 @@ impl<M: Model> Runtime<M> {
                 p => return Err(ModelError::new(format!("bad phase {p}"))),
             };
             let time = r.f64()?;
+            let start_time = r.f64()?;
             let has_stop = r.bool()?;
             let stop = r.f64()?;
             let init_dirty = r.bool()?;
@@ -660,7 +702,7 @@ impl<M: Model> Runtime<M> {
             let model = if r.bool()? {
                 let mut scratch = vars.clone();
                 let mut ctx = self.ctx.clone();
-                ctx.start_time = time;
+                ctx.start_time = start_time;
                 let mut m = M::initialize(&mut scratch, &ctx)?;
                 m.load_state(&mut r)?;
                 Some(m)
@@ -668,13 +710,16 @@ impl<M: Model> Runtime<M> {
                 None
             };
             if !r.is_at_end() {
-                return Err(ModelError::new("trailing bytes after the model state".to_string()));
+                return Err(ModelError::new(
+                    "trailing bytes after the model state".to_string(),
+                ));
             }
             Ok(Snapshot {
                 vars,
                 model,
                 phase,
                 time,
+                start_time,
                 stop_time: has_stop.then_some(stop),
                 init_dirty,
                 inputs_changed,

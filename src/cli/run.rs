@@ -1,0 +1,103 @@
+//! `twinbench run`: run a system file.
+
+use crate::fmu::FmuCache;
+use crate::system::{Simulation, System};
+use anyhow::Context;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// The system description (TOML).
+    pub system: PathBuf,
+    /// Write the recorded signals here (CSV, written atomically).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+    /// Override a parameter: instance.variable=value (repeatable).
+    #[arg(long = "set", value_name = "INSTANCE.VARIABLE=VALUE")]
+    pub set: Vec<String>,
+    /// Print a JSON summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Keep the unpacked FMUs (in a temporary folder whose path is printed).
+    #[arg(long)]
+    pub keep_extracted: bool,
+}
+
+/// Parse `name=value` into a TOML value (number, integer, boolean).
+pub fn parse_assignment(s: &str) -> anyhow::Result<(String, toml::Value)> {
+    let (name, value) = s
+        .split_once('=')
+        .with_context(|| format!("--set '{s}': expected instance.variable=value"))?;
+    let value = value.trim();
+    let v = if let Ok(i) = value.parse::<i64>() {
+        toml::Value::Integer(i)
+    } else if let Ok(x) = value.parse::<f64>() {
+        toml::Value::Float(x)
+    } else if let Ok(b) = value.parse::<bool>() {
+        toml::Value::Boolean(b)
+    } else {
+        anyhow::bail!("--set '{s}': '{value}' is not a number or a boolean");
+    };
+    Ok((name.trim().to_string(), v))
+}
+
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let cache = Arc::new(FmuCache::temporary(args.keep_extracted)?);
+    if args.keep_extracted {
+        eprintln!("unpacked FMUs kept in {}", cache.root().display());
+    }
+    let system = System::load(&args.system, cache)?;
+    for w in &system.warnings {
+        eprintln!("warning: {w}");
+    }
+    let mut sim = Simulation::new(system)?;
+    for s in &args.set {
+        let (name, value) = parse_assignment(s)?;
+        sim.set_parameter(&name, value)
+            .with_context(|| format!("--set {s}"))?;
+    }
+    let summary = sim.run()?;
+    if let Some(out) = &args.out {
+        sim.recording
+            .write_csv(out)
+            .with_context(|| format!("cannot write {}", out.display()))?;
+    }
+    let rtf = summary.simulated_time / summary.wall_time.max(1e-12);
+    if args.json {
+        let j = serde_json::json!({
+            "system": args.system,
+            "steps": summary.steps,
+            "simulated_time": summary.simulated_time,
+            "wall_time": summary.wall_time,
+            "real_time_factor": rtf,
+            "ns_per_step": summary.wall_time * 1e9 / summary.steps.max(1) as f64,
+            "lap_time": summary.lap_time,
+            "stopped_by": summary.stopped_by,
+            "recorded_rows": sim.recording.rows(),
+            "out": args.out,
+        });
+        println!("{}", serde_json::to_string_pretty(&j)?);
+    } else {
+        println!("system          {}", args.system.display());
+        println!("stopped by      {}", summary.stopped_by);
+        println!("steps           {}", summary.steps);
+        println!("simulated time  {:.3} s", summary.simulated_time);
+        if let Some(l) = summary.lap_time {
+            println!("lap time        {l:.3} s");
+        }
+        println!(
+            "wall time       {:.3} s ({rtf:.0}x real time, {:.0} ns per macro step)",
+            summary.wall_time,
+            summary.wall_time * 1e9 / summary.steps.max(1) as f64
+        );
+        if let Some(out) = &args.out {
+            println!(
+                "results         {} ({} rows)",
+                out.display(),
+                sim.recording.rows()
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,181 @@
+//! The system description file (TOML): FMUs, instances, connections, parameters, the
+//! experiment, what to record, replayed measurement channels, port maps.
+
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// A whole system file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SystemFile {
+    /// A name for reports.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// FMU files by a short name; relative paths are relative to the system file.
+    pub fmus: BTreeMap<String, PathBuf>,
+    /// Instances, in the order they are declared (the stepping order's tie-breaker).
+    #[serde(rename = "instance", default)]
+    pub instances: Vec<InstanceConfig>,
+    /// `"a.x -> b.y"` strings.
+    #[serde(default)]
+    pub connections: Vec<String>,
+    /// `"instance.variable" = value`.
+    #[serde(default)]
+    pub parameters: BTreeMap<String, toml::Value>,
+    pub experiment: ExperimentConfig,
+    #[serde(default)]
+    pub record: RecordConfig,
+    /// Measurement channels replayed as signals (`<name>.<column>`).
+    #[serde(default)]
+    pub replay: Vec<ReplayConfig>,
+    /// Shared libraries to load with RTLD_GLOBAL before any FMU (e.g. libpython for pythonfmu FMUs).
+    #[serde(default)]
+    pub preload: Vec<PathBuf>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InstanceConfig {
+    pub name: String,
+    /// Key of `[fmus]`.
+    pub fmu: String,
+    /// Port map for a swapped unit: the name used in this file -> the FMU's own variable name.
+    #[serde(default)]
+    pub ports: BTreeMap<String, String>,
+    /// Ask the FMU for debug logging.
+    #[serde(default)]
+    pub logging: bool,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Algorithm {
+    #[default]
+    GaussSeidel,
+    Jacobi,
+}
+
+/// `stop = 100.0` or `stop = "lap"`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum StopConfig {
+    Time(f64),
+    Word(String),
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentConfig {
+    #[serde(default)]
+    pub start: f64,
+    /// Macro step [s].
+    pub step: f64,
+    pub stop: StopConfig,
+    /// With `stop = "lap"`: the condition `signal >= value` that ends the run.
+    #[serde(default = "default_lap_signal")]
+    pub lap_signal: String,
+    #[serde(default = "one")]
+    pub lap_count: f64,
+    /// With `stop = "lap"`: give up after this simulated time [s].
+    #[serde(default = "default_max_time")]
+    pub max_time: f64,
+    #[serde(default)]
+    pub algorithm: Algorithm,
+    /// Explicit stepping order (instance names); default: derived from the connections.
+    #[serde(default)]
+    pub order: Vec<String>,
+}
+
+fn default_lap_signal() -> String {
+    "vehicle.lap".into()
+}
+fn one() -> f64 {
+    1.0
+}
+fn default_max_time() -> f64 {
+    600.0
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordConfig {
+    /// `instance.variable` names; empty: every output.
+    #[serde(default)]
+    pub signals: Vec<String>,
+    /// Record every n-th macro step.
+    #[serde(default = "one_usize")]
+    pub decimation: usize,
+}
+
+impl Default for RecordConfig {
+    fn default() -> Self {
+        RecordConfig {
+            signals: Vec::new(),
+            decimation: 1,
+        }
+    }
+}
+
+fn one_usize() -> usize {
+    1
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum ReplayBasis {
+    Time,
+    Distance,
+}
+
+/// Replay of measurement columns, by time or by a distance signal of the system.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReplayConfig {
+    pub name: String,
+    /// A measurement CSV (data/README.md format); relative to the system file.
+    pub file: PathBuf,
+    pub basis: ReplayBasis,
+    /// For `basis = "distance"`: the system signal giving the distance (e.g. `vehicle.distance`).
+    #[serde(default)]
+    pub by: Option<String>,
+    pub columns: Vec<String>,
+    /// Unit of each column (default: the column's SI unit from data/README.md, else "1").
+    #[serde(default)]
+    pub units: BTreeMap<String, String>,
+}
+
+impl SystemFile {
+    /// Read and parse; relative paths are resolved against the file's folder.
+    pub fn load(path: &Path) -> Result<SystemFile, super::SystemError> {
+        let text = std::fs::read_to_string(path).map_err(|e| super::SystemError::File {
+            path: path.to_path_buf(),
+            message: format!("cannot read: {e}"),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    pub fn parse(text: &str, path: &Path) -> Result<SystemFile, super::SystemError> {
+        let mut sys: SystemFile = toml::from_str(text).map_err(|e| super::SystemError::File {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        for p in sys.fmus.values_mut() {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        }
+        for r in &mut sys.replay {
+            if r.file.is_relative() {
+                r.file = base.join(&r.file);
+            }
+        }
+        for p in &mut sys.preload {
+            if p.is_relative() && p.components().count() > 1 {
+                *p = base.join(&*p);
+            }
+        }
+        Ok(sys)
+    }
+}
