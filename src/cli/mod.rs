@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 pub mod compare;
+pub mod demo;
 pub mod identify;
 pub mod info;
 pub mod modal;
@@ -28,6 +29,8 @@ pub struct Cli {
 pub enum Command {
     /// Build the model crates in release mode and write target/fmu/<model>.fmu.
     Pack(pack::PackArgs),
+    /// The main job on the bundled data (packs the FMUs if needed).
+    Demo(demo::DemoArgs),
     /// Run a system file (co-simulation of FMUs).
     Run(run::RunArgs),
     /// Show an FMU's capabilities and variables.
@@ -52,6 +55,7 @@ pub fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Pack(a) => pack::run(a),
+        Command::Demo(a) => demo::run(a),
         Command::Run(a) => run::run(a),
         Command::Info(a) => info::run(a),
         Command::Compare(a) => compare::run(a),
