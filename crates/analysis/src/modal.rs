@@ -64,6 +64,10 @@ pub struct ModalResult {
     pub inertias: Vec<String>,
     /// Spring names in the order of Eq. 5 (ground springs first and last, where present).
     pub springs: Vec<String>,
+    /// J_k, kg·m², in the order of `inertias`.
+    pub inertia_values: Vec<f64>,
+    /// c_Tk, N·m/rad, in the order of `springs`.
+    pub stiffness_values: Vec<f64>,
     pub free_free: bool,
     pub modes: Vec<Mode>,
 }
@@ -190,6 +194,8 @@ pub fn analyse(chain: &Chain) -> Result<ModalResult> {
         chain: chain.name.clone(),
         inertias: chain.inertias.iter().map(|j| j.name.clone()).collect(),
         springs: springs.iter().map(|(s, _)| s.name.clone()).collect(),
+        inertia_values: chain.inertias.iter().map(|j| j.inertia).collect(),
+        stiffness_values: springs.iter().map(|(s, _)| s.stiffness).collect(),
         free_free,
         modes,
     })
@@ -226,6 +232,9 @@ pub struct ComponentShare {
     pub a: f64,
     /// Coefficient in chain B (0 when the component is not in B).
     pub b: f64,
+    /// The component differs between the chains: present in one only, or with another
+    /// inertia or stiffness.
+    pub changed: bool,
 }
 
 /// One mode of chain A set beside the mode of the same rank in chain B.
@@ -246,8 +255,9 @@ pub struct ModePair {
     /// The component with the largest sensitivity coefficient in A and in B.
     pub dominant_a: ComponentShare,
     pub dominant_b: ComponentShare,
-    /// The component whose coefficient changed most between A and B: the one responsible
-    /// for the shift.
+    /// Among the components that differ between the chains (added, removed or changed in
+    /// value), the one whose sensitivity coefficient in this mode changed most: the one
+    /// responsible for the shift. (Unchanged components only when nothing differs.)
     pub responsible: ComponentShare,
 }
 
@@ -262,21 +272,24 @@ pub struct Comparison {
     pub unmatched_b: Vec<usize>,
 }
 
-fn shares(r: &ModalResult, mode: &Mode) -> Vec<(String, ComponentKind, f64)> {
-    let mut out: Vec<(String, ComponentKind, f64)> = r
+/// (name, kind, coefficient, parameter value) of every component in one mode.
+fn shares(r: &ModalResult, mode: &Mode) -> Vec<(String, ComponentKind, f64, f64)> {
+    let mut out: Vec<(String, ComponentKind, f64, f64)> = r
         .inertias
         .iter()
         .zip(&mode.mass_sensitivity)
-        .map(|(n, v)| (n.clone(), ComponentKind::Inertia, *v))
+        .zip(&r.inertia_values)
+        .map(|((n, v), j)| (n.clone(), ComponentKind::Inertia, *v, *j))
         .collect();
-    if let Some(g) = &mode.stiffness_sensitivity {
-        out.extend(
-            r.springs
-                .iter()
-                .zip(g)
-                .map(|(n, v)| (n.clone(), ComponentKind::Spring, *v)),
-        );
-    }
+    let zeros = vec![0.0; r.springs.len()];
+    let g = mode.stiffness_sensitivity.as_ref().unwrap_or(&zeros);
+    out.extend(
+        r.springs
+            .iter()
+            .zip(g)
+            .zip(&r.stiffness_values)
+            .map(|((n, v), c)| (n.clone(), ComponentKind::Spring, *v, *c)),
+    );
     out
 }
 
@@ -327,26 +340,32 @@ fn pair(a: &ModalResult, ma: &Mode, b: &ModalResult, mb: &Mode) -> ModePair {
     let sa = shares(a, ma);
     let sb = shares(b, mb);
     let mut all: Vec<ComponentShare> = Vec::new();
-    for (name, kind, v) in &sa {
+    let mut values: Vec<f64> = Vec::new();
+    for (name, kind, v, value) in &sa {
         all.push(ComponentShare {
             name: name.clone(),
             kind: *kind,
             a: *v,
             b: 0.0,
+            changed: true,
         });
+        values.push(*value);
     }
-    for (name, kind, v) in &sb {
-        if let Some(c) = all.iter_mut().find(|c| &c.name == name && c.kind == *kind) {
-            c.b = *v;
+    for (name, kind, v, value) in &sb {
+        if let Some(i) = all.iter().position(|c| &c.name == name && c.kind == *kind) {
+            all[i].b = *v;
+            all[i].changed = values[i] != *value;
         } else {
             all.push(ComponentShare {
                 name: name.clone(),
                 kind: *kind,
                 a: 0.0,
                 b: *v,
+                changed: true,
             });
         }
     }
+    let any_changed = all.iter().any(|c| c.changed);
     let pick = |key: &dyn Fn(&ComponentShare) -> f64| -> ComponentShare {
         // Largest key; on a tie, prefer the component that gained participation in B.
         all.iter()
@@ -360,7 +379,13 @@ fn pair(a: &ModalResult, ma: &Mode, b: &ModalResult, mb: &Mode) -> ModePair {
     };
     let dominant_a = pick(&|c| if c.a > 0.0 { c.a } else { -1.0 });
     let dominant_b = pick(&|c| if c.b > 0.0 { c.b } else { -1.0 });
-    let responsible = pick(&|c| (c.b - c.a).abs());
+    let responsible = pick(&|c| {
+        if c.changed || !any_changed {
+            (c.b - c.a).abs()
+        } else {
+            -1.0
+        }
+    });
     let rigid = ma.kind == ModeKind::RigidBody;
     ModePair {
         kind: ma.kind,

@@ -229,3 +229,22 @@ fn example_chains_parse_and_compare() {
     // drivetrain mode moves up.
     assert!(first.f0_b > first.f0_a, "{} -> {}", first.f0_a, first.f0_b);
 }
+
+#[test]
+fn compare_names_the_changed_component() {
+    let a = chain(&[1.6, 0.8, 52.0], &[1.0e4, 2.4e4], None, None);
+    let mut b = a.clone();
+    b.springs[1].stiffness = 6.0e4; // a stiffer tyre
+    let ra = modal::analyse(&a).unwrap();
+    let rb = modal::analyse(&b).unwrap();
+    let cmp = modal::compare(&ra, &rb);
+    assert_eq!(cmp.pairs.len(), 3);
+    for p in cmp.pairs.iter().filter(|p| p.kind == ModeKind::Elastic) {
+        assert!(p.f0_b > p.f0_a);
+        assert_eq!(p.responsible.name, "c2", "mode {}", p.number_a);
+        assert!(p.responsible.changed);
+    }
+    // identical chains: nothing moves
+    let same = modal::compare(&ra, &ra);
+    assert!(same.pairs.iter().all(|p| p.shift_hz == 0.0));
+}
