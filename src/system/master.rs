@@ -614,7 +614,7 @@ impl Simulation {
             let lap_done = self
                 .lap_sig
                 .is_some_and(|s| self.signals[s] >= exp.lap_count);
-            if k % decimation == 0 || k == total_steps || lap_done {
+            if k.is_multiple_of(decimation) || k == total_steps || lap_done {
                 self.record(t_end);
             }
             if lap_done {

@@ -194,7 +194,7 @@ impl System {
             ));
         }
         match &file.experiment.stop {
-            StopConfig::Time(t) if !(*t > file.experiment.start) => {
+            StopConfig::Time(t) if *t <= file.experiment.start || t.is_nan() => {
                 return Err(invalid(
                     &ctx_file,
                     format!(
@@ -667,9 +667,10 @@ fn check_feedthrough_cycles(
     let mut color: HashMap<Node, u8> = HashMap::new();
     let mut nodes: Vec<Node> = edges.keys().copied().collect();
     nodes.sort();
+    type Edges = HashMap<(usize, u32), Vec<((usize, u32), bool)>>;
     fn dfs(
         n: (usize, u32),
-        edges: &HashMap<(usize, u32), Vec<((usize, u32), bool)>>,
+        edges: &Edges,
         color: &mut HashMap<(usize, u32), u8>,
         path: &mut Vec<((usize, u32), bool)>,
     ) -> Option<Vec<((usize, u32), bool)>> {
@@ -737,10 +738,8 @@ fn stepping_order(
             }
             order.push(k);
         }
-        for k in 0..n {
-            if !order.contains(&k) {
-                return Err(format!("experiment.order: '{}' is missing", unit_names[k]));
-            }
+        if let Some(missing) = unit_names.iter().enumerate().find(|(k, _)| !order.contains(k)) {
+            return Err(format!("experiment.order: '{}' is missing", missing.1));
         }
         return Ok(order);
     }
