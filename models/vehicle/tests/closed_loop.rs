@@ -222,3 +222,84 @@ fn loop_is_stable_at_1ms() {
         }
     }
 }
+
+/// The default study end to end: the Spielberg lap (bundled track, road excitation on, default
+/// parameters) driven by a simple test driver that follows the measured speed over distance
+/// (30 ms preview, feed-forward, PI). Tolerances: lap time within 1.5% of the measurement's
+/// 97.49 s, RMS speed error below 3 km/h, peak braking beyond −20 m/s², no wheel locking
+/// (rear slip above −0.2) and no step failure.
+#[test]
+fn drives_the_spielberg_lap() {
+    // A longer preview makes this driver brake early: the feed-forward already anticipates.
+    const PREVIEW: f64 = 0.03;
+    let csv = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/spielberg_lap.csv"
+    ))
+    .unwrap();
+    let (mut dist, mut speed) = (Vec::new(), Vec::new());
+    for line in csv.lines().skip(1) {
+        let f: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+        if !dist.last().is_some_and(|&d| f[1] <= d) {
+            dist.push(f[1]);
+            speed.push(f[2]);
+        }
+    }
+    let target = |s: f64| -> f64 {
+        let i = dist.partition_point(|&d| d <= s).clamp(1, dist.len() - 1);
+        let t = ((s - dist[i - 1]) / (dist[i] - dist[i - 1])).clamp(0.0, 1.0);
+        speed[i - 1] + t * (speed[i] - speed[i - 1])
+    };
+    let (mut car, _) = runtime::<Vehicle>(Some(bundled_resources()), &[("v_start", r(speed[0]))]);
+    let w0 = speed[0] / R;
+    set(&mut car, "omega_rl", w0);
+    set(&mut car, "omega_rr", w0);
+    assert_eq!(car.exit_initialization_mode(), fmi2Status::OK);
+    let (mut edu, _) = runtime::<Edu>(None, &[("omega_wheel_start", r(w0))]);
+    assert_eq!(edu.exit_initialization_mode(), fmi2Status::OK);
+    let mut b = Bench {
+        car,
+        edu,
+        wheels: [Wheel::new(w0, 0.0, 0.0, 0.0), Wheel::new(w0, 0.0, 0.0, 0.0)],
+        t: 0.0,
+    };
+    let (m, integral_gain, kp) = (880.0, 1.0, 4.0);
+    let mut integral = 0.0;
+    let (mut sq, mut n, mut min_ax, mut min_slip): (f64, usize, f64, f64) = (0.0, 0, 0.0, 0.0);
+    while get(&mut b.car, "lap") < 1.0 && b.t < 120.0 {
+        let v = get(&mut b.car, "v");
+        let s = get(&mut b.car, "distance");
+        let ahead = s + PREVIEW * v;
+        let vt = target(ahead);
+        let ff = v * (target(ahead + 1.0) - target(ahead - 1.0)) / 2.0;
+        let err = vt - v;
+        let force = m * (ff + kp * err + integral) + get(&mut b.car, "F_resistance");
+        let drive_max = (150.0 * 17.86 * 0.96 / R).min(200_000.0 * 0.96 / v.max(1.0));
+        let (pedal, brake) = if force >= 0.0 {
+            ((force / drive_max).min(1.0), 0.0)
+        } else {
+            (0.0, (-force / 22_000.0).min(1.0))
+        };
+        // Anti-windup: integrate only while the pedals are not saturated.
+        if pedal < 1.0 && brake < 1.0 {
+            integral += integral_gain * err * DT;
+        }
+        b.step(pedal, brake);
+        let v_now = get(&mut b.car, "v");
+        sq += (target(get(&mut b.car, "distance")) - v_now).powi(2);
+        n += 1;
+        min_ax = min_ax.min(get(&mut b.car, "a_x"));
+        min_slip = min_slip
+            .min(get(&mut b.car, "slip_rl"))
+            .min(get(&mut b.car, "slip_rr"));
+    }
+    let lap_time = get(&mut b.car, "lap_time");
+    let rms_kmh = (sq / n as f64).sqrt() * 3.6;
+    println!(
+        "Spielberg lap: {lap_time:.2} s (measured 97.49 s), RMS speed error {rms_kmh:.2} km/h, min a_x {min_ax:.1} m/s2, min rear slip {min_slip:.3}"
+    );
+    assert!((lap_time / 97.49 - 1.0).abs() < 0.015);
+    assert!(rms_kmh < 3.0);
+    assert!(min_ax < -20.0);
+    assert!(min_slip > -0.2);
+}
