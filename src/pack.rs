@@ -21,7 +21,10 @@ pub enum PackError {
     #[error("model '{model}': built library {path} not found")]
     MissingBinary { model: String, path: PathBuf },
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("zip: {0}")]
     Zip(#[from] zip::result::ZipError),
     #[error("unknown model '{0}' (known: {1})")]
@@ -54,7 +57,9 @@ impl ModelSpec {
                     concat!("twinbench ", env!("CARGO_PKG_VERSION")),
                 )
             },
-            documentation: || fmu_export::description::render_documentation::<M>(DOCUMENTATION_TEMPLATE),
+            documentation: || {
+                fmu_export::description::render_documentation::<M>(DOCUMENTATION_TEMPLATE)
+            },
             validate: fmu_export::description::validate_table::<M::Vars>,
             guid: fmu_export::description::guid::<M>,
         }
@@ -84,7 +89,11 @@ pub fn default_fmu_dir() -> PathBuf {
 
 /// Path of a packed FMU (test FMUs under `test/`).
 pub fn fmu_path(out_dir: &Path, spec: &ModelSpec) -> PathBuf {
-    let dir = if spec.test_only { out_dir.join("test") } else { out_dir.to_path_buf() };
+    let dir = if spec.test_only {
+        out_dir.join("test")
+    } else {
+        out_dir.to_path_buf()
+    };
     dir.join(format!("{}.fmu", spec.info.name))
 }
 
@@ -95,7 +104,11 @@ pub fn build_libraries(specs: &[ModelSpec]) -> Result<PathBuf, PackError> {
     let target = root.join("target").join("fmu-build");
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut cmd = Command::new(cargo);
-    cmd.current_dir(&root).arg("build").arg("--release").arg("--target-dir").arg(&target);
+    cmd.current_dir(&root)
+        .arg("build")
+        .arg("--release")
+        .arg("--target-dir")
+        .arg(&target);
     let mut features = Vec::new();
     for s in specs {
         cmd.arg("-p").arg(s.package);
@@ -111,7 +124,10 @@ pub fn build_libraries(specs: &[ModelSpec]) -> Result<PathBuf, PackError> {
 
 /// Write `bytes` to `path` atomically (temporary file in the same folder, then rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), PackError> {
-    let io = |source| PackError::Io { path: path.to_path_buf(), source };
+    let io = |source| PackError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(io)?;
     let tmp = dir.join(format!(
@@ -127,13 +143,21 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), PackError> {
 pub fn fmu_archive(spec: &ModelSpec, library: &[u8]) -> Result<Vec<u8>, PackError> {
     use zip::write::SimpleFileOptions;
     let mut entries: Vec<(String, Vec<u8>, u32)> = vec![
-        ("modelDescription.xml".into(), (spec.model_description)().into_bytes(), 0o644),
+        (
+            "modelDescription.xml".into(),
+            (spec.model_description)().into_bytes(),
+            0o644,
+        ),
         (
             format!("binaries/linux64/{}.so", spec.info.identifier),
             library.to_vec(),
             0o755,
         ),
-        ("documentation/index.html".into(), (spec.documentation)().into_bytes(), 0o644),
+        (
+            "documentation/index.html".into(),
+            (spec.documentation)().into_bytes(),
+            0o644,
+        ),
     ];
     for r in spec.info.resources {
         entries.push((format!("resources/{}", r.name), r.content.to_vec(), 0o644));
@@ -160,17 +184,26 @@ pub fn pack(names: &[String], out_dir: &Path) -> Result<Vec<PathBuf>, PackError>
         names
             .iter()
             .map(|n| {
-                all.iter().find(|s| s.info.name == n).copied().ok_or_else(|| {
-                    PackError::UnknownModel(
-                        n.clone(),
-                        all.iter().map(|s| s.info.name).collect::<Vec<_>>().join(", "),
-                    )
-                })
+                all.iter()
+                    .find(|s| s.info.name == n)
+                    .copied()
+                    .ok_or_else(|| {
+                        PackError::UnknownModel(
+                            n.clone(),
+                            all.iter()
+                                .map(|s| s.info.name)
+                                .collect::<Vec<_>>()
+                                .join(", "),
+                        )
+                    })
             })
             .collect::<Result<_, _>>()?
     };
     for s in &specs {
-        (s.validate)().map_err(|reason| PackError::Table { model: s.info.name.into(), reason })?;
+        (s.validate)().map_err(|reason| PackError::Table {
+            model: s.info.name.into(),
+            reason,
+        })?;
     }
     let lib_dir = build_libraries(&specs)?;
     let mut written = Vec::new();

@@ -10,7 +10,14 @@ use twinbench::fmu::Instance;
 
 fn faulty(name: &str) -> (std::sync::Arc<twinbench::fmu::LoadedFmu>, Instance) {
     let f = load("faulty");
-    let i = Instance::instantiate(f.library.clone(), name, &f.description.guid, Some(&f.resource_dir()), true).unwrap();
+    let i = Instance::instantiate(
+        f.library.clone(),
+        name,
+        &f.description.guid,
+        Some(&f.resource_dir()),
+        true,
+    )
+    .unwrap();
     (f, i)
 }
 
@@ -25,7 +32,10 @@ fn every_co_simulation_function_is_exported() {
     let f = load("faulty");
     let so = f.dir.join("binaries/linux64/faulty.so");
     for name in CO_SIMULATION_FUNCTIONS {
-        assert!(twinbench::fmu::Library::has_symbol(&so, name), "{name} missing");
+        assert!(
+            twinbench::fmu::Library::has_symbol(&so, name),
+            "{name} missing"
+        );
     }
     let md = &f.description;
     let cs = md.co_simulation.as_ref().unwrap();
@@ -39,20 +49,32 @@ fn illegal_call_sequences_return_error_with_a_message() {
     // Step before initialisation.
     let e = i.do_step(0.0, 0.1).unwrap_err().to_string();
     assert!(e.contains("fmi2DoStep returned fmi2Error"), "{e}");
-    assert!(e.contains("fmi2DoStep is not allowed in state 'instantiated'"), "{e}");
+    assert!(
+        e.contains("fmi2DoStep is not allowed in state 'instantiated'"),
+        "{e}"
+    );
     // Exit without enter.
     let e = i.exit_initialization_mode().unwrap_err().to_string();
     assert!(e.contains("not allowed in state 'instantiated'"), "{e}");
     init(&mut i);
     // Setup after initialisation, and setting a fixed parameter after it.
     assert!(i.setup_experiment(0.0, None).is_err());
-    let e = i.set_integer(&[vr(&f, "fault_kind")], &[1]).unwrap_err().to_string();
-    assert!(e.contains("'fault_kind' (fixed parameter) cannot be set in state 'step complete'"), "{e}");
+    let e = i
+        .set_integer(&[vr(&f, "fault_kind")], &[1])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("'fault_kind' (fixed parameter) cannot be set in state 'step complete'"),
+        "{e}"
+    );
     // Calculated output cannot be set; unknown value reference; wrong type.
     assert!(i.set_real(&[vr(&f, "y")], &[1.0]).is_err());
     let e = i.set_real(&[9999], &[1.0]).unwrap_err().to_string();
     assert!(e.contains("unknown value reference 9999"), "{e}");
-    let e = i.get_real(&[vr(&f, "steps")], &mut [0.0]).unwrap_err().to_string();
+    let e = i
+        .get_real(&[vr(&f, "steps")], &mut [0.0])
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("'steps' (vr 6) is Integer, not Real"), "{e}");
     // Legal again: a step works, terminate, then no more steps.
     i.do_step(0.0, 0.1).unwrap();
@@ -63,23 +85,44 @@ fn illegal_call_sequences_return_error_with_a_message() {
 #[test]
 fn bad_values_are_refused_naming_the_variable() {
     let (f, mut i) = faulty("bad");
-    let e = i.set_real(&[vr(&f, "gain")], &[2e6]).unwrap_err().to_string();
-    assert!(e.contains("'gain' = 2000000 is outside its range [-1000000, 1000000] 1"), "{e}");
-    let e = i.set_real(&[vr(&f, "gain")], &[f64::NAN]).unwrap_err().to_string();
-    assert!(e.contains("'gain' set to NaN, expected a finite number"), "{e}");
+    let e = i
+        .set_real(&[vr(&f, "gain")], &[2e6])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("'gain' = 2000000 is outside its range [-1000000, 1000000] 1"),
+        "{e}"
+    );
+    let e = i
+        .set_real(&[vr(&f, "gain")], &[f64::NAN])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("'gain' set to NaN, expected a finite number"),
+        "{e}"
+    );
     init(&mut i);
     let e = i.do_step(0.0, 0.0).unwrap_err().to_string();
-    assert!(e.contains("communicationStepSize must be positive and finite, got 0"), "{e}");
+    assert!(
+        e.contains("communicationStepSize must be positive and finite, got 0"),
+        "{e}"
+    );
     assert!(i.do_step(0.0, -1e-3).is_err());
 }
 
 #[test]
 fn wrong_guid_is_refused_with_a_message() {
     let f = load("faulty");
-    let e = Instance::instantiate(f.library.clone(), "guid", "{00000000-0000-0000-0000-000000000000}", None, false)
-        .err()
-        .unwrap()
-        .to_string();
+    let e = Instance::instantiate(
+        f.library.clone(),
+        "guid",
+        "{00000000-0000-0000-0000-000000000000}",
+        None,
+        false,
+    )
+    .err()
+    .unwrap()
+    .to_string();
     assert!(e.contains("GUID mismatch"), "{e}");
     assert!(e.contains(&f.description.guid), "{e}");
 }
@@ -87,7 +130,10 @@ fn wrong_guid_is_refused_with_a_message() {
 #[test]
 fn percent_in_messages_survives_the_printf_logger() {
     let (_f, mut i) = faulty("percent");
-    let e = i.set_debug_logging(true, &["100%s%d"]).unwrap_err().to_string();
+    let e = i
+        .set_debug_logging(true, &["100%s%d"])
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("unknown log category '100%s%d'"), "{e}");
 }
 
@@ -102,9 +148,15 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
     }
     let e = i.do_step(0.5, 0.1).unwrap_err().to_string();
     assert!(e.contains("fmi2DoStep returned fmi2Error"), "{e}");
-    assert!(e.contains("the model panicked: fault_kind = 2: the model panics on purpose"), "{e}");
+    assert!(
+        e.contains("the model panicked: fault_kind = 2: the model panics on purpose"),
+        "{e}"
+    );
     // Poisoned: further calls refused, reset recovers.
-    let e = i.get_real(&[vr(&f, "y")], &mut [0.0]).unwrap_err().to_string();
+    let e = i
+        .get_real(&[vr(&f, "y")], &mut [0.0])
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("unusable until fmi2Reset"), "{e}");
     i.reset().unwrap();
     init(&mut i);
@@ -117,14 +169,34 @@ fn null_pointers_are_errors_not_crashes() {
     let api = &f.library.api;
     let c = i.raw();
     unsafe {
-        assert_eq!((api.fmi2DoStep)(std::ptr::null_mut(), 0.0, 0.1, 1), fmi2Status::ERROR);
-        assert_eq!((api.fmi2GetReal)(c, std::ptr::null(), 2, std::ptr::null_mut()), fmi2Status::ERROR);
-        assert_eq!((api.fmi2GetReal)(c, std::ptr::null(), 0, std::ptr::null_mut()), fmi2Status::OK);
-        assert_eq!((api.fmi2SetFMUstate.unwrap())(c, std::ptr::null_mut()), fmi2Status::ERROR);
+        assert_eq!(
+            (api.fmi2DoStep)(std::ptr::null_mut(), 0.0, 0.1, 1),
+            fmi2Status::ERROR
+        );
+        assert_eq!(
+            (api.fmi2GetReal)(c, std::ptr::null(), 2, std::ptr::null_mut()),
+            fmi2Status::ERROR
+        );
+        assert_eq!(
+            (api.fmi2GetReal)(c, std::ptr::null(), 0, std::ptr::null_mut()),
+            fmi2Status::OK
+        );
+        assert_eq!(
+            (api.fmi2SetFMUstate.unwrap())(c, std::ptr::null_mut()),
+            fmi2Status::ERROR
+        );
         let name = CString::new("x").unwrap();
         let guid = CString::new(f.description.guid.clone()).unwrap();
         // No callback functions at all: NULL, no crash.
-        let comp = (api.fmi2Instantiate)(name.as_ptr(), fmi2Type::CO_SIMULATION, guid.as_ptr(), std::ptr::null(), std::ptr::null(), 0, 0);
+        let comp = (api.fmi2Instantiate)(
+            name.as_ptr(),
+            fmi2Type::CO_SIMULATION,
+            guid.as_ptr(),
+            std::ptr::null(),
+            std::ptr::null(),
+            0,
+            0,
+        );
         assert!(comp.is_null());
         (api.fmi2FreeInstance)(std::ptr::null_mut());
     }
@@ -156,7 +228,10 @@ fn two_instances_with_different_parameters_stay_independent() {
     for (x, y) in ya.iter().zip(&yb) {
         assert!((x / 2.0 + y / 3.0).abs() < 1e-12, "{x} {y}");
     }
-    assert!(ya.iter().any(|x| x.abs() > 0.05), "trajectory too small to tell instances apart");
+    assert!(
+        ya.iter().any(|x| x.abs() > 0.05),
+        "trajectory too small to tell instances apart"
+    );
 }
 
 #[test]
@@ -169,17 +244,31 @@ fn restored_and_deserialized_states_repeat_bit_for_bit() {
     let first = trajectory(&f, &mut i, 30, 40);
     i.set_state(&saved, 0.3).unwrap();
     let again = trajectory(&f, &mut i, 30, 40);
-    assert_eq!(first.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), again.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+    assert_eq!(
+        first.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        again.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    );
     // Deserialized into another, fresh instance.
     let (_, mut other) = faulty("other");
     let st = other.deserialize_state(&bytes).unwrap();
     other.set_state(&st, 0.3).unwrap();
     let third = trajectory(&f, &mut other, 30, 40);
-    assert_eq!(first.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), third.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+    assert_eq!(
+        first.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        third.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    );
     // Garbage is refused with a message.
-    let e = other.deserialize_state(b"not a state").err().unwrap().to_string();
+    let e = other
+        .deserialize_state(b"not a state")
+        .err()
+        .unwrap()
+        .to_string();
     assert!(e.contains("bad magic"), "{e}");
-    let e = other.deserialize_state(&bytes[..bytes.len() - 3]).err().unwrap().to_string();
+    let e = other
+        .deserialize_state(&bytes[..bytes.len() - 3])
+        .err()
+        .unwrap()
+        .to_string();
     assert!(e.contains("truncated"), "{e}");
     other.free_state(st).unwrap();
     i.free_state(saved).unwrap();
@@ -195,7 +284,10 @@ fn reset_then_rerun_repeats_bit_for_bit() {
     i.set_real(&[vr(&f, "gain")], &[1.5]).unwrap();
     init(&mut i);
     let again = trajectory(&f, &mut i, 0, 100);
-    assert_eq!(first.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), again.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+    assert_eq!(
+        first.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        again.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    );
 }
 
 #[test]
@@ -207,15 +299,30 @@ fn error_from_a_step_names_the_instance_and_time() {
         i.do_step(k as f64 * 0.01, 0.01).unwrap();
     }
     let e = i.do_step(1.0, 0.01).unwrap_err().to_string();
-    assert!(e.starts_with("instance 'fails' at t = 1 s: fmi2DoStep returned fmi2Error"), "{e}");
-    assert!(e.contains("at t = 1 s: fault_kind = 1: the step fails on purpose"), "{e}");
+    assert!(
+        e.starts_with("instance 'fails' at t = 1 s: fmi2DoStep returned fmi2Error"),
+        "{e}"
+    );
+    assert!(
+        e.contains("at t = 1 s: fault_kind = 1: the step fails on purpose"),
+        "{e}"
+    );
 }
 
 #[test]
 fn many_instances_per_process() {
     let f = load("faulty");
     let mut v: Vec<Instance> = (0..64)
-        .map(|k| Instance::instantiate(f.library.clone(), &format!("i{k}"), &f.description.guid, None, false).unwrap())
+        .map(|k| {
+            Instance::instantiate(
+                f.library.clone(),
+                &format!("i{k}"),
+                &f.description.guid,
+                None,
+                false,
+            )
+            .unwrap()
+        })
         .collect();
     for (k, i) in v.iter_mut().enumerate() {
         i.set_real(&[vr(&f, "gain")], &[k as f64]).unwrap();

@@ -20,7 +20,9 @@ pub struct DemoArgs {
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let root = crate::pack::workspace_root();
     let fmu_dir = crate::pack::default_fmu_dir();
-    let missing = crate::pack::models().iter().any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists());
+    let missing = crate::pack::models()
+        .iter()
+        .any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists());
     if missing || args.repack {
         eprintln!("packing the FMUs into {} ...", fmu_dir.display());
         crate::pack::pack(&[], &fmu_dir)?;
@@ -30,13 +32,20 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let mut sim = Simulation::new(System::load(&system_path, cache)?)?;
     sim.echo_fmu_log = false;
     let summary = sim.run()?;
-    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
     let csv = args.out.join("rls_v_lap.csv");
     sim.recording.write_csv(&csv)?;
     println!("twinbench demo: the virtual bench (RLS/v) drives the bundled Spielberg lap");
     println!("  system      {}", system_path.display());
-    println!("  lap time    {:.3} s (measured lap: 97.490 s)", summary.lap_time.unwrap_or(f64::NAN));
-    println!("  steps       {} at 1 ms, wall time {:.3} s", summary.steps, summary.wall_time);
+    println!(
+        "  lap time    {:.3} s (measured lap: 97.490 s)",
+        summary.lap_time.unwrap_or(f64::NAN)
+    );
+    println!(
+        "  steps       {} at 1 ms, wall time {:.3} s",
+        summary.steps, summary.wall_time
+    );
     println!("  results     {}", csv.display());
     Ok(())
 }

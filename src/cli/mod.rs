@@ -44,6 +44,10 @@ pub enum Command {
 }
 
 pub fn main() -> ExitCode {
+    // Die quietly on a closed pipe (`twinbench info X | head`) instead of panicking in println!.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let level = match cli.verbose {
         0 => "warn",

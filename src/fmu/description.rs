@@ -110,9 +110,12 @@ impl ModelDescription {
 
     /// The unit of a variable: its own, or its declared type's.
     pub fn unit_of<'a>(&'a self, v: &'a ScalarVariable) -> Option<&'a str> {
-        v.unit
-            .as_deref()
-            .or_else(|| v.declared_type.as_ref().and_then(|t| self.type_units.get(t)).map(String::as_str))
+        v.unit.as_deref().or_else(|| {
+            v.declared_type
+                .as_ref()
+                .and_then(|t| self.type_units.get(t))
+                .map(String::as_str)
+        })
     }
 
     pub fn unit_def(&self, name: &str) -> Option<&UnitDef> {
@@ -121,8 +124,11 @@ impl ModelDescription {
 
     /// Up to `n` variable names closest to `name` (for "did you mean" messages).
     pub fn closest_names(&self, name: &str, n: usize) -> Vec<&str> {
-        let mut scored: Vec<(usize, &str)> =
-            self.variables.iter().map(|v| (edit_distance(name, &v.name), v.name.as_str())).collect();
+        let mut scored: Vec<(usize, &str)> = self
+            .variables
+            .iter()
+            .map(|v| (edit_distance(name, &v.name), v.name.as_str()))
+            .collect();
         scored.sort();
         scored.into_iter().take(n).map(|(_, s)| s).collect()
     }
@@ -149,7 +155,9 @@ fn attrs(e: &BytesStart) -> Result<HashMap<String, String>, String> {
     for a in e.attributes() {
         let a = a.map_err(|e| format!("bad attribute: {e}"))?;
         let key = String::from_utf8_lossy(a.key.as_ref()).into_owned();
-        let val = a.unescape_value().map_err(|e| format!("bad attribute value of '{key}': {e}"))?;
+        let val = a
+            .unescape_value()
+            .map_err(|e| format!("bad attribute value of '{key}': {e}"))?;
         m.insert(key, val.into_owned());
     }
     Ok(m)
@@ -183,11 +191,17 @@ fn unknown(m: &HashMap<String, String>) -> Result<Unknown, String> {
         None => None,
         Some(s) => Some(
             s.split_whitespace()
-                .map(|d| d.parse().map_err(|_| format!("ModelStructure: bad dependency '{d}'")))
+                .map(|d| {
+                    d.parse()
+                        .map_err(|_| format!("ModelStructure: bad dependency '{d}'"))
+                })
                 .collect::<Result<Vec<usize>, String>>()?,
         ),
     };
-    Ok(Unknown { index, dependencies })
+    Ok(Unknown {
+        index,
+        dependencies,
+    })
 }
 
 /// Parse modelDescription.xml text. Errors say what is wrong; the caller adds the file.
@@ -200,7 +214,9 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
     let mut current_type: Option<String> = None;
     let mut saw_root = false;
     loop {
-        let ev = reader.read_event().map_err(|e| format!("XML error at byte {}: {e}", reader.buffer_position()))?;
+        let ev = reader
+            .read_event()
+            .map_err(|e| format!("XML error at byte {}: {e}", reader.buffer_position()))?;
         let (e, empty) = match &ev {
             Event::Start(e) => (e.clone(), false),
             Event::Empty(e) => (e.clone(), true),
@@ -237,7 +253,11 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                 md.description = m.get("description").cloned().unwrap_or_default();
                 md.generation_tool = m.get("generationTool").cloned().unwrap_or_default();
             }
-            ("", other) => return Err(format!("root element is <{other}>, expected <fmiModelDescription>")),
+            ("", other) => {
+                return Err(format!(
+                    "root element is <{other}>, expected <fmiModelDescription>"
+                ))
+            }
             ("fmiModelDescription", "CoSimulation") => {
                 md.co_simulation = Some(CoSimulation {
                     model_identifier: m
@@ -245,8 +265,14 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                         .cloned()
                         .ok_or("<CoSimulation> has no modelIdentifier")?,
                     needs_execution_tool: flag(&m, "needsExecutionTool"),
-                    can_handle_variable_communication_step_size: flag(&m, "canHandleVariableCommunicationStepSize"),
-                    can_be_instantiated_only_once_per_process: flag(&m, "canBeInstantiatedOnlyOncePerProcess"),
+                    can_handle_variable_communication_step_size: flag(
+                        &m,
+                        "canHandleVariableCommunicationStepSize",
+                    ),
+                    can_be_instantiated_only_once_per_process: flag(
+                        &m,
+                        "canBeInstantiatedOnlyOncePerProcess",
+                    ),
                     can_get_and_set_fmu_state: flag(&m, "canGetAndSetFMUstate"),
                     can_serialize_fmu_state: flag(&m, "canSerializeFMUstate"),
                     can_interpolate_inputs: flag(&m, "canInterpolateInputs"),
@@ -264,19 +290,22 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
             }
             ("UnitDefinitions", "Unit") => {
                 let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
-                current_unit = Some((uname, UnitDef {
-                    name: "",
-                    kg: 0,
-                    m: 0,
-                    s: 0,
-                    a: 0,
-                    k: 0,
-                    mol: 0,
-                    cd: 0,
-                    rad: 0,
-                    factor: 1.0,
-                    offset: 0.0,
-                }));
+                current_unit = Some((
+                    uname,
+                    UnitDef {
+                        name: "",
+                        kg: 0,
+                        m: 0,
+                        s: 0,
+                        a: 0,
+                        k: 0,
+                        mol: 0,
+                        cd: 0,
+                        rad: 0,
+                        factor: 1.0,
+                        offset: 0.0,
+                    },
+                ));
                 if empty {
                     md.units.push(current_unit.take().unwrap());
                 }
@@ -307,7 +336,10 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                 }
             }
             ("ModelVariables", "ScalarVariable") => {
-                let vname = m.get("name").cloned().ok_or("<ScalarVariable> without a name")?;
+                let vname = m
+                    .get("name")
+                    .cloned()
+                    .ok_or("<ScalarVariable> without a name")?;
                 let vr = m
                     .get("valueReference")
                     .and_then(|s| s.trim().parse().ok())
@@ -316,8 +348,14 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                     name: vname,
                     value_reference: vr,
                     description: m.get("description").cloned().unwrap_or_default(),
-                    causality: m.get("causality").cloned().unwrap_or_else(|| "local".into()),
-                    variability: m.get("variability").cloned().unwrap_or_else(|| "continuous".into()),
+                    causality: m
+                        .get("causality")
+                        .cloned()
+                        .unwrap_or_else(|| "local".into()),
+                    variability: m
+                        .get("variability")
+                        .cloned()
+                        .unwrap_or_else(|| "continuous".into()),
                     initial: m.get("initial").cloned(),
                     ty: ScalarType::Real,
                     declared_type: None,
@@ -328,7 +366,10 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                     nominal: None,
                 });
                 if empty {
-                    return Err(format!("variable '{}' has no type element", current.unwrap().name));
+                    return Err(format!(
+                        "variable '{}' has no type element",
+                        current.unwrap().name
+                    ));
                 }
             }
             ("ScalarVariable", t @ ("Real" | "Integer" | "Boolean" | "String" | "Enumeration")) => {
@@ -363,7 +404,10 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
     let n = md.variables.len();
     for u in md.outputs.iter().chain(&md.initial_unknowns) {
         if u.index == 0 || u.index > n {
-            return Err(format!("ModelStructure refers to variable index {} of {n}", u.index));
+            return Err(format!(
+                "ModelStructure refers to variable index {} of {n}",
+                u.index
+            ));
         }
     }
     Ok(md)
@@ -408,11 +452,17 @@ mod tests {
 
     #[test]
     fn bad_files_say_what_is_wrong() {
-        assert!(parse("<foo/>").unwrap_err().contains("expected <fmiModelDescription>"));
+        assert!(parse("<foo/>")
+            .unwrap_err()
+            .contains("expected <fmiModelDescription>"));
         let bad = XML.replace("valueReference=\"3\"", "valueReference=\"x\"");
-        assert!(parse(&bad).unwrap_err().contains("variable 'n': missing or bad valueReference"));
+        assert!(parse(&bad)
+            .unwrap_err()
+            .contains("variable 'n': missing or bad valueReference"));
         let bad = XML.replace("max=\"2e4\"", "max=\"lots\"");
-        assert!(parse(&bad).unwrap_err().contains("max=\"lots\" is not a number"));
+        assert!(parse(&bad)
+            .unwrap_err()
+            .contains("max=\"lots\" is not a number"));
         assert!(parse("<fmiModelDescription><broken").is_err());
     }
 

@@ -151,7 +151,10 @@ impl Instance {
     }
 
     pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Result<(), FmuError> {
-        let c: Vec<CString> = categories.iter().map(|s| CString::new(*s).unwrap_or_default()).collect();
+        let c: Vec<CString> = categories
+            .iter()
+            .map(|s| CString::new(*s).unwrap_or_default())
+            .collect();
         let p: Vec<fmi2String> = c.iter().map(|s| s.as_ptr()).collect();
         let s = unsafe {
             (self.lib.api.fmi2SetDebugLogging)(self.comp, on as fmi2Boolean, p.len(), p.as_ptr())
@@ -199,34 +202,46 @@ impl Instance {
     #[inline]
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
         debug_assert_eq!(vrs.len(), out.len());
-        let s = unsafe { (self.lib.api.fmi2GetReal)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr()) };
+        let s = unsafe {
+            (self.lib.api.fmi2GetReal)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
+        };
         self.check("fmi2GetReal", s)
     }
 
     #[inline]
     pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
         debug_assert_eq!(vrs.len(), values.len());
-        let s = unsafe { (self.lib.api.fmi2SetReal)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        let s = unsafe {
+            (self.lib.api.fmi2SetReal)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        };
         self.check("fmi2SetReal", s)
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2GetInteger)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr()) };
+        let s = unsafe {
+            (self.lib.api.fmi2GetInteger)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
+        };
         self.check("fmi2GetInteger", s)
     }
 
     pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2SetInteger)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        let s = unsafe {
+            (self.lib.api.fmi2SetInteger)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        };
         self.check("fmi2SetInteger", s)
     }
 
     pub fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2GetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr()) };
+        let s = unsafe {
+            (self.lib.api.fmi2GetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
+        };
         self.check("fmi2GetBoolean", s)
     }
 
     pub fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2SetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        let s = unsafe {
+            (self.lib.api.fmi2SetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        };
         self.check("fmi2SetBoolean", s)
     }
 
@@ -244,11 +259,18 @@ impl Instance {
     }
 
     fn unsupported(&self, what: &'static str) -> FmuError {
-        FmuError::Unsupported { instance: self.name.clone(), what }
+        FmuError::Unsupported {
+            instance: self.name.clone(),
+            what,
+        }
     }
 
     pub fn get_state(&mut self) -> Result<FmuState, FmuError> {
-        let f = self.lib.api.fmi2GetFMUstate.ok_or_else(|| self.unsupported("fmi2GetFMUstate"))?;
+        let f = self
+            .lib
+            .api
+            .fmi2GetFMUstate
+            .ok_or_else(|| self.unsupported("fmi2GetFMUstate"))?;
         let mut st: fmi2FMUstate = std::ptr::null_mut();
         let s = unsafe { f(self.comp, &mut st) };
         self.check("fmi2GetFMUstate", s)?;
@@ -257,20 +279,32 @@ impl Instance {
 
     /// Save into an existing state (reuses its memory).
     pub fn update_state(&mut self, state: &mut FmuState) -> Result<(), FmuError> {
-        let f = self.lib.api.fmi2GetFMUstate.ok_or_else(|| self.unsupported("fmi2GetFMUstate"))?;
+        let f = self
+            .lib
+            .api
+            .fmi2GetFMUstate
+            .ok_or_else(|| self.unsupported("fmi2GetFMUstate"))?;
         let s = unsafe { f(self.comp, &mut state.0) };
         self.check("fmi2GetFMUstate", s)
     }
 
     pub fn set_state(&mut self, state: &FmuState, time: f64) -> Result<(), FmuError> {
-        let f = self.lib.api.fmi2SetFMUstate.ok_or_else(|| self.unsupported("fmi2SetFMUstate"))?;
+        let f = self
+            .lib
+            .api
+            .fmi2SetFMUstate
+            .ok_or_else(|| self.unsupported("fmi2SetFMUstate"))?;
         let s = unsafe { f(self.comp, state.0) };
         self.time = time;
         self.check("fmi2SetFMUstate", s)
     }
 
     pub fn free_state(&mut self, mut state: FmuState) -> Result<(), FmuError> {
-        let f = self.lib.api.fmi2FreeFMUstate.ok_or_else(|| self.unsupported("fmi2FreeFMUstate"))?;
+        let f = self
+            .lib
+            .api
+            .fmi2FreeFMUstate
+            .ok_or_else(|| self.unsupported("fmi2FreeFMUstate"))?;
         let s = unsafe { f(self.comp, &mut state.0) };
         self.check("fmi2FreeFMUstate", s)
     }
@@ -281,7 +315,11 @@ impl Instance {
             .api
             .fmi2SerializedFMUstateSize
             .ok_or_else(|| self.unsupported("fmi2SerializedFMUstateSize"))?;
-        let ser = self.lib.api.fmi2SerializeFMUstate.ok_or_else(|| self.unsupported("fmi2SerializeFMUstate"))?;
+        let ser = self
+            .lib
+            .api
+            .fmi2SerializeFMUstate
+            .ok_or_else(|| self.unsupported("fmi2SerializeFMUstate"))?;
         let mut n = 0usize;
         let s = unsafe { size_f(self.comp, state.0, &mut n) };
         self.check("fmi2SerializedFMUstateSize", s)?;
@@ -298,7 +336,14 @@ impl Instance {
             .fmi2DeSerializeFMUstate
             .ok_or_else(|| self.unsupported("fmi2DeSerializeFMUstate"))?;
         let mut st: fmi2FMUstate = std::ptr::null_mut();
-        let s = unsafe { f(self.comp, bytes.as_ptr() as *const fmi2Byte, bytes.len(), &mut st) };
+        let s = unsafe {
+            f(
+                self.comp,
+                bytes.as_ptr() as *const fmi2Byte,
+                bytes.len(),
+                &mut st,
+            )
+        };
         self.check("fmi2DeSerializeFMUstate", s)?;
         Ok(FmuState(st))
     }

@@ -49,7 +49,10 @@ pub struct Library {
 pub fn preload_global(path: &Path) -> Result<(), FmuError> {
     use libloading::os::unix::{Library as UnixLibrary, RTLD_GLOBAL, RTLD_NOW};
     let lib = unsafe { UnixLibrary::open(Some(path), RTLD_NOW | RTLD_GLOBAL) }.map_err(|e| {
-        FmuError::Load { path: path.to_path_buf(), message: e.to_string() }
+        FmuError::Load {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        }
     })?;
     // Kept for the life of the process: FMUs loaded later may depend on it.
     std::mem::forget(lib);
@@ -58,18 +61,25 @@ pub fn preload_global(path: &Path) -> Result<(), FmuError> {
 
 impl Library {
     pub fn load(path: &Path) -> Result<Library, FmuError> {
-        let lib = unsafe { libloading::Library::new(path) }
-            .map_err(|e| FmuError::Load { path: path.to_path_buf(), message: e.to_string() })?;
+        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
         macro_rules! req {
             ($name:ident) => {
                 *unsafe { lib.get(concat!(stringify!($name), "\0").as_bytes()) }.map_err(|_| {
-                    FmuError::MissingSymbol { path: path.to_path_buf(), symbol: stringify!($name) }
+                    FmuError::MissingSymbol {
+                        path: path.to_path_buf(),
+                        symbol: stringify!($name),
+                    }
                 })?
             };
         }
         macro_rules! opt {
             ($name:ident) => {
-                unsafe { lib.get(concat!(stringify!($name), "\0").as_bytes()) }.ok().map(|s| *s)
+                unsafe { lib.get(concat!(stringify!($name), "\0").as_bytes()) }
+                    .ok()
+                    .map(|s| *s)
             };
         }
         let api = Fmi2Api {
@@ -101,14 +111,20 @@ impl Library {
             fmi2GetRealStatus: opt!(fmi2GetRealStatus),
             fmi2GetBooleanStatus: opt!(fmi2GetBooleanStatus),
         };
-        let version = unsafe { std::ffi::CStr::from_ptr((api.fmi2GetVersion)()) }.to_string_lossy().into_owned();
+        let version = unsafe { std::ffi::CStr::from_ptr((api.fmi2GetVersion)()) }
+            .to_string_lossy()
+            .into_owned();
         if version != "2.0" {
             return Err(FmuError::Load {
                 path: path.to_path_buf(),
                 message: format!("fmi2GetVersion returned '{version}', expected '2.0'"),
             });
         }
-        Ok(Library { path: path.to_path_buf(), api, _lib: lib })
+        Ok(Library {
+            path: path.to_path_buf(),
+            api,
+            _lib: lib,
+        })
     }
 
     /// Whether the library exports `symbol` (for tests and `twinbench info`).

@@ -42,7 +42,11 @@ pub struct LogSink {
 
 impl LogSink {
     pub fn new(instance: &str) -> Self {
-        LogSink { instance: instance.to_string(), lines: Mutex::new(VecDeque::new()), echo: true }
+        LogSink {
+            instance: instance.to_string(),
+            lines: Mutex::new(VecDeque::new()),
+            echo: true,
+        }
     }
 
     pub fn push(&self, status: fmi2Status, category: &str, message: &str) {
@@ -65,7 +69,10 @@ impl LogSink {
 
     /// The last lines logged by the instance.
     pub fn last_lines(&self) -> Vec<String> {
-        self.lines.lock().map(|l| l.iter().cloned().collect()).unwrap_or_default()
+        self.lines
+            .lock()
+            .map(|l| l.iter().cloned().collect())
+            .unwrap_or_default()
     }
 
     pub fn clear(&self) {
@@ -101,5 +108,8 @@ unsafe extern "C" fn sink(
 
 /// A boxed environment pointing at `sink`; keep both alive as long as the instance.
 pub fn log_env(sink_ref: &LogSink) -> Box<LogEnv> {
-    Box::new(LogEnv { sink, ctx: sink_ref as *const LogSink as *mut c_void })
+    Box::new(LogEnv {
+        sink,
+        ctx: sink_ref as *const LogSink as *mut c_void,
+    })
 }

@@ -22,7 +22,10 @@ pub enum FmuError {
     MissingSymbol { path: PathBuf, symbol: &'static str },
     #[error("instance '{instance}': {message}")]
     Instantiate { instance: String, message: String },
-    #[error("instance '{instance}' at t = {time} s: {function} returned {status}{}", format_log(log))]
+    #[error(
+        "instance '{instance}' at t = {time} s: {function} returned {status}{}",
+        format_log(log)
+    )]
     Call {
         instance: String,
         function: &'static str,
@@ -31,7 +34,10 @@ pub enum FmuError {
         log: Vec<String>,
     },
     #[error("instance '{instance}': {what} is not provided by this FMU")]
-    Unsupported { instance: String, what: &'static str },
+    Unsupported {
+        instance: String,
+        what: &'static str,
+    },
     #[error("{path}: {message}")]
     Archive { path: PathBuf, message: String },
     #[error("{path}: modelDescription.xml: {message}")]

@@ -738,7 +738,11 @@ fn stepping_order(
             }
             order.push(k);
         }
-        if let Some(missing) = unit_names.iter().enumerate().find(|(k, _)| !order.contains(k)) {
+        if let Some(missing) = unit_names
+            .iter()
+            .enumerate()
+            .find(|(k, _)| !order.contains(k))
+        {
             return Err(format!("experiment.order: '{}' is missing", missing.1));
         }
         return Ok(order);

@@ -2,7 +2,9 @@
 //! `fault_time` the model does what `fault_kind` says.
 
 use fmu_export::variables::*;
-use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, StateReader, StateWriter};
+use fmu_export::{
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, StateReader, StateWriter,
+};
 
 fmu_export::variables! {
     /// Variables of the faulty test model.
@@ -14,6 +16,8 @@ fmu_export::variables! {
         u: Real = 0.0 => input(4).unit("1").describe("Integrator input"),
         y: Real = 0.0 => output(5).unit("s").describe("Integral of gain·u"),
         steps: Integer = 0 => discrete_output(6).describe("Steps taken"),
+        y_direct: Real = 0.0 => output(7).unit("1").depends_on(&[4])
+            .describe("gain·u: direct feed-through of the input"),
     }
 }
 
@@ -37,10 +41,13 @@ impl Model for Faulty {
 
     fn initialize(vars: &mut FaultyVars, _ctx: &Context) -> Result<Self, ModelError> {
         if vars.fault_kind == 6 {
-            return Err(ModelError::new("fault_kind = 6: initialization fails on purpose"));
+            return Err(ModelError::new(
+                "fault_kind = 6: initialization fails on purpose",
+            ));
         }
         vars.y = 0.0;
         vars.steps = 0;
+        vars.y_direct = vars.gain * vars.u;
         Ok(Faulty { y: 0.0, steps: 0 })
     }
 
@@ -64,7 +71,12 @@ impl Model for Faulty {
         self.steps += 1;
         vars.y = self.y;
         vars.steps = self.steps;
+        vars.y_direct = vars.gain * vars.u;
         Ok(())
+    }
+
+    fn update_outputs(&mut self, vars: &mut FaultyVars) {
+        vars.y_direct = vars.gain * vars.u;
     }
 
     fn save_state(&self, w: &mut StateWriter) {
