@@ -47,7 +47,14 @@ pub fn canonical_interface<M: Model>() -> String {
 pub fn guid<M: Model>() -> String {
     let h = fnv1a_128(canonical_interface::<M>().as_bytes());
     let x = format!("{h:032x}");
-    format!("{{{}-{}-{}-{}-{}}}", &x[0..8], &x[8..12], &x[12..16], &x[16..20], &x[20..32])
+    format!(
+        "{{{}-{}-{}-{}-{}}}",
+        &x[0..8],
+        &x[8..12],
+        &x[12..16],
+        &x[16..20],
+        &x[20..32]
+    )
 }
 
 /// Consistency of a variable table; the packer refuses a model that fails it.
@@ -76,16 +83,26 @@ pub fn validate_table<V: VarTable>() -> Result<(), String> {
         }
         let x = a.start.as_f64();
         if a.has_start() && (a.min.is_some_and(|m| x < m) || a.max.is_some_and(|m| x > m)) {
-            errors.push(format!("'{}': start {} outside [min, max]", a.name, a.start.xml_text()));
+            errors.push(format!(
+                "'{}': start {} outside [min, max]",
+                a.name,
+                a.start.xml_text()
+            ));
         }
         for d in a.depends_on {
             match t.iter().find(|v| v.value_reference == *d) {
                 Some(v) if v.causality == Causality::Input => {}
-                _ => errors.push(format!("'{}' depends on vr {d}, which is not an input", a.name)),
+                _ => errors.push(format!(
+                    "'{}' depends on vr {d}, which is not an input",
+                    a.name
+                )),
             }
         }
         if !a.depends_on.is_empty() && a.causality != Causality::Output {
-            errors.push(format!("'{}' declares dependencies but is not an output", a.name));
+            errors.push(format!(
+                "'{}' declares dependencies but is not an output",
+                a.name
+            ));
         }
     }
     if errors.is_empty() {
@@ -175,7 +192,11 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
     let mut initial_unknowns = String::new();
     for (i, v) in table.iter().enumerate() {
         if v.causality == Causality::Output {
-            let deps: Vec<String> = v.depends_on.iter().map(|d| index_of_vr(*d).to_string()).collect();
+            let deps: Vec<String> = v
+                .depends_on
+                .iter()
+                .map(|d| index_of_vr(*d).to_string())
+                .collect();
             outputs.push_str(&format!(
                 "      <Unknown index=\"{}\" dependencies=\"{}\"/>\n",
                 i + 1,
@@ -185,7 +206,8 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
         let initial_unknown = (v.causality == Causality::Output
             && matches!(
                 v.effective_initial(),
-                Some(crate::variables::Initial::Approx) | Some(crate::variables::Initial::Calculated)
+                Some(crate::variables::Initial::Approx)
+                    | Some(crate::variables::Initial::Calculated)
             ))
             || v.causality == Causality::CalculatedParameter;
         if initial_unknown {
@@ -197,7 +219,9 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
         structure.push_str(&format!("    <Outputs>\n{outputs}    </Outputs>\n"));
     }
     if !initial_unknowns.is_empty() {
-        structure.push_str(&format!("    <InitialUnknowns>\n{initial_unknowns}    </InitialUnknowns>\n"));
+        structure.push_str(&format!(
+            "    <InitialUnknowns>\n{initial_unknowns}    </InitialUnknowns>\n"
+        ));
     }
     let de = info.default_experiment;
     let default_experiment = format!(
@@ -227,7 +251,11 @@ pub fn render_documentation<M: Model>(template: &str) -> String {
     let info = M::INFO;
     let mut rows = String::new();
     for v in M::Vars::VARIABLES {
-        let start = if v.has_start() { v.start.xml_text() } else { String::new() };
+        let start = if v.has_start() {
+            v.start.xml_text()
+        } else {
+            String::new()
+        };
         rows.push_str(&format!(
             "<tr><td><code>{}</code></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
             xml_escape(v.name),

@@ -34,7 +34,15 @@ impl Logger for CLogger {
         if let Some(cb) = self.callback {
             let cat = CString::new(category).unwrap_or_default();
             let msg = c_message(message);
-            unsafe { cb(self.env, self.instance_name.as_ptr(), status, cat.as_ptr(), msg.as_ptr()) };
+            unsafe {
+                cb(
+                    self.env,
+                    self.instance_name.as_ptr(),
+                    status,
+                    cat.as_ptr(),
+                    msg.as_ptr(),
+                )
+            };
         }
     }
 }
@@ -91,7 +99,9 @@ pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
                 .get(i + 1..i + 3)
                 .and_then(|h| std::str::from_utf8(h).ok())
                 .and_then(|h| u8::from_str_radix(h, 16).ok())
-                .ok_or_else(|| format!("fmuResourceLocation '{uri}': bad percent escape at byte {i}"))?;
+                .ok_or_else(|| {
+                    format!("fmuResourceLocation '{uri}': bad percent escape at byte {i}")
+                })?;
             out.push(hex);
             i += 3;
         } else {
@@ -122,7 +132,11 @@ pub unsafe fn instantiate<M: Model>(
     static QUIET_PANICS: std::sync::Once = std::sync::Once::new();
     QUIET_PANICS.call_once(|| std::panic::set_hook(Box::new(|_| {})));
     let r = catch_unwind(AssertUnwindSafe(|| {
-        let callbacks = if functions.is_null() { None } else { Some(*functions) };
+        let callbacks = if functions.is_null() {
+            None
+        } else {
+            Some(*functions)
+        };
         let name = opt_str(instance_name).map(|s| s.into_owned());
         let logger = CLogger {
             callback: callbacks.and_then(|f| f.logger),
@@ -130,10 +144,16 @@ pub unsafe fn instantiate<M: Model>(
             instance_name: CString::new(name.clone().unwrap_or_default()).unwrap_or_default(),
         };
         let fail = |msg: String| {
-            logger.log(fmi2Status::ERROR, "logStatusError", &format!("fmi2Instantiate: {msg}"));
+            logger.log(
+                fmi2Status::ERROR,
+                "logStatusError",
+                &format!("fmi2Instantiate: {msg}"),
+            );
             std::ptr::null_mut()
         };
-        let Some(name) = name else { return fail("instanceName is NULL".into()) };
+        let Some(name) = name else {
+            return fail("instanceName is NULL".into());
+        };
         if callbacks.is_none() {
             return std::ptr::null_mut();
         }
@@ -171,7 +191,9 @@ pub unsafe fn instantiate<M: Model>(
 
 pub unsafe fn free_instance<M: Model>(c: fmi2Component) {
     if !c.is_null() {
-        let _ = catch_unwind(AssertUnwindSafe(|| drop(Box::from_raw(c as *mut Instance<M>))));
+        let _ = catch_unwind(AssertUnwindSafe(|| {
+            drop(Box::from_raw(c as *mut Instance<M>))
+        }));
     }
 }
 
@@ -211,11 +233,15 @@ pub unsafe fn setup_experiment<M: Model>(
 }
 
 pub unsafe fn enter_initialization_mode<M: Model>(c: fmi2Component) -> fmi2Status {
-    guarded::<M>(c, "fmi2EnterInitializationMode", |rt| rt.enter_initialization_mode())
+    guarded::<M>(c, "fmi2EnterInitializationMode", |rt| {
+        rt.enter_initialization_mode()
+    })
 }
 
 pub unsafe fn exit_initialization_mode<M: Model>(c: fmi2Component) -> fmi2Status {
-    guarded::<M>(c, "fmi2ExitInitializationMode", |rt| rt.exit_initialization_mode())
+    guarded::<M>(c, "fmi2ExitInitializationMode", |rt| {
+        rt.exit_initialization_mode()
+    })
 }
 
 pub unsafe fn terminate<M: Model>(c: fmi2Component) -> fmi2Status {
@@ -256,7 +282,11 @@ macro_rules! getter {
                     Ok(x) => x,
                     Err(s) => return s,
                 };
-                let out: &mut [$t] = if n == 0 { &mut [] } else { std::slice::from_raw_parts_mut(ptr as *mut $t, n) };
+                let out: &mut [$t] = if n == 0 {
+                    &mut []
+                } else {
+                    std::slice::from_raw_parts_mut(ptr as *mut $t, n)
+                };
                 rt.get($cname, $vt, vrs, out, $conv)
             })
         }
@@ -276,19 +306,59 @@ macro_rules! setter {
                     Ok(x) => x,
                     Err(s) => return s,
                 };
-                let vals: &[$t] = if n == 0 { &[] } else { std::slice::from_raw_parts(ptr, n) };
+                let vals: &[$t] = if n == 0 {
+                    &[]
+                } else {
+                    std::slice::from_raw_parts(ptr, n)
+                };
                 rt.set($cname, $vt, vrs, vals.iter().map($conv))
             })
         }
     };
 }
 
-getter!(get_real, "fmi2GetReal", fmi2Real, VarType::Real, |v: Value| v.as_f64());
-getter!(get_integer, "fmi2GetInteger", fmi2Integer, VarType::Integer, |v: Value| v.as_f64() as i32);
-getter!(get_boolean, "fmi2GetBoolean", fmi2Boolean, VarType::Boolean, |v: Value| v.as_f64() as i32);
-setter!(set_real, "fmi2SetReal", fmi2Real, VarType::Real, |x: &f64| Value::Real(*x));
-setter!(set_integer, "fmi2SetInteger", fmi2Integer, VarType::Integer, |x: &i32| Value::Integer(*x));
-setter!(set_boolean, "fmi2SetBoolean", fmi2Boolean, VarType::Boolean, |x: &i32| Value::Boolean(*x != 0));
+getter!(
+    get_real,
+    "fmi2GetReal",
+    fmi2Real,
+    VarType::Real,
+    |v: Value| v.as_f64()
+);
+getter!(
+    get_integer,
+    "fmi2GetInteger",
+    fmi2Integer,
+    VarType::Integer,
+    |v: Value| v.as_f64() as i32
+);
+getter!(
+    get_boolean,
+    "fmi2GetBoolean",
+    fmi2Boolean,
+    VarType::Boolean,
+    |v: Value| v.as_f64() as i32
+);
+setter!(
+    set_real,
+    "fmi2SetReal",
+    fmi2Real,
+    VarType::Real,
+    |x: &f64| Value::Real(*x)
+);
+setter!(
+    set_integer,
+    "fmi2SetInteger",
+    fmi2Integer,
+    VarType::Integer,
+    |x: &i32| Value::Integer(*x)
+);
+setter!(
+    set_boolean,
+    "fmi2SetBoolean",
+    fmi2Boolean,
+    VarType::Boolean,
+    |x: &i32| Value::Boolean(*x != 0)
+);
 
 pub unsafe fn get_string<M: Model>(
     c: fmi2Component,
@@ -300,7 +370,10 @@ pub unsafe fn get_string<M: Model>(
         if n == 0 {
             fmi2Status::OK
         } else {
-            rt.error(&format!("fmi2GetString: model '{}' has no String variables", M::INFO.name))
+            rt.error(&format!(
+                "fmi2GetString: model '{}' has no String variables",
+                M::INFO.name
+            ))
         }
     })
 }
@@ -315,7 +388,10 @@ pub unsafe fn set_string<M: Model>(
         if n == 0 {
             fmi2Status::OK
         } else {
-            rt.error(&format!("fmi2SetString: model '{}' has no String variables", M::INFO.name))
+            rt.error(&format!(
+                "fmi2SetString: model '{}' has no String variables",
+                M::INFO.name
+            ))
         }
     })
 }
@@ -445,7 +521,10 @@ pub unsafe fn get_real_status<M: Model>(
             *value = rt.last_successful_time();
             fmi2Status::OK
         } else {
-            rt.error(&format!("fmi2GetRealStatus: status kind {} not provided", kind.0))
+            rt.error(&format!(
+                "fmi2GetRealStatus: status kind {} not provided",
+                kind.0
+            ))
         }
     })
 }
@@ -463,7 +542,10 @@ pub unsafe fn get_boolean_status<M: Model>(
             *value = fmi2False;
             fmi2Status::OK
         } else {
-            rt.error(&format!("fmi2GetBooleanStatus: status kind {} not provided", kind.0))
+            rt.error(&format!(
+                "fmi2GetBooleanStatus: status kind {} not provided",
+                kind.0
+            ))
         }
     })
 }
@@ -492,11 +574,24 @@ macro_rules! export_fmu {
                 ffi::VERSION.as_ptr()
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetDebugLogging(c: fmi2Component, on: fmi2Boolean, n: usize, cat: *const fmi2String) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SetDebugLogging(
+                c: fmi2Component,
+                on: fmi2Boolean,
+                n: usize,
+                cat: *const fmi2String,
+            ) -> fmi2Status {
                 ffi::set_debug_logging::<M>(c, on, n, cat)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2Instantiate(name: fmi2String, ty: fmi2Type, guid: fmi2String, res: fmi2String, f: *const fmi2CallbackFunctions, visible: fmi2Boolean, log: fmi2Boolean) -> fmi2Component {
+            pub unsafe extern "C" fn fmi2Instantiate(
+                name: fmi2String,
+                ty: fmi2Type,
+                guid: fmi2String,
+                res: fmi2String,
+                f: *const fmi2CallbackFunctions,
+                visible: fmi2Boolean,
+                log: fmi2Boolean,
+            ) -> fmi2Component {
                 ffi::instantiate::<M>(name, ty, guid, res, f, visible, log)
             }
             #[no_mangle]
@@ -504,7 +599,14 @@ macro_rules! export_fmu {
                 ffi::free_instance::<M>(c)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetupExperiment(c: fmi2Component, td: fmi2Boolean, tol: fmi2Real, start: fmi2Real, sd: fmi2Boolean, stop: fmi2Real) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SetupExperiment(
+                c: fmi2Component,
+                td: fmi2Boolean,
+                tol: fmi2Real,
+                start: fmi2Real,
+                sd: fmi2Boolean,
+                stop: fmi2Real,
+            ) -> fmi2Status {
                 ffi::setup_experiment::<M>(c, td, tol, start, sd, stop)
             }
             #[no_mangle]
@@ -524,99 +626,227 @@ macro_rules! export_fmu {
                 ffi::reset::<M>(c)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetReal(c: fmi2Component, vr: *const fmi2ValueReference, n: usize, v: *mut fmi2Real) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetReal(
+                c: fmi2Component,
+                vr: *const fmi2ValueReference,
+                n: usize,
+                v: *mut fmi2Real,
+            ) -> fmi2Status {
                 ffi::get_real::<M>(c, vr, n, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetInteger(c: fmi2Component, vr: *const fmi2ValueReference, n: usize, v: *mut fmi2Integer) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetInteger(
+                c: fmi2Component,
+                vr: *const fmi2ValueReference,
+                n: usize,
+                v: *mut fmi2Integer,
+            ) -> fmi2Status {
                 ffi::get_integer::<M>(c, vr, n, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetBoolean(c: fmi2Component, vr: *const fmi2ValueReference, n: usize, v: *mut fmi2Boolean) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetBoolean(
+                c: fmi2Component,
+                vr: *const fmi2ValueReference,
+                n: usize,
+                v: *mut fmi2Boolean,
+            ) -> fmi2Status {
                 ffi::get_boolean::<M>(c, vr, n, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetString(c: fmi2Component, vr: *const fmi2ValueReference, n: usize, v: *mut fmi2String) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetString(
+                c: fmi2Component,
+                vr: *const fmi2ValueReference,
+                n: usize,
+                v: *mut fmi2String,
+            ) -> fmi2Status {
                 ffi::get_string::<M>(c, vr, n, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetReal(c: fmi2Component, vr: *const fmi2ValueReference, n: usize, v: *const fmi2Real) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SetReal(
+                c: fmi2Component,
+                vr: *const fmi2ValueReference,
+                n: usize,
+                v: *const fmi2Real,
+            ) -> fmi2Status {
                 ffi::set_real::<M>(c, vr, n, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetInteger(c: fmi2Component, vr: *const fmi2ValueReference, n: usize, v: *const fmi2Integer) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SetInteger(
+                c: fmi2Component,
+                vr: *const fmi2ValueReference,
+                n: usize,
+                v: *const fmi2Integer,
+            ) -> fmi2Status {
                 ffi::set_integer::<M>(c, vr, n, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetBoolean(c: fmi2Component, vr: *const fmi2ValueReference, n: usize, v: *const fmi2Boolean) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SetBoolean(
+                c: fmi2Component,
+                vr: *const fmi2ValueReference,
+                n: usize,
+                v: *const fmi2Boolean,
+            ) -> fmi2Status {
                 ffi::set_boolean::<M>(c, vr, n, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetString(c: fmi2Component, vr: *const fmi2ValueReference, n: usize, v: *const fmi2String) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SetString(
+                c: fmi2Component,
+                vr: *const fmi2ValueReference,
+                n: usize,
+                v: *const fmi2String,
+            ) -> fmi2Status {
                 ffi::set_string::<M>(c, vr, n, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetFMUstate(c: fmi2Component, s: *mut fmi2FMUstate) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetFMUstate(
+                c: fmi2Component,
+                s: *mut fmi2FMUstate,
+            ) -> fmi2Status {
                 ffi::get_fmu_state::<M>(c, s)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetFMUstate(c: fmi2Component, s: fmi2FMUstate) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SetFMUstate(
+                c: fmi2Component,
+                s: fmi2FMUstate,
+            ) -> fmi2Status {
                 ffi::set_fmu_state::<M>(c, s)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2FreeFMUstate(c: fmi2Component, s: *mut fmi2FMUstate) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2FreeFMUstate(
+                c: fmi2Component,
+                s: *mut fmi2FMUstate,
+            ) -> fmi2Status {
                 ffi::free_fmu_state::<M>(c, s)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SerializedFMUstateSize(c: fmi2Component, s: fmi2FMUstate, size: *mut usize) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SerializedFMUstateSize(
+                c: fmi2Component,
+                s: fmi2FMUstate,
+                size: *mut usize,
+            ) -> fmi2Status {
                 ffi::serialized_fmu_state_size::<M>(c, s, size)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SerializeFMUstate(c: fmi2Component, s: fmi2FMUstate, b: *mut fmi2Byte, size: usize) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2SerializeFMUstate(
+                c: fmi2Component,
+                s: fmi2FMUstate,
+                b: *mut fmi2Byte,
+                size: usize,
+            ) -> fmi2Status {
                 ffi::serialize_fmu_state::<M>(c, s, b, size)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2DeSerializeFMUstate(c: fmi2Component, b: *const fmi2Byte, size: usize, s: *mut fmi2FMUstate) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
+                c: fmi2Component,
+                b: *const fmi2Byte,
+                size: usize,
+                s: *mut fmi2FMUstate,
+            ) -> fmi2Status {
                 ffi::deserialize_fmu_state::<M>(c, b, size, s)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetDirectionalDerivative(c: fmi2Component, _u: *const fmi2ValueReference, _nu: usize, _z: *const fmi2ValueReference, _nz: usize, _dv: *const fmi2Real, _dz: *mut fmi2Real) -> fmi2Status {
-                ffi::unsupported::<M>(c, "fmi2GetDirectionalDerivative", "not provided (providesDirectionalDerivative=false)")
+            pub unsafe extern "C" fn fmi2GetDirectionalDerivative(
+                c: fmi2Component,
+                _u: *const fmi2ValueReference,
+                _nu: usize,
+                _z: *const fmi2ValueReference,
+                _nz: usize,
+                _dv: *const fmi2Real,
+                _dz: *mut fmi2Real,
+            ) -> fmi2Status {
+                ffi::unsupported::<M>(
+                    c,
+                    "fmi2GetDirectionalDerivative",
+                    "not provided (providesDirectionalDerivative=false)",
+                )
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2SetRealInputDerivatives(c: fmi2Component, _vr: *const fmi2ValueReference, _n: usize, _o: *const fmi2Integer, _v: *const fmi2Real) -> fmi2Status {
-                ffi::unsupported::<M>(c, "fmi2SetRealInputDerivatives", "not provided (canInterpolateInputs=false)")
+            pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
+                c: fmi2Component,
+                _vr: *const fmi2ValueReference,
+                _n: usize,
+                _o: *const fmi2Integer,
+                _v: *const fmi2Real,
+            ) -> fmi2Status {
+                ffi::unsupported::<M>(
+                    c,
+                    "fmi2SetRealInputDerivatives",
+                    "not provided (canInterpolateInputs=false)",
+                )
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(c: fmi2Component, _vr: *const fmi2ValueReference, _n: usize, _o: *const fmi2Integer, _v: *mut fmi2Real) -> fmi2Status {
-                ffi::unsupported::<M>(c, "fmi2GetRealOutputDerivatives", "not provided (maxOutputDerivativeOrder=0)")
+            pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(
+                c: fmi2Component,
+                _vr: *const fmi2ValueReference,
+                _n: usize,
+                _o: *const fmi2Integer,
+                _v: *mut fmi2Real,
+            ) -> fmi2Status {
+                ffi::unsupported::<M>(
+                    c,
+                    "fmi2GetRealOutputDerivatives",
+                    "not provided (maxOutputDerivativeOrder=0)",
+                )
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2DoStep(c: fmi2Component, t: fmi2Real, h: fmi2Real, np: fmi2Boolean) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2DoStep(
+                c: fmi2Component,
+                t: fmi2Real,
+                h: fmi2Real,
+                np: fmi2Boolean,
+            ) -> fmi2Status {
                 ffi::do_step::<M>(c, t, h, np)
             }
             #[no_mangle]
             pub unsafe extern "C" fn fmi2CancelStep(c: fmi2Component) -> fmi2Status {
-                ffi::unsupported::<M>(c, "fmi2CancelStep", "steps are synchronous (canRunAsynchronuously=false)")
+                ffi::unsupported::<M>(
+                    c,
+                    "fmi2CancelStep",
+                    "steps are synchronous (canRunAsynchronuously=false)",
+                )
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetStatus(c: fmi2Component, _k: fmi2StatusKind, _v: *mut fmi2Status) -> fmi2Status {
-                ffi::unsupported::<M>(c, "fmi2GetStatus", "steps are synchronous, there is no pending status")
+            pub unsafe extern "C" fn fmi2GetStatus(
+                c: fmi2Component,
+                _k: fmi2StatusKind,
+                _v: *mut fmi2Status,
+            ) -> fmi2Status {
+                ffi::unsupported::<M>(
+                    c,
+                    "fmi2GetStatus",
+                    "steps are synchronous, there is no pending status",
+                )
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetRealStatus(c: fmi2Component, k: fmi2StatusKind, v: *mut fmi2Real) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetRealStatus(
+                c: fmi2Component,
+                k: fmi2StatusKind,
+                v: *mut fmi2Real,
+            ) -> fmi2Status {
                 ffi::get_real_status::<M>(c, k, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetIntegerStatus(c: fmi2Component, _k: fmi2StatusKind, _v: *mut fmi2Integer) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetIntegerStatus(
+                c: fmi2Component,
+                _k: fmi2StatusKind,
+                _v: *mut fmi2Integer,
+            ) -> fmi2Status {
                 ffi::unsupported::<M>(c, "fmi2GetIntegerStatus", "no integer status is provided")
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetBooleanStatus(c: fmi2Component, k: fmi2StatusKind, v: *mut fmi2Boolean) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetBooleanStatus(
+                c: fmi2Component,
+                k: fmi2StatusKind,
+                v: *mut fmi2Boolean,
+            ) -> fmi2Status {
                 ffi::get_boolean_status::<M>(c, k, v)
             }
             #[no_mangle]
-            pub unsafe extern "C" fn fmi2GetStringStatus(c: fmi2Component, _k: fmi2StatusKind, _v: *mut fmi2String) -> fmi2Status {
+            pub unsafe extern "C" fn fmi2GetStringStatus(
+                c: fmi2Component,
+                _k: fmi2StatusKind,
+                _v: *mut fmi2String,
+            ) -> fmi2Status {
                 ffi::unsupported::<M>(c, "fmi2GetStringStatus", "no string status is provided")
             }
         }

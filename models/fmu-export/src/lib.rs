@@ -19,6 +19,8 @@ pub mod runtime;
 pub mod units;
 pub mod variables;
 
-pub use model::{Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter};
+pub use model::{
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter,
+};
 pub use runtime::{Logger, NullLogger, Phase, Runtime};
 pub use variables::{Value, VarInfo, VarTable};

@@ -190,7 +190,9 @@ impl<'a> StateReader<'a> {
         match self.take(1)?[0] {
             0 => Ok(false),
             1 => Ok(true),
-            b => Err(ModelError::new(format!("serialized FMU state: bad boolean byte {b}"))),
+            b => Err(ModelError::new(format!(
+                "serialized FMU state: bad boolean byte {b}"
+            ))),
         }
     }
     pub fn bytes(&mut self) -> Result<&'a [u8], ModelError> {

@@ -19,7 +19,19 @@ pub struct UnitDef {
 }
 
 const fn unit(name: &'static str, kg: i32, m: i32, s: i32, rad: i32, factor: f64) -> UnitDef {
-    UnitDef { name, kg, m, s, a: 0, k: 0, mol: 0, cd: 0, rad, factor, offset: 0.0 }
+    UnitDef {
+        name,
+        kg,
+        m,
+        s,
+        a: 0,
+        k: 0,
+        mol: 0,
+        cd: 0,
+        rad,
+        factor,
+        offset: 0.0,
+    }
 }
 
 /// Every unit a model may declare.
@@ -59,8 +71,11 @@ pub fn lookup(name: &str) -> Option<&'static UnitDef> {
 impl UnitDef {
     /// Same base-unit exponents: values convert by factor and offset.
     pub fn compatible(&self, other: &UnitDef) -> bool {
-        (self.kg, self.m, self.s, self.a, self.k, self.mol, self.cd, self.rad)
-            == (other.kg, other.m, other.s, other.a, other.k, other.mol, other.cd, other.rad)
+        (
+            self.kg, self.m, self.s, self.a, self.k, self.mol, self.cd, self.rad,
+        ) == (
+            other.kg, other.m, other.s, other.a, other.k, other.mol, other.cd, other.rad,
+        )
     }
 
     /// `<BaseUnit .../>` attributes, only the non-default ones (the standard's defaults are
@@ -82,10 +97,16 @@ impl UnitDef {
             }
         }
         if self.factor != 1.0 {
-            out.push_str(&format!(" factor=\"{}\"", crate::variables::format_real(self.factor)));
+            out.push_str(&format!(
+                " factor=\"{}\"",
+                crate::variables::format_real(self.factor)
+            ));
         }
         if self.offset != 0.0 {
-            out.push_str(&format!(" offset=\"{}\"", crate::variables::format_real(self.offset)));
+            out.push_str(&format!(
+                " offset=\"{}\"",
+                crate::variables::format_real(self.offset)
+            ));
         }
         out
     }

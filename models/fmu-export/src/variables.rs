@@ -245,9 +245,8 @@ impl VarInfo {
         match (self.causality, self.variability) {
             (Causality::Parameter, _) => Some(Initial::Exact),
             (Causality::CalculatedParameter, _) => Some(Initial::Calculated),
-            (Causality::Output, Variability::Constant) | (Causality::Local, Variability::Constant) => {
-                Some(Initial::Exact)
-            }
+            (Causality::Output, Variability::Constant)
+            | (Causality::Local, Variability::Constant) => Some(Initial::Exact),
             (Causality::Output, _) | (Causality::Local, _) => Some(Initial::Calculated),
             (Causality::Input, _) | (Causality::Independent, _) => None,
         }
@@ -288,17 +287,29 @@ pub trait VarTable: Clone + Default + Send + 'static {
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __fmi_type {
-    (Real) => { f64 };
-    (Integer) => { i32 };
-    (Boolean) => { bool };
+    (Real) => {
+        f64
+    };
+    (Integer) => {
+        i32
+    };
+    (Boolean) => {
+        bool
+    };
 }
 
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __fmi_value {
-    (Real, $e:expr) => { $crate::variables::Value::Real($e) };
-    (Integer, $e:expr) => { $crate::variables::Value::Integer($e) };
-    (Boolean, $e:expr) => { $crate::variables::Value::Boolean($e) };
+    (Real, $e:expr) => {
+        $crate::variables::Value::Real($e)
+    };
+    (Integer, $e:expr) => {
+        $crate::variables::Value::Integer($e)
+    };
+    (Boolean, $e:expr) => {
+        $crate::variables::Value::Boolean($e)
+    };
 }
 
 #[doc(hidden)]
@@ -306,19 +317,28 @@ macro_rules! __fmi_value {
 macro_rules! __fmi_set {
     (Real, $place:expr, $v:expr) => {
         match $v {
-            $crate::variables::Value::Real(x) => { $place = x; true }
+            $crate::variables::Value::Real(x) => {
+                $place = x;
+                true
+            }
             _ => false,
         }
     };
     (Integer, $place:expr, $v:expr) => {
         match $v {
-            $crate::variables::Value::Integer(x) => { $place = x; true }
+            $crate::variables::Value::Integer(x) => {
+                $place = x;
+                true
+            }
             _ => false,
         }
     };
     (Boolean, $place:expr, $v:expr) => {
         match $v {
-            $crate::variables::Value::Boolean(x) => { $place = x; true }
+            $crate::variables::Value::Boolean(x) => {
+                $place = x;
+                true
+            }
             _ => false,
         }
     };
