@@ -2,12 +2,12 @@
 //! system's stepping order or Jacobi, initialisation to a fixed point, recording, a stop
 //! condition on a signal. Instances are created once and reset between runs.
 
+use super::backend::Backend;
 use super::config::{Algorithm, ReplayBasis, StopConfig};
 use super::replay::Cursor;
 use super::results::Recording;
 use super::{check_parameter, invalid, split_name, Endpoint, System, SystemError};
 use crate::fmu::description::ScalarType;
-use crate::fmu::Instance;
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -35,7 +35,7 @@ impl<T: Default + Clone> Batch<T> {
 
 struct FmuRt {
     name: String,
-    instance: Option<Instance>,
+    instance: Option<Box<dyn Backend>>,
     in_real: Batch<f64>,
     in_real_scale: Vec<f64>,
     in_real_offset: Vec<f64>,
@@ -127,7 +127,7 @@ impl FmuRt {
                         instance: self.name.clone(),
                         signal: names[self.out_real.sig[k]].clone(),
                         value: x,
-                        time: i.time,
+                        time: i.time(),
                     });
                 }
                 signals[self.out_real.sig[k]] = x;
@@ -446,18 +446,7 @@ impl Simulation {
             };
             if !reuse {
                 f.instance = None;
-                let fmu = &def.fmu;
-                let mut inst = Instance::instantiate(
-                    fmu.library.clone(),
-                    &def.name,
-                    &fmu.description.guid,
-                    Some(&fmu.resource_dir()),
-                    def.logging,
-                )?;
-                if def.logging {
-                    inst.set_debug_logging(true, &[])?;
-                }
-                f.instance = Some(inst);
+                f.instance = Some(def.factory.create(&def.name, def.logging)?);
             }
             let inst = f.instance.as_mut().unwrap();
             inst.set_echo(echo);

@@ -6,6 +6,7 @@
 //! [`Simulation`] owns the instances and runs the system, repeatedly if asked (instances
 //! are reset and reused between runs).
 
+pub mod backend;
 pub mod config;
 pub mod master;
 pub mod replay;
@@ -62,7 +63,13 @@ pub struct InstanceDef {
     /// Name in the system file -> the FMU's variable name.
     pub ports: BTreeMap<String, String>,
     pub logging: bool,
+    /// Creates the running unit (in-process FMU by default).
+    pub factory: Arc<dyn backend::BackendFactory>,
 }
+
+/// How instances are run, chosen when a system is loaded.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {}
 
 impl InstanceDef {
     pub fn description(&self) -> &ModelDescription {
@@ -257,15 +264,17 @@ impl System {
                     ),
                 ));
             }
+            let factory: Arc<dyn backend::BackendFactory> =
+                Arc::new(backend::FmuFactory(fmu.clone()));
             let def = InstanceDef {
                 name: inst.name.clone(),
                 fmu: fmu.clone(),
                 ports: inst.ports.clone(),
                 logging: inst.logging,
+                factory,
             };
-            for (ours, theirs) in &inst.ports {
+            for theirs in inst.ports.values() {
                 if def.description().variable(theirs).is_none() {
-                    let _ = ours;
                     def.variable(theirs, &format!("{ctx_file}: port map of '{}'", inst.name))?;
                 }
             }

@@ -1,0 +1,117 @@
+//! What the master drives: a running co-simulation unit behind one small trait, so that an
+//! FMU loaded in-process, a model linked natively, or an FMU isolated in a worker process
+//! are interchangeable. Each system instance has a factory that creates (and recreates)
+//! its unit.
+
+use crate::fmu::{FmuError, Instance, LoadedFmu};
+use std::sync::Arc;
+
+/// One running instance, in FMI 2.0 Co-Simulation terms.
+pub trait Backend: Send {
+    fn name(&self) -> &str;
+    /// Simulation time reached (for error messages).
+    fn time(&self) -> f64;
+    /// Echo status-OK log messages to the `log` crate (errors are always kept).
+    fn set_echo(&mut self, on: bool);
+    fn last_log_lines(&self) -> Vec<String>;
+    fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError>;
+    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError>;
+    fn enter_initialization_mode(&mut self) -> Result<(), FmuError>;
+    fn exit_initialization_mode(&mut self) -> Result<(), FmuError>;
+    fn terminate(&mut self) -> Result<(), FmuError>;
+    fn reset(&mut self) -> Result<(), FmuError>;
+    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError>;
+    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError>;
+    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError>;
+    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError>;
+    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError>;
+    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError>;
+    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError>;
+}
+
+/// Creates the running unit of one system instance.
+pub trait BackendFactory: Send + Sync {
+    /// "fmu", "native", "isolated", ...
+    fn kind(&self) -> &'static str;
+    fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError>;
+}
+
+/// The default: the FMU's shared library loaded in this process.
+pub struct FmuFactory(pub Arc<LoadedFmu>);
+
+impl BackendFactory for FmuFactory {
+    fn kind(&self) -> &'static str {
+        "fmu"
+    }
+    fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError> {
+        let fmu = &self.0;
+        let mut inst = Instance::instantiate(
+            fmu.library.clone(),
+            instance_name,
+            &fmu.description.guid,
+            Some(&fmu.resource_dir()),
+            logging,
+        )?;
+        if logging {
+            inst.set_debug_logging(true, &[])?;
+        }
+        Ok(Box::new(inst))
+    }
+}
+
+impl Backend for Instance {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn time(&self) -> f64 {
+        self.time
+    }
+    fn set_echo(&mut self, on: bool) {
+        Instance::set_echo(self, on)
+    }
+    fn last_log_lines(&self) -> Vec<String> {
+        Instance::last_log_lines(self)
+    }
+    fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
+        Instance::set_debug_logging(self, on, &[])
+    }
+    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+        Instance::setup_experiment(self, start, stop)
+    }
+    fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        Instance::enter_initialization_mode(self)
+    }
+    fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        Instance::exit_initialization_mode(self)
+    }
+    fn terminate(&mut self) -> Result<(), FmuError> {
+        Instance::terminate(self)
+    }
+    fn reset(&mut self) -> Result<(), FmuError> {
+        Instance::reset(self)
+    }
+    #[inline]
+    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        Instance::get_real(self, vrs, out)
+    }
+    #[inline]
+    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        Instance::set_real(self, vrs, values)
+    }
+    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        Instance::get_integer(self, vrs, out)
+    }
+    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        Instance::set_integer(self, vrs, values)
+    }
+    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        Instance::get_boolean(self, vrs, out)
+    }
+    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        Instance::set_boolean(self, vrs, values)
+    }
+    #[inline]
+    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        Instance::do_step(self, t, h)
+    }
+}
