@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+pub mod benchmark;
 pub mod compare;
 pub mod demo;
 pub mod identify;
@@ -31,6 +32,8 @@ pub enum Command {
     Pack(pack::PackArgs),
     /// The main job on the bundled data (packs the FMUs if needed).
     Demo(demo::DemoArgs),
+    /// Time one lap of the bench (wall time, real-time factor, ns per macro step).
+    Benchmark(benchmark::BenchmarkArgs),
     /// Run a system file (co-simulation of FMUs).
     Run(run::RunArgs),
     /// Show an FMU's capabilities and variables.
@@ -60,6 +63,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Pack(a) => pack::run(a),
         Command::Demo(a) => demo::run(a),
+        Command::Benchmark(a) => benchmark::run(a),
         Command::Run(a) => run::run(a),
         Command::Info(a) => info::run(a),
         Command::Compare(a) => compare::run(a),

@@ -1,0 +1,62 @@
+//! `twinbench benchmark`: one lap of the 5-instance bench at 1 ms, timed (issue 4's figure:
+//! wall time, real-time factor, nanoseconds per macro step).
+
+use crate::fmu::FmuCache;
+use crate::system::{Simulation, System};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+#[derive(clap::Args, Debug)]
+pub struct BenchmarkArgs {
+    /// The system to time (default: the RLS/v bench).
+    #[arg(long)]
+    pub system: Option<PathBuf>,
+    /// Timed laps (after one warm-up lap); the best and the median are reported.
+    #[arg(long, default_value_t = 5)]
+    pub laps: usize,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: BenchmarkArgs) -> anyhow::Result<()> {
+    let fmu_dir = crate::pack::default_fmu_dir();
+    if crate::pack::models().iter().any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists()) {
+        crate::pack::pack(&[], &fmu_dir)?;
+    }
+    let path = args.system.unwrap_or_else(|| crate::pack::workspace_root().join("systems/rls_v.toml"));
+    let cache = Arc::new(FmuCache::temporary(false)?);
+    let mut sim = Simulation::new(System::load(&path, cache)?)?;
+    sim.echo_fmu_log = false;
+    sim.run()?; // warm-up: pages in the libraries, resources, caches
+    let mut runs = Vec::new();
+    for _ in 0..args.laps.max(1) {
+        runs.push(sim.run()?);
+    }
+    let mut walls: Vec<f64> = runs.iter().map(|r| r.wall_time).collect();
+    walls.sort_by(f64::total_cmp);
+    let best = walls[0];
+    let median = walls[walls.len() / 2];
+    let r = &runs[0];
+    let ns = |w: f64| w * 1e9 / r.steps as f64;
+    let instances = sim.system.instances.len();
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "system": path, "instances": instances, "steps": r.steps, "simulated_time": r.simulated_time,
+                "lap_time": r.lap_time, "laps_timed": walls.len(),
+                "wall_time_best": best, "wall_time_median": median,
+                "real_time_factor": r.simulated_time / median,
+                "ns_per_macro_step_best": ns(best), "ns_per_macro_step_median": ns(median),
+            }))?
+        );
+    } else {
+        println!("system            {} ({instances} instances)", path.display());
+        println!("lap               {} steps, {:.3} s simulated", r.steps, r.simulated_time);
+        println!("wall time / lap   best {:.4} s, median {:.4} s ({} laps)", best, median, walls.len());
+        println!("real-time factor  {:.0}x", r.simulated_time / median);
+        println!("per macro step    best {:.0} ns, median {:.0} ns (all instances, models included)", ns(best), ns(median));
+    }
+    Ok(())
+}
