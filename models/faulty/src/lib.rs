@@ -10,8 +10,8 @@ fmu_export::variables! {
     /// Variables of the faulty test model.
     pub struct FaultyVars {
         gain: Real = 1.0 => tunable(1).unit("1").range(-1e6, 1e6).describe("Integrator gain"),
-        fault_kind: Integer = 0 => parameter(2).range(0.0, 6.0)
-            .describe("0 none, 1 return an error, 2 panic, 3 output NaN, 4 abort the process, 5 never return, 6 error in initialization"),
+        fault_kind: Integer = 0 => parameter(2).range(0.0, 8.0)
+            .describe("0 none, 1 return an error, 2 panic, 3 output NaN, 4 abort the process, 5 never return, 6 error in initialization, 7 discard the step, 8 fatal error"),
         fault_time: Real = 1.0 => parameter(3).unit("s").describe("Time from which the fault occurs"),
         u: Real = 0.0 => input(4).unit("1").describe("Integrator input"),
         y: Real = 0.0 => output(5).unit("s").describe("Integral of gain·u"),
@@ -64,6 +64,12 @@ impl Model for Faulty {
                 5 => loop {
                     std::thread::sleep(std::time::Duration::from_secs(3600));
                 },
+                7 => {
+                    return Err(ModelError::discard(
+                        "fault_kind = 7: the step is discarded on purpose",
+                    ))
+                }
+                8 => return Err(ModelError::fatal("fault_kind = 8: a fatal error on purpose")),
                 _ => {}
             }
         }
@@ -118,5 +124,37 @@ mod tests {
         assert!((rt.get_by_name("y").unwrap().as_f64() - 2.0).abs() < 1e-12);
         assert_eq!(rt.do_step(1.0, 0.1).0, 3);
         assert_eq!(rt.phase(), fmu_export::Phase::Error);
+    }
+
+    fn run_to_fault(kind: i32) -> (Runtime<Faulty>, fmu_export::fmi2::fmi2Status) {
+        let mut rt = Runtime::<Faulty>::new("f", None, Box::new(NullLogger), false);
+        assert_eq!(rt.set_by_name("fault_kind", Value::Integer(kind)).0, 0);
+        rt.setup_experiment(0.0, None);
+        rt.enter_initialization_mode();
+        assert_eq!(rt.exit_initialization_mode().0, 0);
+        for k in 0..10 {
+            assert_eq!(rt.do_step(k as f64 * 0.1, 0.1).0, 0);
+        }
+        let s = rt.do_step(1.0, 0.1);
+        (rt, s)
+    }
+
+    #[test]
+    fn discard_keeps_the_instance_usable_at_the_last_good_time() {
+        let (mut rt, s) = run_to_fault(7);
+        assert_eq!(s, fmu_export::fmi2::fmi2Status::DISCARD);
+        assert_eq!(rt.phase(), fmu_export::Phase::StepComplete);
+        assert!((rt.time() - 1.0).abs() < 1e-12);
+        assert_eq!(rt.get_by_name("steps").unwrap().as_f64(), 10.0);
+        assert_eq!(rt.terminate().0, 0);
+    }
+
+    #[test]
+    fn fatal_poisons_the_instance_until_reset() {
+        let (mut rt, s) = run_to_fault(8);
+        assert_eq!(s, fmu_export::fmi2::fmi2Status::FATAL);
+        assert_eq!(rt.phase(), fmu_export::Phase::Error);
+        assert_eq!(rt.do_step(1.0, 0.1).0, 3);
+        assert_eq!(rt.reset().0, 0);
     }
 }

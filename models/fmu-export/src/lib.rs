@@ -20,7 +20,8 @@ pub mod units;
 pub mod variables;
 
 pub use model::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter,
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, Severity, StateReader,
+    StateWriter,
 };
 pub use runtime::{Logger, NullLogger, Phase, Runtime};
 pub use variables::{Value, VarInfo, VarTable};

@@ -3,7 +3,7 @@
 //! panic-guarded shell around this; tests and native hosts can use it directly.
 
 use crate::fmi2::fmi2Status;
-use crate::model::{Context, Model, ModelError, StateReader, StateWriter};
+use crate::model::{Context, Model, ModelError, Severity, StateReader, StateWriter};
 use crate::variables::{Causality, Value, VarInfo, VarTable, VarType, Variability};
 use std::path::PathBuf;
 
@@ -231,7 +231,14 @@ impl<M: Model> Runtime<M> {
 
     fn fail(&mut self, function: &str, e: ModelError) -> fmi2Status {
         self.phase = Phase::Error;
-        self.error(&format!("{function}: {e}"))
+        let msg = format!("{function}: {e}");
+        if e.severity() == Severity::Fatal {
+            // Irreparable: every later call is refused until the instance is reset.
+            self.logger.log(fmi2Status::FATAL, "logStatusError", &msg);
+            self.poisoned = Some(msg);
+            return fmi2Status::FATAL;
+        }
+        self.error(&msg)
     }
 
     pub fn setup_experiment(&mut self, start_time: f64, stop_time: Option<f64>) -> fmi2Status {
@@ -362,9 +369,17 @@ impl<M: Model> Runtime<M> {
                 self.inputs_changed = false;
                 fmi2Status::OK
             }
+            Err(e) if e.severity() == Severity::Discard => {
+                // The step was not completed: time stays at the last successful point and
+                // the instance stays usable (read, terminate, reset, restore a state).
+                let msg = format!("fmi2DoStep: at t = {current_time} s: {e}");
+                self.logger
+                    .log(fmi2Status::DISCARD, "logStatusWarning", &msg);
+                fmi2Status::DISCARD
+            }
             Err(e) => {
                 let msg = format!("at t = {current_time} s: {e}");
-                self.fail("fmi2DoStep", ModelError(msg))
+                self.fail("fmi2DoStep", ModelError(msg, e.severity()))
             }
         }
     }
