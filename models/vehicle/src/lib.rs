@@ -84,7 +84,7 @@ fmu_export::variables! {
             .describe("Initial speed (the default study is a flying lap)"),
         s_start: Real = 0.0 => parameter(30).unit("m").range(0.0, 1e7)
             .describe("Initial position along the track (less than the lap length)"),
-        substep_max: Real = 1e-4 => parameter(31).unit("s").range(1e-6, 0.01)
+        substep_max: Real = 1e-3 => parameter(31).unit("s").range(1e-6, 0.01)
             .describe("Largest internal integration step (the step is split into equal sub-steps no longer than this)"),
 
         omega_rl: Real = 0.0 => input(50).unit("rad/s")
@@ -596,9 +596,12 @@ duration of the last complete lap (crossing time interpolated within the sub-ste
 at <code>s_start</code> ≠ 0 makes the first lap an untimed out-lap.</p>
 
 <h3>Numerics and start</h3>
-<p>Each step is split into equal sub-steps of at most <code>substep_max</code> (0.1 ms by
-default: ten per 1 ms macro step). Forces are explicit; the slip relaxation and the chassis
-filter are solved exactly over each sub-step. The inputs are held over the step, and the
+<p>Each step is split into equal sub-steps of at most <code>substep_max</code> (1 ms by
+default: one per 1 ms macro step). Forces are explicit; the slip relaxation and the chassis
+filter are solved exactly over each sub-step, so they are stable at any sub-step; the explicit
+front-wheel spin (time constant J/(k<sub>c</sub>·r²) ≈ 4.5 ms with the carcass damping) needs
+sub-steps well below 9 ms. On the Spielberg lap 1 ms and 0.1 ms sub-steps differ by 0.02 s in
+lap time and 0.011 m/s RMS in speed, at a seventh of the cost. The inputs are held over the step, and the
 outputs are those of the state at its end (no direct feed-through: the relaxation length
 breaks the wheel-speed → torque loop). The run starts at <code>v_start</code>, front wheels at
 v/r, slips zero, â<sub>x</sub> = 0 and â<sub>y</sub> = v²·κ(s_start).</p>
