@@ -143,10 +143,12 @@ impl Model for Driver {
     };
 
     fn initialize(vars: &mut DriverVars, ctx: &Context) -> Result<Self, ModelError> {
-        let (path, text) = ctx.read_resource(TARGET_FILE)?;
-        let target = TargetSpeed::parse(&text, &path.display().to_string())?;
+        let target = ctx.cached(TARGET_FILE, || {
+            let (path, text) = ctx.read_resource(TARGET_FILE)?;
+            TargetSpeed::parse(&text, &path.display().to_string())
+        })?;
         let driver = Driver {
-            target: Arc::new(target),
+            target,
             error_integral: 0.0,
         };
         driver.write_outputs(vars);

@@ -122,6 +122,7 @@ impl<M: Model> Runtime<M> {
                 instance_name: instance_name.to_string(),
                 resource_dir,
                 start_time: 0.0,
+                cache: Default::default(),
             },
             guid: crate::description::guid::<M>(),
             vr_index,

@@ -410,14 +410,16 @@ impl Model for Vehicle {
     };
 
     fn initialize(vars: &mut VehicleVars, ctx: &Context) -> Result<Self, ModelError> {
-        let (path, text) = ctx.read_resource(TRACK_FILE)?;
-        let track = Track::parse(&path.display().to_string(), &text)?;
+        let track = ctx.cached(TRACK_FILE, || {
+            let (path, text) = ctx.read_resource(TRACK_FILE)?;
+            Track::parse(&path.display().to_string(), &text)
+        })?;
         if vars.s_start >= track.length() {
             return Err(ModelError::new(format!(
                 "s_start = {} m is not less than the lap length {} m of {}",
                 vars.s_start,
                 track.length(),
-                path.display()
+                ctx.resource(TRACK_FILE)?.display()
             )));
         }
         let p = Params::from_vars(vars);
@@ -444,7 +446,7 @@ impl Model for Vehicle {
             ax_raw: 0.0,
         };
         let mut m = Vehicle {
-            track: Arc::new(track),
+            track,
             p,
             st,
             cursor_front: cursor,
