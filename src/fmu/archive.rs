@@ -14,6 +14,23 @@ use std::sync::{Arc, Mutex};
 pub const MAX_ENTRIES: usize = 10_000;
 pub const MAX_TOTAL_BYTES: u64 = 2 << 30;
 
+/// The zip-bomb limits of a cache (the defaults are [`MAX_ENTRIES`] and [`MAX_TOTAL_BYTES`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    pub max_entries: usize,
+    /// Total uncompressed size, declared and actually written.
+    pub max_total_bytes: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_entries: MAX_ENTRIES,
+            max_total_bytes: MAX_TOTAL_BYTES,
+        }
+    }
+}
+
 /// An unpacked, checked FMU with its library loaded.
 pub struct LoadedFmu {
     pub source: PathBuf,
@@ -43,6 +60,7 @@ pub struct FmuCache {
     root: PathBuf,
     keep: bool,
     loaded: Mutex<HashMap<String, Arc<LoadedFmu>>>,
+    limits: Limits,
 }
 
 fn arch(path: &Path, message: impl Into<String>) -> FmuError {
@@ -69,6 +87,7 @@ impl FmuCache {
             root,
             keep,
             loaded: Mutex::new(HashMap::new()),
+            limits: Limits::default(),
         })
     }
 
@@ -80,11 +99,18 @@ impl FmuCache {
             root: dir.to_path_buf(),
             keep: true,
             loaded: Mutex::new(HashMap::new()),
+            limits: Limits::default(),
         })
     }
 
     pub fn root(&self) -> &Path {
         &self.root
+    }
+
+    /// Other zip-bomb limits (tests use small ones).
+    pub fn with_limits(mut self, limits: Limits) -> Self {
+        self.limits = limits;
+        self
     }
 
     /// Check, unpack (once per content) and load an FMU.
@@ -94,10 +120,10 @@ impl FmuCache {
         if let Some(l) = self.loaded.lock().unwrap().get(&sha) {
             return Ok(l.clone());
         }
-        let (md, id) = check_archive(fmu, &bytes)?;
+        let (md, id) = check_archive_with(fmu, &bytes, &self.limits)?;
         let dir = self.root.join(&sha[..32]);
         if !dir.join(".complete").exists() {
-            extract(fmu, &bytes, &dir)?;
+            extract(fmu, &bytes, &dir, &self.limits)?;
         }
         let lib_path = dir
             .join("binaries")
@@ -129,14 +155,24 @@ impl Drop for FmuCache {
 /// no symbolic links, size and count limits, a UTF-8 FMI 2.0 Co-Simulation
 /// modelDescription.xml, and the linux64 binary it names.
 pub fn check_archive(fmu: &Path, bytes: &[u8]) -> Result<(ModelDescription, String), FmuError> {
+    check_archive_with(fmu, bytes, &Limits::default())
+}
+
+/// [`check_archive`] with other limits.
+pub fn check_archive_with(
+    fmu: &Path,
+    bytes: &[u8],
+    limits: &Limits,
+) -> Result<(ModelDescription, String), FmuError> {
     let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
         .map_err(|e| arch(fmu, format!("not a valid zip archive: {e}")))?;
-    if zip.len() > MAX_ENTRIES {
+    if zip.len() > limits.max_entries {
         return Err(arch(
             fmu,
             format!(
-                "{} entries, more than the limit of {MAX_ENTRIES}",
-                zip.len()
+                "{} entries, more than the limit of {} (zip bomb?)",
+                zip.len(),
+                limits.max_entries
             ),
         ));
     }
@@ -160,10 +196,13 @@ pub fn check_archive(fmu: &Path, bytes: &[u8]) -> Result<(ModelDescription, Stri
             return Err(arch(fmu, format!("entry '{name}' is a symbolic link")));
         }
         total = total.saturating_add(f.size());
-        if total > MAX_TOTAL_BYTES {
+        if total > limits.max_total_bytes {
             return Err(arch(
                 fmu,
-                format!("uncompressed size exceeds the limit of {MAX_TOTAL_BYTES} bytes"),
+                format!(
+                    "uncompressed size exceeds the limit of {} bytes (zip bomb?)",
+                    limits.max_total_bytes
+                ),
             ));
         }
         names.push(name);
@@ -189,7 +228,13 @@ pub fn check_archive(fmu: &Path, bytes: &[u8]) -> Result<(ModelDescription, Stri
     };
     let md = description::parse(&xml).map_err(|message| FmuError::Description {
         path: fmu.to_path_buf(),
-        message,
+        // An FMI 1.0 or 3.0 description may not even parse as 2.0: name the version then.
+        message: match sniff_fmi_version(&xml) {
+            Some(v) if v != "2.0" => {
+                format!("fmiVersion is \"{v}\"; twinbench runs FMI 2.0 FMUs only")
+            }
+            _ => message,
+        },
     })?;
     if md.fmi_version != "2.0" {
         return Err(FmuError::Description {
@@ -211,6 +256,19 @@ pub fn check_archive(fmu: &Path, bytes: &[u8]) -> Result<(ModelDescription, Stri
         });
     };
     let id = cs.model_identifier.clone();
+    // Used as a file name and a C symbol prefix: a path here would load a library from
+    // outside the cache.
+    if id.is_empty()
+        || id.starts_with(|c: char| c.is_ascii_digit())
+        || !id.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+    {
+        return Err(FmuError::Description {
+            path: fmu.to_path_buf(),
+            message: format!(
+                "modelIdentifier \"{id}\" is not a valid C identifier (letters, digits, '_')"
+            ),
+        });
+    }
     let so = format!("binaries/linux64/{id}.so");
     if !names.contains(&so) {
         return Err(arch(
@@ -221,9 +279,42 @@ pub fn check_archive(fmu: &Path, bytes: &[u8]) -> Result<(ModelDescription, Stri
     Ok((md, id))
 }
 
-fn extract(fmu: &Path, bytes: &[u8], dir: &Path) -> Result<(), FmuError> {
+/// The `fmiVersion` attribute's value, found without parsing the XML.
+fn sniff_fmi_version(xml: &str) -> Option<&str> {
+    let i = xml.find("fmiVersion")?;
+    let rest = xml[i + "fmiVersion".len()..].trim_start();
+    let rest = rest.strip_prefix('=')?.trim_start();
+    let q = rest.chars().next().filter(|c| *c == '"' || *c == '\'')?;
+    let rest = &rest[1..];
+    Some(&rest[..rest.find(q)?])
+}
+
+fn extract(fmu: &Path, bytes: &[u8], dir: &Path, limits: &Limits) -> Result<(), FmuError> {
     let tmp = dir.with_extension(format!("tmp{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
+    // Nothing half-extracted stays behind in the cache.
+    extract_into(fmu, bytes, &tmp, limits).inspect_err(|_| {
+        let _ = std::fs::remove_dir_all(&tmp);
+    })?;
+    match std::fs::rename(&tmp, dir) {
+        Ok(()) => Ok(()),
+        // Another process unpacked the same content first: use theirs.
+        Err(_) if dir.join(".complete").exists() => {
+            let _ = std::fs::remove_dir_all(&tmp);
+            Ok(())
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&tmp);
+            Err(arch(
+                dir,
+                format!("cannot move the unpacked FMU into the cache: {e}"),
+            ))
+        }
+    }
+}
+
+fn extract_into(fmu: &Path, bytes: &[u8], tmp: &Path, limits: &Limits) -> Result<(), FmuError> {
+    let max = limits.max_total_bytes;
     let mut zip =
         zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| arch(fmu, e.to_string()))?;
     let mut written: u64 = 0;
@@ -244,28 +335,19 @@ fn extract(fmu: &Path, bytes: &[u8], dir: &Path) -> Result<(), FmuError> {
         }
         let mut w = std::fs::File::create(&out).map_err(|e| arch(&out, e.to_string()))?;
         // Bound the real decompressed size too: declared sizes can lie.
-        let n = std::io::copy(&mut f.by_ref().take(MAX_TOTAL_BYTES - written + 1), &mut w)
+        let n = std::io::copy(&mut f.by_ref().take(max - written + 1), &mut w)
             .map_err(|e| arch(fmu, format!("cannot extract '{}': {e}", rel.display())))?;
         written += n;
-        if written > MAX_TOTAL_BYTES {
-            let _ = std::fs::remove_dir_all(&tmp);
+        if written > max {
             return Err(arch(
                 fmu,
-                format!("uncompressed size exceeds the limit of {MAX_TOTAL_BYTES} bytes"),
+                format!(
+                    "uncompressed size exceeds the limit of {max} bytes while extracting '{}' (its declared size is wrong: zip bomb?)",
+                    rel.display()
+                ),
             ));
         }
     }
-    std::fs::write(tmp.join(".complete"), b"").map_err(|e| arch(&tmp, e.to_string()))?;
-    match std::fs::rename(&tmp, dir) {
-        Ok(()) => Ok(()),
-        // Another process unpacked the same content first: use theirs.
-        Err(_) if dir.join(".complete").exists() => {
-            let _ = std::fs::remove_dir_all(&tmp);
-            Ok(())
-        }
-        Err(e) => Err(arch(
-            dir,
-            format!("cannot move the unpacked FMU into the cache: {e}"),
-        )),
-    }
+    std::fs::write(tmp.join(".complete"), b"").map_err(|e| arch(tmp, e.to_string()))?;
+    Ok(())
 }

@@ -409,6 +409,12 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                 u.index
             ));
         }
+        if let Some(d) = u.dependencies.iter().flatten().find(|&&d| d == 0 || d > n) {
+            return Err(format!(
+                "ModelStructure: dependency index {d} of variable {} is not in 1..={n}",
+                u.index
+            ));
+        }
     }
     Ok(md)
 }

@@ -1,0 +1,415 @@
+//! FMU archives are untrusted input: every hostile archive is refused with a message naming
+//! the file and the reason, before anything is written outside the cache or loaded.
+//! The archives are built here from the packed `faulty` FMU with the `zip` crate.
+
+mod common;
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use twinbench::fmu::archive::Limits;
+use twinbench::fmu::FmuCache;
+use zip::write::SimpleFileOptions;
+
+/// The entries of the packed faulty FMU (name, content).
+fn base_entries() -> Vec<(String, Vec<u8>)> {
+    let bytes = std::fs::read(common::fmu("faulty")).unwrap();
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes)).unwrap();
+    (0..zip.len())
+        .map(|i| {
+            let mut f = zip.by_index(i).unwrap();
+            let mut data = Vec::new();
+            f.read_to_end(&mut data).unwrap();
+            (f.name().to_string(), data)
+        })
+        .collect()
+}
+
+fn model_description() -> String {
+    let e = base_entries();
+    let md = &e.iter().find(|e| e.0 == "modelDescription.xml").unwrap().1;
+    String::from_utf8(md.clone()).unwrap()
+}
+
+/// Build an archive from entries, then let `extra` add hostile ones.
+fn build(
+    entries: &[(String, Vec<u8>)],
+    extra: impl FnOnce(&mut zip::ZipWriter<std::io::Cursor<Vec<u8>>>),
+) -> Vec<u8> {
+    let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let opt = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+    for (name, data) in entries {
+        w.start_file(name.as_str(), opt).unwrap();
+        w.write_all(data).unwrap();
+    }
+    extra(&mut w);
+    w.finish().unwrap().into_inner()
+}
+
+/// The base entries with one replaced (or removed with `None`).
+fn with_entry(name: &str, data: Option<Vec<u8>>) -> Vec<(String, Vec<u8>)> {
+    let mut e: Vec<_> = base_entries().into_iter().filter(|e| e.0 != name).collect();
+    if let Some(d) = data {
+        e.push((name.to_string(), d));
+    }
+    e
+}
+
+/// A scratch folder: the hostile file, a persistent cache, and a place a zip-slip would hit.
+struct Scratch {
+    dir: tempfile::TempDir,
+}
+
+impl Scratch {
+    fn new() -> Scratch {
+        Scratch {
+            dir: tempfile::tempdir().unwrap(),
+        }
+    }
+    fn cache_dir(&self) -> PathBuf {
+        // Deep enough that `../..` from an unpacked FMU stays inside the scratch folder.
+        self.dir.path().join("a/b/cache")
+    }
+
+    /// Load `bytes` saved as `name`: the error text, after checking that nothing was
+    /// extracted (the cache is empty, nothing appeared next to it) and nothing was loaded.
+    fn refused(&self, name: &str, bytes: &[u8], limits: Limits) -> String {
+        let fmu = self.dir.path().join(name);
+        std::fs::write(&fmu, bytes).unwrap();
+        let before = list(self.dir.path());
+        let cache = FmuCache::persistent(&self.cache_dir())
+            .unwrap()
+            .with_limits(limits);
+        let err = match cache.load(&fmu) {
+            Ok(_) => panic!("{name} was accepted"),
+            Err(e) => e.to_string(),
+        };
+        assert!(
+            err.contains(&fmu.display().to_string()),
+            "the message does not name the file: {err}"
+        );
+        let after = list(self.dir.path());
+        let cache_dir = self.cache_dir();
+        let new: Vec<_> = after
+            .iter()
+            .filter(|p| !before.contains(p) && !cache_dir.starts_with(p))
+            .collect();
+        assert!(new.is_empty(), "{name}: files written: {new:?}");
+        assert!(
+            !mapped(&cache_dir),
+            "{name}: a library under the cache is mapped"
+        );
+        err
+    }
+}
+
+/// Every path under `dir`.
+fn list(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).into_iter().flatten().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                todo.push(p.clone());
+            }
+            out.push(p);
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Whether this process maps a file under `dir` (a loaded library).
+fn mapped(dir: &Path) -> bool {
+    std::fs::read_to_string("/proc/self/maps")
+        .unwrap()
+        .contains(&dir.display().to_string())
+}
+
+fn default_refused(name: &str, bytes: &[u8]) -> String {
+    Scratch::new().refused(name, bytes, Limits::default())
+}
+
+#[test]
+fn the_rebuilt_base_archive_loads() {
+    // The control: the same construction without a hostile entry is accepted.
+    let s = Scratch::new();
+    let fmu = s.dir.path().join("ok.fmu");
+    std::fs::write(&fmu, build(&base_entries(), |_| {})).unwrap();
+    let cache = FmuCache::persistent(&s.cache_dir()).unwrap();
+    let l = cache.load(&fmu).unwrap();
+    assert_eq!(l.model_identifier(), "faulty");
+    assert!(l.dir.starts_with(s.cache_dir()));
+}
+
+#[test]
+fn zip_slip_with_parent_components_is_refused() {
+    for evil in [
+        "../../escaped.txt",
+        "resources/../../../escaped.txt",
+        "..\\..\\escaped.txt",
+    ] {
+        let bytes = build(&base_entries(), |w| {
+            w.start_file(evil, SimpleFileOptions::default()).unwrap();
+            w.write_all(b"owned").unwrap();
+        });
+        let e = default_refused("slip.fmu", &bytes);
+        assert!(
+            e.contains(&format!("entry '{evil}' escapes the archive")),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn absolute_entry_paths_are_refused() {
+    let target = std::env::temp_dir().join(format!("tb-abs-{}.txt", std::process::id()));
+    let name = target.display().to_string();
+    let bytes = build(&base_entries(), |w| {
+        w.start_file(name.as_str(), SimpleFileOptions::default())
+            .unwrap();
+        w.write_all(b"owned").unwrap();
+    });
+    let e = default_refused("absolute.fmu", &bytes);
+    assert!(
+        e.contains("escapes the archive (absolute path or '..')"),
+        "{e}"
+    );
+    assert!(!target.exists());
+}
+
+#[test]
+fn symbolic_links_are_refused() {
+    let bytes = build(&base_entries(), |w| {
+        w.add_symlink(
+            "resources/passwd",
+            "/etc/passwd",
+            SimpleFileOptions::default(),
+        )
+        .unwrap();
+    });
+    let e = default_refused("symlink.fmu", &bytes);
+    assert!(
+        e.contains("entry 'resources/passwd' is a symbolic link"),
+        "{e}"
+    );
+}
+
+#[test]
+fn too_many_entries_are_refused() {
+    let bytes = build(&base_entries(), |w| {
+        let opt = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+        for i in 0..twinbench::fmu::archive::MAX_ENTRIES {
+            w.start_file(format!("resources/{i}"), opt).unwrap();
+        }
+    });
+    let e = default_refused("many.fmu", &bytes);
+    assert!(
+        e.contains("10003 entries, more than the limit of 10000"),
+        "{e}"
+    );
+}
+
+/// Overwrite the declared uncompressed size of `name` in the central directory and the
+/// local header.
+fn patch_declared_size(bytes: &mut [u8], name: &str, size: u32) {
+    let mut patched = 0;
+    for i in 0..bytes.len().saturating_sub(46) {
+        // (name length at, name at, uncompressed size at)
+        let (len_at, name_at, size_at) = match &bytes[i..i + 4] {
+            b"PK\x01\x02" => (28, 46, 24),
+            b"PK\x03\x04" => (26, 30, 22),
+            _ => continue,
+        };
+        let n = u16::from_le_bytes([bytes[i + len_at], bytes[i + len_at + 1]]) as usize;
+        if bytes.get(i + name_at..i + name_at + n) == Some(name.as_bytes()) {
+            bytes[i + size_at..i + size_at + 4].copy_from_slice(&size.to_le_bytes());
+            patched += 1;
+        }
+    }
+    assert_eq!(patched, 2, "headers of {name} not found");
+}
+
+#[test]
+fn a_declared_size_past_the_limit_is_refused_before_extraction() {
+    let mut bytes = build(&base_entries(), |w| {
+        let opt = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+        w.start_file("resources/huge.bin", opt).unwrap();
+        w.write_all(&[0u8; 16]).unwrap();
+    });
+    patch_declared_size(&mut bytes, "resources/huge.bin", 0xF000_0000);
+    let e = default_refused("declared.fmu", &bytes);
+    assert!(
+        e.contains("uncompressed size exceeds the limit of 2147483648 bytes"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_lying_declared_size_is_caught_while_extracting_and_nothing_stays() {
+    // 4 MB of zeros deflate to a few kB; the headers claim 10 bytes.
+    let bytes = {
+        let mut b = build(&base_entries(), |w| {
+            w.start_file("resources/bomb.bin", SimpleFileOptions::default())
+                .unwrap();
+            w.write_all(&vec![0u8; 4 << 20]).unwrap();
+        });
+        patch_declared_size(&mut b, "resources/bomb.bin", 10);
+        b
+    };
+    let limits = Limits {
+        max_entries: 100,
+        max_total_bytes: 2 << 20,
+    };
+    let s = Scratch::new();
+    let e = s.refused("bomb.fmu", &bytes, limits);
+    assert!(
+        e.contains("uncompressed size exceeds the limit of 2097152 bytes while extracting 'resources/bomb.bin'"),
+        "{e}"
+    );
+    // The half-extracted folder was removed: the cache is empty.
+    assert_eq!(list(&s.cache_dir()), Vec::<PathBuf>::new());
+}
+
+#[test]
+fn a_missing_linux64_binary_is_refused() {
+    let e = default_refused(
+        "nobinary.fmu",
+        &build(&with_entry("binaries/linux64/faulty.so", None), |_| {}),
+    );
+    assert!(
+        e.contains("no binaries/linux64/faulty.so (the FMU has no binary for this platform)"),
+        "{e}"
+    );
+    // Only a Windows binary.
+    let mut entries = with_entry("binaries/linux64/faulty.so", None);
+    entries.push(("binaries/win64/faulty.dll".into(), b"MZ".to_vec()));
+    let e = default_refused("win64only.fmu", &build(&entries, |_| {}));
+    assert!(e.contains("no binaries/linux64/faulty.so"), "{e}");
+}
+
+#[test]
+fn a_missing_model_description_is_refused() {
+    let e = default_refused(
+        "nomd.fmu",
+        &build(&with_entry("modelDescription.xml", None), |_| {}),
+    );
+    assert!(
+        e.contains("no modelDescription.xml at the archive's root"),
+        "{e}"
+    );
+    // One in a sub-folder does not count.
+    let mut entries = with_entry("modelDescription.xml", None);
+    entries.push((
+        "sources/modelDescription.xml".into(),
+        model_description().into_bytes(),
+    ));
+    let e = default_refused("nestedmd.fmu", &build(&entries, |_| {}));
+    assert!(e.contains("no modelDescription.xml"), "{e}");
+}
+
+#[test]
+fn a_non_utf8_model_description_is_refused() {
+    let mut md = model_description().into_bytes();
+    let at = md.len() / 2;
+    md.splice(at..at, [0xFF, 0xFE]);
+    let e = default_refused(
+        "latin.fmu",
+        &build(&with_entry("modelDescription.xml", Some(md)), |_| {}),
+    );
+    assert!(e.contains("modelDescription.xml is not UTF-8 (byte"), "{e}");
+}
+
+#[test]
+fn fmi_1_and_3_are_refused_with_their_version() {
+    let md2 = model_description();
+    for v in ["1.0", "3.0"] {
+        let md = md2.replace("fmiVersion=\"2.0\"", &format!("fmiVersion=\"{v}\""));
+        let e = default_refused(
+            &format!("fmi{v}.fmu"),
+            &build(
+                &with_entry("modelDescription.xml", Some(md.into_bytes())),
+                |_| {},
+            ),
+        );
+        assert!(
+            e.contains(&format!(
+                "fmiVersion is \"{v}\"; twinbench runs FMI 2.0 FMUs only"
+            )),
+            "{e}"
+        );
+    }
+    // A genuine FMI 3.0 description (different elements) says the same.
+    let md3 = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="3.0" modelName="faulty" instantiationToken="{x}">
+  <CoSimulation modelIdentifier="faulty"/>
+  <ModelVariables><Float64 name="y" valueReference="1" causality="output"/></ModelVariables>
+  <ModelStructure><Output valueReference="1"/></ModelStructure>
+</fmiModelDescription>"#;
+    let e = default_refused(
+        "fmi3.fmu",
+        &build(
+            &with_entry("modelDescription.xml", Some(md3.as_bytes().to_vec())),
+            |_| {},
+        ),
+    );
+    assert!(e.contains("fmiVersion is \"3.0\""), "{e}");
+    // FMI 1.0's CoSimulation_StandAlone description.
+    let md1 = r#"<?xml version="1.0"?>
+<fmiModelDescription fmiVersion="1.0" modelName="faulty" modelIdentifier="faulty" guid="{x}">
+  <ModelVariables><ScalarVariable name="y" valueReference="1"><Real/></ScalarVariable></ModelVariables>
+  <Implementation><CoSimulation_StandAlone><Capabilities/></CoSimulation_StandAlone></Implementation>
+</fmiModelDescription>"#;
+    let e = default_refused(
+        "fmi1.fmu",
+        &build(
+            &with_entry("modelDescription.xml", Some(md1.as_bytes().to_vec())),
+            |_| {},
+        ),
+    );
+    assert!(e.contains("fmiVersion is \"1.0\""), "{e}");
+}
+
+#[test]
+fn model_exchange_only_is_refused() {
+    let md = model_description().replace("CoSimulation", "ModelExchange");
+    let e = default_refused(
+        "me.fmu",
+        &build(
+            &with_entry("modelDescription.xml", Some(md.into_bytes())),
+            |_| {},
+        ),
+    );
+    assert!(
+        e.contains("the FMU supports Model Exchange only; twinbench needs Co-Simulation"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_model_identifier_that_is_a_path_is_refused() {
+    for id in ["../../../tmp/evil", "/tmp/evil", "a b", ""] {
+        let md = model_description().replace(
+            "modelIdentifier=\"faulty\"",
+            &format!("modelIdentifier=\"{id}\""),
+        );
+        let mut entries = with_entry("modelDescription.xml", Some(md.into_bytes()));
+        entries.push((format!("binaries/linux64/{id}.so"), b"x".to_vec()));
+        let e = default_refused("id.fmu", &build(&entries, |_| {}));
+        assert!(
+            e.contains(&format!(
+                "modelIdentifier \"{id}\" is not a valid C identifier"
+            )) || e.contains("escapes the archive"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn not_a_zip_and_truncated_archives_are_refused() {
+    let e = default_refused("text.fmu", b"this is not a zip archive");
+    assert!(e.contains("not a valid zip archive"), "{e}");
+    let full = build(&base_entries(), |_| {});
+    let e = default_refused("truncated.fmu", &full[..full.len() / 2]);
+    assert!(e.contains("not a valid zip archive"), "{e}");
+}
