@@ -69,7 +69,11 @@ impl Model for Faulty {
                         "fault_kind = 7: the step is discarded on purpose",
                     ))
                 }
-                8 => return Err(ModelError::fatal("fault_kind = 8: a fatal error on purpose")),
+                8 => {
+                    return Err(ModelError::fatal(
+                        "fault_kind = 8: a fatal error on purpose",
+                    ))
+                }
                 _ => {}
             }
         }
