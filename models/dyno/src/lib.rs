@@ -171,9 +171,9 @@ impl Dyno {
         let mut demand = raw;
         if vars.dead_time_compensation {
             let n = self.raw.len();
-            self.raw_head = (self.raw_head + 1) % n;
+            self.raw_head = wrap_next(self.raw_head, n);
             self.raw[self.raw_head] = raw;
-            let oldest = self.raw[(self.raw_head + 1) % n];
+            let oldest = self.raw[wrap_next(self.raw_head, n)];
             let slope = (raw - oldest) / (self.window_cycles as f64 * self.cycle);
             demand += slope * self.dead_cycles * self.cycle;
         }
@@ -181,7 +181,7 @@ impl Dyno {
         vars.torque_demand = demand;
 
         let n = self.hist.len();
-        self.hist_head = (self.hist_head + 1) % n;
+        self.hist_head = wrap_next(self.hist_head, n);
         self.hist[self.hist_head] = demand;
 
         let mut delay = self.dead_cycles;
@@ -190,12 +190,13 @@ impl Dyno {
             delay += self.jitter_cycles * (2.0 * u - 1.0);
         }
         let delay = delay.clamp(0.0, self.max_delay_cycles);
-        let whole = delay.floor();
-        let frac = delay - whole;
-        let i = whole as usize;
-        let newer = self.hist[(self.hist_head + n - i) % n];
+        // delay >= 0: truncation is floor (no libm call), and the ring indices below stay in
+        // [0, 2n), so one conditional subtraction wraps them (no division per tick).
+        let i = delay as usize;
+        let frac = delay - i as f64;
+        let newer = self.hist[wrap_back(self.hist_head + n - i, n)];
         self.lag_input = if frac > 0.0 {
-            let older = self.hist[(self.hist_head + n - i - 1) % n];
+            let older = self.hist[wrap_back(self.hist_head + n - i - 1, n)];
             newer + frac * (older - newer)
         } else {
             newer
@@ -446,6 +447,26 @@ speed loop crossover with 0.8 kg·m²; scale both with the inertia).</p>
 
 #[cfg(feature = "fmu")]
 fmu_export::export_fmu!(crate::Dyno);
+
+/// Next index of a ring of length `n`.
+#[inline]
+fn wrap_next(i: usize, n: usize) -> usize {
+    if i + 1 == n {
+        0
+    } else {
+        i + 1
+    }
+}
+
+/// An index in `[0, 2n)` wrapped into the ring of length `n`.
+#[inline]
+fn wrap_back(j: usize, n: usize) -> usize {
+    if j >= n {
+        j - n
+    } else {
+        j
+    }
+}
 
 #[cfg(test)]
 mod tests;

@@ -69,6 +69,33 @@ pub struct Snapshot<M: Model> {
     params_changed: bool,
 }
 
+/// Per value reference, what get/set must check: precomputed so the numeric calls of
+/// every step are a lookup and a few compares.
+#[derive(Clone, Copy, Debug)]
+struct Slot {
+    index: u32,
+    ty: VarType,
+    has_start: bool,
+    /// Settable in instantiated / initialization mode.
+    settable_init: bool,
+    /// Settable in step complete (inputs and tunable parameters).
+    settable_run: bool,
+    is_input: bool,
+    min: f64,
+    max: f64,
+}
+
+const NO_SLOT: Slot = Slot {
+    index: u32::MAX,
+    ty: VarType::Real,
+    has_start: false,
+    settable_init: false,
+    settable_run: false,
+    is_input: false,
+    min: f64::NEG_INFINITY,
+    max: f64::INFINITY,
+};
+
 const STATE_MAGIC: &[u8; 8] = b"TBFMUST1";
 
 pub struct Runtime<M: Model> {
@@ -89,6 +116,8 @@ pub struct Runtime<M: Model> {
     guid: String,
     /// value reference -> table index + 1 (0: unknown).
     vr_index: Vec<u32>,
+    /// value reference -> checks of the fast get/set path.
+    slots: Vec<Slot>,
     has_feedthrough: bool,
     logger: Box<dyn Logger>,
     logging_on: bool,
@@ -105,8 +134,22 @@ impl<M: Model> Runtime<M> {
         let table = M::Vars::VARIABLES;
         let max_vr = table.iter().map(|v| v.value_reference).max().unwrap_or(0) as usize;
         let mut vr_index = vec![0u32; max_vr + 1];
+        let mut slots = vec![NO_SLOT; max_vr + 1];
         for (i, v) in table.iter().enumerate() {
             vr_index[v.value_reference as usize] = i as u32 + 1;
+            slots[v.value_reference as usize] = Slot {
+                index: i as u32,
+                ty: v.var_type(),
+                has_start: v.has_start(),
+                settable_init: v.variability != Variability::Constant
+                    && (v.causality == Causality::Input || v.has_start()),
+                settable_run: v.causality == Causality::Input
+                    || (v.causality == Causality::Parameter
+                        && v.variability == Variability::Tunable),
+                is_input: v.causality == Causality::Input,
+                min: v.min.unwrap_or(f64::NEG_INFINITY),
+                max: v.max.unwrap_or(f64::INFINITY),
+            };
         }
         Runtime {
             vars: M::Vars::default(),
@@ -126,6 +169,7 @@ impl<M: Model> Runtime<M> {
             },
             guid: crate::description::guid::<M>(),
             vr_index,
+            slots,
             has_feedthrough: table.iter().any(|v| !v.depends_on.is_empty()),
             logger,
             logging_on,
@@ -454,25 +498,35 @@ impl<M: Model> Runtime<M> {
             }
             _ => {}
         }
-        let table = M::Vars::VARIABLES;
+        let instantiated = self.phase == Phase::Instantiated;
         for (k, &vr) in vrs.iter().enumerate() {
-            let i = match self.index(function, vr) {
-                Ok(i) => i,
-                Err(s) => return s,
-            };
-            let info = &table[i];
-            if let Err(s) = self.check_type(function, info, ty) {
-                return s;
+            match self.slots.get(vr as usize) {
+                Some(sl)
+                    if sl.index != u32::MAX && sl.ty == ty && (sl.has_start || !instantiated) =>
+                {
+                    out[k] = conv(self.vars.get(sl.index as usize));
+                }
+                _ => return self.get_error(function, ty, vr),
             }
-            if self.phase == Phase::Instantiated && !info.has_start() {
-                return self.error(&format!(
-                    "{function}: '{}' is calculated and has no value before initialization",
-                    info.name
-                ));
-            }
-            out[k] = conv(self.vars.get(i));
         }
         fmi2Status::OK
+    }
+
+    /// The message of a refused get (off the fast path).
+    #[cold]
+    fn get_error(&self, function: &str, ty: VarType, vr: u32) -> fmi2Status {
+        let i = match self.index(function, vr) {
+            Ok(i) => i,
+            Err(s) => return s,
+        };
+        let info = &M::Vars::VARIABLES[i];
+        if let Err(s) = self.check_type(function, info, ty) {
+            return s;
+        }
+        self.error(&format!(
+            "{function}: '{}' is calculated and has no value before initialization",
+            info.name
+        ))
     }
 
     /// Set variables of type `ty` from `values`, each checked for causality, variability,
@@ -501,71 +555,77 @@ impl<M: Model> Runtime<M> {
                 values.len()
             ));
         }
-        let table = M::Vars::VARIABLES;
+        let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
         for (&vr, value) in vrs.iter().zip(values) {
-            let i = match self.index(function, vr) {
-                Ok(i) => i,
-                Err(s) => return s,
+            let sl = match self.slots.get(vr as usize) {
+                Some(sl) if sl.index != u32::MAX && sl.ty == ty => *sl,
+                _ => return self.set_error(function, ty, vr, value),
             };
-            let info = &table[i];
-            if let Err(s) = self.check_type(function, info, ty) {
-                return s;
-            }
-            let settable = match self.phase {
-                Phase::Instantiated | Phase::InitializationMode => {
-                    info.variability != Variability::Constant
-                        && (info.causality == Causality::Input || info.has_start())
-                }
-                _ => {
-                    info.causality == Causality::Input
-                        || (info.causality == Causality::Parameter
-                            && info.variability == Variability::Tunable)
-                }
-            };
-            if !settable {
-                return self.error(&format!(
-                    "{function}: '{}' ({} {}) cannot be set in state '{}'",
-                    info.name,
-                    info.variability.xml_name(),
-                    info.causality.xml_name(),
-                    self.phase.name()
-                ));
-            }
             let x = value.as_f64();
-            if let Value::Real(r) = value {
-                if !r.is_finite() {
-                    return self.error(&format!(
-                        "{function}: '{}' set to {r}, expected a finite number",
-                        info.name
-                    ));
-                }
+            let settable = if init {
+                sl.settable_init
+            } else {
+                sl.settable_run
+            };
+            // NaN fails the range test too.
+            if !settable || !(x >= sl.min && x <= sl.max) || !x.is_finite() {
+                return self.set_error(function, ty, vr, value);
             }
-            let below = info.min.is_some_and(|m| x < m);
-            let above = info.max.is_some_and(|m| x > m);
-            if below || above {
-                return self.error(&format!(
-                    "{function}: '{}' = {} is outside its range [{}, {}]{}",
-                    info.name,
-                    value.xml_text(),
-                    info.min
-                        .map_or("-inf".into(), crate::variables::format_real),
-                    info.max.map_or("inf".into(), crate::variables::format_real),
-                    info.unit.map(|u| format!(" {u}")).unwrap_or_default()
-                ));
-            }
-            self.vars.set(i, value);
-            match self.phase {
-                Phase::Instantiated | Phase::InitializationMode => self.init_dirty = true,
-                _ => {
-                    if info.causality == Causality::Input {
-                        self.inputs_changed = true;
-                    } else {
-                        self.params_changed = true;
-                    }
-                }
+            self.vars.set(sl.index as usize, value);
+            if init {
+                self.init_dirty = true;
+            } else if sl.is_input {
+                self.inputs_changed = true;
+            } else {
+                self.params_changed = true;
             }
         }
         fmi2Status::OK
+    }
+
+    /// The message of a refused set (off the fast path).
+    #[cold]
+    fn set_error(&self, function: &str, ty: VarType, vr: u32, value: Value) -> fmi2Status {
+        let i = match self.index(function, vr) {
+            Ok(i) => i,
+            Err(s) => return s,
+        };
+        let info = &M::Vars::VARIABLES[i];
+        if let Err(s) = self.check_type(function, info, ty) {
+            return s;
+        }
+        let sl = self.slots[vr as usize];
+        let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
+        if !(if init {
+            sl.settable_init
+        } else {
+            sl.settable_run
+        }) {
+            return self.error(&format!(
+                "{function}: '{}' ({} {}) cannot be set in state '{}'",
+                info.name,
+                info.variability.xml_name(),
+                info.causality.xml_name(),
+                self.phase.name()
+            ));
+        }
+        if let Value::Real(r) = value {
+            if !r.is_finite() {
+                return self.error(&format!(
+                    "{function}: '{}' set to {r}, expected a finite number",
+                    info.name
+                ));
+            }
+        }
+        self.error(&format!(
+            "{function}: '{}' = {} is outside its range [{}, {}]{}",
+            info.name,
+            value.xml_text(),
+            info.min
+                .map_or("-inf".into(), crate::variables::format_real),
+            info.max.map_or("inf".into(), crate::variables::format_real),
+            info.unit.map(|u| format!(" {u}")).unwrap_or_default()
+        ))
     }
 
     /// Set one variable by name (tests and native hosts).
