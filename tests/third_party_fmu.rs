@@ -1,0 +1,314 @@
+//! Third-party FMI 2.0 Co-Simulation FMUs: standard-valid model descriptions that our
+//! exporter never writes (extra root attributes, vendor annotations, vendor attributes,
+//! unit names we do not know but that the FMU defines) load, convert and run.
+//!
+//! The FMUs are made here by rewriting the model description of the packed test FMU
+//! `faulty` (`y = ∫ gain·u dt`, `y_direct = gain·u`) into a new archive; the GUID is kept,
+//! so the binary accepts them.
+
+mod common;
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use twinbench::fmu::FmuCache;
+use twinbench::system::{Recording, Simulation, System, SystemFile};
+
+fn faulty_xml() -> String {
+    let fmu = common::fmu("faulty");
+    let mut zip = zip::ZipArchive::new(std::fs::File::open(&fmu).unwrap()).unwrap();
+    let mut text = String::new();
+    zip.by_name("modelDescription.xml")
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    text
+}
+
+/// `faulty.fmu` with its modelDescription.xml replaced by `xml`, written to `dir/name.fmu`.
+fn repack(dir: &Path, name: &str, xml: &str) -> PathBuf {
+    let src = common::fmu("faulty");
+    let mut zin = zip::ZipArchive::new(std::fs::File::open(&src).unwrap()).unwrap();
+    let out = dir.join(format!("{name}.fmu"));
+    let mut zout = zip::ZipWriter::new(std::fs::File::create(&out).unwrap());
+    let opts = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated);
+    for k in 0..zin.len() {
+        let mut entry = zin.by_index(k).unwrap();
+        let entry_name = entry.name().to_string();
+        if entry.is_dir() {
+            zout.add_directory(entry_name, opts).unwrap();
+            continue;
+        }
+        let mut bytes = Vec::new();
+        entry.read_to_end(&mut bytes).unwrap();
+        if entry_name == "modelDescription.xml" {
+            bytes = xml.as_bytes().to_vec();
+        }
+        zout.start_file(entry_name, opts).unwrap();
+        zout.write_all(&bytes).unwrap();
+    }
+    zout.finish().unwrap();
+    out
+}
+
+/// Replace exactly one occurrence of `from` (the rewrite must hit the intended place).
+fn edit(xml: &str, from: &str, to: &str) -> String {
+    assert_eq!(xml.matches(from).count(), 1, "'{from}' in:\n{xml}");
+    xml.replacen(from, to, 1)
+}
+
+const ACME: &str = "http://example.com/acme-sim";
+
+/// An extra (namespaced and plain) root attribute.
+fn extra_root_attributes(xml: &str) -> String {
+    edit(
+        xml,
+        "<fmiModelDescription\n",
+        &format!("<fmiModelDescription xmlns:acme=\"{ACME}\" acme:buildId=\"4711\" exportedBy=\"ACME Sim 12.3\"\n"),
+    )
+}
+
+/// `<VendorAnnotations>` at the model level and `<Annotations>` inside a ScalarVariable.
+fn annotations(xml: &str) -> String {
+    let xml = edit(
+        xml,
+        "<ModelVariables>",
+        &format!(
+            "<VendorAnnotations>\n    <Tool name=\"com.acme.sim\">\n      <acme:Solver xmlns:acme=\"{ACME}\" kind=\"fixed\"><acme:Order>2</acme:Order></acme:Solver>\n    </Tool>\n    <Tool name=\"org.other\"/>\n  </VendorAnnotations>\n  <ModelVariables>"
+        ),
+    );
+    edit(
+        &xml,
+        "<Real unit=\"1\" start=\"0\"/>\n",
+        "<Real unit=\"1\" start=\"0\"/>\n      <Annotations>\n        <Tool name=\"com.acme.sim\"><Calibration source=\"bench 3\">text &amp; more</Calibration></Tool>\n      </Annotations>\n",
+    )
+}
+
+/// Vendor attributes on CoSimulation, ScalarVariable and Real, and an optional standard
+/// element (`SourceFiles`) our exporter does not write.
+fn vendor_attributes(xml: &str) -> String {
+    let xml = edit(
+        xml,
+        "providesDirectionalDerivative=\"false\"/>",
+        &format!("providesDirectionalDerivative=\"false\" xmlns:acme=\"{ACME}\" acme:threads=\"1\">\n    <SourceFiles><File name=\"faulty.c\"/></SourceFiles>\n  </CoSimulation>"),
+    );
+    let xml = edit(
+        &xml,
+        "causality=\"input\" variability=\"continuous\">",
+        &format!("causality=\"input\" variability=\"continuous\" xmlns:acme=\"{ACME}\" acme:color=\"red\">"),
+    );
+    edit(
+        &xml,
+        "<Real unit=\"1\" start=\"0\"/>",
+        &format!("<Real xmlns:acme=\"{ACME}\" unit=\"1\" acme:quantity=\"Ratio\" start=\"0\" vendorHint=\"3\"/>"),
+    )
+}
+
+fn cache() -> Arc<FmuCache> {
+    Arc::new(FmuCache::temporary(false).unwrap())
+}
+
+fn system(dir: &Path, fmus: &[(&str, &Path)], body: &str) -> Result<System, String> {
+    let mut text = format!("{body}\n[fmus]\n");
+    for (k, p) in fmus {
+        text.push_str(&format!("{k} = \"{}\"\n", p.display()));
+    }
+    let path = dir.join("system.toml");
+    let file = SystemFile::parse(&text, &path).map_err(|e| e.to_string())?;
+    System::from_file(file, &path, cache()).map_err(|e| e.to_string())
+}
+
+fn run(sys: System) -> Recording {
+    let mut sim = Simulation::new(sys).unwrap();
+    sim.echo_fmu_log = false;
+    let s = sim.run().unwrap();
+    assert_eq!(s.steps, 1000);
+    sim.recording.clone()
+}
+
+/// `src` (u = 1, gain 2) drives `dst` through `y_direct -> u`: dst.y = 2·t.
+const CHAIN: &str = r#"connections = ["src.y_direct -> dst.u"]
+[[instance]]
+name = "src"
+fmu = "third_party"
+
+[[instance]]
+name = "dst"
+fmu = "third_party"
+
+[parameters]
+"src.u" = 1.0
+"src.gain" = 2.0
+
+[experiment]
+step = 1e-3
+stop = 1.0
+
+[record]
+signals = ["src.y", "src.y_direct", "dst.u", "dst.y", "dst.steps"]
+"#;
+
+#[test]
+fn fmus_with_extra_root_attributes_annotations_and_vendor_attributes_load_and_run() {
+    let original = faulty_xml();
+    let dir = tempfile::tempdir().unwrap();
+    fn all(x: &str) -> String {
+        vendor_attributes(&annotations(&extra_root_attributes(x)))
+    }
+    type Rewrite = fn(&str) -> String;
+    let cases: [(&str, Rewrite); 4] = [
+        ("extra_root_attributes", extra_root_attributes),
+        ("annotations", annotations),
+        ("vendor_attributes", vendor_attributes),
+        ("all", all),
+    ];
+    for (name, rewrite) in cases {
+        let xml = rewrite(&original);
+        let fmu = repack(dir.path(), name, &xml);
+        // The reader keeps what it needs from the standard part.
+        let loaded = cache().load(&fmu).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let md = &loaded.description;
+        assert_eq!(md.model_name, "faulty", "{name}");
+        let u = md.variable("u").unwrap();
+        assert_eq!(
+            (u.causality.as_str(), u.start.as_deref()),
+            ("input", Some("0")),
+            "{name}"
+        );
+        assert_eq!(md.unit_of(u), Some("1"), "{name}");
+        assert_eq!(md.outputs.len(), 3, "{name}");
+        // And it runs in a system.
+        let sys = system(dir.path(), &[("third_party", &fmu)], CHAIN)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let rec = run(sys);
+        let y = *rec.column("dst.y").unwrap().last().unwrap();
+        assert!((y - 2.0).abs() < 1e-9, "{name}: dst.y(1 s) = {y}");
+        assert_eq!(*rec.column("dst.steps").unwrap().last().unwrap(), 1000.0);
+    }
+}
+
+#[test]
+fn units_unknown_to_us_but_defined_by_the_fmus_are_converted() {
+    let original = faulty_xml();
+    let dir = tempfile::tempdir().unwrap();
+    let defs = "<UnitDefinitions>\n";
+    // The source's y_direct is in hours and degrees Celsius; the sinks' u in minutes and
+    // degrees Fahrenheit. None of these names is in our unit table.
+    let with_unit = |name: &str, var: &str, unit: &str, base: &str| {
+        let xml = edit(
+            &original,
+            defs,
+            &format!(
+                "{defs}    <Unit name=\"{unit}\">\n      <BaseUnit {base}/>\n      <DisplayUnit name=\"x{unit}\" factor=\"2\"/>\n    </Unit>\n"
+            ),
+        );
+        let (from, to) = match var {
+            "u" => ("<Real unit=\"1\" start=\"0\"/>", format!("<Real unit=\"{unit}\" start=\"0\"/>")),
+            _ => (
+                "gain·u: direct feed-through of the input\" causality=\"output\" variability=\"continuous\">\n      <Real unit=\"1\"/>",
+                format!("gain·u: direct feed-through of the input\" causality=\"output\" variability=\"continuous\">\n      <Real unit=\"{unit}\"/>"),
+            ),
+        };
+        repack(dir.path(), name, &edit(&xml, from, &to))
+    };
+    assert!(twinbench::fmu::description::ModelDescription::default()
+        .unit_def("h")
+        .is_none());
+    for u in ["h", "min", "degC", "degF", "furlong"] {
+        assert!(fmu_export::units::lookup(u).is_none(), "{u} is known to us");
+    }
+    let src_h = with_unit("src_h", "y_direct", "h", "s=\"1\" factor=\"3600\"");
+    let dst_min = with_unit("dst_min", "u", "min", "s=\"1\" factor=\"60\"");
+    let src_c = with_unit("src_c", "y_direct", "degC", "K=\"1\" offset=\"273.15\"");
+    let dst_f = with_unit(
+        "dst_f",
+        "u",
+        "degF",
+        "K=\"1\" factor=\"0.5555555555555556\" offset=\"255.3722222222222\"",
+    );
+    let body = r#"connections = ["time.y_direct -> minutes.u", "celsius.y_direct -> fahrenheit.u"]
+[[instance]]
+name = "time"
+fmu = "src_h"
+
+[[instance]]
+name = "minutes"
+fmu = "dst_min"
+
+[[instance]]
+name = "celsius"
+fmu = "src_c"
+
+[[instance]]
+name = "fahrenheit"
+fmu = "dst_f"
+
+[parameters]
+"time.u" = 1.0
+"time.gain" = 0.5
+"celsius.u" = 1.0
+"celsius.gain" = 100.0
+
+[experiment]
+step = 1e-3
+stop = 1.0
+
+[record]
+signals = ["minutes.u", "fahrenheit.u"]
+"#;
+    let sys = system(
+        dir.path(),
+        &[
+            ("src_h", &src_h),
+            ("dst_min", &dst_min),
+            ("src_c", &src_c),
+            ("dst_f", &dst_f),
+        ],
+        body,
+    )
+    .unwrap();
+    let conv = |text: &str| {
+        let c = sys.connections.iter().find(|c| c.text == text).unwrap();
+        (c.scale, c.offset)
+    };
+    let (s, o) = conv("time.y_direct -> minutes.u");
+    assert!((s - 60.0).abs() < 1e-12 && o == 0.0, "h -> min: {s}, {o}");
+    let (s, o) = conv("celsius.y_direct -> fahrenheit.u");
+    assert!(
+        (s - 1.8).abs() < 1e-12 && (o - 32.0).abs() < 1e-9,
+        "degC -> degF: {s}, {o}"
+    );
+    let rec = run(sys);
+    // 0.5 h = 30 min; 100 °C = 212 °F.
+    for (name, expected) in [("minutes.u", 30.0), ("fahrenheit.u", 212.0)] {
+        for x in rec.column(name).unwrap() {
+            assert!(
+                (x - expected).abs() < 1e-9,
+                "{name} = {x}, expected {expected}"
+            );
+        }
+    }
+    // A unit nobody defines is refused, naming both units.
+    let undefined = repack(
+        dir.path(),
+        "undefined",
+        &edit(
+            &original,
+            "<Real unit=\"1\" start=\"0\"/>",
+            "<Real unit=\"furlong\" start=\"0\"/>",
+        ),
+    );
+    let e = match system(
+        dir.path(),
+        &[("src_h", &src_h), ("undefined", &undefined)],
+        "connections = [\"a.y_direct -> b.u\"]\n[[instance]]\nname = \"a\"\nfmu = \"src_h\"\n\n[[instance]]\nname = \"b\"\nfmu = \"undefined\"\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n",
+    ) {
+        Ok(_) => panic!("a connection to an undefined unit was accepted"),
+        Err(e) => e,
+    };
+    assert!(
+        e.contains("units 'h' and 'furlong' differ and at least one has no definition"),
+        "{e}"
+    );
+}
