@@ -345,3 +345,69 @@ fn packing_twice_gives_identical_fmus() {
     twinbench::pack::pack(&["faulty".to_string()], &dir).unwrap();
     assert_eq!(before, std::fs::read(&path).unwrap());
 }
+
+#[test]
+fn missing_or_malformed_resource_is_an_error_naming_the_file() {
+    let f = load("driver");
+    // No resources folder at all.
+    let empty = std::env::temp_dir().join(format!("tb-noresources-{}", std::process::id()));
+    std::fs::create_dir_all(&empty).unwrap();
+    let mut i = Instance::instantiate(
+        f.library.clone(),
+        "drv",
+        &f.description.guid,
+        Some(&empty),
+        false,
+    )
+    .unwrap();
+    i.setup_experiment(0.0, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    let e = i.exit_initialization_mode().unwrap_err().to_string();
+    assert!(
+        e.contains("fmi2ExitInitializationMode returned fmi2Error"),
+        "{e}"
+    );
+    assert!(e.contains("target_speed.csv"), "{e}");
+    // A malformed file: the row is named.
+    std::fs::write(empty.join("target_speed.csv"), "s,v\n0,10\n1,abc\n2,12\n").unwrap();
+    let mut i = Instance::instantiate(
+        f.library.clone(),
+        "drv2",
+        &f.description.guid,
+        Some(&empty),
+        false,
+    )
+    .unwrap();
+    i.setup_experiment(0.0, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    let e = i.exit_initialization_mode().unwrap_err().to_string();
+    assert!(e.contains("target_speed.csv") && e.contains("abc"), "{e}");
+    std::fs::remove_dir_all(&empty).unwrap();
+}
+
+#[test]
+fn every_fmu_ships_its_documentation_and_notices() {
+    for name in ["vehicle", "driver", "dyno", "edu"] {
+        let f = load(name);
+        let doc = std::fs::read_to_string(f.dir.join("documentation/index.html")).unwrap();
+        assert!(
+            doc.contains("<table>") && doc.contains(&f.description.guid),
+            "{name}"
+        );
+        for v in &f.description.variables {
+            assert!(
+                doc.contains(&format!("<code>{}</code>", v.name)),
+                "{name}: {} missing in the documentation",
+                v.name
+            );
+        }
+    }
+    for name in ["vehicle", "driver"] {
+        let f = load(name);
+        let notice = std::fs::read_to_string(f.resource_dir().join("NOTICE")).unwrap();
+        assert!(
+            notice.contains("LGPL-3.0") && notice.contains("OpenStreetMap"),
+            "{name}: {notice}"
+        );
+    }
+}
