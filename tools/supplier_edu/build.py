@@ -51,13 +51,20 @@ def libpython() -> Path:
 
 
 def check(fmu: Path) -> None:
-    """The post-processed model description must declare every unit it uses."""
+    """The post-processed model description declares every unit it uses and is valid."""
     with zipfile.ZipFile(fmu) as z:
         root = ElementTree.fromstring(z.read("modelDescription.xml"))
     defined = {u.get("name") for u in root.iter("Unit")}
     used = {r.get("unit") for r in root.iter("Real") if r.get("unit")}
     if not used or not used <= defined:
         sys.exit(f"{fmu}: units used {sorted(used)} but defined {sorted(defined)}")
+    try:
+        from fmpy.validation import validate_fmu
+    except ImportError:
+        return  # FMPy (tools/requirements.txt) is the second opinion when present
+    problems = validate_fmu(str(fmu))
+    if problems:
+        sys.exit(f"{fmu}: FMPy finds the model description invalid: {problems}")
 
 
 def main() -> None:

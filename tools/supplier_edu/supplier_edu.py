@@ -16,8 +16,9 @@ Physics (SI inside; the interface converts):
 Integration: equal sub-steps of at most h_SubstepMax, semi-implicit (the twist sees the
 updated motor speed), the current lag and the twist difference solved exactly per sub-step.
 
-pythonfmu 0.7 cannot declare units or output dependencies, so `to_xml` below adds them to
-the model description it generates at build time (tools/supplier_edu/build.py).
+pythonfmu 0.7 cannot declare units, output dependencies or initial unknowns, so `to_xml`
+below adds them to the model description it generates at build time
+(tools/supplier_edu/build.py).
 """
 
 import math
@@ -191,4 +192,9 @@ class SupplierEdu(Fmi2Slave):
             name = list(root.find("ModelVariables"))[int(unknown.get("index")) - 1].get("name")
             feedthrough = next(f for n, _, f, _ in OUTPUTS if n == name)
             unknown.set("dependencies", speeds if feedthrough else "")
+        # Outputs are calculated in initialization mode: they are initial unknowns (no
+        # dependencies attribute: they may depend on every parameter and input).
+        initial = SubElement(root.find("ModelStructure"), "InitialUnknowns")
+        for unknown in outputs:
+            SubElement(initial, "Unknown", index=unknown.get("index"))
         return root
