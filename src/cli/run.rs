@@ -1,7 +1,7 @@
 //! `twinbench run`: run a system file.
 
 use crate::fmu::FmuCache;
-use crate::system::{Simulation, System};
+use crate::system::{LoadOptions, Simulation, System};
 use anyhow::Context;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -22,6 +22,9 @@ pub struct RunArgs {
     /// Keep the unpacked FMUs (in a temporary folder whose path is printed).
     #[arg(long)]
     pub keep_extracted: bool,
+    /// Call the linked models directly (no FMI boundary; same results, the overhead floor).
+    #[arg(long)]
+    pub native: bool,
 }
 
 /// Parse `name=value` into a TOML value (number, integer, boolean).
@@ -47,10 +50,18 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if args.keep_extracted {
         eprintln!("unpacked FMUs kept in {}", cache.root().display());
     }
-    let system = System::load(&args.system, cache)?;
+    let options = LoadOptions {
+        native: args.native,
+    };
+    let system = System::load_with(&args.system, cache, &options)?;
     for w in &system.warnings {
         eprintln!("warning: {w}");
     }
+    let order: Vec<String> = system
+        .order
+        .iter()
+        .map(|&k| system.unit_name(k).to_string())
+        .collect();
     let mut sim = Simulation::new(system)?;
     for s in &args.set {
         let (name, value) = parse_assignment(s)?;
@@ -74,6 +85,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "ns_per_step": summary.wall_time * 1e9 / summary.steps.max(1) as f64,
             "lap_time": summary.lap_time,
             "stopped_by": summary.stopped_by,
+            "order": order,
+            "backends": sim.system.instances.iter().map(|i| (i.name.clone(), i.factory.kind())).collect::<std::collections::BTreeMap<_, _>>(),
             "recorded_rows": sim.recording.rows(),
             "out": args.out,
         });
@@ -81,6 +94,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     } else {
         println!("system          {}", args.system.display());
         println!("stopped by      {}", summary.stopped_by);
+        println!("stepping order  {}", order.join(", "));
         println!("steps           {}", summary.steps);
         println!("simulated time  {:.3} s", summary.simulated_time);
         if let Some(l) = summary.lap_time {

@@ -9,6 +9,7 @@
 pub mod backend;
 pub mod config;
 pub mod master;
+pub mod native;
 pub mod replay;
 pub mod results;
 
@@ -69,7 +70,10 @@ pub struct InstanceDef {
 
 /// How instances are run, chosen when a system is loaded.
 #[derive(Clone, Debug, Default)]
-pub struct LoadOptions {}
+pub struct LoadOptions {
+    /// Run linked models natively (no FMI boundary); other FMUs stay FMUs (with a warning).
+    pub native: bool,
+}
 
 impl InstanceDef {
     pub fn description(&self) -> &ModelDescription {
@@ -178,14 +182,32 @@ fn unit_conversion(
 impl System {
     /// Load a system file and check it. `overrides` are `instance.variable=value` strings.
     pub fn load(path: &std::path::Path, cache: Arc<FmuCache>) -> Result<System, SystemError> {
+        Self::load_with(path, cache, &LoadOptions::default())
+    }
+
+    /// [`System::load`] with a choice of backends.
+    pub fn load_with(
+        path: &std::path::Path,
+        cache: Arc<FmuCache>,
+        options: &LoadOptions,
+    ) -> Result<System, SystemError> {
         let file = SystemFile::load(path)?;
-        Self::from_file(file, path, cache)
+        Self::from_file_with(file, path, cache, options)
     }
 
     pub fn from_file(
         file: SystemFile,
         path: &std::path::Path,
         cache: Arc<FmuCache>,
+    ) -> Result<System, SystemError> {
+        Self::from_file_with(file, path, cache, &LoadOptions::default())
+    }
+
+    pub fn from_file_with(
+        file: SystemFile,
+        path: &std::path::Path,
+        cache: Arc<FmuCache>,
+        options: &LoadOptions,
     ) -> Result<System, SystemError> {
         let ctx_file = path.display().to_string();
         for lib in &file.preload {
@@ -227,6 +249,7 @@ impl System {
             loaded.insert(key, cache.load(p)?);
         }
         let mut instances = Vec::new();
+        let mut native_fallback = Vec::new();
         for inst in &file.instances {
             let fmu = loaded.get(inst.fmu.as_str()).ok_or_else(|| {
                 invalid(
@@ -264,8 +287,17 @@ impl System {
                     ),
                 ));
             }
-            let factory: Arc<dyn backend::BackendFactory> =
-                Arc::new(backend::FmuFactory(fmu.clone()));
+            let factory: Arc<dyn backend::BackendFactory> = match options.native {
+                true => match native::NativeFactory::for_fmu(fmu) {
+                    Ok(f) => Arc::new(f),
+                    Err(why) => {
+                        native_fallback
+                            .push(format!("instance '{}' runs as an FMU: {why}", inst.name));
+                        Arc::new(backend::FmuFactory(fmu.clone()))
+                    }
+                },
+                false => Arc::new(backend::FmuFactory(fmu.clone())),
+            };
             let def = InstanceDef {
                 name: inst.name.clone(),
                 fmu: fmu.clone(),
@@ -487,7 +519,7 @@ impl System {
                 &file.experiment.lap_signal,
             )?;
         }
-        let mut warnings = Vec::new();
+        let mut warnings = native_fallback;
         // Unconnected inputs without a start value.
         for (k, inst) in instances.iter().enumerate() {
             for v in inst
