@@ -247,6 +247,9 @@ pub struct Vehicle {
     /// Lookup cursors of the front and rear axle on the track (speed only, not results).
     cursor_front: usize,
     cursor_rear: usize,
+    /// Last (κ, μ(κ)) per tyre: the outputs at the end of a step and the first sub-step of
+    /// the next one evaluate the Magic Formula at the same slip (a derived value, exact).
+    mu_cache: [(f64, f64); 4],
 }
 
 /// Everything the equations derive from the state at one instant.
@@ -286,8 +289,15 @@ impl Vehicle {
             // wheel/tyre mode that the bench's delays would otherwise excite.
             let slip_rate = omegas[i] * p.r - st.v - speed * st.kappa[i];
             let limit = p.tyre.d * fz[i].max(0.0);
-            fx[i] = (p.tyre.force(fz[i], st.kappa[i]) + p.carcass_damping * slip_rate)
-                .clamp(-limit, limit);
+            let kappa = st.kappa[i];
+            let mu = if self.mu_cache[i].0 == kappa {
+                self.mu_cache[i].1
+            } else {
+                let mu = p.tyre.mu(kappa);
+                self.mu_cache[i] = (kappa, mu);
+                mu
+            };
+            fx[i] = (fz[i].max(0.0) * mu + p.carcass_damping * slip_rate).clamp(-limit, limit);
         }
         let resistance = p.resistance(st.v, loads.sum(), at.grade);
         Forces {
@@ -451,6 +461,7 @@ impl Model for Vehicle {
             st,
             cursor_front: cursor,
             cursor_rear: 0,
+            mu_cache: [(f64::NAN, 0.0); 4],
         };
         m.write_outputs(vars);
         Ok(m)
