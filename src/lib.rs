@@ -9,4 +9,6 @@
 pub mod cli;
 pub mod fmu;
 pub mod pack;
+pub mod optimize;
+pub mod report;
 pub mod system;

@@ -9,6 +9,7 @@ pub mod demo;
 pub mod identify;
 pub mod info;
 pub mod modal;
+pub mod optimize;
 pub mod pack;
 pub mod run;
 
@@ -40,6 +41,8 @@ pub enum Command {
     Info(info::InfoArgs),
     /// Compare a simulation result with a vehicle measurement on a distance basis.
     Compare(compare::CompareArgs),
+    /// Optimise the twin's parameters against a vehicle measurement (a study file).
+    Optimize(optimize::OptimizeArgs),
     /// Modal analysis of a torsional drivetrain chain.
     Modal(modal::ModalArgs),
     /// Identify the dyno loop from a step response or a frequency sweep.
@@ -67,6 +70,7 @@ pub fn main() -> ExitCode {
         Command::Run(a) => run::run(a),
         Command::Info(a) => info::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Optimize(a) => optimize::run(a),
         Command::Modal(a) => modal::run(a),
         Command::Identify(a) => identify::run(a),
     };

@@ -1,0 +1,98 @@
+//! `twinbench optimize STUDY.toml [--resume] [--json] [--threads N]`: runs an optimisation
+//! study (docs/optimize.md), checkpointing after every generation.
+
+use crate::optimize::{run_study, OptimizerKind, RunOptions, Study, StudyOutcome};
+use anyhow::Context;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct OptimizeArgs {
+    /// The study file (TOML).
+    pub study: PathBuf,
+    /// Continue from the checkpoint (to the same result as an uninterrupted run).
+    #[arg(long)]
+    pub resume: bool,
+    /// Print the result as JSON (per step: parameters and e before/after).
+    #[arg(long)]
+    pub json: bool,
+    /// Evaluation threads (default: all cores).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Output folder: checkpoint, result JSON, Tab. 1 and plots.
+    #[arg(long, short, default_value = "target/optimize")]
+    pub out: PathBuf,
+    /// Override the study's optimiser (ga or cmaes).
+    #[arg(long, value_parser = parse_kind)]
+    pub optimizer: Option<OptimizerKind>,
+    /// Override the generations of every step.
+    #[arg(long)]
+    pub generations: Option<usize>,
+    /// Skip the report (Tab. 1 and plots).
+    #[arg(long)]
+    pub no_report: bool,
+}
+
+fn parse_kind(s: &str) -> Result<OptimizerKind, String> {
+    match s {
+        "ga" => Ok(OptimizerKind::Ga),
+        "cmaes" | "cma-es" => Ok(OptimizerKind::Cmaes),
+        _ => Err(format!("unknown optimiser '{s}' (ga, cmaes)")),
+    }
+}
+
+pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
+    let study = Study::load(&args.study)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let checkpoint = args.out.join(format!("{}.checkpoint.json", study.name()));
+    if args.resume && !checkpoint.exists() {
+        eprintln!(
+            "no checkpoint at {}: starting from the beginning",
+            checkpoint.display()
+        );
+    }
+    let options = RunOptions {
+        threads: args.threads,
+        progress: !args.json,
+        checkpoint: Some(checkpoint.clone()),
+        resume: args.resume,
+        stop_after: None,
+        optimizer: args.optimizer,
+        generations: args.generations,
+        verbose: !args.json,
+    };
+    let result = match run_study(&study, &options)? {
+        StudyOutcome::Finished(r) => r,
+        StudyOutcome::Interrupted { .. } => anyhow::bail!("interrupted"),
+    };
+    let report = if args.no_report {
+        None
+    } else {
+        Some(crate::report::write_report(
+            &study,
+            &result,
+            &args.out,
+            args.threads,
+        )?)
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&result)?);
+    } else {
+        if let Some(r) = &report {
+            println!("{}", r.table_markdown);
+        }
+        println!(
+            "{} full-lap simulations in {:.1} s ({:.2} per second, {} threads, {} simulations created)",
+            result.simulations,
+            result.wall_seconds,
+            result.simulations as f64 / result.wall_seconds,
+            result.threads,
+            result.workers_created
+        );
+        println!("checkpoint  {}", checkpoint.display());
+        if let Some(r) = &report {
+            println!("report      {}", r.folder.display());
+        }
+    }
+    Ok(())
+}

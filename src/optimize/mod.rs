@@ -1,0 +1,56 @@
+//! Parameter optimisation of the twin against a vehicle measurement (paper ch. 4.3,
+//! BENCH.md §4, issue 5 items 3–5).
+//!
+//! - [`study`]: the study file (system, measurement, comparison settings, optimiser, steps).
+//! - [`optimizer`]: the ask/tell [`Optimizer`] trait, the [`Problem`] trait and the
+//!   generation loop [`minimize`] (parallel evaluation with rayon, failures penalised).
+//! - [`ga`]: real-coded GA (tournament, SBX, polynomial mutation, elitism); [`cmaes`]: CMA-ES.
+//! - [`bench`]: candidates on the co-simulated bench, one reused `Simulation` per worker.
+//! - [`identify`]: identifiability check (finite-difference Jacobian, near-null directions).
+//! - [`run`]: the study driver: steps in order, each starting from the earlier results,
+//!   identifiability check, e before/after, a checkpoint after every generation, resume.
+//!
+//! Determinism: every random number is drawn on the calling thread in `ask`/`tell`, a
+//! candidate's cost depends on the candidate only, and costs go back in the asked order, so
+//! the same seed gives the same result with any number of threads, and a resumed study
+//! (bit-exact optimiser state in the checkpoint) the same result as an uninterrupted one.
+
+pub mod bench;
+pub mod cmaes;
+pub mod exact;
+pub mod ga;
+pub mod identify;
+pub mod optimizer;
+pub mod rng;
+pub mod run;
+pub mod study;
+
+pub use cmaes::{Cmaes, CmaesSettings};
+pub use ga::{Ga, GaSettings};
+pub use identify::Identifiability;
+pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
+pub use rng::Rng;
+pub use run::{run_study, RunOptions, StepResult, StudyOutcome, StudyResult};
+pub use study::{OptimizerKind, Study, StudyFile};
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum OptimizeError {
+    #[error("{path}: {message}")]
+    File { path: PathBuf, message: String },
+    #[error("{0}")]
+    Invalid(String),
+    #[error("system: {0}")]
+    System(#[from] crate::system::SystemError),
+    #[error("measurement: {0}")]
+    Compare(#[from] tb_compare::Error),
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
+    #[error("thread pool: {0}")]
+    Threads(String),
+    #[error("step '{step}': the start point cannot be evaluated: {reason}")]
+    Start { step: String, reason: String },
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}

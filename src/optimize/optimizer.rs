@@ -1,0 +1,196 @@
+//! The optimiser interface and the generation loop.
+//!
+//! An [`Optimizer`] works in the unit box `[0, 1]^n` and is ask/tell: [`Optimizer::ask`]
+//! proposes a generation of candidates, the caller evaluates them (in any order, on any
+//! number of threads) and hands the costs back through [`Optimizer::tell`] in the order
+//! asked. All random numbers are drawn inside `ask`/`tell` on the caller's thread, so a
+//! seed fixes the result whatever the number of evaluation threads.
+//!
+//! A [`Problem`] knows nothing of the optimiser: bounds and a cost. [`minimize`] joins the
+//! two: scaling from the unit box to the bounds, parallel evaluation with rayon, failures
+//! turned into a penalty (their reason logged), per-generation callback (checkpoint,
+//! progress, interruption).
+
+use super::OptimizeError;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::ops::ControlFlow;
+
+/// An ask/tell optimiser over the unit box.
+pub trait Optimizer: Send {
+    /// Short name ("ga", "cmaes").
+    fn name(&self) -> &'static str;
+    fn dim(&self) -> usize;
+    /// The next generation's candidates (each in `[0, 1]^n`).
+    fn ask(&mut self) -> Vec<Vec<f64>>;
+    /// The costs of the candidates of the last `ask`, in the same order (lower is better).
+    fn tell(&mut self, costs: &[f64]);
+    /// The best candidate evaluated so far and its cost.
+    fn best(&self) -> Option<(&[f64], f64)>;
+    /// Completed generations (tells).
+    fn generation(&self) -> usize;
+    /// The whole state (including the random generator), for a checkpoint.
+    fn save(&self) -> serde_json::Value;
+    /// Continue from a saved state.
+    fn restore(&mut self, state: &serde_json::Value) -> Result<(), OptimizeError>;
+}
+
+/// What is minimised: a cost over a box. `evaluate` is called from several threads at once;
+/// `Err` is a failed evaluation (its text says why) that the driver penalises.
+pub trait Problem: Sync {
+    /// `(lower, upper)` per parameter, in the problem's own units.
+    fn bounds(&self) -> Vec<(f64, f64)>;
+    fn evaluate(&self, x: &[f64]) -> Result<f64, String>;
+}
+
+/// From the unit box to the bounds.
+pub fn to_bounds(u: &[f64], bounds: &[(f64, f64)]) -> Vec<f64> {
+    u.iter()
+        .zip(bounds)
+        .map(|(&u, &(lo, hi))| lo + u.clamp(0.0, 1.0) * (hi - lo))
+        .collect()
+}
+
+/// From the bounds to the unit box.
+pub fn to_unit(x: &[f64], bounds: &[(f64, f64)]) -> Vec<f64> {
+    x.iter()
+        .zip(bounds)
+        .map(|(&x, &(lo, hi))| {
+            if hi > lo {
+                ((x - lo) / (hi - lo)).clamp(0.0, 1.0)
+            } else {
+                0.5
+            }
+        })
+        .collect()
+}
+
+/// Settings of the generation loop.
+#[derive(Clone, Debug)]
+pub struct RunSettings {
+    /// Stop after this many generations in total (counting resumed ones).
+    pub max_generations: usize,
+    /// Evaluation threads (0: all cores).
+    pub threads: usize,
+    /// Cost given to a failed candidate.
+    pub penalty: f64,
+}
+
+/// One generation's record.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GenerationRecord {
+    pub generation: usize,
+    /// Evaluations so far (after this generation).
+    pub evaluations: usize,
+    pub best_cost: f64,
+    pub best_x: Vec<f64>,
+    /// Failed candidates in this generation.
+    pub failures: usize,
+}
+
+/// The loop's own bookkeeping, checkpointed with the optimiser.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RunState {
+    pub evaluations: usize,
+    pub failures: usize,
+    pub history: Vec<GenerationRecord>,
+    /// Reasons of failed candidates (the first few).
+    pub failure_reasons: Vec<String>,
+}
+
+const MAX_REASONS: usize = 20;
+
+/// Builds the evaluation thread pool (0: all cores).
+pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, OptimizeError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("tb-eval-{i}"))
+        .build()
+        .map_err(|e| OptimizeError::Threads(e.to_string()))
+}
+
+/// Evaluates candidates (problem units) in parallel; results in the given order.
+pub fn evaluate_all<P: Problem + ?Sized>(
+    pool: &rayon::ThreadPool,
+    problem: &P,
+    xs: &[Vec<f64>],
+) -> Vec<Result<f64, String>> {
+    pool.install(|| {
+        xs.par_iter()
+            .with_max_len(1)
+            .map(|x| match problem.evaluate(x) {
+                Ok(c) if c.is_finite() => Ok(c),
+                Ok(c) => Err(format!("cost is not finite ({c})")),
+                Err(e) => Err(e),
+            })
+            .collect()
+    })
+}
+
+/// Runs generations until `settings.max_generations`, or until `on_generation` breaks.
+/// `state` carries the counters and history (empty for a fresh run, restored on resume).
+/// Returns the best point (problem units) and its cost.
+pub fn minimize<P: Problem + ?Sized>(
+    optimizer: &mut dyn Optimizer,
+    problem: &P,
+    settings: &RunSettings,
+    state: &mut RunState,
+    mut on_generation: impl FnMut(&dyn Optimizer, &RunState) -> ControlFlow<()>,
+) -> Result<(Vec<f64>, f64), OptimizeError> {
+    let bounds = problem.bounds();
+    if bounds.len() != optimizer.dim() {
+        return Err(OptimizeError::Invalid(format!(
+            "the optimiser has {} dimensions, the problem {}",
+            optimizer.dim(),
+            bounds.len()
+        )));
+    }
+    let pool = thread_pool(settings.threads)?;
+    while optimizer.generation() < settings.max_generations {
+        let unit = optimizer.ask();
+        let xs: Vec<Vec<f64>> = unit.iter().map(|u| to_bounds(u, &bounds)).collect();
+        let results = evaluate_all(&pool, problem, &xs);
+        let mut failures = 0;
+        let costs: Vec<f64> = results
+            .into_iter()
+            .zip(&xs)
+            .map(|(r, x)| match r {
+                Ok(c) => c,
+                Err(reason) => {
+                    failures += 1;
+                    let text = format!(
+                        "candidate {x:?} failed (cost {}): {reason}",
+                        settings.penalty
+                    );
+                    log::warn!("{text}");
+                    if state.failure_reasons.len() < MAX_REASONS {
+                        state.failure_reasons.push(text);
+                    }
+                    settings.penalty
+                }
+            })
+            .collect();
+        optimizer.tell(&costs);
+        state.evaluations += xs.len();
+        state.failures += failures;
+        let (bu, bc) = optimizer
+            .best()
+            .map(|(x, c)| (x.to_vec(), c))
+            .unwrap_or((vec![f64::NAN; bounds.len()], f64::INFINITY));
+        state.history.push(GenerationRecord {
+            generation: optimizer.generation(),
+            evaluations: state.evaluations,
+            best_cost: bc,
+            best_x: to_bounds(&bu, &bounds),
+            failures,
+        });
+        if on_generation(optimizer, state).is_break() {
+            break;
+        }
+    }
+    let (bu, bc) = optimizer
+        .best()
+        .map(|(x, c)| (x.to_vec(), c))
+        .ok_or_else(|| OptimizeError::Invalid("no generation was evaluated".into()))?;
+    Ok((to_bounds(&bu, &bounds), bc))
+}

@@ -1,0 +1,667 @@
+//! The study driver: the steps in order (each starts from the earlier steps' results), an
+//! identifiability check and e before each step, the optimiser's generations with a
+//! checkpoint after every one, e after, and the whole result as a serialisable value.
+
+use super::bench::{Bench, Outcome};
+use super::cmaes::Cmaes;
+use super::exact;
+use super::ga::Ga;
+use super::identify::{analyse, Identifiability};
+use super::optimizer::{
+    minimize, thread_pool, to_unit, GenerationRecord, Optimizer, Problem, RunSettings, RunState,
+};
+use super::study::{OptimizerKind, StepConfig, Study};
+use super::OptimizeError;
+use crate::fmu::FmuCache;
+use crate::system::results::write_atomic;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+use tb_compare::{Comparison, Measurement, Metrics, PreparedMeasurement, Workspace};
+
+/// How to run a study.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Evaluation threads (0: all cores).
+    pub threads: usize,
+    /// Show a progress bar per step (stderr).
+    pub progress: bool,
+    /// Checkpoint file, written after every generation (None: no checkpoint).
+    pub checkpoint: Option<PathBuf>,
+    /// Continue from the checkpoint when it exists.
+    pub resume: bool,
+    /// Stop after this many generations in this session (a test hook for an interruption).
+    pub stop_after: Option<usize>,
+    /// Override the study's optimiser.
+    pub optimizer: Option<OptimizerKind>,
+    /// Override the generations of every step.
+    pub generations: Option<usize>,
+    /// Print the identifiability report and step summaries to stderr.
+    pub verbose: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParameterChange {
+    pub name: String,
+    pub min: f64,
+    pub max: f64,
+    pub before: f64,
+    pub after: f64,
+    pub change_percent: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SignalChange {
+    pub signal: String,
+    pub weight: f64,
+    pub before: Metrics,
+    pub after: Metrics,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepResult {
+    pub step: usize,
+    pub name: String,
+    pub signals: Vec<String>,
+    pub bias_weight: f64,
+    pub optimizer: String,
+    pub seed: u64,
+    pub parameters: Vec<ParameterChange>,
+    pub e: Vec<SignalChange>,
+    pub cost_before: f64,
+    pub cost_after: f64,
+    pub identifiability: Identifiability,
+    pub history: Vec<GenerationRecord>,
+    pub evaluations: usize,
+    pub failures: usize,
+    pub failure_reasons: Vec<String>,
+    /// The parameter values after the step, bit-exact (the next step starts from them).
+    #[serde(with = "exact::vec")]
+    pub after_exact: Vec<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StudyResult {
+    pub study: String,
+    pub system: PathBuf,
+    pub measurement: PathBuf,
+    pub seed: u64,
+    pub threads: usize,
+    pub steps: Vec<StepResult>,
+    /// Every parameter the study touches: initial and final values.
+    pub parameters_initial: Vec<(String, f64)>,
+    pub parameters_final: Vec<(String, f64)>,
+    /// Full-lap simulations in this session, their summed wall time, and the session's
+    /// wall time [s].
+    pub simulations: usize,
+    pub simulation_seconds: f64,
+    pub wall_seconds: f64,
+    /// `Simulation`s (sets of FMU instances) created: one per worker, reused.
+    pub workers_created: usize,
+    pub resumed: bool,
+}
+
+impl StudyResult {
+    pub fn final_value(&self, name: &str) -> Option<f64> {
+        self.parameters_final
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|p| p.1)
+    }
+}
+
+pub enum StudyOutcome {
+    Finished(Box<StudyResult>),
+    /// Stopped by `RunOptions::stop_after`; the checkpoint holds the state.
+    Interrupted {
+        generations: usize,
+    },
+}
+
+/// What a step knows before its first generation (checkpointed, so a resume does not redo it).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct StepStart {
+    #[serde(with = "exact::vec")]
+    x0: Vec<f64>,
+    before: Comparison,
+    cost_before: f64,
+    identifiability: Identifiability,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct Current {
+    step: usize,
+    start: StepStart,
+    optimizer: serde_json::Value,
+    run: RunState,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct Checkpoint {
+    version: u32,
+    fingerprint: String,
+    completed: Vec<StepResult>,
+    current: Option<Current>,
+}
+
+const CHECKPOINT_VERSION: u32 = 1;
+
+/// The cost of a comparison: Σ w·(e + β·|bias|) / Σ w over the step's signals.
+pub fn cost_of(cmp: &Comparison, signals: &[String], weights: &[f64], bias_weight: f64) -> f64 {
+    let mut num = 0.0;
+    let mut den = 0.0;
+    for (s, w) in signals.iter().zip(weights) {
+        let m = match cmp.get(s) {
+            Some(m) => m,
+            None => return f64::NAN,
+        };
+        num += w * (m.e + bias_weight * m.bias.abs());
+        den += w;
+    }
+    num / den
+}
+
+/// One step's cost over the bench.
+struct StepProblem<'a> {
+    bench: &'a Bench,
+    prepared: &'a PreparedMeasurement,
+    /// Every parameter of the study with its current value.
+    assignment: Vec<(String, f64)>,
+    /// Indices into `assignment` of the step's parameters.
+    index: Vec<usize>,
+    bounds: Vec<(f64, f64)>,
+    signals: Vec<String>,
+    weights: Vec<f64>,
+    bias_weight: f64,
+}
+
+impl StepProblem<'_> {
+    fn params(&self, x: &[f64]) -> Vec<(String, f64)> {
+        let mut a = self.assignment.clone();
+        for (k, &i) in self.index.iter().enumerate() {
+            a[i].1 = x[k];
+        }
+        a
+    }
+
+    fn outcome(&self, x: &[f64]) -> Result<Outcome, String> {
+        self.bench.run(&self.params(x), self.prepared)
+    }
+}
+
+impl Problem for StepProblem<'_> {
+    fn bounds(&self) -> Vec<(f64, f64)> {
+        self.bounds.clone()
+    }
+
+    fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
+        let o = self.outcome(x)?;
+        Ok(cost_of(
+            &o.comparison,
+            &self.signals,
+            &self.weights,
+            self.bias_weight,
+        ))
+    }
+}
+
+fn read_checkpoint(path: &std::path::Path, study: &Study) -> Result<Checkpoint, OptimizeError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| OptimizeError::Checkpoint(format!("{}: {e}", path.display())))?;
+    let c: Checkpoint = serde_json::from_str(&text)
+        .map_err(|e| OptimizeError::Checkpoint(format!("{}: {e}", path.display())))?;
+    if c.version != CHECKPOINT_VERSION {
+        return Err(OptimizeError::Checkpoint(format!(
+            "{}: version {} (expected {CHECKPOINT_VERSION})",
+            path.display(),
+            c.version
+        )));
+    }
+    if c.fingerprint != study.fingerprint {
+        return Err(OptimizeError::Checkpoint(format!(
+            "{} belongs to another study (or the study file changed): start without --resume",
+            path.display()
+        )));
+    }
+    Ok(c)
+}
+
+fn write_checkpoint(path: &std::path::Path, c: &Checkpoint) -> Result<(), OptimizeError> {
+    let text = serde_json::to_vec_pretty(c)
+        .map_err(|e| OptimizeError::Checkpoint(format!("serialising: {e}")))?;
+    write_atomic(path, &text)
+        .map_err(|e| OptimizeError::Checkpoint(format!("writing {}: {e}", path.display())))
+}
+
+fn step_seed(seed: u64, step: usize) -> u64 {
+    seed ^ (step as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+fn make_optimizer(
+    study: &Study,
+    kind: OptimizerKind,
+    dim: usize,
+    seed: u64,
+    start: Vec<f64>,
+) -> Result<Box<dyn Optimizer>, OptimizeError> {
+    let o = &study.file.optimizer;
+    Ok(match kind {
+        OptimizerKind::Ga => Box::new(Ga::new(dim, o.ga.clone(), seed, Some(start))?),
+        OptimizerKind::Cmaes => Box::new(Cmaes::new(dim, o.cmaes.clone(), seed, Some(start))?),
+    })
+}
+
+/// Finite-difference identifiability check around `x0` (2 runs per parameter, in parallel).
+fn identifiability(
+    study: &Study,
+    problem: &StepProblem,
+    step: &StepConfig,
+    x0: &[f64],
+    pool: &rayon::ThreadPool,
+) -> Identifiability {
+    const REL_STEP: f64 = 0.02;
+    let p = x0.len();
+    let scale: Vec<f64> = x0
+        .iter()
+        .zip(&problem.bounds)
+        .map(|(&x, &(lo, hi))| if x.abs() > 1e-12 { x.abs() } else { hi - lo })
+        .collect();
+    let points: Vec<Vec<f64>> = (0..2 * p)
+        .map(|j| {
+            let i = j / 2;
+            let sign = if j % 2 == 0 { 1.0 } else { -1.0 };
+            let mut x = x0.to_vec();
+            x[i] += sign * REL_STEP * scale[i];
+            x
+        })
+        .collect();
+    let prepared = problem.prepared;
+    let residuals: Vec<Result<Vec<(std::ops::Range<usize>, Vec<f64>)>, String>> =
+        pool.install(|| {
+            points
+                .par_iter()
+                .with_max_len(1)
+                .map(|x| {
+                    let o = problem.outcome(x)?;
+                    let mut ws = Workspace::new();
+                    step.signals
+                        .iter()
+                        .map(|s| {
+                            prepared
+                                .on_grid(&o.table, s, true, &mut ws)
+                                .map_err(|e| e.to_string())
+                        })
+                        .collect()
+                })
+                .collect()
+        });
+    let mut failures = Vec::new();
+    let weights = step.weights();
+    // Per signal, per parameter: the column of J.
+    let mut blocks: Vec<Vec<Vec<f64>>> = vec![vec![Vec::new(); p]; step.signals.len()];
+    if residuals.iter().all(|r| r.is_ok()) {
+        let res: Vec<_> = residuals.into_iter().map(|r| r.unwrap()).collect();
+        for (s, name) in step.signals.iter().enumerate() {
+            // The grid points every run covers.
+            let lo = res.iter().map(|r| r[s].0.start).max().unwrap_or(0);
+            let hi = res.iter().map(|r| r[s].0.end).min().unwrap_or(0);
+            let meas = prepared.measured(name).unwrap_or(&[]);
+            let n = hi.saturating_sub(lo);
+            let m = &meas[lo.min(meas.len())..hi.min(meas.len())];
+            let mean = m.iter().sum::<f64>() / n.max(1) as f64;
+            let sd = (m.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n.max(1) as f64)
+                .sqrt()
+                .max(1e-12);
+            let norm = weights[s].sqrt() / (sd * (n.max(1) as f64).sqrt());
+            for i in 0..p {
+                let (plus, minus) = (&res[2 * i][s], &res[2 * i + 1][s]);
+                let col: Vec<f64> = (lo..hi)
+                    .map(|g| {
+                        let a = plus.1[g - plus.0.start];
+                        let b = minus.1[g - minus.0.start];
+                        (a - b) / (2.0 * REL_STEP) * norm
+                    })
+                    .collect();
+                blocks[s][i] = col;
+            }
+        }
+    } else {
+        for r in residuals.into_iter().filter_map(|r| r.err()) {
+            failures.push(r);
+        }
+        for b in blocks.iter_mut() {
+            for c in b.iter_mut() {
+                *c = vec![0.0];
+            }
+        }
+    }
+    let combined = analyse(&step.signals, &blocks, &scale, study.file.null_ratio);
+    let per_signal = step
+        .signals
+        .iter()
+        .enumerate()
+        .map(|(s, name)| {
+            analyse(
+                std::slice::from_ref(name),
+                std::slice::from_ref(&blocks[s]),
+                &scale,
+                study.file.null_ratio,
+            )
+        })
+        .collect();
+    Identifiability {
+        parameters: step.parameter_names(),
+        start: x0.to_vec(),
+        rel_step: REL_STEP,
+        null_ratio: study.file.null_ratio,
+        combined,
+        per_signal,
+        failures,
+    }
+}
+
+fn progress_bar(show: bool, len: u64, prefix: String) -> indicatif::ProgressBar {
+    if !show {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new(len);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix} [{bar:30}] {pos}/{len} generations  {msg}  ({elapsed})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    pb.set_prefix(prefix);
+    pb
+}
+
+/// Runs a study (or continues it from its checkpoint).
+pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, OptimizeError> {
+    let wall = Instant::now();
+    let cache = Arc::new(FmuCache::temporary(false).map_err(crate::system::SystemError::from)?);
+    let bench = Bench::new(study, cache)?;
+    let measurement = Measurement::read_path(&study.measurement_path)?;
+    let pool = thread_pool(options.threads)?;
+    let threads = pool.current_num_threads();
+    let kind = options.optimizer.unwrap_or(study.file.optimizer.kind);
+
+    // Every parameter the study touches, with its initial value.
+    let mut assignment: Vec<(String, f64)> = Vec::new();
+    for (name, &x) in &study.file.parameters {
+        assignment.push((name.clone(), x));
+    }
+    for step in &study.file.steps {
+        for p in &step.parameters {
+            if assignment.iter().all(|(n, _)| n != &p.name) {
+                let x = bench.parameter(&p.name).ok_or_else(|| {
+                    OptimizeError::Invalid(format!(
+                        "step '{}': '{}' has no value in the system (not a parameter?)",
+                        step.name, p.name
+                    ))
+                })?;
+                assignment.push((p.name.clone(), x));
+            }
+        }
+    }
+    let initial = assignment.clone();
+
+    let mut checkpoint = Checkpoint {
+        version: CHECKPOINT_VERSION,
+        fingerprint: study.fingerprint.clone(),
+        completed: Vec::new(),
+        current: None,
+    };
+    let mut resumed = false;
+    if options.resume {
+        if let Some(path) = options.checkpoint.as_ref().filter(|p| p.exists()) {
+            checkpoint = read_checkpoint(path, study)?;
+            resumed = true;
+        }
+    }
+    let mut session_generations = 0usize;
+
+    for (k, step) in study.file.steps.iter().enumerate() {
+        let names = step.parameter_names();
+        let index: Vec<usize> = names
+            .iter()
+            .map(|n| assignment.iter().position(|(a, _)| a == n).unwrap())
+            .collect();
+        if let Some(done) = checkpoint.completed.get(k) {
+            for (j, &i) in index.iter().enumerate() {
+                assignment[i].1 = done.after_exact[j];
+            }
+            continue;
+        }
+        let prepared = PreparedMeasurement::new(&measurement, &step.signals, &study.file.compare)?;
+        let bounds: Vec<(f64, f64)> = step.parameters.iter().map(|p| (p.min, p.max)).collect();
+        let bias_weight = step.bias_weight.unwrap_or(study.file.bias_weight);
+        let mut problem = StepProblem {
+            bench: &bench,
+            prepared: &prepared,
+            assignment: assignment.clone(),
+            index: index.clone(),
+            bounds: bounds.clone(),
+            signals: step.signals.clone(),
+            weights: step.weights(),
+            bias_weight,
+        };
+        let seed = step_seed(study.file.seed, k);
+        let generations = options
+            .generations
+            .or(step.generations)
+            .unwrap_or(study.file.optimizer.generations);
+
+        let current = checkpoint.current.take().filter(|c| c.step == k);
+        let (start, mut optimizer, mut run_state) = match current {
+            Some(c) => {
+                let mut opt = make_optimizer(
+                    study,
+                    kind,
+                    names.len(),
+                    seed,
+                    to_unit(&c.start.x0, &bounds),
+                )?;
+                opt.restore(&c.optimizer)?;
+                (c.start, opt, c.run)
+            }
+            None => {
+                let x0: Vec<f64> = step
+                    .parameters
+                    .iter()
+                    .zip(&index)
+                    .map(|(p, &i)| p.start.unwrap_or(assignment[i].1).clamp(p.min, p.max))
+                    .collect();
+                for (j, &i) in index.iter().enumerate() {
+                    problem.assignment[i].1 = x0[j];
+                }
+                let ident = identifiability(study, &problem, step, &x0, &pool);
+                let before = problem
+                    .outcome(&x0)
+                    .map_err(|reason| OptimizeError::Start {
+                        step: step.name.clone(),
+                        reason,
+                    })?;
+                let cost_before = cost_of(
+                    &before.comparison,
+                    &step.signals,
+                    &step.weights(),
+                    bias_weight,
+                );
+                let opt = make_optimizer(study, kind, names.len(), seed, to_unit(&x0, &bounds))?;
+                (
+                    StepStart {
+                        x0,
+                        before: before.comparison,
+                        cost_before,
+                        identifiability: ident,
+                    },
+                    opt,
+                    RunState::default(),
+                )
+            }
+        };
+        for (j, &i) in index.iter().enumerate() {
+            problem.assignment[i].1 = start.x0[j];
+        }
+        if options.verbose {
+            eprintln!("step {} '{}': identifiability", k + 1, step.name);
+            for l in start.identifiability.report_lines() {
+                eprintln!("  {l}");
+            }
+        }
+
+        let pb = progress_bar(
+            options.progress,
+            generations as u64,
+            format!("step {} {}", k + 1, step.name),
+        );
+        pb.set_position(optimizer.generation() as u64);
+        let settings = RunSettings {
+            max_generations: generations,
+            threads: options.threads,
+            penalty: study.file.penalty,
+        };
+        let mut interrupted = false;
+        let mut write_error = None;
+        let start_for_cp = start.clone();
+        let completed_so_far = checkpoint.completed.clone();
+        let result = minimize(
+            optimizer.as_mut(),
+            &problem,
+            &settings,
+            &mut run_state,
+            |opt, state| {
+                session_generations += 1;
+                if let Some(rec) = state.history.last() {
+                    pb.set_position(rec.generation as u64);
+                    pb.set_message(format!(
+                        "best cost {:.5}  ({} evaluations)",
+                        rec.best_cost, rec.evaluations
+                    ));
+                }
+                if let Some(path) = &options.checkpoint {
+                    let cp = Checkpoint {
+                        version: CHECKPOINT_VERSION,
+                        fingerprint: study.fingerprint.clone(),
+                        completed: completed_so_far.clone(),
+                        current: Some(Current {
+                            step: k,
+                            start: start_for_cp.clone(),
+                            optimizer: opt.save(),
+                            run: state.clone(),
+                        }),
+                    };
+                    if let Err(e) = write_checkpoint(path, &cp) {
+                        write_error = Some(e);
+                        return ControlFlow::Break(());
+                    }
+                }
+                if options.stop_after.is_some_and(|n| session_generations >= n)
+                    && opt.generation() < generations
+                {
+                    interrupted = true;
+                    return ControlFlow::Break(());
+                }
+                ControlFlow::Continue(())
+            },
+        );
+        pb.finish();
+        if let Some(e) = write_error {
+            return Err(e);
+        }
+        if interrupted {
+            return Ok(StudyOutcome::Interrupted {
+                generations: session_generations,
+            });
+        }
+        let (best, best_cost) = result?;
+        let after = problem
+            .outcome(&best)
+            .map_err(|reason| OptimizeError::Start {
+                step: step.name.clone(),
+                reason: format!("the best point cannot be re-evaluated: {reason}"),
+            })?;
+        let weights = step.weights();
+        let cost_after = cost_of(&after.comparison, &step.signals, &weights, bias_weight);
+        if cost_after.to_bits() != best_cost.to_bits() {
+            log::warn!(
+                "step '{}': the best point re-evaluated to {cost_after} (optimiser saw {best_cost})",
+                step.name
+            );
+        }
+        let parameters = step
+            .parameters
+            .iter()
+            .enumerate()
+            .map(|(j, p)| ParameterChange {
+                name: p.name.clone(),
+                min: p.min,
+                max: p.max,
+                before: start.x0[j],
+                after: best[j],
+                change_percent: if start.x0[j] != 0.0 {
+                    (best[j] / start.x0[j] - 1.0) * 100.0
+                } else {
+                    f64::NAN
+                },
+            })
+            .collect();
+        let e = step
+            .signals
+            .iter()
+            .zip(&weights)
+            .map(|(s, &w)| SignalChange {
+                signal: s.clone(),
+                weight: w,
+                before: start.before.get(s).cloned().expect("compared"),
+                after: after.comparison.get(s).cloned().expect("compared"),
+            })
+            .collect();
+        let res = StepResult {
+            step: k + 1,
+            name: step.name.clone(),
+            signals: step.signals.clone(),
+            bias_weight,
+            optimizer: optimizer.name().into(),
+            seed,
+            parameters,
+            e,
+            cost_before: start.cost_before,
+            cost_after,
+            identifiability: start.identifiability.clone(),
+            history: run_state.history.clone(),
+            evaluations: run_state.evaluations,
+            failures: run_state.failures,
+            failure_reasons: run_state.failure_reasons.clone(),
+            after_exact: best.clone(),
+        };
+        for (j, &i) in index.iter().enumerate() {
+            assignment[i].1 = best[j];
+        }
+        checkpoint.completed.push(res);
+        checkpoint.current = None;
+        if let Some(path) = &options.checkpoint {
+            write_checkpoint(path, &checkpoint)?;
+        }
+    }
+    let (simulations, simulation_seconds) = bench.runs();
+    Ok(StudyOutcome::Finished(Box::new(StudyResult {
+        study: study.name(),
+        system: study.system_path.clone(),
+        measurement: study.measurement_path.clone(),
+        seed: study.file.seed,
+        threads,
+        steps: checkpoint.completed,
+        parameters_initial: initial,
+        parameters_final: assignment,
+        simulations,
+        simulation_seconds,
+        wall_seconds: wall.elapsed().as_secs_f64(),
+        workers_created: bench.workers_created(),
+        resumed,
+    })))
+}

@@ -1,0 +1,247 @@
+//! The study file (TOML): the system, the measurement, the comparison settings, the
+//! optimiser, and the steps (parameters with bounds, validation signals with weights).
+//! Paths are relative to the study file.
+
+use super::cmaes::CmaesSettings;
+use super::ga::GaSettings;
+use super::OptimizeError;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use tb_compare::CompareSettings;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StudyFile {
+    /// A name for reports and the default checkpoint file.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// The system file (TOML) run for every candidate.
+    pub system: PathBuf,
+    /// The vehicle measurement (CSV, `data/README.md`).
+    pub measurement: PathBuf,
+    /// Seed of every random draw of the study.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// Cost of a candidate whose simulation or comparison fails.
+    #[serde(default = "default_penalty")]
+    pub penalty: f64,
+    /// Weight of |bias| next to e in the cost (per signal); see docs/optimize.md.
+    #[serde(default)]
+    pub bias_weight: f64,
+    /// Comparison settings (tb-compare), all optional.
+    #[serde(default)]
+    pub compare: CompareSettings,
+    /// Overrides of the system's `[record]` (fewer signals, coarser decimation: faster).
+    #[serde(default)]
+    pub record: Option<RecordOverride>,
+    /// Fixed parameter values applied before the first step (`"instance.variable" = x`).
+    #[serde(default)]
+    pub parameters: std::collections::BTreeMap<String, f64>,
+    pub optimizer: OptimizerConfig,
+    #[serde(rename = "step")]
+    pub steps: Vec<StepConfig>,
+    /// Identifiability: a direction is reported as not seen when its eigenvalue of JᵀJ is
+    /// below this fraction of the largest.
+    #[serde(default = "default_null_ratio")]
+    pub null_ratio: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordOverride {
+    pub signals: Vec<String>,
+    #[serde(default = "one")]
+    pub decimation: usize,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum OptimizerKind {
+    #[default]
+    Ga,
+    Cmaes,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OptimizerConfig {
+    #[serde(default)]
+    pub kind: OptimizerKind,
+    /// Generations per step (a step may override it).
+    pub generations: usize,
+    #[serde(default)]
+    pub ga: GaSettings,
+    #[serde(default)]
+    pub cmaes: CmaesSettings,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StepConfig {
+    pub name: String,
+    #[serde(rename = "parameter")]
+    pub parameters: Vec<ParameterConfig>,
+    /// Validation signals (measurement columns or Fz_sum, Fz_front, Fz_rear).
+    pub signals: Vec<String>,
+    /// Weights of the signals (default: all 1).
+    #[serde(default)]
+    pub weights: Option<Vec<f64>>,
+    #[serde(default)]
+    pub generations: Option<usize>,
+    /// Overrides the study's `bias_weight` for this step.
+    #[serde(default)]
+    pub bias_weight: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParameterConfig {
+    /// `instance.variable`.
+    pub name: String,
+    pub min: f64,
+    pub max: f64,
+    /// Start value; default: the value after earlier steps, else the system's.
+    #[serde(default)]
+    pub start: Option<f64>,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+fn default_penalty() -> f64 {
+    10.0
+}
+fn default_null_ratio() -> f64 {
+    5e-3
+}
+fn one() -> usize {
+    1
+}
+
+/// A study file read and checked, with its paths resolved.
+#[derive(Clone, Debug)]
+pub struct Study {
+    pub file: StudyFile,
+    pub path: PathBuf,
+    pub system_path: PathBuf,
+    pub measurement_path: PathBuf,
+    /// Hash of the study text: a checkpoint of another study is refused.
+    pub fingerprint: String,
+}
+
+impl StepConfig {
+    pub fn weights(&self) -> Vec<f64> {
+        self.weights
+            .clone()
+            .unwrap_or_else(|| vec![1.0; self.signals.len()])
+    }
+
+    pub fn parameter_names(&self) -> Vec<String> {
+        self.parameters.iter().map(|p| p.name.clone()).collect()
+    }
+}
+
+impl Study {
+    pub fn load(path: &Path) -> Result<Study, OptimizeError> {
+        let text = std::fs::read_to_string(path).map_err(|e| OptimizeError::File {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    pub fn parse(text: &str, path: &Path) -> Result<Study, OptimizeError> {
+        let file: StudyFile = toml::from_str(text).map_err(|e| OptimizeError::File {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let system_path = dir.join(&file.system);
+        let measurement_path = dir.join(&file.measurement);
+        use sha2::Digest;
+        let fingerprint = format!("{:x}", sha2::Sha256::digest(text.as_bytes()));
+        let study = Study {
+            file,
+            path: path.to_path_buf(),
+            system_path,
+            measurement_path,
+            fingerprint,
+        };
+        study.validate()?;
+        Ok(study)
+    }
+
+    pub fn name(&self) -> String {
+        self.file.name.clone().unwrap_or_else(|| {
+            self.path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "study".into())
+        })
+    }
+
+    fn validate(&self) -> Result<(), OptimizeError> {
+        let bad = |m: String| OptimizeError::File {
+            path: self.path.clone(),
+            message: m,
+        };
+        let f = &self.file;
+        if f.steps.is_empty() {
+            return Err(bad("no [[step]]".into()));
+        }
+        f.compare
+            .validate()
+            .map_err(|e| bad(format!("[compare]: {e}")))?;
+        if f.optimizer.generations == 0 {
+            return Err(bad("optimizer.generations must be at least 1".into()));
+        }
+        if !(f.penalty.is_finite() && f.bias_weight >= 0.0 && f.null_ratio > 0.0) {
+            return Err(bad(
+                "penalty must be finite, bias_weight ≥ 0, null_ratio > 0".into(),
+            ));
+        }
+        for s in &f.steps {
+            let ctx = format!("step '{}'", s.name);
+            if s.parameters.is_empty() || s.signals.is_empty() {
+                return Err(bad(format!("{ctx}: needs parameters and signals")));
+            }
+            if s.weights().len() != s.signals.len() || s.weights().iter().any(|w| !(*w >= 0.0)) {
+                return Err(bad(format!(
+                    "{ctx}: weights must be one non-negative number per signal"
+                )));
+            }
+            if s.weights().iter().sum::<f64>() <= 0.0 {
+                return Err(bad(format!("{ctx}: the weights sum to zero")));
+            }
+            for p in &s.parameters {
+                if crate::system::split_name(&p.name).is_none() {
+                    return Err(bad(format!(
+                        "{ctx}: parameter '{}' is not instance.variable",
+                        p.name
+                    )));
+                }
+                if !(p.min.is_finite() && p.max.is_finite() && p.min < p.max) {
+                    return Err(bad(format!(
+                        "{ctx}: parameter '{}': bounds [{}, {}] are not an interval",
+                        p.name, p.min, p.max
+                    )));
+                }
+                if let Some(x) = p.start {
+                    if !(p.min..=p.max).contains(&x) {
+                        return Err(bad(format!(
+                            "{ctx}: parameter '{}': start {x} outside [{}, {}]",
+                            p.name, p.min, p.max
+                        )));
+                    }
+                }
+            }
+            let mut names = s.parameter_names();
+            names.sort();
+            names.dedup();
+            if names.len() != s.parameters.len() {
+                return Err(bad(format!("{ctx}: a parameter appears twice")));
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,310 @@
+//! Reports of an optimisation study: the paper's Tab. 1 as Markdown and JSON, and plots
+//! (SVG + PNG): Fz_sum over distance measured / initial / optimised, filtered and unfiltered
+//! (Fig. 7); time over distance (Fig. 6); best cost per generation; a_x of twin and car.
+
+use crate::fmu::FmuCache;
+use crate::optimize::bench::Bench;
+use crate::optimize::{OptimizeError, Study, StudyResult};
+use crate::system::results::write_atomic;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tb_compare::{Measurement, PreparedMeasurement, Table, Workspace};
+use tb_plot::LinePlot;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    #[error("{0}")]
+    Optimize(#[from] OptimizeError),
+    #[error("comparison: {0}")]
+    Compare(#[from] tb_compare::Error),
+    #[error("plot: {0}")]
+    Plot(#[from] tb_plot::PlotError),
+    #[error("writing {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("simulation for the report failed: {0}")]
+    Run(String),
+}
+
+/// One row of Tab. 1: a validation signal of a step.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TableRow {
+    pub signal: String,
+    pub e_initial: f64,
+    pub e_optimized: f64,
+    pub slope_initial: f64,
+    pub slope_optimized: f64,
+    pub r_squared_initial: f64,
+    pub r_squared_optimized: f64,
+    pub bias_percent_initial: f64,
+    pub bias_percent_optimized: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TableParameter {
+    pub name: String,
+    pub initial: f64,
+    pub optimized: f64,
+    pub change_percent: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TableStep {
+    pub step: usize,
+    pub name: String,
+    pub parameters: Vec<TableParameter>,
+    pub signals: Vec<TableRow>,
+}
+
+/// Tab. 1 as data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Table1 {
+    pub study: String,
+    pub steps: Vec<TableStep>,
+}
+
+/// What was written.
+#[derive(Clone, Debug)]
+pub struct ReportFiles {
+    pub folder: PathBuf,
+    pub table_markdown: String,
+    pub files: Vec<PathBuf>,
+}
+
+fn short(name: &str) -> &str {
+    name.split_once('.').map_or(name, |(_, v)| v)
+}
+
+pub fn table1(result: &StudyResult) -> Table1 {
+    Table1 {
+        study: result.study.clone(),
+        steps: result
+            .steps
+            .iter()
+            .map(|s| TableStep {
+                step: s.step,
+                name: s.name.clone(),
+                parameters: s
+                    .parameters
+                    .iter()
+                    .map(|p| TableParameter {
+                        name: p.name.clone(),
+                        initial: p.before,
+                        optimized: p.after,
+                        change_percent: p.change_percent,
+                    })
+                    .collect(),
+                signals: s
+                    .e
+                    .iter()
+                    .map(|e| TableRow {
+                        signal: e.signal.clone(),
+                        e_initial: e.before.e,
+                        e_optimized: e.after.e,
+                        slope_initial: e.before.slope,
+                        slope_optimized: e.after.slope,
+                        r_squared_initial: e.before.r_squared,
+                        r_squared_optimized: e.after.r_squared,
+                        bias_percent_initial: 100.0 * e.before.bias,
+                        bias_percent_optimized: 100.0 * e.after.bias,
+                    })
+                    .collect(),
+            })
+            .collect(),
+    }
+}
+
+/// Tab. 1 as Markdown (parameters listed on a step's first row, as in the paper).
+pub fn table1_markdown(t: &Table1) -> String {
+    let mut s = String::new();
+    s.push_str(&format!(
+        "Tab. 1 ({}): quality of the twin against the vehicle measurement before and after \
+         the optimisation\n\n",
+        t.study
+    ));
+    s.push_str("| step | validation signal | optimised parameters | e initial | e optimised | m initial | m optimised | bias initial | bias optimised |\n");
+    s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|\n");
+    for st in &t.steps {
+        let params = st
+            .parameters
+            .iter()
+            .map(|p| {
+                format!(
+                    "{}: {:+.1} % ({:.4} → {:.4})",
+                    short(&p.name),
+                    p.change_percent,
+                    p.initial,
+                    p.optimized
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("<br>");
+        for (k, r) in st.signals.iter().enumerate() {
+            s.push_str(&format!(
+                "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:+.2} % | {:+.2} % |\n",
+                if k == 0 {
+                    st.step.to_string()
+                } else {
+                    String::new()
+                },
+                r.signal,
+                if k == 0 { params.as_str() } else { "" },
+                r.e_initial,
+                r.e_optimized,
+                r.slope_initial,
+                r.slope_optimized,
+                r.bias_percent_initial,
+                r.bias_percent_optimized
+            ));
+        }
+    }
+    s
+}
+
+fn write(path: &Path, bytes: &[u8], files: &mut Vec<PathBuf>) -> Result<(), ReportError> {
+    write_atomic(path, bytes).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    files.push(path.to_path_buf());
+    Ok(())
+}
+
+fn points(
+    grid: &tb_compare::DistanceGrid,
+    range: std::ops::Range<usize>,
+    y: &[f64],
+) -> Vec<(f64, f64)> {
+    range.zip(y).map(|(g, &v)| (grid.at(g), v)).collect()
+}
+
+/// Writes Tab. 1 (Markdown, JSON), the result JSON and the plots into `folder`. Runs the
+/// bench twice (initial and optimised parameters) for the plots.
+pub fn write_report(
+    study: &Study,
+    result: &StudyResult,
+    folder: &Path,
+    threads: usize,
+) -> Result<ReportFiles, ReportError> {
+    std::fs::create_dir_all(folder).map_err(|source| ReportError::Io {
+        path: folder.to_path_buf(),
+        source,
+    })?;
+    let mut files = Vec::new();
+    let t = table1(result);
+    let md = table1_markdown(&t);
+    write(&folder.join("table1.md"), md.as_bytes(), &mut files)?;
+    write(
+        &folder.join("table1.json"),
+        &serde_json::to_vec_pretty(&t).expect("serialises"),
+        &mut files,
+    )?;
+    write(
+        &folder.join("result.json"),
+        &serde_json::to_vec_pretty(result).expect("serialises"),
+        &mut files,
+    )?;
+
+    // Best cost per generation, per step.
+    let mut plot = LinePlot::new(
+        "Best cost per generation (weighted e + bias term)",
+        "generation",
+        "best cost",
+    );
+    for s in &result.steps {
+        let pts: Vec<(f64, f64)> = s
+            .history
+            .iter()
+            .map(|h| (h.generation as f64, h.best_cost))
+            .collect();
+        plot = plot.series(
+            format!("step {} {} ({})", s.step, s.name, s.optimizer),
+            &pts,
+        );
+    }
+    let stem = folder.join("best_cost_per_generation");
+    plot.save_both(&stem)?;
+    files.push(stem.with_extension("svg"));
+    files.push(stem.with_extension("png"));
+
+    // The lap with the initial and the optimised parameters.
+    let cache = Arc::new(
+        FmuCache::temporary(false)
+            .map_err(|e| OptimizeError::System(crate::system::SystemError::from(e)))?,
+    );
+    let bench = Bench::new(study, cache)?;
+    let measurement = Measurement::read_path(&study.measurement_path)?;
+    let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum", "a_x"], &study.file.compare)?;
+    let pool = crate::optimize::optimizer::thread_pool(threads.min(2))?;
+    let (initial, optimised) = pool.install(|| {
+        rayon::join(
+            || bench.run(&result.parameters_initial, &prepared),
+            || bench.run(&result.parameters_final, &prepared),
+        )
+    });
+    let initial = initial.map_err(ReportError::Run)?.table;
+    let optimised = optimised.map_err(ReportError::Run)?.table;
+    let grid = prepared.grid();
+    let mut ws = Workspace::new();
+    let meas: &Table = measurement.table();
+
+    for (filtered, stem, title) in [
+        (
+            true,
+            "fz_sum_filtered",
+            "Fz_sum over distance, low-pass filtered (Fig. 7 top)",
+        ),
+        (
+            false,
+            "fz_sum_unfiltered",
+            "Fz_sum over distance, unfiltered (Fig. 7 bottom)",
+        ),
+    ] {
+        let (rm, m) = prepared.on_grid(meas, "Fz_sum", filtered, &mut ws)?;
+        let (ri, i) = prepared.on_grid(&initial, "Fz_sum", filtered, &mut ws)?;
+        let (ro, o) = prepared.on_grid(&optimised, "Fz_sum", filtered, &mut ws)?;
+        let plot = LinePlot::new(title, "distance [m]", "Fz_sum [N]")
+            .series("measured (vehicle)", &points(grid, rm, &m))
+            .series("twin, initial", &points(grid, ri, &i))
+            .series("twin, optimised", &points(grid, ro, &o));
+        let stem = folder.join(stem);
+        plot.save_both(&stem)?;
+        files.push(stem.with_extension("svg"));
+        files.push(stem.with_extension("png"));
+    }
+
+    // Fig. 6: time over distance.
+    let (rm, m) = prepared.on_grid(meas, "time", false, &mut ws)?;
+    let (ro, o) = prepared.on_grid(&optimised, "time", false, &mut ws)?;
+    let plot = LinePlot::new("Time over distance (Fig. 6)", "distance [m]", "time [s]")
+        .series("vehicle", &points(grid, rm, &m))
+        .series("twin (bench), optimised", &points(grid, ro, &o));
+    let stem = folder.join("time_over_distance");
+    plot.save_both(&stem)?;
+    files.push(stem.with_extension("svg"));
+    files.push(stem.with_extension("png"));
+
+    // a_x of twin and car.
+    let (rm, m) = prepared.on_grid(meas, "a_x", true, &mut ws)?;
+    let (ro, o) = prepared.on_grid(&optimised, "a_x", true, &mut ws)?;
+    let plot = LinePlot::new(
+        "Longitudinal acceleration over distance, low-pass filtered",
+        "distance [m]",
+        "a_x [m/s²]",
+    )
+    .series("vehicle", &points(grid, rm, &m))
+    .series("twin (bench), optimised", &points(grid, ro, &o));
+    let stem = folder.join("a_x_over_distance");
+    plot.save_both(&stem)?;
+    files.push(stem.with_extension("svg"));
+    files.push(stem.with_extension("png"));
+
+    Ok(ReportFiles {
+        folder: folder.to_path_buf(),
+        table_markdown: md,
+        files,
+    })
+}
