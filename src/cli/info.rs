@@ -10,9 +10,15 @@ pub struct InfoArgs {
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
+    /// Load a shared library with RTLD_GLOBAL first (e.g. libpython for a pythonfmu FMU).
+    #[arg(long, value_name = "LIBRARY")]
+    pub preload: Vec<PathBuf>,
 }
 
 pub fn run(args: InfoArgs) -> anyhow::Result<()> {
+    for lib in &args.preload {
+        crate::fmu::library::preload_global(lib)?;
+    }
     let cache = FmuCache::temporary(false)?;
     let fmu = cache.load(&args.fmu)?;
     let md = &fmu.description;
