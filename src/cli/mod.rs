@@ -12,6 +12,7 @@ pub mod modal;
 pub mod optimize;
 pub mod pack;
 pub mod run;
+pub mod worker;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -47,6 +48,9 @@ pub enum Command {
     Modal(modal::ModalArgs),
     /// Identify the dyno loop from a step response or a frequency sweep.
     Identify(identify::IdentifyArgs),
+    /// Serve one isolated FMU instance over stdin (started by `run --isolate`).
+    #[command(hide = true)]
+    Worker(worker::WorkerArgs),
 }
 
 pub fn main() -> ExitCode {
@@ -73,6 +77,7 @@ pub fn main() -> ExitCode {
         Command::Optimize(a) => optimize::run(a),
         Command::Modal(a) => modal::run(a),
         Command::Identify(a) => identify::run(a),
+        Command::Worker(a) => worker::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -25,6 +25,13 @@ pub struct RunArgs {
     /// Call the linked models directly (no FMI boundary; same results, the overhead floor).
     #[arg(long)]
     pub native: bool,
+    /// Run every FMU instance in a worker process: a crash or hang of an FMU ends the run
+    /// with an error naming the instance, time and cause (`isolate = true` does it per instance).
+    #[arg(long)]
+    pub isolate: bool,
+    /// Watchdog of isolated instances: the longest wait for one call [s].
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0)]
+    pub worker_timeout: f64,
 }
 
 /// Parse `name=value` into a TOML value (number, integer, boolean).
@@ -50,8 +57,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if args.keep_extracted {
         eprintln!("unpacked FMUs kept in {}", cache.root().display());
     }
+    anyhow::ensure!(
+        args.worker_timeout > 0.0 && args.worker_timeout.is_finite(),
+        "--worker-timeout must be a positive number of seconds"
+    );
     let options = LoadOptions {
         native: args.native,
+        isolate: args.isolate,
+        isolation: crate::system::isolated::IsolationOptions {
+            timeout: std::time::Duration::from_secs_f64(args.worker_timeout),
+            worker_exe: None,
+        },
     };
     let system = System::load_with(&args.system, cache, &options)?;
     for w in &system.warnings {

@@ -38,6 +38,18 @@ pub enum FmuError {
         instance: String,
         what: &'static str,
     },
+    /// A unit run in a worker process (isolation mode) that crashed, hung or broke the protocol.
+    #[error(
+        "instance '{instance}' at t = {time} s: {function} in the isolated worker process: {cause}{}",
+        format_log(log)
+    )]
+    Isolated {
+        instance: String,
+        function: String,
+        time: f64,
+        cause: String,
+        log: Vec<String>,
+    },
     #[error("{path}: {message}")]
     Archive { path: PathBuf, message: String },
     #[error("{path}: modelDescription.xml: {message}")]

@@ -46,6 +46,10 @@ pub struct InstanceConfig {
     /// Ask the FMU for debug logging.
     #[serde(default)]
     pub logging: bool,
+    /// Run this instance in a worker process (a crash or hang of the FMU ends the run
+    /// with an error instead of taking twinbench down).
+    #[serde(default)]
+    pub isolate: bool,
 }
 
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]

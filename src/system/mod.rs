@@ -8,6 +8,7 @@
 
 pub mod backend;
 pub mod config;
+pub mod isolated;
 pub mod master;
 pub mod native;
 pub mod replay;
@@ -27,7 +28,8 @@ use std::sync::Arc;
 pub enum SystemError {
     #[error("{path}: {message}")]
     File { path: PathBuf, message: String },
-    #[error("{0}")]
+    // Transparent: with "{0}" and #[from], `{:#}` printed the FMU error twice.
+    #[error(transparent)]
     Fmu(#[from] FmuError),
     #[error("{context}: {message}")]
     Invalid { context: String, message: String },
@@ -73,6 +75,10 @@ pub struct InstanceDef {
 pub struct LoadOptions {
     /// Run linked models natively (no FMI boundary); other FMUs stay FMUs (with a warning).
     pub native: bool,
+    /// Run every FMU instance in a worker process (as `isolate = true` does for one).
+    pub isolate: bool,
+    /// Watchdog and worker executable of isolated instances.
+    pub isolation: isolated::IsolationOptions,
 }
 
 impl InstanceDef {
@@ -297,6 +303,15 @@ impl System {
                     }
                 },
                 false => Arc::new(backend::FmuFactory(fmu.clone())),
+            };
+            // Isolation (of this instance, or of all) wins over the in-process choices.
+            let factory: Arc<dyn backend::BackendFactory> = if inst.isolate || options.isolate {
+                Arc::new(isolated::IsolatedFactory {
+                    fmu: fmu.clone(),
+                    options: options.isolation.clone(),
+                })
+            } else {
+                factory
             };
             let def = InstanceDef {
                 name: inst.name.clone(),

@@ -1,0 +1,9 @@
+//! `twinbench worker` (hidden): serves one isolated FMU instance to the host process over
+//! the socket on its stdin; see `system::isolated`.
+
+#[derive(clap::Args, Debug)]
+pub struct WorkerArgs {}
+
+pub fn run(_args: WorkerArgs) -> anyhow::Result<()> {
+    std::process::exit(crate::system::isolated::serve_stdio())
+}
