@@ -1,0 +1,132 @@
+//! The corpus of broken user files in `tests/bad_files/`: every `X.toml` (system file) or
+//! `X.csv` (measurement) there has a sidecar `X.expect` whose lines must each appear in the
+//! error message it produces. A new broken file is a new case: drop it in with its `.expect`.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use twinbench::fmu::FmuCache;
+use twinbench::system::{Simulation, System};
+
+fn corpus(sub: &str, ext: &str) -> Vec<PathBuf> {
+    let dir = twinbench::pack::workspace_root()
+        .join("tests/bad_files")
+        .join(sub);
+    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == ext))
+        .collect();
+    v.sort();
+    v
+}
+
+fn expected(case: &Path) -> Vec<String> {
+    let e = case.with_extension("expect");
+    std::fs::read_to_string(&e)
+        .unwrap_or_else(|_| panic!("{} has no {}", case.display(), e.display()))
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+/// Check every case; report all mismatches at once.
+fn check_all(cases: &[PathBuf], error_of: impl Fn(&Path) -> Option<String>) {
+    let mut failures = Vec::new();
+    for case in cases {
+        let want = expected(case);
+        match error_of(case) {
+            None => failures.push(format!("{}: accepted", case.display())),
+            Some(msg) => {
+                for w in &want {
+                    if !msg.contains(w.as_str()) {
+                        failures.push(format!(
+                            "{}: message lacks {w:?}:\n    {msg}",
+                            case.display()
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "\n{}", failures.join("\n"));
+}
+
+fn system_error(path: &Path) -> Option<String> {
+    let cache = Arc::new(FmuCache::temporary(false).unwrap());
+    match System::load(path, cache) {
+        Err(e) => Some(e.to_string()),
+        Ok(sys) => Simulation::new(sys).err().map(|e| e.to_string()),
+    }
+}
+
+#[test]
+fn every_broken_system_file_gives_its_message() {
+    common::fmu_dir();
+    let cases = corpus("systems", "toml");
+    assert!(cases.len() >= 30, "{} system cases", cases.len());
+    check_all(&cases, system_error);
+}
+
+#[test]
+fn every_broken_measurement_gives_its_message() {
+    let cases = corpus("measurements", "csv");
+    assert!(cases.len() >= 10, "{} measurement cases", cases.len());
+    check_all(&cases, |p| {
+        tb_compare::Measurement::read_path(p)
+            .err()
+            .map(|e| e.to_string())
+    });
+}
+
+fn cli(args: &[&str]) -> (Option<i32>, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn the_command_line_exits_with_1_and_the_message_on_stderr() {
+    common::fmu_dir();
+    let root = twinbench::pack::workspace_root().join("tests/bad_files");
+    for case in ["systems/unknown_variable.toml", "systems/toml_syntax.toml"] {
+        let p = root.join(case);
+        let (code, err) = cli(&["run", p.to_str().unwrap()]);
+        assert_eq!(code, Some(1), "{case}: {err}");
+        assert!(err.starts_with("error: "), "{err}");
+        for w in expected(&p) {
+            assert!(err.contains(&w), "{case}: {w:?} not in {err}");
+        }
+    }
+    // A broken measurement given to `compare` (the simulation side is a valid file).
+    let meas = twinbench::pack::workspace_root().join("data/spielberg_lap.csv");
+    let bad = root.join("measurements/distance_backwards.csv");
+    let (code, err) = cli(&[
+        "compare",
+        meas.to_str().unwrap(),
+        bad.to_str().unwrap(),
+        "--signals",
+        "v",
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    for w in expected(&bad) {
+        assert!(err.contains(&w), "{w:?} not in {err}");
+    }
+}
+
+#[test]
+fn an_fmu_error_is_printed_once() {
+    common::fmu_dir();
+    let p = twinbench::pack::workspace_root().join("tests/bad_files/systems/missing_fmu_file.toml");
+    let (code, err) = cli(&["run", p.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(err.matches("cannot read").count(), 1, "{err}");
+}
