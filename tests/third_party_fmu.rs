@@ -312,3 +312,28 @@ signals = ["minutes.u", "fahrenheit.u"]
         "{e}"
     );
 }
+
+#[test]
+fn an_unconnected_input_without_a_start_value_is_warned_about() {
+    let dir = std::env::temp_dir().join(format!("tb-nostart-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let xml = edit(
+        &faulty_xml(),
+        "<Real unit=\"1\" start=\"0\"/>",
+        "<Real unit=\"1\"/>",
+    );
+    let fmu = repack(&dir, "nostart", &xml);
+    let text = format!(
+        "[fmus]\nx = \"{}\"\n\n[[instance]]\nname = \"a\"\nfmu = \"x\"\n\n[experiment]\nstep = 1e-3\nstop = 0.01\n",
+        fmu.display()
+    );
+    let path = dir.join("sys.toml");
+    let file = SystemFile::parse(&text, &path).unwrap();
+    let system =
+        System::from_file(file, &path, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    assert_eq!(
+        system.warnings,
+        vec!["input 'a.u' is not connected and has no start value".to_string()]
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,148 @@
+//! The master's time base, warnings, result files and the `run`/`info` commands.
+
+mod common;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use twinbench::fmu::FmuCache;
+use twinbench::system::{Simulation, System, SystemFile};
+
+fn faulty_system(body: &str, name: &str) -> (SystemFile, PathBuf) {
+    let fmu = common::fmu("faulty");
+    let text = format!("{body}\n[fmus]\nfaulty = \"{}\"\n", fmu.display());
+    let path = std::env::temp_dir().join(format!("tb-orch-{name}-{}.toml", std::process::id()));
+    std::fs::write(&path, &text).unwrap();
+    (SystemFile::parse(&text, &path).unwrap(), path)
+}
+
+fn sim(file: SystemFile, path: &std::path::Path) -> Simulation {
+    let s = System::from_file(file, path, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    let mut sim = Simulation::new(s).unwrap();
+    sim.echo_fmu_log = false;
+    sim
+}
+
+const ONE: &str = "[[instance]]\nname = \"a\"\nfmu = \"faulty\"\n\n[parameters]\n\"a.u\" = 1.0\n\n[record]\nsignals = [\"a.y\", \"a.steps\"]\n\n[experiment]\nstep = 1e-3\n";
+
+#[test]
+fn the_last_step_is_clamped_to_the_stop_time() {
+    let (f, p) = faulty_system(&format!("{ONE}stop = 1.0005\n"), "clamp");
+    let mut s = sim(f, &p);
+    let r = s.run().unwrap();
+    // 1000 full steps and one of 0.5 ms: y = ∫1 dt ends at exactly the stop time.
+    assert_eq!(r.steps, 1001);
+    assert_eq!(r.simulated_time, 1.0005);
+    let y = *s.recording.column("a.y").unwrap().last().unwrap();
+    assert!((y - 1.0005).abs() < 1e-12, "{y}");
+    assert_eq!(*s.recording.column("time").unwrap().last().unwrap(), 1.0005);
+}
+
+#[test]
+fn the_tick_time_base_does_not_drift() {
+    let (f, p) = faulty_system(&format!("{ONE}stop = 100.0\n"), "drift");
+    let mut f = f;
+    f.record.decimation = 1000;
+    let mut s = sim(f, &p);
+    let r = s.run().unwrap();
+    assert_eq!(r.steps, 100_000);
+    let t = s.recording.column("time").unwrap();
+    // Every recorded time is exactly k·h (k integer), no accumulated rounding.
+    for (k, &x) in t.iter().enumerate() {
+        assert_eq!(x, k as f64 * 1000.0 * 1e-3, "row {k}");
+    }
+    assert_eq!(
+        *s.recording.column("a.steps").unwrap().last().unwrap(),
+        100_000.0
+    );
+}
+
+#[test]
+fn results_are_csv_with_a_units_row_written_atomically() {
+    let (f, p) = faulty_system(&format!("{ONE}stop = 0.1\n"), "csv");
+    let mut s = sim(f, &p);
+    s.run().unwrap();
+    let out = std::env::temp_dir().join(format!("tb-orch-{}.csv", std::process::id()));
+    s.recording.write_csv(&out).unwrap();
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("time,a.y,a.steps"));
+    assert_eq!(lines.next(), Some("s,s,"));
+    let t = tb_compare::Table::read_path(&out).unwrap();
+    assert_eq!(t.names(), &["time", "a.y", "a.steps"]);
+    assert_eq!(t.column("a.steps").unwrap().unwrap().last(), Some(&100.0));
+    // No temporary file is left beside it.
+    let dir = out.parent().unwrap();
+    let stem = out.file_name().unwrap().to_string_lossy().to_string();
+    assert!(std::fs::read_dir(dir).unwrap().all(|e| !e
+        .unwrap()
+        .file_name()
+        .to_string_lossy()
+        .starts_with(&format!(".{stem}.tmp"))));
+    std::fs::remove_file(out).unwrap();
+}
+
+fn twinbench_bin() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_twinbench"))
+}
+
+#[test]
+fn run_json_summary_and_info_table() {
+    common::fmu_dir();
+    let root = twinbench::pack::workspace_root();
+    let out = std::env::temp_dir().join(format!("tb-orch-run-{}.csv", std::process::id()));
+    let o = std::process::Command::new(twinbench_bin())
+        .args([
+            "run",
+            "systems/rls_v.toml",
+            "--json",
+            "--set",
+            "vehicle.c_lift_front=0.9",
+            "--out",
+        ])
+        .arg(&out)
+        .current_dir(&root)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for key in ["steps", "simulated_time", "wall_time", "lap_time"] {
+        assert!(j[key].is_number(), "{key} missing in {j}");
+    }
+    assert!((j["lap_time"].as_f64().unwrap() - 98.0).abs() < 3.0);
+    assert!(out.exists());
+    std::fs::remove_file(&out).unwrap();
+    // A bad --set names the variable.
+    let o = std::process::Command::new(twinbench_bin())
+        .args([
+            "run",
+            "systems/rls_v.toml",
+            "--set",
+            "vehicle.c_lift_frnt=0.9",
+        ])
+        .current_dir(&root)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("unknown variable 'vehicle.c_lift_frnt'") && err.contains("c_lift_front"),
+        "{err}"
+    );
+    // info lists variables with units.
+    let o = std::process::Command::new(twinbench_bin())
+        .args(["info", "target/fmu/vehicle.fmu"])
+        .current_dir(&root)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success());
+    assert!(
+        text.contains("canGetAndSetFMUstate") || text.contains("get/set state true"),
+        "{text}"
+    );
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("Fz_sum") && l.contains(" N ")),
+        "{text}"
+    );
+}
