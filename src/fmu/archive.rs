@@ -73,6 +73,7 @@ fn arch(path: &Path, message: impl Into<String>) -> FmuError {
 impl FmuCache {
     /// A fresh cache under the system temporary folder, removed on drop unless `keep`.
     pub fn temporary(keep: bool) -> Result<FmuCache, FmuError> {
+        remove_stale_caches();
         let root = std::env::temp_dir().join(format!(
             "twinbench-fmu-{}-{:x}",
             std::process::id(),
@@ -139,6 +140,28 @@ impl FmuCache {
         });
         self.loaded.lock().unwrap().insert(sha, loaded.clone());
         Ok(loaded)
+    }
+}
+
+/// Remove temporary caches left by twinbench processes that no longer run (killed with
+/// SIGKILL, or crashed): `twinbench-fmu-<pid>-<time>` whose process is gone.
+fn remove_stale_caches() {
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("twinbench-fmu-"))
+            .and_then(|r| r.split_once('-'))
+            .and_then(|(pid, _)| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
     }
 }
 

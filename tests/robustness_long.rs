@@ -1,0 +1,246 @@
+//! Long runs: many consecutive simulations with instance reuse in one process keep their
+//! resident memory bounded and leave no temporary folders; result files are never seen
+//! half-written.
+//!
+//! The full soak (laps of Spielberg) is not in the default suite:
+//!
+//! ```sh
+//! SOAK_LAPS=10000 cargo test --release --test robustness_long -- --ignored --nocapture soak
+//! ```
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+use twinbench::fmu::FmuCache;
+use twinbench::system::{Recording, Simulation, StopConfig, System, SystemFile};
+
+/// Resident set size of this process [kB] (VmRSS).
+fn rss_kb() -> u64 {
+    let s = std::fs::read_to_string("/proc/self/status").unwrap();
+    s.lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .expect("VmRSS in /proc/self/status")
+}
+
+/// Folders of this process's unpack caches in the temporary folder.
+fn cache_dirs() -> Vec<PathBuf> {
+    let mine = format!("twinbench-fmu-{}-", std::process::id());
+    let mut v: Vec<PathBuf> = std::fs::read_dir(std::env::temp_dir())
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with(&mine))
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+fn lap_simulation(stop: Option<f64>) -> Simulation {
+    common::fmu_dir();
+    let path = twinbench::pack::workspace_root().join("systems/rls_v.toml");
+    let mut file = SystemFile::load(&path).unwrap();
+    if let Some(t) = stop {
+        file.experiment.stop = StopConfig::Time(t);
+    }
+    let cache = Arc::new(FmuCache::temporary(false).unwrap());
+    let mut sim = Simulation::new(System::from_file(file, &path, cache).unwrap()).unwrap();
+    sim.echo_fmu_log = false;
+    sim
+}
+
+/// Runs `n` simulations (a parameter nudged each time, as an optimiser does) and returns
+/// the RSS after the warm-up run and after the last one [kB], and the seconds per run.
+fn repeated_runs(sim: &mut Simulation, n: usize, report_every: usize) -> (u64, u64, f64) {
+    let c0 = sim.parameter("vehicle.c_lift_front").unwrap_or(0.0);
+    let mut warm = 0;
+    let t0 = Instant::now();
+    for k in 0..n {
+        let nudge = 1.0 + 0.01 * ((k % 7) as f64 - 3.0);
+        sim.set_parameter("vehicle.c_lift_front", toml::Value::Float(c0 * nudge))
+            .unwrap();
+        sim.run().unwrap();
+        if k == 0 {
+            warm = rss_kb();
+        }
+        if report_every > 0 && (k + 1) % report_every == 0 {
+            println!(
+                "run {:>6}: RSS {:>7} kB ({:+} kB since run 1), {:.3} s per run",
+                k + 1,
+                rss_kb(),
+                rss_kb() as i64 - warm as i64,
+                t0.elapsed().as_secs_f64() / (k + 1) as f64
+            );
+        }
+    }
+    (warm, rss_kb(), t0.elapsed().as_secs_f64() / n as f64)
+}
+
+#[test]
+fn thirty_reused_runs_keep_memory_bounded_and_leave_no_temporary_folders() {
+    let before = cache_dirs();
+    {
+        let mut sim = lap_simulation(Some(10.0));
+        let (warm, end, per_run) = repeated_runs(&mut sim, 30, 0);
+        let growth = end as i64 - warm as i64;
+        println!("30 runs of 10 s: RSS {warm} -> {end} kB ({growth:+} kB), {per_run:.3} s per run");
+        assert!(growth < 2048, "RSS grew by {growth} kB over 30 runs");
+        // One cache folder while the simulation lives, not one per run.
+        let during = cache_dirs();
+        assert!(during.len() <= before.len() + 1, "{during:?}");
+    }
+    let after = cache_dirs();
+    let left: Vec<_> = after.iter().filter(|p| !before.contains(p)).collect();
+    assert!(left.is_empty(), "temporary folders left: {left:?}");
+}
+
+/// The soak: `SOAK_LAPS` (default 1000) laps of Spielberg with instance reuse.
+#[test]
+#[ignore = "long: run with SOAK_LAPS=N ... -- --ignored soak"]
+fn soak_laps() {
+    let n: usize = std::env::var("SOAK_LAPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1000);
+    let before = cache_dirs();
+    {
+        let mut sim = lap_simulation(None);
+        let (warm, end, per_run) = repeated_runs(&mut sim, n, (n / 20).max(1));
+        let growth = end as i64 - warm as i64;
+        println!(
+            "SOAK {n} laps: RSS after lap 1 {warm} kB, after lap {n} {end} kB, growth {growth:+} kB, {per_run:.3} s per lap"
+        );
+        assert!(growth < 10 * 1024, "RSS grew by {growth} kB");
+    }
+    let left: Vec<_> = cache_dirs()
+        .into_iter()
+        .filter(|p| !before.contains(p))
+        .collect();
+    assert!(left.is_empty(), "temporary folders left: {left:?}");
+}
+
+// ---- output files ----
+
+fn big_recording(rows: usize, value: f64) -> Recording {
+    let names: Vec<String> = (0..20).map(|k| format!("unit.signal_{k}")).collect();
+    let mut r = Recording::new(
+        std::iter::once("time".to_string()).chain(names).collect(),
+        vec!["s".to_string(); 21],
+    );
+    for i in 0..rows {
+        r.columns[0].push(i as f64);
+        for (c, col) in r.columns.iter_mut().enumerate().skip(1) {
+            col.push(value + c as f64);
+        }
+    }
+    r
+}
+
+/// A complete file: header, units row, `rows` rows of 21 fields.
+fn is_complete(text: &str, rows: usize) -> bool {
+    let lines: Vec<&str> = text.lines().collect();
+    text.ends_with('\n')
+        && lines.len() == rows + 2
+        && lines.iter().all(|l| l.split(',').count() == 21)
+}
+
+fn temp_siblings(dir: &Path) -> Vec<PathBuf> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.file_name().unwrap().to_string_lossy().contains(".tmp"))
+        .collect()
+}
+
+#[test]
+fn a_reader_never_sees_a_half_written_result_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("lap.csv");
+    let rows = 20_000; // about 3 MB: many write calls per file
+    big_recording(rows, 0.0).write_csv(&out).unwrap();
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let reader = {
+        let (out, stop) = (out.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let mut reads = 0;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                let text = std::fs::read_to_string(&out).unwrap();
+                assert!(is_complete(&text, rows), "a partial file was seen");
+                reads += 1;
+            }
+            reads
+        })
+    };
+    for k in 0..15 {
+        big_recording(rows, k as f64).write_csv(&out).unwrap();
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let reads = reader.join().unwrap();
+    assert!(reads > 0);
+    assert_eq!(temp_siblings(dir.path()), Vec::<PathBuf>::new());
+}
+
+#[test]
+fn a_killed_run_leaves_no_partial_result_file() {
+    // `twinbench run --out` killed at various moments: the result is absent or complete.
+    common::fmu_dir();
+    let system = twinbench::pack::workspace_root().join("systems/rls_v.toml");
+    let dir = tempfile::tempdir().unwrap();
+    for (k, delay_ms) in [50u64, 150, 300, 400].into_iter().enumerate() {
+        let out = dir.path().join(format!("lap{k}.csv"));
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .args([
+                "run",
+                system.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        let _ = child.kill();
+        let _ = child.wait();
+        if out.exists() {
+            let text = std::fs::read_to_string(&out).unwrap();
+            let rows = text.lines().count();
+            assert!(text.ends_with('\n') && rows > 1000, "partial: {rows} lines");
+        }
+    }
+    // A run that completes leaves its file and no temporary sibling.
+    let out = dir.path().join("done.csv");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args([
+            "run",
+            system.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    assert!(out.exists());
+    let tmps: Vec<_> = temp_siblings(dir.path())
+        .into_iter()
+        .filter(|p| !p.to_string_lossy().contains("lap"))
+        .collect();
+    assert_eq!(tmps, Vec::<PathBuf>::new());
+}
+
+#[test]
+fn caches_left_by_killed_processes_are_removed_by_the_next_one() {
+    // A cache folder of a process that no longer runs (pid beyond pid_max).
+    let stale = std::env::temp_dir().join("twinbench-fmu-99999999-deadbeef");
+    std::fs::create_dir_all(stale.join("x/binaries")).unwrap();
+    let _cache = FmuCache::temporary(false).unwrap();
+    assert!(!stale.exists());
+}
