@@ -11,4 +11,5 @@ pub mod fmu;
 pub mod pack;
 pub mod optimize;
 pub mod report;
+pub mod ssp;
 pub mod system;

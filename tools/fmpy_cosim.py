@@ -304,9 +304,11 @@ class System:
         wall = time.perf_counter()
         fixed_stop = None if self.stop == "lap" else float(self.stop)
         signals = [0.0] * len(self.names)
-        self.instantiate(fixed_stop)
+        # simulate_ssp calls fmi2SetupExperiment without a stop time.
+        self.instantiate(fixed_stop if time_base != "sum" else None)
         sweeps = self.initialize(signals, init)
-        rows = [[self.start] + [signals[s] for s in self.record_slots]]
+        # simulate_ssp records after each step only.
+        rows = [[self.start] + [signals[s] for s in self.record_slots]] if time_base != "sum" else []
         if init == "zero":
             signals = [0.0] * len(self.names)
         start, h = self.start, self.h
@@ -318,10 +320,16 @@ class System:
         jacobi = self.algorithm == "jacobi"
         k, t_end, lap_done = 0, start, False
         t_sum = start
-        while (k < total) if time_base == "ticks" else (t_sum < start + span):
+        while (k < total) if time_base != "sum" else (t_sum < start + span):
             if time_base == "ticks":
                 t = start + k * h
                 step = last if k == full_steps else h
+            elif time_base == "ns":
+                # libcosim: integer nanoseconds; t and the step size converted to double
+                # at each step (the step as the difference of two converted time points).
+                hns = int(round(h * 1e9))
+                t = (int(round(start * 1e9)) + k * hns) / 1e9
+                step = (int(round(start * 1e9)) + (k + 1) * hns) / 1e9 - t
             else:
                 # simulate_ssp: time += step_size, steps while time < stop_time.
                 t, step = t_sum, h
@@ -341,12 +349,12 @@ class System:
                     u.slave.doStep(currentCommunicationPoint=t, communicationStepSize=step)
                     u.get_outputs(signals, self.names)
             k += 1
-            if time_base == "ticks":
+            if time_base != "sum":
                 t_end = start + span if (k == total and fixed_stop is not None) else start + k * h
             else:
                 t_end = t_sum
             lap_done = self.lap_slot is not None and signals[self.lap_slot] >= self.lap_count
-            if k % self.decimation == 0 or k == total or lap_done or time_base != "ticks":
+            if k % self.decimation == 0 or k == total or lap_done or time_base == "sum":
                 rows.append([t_end] + [signals[s] for s in self.record_slots])
             if lap_done:
                 break
@@ -427,8 +435,9 @@ def main():
     ap.add_argument("--order", help="comma-separated instance names")
     ap.add_argument("--set", action="append", default=[], help="instance.variable=value")
     ap.add_argument("--init", choices=["fixed-point", "zero"], default="fixed-point")
-    ap.add_argument("--time-base", choices=["ticks", "sum"], default="ticks",
-                    help="sum: t += h while t < stop, every step recorded (simulate_ssp's loop)")
+    ap.add_argument("--time-base", choices=["ticks", "sum", "ns"], default="ticks",
+                    help="sum: t += h while t < stop, every step recorded (simulate_ssp's loop); "
+                         "ns: libcosim's integer-nanosecond clock (t and h converted per step)")
     ap.add_argument("--out")
     ap.add_argument("--compare", help="twinbench's CSV of the same run")
     ap.add_argument("--json", action="store_true")

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 pub mod benchmark;
 pub mod compare;
 pub mod demo;
+pub mod export_ssp;
 pub mod identify;
 pub mod info;
 pub mod modal;
@@ -40,6 +41,8 @@ pub enum Command {
     Run(run::RunArgs),
     /// Show an FMU's capabilities and variables.
     Info(info::InfoArgs),
+    /// Write a system as an SSP 1.0 package (SystemStructure.ssd, FMUs under resources/).
+    ExportSsp(export_ssp::ExportSspArgs),
     /// Compare a simulation result with a vehicle measurement on a distance basis.
     Compare(compare::CompareArgs),
     /// Optimise the twin's parameters against a vehicle measurement (a study file).
@@ -73,6 +76,7 @@ pub fn main() -> ExitCode {
         Command::Benchmark(a) => benchmark::run(a),
         Command::Run(a) => run::run(a),
         Command::Info(a) => info::run(a),
+        Command::ExportSsp(a) => export_ssp::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Optimize(a) => optimize::run(a),
         Command::Modal(a) => modal::run(a),
