@@ -162,6 +162,7 @@ impl Cmaes {
 
 /// Eigen-decomposition of a symmetric matrix by cyclic Jacobi rotations: returns the
 /// eigenvalues and the eigenvectors as the columns of a matrix.
+#[allow(clippy::needless_range_loop)] // index arithmetic on rows and columns
 pub fn symmetric_eigen(a: &[Vec<f64>]) -> (Vec<f64>, Vec<Vec<f64>>) {
     let n = a.len();
     let mut a: Vec<Vec<f64>> = a.to_vec();
@@ -234,6 +235,7 @@ impl Optimizer for Cmaes {
         out
     }
 
+    #[allow(clippy::needless_range_loop)] // vector algebra written out by index
     fn tell(&mut self, costs: &[f64]) {
         assert_eq!(
             costs.len(),

@@ -105,6 +105,13 @@ pub struct StudyResult {
 }
 
 impl StudyResult {
+    pub fn initial_value(&self, name: &str) -> Option<f64> {
+        self.parameters_initial
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|p| p.1)
+    }
+
     pub fn final_value(&self, name: &str) -> Option<f64> {
         self.parameters_final
             .iter()
@@ -254,6 +261,9 @@ fn make_optimizer(
     })
 }
 
+/// Per run: each signal's covered grid range and filtered values on it.
+type Residuals = Result<Vec<(std::ops::Range<usize>, Vec<f64>)>, String>;
+
 /// Finite-difference identifiability check around `x0` (2 runs per parameter, in parallel).
 fn identifiability(
     study: &Study,
@@ -279,25 +289,24 @@ fn identifiability(
         })
         .collect();
     let prepared = problem.prepared;
-    let residuals: Vec<Result<Vec<(std::ops::Range<usize>, Vec<f64>)>, String>> =
-        pool.install(|| {
-            points
-                .par_iter()
-                .with_max_len(1)
-                .map(|x| {
-                    let o = problem.outcome(x)?;
-                    let mut ws = Workspace::new();
-                    step.signals
-                        .iter()
-                        .map(|s| {
-                            prepared
-                                .on_grid(&o.table, s, true, &mut ws)
-                                .map_err(|e| e.to_string())
-                        })
-                        .collect()
-                })
-                .collect()
-        });
+    let residuals: Vec<Residuals> = pool.install(|| {
+        points
+            .par_iter()
+            .with_max_len(1)
+            .map(|x| {
+                let o = problem.outcome(x)?;
+                let mut ws = Workspace::new();
+                step.signals
+                    .iter()
+                    .map(|s| {
+                        prepared
+                            .on_grid(&o.table, s, true, &mut ws)
+                            .map_err(|e| e.to_string())
+                    })
+                    .collect()
+            })
+            .collect()
+    });
     let mut failures = Vec::new();
     let weights = step.weights();
     // Per signal, per parameter: the column of J.

@@ -205,7 +205,9 @@ impl Study {
             if s.parameters.is_empty() || s.signals.is_empty() {
                 return Err(bad(format!("{ctx}: needs parameters and signals")));
             }
-            if s.weights().len() != s.signals.len() || s.weights().iter().any(|w| !(*w >= 0.0)) {
+            if s.weights().len() != s.signals.len()
+                || s.weights().iter().any(|w| w.is_nan() || *w < 0.0)
+            {
                 return Err(bad(format!(
                     "{ctx}: weights must be one non-negative number per signal"
                 )));

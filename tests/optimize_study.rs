@@ -1,0 +1,205 @@
+//! Studies on the co-simulated bench (small ones): the same seed gives the same result with
+//! 1 and 2 threads; a study interrupted (twice, in both steps) and resumed ends with the same
+//! result as an uninterrupted one; a candidate whose run fails is penalised and the study
+//! goes on.
+
+mod common;
+
+use std::path::Path;
+use twinbench::optimize::{run_study, RunOptions, Study, StudyOutcome, StudyResult};
+
+fn study_text(optimizer: &str, body: &str) -> String {
+    let root = twinbench::pack::workspace_root();
+    format!(
+        r#"
+name = "small"
+system = "{sys}"
+measurement = "{meas}"
+seed = 17
+bias_weight = 1.0
+[record]
+signals = ["vehicle.distance", "vehicle.v", "vehicle.Fz_fl", "vehicle.Fz_fr", "vehicle.Fz_rl", "vehicle.Fz_rr"]
+decimation = 10
+[optimizer]
+kind = "{optimizer}"
+generations = 2
+[optimizer.ga]
+population = 6
+elites = 2
+[optimizer.cmaes]
+population = 4
+{body}
+"#,
+        sys = root.join("systems/rls_v.toml").display(),
+        meas = root.join("data/spielberg_lap.csv").display(),
+    )
+}
+
+const TWO_STEPS: &str = r#"
+[[step]]
+name = "lift"
+signals = ["Fz_front", "Fz_rear"]
+[[step.parameter]]
+name = "vehicle.c_lift_front"
+min = 0.2
+max = 2.5
+[[step.parameter]]
+name = "vehicle.c_lift_rear"
+min = 0.2
+max = 2.5
+[[step]]
+name = "track"
+signals = ["Fz_fl", "Fz_fr"]
+[[step.parameter]]
+name = "vehicle.b_front"
+min = 0.9
+max = 2.0
+"#;
+
+fn load(dir: &Path, text: &str) -> Study {
+    let path = dir.join("study.toml");
+    std::fs::write(&path, text).unwrap();
+    Study::load(&path).unwrap()
+}
+
+fn options(threads: usize, checkpoint: &Path) -> RunOptions {
+    RunOptions {
+        threads,
+        checkpoint: Some(checkpoint.to_path_buf()),
+        ..RunOptions::default()
+    }
+}
+
+fn finished(o: StudyOutcome) -> StudyResult {
+    match o {
+        StudyOutcome::Finished(r) => *r,
+        StudyOutcome::Interrupted { .. } => panic!("interrupted"),
+    }
+}
+
+/// Everything the optimisation decides, bit for bit.
+fn assert_same(a: &StudyResult, b: &StudyResult, what: &str) {
+    assert_eq!(a.steps.len(), b.steps.len(), "{what}");
+    for (x, y) in a.steps.iter().zip(&b.steps) {
+        assert_eq!(
+            x.after_exact, y.after_exact,
+            "{what}: step {} parameters",
+            x.name
+        );
+        assert_eq!(x.cost_after.to_bits(), y.cost_after.to_bits(), "{what}");
+        assert_eq!(x.evaluations, y.evaluations, "{what}");
+        let h = |r: &twinbench::optimize::StepResult| -> Vec<u64> {
+            r.history.iter().map(|g| g.best_cost.to_bits()).collect()
+        };
+        assert_eq!(h(x), h(y), "{what}: best cost per generation");
+        for (e1, e2) in x.e.iter().zip(&y.e) {
+            assert_eq!(
+                e1.after.e.to_bits(),
+                e2.after.e.to_bits(),
+                "{what}: e of {}",
+                e1.signal
+            );
+            assert_eq!(e1.before.e.to_bits(), e2.before.e.to_bits(), "{what}");
+        }
+    }
+    assert_eq!(a.parameters_final, b.parameters_final, "{what}");
+}
+
+#[test]
+fn same_seed_same_result_any_threads_and_after_resume() {
+    common::fmu_dir();
+    let dir = tempfile::tempdir().unwrap();
+    let study = load(dir.path(), &study_text("ga", TWO_STEPS));
+    let one = finished(run_study(&study, &options(1, &dir.path().join("a.json"))).unwrap());
+    let two = finished(run_study(&study, &options(2, &dir.path().join("b.json"))).unwrap());
+    assert_eq!((one.threads, two.threads), (1, 2));
+    assert_same(&one, &two, "1 vs 2 threads");
+    // Each worker owns one Simulation, reused: never more than the threads (+ the first).
+    assert!(
+        two.workers_created <= 2,
+        "{} simulations created",
+        two.workers_created
+    );
+    // Later steps start from earlier results.
+    assert_eq!(
+        two.steps[1].identifiability.start,
+        vec![two.initial_value("vehicle.b_front").unwrap()],
+        "step 2 starts at the system's b_front"
+    );
+    assert!(two.steps[0].e.iter().all(|e| e.after.e < e.before.e));
+
+    // Interrupted after 1 generation (in step 1), resumed and interrupted again after
+    // 2 more (in step 2), resumed to the end: the same result.
+    let cp = dir.path().join("c.json");
+    let mut o = options(2, &cp);
+    o.stop_after = Some(1);
+    assert!(matches!(
+        run_study(&study, &o).unwrap(),
+        StudyOutcome::Interrupted { generations: 1 }
+    ));
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&cp).unwrap()).unwrap();
+    assert_eq!(saved["current"]["step"], 0);
+    o.resume = true;
+    o.stop_after = Some(2);
+    o.threads = 1;
+    assert!(matches!(
+        run_study(&study, &o).unwrap(),
+        StudyOutcome::Interrupted { .. }
+    ));
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&cp).unwrap()).unwrap();
+    assert_eq!(
+        saved["current"]["step"], 1,
+        "the second interruption is in step 2"
+    );
+    assert_eq!(saved["completed"].as_array().unwrap().len(), 1);
+    o.stop_after = None;
+    o.threads = 2;
+    let resumed = finished(run_study(&study, &o).unwrap());
+    assert!(resumed.resumed);
+    assert_same(
+        &two,
+        &resumed,
+        "interrupted twice and resumed vs uninterrupted",
+    );
+
+    // A checkpoint of another study is refused.
+    let other = load(dir.path(), &study_text("cmaes", TWO_STEPS));
+    let err = run_study(&other, &o).err().expect("refused");
+    assert!(err.to_string().contains("another study"), "{err}");
+}
+
+#[test]
+fn a_failing_candidate_is_penalised_and_the_study_goes_on() {
+    common::fmu_dir();
+    let dir = tempfile::tempdir().unwrap();
+    // Grip below about 0.05 cannot finish the lap within max_time (or is outside the FMU's
+    // declared range): those candidates fail.
+    let body = r#"
+[[step]]
+name = "grip"
+signals = ["Fz_sum"]
+[[step.parameter]]
+name = "vehicle.tyre_D"
+min = 0.0
+max = 0.3
+start = 0.3
+"#;
+    let study = load(dir.path(), &study_text("ga", body));
+    let r = finished(run_study(&study, &options(2, &dir.path().join("cp.json"))).unwrap());
+    let s = &r.steps[0];
+    assert!(
+        s.failures >= 1,
+        "the seed was chosen to draw failing candidates: {s:?}"
+    );
+    assert_eq!(s.failure_reasons.len(), s.failures);
+    for reason in &s.failure_reasons {
+        assert!(
+            reason.contains("did not complete") || reason.contains("outside the declared range"),
+            "{reason}"
+        );
+    }
+    assert!(s.cost_after < 1.0, "a finite best: {}", s.cost_after);
+    assert_eq!(s.history.len(), 2);
+}
