@@ -95,6 +95,9 @@ fn type_element(ty: ScalarType, unit: Option<&str>) -> String {
     }
 }
 
+/// The SSD text, the FMU files to pack (archive name, source path), and the summary.
+pub type SystemStructure = (String, Vec<(String, std::path::PathBuf)>, ExportSummary);
+
 struct Conn {
     kind: &'static str,
     ty: ScalarType,
@@ -105,7 +108,7 @@ struct Conn {
 pub fn system_structure(
     system: &System,
     options: &ExportOptions,
-) -> Result<(String, Vec<(String, std::path::PathBuf)>, ExportSummary), SspError> {
+) -> Result<SystemStructure, SspError> {
     if let Some(r) = system.replays.first() {
         return Err(SspError::Unsupported(format!(
             "{}: replayed measurement channels (replay '{}', {}) cannot be expressed in SSP 1.0 \

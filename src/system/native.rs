@@ -229,20 +229,21 @@ impl<M: Model> Backend for NativeBackend<M> {
     }
 }
 
+/// Creates one boxed native instance: (instance name, resource folder, logging).
+type Create = fn(&str, Option<PathBuf>, bool) -> Box<dyn Backend>;
+
 /// Creates [`NativeBackend`]s of one linked model, with the FMU's resources.
 pub struct NativeFactory {
     model: &'static str,
     resource_dir: PathBuf,
-    create: fn(&str, Option<PathBuf>, bool) -> Box<dyn Backend>,
+    create: Create,
 }
 
 fn boxed<M: Model>(name: &str, res: Option<PathBuf>, logging: bool) -> Box<dyn Backend> {
     Box::new(NativeBackend::<M>::new(name, res, logging))
 }
 
-fn linked<M: Model>(
-    fmu: &LoadedFmu,
-) -> Result<fn(&str, Option<PathBuf>, bool) -> Box<dyn Backend>, String> {
+fn linked<M: Model>(fmu: &LoadedFmu) -> Result<Create, String> {
     let guid = fmu_export::description::guid::<M>();
     if fmu.description.guid != guid {
         return Err(format!(
