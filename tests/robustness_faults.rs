@@ -315,3 +315,18 @@ fn twinbench_run_isolate_survives_an_abort_and_a_hang() {
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("fmi2DoStep returned fmi2Discard"), "{err}");
 }
+
+#[test]
+fn an_isolated_simulation_can_move_between_threads() {
+    // Workers must not die with the thread that started them (hosts pool simulations).
+    let _serial = serial();
+    let mut sim = std::thread::spawn(|| {
+        let mut sim = simulation(&system_text(0, true), &in_process());
+        sim.run().unwrap();
+        sim
+    })
+    .join()
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(sim.run().unwrap().steps, 200);
+}

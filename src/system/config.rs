@@ -50,6 +50,9 @@ pub struct InstanceConfig {
     /// with an error instead of taking twinbench down).
     #[serde(default)]
     pub isolate: bool,
+    /// With `isolate`: the longest wait for one call of this instance [s] (default 10 s).
+    #[serde(default)]
+    pub watchdog: Option<f64>,
 }
 
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]

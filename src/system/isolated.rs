@@ -810,12 +810,19 @@ pub fn serve_stdio() -> i32 {
             libc::close(null);
         }
         libc::dup2(2, 1);
-        // Die with the host even when stuck inside the FMU.
-        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-        if libc::getppid() == 1 {
-            return 3;
-        }
     }
+    // Die with the host even when stuck inside the FMU (a closed socket is noticed only
+    // between calls). Not PR_SET_PDEATHSIG: that fires when the host *thread* that started
+    // the worker ends, and hosts move simulations between threads.
+    let parent = unsafe { libc::getppid() };
+    let _ = std::thread::Builder::new()
+        .name("host-watch".into())
+        .spawn(move || loop {
+            std::thread::sleep(Duration::from_millis(250));
+            if unsafe { libc::getppid() } != parent {
+                unsafe { libc::_exit(4) };
+            }
+        });
     let stream = unsafe { <UnixStream as std::os::fd::FromRawFd>::from_raw_fd(fd) };
     serve(stream)
 }

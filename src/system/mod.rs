@@ -306,9 +306,19 @@ impl System {
             };
             // Isolation (of this instance, or of all) wins over the in-process choices.
             let factory: Arc<dyn backend::BackendFactory> = if inst.isolate || options.isolate {
+                let mut iso = options.isolation.clone();
+                if let Some(w) = inst.watchdog {
+                    if !w.is_finite() || w <= 0.0 {
+                        return Err(invalid(
+                            format!("{ctx_file}: instance '{}'", inst.name),
+                            format!("watchdog must be a positive number of seconds, got {w}"),
+                        ));
+                    }
+                    iso.timeout = std::time::Duration::from_secs_f64(w);
+                }
                 Arc::new(isolated::IsolatedFactory {
                     fmu: fmu.clone(),
-                    options: options.isolation.clone(),
+                    options: iso,
                 })
             } else {
                 factory
