@@ -1,6 +1,6 @@
-//! The corpus of broken user files in `tests/bad_files/`: every `X.toml` (system file) or
-//! `X.csv` (measurement) there has a sidecar `X.expect` whose lines must each appear in the
-//! error message it produces. A new broken file is a new case: drop it in with its `.expect`.
+//! The corpus of broken user files in `tests/bad_files/`: every `X.toml` (system file in
+//! `systems/`, study file in `studies/`) or `X.csv` (measurement in `measurements/`) there
+//! has a sidecar `X.expect` whose lines must each appear in the error message it produces. A new broken file is a new case: drop it in with its `.expect`.
 
 mod common;
 
@@ -77,6 +77,28 @@ fn every_broken_measurement_gives_its_message() {
     assert!(cases.len() >= 10, "{} measurement cases", cases.len());
     check_all(&cases, |p| {
         tb_compare::Measurement::read_path(p)
+            .err()
+            .map(|e| e.to_string())
+    });
+}
+
+#[test]
+fn every_broken_study_file_gives_its_message() {
+    common::fmu_dir();
+    let cases = corpus("studies", "toml");
+    assert!(cases.len() >= 15, "{} study cases", cases.len());
+    check_all(&cases, |p| {
+        let study = match twinbench::optimize::Study::load(p) {
+            Err(e) => return Some(e.to_string()),
+            Ok(s) => s,
+        };
+        // Everything else is refused before the first simulation.
+        let options = twinbench::optimize::RunOptions {
+            threads: 1,
+            generations: Some(1),
+            ..Default::default()
+        };
+        twinbench::optimize::run_study(&study, &options)
             .err()
             .map(|e| e.to_string())
     });
