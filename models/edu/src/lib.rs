@@ -200,7 +200,9 @@ impl Model for Edu {
     }
 
     fn do_step(&mut self, vars: &mut EduVars, _time: f64, step: f64) -> Result<(), ModelError> {
-        let n = (step / self.p.substep_max).ceil().max(1.0);
+        // A step a rounding unit longer than a multiple of substep_max (a host's nanosecond
+        // clock) must not cost an extra sub-step.
+        let n = (step / self.p.substep_max * (1.0 - 1e-9)).ceil().max(1.0);
         let h = step / n;
         let (pedal, wl, wr) = (vars.accel_pedal, vars.omega_left, vars.omega_right);
         for _ in 0..n as usize {

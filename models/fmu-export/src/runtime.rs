@@ -567,8 +567,8 @@ impl<M: Model> Runtime<M> {
             } else {
                 sl.settable_run
             };
-            // NaN fails the range test too.
-            if !settable || !(x >= sl.min && x <= sl.max) || !x.is_finite() {
+            let accepted = settable && x.is_finite() && (sl.min..=sl.max).contains(&x);
+            if !accepted {
                 return self.set_error(function, ty, vr, value);
             }
             self.vars.set(sl.index as usize, value);

@@ -468,7 +468,9 @@ impl Model for Vehicle {
     }
 
     fn do_step(&mut self, vars: &mut VehicleVars, time: f64, step: f64) -> Result<(), ModelError> {
-        let n = (step / self.p.substep_max).ceil().max(1.0);
+        // A step a rounding unit longer than a multiple of substep_max (a host's nanosecond
+        // clock) must not cost an extra sub-step.
+        let n = (step / self.p.substep_max * (1.0 - 1e-9)).ceil().max(1.0);
         let h = step / n;
         let omega_rear = [vars.omega_rl, vars.omega_rr];
         let pedal = vars.brake_pedal;
