@@ -7,6 +7,9 @@ use fmu_export::ModelError;
 pub struct TargetSpeed {
     s: Vec<f64>,
     v: Vec<f64>,
+    /// 1/spacing when the rows are evenly spaced: the segment is then found by one
+    /// multiplication instead of a binary search (the same segment, checked).
+    inv_spacing: Option<f64>,
 }
 
 impl TargetSpeed {
@@ -75,7 +78,12 @@ impl TargetSpeed {
                 s.len()
             )));
         }
-        Ok(TargetSpeed { s, v })
+        let spacing = (s[s.len() - 1] - s[0]) / (s.len() - 1) as f64;
+        let even = s
+            .windows(2)
+            .all(|w| ((w[1] - w[0]) - spacing).abs() <= 1e-9 * spacing);
+        let inv_spacing = even.then_some(1.0 / spacing);
+        Ok(TargetSpeed { s, v, inv_spacing })
     }
 
     /// Lap length: the last `s` of the file; positions wrap modulo it.
@@ -88,8 +96,21 @@ impl TargetSpeed {
     pub fn at(&self, s: f64) -> (f64, f64) {
         let x = s.rem_euclid(self.lap_length());
         let n = self.s.len();
-        // Index of the segment [s_k, s_{k+1}] containing x.
-        let k = self.s.partition_point(|&sk| sk <= x);
+        // Index of the segment [s_k, s_{k+1}] containing x: partition_point's answer, found
+        // directly on an even grid (the guess is corrected by a step if rounding missed).
+        let k = match self.inv_spacing {
+            Some(inv) if x >= self.s[0] => {
+                let mut k = (((x - self.s[0]) * inv) as usize + 1).min(n);
+                while k < n && self.s[k] <= x {
+                    k += 1;
+                }
+                while k > 0 && self.s[k - 1] > x {
+                    k -= 1;
+                }
+                k
+            }
+            _ => self.s.partition_point(|&sk| sk <= x),
+        };
         if k == 0 {
             return (self.v[0], 0.0);
         }
