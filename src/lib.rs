@@ -8,8 +8,8 @@
 
 pub mod cli;
 pub mod fmu;
-pub mod pack;
 pub mod optimize;
+pub mod pack;
 pub mod report;
 pub mod ssp;
 pub mod system;

@@ -21,10 +21,15 @@ pub struct BenchmarkArgs {
 
 pub fn run(args: BenchmarkArgs) -> anyhow::Result<()> {
     let fmu_dir = crate::pack::default_fmu_dir();
-    if crate::pack::models().iter().any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists()) {
+    if crate::pack::models()
+        .iter()
+        .any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists())
+    {
         crate::pack::pack(&[], &fmu_dir)?;
     }
-    let path = args.system.unwrap_or_else(|| crate::pack::workspace_root().join("systems/rls_v.toml"));
+    let path = args
+        .system
+        .unwrap_or_else(|| crate::pack::workspace_root().join("systems/rls_v.toml"));
     let cache = Arc::new(FmuCache::temporary(false)?);
     let mut sim = Simulation::new(System::load(&path, cache)?)?;
     sim.echo_fmu_log = false;
@@ -52,11 +57,26 @@ pub fn run(args: BenchmarkArgs) -> anyhow::Result<()> {
             }))?
         );
     } else {
-        println!("system            {} ({instances} instances)", path.display());
-        println!("lap               {} steps, {:.3} s simulated", r.steps, r.simulated_time);
-        println!("wall time / lap   best {:.4} s, median {:.4} s ({} laps)", best, median, walls.len());
+        println!(
+            "system            {} ({instances} instances)",
+            path.display()
+        );
+        println!(
+            "lap               {} steps, {:.3} s simulated",
+            r.steps, r.simulated_time
+        );
+        println!(
+            "wall time / lap   best {:.4} s, median {:.4} s ({} laps)",
+            best,
+            median,
+            walls.len()
+        );
         println!("real-time factor  {:.0}x", r.simulated_time / median);
-        println!("per macro step    best {:.0} ns, median {:.0} ns (all instances, models included)", ns(best), ns(median));
+        println!(
+            "per macro step    best {:.0} ns, median {:.0} ns (all instances, models included)",
+            ns(best),
+            ns(median)
+        );
     }
     Ok(())
 }
