@@ -594,6 +594,8 @@ impl IsolatedBackend {
         args: impl FnOnce(&mut Enc),
     ) -> Result<(), FmuError> {
         self.prefetched.clear();
+        // Gets before a state change are no guide to those after the next step.
+        self.observed.clear();
         let mut e = Enc::default();
         e.u8(code);
         args(&mut e);
