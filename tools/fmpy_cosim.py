@@ -17,7 +17,7 @@ mirroring twinbench's master algorithm step for step:
 - Gauss-Seidel: per instance inputs, step, outputs; Jacobi: all inputs gathered first,
   all steps, then all outputs;
 - stop at a fixed time or when the lap signal reaches `lap_count`; record every
-  `decimation`-th step, the last step and the lap step.
+  `decimation`-th step, and the last step of a run with a fixed stop time.
 
 `--init zero --time-base sum --algorithm jacobi` instead reproduces FMPy's `simulate_ssp`
 semantics (no exchange in initialisation: inputs keep their start values and the first
@@ -354,7 +354,7 @@ class System:
             else:
                 t_end = t_sum
             lap_done = self.lap_slot is not None and signals[self.lap_slot] >= self.lap_count
-            if k % self.decimation == 0 or k == total or lap_done or time_base == "sum":
+            if k % self.decimation == 0 or (k == total and fixed_stop is not None) or time_base == "sum":
                 rows.append([t_end] + [signals[s] for s in self.record_slots])
             if lap_done:
                 break

@@ -603,7 +603,9 @@ impl Simulation {
             let lap_done = self
                 .lap_sig
                 .is_some_and(|s| self.signals[s] >= exp.lap_count);
-            if k.is_multiple_of(decimation) || k == total_steps || lap_done {
+            // Rows stay on the decimation grid (a uniform time base for filters); only a
+            // fixed stop time adds its final row.
+            if k.is_multiple_of(decimation) || (k == total_steps && fixed_stop.is_some()) {
                 self.record(t_end);
             }
             if lap_done {
