@@ -255,23 +255,30 @@ impl<M: Model> Runtime<M> {
 
     // ---- state machine ----
 
+    #[inline]
     fn require(&self, function: &str, allowed: &[Phase]) -> Result<(), fmi2Status> {
-        if let Some(p) = &self.poisoned {
-            return Err(self.error(&format!("{function} refused: {p}")));
-        }
-        if allowed.contains(&self.phase) {
+        if self.poisoned.is_none() && allowed.contains(&self.phase) {
             Ok(())
         } else {
-            Err(self.error(&format!(
-                "{function} is not allowed in state '{}' (allowed in: {})",
-                self.phase.name(),
-                allowed
-                    .iter()
-                    .map(|p| p.name())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )))
+            Err(self.refuse(function, allowed))
         }
+    }
+
+    /// The message of a call refused in this state (off the fast path).
+    #[cold]
+    fn refuse(&self, function: &str, allowed: &[Phase]) -> fmi2Status {
+        if let Some(p) = &self.poisoned {
+            return self.error(&format!("{function} refused: {p}"));
+        }
+        self.error(&format!(
+            "{function} is not allowed in state '{}' (allowed in: {})",
+            self.phase.name(),
+            allowed
+                .iter()
+                .map(|p| p.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))
     }
 
     fn fail(&mut self, function: &str, e: ModelError) -> fmi2Status {
