@@ -41,9 +41,11 @@ pub enum OptimizeError {
     File { path: PathBuf, message: String },
     #[error("{0}")]
     Invalid(String),
-    #[error("system: {0}")]
+    // Transparent: the inner errors name their file, instance or row already, and a
+    // prefixed message with a source would print the cause twice in the CLI's chain.
+    #[error(transparent)]
     System(#[from] crate::system::SystemError),
-    #[error("measurement: {0}")]
+    #[error(transparent)]
     Compare(#[from] tb_compare::Error),
     #[error("checkpoint: {0}")]
     Checkpoint(String),
@@ -51,6 +53,6 @@ pub enum OptimizeError {
     Threads(String),
     #[error("step '{step}': the start point cannot be evaluated: {reason}")]
     Start { step: String, reason: String },
-    #[error("{0}")]
+    #[error(transparent)]
     Io(#[from] std::io::Error),
 }
