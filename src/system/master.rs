@@ -194,34 +194,9 @@ impl Simulation {
                     ),
                 }
             };
-        // Resolve a name to an endpoint (same rules as the system's validation).
-        let resolve = |full: &str| -> Result<Endpoint, SystemError> {
-            let (u, var) = split_name(full)
-                .ok_or_else(|| invalid(&ctx, format!("'{full}' is not instance.variable")))?;
-            if let Some(k) = system.instances.iter().position(|i| i.name == u) {
-                let sv = system.instances[k].variable(var, &ctx)?;
-                Ok(Endpoint::Fmu {
-                    unit: k,
-                    vr: sv.value_reference,
-                    ty: sv.ty,
-                    unit_name: system.instances[k]
-                        .description()
-                        .unit_of(sv)
-                        .map(str::to_string),
-                })
-            } else if let Some(r) = system.replays.iter().position(|r| r.name == u) {
-                let c = system.replays[r]
-                    .column_index(var)
-                    .ok_or_else(|| invalid(&ctx, format!("no replayed column '{full}'")))?;
-                Ok(Endpoint::Replay {
-                    unit: n_fmu + r,
-                    column: c,
-                    unit_name: system.replays[r].units[c].clone(),
-                })
-            } else {
-                Err(invalid(&ctx, format!("unknown instance '{u}'")))
-            }
-        };
+        // Resolve a name to an endpoint (the rules the system's validation used).
+        let resolve =
+            |full: &str| super::resolve_endpoint(&system.instances, &system.replays, &ctx, full);
         // Connection sources.
         let mut conn_slots = Vec::new();
         for c in &system.connections {

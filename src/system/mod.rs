@@ -356,64 +356,11 @@ impl System {
                     .map(|k| n_fmu + k)
             })
         };
-        let unit_names: Vec<String> = instances
-            .iter()
-            .map(|i| i.name.clone())
-            .chain(replays.iter().map(|r| r.name.clone()))
-            .collect();
-        let unknown_unit = |ctx: &str, name: &str| {
-            let mut v: Vec<(usize, &String)> = unit_names
-                .iter()
-                .map(|n| (crate::fmu::description::edit_distance(name, n), n))
-                .collect();
-            v.sort();
-            invalid(
-                ctx,
-                format!(
-                    "unknown instance '{name}'; instances: {}",
-                    v.iter()
-                        .map(|x| x.1.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            )
-        };
+        let unknown_unit =
+            |ctx: &str, name: &str| unknown_instance(&instances, &replays, ctx, name);
         // A signal the system can read.
-        let resolve_source = |ctx: &str, full: &str| -> Result<Endpoint, SystemError> {
-            let (u, var) = split_name(full).ok_or_else(|| {
-                invalid(
-                    ctx,
-                    format!("'{full}' is not of the form instance.variable"),
-                )
-            })?;
-            let k = unit_index(u).ok_or_else(|| unknown_unit(ctx, u))?;
-            if k < n_fmu {
-                let sv = instances[k].variable(var, ctx)?;
-                Ok(Endpoint::Fmu {
-                    unit: k,
-                    vr: sv.value_reference,
-                    ty: sv.ty,
-                    unit_name: instances[k].description().unit_of(sv).map(str::to_string),
-                })
-            } else {
-                let r = &replays[k - n_fmu];
-                let c = r.column_index(var).ok_or_else(|| {
-                    invalid(
-                        ctx,
-                        format!(
-                            "replay '{}' has no column '{var}' (columns: {})",
-                            r.name,
-                            r.columns.join(", ")
-                        ),
-                    )
-                })?;
-                Ok(Endpoint::Replay {
-                    unit: k,
-                    column: c,
-                    unit_name: r.units[c].clone(),
-                })
-            }
-        };
+        let resolve_source =
+            |ctx: &str, full: &str| resolve_endpoint(&instances, &replays, ctx, full);
         // Connections.
         let mut connections: Vec<ConnectionDef> = Vec::new();
         for text in &file.connections {
@@ -575,6 +522,11 @@ impl System {
         }
         check_feedthrough_cycles(&instances, &connections, &mut warnings)
             .map_err(|m| invalid(&ctx_file, m))?;
+        let unit_names: Vec<String> = instances
+            .iter()
+            .map(|i| i.name.clone())
+            .chain(replays.iter().map(|r| r.name.clone()))
+            .collect();
         let order = stepping_order(
             &file,
             &unit_names,
@@ -606,6 +558,73 @@ impl System {
             &self.replays[k - self.instances.len()].name
         }
     }
+}
+
+/// "unknown instance" with every unit name, closest first.
+fn unknown_instance(
+    instances: &[InstanceDef],
+    replays: &[replay::ReplaySource],
+    ctx: &str,
+    name: &str,
+) -> SystemError {
+    let mut v: Vec<(usize, &str)> = instances
+        .iter()
+        .map(|i| i.name.as_str())
+        .chain(replays.iter().map(|r| r.name.as_str()))
+        .map(|n| (crate::fmu::description::edit_distance(name, n), n))
+        .collect();
+    v.sort();
+    invalid(
+        ctx,
+        format!(
+            "unknown instance '{name}'; instances: {}",
+            v.iter().map(|x| x.1).collect::<Vec<_>>().join(", ")
+        ),
+    )
+}
+
+/// A signal the system can read, `instance.variable`: an FMU variable (through the port
+/// map) or a replayed column. Instances come first in the unit numbering, then replays.
+pub(crate) fn resolve_endpoint(
+    instances: &[InstanceDef],
+    replays: &[replay::ReplaySource],
+    ctx: &str,
+    full: &str,
+) -> Result<Endpoint, SystemError> {
+    let (u, var) = split_name(full).ok_or_else(|| {
+        invalid(
+            ctx,
+            format!("'{full}' is not of the form instance.variable"),
+        )
+    })?;
+    if let Some(k) = instances.iter().position(|i| i.name == u) {
+        let sv = instances[k].variable(var, ctx)?;
+        return Ok(Endpoint::Fmu {
+            unit: k,
+            vr: sv.value_reference,
+            ty: sv.ty,
+            unit_name: instances[k].description().unit_of(sv).map(str::to_string),
+        });
+    }
+    let Some(k) = replays.iter().position(|r| r.name == u) else {
+        return Err(unknown_instance(instances, replays, ctx, u));
+    };
+    let r = &replays[k];
+    let c = r.column_index(var).ok_or_else(|| {
+        invalid(
+            ctx,
+            format!(
+                "replay '{}' has no column '{var}' (columns: {})",
+                r.name,
+                r.columns.join(", ")
+            ),
+        )
+    })?;
+    Ok(Endpoint::Replay {
+        unit: instances.len() + k,
+        column: c,
+        unit_name: r.units[c].clone(),
+    })
 }
 
 /// A parameter assignment: the instance, the variable and the typed value.

@@ -98,11 +98,7 @@ impl<M: Model> NativeBackend<M> {
         let status = match catch_unwind(AssertUnwindSafe(|| f(rt))) {
             Ok(s) => s,
             Err(payload) => {
-                let text = payload
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| payload.downcast_ref::<String>().cloned())
-                    .unwrap_or_else(|| "non-string panic payload".into());
+                let text = fmu_export::ffi::panic_text(&*payload);
                 self.rt.poison(function, &text)
             }
         };
