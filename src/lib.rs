@@ -1,15 +1,16 @@
-//! twinbench: the digital twin of a powertrain test bench.
+//! twinbench, the command line over the libraries:
 //!
-//! - `pack`: builds the model crates and writes FMI 2.0 Co-Simulation FMUs.
-//! - `cli`: the command line (one module per subcommand).
+//! - [`registry`]: the models twinbench ships (one list for packing and the native backend);
+//! - [`pack`]: builds the model crates and writes FMI 2.0 Co-Simulation FMUs;
+//! - [`report`]: Tab. 1 and plots of an optimisation study, from its stored results;
+//! - [`cli`]: one module per subcommand.
 //!
-//! The models live in `models/` (one crate each, over the `fmu-export` crate); signal
-//! processing and comparison in `crates/compare`, bench analysis in `crates/analysis`.
+//! The libraries: `tb-fmi` (FMI vocabulary and import), `tb-cosim` (system, plan, master,
+//! backends, results), `tb-compare` (distance-based comparison), `tb-optimize` (studies),
+//! `tb-analysis` (modal analysis, identification), `tb-plot` (plots); the models under
+//! `models/` over the `fmu-export` framework. `docs/design.md` maps them.
 
 pub mod cli;
-pub mod fmu;
-pub mod optimize;
 pub mod pack;
+pub mod registry;
 pub mod report;
-pub mod ssp;
-pub mod system;

@@ -66,15 +66,12 @@ impl ModelSpec {
     }
 }
 
-/// Every model twinbench ships, and the test FMUs.
+/// Every model twinbench ships, and the test FMUs (from [`crate::registry`]).
 pub fn models() -> Vec<ModelSpec> {
-    vec![
-        ModelSpec::of::<dyno::Dyno>("dyno", false),
-        ModelSpec::of::<driver::Driver>("driver", false),
-        ModelSpec::of::<vehicle::Vehicle>("vehicle", false),
-        ModelSpec::of::<edu::Edu>("edu", false),
-        ModelSpec::of::<faulty::Faulty>("faulty", true),
-    ]
+    crate::registry::models()
+        .into_iter()
+        .map(|m| m.pack)
+        .collect()
 }
 
 /// The workspace root (where `Cargo.toml` of twinbench lives).

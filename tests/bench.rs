@@ -4,8 +4,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use twinbench::fmu::FmuCache;
-use twinbench::system::{Simulation, System, SystemError};
+use tb_cosim::{Simulation, System, SystemError};
+use tb_fmi::FmuCache;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
@@ -18,7 +18,7 @@ fn cache() -> Arc<FmuCache> {
 fn simulate(
     system: &Path,
     set: &[(&str, toml::Value)],
-) -> (twinbench::system::RunSummary, twinbench::system::Recording) {
+) -> (tb_cosim::RunSummary, tb_cosim::Recording) {
     common::fmu_dir();
     let mut sim = Simulation::new(System::load(system, cache()).unwrap()).unwrap();
     sim.echo_fmu_log = false;
@@ -49,7 +49,7 @@ fn measured() -> Measured {
 }
 
 /// RMS and max of the speed difference over distance [km/h], inside the measured range.
-fn speed_error_kmh(rec: &twinbench::system::Recording, meas: &Measured) -> (f64, f64) {
+fn speed_error_kmh(rec: &tb_cosim::Recording, meas: &Measured) -> (f64, f64) {
     let d = rec.column("vehicle.distance").unwrap();
     let v = rec.column("vehicle.v").unwrap();
     let dmax = *meas.distance.last().unwrap();
@@ -105,7 +105,7 @@ fn rls_v_drives_the_spielberg_lap() {
 fn a_tenth_millisecond_step_agrees_with_the_millisecond_step() {
     let path = root().join("systems/rls_v.toml");
     let (s1, r1) = simulate(&path, &[]);
-    let mut file = twinbench::system::SystemFile::load(&path).unwrap();
+    let mut file = tb_cosim::SystemFile::load(&path).unwrap();
     file.experiment.step = 1e-4;
     file.record.decimation = 50;
     common::fmu_dir();
@@ -130,8 +130,8 @@ fn a_tenth_millisecond_step_agrees_with_the_millisecond_step() {
 #[test]
 fn jacobi_drives_the_same_lap() {
     let path = root().join("systems/rls_v.toml");
-    let mut file = twinbench::system::SystemFile::load(&path).unwrap();
-    file.experiment.algorithm = twinbench::system::Algorithm::Jacobi;
+    let mut file = tb_cosim::SystemFile::load(&path).unwrap();
+    file.experiment.algorithm = tb_cosim::Algorithm::Jacobi;
     common::fmu_dir();
     let mut sim = Simulation::new(System::from_file(file, &path, cache()).unwrap()).unwrap();
     sim.echo_fmu_log = false;
@@ -176,8 +176,8 @@ fn rls_alpha_and_n_alpha_run_the_lap_from_replayed_channels() {
 fn reruns_of_one_simulation_reuse_instances_and_repeat_exactly() {
     common::fmu_dir();
     let path = root().join("systems/rls_v.toml");
-    let mut file = twinbench::system::SystemFile::load(&path).unwrap();
-    file.experiment.stop = twinbench::system::StopConfig::Time(5.0);
+    let mut file = tb_cosim::SystemFile::load(&path).unwrap();
+    file.experiment.stop = tb_cosim::StopConfig::Time(5.0);
     let mut sim = Simulation::new(System::from_file(file, &path, cache()).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     sim.run().unwrap();
@@ -214,7 +214,7 @@ fn system_text(body: &str) -> String {
 fn load_err(body: &str) -> String {
     let text = system_text(body);
     let path = std::env::temp_dir().join(format!("tb-bench-err-{}.toml", std::process::id()));
-    let file = twinbench::system::SystemFile::parse(&text, &path).unwrap();
+    let file = tb_cosim::SystemFile::parse(&text, &path).unwrap();
     match System::from_file(file, &path, cache()) {
         Ok(_) => panic!("expected an error for:\n{body}"),
         Err(e) => e.to_string(),
@@ -276,7 +276,7 @@ fn a_direct_feed_through_cycle_is_reported_with_its_variables() {
     let ok = system_text("connections = [\"a.steps -> b.u\", \"b.steps -> a.u\"]\n[[instance]]\nname = \"a\"\nfmu = \"faulty\"\n\n[[instance]]\nname = \"b\"\nfmu = \"faulty\"\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n");
     let path = std::env::temp_dir().join("tb-bench-ok.toml");
     System::from_file(
-        twinbench::system::SystemFile::parse(&ok, &path).unwrap(),
+        tb_cosim::SystemFile::parse(&ok, &path).unwrap(),
         &path,
         cache(),
     )
@@ -289,7 +289,7 @@ fn an_fmu_failing_at_one_second_stops_the_run_with_instance_time_and_log() {
     let text = system_text(body);
     let path = std::env::temp_dir().join("tb-bench-fail.toml");
     let sys = System::from_file(
-        twinbench::system::SystemFile::parse(&text, &path).unwrap(),
+        tb_cosim::SystemFile::parse(&text, &path).unwrap(),
         &path,
         cache(),
     )

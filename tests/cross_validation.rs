@@ -7,8 +7,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
-use twinbench::fmu::FmuCache;
-use twinbench::system::{Algorithm, Simulation, StopConfig, System, SystemFile};
+use tb_cosim::{Algorithm, Simulation, StopConfig, System, SystemFile};
+use tb_fmi::FmuCache;
 
 const TOLERANCE: f64 = 1e-9;
 

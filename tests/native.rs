@@ -4,8 +4,8 @@
 mod common;
 
 use std::sync::Arc;
-use twinbench::fmu::FmuCache;
-use twinbench::system::{LoadOptions, Recording, Simulation, System};
+use tb_cosim::{LoadOptions, Recording, Simulation, System};
+use tb_fmi::FmuCache;
 
 fn run(native: bool, set: &[(&str, f64)]) -> (Simulation, Recording) {
     common::fmu_dir();
@@ -16,6 +16,7 @@ fn run(native: bool, set: &[(&str, f64)]) -> (Simulation, Recording) {
         cache,
         &LoadOptions {
             native,
+            native_models: twinbench::registry::native_models(),
             ..Default::default()
         },
     )
@@ -72,11 +73,11 @@ fn native_lap_is_bit_identical_to_the_fmu_lap() {
 
 #[test]
 fn native_errors_name_the_instance_and_keep_the_log() {
-    use twinbench::system::backend::BackendFactory;
-    use twinbench::system::native::NativeFactory;
+    use tb_cosim::backend::BackendFactory;
+    use tb_cosim::native::NativeFactory;
     let cache = FmuCache::temporary(false).unwrap();
     let fmu = cache.load(&common::fmu("dyno")).unwrap();
-    let f = NativeFactory::for_fmu(&fmu).unwrap();
+    let f = NativeFactory::for_fmu(&fmu, &twinbench::registry::native_models()).unwrap();
     assert_eq!(f.model(), "dyno");
     let mut b = f.create("dyno_x", false).unwrap();
     b.setup_experiment(0.0, Some(1.0)).unwrap();

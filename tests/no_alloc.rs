@@ -57,7 +57,7 @@ fn allocations_while_stepping<M: Model>(
         .iter()
         .filter(|v| {
             v.causality == fmu_export::variables::Causality::Output
-                && v.var_type() == fmu_export::variables::VarType::Real
+                && v.var_type() == fmu_export::variables::ScalarType::Real
         })
         .map(|v| v.value_reference)
         .collect();
@@ -66,7 +66,7 @@ fn allocations_while_stepping<M: Model>(
     for k in 0..steps {
         let s = rt.set(
             "fmi2SetReal",
-            fmu_export::variables::VarType::Real,
+            fmu_export::variables::ScalarType::Real,
             &vrs_in,
             vals_in.iter().map(|x| Value::Real(*x)),
         );
@@ -74,7 +74,7 @@ fn allocations_while_stepping<M: Model>(
         assert_eq!(rt.do_step(k as f64 * 1e-3, 1e-3), fmi2Status::OK);
         let s = rt.get(
             "fmi2GetReal",
-            fmu_export::variables::VarType::Real,
+            fmu_export::variables::ScalarType::Real,
             &vrs_out,
             &mut out,
             |v| v.as_f64(),

@@ -3,8 +3,8 @@
 //! checkpoint/restore equal to an uninterrupted run, failures penalised.
 
 use std::ops::ControlFlow;
-use twinbench::optimize::optimizer::to_unit;
-use twinbench::optimize::{
+use tb_optimize::optimizer::to_unit;
+use tb_optimize::{
     minimize, Cmaes, CmaesSettings, Ga, GaSettings, Optimizer, Problem, RunSettings, RunState,
 };
 

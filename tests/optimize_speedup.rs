@@ -6,11 +6,11 @@
 mod common;
 
 use std::time::Instant;
-use twinbench::fmu::FmuCache;
-use twinbench::optimize::bench::Bench;
-use twinbench::optimize::optimizer::{evaluate_all, thread_pool};
-use twinbench::optimize::run::cost_of;
-use twinbench::optimize::{Problem, Study};
+use tb_fmi::FmuCache;
+use tb_optimize::bench::Bench;
+use tb_optimize::optimizer::{evaluate_all, thread_pool};
+use tb_optimize::run::cost_of;
+use tb_optimize::{Problem, Study};
 
 struct Lift<'a> {
     bench: &'a Bench,

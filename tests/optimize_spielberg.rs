@@ -11,7 +11,7 @@
 
 mod common;
 
-use twinbench::optimize::{run_study, RunOptions, Study, StudyOutcome};
+use tb_optimize::{run_study, RunOptions, Study, StudyOutcome};
 
 #[test]
 fn spielberg_two_step_study_recovers_the_truth() {

@@ -6,7 +6,7 @@
 mod common;
 
 use std::path::Path;
-use twinbench::optimize::{run_study, RunOptions, Study, StudyOutcome, StudyResult};
+use tb_optimize::{run_study, RunOptions, Study, StudyOutcome, StudyResult};
 
 fn study_text(optimizer: &str, body: &str) -> String {
     let root = twinbench::pack::workspace_root();
@@ -88,7 +88,7 @@ fn assert_same(a: &StudyResult, b: &StudyResult, what: &str) {
         );
         assert_eq!(x.cost_after.to_bits(), y.cost_after.to_bits(), "{what}");
         assert_eq!(x.evaluations, y.evaluations, "{what}");
-        let h = |r: &twinbench::optimize::StepResult| -> Vec<u64> {
+        let h = |r: &tb_optimize::StepResult| -> Vec<u64> {
             r.history.iter().map(|g| g.best_cost.to_bits()).collect()
         };
         assert_eq!(h(x), h(y), "{what}: best cost per generation");

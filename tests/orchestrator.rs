@@ -4,8 +4,8 @@ mod common;
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use twinbench::fmu::FmuCache;
-use twinbench::system::{Simulation, System, SystemFile};
+use tb_cosim::{Simulation, System, SystemFile};
+use tb_fmi::FmuCache;
 
 fn faulty_system(body: &str, name: &str) -> (SystemFile, PathBuf) {
     let fmu = common::fmu("faulty");

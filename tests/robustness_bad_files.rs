@@ -6,8 +6,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use twinbench::fmu::FmuCache;
-use twinbench::system::{Simulation, System};
+use tb_cosim::{Simulation, System};
+use tb_fmi::FmuCache;
 
 fn corpus(sub: &str, ext: &str) -> Vec<PathBuf> {
     let dir = twinbench::pack::workspace_root()
@@ -88,17 +88,17 @@ fn every_broken_study_file_gives_its_message() {
     let cases = corpus("studies", "toml");
     assert!(cases.len() >= 15, "{} study cases", cases.len());
     check_all(&cases, |p| {
-        let study = match twinbench::optimize::Study::load(p) {
+        let study = match tb_optimize::Study::load(p) {
             Err(e) => return Some(e.to_string()),
             Ok(s) => s,
         };
         // Everything else is refused before the first simulation.
-        let options = twinbench::optimize::RunOptions {
+        let options = tb_optimize::RunOptions {
             threads: 1,
             generations: Some(1),
             ..Default::default()
         };
-        twinbench::optimize::run_study(&study, &options)
+        tb_optimize::run_study(&study, &options)
             .err()
             .map(|e| e.to_string())
     });

@@ -8,9 +8,9 @@ mod common;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use twinbench::fmu::FmuCache;
-use twinbench::system::isolated::IsolationOptions;
-use twinbench::system::{LoadOptions, Simulation, System, SystemError, SystemFile};
+use tb_cosim::isolated::IsolationOptions;
+use tb_cosim::{LoadOptions, Simulation, System, SystemError, SystemFile};
+use tb_fmi::FmuCache;
 
 fn cache() -> Arc<FmuCache> {
     Arc::new(FmuCache::temporary(false).unwrap())

@@ -13,8 +13,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
-use twinbench::fmu::FmuCache;
-use twinbench::system::{Recording, Simulation, StopConfig, System, SystemFile};
+use tb_cosim::{Recording, Simulation, StopConfig, System, SystemFile};
+use tb_fmi::FmuCache;
 
 /// Resident set size of this process [kB] (VmRSS).
 fn rss_kb() -> u64 {

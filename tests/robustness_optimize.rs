@@ -9,7 +9,7 @@
 mod common;
 
 use std::path::Path;
-use twinbench::optimize::{run_study, RunOptions, Study, StudyOutcome};
+use tb_optimize::{run_study, RunOptions, Study, StudyOutcome};
 
 /// rls_v.toml with absolute paths and the supplier instance.
 fn system_text(kind: i32, isolate: bool) -> String {

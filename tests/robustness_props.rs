@@ -9,7 +9,7 @@ mod common;
 use proptest::prelude::*;
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
-use twinbench::fmu::FmuCache;
+use tb_fmi::FmuCache;
 
 /// A random edit: delete, insert or overwrite a few bytes at a position.
 #[derive(Clone, Debug)]
@@ -111,12 +111,12 @@ proptest! {
     fn model_description_never_panics_on_edits(k in 0..64usize, edits in prop::collection::vec(edit(), 1..6)) {
         let s = md_seeds();
         let text = apply(&s[k % s.len()], &edits);
-        let _ = twinbench::fmu::description::parse(&String::from_utf8_lossy(&text));
+        let _ = tb_fmi::description::parse(&String::from_utf8_lossy(&text));
     }
 
     #[test]
     fn model_description_never_panics_on_arbitrary_text(text in "\\PC{0,400}") {
-        let _ = twinbench::fmu::description::parse(&text);
+        let _ = tb_fmi::description::parse(&text);
     }
 }
 
@@ -143,14 +143,14 @@ fn system_path() -> PathBuf {
 
 fn check_system(text: &str) {
     let path = system_path();
-    if let Ok(file) = twinbench::system::SystemFile::parse(text, &path) {
+    if let Ok(file) = tb_cosim::SystemFile::parse(text, &path) {
         // Only regular files (an edit could name /dev/zero) and no preloaded libraries.
         if file.fmus.values().all(|p| p.is_file())
             && file.replay.iter().all(|r| r.file.is_file())
             && file.preload.is_empty()
         {
-            if let Ok(sys) = twinbench::system::System::from_file(file, &path, shared_cache()) {
-                let _ = twinbench::system::Simulation::new(sys);
+            if let Ok(sys) = tb_cosim::System::from_file(file, &path, shared_cache()) {
+                let _ = tb_cosim::Simulation::new(sys);
             }
         }
     }

@@ -8,8 +8,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
-use twinbench::fmu::FmuCache;
-use twinbench::system::{Algorithm, Simulation, StopConfig, System, SystemFile};
+use tb_cosim::{Algorithm, Simulation, StopConfig, System, SystemFile};
+use tb_fmi::FmuCache;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
@@ -43,10 +43,10 @@ fn twinbench_csv(system: &Path, out: &Path) -> u64 {
 fn export(system: &Path, out: &Path, stop: f64) -> serde_json::Value {
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
     let sys = System::load(system, cache).unwrap();
-    let s = twinbench::ssp::export(
+    let s = tb_cosim::ssp::export(
         &sys,
         out,
-        &twinbench::ssp::ExportOptions {
+        &tb_cosim::ssp::ExportOptions {
             stop_time: Some(stop),
         },
     )
@@ -229,7 +229,7 @@ fn replays_are_refused_with_a_clear_error() {
     let sys = System::load(&path, cache).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("x.ssp");
-    let e = twinbench::ssp::export(&sys, &out, &Default::default())
+    let e = tb_cosim::ssp::export(&sys, &out, &Default::default())
         .unwrap_err()
         .to_string();
     assert!(e.contains("replay") && e.contains("SSP 1.0"), "{e}");
@@ -244,6 +244,6 @@ fn replays_are_refused_with_a_clear_error() {
         Arc::new(FmuCache::temporary(false).unwrap()),
     )
     .unwrap();
-    twinbench::ssp::export(&sys, &out, &Default::default()).unwrap();
+    tb_cosim::ssp::export(&sys, &out, &Default::default()).unwrap();
     assert!(out.exists());
 }

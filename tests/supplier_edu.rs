@@ -11,8 +11,8 @@ mod common;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
-use twinbench::fmu::FmuCache;
-use twinbench::system::{Recording, RunSummary, Simulation, System, SystemFile};
+use tb_cosim::{Recording, RunSummary, Simulation, System, SystemFile};
+use tb_fmi::FmuCache;
 
 const RPM: f64 = PI / 30.0;
 

@@ -11,8 +11,8 @@ mod common;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use twinbench::fmu::FmuCache;
-use twinbench::system::{Recording, Simulation, System, SystemFile};
+use tb_cosim::{Recording, Simulation, System, SystemFile};
+use tb_fmi::FmuCache;
 
 fn faulty_xml() -> String {
     let fmu = common::fmu("faulty");
@@ -172,7 +172,7 @@ fn fmus_with_extra_root_attributes_annotations_and_vendor_attributes_load_and_ru
         assert_eq!(md.model_name, "faulty", "{name}");
         let u = md.variable("u").unwrap();
         assert_eq!(
-            (u.causality.as_str(), u.start.as_deref()),
+            (u.causality.xml_name(), u.start.as_deref()),
             ("input", Some("0")),
             "{name}"
         );
@@ -212,7 +212,7 @@ fn units_unknown_to_us_but_defined_by_the_fmus_are_converted() {
         };
         repack(dir.path(), name, &edit(&xml, from, &to))
     };
-    assert!(twinbench::fmu::description::ModelDescription::default()
+    assert!(tb_fmi::description::ModelDescription::default()
         .unit_def("h")
         .is_none());
     for u in ["h", "min", "degC", "degF", "furlong"] {

@@ -1,10 +1,10 @@
 //! `twinbench benchmark`: one lap of the 5-instance bench at 1 ms, timed (issue 4's figure:
 //! wall time, real-time factor, nanoseconds per macro step).
 
-use crate::fmu::FmuCache;
-use crate::system::{Simulation, System};
 use std::path::PathBuf;
 use std::sync::Arc;
+use tb_cosim::{Simulation, System};
+use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
 pub struct BenchmarkArgs {

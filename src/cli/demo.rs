@@ -3,10 +3,10 @@
 //! (RLS/v) in the loop against the bundled Spielberg measurement, prints Tab. 1 and writes
 //! the report (Tab. 1 as Markdown and JSON, plots as SVG and PNG) to a folder it names.
 
-use crate::optimize::{run_study, RunOptions, Study, StudyOutcome};
 use anyhow::Context;
 use std::path::PathBuf;
 use std::time::Instant;
+use tb_optimize::{run_study, RunOptions, Study, StudyOutcome};
 
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
@@ -51,7 +51,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let optimise_start = Instant::now();
     let options = RunOptions {
         threads: args.threads,
-        progress: true,
+        progress: Some(super::progress::Bars::shared()),
         checkpoint: Some(args.out.join(format!("{}.checkpoint.json", study.name()))),
         resume: false,
         verbose: true,

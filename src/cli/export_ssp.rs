@@ -1,10 +1,10 @@
 //! `twinbench export-ssp`: write a system as an SSP 1.0 package (SystemStructure.ssd plus
 //! the FMUs under resources/), for FMPy's simulate_ssp, libcosim and other SSP tools.
 
-use crate::fmu::FmuCache;
-use crate::system::System;
 use std::path::PathBuf;
 use std::sync::Arc;
+use tb_cosim::System;
+use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
 pub struct ExportSspArgs {
@@ -25,10 +25,10 @@ pub struct ExportSspArgs {
 pub fn run(args: ExportSspArgs) -> anyhow::Result<()> {
     let cache = Arc::new(FmuCache::temporary(false)?);
     let system = System::load(&args.system, cache)?;
-    let options = crate::ssp::ExportOptions {
+    let options = tb_cosim::ssp::ExportOptions {
         stop_time: args.stop_time,
     };
-    let s = crate::ssp::export(&system, &args.out, &options)?;
+    let s = tb_cosim::ssp::export(&system, &args.out, &options)?;
     if args.json {
         let mut j = serde_json::to_value(&s)?;
         j["out"] = serde_json::json!(args.out);

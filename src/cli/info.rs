@@ -1,7 +1,7 @@
 //! `twinbench info`: an FMU's capabilities and variables.
 
-use crate::fmu::FmuCache;
 use std::path::PathBuf;
+use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
 pub struct InfoArgs {
@@ -17,7 +17,7 @@ pub struct InfoArgs {
 
 pub fn run(args: InfoArgs) -> anyhow::Result<()> {
     for lib in &args.preload {
-        crate::fmu::library::preload_global(lib)?;
+        tb_fmi::library::preload_global(lib)?;
     }
     let cache = FmuCache::temporary(false)?;
     let fmu = cache.load(&args.fmu)?;
@@ -30,7 +30,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             .map(|v| {
                 serde_json::json!({
                     "name": v.name, "value_reference": v.value_reference, "type": v.ty.name(),
-                    "causality": v.causality, "variability": v.variability, "unit": md.unit_of(v),
+                    "causality": v.causality.xml_name(), "variability": v.variability.xml_name(), "unit": md.unit_of(v),
                     "start": v.start, "min": v.min, "max": v.max, "description": v.description,
                 })
             })

@@ -12,6 +12,7 @@ pub mod info;
 pub mod modal;
 pub mod optimize;
 pub mod pack;
+pub mod progress;
 pub mod run;
 pub mod worker;
 

@@ -1,9 +1,9 @@
 //! `twinbench optimize STUDY.toml [--resume] [--json] [--threads N]`: runs an optimisation
 //! study (docs/optimize.md), checkpointing after every generation.
 
-use crate::optimize::{run_study, OptimizerKind, RunOptions, Study, StudyOutcome};
 use anyhow::Context;
 use std::path::PathBuf;
+use tb_optimize::{run_study, OptimizerKind, RunOptions, Study, StudyOutcome};
 
 #[derive(clap::Args, Debug)]
 pub struct OptimizeArgs {
@@ -53,7 +53,7 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
     }
     let options = RunOptions {
         threads: args.threads,
-        progress: !args.json,
+        progress: (!args.json).then(super::progress::Bars::shared),
         checkpoint: Some(checkpoint.clone()),
         resume: args.resume,
         stop_after: None,

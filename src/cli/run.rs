@@ -1,10 +1,10 @@
 //! `twinbench run`: run a system file.
 
-use crate::fmu::FmuCache;
-use crate::system::{LoadOptions, Simulation, System};
 use anyhow::Context;
 use std::path::PathBuf;
 use std::sync::Arc;
+use tb_cosim::{LoadOptions, Simulation, System};
+use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
@@ -63,8 +63,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     );
     let options = LoadOptions {
         native: args.native,
+        native_models: crate::registry::native_models(),
         isolate: args.isolate,
-        isolation: crate::system::isolated::IsolationOptions {
+        isolation: tb_cosim::isolated::IsolationOptions {
             timeout: std::time::Duration::from_secs_f64(args.worker_timeout),
             worker_exe: None,
         },

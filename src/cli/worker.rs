@@ -5,5 +5,5 @@
 pub struct WorkerArgs {}
 
 pub fn run(_args: WorkerArgs) -> anyhow::Result<()> {
-    std::process::exit(crate::system::isolated::serve_stdio())
+    std::process::exit(tb_cosim::isolated::serve_stdio())
 }

@@ -2,14 +2,14 @@
 //! (SVG + PNG): Fz_sum over distance measured / initial / optimised, filtered and unfiltered
 //! (Fig. 7); time over distance (Fig. 6); best cost per generation; a_x of twin and car.
 
-use crate::fmu::FmuCache;
-use crate::optimize::bench::Bench;
-use crate::optimize::{OptimizeError, Study, StudyResult};
-use crate::system::results::write_atomic;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_compare::{Measurement, PreparedMeasurement, Table, Workspace};
+use tb_cosim::results::write_atomic;
+use tb_fmi::FmuCache;
+use tb_optimize::bench::Bench;
+use tb_optimize::{OptimizeError, Study, StudyResult};
 use tb_plot::LinePlot;
 
 #[derive(Debug, thiserror::Error)]
@@ -233,12 +233,12 @@ pub fn write_report(
     // The lap with the initial and the optimised parameters.
     let cache = Arc::new(
         FmuCache::temporary(false)
-            .map_err(|e| OptimizeError::System(crate::system::SystemError::from(e)))?,
+            .map_err(|e| OptimizeError::System(tb_cosim::SystemError::from(e)))?,
     );
     let bench = Bench::new(study, cache)?;
     let measurement = Measurement::read_path(&study.measurement_path)?;
     let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum", "a_x"], &study.file.compare)?;
-    let pool = crate::optimize::optimizer::thread_pool(threads.min(2))?;
+    let pool = tb_optimize::optimizer::thread_pool(threads.min(2))?;
     let (initial, optimised) = pool.install(|| {
         rayon::join(
             || bench.run(&result.parameters_initial, &prepared),

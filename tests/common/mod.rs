@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
-use twinbench::fmu::{FmuCache, LoadedFmu};
+use tb_fmi::{FmuCache, LoadedFmu};
 
 /// Pack every model once per test binary (a no-op build when nothing changed), so that the
 /// tests always run the FMUs of the current sources.

@@ -4,7 +4,8 @@
 //! [`Model`] trait, and calls [`export_fmu!`] (behind its `fmu` feature) to get every
 //! `fmi2*` C entry point. Nothing else in the models touches FFI.
 //!
-//! - [`fmi2`]: the C types, shared with the orchestrator's importer.
+//! - [`fmi2`], [`units`], [`Phase`], [`Function`]: re-exported from `tb-fmi`, the FMI vocabulary
+//!   shared with the importer (C types, unit table, states and the function table).
 //! - [`variables`]: the variable table, one source of truth per variable.
 //! - [`model`]: the trait a model implements.
 //! - [`runtime`]: the safe instance and its FMI state machine (also usable natively).
@@ -13,15 +14,15 @@
 
 pub mod description;
 pub mod ffi;
-pub mod fmi2;
 pub mod model;
 pub mod runtime;
-pub mod units;
 pub mod variables;
+
+pub use tb_fmi::{fmi2, units, Function, Phase};
 
 pub use model::{
     Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, Severity, StateReader,
     StateWriter,
 };
-pub use runtime::{Logger, NullLogger, Phase, Runtime};
+pub use runtime::{Logger, NullLogger, Runtime};
 pub use variables::{Value, VarInfo, VarTable};

@@ -4,30 +4,9 @@
 
 use crate::fmi2::fmi2Status;
 use crate::model::{Context, Model, ModelError, Severity, StateReader, StateWriter};
-use crate::variables::{Causality, Value, VarInfo, VarTable, VarType, Variability};
+use crate::variables::{Causality, ScalarType, Value, VarInfo, VarTable, Variability};
 use std::path::PathBuf;
-
-/// Where an instance is in the FMI 2.0 Co-Simulation state machine (FMI 2.0 §4.2.4).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Phase {
-    Instantiated,
-    InitializationMode,
-    StepComplete,
-    Terminated,
-    Error,
-}
-
-impl Phase {
-    fn name(self) -> &'static str {
-        match self {
-            Phase::Instantiated => "instantiated",
-            Phase::InitializationMode => "initialization mode",
-            Phase::StepComplete => "step complete",
-            Phase::Terminated => "terminated",
-            Phase::Error => "error",
-        }
-    }
-}
+use tb_fmi::{Function, Phase, PhaseSet};
 
 /// Log categories declared in modelDescription.xml, in bit order.
 pub const LOG_CATEGORIES: &[(&str, &str)] = &[
@@ -74,7 +53,7 @@ pub struct Snapshot<M: Model> {
 #[derive(Clone, Copy, Debug)]
 struct Slot {
     index: u32,
-    ty: VarType,
+    ty: ScalarType,
     has_start: bool,
     /// Settable in instantiated / initialization mode.
     settable_init: bool,
@@ -87,7 +66,7 @@ struct Slot {
 
 const NO_SLOT: Slot = Slot {
     index: u32::MAX,
-    ty: VarType::Real,
+    ty: ScalarType::Real,
     has_start: false,
     settable_init: false,
     settable_run: false,
@@ -255,29 +234,31 @@ impl<M: Model> Runtime<M> {
 
     // ---- state machine ----
 
+    /// The call-order check: the phases of [`tb_fmi::FUNCTIONS`], and no poisoned instance.
     #[inline]
-    fn require(&self, function: &str, allowed: &[Phase]) -> Result<(), fmi2Status> {
-        if self.poisoned.is_none() && allowed.contains(&self.phase) {
+    fn require(&self, function: Function) -> Result<(), fmi2Status> {
+        self.require_named(function.name(), function.allowed())
+    }
+
+    #[inline]
+    fn require_named(&self, name: &str, allowed: PhaseSet) -> Result<(), fmi2Status> {
+        if self.poisoned.is_none() && allowed.contains(self.phase) {
             Ok(())
         } else {
-            Err(self.refuse(function, allowed))
+            Err(self.refuse(name, allowed))
         }
     }
 
     /// The message of a call refused in this state (off the fast path).
     #[cold]
-    fn refuse(&self, function: &str, allowed: &[Phase]) -> fmi2Status {
+    fn refuse(&self, function: &str, allowed: PhaseSet) -> fmi2Status {
         if let Some(p) = &self.poisoned {
             return self.error(&format!("{function} refused: {p}"));
         }
         self.error(&format!(
             "{function} is not allowed in state '{}' (allowed in: {})",
             self.phase.name(),
-            allowed
-                .iter()
-                .map(|p| p.name())
-                .collect::<Vec<_>>()
-                .join(", ")
+            allowed.describe()
         ))
     }
 
@@ -294,7 +275,7 @@ impl<M: Model> Runtime<M> {
     }
 
     pub fn setup_experiment(&mut self, start_time: f64, stop_time: Option<f64>) -> fmi2Status {
-        if let Err(s) = self.require("fmi2SetupExperiment", &[Phase::Instantiated]) {
+        if let Err(s) = self.require(Function::SetupExperiment) {
             return s;
         }
         if !start_time.is_finite() {
@@ -316,7 +297,7 @@ impl<M: Model> Runtime<M> {
     }
 
     pub fn enter_initialization_mode(&mut self) -> fmi2Status {
-        if let Err(s) = self.require("fmi2EnterInitializationMode", &[Phase::Instantiated]) {
+        if let Err(s) = self.require(Function::EnterInitializationMode) {
             return s;
         }
         self.phase = Phase::InitializationMode;
@@ -345,7 +326,7 @@ impl<M: Model> Runtime<M> {
     }
 
     pub fn exit_initialization_mode(&mut self) -> fmi2Status {
-        if let Err(s) = self.require("fmi2ExitInitializationMode", &[Phase::InitializationMode]) {
+        if let Err(s) = self.require(Function::ExitInitializationMode) {
             return s;
         }
         let s = self.ensure_initialized("fmi2ExitInitializationMode");
@@ -357,7 +338,7 @@ impl<M: Model> Runtime<M> {
     }
 
     pub fn terminate(&mut self) -> fmi2Status {
-        if let Err(s) = self.require("fmi2Terminate", &[Phase::StepComplete]) {
+        if let Err(s) = self.require(Function::Terminate) {
             return s;
         }
         self.phase = Phase::Terminated;
@@ -381,7 +362,7 @@ impl<M: Model> Runtime<M> {
     }
 
     pub fn do_step(&mut self, current_time: f64, step: f64) -> fmi2Status {
-        if let Err(s) = self.require("fmi2DoStep", &[Phase::StepComplete]) {
+        if let Err(s) = self.require(Function::DoStep) {
             return s;
         }
         if step <= 0.0 || !step.is_finite() {
@@ -448,7 +429,7 @@ impl<M: Model> Runtime<M> {
         }
     }
 
-    fn check_type(&self, function: &str, info: &VarInfo, ty: VarType) -> Result<(), fmi2Status> {
+    fn check_type(&self, function: &str, info: &VarInfo, ty: ScalarType) -> Result<(), fmi2Status> {
         if info.var_type() == ty {
             Ok(())
         } else {
@@ -466,21 +447,12 @@ impl<M: Model> Runtime<M> {
     pub fn get<T>(
         &mut self,
         function: &str,
-        ty: VarType,
+        ty: ScalarType,
         vrs: &[u32],
         out: &mut [T],
         conv: impl Fn(Value) -> T,
     ) -> fmi2Status {
-        if let Err(s) = self.require(
-            function,
-            &[
-                Phase::Instantiated,
-                Phase::InitializationMode,
-                Phase::StepComplete,
-                Phase::Terminated,
-                Phase::Error,
-            ],
-        ) {
+        if let Err(s) = self.require_named(function, Function::GetReal.allowed()) {
             return s;
         }
         if vrs.len() != out.len() {
@@ -521,7 +493,7 @@ impl<M: Model> Runtime<M> {
 
     /// The message of a refused get (off the fast path).
     #[cold]
-    fn get_error(&self, function: &str, ty: VarType, vr: u32) -> fmi2Status {
+    fn get_error(&self, function: &str, ty: ScalarType, vr: u32) -> fmi2Status {
         let i = match self.index(function, vr) {
             Ok(i) => i,
             Err(s) => return s,
@@ -541,18 +513,11 @@ impl<M: Model> Runtime<M> {
     pub fn set(
         &mut self,
         function: &str,
-        ty: VarType,
+        ty: ScalarType,
         vrs: &[u32],
         values: impl ExactSizeIterator<Item = Value>,
     ) -> fmi2Status {
-        if let Err(s) = self.require(
-            function,
-            &[
-                Phase::Instantiated,
-                Phase::InitializationMode,
-                Phase::StepComplete,
-            ],
-        ) {
+        if let Err(s) = self.require_named(function, Function::SetReal.allowed()) {
             return s;
         }
         if vrs.len() != values.len() {
@@ -592,7 +557,7 @@ impl<M: Model> Runtime<M> {
 
     /// The message of a refused set (off the fast path).
     #[cold]
-    fn set_error(&self, function: &str, ty: VarType, vr: u32, value: Value) -> fmi2Status {
+    fn set_error(&self, function: &str, ty: ScalarType, vr: u32, value: Value) -> fmi2Status {
         let i = match self.index(function, vr) {
             Ok(i) => i,
             Err(s) => return s,
@@ -713,13 +678,7 @@ impl<M: Model> Runtime<M> {
         let mut w = StateWriter::default();
         w.bytes.extend_from_slice(STATE_MAGIC);
         w.bytes(self.guid.as_bytes());
-        w.u64(match snap.phase {
-            Phase::Instantiated => 0,
-            Phase::InitializationMode => 1,
-            Phase::StepComplete => 2,
-            Phase::Terminated => 3,
-            Phase::Error => 4,
-        });
+        w.u64(snap.phase as u8 as u64);
         w.f64(snap.time);
         w.f64(snap.start_time);
         w.bool(snap.stop_time.is_some());
@@ -758,14 +717,11 @@ impl<M: Model> Runtime<M> {
                     self.guid
                 )));
             }
-            let phase = match r.u64()? {
-                0 => Phase::Instantiated,
-                1 => Phase::InitializationMode,
-                2 => Phase::StepComplete,
-                3 => Phase::Terminated,
-                4 => Phase::Error,
-                p => return Err(ModelError::new(format!("bad phase {p}"))),
-            };
+            let p = r.u64()?;
+            let phase = u8::try_from(p)
+                .ok()
+                .and_then(Phase::from_u8)
+                .ok_or_else(|| ModelError::new(format!("bad phase {p}")))?;
             let time = r.f64()?;
             let start_time = r.f64()?;
             let has_stop = r.bool()?;
@@ -776,9 +732,15 @@ impl<M: Model> Runtime<M> {
             let mut vars = M::Vars::default();
             for (i, info) in M::Vars::VARIABLES.iter().enumerate() {
                 let v = match info.var_type() {
-                    VarType::Real => Value::Real(r.f64()?),
-                    VarType::Integer => Value::Integer(r.i32()?),
-                    VarType::Boolean => Value::Boolean(r.bool()?),
+                    ScalarType::Real => Value::Real(r.f64()?),
+                    ScalarType::Integer => Value::Integer(r.i32()?),
+                    ScalarType::Boolean => Value::Boolean(r.bool()?),
+                    other => {
+                        return Err(ModelError::new(format!(
+                            "variable '{}' is {other}, which the export framework does not support",
+                            info.name
+                        )))
+                    }
                 };
                 vars.set(i, v);
             }

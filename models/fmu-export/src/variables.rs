@@ -5,84 +5,7 @@
 //! read and write) and the table of [`VarInfo`] that drives the runtime (value references,
 //! causality checks, ranges) and generates `modelDescription.xml` and the documentation.
 
-/// Scalar type of a variable.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum VarType {
-    Real,
-    Integer,
-    Boolean,
-}
-
-impl VarType {
-    pub fn xml_name(self) -> &'static str {
-        match self {
-            VarType::Real => "Real",
-            VarType::Integer => "Integer",
-            VarType::Boolean => "Boolean",
-        }
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Causality {
-    Parameter,
-    CalculatedParameter,
-    Input,
-    Output,
-    Local,
-    Independent,
-}
-
-impl Causality {
-    pub fn xml_name(self) -> &'static str {
-        match self {
-            Causality::Parameter => "parameter",
-            Causality::CalculatedParameter => "calculatedParameter",
-            Causality::Input => "input",
-            Causality::Output => "output",
-            Causality::Local => "local",
-            Causality::Independent => "independent",
-        }
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Variability {
-    Constant,
-    Fixed,
-    Tunable,
-    Discrete,
-    Continuous,
-}
-
-impl Variability {
-    pub fn xml_name(self) -> &'static str {
-        match self {
-            Variability::Constant => "constant",
-            Variability::Fixed => "fixed",
-            Variability::Tunable => "tunable",
-            Variability::Discrete => "discrete",
-            Variability::Continuous => "continuous",
-        }
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Initial {
-    Exact,
-    Approx,
-    Calculated,
-}
-
-impl Initial {
-    pub fn xml_name(self) -> &'static str {
-        match self {
-            Initial::Exact => "exact",
-            Initial::Approx => "approx",
-            Initial::Calculated => "calculated",
-        }
-    }
-}
+pub use tb_fmi::schema::{format_real, Causality, Initial, ScalarType, Variability};
 
 /// A typed scalar value.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -93,11 +16,11 @@ pub enum Value {
 }
 
 impl Value {
-    pub fn var_type(self) -> VarType {
+    pub fn var_type(self) -> ScalarType {
         match self {
-            Value::Real(_) => VarType::Real,
-            Value::Integer(_) => VarType::Integer,
-            Value::Boolean(_) => VarType::Boolean,
+            Value::Real(_) => ScalarType::Real,
+            Value::Integer(_) => ScalarType::Integer,
+            Value::Boolean(_) => ScalarType::Boolean,
         }
     }
 
@@ -118,13 +41,6 @@ impl Value {
             Value::Boolean(b) => b.to_string(),
         }
     }
-}
-
-/// Shortest decimal text that parses back to the same f64 (Rust's `Display` is round-trip
-/// exact); integral values keep a trailing ".0" out for readability.
-pub fn format_real(x: f64) -> String {
-    let s = format!("{x:?}");
-    s.strip_suffix(".0").map(str::to_string).unwrap_or(s)
 }
 
 /// Everything modelDescription.xml and the runtime know about one variable.
@@ -233,7 +149,7 @@ impl VarInfo {
         self
     }
 
-    pub fn var_type(&self) -> VarType {
+    pub fn var_type(&self) -> ScalarType {
         self.start.var_type()
     }
 

@@ -99,13 +99,13 @@ impl UnitDef {
         if self.factor != 1.0 {
             out.push_str(&format!(
                 " factor=\"{}\"",
-                crate::variables::format_real(self.factor)
+                crate::schema::format_real(self.factor)
             ));
         }
         if self.offset != 0.0 {
             out.push_str(&format!(
                 " offset=\"{}\"",
-                crate::variables::format_real(self.offset)
+                crate::schema::format_real(self.offset)
             ));
         }
         out

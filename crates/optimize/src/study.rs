@@ -216,7 +216,7 @@ impl Study {
                 return Err(bad(format!("{ctx}: the weights sum to zero")));
             }
             for p in &s.parameters {
-                if crate::system::split_name(&p.name).is_none() {
+                if tb_cosim::split_name(&p.name).is_none() {
                     return Err(bad(format!(
                         "{ctx}: parameter '{}' is not instance.variable",
                         p.name

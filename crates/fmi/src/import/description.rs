@@ -1,40 +1,20 @@
 //! modelDescription.xml reader (FMI 2.0). Tolerant as the standard asks: unknown
 //! attributes and elements (vendor annotations, tool extensions) are ignored.
 
-use fmu_export::units::UnitDef;
+pub use crate::schema::{Causality, Initial, ScalarType, Variability};
+use crate::units::UnitDef;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::Reader;
 use std::collections::HashMap;
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ScalarType {
-    Real,
-    Integer,
-    Boolean,
-    String,
-    Enumeration,
-}
-
-impl ScalarType {
-    pub fn name(self) -> &'static str {
-        match self {
-            ScalarType::Real => "Real",
-            ScalarType::Integer => "Integer",
-            ScalarType::Boolean => "Boolean",
-            ScalarType::String => "String",
-            ScalarType::Enumeration => "Enumeration",
-        }
-    }
-}
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScalarVariable {
     pub name: String,
     pub value_reference: u32,
     pub description: String,
-    pub causality: String,
-    pub variability: String,
-    pub initial: Option<String>,
+    pub causality: Causality,
+    pub variability: Variability,
+    pub initial: Option<Initial>,
     pub ty: ScalarType,
     pub declared_type: Option<String>,
     pub unit: Option<String>,
@@ -344,19 +324,26 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                     .get("valueReference")
                     .and_then(|s| s.trim().parse().ok())
                     .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
+                let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
+                let causality = match m.get("causality") {
+                    Some(c) => Causality::parse(c).map_err(ctx)?,
+                    None => Causality::DEFAULT,
+                };
+                let variability = match m.get("variability") {
+                    Some(v) => Variability::parse(v).map_err(ctx)?,
+                    None => Variability::DEFAULT,
+                };
+                let initial = match m.get("initial") {
+                    Some(i) => Some(Initial::parse(i).map_err(ctx)?),
+                    None => None,
+                };
                 current = Some(ScalarVariable {
                     name: vname,
                     value_reference: vr,
                     description: m.get("description").cloned().unwrap_or_default(),
-                    causality: m
-                        .get("causality")
-                        .cloned()
-                        .unwrap_or_else(|| "local".into()),
-                    variability: m
-                        .get("variability")
-                        .cloned()
-                        .unwrap_or_else(|| "continuous".into()),
-                    initial: m.get("initial").cloned(),
+                    causality,
+                    variability,
+                    initial,
                     ty: ScalarType::Real,
                     declared_type: None,
                     unit: None,
@@ -375,13 +362,7 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
             ("ScalarVariable", t @ ("Real" | "Integer" | "Boolean" | "String" | "Enumeration")) => {
                 if let Some(v) = current.as_mut() {
                     let ctx = format!("variable '{}'", v.name);
-                    v.ty = match t {
-                        "Real" => ScalarType::Real,
-                        "Integer" => ScalarType::Integer,
-                        "Boolean" => ScalarType::Boolean,
-                        "String" => ScalarType::String,
-                        _ => ScalarType::Enumeration,
-                    };
+                    v.ty = ScalarType::parse(t).expect("matched above");
                     v.declared_type = m.get("declaredType").cloned();
                     v.unit = m.get("unit").cloned();
                     v.start = m.get("start").cloned();

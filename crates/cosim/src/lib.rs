@@ -13,16 +13,17 @@ pub mod master;
 pub mod native;
 pub mod replay;
 pub mod results;
+pub mod ssp;
 
 pub use config::{Algorithm, StopConfig, SystemFile};
 pub use master::{RunSummary, Simulation};
 pub use results::Recording;
 
-use crate::fmu::description::{ModelDescription, ScalarType, ScalarVariable};
-use crate::fmu::{FmuCache, FmuError, LoadedFmu};
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 use std::sync::Arc;
+use tb_fmi::description::{ModelDescription, ScalarVariable};
+use tb_fmi::{Causality, FmuCache, FmuError, LoadedFmu, ScalarType, Variability};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SystemError {
@@ -75,6 +76,8 @@ pub struct InstanceDef {
 pub struct LoadOptions {
     /// Run linked models natively (no FMI boundary); other FMUs stay FMUs (with a warning).
     pub native: bool,
+    /// The models linked into the host that `native` may use (the host's model registry).
+    pub native_models: Vec<native::NativeModel>,
     /// Run every FMU instance in a worker process (as `isolate = true` does for one).
     pub isolate: bool,
     /// Watchdog and worker executable of isolated instances.
@@ -169,7 +172,7 @@ fn unit_conversion(
     let def = |md: &ModelDescription, u: &str| {
         md.unit_def(u)
             .copied()
-            .or_else(|| fmu_export::units::lookup(u).copied())
+            .or_else(|| tb_fmi::units::lookup(u).copied())
     };
     let (Some(a), Some(b)) = (def(from.0, fu), def(to.0, tu)) else {
         return Err(format!(
@@ -217,7 +220,7 @@ impl System {
     ) -> Result<System, SystemError> {
         let ctx_file = path.display().to_string();
         for lib in &file.preload {
-            crate::fmu::library::preload_global(lib)?;
+            tb_fmi::library::preload_global(lib)?;
         }
         if !(file.experiment.step > 0.0 && file.experiment.step.is_finite()) {
             return Err(invalid(
@@ -294,7 +297,7 @@ impl System {
                 ));
             }
             let factory: Arc<dyn backend::BackendFactory> = match options.native {
-                true => match native::NativeFactory::for_fmu(fmu) {
+                true => match native::NativeFactory::for_fmu(fmu, &options.native_models) {
                     Ok(f) => Arc::new(f),
                     Err(why) => {
                         native_fallback
@@ -382,7 +385,7 @@ impl System {
             }
             let to_def = &instances[to_unit];
             let to_sv = to_def.variable(tv, &ctx)?;
-            if to_sv.causality != "input" {
+            if to_sv.causality != Causality::Input {
                 return Err(invalid(
                     &ctx,
                     format!(
@@ -405,7 +408,7 @@ impl System {
                         .iter()
                         .find(|v| v.value_reference == *vr)
                         .unwrap();
-                    if sv.causality != "output" {
+                    if sv.causality != Causality::Output {
                         return Err(invalid(
                             &ctx,
                             format!(
@@ -498,7 +501,7 @@ impl System {
                 .description()
                 .variables
                 .iter()
-                .filter(|v| v.causality == "input")
+                .filter(|v| v.causality == Causality::Input)
             {
                 let connected = connections
                     .iter()
@@ -571,7 +574,7 @@ fn unknown_instance(
         .iter()
         .map(|i| i.name.as_str())
         .chain(replays.iter().map(|r| r.name.as_str()))
-        .map(|n| (crate::fmu::description::edit_distance(name, n), n))
+        .map(|n| (tb_fmi::description::edit_distance(name, n), n))
         .collect();
     v.sort();
     invalid(
@@ -650,7 +653,9 @@ pub(crate) fn check_parameter<'a>(
         )
     })?;
     let sv = instances[k].variable(var, ctx)?;
-    if !(sv.causality == "parameter" || sv.causality == "input") || sv.variability == "constant" {
+    if !(sv.causality == Causality::Parameter || sv.causality == Causality::Input)
+        || sv.variability == Variability::Constant
+    {
         return Err(invalid(
             ctx,
             format!(
@@ -717,14 +722,14 @@ fn check_feedthrough_cycles(
                 Some(d) => (
                     d.iter()
                         .filter_map(|i| md.variables.get(i - 1))
-                        .filter(|v| v.causality == "input")
+                        .filter(|v| v.causality == Causality::Input)
                         .collect(),
                     true,
                 ),
                 None => (
                     md.variables
                         .iter()
-                        .filter(|v| v.causality == "input")
+                        .filter(|v| v.causality == Causality::Input)
                         .collect(),
                     false,
                 ),

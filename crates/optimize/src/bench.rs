@@ -5,11 +5,11 @@
 
 use super::study::Study;
 use super::OptimizeError;
-use crate::fmu::FmuCache;
-use crate::system::{Recording, Simulation, System, SystemError, SystemFile};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use tb_compare::{Comparison, PreparedMeasurement, Table, Workspace};
+use tb_cosim::{Recording, Simulation, System, SystemError, SystemFile};
+use tb_fmi::FmuCache;
 
 struct Worker {
     sim: Simulation,

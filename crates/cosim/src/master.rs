@@ -7,9 +7,9 @@ use super::config::{Algorithm, ReplayBasis, StopConfig};
 use super::replay::Cursor;
 use super::results::Recording;
 use super::{check_parameter, invalid, split_name, Endpoint, System, SystemError};
-use crate::fmu::description::ScalarType;
 use std::collections::HashMap;
 use std::time::Instant;
+use tb_fmi::{Causality, ScalarType};
 
 /// Where a signal's value comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -210,7 +210,7 @@ impl Simulation {
                     .description()
                     .variables
                     .iter()
-                    .filter(|v| v.causality == "output" && v.ty != ScalarType::String)
+                    .filter(|v| v.causality == Causality::Output && v.ty != ScalarType::String)
                 {
                     let ours = inst
                         .ports

@@ -1,19 +1,9 @@
-//! FMU import: archives, modelDescription.xml, shared libraries, instances.
+//! The importer's errors, each naming the file or instance and what was expected.
 
-pub mod archive;
-pub mod description;
-pub mod instance;
-pub mod library;
-pub mod logger;
-
-pub use archive::{FmuCache, LoadedFmu};
-pub use description::ModelDescription;
-pub use instance::{FmuState, Instance};
-pub use library::Library;
-
+use crate::fmi2::fmi2Status;
+use crate::functions::Function;
 use std::path::PathBuf;
 
-/// Errors of FMU import and calls, each naming the file or instance and what was expected.
 #[derive(Debug, thiserror::Error)]
 pub enum FmuError {
     #[error("{path}: cannot load shared library: {message}")]
@@ -28,8 +18,8 @@ pub enum FmuError {
     )]
     Call {
         instance: String,
-        function: &'static str,
-        status: &'static str,
+        function: Function,
+        status: fmi2Status,
         time: f64,
         log: Vec<String>,
     },
@@ -61,5 +51,25 @@ fn format_log(lines: &[String]) -> String {
         String::new()
     } else {
         format!("; the FMU's last messages:\n  {}", lines.join("\n  "))
+    }
+}
+
+impl FmuError {
+    /// A refused call: the one place a status becomes an error, for every backend.
+    #[cold]
+    pub fn call(
+        instance: &str,
+        function: Function,
+        status: fmi2Status,
+        time: f64,
+        log: Vec<String>,
+    ) -> FmuError {
+        FmuError::Call {
+            instance: instance.to_string(),
+            function,
+            status,
+            time,
+            log,
+        }
     }
 }

@@ -30,7 +30,7 @@ pub use ga::{Ga, GaSettings};
 pub use identify::Identifiability;
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
 pub use rng::Rng;
-pub use run::{run_study, RunOptions, StepResult, StudyOutcome, StudyResult};
+pub use run::{run_study, Progress, RunOptions, StepResult, StudyOutcome, StudyResult};
 pub use study::{OptimizerKind, Study, StudyFile};
 
 use std::path::PathBuf;
@@ -44,7 +44,7 @@ pub enum OptimizeError {
     // Transparent: the inner errors name their file, instance or row already, and a
     // prefixed message with a source would print the cause twice in the CLI's chain.
     #[error(transparent)]
-    System(#[from] crate::system::SystemError),
+    System(#[from] tb_cosim::SystemError),
     #[error(transparent)]
     Compare(#[from] tb_compare::Error),
     #[error("checkpoint: {0}")]

@@ -16,11 +16,11 @@
 //!
 //! Replayed measurement channels have no SSP 1.0 equivalent and are refused.
 
-use crate::fmu::description::ScalarType;
-use crate::system::{split_name, Endpoint, StopConfig, System};
+use crate::{split_name, Endpoint, StopConfig, System};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
 use std::path::Path;
+use tb_fmi::{Causality, ScalarType};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SspError {
@@ -153,7 +153,11 @@ pub fn system_structure(
     let mut units_used: BTreeSet<String> = BTreeSet::new();
     for (k, inst) in system.instances.iter().enumerate() {
         let md = inst.description();
-        for v in md.variables.iter().filter(|v| v.causality == "output") {
+        for v in md
+            .variables
+            .iter()
+            .filter(|v| v.causality == Causality::Output)
+        {
             let unit = md.unit_of(v).map(str::to_string);
             connectors[k].insert(
                 v.name.clone(),
@@ -220,7 +224,7 @@ pub fn system_structure(
             ),
         };
         params[k].push((var.clone(), elem));
-        if sv.causality == "parameter" {
+        if sv.causality == Causality::Parameter {
             connectors[k].insert(
                 var.clone(),
                 Conn {
@@ -356,7 +360,7 @@ pub fn system_structure(
             .instances
             .iter()
             .find_map(|i| i.description().unit_def(u).copied())
-            .or_else(|| fmu_export::units::lookup(u).copied());
+            .or_else(|| tb_fmi::units::lookup(u).copied());
         match def {
             Some(d) => unit_xml.push_str(&format!(
                 "    <ssc:Unit name=\"{}\"><ssc:BaseUnit{}/></ssc:Unit>\n",
@@ -373,8 +377,8 @@ pub fn system_structure(
     }
     let order: Vec<&str> = system.order.iter().map(|&k| system.unit_name(k)).collect();
     let algorithm = match exp.algorithm {
-        crate::system::Algorithm::GaussSeidel => "gauss-seidel",
-        crate::system::Algorithm::Jacobi => "jacobi",
+        crate::Algorithm::GaussSeidel => "gauss-seidel",
+        crate::Algorithm::Jacobi => "jacobi",
     };
     let lap = match &exp.stop {
         StopConfig::Word(_) => format!(
@@ -444,6 +448,6 @@ pub fn export(
         zip.write_all(&bytes).map_err(|e| io(out, &e))?;
     }
     let bytes = zip.finish().map_err(|e| io(out, &e))?.into_inner();
-    crate::system::results::write_atomic(out, &bytes).map_err(|e| io(out, &e))?;
+    crate::results::write_atomic(out, &bytes).map_err(|e| io(out, &e))?;
     Ok(summary)
 }

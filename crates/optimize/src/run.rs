@@ -12,8 +12,6 @@ use super::optimizer::{
 };
 use super::study::{OptimizerKind, StepConfig, Study};
 use super::OptimizeError;
-use crate::fmu::FmuCache;
-use crate::system::results::write_atomic;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
@@ -21,14 +19,27 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 use tb_compare::{Comparison, Measurement, Metrics, PreparedMeasurement, Workspace};
+use tb_cosim::results::write_atomic;
+use tb_fmi::FmuCache;
+
+/// What a study reports while it runs: the library draws nothing, a front end (the CLI's
+/// progress bars, a notebook) implements what it wants.
+pub trait Progress: Send + Sync {
+    /// A step starts (or resumes at generation `done` of `generations`).
+    fn step_started(&self, _step: usize, _name: &str, _generations: usize, _done: usize) {}
+    /// A generation of the current step is complete.
+    fn generation(&self, _record: &GenerationRecord) {}
+    /// The current step's optimiser is done.
+    fn step_finished(&self) {}
+}
 
 /// How to run a study.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Default)]
 pub struct RunOptions {
     /// Evaluation threads (0: all cores).
     pub threads: usize,
-    /// Show a progress bar per step (stderr).
-    pub progress: bool,
+    /// Told about every step and generation (None: silent).
+    pub progress: Option<Arc<dyn Progress>>,
     /// Checkpoint file, written after every generation (None: no checkpoint).
     pub checkpoint: Option<PathBuf>,
     /// Continue from the checkpoint when it exists.
@@ -41,6 +52,21 @@ pub struct RunOptions {
     pub generations: Option<usize>,
     /// Print the identifiability report and step summaries to stderr.
     pub verbose: bool,
+}
+
+impl std::fmt::Debug for RunOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunOptions")
+            .field("threads", &self.threads)
+            .field("progress", &self.progress.is_some())
+            .field("checkpoint", &self.checkpoint)
+            .field("resume", &self.resume)
+            .field("stop_after", &self.stop_after)
+            .field("optimizer", &self.optimizer)
+            .field("generations", &self.generations)
+            .field("verbose", &self.verbose)
+            .finish()
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -372,26 +398,10 @@ fn identifiability(
     }
 }
 
-fn progress_bar(show: bool, len: u64, prefix: String) -> indicatif::ProgressBar {
-    if !show {
-        return indicatif::ProgressBar::hidden();
-    }
-    let pb = indicatif::ProgressBar::new(len);
-    pb.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix} [{bar:30}] {pos}/{len} generations  {msg}  ({elapsed})",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    pb.set_prefix(prefix);
-    pb
-}
-
 /// Runs a study (or continues it from its checkpoint).
 pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, OptimizeError> {
     let wall = Instant::now();
-    let cache = Arc::new(FmuCache::temporary(false).map_err(crate::system::SystemError::from)?);
+    let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
     let bench = Bench::new(study, cache)?;
     let measurement = Measurement::read_path(&study.measurement_path)?;
     let pool = thread_pool(options.threads)?;
@@ -523,12 +533,9 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
             }
         }
 
-        let pb = progress_bar(
-            options.progress,
-            generations as u64,
-            format!("step {} {}", k + 1, step.name),
-        );
-        pb.set_position(optimizer.generation() as u64);
+        if let Some(p) = &options.progress {
+            p.step_started(k + 1, &step.name, generations, optimizer.generation());
+        }
         let settings = RunSettings {
             max_generations: generations,
             threads: options.threads,
@@ -545,12 +552,8 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
             &mut run_state,
             |opt, state| {
                 session_generations += 1;
-                if let Some(rec) = state.history.last() {
-                    pb.set_position(rec.generation as u64);
-                    pb.set_message(format!(
-                        "best cost {:.5}  ({} evaluations)",
-                        rec.best_cost, rec.evaluations
-                    ));
+                if let (Some(p), Some(rec)) = (&options.progress, state.history.last()) {
+                    p.generation(rec);
                 }
                 if let Some(path) = &options.checkpoint {
                     let cp = Checkpoint {
@@ -578,7 +581,9 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                 ControlFlow::Continue(())
             },
         );
-        pb.finish();
+        if let Some(p) = &options.progress {
+            p.step_finished();
+        }
         if let Some(e) = write_error {
             return Err(e);
         }

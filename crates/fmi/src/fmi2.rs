@@ -1,6 +1,7 @@
 //! FMI 2.0 C types and function signatures (fmi2TypesPlatform.h, fmi2FunctionTypes.h).
 //!
-//! Shared by the export side (our models) and the orchestrator's importer. Status and
+//! Shared by the export side (our models) and the importer; [`crate::functions`] lists every
+//! function with its type. Status and
 //! enumeration values are plain integers wrapped in `repr(transparent)` structs: a foreign
 //! FMU may return any integer, and an out-of-range Rust enum would be undefined behaviour.
 #![allow(non_camel_case_types, non_snake_case, non_upper_case_globals)]
@@ -215,42 +216,3 @@ pub type fmi2GetBooleanStatusTYPE =
     unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2Boolean) -> fmi2Status;
 pub type fmi2GetStringStatusTYPE =
     unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2String) -> fmi2Status;
-
-/// Names of every function a Co-Simulation FMU must export (common + CS), in the order of
-/// the standard's header. The importer resolves each once; the tests check each is present.
-pub const CO_SIMULATION_FUNCTIONS: &[&str] = &[
-    "fmi2GetTypesPlatform",
-    "fmi2GetVersion",
-    "fmi2SetDebugLogging",
-    "fmi2Instantiate",
-    "fmi2FreeInstance",
-    "fmi2SetupExperiment",
-    "fmi2EnterInitializationMode",
-    "fmi2ExitInitializationMode",
-    "fmi2Terminate",
-    "fmi2Reset",
-    "fmi2GetReal",
-    "fmi2GetInteger",
-    "fmi2GetBoolean",
-    "fmi2GetString",
-    "fmi2SetReal",
-    "fmi2SetInteger",
-    "fmi2SetBoolean",
-    "fmi2SetString",
-    "fmi2GetFMUstate",
-    "fmi2SetFMUstate",
-    "fmi2FreeFMUstate",
-    "fmi2SerializedFMUstateSize",
-    "fmi2SerializeFMUstate",
-    "fmi2DeSerializeFMUstate",
-    "fmi2GetDirectionalDerivative",
-    "fmi2SetRealInputDerivatives",
-    "fmi2GetRealOutputDerivatives",
-    "fmi2DoStep",
-    "fmi2CancelStep",
-    "fmi2GetStatus",
-    "fmi2GetRealStatus",
-    "fmi2GetIntegerStatus",
-    "fmi2GetBooleanStatus",
-    "fmi2GetStringStatus",
-];

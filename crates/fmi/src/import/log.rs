@@ -1,13 +1,74 @@
-//! Per-instance logging of FMU messages: formatted by the C shim, forwarded to the `log`
-//! crate with the instance name, and kept (the last lines) for error reports.
+//! The log sink of one instance, whatever runs it (a loaded FMU through the C logger shim, a
+//! model linked natively, an isolated worker): messages are forwarded to the `log` crate
+//! with the instance name and the last lines are kept for error reports.
 
-use fmu_export::fmi2::{fmi2CallbackLogger, fmi2Status};
+use crate::fmi2::{fmi2CallbackLogger, fmi2Status};
 use std::collections::VecDeque;
 use std::ffi::{c_char, c_int, c_void, CStr};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
 /// How many of an instance's last log lines an error report carries.
 pub const KEPT_LINES: usize = 20;
+
+/// Where one instance's messages go.
+pub struct LogSink {
+    pub instance: String,
+    lines: Mutex<VecDeque<String>>,
+    /// Forward messages to `log` (off: kept only for error reports).
+    echo: AtomicBool,
+}
+
+impl LogSink {
+    pub fn new(instance: &str) -> Self {
+        LogSink {
+            instance: instance.to_string(),
+            lines: Mutex::new(VecDeque::new()),
+            echo: AtomicBool::new(true),
+        }
+    }
+
+    pub fn set_echo(&self, on: bool) {
+        self.echo.store(on, Ordering::Relaxed);
+    }
+
+    pub fn push(&self, status: fmi2Status, category: &str, message: &str) {
+        let line = format!("[{}] {category}: {message}", status.name());
+        if self.echo.load(Ordering::Relaxed) {
+            let level = match status {
+                fmi2Status::OK => log::Level::Debug,
+                fmi2Status::WARNING | fmi2Status::DISCARD => log::Level::Warn,
+                _ => log::Level::Error,
+            };
+            log::log!(target: "fmu", level, "{}: {line}", self.instance);
+        }
+        self.keep(line);
+    }
+
+    /// Keep a line for error reports without echoing it.
+    pub fn keep(&self, line: String) {
+        if let Ok(mut l) = self.lines.lock() {
+            if l.len() == KEPT_LINES {
+                l.pop_front();
+            }
+            l.push_back(line);
+        }
+    }
+
+    /// The last lines logged by the instance.
+    pub fn last_lines(&self) -> Vec<String> {
+        self.lines
+            .lock()
+            .map(|l| l.iter().cloned().collect())
+            .unwrap_or_default()
+    }
+
+    pub fn clear(&self) {
+        if let Ok(mut l) = self.lines.lock() {
+            l.clear();
+        }
+    }
+}
 
 extern "C" {
     fn twinbench_fmi2_logger(
@@ -30,56 +91,6 @@ pub fn fmi2_logger() -> fmi2CallbackLogger {
 pub struct LogEnv {
     sink: unsafe extern "C" fn(*mut c_void, *const c_char, c_int, *const c_char, *const c_char),
     ctx: *mut c_void,
-}
-
-/// Where one instance's messages go.
-pub struct LogSink {
-    pub instance: String,
-    lines: Mutex<VecDeque<String>>,
-    /// Forward messages with status OK to `log` at debug level only (they can be many).
-    pub echo: bool,
-}
-
-impl LogSink {
-    pub fn new(instance: &str) -> Self {
-        LogSink {
-            instance: instance.to_string(),
-            lines: Mutex::new(VecDeque::new()),
-            echo: true,
-        }
-    }
-
-    pub fn push(&self, status: fmi2Status, category: &str, message: &str) {
-        let line = format!("[{}] {category}: {message}", status.name());
-        let level = match status {
-            fmi2Status::OK => log::Level::Debug,
-            fmi2Status::WARNING | fmi2Status::DISCARD => log::Level::Warn,
-            _ => log::Level::Error,
-        };
-        if self.echo {
-            log::log!(target: "fmu", level, "{}: {line}", self.instance);
-        }
-        if let Ok(mut l) = self.lines.lock() {
-            if l.len() == KEPT_LINES {
-                l.pop_front();
-            }
-            l.push_back(line);
-        }
-    }
-
-    /// The last lines logged by the instance.
-    pub fn last_lines(&self) -> Vec<String> {
-        self.lines
-            .lock()
-            .map(|l| l.iter().cloned().collect())
-            .unwrap_or_default()
-    }
-
-    pub fn clear(&self) {
-        if let Ok(mut l) = self.lines.lock() {
-            l.clear();
-        }
-    }
 }
 
 unsafe extern "C" fn sink(
@@ -106,7 +117,7 @@ unsafe extern "C" fn sink(
     });
 }
 
-/// A boxed environment pointing at `sink`; keep both alive as long as the instance.
+/// A boxed environment pointing at `sink_ref`; keep both alive as long as the instance.
 pub fn log_env(sink_ref: &LogSink) -> Box<LogEnv> {
     Box::new(LogEnv {
         sink,

@@ -1,9 +1,9 @@
 //! FMU archives: checked as untrusted input, unzipped once into a content-addressed cache,
 //! their shared library loaded once and shared by every instance.
 
-use super::description::{self, ModelDescription};
-use super::library::Library;
-use super::FmuError;
+use crate::description::{self, ModelDescription};
+use crate::library::Library;
+use crate::FmuError;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
 use std::io::Read;
@@ -56,10 +56,16 @@ impl LoadedFmu {
 
 /// The unpack cache: a folder per FMU content hash. A temporary cache is removed when
 /// dropped; a kept one stays for later runs.
+///
+/// Safe to share between threads and processes: one thread of a process unpacks a given
+/// content while the others wait for it (a lock per content hash), and every unpacking
+/// goes into a folder of its own that is renamed into place when complete.
 pub struct FmuCache {
     root: PathBuf,
     keep: bool,
     loaded: Mutex<HashMap<String, Arc<LoadedFmu>>>,
+    /// One lock per content hash being loaded.
+    loading: Mutex<HashMap<String, Arc<Mutex<()>>>>,
     limits: Limits,
 }
 
@@ -88,6 +94,7 @@ impl FmuCache {
             root,
             keep,
             loaded: Mutex::new(HashMap::new()),
+            loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
         })
     }
@@ -100,6 +107,7 @@ impl FmuCache {
             root: dir.to_path_buf(),
             keep: true,
             loaded: Mutex::new(HashMap::new()),
+            loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
         })
     }
@@ -118,7 +126,13 @@ impl FmuCache {
     pub fn load(&self, fmu: &Path) -> Result<Arc<LoadedFmu>, FmuError> {
         let bytes = std::fs::read(fmu).map_err(|e| arch(fmu, format!("cannot read: {e}")))?;
         let sha = format!("{:x}", Sha256::digest(&bytes));
-        if let Some(l) = self.loaded.lock().unwrap().get(&sha) {
+        if let Some(l) = lock(&self.loaded).get(&sha) {
+            return Ok(l.clone());
+        }
+        // One loader per content: the others wait here and then find it loaded.
+        let key_lock = lock(&self.loading).entry(sha.clone()).or_default().clone();
+        let _loading = lock(&key_lock);
+        if let Some(l) = lock(&self.loaded).get(&sha) {
             return Ok(l.clone());
         }
         let (md, id) = check_archive_with(fmu, &bytes, &self.limits)?;
@@ -138,9 +152,15 @@ impl FmuCache {
             description: md,
             library,
         });
-        self.loaded.lock().unwrap().insert(sha, loaded.clone());
+        lock(&self.loaded).insert(sha, loaded.clone());
         Ok(loaded)
     }
+}
+
+/// A poisoned lock only means another thread panicked while holding it; the maps stay
+/// consistent (every insert is a single call), so go on.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// Remove temporary caches left by twinbench processes that no longer run (killed with
@@ -312,9 +332,24 @@ fn sniff_fmi_version(xml: &str) -> Option<&str> {
     Some(&rest[..rest.find(q)?])
 }
 
+/// A folder name no other thread or process uses: process id, a per-process counter, the
+/// clock (processes in other PID namespaces may share the id).
+fn unique_sibling(dir: &Path) -> PathBuf {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.subsec_nanos())
+        .unwrap_or(0);
+    dir.with_extension(format!(
+        "tmp-{}-{}-{nanos:x}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ))
+}
+
 fn extract(fmu: &Path, bytes: &[u8], dir: &Path, limits: &Limits) -> Result<(), FmuError> {
-    let tmp = dir.with_extension(format!("tmp{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
+    let tmp = unique_sibling(dir);
     // Nothing half-extracted stays behind in the cache.
     extract_into(fmu, bytes, &tmp, limits).inspect_err(|_| {
         let _ = std::fs::remove_dir_all(&tmp);

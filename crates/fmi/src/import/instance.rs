@@ -1,10 +1,11 @@
 //! A safe handle on one FMU instance: every call checked, errors carry the instance name,
 //! the simulation time and the FMU's last log lines.
 
-use super::library::Library;
-use super::logger::{fmi2_logger, log_env, LogEnv, LogSink};
-use super::FmuError;
-use fmu_export::fmi2::*;
+use crate::fmi2::*;
+use crate::functions::Function;
+use crate::library::Library;
+use crate::log::{fmi2_logger, log_env, LogEnv, LogSink};
+use crate::FmuError;
 use std::ffi::{c_void, CString};
 use std::path::Path;
 use std::sync::Arc;
@@ -127,27 +128,31 @@ impl Instance {
 
     /// Stop echoing OK-status messages to the `log` crate (they are still kept).
     pub fn set_echo(&mut self, on: bool) {
-        self.sink.echo = on;
+        self.sink.set_echo(on);
     }
 
     #[inline]
-    fn check(&self, function: &'static str, status: fmi2Status) -> Result<(), FmuError> {
-        if status == fmi2Status::OK || status == fmi2Status::WARNING {
-            Ok(())
-        } else {
-            Err(self.call_error(function, status))
+    fn check(&self, function: Function, status: fmi2Status) -> Result<(), FmuError> {
+        match status.ok() {
+            Ok(()) => Ok(()),
+            Err(s) => Err(self.call_error(function, s)),
         }
     }
 
     #[cold]
-    fn call_error(&self, function: &'static str, status: fmi2Status) -> FmuError {
-        FmuError::Call {
-            instance: self.name.clone(),
+    fn call_error(&self, function: Function, status: fmi2Status) -> FmuError {
+        FmuError::call(
+            &self.name,
             function,
-            status: status.name(),
-            time: self.time,
-            log: self.sink.last_lines(),
-        }
+            status,
+            self.time,
+            self.sink.last_lines(),
+        )
+    }
+
+    /// The instance's log sink (kept lines, echo switch).
+    pub fn sink(&self) -> &LogSink {
+        &self.sink
     }
 
     pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Result<(), FmuError> {
@@ -159,7 +164,7 @@ impl Instance {
         let s = unsafe {
             (self.lib.api.fmi2SetDebugLogging)(self.comp, on as fmi2Boolean, p.len(), p.as_ptr())
         };
-        self.check("fmi2SetDebugLogging", s)
+        self.check(Function::SetDebugLogging, s)
     }
 
     pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
@@ -174,29 +179,29 @@ impl Instance {
                 stop.unwrap_or(0.0),
             )
         };
-        self.check("fmi2SetupExperiment", s)
+        self.check(Function::SetupExperiment, s)
     }
 
     pub fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
         let s = unsafe { (self.lib.api.fmi2EnterInitializationMode)(self.comp) };
-        self.check("fmi2EnterInitializationMode", s)
+        self.check(Function::EnterInitializationMode, s)
     }
 
     pub fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
         let s = unsafe { (self.lib.api.fmi2ExitInitializationMode)(self.comp) };
-        self.check("fmi2ExitInitializationMode", s)
+        self.check(Function::ExitInitializationMode, s)
     }
 
     pub fn terminate(&mut self) -> Result<(), FmuError> {
         let s = unsafe { (self.lib.api.fmi2Terminate)(self.comp) };
-        self.check("fmi2Terminate", s)
+        self.check(Function::Terminate, s)
     }
 
     pub fn reset(&mut self) -> Result<(), FmuError> {
         let s = unsafe { (self.lib.api.fmi2Reset)(self.comp) };
         self.sink.clear();
         self.time = 0.0;
-        self.check("fmi2Reset", s)
+        self.check(Function::Reset, s)
     }
 
     #[inline]
@@ -205,7 +210,7 @@ impl Instance {
         let s = unsafe {
             (self.lib.api.fmi2GetReal)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
         };
-        self.check("fmi2GetReal", s)
+        self.check(Function::GetReal, s)
     }
 
     #[inline]
@@ -214,35 +219,35 @@ impl Instance {
         let s = unsafe {
             (self.lib.api.fmi2SetReal)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
         };
-        self.check("fmi2SetReal", s)
+        self.check(Function::SetReal, s)
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
         let s = unsafe {
             (self.lib.api.fmi2GetInteger)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
         };
-        self.check("fmi2GetInteger", s)
+        self.check(Function::GetInteger, s)
     }
 
     pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
         let s = unsafe {
             (self.lib.api.fmi2SetInteger)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
         };
-        self.check("fmi2SetInteger", s)
+        self.check(Function::SetInteger, s)
     }
 
     pub fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
         let s = unsafe {
             (self.lib.api.fmi2GetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
         };
-        self.check("fmi2GetBoolean", s)
+        self.check(Function::GetBoolean, s)
     }
 
     pub fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
         let s = unsafe {
             (self.lib.api.fmi2SetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
         };
-        self.check("fmi2SetBoolean", s)
+        self.check(Function::SetBoolean, s)
     }
 
     /// One communication step; on success the instance's time advances.
@@ -254,14 +259,14 @@ impl Instance {
             Ok(())
         } else {
             self.time = t;
-            self.check("fmi2DoStep", s).map(|_| self.time = t + h)
+            self.check(Function::DoStep, s).map(|_| self.time = t + h)
         }
     }
 
-    fn unsupported(&self, what: &'static str) -> FmuError {
+    fn unsupported(&self, function: Function) -> FmuError {
         FmuError::Unsupported {
             instance: self.name.clone(),
-            what,
+            what: function.name(),
         }
     }
 
@@ -270,10 +275,10 @@ impl Instance {
             .lib
             .api
             .fmi2GetFMUstate
-            .ok_or_else(|| self.unsupported("fmi2GetFMUstate"))?;
+            .ok_or_else(|| self.unsupported(Function::GetFMUstate))?;
         let mut st: fmi2FMUstate = std::ptr::null_mut();
         let s = unsafe { f(self.comp, &mut st) };
-        self.check("fmi2GetFMUstate", s)?;
+        self.check(Function::GetFMUstate, s)?;
         Ok(FmuState(st))
     }
 
@@ -283,9 +288,9 @@ impl Instance {
             .lib
             .api
             .fmi2GetFMUstate
-            .ok_or_else(|| self.unsupported("fmi2GetFMUstate"))?;
+            .ok_or_else(|| self.unsupported(Function::GetFMUstate))?;
         let s = unsafe { f(self.comp, &mut state.0) };
-        self.check("fmi2GetFMUstate", s)
+        self.check(Function::GetFMUstate, s)
     }
 
     pub fn set_state(&mut self, state: &FmuState, time: f64) -> Result<(), FmuError> {
@@ -293,10 +298,10 @@ impl Instance {
             .lib
             .api
             .fmi2SetFMUstate
-            .ok_or_else(|| self.unsupported("fmi2SetFMUstate"))?;
+            .ok_or_else(|| self.unsupported(Function::SetFMUstate))?;
         let s = unsafe { f(self.comp, state.0) };
         self.time = time;
-        self.check("fmi2SetFMUstate", s)
+        self.check(Function::SetFMUstate, s)
     }
 
     pub fn free_state(&mut self, mut state: FmuState) -> Result<(), FmuError> {
@@ -304,9 +309,9 @@ impl Instance {
             .lib
             .api
             .fmi2FreeFMUstate
-            .ok_or_else(|| self.unsupported("fmi2FreeFMUstate"))?;
+            .ok_or_else(|| self.unsupported(Function::FreeFMUstate))?;
         let s = unsafe { f(self.comp, &mut state.0) };
-        self.check("fmi2FreeFMUstate", s)
+        self.check(Function::FreeFMUstate, s)
     }
 
     pub fn serialize_state(&mut self, state: &FmuState) -> Result<Vec<u8>, FmuError> {
@@ -314,18 +319,18 @@ impl Instance {
             .lib
             .api
             .fmi2SerializedFMUstateSize
-            .ok_or_else(|| self.unsupported("fmi2SerializedFMUstateSize"))?;
+            .ok_or_else(|| self.unsupported(Function::SerializedFMUstateSize))?;
         let ser = self
             .lib
             .api
             .fmi2SerializeFMUstate
-            .ok_or_else(|| self.unsupported("fmi2SerializeFMUstate"))?;
+            .ok_or_else(|| self.unsupported(Function::SerializeFMUstate))?;
         let mut n = 0usize;
         let s = unsafe { size_f(self.comp, state.0, &mut n) };
-        self.check("fmi2SerializedFMUstateSize", s)?;
+        self.check(Function::SerializedFMUstateSize, s)?;
         let mut buf = vec![0u8; n];
         let s = unsafe { ser(self.comp, state.0, buf.as_mut_ptr() as *mut fmi2Byte, n) };
-        self.check("fmi2SerializeFMUstate", s)?;
+        self.check(Function::SerializeFMUstate, s)?;
         Ok(buf)
     }
 
@@ -334,7 +339,7 @@ impl Instance {
             .lib
             .api
             .fmi2DeSerializeFMUstate
-            .ok_or_else(|| self.unsupported("fmi2DeSerializeFMUstate"))?;
+            .ok_or_else(|| self.unsupported(Function::DeSerializeFMUstate))?;
         let mut st: fmi2FMUstate = std::ptr::null_mut();
         let s = unsafe {
             f(
@@ -344,7 +349,7 @@ impl Instance {
                 &mut st,
             )
         };
-        self.check("fmi2DeSerializeFMUstate", s)?;
+        self.check(Function::DeSerializeFMUstate, s)?;
         Ok(FmuState(st))
     }
 }

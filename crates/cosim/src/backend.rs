@@ -3,8 +3,8 @@
 //! are interchangeable. Each system instance has a factory that creates (and recreates)
 //! its unit.
 
-use crate::fmu::{FmuError, Instance, LoadedFmu};
 use std::sync::Arc;
+use tb_fmi::{FmuError, Instance, LoadedFmu};
 
 /// One running instance, in FMI 2.0 Co-Simulation terms.
 pub trait Backend: Send {

@@ -1,0 +1,103 @@
+//! Isolation mode: an FMU instance runs in a worker process (`twinbench worker`, a hidden
+//! subcommand of this very executable), so that a segfault, an abort or a hang inside a
+//! third-party FMU ends that run with an error naming the instance, the time and the
+//! cause, and the host lives on.
+//!
+//! Transport: a Unix socket pair whose worker end is the worker's stdin (the worker moves
+//! it away from fd 0/1 at once, so an FMU printing to stdout cannot corrupt the protocol).
+//! Protocol: length-prefixed little-endian frames. A request is a list of operations run in
+//! order, stopping at the first error; the response carries the results of the operations
+//! that completed. Sets are queued on the host and sent with the next call, and the gets
+//! that followed the previous step are sent with each step, so that a Gauss-Seidel step
+//! (set inputs, step, get outputs) is one round trip. Every round trip has a watchdog: no
+//! complete answer in time, and the worker is killed.
+
+//! - this module: the options and the factory;
+//! - [`wire`]: the frame codec and the operation codes (FMI calls by their number in
+//!   [`tb_fmi::FUNCTIONS`]);
+//! - [`host`]: the backend that talks to a worker;
+//! - [`worker`]: the server that runs in the worker process.
+
+mod host;
+pub mod wire;
+pub mod worker;
+
+pub use host::IsolatedBackend;
+pub use worker::serve_stdio;
+
+use crate::backend::{Backend, BackendFactory};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+use tb_fmi::{FmuError, LoadedFmu};
+
+/// The default per-call watchdog.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(10);
+/// Environment variable naming the executable that serves `worker` (default: this one).
+pub const WORKER_EXE_ENV: &str = "TWINBENCH_WORKER_EXE";
+/// Lines of the worker's stderr kept for crash reports.
+const STDERR_LINES: usize = 20;
+
+/// How isolated instances are run.
+#[derive(Clone, Debug)]
+pub struct IsolationOptions {
+    /// Longest wait for one answer of the worker (one step, one initialisation, ...).
+    pub timeout: Duration,
+    /// The executable to run as `<exe> worker`; default: [`WORKER_EXE_ENV`], else this
+    /// executable (or, from a test binary, `target/<profile>/twinbench`).
+    pub worker_exe: Option<PathBuf>,
+}
+
+impl Default for IsolationOptions {
+    fn default() -> Self {
+        IsolationOptions {
+            timeout: DEFAULT_TIMEOUT,
+            worker_exe: None,
+        }
+    }
+}
+
+impl IsolationOptions {
+    pub fn resolve_exe(&self) -> Result<PathBuf, String> {
+        if let Some(p) = &self.worker_exe {
+            return Ok(p.clone());
+        }
+        if let Some(p) = std::env::var_os(WORKER_EXE_ENV) {
+            return Ok(PathBuf::from(p));
+        }
+        let me =
+            std::env::current_exe().map_err(|e| format!("cannot find this executable: {e}"))?;
+        if me.file_stem().is_some_and(|s| s == "twinbench") {
+            return Ok(me);
+        }
+        // A test or bench binary in target/<profile>/deps.
+        if let Some(p) = me
+            .parent()
+            .and_then(Path::parent)
+            .map(|d| d.join("twinbench"))
+            .filter(|p| p.is_file())
+        {
+            return Ok(p);
+        }
+        Err(format!(
+            "cannot find the twinbench executable to run the worker (this is {}); set {WORKER_EXE_ENV}",
+            me.display()
+        ))
+    }
+}
+
+/// Creates instances that run in their own worker process.
+pub struct IsolatedFactory {
+    pub fmu: Arc<LoadedFmu>,
+    pub options: IsolationOptions,
+}
+
+impl BackendFactory for IsolatedFactory {
+    fn kind(&self) -> &'static str {
+        "isolated"
+    }
+    fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError> {
+        let b = IsolatedBackend::start(instance_name, &self.fmu, &self.options, logging)?;
+        Ok(Box::new(b))
+    }
+}

@@ -1,0 +1,178 @@
+//! The worker protocol's codec: length-prefixed little-endian frames. A request is a list
+//! of operations; an FMI call's operation code is its number in [`tb_fmi::FUNCTIONS`]
+//! (`Function as u8`), so the table that loads an FMU's symbols also names the calls on the
+//! wire. Two codes of the protocol's own: [`op::INSTANTIATE`] (load the library, then
+//! `fmi2Instantiate`) and [`op::QUIT`].
+//!
+//! A response: `ok: u8`, the number of completed gets `u32`, the instance's time `f64`, the
+//! get results, then (when not ok) the error: a [`kind`] and its fields.
+
+use tb_fmi::Function;
+
+/// Operation codes.
+pub mod op {
+    use tb_fmi::Function;
+
+    /// Load the FMU's library (path), then instantiate (name, GUID, resource folder, logging).
+    pub const INSTANTIATE: u8 = 200;
+    /// Free the instance and end the worker.
+    pub const QUIT: u8 = 201;
+
+    pub const SET_DEBUG_LOGGING: u8 = Function::SetDebugLogging as u8;
+    pub const SETUP_EXPERIMENT: u8 = Function::SetupExperiment as u8;
+    pub const ENTER_INIT: u8 = Function::EnterInitializationMode as u8;
+    pub const EXIT_INIT: u8 = Function::ExitInitializationMode as u8;
+    pub const TERMINATE: u8 = Function::Terminate as u8;
+    pub const RESET: u8 = Function::Reset as u8;
+    pub const SET_REAL: u8 = Function::SetReal as u8;
+    pub const SET_INTEGER: u8 = Function::SetInteger as u8;
+    pub const SET_BOOLEAN: u8 = Function::SetBoolean as u8;
+    pub const GET_REAL: u8 = Function::GetReal as u8;
+    pub const GET_INTEGER: u8 = Function::GetInteger as u8;
+    pub const GET_BOOLEAN: u8 = Function::GetBoolean as u8;
+    pub const DO_STEP: u8 = Function::DoStep as u8;
+}
+
+/// Error kinds in a response.
+pub mod kind {
+    /// An FMI call returned a status that stops the caller: function code, status, time, log.
+    pub const CALL: u8 = 0;
+    /// `fmi2Instantiate` failed: the message.
+    pub const INSTANTIATE: u8 = 1;
+    /// An optional function the FMU does not export: its code.
+    pub const UNSUPPORTED: u8 = 2;
+    /// Anything else: a message.
+    pub const OTHER: u8 = 3;
+}
+
+/// The function an operation code stands for (for messages).
+pub fn function_of(code: u8) -> Option<Function> {
+    match code {
+        op::INSTANTIATE => Some(Function::Instantiate),
+        op::QUIT => Some(Function::FreeInstance),
+        c => Function::from_u8(c),
+    }
+}
+
+/// Largest frame accepted (a corrupted length must not allocate gigabytes).
+pub const MAX_FRAME: usize = 256 << 20;
+
+/// A frame: the payload's length, then the payload.
+pub fn frame(payload: &[u8]) -> Vec<u8> {
+    let mut v = Vec::with_capacity(payload.len() + 4);
+    v.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+    v.extend_from_slice(payload);
+    v
+}
+
+/// Writes values in the protocol's encoding.
+#[derive(Default)]
+pub struct Enc(pub Vec<u8>);
+
+impl Enc {
+    pub fn u8(&mut self, x: u8) {
+        self.0.push(x);
+    }
+    pub fn u32(&mut self, x: u32) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    pub fn f64(&mut self, x: f64) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    pub fn i32(&mut self, x: i32) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    pub fn str(&mut self, s: &str) {
+        self.u32(s.len() as u32);
+        self.0.extend_from_slice(s.as_bytes());
+    }
+    pub fn vrs(&mut self, vrs: &[u32]) {
+        self.u32(vrs.len() as u32);
+        for &v in vrs {
+            self.u32(v);
+        }
+    }
+}
+
+/// Reads values in the protocol's encoding; every read is checked against the frame.
+pub struct Dec<'a> {
+    b: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Dec<'a> {
+    pub fn new(b: &'a [u8]) -> Self {
+        Dec { b, pos: 0 }
+    }
+    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+        if self.b.len() - self.pos < n {
+            return Err(format!(
+                "truncated message: {n} bytes needed at offset {}",
+                self.pos
+            ));
+        }
+        let s = &self.b[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], String> {
+        let mut a = [0u8; N];
+        a.copy_from_slice(self.take(N)?);
+        Ok(a)
+    }
+    pub fn u8(&mut self) -> Result<u8, String> {
+        Ok(self.take(1)?[0])
+    }
+    pub fn u32(&mut self) -> Result<u32, String> {
+        Ok(u32::from_le_bytes(self.array()?))
+    }
+    pub fn f64(&mut self) -> Result<f64, String> {
+        Ok(f64::from_le_bytes(self.array()?))
+    }
+    pub fn i32(&mut self) -> Result<i32, String> {
+        Ok(i32::from_le_bytes(self.array()?))
+    }
+    pub fn str(&mut self) -> Result<String, String> {
+        let n = self.u32()? as usize;
+        Ok(String::from_utf8_lossy(self.take(n)?).into_owned())
+    }
+    /// A count of elements of `size` bytes each, checked against what remains.
+    pub fn count(&mut self, size: usize) -> Result<usize, String> {
+        let n = self.u32()? as usize;
+        if n.saturating_mul(size) > self.b.len() - self.pos {
+            return Err(format!("count {n} exceeds the message"));
+        }
+        Ok(n)
+    }
+    pub fn vrs(&mut self) -> Result<Vec<u32>, String> {
+        let n = self.count(4)?;
+        (0..n).map(|_| self.u32()).collect()
+    }
+    pub fn at_end(&self) -> bool {
+        self.pos == self.b.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decoder_refuses_truncated_and_oversized_counts() {
+        let mut d = Dec::new(&[5, 0, 0, 0, 1, 2]);
+        assert!(d.count(4).unwrap_err().contains("exceeds"));
+        let mut d = Dec::new(&[1, 0]);
+        assert!(d.u32().unwrap_err().contains("truncated"));
+    }
+
+    #[test]
+    fn fmi_calls_are_coded_by_the_function_table() {
+        assert_eq!(function_of(op::DO_STEP), Some(Function::DoStep));
+        assert_eq!(function_of(op::GET_REAL).unwrap().name(), "fmi2GetReal");
+        assert_eq!(function_of(op::INSTANTIATE), Some(Function::Instantiate));
+        assert_eq!(function_of(150), None);
+        // The protocol's own codes are outside the table.
+        assert!(Function::from_u8(op::INSTANTIATE).is_none());
+        assert!(Function::from_u8(op::QUIT).is_none());
+    }
+}

@@ -1,0 +1,446 @@
+//! The FMI 2.0 entry points, generic over the model: each checks its pointers and runs the
+//! safe [`Runtime`] call inside [`guarded`].
+#![allow(clippy::missing_safety_doc, clippy::too_many_arguments)]
+
+use super::{guarded, opt_str, resource_dir_from_uri, CLogger, Instance};
+use crate::fmi2::*;
+use crate::model::Model;
+use crate::runtime::{Logger, Runtime, Snapshot};
+use crate::variables::{ScalarType, Value};
+use std::ffi::{CStr, CString};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+pub unsafe fn instantiate<M: Model>(
+    instance_name: fmi2String,
+    fmu_type: fmi2Type,
+    guid: fmi2String,
+    resource_location: fmi2String,
+    functions: *const fmi2CallbackFunctions,
+    _visible: fmi2Boolean,
+    logging_on: fmi2Boolean,
+) -> fmi2Component {
+    // This library's own copy of std: silence its default panic printing (panics are caught
+    // and reported through the FMI logger instead). The host's panic hook is not affected.
+    static QUIET_PANICS: std::sync::Once = std::sync::Once::new();
+    QUIET_PANICS.call_once(|| std::panic::set_hook(Box::new(|_| {})));
+    let r = catch_unwind(AssertUnwindSafe(|| {
+        let callbacks = if functions.is_null() {
+            None
+        } else {
+            Some(*functions)
+        };
+        let name = opt_str(instance_name).map(|s| s.into_owned());
+        let logger = CLogger {
+            callback: callbacks.and_then(|f| f.logger),
+            env: callbacks.map_or(std::ptr::null_mut(), |f| f.componentEnvironment),
+            instance_name: CString::new(name.clone().unwrap_or_default()).unwrap_or_default(),
+        };
+        let fail = |msg: String| {
+            logger.log(
+                fmi2Status::ERROR,
+                "logStatusError",
+                &format!("fmi2Instantiate: {msg}"),
+            );
+            std::ptr::null_mut()
+        };
+        let Some(name) = name else {
+            return fail("instanceName is NULL".into());
+        };
+        if callbacks.is_none() {
+            return std::ptr::null_mut();
+        }
+        if fmu_type != fmi2Type::CO_SIMULATION {
+            return fail(format!(
+                "model '{}' supports Co-Simulation only (fmuType {} requested)",
+                M::INFO.name,
+                fmu_type.0
+            ));
+        }
+        let expected = crate::description::guid::<M>();
+        match opt_str(guid) {
+            Some(g) if g == expected => {}
+            Some(g) => {
+                return fail(format!(
+                    "GUID mismatch: the host passed {g}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
+                    M::INFO.name
+                ))
+            }
+            None => return fail("fmuGUID is NULL".into()),
+        }
+        let resource_dir = match opt_str(resource_location) {
+            None => None,
+            Some(uri) if uri.is_empty() => None,
+            Some(uri) => match resource_dir_from_uri(&uri) {
+                Ok(p) => Some(p),
+                Err(e) => return fail(e),
+            },
+        };
+        let runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on != 0);
+        Box::into_raw(Box::new(Instance { runtime })) as fmi2Component
+    }));
+    r.unwrap_or(std::ptr::null_mut())
+}
+
+pub unsafe fn free_instance<M: Model>(c: fmi2Component) {
+    if !c.is_null() {
+        let _ = catch_unwind(AssertUnwindSafe(|| {
+            drop(Box::from_raw(c as *mut Instance<M>))
+        }));
+    }
+}
+
+pub unsafe fn set_debug_logging<M: Model>(
+    c: fmi2Component,
+    on: fmi2Boolean,
+    n: usize,
+    categories: *const fmi2String,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2SetDebugLogging", |rt| {
+        if n > 0 && categories.is_null() {
+            return rt.error("fmi2SetDebugLogging: categories is NULL");
+        }
+        let mut names = Vec::with_capacity(n);
+        for i in 0..n {
+            match opt_str(*categories.add(i)) {
+                Some(s) => names.push(s.into_owned()),
+                None => return rt.error("fmi2SetDebugLogging: a category is NULL"),
+            }
+        }
+        let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+        rt.set_debug_logging(on != 0, &refs)
+    })
+}
+
+pub unsafe fn setup_experiment<M: Model>(
+    c: fmi2Component,
+    _tolerance_defined: fmi2Boolean,
+    _tolerance: fmi2Real,
+    start: fmi2Real,
+    stop_defined: fmi2Boolean,
+    stop: fmi2Real,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2SetupExperiment", |rt| {
+        rt.setup_experiment(start, (stop_defined != 0).then_some(stop))
+    })
+}
+
+pub unsafe fn enter_initialization_mode<M: Model>(c: fmi2Component) -> fmi2Status {
+    guarded::<M>(c, "fmi2EnterInitializationMode", |rt| {
+        rt.enter_initialization_mode()
+    })
+}
+
+pub unsafe fn exit_initialization_mode<M: Model>(c: fmi2Component) -> fmi2Status {
+    guarded::<M>(c, "fmi2ExitInitializationMode", |rt| {
+        rt.exit_initialization_mode()
+    })
+}
+
+pub unsafe fn terminate<M: Model>(c: fmi2Component) -> fmi2Status {
+    guarded::<M>(c, "fmi2Terminate", |rt| rt.terminate())
+}
+
+pub unsafe fn reset<M: Model>(c: fmi2Component) -> fmi2Status {
+    guarded::<M>(c, "fmi2Reset", |rt| rt.reset())
+}
+
+/// Borrow the (vr, value) arrays, NULL-checked (NULL is fine when n is 0).
+unsafe fn arrays<'a, T>(
+    rt: &Runtime<impl Model>,
+    function: &str,
+    vr: *const fmi2ValueReference,
+    n: usize,
+    values: *const T,
+) -> Result<(&'a [u32], *const T), fmi2Status> {
+    if n == 0 {
+        return Ok((&[], values));
+    }
+    if vr.is_null() || values.is_null() {
+        return Err(rt.error(&format!("{function}: NULL array with nvr = {n}")));
+    }
+    Ok((std::slice::from_raw_parts(vr, n), values))
+}
+
+macro_rules! getter {
+    ($fn:ident, $cname:literal, $t:ty, $vt:expr, $conv:expr) => {
+        pub unsafe fn $fn<M: Model>(
+            c: fmi2Component,
+            vr: *const fmi2ValueReference,
+            n: usize,
+            value: *mut $t,
+        ) -> fmi2Status {
+            guarded::<M>(c, $cname, |rt| {
+                let (vrs, ptr) = match arrays(rt, $cname, vr, n, value as *const $t) {
+                    Ok(x) => x,
+                    Err(s) => return s,
+                };
+                let out: &mut [$t] = if n == 0 {
+                    &mut []
+                } else {
+                    std::slice::from_raw_parts_mut(ptr as *mut $t, n)
+                };
+                rt.get($cname, $vt, vrs, out, $conv)
+            })
+        }
+    };
+}
+
+macro_rules! setter {
+    ($fn:ident, $cname:literal, $t:ty, $vt:expr, $conv:expr) => {
+        pub unsafe fn $fn<M: Model>(
+            c: fmi2Component,
+            vr: *const fmi2ValueReference,
+            n: usize,
+            value: *const $t,
+        ) -> fmi2Status {
+            guarded::<M>(c, $cname, |rt| {
+                let (vrs, ptr) = match arrays(rt, $cname, vr, n, value) {
+                    Ok(x) => x,
+                    Err(s) => return s,
+                };
+                let vals: &[$t] = if n == 0 {
+                    &[]
+                } else {
+                    std::slice::from_raw_parts(ptr, n)
+                };
+                rt.set($cname, $vt, vrs, vals.iter().map($conv))
+            })
+        }
+    };
+}
+
+getter!(
+    get_real,
+    "fmi2GetReal",
+    fmi2Real,
+    ScalarType::Real,
+    |v: Value| v.as_f64()
+);
+getter!(
+    get_integer,
+    "fmi2GetInteger",
+    fmi2Integer,
+    ScalarType::Integer,
+    |v: Value| v.as_f64() as i32
+);
+getter!(
+    get_boolean,
+    "fmi2GetBoolean",
+    fmi2Boolean,
+    ScalarType::Boolean,
+    |v: Value| v.as_f64() as i32
+);
+setter!(
+    set_real,
+    "fmi2SetReal",
+    fmi2Real,
+    ScalarType::Real,
+    |x: &f64| Value::Real(*x)
+);
+setter!(
+    set_integer,
+    "fmi2SetInteger",
+    fmi2Integer,
+    ScalarType::Integer,
+    |x: &i32| Value::Integer(*x)
+);
+setter!(
+    set_boolean,
+    "fmi2SetBoolean",
+    fmi2Boolean,
+    ScalarType::Boolean,
+    |x: &i32| Value::Boolean(*x != 0)
+);
+
+pub unsafe fn get_string<M: Model>(
+    c: fmi2Component,
+    _vr: *const fmi2ValueReference,
+    n: usize,
+    _value: *mut fmi2String,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2GetString", |rt| {
+        if n == 0 {
+            fmi2Status::OK
+        } else {
+            rt.error(&format!(
+                "fmi2GetString: model '{}' has no String variables",
+                M::INFO.name
+            ))
+        }
+    })
+}
+
+pub unsafe fn set_string<M: Model>(
+    c: fmi2Component,
+    _vr: *const fmi2ValueReference,
+    n: usize,
+    _value: *const fmi2String,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2SetString", |rt| {
+        if n == 0 {
+            fmi2Status::OK
+        } else {
+            rt.error(&format!(
+                "fmi2SetString: model '{}' has no String variables",
+                M::INFO.name
+            ))
+        }
+    })
+}
+
+pub unsafe fn get_fmu_state<M: Model>(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
+    guarded::<M>(c, "fmi2GetFMUstate", |rt| {
+        if state.is_null() {
+            return rt.error("fmi2GetFMUstate: FMUstate pointer is NULL");
+        }
+        if (*state).is_null() {
+            match rt.snapshot() {
+                Ok(s) => {
+                    *state = Box::into_raw(Box::new(s)) as fmi2FMUstate;
+                    fmi2Status::OK
+                }
+                Err(s) => s,
+            }
+        } else {
+            rt.snapshot_into(&mut *(*state as *mut Snapshot<M>))
+        }
+    })
+}
+
+pub unsafe fn set_fmu_state<M: Model>(c: fmi2Component, state: fmi2FMUstate) -> fmi2Status {
+    guarded::<M>(c, "fmi2SetFMUstate", |rt| {
+        if state.is_null() {
+            return rt.error("fmi2SetFMUstate: FMUstate is NULL");
+        }
+        rt.restore(&*(state as *const Snapshot<M>))
+    })
+}
+
+pub unsafe fn free_fmu_state<M: Model>(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
+    guarded::<M>(c, "fmi2FreeFMUstate", |_rt| {
+        if !state.is_null() && !(*state).is_null() {
+            drop(Box::from_raw(*state as *mut Snapshot<M>));
+            *state = std::ptr::null_mut();
+        }
+        fmi2Status::OK
+    })
+}
+
+pub unsafe fn serialized_fmu_state_size<M: Model>(
+    c: fmi2Component,
+    state: fmi2FMUstate,
+    size: *mut usize,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2SerializedFMUstateSize", |rt| {
+        if state.is_null() || size.is_null() {
+            return rt.error("fmi2SerializedFMUstateSize: NULL argument");
+        }
+        *size = rt.serialize(&*(state as *const Snapshot<M>)).len();
+        fmi2Status::OK
+    })
+}
+
+pub unsafe fn serialize_fmu_state<M: Model>(
+    c: fmi2Component,
+    state: fmi2FMUstate,
+    bytes: *mut fmi2Byte,
+    size: usize,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2SerializeFMUstate", |rt| {
+        if state.is_null() || bytes.is_null() {
+            return rt.error("fmi2SerializeFMUstate: NULL argument");
+        }
+        let data = rt.serialize(&*(state as *const Snapshot<M>));
+        if data.len() > size {
+            return rt.error(&format!(
+                "fmi2SerializeFMUstate: buffer of {size} bytes, the state needs {}",
+                data.len()
+            ));
+        }
+        std::ptr::copy_nonoverlapping(data.as_ptr(), bytes as *mut u8, data.len());
+        fmi2Status::OK
+    })
+}
+
+pub unsafe fn deserialize_fmu_state<M: Model>(
+    c: fmi2Component,
+    bytes: *const fmi2Byte,
+    size: usize,
+    state: *mut fmi2FMUstate,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2DeSerializeFMUstate", |rt| {
+        if bytes.is_null() || state.is_null() {
+            return rt.error("fmi2DeSerializeFMUstate: NULL argument");
+        }
+        let data = std::slice::from_raw_parts(bytes as *const u8, size);
+        match rt.deserialize(data) {
+            Ok(snap) => {
+                if (*state).is_null() {
+                    *state = Box::into_raw(Box::new(snap)) as fmi2FMUstate;
+                } else {
+                    *(*state as *mut Snapshot<M>) = snap;
+                }
+                fmi2Status::OK
+            }
+            Err(s) => s,
+        }
+    })
+}
+
+pub unsafe fn unsupported<M: Model>(c: fmi2Component, function: &str, why: &str) -> fmi2Status {
+    guarded::<M>(c, function, |rt| rt.error(&format!("{function}: {why}")))
+}
+
+pub unsafe fn do_step<M: Model>(
+    c: fmi2Component,
+    current: fmi2Real,
+    step: fmi2Real,
+    _no_prior: fmi2Boolean,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2DoStep", |rt| rt.do_step(current, step))
+}
+
+pub unsafe fn get_real_status<M: Model>(
+    c: fmi2Component,
+    kind: fmi2StatusKind,
+    value: *mut fmi2Real,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2GetRealStatus", |rt| {
+        if value.is_null() {
+            return rt.error("fmi2GetRealStatus: value is NULL");
+        }
+        if kind == fmi2StatusKind::LAST_SUCCESSFUL_TIME {
+            *value = rt.last_successful_time();
+            fmi2Status::OK
+        } else {
+            rt.error(&format!(
+                "fmi2GetRealStatus: status kind {} not provided",
+                kind.0
+            ))
+        }
+    })
+}
+
+pub unsafe fn get_boolean_status<M: Model>(
+    c: fmi2Component,
+    kind: fmi2StatusKind,
+    value: *mut fmi2Boolean,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2GetBooleanStatus", |rt| {
+        if value.is_null() {
+            return rt.error("fmi2GetBooleanStatus: value is NULL");
+        }
+        if kind == fmi2StatusKind::TERMINATED {
+            *value = fmi2False;
+            fmi2Status::OK
+        } else {
+            rt.error(&format!(
+                "fmi2GetBooleanStatus: status kind {} not provided",
+                kind.0
+            ))
+        }
+    })
+}
+
+pub const TYPES_PLATFORM: &CStr = c"default";
+pub const VERSION: &CStr = c"2.0";

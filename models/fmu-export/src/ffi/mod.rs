@@ -1,0 +1,128 @@
+//! The FMI 2.0 Co-Simulation C entry points, generic over the model. [`export_fmu!`]
+//! instantiates them as `#[no_mangle]` symbols in a model's `cdylib`.
+//!
+//! Every entry point checks its pointers, runs inside `catch_unwind` (a panicking model
+//! returns fmi2Error, logs the panic and poisons the instance) and never unwinds into C.
+//!
+//! - this module: the guard around every call, the host's logger, the resource URI;
+//! - [`entry`]: one generic function per `fmi2*` entry point;
+//! - `export`: the [`export_fmu!`](crate::export_fmu) macro that instantiates them as C symbols.
+#![allow(clippy::missing_safety_doc, clippy::too_many_arguments)]
+
+use crate::fmi2::*;
+use crate::model::Model;
+use crate::runtime::{Logger, Runtime};
+use std::ffi::{CStr, CString};
+use std::os::raw::c_char;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::PathBuf;
+
+/// Forwards log messages to the host's `fmi2CallbackLogger`.
+pub(crate) struct CLogger {
+    callback: Option<fmi2CallbackLogger>,
+    env: fmi2ComponentEnvironment,
+    instance_name: CString,
+}
+
+// The host's environment pointer is opaque to us and only handed back to the host.
+unsafe impl Send for CLogger {}
+
+/// `message` goes through the host's printf: `%` must be doubled, NULs cannot pass.
+fn c_message(message: &str) -> CString {
+    CString::new(message.replace('%', "%%").replace('\0', "\\0")).unwrap_or_default()
+}
+
+impl Logger for CLogger {
+    fn log(&self, status: fmi2Status, category: &str, message: &str) {
+        if let Some(cb) = self.callback {
+            let cat = CString::new(category).unwrap_or_default();
+            let msg = c_message(message);
+            unsafe {
+                cb(
+                    self.env,
+                    self.instance_name.as_ptr(),
+                    status,
+                    cat.as_ptr(),
+                    msg.as_ptr(),
+                )
+            };
+        }
+    }
+}
+
+/// The component handed to the host.
+pub struct Instance<M: Model> {
+    pub runtime: Runtime<M>,
+}
+
+/// The message of a caught panic (for the log and the poisoned instance).
+pub fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "non-string panic payload".to_string()
+    }
+}
+
+/// Run `f` on the instance behind `c`, catching panics.
+pub(crate) unsafe fn guarded<M: Model>(
+    c: fmi2Component,
+    function: &str,
+    f: impl FnOnce(&mut Runtime<M>) -> fmi2Status,
+) -> fmi2Status {
+    if c.is_null() {
+        return fmi2Status::ERROR;
+    }
+    let inst = &mut *(c as *mut Instance<M>);
+    match catch_unwind(AssertUnwindSafe(|| f(&mut inst.runtime))) {
+        Ok(s) => s,
+        Err(payload) => {
+            let text = panic_text(&*payload);
+            catch_unwind(AssertUnwindSafe(|| inst.runtime.poison(function, &text)))
+                .unwrap_or(fmi2Status::ERROR)
+        }
+    }
+}
+
+/// Decode `fmuResourceLocation` (a file URI, percent-encoded) into a folder path.
+pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
+    let rest = uri
+        .strip_prefix("file://localhost/")
+        .map(|r| format!("/{r}"))
+        .or_else(|| uri.strip_prefix("file:///").map(|r| format!("/{r}")))
+        .or_else(|| uri.strip_prefix("file:/").map(|r| format!("/{r}")))
+        .ok_or_else(|| format!("fmuResourceLocation '{uri}' is not a file URI"))?;
+    let bytes = rest.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%' {
+            let hex = bytes
+                .get(i + 1..i + 3)
+                .and_then(|h| std::str::from_utf8(h).ok())
+                .and_then(|h| u8::from_str_radix(h, 16).ok())
+                .ok_or_else(|| {
+                    format!("fmuResourceLocation '{uri}': bad percent escape at byte {i}")
+                })?;
+            out.push(hex);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    let s = String::from_utf8(out)
+        .map_err(|_| format!("fmuResourceLocation '{uri}' is not UTF-8 after decoding"))?;
+    Ok(PathBuf::from(s))
+}
+
+pub(crate) unsafe fn opt_str<'a>(p: *const c_char) -> Option<std::borrow::Cow<'a, str>> {
+    (!p.is_null()).then(|| CStr::from_ptr(p).to_string_lossy())
+}
+
+pub mod entry;
+mod export;
+
+pub use entry::*;
