@@ -4,7 +4,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tb_cosim::{Simulation, System, SystemError};
+use tb_cosim::{Plan, Simulation, SystemError};
 use tb_fmi::FmuCache;
 
 fn root() -> PathBuf {
@@ -15,12 +15,9 @@ fn cache() -> Arc<FmuCache> {
     Arc::new(FmuCache::temporary(false).unwrap())
 }
 
-fn simulate(
-    system: &Path,
-    set: &[(&str, toml::Value)],
-) -> (tb_cosim::RunSummary, tb_cosim::Recording) {
+fn simulate(system: &Path, set: &[(&str, toml::Value)]) -> (tb_cosim::RunSummary, tb_cosim::Table) {
     common::fmu_dir();
-    let mut sim = Simulation::new(System::load(system, cache()).unwrap()).unwrap();
+    let mut sim = Simulation::new(Plan::load(system, cache()).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     for (k, v) in set {
         sim.set_parameter(k, v.clone()).unwrap();
@@ -49,9 +46,9 @@ fn measured() -> Measured {
 }
 
 /// RMS and max of the speed difference over distance [km/h], inside the measured range.
-fn speed_error_kmh(rec: &tb_cosim::Recording, meas: &Measured) -> (f64, f64) {
-    let d = rec.column("vehicle.distance").unwrap();
-    let v = rec.column("vehicle.v").unwrap();
+fn speed_error_kmh(rec: &tb_cosim::Table, meas: &Measured) -> (f64, f64) {
+    let d = rec.require("vehicle.distance").unwrap();
+    let v = rec.require("vehicle.v").unwrap();
     let dmax = *meas.distance.last().unwrap();
     let vm = tb_compare::resample::interp(&meas.distance, &meas.v, d);
     let errs: Vec<f64> = d
@@ -69,7 +66,7 @@ fn speed_error_kmh(rec: &tb_cosim::Recording, meas: &Measured) -> (f64, f64) {
 fn rls_v_drives_the_spielberg_lap() {
     let meas = measured();
     let (s, rec) = simulate(&root().join("systems/rls_v.toml"), &[]);
-    let lap = s.lap_time.expect("lap completed");
+    let lap = s.value("vehicle.lap_time").expect("lap completed");
     // Lap time within 3% of the measurement's 97.49 s (measured here: 98.13 s, +0.7%).
     assert!(
         (lap / meas.lap_time - 1.0).abs() < 0.03,
@@ -81,7 +78,7 @@ fn rls_v_drives_the_spielberg_lap() {
     assert!(rms < 2.0, "RMS speed error {rms} km/h (max {max})");
     // Eq. 17 along the lap: Fz_sum is the sum of the four loads (1e-9 relative), and never
     // below the weight by more than the road excitation can take away (lift presses down).
-    let sum = rec.column("vehicle.Fz_sum").unwrap();
+    let sum = rec.require("vehicle.Fz_sum").unwrap();
     let four: Vec<&[f64]> = [
         "vehicle.Fz_fl",
         "vehicle.Fz_fr",
@@ -89,7 +86,7 @@ fn rls_v_drives_the_spielberg_lap() {
         "vehicle.Fz_rr",
     ]
     .iter()
-    .map(|n| rec.column(n).unwrap())
+    .map(|n| rec.require(n).unwrap())
     .collect();
     for (k, s) in sum.iter().enumerate() {
         let total: f64 = four.iter().map(|c| c[k]).sum();
@@ -109,15 +106,18 @@ fn a_tenth_millisecond_step_agrees_with_the_millisecond_step() {
     file.experiment.step = 1e-4;
     file.record.decimation = 50;
     common::fmu_dir();
-    let mut sim = Simulation::new(System::from_file(file, &path, cache()).unwrap()).unwrap();
+    let mut sim = Simulation::new(Plan::from_file(file, &path, cache()).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     let s2 = sim.run().unwrap();
-    let (l1, l2) = (s1.lap_time.unwrap(), s2.lap_time.unwrap());
+    let (l1, l2) = (
+        s1.value("vehicle.lap_time").unwrap(),
+        s2.value("vehicle.lap_time").unwrap(),
+    );
     // Lap times within 0.3% and speed over distance within 1 km/h RMS of each other.
     assert!((l1 / l2 - 1.0).abs() < 3e-3, "1 ms: {l1} s, 0.1 ms: {l2} s");
     let other = Measured {
-        distance: sim.recording.column("vehicle.distance").unwrap().to_vec(),
-        v: sim.recording.column("vehicle.v").unwrap().to_vec(),
+        distance: sim.recording.require("vehicle.distance").unwrap().to_vec(),
+        v: sim.recording.require("vehicle.v").unwrap().to_vec(),
         lap_time: l2,
     };
     let (rms, _) = speed_error_kmh(&r1, &other);
@@ -133,10 +133,10 @@ fn jacobi_drives_the_same_lap() {
     let mut file = tb_cosim::SystemFile::load(&path).unwrap();
     file.experiment.algorithm = tb_cosim::Algorithm::Jacobi;
     common::fmu_dir();
-    let mut sim = Simulation::new(System::from_file(file, &path, cache()).unwrap()).unwrap();
+    let mut sim = Simulation::new(Plan::from_file(file, &path, cache()).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
-    let lap = s.lap_time.unwrap();
+    let lap = s.value("vehicle.lap_time").unwrap();
     assert!(
         (lap / measured().lap_time - 1.0).abs() < 0.03,
         "Jacobi lap {lap} s"
@@ -147,26 +147,26 @@ fn jacobi_drives_the_same_lap() {
 fn rls_alpha_and_n_alpha_run_the_lap_from_replayed_channels() {
     let meas = measured();
     let (s, rec) = simulate(&root().join("systems/rls_alpha.toml"), &[]);
-    let lap = s.lap_time.unwrap();
+    let lap = s.value("vehicle.lap_time").unwrap();
     // Open-loop pedals by distance: the lap completes near the measured time (within 5%).
     assert!(
         (lap / meas.lap_time - 1.0).abs() < 0.05,
         "RLS/α lap {lap} s"
     );
     assert!(rec
-        .column("pedals.brake_pedal")
+        .require("pedals.brake_pedal")
         .unwrap()
         .iter()
         .any(|&b| b > 0.5));
     let (s, rec) = simulate(&root().join("systems/n_alpha.toml"), &[]);
     assert!((s.simulated_time - 97.48).abs() < 1e-9);
     // Speed-controlled dynos follow the measured wheel speeds (RMS within 1 rad/s).
-    let w = rec.column("dyno_rl.omega").unwrap();
-    let wm = rec.column("meas.omega_rl").unwrap();
+    let w = rec.require("dyno_rl.omega").unwrap();
+    let wm = rec.require("meas.omega_rl").unwrap();
     let rms = (w.iter().zip(wm).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / w.len() as f64).sqrt();
     assert!(rms < 1.0, "n/α speed tracking RMS {rms} rad/s");
     assert!(rec
-        .column("edu.electric_power")
+        .require("edu.electric_power")
         .unwrap()
         .iter()
         .any(|&p| p > 1e5));
@@ -178,24 +178,24 @@ fn reruns_of_one_simulation_reuse_instances_and_repeat_exactly() {
     let path = root().join("systems/rls_v.toml");
     let mut file = tb_cosim::SystemFile::load(&path).unwrap();
     file.experiment.stop = tb_cosim::StopConfig::Time(5.0);
-    let mut sim = Simulation::new(System::from_file(file, &path, cache()).unwrap()).unwrap();
+    let mut sim = Simulation::new(Plan::from_file(file, &path, cache()).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     sim.run().unwrap();
     let first = sim.recording.clone();
     sim.set_parameter("vehicle.c_lift_front", toml::Value::Float(0.8))
         .unwrap();
     sim.run().unwrap();
-    let changed = sim.recording.column("vehicle.Fz_sum").unwrap().to_vec();
+    let changed = sim.recording.require("vehicle.Fz_sum").unwrap().to_vec();
     sim.set_parameter("vehicle.c_lift_front", toml::Value::Float(1.653))
         .unwrap();
     sim.run().unwrap();
     assert_eq!(
-        first.column("vehicle.Fz_sum").unwrap(),
-        sim.recording.column("vehicle.Fz_sum").unwrap()
+        first.require("vehicle.Fz_sum").unwrap(),
+        sim.recording.require("vehicle.Fz_sum").unwrap()
     );
     assert!(changed
         .iter()
-        .zip(first.column("vehicle.Fz_sum").unwrap())
+        .zip(first.require("vehicle.Fz_sum").unwrap())
         .all(|(a, b)| a < b));
 }
 
@@ -215,7 +215,7 @@ fn load_err(body: &str) -> String {
     let text = system_text(body);
     let path = std::env::temp_dir().join(format!("tb-bench-err-{}.toml", std::process::id()));
     let file = tb_cosim::SystemFile::parse(&text, &path).unwrap();
-    match System::from_file(file, &path, cache()) {
+    match Plan::from_file(file, &path, cache()) {
         Ok(_) => panic!("expected an error for:\n{body}"),
         Err(e) => e.to_string(),
     }
@@ -275,7 +275,7 @@ fn a_direct_feed_through_cycle_is_reported_with_its_variables() {
     // The same wiring through a stepped output (no feed-through) is fine.
     let ok = system_text("connections = [\"a.steps -> b.u\", \"b.steps -> a.u\"]\n[[instance]]\nname = \"a\"\nfmu = \"faulty\"\n\n[[instance]]\nname = \"b\"\nfmu = \"faulty\"\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n");
     let path = std::env::temp_dir().join("tb-bench-ok.toml");
-    System::from_file(
+    Plan::from_file(
         tb_cosim::SystemFile::parse(&ok, &path).unwrap(),
         &path,
         cache(),
@@ -288,7 +288,7 @@ fn an_fmu_failing_at_one_second_stops_the_run_with_instance_time_and_log() {
     let body = "[[instance]]\nname = \"supplier\"\nfmu = \"faulty\"\n\n[parameters]\n\"supplier.fault_kind\" = 1\n\"supplier.u\" = 1.0\n\n[experiment]\nstep = 1e-3\nstop = 2.0\n";
     let text = system_text(body);
     let path = std::env::temp_dir().join("tb-bench-fail.toml");
-    let sys = System::from_file(
+    let sys = Plan::from_file(
         tb_cosim::SystemFile::parse(&text, &path).unwrap(),
         &path,
         cache(),

@@ -7,7 +7,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
-use tb_cosim::{Algorithm, Simulation, StopConfig, System, SystemFile};
+use tb_cosim::{Algorithm, Plan, Simulation, StopConfig, SystemFile};
 use tb_fmi::FmuCache;
 
 const TOLERANCE: f64 = 1e-9;
@@ -32,7 +32,7 @@ fn twinbench_run(
         file.experiment.algorithm = a;
     }
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
-    let sys = System::from_file(file, system, cache).unwrap();
+    let sys = Plan::from_file(file, system, cache).unwrap();
     let order = sys
         .order
         .iter()

@@ -4,14 +4,14 @@
 mod common;
 
 use std::sync::Arc;
-use tb_cosim::{LoadOptions, Recording, Simulation, System};
+use tb_cosim::{LoadOptions, Plan, Simulation, Table};
 use tb_fmi::FmuCache;
 
-fn run(native: bool, set: &[(&str, f64)]) -> (Simulation, Recording) {
+fn run(native: bool, set: &[(&str, f64)]) -> (Simulation, Table) {
     common::fmu_dir();
     let path = twinbench::pack::workspace_root().join("systems/rls_v.toml");
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
-    let system = System::load_with(
+    let system = Plan::load_with(
         &path,
         cache,
         &LoadOptions {
@@ -40,10 +40,10 @@ fn run(native: bool, set: &[(&str, f64)]) -> (Simulation, Recording) {
     (sim, rec)
 }
 
-fn assert_bit_identical(a: &Recording, b: &Recording) {
-    assert_eq!(a.names, b.names);
-    assert_eq!(a.rows(), b.rows());
-    for (k, (x, y)) in a.columns.iter().zip(&b.columns).enumerate() {
+fn assert_bit_identical(a: &Table, b: &Table) {
+    assert_eq!(a.names(), b.names());
+    assert_eq!(a.len(), b.len());
+    for (k, (x, y)) in a.columns().iter().zip(b.columns()).enumerate() {
         if let Some(i) = x
             .iter()
             .zip(y)
@@ -51,7 +51,9 @@ fn assert_bit_identical(a: &Recording, b: &Recording) {
         {
             panic!(
                 "{} differs at row {i}: {} (FMU) vs {} (native)",
-                a.names[k], x[i], y[i]
+                a.names()[k],
+                x[i],
+                y[i]
             );
         }
     }
@@ -61,7 +63,7 @@ fn assert_bit_identical(a: &Recording, b: &Recording) {
 fn native_lap_is_bit_identical_to_the_fmu_lap() {
     let (_, fmu) = run(false, &[]);
     let (mut sim, native) = run(true, &[]);
-    assert!(fmu.rows() > 19_000, "a whole lap: {} rows", fmu.rows());
+    assert!(fmu.len() > 19_000, "a whole lap: {} rows", fmu.len());
     assert_bit_identical(&fmu, &native);
     // Reused (reset) native instances with a changed parameter agree as well.
     sim.set_parameter("vehicle.c_lift_front", toml::Value::Float(0.9))

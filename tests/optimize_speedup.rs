@@ -33,10 +33,10 @@ impl Problem for Lift<'_> {
         vec![(0.2, 2.5); 2]
     }
     fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
-        let p = vec![
-            ("vehicle.c_lift_front".to_string(), x[0]),
-            ("vehicle.c_lift_rear".to_string(), x[1]),
-        ];
+        // Every parameter of the study at its initial value, the lift coefficients at x.
+        let mut p: Vec<f64> = self.bench.assignment().iter().map(|a| a.1).collect();
+        p[self.bench.index_of("vehicle.c_lift_front").unwrap()] = x[0];
+        p[self.bench.index_of("vehicle.c_lift_rear").unwrap()] = x[1];
         let c0 = thread_cpu_seconds();
         let o = self.bench.run(&p, self.prepared);
         *self.cpu.lock().unwrap() += thread_cpu_seconds() - c0;

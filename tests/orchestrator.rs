@@ -4,7 +4,7 @@ mod common;
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use tb_cosim::{Simulation, System, SystemFile};
+use tb_cosim::{Plan, Simulation, SystemFile};
 use tb_fmi::FmuCache;
 
 fn faulty_system(body: &str, name: &str) -> (SystemFile, PathBuf) {
@@ -16,7 +16,7 @@ fn faulty_system(body: &str, name: &str) -> (SystemFile, PathBuf) {
 }
 
 fn sim(file: SystemFile, path: &std::path::Path) -> Simulation {
-    let s = System::from_file(file, path, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    let s = Plan::from_file(file, path, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
     let mut sim = Simulation::new(s).unwrap();
     sim.echo_fmu_log = false;
     sim
@@ -32,9 +32,12 @@ fn the_last_step_is_clamped_to_the_stop_time() {
     // 1000 full steps and one of 0.5 ms: y = ∫1 dt ends at exactly the stop time.
     assert_eq!(r.steps, 1001);
     assert_eq!(r.simulated_time, 1.0005);
-    let y = *s.recording.column("a.y").unwrap().last().unwrap();
+    let y = *s.recording.require("a.y").unwrap().last().unwrap();
     assert!((y - 1.0005).abs() < 1e-12, "{y}");
-    assert_eq!(*s.recording.column("time").unwrap().last().unwrap(), 1.0005);
+    assert_eq!(
+        *s.recording.require("time").unwrap().last().unwrap(),
+        1.0005
+    );
 }
 
 #[test]
@@ -45,13 +48,13 @@ fn the_tick_time_base_does_not_drift() {
     let mut s = sim(f, &p);
     let r = s.run().unwrap();
     assert_eq!(r.steps, 100_000);
-    let t = s.recording.column("time").unwrap();
+    let t = s.recording.require("time").unwrap();
     // Every recorded time is exactly k·h (k integer), no accumulated rounding.
     for (k, &x) in t.iter().enumerate() {
         assert_eq!(x, k as f64 * 1000.0 * 1e-3, "row {k}");
     }
     assert_eq!(
-        *s.recording.column("a.steps").unwrap().last().unwrap(),
+        *s.recording.require("a.steps").unwrap().last().unwrap(),
         100_000.0
     );
 }

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tb_cosim::{Simulation, System};
+use tb_cosim::{Plan, Simulation};
 use tb_fmi::FmuCache;
 
 fn corpus(sub: &str, ext: &str) -> Vec<PathBuf> {
@@ -57,7 +57,7 @@ fn check_all(cases: &[PathBuf], error_of: impl Fn(&Path) -> Option<String>) {
 
 fn system_error(path: &Path) -> Option<String> {
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
-    match System::load(path, cache) {
+    match Plan::load(path, cache) {
         Err(e) => Some(e.to_string()),
         Ok(sys) => Simulation::new(sys).err().map(|e| e.to_string()),
     }

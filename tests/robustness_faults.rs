@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tb_cosim::isolated::IsolationOptions;
-use tb_cosim::{LoadOptions, Simulation, System, SystemError, SystemFile};
+use tb_cosim::{LoadOptions, Plan, Simulation, SystemError, SystemFile};
 use tb_fmi::FmuCache;
 
 fn cache() -> Arc<FmuCache> {
@@ -60,7 +60,7 @@ fn options(isolate: bool, timeout: Duration) -> LoadOptions {
 fn simulation(text: &str, opts: &LoadOptions) -> Simulation {
     let path = std::env::temp_dir().join(format!("tb-faults-{}.toml", std::process::id()));
     let file = SystemFile::parse(text, &path).unwrap();
-    let sys = System::from_file_with(file, &path, cache(), opts).unwrap();
+    let sys = Plan::compile(file, &path, cache(), opts).unwrap();
     let mut sim = Simulation::new(sys).unwrap();
     sim.echo_fmu_log = false;
     sim
@@ -209,15 +209,15 @@ fn isolated_runs_give_the_same_results_as_in_process_runs() {
     let mut b = simulation(&text, &isolated(Duration::from_secs(10)));
     a.run().unwrap();
     b.run().unwrap();
-    assert_eq!(a.recording.names, b.recording.names);
-    for (x, y) in a.recording.columns.iter().zip(&b.recording.columns) {
+    assert_eq!(a.recording.names(), b.recording.names());
+    for (x, y) in a.recording.columns().iter().zip(b.recording.columns()) {
         assert_eq!(x, y);
     }
     // Instance reuse: a second run on the same workers.
     b.set_parameter("supplier.gain", toml::Value::Float(2.0))
         .unwrap();
     b.run().unwrap();
-    let y = b.recording.column("supplier.y").unwrap();
+    let y = b.recording.require("supplier.y").unwrap();
     assert!((y.last().unwrap() - 4.0).abs() < 1e-9, "{y:?}");
 }
 

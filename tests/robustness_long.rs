@@ -13,7 +13,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
-use tb_cosim::{Recording, Simulation, StopConfig, System, SystemFile};
+use tb_cosim::{Plan, Simulation, StopConfig, SystemFile, Table};
 use tb_fmi::FmuCache;
 
 /// Resident set size of this process [kB] (VmRSS).
@@ -50,7 +50,7 @@ fn lap_simulation(stop: Option<f64>) -> Simulation {
         file.experiment.stop = StopConfig::Time(t);
     }
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
-    let mut sim = Simulation::new(System::from_file(file, &path, cache).unwrap()).unwrap();
+    let mut sim = Simulation::new(Plan::from_file(file, &path, cache).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     sim
 }
@@ -127,17 +127,16 @@ fn soak_laps() {
 
 // ---- output files ----
 
-fn big_recording(rows: usize, value: f64) -> Recording {
+fn big_recording(rows: usize, value: f64) -> Table {
     let names: Vec<String> = (0..20).map(|k| format!("unit.signal_{k}")).collect();
-    let mut r = Recording::new(
+    let mut r = Table::new(
+        "big",
         std::iter::once("time".to_string()).chain(names).collect(),
         vec!["s".to_string(); 21],
-    );
+    )
+    .unwrap();
     for i in 0..rows {
-        r.columns[0].push(i as f64);
-        for (c, col) in r.columns.iter_mut().enumerate().skip(1) {
-            col.push(value + c as f64);
-        }
+        r.push_row(std::iter::once(i as f64).chain((1..21).map(|c| value + c as f64)));
     }
     r
 }

@@ -149,7 +149,7 @@ fn check_system(text: &str) {
             && file.replay.iter().all(|r| r.file.is_file())
             && file.preload.is_empty()
         {
-            if let Ok(sys) = tb_cosim::System::from_file(file, &path, shared_cache()) {
+            if let Ok(sys) = tb_cosim::Plan::from_file(file, &path, shared_cache()) {
                 let _ = tb_cosim::Simulation::new(sys);
             }
         }

@@ -8,7 +8,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
-use tb_cosim::{Algorithm, Simulation, StopConfig, System, SystemFile};
+use tb_cosim::{Algorithm, Plan, Simulation, StopConfig, SystemFile};
 use tb_fmi::FmuCache;
 
 fn root() -> PathBuf {
@@ -24,7 +24,7 @@ fn jacobi_system(dir: &Path, stop: Option<f64>) -> PathBuf {
         .replace("decimation = 5", "decimation = 1")
         .replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()));
     if let Some(t) = stop {
-        text = text.replace("stop = \"lap\"", &format!("stop = {t:?}"));
+        text = text.replace("stop = \"vehicle.lap >= 1\"", &format!("stop = {t:?}"));
     }
     let p = dir.join(format!("jacobi_{}.toml", stop.unwrap_or(0.0)));
     std::fs::write(&p, text).unwrap();
@@ -33,7 +33,7 @@ fn jacobi_system(dir: &Path, stop: Option<f64>) -> PathBuf {
 
 fn twinbench_csv(system: &Path, out: &Path) -> u64 {
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
-    let mut sim = Simulation::new(System::load(system, cache).unwrap()).unwrap();
+    let mut sim = Simulation::new(Plan::load(system, cache).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
     sim.recording.write_csv(out).unwrap();
@@ -42,7 +42,7 @@ fn twinbench_csv(system: &Path, out: &Path) -> u64 {
 
 fn export(system: &Path, out: &Path, stop: f64) -> serde_json::Value {
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
-    let sys = System::load(system, cache).unwrap();
+    let sys = Plan::load(system, cache).unwrap();
     let s = tb_cosim::ssp::export(
         &sys,
         out,
@@ -226,7 +226,7 @@ fn replays_are_refused_with_a_clear_error() {
     common::fmu_dir();
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
     let path = root().join("systems/rls_alpha.toml");
-    let sys = System::load(&path, cache).unwrap();
+    let sys = Plan::load(&path, cache).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("x.ssp");
     let e = tb_cosim::ssp::export(&sys, &out, &Default::default())
@@ -238,7 +238,7 @@ fn replays_are_refused_with_a_clear_error() {
     let mut file = SystemFile::load(&root().join("systems/rls_v.toml")).unwrap();
     file.experiment.stop = StopConfig::Time(1.0);
     file.experiment.algorithm = Algorithm::Jacobi;
-    let sys = System::from_file(
+    let sys = Plan::from_file(
         file,
         &root().join("systems/rls_v.toml"),
         Arc::new(FmuCache::temporary(false).unwrap()),

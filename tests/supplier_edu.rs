@@ -11,7 +11,7 @@ mod common;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
-use tb_cosim::{Recording, RunSummary, Simulation, System, SystemFile};
+use tb_cosim::{Plan, RunSummary, Simulation, SystemFile, Table};
 use tb_fmi::FmuCache;
 
 const RPM: f64 = PI / 30.0;
@@ -41,17 +41,17 @@ fn cache() -> Arc<FmuCache> {
         .clone()
 }
 
-fn run(system: System) -> (RunSummary, Recording) {
+fn run(system: Plan) -> (RunSummary, Table) {
     let mut sim = Simulation::new(system).unwrap();
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
     (s, sim.recording.clone())
 }
 
-fn load(path: &Path) -> System {
+fn load(path: &Path) -> Plan {
     common::fmu_dir();
     supplier_fmu();
-    System::load(path, cache()).unwrap()
+    Plan::load(path, cache()).unwrap()
 }
 
 #[test]
@@ -81,7 +81,10 @@ fn the_supplier_edu_drives_the_lap_within_one_percent_of_the_reference() {
 
     let (s_sup, r_sup) = run(sup);
     let (s_ref, r_ref) = run(load(&root().join("systems/rls_v.toml")));
-    let (lap_sup, lap_ref) = (s_sup.lap_time.unwrap(), s_ref.lap_time.unwrap());
+    let (lap_sup, lap_ref) = (
+        s_sup.value("vehicle.lap_time").unwrap(),
+        s_ref.value("vehicle.lap_time").unwrap(),
+    );
     eprintln!(
         "lap time: reference EDU {lap_ref:.4} s, supplier EDU {lap_sup:.4} s ({:+.2e} relative); \
          wall time {:.2} s vs {:.2} s",
@@ -97,13 +100,13 @@ fn the_supplier_edu_drives_the_lap_within_one_percent_of_the_reference() {
 
     // The recorded supplier ports are in its own units (the units row says so).
     let unit = |name: &str| {
-        let k = r_sup.names.iter().position(|n| n == name).unwrap();
-        r_sup.units[k].clone()
+        let k = r_sup.names().iter().position(|n| n == name).unwrap();
+        r_sup.units().unwrap()[k].clone()
     };
     assert_eq!(unit("edu.motor_speed"), "rpm");
     assert_eq!(unit("edu.accel_pedal"), "%");
     assert_eq!(unit("edu.electric_power"), "kW");
-    let col = |name: &str| r_sup.column(name).unwrap();
+    let col = |name: &str| r_sup.require(name).unwrap();
     // The pedal arrives in percent.
     for (p_pct, p) in col("edu.accel_pedal").iter().zip(col("driver.accel_pedal")) {
         assert!((p_pct - 100.0 * p).abs() < 1e-9, "{p_pct} % vs {p}");
@@ -126,14 +129,14 @@ fn the_supplier_edu_drives_the_lap_within_one_percent_of_the_reference() {
         "motor speed vs 17.86 x wheel speed: RMS {rms} rad/s, max {worst} rad/s (mean motor speed {mean} rad/s)"
     );
     // And the supplier's motor speed is the reference EDU's, converted.
-    let rows = r_sup.rows().min(r_ref.rows());
+    let rows = r_sup.len().min(r_ref.len());
     let (n_sup, w_ref) = (
         col("edu.motor_speed"),
-        r_ref.column("edu.motor_speed").unwrap(),
+        r_ref.require("edu.motor_speed").unwrap(),
     );
     let (p_sup, p_ref) = (
         col("edu.electric_power"),
-        r_ref.column("edu.electric_power").unwrap(),
+        r_ref.require("edu.electric_power").unwrap(),
     );
     for k in 0..rows {
         assert!(
@@ -152,7 +155,7 @@ fn the_supplier_edu_drives_the_lap_within_one_percent_of_the_reference() {
 }
 
 /// Reference and supplier EDU side by side, inputs held (set in each FMU's own unit).
-fn open_loop(pedal: f64, omega_wheel: f64, omega_start: f64) -> Recording {
+fn open_loop(pedal: f64, omega_wheel: f64, omega_start: f64) -> Table {
     let (fmu, lib) = supplier_fmu();
     let text = format!(
         r#"preload = ["{lib}"]
@@ -196,7 +199,7 @@ signals = ["ref.motor_speed", "ref.motor_torque", "ref.torque_left", "ref.torque
     );
     let path = std::env::temp_dir().join(format!("tb-supplier-open-{}.toml", std::process::id()));
     let file = SystemFile::parse(&text, &path).unwrap();
-    let sys = System::from_file(file, &path, cache()).unwrap();
+    let sys = Plan::from_file(file, &path, cache()).unwrap();
     assert!(sys.warnings.is_empty(), "{:?}", sys.warnings);
     run(sys).1
 }
@@ -208,7 +211,7 @@ fn open_loop_the_supplier_edu_has_the_reference_physics() {
     // and a motor starting slower than the wheels (the shafts drive it up).
     for (pedal, omega, omega0) in [(0.6, 150.0, 150.0), (-0.4, 150.0, 150.0), (1.0, 20.0, 15.0)] {
         let rec = open_loop(pedal, omega, omega0);
-        let c = |n: &str| rec.column(n).unwrap();
+        let c = |n: &str| rec.require(n).unwrap();
         let pairs: [(&str, &str, f64); 5] = [
             ("ref.motor_speed", "sup.n_Motor", RPM),
             ("ref.motor_torque", "sup.T_Motor", 1.0),
@@ -216,11 +219,11 @@ fn open_loop_the_supplier_edu_has_the_reference_physics() {
             ("ref.torque_right", "sup.T_ShaftRight", 1.0),
             ("ref.electric_power", "sup.P_Electric", 1000.0),
         ];
-        assert_eq!(rec.rows(), 501);
+        assert_eq!(rec.len(), 501);
         for (ours, theirs, factor) in pairs {
             let (a, b) = (c(ours), c(theirs));
             let scale = a.iter().fold(1.0f64, |m, x| m.max(x.abs()));
-            for k in 0..rec.rows() {
+            for k in 0..rec.len() {
                 assert!(
                     (a[k] - factor * b[k]).abs() <= 1e-9 * scale,
                     "pedal {pedal}, row {k}: {ours} = {} vs {theirs} = {} (x{factor})",

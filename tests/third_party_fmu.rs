@@ -11,7 +11,7 @@ mod common;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tb_cosim::{Recording, Simulation, System, SystemFile};
+use tb_cosim::{Plan, Simulation, SystemFile, Table};
 use tb_fmi::FmuCache;
 
 fn faulty_xml() -> String {
@@ -109,17 +109,17 @@ fn cache() -> Arc<FmuCache> {
     Arc::new(FmuCache::temporary(false).unwrap())
 }
 
-fn system(dir: &Path, fmus: &[(&str, &Path)], body: &str) -> Result<System, String> {
+fn system(dir: &Path, fmus: &[(&str, &Path)], body: &str) -> Result<Plan, String> {
     let mut text = format!("{body}\n[fmus]\n");
     for (k, p) in fmus {
         text.push_str(&format!("{k} = \"{}\"\n", p.display()));
     }
     let path = dir.join("system.toml");
     let file = SystemFile::parse(&text, &path).map_err(|e| e.to_string())?;
-    System::from_file(file, &path, cache()).map_err(|e| e.to_string())
+    Plan::from_file(file, &path, cache()).map_err(|e| e.to_string())
 }
 
-fn run(sys: System) -> Recording {
+fn run(sys: Plan) -> Table {
     let mut sim = Simulation::new(sys).unwrap();
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
@@ -182,9 +182,9 @@ fn fmus_with_extra_root_attributes_annotations_and_vendor_attributes_load_and_ru
         let sys = system(dir.path(), &[("third_party", &fmu)], CHAIN)
             .unwrap_or_else(|e| panic!("{name}: {e}"));
         let rec = run(sys);
-        let y = *rec.column("dst.y").unwrap().last().unwrap();
+        let y = *rec.require("dst.y").unwrap().last().unwrap();
         assert!((y - 2.0).abs() < 1e-9, "{name}: dst.y(1 s) = {y}");
-        assert_eq!(*rec.column("dst.steps").unwrap().last().unwrap(), 1000.0);
+        assert_eq!(*rec.require("dst.steps").unwrap().last().unwrap(), 1000.0);
     }
 }
 
@@ -282,7 +282,7 @@ signals = ["minutes.u", "fahrenheit.u"]
     let rec = run(sys);
     // 0.5 h = 30 min; 100 °C = 212 °F.
     for (name, expected) in [("minutes.u", 30.0), ("fahrenheit.u", 212.0)] {
-        for x in rec.column(name).unwrap() {
+        for x in rec.require(name).unwrap() {
             assert!(
                 (x - expected).abs() < 1e-9,
                 "{name} = {x}, expected {expected}"
@@ -330,7 +330,7 @@ fn an_unconnected_input_without_a_start_value_is_warned_about() {
     let path = dir.join("sys.toml");
     let file = SystemFile::parse(&text, &path).unwrap();
     let system =
-        System::from_file(file, &path, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+        Plan::from_file(file, &path, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
     assert_eq!(
         system.warnings,
         vec!["input 'a.u' is not connected and has no start value".to_string()]

@@ -50,7 +50,7 @@ def system_variant(tmp, algorithm=None, stop=None):
     if algorithm:
         text = text.replace('algorithm = "gauss-seidel"', f'algorithm = "{algorithm}"')
     if stop is not None:
-        text = text.replace('stop = "lap"', f"stop = {stop!r}")
+        text = text.replace('stop = "vehicle.lap >= 1"', f"stop = {stop!r}")
     p = os.path.join(tmp, f"rls_v_{algorithm or 'gs'}_{stop or 'lap'}.toml")
     with open(p, "w") as f:
         f.write(text)

@@ -35,6 +35,7 @@ import argparse
 import csv
 import json
 import math
+import re
 import os
 import sys
 import time
@@ -46,6 +47,12 @@ except ImportError:  # Python < 3.11
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+
+
+def holds(condition, x):
+    """Whether `signal OP threshold` holds for the signal's value x."""
+    _, op, threshold = condition
+    return {">=": x >= threshold, "<=": x <= threshold, ">": x > threshold, "<": x < threshold}[op]
 
 
 class Error(Exception):
@@ -172,9 +179,20 @@ class System:
         self.exp = exp
         self.start = float(exp.get("start", 0.0))
         self.h = float(exp["step"])
+        # stop: a time, a condition "signal >= value" (or <=, >, <), or the older "lap"
+        # (lap_signal >= lap_count).
         self.stop = exp["stop"]
-        self.lap_signal = exp.get("lap_signal", "vehicle.lap")
-        self.lap_count = float(exp.get("lap_count", 1.0))
+        self.condition = None
+        if isinstance(self.stop, str):
+            if self.stop == "lap":
+                if "lap_signal" not in exp:
+                    raise Error('stop = "lap" needs lap_signal')
+                self.condition = (exp["lap_signal"], ">=", float(exp.get("lap_count", 1.0)))
+            else:
+                m = re.fullmatch(r"\s*(\S+)\s*(>=|<=|>|<)\s*(\S+)\s*", self.stop)
+                if not m:
+                    raise Error(f"experiment.stop: not a time or a condition: {self.stop!r}")
+                self.condition = (m.group(1), m.group(2), float(m.group(3)))
         self.max_time = float(exp.get("max_time", 600.0))
         self.algorithm = exp.get("algorithm", "gauss-seidel")
         if self.algorithm not in ("gauss-seidel", "jacobi"):
@@ -229,7 +247,7 @@ class System:
         self.record_names = rec
         self.record_slots = [slot(n)[0] for n in rec]
         self.decimation = int(sysf.get("record", {}).get("decimation", 1))
-        self.lap_slot = slot(self.lap_signal)[0] if self.stop == "lap" else None
+        self.lap_slot = slot(self.condition[0])[0] if self.condition else None
         params = dict(sysf.get("parameters", {}))
         for o in overrides or []:
             name, _, value = o.partition("=")
@@ -302,7 +320,7 @@ class System:
 
     def run(self, init="fixed-point", time_base="ticks"):
         wall = time.perf_counter()
-        fixed_stop = None if self.stop == "lap" else float(self.stop)
+        fixed_stop = None if self.condition else float(self.stop)
         signals = [0.0] * len(self.names)
         # simulate_ssp calls fmi2SetupExperiment without a stop time.
         self.instantiate(fixed_stop if time_base != "sum" else None)
@@ -353,13 +371,13 @@ class System:
                 t_end = start + span if (k == total and fixed_stop is not None) else start + k * h
             else:
                 t_end = t_sum
-            lap_done = self.lap_slot is not None and signals[self.lap_slot] >= self.lap_count
+            lap_done = self.lap_slot is not None and holds(self.condition, signals[self.lap_slot])
             if k % self.decimation == 0 or (k == total and fixed_stop is not None) or time_base == "sum":
                 rows.append([t_end] + [signals[s] for s in self.record_slots])
             if lap_done:
                 break
         if fixed_stop is None and not lap_done:
-            raise Error(f"the lap did not complete within max_time = {self.max_time} s")
+            raise Error(f"the run did not complete within max_time = {self.max_time} s")
         for u in self.units:
             u.slave.terminate()
             u.slave.freeInstance()
@@ -431,7 +449,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("system")
     ap.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"])
-    ap.add_argument("--stop", help="a time in s, or 'lap'")
+    ap.add_argument("--stop", help="a time in s, or a condition such as 'vehicle.lap >= 1'")
     ap.add_argument("--order", help="comma-separated instance names")
     ap.add_argument("--set", action="append", default=[], help="instance.variable=value")
     ap.add_argument("--init", choices=["fixed-point", "zero"], default="fixed-point")
@@ -444,7 +462,10 @@ def main():
     a = ap.parse_args()
     stop = None
     if a.stop is not None:
-        stop = a.stop if a.stop == "lap" else float(a.stop)
+        try:
+            stop = float(a.stop)
+        except ValueError:
+            stop = a.stop
     try:
         sys_ = System(a.system, a.set, a.algorithm, stop, a.order.split(",") if a.order else None)
         r = sys_.run(a.init, a.time_base)

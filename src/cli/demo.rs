@@ -62,7 +62,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         StudyOutcome::Interrupted { .. } => anyhow::bail!("interrupted"),
     };
     let optimise_seconds = optimise_start.elapsed().as_secs_f64();
-    let report = crate::report::write_report(&study, &result, &args.out, args.threads)?;
+    let report = crate::report::write_report(&study, &result, &args.out)?;
     println!();
     println!("{}", report.table_markdown);
     for s in &result.steps {

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use tb_cosim::System;
+use tb_cosim::Plan;
 use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
@@ -24,7 +24,7 @@ pub struct ExportSspArgs {
 
 pub fn run(args: ExportSspArgs) -> anyhow::Result<()> {
     let cache = Arc::new(FmuCache::temporary(false)?);
-    let system = System::load(&args.system, cache)?;
+    let system = Plan::load(&args.system, cache)?;
     let options = tb_cosim::ssp::ExportOptions {
         stop_time: args.stop_time,
     };

@@ -57,6 +57,21 @@ pub enum Command {
     Worker(worker::WorkerArgs),
 }
 
+/// The bench's lap time of a run: a reported `*.lap_time` signal (the vehicle interpolates
+/// the line crossing inside its step), else the simulated time when the run stopped on a
+/// condition, else none.
+pub fn lap_time(summary: &tb_cosim::RunSummary, plan: &tb_cosim::Plan) -> Option<f64> {
+    summary
+        .reported
+        .iter()
+        .find(|(n, _)| n.ends_with(".lap_time"))
+        .map(|r| r.1)
+        .or(match plan.stop {
+            tb_cosim::Stop::When { .. } => Some(summary.simulated_time),
+            tb_cosim::Stop::Time(_) => None,
+        })
+}
+
 pub fn main() -> ExitCode {
     // Die quietly on a closed pipe (`twinbench info X | head`) instead of panicking in println!.
     unsafe {

@@ -68,12 +68,7 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
     let report = if args.no_report {
         None
     } else {
-        Some(crate::report::write_report(
-            &study,
-            &result,
-            &args.out,
-            args.threads,
-        )?)
+        Some(crate::report::write_report(&study, &result, &args.out)?)
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&result)?);

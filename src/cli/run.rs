@@ -3,7 +3,7 @@
 use anyhow::Context;
 use std::path::PathBuf;
 use std::sync::Arc;
-use tb_cosim::{LoadOptions, Simulation, System};
+use tb_cosim::{LoadOptions, Plan, Simulation};
 use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
@@ -70,7 +70,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             worker_exe: None,
         },
     };
-    let system = System::load_with(&args.system, cache, &options)?;
+    let system = Arc::new(Plan::load_with(&args.system, cache, &options)?);
     for w in &system.warnings {
         eprintln!("warning: {w}");
     }
@@ -79,7 +79,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .iter()
         .map(|&k| system.unit_name(k).to_string())
         .collect();
-    let mut sim = Simulation::new(system)?;
+    let mut sim = Simulation::new(system.clone())?;
     for s in &args.set {
         let (name, value) = parse_assignment(s)?;
         sim.set_parameter(&name, value)
@@ -100,11 +100,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "wall_time": summary.wall_time,
             "real_time_factor": rtf,
             "ns_per_step": summary.wall_time * 1e9 / summary.steps.max(1) as f64,
-            "lap_time": summary.lap_time,
+            "lap_time": super::lap_time(&summary, &system),
+            "reported": summary.reported.iter().cloned().collect::<std::collections::BTreeMap<_, _>>(),
             "stopped_by": summary.stopped_by,
             "order": order,
-            "backends": sim.system.instances.iter().map(|i| (i.name.clone(), i.factory.kind())).collect::<std::collections::BTreeMap<_, _>>(),
-            "recorded_rows": sim.recording.rows(),
+            "backends": system.instances.iter().map(|i| (i.name.clone(), i.factory.kind())).collect::<std::collections::BTreeMap<_, _>>(),
+            "recorded_rows": sim.recording.len(),
             "out": args.out,
         });
         println!("{}", serde_json::to_string_pretty(&j)?);
@@ -114,7 +115,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         println!("stepping order  {}", order.join(", "));
         println!("steps           {}", summary.steps);
         println!("simulated time  {:.3} s", summary.simulated_time);
-        if let Some(l) = summary.lap_time {
+        if let Some(l) = super::lap_time(&summary, &system) {
             println!("lap time        {l:.3} s");
         }
         println!(
@@ -126,7 +127,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             println!(
                 "results         {} ({} rows)",
                 out.display(),
-                sim.recording.rows()
+                sim.recording.len()
             );
         }
     }

@@ -1,16 +1,15 @@
 //! Reports of an optimisation study: the paper's Tab. 1 as Markdown and JSON, and plots
 //! (SVG + PNG): Fz_sum over distance measured / initial / optimised, filtered and unfiltered
 //! (Fig. 7); time over distance (Fig. 6); best cost per generation; a_x of twin and car.
+//! Everything comes from the study's result and the laps it kept: the report simulates
+//! nothing.
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use tb_compare::{Measurement, PreparedMeasurement, Table, Workspace};
-use tb_cosim::results::write_atomic;
-use tb_fmi::FmuCache;
-use tb_optimize::bench::Bench;
 use tb_optimize::{OptimizeError, Study, StudyResult};
 use tb_plot::LinePlot;
+use tb_table::write_atomic;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
@@ -25,8 +24,8 @@ pub enum ReportError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("simulation for the report failed: {0}")]
-    Run(String),
+    #[error("the study result carries no {0} lap to plot")]
+    MissingLap(&'static str),
 }
 
 /// One row of Tab. 1: a validation signal of a step.
@@ -181,13 +180,12 @@ fn points(
     range.zip(y).map(|(g, &v)| (grid.at(g), v)).collect()
 }
 
-/// Writes Tab. 1 (Markdown, JSON), the result JSON and the plots into `folder`. Runs the
-/// bench twice (initial and optimised parameters) for the plots.
+/// Writes Tab. 1 (Markdown, JSON), the result JSON and the plots into `folder`, from the
+/// result and its laps.
 pub fn write_report(
     study: &Study,
     result: &StudyResult,
     folder: &Path,
-    threads: usize,
 ) -> Result<ReportFiles, ReportError> {
     std::fs::create_dir_all(folder).map_err(|source| ReportError::Io {
         path: folder.to_path_buf(),
@@ -230,23 +228,19 @@ pub fn write_report(
     files.push(stem.with_extension("svg"));
     files.push(stem.with_extension("png"));
 
-    // The lap with the initial and the optimised parameters.
-    let cache = Arc::new(
-        FmuCache::temporary(false)
-            .map_err(|e| OptimizeError::System(tb_cosim::SystemError::from(e)))?,
-    );
-    let bench = Bench::new(study, cache)?;
+    // The laps with the initial and the optimised parameters, as the study ran them.
+    let initial = result
+        .laps
+        .initial
+        .as_ref()
+        .ok_or(ReportError::MissingLap("initial"))?;
+    let optimised = result
+        .laps
+        .optimized
+        .as_ref()
+        .ok_or(ReportError::MissingLap("optimised"))?;
     let measurement = Measurement::read_path(&study.measurement_path)?;
     let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum", "a_x"], &study.file.compare)?;
-    let pool = tb_optimize::optimizer::thread_pool(threads.min(2))?;
-    let (initial, optimised) = pool.install(|| {
-        rayon::join(
-            || bench.run(&result.parameters_initial, &prepared),
-            || bench.run(&result.parameters_final, &prepared),
-        )
-    });
-    let initial = initial.map_err(ReportError::Run)?.table;
-    let optimised = optimised.map_err(ReportError::Run)?.table;
     let grid = prepared.grid();
     let mut ws = Workspace::new();
     let meas: &Table = measurement.table();
@@ -264,8 +258,8 @@ pub fn write_report(
         ),
     ] {
         let (rm, m) = prepared.on_grid(meas, "Fz_sum", filtered, &mut ws)?;
-        let (ri, i) = prepared.on_grid(&initial, "Fz_sum", filtered, &mut ws)?;
-        let (ro, o) = prepared.on_grid(&optimised, "Fz_sum", filtered, &mut ws)?;
+        let (ri, i) = prepared.on_grid(initial, "Fz_sum", filtered, &mut ws)?;
+        let (ro, o) = prepared.on_grid(optimised, "Fz_sum", filtered, &mut ws)?;
         let plot = LinePlot::new(title, "distance [m]", "Fz_sum [N]")
             .series("measured (vehicle)", &points(grid, rm, &m))
             .series("twin, initial", &points(grid, ri, &i))
@@ -278,7 +272,7 @@ pub fn write_report(
 
     // Fig. 6: time over distance.
     let (rm, m) = prepared.on_grid(meas, "time", false, &mut ws)?;
-    let (ro, o) = prepared.on_grid(&optimised, "time", false, &mut ws)?;
+    let (ro, o) = prepared.on_grid(optimised, "time", false, &mut ws)?;
     let plot = LinePlot::new("Time over distance (Fig. 6)", "distance [m]", "time [s]")
         .series("vehicle", &points(grid, rm, &m))
         .series("twin (bench), optimised", &points(grid, ro, &o));
@@ -289,7 +283,7 @@ pub fn write_report(
 
     // a_x of twin and car.
     let (rm, m) = prepared.on_grid(meas, "a_x", true, &mut ws)?;
-    let (ro, o) = prepared.on_grid(&optimised, "a_x", true, &mut ws)?;
+    let (ro, o) = prepared.on_grid(optimised, "a_x", true, &mut ws)?;
     let plot = LinePlot::new(
         "Longitudinal acceleration over distance, low-pass filtered",
         "distance [m]",

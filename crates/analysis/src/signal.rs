@@ -1,8 +1,9 @@
-//! Uniformly sampled time series read from CSV (a header row of column names, then numbers;
-//! comma- or semicolon-separated; `#` lines are comments).
+//! Uniformly sampled time series: a [`Table`] (the CSV reader and the in-memory table every
+//! part of twinbench shares) with one column as the time base, checked to be uniform.
 
 use crate::error::{AnalysisError, Result};
 use std::path::Path;
+use tb_table::{Table, TableError};
 
 /// Relative tolerance on the sampling step: a step that differs from the mean step by more
 /// than this share is uneven sampling. Generous enough for times printed with few digits.
@@ -11,88 +12,45 @@ pub const SAMPLING_TOLERANCE: f64 = 0.01;
 /// Named columns on a uniform time grid.
 #[derive(Debug, Clone)]
 pub struct TimeSeries {
-    /// Where the data came from (file name), for error messages.
-    pub source: String,
-    pub time: Vec<f64>,
+    table: Table,
+    /// Index of the time column.
+    time: usize,
     /// Mean sampling step, s.
     pub dt: f64,
-    names: Vec<String>,
-    columns: Vec<Vec<f64>>,
 }
 
 impl TimeSeries {
     /// Read a CSV file; `time` names the time column.
     pub fn read_csv(path: &Path, time: &str) -> Result<TimeSeries> {
-        let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| AnalysisError::Io {
-            file: file.clone(),
-            source,
-        })?;
-        TimeSeries::parse_csv(&text, &file, time)
+        let table =
+            Table::read_path(path).map_err(|e| table_error(e, &path.display().to_string()))?;
+        TimeSeries::from_table(table, time)
     }
 
     /// Parse CSV text; `source` names it in error messages.
     pub fn parse_csv(text: &str, source: &str, time: &str) -> Result<TimeSeries> {
-        let csv_err = |line: usize, message: String| AnalysisError::Csv {
-            file: source.to_string(),
-            line,
-            message,
-        };
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .map(|(i, l)| (i + 1, l.trim()))
-            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-        let (header_line, header) = lines
-            .next()
-            .ok_or_else(|| csv_err(1, "the file is empty (expected a header row)".into()))?;
-        let sep = if header.contains(',') || !header.contains(';') {
-            ','
-        } else {
-            ';'
-        };
-        let names: Vec<String> = header
-            .split(sep)
-            .map(|s| s.trim().trim_matches('"').to_string())
-            .collect();
-        if names.iter().any(|n| n.is_empty()) {
-            return Err(csv_err(
-                header_line,
-                "empty column name in the header".into(),
-            ));
-        }
-        let mut columns: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
-        for (line, l) in lines {
-            let fields: Vec<&str> = l.split(sep).collect();
-            if fields.len() != names.len() {
-                return Err(csv_err(
-                    line,
-                    format!(
-                        "{} fields, but the header has {} columns",
-                        fields.len(),
-                        names.len()
-                    ),
-                ));
-            }
-            for (k, f) in fields.iter().enumerate() {
-                let v: f64 = f.trim().parse().map_err(|_| {
-                    csv_err(
-                        line,
-                        format!("column '{}': '{}' is not a number", names[k], f.trim()),
-                    )
-                })?;
-                columns[k].push(v);
-            }
-        }
+        let table =
+            Table::from_reader(text.as_bytes(), source).map_err(|e| table_error(e, source))?;
+        TimeSeries::from_table(table, time)
+    }
+
+    /// A table with `time` as its time base (checked: increasing, uniform).
+    pub fn from_table(table: Table, time: &str) -> Result<TimeSeries> {
+        let index = table
+            .names()
+            .iter()
+            .position(|n| n == time)
+            .ok_or_else(|| AnalysisError::MissingColumn {
+                file: table.source().to_string(),
+                column: time.to_string(),
+                available: table.names().join(", "),
+            })?;
         let mut ts = TimeSeries {
-            source: source.to_string(),
-            time: Vec::new(),
+            table,
+            time: index,
             dt: 0.0,
-            names,
-            columns,
         };
-        let time_values = ts.column(time)?.to_vec();
-        ts.set_time(time_values, header_line)?;
+        ts.check_time()?;
         Ok(ts)
     }
 
@@ -111,33 +69,44 @@ impl TimeSeries {
                 )));
             }
         }
-        let (names, columns) = columns.into_iter().unzip();
-        let mut ts = TimeSeries {
-            source: source.to_string(),
-            time: Vec::new(),
-            dt: 0.0,
-            names,
-            columns,
-        };
-        ts.set_time(time, 0)?;
-        Ok(ts)
+        let (mut names, mut data): (Vec<String>, Vec<Vec<f64>>) = columns.into_iter().unzip();
+        names.insert(0, "time".to_string());
+        data.insert(0, time);
+        let table = Table::from_columns(source, names, data)
+            .map_err(|e| AnalysisError::InvalidParameter(e.to_string()))?;
+        TimeSeries::from_table(table, "time")
     }
 
-    fn set_time(&mut self, time: Vec<f64>, header_line: usize) -> Result<()> {
+    /// The table behind the series.
+    pub fn table(&self) -> &Table {
+        &self.table
+    }
+
+    /// Where the data came from (file name), for error messages.
+    pub fn source(&self) -> &str {
+        self.table.source()
+    }
+
+    /// The time base, s.
+    pub fn time(&self) -> &[f64] {
+        self.table.column_at(self.time)
+    }
+
+    fn check_time(&mut self) -> Result<()> {
+        let time = self.time();
         let n = time.len();
         if n < 2 {
             return Err(AnalysisError::TooFewSamples {
-                file: self.source.clone(),
+                file: self.source().to_string(),
                 samples: n,
                 nperseg: 2,
             });
         }
-        // Line numbers for CSV rows: header line + row index (comment lines aside).
-        let line_of = |i: usize| header_line + 1 + i;
+        let line_of = |i: usize| self.table.line_of(i) as usize;
         for i in 1..n {
             if time[i] <= time[i - 1] || !time[i].is_finite() {
                 return Err(AnalysisError::NonIncreasingTime {
-                    file: self.source.clone(),
+                    file: self.source().to_string(),
                     line: line_of(i),
                 });
             }
@@ -147,14 +116,13 @@ impl TimeSeries {
             let dt = time[i] - time[i - 1];
             if (dt - mean).abs() > SAMPLING_TOLERANCE * mean {
                 return Err(AnalysisError::UnevenSampling {
-                    file: self.source.clone(),
+                    file: self.source().to_string(),
                     line: line_of(i),
                     dt,
                     mean,
                 });
             }
         }
-        self.time = time;
         self.dt = mean;
         Ok(())
     }
@@ -165,27 +133,63 @@ impl TimeSeries {
     }
 
     pub fn len(&self) -> usize {
-        self.time.len()
+        self.table.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.time.is_empty()
+        self.table.is_empty()
     }
 
     pub fn names(&self) -> &[String] {
-        &self.names
+        self.table.names()
     }
 
     /// A column by name, or an error naming the file and the columns there are.
     pub fn column(&self, name: &str) -> Result<&[f64]> {
-        self.names
+        self.table
+            .names()
             .iter()
             .position(|n| n == name)
-            .map(|k| self.columns[k].as_slice())
+            .map(|k| self.table.column_at(k))
             .ok_or_else(|| AnalysisError::MissingColumn {
-                file: self.source.clone(),
+                file: self.source().to_string(),
                 column: name.to_string(),
-                available: self.names.join(", "),
+                available: self.table.names().join(", "),
             })
+    }
+}
+
+/// A table reader's error in this crate's words (file, line, what is wrong).
+fn table_error(e: TableError, source: &str) -> AnalysisError {
+    let csv = |line: u64, message: String| AnalysisError::Csv {
+        file: source.to_string(),
+        line: line as usize,
+        message,
+    };
+    match e {
+        TableError::Io { source: io, .. } => AnalysisError::Io {
+            file: source.to_string(),
+            source: io,
+        },
+        TableError::Empty { .. } => csv(
+            1,
+            "the file is empty (expected a header row and data)".into(),
+        ),
+        TableError::Malformed {
+            row, column, value, ..
+        } => csv(row, format!("column '{column}': '{value}' is not a number")),
+        TableError::RaggedRow {
+            row,
+            expected,
+            found,
+            ..
+        } => csv(
+            row,
+            format!("{found} fields, but the header has {expected} columns"),
+        ),
+        TableError::DuplicateColumn { column, .. } => {
+            csv(1, format!("column name '{column}' appears twice"))
+        }
+        other => AnalysisError::InvalidParameter(other.to_string()),
     }
 }

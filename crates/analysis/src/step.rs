@@ -89,9 +89,9 @@ pub fn analyse(
 ) -> Result<StepResult> {
     let u = ts.column(setpoint)?;
     let y = ts.column(response)?;
-    let t = &ts.time;
+    let t = ts.time();
     let err = |message: String| AnalysisError::StepResponse {
-        file: ts.source.clone(),
+        file: ts.source().to_string(),
         message,
     };
     let n = t.len();
@@ -101,7 +101,7 @@ pub fn analyse(
         .unwrap_or((0, 0.0));
     if du == 0.0 {
         return Err(AnalysisError::NoStep {
-            file: ts.source.clone(),
+            file: ts.source().to_string(),
             column: setpoint.to_string(),
         });
     }

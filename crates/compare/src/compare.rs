@@ -17,10 +17,10 @@ use crate::filter::{uniform_sample_rate, Butterworth};
 use crate::measurement::{check_forward, cumulative_trapezoid_into, Measurement};
 use crate::metrics::{metrics, Metrics};
 use crate::resample::{interpolate_onto, DistanceGrid};
-use crate::table::Table;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::Path;
+use tb_table::Table;
 
 /// Derived signals and the columns they sum.
 pub const DERIVED_SIGNALS: [(&str, &[&str]); 3] = [

@@ -117,3 +117,68 @@ pub enum Error {
     #[error("invalid settings: {0}")]
     Settings(String),
 }
+
+/// Table errors keep their message (the same variants, converted one to one).
+impl From<tb_table::TableError> for Error {
+    fn from(e: tb_table::TableError) -> Self {
+        use tb_table::TableError as T;
+        match e {
+            T::Io { path, source } => Error::Io { path, source },
+            T::Empty { file, what } => Error::Empty { file, what },
+            T::RaggedRow {
+                file,
+                row,
+                expected,
+                found,
+            } => Error::RaggedRow {
+                file,
+                row,
+                expected,
+                found,
+            },
+            T::DuplicateColumn { file, column } => Error::DuplicateColumn { file, column },
+            T::Malformed {
+                file,
+                row,
+                column,
+                value,
+            } => Error::Malformed {
+                file,
+                row,
+                column,
+                value,
+            },
+            T::NonFinite {
+                file,
+                row,
+                column,
+                value,
+            } => Error::NonFinite {
+                file,
+                row,
+                column,
+                value,
+            },
+            T::MissingColumn {
+                file,
+                column,
+                available,
+            } => Error::MissingColumn {
+                file,
+                column,
+                available,
+            },
+            T::AmbiguousColumn {
+                file,
+                column,
+                candidates,
+            } => Error::AmbiguousColumn {
+                file,
+                column,
+                candidates,
+            },
+            T::Shape(m) => Error::Settings(m),
+            other => Error::Settings(other.to_string()),
+        }
+    }
+}

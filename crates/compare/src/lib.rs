@@ -1,7 +1,7 @@
 //! Distance-based comparison of a simulation with a vehicle measurement (paper ch. 4.2,
 //! BENCH.md §4).
 //!
-//! - [`table`]: a column table read from CSV (header of names, optional units row).
+//! - [`Table`]: the column table (from `tb-table`, shared with results, replays, analysis).
 //! - [`measurement`]: the vehicle measurement format, validated.
 //! - [`filter`]: Butterworth low-pass (bilinear transform, prewarped) as second-order
 //!   sections; zero-phase forward-backward filtering with scipy's default odd padding.
@@ -28,7 +28,6 @@ pub mod filter;
 pub mod measurement;
 pub mod metrics;
 pub mod resample;
-pub mod table;
 
 pub use compare::{
     compare_files, CompareSettings, Comparison, PreparedMeasurement, SignalComparison, Workspace,
@@ -39,4 +38,4 @@ pub use filter::Butterworth;
 pub use measurement::{DistanceSource, Measurement, REQUIRED_COLUMNS};
 pub use metrics::{error_measure, metrics, Metrics};
 pub use resample::DistanceGrid;
-pub use table::Table;
+pub use tb_table::Table;

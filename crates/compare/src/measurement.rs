@@ -10,8 +10,8 @@
 //! that does not strictly increase, a distance that decreases (equal is allowed: standstill).
 
 use crate::error::{Error, Result};
-use crate::table::Table;
 use std::path::Path;
+use tb_table::Table;
 
 /// Columns that must be present in a measurement.
 pub const REQUIRED_COLUMNS: [&str; 6] = ["time", "v", "Fz_fl", "Fz_fr", "Fz_rl", "Fz_rr"];
@@ -56,7 +56,7 @@ impl Measurement {
             })
             .min();
         if let Some((r, c)) = first_bad {
-            return Err(table.non_finite(c, r));
+            return Err(table.non_finite(c, r).into());
         }
         let time = table.require_index("time")?;
         check_increasing_time(&table, time)?;
@@ -99,12 +99,12 @@ impl Measurement {
 
     /// A column by name, or `Ok(None)`.
     pub fn signal(&self, name: &str) -> Result<Option<&[f64]>> {
-        self.table.column(name)
+        Ok(self.table.column(name)?)
     }
 
     /// A column by name, or a missing-column error (for callers that need e.g. the pedals).
     pub fn require(&self, name: &str) -> Result<&[f64]> {
-        self.table.require(name)
+        Ok(self.table.require(name)?)
     }
 }
 

@@ -63,7 +63,8 @@ pub enum Algorithm {
     Jacobi,
 }
 
-/// `stop = 100.0` or `stop = "lap"`.
+/// `stop = 100.0` (a time, s) or `stop = "vehicle.lap >= 1"` (a condition on a signal);
+/// `stop = "lap"` is the older spelling of `"<lap_signal> >= <lap_count>"`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(untagged)]
 pub enum StopConfig {
@@ -79,14 +80,17 @@ pub struct ExperimentConfig {
     /// Macro step [s].
     pub step: f64,
     pub stop: StopConfig,
-    /// With `stop = "lap"`: the condition `signal >= value` that ends the run.
-    #[serde(default = "default_lap_signal")]
-    pub lap_signal: String,
+    /// With the older `stop = "lap"`: the condition `lap_signal >= lap_count` ends the run.
+    #[serde(default)]
+    pub lap_signal: Option<String>,
     #[serde(default = "one")]
     pub lap_count: f64,
-    /// With `stop = "lap"`: give up after this simulated time [s].
+    /// With a stop condition: give up after this simulated time [s].
     #[serde(default = "default_max_time")]
     pub max_time: f64,
+    /// Signals whose values at the end of a run the run summary reports (e.g. a lap time).
+    #[serde(default)]
+    pub report: Vec<String>,
     #[serde(default)]
     pub algorithm: Algorithm,
     /// Explicit stepping order (instance names); default: derived from the connections.
@@ -94,9 +98,6 @@ pub struct ExperimentConfig {
     pub order: Vec<String>,
 }
 
-fn default_lap_signal() -> String {
-    "vehicle.lap".into()
-}
 fn one() -> f64 {
     1.0
 }

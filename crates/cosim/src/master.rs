@@ -1,22 +1,18 @@
-//! The master algorithm: fixed macro step on an integer tick base, Gauss-Seidel in the
-//! system's stepping order or Jacobi, initialisation to a fixed point, recording, a stop
-//! condition on a signal. Instances are created once and reset between runs.
+//! The master: runs a [`Plan`] on a fixed macro step with an integer tick base. The
+//! exchange of values between units ([`Exchange`]) is shared; how the units are stepped
+//! within one macro step is a [`MasterAlgorithm`] ([`GaussSeidel`] in the plan's stepping
+//! order, [`Jacobi`] all from the same values). Initialisation propagates outputs to inputs
+//! to a fixed point; the run ends at the stop time or when the plan's condition holds.
+//! Instances are created once and reset between runs.
 
-use super::backend::Backend;
-use super::config::{Algorithm, ReplayBasis, StopConfig};
-use super::replay::Cursor;
-use super::results::Recording;
-use super::{check_parameter, invalid, split_name, Endpoint, System, SystemError};
-use std::collections::HashMap;
+use crate::config::{Algorithm, ReplayBasis};
+use crate::plan::{Endpoint, ParamSlot, ParamValue, Plan, Stop};
+use crate::replay::Cursor;
+use crate::{backend::Backend, invalid, SystemError};
+use std::sync::Arc;
 use std::time::Instant;
-use tb_fmi::{Causality, ScalarType};
-
-/// Where a signal's value comes from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-enum Source {
-    Fmu(usize, u32),
-    Replay(usize, usize),
-}
+use tb_fmi::ScalarType;
+use tb_table::Table;
 
 #[derive(Default)]
 struct Batch<T> {
@@ -33,7 +29,8 @@ impl<T: Default + Clone> Batch<T> {
     }
 }
 
-struct FmuRt {
+/// One FMU instance at run time: its backend and its exchange tables.
+struct FmuUnit {
     name: String,
     instance: Option<Box<dyn Backend>>,
     in_real: Batch<f64>,
@@ -44,48 +41,38 @@ struct FmuRt {
     out_real: Batch<f64>,
     out_int: Batch<i32>,
     out_bool: Batch<i32>,
-    /// (vr, type, value) applied before each initialisation.
-    params: Vec<(u32, ScalarType, toml::Value)>,
+    /// (value reference, value) applied before each initialisation.
+    params: Vec<(u32, ParamValue)>,
 }
 
-struct ReplayRt {
+/// One replayed file at run time.
+struct ReplayUnit {
     source: usize,
     basis_sig: Option<usize>,
     out_sig: Vec<usize>,
     cursor: Cursor,
 }
 
-enum UnitRt {
-    Fmu(Box<FmuRt>),
-    Replay(ReplayRt),
+enum Unit {
+    Fmu(Box<FmuUnit>),
+    Replay(ReplayUnit),
 }
 
-/// What a run did.
-#[derive(Clone, Debug)]
-pub struct RunSummary {
-    pub steps: u64,
-    pub simulated_time: f64,
-    pub wall_time: f64,
-    /// Duration of the completed lap, when the run stopped on a lap.
-    pub lap_time: Option<f64>,
-    pub stopped_by: String,
-}
-
-/// A runnable system: the loaded [`System`] plus its instances and exchange buffers.
-pub struct Simulation {
-    pub system: System,
-    units: Vec<UnitRt>,
+/// The units and the exchange buffer of one simulation: what a master algorithm moves.
+pub struct Exchange {
+    plan: Arc<Plan>,
+    units: Vec<Unit>,
     signals: Vec<f64>,
-    signal_names: Vec<String>,
-    record_sigs: Vec<usize>,
-    lap_sig: Option<usize>,
-    lap_time_source: Option<(usize, u32)>,
-    pub recording: Recording,
-    /// Echo FMU messages with status OK to the log (off: kept only for error reports).
-    pub echo_fmu_log: bool,
 }
 
-impl FmuRt {
+impl FmuUnit {
+    #[inline]
+    fn backend(&mut self) -> &mut dyn Backend {
+        self.instance
+            .as_deref_mut()
+            .expect("instances are created before the first step")
+    }
+
     #[inline]
     fn gather(&mut self, signals: &[f64]) {
         for k in 0..self.in_real.vr.len() {
@@ -102,7 +89,10 @@ impl FmuRt {
 
     #[inline]
     fn set_inputs(&mut self) -> Result<(), SystemError> {
-        let i = self.instance.as_mut().expect("instantiated");
+        let i = self
+            .instance
+            .as_deref_mut()
+            .expect("instances are created before the first step");
         if !self.in_real.vr.is_empty() {
             i.set_real(&self.in_real.vr, &self.in_real.buf)?;
         }
@@ -116,8 +106,11 @@ impl FmuRt {
     }
 
     #[inline]
-    fn get_outputs(&mut self, signals: &mut [f64], names: &[String]) -> Result<(), SystemError> {
-        let i = self.instance.as_mut().expect("instantiated");
+    fn get_outputs(&mut self, signals: &mut [f64], plan: &Plan) -> Result<(), SystemError> {
+        let i = self
+            .instance
+            .as_deref_mut()
+            .expect("instances are created before the first step");
         if !self.out_real.vr.is_empty() {
             i.get_real(&self.out_real.vr, &mut self.out_real.buf)?;
             for k in 0..self.out_real.vr.len() {
@@ -125,7 +118,7 @@ impl FmuRt {
                 if !x.is_finite() {
                     return Err(SystemError::NotFinite {
                         instance: self.name.clone(),
-                        signal: names[self.out_real.sig[k]].clone(),
+                        signal: plan.signals.signals[self.out_real.sig[k]].name.clone(),
                         value: x,
                         time: i.time(),
                     });
@@ -149,157 +142,214 @@ impl FmuRt {
     }
 }
 
+impl Exchange {
+    /// Set unit `u`'s inputs from the exchange buffer (a replay has none).
+    #[inline]
+    pub fn set_inputs(&mut self, u: usize) -> Result<(), SystemError> {
+        if let Unit::Fmu(f) = &mut self.units[u] {
+            f.gather(&self.signals);
+            f.set_inputs()?;
+        }
+        Ok(())
+    }
+
+    /// Compute unit `u`'s inputs into its own buffer without setting them (Jacobi: every
+    /// unit sees the values of before the step).
+    #[inline]
+    pub fn gather(&mut self, u: usize) {
+        if let Unit::Fmu(f) = &mut self.units[u] {
+            f.gather(&self.signals);
+        }
+    }
+
+    /// Set the inputs gathered before.
+    #[inline]
+    pub fn set_gathered(&mut self, u: usize) -> Result<(), SystemError> {
+        if let Unit::Fmu(f) = &mut self.units[u] {
+            f.set_inputs()?;
+        }
+        Ok(())
+    }
+
+    /// Step unit `u` from `t` by `h` (a replay does nothing here).
+    #[inline]
+    pub fn do_step(&mut self, u: usize, t: f64, h: f64) -> Result<(), SystemError> {
+        if let Unit::Fmu(f) = &mut self.units[u] {
+            f.backend().do_step(t, h)?;
+        }
+        Ok(())
+    }
+
+    /// Read unit `u`'s outputs into the exchange buffer; a replay takes its values at `t`.
+    #[inline]
+    pub fn publish(&mut self, u: usize, t: f64) -> Result<(), SystemError> {
+        match &mut self.units[u] {
+            Unit::Fmu(f) => f.get_outputs(&mut self.signals, &self.plan),
+            Unit::Replay(_) => {
+                self.step_replay(u, t);
+                Ok(())
+            }
+        }
+    }
+
+    fn step_replay(&mut self, u: usize, t: f64) {
+        let Unit::Replay(r) = &mut self.units[u] else {
+            return;
+        };
+        let src = &self.plan.replays[r.source];
+        let q = match (src.basis, r.basis_sig) {
+            (ReplayBasis::Distance, Some(s)) => self.signals[s],
+            _ => t,
+        };
+        let (i, w) = r.cursor.locate(src.basis_values(), q);
+        for (c, &sig) in r.out_sig.iter().enumerate() {
+            if sig != usize::MAX {
+                let col = src.values(c);
+                self.signals[sig] = if col.len() > 1 {
+                    col[i] + w * (col[i + 1] - col[i])
+                } else {
+                    col[0]
+                };
+            }
+        }
+    }
+}
+
+/// How the units are advanced over one macro step.
+pub trait MasterAlgorithm: Send + Sync {
+    /// The name in the system file and in messages.
+    fn name(&self) -> &'static str;
+    /// Advance every unit in `order` from `t` by `h`; the exchange buffer holds the outputs
+    /// at `t + h` afterwards.
+    fn step(&self, ex: &mut Exchange, order: &[usize], t: f64, h: f64) -> Result<(), SystemError>;
+}
+
+/// Gauss-Seidel: each unit in turn, with the outputs its predecessors produced this step.
+pub struct GaussSeidel;
+
+impl MasterAlgorithm for GaussSeidel {
+    fn name(&self) -> &'static str {
+        "gauss-seidel"
+    }
+    #[inline]
+    fn step(&self, ex: &mut Exchange, order: &[usize], t: f64, h: f64) -> Result<(), SystemError> {
+        for &u in order {
+            ex.set_inputs(u)?;
+            ex.do_step(u, t, h)?;
+            ex.publish(u, t + h)?;
+        }
+        Ok(())
+    }
+}
+
+/// Jacobi: every unit from the outputs at `t` (parallel stepping, as libcosim and FMPy's
+/// SSP master do).
+pub struct Jacobi;
+
+impl MasterAlgorithm for Jacobi {
+    fn name(&self) -> &'static str {
+        "jacobi"
+    }
+    #[inline]
+    fn step(&self, ex: &mut Exchange, order: &[usize], t: f64, h: f64) -> Result<(), SystemError> {
+        for &u in order {
+            ex.gather(u);
+        }
+        for &u in order {
+            ex.set_gathered(u)?;
+            ex.do_step(u, t, h)?;
+        }
+        for &u in order {
+            ex.publish(u, t + h)?;
+        }
+        Ok(())
+    }
+}
+
+/// The algorithm a system file names.
+pub fn algorithm(a: Algorithm) -> Box<dyn MasterAlgorithm> {
+    match a {
+        Algorithm::GaussSeidel => Box::new(GaussSeidel),
+        Algorithm::Jacobi => Box::new(Jacobi),
+    }
+}
+
+/// What a run did.
+#[derive(Clone, Debug)]
+pub struct RunSummary {
+    pub steps: u64,
+    pub simulated_time: f64,
+    pub wall_time: f64,
+    /// "stop time 10 s" or the condition that held, e.g. "vehicle.lap >= 1".
+    pub stopped_by: String,
+    /// The plan's reported signals at the end of the run, in the system file's order.
+    pub reported: Vec<(String, f64)>,
+}
+
+impl RunSummary {
+    /// A reported signal's final value.
+    pub fn value(&self, name: &str) -> Option<f64> {
+        self.reported.iter().find(|(n, _)| n == name).map(|r| r.1)
+    }
+}
+
+/// A runnable system: a [`Plan`] plus its instances and exchange buffers.
+pub struct Simulation {
+    plan: Arc<Plan>,
+    ex: Exchange,
+    algorithm: Box<dyn MasterAlgorithm>,
+    /// The recorded signals of the last run (time first).
+    pub recording: Table,
+    /// Echo FMU messages with status OK to the log (off: kept only for error reports).
+    pub echo_fmu_log: bool,
+}
+
 impl Simulation {
-    /// Prepare the exchange tables; instances are created at the first run.
-    pub fn new(system: System) -> Result<Simulation, SystemError> {
-        let n_fmu = system.instances.len();
-        let mut slots: HashMap<Source, usize> = HashMap::new();
-        let mut signal_names = Vec::new();
-        let mut signal_units = Vec::new();
-        let mut sources: Vec<(Source, ScalarType)> = Vec::new();
-        let mut slot_of = |src: Source, ty: ScalarType, name: String, unit: String| -> usize {
-            *slots.entry(src).or_insert_with(|| {
-                signal_names.push(name);
-                signal_units.push(unit);
-                sources.push((src, ty));
-                sources.len() - 1
+    /// Prepare the exchange tables of a plan; instances are created at the first run.
+    pub fn new(plan: impl Into<Arc<Plan>>) -> Result<Simulation, SystemError> {
+        let plan: Arc<Plan> = plan.into();
+        let n_fmu = plan.instances.len();
+        let mut units: Vec<Unit> = plan
+            .instances
+            .iter()
+            .map(|inst| {
+                Unit::Fmu(Box::new(FmuUnit {
+                    name: inst.name.clone(),
+                    instance: None,
+                    in_real: Batch::default(),
+                    in_real_scale: Vec::new(),
+                    in_real_offset: Vec::new(),
+                    in_int: Batch::default(),
+                    in_bool: Batch::default(),
+                    out_real: Batch::default(),
+                    out_int: Batch::default(),
+                    out_bool: Batch::default(),
+                    params: Vec::new(),
+                }))
             })
-        };
-        let ctx = system.path.display().to_string();
-        let endpoint_slot =
-            |e: &Endpoint,
-             name: &str,
-             slot_of: &mut dyn FnMut(Source, ScalarType, String, String) -> usize| {
-                match e {
-                    Endpoint::Fmu {
-                        unit,
-                        vr,
-                        ty,
-                        unit_name,
-                    } => slot_of(
-                        Source::Fmu(*unit, *vr),
-                        *ty,
-                        name.to_string(),
-                        unit_name.clone().unwrap_or_default(),
-                    ),
-                    Endpoint::Replay {
-                        unit,
-                        column,
-                        unit_name,
-                    } => slot_of(
-                        Source::Replay(*unit, *column),
-                        ScalarType::Real,
-                        name.to_string(),
-                        unit_name.clone(),
-                    ),
-                }
-            };
-        // Resolve a name to an endpoint (the rules the system's validation used).
-        let resolve =
-            |full: &str| super::resolve_endpoint(&system.instances, &system.replays, &ctx, full);
-        // Connection sources.
-        let mut conn_slots = Vec::new();
-        for c in &system.connections {
-            conn_slots.push(endpoint_slot(&c.from, &c.from_name, &mut slot_of));
-        }
-        // Recorded signals: as listed, or every output and replayed column.
-        let mut record_names: Vec<String> = system.file.record.signals.clone();
-        if record_names.is_empty() {
-            for inst in &system.instances {
-                for v in inst
-                    .description()
-                    .variables
-                    .iter()
-                    .filter(|v| v.causality == Causality::Output && v.ty != ScalarType::String)
-                {
-                    let ours = inst
-                        .ports
+            .collect();
+        for (k, r) in plan.replays.iter().enumerate() {
+            let out_sig = (0..r.columns.len())
+                .map(|c| {
+                    plan.signals
+                        .signals
                         .iter()
-                        .find(|(_, t)| *t == &v.name)
-                        .map(|(o, _)| o.clone())
-                        .unwrap_or(v.name.clone());
-                    record_names.push(format!("{}.{ours}", inst.name));
-                }
-            }
-            for r in &system.replays {
-                for c in &r.columns {
-                    record_names.push(format!("{}.{c}", r.name));
-                }
-            }
-        }
-        let mut record_sigs = Vec::new();
-        for n in &record_names {
-            let e = resolve(n)?;
-            if let Endpoint::Fmu {
-                ty: ScalarType::String,
-                ..
-            } = e
-            {
-                return Err(invalid(&ctx, format!("record: '{n}' is a String")));
-            }
-            record_sigs.push(endpoint_slot(&e, n, &mut slot_of));
-        }
-        let lap_sig = if system.file.experiment.stop == StopConfig::Word("lap".into()) {
-            let e = resolve(&system.file.experiment.lap_signal)?;
-            Some(endpoint_slot(
-                &e,
-                &system.file.experiment.lap_signal,
-                &mut slot_of,
-            ))
-        } else {
-            None
-        };
-        let lap_time_source = lap_sig.and_then(|_| {
-            let (u, _) = split_name(&system.file.experiment.lap_signal)?;
-            let k = system.instances.iter().position(|i| i.name == u)?;
-            let sv = system.instances[k].description().variable("lap_time")?;
-            (sv.ty == ScalarType::Real).then_some((k, sv.value_reference))
-        });
-        let mut replay_basis = Vec::new();
-        for r in &system.replays {
-            replay_basis.push(match &r.by {
-                Some(by) => {
-                    let e = resolve(by)?;
-                    Some(endpoint_slot(&e, by, &mut slot_of))
-                }
-                None => None,
-            });
-        }
-        // Per-unit exchange tables.
-        let mut units: Vec<UnitRt> = Vec::new();
-        for inst in &system.instances {
-            units.push(UnitRt::Fmu(Box::new(FmuRt {
-                name: inst.name.clone(),
-                instance: None,
-                in_real: Batch::default(),
-                in_real_scale: Vec::new(),
-                in_real_offset: Vec::new(),
-                in_int: Batch::default(),
-                in_bool: Batch::default(),
-                out_real: Batch::default(),
-                out_int: Batch::default(),
-                out_bool: Batch::default(),
-                params: Vec::new(),
-            })));
-        }
-        for (k, r) in system.replays.iter().enumerate() {
-            units.push(UnitRt::Replay(ReplayRt {
+                        .position(|s| {
+                            matches!(s.source, Endpoint::Replay { unit, column, .. } if unit == n_fmu + k && column == c)
+                        })
+                        .unwrap_or(usize::MAX)
+                })
+                .collect();
+            units.push(Unit::Replay(ReplayUnit {
                 source: k,
-                basis_sig: replay_basis[k],
-                out_sig: (0..r.columns.len())
-                    .map(|c| {
-                        slots
-                            .get(&Source::Replay(n_fmu + k, c))
-                            .copied()
-                            .unwrap_or(usize::MAX)
-                    })
-                    .collect(),
+                basis_sig: plan.replay_basis[k],
+                out_sig,
                 cursor: Cursor::default(),
             }));
         }
-        for (slot, (src, ty)) in sources.iter().enumerate() {
-            if let Source::Fmu(u, vr) = *src {
-                if let UnitRt::Fmu(f) = &mut units[u] {
+        for (slot, s) in plan.signals.signals.iter().enumerate() {
+            if let Endpoint::Fmu { unit, vr, ty, .. } = s.source {
+                if let Unit::Fmu(f) = &mut units[unit] {
                     match ty {
                         ScalarType::Real => f.out_real.push(vr, slot),
                         ScalarType::Integer | ScalarType::Enumeration => f.out_int.push(vr, slot),
@@ -309,112 +359,103 @@ impl Simulation {
                 }
             }
         }
-        for (c, &slot) in system.connections.iter().zip(&conn_slots) {
-            if let UnitRt::Fmu(f) = &mut units[c.to_unit] {
+        for c in &plan.connections {
+            if let Unit::Fmu(f) = &mut units[c.to_unit] {
                 match c.to_ty {
                     ScalarType::Real => {
-                        f.in_real.push(c.to_vr, slot);
+                        f.in_real.push(c.to_vr, c.from_slot);
                         f.in_real_scale.push(c.scale);
                         f.in_real_offset.push(c.offset);
                     }
-                    ScalarType::Integer | ScalarType::Enumeration => f.in_int.push(c.to_vr, slot),
-                    ScalarType::Boolean => f.in_bool.push(c.to_vr, slot),
+                    ScalarType::Integer | ScalarType::Enumeration => {
+                        f.in_int.push(c.to_vr, c.from_slot)
+                    }
+                    ScalarType::Boolean => f.in_bool.push(c.to_vr, c.from_slot),
                     ScalarType::String => {}
                 }
             }
         }
-        let mut record_names_full = vec!["time".to_string()];
-        let mut record_units = vec!["s".to_string()];
-        for &s in &record_sigs {
-            record_names_full.push(signal_names[s].clone());
-            record_units.push(signal_units[s].clone());
-        }
-        let n_sig = signal_names.len();
-        let mut sim = Simulation {
-            system,
-            units,
-            signals: vec![0.0; n_sig],
-            signal_names,
-            record_sigs,
-            lap_sig,
-            lap_time_source,
-            recording: Recording::new(record_names_full, record_units),
-            echo_fmu_log: true,
-        };
-        let params: Vec<(String, toml::Value)> = sim
-            .system
-            .file
-            .parameters
-            .iter()
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-        for (k, v) in params {
-            sim.set_parameter(&k, v)?;
-        }
-        Ok(sim)
-    }
-
-    /// Set (or change, between runs) a parameter or input start value: `instance.variable`.
-    pub fn set_parameter(&mut self, name: &str, value: toml::Value) -> Result<(), SystemError> {
-        let ctx = format!("parameter \"{name}\"");
-        let (k, sv) = check_parameter(&self.system.instances, name, &value, &ctx)?;
-        let (vr, ty) = (sv.value_reference, sv.ty);
-        if let UnitRt::Fmu(f) = &mut self.units[k] {
-            match f.params.iter_mut().find(|p| p.0 == vr) {
-                Some(p) => p.2 = value,
-                None => f.params.push((vr, ty, value)),
+        for (slot, value) in &plan.parameters {
+            if let Unit::Fmu(f) = &mut units[slot.unit] {
+                f.params.push((slot.vr, value.clone()));
             }
         }
+        let (names, record_units) = plan.record_columns();
+        let recording = Table::new(plan.path.display().to_string(), names, record_units)
+            .map_err(|e| invalid(plan.path.display().to_string(), format!("record: {e}")))?;
+        Ok(Simulation {
+            algorithm: algorithm(plan.file.experiment.algorithm),
+            ex: Exchange {
+                signals: vec![0.0; plan.signals.len()],
+                plan: plan.clone(),
+                units,
+            },
+            plan,
+            recording,
+            echo_fmu_log: true,
+        })
+    }
+
+    /// The plan this simulation runs.
+    pub fn plan(&self) -> &Arc<Plan> {
+        &self.plan
+    }
+
+    /// Run with another master algorithm.
+    pub fn set_algorithm(&mut self, algorithm: Box<dyn MasterAlgorithm>) {
+        self.algorithm = algorithm;
+    }
+
+    /// Set (or change, between runs) a parameter or input start value, resolved with
+    /// [`Plan::parameter`] and checked with [`ParamSlot::check`].
+    pub fn set(&mut self, slot: &ParamSlot, value: ParamValue) {
+        if let Unit::Fmu(f) = &mut self.ex.units[slot.unit] {
+            match f.params.iter_mut().find(|p| p.0 == slot.vr) {
+                Some(p) => p.1 = value,
+                None => f.params.push((slot.vr, value)),
+            }
+        }
+    }
+
+    /// Set a parameter by name from a TOML value (`--set`, files): resolved and checked.
+    pub fn set_parameter(&mut self, name: &str, value: toml::Value) -> Result<(), SystemError> {
+        let slot = self.plan.parameter(name)?;
+        let v = slot.value_from_toml(&value, &format!("parameter \"{name}\""))?;
+        self.set(&slot, v);
         Ok(())
     }
 
-    /// Current value of a parameter set through the system (None: the FMU's start value).
+    /// Current value of a parameter set through the system (else the FMU's start value).
+    pub fn value_of(&self, slot: &ParamSlot) -> Option<f64> {
+        if let Unit::Fmu(f) = &self.ex.units[slot.unit] {
+            if let Some(p) = f.params.iter().find(|p| p.0 == slot.vr) {
+                return p.1.as_f64();
+            }
+        }
+        slot.start
+    }
+
+    /// [`Simulation::value_of`] by name (None: not a settable variable).
     pub fn parameter(&self, name: &str) -> Option<f64> {
-        let (u, var) = split_name(name)?;
-        let k = self.system.instances.iter().position(|i| i.name == u)?;
-        let sv = self.system.instances[k].variable(var, "").ok()?;
-        if let UnitRt::Fmu(f) = &self.units[k] {
-            if let Some(p) = f.params.iter().find(|p| p.0 == sv.value_reference) {
-                return p
-                    .2
-                    .as_float()
-                    .or_else(|| p.2.as_integer().map(|i| i as f64));
-            }
-        }
-        sv.start_f64()
+        let slot = self.plan.parameter(name).ok()?;
+        self.value_of(&slot)
     }
 
-    pub fn signal_names(&self) -> &[String] {
-        &self.signal_names
-    }
-
-    fn step_replay(&mut self, u: usize, t: f64) {
-        let UnitRt::Replay(r) = &mut self.units[u] else {
-            return;
-        };
-        let src = &self.system.replays[r.source];
-        let q = match (src.basis, r.basis_sig) {
-            (ReplayBasis::Distance, Some(s)) => self.signals[s],
-            _ => t,
-        };
-        let (i, w) = r.cursor.locate(&src.x, q);
-        for (c, &sig) in r.out_sig.iter().enumerate() {
-            if sig != usize::MAX {
-                let col = &src.data[c];
-                self.signals[sig] = if col.len() > 1 {
-                    col[i] + w * (col[i + 1] - col[i])
-                } else {
-                    col[0]
-                };
-            }
-        }
+    /// Names of the exchange slots.
+    pub fn signal_names(&self) -> Vec<String> {
+        self.plan
+            .signals
+            .signals
+            .iter()
+            .map(|s| s.name.clone())
+            .collect()
     }
 
     fn instantiate_all(&mut self, start: f64, stop: Option<f64>) -> Result<(), SystemError> {
         let echo = self.echo_fmu_log;
-        for (k, unit) in self.units.iter_mut().enumerate() {
-            let UnitRt::Fmu(f) = unit else { continue };
-            let def = &self.system.instances[k];
+        for (k, unit) in self.ex.units.iter_mut().enumerate() {
+            let Unit::Fmu(f) = unit else { continue };
+            let def = &self.plan.instances[k];
             let reuse = match f.instance.as_mut() {
                 Some(i) => i.reset().is_ok(),
                 None => false,
@@ -423,24 +464,17 @@ impl Simulation {
                 f.instance = None;
                 f.instance = Some(def.factory.create(&def.name, def.logging)?);
             }
-            let inst = f.instance.as_mut().unwrap();
+            let inst = f.backend();
             inst.set_echo(echo);
             inst.setup_experiment(start, stop)?;
-            for (vr, ty, v) in &f.params {
-                match ty {
-                    ScalarType::Real => inst.set_real(
-                        &[*vr],
-                        &[v.as_float()
-                            .or_else(|| v.as_integer().map(|i| i as f64))
-                            .unwrap_or(0.0)],
-                    )?,
-                    ScalarType::Integer | ScalarType::Enumeration => {
-                        inst.set_integer(&[*vr], &[v.as_integer().unwrap_or(0) as i32])?
-                    }
-                    ScalarType::Boolean => {
-                        inst.set_boolean(&[*vr], &[v.as_bool().unwrap_or(false) as i32])?
-                    }
-                    ScalarType::String => {}
+            for (vr, v) in &f.params {
+                let inst = f.instance.as_deref_mut().expect("created above");
+                match v {
+                    ParamValue::Real(x) => inst.set_real(&[*vr], &[*x])?,
+                    ParamValue::Integer(i) => inst.set_integer(&[*vr], &[*i])?,
+                    ParamValue::Boolean(b) => inst.set_boolean(&[*vr], &[*b as i32])?,
+                    // Not yet passed to the units: the backends have no string calls.
+                    ParamValue::String(_) => {}
                 }
             }
         }
@@ -449,72 +483,108 @@ impl Simulation {
 
     /// Initialisation mode for all, outputs propagated to inputs until nothing changes.
     fn initialize(&mut self, start: f64) -> Result<(), SystemError> {
-        for u in &mut self.units {
-            if let UnitRt::Fmu(f) = u {
-                f.instance.as_mut().unwrap().enter_initialization_mode()?;
+        for u in &mut self.ex.units {
+            if let Unit::Fmu(f) = u {
+                f.backend().enter_initialization_mode()?;
             }
         }
-        let order = self.system.order.clone();
-        let mut previous = vec![f64::NAN; self.signals.len()];
+        let plan = self.plan.clone();
+        let order = &plan.order;
+        let mut previous = vec![f64::NAN; self.ex.signals.len()];
         let mut converged = false;
         for _ in 0..50 {
-            for &u in &order {
-                match &mut self.units[u] {
-                    UnitRt::Fmu(f) => {
-                        f.gather(&self.signals);
-                        f.set_inputs()?;
-                        f.get_outputs(&mut self.signals, &self.signal_names)?;
-                    }
-                    UnitRt::Replay(_) => self.step_replay(u, start),
-                }
+            for &u in order {
+                self.ex.set_inputs(u)?;
+                self.ex.publish(u, start)?;
             }
             if previous
                 .iter()
-                .zip(&self.signals)
+                .zip(&self.ex.signals)
                 .all(|(a, b)| a.to_bits() == b.to_bits())
             {
                 converged = true;
                 break;
             }
-            previous.copy_from_slice(&self.signals);
+            previous.copy_from_slice(&self.ex.signals);
         }
         if !converged {
             log::warn!(
                 "{}: initialisation did not reach a fixed point in 50 sweeps",
-                self.system.path.display()
+                plan.path.display()
             );
         }
-        for &u in &order {
-            if let UnitRt::Fmu(f) = &mut self.units[u] {
-                f.gather(&self.signals);
+        for &u in order {
+            if let Unit::Fmu(f) = &mut self.ex.units[u] {
+                f.gather(&self.ex.signals);
                 f.set_inputs()?;
-                f.instance.as_mut().unwrap().exit_initialization_mode()?;
-                f.get_outputs(&mut self.signals, &self.signal_names)?;
+                f.backend().exit_initialization_mode()?;
+                f.get_outputs(&mut self.ex.signals, &plan)?;
             }
         }
         Ok(())
     }
 
+    #[inline]
     fn record(&mut self, t: f64) {
-        self.recording.columns[0].push(t);
-        for (k, &s) in self.record_sigs.iter().enumerate() {
-            self.recording.columns[k + 1].push(self.signals[s]);
+        let signals = &self.ex.signals;
+        self.recording
+            .push_row(std::iter::once(t).chain(self.plan.record.iter().map(|&s| signals[s])));
+    }
+
+    /// The reported signals' values now.
+    fn read_reported(&mut self) -> Result<Vec<(String, f64)>, SystemError> {
+        let plan = self.plan.clone();
+        let mut out = Vec::with_capacity(plan.report.len());
+        for (name, e) in &plan.report {
+            let x = match e {
+                Endpoint::Fmu { unit, vr, ty, .. } => {
+                    let Unit::Fmu(f) = &mut self.ex.units[*unit] else {
+                        continue;
+                    };
+                    let i = f.backend();
+                    match ty {
+                        ScalarType::Real => {
+                            let mut v = [0.0];
+                            i.get_real(&[*vr], &mut v)?;
+                            v[0]
+                        }
+                        ScalarType::Integer | ScalarType::Enumeration => {
+                            let mut v = [0];
+                            i.get_integer(&[*vr], &mut v)?;
+                            v[0] as f64
+                        }
+                        ScalarType::Boolean => {
+                            let mut v = [0];
+                            i.get_boolean(&[*vr], &mut v)?;
+                            v[0] as f64
+                        }
+                        ScalarType::String => continue,
+                    }
+                }
+                Endpoint::Replay { .. } => continue,
+            };
+            out.push((name.clone(), x));
         }
+        Ok(out)
     }
 
     /// Run the experiment once (again: instances are reset and reused).
     pub fn run(&mut self) -> Result<RunSummary, SystemError> {
         let wall = Instant::now();
-        let exp = self.system.file.experiment.clone();
+        let plan = self.plan.clone();
+        let exp = &plan.file.experiment;
         let (start, h) = (exp.start, exp.step);
-        let fixed_stop = match exp.stop {
-            StopConfig::Time(t) => Some(t),
-            StopConfig::Word(_) => None,
+        let (fixed_stop, condition) = match &plan.stop {
+            Stop::Time(t) => (Some(*t), None),
+            Stop::When {
+                condition,
+                max_time,
+            } => (None, Some((condition, *max_time))),
         };
         self.recording.clear();
-        self.signals.iter_mut().for_each(|s| *s = 0.0);
-        for u in &mut self.units {
-            if let UnitRt::Replay(r) = u {
+        self.ex.signals.iter_mut().for_each(|s| *s = 0.0);
+        for u in &mut self.ex.units {
+            if let Unit::Replay(r) = u {
                 r.cursor = Cursor::default();
             }
         }
@@ -522,108 +592,59 @@ impl Simulation {
         self.initialize(start)?;
         self.record(start);
         // Integer ticks: t_k = start + k·h exactly, no accumulated drift.
-        let span = fixed_stop.unwrap_or(start + exp.max_time) - start;
+        let span = fixed_stop.unwrap_or(start + condition.map_or(0.0, |c| c.1)) - start;
         let full_steps = (span / h * (1.0 + 1e-12)).floor() as u64;
         let last = span - full_steps as f64 * h;
         let total_steps = full_steps + u64::from(last > h * 1e-9);
-        let decimation = self.system.file.record.decimation as u64;
-        let order = self.system.order.clone();
-        let jacobi = exp.algorithm == Algorithm::Jacobi;
+        let decimation = plan.file.record.decimation as u64;
+        let order = &plan.order;
         let mut stopped_by = format!("stop time {} s", start + span);
         let mut k = 0u64;
         let mut t_end = start;
+        let mut met = false;
         while k < total_steps {
             let t = start + k as f64 * h;
             let step = if k == full_steps { last } else { h };
-            if jacobi {
-                for &u in &order {
-                    if let UnitRt::Fmu(f) = &mut self.units[u] {
-                        f.gather(&self.signals);
-                    }
-                }
-                for &u in &order {
-                    match &mut self.units[u] {
-                        UnitRt::Fmu(f) => {
-                            f.set_inputs()?;
-                            f.instance.as_mut().unwrap().do_step(t, step)?;
-                        }
-                        UnitRt::Replay(_) => {}
-                    }
-                }
-                for &u in &order {
-                    match &mut self.units[u] {
-                        UnitRt::Fmu(f) => f.get_outputs(&mut self.signals, &self.signal_names)?,
-                        UnitRt::Replay(_) => self.step_replay(u, t + step),
-                    }
-                }
-            } else {
-                for &u in &order {
-                    match &mut self.units[u] {
-                        UnitRt::Fmu(f) => {
-                            f.gather(&self.signals);
-                            f.set_inputs()?;
-                            f.instance.as_mut().unwrap().do_step(t, step)?;
-                            f.get_outputs(&mut self.signals, &self.signal_names)?;
-                        }
-                        UnitRt::Replay(_) => self.step_replay(u, t + step),
-                    }
-                }
-            }
+            self.algorithm.step(&mut self.ex, order, t, step)?;
             k += 1;
             t_end = if k == total_steps && fixed_stop.is_some() {
                 start + span
             } else {
                 start + k as f64 * h
             };
-            let lap_done = self
-                .lap_sig
-                .is_some_and(|s| self.signals[s] >= exp.lap_count);
+            met = condition.is_some_and(|(c, _)| c.holds(self.ex.signals[c.slot]));
             // Rows stay on the decimation grid (a uniform time base for filters); only a
             // fixed stop time adds its final row.
             if k.is_multiple_of(decimation) || (k == total_steps && fixed_stop.is_some()) {
                 self.record(t_end);
             }
-            if lap_done {
-                stopped_by = format!("{} >= {}", exp.lap_signal, exp.lap_count);
+            if met {
                 break;
             }
         }
-        if fixed_stop.is_none()
-            && !self
-                .lap_sig
-                .is_some_and(|s| self.signals[s] >= exp.lap_count)
-        {
-            return Err(SystemError::Stop(format!(
-                "{}: the lap did not complete within max_time = {} s ({} stayed below {})",
-                self.system.path.display(),
-                exp.max_time,
-                exp.lap_signal,
-                exp.lap_count
-            )));
-        }
-        let lap_time = match (self.lap_sig, self.lap_time_source) {
-            (Some(_), Some((u, vr))) => {
-                let UnitRt::Fmu(f) = &mut self.units[u] else {
-                    unreachable!()
-                };
-                let mut v = [0.0];
-                f.instance.as_mut().unwrap().get_real(&[vr], &mut v)?;
-                Some(v[0])
+        if let Some((c, max_time)) = condition {
+            if !met {
+                return Err(SystemError::Stop(format!(
+                    "{}: the run did not complete within max_time = {max_time} s: the stop condition {c} never held ({} = {} at the end)",
+                    plan.path.display(),
+                    c.signal,
+                    self.ex.signals[c.slot]
+                )));
             }
-            (Some(_), None) => Some(t_end - start),
-            _ => None,
-        };
-        for u in &mut self.units {
-            if let UnitRt::Fmu(f) = u {
-                f.instance.as_mut().unwrap().terminate()?;
+            stopped_by = c.to_string();
+        }
+        let reported = self.read_reported()?;
+        for u in &mut self.ex.units {
+            if let Unit::Fmu(f) = u {
+                f.backend().terminate()?;
             }
         }
         Ok(RunSummary {
             steps: k,
             simulated_time: t_end - start,
             wall_time: wall.elapsed().as_secs_f64(),
-            lap_time,
             stopped_by,
+            reported,
         })
     }
 }

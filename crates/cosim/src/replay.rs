@@ -4,6 +4,7 @@
 use super::config::{ReplayBasis, ReplayConfig};
 use super::SystemError;
 use std::path::PathBuf;
+use tb_table::Table;
 
 /// SI unit of the columns of the measurement format (data/README.md).
 pub fn default_unit(column: &str) -> &'static str {
@@ -27,9 +28,8 @@ pub struct ReplaySource {
     pub by: Option<String>,
     pub columns: Vec<String>,
     pub units: Vec<String>,
-    /// Basis values (time or distance), non-decreasing.
-    pub x: Vec<f64>,
-    pub data: Vec<Vec<f64>>,
+    /// The basis (time or distance, non-decreasing) first, then the replayed columns.
+    pub table: Table,
 }
 
 impl ReplaySource {
@@ -52,7 +52,7 @@ impl ReplaySource {
         if cfg.columns.is_empty() {
             return Err(err("no columns to replay".into()));
         }
-        let mut data = Vec::new();
+        let mut data = vec![x];
         let mut units = Vec::new();
         for c in &cfg.columns {
             let col = meas
@@ -67,6 +67,14 @@ impl ReplaySource {
                     .unwrap_or_else(|| default_unit(c).to_string()),
             );
         }
+        let basis = match cfg.basis {
+            ReplayBasis::Time => "time",
+            ReplayBasis::Distance => "distance",
+        };
+        let mut names = vec![format!("{basis} (basis)")];
+        names.extend(cfg.columns.iter().cloned());
+        let table = Table::from_columns(cfg.file.display().to_string(), names, data)
+            .map_err(|e| err(e.to_string()))?;
         Ok(ReplaySource {
             name: cfg.name.clone(),
             path: cfg.file.clone(),
@@ -74,9 +82,20 @@ impl ReplaySource {
             by: cfg.by.clone(),
             columns: cfg.columns.clone(),
             units,
-            x,
-            data,
+            table,
         })
+    }
+
+    /// The basis values (time or distance), non-decreasing.
+    #[inline]
+    pub fn basis_values(&self) -> &[f64] {
+        self.table.column_at(0)
+    }
+
+    /// The replayed column `c` (an index into [`ReplaySource::columns`]).
+    #[inline]
+    pub fn values(&self, c: usize) -> &[f64] {
+        self.table.column_at(c + 1)
     }
 
     pub fn column_index(&self, name: &str) -> Option<usize> {

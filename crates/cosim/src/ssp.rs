@@ -16,7 +16,7 @@
 //!
 //! Replayed measurement channels have no SSP 1.0 equivalent and are refused.
 
-use crate::{split_name, Endpoint, StopConfig, System};
+use crate::{split_name, Endpoint, Plan, StopConfig};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
 use std::path::Path;
@@ -106,7 +106,7 @@ struct Conn {
 
 /// Build the SystemStructure.ssd text and the list of (archive name, FMU file) to pack.
 pub fn system_structure(
-    system: &System,
+    system: &Plan,
     options: &ExportOptions,
 ) -> Result<SystemStructure, SspError> {
     if let Some(r) = system.replays.first() {
@@ -380,14 +380,16 @@ pub fn system_structure(
         crate::Algorithm::GaussSeidel => "gauss-seidel",
         crate::Algorithm::Jacobi => "jacobi",
     };
-    let lap = match &exp.stop {
-        StopConfig::Word(_) => format!(
-            " stop=\"lap\" lapSignal=\"{}\" lapCount=\"{}\" maxTime=\"{}\"",
-            esc(&exp.lap_signal),
-            real(exp.lap_count),
-            real(exp.max_time)
+    let lap = match &system.stop {
+        crate::Stop::When {
+            condition,
+            max_time,
+        } => format!(
+            " stop=\"{}\" maxTime=\"{}\"",
+            esc(&condition.to_string()),
+            real(*max_time)
         ),
-        StopConfig::Time(t) => format!(" stop=\"{}\"", real(*t)),
+        crate::Stop::Time(t) => format!(" stop=\"{}\"", real(*t)),
     };
     x.push_str(&format!(
         "  <ssd:DefaultExperiment startTime=\"{}\" stopTime=\"{}\">\n    <ssd:Annotations>\n",
@@ -421,7 +423,7 @@ pub fn system_structure(
 
 /// Write the SSP archive (atomically).
 pub fn export(
-    system: &System,
+    system: &Plan,
     out: &Path,
     options: &ExportOptions,
 ) -> Result<ExportSummary, SspError> {
@@ -448,6 +450,6 @@ pub fn export(
         zip.write_all(&bytes).map_err(|e| io(out, &e))?;
     }
     let bytes = zip.finish().map_err(|e| io(out, &e))?.into_inner();
-    crate::results::write_atomic(out, &bytes).map_err(|e| io(out, &e))?;
+    tb_table::write_atomic(out, &bytes).map_err(|e| io(out, &e))?;
     Ok(summary)
 }

@@ -1,14 +1,19 @@
-//! Candidates on the co-simulated bench: a pool of workers, each owning one [`Simulation`]
-//! (its FMU instances are reset and reused between candidates, never re-instantiated) and
-//! one comparison [`Workspace`]. A worker is created the first time a thread finds the
-//! pool empty, so there are at most as many as evaluations run at once.
+//! Candidates on the co-simulated bench. The study's system is compiled once into a plan;
+//! a pool of workers, each owning one [`Simulation`] of that plan (its FMU instances are
+//! reset and reused between candidates, never re-instantiated) and one comparison
+//! [`Workspace`]. A worker is created the first time a thread finds the pool empty, so
+//! there are at most as many as evaluations run at once.
+//!
+//! Every parameter the study touches is resolved to a [`ParamSlot`] once; a candidate is a
+//! value for each of them (all of them, on every run: a worker keeps nothing of the
+//! candidate it ran before).
 
 use super::study::Study;
 use super::OptimizeError;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use tb_compare::{Comparison, PreparedMeasurement, Table, Workspace};
-use tb_cosim::{Recording, Simulation, System, SystemError, SystemFile};
+use tb_cosim::{LoadOptions, ParamSlot, Plan, Simulation, SystemError, SystemFile};
 use tb_fmi::FmuCache;
 
 struct Worker {
@@ -18,9 +23,11 @@ struct Worker {
 
 /// The system of a study, ready to run candidates from several threads.
 pub struct Bench {
-    file: SystemFile,
-    path: std::path::PathBuf,
-    cache: Arc<FmuCache>,
+    plan: Arc<Plan>,
+    /// Every parameter the study touches, in the study's order (fixed ones first).
+    slots: Vec<ParamSlot>,
+    /// Their values before the study (fixed values, else the system's).
+    initial: Vec<f64>,
     workers: Mutex<Vec<Worker>>,
     created: AtomicUsize,
     runs: AtomicUsize,
@@ -30,6 +37,7 @@ pub struct Bench {
 /// One candidate's simulation compared with the measurement.
 pub struct Outcome {
     pub comparison: Comparison,
+    /// The recording on its uniform time grid (what the comparison used).
     pub table: Table,
 }
 
@@ -42,46 +50,84 @@ pub fn describe_failure(e: &SystemError) -> String {
 }
 
 impl Bench {
-    /// Loads the system once (to check it) with the study's record override.
+    /// Compiles the study's system (with its record override) and resolves every parameter
+    /// the study touches: a bad system or study parameter is an error here, up front.
     pub fn new(study: &Study, cache: Arc<FmuCache>) -> Result<Bench, OptimizeError> {
         let mut file = SystemFile::load(&study.system_path)?;
         if let Some(r) = &study.file.record {
             file.record.signals = r.signals.clone();
             file.record.decimation = r.decimation;
         }
-        let bench = Bench {
+        let plan = Arc::new(Plan::compile(
             file,
-            path: study.system_path.clone(),
+            &study.system_path,
             cache,
-            workers: Mutex::new(Vec::new()),
-            created: AtomicUsize::new(0),
-            runs: AtomicUsize::new(0),
-            run_seconds: Mutex::new(0.0),
-        };
-        // Load once here so that a bad system or study parameter is an error up front.
-        let mut w = bench.new_worker()?;
-        for (name, x) in &study.file.parameters {
-            w.sim.set_parameter(name, toml::Value::Float(*x))?;
+            &LoadOptions::default(),
+        )?);
+        let mut sim = Simulation::new(plan.clone())?;
+        sim.echo_fmu_log = false;
+        let mut slots: Vec<ParamSlot> = Vec::new();
+        let mut initial = Vec::new();
+        for (name, &x) in &study.file.parameters {
+            let slot = plan.parameter(name)?;
+            slot.real(x)?;
+            slots.push(slot);
+            initial.push(x);
         }
         for step in &study.file.steps {
             for p in &step.parameters {
-                let v = w.sim.parameter(&p.name).unwrap_or(p.min);
-                w.sim.set_parameter(&p.name, toml::Value::Float(v))?;
+                if slots.iter().any(|s| s.name == p.name) {
+                    continue;
+                }
+                let slot = plan.parameter(&p.name)?;
+                let x = sim.value_of(&slot).unwrap_or(p.min);
+                slot.real(x)?;
+                slots.push(slot);
+                initial.push(x);
             }
         }
-        bench.workers.lock().unwrap().push(w);
+        let bench = Bench {
+            plan,
+            slots,
+            initial,
+            workers: Mutex::new(vec![Worker {
+                sim,
+                ws: Workspace::new(),
+            }]),
+            created: AtomicUsize::new(1),
+            runs: AtomicUsize::new(0),
+            run_seconds: Mutex::new(0.0),
+        };
         Ok(bench)
     }
 
     fn new_worker(&self) -> Result<Worker, SystemError> {
-        let system = System::from_file(self.file.clone(), &self.path, self.cache.clone())?;
-        let mut sim = Simulation::new(system)?;
+        let mut sim = Simulation::new(self.plan.clone())?;
         sim.echo_fmu_log = false;
         self.created.fetch_add(1, Ordering::Relaxed);
         Ok(Worker {
             sim,
             ws: Workspace::new(),
         })
+    }
+
+    /// The compiled system.
+    pub fn plan(&self) -> &Arc<Plan> {
+        &self.plan
+    }
+
+    /// Every parameter the study touches, with its value before the study.
+    pub fn assignment(&self) -> Vec<(String, f64)> {
+        self.slots
+            .iter()
+            .zip(&self.initial)
+            .map(|(s, &x)| (s.name.clone(), x))
+            .collect()
+    }
+
+    /// Position of a parameter in [`Bench::assignment`].
+    pub fn index_of(&self, name: &str) -> Option<usize> {
+        self.slots.iter().position(|s| s.name == name)
     }
 
     /// Simulations (sets of FMU instances) created so far.
@@ -93,49 +139,50 @@ impl Bench {
     pub fn runs(&self) -> (usize, f64) {
         (
             self.runs.load(Ordering::Relaxed),
-            *self.run_seconds.lock().unwrap(),
+            *self.run_seconds.lock().unwrap_or_else(|e| e.into_inner()),
         )
     }
 
-    /// The system's value of a parameter (None: not settable or unknown).
-    pub fn parameter(&self, name: &str) -> Option<f64> {
-        let w = self.workers.lock().unwrap();
-        w.first().and_then(|w| w.sim.parameter(name))
-    }
-
-    /// Runs with `params` (`instance.variable`, value) and compares. `keep_table`: return
-    /// the recording as a table too (for plots).
-    pub fn run(
-        &self,
-        params: &[(String, f64)],
-        prepared: &PreparedMeasurement,
-    ) -> Result<Outcome, String> {
-        let worker = self.workers.lock().unwrap().pop();
+    /// Runs with `values` (one per parameter of [`Bench::assignment`], in its order) and
+    /// compares with the measurement.
+    pub fn run(&self, values: &[f64], prepared: &PreparedMeasurement) -> Result<Outcome, String> {
+        if values.len() != self.slots.len() {
+            return Err(format!(
+                "{} values for {} parameters",
+                values.len(),
+                self.slots.len()
+            ));
+        }
+        let worker = self.lock_workers().pop();
         let mut worker = match worker {
             Some(w) => w,
             None => self.new_worker().map_err(|e| describe_failure(&e))?,
         };
-        let result = Self::run_on(&mut worker, params, prepared, &self.runs, &self.run_seconds);
-        self.workers.lock().unwrap().push(worker);
+        let result = self.run_on(&mut worker, values, prepared);
+        self.lock_workers().push(worker);
         result
     }
 
+    fn lock_workers(&self) -> std::sync::MutexGuard<'_, Vec<Worker>> {
+        self.workers.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
     fn run_on(
+        &self,
         w: &mut Worker,
-        params: &[(String, f64)],
+        values: &[f64],
         prepared: &PreparedMeasurement,
-        runs: &AtomicUsize,
-        seconds: &Mutex<f64>,
     ) -> Result<Outcome, String> {
-        for (name, x) in params {
-            w.sim
-                .set_parameter(name, toml::Value::Float(*x))
-                .map_err(|e| format!("setting {name} = {x}: {}", describe_failure(&e)))?;
+        for (slot, &x) in self.slots.iter().zip(values) {
+            let v = slot
+                .real(x)
+                .map_err(|e| format!("setting {} = {x}: {}", slot.name, describe_failure(&e)))?;
+            w.sim.set(slot, v);
         }
         let summary = w.sim.run();
-        runs.fetch_add(1, Ordering::Relaxed);
+        self.runs.fetch_add(1, Ordering::Relaxed);
         let summary = summary.map_err(|e| describe_failure(&e))?;
-        *seconds.lock().unwrap() += summary.wall_time;
+        *self.run_seconds.lock().unwrap_or_else(|e| e.into_inner()) += summary.wall_time;
         let table = uniform_table(&w.sim.recording).map_err(|e| e.to_string())?;
         let comparison = prepared
             .compare(&table, &mut w.ws)
@@ -146,18 +193,17 @@ impl Bench {
 
 /// The recording as a comparison table, without a last row that is off the decimated time
 /// grid (a lap ends between two recorded samples; the filter needs uniform sampling).
-pub fn uniform_table(rec: &Recording) -> Result<Table, tb_compare::Error> {
-    let n = rec.rows();
-    let mut columns = rec.columns.clone();
+pub fn uniform_table(rec: &Table) -> Result<Table, tb_compare::Error> {
+    let n = rec.len();
+    let mut table =
+        Table::from_columns("simulation", rec.names().to_vec(), rec.columns().to_vec())?;
     if n >= 3 {
-        let t = &rec.columns[0];
+        let t = rec.column_at(0);
         let h = t[1] - t[0];
         let last = t[n - 1] - t[n - 2];
         if (last - h).abs() > 1e-6 * h.abs() {
-            for c in &mut columns {
-                c.truncate(n - 1);
-            }
+            table.truncate(n - 1);
         }
     }
-    Table::from_columns("simulation", rec.names.clone(), columns)
+    Ok(table)
 }

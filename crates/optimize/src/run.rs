@@ -18,9 +18,9 @@ use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
-use tb_compare::{Comparison, Measurement, Metrics, PreparedMeasurement, Workspace};
-use tb_cosim::results::write_atomic;
+use tb_compare::{Comparison, Measurement, Metrics, PreparedMeasurement, Table, Workspace};
 use tb_fmi::FmuCache;
+use tb_table::write_atomic;
 
 /// What a study reports while it runs: the library draws nothing, a front end (the CLI's
 /// progress bars, a notebook) implements what it wants.
@@ -128,6 +128,36 @@ pub struct StudyResult {
     /// `Simulation`s (sets of FMU instances) created: one per worker, reused.
     pub workers_created: usize,
     pub resumed: bool,
+    /// The recorded laps a report draws (not serialised: tables of samples).
+    #[serde(skip)]
+    pub laps: StudyLaps,
+}
+
+/// The twin's laps of a study, on the comparison's uniform time grid: at the first step's
+/// start (Tab. 1's "initial") and at the result. Kept from the runs the study made, so a
+/// report simulates nothing.
+#[derive(Clone, Debug, Default)]
+pub struct StudyLaps {
+    pub initial: Option<Table>,
+    pub optimized: Option<Table>,
+}
+
+impl PartialEq for StudyLaps {
+    fn eq(&self, other: &Self) -> bool {
+        fn same(a: &Option<Table>, b: &Option<Table>) -> bool {
+            match (a, b) {
+                (Some(a), Some(b)) => a.names() == b.names() && a.columns() == b.columns(),
+                (None, None) => true,
+                _ => false,
+            }
+        }
+        same(&self.initial, &other.initial) && same(&self.optimized, &other.optimized)
+    }
+}
+
+/// Where a study with a checkpoint keeps its initial lap (written once, read on resume).
+pub fn initial_lap_path(checkpoint: &std::path::Path) -> PathBuf {
+    checkpoint.with_extension("initial-lap.csv")
 }
 
 impl StudyResult {
@@ -212,10 +242,11 @@ struct StepProblem<'a> {
 }
 
 impl StepProblem<'_> {
-    fn params(&self, x: &[f64]) -> Vec<(String, f64)> {
-        let mut a = self.assignment.clone();
+    /// Every parameter's value with the step's parameters at `x`.
+    fn params(&self, x: &[f64]) -> Vec<f64> {
+        let mut a: Vec<f64> = self.assignment.iter().map(|p| p.1).collect();
         for (k, &i) in self.index.iter().enumerate() {
-            a[i].1 = x[k];
+            a[i] = x[k];
         }
         a
     }
@@ -409,23 +440,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
     let kind = options.optimizer.unwrap_or(study.file.optimizer.kind);
 
     // Every parameter the study touches, with its initial value.
-    let mut assignment: Vec<(String, f64)> = Vec::new();
-    for (name, &x) in &study.file.parameters {
-        assignment.push((name.clone(), x));
-    }
-    for step in &study.file.steps {
-        for p in &step.parameters {
-            if assignment.iter().all(|(n, _)| n != &p.name) {
-                let x = bench.parameter(&p.name).ok_or_else(|| {
-                    OptimizeError::Invalid(format!(
-                        "step '{}': '{}' has no value in the system (not a parameter?)",
-                        step.name, p.name
-                    ))
-                })?;
-                assignment.push((p.name.clone(), x));
-            }
-        }
-    }
+    let mut assignment: Vec<(String, f64)> = bench.assignment();
     let initial = assignment.clone();
 
     let mut checkpoint = Checkpoint {
@@ -442,14 +457,29 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         }
     }
     let mut session_generations = 0usize;
+    let mut laps = StudyLaps::default();
+    if resumed {
+        if let Some(path) = options.checkpoint.as_ref().map(|c| initial_lap_path(c)) {
+            laps.initial = Table::read_path(&path).ok();
+        }
+    }
+    // The first step's start point (for the initial lap when it has to be made again).
+    let mut first_x0: Option<Vec<f64>> = None;
 
     for (k, step) in study.file.steps.iter().enumerate() {
         let names = step.parameter_names();
         let index: Vec<usize> = names
             .iter()
-            .map(|n| assignment.iter().position(|(a, _)| a == n).unwrap())
-            .collect();
+            .map(|n| {
+                bench.index_of(n).ok_or_else(|| {
+                    OptimizeError::Invalid(format!("step '{}': unknown parameter '{n}'", step.name))
+                })
+            })
+            .collect::<Result<_, _>>()?;
         if let Some(done) = checkpoint.completed.get(k) {
+            if k == 0 {
+                first_x0 = Some(done.parameters.iter().map(|p| p.before).collect());
+            }
             for (j, &i) in index.iter().enumerate() {
                 assignment[i].1 = done.after_exact[j];
             }
@@ -510,6 +540,15 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                     &step.weights(),
                     bias_weight,
                 );
+                if k == 0 {
+                    if let Some(c) = &options.checkpoint {
+                        let path = initial_lap_path(c);
+                        write_atomic(&path, &before.table.to_csv()).map_err(|e| {
+                            OptimizeError::Checkpoint(format!("writing {}: {e}", path.display()))
+                        })?;
+                    }
+                    laps.initial = Some(before.table.clone());
+                }
                 let opt = make_optimizer(study, kind, names.len(), seed, to_unit(&x0, &bounds))?;
                 (
                     StepStart {
@@ -525,6 +564,9 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         };
         for (j, &i) in index.iter().enumerate() {
             problem.assignment[i].1 = start.x0[j];
+        }
+        if k == 0 {
+            first_x0 = Some(start.x0.clone());
         }
         if options.verbose {
             eprintln!("step {} '{}': identifiability", k + 1, step.name);
@@ -601,6 +643,9 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
             })?;
         let weights = step.weights();
         let cost_after = cost_of(&after.comparison, &step.signals, &weights, bias_weight);
+        if k + 1 == study.file.steps.len() {
+            laps.optimized = Some(after.table.clone());
+        }
         if cost_after.to_bits() != best_cost.to_bits() {
             log::warn!(
                 "step '{}': the best point re-evaluated to {cost_after} (optimiser saw {best_cost})",
@@ -662,6 +707,32 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
             write_checkpoint(path, &checkpoint)?;
         }
     }
+    // Laps a resumed session did not run itself: once each, before the summary counts runs.
+    let all: Vec<f64> = assignment.iter().map(|p| p.1).collect();
+    let lap = |values: &[f64]| -> Result<Table, OptimizeError> {
+        let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum"], &study.file.compare)?;
+        bench
+            .run(values, &prepared)
+            .map(|o| o.table)
+            .map_err(|reason| OptimizeError::Start {
+                step: "report".into(),
+                reason,
+            })
+    };
+    if laps.optimized.is_none() {
+        laps.optimized = Some(lap(&all)?);
+    }
+    if laps.initial.is_none() {
+        if let Some(x0) = &first_x0 {
+            let mut values: Vec<f64> = initial.iter().map(|p| p.1).collect();
+            for (j, p) in study.file.steps[0].parameters.iter().enumerate() {
+                if let Some(i) = bench.index_of(&p.name) {
+                    values[i] = x0[j];
+                }
+            }
+            laps.initial = Some(lap(&values)?);
+        }
+    }
     let (simulations, simulation_seconds) = bench.runs();
     Ok(StudyOutcome::Finished(Box::new(StudyResult {
         study: study.name(),
@@ -677,5 +748,6 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         wall_seconds: wall.elapsed().as_secs_f64(),
         workers_created: bench.workers_created(),
         resumed,
+        laps,
     })))
 }

@@ -1,18 +1,18 @@
-//! A column table of `f64` read from CSV.
+//! The column table of `f64`, read from and written to CSV.
 //!
 //! Format: one header row of column names; optionally a units row right after it (detected:
 //! a row in which no field is a number, where the dimensionless unit `1` and empty fields
-//! are allowed); then one record per line, every field a number. Comma separated; fields
-//! are trimmed and may be wrapped in double quotes (no quoted commas: these are numeric
-//! files); CRLF and a UTF-8 BOM are accepted; blank lines are skipped, and line numbers in
-//! errors count them, so they point at the line an editor shows. `NaN` and `inf` parse (as Rust's `f64` parser
-//! reads them): rejecting them is the measurement's and the comparison's job, which know
-//! which columns matter.
+//! are allowed); then one record per line, every field a number. The separator is the
+//! header's: a comma, else a semicolon, else a tab. Fields are trimmed and may be wrapped in
+//! double quotes (no quoted separators: these are numeric files); CRLF and a UTF-8 BOM are
+//! accepted; blank lines and lines starting with `#` are skipped, and line numbers in errors
+//! count them, so they point at the line an editor shows. `NaN` and `inf` parse (as Rust's
+//! `f64` parser reads them): rejecting them is the job of whoever knows which columns matter.
 //!
 //! Columns are looked up by exact name, or else by the part after the last `.`, so that a
 //! signal requested as `Fz_rl` is found as `vehicle.Fz_rl` in a twinbench result file.
 
-use crate::error::{Error, Result};
+use crate::error::{Result, TableError as Error};
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
@@ -38,7 +38,7 @@ impl Table {
     ) -> Result<Self> {
         let source = source.into();
         if names.len() != columns.len() {
-            return Err(Error::Settings(format!(
+            return Err(Error::Shape(format!(
                 "{source}: {} names for {} columns",
                 names.len(),
                 columns.len()
@@ -46,7 +46,7 @@ impl Table {
         }
         let len = columns.first().map_or(0, Vec::len);
         if let Some((i, c)) = columns.iter().enumerate().find(|(_, c)| c.len() != len) {
-            return Err(Error::Settings(format!(
+            return Err(Error::Shape(format!(
                 "{source}: column `{}` has {} rows, the first has {len}",
                 names[i],
                 c.len()
@@ -60,6 +60,40 @@ impl Table {
             columns,
             lines: None,
         })
+    }
+
+    /// An empty table with these columns and units (a recording to be filled row by row).
+    pub fn new(source: impl Into<String>, names: Vec<String>, units: Vec<String>) -> Result<Self> {
+        let source = source.into();
+        if names.len() != units.len() {
+            return Err(Error::Shape(format!(
+                "{source}: {} names for {} units",
+                names.len(),
+                units.len()
+            )));
+        }
+        check_duplicates(&source, &names)?;
+        Ok(Self {
+            source,
+            columns: vec![Vec::new(); names.len()],
+            names,
+            units: Some(units),
+            lines: None,
+        })
+    }
+
+    /// The same table with a units row (one unit per column).
+    pub fn with_units(mut self, units: Vec<String>) -> Result<Self> {
+        if units.len() != self.names.len() {
+            return Err(Error::Shape(format!(
+                "{}: {} units for {} columns",
+                self.source,
+                units.len(),
+                self.names.len()
+            )));
+        }
+        self.units = Some(units);
+        Ok(self)
     }
 
     /// Reads a CSV file.
@@ -95,7 +129,7 @@ impl Table {
                 } else {
                     t
                 };
-                if !t.trim().is_empty() {
+                if !t.trim().is_empty() && !t.trim_start().starts_with('#') {
                     *line = t.to_owned();
                     return Ok(Some(lineno));
                 }
@@ -108,7 +142,8 @@ impl Table {
                 what: "no header row",
             });
         }
-        let names: Vec<String> = fields(&line).map(str::to_owned).collect();
+        let sep = separator(&line);
+        let names: Vec<String> = fields(&line, sep).map(str::to_owned).collect();
         check_duplicates(source, &names)?;
         let ncol = names.len();
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); ncol];
@@ -116,7 +151,7 @@ impl Table {
         let mut units = None;
         let mut first = true;
         while let Some(row) = next_line(&mut line)? {
-            let found = fields(&line).count();
+            let found = fields(&line, sep).count();
             if found != ncol {
                 return Err(Error::RaggedRow {
                     file: source.into(),
@@ -127,12 +162,12 @@ impl Table {
             }
             if first {
                 first = false;
-                if is_units_row(&line) {
-                    units = Some(fields(&line).map(str::to_owned).collect());
+                if is_units_row(&line, sep) {
+                    units = Some(fields(&line, sep).map(str::to_owned).collect());
                     continue;
                 }
             }
-            for (j, field) in fields(&line).enumerate() {
+            for (j, field) in fields(&line, sep).enumerate() {
                 let v: f64 = field.parse().map_err(|_| Error::Malformed {
                     file: source.into(),
                     row,
@@ -156,6 +191,65 @@ impl Table {
             columns,
             lines: Some(lines),
         })
+    }
+
+    /// Appends one row (one value per column, in column order).
+    #[inline]
+    pub fn push_row(&mut self, row: impl IntoIterator<Item = f64>) {
+        for (c, x) in self.columns.iter_mut().zip(row) {
+            c.push(x);
+        }
+    }
+
+    /// Removes every row (keeps names, units and capacity).
+    pub fn clear(&mut self) {
+        for c in &mut self.columns {
+            c.clear();
+        }
+        self.lines = None;
+    }
+
+    /// Keeps the first `rows` rows.
+    pub fn truncate(&mut self, rows: usize) {
+        for c in &mut self.columns {
+            c.truncate(rows);
+        }
+        if let Some(l) = &mut self.lines {
+            l.truncate(rows);
+        }
+    }
+
+    /// Every column, in order.
+    pub fn columns(&self) -> &[Vec<f64>] {
+        &self.columns
+    }
+
+    /// The table as CSV: header, units row (when known), then the values in shortest
+    /// round-trip text (reading the file back gives the same bits).
+    pub fn to_csv(&self) -> Vec<u8> {
+        use std::fmt::Write as _;
+        let mut out = String::with_capacity(self.len() * self.names.len() * 12 + 256);
+        out.push_str(&self.names.join(","));
+        out.push('\n');
+        if let Some(u) = &self.units {
+            out.push_str(&u.join(","));
+            out.push('\n');
+        }
+        for r in 0..self.len() {
+            for (k, c) in self.columns.iter().enumerate() {
+                if k > 0 {
+                    out.push(',');
+                }
+                let _ = write!(out, "{}", c[r]);
+            }
+            out.push('\n');
+        }
+        out.into_bytes()
+    }
+
+    /// Writes [`Table::to_csv`] atomically: nothing half-written is ever visible at `path`.
+    pub fn write_csv(&self, path: &Path) -> std::io::Result<()> {
+        crate::write_atomic(path, &self.to_csv())
     }
 
     /// The file path or label this table came from.
@@ -253,7 +347,7 @@ impl Table {
     pub fn push_column(&mut self, name: impl Into<String>, values: Vec<f64>) -> Result<()> {
         let name = name.into();
         if !self.names.is_empty() && values.len() != self.len() {
-            return Err(Error::Settings(format!(
+            return Err(Error::Shape(format!(
                 "{}: new column `{name}` has {} rows, the table {}",
                 self.source,
                 values.len(),
@@ -282,7 +376,8 @@ impl Table {
         }
     }
 
-    pub(crate) fn non_finite(&self, col: usize, row: usize) -> Error {
+    /// The error for the non-finite value at (`col`, `row`).
+    pub fn non_finite(&self, col: usize, row: usize) -> Error {
         Error::NonFinite {
             file: self.source.clone(),
             row: self.line_of(row),
@@ -304,9 +399,17 @@ fn check_duplicates(source: &str, names: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// The comma-separated fields of a line, trimmed, surrounding double quotes removed.
-fn fields(line: &str) -> impl Iterator<Item = &str> {
-    line.split(',').map(|f| {
+/// The separator of a file, from its header: a comma, else a semicolon, else a tab.
+fn separator(header: &str) -> char {
+    [',', ';', '\t']
+        .into_iter()
+        .find(|c| header.contains(*c))
+        .unwrap_or(',')
+}
+
+/// The fields of a line, trimmed, surrounding double quotes removed.
+fn fields(line: &str, sep: char) -> impl Iterator<Item = &str> {
+    line.split(sep).map(|f| {
         let f = f.trim();
         f.strip_prefix('"')
             .and_then(|g| g.strip_suffix('"'))
@@ -316,9 +419,9 @@ fn fields(line: &str) -> impl Iterator<Item = &str> {
 
 /// A units row: no field parses as a number, except the dimensionless unit `1`; empty
 /// fields allowed; at least one field is not a number.
-fn is_units_row(line: &str) -> bool {
+fn is_units_row(line: &str, sep: char) -> bool {
     let mut any_text = false;
-    for f in fields(line) {
+    for f in fields(line, sep) {
         if f.is_empty() || f == "1" {
             continue;
         }

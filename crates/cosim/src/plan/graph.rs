@@ -1,0 +1,181 @@
+//! The connection graph: direct feed-through cycles and the stepping order.
+
+use super::{ConnectionDef, Endpoint, InstanceDef};
+use crate::config::SystemFile;
+use crate::replay::ReplaySource;
+use crate::split_name;
+use std::collections::HashMap;
+use tb_fmi::description::ScalarVariable;
+use tb_fmi::Causality;
+
+/// Direct feed-through cycles: output -> input (connection) -> output of the same instance
+/// (declared dependency). Cycles made only of declared dependencies are errors; cycles
+/// that rely on outputs without a `dependencies` attribute (meaning "may depend on every
+/// input") are warnings.
+pub(crate) fn check_feedthrough_cycles(
+    instances: &[InstanceDef],
+    connections: &[ConnectionDef],
+    warnings: &mut Vec<String>,
+) -> Result<(), String> {
+    // Nodes: (instance, vr) of connected inputs and outputs.
+    type Node = (usize, u32);
+    let mut edges: HashMap<Node, Vec<(Node, bool)>> = HashMap::new();
+    for c in connections {
+        if let Endpoint::Fmu { unit, vr, .. } = c.from {
+            edges
+                .entry((unit, vr))
+                .or_default()
+                .push(((c.to_unit, c.to_vr), true));
+        }
+    }
+    for (k, inst) in instances.iter().enumerate() {
+        let md = inst.description();
+        for o in &md.outputs {
+            let out = &md.variables[o.index - 1];
+            let (deps, declared): (Vec<&ScalarVariable>, bool) = match &o.dependencies {
+                Some(d) => (
+                    d.iter()
+                        .filter_map(|i| md.variables.get(i - 1))
+                        .filter(|v| v.causality == Causality::Input)
+                        .collect(),
+                    true,
+                ),
+                None => (
+                    md.variables
+                        .iter()
+                        .filter(|v| v.causality == Causality::Input)
+                        .collect(),
+                    false,
+                ),
+            };
+            for inp in deps {
+                edges
+                    .entry((k, inp.value_reference))
+                    .or_default()
+                    .push(((k, out.value_reference), declared));
+            }
+        }
+    }
+    let name = |n: &Node| {
+        let inst = &instances[n.0];
+        let v = inst
+            .description()
+            .variables
+            .iter()
+            .find(|v| v.value_reference == n.1)
+            .map(|v| v.name.as_str())
+            .unwrap_or("?");
+        format!("{}.{v}", inst.name)
+    };
+    // DFS for a cycle.
+    let mut color: HashMap<Node, u8> = HashMap::new();
+    let mut nodes: Vec<Node> = edges.keys().copied().collect();
+    nodes.sort();
+    type Edges = HashMap<(usize, u32), Vec<((usize, u32), bool)>>;
+    fn dfs(
+        n: (usize, u32),
+        edges: &Edges,
+        color: &mut HashMap<(usize, u32), u8>,
+        path: &mut Vec<((usize, u32), bool)>,
+    ) -> Option<Vec<((usize, u32), bool)>> {
+        color.insert(n, 1);
+        if let Some(next) = edges.get(&n) {
+            for &(m, declared) in next {
+                path.push((m, declared));
+                match color.get(&m).copied().unwrap_or(0) {
+                    1 => {
+                        let start = path.iter().position(|p| p.0 == m).unwrap_or(0);
+                        return Some(path[start..].to_vec());
+                    }
+                    0 => {
+                        if let Some(c) = dfs(m, edges, color, path) {
+                            return Some(c);
+                        }
+                    }
+                    _ => {}
+                }
+                path.pop();
+            }
+        }
+        color.insert(n, 2);
+        None
+    }
+    for n in nodes {
+        if color.get(&n).copied().unwrap_or(0) == 0 {
+            let mut path = vec![(n, true)];
+            if let Some(cycle) = dfs(n, &edges, &mut color, &mut path) {
+                let text = cycle.iter().map(|(n, _)| name(n)).collect::<Vec<_>>();
+                let text = format!("{} -> {}", text.join(" -> "), text[0]);
+                if cycle.iter().all(|c| c.1) {
+                    return Err(format!(
+                        "direct feed-through cycle (an algebraic loop): {text}"
+                    ));
+                }
+                warnings.push(format!("possible feed-through cycle through outputs that declare no dependencies: {text}"));
+                return Ok(());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Stepping order: the explicit one, or a topological order of the connections
+/// (sources before their consumers), ties and cycles broken by declaration order.
+pub(crate) fn stepping_order(
+    file: &SystemFile,
+    unit_names: &[String],
+    n_fmu: usize,
+    connections: &[ConnectionDef],
+    replays: &[ReplaySource],
+    instances: &[InstanceDef],
+) -> Result<Vec<usize>, String> {
+    let n = unit_names.len();
+    if !file.experiment.order.is_empty() {
+        let mut order = Vec::new();
+        for name in &file.experiment.order {
+            let k = unit_names
+                .iter()
+                .position(|u| u == name)
+                .ok_or_else(|| format!("experiment.order: unknown instance '{name}'"))?;
+            if order.contains(&k) {
+                return Err(format!("experiment.order: '{name}' appears twice"));
+            }
+            order.push(k);
+        }
+        if let Some(missing) = unit_names
+            .iter()
+            .enumerate()
+            .find(|(k, _)| !order.contains(k))
+        {
+            return Err(format!("experiment.order: '{}' is missing", missing.1));
+        }
+        return Ok(order);
+    }
+    let mut deps: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for c in connections {
+        let from = match c.from {
+            Endpoint::Fmu { unit, .. } | Endpoint::Replay { unit, .. } => unit,
+        };
+        if from != c.to_unit && !deps[c.to_unit].contains(&from) {
+            deps[c.to_unit].push(from);
+        }
+    }
+    for (k, r) in replays.iter().enumerate() {
+        if let Some((u, _)) = r.by.as_deref().and_then(split_name) {
+            if let Some(src) = instances.iter().position(|i| i.name == u) {
+                deps[n_fmu + k].push(src);
+            }
+        }
+    }
+    let mut done = vec![false; n];
+    let mut order = Vec::with_capacity(n);
+    while order.len() < n {
+        let next = (0..n)
+            .find(|&k| !done[k] && deps[k].iter().all(|&d| done[d]))
+            .or_else(|| (0..n).find(|&k| !done[k]))
+            .unwrap();
+        done[next] = true;
+        order.push(next);
+    }
+    Ok(order)
+}

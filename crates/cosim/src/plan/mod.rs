@@ -1,0 +1,809 @@
+//! The compiled plan: a system file checked once against its FMUs and resolved into what the
+//! master needs. Names become slots (instances, value references, exchange buffers), values
+//! become typed parameter values, the stop condition a slot and a threshold. Every
+//! [`crate::Simulation`] (one per optimiser worker) is built from a shared `Arc<Plan>`
+//! without looking at a name again.
+//!
+//! [`Plan::compile`] checks everything before the first step: names (with suggestions),
+//! causality, types, units (converted when compatible, refused when not), parameter types
+//! and declared ranges, unconnected inputs, direct-feed-through cycles, the stop condition.
+
+mod graph;
+mod units;
+mod values;
+
+pub use values::{Condition, Op, ParamSlot, ParamValue, Stop};
+
+use crate::backend::{BackendFactory, FmuFactory};
+use crate::config::{StopConfig, SystemFile};
+use crate::isolated::{IsolatedFactory, IsolationOptions};
+use crate::native::{NativeFactory, NativeModel};
+use crate::replay::ReplaySource;
+use crate::{invalid, split_name, SystemError};
+use graph::{check_feedthrough_cycles, stepping_order};
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tb_fmi::description::{ModelDescription, ScalarVariable};
+use tb_fmi::{Causality, FmuCache, LoadedFmu, ScalarType, Variability};
+use units::unit_conversion;
+
+/// One FMU instance of the system, resolved.
+pub struct InstanceDef {
+    pub name: String,
+    pub fmu: Arc<LoadedFmu>,
+    /// Name in the system file -> the FMU's variable name.
+    pub ports: BTreeMap<String, String>,
+    pub logging: bool,
+    /// Creates the running unit (in-process FMU by default).
+    pub factory: Arc<dyn BackendFactory>,
+}
+
+/// How instances are run, chosen when a system is loaded.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// Run linked models natively (no FMI boundary); other FMUs stay FMUs (with a warning).
+    pub native: bool,
+    /// The models linked into the host that `native` may use (the host's model registry).
+    pub native_models: Vec<NativeModel>,
+    /// Run every FMU instance in a worker process (as `isolate = true` does for one).
+    pub isolate: bool,
+    /// Watchdog and worker executable of isolated instances.
+    pub isolation: IsolationOptions,
+}
+
+impl InstanceDef {
+    pub fn description(&self) -> &ModelDescription {
+        &self.fmu.description
+    }
+
+    /// Resolve a variable by the name the system file uses (through the port map).
+    pub fn variable(&self, name: &str, context: &str) -> Result<&ScalarVariable, SystemError> {
+        let fmu_name = self.ports.get(name).map(String::as_str).unwrap_or(name);
+        self.description().variable(fmu_name).ok_or_else(|| {
+            let mut close = self.description().closest_names(fmu_name, 3);
+            close.retain(|c| !c.is_empty());
+            invalid(
+                context,
+                format!(
+                    "unknown variable '{}.{fmu_name}' (FMU {}); closest names: {}",
+                    self.name,
+                    self.fmu.source.display(),
+                    close.join(", ")
+                ),
+            )
+        })
+    }
+}
+
+/// A signal source: an FMU variable or a replayed column.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Endpoint {
+    Fmu {
+        unit: usize,
+        vr: u32,
+        ty: ScalarType,
+        unit_name: Option<String>,
+    },
+    Replay {
+        unit: usize,
+        column: usize,
+        unit_name: String,
+    },
+}
+
+/// A checked connection with its unit conversion `to = scale·from + offset`.
+#[derive(Clone, Debug)]
+pub struct ConnectionDef {
+    pub text: String,
+    pub from: Endpoint,
+    /// The exchange slot of the source.
+    pub from_slot: usize,
+    pub from_name: String,
+    pub to_unit: usize,
+    pub to_vr: u32,
+    pub to_ty: ScalarType,
+    pub to_name: String,
+    pub scale: f64,
+    pub offset: f64,
+}
+
+/// One exchange slot: a value the master reads from a unit and others use.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Signal {
+    /// `instance.variable` as the system file wrote it first.
+    pub name: String,
+    /// Its unit ("" when the FMU declares none).
+    pub unit: String,
+    pub source: Endpoint,
+}
+
+/// The exchange slots, one per distinct source.
+#[derive(Clone, Debug, Default)]
+pub struct SignalTable {
+    pub signals: Vec<Signal>,
+    index: HashMap<(bool, usize, u64), usize>,
+}
+
+impl SignalTable {
+    /// The slot of a source (a new one the first time).
+    pub fn slot(&mut self, e: &Endpoint, name: &str) -> usize {
+        let key = match e {
+            Endpoint::Fmu { unit, vr, .. } => (false, *unit, *vr as u64),
+            Endpoint::Replay { unit, column, .. } => (true, *unit, *column as u64),
+        };
+        if let Some(&k) = self.index.get(&key) {
+            return k;
+        }
+        let unit = match e {
+            Endpoint::Fmu { unit_name, .. } => unit_name.clone().unwrap_or_default(),
+            Endpoint::Replay { unit_name, .. } => unit_name.clone(),
+        };
+        self.signals.push(Signal {
+            name: name.to_string(),
+            unit,
+            source: e.clone(),
+        });
+        self.index.insert(key, self.signals.len() - 1);
+        self.signals.len() - 1
+    }
+
+    pub fn len(&self) -> usize {
+        self.signals.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.signals.is_empty()
+    }
+}
+
+/// The loaded, checked and resolved system.
+pub struct Plan {
+    pub file: SystemFile,
+    pub path: PathBuf,
+    /// FMU instances first (indices 0..n), then replays (n..).
+    pub instances: Vec<InstanceDef>,
+    pub replays: Vec<ReplaySource>,
+    pub connections: Vec<ConnectionDef>,
+    /// The exchange slots.
+    pub signals: SignalTable,
+    /// Slots recorded every `decimation` steps, in column order.
+    pub record: Vec<usize>,
+    /// Parameters of the system file, typed, applied before every run.
+    pub parameters: Vec<(ParamSlot, ParamValue)>,
+    pub stop: Stop,
+    /// Signals read at the end of a run for its summary.
+    pub report: Vec<(String, Endpoint)>,
+    /// Per replay: the slot of the signal giving its basis (distance mode).
+    pub replay_basis: Vec<Option<usize>>,
+    /// Stepping order over units (FMU instances and replays).
+    pub order: Vec<usize>,
+    pub warnings: Vec<String>,
+    /// Keeps the unpacked FMUs alive (and removes them at the end).
+    pub cache: Arc<FmuCache>,
+}
+
+impl Plan {
+    /// Load a system file and compile it.
+    pub fn load(path: &Path, cache: Arc<FmuCache>) -> Result<Plan, SystemError> {
+        Self::load_with(path, cache, &LoadOptions::default())
+    }
+
+    /// [`Plan::load`] with a choice of backends.
+    pub fn load_with(
+        path: &Path,
+        cache: Arc<FmuCache>,
+        options: &LoadOptions,
+    ) -> Result<Plan, SystemError> {
+        let file = SystemFile::load(path)?;
+        Self::compile(file, path, cache, options)
+    }
+
+    /// [`Plan::compile`] with the default backends.
+    pub fn from_file(
+        file: SystemFile,
+        path: &Path,
+        cache: Arc<FmuCache>,
+    ) -> Result<Plan, SystemError> {
+        Self::compile(file, path, cache, &LoadOptions::default())
+    }
+
+    /// Check a parsed system file against its FMUs and resolve it. `path` is the file it
+    /// came from (messages name it).
+    pub fn compile(
+        file: SystemFile,
+        path: &Path,
+        cache: Arc<FmuCache>,
+        options: &LoadOptions,
+    ) -> Result<Plan, SystemError> {
+        let ctx_file = path.display().to_string();
+        for lib in &file.preload {
+            tb_fmi::library::preload_global(lib)?;
+        }
+        if !(file.experiment.step > 0.0 && file.experiment.step.is_finite()) {
+            return Err(invalid(
+                &ctx_file,
+                format!(
+                    "experiment.step must be positive, got {}",
+                    file.experiment.step
+                ),
+            ));
+        }
+        match &file.experiment.stop {
+            StopConfig::Time(t) if *t <= file.experiment.start || t.is_nan() => {
+                return Err(invalid(
+                    &ctx_file,
+                    format!(
+                        "experiment.stop {t} is not after start {}",
+                        file.experiment.start
+                    ),
+                ))
+            }
+            _ => {}
+        }
+        if file.record.decimation == 0 {
+            return Err(invalid(&ctx_file, "record.decimation must be at least 1"));
+        }
+        // FMUs and instances.
+        let mut loaded: HashMap<&str, Arc<LoadedFmu>> = HashMap::new();
+        for (key, p) in &file.fmus {
+            loaded.insert(key, cache.load(p)?);
+        }
+        let mut instances = Vec::new();
+        let mut native_fallback = Vec::new();
+        for inst in &file.instances {
+            let fmu = loaded.get(inst.fmu.as_str()).ok_or_else(|| {
+                invalid(
+                    format!("{ctx_file}: instance '{}'", inst.name),
+                    format!(
+                        "fmu '{}' is not in [fmus] (known: {})",
+                        inst.fmu,
+                        file.fmus.keys().cloned().collect::<Vec<_>>().join(", ")
+                    ),
+                )
+            })?;
+            if instances.iter().any(|i: &InstanceDef| i.name == inst.name)
+                || inst.name.contains('.')
+            {
+                return Err(invalid(
+                    &ctx_file,
+                    format!(
+                        "instance name '{}' is repeated or contains a '.'",
+                        inst.name
+                    ),
+                ));
+            }
+            if fmu
+                .description
+                .co_simulation
+                .as_ref()
+                .is_some_and(|c| c.can_be_instantiated_only_once_per_process)
+                && file.instances.iter().filter(|i| i.fmu == inst.fmu).count() > 1
+            {
+                return Err(invalid(
+                    &ctx_file,
+                    format!(
+                        "FMU '{}' can be instantiated only once per process",
+                        inst.fmu
+                    ),
+                ));
+            }
+            let factory: Arc<dyn BackendFactory> = match options.native {
+                true => match NativeFactory::for_fmu(fmu, &options.native_models) {
+                    Ok(f) => Arc::new(f),
+                    Err(why) => {
+                        native_fallback
+                            .push(format!("instance '{}' runs as an FMU: {why}", inst.name));
+                        Arc::new(FmuFactory(fmu.clone()))
+                    }
+                },
+                false => Arc::new(FmuFactory(fmu.clone())),
+            };
+            // Isolation (of this instance, or of all) wins over the in-process choices.
+            let factory: Arc<dyn BackendFactory> = if inst.isolate || options.isolate {
+                let mut iso = options.isolation.clone();
+                if let Some(w) = inst.watchdog {
+                    if !w.is_finite() || w <= 0.0 {
+                        return Err(invalid(
+                            format!("{ctx_file}: instance '{}'", inst.name),
+                            format!("watchdog must be a positive number of seconds, got {w}"),
+                        ));
+                    }
+                    iso.timeout = std::time::Duration::from_secs_f64(w);
+                }
+                Arc::new(IsolatedFactory {
+                    fmu: fmu.clone(),
+                    options: iso,
+                })
+            } else {
+                factory
+            };
+            let def = InstanceDef {
+                name: inst.name.clone(),
+                fmu: fmu.clone(),
+                ports: inst.ports.clone(),
+                logging: inst.logging,
+                factory,
+            };
+            for theirs in inst.ports.values() {
+                if def.description().variable(theirs).is_none() {
+                    def.variable(theirs, &format!("{ctx_file}: port map of '{}'", inst.name))?;
+                }
+            }
+            instances.push(def);
+        }
+        let n_fmu = instances.len();
+        let mut replays = Vec::new();
+        for r in &file.replay {
+            if instances.iter().any(|i| i.name == r.name) {
+                return Err(invalid(
+                    &ctx_file,
+                    format!("replay name '{}' is also an instance name", r.name),
+                ));
+            }
+            replays.push(ReplaySource::load(r)?);
+        }
+        let unit_index = |name: &str| -> Option<usize> {
+            instances.iter().position(|i| i.name == name).or_else(|| {
+                replays
+                    .iter()
+                    .position(|r| r.name == name)
+                    .map(|k| n_fmu + k)
+            })
+        };
+        let unknown_unit =
+            |ctx: &str, name: &str| unknown_instance(&instances, &replays, ctx, name);
+        // A signal the system can read.
+        let resolve_source =
+            |ctx: &str, full: &str| resolve_endpoint(&instances, &replays, ctx, full);
+        // The exchange slots, connection sources first.
+        let mut signals = SignalTable::default();
+        // Connections.
+        let mut connections: Vec<ConnectionDef> = Vec::new();
+        for text in &file.connections {
+            let ctx = format!("{ctx_file}: connection \"{text}\"");
+            let (a, b) = text
+                .split_once("->")
+                .ok_or_else(|| invalid(&ctx, "expected \"instance.output -> instance.input\""))?;
+            let (a, b) = (a.trim(), b.trim());
+            let from = resolve_source(&ctx, a)?;
+            let (tu, tv) = split_name(b).ok_or_else(|| {
+                invalid(&ctx, format!("'{b}' is not of the form instance.variable"))
+            })?;
+            let to_unit = unit_index(tu).ok_or_else(|| unknown_unit(&ctx, tu))?;
+            if to_unit >= n_fmu {
+                return Err(invalid(
+                    &ctx,
+                    format!("'{b}' is a replayed channel; it cannot be an input"),
+                ));
+            }
+            let to_def = &instances[to_unit];
+            let to_sv = to_def.variable(tv, &ctx)?;
+            if to_sv.causality != Causality::Input {
+                return Err(invalid(
+                    &ctx,
+                    format!(
+                        "'{b}' is {} {}, not an input: it cannot be connected to",
+                        to_sv.variability, to_sv.causality
+                    ),
+                ));
+            }
+            let (from_unit_name, from_md): (Option<String>, Option<&ModelDescription>) = match &from
+            {
+                Endpoint::Fmu {
+                    unit,
+                    vr,
+                    unit_name,
+                    ..
+                } => {
+                    let sv = instances[*unit]
+                        .description()
+                        .variables
+                        .iter()
+                        .find(|v| v.value_reference == *vr)
+                        .unwrap();
+                    if sv.causality != Causality::Output {
+                        return Err(invalid(
+                            &ctx,
+                            format!(
+                                "'{a}' is {} {}, not an output",
+                                sv.variability, sv.causality
+                            ),
+                        ));
+                    }
+                    (unit_name.clone(), Some(instances[*unit].description()))
+                }
+                Endpoint::Replay { unit_name, .. } => (Some(unit_name.clone()), None),
+            };
+            let from_ty = match &from {
+                Endpoint::Fmu { ty, .. } => *ty,
+                Endpoint::Replay { .. } => ScalarType::Real,
+            };
+            let type_ok = from_ty == to_sv.ty
+                || (to_sv.ty == ScalarType::Real
+                    && matches!(
+                        from_ty,
+                        ScalarType::Integer | ScalarType::Boolean | ScalarType::Enumeration
+                    ))
+                || (matches!(to_sv.ty, ScalarType::Integer | ScalarType::Enumeration)
+                    && matches!(from_ty, ScalarType::Integer | ScalarType::Enumeration));
+            if !type_ok || to_sv.ty == ScalarType::String {
+                return Err(invalid(
+                    &ctx,
+                    format!(
+                        "type mismatch: '{a}' is {}, '{b}' is {}",
+                        from_ty.name(),
+                        to_sv.ty.name()
+                    ),
+                ));
+            }
+            let empty = ModelDescription::default();
+            let (scale, offset) = unit_conversion(
+                (from_md.unwrap_or(&empty), from_unit_name.as_deref()),
+                (to_def.description(), to_def.description().unit_of(to_sv)),
+            )
+            .map_err(|m| invalid(&ctx, m))?;
+            if connections
+                .iter()
+                .any(|c| c.to_unit == to_unit && c.to_vr == to_sv.value_reference)
+            {
+                return Err(invalid(&ctx, format!("'{b}' is already connected")));
+            }
+            connections.push(ConnectionDef {
+                text: text.clone(),
+                from_slot: signals.slot(&from, a),
+                from,
+                from_name: a.to_string(),
+                to_unit,
+                to_vr: to_sv.value_reference,
+                to_ty: to_sv.ty,
+                to_name: b.to_string(),
+                scale,
+                offset,
+            });
+        }
+        // Parameters: typed and range-checked once, here.
+        let mut parameters = Vec::new();
+        for (name, value) in &file.parameters {
+            let ctx = format!("{ctx_file}: parameter \"{name}\"");
+            let slot = parameter_slot(&instances, name, &ctx)?;
+            let value = slot.value_from_toml(value, &ctx)?;
+            parameters.push((slot, value));
+        }
+        // Recorded signals: as listed, or every output and replayed column.
+        let record_names = match file.record.signals.is_empty() {
+            false => file.record.signals.clone(),
+            true => default_record(&instances, &replays),
+        };
+        let mut record = Vec::with_capacity(record_names.len());
+        for n in &record_names {
+            let e = resolve_source(&format!("{ctx_file}: record"), n)?;
+            if let Endpoint::Fmu {
+                ty: ScalarType::String,
+                ..
+            } = e
+            {
+                return Err(invalid(&ctx_file, format!("record: '{n}' is a String")));
+            }
+            record.push(signals.slot(&e, n));
+        }
+        // The stop condition.
+        let stop = match &file.experiment.stop {
+            StopConfig::Time(t) => Stop::Time(*t),
+            StopConfig::Word(w) => {
+                let (ctx, text) = if w == "lap" {
+                    let signal = file.experiment.lap_signal.as_deref().ok_or_else(|| {
+                        invalid(
+                            &ctx_file,
+                            "stop = \"lap\" needs lap_signal (or write the condition: stop = \"vehicle.lap >= 1\")",
+                        )
+                    })?;
+                    (
+                        "experiment.lap_signal",
+                        format!("{signal} >= {}", file.experiment.lap_count),
+                    )
+                } else {
+                    ("experiment.stop", w.clone())
+                };
+                let (signal, op, threshold) = Condition::parse(&text).ok_or_else(|| {
+                    invalid(
+                        &ctx_file,
+                        format!(
+                            "experiment.stop must be a time in s or a condition such as \"vehicle.lap >= 1\", got \"{w}\""
+                        ),
+                    )
+                })?;
+                let max_time = file.experiment.max_time;
+                if !(max_time.is_finite() && max_time > 0.0) {
+                    return Err(invalid(
+                        &ctx_file,
+                        format!("experiment.max_time must be a positive number of seconds, got {max_time}"),
+                    ));
+                }
+                let e = resolve_source(&format!("{ctx_file}: {ctx}"), &signal)?;
+                Stop::When {
+                    condition: Condition {
+                        slot: signals.slot(&e, &signal),
+                        signal,
+                        op,
+                        threshold,
+                    },
+                    max_time,
+                }
+            }
+        };
+        // Values reported at the end of a run.
+        let mut report = Vec::new();
+        for n in &file.experiment.report {
+            let ctx = format!("{ctx_file}: experiment.report");
+            let e = resolve_source(&ctx, n)?;
+            match &e {
+                Endpoint::Fmu {
+                    ty: ScalarType::String,
+                    ..
+                } => return Err(invalid(&ctx, format!("'{n}' is a String, not a number"))),
+                Endpoint::Replay { .. } => {
+                    return Err(invalid(
+                        &ctx,
+                        format!("'{n}' is a replayed column; report FMU variables"),
+                    ))
+                }
+                Endpoint::Fmu { .. } => {}
+            }
+            report.push((n.clone(), e));
+        }
+        // Replay bases.
+        let mut replay_basis = Vec::with_capacity(replays.len());
+        for r in &replays {
+            replay_basis.push(match &r.by {
+                Some(by) => {
+                    let ctx = format!("{ctx_file}: replay '{}'", r.name);
+                    let e = resolve_source(&ctx, by)?;
+                    if let Endpoint::Replay { .. } = e {
+                        return Err(invalid(&ctx, "a replay cannot be driven by another replay"));
+                    }
+                    Some(signals.slot(&e, by))
+                }
+                None => None,
+            });
+        }
+        let mut warnings = native_fallback;
+        // Unconnected inputs without a start value.
+        for (k, inst) in instances.iter().enumerate() {
+            for v in inst
+                .description()
+                .variables
+                .iter()
+                .filter(|v| v.causality == Causality::Input)
+            {
+                let connected = connections
+                    .iter()
+                    .any(|c| c.to_unit == k && c.to_vr == v.value_reference);
+                let set = file
+                    .parameters
+                    .contains_key(&format!("{}.{}", inst.name, v.name))
+                    || inst.ports.iter().any(|(ours, theirs)| {
+                        theirs == &v.name
+                            && file
+                                .parameters
+                                .contains_key(&format!("{}.{ours}", inst.name))
+                    });
+                if !connected && !set && v.start.is_none() {
+                    warnings.push(format!(
+                        "input '{}.{}' is not connected and has no start value",
+                        inst.name, v.name
+                    ));
+                }
+            }
+        }
+        check_feedthrough_cycles(&instances, &connections, &mut warnings)
+            .map_err(|m| invalid(&ctx_file, m))?;
+        let unit_names: Vec<String> = instances
+            .iter()
+            .map(|i| i.name.clone())
+            .chain(replays.iter().map(|r| r.name.clone()))
+            .collect();
+        let order = stepping_order(
+            &file,
+            &unit_names,
+            n_fmu,
+            &connections,
+            &replays,
+            &instances,
+        )
+        .map_err(|m| invalid(&ctx_file, m))?;
+        for w in &warnings {
+            log::warn!("{ctx_file}: {w}");
+        }
+        Ok(Plan {
+            file,
+            path: path.to_path_buf(),
+            instances,
+            replays,
+            connections,
+            signals,
+            record,
+            parameters,
+            stop,
+            report,
+            replay_basis,
+            order,
+            warnings,
+            cache,
+        })
+    }
+
+    pub fn unit_name(&self, k: usize) -> &str {
+        if k < self.instances.len() {
+            &self.instances[k].name
+        } else {
+            &self.replays[k - self.instances.len()].name
+        }
+    }
+
+    /// Resolve a parameter or input by its system name (`instance.variable`, through the
+    /// port map), for setting it between runs.
+    pub fn parameter(&self, name: &str) -> Result<ParamSlot, SystemError> {
+        parameter_slot(&self.instances, name, &format!("parameter \"{name}\""))
+    }
+
+    /// A signal the system can read (`instance.variable` or `replay.column`).
+    pub fn endpoint(&self, name: &str) -> Result<Endpoint, SystemError> {
+        resolve_endpoint(
+            &self.instances,
+            &self.replays,
+            &self.path.display().to_string(),
+            name,
+        )
+    }
+
+    /// Names and units of the recorded columns (time first).
+    pub fn record_columns(&self) -> (Vec<String>, Vec<String>) {
+        let mut names = vec!["time".to_string()];
+        let mut units = vec!["s".to_string()];
+        for &s in &self.record {
+            names.push(self.signals.signals[s].name.clone());
+            units.push(self.signals.signals[s].unit.clone());
+        }
+        (names, units)
+    }
+}
+
+/// Every output of every instance (under the system's names) and every replayed column.
+fn default_record(instances: &[InstanceDef], replays: &[ReplaySource]) -> Vec<String> {
+    let mut names = Vec::new();
+    for inst in instances {
+        for v in inst
+            .description()
+            .variables
+            .iter()
+            .filter(|v| v.causality == Causality::Output && v.ty != ScalarType::String)
+        {
+            let ours = inst
+                .ports
+                .iter()
+                .find(|(_, t)| *t == &v.name)
+                .map(|(o, _)| o.clone())
+                .unwrap_or(v.name.clone());
+            names.push(format!("{}.{ours}", inst.name));
+        }
+    }
+    for r in replays {
+        for c in &r.columns {
+            names.push(format!("{}.{c}", r.name));
+        }
+    }
+    names
+}
+
+/// "unknown instance" with every unit name, closest first.
+fn unknown_instance(
+    instances: &[InstanceDef],
+    replays: &[ReplaySource],
+    ctx: &str,
+    name: &str,
+) -> SystemError {
+    let mut v: Vec<(usize, &str)> = instances
+        .iter()
+        .map(|i| i.name.as_str())
+        .chain(replays.iter().map(|r| r.name.as_str()))
+        .map(|n| (tb_fmi::description::edit_distance(name, n), n))
+        .collect();
+    v.sort();
+    invalid(
+        ctx,
+        format!(
+            "unknown instance '{name}'; instances: {}",
+            v.iter().map(|x| x.1).collect::<Vec<_>>().join(", ")
+        ),
+    )
+}
+
+/// A signal the system can read, `instance.variable`: an FMU variable (through the port
+/// map) or a replayed column. Instances come first in the unit numbering, then replays.
+pub(crate) fn resolve_endpoint(
+    instances: &[InstanceDef],
+    replays: &[ReplaySource],
+    ctx: &str,
+    full: &str,
+) -> Result<Endpoint, SystemError> {
+    let (u, var) = split_name(full).ok_or_else(|| {
+        invalid(
+            ctx,
+            format!("'{full}' is not of the form instance.variable"),
+        )
+    })?;
+    if let Some(k) = instances.iter().position(|i| i.name == u) {
+        let sv = instances[k].variable(var, ctx)?;
+        return Ok(Endpoint::Fmu {
+            unit: k,
+            vr: sv.value_reference,
+            ty: sv.ty,
+            unit_name: instances[k].description().unit_of(sv).map(str::to_string),
+        });
+    }
+    let Some(k) = replays.iter().position(|r| r.name == u) else {
+        return Err(unknown_instance(instances, replays, ctx, u));
+    };
+    let r = &replays[k];
+    let c = r.column_index(var).ok_or_else(|| {
+        invalid(
+            ctx,
+            format!(
+                "replay '{}' has no column '{var}' (columns: {})",
+                r.name,
+                r.columns.join(", ")
+            ),
+        )
+    })?;
+    Ok(Endpoint::Replay {
+        unit: instances.len() + k,
+        column: c,
+        unit_name: r.units[c].clone(),
+    })
+}
+
+/// A settable variable (parameter or input) by its system name: the instance, the value
+/// reference, the type and the declared range.
+fn parameter_slot(
+    instances: &[InstanceDef],
+    name: &str,
+    ctx: &str,
+) -> Result<ParamSlot, SystemError> {
+    let (u, var) =
+        split_name(name).ok_or_else(|| invalid(ctx, "expected \"instance.variable\""))?;
+    let k = instances.iter().position(|i| i.name == u).ok_or_else(|| {
+        invalid(
+            ctx,
+            format!(
+                "unknown instance '{u}'; instances: {}",
+                instances
+                    .iter()
+                    .map(|i| i.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })?;
+    let sv: &ScalarVariable = instances[k].variable(var, ctx)?;
+    if !(sv.causality == Causality::Parameter || sv.causality == Causality::Input)
+        || sv.variability == Variability::Constant
+    {
+        return Err(invalid(
+            ctx,
+            format!(
+                "'{name}' is {} {}; only parameters and inputs can be set",
+                sv.variability, sv.causality
+            ),
+        ));
+    }
+    Ok(ParamSlot {
+        name: name.to_string(),
+        unit: k,
+        vr: sv.value_reference,
+        ty: sv.ty,
+        min: sv.min,
+        max: sv.max,
+        start: sv.start_f64(),
+    })
+}
