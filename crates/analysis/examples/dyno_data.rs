@@ -15,20 +15,7 @@ use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-struct Noise(u64);
-impl Noise {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn gauss(&mut self) -> f64 {
-        (-2.0 * self.uniform().ln()).sqrt() * (2.0 * PI * self.uniform()).cos()
-    }
-}
+use tb_testkit::Noise;
 
 fn run(h: f64, n: usize, setpoint: &dyn Fn(usize) -> f64) -> String {
     let mut rt = Runtime::<Dyno>::new("dyno_rl", None, Box::new(NullLogger), false);
@@ -42,7 +29,7 @@ fn run(h: f64, n: usize, setpoint: &dyn Fn(usize) -> f64) -> String {
     rt.setup_experiment(0.0, None);
     rt.enter_initialization_mode();
     assert_eq!(rt.exit_initialization_mode().0, 0);
-    let mut noise = Noise(2024);
+    let mut noise = Noise::new(2024);
     let mut out = String::from("time,torque_setpoint,torque_dyno,torque_measured,omega\n");
     for k in 0..n {
         let t = k as f64 * h;
@@ -71,7 +58,7 @@ fn main() {
     let h = 1e-4;
     let n = 1 << 16;
     let step = |k: usize| if k < 200 { 100.0 } else { 600.0 };
-    let mut g = Noise(3);
+    let mut g = Noise::new(3);
     let white: Vec<f64> = (0..n).map(|_| 200.0 + 100.0 * g.gauss()).collect();
     let (f0, f1, dur) = (5.0_f64, 4000.0_f64, n as f64 * h);
     let k_rate = (f1 / f0).ln() / dur;

@@ -11,21 +11,7 @@ use tb_analysis::signal::TimeSeries;
 use tb_analysis::step::{self, StepConfig};
 use tb_analysis::Complex64;
 
-/// SplitMix64 + Box–Muller: reproducible Gaussian noise without a dependency.
-struct Noise(u64);
-impl Noise {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn gauss(&mut self) -> f64 {
-        (-2.0 * self.uniform().ln()).sqrt() * (2.0 * PI * self.uniform()).cos()
-    }
-}
+use tb_testkit::Noise;
 
 struct Bench {
     dead_time: f64,
@@ -74,7 +60,7 @@ impl Bench {
         rt.setup_experiment(0.0, None);
         rt.enter_initialization_mode();
         assert_eq!(rt.exit_initialization_mode().0, 0);
-        let mut noise = Noise(42);
+        let mut noise = Noise::new(42);
         let (mut t, mut u, mut y) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..n {
             let tk = k as f64 * h;
@@ -104,7 +90,7 @@ fn sampling_name(s: Sampling) -> &'static str {
 }
 
 fn white_setpoint(seed: u64, n: usize) -> Vec<f64> {
-    let mut g = Noise(seed);
+    let mut g = Noise::new(seed);
     (0..n).map(|_| 200.0 + 100.0 * g.gauss()).collect()
 }
 
@@ -330,7 +316,7 @@ fn group_delay_of_a_pure_delay_is_the_delay() {
     // Estimated: white noise delayed by 12 samples, through Welch/H1.
     let n = 1 << 15;
     let d = 12;
-    let mut g = Noise(9);
+    let mut g = Noise::new(9);
     let u: Vec<f64> = (0..n).map(|_| g.gauss()).collect();
     let y: Vec<f64> = (0..n)
         .map(|k| if k >= d { u[k - d] } else { 0.0 })

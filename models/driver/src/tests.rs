@@ -1,39 +1,28 @@
 use super::*;
-use fmu_export::fmi2::fmi2Status;
-use fmu_export::{Logger, Runtime, Value};
+use fmu_export::{Runtime, Value};
 use std::path::PathBuf;
-use std::sync::Mutex;
+use tb_testkit::Capture;
 
 const OK: i32 = 0;
 const ERROR: i32 = 3;
-
-#[derive(Clone, Default)]
-struct Captured(Arc<Mutex<Vec<String>>>);
-
-impl Logger for Captured {
-    fn log(&self, _: fmi2Status, _: &str, message: &str) {
-        self.0.lock().unwrap().push(message.to_string());
-    }
-}
 
 fn default_resources() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("resources")
 }
 
-/// A resource folder holding `target_speed.csv` with `content` (None: no file).
-fn resources_with(name: &str, content: Option<&str>) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("twinbench-driver-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let _ = std::fs::remove_file(dir.join(TARGET_FILE));
+/// A resource folder holding `target_speed.csv` with `content` (None: no file), removed
+/// when dropped.
+fn resources_with(name: &str, content: Option<&str>) -> tempfile::TempDir {
+    let dir = tb_testkit::scratch(&format!("driver-{name}"));
     if let Some(text) = content {
-        std::fs::write(dir.join(TARGET_FILE), text).unwrap();
+        std::fs::write(dir.path().join(TARGET_FILE), text).unwrap();
     }
     dir
 }
 
 /// An initialised driver at speed `v0`, position `s0`.
 fn driver(resources: Option<PathBuf>, v0: f64, s0: f64) -> Runtime<Driver> {
-    let mut rt = Runtime::<Driver>::new("driver", resources, Box::new(Captured::default()), false);
+    let mut rt = Runtime::<Driver>::new("driver", resources, Capture::default().boxed(), false);
     assert_eq!(rt.set_by_name("v", Value::Real(v0)).0, OK);
     assert_eq!(rt.set_by_name("s", Value::Real(s0)).0, OK);
     assert_eq!(rt.setup_experiment(0.0, None).0, OK);
@@ -124,7 +113,7 @@ fn holds_a_constant_target_with_a_mismatched_car() {
     let dir = resources_with("constant", Some("s,v\n0,30\n1000,30\n"));
     // Start slower and faster than the target: the faster start needs the brake.
     for v0 in [20.0, 40.0] {
-        let mut rt = driver(Some(dir.clone()), v0, 0.0);
+        let mut rt = driver(Some(dir.path().to_path_buf()), v0, 0.0);
         // 8% heavier, 15% more drag, slower drive than the driver believes.
         let mut car = Car {
             mass: 950.0,
@@ -161,7 +150,6 @@ fn holds_a_constant_target_with_a_mismatched_car() {
             assert!(braked, "10 m/s too fast and never braked");
         }
     }
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -277,7 +265,7 @@ fn feed_forward_is_the_target_deceleration() {
     let dir = resources_with("decel", Some(&csv));
     for s in [10.0f64, 40.0, 70.0] {
         let v = (2500.0 - 20.0 * s).sqrt();
-        let mut rt = driver(Some(dir.clone()), v, s);
+        let mut rt = driver(Some(dir.path().to_path_buf()), v, s);
         let a = get(&mut rt, "a_target");
         assert!(
             (a + 10.0).abs() < 0.1,
@@ -294,7 +282,6 @@ fn feed_forward_is_the_target_deceleration() {
         );
         assert_eq!(get(&mut rt, "accel_pedal"), 0.0);
     }
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -303,7 +290,7 @@ fn anti_windup_stops_the_integral_at_full_throttle() {
     // forward, a_demand − kp·e is the integral part; conditional integration keeps it
     // where it was when the pedal hit its stop (here at once), instead of at the bound.
     let dir = resources_with("windup", Some("s,v\n0,200\n1000,200\n"));
-    let mut rt = driver(Some(dir.clone()), 20.0, 0.0);
+    let mut rt = driver(Some(dir.path().to_path_buf()), 20.0, 0.0);
     assert_eq!(rt.set_by_name("feed_forward_gain", Value::Real(0.0)).0, OK);
     let mut car = Car::nominal(20.0);
     let h = 1e-3;
@@ -318,17 +305,16 @@ fn anti_windup_stops_the_integral_at_full_throttle() {
         integral_part.abs() < 0.01,
         "integral part {integral_part} m/s2 after 30 s at the stop"
     );
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// Initialise with `dir` and return the status and the logged messages.
 fn init_messages(dir: Option<PathBuf>) -> (i32, String) {
-    let log = Captured::default();
-    let mut rt = Runtime::<Driver>::new("driver", dir, Box::new(log.clone()), false);
+    let log = Capture::default();
+    let mut rt = Runtime::<Driver>::new("driver", dir, log.boxed(), false);
     rt.setup_experiment(0.0, None);
     rt.enter_initialization_mode();
     let status = rt.exit_initialization_mode().0;
-    let text = log.0.lock().unwrap().join("\n");
+    let text = log.text();
     (status, text)
 }
 
@@ -343,9 +329,9 @@ fn bad_resource_fails_initialization_naming_file_and_row() {
     ];
     for (name, content, expected) in cases {
         let dir = resources_with(name, content);
-        let (status, log) = init_messages(Some(dir.clone()));
+        let (status, log) = init_messages(Some(dir.path().to_path_buf()));
         assert_eq!(status, ERROR, "{name}");
-        let file = dir.join(TARGET_FILE).display().to_string();
+        let file = dir.path().join(TARGET_FILE).display().to_string();
         assert!(
             log.contains(&file),
             "{name}: the message names the file: {log}"
@@ -354,7 +340,6 @@ fn bad_resource_fails_initialization_naming_file_and_row() {
             log.contains(expected),
             "{name}: the message says '{expected}': {log}"
         );
-        let _ = std::fs::remove_dir_all(dir);
     }
     let (status, log) = init_messages(None);
     assert_eq!(status, ERROR);

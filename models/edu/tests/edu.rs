@@ -2,23 +2,15 @@
 
 use edu::{Edu, EduVars};
 use fmu_export::fmi2::fmi2Status;
-use fmu_export::{Logger, Runtime, Value};
-use std::sync::{Arc, Mutex};
+use fmu_export::{Runtime, Value};
+use tb_testkit::Capture;
 
 const DT: f64 = 1e-3;
 const ETA_M: f64 = 0.9;
 const ETA_G: f64 = 0.96;
 
-#[derive(Clone, Default)]
-struct Capture(Arc<Mutex<Vec<String>>>);
-impl Logger for Capture {
-    fn log(&self, _: fmi2Status, _: &str, message: &str) {
-        self.0.lock().unwrap().push(message.to_string());
-    }
-}
-
 fn start(params: &[(&str, f64)]) -> Runtime<Edu> {
-    let mut rt = Runtime::<Edu>::new("edu", None, Box::new(Capture::default()), false);
+    let mut rt = Runtime::<Edu>::new("edu", None, Capture::default().boxed(), false);
     for (n, x) in params {
         assert_eq!(rt.set_by_name(n, Value::Real(*x)), fmi2Status::OK, "{n}");
     }
@@ -200,8 +192,8 @@ fn bad_parameters_are_refused_naming_the_variable() {
         ("torque_max", -150.0),
     ] {
         let cap = Capture::default();
-        let mut rt = Runtime::<Edu>::new("edu", None, Box::new(cap.clone()), true);
+        let mut rt = Runtime::<Edu>::new("edu", None, cap.boxed(), true);
         assert_eq!(rt.set_by_name(n, Value::Real(x)), fmi2Status::ERROR, "{n}");
-        assert!(cap.0.lock().unwrap().join("\n").contains(&format!("'{n}'")));
+        assert!(cap.text().contains(&format!("'{n}'")));
     }
 }

@@ -18,7 +18,7 @@ pub mod model;
 pub mod runtime;
 pub mod variables;
 
-pub use tb_fmi::{fmi2, units, Function, Phase};
+pub use tb_fmi::{fmi2, units, Function, Phase, PhaseSet};
 
 pub use model::{
     Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, Severity, StateReader,

@@ -65,7 +65,8 @@ impl Bench {
             &format!("loop{}", (v0 * 1e3 + dead_time * 1e7) as u64),
             &uniform_track(2000.0, 0.0),
         );
-        let (mut car, _) = runtime::<Vehicle>(Some(dir), &[("v_start", r(v0))]);
+        let (mut car, _) =
+            runtime::<Vehicle>(Some(dir.path().to_path_buf()), &[("v_start", r(v0))]);
         let w0 = v0 / R;
         set(&mut car, "omega_rl", w0);
         set(&mut car, "omega_rr", w0);

@@ -118,7 +118,7 @@ fn left_turn_transfers_load_left_to_right_split_by_x_rc() {
 #[test]
 fn steady_left_turn_in_the_running_model() {
     let dir = temp_resources("turn", &uniform_track(1000.0, 0.01));
-    let (mut rt, _) = runtime::<Vehicle>(Some(dir), &[("v_start", r(30.0))]);
+    let (mut rt, _) = runtime::<Vehicle>(Some(dir.path().to_path_buf()), &[("v_start", r(30.0))]);
     assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
     for k in 0..1000 {
         let w = get(&mut rt, "v") / 0.345;
@@ -203,7 +203,7 @@ fn coast_decel(v: f64) -> f64 {
 #[test]
 fn coast_down_matches_drag_and_rolling_resistance() {
     let dir = temp_resources("coast", &uniform_track(2000.0, 0.0));
-    let (mut rt, _) = runtime::<Vehicle>(Some(dir), &[("v_start", r(50.0))]);
+    let (mut rt, _) = runtime::<Vehicle>(Some(dir.path().to_path_buf()), &[("v_start", r(50.0))]);
     assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
     let mut worst: f64 = 0.0;
     let mut v_prev = get(&mut rt, "v");
@@ -248,7 +248,7 @@ fn coast_down_matches_drag_and_rolling_resistance() {
 #[test]
 fn laps_wrap_count_and_time() {
     let dir = temp_resources("laps", &uniform_track(100.0, 0.0));
-    let (mut rt, _) = runtime::<Vehicle>(Some(dir), &[("v_start", r(50.0))]);
+    let (mut rt, _) = runtime::<Vehicle>(Some(dir.path().to_path_buf()), &[("v_start", r(50.0))]);
     assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
     assert_eq!(get(&mut rt, "lap_length"), 100.0);
     let mut crossings = vec![0.0];
@@ -350,12 +350,12 @@ fn bad_track_files_are_refused_with_file_and_row() {
     ];
     for (tag, text, want) in cases {
         let dir = temp_resources(tag, &text);
-        let (mut rt, cap) = runtime::<Vehicle>(Some(dir.clone()), &[]);
+        let (mut rt, cap) = runtime::<Vehicle>(Some(dir.path().to_path_buf()), &[]);
         assert_eq!(rt.exit_initialization_mode(), fmi2Status::ERROR);
         let msg = cap.text();
         assert!(msg.contains("fmi2ExitInitializationMode"), "{msg}");
         assert!(
-            msg.contains(&dir.join("track.csv").display().to_string()),
+            msg.contains(&dir.path().join("track.csv").display().to_string()),
             "{msg}"
         );
         assert!(msg.contains(want), "{tag}: {msg}");
@@ -381,7 +381,7 @@ fn bad_parameters_are_refused_naming_the_variable() {
         let mut rt = fmu_export::Runtime::<Vehicle>::new(
             "bad",
             Some(bundled_resources()),
-            Box::new(cap.clone()),
+            cap.boxed(),
             true,
         );
         assert_eq!(rt.set_by_name(name, r(x)), fmi2Status::ERROR, "{name}");

@@ -2,35 +2,18 @@
 #![allow(dead_code)]
 
 use fmu_export::fmi2::fmi2Status;
-use fmu_export::{Logger, Model, Runtime, Value};
+use fmu_export::{Model, Runtime, Value};
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
-
-/// Keeps every message, so tests can check what an error names.
-#[derive(Clone, Default)]
-pub struct Capture(pub Arc<Mutex<Vec<String>>>);
-
-impl Logger for Capture {
-    fn log(&self, _status: fmi2Status, _category: &str, message: &str) {
-        self.0.lock().unwrap().push(message.to_string());
-    }
-}
-
-impl Capture {
-    pub fn text(&self) -> String {
-        self.0.lock().unwrap().join("\n")
-    }
-}
+pub use tb_testkit::Capture;
 
 pub fn bundled_resources() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("resources")
 }
 
-/// A resource folder holding `track.csv` with `text`, unique per test.
-pub fn temp_resources(tag: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("tb-vehicle-{}-{tag}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("track.csv"), text).unwrap();
+/// A resource folder holding `track.csv` with `text`, removed when dropped.
+pub fn temp_resources(tag: &str, text: &str) -> tempfile::TempDir {
+    let dir = tb_testkit::scratch(&format!("vehicle-{tag}"));
+    std::fs::write(dir.path().join("track.csv"), text).unwrap();
     dir
 }
 
@@ -49,7 +32,7 @@ pub fn runtime<M: Model>(
     params: &[(&str, Value)],
 ) -> (Runtime<M>, Capture) {
     let cap = Capture::default();
-    let mut rt = Runtime::<M>::new("test", resources, Box::new(cap.clone()), true);
+    let mut rt = Runtime::<M>::new("test", resources, cap.boxed(), true);
     for (name, v) in params {
         assert_eq!(
             rt.set_by_name(name, *v),
