@@ -352,8 +352,8 @@ fn packing_twice_gives_identical_fmus() {
 fn missing_or_malformed_resource_is_an_error_naming_the_file() {
     let f = load("driver");
     // No resources folder at all.
-    let empty = std::env::temp_dir().join(format!("tb-noresources-{}", std::process::id()));
-    std::fs::create_dir_all(&empty).unwrap();
+    let scratch = tb_testkit::scratch("noresources");
+    let empty = scratch.path().to_path_buf();
     let mut i = Instance::instantiate(
         f.library.clone(),
         "drv",

@@ -7,11 +7,11 @@ use std::sync::Arc;
 use tb_cosim::{Plan, Simulation, SystemFile};
 use tb_fmi::FmuCache;
 
+/// The system text parsed as if read from `<scratch>/<name>.toml` (nothing is written).
 fn faulty_system(body: &str, name: &str) -> (SystemFile, PathBuf) {
     let fmu = common::fmu("faulty");
     let text = format!("{body}\n[fmus]\nfaulty = \"{}\"\n", fmu.display());
-    let path = std::env::temp_dir().join(format!("tb-orch-{name}-{}.toml", std::process::id()));
-    std::fs::write(&path, &text).unwrap();
+    let path = PathBuf::from(format!("/nonexistent/tb-orch/{name}.toml"));
     (SystemFile::parse(&text, &path).unwrap(), path)
 }
 
@@ -64,7 +64,8 @@ fn results_are_csv_with_a_units_row_written_atomically() {
     let (f, p) = faulty_system(&format!("{ONE}stop = 0.1\n"), "csv");
     let mut s = sim(f, &p);
     s.run().unwrap();
-    let out = std::env::temp_dir().join(format!("tb-orch-{}.csv", std::process::id()));
+    let scratch = tb_testkit::scratch("orch-csv");
+    let out = scratch.path().join("lap.csv");
     s.recording.write_csv(&out).unwrap();
     let text = std::fs::read_to_string(&out).unwrap();
     let mut lines = text.lines();
@@ -92,7 +93,8 @@ fn twinbench_bin() -> PathBuf {
 fn run_json_summary_and_info_table() {
     common::fmu_dir();
     let root = twinbench::pack::workspace_root();
-    let out = std::env::temp_dir().join(format!("tb-orch-run-{}.csv", std::process::id()));
+    let scratch = tb_testkit::scratch("orch-run");
+    let out = scratch.path().join("lap.csv");
     let o = std::process::Command::new(twinbench_bin())
         .args([
             "run",

@@ -186,35 +186,94 @@ fn a_reader_never_sees_a_half_written_result_file() {
     assert_eq!(temp_siblings(dir.path()), Vec::<PathBuf>::new());
 }
 
+/// The bundled bench recording every output at every step (a result file of about 40 MB,
+/// so that writing it takes long enough to be caught), with absolute FMU paths.
+fn big_output_system(dir: &Path) -> PathBuf {
+    let fmu_dir = common::fmu_dir();
+    let root = twinbench::pack::workspace_root();
+    let text = std::fs::read_to_string(root.join("systems/rls_v.toml"))
+        .unwrap()
+        .replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()))
+        .replace("decimation = 5", "decimation = 1");
+    let p = dir.join("big_output.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn twinbench_run(system: &Path, out: &Path, tmp: &Path) -> std::process::Child {
+    std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args([
+            "run",
+            system.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        // The child's unpack cache goes to the test's scratch folder (removed with it).
+        .env("TMPDIR", tmp)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap()
+}
+
 #[test]
-fn a_killed_run_leaves_no_partial_result_file() {
-    // `twinbench run --out` killed at various moments: the result is absent or complete.
+fn a_run_killed_while_writing_its_result_leaves_no_partial_file() {
+    // The kill is proven to land during the write: the process is frozen (SIGSTOP) the
+    // moment its temporary file appears, seen to be mid-write (temporary present, result
+    // absent), and only then killed. A run that finished its write before the freeze is
+    // not a landing; at most 5 runs are tried.
     common::fmu_dir();
-    let system = twinbench::pack::workspace_root().join("systems/rls_v.toml");
-    let dir = tempfile::tempdir().unwrap();
-    for (k, delay_ms) in [50u64, 150, 300, 400].into_iter().enumerate() {
-        let out = dir.path().join(format!("lap{k}.csv"));
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
-            .args([
-                "run",
-                system.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+    let dir = tb_testkit::scratch("killed-write");
+    let system = big_output_system(dir.path());
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let mut landed = false;
+    for attempt in 0..5 {
+        let out = out_dir.join(format!("lap{attempt}.csv"));
+        let mut child = twinbench_run(&system, &out, &tmp);
+        let pid = child.id() as libc::pid_t;
+        let mut frozen_mid_write = false;
+        let deadline = Instant::now() + std::time::Duration::from_secs(60);
+        loop {
+            if child.try_wait().unwrap().is_some() || Instant::now() > deadline {
+                break;
+            }
+            if !temp_siblings(&out_dir).is_empty() {
+                unsafe { libc::kill(pid, libc::SIGSTOP) };
+                frozen_mid_write = !temp_siblings(&out_dir).is_empty() && !out.exists();
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
         let _ = child.kill();
         let _ = child.wait();
         if out.exists() {
             let text = std::fs::read_to_string(&out).unwrap();
             let rows = text.lines().count();
-            assert!(text.ends_with('\n') && rows > 1000, "partial: {rows} lines");
+            assert!(
+                text.ends_with('\n') && rows > 90_000,
+                "partial: {rows} lines"
+            );
+        }
+        if frozen_mid_write {
+            assert!(
+                !out.exists(),
+                "attempt {attempt}: a result appeared after the kill"
+            );
+            landed = true;
+            break;
         }
     }
-    // A run that completes leaves its file and no temporary sibling.
+    assert!(landed, "no kill landed during the write in 5 runs");
+}
+
+#[test]
+fn a_completed_run_leaves_its_result_and_no_temporary_file() {
+    common::fmu_dir();
+    let system = twinbench::pack::workspace_root().join("systems/rls_v.toml");
+    let dir = tb_testkit::scratch("completed-write");
     let out = dir.path().join("done.csv");
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
         .args([
@@ -223,16 +282,13 @@ fn a_killed_run_leaves_no_partial_result_file() {
             "--out",
             out.to_str().unwrap(),
         ])
+        .env("TMPDIR", dir.path())
         .stdout(std::process::Stdio::null())
         .status()
         .unwrap();
     assert!(st.success());
     assert!(out.exists());
-    let tmps: Vec<_> = temp_siblings(dir.path())
-        .into_iter()
-        .filter(|p| !p.to_string_lossy().contains("lap"))
-        .collect();
-    assert_eq!(tmps, Vec::<PathBuf>::new());
+    assert_eq!(temp_siblings(dir.path()), Vec::<PathBuf>::new());
 }
 
 #[test]

@@ -131,9 +131,7 @@ fn system_seeds() -> &'static Vec<Vec<u8>> {
 }
 
 fn shared_cache() -> Arc<FmuCache> {
-    static C: OnceLock<Arc<FmuCache>> = OnceLock::new();
-    C.get_or_init(|| Arc::new(FmuCache::temporary(false).unwrap()))
-        .clone()
+    common::shared_cache()
 }
 
 /// The seeds name FMUs relative to `systems/`.
@@ -216,4 +214,218 @@ proptest! {
         prop_assert_eq!(m.time().len(), rows.len());
         prop_assert_eq!(*m.distance().last().unwrap(), d);
     }
+}
+
+// ---- system files edited by meaning: every case reaches the validator ----
+
+/// What an edit by meaning changes in the bundled bench's system file.
+#[derive(Clone, Debug)]
+enum Change {
+    /// A connection's source or target becomes another `instance.variable`.
+    Endpoint(usize, bool, usize, usize),
+    /// A parameter with a value of some type.
+    Parameter(usize, usize, ParamKind),
+    Step(f64),
+    Stop(usize, usize, f64),
+    Record(usize, usize),
+    /// An instance is dropped.
+    DropInstance(usize),
+    Algorithm(bool),
+}
+
+#[derive(Clone, Debug)]
+enum ParamKind {
+    Real(f64),
+    Integer(i64),
+    Boolean(bool),
+    Text,
+}
+
+fn change() -> impl Strategy<Value = Change> {
+    let number = prop_oneof![
+        -1e6f64..1e6,
+        Just(0.0),
+        Just(f64::NAN),
+        Just(f64::INFINITY),
+        Just(1e-20),
+        Just(-1.0),
+        Just(1e300),
+    ];
+    prop_oneof![
+        (
+            any::<usize>(),
+            any::<bool>(),
+            any::<usize>(),
+            any::<usize>()
+        )
+            .prop_map(|(c, side, i, v)| Change::Endpoint(c, side, i, v)),
+        (
+            any::<usize>(),
+            any::<usize>(),
+            prop_oneof![
+                number.clone().prop_map(ParamKind::Real),
+                any::<i64>().prop_map(ParamKind::Integer),
+                any::<bool>().prop_map(ParamKind::Boolean),
+                Just(ParamKind::Text),
+            ]
+        )
+            .prop_map(|(i, v, k)| Change::Parameter(i, v, k)),
+        number.clone().prop_map(Change::Step),
+        (any::<usize>(), any::<usize>(), number).prop_map(|(i, v, x)| Change::Stop(i, v, x)),
+        (any::<usize>(), any::<usize>()).prop_map(|(i, v)| Change::Record(i, v)),
+        any::<usize>().prop_map(Change::DropInstance),
+        any::<bool>().prop_map(Change::Algorithm),
+    ]
+}
+
+/// Instance names and, per instance, its FMU's variable names (plus a misspelled one).
+fn bench_names() -> &'static Vec<(String, Vec<String>)> {
+    static N: OnceLock<Vec<(String, Vec<String>)>> = OnceLock::new();
+    N.get_or_init(|| {
+        common::fmu_dir();
+        let plan =
+            tb_cosim::Plan::load(&root().join("systems/rls_v.toml"), shared_cache()).unwrap();
+        plan.instances
+            .iter()
+            .map(|i| {
+                let mut v: Vec<String> = i
+                    .description()
+                    .variables
+                    .iter()
+                    .map(|v| v.name.clone())
+                    .collect();
+                v.push("no_such_variable".into());
+                (i.name.clone(), v)
+            })
+            .collect()
+    })
+}
+
+fn pick<'a>(names: &'a [(String, Vec<String>)], i: usize, v: usize) -> String {
+    let (inst, vars) = &names[i % names.len()];
+    format!("{inst}.{}", vars[v % vars.len()])
+}
+
+fn apply_changes(doc: &mut toml::Table, changes: &[Change]) {
+    let names = bench_names();
+    for c in changes {
+        match c {
+            Change::Endpoint(k, side, i, v) => {
+                if let Some(toml::Value::Array(conns)) = doc.get_mut("connections") {
+                    if conns.is_empty() {
+                        continue;
+                    }
+                    let n = conns.len();
+                    let text = conns[k % n].as_str().unwrap_or("a.b -> c.d").to_string();
+                    let (a, b) = text.split_once("->").unwrap_or(("a.b", "c.d"));
+                    let new = pick(names, *i, *v);
+                    conns[k % n] = toml::Value::String(if *side {
+                        format!("{new} -> {}", b.trim())
+                    } else {
+                        format!("{} -> {new}", a.trim())
+                    });
+                }
+            }
+            Change::Parameter(i, v, kind) => {
+                let value = match kind {
+                    ParamKind::Real(x) => toml::Value::Float(*x),
+                    ParamKind::Integer(n) => toml::Value::Integer(*n),
+                    ParamKind::Boolean(b) => toml::Value::Boolean(*b),
+                    ParamKind::Text => toml::Value::String("text".into()),
+                };
+                if let Some(toml::Value::Table(p)) = doc.get_mut("parameters") {
+                    p.insert(pick(names, *i, *v), value);
+                }
+            }
+            Change::Step(h) => {
+                if let Some(toml::Value::Table(e)) = doc.get_mut("experiment") {
+                    e.insert("step".into(), toml::Value::Float(*h));
+                }
+            }
+            Change::Stop(i, v, x) => {
+                if let Some(toml::Value::Table(e)) = doc.get_mut("experiment") {
+                    let stop = if x.is_finite() && *x > 0.0 && *x < 3.0 {
+                        toml::Value::Float(*x)
+                    } else {
+                        toml::Value::String(format!("{} >= {x}", pick(names, *i, *v)))
+                    };
+                    e.insert("stop".into(), stop);
+                }
+            }
+            Change::Record(i, v) => {
+                if let Some(toml::Value::Table(r)) = doc.get_mut("record") {
+                    if let Some(toml::Value::Array(s)) = r.get_mut("signals") {
+                        s.push(toml::Value::String(pick(names, *i, *v)));
+                    }
+                }
+            }
+            Change::DropInstance(k) => {
+                if let Some(toml::Value::Array(insts)) = doc.get_mut("instance") {
+                    if !insts.is_empty() {
+                        let n = insts.len();
+                        insts.remove(k % n);
+                    }
+                }
+            }
+            Change::Algorithm(jacobi) => {
+                if let Some(toml::Value::Table(e)) = doc.get_mut("experiment") {
+                    let a = if *jacobi { "jacobi" } else { "gauss-seidel" };
+                    e.insert("algorithm".into(), toml::Value::String(a.into()));
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn system_files_edited_by_meaning_reach_the_validator_and_never_panic() {
+    use proptest::test_runner::TestRunner;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let path = root().join("systems/rls_v.toml");
+    let seed: toml::Table = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    bench_names();
+    let (parsed, accepted, refused) = (
+        AtomicUsize::new(0),
+        AtomicUsize::new(0),
+        AtomicUsize::new(0),
+    );
+    let cases = 300;
+    let mut runner = TestRunner::new(config(cases));
+    runner
+        .run(&prop::collection::vec(change(), 1..4), |changes| {
+            let mut doc = seed.clone();
+            apply_changes(&mut doc, &changes);
+            let text = toml::to_string(&doc).unwrap();
+            let Ok(file) = tb_cosim::SystemFile::parse(&text, &path) else {
+                return Ok(());
+            };
+            parsed.fetch_add(1, Ordering::Relaxed);
+            match tb_cosim::Plan::from_file(file, &path, shared_cache()) {
+                Ok(plan) => {
+                    accepted.fetch_add(1, Ordering::Relaxed);
+                    prop_assert!(tb_cosim::Simulation::new(plan).is_ok());
+                }
+                Err(e) => {
+                    refused.fetch_add(1, Ordering::Relaxed);
+                    // A refusal names the file and says what is wrong.
+                    let m = e.to_string();
+                    prop_assert!(m.len() > 20, "terse message: {m}");
+                }
+            }
+            Ok(())
+        })
+        .unwrap();
+    let (p, a, r) = (
+        parsed.into_inner(),
+        accepted.into_inner(),
+        refused.into_inner(),
+    );
+    eprintln!(
+        "{cases} edited system files: {p} parsed, {a} accepted, {r} refused by the validator"
+    );
+    // Edits by meaning keep the file valid TOML: nearly all reach the validator, and both
+    // of its answers are exercised.
+    assert!(p as f64 >= 0.95 * cases as f64, "{p} of {cases} parsed");
+    assert!(a as f64 >= 0.05 * cases as f64, "{a} accepted");
+    assert!(r as f64 >= 0.3 * cases as f64, "{r} refused");
 }

@@ -10,7 +10,7 @@ mod common;
 
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 use tb_cosim::{Plan, RunSummary, Simulation, SystemFile, Table};
 use tb_fmi::FmuCache;
 
@@ -35,10 +35,7 @@ fn supplier_fmu() -> (PathBuf, PathBuf) {
 }
 
 fn cache() -> Arc<FmuCache> {
-    static CACHE: OnceLock<Arc<FmuCache>> = OnceLock::new();
-    CACHE
-        .get_or_init(|| Arc::new(FmuCache::temporary(false).unwrap()))
-        .clone()
+    common::shared_cache()
 }
 
 fn run(system: Plan) -> (RunSummary, Table) {

@@ -315,8 +315,8 @@ signals = ["minutes.u", "fahrenheit.u"]
 
 #[test]
 fn an_unconnected_input_without_a_start_value_is_warned_about() {
-    let dir = std::env::temp_dir().join(format!("tb-nostart-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let scratch = tb_testkit::scratch("nostart");
+    let dir = scratch.path().to_path_buf();
     let xml = edit(
         &faulty_xml(),
         "<Real unit=\"1\" start=\"0\"/>",
@@ -335,5 +335,4 @@ fn an_unconnected_input_without_a_start_value_is_warned_about() {
         system.warnings,
         vec!["input 'a.u' is not connected and has no start value".to_string()]
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }

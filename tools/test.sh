@@ -15,4 +15,19 @@ export TWINBENCH_PYTHON="$PWD/target/venv/bin/python"
 # The pythonfmu supplier EDU (tests/supplier_edu.rs, systems/rls_v_supplier.toml) and the
 # link to the libpython a native host must preload for it.
 "$TWINBENCH_PYTHON" tools/supplier_edu/build.py
+# Everything the tests and the processes they start put in the temporary directory goes to
+# a fresh folder, which must be empty at the end: the suite leaves nothing behind.
+export TMPDIR="$PWD/target/test-tmp"
+rm -rf "$TMPDIR"
+mkdir -p "$TMPDIR"
+# The fast tier: every crate's tests, the FMUs through their C symbols, the orchestrator.
 cargo test --release --workspace "$@"
+# The slow tier: whole optimisations, FMPy's master over a lap, the SSP in FMPy and libcosim.
+cargo test --release -p twinbench --features slow-tests \
+    --test optimize_spielberg --test optimize_study --test robustness_optimize \
+    --test ssp_export --test cross_validation "$@"
+if [ -n "$(ls -A "$TMPDIR")" ]; then
+    echo "error: the tests left files in the temporary directory ($TMPDIR):" >&2
+    ls -lA "$TMPDIR" >&2
+    exit 1
+fi

@@ -28,9 +28,22 @@ pub fn fmu(name: &str) -> PathBuf {
     twinbench::pack::fmu_path(&dir, &spec)
 }
 
+/// One unpack cache for all tests of a binary, kept under `target/` (content-addressed and
+/// safe for concurrent processes). A static is never dropped: a temporary cache held by one
+/// would stay behind in the system's temporary folder.
+pub fn shared_cache() -> Arc<FmuCache> {
+    static CACHE: OnceLock<Arc<FmuCache>> = OnceLock::new();
+    CACHE
+        .get_or_init(|| {
+            let dir = twinbench::pack::workspace_root().join("target/test-fmu-cache");
+            Arc::new(FmuCache::persistent(&dir).unwrap())
+        })
+        .clone()
+}
+
 pub fn cache() -> &'static FmuCache {
-    static CACHE: OnceLock<FmuCache> = OnceLock::new();
-    CACHE.get_or_init(|| FmuCache::temporary(false).unwrap())
+    static CACHE: OnceLock<Arc<FmuCache>> = OnceLock::new();
+    CACHE.get_or_init(shared_cache)
 }
 
 pub fn load(name: &str) -> Arc<LoadedFmu> {

@@ -5,16 +5,16 @@ use tb_compare::{DistanceSource, Measurement};
 
 const HEADER: &str = "time,distance,v,Fz_fl,Fz_fr,Fz_rl,Fz_rr\n";
 
-fn write(name: &str, text: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("tb-compare-bad-input-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(name);
+/// `text` written as `name` in a scratch folder (removed when the returned handle drops).
+fn write(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
+    let dir = tb_testkit::scratch("compare-bad-input");
+    let p = dir.path().join(name);
     std::fs::write(&p, text).unwrap();
-    p
+    (dir, p)
 }
 
 fn error_of(name: &str, text: &str) -> String {
-    let p = write(name, text);
+    let (_dir, p) = write(name, text);
     let e = Measurement::read_path(&p).unwrap_err().to_string();
     assert!(e.contains(name), "message names the file: {e}");
     e
@@ -63,7 +63,7 @@ fn distance_running_backwards() {
         "{e}"
     );
     // Standing still is allowed.
-    let p = write(
+    let (_dir, p) = write(
         "still.csv",
         &format!("{HEADER}0,0,0,1,1,1,1\n0.1,0,0,1,1,1,1\n0.2,0.5,10,1,1,1,1\n"),
     );
@@ -119,7 +119,7 @@ fn units_row_and_blank_lines_keep_line_numbers() {
 
 #[test]
 fn distance_integrated_from_speed() {
-    let p = write(
+    let (_dir, p) = write(
         "nodist.csv",
         "time,v,Fz_fl,Fz_fr,Fz_rl,Fz_rr\r\n0,10,1,1,1,1\r\n0.1,10,1,1,1,1\r\n0.2,20,1,1,1,1\r\n",
     );

@@ -15,6 +15,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tb_fmi::fmi2::fmi2Status;
+use tb_fmi::log::LogSink;
 use tb_fmi::{FmuError, Function, LoadedFmu};
 
 /// A kind of get, with the value references asked for.
@@ -46,7 +47,8 @@ pub struct IsolatedBackend {
     prefetched: VecDeque<(GetSpec, Values)>,
     /// Why the worker is gone; every later call fails at once.
     dead: Option<String>,
-    last_log: Vec<String>,
+    /// The FMU's last messages, as the worker reported them with an error.
+    sink: LogSink,
 }
 
 impl IsolatedBackend {
@@ -124,7 +126,7 @@ impl IsolatedBackend {
             observed: Vec::new(),
             prefetched: VecDeque::new(),
             dead: None,
-            last_log: Vec::new(),
+            sink: LogSink::new(name),
         })
     }
 
@@ -341,7 +343,10 @@ impl IsolatedBackend {
                     .map(|_| d.str())
                     .collect::<Result<_, _>>()
                     .map_err(p)?;
-                self.last_log.clone_from(&log);
+                self.sink.clear();
+                for l in &log {
+                    self.sink.keep(l.clone());
+                }
                 FmuError::call(&self.name, f, status, t, log)
             }
             kind::INSTANTIATE => FmuError::Instantiate {
@@ -463,7 +468,7 @@ impl Backend for IsolatedBackend {
         // The worker keeps the FMU's messages for error reports; nothing is echoed.
     }
     fn last_log_lines(&self) -> Vec<String> {
-        self.last_log.clone()
+        self.sink.last_lines()
     }
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
         IsolatedBackend::set_debug_logging(self, on)

@@ -476,7 +476,15 @@ impl Plan {
             true => default_record(&instances, &replays),
         };
         let mut record = Vec::with_capacity(record_names.len());
-        for n in &record_names {
+        for (k, n) in record_names.iter().enumerate() {
+            if record_names[..k].contains(n) || n == "time" {
+                return Err(invalid(
+                    &ctx_file,
+                    format!(
+                        "record: '{n}' is listed twice (a result file has one column per name)"
+                    ),
+                ));
+            }
             let e = resolve_source(&format!("{ctx_file}: record"), n)?;
             if let Endpoint::Fmu {
                 ty: ScalarType::String,
