@@ -339,7 +339,7 @@ impl IsolatedBackend {
                 let status = fmi2Status(d.i32().map_err(p)?);
                 let t = d.f64().map_err(p)?;
                 let n = d.count(4).map_err(p)?;
-                let log = (0..n)
+                let log: Vec<String> = (0..n)
                     .map(|_| d.str())
                     .collect::<Result<_, _>>()
                     .map_err(p)?;
