@@ -301,7 +301,7 @@ fn bench_names() -> &'static Vec<(String, Vec<String>)> {
     })
 }
 
-fn pick<'a>(names: &'a [(String, Vec<String>)], i: usize, v: usize) -> String {
+fn pick(names: &[(String, Vec<String>)], i: usize, v: usize) -> String {
     let (inst, vars) = &names[i % names.len()];
     format!("{inst}.{}", vars[v % vars.len()])
 }

@@ -6,6 +6,6 @@
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
     if let Ok(text) = std::str::from_utf8(data) {
         let path = std::path::Path::new("systems/fuzzed.toml");
-        let _ = twinbench::system::SystemFile::parse(text, path);
+        let _ = tb_cosim::SystemFile::parse(text, path);
     }
 });
