@@ -1,5 +1,5 @@
-//! Distance-based comparison of a simulation with a vehicle measurement (paper ch. 4.2,
-//! BENCH.md §4).
+//! Distance-based comparison of a simulation with a vehicle measurement (paper ch. 4.2;
+//! `docs/compare.md`).
 //!
 //! - [`Table`]: the column table (from `tb-table`, shared with results, replays, analysis).
 //! - [`measurement`]: the vehicle measurement format, validated.
@@ -9,6 +9,7 @@
 //! - [`metrics`]: regression slope m, intercept, R², e (Eq. 16), bias, RMS.
 //! - [`compare`]: the pipeline; [`PreparedMeasurement`] holds what depends on the
 //!   measurement only, [`Workspace`] the per-thread buffers.
+//! - [`error`]: the crate's error type (table errors converted one to one).
 //!
 //! ```no_run
 //! use tb_compare::{CompareSettings, PreparedMeasurement, Table, Workspace};

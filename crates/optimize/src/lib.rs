@@ -1,11 +1,14 @@
-//! Parameter optimisation of the twin against a vehicle measurement (paper ch. 4.3,
-//! BENCH.md §4, issue 5 items 3–5).
+//! Parameter optimisation of the twin against a vehicle measurement (paper ch. 4.3;
+//! `docs/optimize.md`).
 //!
 //! - [`study`]: the study file (system, measurement, comparison settings, optimiser, steps).
 //! - [`optimizer`]: the ask/tell [`Optimizer`] trait, the [`Problem`] trait and the
 //!   generation loop [`minimize`] (parallel evaluation with rayon, failures penalised).
 //! - [`ga`]: real-coded GA (tournament, SBX, polynomial mutation, elitism); [`cmaes`]: CMA-ES.
-//! - [`bench`]: candidates on the co-simulated bench, one reused `Simulation` per worker.
+//! - [`bench`]: candidates on the co-simulated bench: the system compiled once into a plan,
+//!   one reused `Simulation` of it per worker, every study parameter resolved to a slot.
+//! - [`rng`]: the seeded generator every random draw comes from; [`exact`]: bit-exact
+//!   floats in checkpoints.
 //! - [`identify`]: identifiability check (finite-difference Jacobian, near-null directions).
 //! - [`run`]: the study driver: steps in order, each starting from the earlier results,
 //!   identifiability check, e before/after, a checkpoint after every generation, resume.
