@@ -34,7 +34,8 @@ pub struct RunArgs {
     pub worker_timeout: f64,
 }
 
-/// Parse `name=value` into a TOML value (number, integer, boolean).
+/// Parse `name=value` into a TOML value: an integer, a number, a boolean, else a string
+/// (surrounding double quotes removed); the variable's type decides whether it fits.
 pub fn parse_assignment(s: &str) -> anyhow::Result<(String, toml::Value)> {
     let (name, value) = s
         .split_once('=')
@@ -47,7 +48,11 @@ pub fn parse_assignment(s: &str) -> anyhow::Result<(String, toml::Value)> {
     } else if let Ok(b) = value.parse::<bool>() {
         toml::Value::Boolean(b)
     } else {
-        anyhow::bail!("--set '{s}': '{value}' is not a number or a boolean");
+        let text = value
+            .strip_prefix('"')
+            .and_then(|v| v.strip_suffix('"'))
+            .unwrap_or(value);
+        toml::Value::String(text.to_string())
     };
     Ok((name.trim().to_string(), v))
 }
@@ -82,8 +87,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut sim = Simulation::new(system.clone())?;
     for s in &args.set {
         let (name, value) = parse_assignment(s)?;
-        sim.set_parameter(&name, value)
+        // A relative path on the command line is relative to the working directory.
+        let slot = system
+            .parameter(&name)
             .with_context(|| format!("--set {s}"))?;
+        let v = slot
+            .value_from_toml(&value, &format!("parameter \"{name}\""))
+            .with_context(|| format!("--set {s}"))?;
+        let cwd = std::env::current_dir().unwrap_or_default();
+        sim.set(&slot, slot.resolve_path(v, &cwd));
     }
     let summary = sim.run()?;
     if let Some(out) = &args.out {

@@ -45,8 +45,10 @@ impl Measurement {
         for c in REQUIRED_COLUMNS {
             table.require(c)?;
         }
-        // Every cell finite; report the earliest row (then the leftmost column).
+        // Every number finite (text columns aside: labels a logger writes); report the
+        // earliest row (then the leftmost column).
         let first_bad = (0..table.names().len())
+            .filter(|&c| !table.is_text(c))
             .filter_map(|c| {
                 table
                     .column_at(c)

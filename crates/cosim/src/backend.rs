@@ -26,6 +26,9 @@ pub trait Backend: Send {
     fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError>;
     fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError>;
     fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError>;
+    /// String values into `out` (cleared first), one per value reference.
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError>;
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError>;
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError>;
 }
 
@@ -109,6 +112,12 @@ impl Backend for Instance {
     }
     fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
         Instance::set_boolean(self, vrs, values)
+    }
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        Instance::get_string(self, vrs, out)
+    }
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        Instance::set_string(self, vrs, values)
     }
     #[inline]
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {

@@ -41,6 +41,8 @@ struct FmuUnit {
     out_real: Batch<f64>,
     out_int: Batch<i32>,
     out_bool: Batch<i32>,
+    in_str: Batch<String>,
+    out_str: Batch<String>,
     /// (value reference, value) applied before each initialisation.
     params: Vec<(u32, ParamValue)>,
 }
@@ -63,6 +65,8 @@ pub struct Exchange {
     plan: Arc<Plan>,
     units: Vec<Unit>,
     signals: Vec<f64>,
+    /// The values of String slots (same numbering as `signals`; empty elsewhere).
+    texts: Vec<String>,
 }
 
 impl FmuUnit {
@@ -74,7 +78,10 @@ impl FmuUnit {
     }
 
     #[inline]
-    fn gather(&mut self, signals: &[f64]) {
+    fn gather(&mut self, signals: &[f64], texts: &[String]) {
+        for k in 0..self.in_str.vr.len() {
+            self.in_str.buf[k].clone_from(&texts[self.in_str.sig[k]]);
+        }
         for k in 0..self.in_real.vr.len() {
             self.in_real.buf[k] =
                 self.in_real_scale[k] * signals[self.in_real.sig[k]] + self.in_real_offset[k];
@@ -102,11 +109,20 @@ impl FmuUnit {
         if !self.in_bool.vr.is_empty() {
             i.set_boolean(&self.in_bool.vr, &self.in_bool.buf)?;
         }
+        if !self.in_str.vr.is_empty() {
+            let refs: Vec<&str> = self.in_str.buf.iter().map(String::as_str).collect();
+            i.set_string(&self.in_str.vr, &refs)?;
+        }
         Ok(())
     }
 
     #[inline]
-    fn get_outputs(&mut self, signals: &mut [f64], plan: &Plan) -> Result<(), SystemError> {
+    fn get_outputs(
+        &mut self,
+        signals: &mut [f64],
+        texts: &mut [String],
+        plan: &Plan,
+    ) -> Result<(), SystemError> {
         let i = self
             .instance
             .as_deref_mut()
@@ -138,6 +154,12 @@ impl FmuUnit {
                 signals[self.out_bool.sig[k]] = (self.out_bool.buf[k] != 0) as i32 as f64;
             }
         }
+        if !self.out_str.vr.is_empty() {
+            i.get_string(&self.out_str.vr, &mut self.out_str.buf)?;
+            for k in 0..self.out_str.vr.len() {
+                texts[self.out_str.sig[k]].clone_from(&self.out_str.buf[k]);
+            }
+        }
         Ok(())
     }
 }
@@ -147,7 +169,7 @@ impl Exchange {
     #[inline]
     pub fn set_inputs(&mut self, u: usize) -> Result<(), SystemError> {
         if let Unit::Fmu(f) = &mut self.units[u] {
-            f.gather(&self.signals);
+            f.gather(&self.signals, &self.texts);
             f.set_inputs()?;
         }
         Ok(())
@@ -158,7 +180,7 @@ impl Exchange {
     #[inline]
     pub fn gather(&mut self, u: usize) {
         if let Unit::Fmu(f) = &mut self.units[u] {
-            f.gather(&self.signals);
+            f.gather(&self.signals, &self.texts);
         }
     }
 
@@ -184,7 +206,7 @@ impl Exchange {
     #[inline]
     pub fn publish(&mut self, u: usize, t: f64) -> Result<(), SystemError> {
         match &mut self.units[u] {
-            Unit::Fmu(f) => f.get_outputs(&mut self.signals, &self.plan),
+            Unit::Fmu(f) => f.get_outputs(&mut self.signals, &mut self.texts, &self.plan),
             Unit::Replay(_) => {
                 self.step_replay(u, t);
                 Ok(())
@@ -324,6 +346,8 @@ impl Simulation {
                     out_real: Batch::default(),
                     out_int: Batch::default(),
                     out_bool: Batch::default(),
+                    in_str: Batch::default(),
+                    out_str: Batch::default(),
                     params: Vec::new(),
                 }))
             })
@@ -354,7 +378,7 @@ impl Simulation {
                         ScalarType::Real => f.out_real.push(vr, slot),
                         ScalarType::Integer | ScalarType::Enumeration => f.out_int.push(vr, slot),
                         ScalarType::Boolean => f.out_bool.push(vr, slot),
-                        ScalarType::String => {}
+                        ScalarType::String => f.out_str.push(vr, slot),
                     }
                 }
             }
@@ -371,7 +395,7 @@ impl Simulation {
                         f.in_int.push(c.to_vr, c.from_slot)
                     }
                     ScalarType::Boolean => f.in_bool.push(c.to_vr, c.from_slot),
-                    ScalarType::String => {}
+                    ScalarType::String => f.in_str.push(c.to_vr, c.from_slot),
                 }
             }
         }
@@ -381,12 +405,18 @@ impl Simulation {
             }
         }
         let (names, record_units) = plan.record_columns();
-        let recording = Table::new(plan.path.display().to_string(), names, record_units)
+        let mut recording = Table::new(plan.path.display().to_string(), names, record_units)
             .map_err(|e| invalid(plan.path.display().to_string(), format!("record: {e}")))?;
+        for (k, &slot) in plan.record.iter().enumerate() {
+            if plan.signals.signals[slot].is_text() {
+                recording.set_text(k + 1);
+            }
+        }
         Ok(Simulation {
             algorithm: algorithm(plan.file.experiment.algorithm),
             ex: Exchange {
                 signals: vec![0.0; plan.signals.len()],
+                texts: vec![String::new(); plan.signals.len()],
                 plan: plan.clone(),
                 units,
             },
@@ -473,8 +503,7 @@ impl Simulation {
                     ParamValue::Real(x) => inst.set_real(&[*vr], &[*x])?,
                     ParamValue::Integer(i) => inst.set_integer(&[*vr], &[*i])?,
                     ParamValue::Boolean(b) => inst.set_boolean(&[*vr], &[*b as i32])?,
-                    // Not yet passed to the units: the backends have no string calls.
-                    ParamValue::String(_) => {}
+                    ParamValue::String(t) => inst.set_string(&[*vr], &[t.as_str()])?,
                 }
             }
         }
@@ -491,6 +520,7 @@ impl Simulation {
         let plan = self.plan.clone();
         let order = &plan.order;
         let mut previous = vec![f64::NAN; self.ex.signals.len()];
+        let mut previous_texts: Option<Vec<String>> = None;
         let mut converged = false;
         for _ in 0..50 {
             for &u in order {
@@ -501,11 +531,13 @@ impl Simulation {
                 .iter()
                 .zip(&self.ex.signals)
                 .all(|(a, b)| a.to_bits() == b.to_bits())
+                && previous_texts.as_ref() == Some(&self.ex.texts)
             {
                 converged = true;
                 break;
             }
             previous.copy_from_slice(&self.ex.signals);
+            previous_texts = Some(self.ex.texts.clone());
         }
         if !converged {
             log::warn!(
@@ -515,10 +547,10 @@ impl Simulation {
         }
         for &u in order {
             if let Unit::Fmu(f) = &mut self.ex.units[u] {
-                f.gather(&self.ex.signals);
+                f.gather(&self.ex.signals, &self.ex.texts);
                 f.set_inputs()?;
                 f.backend().exit_initialization_mode()?;
-                f.get_outputs(&mut self.ex.signals, &plan)?;
+                f.get_outputs(&mut self.ex.signals, &mut self.ex.texts, &plan)?;
             }
         }
         Ok(())

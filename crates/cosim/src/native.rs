@@ -168,6 +168,17 @@ impl<M: Model> Backend for NativeBackend<M> {
             )
         })
     }
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        out.clear();
+        self.call(Function::GetString, |rt| {
+            rt.get_strings("fmi2GetString", vrs, |_, s| out.push(s.to_string()))
+        })
+    }
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        self.call(Function::SetString, |rt| {
+            rt.set_strings("fmi2SetString", vrs, values)
+        })
+    }
     #[inline]
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
         self.time = t;

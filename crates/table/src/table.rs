@@ -22,7 +22,11 @@ pub struct Table {
     source: String,
     names: Vec<String>,
     units: Option<Vec<String>>,
+    /// The numbers of every column (NaN in a text column).
     columns: Vec<Vec<f64>>,
+    /// The strings of a text column (a String signal, a label in a logger's file); `None`
+    /// for a column of numbers.
+    text: Vec<Option<Vec<String>>>,
     /// 1-based line of each record in the file; `None` for an in-memory table.
     lines: Option<Vec<u64>>,
 }
@@ -55,6 +59,7 @@ impl Table {
         check_duplicates(&source, &names)?;
         Ok(Self {
             source,
+            text: vec![None; names.len()],
             names,
             units: None,
             columns,
@@ -76,6 +81,7 @@ impl Table {
         Ok(Self {
             source,
             columns: vec![Vec::new(); names.len()],
+            text: vec![None; names.len()],
             names,
             units: Some(units),
             lines: None,
@@ -143,15 +149,19 @@ impl Table {
             });
         }
         let sep = separator(&line);
-        let names: Vec<String> = fields(&line, sep).map(str::to_owned).collect();
+        let names: Vec<String> = fields(&line, sep).collect();
         check_duplicates(source, &names)?;
         let ncol = names.len();
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); ncol];
+        let mut text: Vec<Option<Vec<String>>> = vec![None; ncol];
         let mut lines = Vec::new();
         let mut units = None;
         let mut first = true;
+        let mut row_fields: Vec<String> = Vec::with_capacity(ncol);
         while let Some(row) = next_line(&mut line)? {
-            let found = fields(&line, sep).count();
+            row_fields.clear();
+            row_fields.extend(fields(&line, sep));
+            let found = row_fields.len();
             if found != ncol {
                 return Err(Error::RaggedRow {
                     file: source.into(),
@@ -161,13 +171,25 @@ impl Table {
                 });
             }
             if first {
-                first = false;
-                if is_units_row(&line, sep) {
-                    units = Some(fields(&line, sep).map(str::to_owned).collect());
+                if is_units_row(&row_fields) {
+                    first = false;
+                    units = Some(row_fields.clone());
                     continue;
                 }
+                // A column whose first value is words, not a number, holds text.
+                for (j, f) in row_fields.iter().enumerate() {
+                    if f.parse::<f64>().is_err() && is_words(f) {
+                        text[j] = Some(Vec::new());
+                    }
+                }
+                first = false;
             }
-            for (j, field) in fields(&line, sep).enumerate() {
+            for (j, field) in row_fields.iter().enumerate() {
+                if let Some(t) = &mut text[j] {
+                    t.push(field.clone());
+                    columns[j].push(f64::NAN);
+                    continue;
+                }
                 let v: f64 = field.parse().map_err(|_| Error::Malformed {
                     file: source.into(),
                     row,
@@ -189,6 +211,7 @@ impl Table {
             names,
             units,
             columns,
+            text,
             lines: Some(lines),
         })
     }
@@ -201,10 +224,35 @@ impl Table {
         }
     }
 
+    /// Appends a string to text column `index` (see [`Table::set_text`]); its number is NaN.
+    pub fn push_text(&mut self, index: usize, value: &str) {
+        if let Some(t) = &mut self.text[index] {
+            t.push(value.to_string());
+        }
+    }
+
+    /// Makes column `index` a text column (empty; a recording fills it row by row).
+    pub fn set_text(&mut self, index: usize) {
+        self.text[index] = Some(Vec::new());
+    }
+
+    /// Whether column `index` holds text.
+    pub fn is_text(&self, index: usize) -> bool {
+        self.text[index].is_some()
+    }
+
+    /// The strings of text column `index`.
+    pub fn text_at(&self, index: usize) -> Option<&[String]> {
+        self.text[index].as_deref()
+    }
+
     /// Removes every row (keeps names, units and capacity).
     pub fn clear(&mut self) {
         for c in &mut self.columns {
             c.clear();
+        }
+        for t in self.text.iter_mut().flatten() {
+            t.clear();
         }
         self.lines = None;
     }
@@ -213,6 +261,9 @@ impl Table {
     pub fn truncate(&mut self, rows: usize) {
         for c in &mut self.columns {
             c.truncate(rows);
+        }
+        for t in self.text.iter_mut().flatten() {
+            t.truncate(rows);
         }
         if let Some(l) = &mut self.lines {
             l.truncate(rows);
@@ -229,7 +280,14 @@ impl Table {
     pub fn to_csv(&self) -> Vec<u8> {
         use std::fmt::Write as _;
         let mut out = String::with_capacity(self.len() * self.names.len() * 12 + 256);
-        out.push_str(&self.names.join(","));
+        out.push_str(
+            &self
+                .names
+                .iter()
+                .map(|n| quote_if_needed(n))
+                .collect::<Vec<_>>()
+                .join(","),
+        );
         out.push('\n');
         if let Some(u) = &self.units {
             out.push_str(&u.join(","));
@@ -240,7 +298,17 @@ impl Table {
                 if k > 0 {
                     out.push(',');
                 }
-                let _ = write!(out, "{}", c[r]);
+                match &self.text[k] {
+                    // Text is always quoted ("" inside), so it can hold separators.
+                    Some(t) => {
+                        out.push('"');
+                        out.push_str(&t.get(r).map_or(String::new(), |x| x.replace('"', "\"\"")));
+                        out.push('"');
+                    }
+                    None => {
+                        let _ = write!(out, "{}", c[r]);
+                    }
+                }
             }
             out.push('\n');
         }
@@ -314,14 +382,32 @@ impl Table {
         }
     }
 
-    /// The column `name` (see [`Table::find`]), if present.
+    /// The numbers of column `name` (see [`Table::find`]), if present; a text column is an
+    /// error naming its first value.
     pub fn column(&self, name: &str) -> Result<Option<&[f64]>> {
-        Ok(self.find(name)?.map(|i| self.columns[i].as_slice()))
+        match self.find(name)? {
+            Some(i) => self.numbers(i).map(Some),
+            None => Ok(None),
+        }
     }
 
-    /// The column `name`, or a [`Error::MissingColumn`].
+    /// The numbers of column `name`, or a [`Error::MissingColumn`].
     pub fn require(&self, name: &str) -> Result<&[f64]> {
-        self.require_index(name).map(|i| self.columns[i].as_slice())
+        let i = self.require_index(name)?;
+        self.numbers(i)
+    }
+
+    /// The numbers of column `i`; a text column is an error naming its first value.
+    fn numbers(&self, i: usize) -> Result<&[f64]> {
+        match &self.text[i] {
+            None => Ok(&self.columns[i]),
+            Some(t) => Err(Error::Malformed {
+                file: self.source.clone(),
+                row: if t.is_empty() { 0 } else { self.line_of(0) },
+                column: self.names[i].clone(),
+                value: t.first().cloned().unwrap_or_default(),
+            }),
+        }
     }
 
     /// Index of the column `name`, or a [`Error::MissingColumn`].
@@ -365,6 +451,7 @@ impl Table {
             u.push(String::new());
         }
         self.columns.push(values);
+        self.text.push(None);
         Ok(())
     }
 
@@ -407,21 +494,69 @@ fn separator(header: &str) -> char {
         .unwrap_or(',')
 }
 
-/// The fields of a line, trimmed, surrounding double quotes removed.
-fn fields(line: &str, sep: char) -> impl Iterator<Item = &str> {
-    line.split(sep).map(|f| {
-        let f = f.trim();
-        f.strip_prefix('"')
-            .and_then(|g| g.strip_suffix('"'))
-            .unwrap_or(f)
+/// The fields of a line, trimmed; a field in double quotes may hold the separator and
+/// `""` for a quote.
+fn fields(line: &str, sep: char) -> impl Iterator<Item = String> + '_ {
+    let mut rest = Some(line);
+    std::iter::from_fn(move || {
+        let r = rest?;
+        let t = r.trim_start();
+        if let Some(q) = t.strip_prefix('"') {
+            let mut value = String::new();
+            let mut chars = q.char_indices();
+            let mut end = None;
+            while let Some((i, c)) = chars.next() {
+                if c == '"' {
+                    if q[i + 1..].starts_with('"') {
+                        value.push('"');
+                        chars.next();
+                    } else {
+                        end = Some(i + 1);
+                        break;
+                    }
+                } else {
+                    value.push(c);
+                }
+            }
+            let after = end.map_or("", |e| &q[e..]);
+            rest = after.find(sep).map(|k| &after[k + sep.len_utf8()..]);
+            return Some(value);
+        }
+        match r.find(sep) {
+            Some(k) => {
+                rest = Some(&r[k + sep.len_utf8()..]);
+                Some(r[..k].trim().to_string())
+            }
+            None => {
+                rest = None;
+                Some(r.trim().to_string())
+            }
+        }
     })
+}
+
+/// A name written to a CSV header: quoted when it holds a separator, a quote or a line break.
+fn quote_if_needed(name: &str) -> String {
+    if name.contains([',', ';', '\t', '"', '\n', '\r']) {
+        format!("\"{}\"", name.replace('"', "\"\""))
+    } else {
+        name.to_string()
+    }
+}
+
+/// A field that is words (a label), not a mistyped number: it does not start like a number.
+fn is_words(field: &str) -> bool {
+    field
+        .chars()
+        .next()
+        .is_some_and(|c| !(c.is_ascii_digit() || "+-.".contains(c)))
 }
 
 /// A units row: no field parses as a number, except the dimensionless unit `1`; empty
 /// fields allowed; at least one field is not a number.
-fn is_units_row(line: &str, sep: char) -> bool {
+fn is_units_row(fields: &[String]) -> bool {
     let mut any_text = false;
-    for f in fields(line, sep) {
+    for f in fields.iter().map(String::as_str) {
         if f.is_empty() || f == "1" {
             continue;
         }

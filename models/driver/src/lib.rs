@@ -32,6 +32,10 @@ fmu_export::variables! {
             .describe("Brake pedal, 0..1 (share of the full braking deceleration); never together with the accelerator"),
         v_target: Real = 0.0 => output(12).unit("m/s")
             .describe("Target speed at the current distance s"),
+        lap_length: Real = 0.0 => output(13).unit("m")
+            .describe("Length of the target's lap (the last s of the target file)"),
+        target_speed_file: String = "" => parameter(40)
+            .describe("The target speed file (CSV with columns s, v): an absolute path or a file:// URI; empty: the bundled resources/target_speed.csv"),
         preview_time: Real = 0.2 => tunable(20).unit("s").range(0.0, 5.0)
             .describe("The driver looks ahead by v·preview_time along the target"),
         preview_distance_min: Real = 1.0 => tunable(21).unit("m").range(0.0, 1000.0)
@@ -143,10 +147,19 @@ impl Model for Driver {
     };
 
     fn initialize(vars: &mut DriverVars, ctx: &Context) -> Result<Self, ModelError> {
-        let target = ctx.cached(TARGET_FILE, || {
-            let (path, text) = ctx.read_resource(TARGET_FILE)?;
-            TargetSpeed::parse(&text, &path.display().to_string())
-        })?;
+        let target = if vars.target_speed_file.is_empty() {
+            ctx.cached(TARGET_FILE, || {
+                let (path, text) = ctx.read_resource(TARGET_FILE)?;
+                TargetSpeed::parse(&text, &path.display().to_string())
+            })?
+        } else {
+            let path =
+                fmu_export::model::parameter_path("target_speed_file", &vars.target_speed_file)?;
+            fmu_export::model::shared_file(&path, |p, text| {
+                TargetSpeed::parse(text, &p.display().to_string())
+            })?
+        };
+        vars.lap_length = target.lap_length();
         let driver = Driver {
             target,
             error_integral: 0.0,

@@ -81,6 +81,11 @@ pub fn validate_table<V: VarTable>() -> Result<(), String> {
         if a.description.is_empty() {
             errors.push(format!("'{}' has no description", a.name));
         }
+        if a.var_type() == crate::variables::ScalarType::String
+            && (a.unit.is_some() || a.min.is_some() || a.max.is_some())
+        {
+            errors.push(format!("'{}': a String has no unit and no range", a.name));
+        }
         let x = a.start.as_f64();
         if a.has_start() && (a.min.is_some_and(|m| x < m) || a.max.is_some_and(|m| x > m)) {
             errors.push(format!(
@@ -159,7 +164,7 @@ fn scalar_variable(v: &VarInfo) -> String {
         s.push_str(&format!(" max=\"{}\"", format_real(m)));
     }
     if v.has_start() {
-        s.push_str(&format!(" start=\"{}\"", v.start.xml_text()));
+        s.push_str(&format!(" start=\"{}\"", xml_escape(&v.start.xml_text())));
     }
     s.push_str("/>\n    </ScalarVariable>\n");
     s
@@ -252,7 +257,10 @@ pub fn render_documentation<M: Model>(template: &str) -> String {
     let mut rows = String::new();
     for v in M::Vars::VARIABLES {
         let start = if v.has_start() {
-            v.start.xml_text()
+            match v.start {
+                crate::variables::Value::Str(t) => format!("\"{}\"", xml_escape(t)),
+                other => other.xml_text(),
+            }
         } else {
             String::new()
         };

@@ -600,8 +600,101 @@ impl<M: Model> Runtime<M> {
         ))
     }
 
+    /// Read String variables; `out(k, value)` receives the value of `vrs[k]`.
+    pub fn get_strings(
+        &mut self,
+        function: &str,
+        vrs: &[u32],
+        mut out: impl FnMut(usize, &str),
+    ) -> fmi2Status {
+        if let Err(s) = self.require_named(function, Function::GetString.allowed()) {
+            return s;
+        }
+        if self.phase == Phase::InitializationMode {
+            let s = self.ensure_initialized(function);
+            if s != fmi2Status::OK {
+                return s;
+            }
+        }
+        let instantiated = self.phase == Phase::Instantiated;
+        for (k, &vr) in vrs.iter().enumerate() {
+            match self.slots.get(vr as usize) {
+                Some(sl)
+                    if sl.index != u32::MAX
+                        && sl.ty == ScalarType::String
+                        && (sl.has_start || !instantiated) =>
+                {
+                    out(k, self.vars.get_str(sl.index as usize).unwrap_or(""));
+                }
+                _ => return self.get_error(function, ScalarType::String, vr),
+            }
+        }
+        fmi2Status::OK
+    }
+
+    /// Set String variables, each checked for causality, variability and state.
+    pub fn set_strings(&mut self, function: &str, vrs: &[u32], values: &[&str]) -> fmi2Status {
+        if let Err(s) = self.require_named(function, Function::SetString.allowed()) {
+            return s;
+        }
+        if vrs.len() != values.len() {
+            return self.error(&format!(
+                "{function}: {} value references but {} values",
+                vrs.len(),
+                values.len()
+            ));
+        }
+        let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
+        for (&vr, value) in vrs.iter().zip(values) {
+            let sl = match self.slots.get(vr as usize) {
+                Some(sl) if sl.index != u32::MAX && sl.ty == ScalarType::String => *sl,
+                _ => return self.set_error(function, ScalarType::String, vr, Value::Str("")),
+            };
+            let settable = if init {
+                sl.settable_init
+            } else {
+                sl.settable_run
+            };
+            if !settable {
+                return self.set_error(function, ScalarType::String, vr, Value::Str(""));
+            }
+            self.vars.set_str(sl.index as usize, value);
+            if init {
+                self.init_dirty = true;
+            } else if sl.is_input {
+                self.inputs_changed = true;
+            } else {
+                self.params_changed = true;
+            }
+        }
+        fmi2Status::OK
+    }
+
+    /// Set one String variable by name (tests and native hosts).
+    pub fn set_string_by_name(&mut self, name: &str, value: &str) -> fmi2Status {
+        match M::Vars::vr_of(name) {
+            Some(vr) => self.set_strings("set", &[vr], &[value]),
+            None => self.error(&format!(
+                "no variable named '{name}' in model '{}'",
+                M::INFO.name
+            )),
+        }
+    }
+
+    /// Read one String variable by name (tests and native hosts).
+    pub fn get_string_by_name(&mut self, name: &str) -> Option<String> {
+        let vr = M::Vars::vr_of(name)?;
+        let mut value = None;
+        (self.get_strings("get", &[vr], |_, s| value = Some(s.to_string())) == fmi2Status::OK)
+            .then_some(value)
+            .flatten()
+    }
+
     /// Set one variable by name (tests and native hosts).
     pub fn set_by_name(&mut self, name: &str, value: Value) -> fmi2Status {
+        if let Value::Str(s) = value {
+            return self.set_string_by_name(name, s);
+        }
         match M::Vars::vr_of(name) {
             Some(vr) => self.set("set", value.var_type(), &[vr], std::iter::once(value)),
             None => self.error(&format!(
@@ -691,6 +784,7 @@ impl<M: Model> Runtime<M> {
                 Value::Real(x) => w.f64(x),
                 Value::Integer(x) => w.i32(x),
                 Value::Boolean(x) => w.bool(x),
+                Value::Str(_) => w.bytes(snap.vars.get_str(i).unwrap_or("").as_bytes()),
             }
         }
         w.bool(snap.model.is_some());
@@ -735,6 +829,16 @@ impl<M: Model> Runtime<M> {
                     ScalarType::Real => Value::Real(r.f64()?),
                     ScalarType::Integer => Value::Integer(r.i32()?),
                     ScalarType::Boolean => Value::Boolean(r.bool()?),
+                    ScalarType::String => {
+                        let text = std::str::from_utf8(r.bytes()?).map_err(|_| {
+                            ModelError::new(format!(
+                                "'{}': the saved string is not UTF-8",
+                                info.name
+                            ))
+                        })?;
+                        vars.set_str(i, text);
+                        continue;
+                    }
                     other => {
                         return Err(ModelError::new(format!(
                             "variable '{}' is {other}, which the export framework does not support",

@@ -7,12 +7,15 @@
 
 pub use tb_fmi::schema::{format_real, Causality, Initial, ScalarType, Variability};
 
-/// A typed scalar value.
+/// A typed scalar value. Strings appear here only as start values of the table (a
+/// String variable's value at run time is read and written with
+/// [`VarTable::get_str`]/[`VarTable::set_str`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Value {
     Real(f64),
     Integer(i32),
     Boolean(bool),
+    Str(&'static str),
 }
 
 impl Value {
@@ -21,24 +24,29 @@ impl Value {
             Value::Real(_) => ScalarType::Real,
             Value::Integer(_) => ScalarType::Integer,
             Value::Boolean(_) => ScalarType::Boolean,
+            Value::Str(_) => ScalarType::String,
         }
     }
 
-    /// The value as a number (booleans as 0/1), for range checks and documentation.
+    /// The value as a number (booleans as 0/1), for range checks and documentation; NaN for
+    /// a string.
     pub fn as_f64(self) -> f64 {
         match self {
             Value::Real(x) => x,
             Value::Integer(i) => i as f64,
             Value::Boolean(b) => b as i32 as f64,
+            Value::Str(_) => f64::NAN,
         }
     }
 
-    /// The value as written in modelDescription.xml (shortest round-trip form).
+    /// The value as written in modelDescription.xml (shortest round-trip form; a string as
+    /// it is, to be escaped by the writer).
     pub fn xml_text(self) -> String {
         match self {
             Value::Real(x) => format_real(x),
             Value::Integer(i) => i.to_string(),
             Value::Boolean(b) => b.to_string(),
+            Value::Str(s) => s.to_string(),
         }
     }
 }
@@ -189,6 +197,12 @@ pub trait VarTable: Clone + Default + Send + 'static {
     /// Set the variable at `index`; `false` when `value` has another type.
     fn set(&mut self, index: usize, value: Value) -> bool;
 
+    /// The String variable at `index` (None: not a String).
+    fn get_str(&self, index: usize) -> Option<&str>;
+
+    /// Set the String variable at `index`; `false` when it is not a String.
+    fn set_str(&mut self, index: usize, value: &str) -> bool;
+
     /// Index in the table of the variable named `name`.
     fn index_of(name: &str) -> Option<usize> {
         Self::VARIABLES.iter().position(|v| v.name == name)
@@ -212,6 +226,58 @@ macro_rules! __fmi_type {
     (Boolean) => {
         bool
     };
+    (String) => {
+        ::std::string::String
+    };
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi_init {
+    (String, $e:expr) => {
+        ::std::string::String::from($e)
+    };
+    ($t:ident, $e:expr) => {
+        $e
+    };
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi_get {
+    (String, $place:expr) => {{
+        let _ = &$place;
+        $crate::variables::Value::Str("")
+    }};
+    ($t:ident, $place:expr) => {
+        $crate::__fmi_value!($t, $place)
+    };
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi_get_str {
+    (String, $place:expr) => {
+        Some($place.as_str())
+    };
+    ($t:ident, $place:expr) => {{
+        let _ = &$place;
+        None
+    }};
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi_set_str {
+    (String, $place:expr, $v:expr) => {{
+        $place.clear();
+        $place.push_str($v);
+        true
+    }};
+    ($t:ident, $place:expr, $v:expr) => {{
+        let _ = (&$place, $v);
+        false
+    }};
 }
 
 #[doc(hidden)]
@@ -225,6 +291,9 @@ macro_rules! __fmi_value {
     };
     (Boolean, $e:expr) => {
         $crate::variables::Value::Boolean($e)
+    };
+    (String, $e:expr) => {
+        $crate::variables::Value::Str($e)
     };
 }
 
@@ -258,6 +327,11 @@ macro_rules! __fmi_set {
             _ => false,
         }
     };
+    (String, $place:expr, $v:expr) => {{
+        let _ = &$place;
+        let _ = $v;
+        false
+    }};
 }
 
 /// Declare a model's variables once: a typed struct plus its [`VarTable`].
@@ -296,7 +370,7 @@ macro_rules! variables {
 
         impl ::core::default::Default for $name {
             fn default() -> Self {
-                Self { $( $field: $start, )* }
+                Self { $( $field: $crate::__fmi_init!($ty, $start), )* }
             }
         }
 
@@ -308,8 +382,20 @@ macro_rules! variables {
             #[inline]
             fn get(&self, index: usize) -> $crate::variables::Value {
                 const GET: &[fn(&$name) -> $crate::variables::Value] =
-                    &[ $( |s: &$name| $crate::__fmi_value!($ty, s.$field), )* ];
+                    &[ $( |s: &$name| $crate::__fmi_get!($ty, s.$field), )* ];
                 GET[index](self)
+            }
+
+            fn get_str(&self, index: usize) -> ::core::option::Option<&str> {
+                const GET: &[for<'a> fn(&'a $name) -> ::core::option::Option<&'a str>] =
+                    &[ $( |s: &$name| $crate::__fmi_get_str!($ty, s.$field), )* ];
+                GET[index](self)
+            }
+
+            fn set_str(&mut self, index: usize, value: &str) -> bool {
+                const SET: &[fn(&mut $name, &str) -> bool] =
+                    &[ $( |s: &mut $name, v: &str| $crate::__fmi_set_str!($ty, s.$field, v), )* ];
+                SET[index](self, value)
             }
 
             #[inline]

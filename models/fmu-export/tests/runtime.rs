@@ -20,6 +20,8 @@ fmu_export::variables! {
             .describe("gain·u + offset"),
         fault: Integer = 0 => parameter(6).range(0.0, 3.0)
             .describe("From t = 1 s: 0 none, 1 error, 2 panic, 3 discard"),
+        label: String = "a <label> & \"quotes\"" => tunable(7).describe("A tunable text"),
+        source_file: String = "" => parameter(8).describe("A fixed text (a file name)"),
     }
 }
 
@@ -392,4 +394,138 @@ fn a_discarded_step_keeps_the_time_and_the_instance_usable() {
     assert_eq!(rt.time(), 1.0);
     assert_eq!(rt.phase(), Phase::StepComplete);
     assert_eq!(rt.terminate(), fmi2Status::OK);
+}
+
+const VR_LABEL: u32 = 7;
+const VR_SOURCE: u32 = 8;
+
+fn strings(rt: &mut Runtime<Counter>, vrs: &[u32]) -> (fmi2Status, Vec<String>) {
+    let mut out = vec![String::new(); vrs.len()];
+    let s = rt.get_strings("fmi2GetString", vrs, |k, v| out[k] = v.to_string());
+    (s, out)
+}
+
+#[test]
+fn string_parameters_are_read_set_checked_and_saved() {
+    let (mut rt, cap) = runtime();
+    // The start value, before initialisation.
+    let (s, v) = strings(&mut rt, &[VR_LABEL, VR_SOURCE]);
+    assert_eq!(s, fmi2Status::OK);
+    assert_eq!(v, ["a <label> & \"quotes\"", ""]);
+    assert_eq!(
+        rt.set_strings("fmi2SetString", &[VR_SOURCE], &["/data/track.csv"]),
+        fmi2Status::OK
+    );
+    assert_eq!(rt.setup_experiment(0.0, None), fmi2Status::OK);
+    assert_eq!(rt.enter_initialization_mode(), fmi2Status::OK);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    // A fixed String cannot change after initialisation; a tunable one can.
+    assert_eq!(
+        rt.set_strings("fmi2SetString", &[VR_SOURCE], &["other"]),
+        fmi2Status::ERROR
+    );
+    assert!(
+        cap.text()
+            .contains("'source_file' (fixed parameter) cannot be set in state 'step complete'"),
+        "{}",
+        cap.text()
+    );
+    assert_eq!(
+        rt.set_strings("fmi2SetString", &[VR_LABEL], &["lap 2"]),
+        fmi2Status::OK
+    );
+    // Type checks both ways.
+    assert_eq!(
+        rt.set_strings("fmi2SetString", &[VR_GAIN], &["x"]),
+        fmi2Status::ERROR
+    );
+    assert!(
+        cap.text().contains("'gain' (vr 1) is Real, not String"),
+        "{}",
+        cap.text()
+    );
+    let mut x = [0.0];
+    assert_eq!(
+        rt.get("fmi2GetReal", ScalarType::Real, &[VR_LABEL], &mut x, |v| v
+            .as_f64()),
+        fmi2Status::ERROR
+    );
+    // A saved and serialised state restores the strings.
+    let snap = rt.snapshot().unwrap();
+    let bytes = rt.serialize(&snap);
+    assert_eq!(
+        rt.set_strings("fmi2SetString", &[VR_LABEL], &["changed"]),
+        fmi2Status::OK
+    );
+    let back = rt.deserialize(&bytes).unwrap();
+    assert_eq!(rt.restore(&back), fmi2Status::OK);
+    assert_eq!(
+        strings(&mut rt, &[VR_LABEL, VR_SOURCE]).1,
+        ["lap 2", "/data/track.csv"]
+    );
+}
+
+#[test]
+fn string_variables_are_in_the_model_description_and_the_guid() {
+    let md = fmu_export::description::render_model_description::<Counter>(
+        include_str!("../../../fmu-templates/modelDescription.xml"),
+        "test",
+    );
+    assert!(
+        md.contains("<String start=\"a &lt;label&gt; &amp; &quot;quotes&quot;\"/>"),
+        "{md}"
+    );
+    fmu_export::description::validate_table::<CounterVars>().unwrap();
+    // The interface text carries the String start value (so the GUID changes with it).
+    assert!(fmu_export::description::canonical_interface::<Counter>().contains("|String|"));
+}
+
+#[test]
+fn the_c_entry_points_pass_strings_both_ways() {
+    use fmu_export::ffi;
+    let callbacks = fmi2CallbackFunctions {
+        logger: None,
+        allocateMemory: None,
+        freeMemory: None,
+        stepFinished: None,
+        componentEnvironment: std::ptr::null_mut(),
+    };
+    let guid = std::ffi::CString::new(fmu_export::description::guid::<Counter>()).unwrap();
+    unsafe {
+        let c = ffi::instantiate::<Counter>(
+            c"counter".as_ptr(),
+            fmi2Type::CO_SIMULATION,
+            guid.as_ptr(),
+            std::ptr::null(),
+            &callbacks,
+            fmi2False,
+            fmi2False,
+        );
+        assert!(!c.is_null());
+        let value = [c"/tmp/ä.csv".as_ptr()];
+        assert_eq!(
+            ffi::set_string::<Counter>(c, [VR_SOURCE].as_ptr(), 1, value.as_ptr()),
+            fmi2Status::OK
+        );
+        let mut out: [fmi2String; 2] = [std::ptr::null(); 2];
+        assert_eq!(
+            ffi::get_string::<Counter>(c, [VR_SOURCE, VR_LABEL].as_ptr(), 2, out.as_mut_ptr()),
+            fmi2Status::OK
+        );
+        assert_eq!(
+            std::ffi::CStr::from_ptr(out[0]).to_str().unwrap(),
+            "/tmp/ä.csv"
+        );
+        assert!(std::ffi::CStr::from_ptr(out[1])
+            .to_str()
+            .unwrap()
+            .starts_with("a <label>"));
+        // A NULL string is an error, not a crash.
+        let null = [std::ptr::null()];
+        assert_eq!(
+            ffi::set_string::<Counter>(c, [VR_SOURCE].as_ptr(), 1, null.as_ptr()),
+            fmi2Status::ERROR
+        );
+        ffi::free_instance::<Counter>(c);
+    }
 }

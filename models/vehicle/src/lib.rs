@@ -108,7 +108,9 @@ fmu_export::variables! {
         lap_time: Real = 0.0 => output(106).unit("s")
             .describe("Duration of the last complete lap (0 before; a start away from s = 0 gives an out-lap that is not timed)"),
         lap_length: Real = 0.0 => output(107).unit("m")
-            .describe("Length of the lap in the track resource"),
+            .describe("Length of the lap of the track (the bundled one or track_file)"),
+        track_file: String = "" => parameter(40)
+            .describe("The track file (CSV with columns s, curvature, grade, z_road_left, z_road_right): an absolute path or a file:// URI; empty: the bundled resources/track.csv"),
         a_x: Real = 0.0 => output(108).unit("m/s2")
             .describe("Longitudinal acceleration after the chassis low-pass (used in the load equations)"),
         a_y: Real = 0.0 => output(109).unit("m/s2")
@@ -420,16 +422,25 @@ impl Model for Vehicle {
     };
 
     fn initialize(vars: &mut VehicleVars, ctx: &Context) -> Result<Self, ModelError> {
-        let track = ctx.cached(TRACK_FILE, || {
-            let (path, text) = ctx.read_resource(TRACK_FILE)?;
-            Track::parse(&path.display().to_string(), &text)
-        })?;
+        let (track, track_path) = if vars.track_file.is_empty() {
+            let track = ctx.cached(TRACK_FILE, || {
+                let (path, text) = ctx.read_resource(TRACK_FILE)?;
+                Track::parse(&path.display().to_string(), &text)
+            })?;
+            (track, ctx.resource(TRACK_FILE)?)
+        } else {
+            let path = fmu_export::model::parameter_path("track_file", &vars.track_file)?;
+            let track = fmu_export::model::shared_file(&path, |p, text| {
+                Track::parse(&p.display().to_string(), text)
+            })?;
+            (track, path)
+        };
         if vars.s_start >= track.length() {
             return Err(ModelError::new(format!(
                 "s_start = {} m is not less than the lap length {} m of {}",
                 vars.s_start,
                 track.length(),
-                ctx.resource(TRACK_FILE)?.display()
+                track_path.display()
             )));
         }
         let p = Params::from_vars(vars);

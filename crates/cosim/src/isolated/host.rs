@@ -28,6 +28,7 @@ struct GetSpec {
 enum Values {
     Real(Vec<f64>),
     Int(Vec<i32>),
+    Text(Vec<String>),
 }
 
 /// One instance in a worker process.
@@ -314,6 +315,13 @@ impl IsolatedBackend {
                         .collect::<Result<_, _>>()
                         .map_err(p)?,
                 )
+            } else if g.op == op::GET_STRING {
+                Values::Text(
+                    (0..g.vrs.len())
+                        .map(|_| d.str())
+                        .collect::<Result<_, _>>()
+                        .map_err(p)?,
+                )
             } else {
                 Values::Int(
                     (0..g.vrs.len())
@@ -522,6 +530,25 @@ impl Backend for IsolatedBackend {
     fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
         self.queue_set(op::SET_BOOLEAN, vrs, |e| {
             values.iter().for_each(|&x| e.i32(x))
+        });
+        Ok(())
+    }
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        match self.get("fmi2GetString", op::GET_STRING, vrs)? {
+            Values::Text(t) if t.len() == vrs.len() => {
+                *out = t;
+                Ok(())
+            }
+            _ => Err(self.isolated_error(
+                "fmi2GetString",
+                "protocol error (the answer is not one string per value reference)".into(),
+                Vec::new(),
+            )),
+        }
+    }
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        self.queue_set(op::SET_STRING, vrs, |e| {
+            values.iter().for_each(|v| e.str(v))
         });
         Ok(())
     }

@@ -30,6 +30,8 @@ pub mod op {
     pub const GET_REAL: u8 = Function::GetReal as u8;
     pub const GET_INTEGER: u8 = Function::GetInteger as u8;
     pub const GET_BOOLEAN: u8 = Function::GetBoolean as u8;
+    pub const GET_STRING: u8 = Function::GetString as u8;
+    pub const SET_STRING: u8 = Function::SetString as u8;
     pub const DO_STEP: u8 = Function::DoStep as u8;
 }
 

@@ -149,6 +149,22 @@ fn run_ops(
                         i.set_boolean(&vrs, &ints).map_err(Ok)?
                     }
                 }
+                op::SET_STRING => {
+                    let vrs = d.vrs().map_err(Err)?;
+                    let mut texts = Vec::with_capacity(vrs.len());
+                    for _ in 0..vrs.len() {
+                        texts.push(d.str().map_err(Err)?);
+                    }
+                    let refs: Vec<&str> = texts.iter().map(String::as_str).collect();
+                    i.set_string(&vrs, &refs).map_err(Ok)?
+                }
+                op::GET_STRING => {
+                    let vrs = d.vrs().map_err(Err)?;
+                    let mut texts = Vec::new();
+                    i.get_string(&vrs, &mut texts).map_err(Ok)?;
+                    texts.iter().for_each(|t| results.str(t));
+                    n_gets += 1;
+                }
                 op::GET_REAL => {
                     let vrs = d.vrs().map_err(Err)?;
                     reals.clear();

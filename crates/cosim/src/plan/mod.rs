@@ -125,6 +125,19 @@ pub struct SignalTable {
     index: HashMap<(bool, usize, u64), usize>,
 }
 
+impl Signal {
+    /// A String signal (exchanged as text, recorded as a text column).
+    pub fn is_text(&self) -> bool {
+        matches!(
+            self.source,
+            Endpoint::Fmu {
+                ty: ScalarType::String,
+                ..
+            }
+        )
+    }
+}
+
 impl SignalTable {
     /// The slot of a source (a new one the first time).
     pub fn slot(&mut self, e: &Endpoint, name: &str) -> usize {
@@ -427,7 +440,7 @@ impl Plan {
                     ))
                 || (matches!(to_sv.ty, ScalarType::Integer | ScalarType::Enumeration)
                     && matches!(from_ty, ScalarType::Integer | ScalarType::Enumeration));
-            if !type_ok || to_sv.ty == ScalarType::String {
+            if !type_ok {
                 return Err(invalid(
                     &ctx,
                     format!(
@@ -468,6 +481,7 @@ impl Plan {
             let ctx = format!("{ctx_file}: parameter \"{name}\"");
             let slot = parameter_slot(&instances, name, &ctx)?;
             let value = slot.value_from_toml(value, &ctx)?;
+            let value = slot.resolve_path(value, path.parent().unwrap_or(Path::new(".")));
             parameters.push((slot, value));
         }
         // Recorded signals: as listed, or every output and replayed column.
@@ -486,13 +500,6 @@ impl Plan {
                 ));
             }
             let e = resolve_source(&format!("{ctx_file}: record"), n)?;
-            if let Endpoint::Fmu {
-                ty: ScalarType::String,
-                ..
-            } = e
-            {
-                return Err(invalid(&ctx_file, format!("record: '{n}' is a String")));
-            }
             record.push(signals.slot(&e, n));
         }
         // The stop condition.
@@ -529,6 +536,16 @@ impl Plan {
                     ));
                 }
                 let e = resolve_source(&format!("{ctx_file}: {ctx}"), &signal)?;
+                if let Endpoint::Fmu {
+                    ty: ScalarType::String,
+                    ..
+                } = e
+                {
+                    return Err(invalid(
+                        format!("{ctx_file}: {ctx}"),
+                        format!("'{signal}' is a String; a stop condition compares a number"),
+                    ));
+                }
                 Stop::When {
                     condition: Condition {
                         slot: signals.slot(&e, &signal),
@@ -569,6 +586,13 @@ impl Plan {
                     let e = resolve_source(&ctx, by)?;
                     if let Endpoint::Replay { .. } = e {
                         return Err(invalid(&ctx, "a replay cannot be driven by another replay"));
+                    }
+                    if let Endpoint::Fmu {
+                        ty: ScalarType::String,
+                        ..
+                    } = e
+                    {
+                        return Err(invalid(&ctx, format!("'{by}' is a String, not a distance")));
                     }
                     Some(signals.slot(&e, by))
                 }
@@ -685,7 +709,7 @@ fn default_record(instances: &[InstanceDef], replays: &[ReplaySource]) -> Vec<St
             .description()
             .variables
             .iter()
-            .filter(|v| v.causality == Causality::Output && v.ty != ScalarType::String)
+            .filter(|v| v.causality == Causality::Output)
         {
             let ours = inst
                 .ports
@@ -813,5 +837,6 @@ fn parameter_slot(
         min: sv.min,
         max: sv.max,
         start: sv.start_f64(),
+        is_path: sv.ty == ScalarType::String && sv.name.ends_with("_file"),
     })
 }

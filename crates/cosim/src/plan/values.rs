@@ -17,6 +17,9 @@ pub struct ParamSlot {
     pub max: Option<f64>,
     /// The FMU's start value as a number, if it has one.
     pub start: Option<f64>,
+    /// A String parameter whose FMU name ends in `_file`: it holds a path, and a relative
+    /// one is taken relative to the file that sets it.
+    pub is_path: bool,
 }
 
 /// A typed parameter value.
@@ -91,6 +94,22 @@ impl ParamSlot {
             ScalarType::String => ParamValue::String(value.as_str().ok_or_else(mismatch)?.into()),
         };
         self.check(v, ctx)
+    }
+
+    /// A path value made absolute against `base` (the folder of the system or study file,
+    /// or the working directory for the command line). Other values pass unchanged.
+    pub fn resolve_path(&self, value: ParamValue, base: &std::path::Path) -> ParamValue {
+        match value {
+            ParamValue::String(v)
+                if self.is_path
+                    && !v.is_empty()
+                    && !v.starts_with("file:")
+                    && std::path::Path::new(&v).is_relative() =>
+            {
+                ParamValue::String(base.join(&v).display().to_string())
+            }
+            other => other,
+        }
     }
 
     /// A number for this slot (the optimiser's candidates), checked like any value.

@@ -250,6 +250,43 @@ impl Instance {
         self.check(Function::SetBoolean, s)
     }
 
+    /// Read String variables into `out` (one per value reference). The FMU's strings are
+    /// copied at once: the standard keeps them valid only until the next call.
+    pub fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        let mut ptrs: Vec<fmi2String> = vec![std::ptr::null(); vrs.len()];
+        let s = unsafe {
+            (self.lib.api.fmi2GetString)(self.comp, vrs.as_ptr(), vrs.len(), ptrs.as_mut_ptr())
+        };
+        self.check(Function::GetString, s)?;
+        out.clear();
+        for p in ptrs {
+            out.push(if p.is_null() {
+                String::new()
+            } else {
+                unsafe { std::ffi::CStr::from_ptr(p) }
+                    .to_string_lossy()
+                    .into_owned()
+            });
+        }
+        Ok(())
+    }
+
+    /// Set String variables (a NUL inside a value is refused).
+    pub fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        let c: Vec<CString> = values
+            .iter()
+            .map(|v| CString::new(*v))
+            .collect::<Result<_, _>>()
+            .map_err(|_| FmuError::Instantiate {
+                instance: self.name.clone(),
+                message: "fmi2SetString: a value contains a NUL byte".into(),
+            })?;
+        let p: Vec<fmi2String> = c.iter().map(|s| s.as_ptr()).collect();
+        let s =
+            unsafe { (self.lib.api.fmi2SetString)(self.comp, vrs.as_ptr(), vrs.len(), p.as_ptr()) };
+        self.check(Function::SetString, s)
+    }
+
     /// One communication step; on success the instance's time advances.
     #[inline]
     pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {

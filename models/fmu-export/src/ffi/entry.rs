@@ -2,7 +2,7 @@
 //! safe [`Runtime`] call inside [`guarded`].
 #![allow(clippy::missing_safety_doc, clippy::too_many_arguments)]
 
-use super::{guarded, opt_str, resource_dir_from_uri, CLogger, Instance};
+use super::{guarded, guarded_instance, opt_str, resource_dir_from_uri, CLogger, Instance};
 use crate::fmi2::*;
 use crate::model::Model;
 use crate::runtime::{Logger, Runtime, Snapshot};
@@ -76,7 +76,10 @@ pub unsafe fn instantiate<M: Model>(
             },
         };
         let runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on != 0);
-        Box::into_raw(Box::new(Instance { runtime })) as fmi2Component
+        Box::into_raw(Box::new(Instance {
+            runtime,
+            strings: Vec::new(),
+        })) as fmi2Component
     }));
     r.unwrap_or(std::ptr::null_mut())
 }
@@ -254,37 +257,57 @@ setter!(
 
 pub unsafe fn get_string<M: Model>(
     c: fmi2Component,
-    _vr: *const fmi2ValueReference,
+    vr: *const fmi2ValueReference,
     n: usize,
-    _value: *mut fmi2String,
+    value: *mut fmi2String,
 ) -> fmi2Status {
-    guarded::<M>(c, "fmi2GetString", |rt| {
-        if n == 0 {
-            fmi2Status::OK
-        } else {
-            rt.error(&format!(
-                "fmi2GetString: model '{}' has no String variables",
-                M::INFO.name
-            ))
+    guarded_instance::<M>(c, "fmi2GetString", |inst| {
+        let (vrs, ptr) = match arrays(
+            &inst.runtime,
+            "fmi2GetString",
+            vr,
+            n,
+            value as *const fmi2String,
+        ) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        // The host reads the strings until its next call: keep them in the instance.
+        let strings = &mut inst.strings;
+        strings.clear();
+        let status = inst.runtime.get_strings("fmi2GetString", vrs, |_, s| {
+            strings.push(CString::new(s.replace('\0', "")).unwrap_or_default())
+        });
+        if status == fmi2Status::OK {
+            let out = ptr as *mut fmi2String;
+            for (k, s) in strings.iter().enumerate() {
+                *out.add(k) = s.as_ptr();
+            }
         }
+        status
     })
 }
 
 pub unsafe fn set_string<M: Model>(
     c: fmi2Component,
-    _vr: *const fmi2ValueReference,
+    vr: *const fmi2ValueReference,
     n: usize,
-    _value: *const fmi2String,
+    value: *const fmi2String,
 ) -> fmi2Status {
     guarded::<M>(c, "fmi2SetString", |rt| {
-        if n == 0 {
-            fmi2Status::OK
-        } else {
-            rt.error(&format!(
-                "fmi2SetString: model '{}' has no String variables",
-                M::INFO.name
-            ))
+        let (vrs, ptr) = match arrays(rt, "fmi2SetString", vr, n, value) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        let mut texts = Vec::with_capacity(n);
+        for (k, vr) in vrs.iter().enumerate() {
+            match opt_str(*ptr.add(k)) {
+                Some(t) => texts.push(t),
+                None => return rt.error(&format!("fmi2SetString: value {k} (vr {vr}) is NULL")),
+            }
         }
+        let refs: Vec<&str> = texts.iter().map(|t| t.as_ref()).collect();
+        rt.set_strings("fmi2SetString", vrs, &refs)
     })
 }
 

@@ -53,6 +53,8 @@ impl Logger for CLogger {
 /// The component handed to the host.
 pub struct Instance<M: Model> {
     pub runtime: Runtime<M>,
+    /// The strings of the last fmi2GetString: the host may read them until the next call.
+    pub strings: Vec<CString>,
 }
 
 /// The message of a caught panic (for the log and the poisoned instance).
@@ -63,6 +65,26 @@ pub fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
         s.clone()
     } else {
         "non-string panic payload".to_string()
+    }
+}
+
+/// Run `f` on the whole instance behind `c` (runtime and string buffer), catching panics.
+pub(crate) unsafe fn guarded_instance<M: Model>(
+    c: fmi2Component,
+    function: &str,
+    f: impl FnOnce(&mut Instance<M>) -> fmi2Status,
+) -> fmi2Status {
+    if c.is_null() {
+        return fmi2Status::ERROR;
+    }
+    let inst = &mut *(c as *mut Instance<M>);
+    match catch_unwind(AssertUnwindSafe(|| f(inst))) {
+        Ok(s) => s,
+        Err(payload) => {
+            let text = panic_text(&*payload);
+            catch_unwind(AssertUnwindSafe(|| inst.runtime.poison(function, &text)))
+                .unwrap_or(fmi2Status::ERROR)
+        }
     }
 }
 
