@@ -32,6 +32,28 @@ pub struct SystemFile {
     /// Shared libraries to load with RTLD_GLOBAL before any FMU (e.g. libpython for pythonfmu FMUs).
     #[serde(default)]
     pub preload: Vec<PathBuf>,
+    /// Consistency checks after initialisation, before the first step.
+    #[serde(rename = "check", default)]
+    pub checks: Vec<CheckConfig>,
+}
+
+/// Signals that must agree after initialisation (e.g. the lap lengths of the vehicle's track
+/// and the driver's target): otherwise the run stops before its first step.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckConfig {
+    /// Two or more `instance.variable` outputs.
+    pub equal: Vec<String>,
+    /// Largest relative difference |a − b| / max(|a|, |b|) allowed.
+    #[serde(default = "half_percent")]
+    pub relative_tolerance: f64,
+    /// What a failure means, for the message.
+    #[serde(default)]
+    pub why: Option<String>,
+}
+
+fn half_percent() -> f64 {
+    0.005
 }
 
 #[derive(Clone, Debug, Deserialize)]

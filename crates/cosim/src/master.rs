@@ -563,11 +563,52 @@ impl Simulation {
             .push_row(std::iter::once(t).chain(self.plan.record.iter().map(|&s| signals[s])));
     }
 
+    /// The plan's consistency checks, after initialisation.
+    fn check_consistency(&mut self) -> Result<(), SystemError> {
+        let plan = self.plan.clone();
+        for (signals, tolerance, why) in &plan.checks {
+            let values = self.read_values(signals)?;
+            let (mut lo, mut hi) = (&values[0], &values[0]);
+            for v in &values {
+                if v.1 < lo.1 {
+                    lo = v;
+                }
+                if v.1 > hi.1 {
+                    hi = v;
+                }
+            }
+            let scale = lo.1.abs().max(hi.1.abs());
+            let rel = if scale > 0.0 { (hi.1 - lo.1) / scale } else { 0.0 };
+            if !(rel <= *tolerance) {
+                return Err(SystemError::Stop(format!(
+                    "{}: check failed after initialisation: {} = {} and {} = {} differ by {:.3} % (at most {} % allowed){}",
+                    plan.path.display(),
+                    lo.0,
+                    lo.1,
+                    hi.0,
+                    hi.1,
+                    rel * 100.0,
+                    tolerance * 100.0,
+                    why.as_ref().map(|w| format!(": {w}")).unwrap_or_default()
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// The reported signals' values now.
     fn read_reported(&mut self) -> Result<Vec<(String, f64)>, SystemError> {
         let plan = self.plan.clone();
-        let mut out = Vec::with_capacity(plan.report.len());
-        for (name, e) in &plan.report {
+        self.read_values(&plan.report)
+    }
+
+    /// Current values of FMU variables, read directly from the units.
+    fn read_values(
+        &mut self,
+        signals: &[(String, Endpoint)],
+    ) -> Result<Vec<(String, f64)>, SystemError> {
+        let mut out = Vec::with_capacity(signals.len());
+        for (name, e) in signals {
             let x = match e {
                 Endpoint::Fmu { unit, vr, ty, .. } => {
                     let Unit::Fmu(f) = &mut self.ex.units[*unit] else {
@@ -622,6 +663,7 @@ impl Simulation {
         }
         self.instantiate_all(start, fixed_stop)?;
         self.initialize(start)?;
+        self.check_consistency()?;
         self.record(start);
         // Integer ticks: t_k = start + k·h exactly, no accumulated drift.
         let span = fixed_stop.unwrap_or(start + condition.map_or(0.0, |c| c.1)) - start;

@@ -13,7 +13,7 @@ use super::OptimizeError;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use tb_compare::{Comparison, PreparedMeasurement, Table, Workspace};
-use tb_cosim::{LoadOptions, ParamSlot, Plan, Simulation, SystemError, SystemFile};
+use tb_cosim::{LoadOptions, ParamSlot, ParamValue, Plan, Simulation, SystemError, SystemFile};
 use tb_fmi::FmuCache;
 
 struct Worker {
@@ -28,6 +28,8 @@ pub struct Bench {
     slots: Vec<ParamSlot>,
     /// Their values before the study (fixed values, else the system's).
     initial: Vec<f64>,
+    /// The study's fixed values that are not numbers (strings, integers, booleans).
+    fixed: Vec<(ParamSlot, ParamValue)>,
     workers: Mutex<Vec<Worker>>,
     created: AtomicUsize,
     runs: AtomicUsize,
@@ -68,11 +70,24 @@ impl Bench {
         sim.echo_fmu_log = false;
         let mut slots: Vec<ParamSlot> = Vec::new();
         let mut initial = Vec::new();
-        for (name, &x) in &study.file.parameters {
+        // Fixed values: numbers join the assignment (reported with the results); other
+        // types are set once on every worker.
+        let mut fixed = Vec::new();
+        let study_dir = study.path.parent().unwrap_or(std::path::Path::new("."));
+        for (name, value) in &study.file.parameters {
+            let ctx = format!("{}: parameter \"{name}\"", study.path.display());
             let slot = plan.parameter(name)?;
-            slot.real(x)?;
-            slots.push(slot);
-            initial.push(x);
+            let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, study_dir);
+            match v {
+                ParamValue::Real(x) => {
+                    slots.push(slot);
+                    initial.push(x);
+                }
+                other => fixed.push((slot, other)),
+            }
+        }
+        for (slot, v) in &fixed {
+            sim.set(slot, v.clone());
         }
         for step in &study.file.steps {
             for p in &step.parameters {
@@ -90,6 +105,7 @@ impl Bench {
             plan,
             slots,
             initial,
+            fixed,
             workers: Mutex::new(vec![Worker {
                 sim,
                 ws: Workspace::new(),
@@ -104,6 +120,9 @@ impl Bench {
     fn new_worker(&self) -> Result<Worker, SystemError> {
         let mut sim = Simulation::new(self.plan.clone())?;
         sim.echo_fmu_log = false;
+        for (slot, v) in &self.fixed {
+            sim.set(slot, v.clone());
+        }
         self.created.fetch_add(1, Ordering::Relaxed);
         Ok(Worker {
             sim,

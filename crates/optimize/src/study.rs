@@ -34,9 +34,10 @@ pub struct StudyFile {
     /// Overrides of the system's `[record]` (fewer signals, coarser decimation: faster).
     #[serde(default)]
     pub record: Option<RecordOverride>,
-    /// Fixed parameter values applied before the first step (`"instance.variable" = x`).
+    /// Fixed parameter values applied to every run (`"instance.variable" = value`: a
+    /// number, an integer, a boolean or a string; a `*_file` path relative to the study).
     #[serde(default)]
-    pub parameters: std::collections::BTreeMap<String, f64>,
+    pub parameters: std::collections::BTreeMap<String, toml::Value>,
     pub optimizer: OptimizerConfig,
     #[serde(rename = "step")]
     pub steps: Vec<StepConfig>,

@@ -187,6 +187,8 @@ pub struct Plan {
     pub stop: Stop,
     /// Signals read at the end of a run for its summary.
     pub report: Vec<(String, Endpoint)>,
+    /// Signals that must agree after initialisation: (names and endpoints, tolerance, why).
+    pub checks: Vec<(Vec<(String, Endpoint)>, f64, Option<String>)>,
     /// Per replay: the slot of the signal giving its basis (distance mode).
     pub replay_basis: Vec<Option<usize>>,
     /// Stepping order over units (FMU instances and replays).
@@ -577,6 +579,36 @@ impl Plan {
             }
             report.push((n.clone(), e));
         }
+        // Consistency checks after initialisation.
+        let mut checks = Vec::new();
+        for (k, c) in file.checks.iter().enumerate() {
+            let ctx = format!("{ctx_file}: check {}", k + 1);
+            if c.equal.len() < 2 {
+                return Err(invalid(&ctx, "`equal` needs two or more signals"));
+            }
+            if !(c.relative_tolerance.is_finite() && c.relative_tolerance >= 0.0) {
+                return Err(invalid(
+                    &ctx,
+                    format!(
+                        "relative_tolerance must be a non-negative number, got {}",
+                        c.relative_tolerance
+                    ),
+                ));
+            }
+            let mut signals = Vec::new();
+            for n in &c.equal {
+                let e = resolve_source(&ctx, n)?;
+                match &e {
+                    Endpoint::Fmu {
+                        ty: ScalarType::Real | ScalarType::Integer | ScalarType::Enumeration,
+                        ..
+                    } => {}
+                    _ => return Err(invalid(&ctx, format!("'{n}' is not a numeric FMU variable"))),
+                }
+                signals.push((n.clone(), e));
+            }
+            checks.push((signals, c.relative_tolerance, c.why.clone()));
+        }
         // Replay bases.
         let mut replay_basis = Vec::with_capacity(replays.len());
         for r in &replays {
@@ -658,6 +690,7 @@ impl Plan {
             parameters,
             stop,
             report,
+            checks,
             replay_basis,
             order,
             warnings,

@@ -34,12 +34,13 @@ impl LogSink {
 
     pub fn push(&self, status: fmi2Status, category: &str, message: &str) {
         let line = format!("[{}] {category}: {message}", status.name());
-        if self.echo.load(Ordering::Relaxed) {
-            let level = match status {
-                fmi2Status::OK => log::Level::Debug,
-                fmi2Status::WARNING | fmi2Status::DISCARD => log::Level::Warn,
-                _ => log::Level::Error,
-            };
+        // Errors are not echoed: the call that failed reports them with its error (once).
+        let level = match status {
+            fmi2Status::OK => Some(log::Level::Debug),
+            fmi2Status::WARNING | fmi2Status::DISCARD => Some(log::Level::Warn),
+            _ => None,
+        };
+        if let (true, Some(level)) = (self.echo.load(Ordering::Relaxed), level) {
             log::log!(target: "fmu", level, "{}: {line}", self.instance);
         }
         self.keep(line);
