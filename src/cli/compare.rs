@@ -6,15 +6,22 @@
 use anyhow::Context;
 use std::io::Write;
 use std::path::PathBuf;
-use tb_compare::{CompareSettings, Comparison, PreparedMeasurement, Table, Workspace};
+use tb_compare::{
+    ChannelMap, CompareSettings, Comparison, Measurement, PreparedMeasurement, Table, Workspace,
+};
 
 #[derive(clap::Args, Debug)]
 pub struct CompareArgs {
-    /// Simulation result CSV (header `time`, `instance.variable`, ...; distance column, or
-    /// speed to integrate).
+    /// Simulation result, CSV or MDF 4 (`time`, `instance.variable`, ...; a distance
+    /// column, or speed to integrate).
     pub sim: PathBuf,
-    /// Vehicle measurement CSV (format of data/README.md).
+    /// Vehicle measurement, CSV or MDF 4 (units converted to SI from its units row or its
+    /// channels' units).
     pub measurement: PathBuf,
+    /// The channel of each signal in the measurement: a TOML file with a `[channels]`
+    /// table, `v = "GPS_Speed"`, ...
+    #[arg(long, value_name = "MAP.toml")]
+    pub channels: Option<PathBuf>,
     /// Signals to compare, comma separated; derived: Fz_sum, Fz_front, Fz_rear.
     #[arg(long, value_delimiter = ',', default_value = "Fz_sum")]
     pub signals: Vec<String>,
@@ -50,9 +57,14 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
         .filter(|s| !s.is_empty())
         .collect();
     anyhow::ensure!(!signals.is_empty(), "--signals names no signal");
-    let prepared = PreparedMeasurement::from_path(&args.measurement, &signals, &settings)
+    let map = match &args.channels {
+        Some(p) => ChannelMap::read_path(p)?,
+        None => ChannelMap::default(),
+    };
+    let meas = Measurement::load(&args.measurement, &map)?;
+    let prepared = PreparedMeasurement::new(&meas, &signals, &settings)
         .context("preparing the measurement")?;
-    let sim = Table::read_path(&args.sim).context("reading the simulation")?;
+    let sim = Table::read_any(&args.sim).context("reading the simulation")?;
     let cmp = prepared
         .compare(&sim, &mut Workspace::new())
         .context("comparing")?;
@@ -139,6 +151,7 @@ mod tests {
         let args = CompareArgs {
             sim: fixture("pipeline_sim.csv"),
             measurement: fixture("pipeline_meas.csv"),
+            channels: None,
             signals: vec!["Fz_sum".into(), "Fz_rl".into()],
             cutoff: 2.0,
             order: 2,
@@ -150,6 +163,7 @@ mod tests {
         let args = CompareArgs {
             sim: fixture("pipeline_sim.csv"),
             measurement: fixture("pipeline_meas.csv"),
+            channels: None,
             signals: vec!["Fz_nope".into()],
             cutoff: 2.0,
             order: 2,

@@ -10,7 +10,8 @@ use tb_fmi::FmuCache;
 pub struct RunArgs {
     /// The system description (TOML).
     pub system: PathBuf,
-    /// Write the recorded signals here (CSV, written atomically).
+    /// Write the recorded signals here, written atomically: MDF 4 for `.mf4`/`.mdf` (with
+    /// units, `time` the master channel), CSV otherwise.
     #[arg(long, short)]
     pub out: Option<PathBuf>,
     /// Override a parameter: instance.variable=value (repeatable).
@@ -100,7 +101,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let summary = sim.run()?;
     if let Some(out) = &args.out {
         sim.recording
-            .write_csv(out)
+            .write_any(out)
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
     let rtf = summary.simulated_time / summary.wall_time.max(1e-12);

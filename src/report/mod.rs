@@ -239,7 +239,7 @@ pub fn write_report(
         .optimized
         .as_ref()
         .ok_or(ReportError::MissingLap("optimised"))?;
-    let measurement = Measurement::read_path(&study.measurement_path)?;
+    let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
     let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum", "a_x"], &study.file.compare)?;
     let grid = prepared.grid();
     let mut ws = Workspace::new();

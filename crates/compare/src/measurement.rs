@@ -35,9 +35,10 @@ pub struct Measurement {
 }
 
 impl Measurement {
-    /// Reads and validates a measurement CSV.
+    /// Reads and validates a measurement file (MDF 4 or CSV; declared units converted to
+    /// SI), its channels under twinbench's names.
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self> {
-        Self::from_table(Table::read_path(path)?)
+        Self::load(path.as_ref(), &ChannelMap::default())
     }
 
     /// Validates a table as a measurement.
@@ -174,4 +175,115 @@ pub fn cumulative_trapezoid_into(x: &[f64], y: &[f64], out: &mut Vec<f64>) {
         acc += 0.5 * (y[i] + y[i - 1]) * (x[i] - x[i - 1]);
         out.push(acc);
     }
+}
+
+/// The SI unit twinbench expects of a measurement signal, if it knows the signal.
+pub fn si_unit(signal: &str) -> Option<&'static str> {
+    Some(match signal {
+        "time" => "s",
+        "distance" => "m",
+        "v" => "m/s",
+        "a_x" | "a_y" => "m/s2",
+        "accel_pedal" | "brake_pedal" => "1",
+        s if s.starts_with("Fz") => "N",
+        s if s.starts_with("omega") => "rad/s",
+        _ => return None,
+    })
+}
+
+/// Which channel of a file each twinbench signal is (`v = "GPS_Speed"`, ...); unmapped
+/// signals are looked up under their own name.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(transparent)]
+pub struct ChannelMap(pub std::collections::BTreeMap<String, String>);
+
+impl ChannelMap {
+    /// A map file: a `[channels]` table of `signal = "channel"`.
+    pub fn read_path(path: &Path) -> Result<ChannelMap> {
+        #[derive(serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct File {
+            channels: ChannelMap,
+        }
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let f: File = toml::from_str(&text)
+            .map_err(|e| Error::Settings(format!("{}: {e}", path.display())))?;
+        Ok(f.channels)
+    }
+}
+
+impl Measurement {
+    /// Reads a measurement in its own format (MDF 4 or CSV), its channels renamed to
+    /// twinbench's signals by `map` and converted from the units the file declares (MDF 4
+    /// channel units, a CSV units row) to SI; then validated as [`Measurement::from_table`]
+    /// does. A missing channel, an unknown or incompatible unit name the file and channel.
+    pub fn load(path: &Path, map: &ChannelMap) -> Result<Self> {
+        let mut table = Table::read_any(path)?;
+        let file = path.display().to_string();
+        for (signal, channel) in &map.0 {
+            let i = table
+                .names()
+                .iter()
+                .position(|n| n == channel)
+                .ok_or_else(|| Error::MissingColumn {
+                    file: file.clone(),
+                    column: format!("{channel}` (mapped to `{signal}`"),
+                    available: table.names().join(", "),
+                })?;
+            table.rename(i, signal)?;
+        }
+        to_si(&mut table, &file, map)?;
+        Self::from_table(table)
+    }
+}
+
+/// Converts every known signal from its declared unit to SI (no unit declared: SI assumed).
+fn to_si(table: &mut Table, file: &str, map: &ChannelMap) -> Result<()> {
+    let Some(units) = table.units().map(<[String]>::to_vec) else {
+        return Ok(());
+    };
+    for (i, declared) in units.iter().enumerate() {
+        let name = table.name_at(i).to_string();
+        let Some(target) = si_unit(&name) else {
+            continue;
+        };
+        let declared = declared.trim();
+        if declared.is_empty() || declared == target || table.is_text(i) {
+            continue;
+        }
+        let channel = map.0.get(&name).cloned().unwrap_or(name.clone());
+        let what = if channel == name {
+            format!("channel `{name}`")
+        } else {
+            format!("channel `{channel}` ({name})")
+        };
+        let from = tb_fmi::units::lookup(declared).ok_or_else(|| {
+            Error::Settings(format!(
+                "{file}: {what}: unknown unit '{declared}' (known: {})",
+                tb_fmi::units::UNITS
+                    .iter()
+                    .map(|u| u.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })?;
+        let to = tb_fmi::units::lookup(target).expect("SI units are in the table");
+        if !from.compatible(to) {
+            return Err(Error::Settings(format!(
+                "{file}: {what}: unit '{declared}' cannot be converted to '{target}'"
+            )));
+        }
+        let (scale, offset) = (
+            from.factor / to.factor,
+            (from.offset - to.offset) / to.factor,
+        );
+        for x in table.values_mut(i) {
+            *x = scale * *x + offset;
+        }
+        table.set_unit(i, target);
+    }
+    Ok(())
 }

@@ -578,7 +578,11 @@ impl Simulation {
                 }
             }
             let scale = lo.1.abs().max(hi.1.abs());
-            let rel = if scale > 0.0 { (hi.1 - lo.1) / scale } else { 0.0 };
+            let rel = if scale > 0.0 {
+                (hi.1 - lo.1) / scale
+            } else {
+                0.0
+            };
             if !(rel <= *tolerance) {
                 return Err(SystemError::Stop(format!(
                     "{}: check failed after initialisation: {} = {} and {} = {} differ by {:.3} % (at most {} % allowed){}",

@@ -34,7 +34,7 @@ const fn unit(name: &'static str, kg: i32, m: i32, s: i32, rad: i32, factor: f64
     }
 }
 
-/// Every unit a model may declare.
+/// Every unit twinbench knows: the ones a model may declare, and a logger's.
 pub const UNITS: &[UnitDef] = &[
     unit("1", 0, 0, 0, 0, 1.0),
     unit("%", 0, 0, 0, 0, 0.01),
@@ -61,6 +61,17 @@ pub const UNITS: &[UnitDef] = &[
     unit("rad/s", 0, 0, -1, 1, 1.0),
     unit("rpm", 0, 0, -1, 1, std::f64::consts::PI / 30.0),
     unit("rad/s2", 0, 0, -2, 1, 1.0),
+    // Units data loggers write (measurements, not model variables).
+    unit("g", 0, 1, -2, 0, 9.80665),
+    unit("kN", 1, 1, -2, 0, 1000.0),
+    unit("km", 0, 1, 0, 0, 1000.0),
+    unit("mm", 0, 1, 0, 0, 0.001),
+    unit("ms", 0, 0, 1, 0, 0.001),
+    unit("min", 0, 0, 1, 0, 60.0),
+    unit("h", 0, 0, 1, 0, 3600.0),
+    unit("deg", 0, 0, 0, 1, std::f64::consts::PI / 180.0),
+    unit("deg/s", 0, 0, -1, 1, std::f64::consts::PI / 180.0),
+    unit("1/s", 0, 0, -1, 0, 1.0),
 ];
 
 /// The definition of `name`, if known.

@@ -434,7 +434,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
     let wall = Instant::now();
     let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
     let bench = Bench::new(study, cache)?;
-    let measurement = Measurement::read_path(&study.measurement_path)?;
+    let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
     let pool = thread_pool(options.threads)?;
     let threads = pool.current_num_threads();
     let kind = options.optimizer.unwrap_or(study.file.optimizer.kind);

@@ -7,7 +7,7 @@ use super::ga::GaSettings;
 use super::OptimizeError;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use tb_compare::CompareSettings;
+use tb_compare::{ChannelMap, CompareSettings};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -17,8 +17,9 @@ pub struct StudyFile {
     pub name: Option<String>,
     /// The system file (TOML) run for every candidate.
     pub system: PathBuf,
-    /// The vehicle measurement (CSV, `data/README.md`).
-    pub measurement: PathBuf,
+    /// The vehicle measurement: a path (MDF 4 or CSV), or `{ file = "...", channels = {
+    /// v = "GPS_Speed", ... } }` with the channel of each twinbench signal.
+    pub measurement: MeasurementConfig,
     /// Seed of every random draw of the study.
     #[serde(default = "default_seed")]
     pub seed: u64,
@@ -45,6 +46,34 @@ pub struct StudyFile {
     /// below this fraction of the largest.
     #[serde(default = "default_null_ratio")]
     pub null_ratio: f64,
+}
+
+/// `measurement = "lap.mf4"` or `[measurement] file = "lap.mf4"` with `[measurement.channels]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum MeasurementConfig {
+    Path(PathBuf),
+    Mapped {
+        file: PathBuf,
+        #[serde(default)]
+        channels: ChannelMap,
+    },
+}
+
+impl MeasurementConfig {
+    pub fn file(&self) -> &Path {
+        match self {
+            MeasurementConfig::Path(p) => p,
+            MeasurementConfig::Mapped { file, .. } => file,
+        }
+    }
+
+    pub fn channels(&self) -> ChannelMap {
+        match self {
+            MeasurementConfig::Path(_) => ChannelMap::default(),
+            MeasurementConfig::Mapped { channels, .. } => channels.clone(),
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -126,6 +155,8 @@ pub struct Study {
     pub path: PathBuf,
     pub system_path: PathBuf,
     pub measurement_path: PathBuf,
+    /// The channel of each twinbench signal in the measurement file.
+    pub channels: ChannelMap,
     /// Hash of the study text: a checkpoint of another study is refused.
     pub fingerprint: String,
 }
@@ -158,7 +189,8 @@ impl Study {
         })?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let system_path = dir.join(&file.system);
-        let measurement_path = dir.join(&file.measurement);
+        let measurement_path = dir.join(file.measurement.file());
+        let channels = file.measurement.channels();
         use sha2::Digest;
         let fingerprint = format!("{:x}", sha2::Sha256::digest(text.as_bytes()));
         let study = Study {
@@ -166,6 +198,7 @@ impl Study {
             path: path.to_path_buf(),
             system_path,
             measurement_path,
+            channels,
             fingerprint,
         };
         study.validate()?;

@@ -171,18 +171,19 @@ impl Table {
                 });
             }
             if first {
+                first = false;
                 if is_units_row(&row_fields) {
-                    first = false;
                     units = Some(row_fields.clone());
                     continue;
                 }
+            }
+            if lines.is_empty() {
                 // A column whose first value is words, not a number, holds text.
                 for (j, f) in row_fields.iter().enumerate() {
                     if f.parse::<f64>().is_err() && is_words(f) {
                         text[j] = Some(Vec::new());
                     }
                 }
-                first = false;
             }
             for (j, field) in row_fields.iter().enumerate() {
                 if let Some(t) = &mut text[j] {
@@ -268,6 +269,35 @@ impl Table {
         if let Some(l) = &mut self.lines {
             l.truncate(rows);
         }
+    }
+
+    /// Renames column `index` (an error if the new name is taken).
+    pub fn rename(&mut self, index: usize, name: &str) -> Result<()> {
+        if self
+            .names
+            .iter()
+            .enumerate()
+            .any(|(i, n)| i != index && n == name)
+        {
+            return Err(Error::DuplicateColumn {
+                file: self.source.clone(),
+                column: name.to_string(),
+            });
+        }
+        self.names[index] = name.to_string();
+        Ok(())
+    }
+
+    /// The numbers of column `index`, to change in place (same length).
+    pub fn values_mut(&mut self, index: usize) -> &mut [f64] {
+        &mut self.columns[index]
+    }
+
+    /// Sets the unit of column `index` (a units row is added if there was none).
+    pub fn set_unit(&mut self, index: usize, unit: &str) {
+        let n = self.names.len();
+        let units = self.units.get_or_insert_with(|| vec![String::new(); n]);
+        units[index] = unit.to_string();
     }
 
     /// Every column, in order.

@@ -603,7 +603,12 @@ impl Plan {
                         ty: ScalarType::Real | ScalarType::Integer | ScalarType::Enumeration,
                         ..
                     } => {}
-                    _ => return Err(invalid(&ctx, format!("'{n}' is not a numeric FMU variable"))),
+                    _ => {
+                        return Err(invalid(
+                            &ctx,
+                            format!("'{n}' is not a numeric FMU variable"),
+                        ))
+                    }
                 }
                 signals.push((n.clone(), e));
             }
