@@ -2,6 +2,7 @@
 //!
 //! - [`registry`]: the models twinbench ships (one list for packing and the native backend);
 //! - [`pack`]: builds the model crates and writes FMI 2.0 Co-Simulation FMUs;
+//! - [`lap`]: a new lap for the packed FMUs from a measurement (target, track, system, study);
 //! - [`report`]: Tab. 1 and plots of an optimisation study, from its stored results;
 //! - [`cli`]: one module per subcommand.
 //!
@@ -11,6 +12,7 @@
 //! `models/` over the `fmu-export` framework. `docs/design.md` maps them.
 
 pub mod cli;
+pub mod lap;
 pub mod pack;
 pub mod registry;
 pub mod report;

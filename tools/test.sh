@@ -5,7 +5,7 @@
 # pythonfmu supplier EDU is built here.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if ! target/venv/bin/python -c "import fmpy, numpy, scipy, pythonfmu, libcosimpy" 2>/dev/null; then
+if ! target/venv/bin/python -c "import fmpy, numpy, scipy, pythonfmu, libcosimpy, asammdf" 2>/dev/null; then
     echo "== creating target/venv (tools/requirements.txt)"
     python3 -m venv target/venv
     target/venv/bin/pip install --quiet --upgrade pip

@@ -9,6 +9,7 @@ pub mod demo;
 pub mod export_ssp;
 pub mod identify;
 pub mod info;
+pub mod lap;
 pub mod modal;
 pub mod optimize;
 pub mod pack;
@@ -42,6 +43,8 @@ pub enum Command {
     Run(run::RunArgs),
     /// Show an FMU's capabilities and variables.
     Info(info::InfoArgs),
+    /// Prepare a lap of any circuit from its measurement: target speed, track, system, study.
+    Lap(lap::LapArgs),
     /// Write a system as an SSP 1.0 package (SystemStructure.ssd, FMUs under resources/).
     ExportSsp(export_ssp::ExportSspArgs),
     /// Compare a simulation result with a vehicle measurement on a distance basis.
@@ -92,6 +95,7 @@ pub fn main() -> ExitCode {
         Command::Benchmark(a) => benchmark::run(a),
         Command::Run(a) => run::run(a),
         Command::Info(a) => info::run(a),
+        Command::Lap(a) => lap::run(a),
         Command::ExportSsp(a) => export_ssp::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Optimize(a) => optimize::run(a),

@@ -30,6 +30,10 @@ pub struct OptimizeArgs {
     /// Skip the report (Tab. 1 and plots).
     #[arg(long)]
     pub no_report: bool,
+    /// Optimise even when the first run says the measurement and the twin do not belong
+    /// together (lap length, lap time, speed over distance; the study's [plausibility]).
+    #[arg(long)]
+    pub force: bool,
 }
 
 fn parse_kind(s: &str) -> Result<OptimizerKind, String> {
@@ -60,6 +64,7 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
         optimizer: args.optimizer,
         generations: args.generations,
         verbose: !args.json,
+        force: args.force,
     };
     let result = match run_study(&study, &options)? {
         StudyOutcome::Finished(r) => r,

@@ -52,6 +52,8 @@ pub enum OptimizeError {
     Compare(#[from] tb_compare::Error),
     #[error("checkpoint: {0}")]
     Checkpoint(String),
+    #[error("{0}")]
+    Implausible(String),
     #[error("thread pool: {0}")]
     Threads(String),
     #[error("step '{step}': the start point cannot be evaluated: {reason}")]

@@ -52,6 +52,8 @@ pub struct RunOptions {
     pub generations: Option<usize>,
     /// Print the identifiability report and step summaries to stderr.
     pub verbose: bool,
+    /// Optimise even when the first run says measurement and twin do not belong together.
+    pub force: bool,
 }
 
 impl std::fmt::Debug for RunOptions {
@@ -65,6 +67,7 @@ impl std::fmt::Debug for RunOptions {
             .field("optimizer", &self.optimizer)
             .field("generations", &self.generations)
             .field("verbose", &self.verbose)
+            .field("force", &self.force)
             .finish()
     }
 }
@@ -429,6 +432,61 @@ fn identifiability(
     }
 }
 
+/// Do the measurement and the twin's first run belong together? Lap length, lap time and
+/// the speed over distance, each against the study's `[plausibility]` bounds.
+fn check_plausible(
+    study: &Study,
+    measurement: &Measurement,
+    lap: &Table,
+) -> Result<(), OptimizeError> {
+    let p = &study.file.plausibility;
+    let mut problems = Vec::new();
+    let rel = |a: f64, b: f64| (a - b).abs() / b.abs().max(1e-12);
+    let (mt, md) = (measurement.time(), measurement.distance());
+    let measured_length = md[md.len() - 1] - md[0];
+    let measured_time = mt[mt.len() - 1] - mt[0];
+    if let Ok(d) = lap.require("distance") {
+        let twin = d[d.len() - 1] - d[0];
+        if rel(twin, measured_length) > p.lap_length {
+            problems.push(format!(
+                "lap length {twin:.1} m (twin) against {measured_length:.1} m (measured), {:.1} % apart (at most {} %)",
+                100.0 * rel(twin, measured_length),
+                100.0 * p.lap_length
+            ));
+        }
+    }
+    let t = lap.column_at(0);
+    let twin_time = t[t.len() - 1] - t[0];
+    if rel(twin_time, measured_time) > p.lap_time {
+        problems.push(format!(
+            "lap time {twin_time:.2} s (twin) against {measured_time:.2} s (measured), {:.1} % apart (at most {} %)",
+            100.0 * rel(twin_time, measured_time),
+            100.0 * p.lap_time
+        ));
+    }
+    if lap.find("v").ok().flatten().is_some() {
+        let speed = PreparedMeasurement::new(measurement, &["v"], &study.file.compare)
+            .and_then(|prep| prep.compare(lap, &mut Workspace::new()));
+        match speed.as_ref().map(|c| c.get("v").map(|m| m.r_squared)) {
+            Ok(Some(r2)) if r2 < p.r_squared_v => problems.push(format!(
+                "the speed over distance agrees with R² = {r2:.3} (at least {} required)",
+                p.r_squared_v
+            )),
+            Err(e) => problems.push(format!("the speeds cannot be compared: {e}")),
+            _ => {}
+        }
+    }
+    if problems.is_empty() {
+        return Ok(());
+    }
+    Err(OptimizeError::Implausible(format!(
+        "{} and the twin of {} do not belong together: {}. Is the measurement of this circuit, and are the track and the target speed its own (twinbench lap)? `--force` optimises anyway",
+        study.measurement_path.display(),
+        study.system_path.display(),
+        problems.join("; ")
+    )))
+}
+
 /// Runs a study (or continues it from its checkpoint).
 pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, OptimizeError> {
     let wall = Instant::now();
@@ -540,6 +598,9 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                     &step.weights(),
                     bias_weight,
                 );
+                if k == 0 && !options.force {
+                    check_plausible(study, &measurement, &before.table)?;
+                }
                 if k == 0 {
                     if let Some(c) = &options.checkpoint {
                         let path = initial_lap_path(c);

@@ -46,6 +46,46 @@ pub struct StudyFile {
     /// below this fraction of the largest.
     #[serde(default = "default_null_ratio")]
     pub null_ratio: f64,
+    /// Checks on the first run that measurement and twin belong together.
+    #[serde(default)]
+    pub plausibility: Plausibility,
+}
+
+/// Before optimising, the first run of the twin is checked against the measurement: a
+/// measurement of another circuit, or a track that is not the measured one, is an error
+/// (`twinbench optimize --force` runs anyway).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plausibility {
+    /// Largest relative difference of the twin's and the measured lap length.
+    #[serde(default = "one_percent")]
+    pub lap_length: f64,
+    /// Largest relative difference of the twin's and the measured lap time.
+    #[serde(default = "five_percent")]
+    pub lap_time: f64,
+    /// Least R² of the twin's speed against the measured one over distance.
+    #[serde(default = "r_squared_v")]
+    pub r_squared_v: f64,
+}
+
+impl Default for Plausibility {
+    fn default() -> Self {
+        Plausibility {
+            lap_length: one_percent(),
+            lap_time: five_percent(),
+            r_squared_v: r_squared_v(),
+        }
+    }
+}
+
+fn one_percent() -> f64 {
+    0.01
+}
+fn five_percent() -> f64 {
+    0.05
+}
+fn r_squared_v() -> f64 {
+    0.9
 }
 
 /// `measurement = "lap.mf4"` or `[measurement] file = "lap.mf4"` with `[measurement.channels]`.
