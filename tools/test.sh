@@ -22,10 +22,11 @@ rm -rf "$TMPDIR"
 mkdir -p "$TMPDIR"
 # The fast tier: every crate's tests, the FMUs through their C symbols, the orchestrator.
 cargo test --release --workspace "$@"
-# The slow tier: whole optimisations, FMPy's master over a lap, the SSP in FMPy and libcosim.
+# The slow tier: whole optimisations (Spielberg, and a lap the suite makes itself), FMPy's
+# master over a lap, the SSP in FMPy and libcosim.
 cargo test --release -p twinbench --features slow-tests \
     --test optimize_spielberg --test optimize_study --test robustness_optimize \
-    --test ssp_export --test cross_validation "$@"
+    --test ssp_export --test cross_validation --test own_lap "$@"
 if [ -n "$(ls -A "$TMPDIR")" ]; then
     echo "error: the tests left files in the temporary directory ($TMPDIR):" >&2
     ls -lA "$TMPDIR" >&2

@@ -1,0 +1,336 @@
+//! Bring your own lap (slow tier): a circuit the suite makes itself, unlike Spielberg, and
+//! a "measurement" of it made by the twin with known lift coefficients and geometry. Then
+//! `twinbench lap` and `twinbench optimize` on the packed FMUs, as a user would: the known
+//! values come back, with and without the circuit's track; the same measurement as MDF 4
+//! with a logger's channel names and units gives the same Tab. 1.
+
+mod common;
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The values the "measurement" is made with (the FMUs' defaults are 1.653, 2.027, 3.10,
+/// 1.55, 1.50: the study starts there).
+const TRUTH: [(&str, f64); 5] = [
+    ("vehicle.c_lift_front", 0.95),
+    ("vehicle.c_lift_rear", 1.25),
+    ("vehicle.l", 2.85),
+    ("vehicle.b_front", 1.45),
+    ("vehicle.b_rear", 1.40),
+];
+const WHEEL_RADIUS: f64 = 0.345;
+
+/// A closed circuit of straights and constant-radius corners (curvature per 1 m row) and a
+/// feasible target speed over it.
+fn circuit() -> (String, String, f64) {
+    let segments: [(usize, f64); 12] = [
+        (420, 0.0),
+        (140, 1.0 / 55.0),
+        (260, 0.0),
+        (190, -1.0 / 95.0),
+        (380, 0.0),
+        (110, 1.0 / 40.0),
+        (230, 0.0),
+        (170, -1.0 / 70.0),
+        (150, 0.0),
+        (200, 1.0 / 120.0),
+        (300, 0.0),
+        (90, -1.0 / 35.0),
+    ];
+    let kappa: Vec<f64> = segments
+        .iter()
+        .flat_map(|&(n, k)| std::iter::repeat_n(k, n))
+        .collect();
+    let n = kappa.len();
+    // Corner speed from a lateral acceleration of 11 m/s², at most 62 m/s; then braking at
+    // 11 m/s² and accelerating at 5 m/s², twice round the lap (it is periodic).
+    let mut v: Vec<f64> = kappa
+        .iter()
+        .map(|k| {
+            if *k == 0.0 {
+                62.0
+            } else {
+                (11.0 / k.abs()).sqrt().min(62.0)
+            }
+        })
+        .collect();
+    for _ in 0..2 {
+        for i in (0..2 * n).rev() {
+            let (a, b) = (i % n, (i + 1) % n);
+            v[a] = v[a].min((v[b] * v[b] + 2.0 * 11.0).sqrt());
+        }
+        for i in 1..2 * n {
+            let (a, b) = (i % n, (i - 1) % n);
+            v[a] = v[a].min((v[b] * v[b] + 2.0 * 5.0).sqrt());
+        }
+    }
+    let mut track = String::from("s,curvature,grade,z_road_left,z_road_right\n");
+    for (i, k) in kappa.iter().enumerate() {
+        let _ = writeln!(track, "{i},{k},0,0,0");
+    }
+    let mut target = String::from("s,v\n");
+    for (i, x) in v.iter().enumerate() {
+        let _ = writeln!(target, "{i},{x}");
+    }
+    let _ = writeln!(target, "{n},{}", v[0]);
+    (track, target, v[0])
+}
+
+fn bin() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_twinbench"))
+}
+
+fn twinbench(args: &[&str]) -> String {
+    let out = Command::new(bin()).args(args).output().unwrap();
+    assert!(
+        out.status.success(),
+        "twinbench {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// The twin's lap with the true values, as a measurement file (CSV, SI, a units row).
+fn measurement(dir: &Path) -> (PathBuf, PathBuf) {
+    let fmu_dir = common::fmu_dir();
+    let (track, target, v0) = circuit();
+    let track_p = dir.join("circuit_track.csv");
+    let target_p = dir.join("truth_target.csv");
+    std::fs::write(&track_p, track).unwrap();
+    std::fs::write(&target_p, target).unwrap();
+    let mut params = format!(
+        "\"vehicle.track_file\" = {:?}\n\"driver.target_speed_file\" = {:?}\n\"vehicle.v_start\" = {v0:?}\n\"dyno_rl.omega_start\" = {w:?}\n\"dyno_rr.omega_start\" = {w:?}\n\"edu.omega_wheel_start\" = {w:?}\n",
+        track_p.display().to_string(),
+        target_p.display().to_string(),
+        w = v0 / WHEEL_RADIUS,
+    );
+    for (n, x) in TRUTH {
+        let _ = writeln!(params, "\"{n}\" = {x:?}");
+    }
+    let bundled =
+        std::fs::read_to_string(twinbench::pack::workspace_root().join("systems/rls_v.toml"))
+            .unwrap();
+    let start = bundled.find("[parameters]").unwrap();
+    let end = bundled.find("# The vehicle's track and").unwrap();
+    let text = format!(
+        "{}[parameters]\n{params}\n{}",
+        &bundled[..start],
+        &bundled[end..]
+    )
+    .replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()));
+    let sys = dir.join("truth.toml");
+    std::fs::write(&sys, text).unwrap();
+    let raw = dir.join("truth_run.csv");
+    twinbench(&["run", sys.to_str().unwrap(), "--out", raw.to_str().unwrap()]);
+    // The logger's view: plain names, SI units.
+    let t = tb_table::Table::read_path(&raw).unwrap();
+    let cols = [
+        ("time", "time", "s"),
+        ("distance", "vehicle.distance", "m"),
+        ("v", "vehicle.v", "m/s"),
+        ("a_x", "vehicle.a_x", "m/s2"),
+        ("a_y", "vehicle.a_y", "m/s2"),
+        ("Fz_fl", "vehicle.Fz_fl", "N"),
+        ("Fz_fr", "vehicle.Fz_fr", "N"),
+        ("Fz_rl", "vehicle.Fz_rl", "N"),
+        ("Fz_rr", "vehicle.Fz_rr", "N"),
+    ];
+    let meas = tb_table::Table::from_columns(
+        "measurement",
+        cols.iter().map(|c| c.0.to_string()).collect(),
+        cols.iter()
+            .map(|c| t.require(c.1).unwrap().to_vec())
+            .collect(),
+    )
+    .unwrap()
+    .with_units(cols.iter().map(|c| c.2.to_string()).collect())
+    .unwrap();
+    let p = dir.join("measurement.csv");
+    meas.write_csv(&p).unwrap();
+    (p, track_p)
+}
+
+fn optimise(study: &Path) -> serde_json::Value {
+    let out_dir = study.parent().unwrap().join("optimize");
+    let text = twinbench(&[
+        "optimize",
+        study.to_str().unwrap(),
+        "--json",
+        "--threads",
+        "2",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let mut j: serde_json::Value = serde_json::from_str(&text).unwrap();
+    j["table1"] =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("table1.json")).unwrap())
+            .unwrap();
+    j
+}
+
+fn final_value(result: &serde_json::Value, name: &str) -> f64 {
+    result["parameters_final"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p[0] == name)
+        .unwrap_or_else(|| panic!("no {name}"))[1]
+        .as_f64()
+        .unwrap()
+}
+
+fn assert_recovered(result: &serde_json::Value, what: &str) {
+    for (name, truth) in TRUTH {
+        let got = final_value(result, name);
+        let rel = (got / truth - 1.0).abs();
+        // Lift coefficients within 5 %, the track widths within 3 %; the wheelbase is seen
+        // only through the longitudinal load transfer (weakly: the identifiability report
+        // says so), 10 %.
+        let bound = match name {
+            "vehicle.l" => 0.10,
+            n if n.contains("lift") => 0.05,
+            _ => 0.03,
+        };
+        eprintln!(
+            "{what}: {name} = {got:.4} (truth {truth}, {:.2} %)",
+            100.0 * rel
+        );
+        assert!(rel < bound, "{what}: {name} = {got} against {truth}");
+    }
+}
+
+#[test]
+fn an_own_lap_recovers_its_lift_coefficients_and_geometry_with_and_without_its_track() {
+    let dir = tb_testkit::scratch("own-lap");
+    let (meas, track) = measurement(dir.path());
+    // With the circuit's track.
+    let with = dir.path().join("with_track");
+    twinbench(&[
+        "lap",
+        meas.to_str().unwrap(),
+        "--track",
+        track.to_str().unwrap(),
+        "--out",
+        with.to_str().unwrap(),
+        "--fmus",
+        common::fmu_dir().to_str().unwrap(),
+    ]);
+    assert_recovered(&optimise(&with.join("study.toml")), "with --track");
+    // With a track derived from the measurement.
+    let derived = dir.path().join("derived_track");
+    twinbench(&[
+        "lap",
+        meas.to_str().unwrap(),
+        "--out",
+        derived.to_str().unwrap(),
+        "--fmus",
+        common::fmu_dir().to_str().unwrap(),
+    ]);
+    assert_recovered(&optimise(&derived.join("study.toml")), "derived track");
+}
+
+#[test]
+fn the_same_lap_as_mdf4_with_a_loggers_names_and_units_gives_the_same_table_1() {
+    let dir = tb_testkit::scratch("own-lap-mdf");
+    let (meas, track) = measurement(dir.path());
+    // A logger's file: other channel names, km/h, g and kN; and the same values converted
+    // back to SI the way twinbench converts them, as CSV.
+    let mf4 = dir.path().join("logger.mf4");
+    let si = dir.path().join("logger_si.csv");
+    let script = r#"
+import csv, sys
+import numpy as np
+from asammdf import MDF, Signal
+src, mf4, si = sys.argv[1:4]
+rows = list(csv.reader(open(src)))
+names, data = rows[0], np.array(rows[2:], dtype=float)
+col = {n: data[:, i] for i, n in enumerate(names)}
+logger = [  # twinbench name, logger channel, unit, factor to that unit
+    ("v", "GPS_Speed", "km/h", 3.6), ("a_x", "AccLong", "g", 1 / 9.80665),
+    ("a_y", "AccLat", "g", 1 / 9.80665), ("Fz_fl", "LoadFL", "kN", 1e-3),
+    ("Fz_fr", "LoadFR", "kN", 1e-3), ("Fz_rl", "LoadRL", "kN", 1e-3),
+    ("Fz_rr", "LoadRR", "kN", 1e-3), ("distance", "Dist", "m", 1.0),
+]
+t = col["time"]
+raw = {ch: col[n] * f for n, ch, u, f in logger}
+m = MDF(version="4.10")
+m.append([Signal(samples=raw[ch], timestamps=t, name=ch, unit=u) for n, ch, u, f in logger])
+m.save(mf4, overwrite=True)
+# What twinbench reads: the logger's values times (unit factor / SI factor) plus 0.0.
+si_factor = {"km/h": 1 / 3.6, "g": 9.80665, "kN": 1000.0, "m": 1.0}
+with open(si, "w") as f:
+    f.write("time," + ",".join(n for n, *_ in logger) + "\n")
+    for k in range(len(t)):
+        vals = [raw[ch][k] * si_factor[u] + 0.0 for n, ch, u, _ in logger]
+        f.write(repr(float(t[k])) + "," + ",".join(repr(float(x)) for x in vals) + "\n")
+"#;
+    let out = Command::new(common::python::python())
+        .args(["-c", script])
+        .args([
+            meas.to_str().unwrap(),
+            mf4.to_str().unwrap(),
+            si.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let map = dir.path().join("channels.toml");
+    std::fs::write(
+        &map,
+        "[channels]\nv = \"GPS_Speed\"\na_x = \"AccLong\"\na_y = \"AccLat\"\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\ndistance = \"Dist\"\n",
+    )
+    .unwrap();
+    let fmus = common::fmu_dir();
+    let (a, b) = (dir.path().join("from_mdf"), dir.path().join("from_csv"));
+    twinbench(&[
+        "lap",
+        mf4.to_str().unwrap(),
+        "--channels",
+        map.to_str().unwrap(),
+        "--track",
+        track.to_str().unwrap(),
+        "--out",
+        a.to_str().unwrap(),
+        "--fmus",
+        fmus.to_str().unwrap(),
+    ]);
+    twinbench(&[
+        "lap",
+        si.to_str().unwrap(),
+        "--track",
+        track.to_str().unwrap(),
+        "--out",
+        b.to_str().unwrap(),
+        "--fmus",
+        fmus.to_str().unwrap(),
+    ]);
+    let (ra, rb) = (
+        optimise(&a.join("study.toml")),
+        optimise(&b.join("study.toml")),
+    );
+    // Every number of Tab. 1 to 1e-9 relative.
+    fn numbers(v: &serde_json::Value, out: &mut Vec<f64>) {
+        match v {
+            serde_json::Value::Number(n) => out.push(n.as_f64().unwrap()),
+            serde_json::Value::Array(a) => a.iter().for_each(|x| numbers(x, out)),
+            serde_json::Value::Object(o) => o.values().for_each(|x| numbers(x, out)),
+            _ => {}
+        }
+    }
+    let (mut na, mut nb) = (Vec::new(), Vec::new());
+    numbers(&ra["table1"]["steps"], &mut na);
+    numbers(&rb["table1"]["steps"], &mut nb);
+    assert_eq!(na.len(), nb.len());
+    assert!(na.len() > 30);
+    for (x, y) in na.iter().zip(&nb) {
+        assert!(
+            (x - y).abs() <= 1e-9 * x.abs().max(y.abs()).max(1e-300),
+            "Tab. 1 differs: {x} (MDF 4) against {y} (CSV)"
+        );
+    }
+}
