@@ -182,6 +182,35 @@ impl Bench {
         result
     }
 
+    /// Runs with `values` and returns the recording on its uniform grid, without comparing
+    /// (a first look at a lap that may not match the measurement at all).
+    pub fn lap(&self, values: &[f64]) -> Result<Table, String> {
+        if values.len() != self.slots.len() {
+            return Err(format!(
+                "{} values for {} parameters",
+                values.len(),
+                self.slots.len()
+            ));
+        }
+        let worker = self.lock_workers().pop();
+        let mut w = match worker {
+            Some(w) => w,
+            None => self.new_worker().map_err(|e| describe_failure(&e))?,
+        };
+        let result = (|| {
+            for (slot, &x) in self.slots.iter().zip(values) {
+                let v = slot.real(x).map_err(|e| describe_failure(&e))?;
+                w.sim.set(slot, v);
+            }
+            let summary = w.sim.run();
+            self.runs.fetch_add(1, Ordering::Relaxed);
+            summary.map_err(|e| describe_failure(&e))?;
+            uniform_table(&w.sim.recording).map_err(|e| e.to_string())
+        })();
+        self.lock_workers().push(w);
+        result
+    }
+
     fn lock_workers(&self) -> std::sync::MutexGuard<'_, Vec<Worker>> {
         self.workers.lock().unwrap_or_else(|e| e.into_inner())
     }

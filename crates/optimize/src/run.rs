@@ -585,6 +585,17 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                 for (j, &i) in index.iter().enumerate() {
                     problem.assignment[i].1 = x0[j];
                 }
+                if k == 0 && !options.force {
+                    // Before any optimising: do the measurement and the twin belong together?
+                    let lap =
+                        bench
+                            .lap(&problem.params(&x0))
+                            .map_err(|reason| OptimizeError::Start {
+                                step: step.name.clone(),
+                                reason,
+                            })?;
+                    check_plausible(study, &measurement, &lap)?;
+                }
                 let ident = identifiability(study, &problem, step, &x0, &pool);
                 let before = problem
                     .outcome(&x0)
@@ -598,9 +609,6 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                     &step.weights(),
                     bias_weight,
                 );
-                if k == 0 && !options.force {
-                    check_plausible(study, &measurement, &before.table)?;
-                }
                 if k == 0 {
                     if let Some(c) = &options.checkpoint {
                         let path = initial_lap_path(c);

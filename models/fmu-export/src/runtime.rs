@@ -85,6 +85,8 @@ pub struct Runtime<M: Model> {
     stop_time: Option<f64>,
     /// Parameters or inputs changed in initialization mode since the model was initialised.
     init_dirty: bool,
+    /// The last lazy initialisation (by a getter in initialization mode) failed.
+    init_failed: bool,
     /// Inputs set since the last step (feed-through outputs need recomputing).
     inputs_changed: bool,
     /// Tunable parameters set since the last step.
@@ -137,6 +139,7 @@ impl<M: Model> Runtime<M> {
             time: 0.0,
             stop_time: None,
             init_dirty: true,
+            init_failed: false,
             inputs_changed: false,
             params_changed: false,
             poisoned: None,
@@ -310,6 +313,7 @@ impl<M: Model> Runtime<M> {
         if self.model.is_some() && !self.init_dirty {
             return fmi2Status::OK;
         }
+        self.init_failed = false;
         match M::initialize(&mut self.vars, &self.ctx) {
             Ok(m) => {
                 self.model = Some(m);
@@ -323,6 +327,28 @@ impl<M: Model> Runtime<M> {
                 self.fail(function, e)
             }
         }
+    }
+
+    /// A getter in initialization mode initialises the model lazily (a host propagating
+    /// outputs to inputs reads them). A failure there is not the getter's: the values stay
+    /// as they are and fmi2ExitInitializationMode, which initialises again, reports it once.
+    fn try_initialize(&mut self) {
+        if (self.model.is_some() || self.init_failed) && !self.init_dirty {
+            return;
+        }
+        match M::initialize(&mut self.vars, &self.ctx) {
+            Ok(m) => {
+                self.model = Some(m);
+                self.init_failed = false;
+                self.inputs_changed = false;
+                self.params_changed = false;
+            }
+            Err(_) => {
+                self.model = None;
+                self.init_failed = true;
+            }
+        }
+        self.init_dirty = false;
     }
 
     pub fn exit_initialization_mode(&mut self) -> fmi2Status {
@@ -354,6 +380,7 @@ impl<M: Model> Runtime<M> {
         self.ctx.start_time = 0.0;
         self.stop_time = None;
         self.init_dirty = true;
+        self.init_failed = false;
         self.inputs_changed = false;
         self.params_changed = false;
         self.poisoned = None;
@@ -463,12 +490,7 @@ impl<M: Model> Runtime<M> {
             ));
         }
         match self.phase {
-            Phase::InitializationMode => {
-                let s = self.ensure_initialized(function);
-                if s != fmi2Status::OK {
-                    return s;
-                }
-            }
+            Phase::InitializationMode => self.try_initialize(),
             Phase::StepComplete if self.inputs_changed && self.has_feedthrough => {
                 if let Some(m) = self.model.as_mut() {
                     m.update_outputs(&mut self.vars);
@@ -611,10 +633,7 @@ impl<M: Model> Runtime<M> {
             return s;
         }
         if self.phase == Phase::InitializationMode {
-            let s = self.ensure_initialized(function);
-            if s != fmi2Status::OK {
-                return s;
-            }
+            self.try_initialize();
         }
         let instantiated = self.phase == Phase::Instantiated;
         for (k, &vr) in vrs.iter().enumerate() {

@@ -1,0 +1,229 @@
+//! A lap of one's own, and what goes wrong with it: a malformed track file, a track and a
+//! target of different laps, a missing channel, an unknown unit, a measurement of another
+//! circuit; each refused with a message naming what disagrees. And FMPy sets the same
+//! String parameters as twinbench.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn root() -> PathBuf {
+    twinbench::pack::workspace_root()
+}
+
+fn twinbench(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn failure(args: &[&str]) -> String {
+    let o = twinbench(args);
+    assert!(!o.status.success(), "twinbench {args:?} succeeded");
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The bundled bench with some parameters added, written beside `dir`'s files.
+fn bench_with(dir: &Path, extra: &str) -> PathBuf {
+    let fmu_dir = common::fmu_dir();
+    let text = std::fs::read_to_string(root().join("systems/rls_v.toml"))
+        .unwrap()
+        .replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()))
+        .replace("[parameters]\n", &format!("[parameters]\n{extra}\n"));
+    let p = dir.join("bench.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn a_malformed_track_file_fails_initialisation_naming_the_users_path_row_and_column() {
+    let dir = tb_testkit::scratch("bad-track");
+    std::fs::write(
+        dir.path().join("my_track.csv"),
+        "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,0.01,x,0,0\n2,0,0,0,0\n",
+    )
+    .unwrap();
+    // A relative path in the system file is relative to the system file.
+    let sys = bench_with(dir.path(), "\"vehicle.track_file\" = \"my_track.csv\"");
+    let e = failure(&["run", sys.to_str().unwrap()]);
+    let user_path = dir.path().join("my_track.csv").display().to_string();
+    assert!(e.contains("fmi2ExitInitializationMode"), "{e}");
+    assert!(
+        e.contains(&format!(
+            "{user_path}: row 3: column 'grade': 'x' is not a number"
+        )),
+        "{e}"
+    );
+    // Printed once (the FMU's message with the failed call, not echoed before it too).
+    assert_eq!(e.matches("is not a number").count(), 1, "{e}");
+    // No temporary folder of the unpacked FMU in the message.
+    assert!(!e.contains("twinbench-fmu-"), "{e}");
+}
+
+#[test]
+fn a_track_and_a_target_of_different_laps_are_refused_before_the_first_step() {
+    let dir = tb_testkit::scratch("other-target");
+    let mut target = String::from("s,v\n");
+    for s in 0..=3000 {
+        target.push_str(&format!("{s},40\n"));
+    }
+    std::fs::write(dir.path().join("short.csv"), target).unwrap();
+    let sys = bench_with(dir.path(), "\"driver.target_speed_file\" = \"short.csv\"");
+    let e = failure(&["run", sys.to_str().unwrap()]);
+    assert!(e.contains("check failed after initialisation"), "{e}");
+    assert!(
+        e.contains("vehicle.lap_length") && e.contains("driver.lap_length"),
+        "{e}"
+    );
+    assert!(e.contains("not the same lap"), "{e}");
+}
+
+#[test]
+fn a_missing_channel_and_an_unknown_unit_name_the_file_and_the_channel() {
+    let dir = tb_testkit::scratch("bad-channels");
+    let map = dir.path().join("map.toml");
+    std::fs::write(&map, "[channels]\nv = \"GPS_Speed\"\n").unwrap();
+    let meas = root().join("data/spielberg_lap.csv");
+    let out = dir.path().join("lap");
+    let e = failure(&[
+        "lap",
+        meas.to_str().unwrap(),
+        "--channels",
+        map.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(e.contains("spielberg_lap.csv"), "{e}");
+    assert!(
+        e.contains("GPS_Speed") && e.contains("mapped to `v`"),
+        "{e}"
+    );
+    // A units row with a unit twinbench does not know.
+    let text = std::fs::read_to_string(&meas).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let units: Vec<&str> = header
+        .split(',')
+        .map(|c| if c == "v" { "furlong/fortnight" } else { "" })
+        .collect();
+    let odd = dir.path().join("odd_units.csv");
+    std::fs::write(
+        &odd,
+        format!(
+            "{header}\n{}\n{}\n",
+            units.join(","),
+            lines.collect::<Vec<_>>().join("\n")
+        ),
+    )
+    .unwrap();
+    let e = failure(&["lap", odd.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(
+        e.contains("odd_units.csv") && e.contains("channel `v`"),
+        "{e}"
+    );
+    assert!(e.contains("unknown unit 'furlong/fortnight'"), "{e}");
+}
+
+#[test]
+fn a_measurement_of_another_circuit_is_refused_before_optimising() {
+    common::fmu_dir();
+    let dir = tb_testkit::scratch("other-circuit");
+    // The bundled lap stretched in time and distance by 1.3: another circuit.
+    let t = tb_table::Table::read_path(&root().join("data/spielberg_lap.csv")).unwrap();
+    let cols: Vec<Vec<f64>> = t
+        .names()
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let c = t.column_at(i);
+            if n == "time" || n == "distance" {
+                c.iter().map(|x| 1.3 * x).collect()
+            } else {
+                c.to_vec()
+            }
+        })
+        .collect();
+    let other = dir.path().join("other_circuit.csv");
+    tb_table::Table::from_columns("other", t.names().to_vec(), cols)
+        .unwrap()
+        .write_csv(&other)
+        .unwrap();
+    let study = std::fs::read_to_string(root().join("studies/spielberg.toml"))
+        .unwrap()
+        .replace(
+            "system = \"../systems/rls_v.toml\"",
+            &format!(
+                "system = {:?}",
+                root().join("systems/rls_v.toml").display().to_string()
+            ),
+        )
+        .replace(
+            "measurement = \"../data/spielberg_lap.csv\"",
+            &format!("measurement = {:?}", other.display().to_string()),
+        );
+    let study_p = dir.path().join("study.toml");
+    std::fs::write(&study_p, study).unwrap();
+    let out = dir.path().join("out");
+    let e = failure(&[
+        "optimize",
+        study_p.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--generations",
+        "1",
+        "--no-report",
+    ]);
+    assert!(e.contains("do not belong together"), "{e}");
+    assert!(e.contains("lap length") && e.contains("(measured)"), "{e}");
+    assert!(e.contains("--force"), "{e}");
+}
+
+#[test]
+fn fmpy_sets_the_track_file_and_reads_the_same_lap_length_as_twinbench() {
+    let dir = tb_testkit::scratch("fmpy-track");
+    let mut track = String::from("s,curvature,grade,z_road_left,z_road_right\n");
+    for s in 0..1234 {
+        track.push_str(&format!("{s},0.002,0,0,0\n"));
+    }
+    let track_p = dir.path().join("oval.csv");
+    std::fs::write(&track_p, track).unwrap();
+    // twinbench: the vehicle alone, track_file set.
+    let fmu = common::fmu("vehicle");
+    let sys = dir.path().join("vehicle.toml");
+    std::fs::write(
+        &sys,
+        format!(
+            "[fmus]\nvehicle = {:?}\n\n[[instance]]\nname = \"vehicle\"\nfmu = \"vehicle\"\n\n[parameters]\n\"vehicle.track_file\" = \"oval.csv\"\n\"vehicle.v_start\" = 20.0\n\"vehicle.omega_rl\" = 57.97\n\"vehicle.omega_rr\" = 57.97\n\n[experiment]\nstep = 1e-3\nstop = 0.01\n\n[record]\nsignals = [\"vehicle.lap_length\"]\n",
+            fmu.display().to_string()
+        ),
+    )
+    .unwrap();
+    let csv = dir.path().join("tb.csv");
+    let o = twinbench(&["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let tb = tb_table::Table::read_path(&csv).unwrap();
+    let ours = *tb.require("vehicle.lap_length").unwrap().last().unwrap();
+    assert_eq!(ours, 1234.0);
+    // FMPy, with the same String parameter.
+    let script = r#"
+import sys
+from fmpy import simulate_fmu
+r = simulate_fmu(sys.argv[1], start_values={"track_file": sys.argv[2], "v_start": 20.0},
+                 stop_time=0.01, step_size=1e-3, output=["lap_length"])
+print(repr(float(r["lap_length"][-1])))
+"#;
+    let o = Command::new(common::python::python())
+        .args([
+            "-c",
+            script,
+            fmu.to_str().unwrap(),
+            track_p.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fmpy: f64 = String::from_utf8_lossy(&o.stdout).trim().parse().unwrap();
+    assert_eq!(fmpy, ours);
+}
