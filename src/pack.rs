@@ -1,25 +1,19 @@
-//! Packing: build the model crates as `cdylib`s (release, `fmu` feature) and write
-//! `target/fmu/<model>.fmu` with modelDescription.xml, the binary, resources and
-//! documentation. The output is deterministic: same sources, byte-identical FMUs.
+//! Packing: write `<model>.fmu` with modelDescription.xml, the model's library, resources
+//! and documentation. The libraries are built by the build script (release, the models'
+//! `fmu` feature) and embedded in this binary, so packing needs no sources and no cargo.
+//! The output is deterministic: same sources, byte-identical FMUs.
 
 use fmu_export::Model;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const MODEL_DESCRIPTION_TEMPLATE: &str = include_str!("../fmu-templates/modelDescription.xml");
 const DOCUMENTATION_TEMPLATE: &str = include_str!("../fmu-templates/documentation/index.html");
 
 #[derive(Debug, thiserror::Error)]
 pub enum PackError {
-    #[error("cargo build of the model crates failed ({0}); see its output above")]
-    Build(String),
-    #[error("cannot run cargo: {0}")]
-    Cargo(std::io::Error),
     #[error("model '{model}': inconsistent variable table: {reason}")]
     Table { model: String, reason: String },
-    #[error("model '{model}': built library {path} not found")]
-    MissingBinary { model: String, path: PathBuf },
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,
@@ -43,13 +37,16 @@ pub struct ModelSpec {
     pub documentation: fn() -> String,
     pub validate: fn() -> Result<(), String>,
     pub guid: fn() -> String,
+    /// The model's FMU library (`binaries/linux64/<identifier>.so`), built by the build script.
+    pub library: &'static [u8],
 }
 
 impl ModelSpec {
-    pub fn of<M: Model>(package: &'static str, test_only: bool) -> Self {
+    pub fn of<M: Model>(package: &'static str, test_only: bool, library: &'static [u8]) -> Self {
         ModelSpec {
             package,
             test_only,
+            library,
             info: M::INFO,
             model_description: || {
                 fmu_export::description::render_model_description::<M>(
@@ -74,14 +71,25 @@ pub fn models() -> Vec<ModelSpec> {
         .collect()
 }
 
-/// The workspace root (where `Cargo.toml` of twinbench lives).
+/// Where twinbench was built from (its `Cargo.toml`), if that folder is still there: the
+/// tests and the bundled system files use it; an installed binary does not need it.
 pub fn workspace_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// Default output folder of `pack`.
+/// Default output folder of `pack`: `target/fmu` of the source tree the binary was built
+/// from, if it is still there (the bundled system files name it); else
+/// `$XDG_DATA_HOME/twinbench/fmu` (`~/.local/share/twinbench/fmu`).
 pub fn default_fmu_dir() -> PathBuf {
-    workspace_root().join("target").join("fmu")
+    let root = workspace_root();
+    if root.join("Cargo.toml").is_file() {
+        return root.join("target").join("fmu");
+    }
+    let data = std::env::var_os("XDG_DATA_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local/share")))
+        .unwrap_or_else(|| PathBuf::from("."));
+    data.join("twinbench").join("fmu")
 }
 
 /// Path of a packed FMU (test FMUs under `test/`).
@@ -92,31 +100,6 @@ pub fn fmu_path(out_dir: &Path, spec: &ModelSpec) -> PathBuf {
         out_dir.to_path_buf()
     };
     dir.join(format!("{}.fmu", spec.info.name))
-}
-
-/// Build the cdylibs of `specs` in release mode with the `fmu` feature, in a target folder
-/// of their own (so that native builds without the feature never overwrite them).
-pub fn build_libraries(specs: &[ModelSpec]) -> Result<PathBuf, PackError> {
-    let root = workspace_root();
-    let target = root.join("target").join("fmu-build");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut cmd = Command::new(cargo);
-    cmd.current_dir(&root)
-        .arg("build")
-        .arg("--release")
-        .arg("--target-dir")
-        .arg(&target);
-    let mut features = Vec::new();
-    for s in specs {
-        cmd.arg("-p").arg(s.package);
-        features.push(format!("{}/fmu", s.package));
-    }
-    cmd.arg("--features").arg(features.join(","));
-    let status = cmd.status().map_err(PackError::Cargo)?;
-    if !status.success() {
-        return Err(PackError::Build(status.to_string()));
-    }
-    Ok(target.join("release"))
 }
 
 /// Write `bytes` to `path` atomically (temporary file in the same folder, then rename).
@@ -202,15 +185,9 @@ pub fn pack(names: &[String], out_dir: &Path) -> Result<Vec<PathBuf>, PackError>
             reason,
         })?;
     }
-    let lib_dir = build_libraries(&specs)?;
     let mut written = Vec::new();
     for s in &specs {
-        let lib_path = lib_dir.join(format!("lib{}.so", s.package.replace('-', "_")));
-        let lib = std::fs::read(&lib_path).map_err(|_| PackError::MissingBinary {
-            model: s.info.name.into(),
-            path: lib_path.clone(),
-        })?;
-        let bytes = fmu_archive(s, &lib)?;
+        let bytes = fmu_archive(s, s.library)?;
         let path = fmu_path(out_dir, s);
         write_atomic(&path, &bytes)?;
         written.push(path);

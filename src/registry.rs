@@ -20,7 +20,11 @@ macro_rules! registry {
         /// Every registered model, in packing order.
         pub fn models() -> Vec<RegisteredModel> {
             vec![$(RegisteredModel {
-                pack: ModelSpec::of::<$model>($package, registry!(@test_only $kind)),
+                pack: ModelSpec::of::<$model>(
+                    $package,
+                    registry!(@test_only $kind),
+                    include_bytes!(env!(concat!("TWINBENCH_LIB_", $package))),
+                ),
                 native: NativeModel::of::<$model>(),
             }),*]
         }

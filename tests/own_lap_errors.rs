@@ -131,7 +131,7 @@ fn a_measurement_of_another_circuit_is_refused_before_optimising() {
     common::fmu_dir();
     let dir = tb_testkit::scratch("other-circuit");
     // The bundled lap stretched in time and distance by 1.3: another circuit.
-    let t = tb_table::Table::read_path(&root().join("data/spielberg_lap.csv")).unwrap();
+    let t = tb_table::Table::read_path(root().join("data/spielberg_lap.csv")).unwrap();
     let cols: Vec<Vec<f64>> = t
         .names()
         .iter()

@@ -1,7 +1,8 @@
-//! `twinbench demo`: the main job on the bundled data. Packs the FMUs when missing, runs the
-//! paper's two-step optimisation (studies/spielberg.toml) with the whole virtual bench
-//! (RLS/v) in the loop against the bundled Spielberg measurement, prints Tab. 1 and writes
-//! the report (Tab. 1 as Markdown and JSON, plots as SVG and PNG) to a folder it names.
+//! `twinbench demo`: the main job on the bundled data. Writes the bundled study, system,
+//! measurement and the packed FMUs into `<out>/bundle` (they are embedded in the binary: no
+//! sources needed), runs the paper's two-step optimisation with the whole virtual bench
+//! (RLS/v) in the loop against the Spielberg measurement, prints Tab. 1 and writes the
+//! report (Tab. 1 as Markdown and JSON, plots as SVG and PNG) to `<out>`.
 
 use anyhow::Context;
 use std::path::PathBuf;
@@ -26,8 +27,9 @@ pub struct DemoArgs {
 
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let wall = Instant::now();
-    let root = crate::pack::workspace_root();
-    let fmu_dir = crate::pack::default_fmu_dir();
+    let bundle = args.out.join("bundle");
+    write_bundle(&bundle)?;
+    let fmu_dir = bundle.join("target").join("fmu");
     let missing = crate::pack::models()
         .iter()
         .any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists());
@@ -37,7 +39,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     }
     let study_path = args
         .study
-        .unwrap_or_else(|| root.join("studies/spielberg.toml"));
+        .unwrap_or_else(|| bundle.join("studies/spielberg.toml"));
     let study = Study::load(&study_path)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
@@ -87,6 +89,37 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     println!("report        {}", report.folder.display());
     for f in &report.files {
         println!("  {}", f.display());
+    }
+    Ok(())
+}
+
+/// The bundled lap, embedded in the binary: the study, the system, the measurement with its
+/// provenance, at their paths relative to each other.
+const BUNDLE: &[(&str, &[u8])] = &[
+    (
+        "studies/spielberg.toml",
+        include_bytes!("../../studies/spielberg.toml"),
+    ),
+    (
+        "systems/rls_v.toml",
+        include_bytes!("../../systems/rls_v.toml"),
+    ),
+    (
+        "data/spielberg_lap.csv",
+        include_bytes!("../../data/spielberg_lap.csv"),
+    ),
+    ("data/README.md", include_bytes!("../../data/README.md")),
+];
+
+/// Writes the bundle into `dir` (files already there with the same content stay untouched).
+fn write_bundle(dir: &std::path::Path) -> anyhow::Result<()> {
+    for (name, bytes) in BUNDLE {
+        let p = dir.join(name);
+        if std::fs::read(&p).ok().as_deref() == Some(*bytes) {
+            continue;
+        }
+        tb_table::write_atomic(&p, bytes)
+            .with_context(|| format!("cannot write {}", p.display()))?;
     }
     Ok(())
 }

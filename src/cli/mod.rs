@@ -33,7 +33,7 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Build the model crates in release mode and write target/fmu/<model>.fmu.
+    /// Write the FMUs (the model libraries are built into this binary): target/fmu/<model>.fmu, or -o DIR.
     Pack(pack::PackArgs),
     /// The main job on the bundled data (packs the FMUs if needed).
     Demo(demo::DemoArgs),

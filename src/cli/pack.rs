@@ -1,4 +1,4 @@
-//! `twinbench pack`: build the models and write their FMUs.
+//! `twinbench pack`: write the FMUs of the models built into this binary.
 
 use std::path::PathBuf;
 
@@ -6,7 +6,8 @@ use std::path::PathBuf;
 pub struct PackArgs {
     /// Models to pack (default: all).
     pub models: Vec<String>,
-    /// Output folder (default: target/fmu of the workspace).
+    /// Output folder (default: target/fmu of the source tree, if it is there; else
+    /// ~/.local/share/twinbench/fmu).
     #[arg(long, short)]
     pub out: Option<PathBuf>,
 }

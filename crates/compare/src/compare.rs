@@ -1,4 +1,4 @@
-//! The comparison pipeline (paper §4.2, BENCH.md §4): both the measurement and the
+//! The comparison pipeline (paper §4.2, docs/bench.md, comparing with the vehicle): both the measurement and the
 //! simulation are low-pass filtered alike (zero-phase Butterworth, same order and cutoff in
 //! Hz, each at its own uniform sample rate, in time), then interpolated onto one linearly
 //! spaced distance grid, then compared signal by signal ([`crate::metrics`]).

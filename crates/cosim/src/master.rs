@@ -566,7 +566,8 @@ impl Simulation {
     /// The plan's consistency checks, after initialisation.
     fn check_consistency(&mut self) -> Result<(), SystemError> {
         let plan = self.plan.clone();
-        for (signals, tolerance, why) in &plan.checks {
+        for check in &plan.checks {
+            let (signals, tolerance, why) = (&check.signals, &check.tolerance, &check.why);
             let values = self.read_values(signals)?;
             let (mut lo, mut hi) = (&values[0], &values[0]);
             for v in &values {
@@ -583,7 +584,8 @@ impl Simulation {
             } else {
                 0.0
             };
-            if !(rel <= *tolerance) {
+            // NaN fails too.
+            if rel.is_nan() || rel > *tolerance {
                 return Err(SystemError::Stop(format!(
                     "{}: check failed after initialisation: {} = {} and {} = {} differ by {:.3} % (at most {} % allowed){}",
                     plan.path.display(),

@@ -208,7 +208,8 @@ v ≥ 0). The target is piecewise linear in s and periodic: the lap length L is 
 of the file and every position is taken modulo L, so the vehicle's <code>s</code> may keep
 growing over several laps or wrap at L itself. The default file is the Spielberg lap of
 <code>data/spielberg_lap.csv</code>, resampled every 1 m and smoothed over 9 m
-(<code>tools/make_target_speed.py</code>; provenance in <code>resources/NOTICE</code>). A
+(<code>twinbench lap</code> makes the same file for any measured lap; provenance in
+<code>resources/NOTICE</code>). <code>target_speed_file</code> names another file. A
 missing or malformed file fails the initialisation with the file and row named.</p>
 <h3>Control law</h3>
 <p class="eq">s<sub>p</sub> = s + max(v·t<sub>p</sub>, d<sub>min</sub>),&nbsp;

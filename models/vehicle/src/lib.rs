@@ -19,7 +19,7 @@ use track::{Track, TrackPoint};
 pub const TRACK_FILE: &str = "track.csv";
 
 fmu_export::variables! {
-    /// Variables of the vehicle model (names as in BENCH.md and the paper, hence the case).
+    /// Variables of the vehicle model (names as in docs/bench.md and the paper, hence the case).
     #[allow(non_snake_case)]
     pub struct VehicleVars {
         m: Real = 880.0 => parameter(1).unit("kg").range(1.0, 1e5)

@@ -183,7 +183,7 @@ fn ripple(x: &[f64]) -> f64 {
 
 /// Stability at 1 ms: a pedal step to half torque at 0.1 s and a brake pulse at 1 s, from 5,
 /// 10, 20 and 50 m/s, on an ideal plant and on a dyno-like one (0.5 ms dead time, 1 ms lag,
-/// BENCH.md's clean case). The rear setpoint's ripple (around its trend) over the last 0.5 s of
+/// docs/bench.md's clean case). The rear setpoint's ripple (around its trend) over the last 0.5 s of
 /// 2 s stays below 2 N·m. Longer dead times are printed, not asserted: that ringing is the
 /// bench effect the paper studies (2 ms: ripple up to ~15 N·m; 5 ms: a limit cycle bounded
 /// by the tyre friction, kN·m; dead-time compensation belongs to the dyno).

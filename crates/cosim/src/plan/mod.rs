@@ -108,6 +108,15 @@ pub struct ConnectionDef {
     pub offset: f64,
 }
 
+/// Signals that must agree after initialisation, within a relative tolerance.
+#[derive(Clone, Debug)]
+pub struct Check {
+    pub signals: Vec<(String, Endpoint)>,
+    pub tolerance: f64,
+    /// What a failure means.
+    pub why: Option<String>,
+}
+
 /// One exchange slot: a value the master reads from a unit and others use.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Signal {
@@ -187,8 +196,8 @@ pub struct Plan {
     pub stop: Stop,
     /// Signals read at the end of a run for its summary.
     pub report: Vec<(String, Endpoint)>,
-    /// Signals that must agree after initialisation: (names and endpoints, tolerance, why).
-    pub checks: Vec<(Vec<(String, Endpoint)>, f64, Option<String>)>,
+    /// Signals that must agree after initialisation.
+    pub checks: Vec<Check>,
     /// Per replay: the slot of the signal giving its basis (distance mode).
     pub replay_basis: Vec<Option<usize>>,
     /// Stepping order over units (FMU instances and replays).
@@ -612,7 +621,11 @@ impl Plan {
                 }
                 signals.push((n.clone(), e));
             }
-            checks.push((signals, c.relative_tolerance, c.why.clone()));
+            checks.push(Check {
+                signals,
+                tolerance: c.relative_tolerance,
+                why: c.why.clone(),
+            });
         }
         // Replay bases.
         let mut replay_basis = Vec::with_capacity(replays.len());
