@@ -151,3 +151,48 @@ fn run_json_summary_and_info_table() {
         "{text}"
     );
 }
+
+#[test]
+fn strings_are_set_connected_recorded_and_quoted_in_the_csv() {
+    let body = "connections = [\"a.tag_out -> b.tag\"]\n[[instance]]\nname = \"a\"\nfmu = \"faulty\"\n\n[[instance]]\nname = \"b\"\nfmu = \"faulty\"\n\n[parameters]\n\"a.tag\" = \"lap, one\"\n\n[record]\nsignals = [\"a.tag_out\", \"b.tag_out\", \"b.steps\"]\n\n[experiment]\nstep = 1e-3\nstop = 0.003\n";
+    let (f, p) = faulty_system(body, "strings");
+    let mut s = sim(f, &p);
+    s.run().unwrap();
+    let rec = &s.recording;
+    assert_eq!(
+        rec.text_at(1).unwrap(),
+        ["lap, one 0", "lap, one 1", "lap, one 2", "lap, one 3"]
+    );
+    assert_eq!(rec.text_at(2).unwrap()[3], "lap, one 3 3");
+    let scratch = tb_testkit::scratch("orch-strings");
+    let out = scratch.path().join("s.csv");
+    rec.write_csv(&out).unwrap();
+    let text = std::fs::read_to_string(&out).unwrap();
+    assert!(text.contains("\"lap, one 3\",\"lap, one 3 3\",3"), "{text}");
+    let back = tb_table::Table::read_path(&out).unwrap();
+    assert_eq!(back.text_at(2).unwrap()[3], "lap, one 3 3");
+    // The same through isolated workers (strings on the worker protocol).
+    let (f, p) = faulty_system(body, "strings-isolated");
+    let options = tb_cosim::LoadOptions {
+        isolate: true,
+        ..Default::default()
+    };
+    let plan = Plan::compile(
+        f,
+        &p,
+        Arc::new(FmuCache::temporary(false).unwrap()),
+        &options,
+    )
+    .unwrap();
+    let mut iso = Simulation::new(plan).unwrap();
+    iso.run().unwrap();
+    assert_eq!(iso.recording.text_at(2), rec.text_at(2));
+    // A String parameter of the wrong type is refused by the plan, naming it.
+    let bad = body.replace("\"a.tag\" = \"lap, one\"", "\"a.tag\" = 3");
+    let (f, p) = faulty_system(&bad, "strings-bad");
+    let e = Plan::from_file(f, &p, Arc::new(FmuCache::temporary(false).unwrap()))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("'a.tag' is String, the value 3 is not"), "{e}");
+}

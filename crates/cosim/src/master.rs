@@ -324,6 +324,8 @@ pub struct Simulation {
     pub recording: Table,
     /// Echo FMU messages with status OK to the log (off: kept only for error reports).
     pub echo_fmu_log: bool,
+    /// The recording has text columns (String signals).
+    has_text: bool,
 }
 
 impl Simulation {
@@ -412,7 +414,9 @@ impl Simulation {
                 recording.set_text(k + 1);
             }
         }
+        let has_text = (0..recording.names().len()).any(|k| recording.is_text(k));
         Ok(Simulation {
+            has_text,
             algorithm: algorithm(plan.file.experiment.algorithm),
             ex: Exchange {
                 signals: vec![0.0; plan.signals.len()],
@@ -561,6 +565,13 @@ impl Simulation {
         let signals = &self.ex.signals;
         self.recording
             .push_row(std::iter::once(t).chain(self.plan.record.iter().map(|&s| signals[s])));
+        if self.has_text {
+            for (k, &s) in self.plan.record.iter().enumerate() {
+                if self.recording.is_text(k + 1) {
+                    self.recording.push_text(k + 1, &self.ex.texts[s]);
+                }
+            }
+        }
     }
 
     /// The plan's consistency checks, after initialisation.

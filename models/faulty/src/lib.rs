@@ -18,6 +18,9 @@ fmu_export::variables! {
         steps: Integer = 0 => discrete_output(6).describe("Steps taken"),
         y_direct: Real = 0.0 => output(7).unit("1").depends_on(&[4])
             .describe("gain·u: direct feed-through of the input"),
+        tag: String = "" => input(8).describe("A text input (for hosts' tests of String variables)"),
+        tag_out: String = "" => output(9).depends_on(&[8])
+            .describe("tag and the steps taken, e.g. \"lap 3\" after 3 steps of tag \"lap\""),
     }
 }
 
@@ -48,6 +51,7 @@ impl Model for Faulty {
         vars.y = 0.0;
         vars.steps = 0;
         vars.y_direct = vars.gain * vars.u;
+        vars.tag_out = format!("{} 0", vars.tag);
         Ok(Faulty { y: 0.0, steps: 0 })
     }
 
@@ -82,11 +86,13 @@ impl Model for Faulty {
         vars.y = self.y;
         vars.steps = self.steps;
         vars.y_direct = vars.gain * vars.u;
+        vars.tag_out = format!("{} {}", vars.tag, self.steps);
         Ok(())
     }
 
     fn update_outputs(&mut self, vars: &mut FaultyVars) {
         vars.y_direct = vars.gain * vars.u;
+        vars.tag_out = format!("{} {}", vars.tag, self.steps);
     }
 
     fn save_state(&self, w: &mut StateWriter) {
