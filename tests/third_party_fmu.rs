@@ -177,7 +177,7 @@ fn fmus_with_extra_root_attributes_annotations_and_vendor_attributes_load_and_ru
             "{name}"
         );
         assert_eq!(md.unit_of(u), Some("1"), "{name}");
-        assert_eq!(md.outputs.len(), 3, "{name}");
+        assert_eq!(md.outputs.len(), 4, "{name}");
         // And it runs in a system.
         let sys = system(dir.path(), &[("third_party", &fmu)], CHAIN)
             .unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -213,13 +213,13 @@ fn units_unknown_to_us_but_defined_by_the_fmus_are_converted() {
         repack(dir.path(), name, &edit(&xml, from, &to))
     };
     assert!(tb_fmi::description::ModelDescription::default()
-        .unit_def("h")
+        .unit_def("hr")
         .is_none());
-    for u in ["h", "min", "degC", "degF", "furlong"] {
+    for u in ["hr", "mins", "degC", "degF", "furlong"] {
         assert!(fmu_export::units::lookup(u).is_none(), "{u} is known to us");
     }
-    let src_h = with_unit("src_h", "y_direct", "h", "s=\"1\" factor=\"3600\"");
-    let dst_min = with_unit("dst_min", "u", "min", "s=\"1\" factor=\"60\"");
+    let src_h = with_unit("src_h", "y_direct", "hr", "s=\"1\" factor=\"3600\"");
+    let dst_min = with_unit("dst_min", "u", "mins", "s=\"1\" factor=\"60\"");
     let src_c = with_unit("src_c", "y_direct", "degC", "K=\"1\" offset=\"273.15\"");
     let dst_f = with_unit(
         "dst_f",
@@ -308,7 +308,7 @@ signals = ["minutes.u", "fahrenheit.u"]
         Err(e) => e,
     };
     assert!(
-        e.contains("units 'h' and 'furlong' differ and at least one has no definition"),
+        e.contains("units 'hr' and 'furlong' differ and at least one has no definition"),
         "{e}"
     );
 }

@@ -18,8 +18,8 @@ fmu_export::variables! {
         steps: Integer = 0 => discrete_output(6).describe("Steps taken"),
         y_direct: Real = 0.0 => output(7).unit("1").depends_on(&[4])
             .describe("gain·u: direct feed-through of the input"),
-        tag: String = "" => input(8).describe("A text input (for hosts' tests of String variables)"),
-        tag_out: String = "" => output(9).depends_on(&[8])
+        tag: String = "" => discrete_input(8).describe("A text input (for hosts' tests of String variables)"),
+        tag_out: String = "" => discrete_output(9).depends_on(&[8])
             .describe("tag and the steps taken, e.g. \"lap 3\" after 3 steps of tag \"lap\""),
     }
 }

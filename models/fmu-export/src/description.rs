@@ -86,6 +86,14 @@ pub fn validate_table<V: VarTable>() -> Result<(), String> {
         {
             errors.push(format!("'{}': a String has no unit and no range", a.name));
         }
+        if a.var_type() != crate::variables::ScalarType::Real
+            && a.variability == crate::variables::Variability::Continuous
+        {
+            errors.push(format!(
+                "'{}': only a Real can be continuous (FMI 2.0 §2.2.7); declare it discrete",
+                a.name
+            ));
+        }
         let x = a.start.as_f64();
         if a.has_start() && (a.min.is_some_and(|m| x < m) || a.max.is_some_and(|m| x > m)) {
             errors.push(format!(
