@@ -19,8 +19,8 @@ fn columns_bits(t: &tb_table::Table) -> Vec<Vec<u64>> {
 #[test]
 fn a_candidate_gives_the_same_bits_on_a_fresh_and_on_a_used_worker() {
     common::fmu_dir();
-    let study = Study::load(&twinbench::pack::workspace_root().join("studies/spielberg.toml"))
-        .unwrap();
+    let study =
+        Study::load(&twinbench::pack::workspace_root().join("studies/spielberg.toml")).unwrap();
     let prepared = tb_compare::PreparedMeasurement::from_path(
         &study.measurement_path,
         &["Fz_sum", "Fz_rl"],
@@ -53,6 +53,9 @@ fn a_candidate_gives_the_same_bits_on_a_fresh_and_on_a_used_worker() {
             );
         }
     }
-    let (ea, eb) = (fresh.comparison.get("Fz_sum").unwrap().e, used.comparison.get("Fz_sum").unwrap().e);
+    let (ea, eb) = (
+        fresh.comparison.get("Fz_sum").unwrap().e,
+        used.comparison.get("Fz_sum").unwrap().e,
+    );
     assert_eq!(ea.to_bits(), eb.to_bits());
 }

@@ -163,6 +163,35 @@ fn same_seed_same_result_any_threads_and_after_resume() {
         &resumed,
         "interrupted twice and resumed vs uninterrupted",
     );
+    // Every reported value, byte for byte (the session's own figures aside: run counts,
+    // times, workers, whether it was resumed).
+    let reported = |r: &StudyResult| {
+        let mut j = serde_json::to_value(r).unwrap();
+        let o = j.as_object_mut().unwrap();
+        for k in [
+            "simulations",
+            "simulation_seconds",
+            "wall_seconds",
+            "workers_created",
+            "resumed",
+            "threads",
+        ] {
+            o.remove(k);
+        }
+        serde_json::to_string_pretty(&j).unwrap()
+    };
+    let (a, b) = (reported(&two), reported(&resumed));
+    if a != b {
+        let diff: Vec<String> = a
+            .lines()
+            .zip(b.lines())
+            .enumerate()
+            .filter(|(_, (x, y))| x != y)
+            .take(20)
+            .map(|(i, (x, y))| format!("line {i}: {x} | {y}"))
+            .collect();
+        panic!("the resumed result differs:\n{}", diff.join("\n"));
+    }
 
     // A checkpoint of another study is refused.
     let other = load(dir.path(), &study_text("cmaes", TWO_STEPS));
