@@ -369,6 +369,16 @@ pub fn prepare(o: &LapOptions) -> Result<LapFiles, LapError> {
         path: o.out.clone(),
         source,
     })?;
+    let mut inputs = vec![o.measurement.as_path()];
+    if let Some(t) = &o.track {
+        inputs.push(t.as_path());
+    }
+    for name in ["target_speed.csv", "track.csv", "system.toml", "study.toml"] {
+        tb_table::check_output(&o.out.join(name), &inputs).map_err(|source| LapError::Io {
+            path: o.out.join(name),
+            source,
+        })?;
+    }
     let lap = lap_length(&m)?;
     let t = m.time();
     let lap_time = t[t.len() - 1] - t[0];

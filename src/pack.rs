@@ -102,21 +102,12 @@ pub fn fmu_path(out_dir: &Path, spec: &ModelSpec) -> PathBuf {
     dir.join(format!("{}.fmu", spec.info.name))
 }
 
-/// Write `bytes` to `path` atomically (temporary file in the same folder, then rename).
+/// Write `bytes` to `path` atomically (see [`tb_table::write_atomic`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), PackError> {
-    let io = |source| PackError::Io {
+    tb_table::write_atomic(path, bytes).map_err(|source| PackError::Io {
         path: path.to_path_buf(),
         source,
-    };
-    let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(io)?;
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        path.file_name().unwrap_or_default().to_string_lossy(),
-        std::process::id()
-    ));
-    std::fs::write(&tmp, bytes).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    })
 }
 
 /// Assemble one FMU archive in memory.

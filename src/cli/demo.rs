@@ -27,6 +27,7 @@ pub struct DemoArgs {
 
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let wall = Instant::now();
+    let _lock = tb_table::FolderLock::acquire(&args.out)?;
     let bundle = args.out.join("bundle");
     write_bundle(&bundle)?;
     let fmu_dir = bundle.join("target").join("fmu");

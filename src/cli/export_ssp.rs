@@ -25,6 +25,9 @@ pub struct ExportSspArgs {
 pub fn run(args: ExportSspArgs) -> anyhow::Result<()> {
     let cache = Arc::new(FmuCache::temporary(false)?);
     let system = Plan::load(&args.system, cache)?;
+    let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
+    inputs.extend(system.file.fmus.values().map(|p| p.as_path()));
+    tb_table::check_output(&args.out, &inputs)?;
     let options = tb_cosim::ssp::ExportOptions {
         stop_time: args.stop_time,
     };

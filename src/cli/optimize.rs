@@ -48,7 +48,22 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
     let study = Study::load(&args.study)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
+    // One optimisation per output folder at a time; no output replaces an input.
+    let _lock = tb_table::FolderLock::acquire(&args.out)?;
     let checkpoint = args.out.join(format!("{}.checkpoint.json", study.name()));
+    let inputs = [
+        study.path.as_path(),
+        study.system_path.as_path(),
+        study.measurement_path.as_path(),
+    ];
+    for name in [
+        checkpoint.clone(),
+        args.out.join("result.json"),
+        args.out.join("table1.json"),
+        args.out.join("table1.md"),
+    ] {
+        tb_table::check_output(&name, &inputs)?;
+    }
     if args.resume && !checkpoint.exists() {
         eprintln!(
             "no checkpoint at {}: starting from the beginning",

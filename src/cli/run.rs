@@ -77,6 +77,14 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         },
     };
     let system = Arc::new(Plan::load_with(&args.system, cache, &options)?);
+    if let Some(out) = &args.out {
+        // Before the run: a result must not replace a device, a link, a folder or an input.
+        let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
+        inputs.extend(system.file.fmus.values().map(|p| p.as_path()));
+        inputs.extend(system.file.replay.iter().map(|r| r.file.as_path()));
+        inputs.extend(system.file.preload.iter().map(|p| p.as_path()));
+        tb_table::check_output(out, &inputs)?;
+    }
     for w in &system.warnings {
         eprintln!("warning: {w}");
     }

@@ -1,0 +1,124 @@
+//! Result files are written safely: `--out` onto a FIFO, a device, a symbolic link, a folder
+//! or an input of the run is refused before the run; a symbolic link planted where a
+//! temporary file could be expected changes nothing; two optimisations cannot share a folder.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn run_out(system: &Path, out: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args([
+            "run",
+            system.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap()
+}
+
+/// A one-second system of the test FMU (quick), written in `dir`.
+fn small_system(dir: &Path) -> PathBuf {
+    let fmu = common::fmu("faulty");
+    let p = dir.join("small.toml");
+    std::fs::write(
+        &p,
+        format!(
+            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n",
+            fmu.display().to_string()
+        ),
+    )
+    .unwrap();
+    p
+}
+
+fn refused(o: &Output, what: &str) -> String {
+    assert!(!o.status.success(), "{what}: accepted");
+    let e = String::from_utf8_lossy(&o.stderr).into_owned();
+    // Refused before the run: no summary was printed.
+    assert!(o.stdout.is_empty(), "{what}: the run went ahead");
+    e
+}
+
+#[test]
+fn out_onto_a_fifo_a_device_a_link_a_folder_or_an_input_is_refused_before_the_run() {
+    let dir = tb_testkit::scratch("outs");
+    let sys = small_system(dir.path());
+    // A FIFO (mkfifo).
+    let fifo = dir.path().join("fifo");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let e = refused(&run_out(&sys, &fifo), "FIFO");
+    assert!(e.contains("not a regular file"), "{e}");
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo_like());
+    // A device.
+    let e = refused(&run_out(&sys, Path::new("/dev/null")), "/dev/null");
+    assert!(e.contains("/dev/null: is not a regular file"), "{e}");
+    // A symbolic link (to a file the link must not let us replace).
+    let victim = dir.path().join("victim.txt");
+    std::fs::write(&victim, "keep me").unwrap();
+    let link = dir.path().join("link.csv");
+    std::os::unix::fs::symlink(&victim, &link).unwrap();
+    let e = refused(&run_out(&sys, &link), "symlink");
+    assert!(e.contains("is a symbolic link"), "{e}");
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep me");
+    // A folder.
+    let e = refused(&run_out(&sys, dir.path()), "folder");
+    assert!(e.contains("is a folder"), "{e}");
+    // The system file itself.
+    let e = refused(&run_out(&sys, &sys), "input");
+    assert!(e.contains("is an input of this run"), "{e}");
+    assert!(std::fs::read_to_string(&sys)
+        .unwrap()
+        .contains("[experiment]"));
+}
+
+#[test]
+fn a_planted_temporary_link_redirects_nothing() {
+    let dir = tb_testkit::scratch("planted");
+    let sys = small_system(dir.path());
+    let victim = dir.path().join("victim.txt");
+    std::fs::write(&victim, "keep me").unwrap();
+    // Links at the names a predictable writer would use (".NAME.tmpPID", ".NAME.tmp").
+    for pid in 0..64 {
+        let _ = std::os::unix::fs::symlink(&victim, dir.path().join(format!(".lap.csv.tmp{pid}")));
+    }
+    std::os::unix::fs::symlink(&victim, dir.path().join(".lap.csv.tmp")).unwrap();
+    let out = dir.path().join("lap.csv");
+    let o = run_out(&sys, &out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep me");
+    assert!(std::fs::read_to_string(&out).unwrap().starts_with("time,"));
+}
+
+#[test]
+fn two_writers_cannot_share_an_output_folder() {
+    let dir = tb_testkit::scratch("lock");
+    let first = tb_table::FolderLock::acquire(dir.path()).unwrap();
+    let second = tb_table::FolderLock::acquire(dir.path())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        second.contains("another twinbench") && second.contains(&std::process::id().to_string()),
+        "{second}"
+    );
+    drop(first);
+    tb_table::FolderLock::acquire(dir.path()).unwrap();
+}
+
+trait FifoLike {
+    fn is_fifo_like(&self) -> bool;
+}
+
+impl FifoLike for std::fs::FileType {
+    fn is_fifo_like(&self) -> bool {
+        use std::os::unix::fs::FileTypeExt;
+        self.is_fifo()
+    }
+}
