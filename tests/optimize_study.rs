@@ -201,27 +201,41 @@ fn same_seed_same_result_any_threads_and_after_resume() {
 
 #[test]
 fn a_failing_candidate_is_penalised_and_the_study_goes_on() {
-    common::fmu_dir();
+    let fmu_dir = common::fmu_dir();
     let dir = tempfile::tempdir().unwrap();
-    // Grip below about 0.05 cannot finish the lap within max_time (or is outside the FMU's
-    // declared range): those candidates fail.
+    // The bench with a probe that fails on purpose (fmi2Error) from `probe.fault_time` on:
+    // candidates with a fault time inside the lap (about 98 s) fail.
+    let root = twinbench::pack::workspace_root();
+    let faulty = common::fmu("faulty");
+    let system = std::fs::read_to_string(root.join("systems/rls_v.toml"))
+        .unwrap()
+        .replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()))
+        .replace(
+            "[fmus]\n",
+            &format!("[fmus]\nprobe = {:?}\n", faulty.display().to_string()),
+        )
+        .replace(
+            "[parameters]\n",
+            "[[instance]]\nname = \"probe\"\nfmu = \"probe\"\n\n[parameters]\n\"probe.fault_kind\" = 1\n",
+        );
+    let sys = dir.path().join("probe.toml");
+    std::fs::write(&sys, system).unwrap();
     let body = r#"
 [[step]]
-name = "grip"
+name = "probe"
 signals = ["Fz_sum"]
 [[step.parameter]]
-name = "vehicle.tyre_D"
-min = 0.0
-max = 0.3
-start = 0.3
+name = "probe.fault_time"
+min = 60.0
+max = 300.0
+start = 300.0
 "#;
-    let study = load(dir.path(), &study_text("ga", body));
-    // A grip of 0.3 drives nothing like the measured lap: past the plausibility check.
-    let forced = RunOptions {
-        force: true,
-        ..options(2, &dir.path().join("cp.json"))
-    };
-    let r = finished(run_study(&study, &forced).unwrap());
+    let text = study_text("ga", body).replace(
+        &root.join("systems/rls_v.toml").display().to_string(),
+        &sys.display().to_string(),
+    );
+    let study = load(dir.path(), &text);
+    let r = finished(run_study(&study, &options(2, &dir.path().join("cp.json"))).unwrap());
     let s = &r.steps[0];
     assert!(
         s.failures >= 1,
@@ -230,10 +244,41 @@ start = 0.3
     assert_eq!(s.failure_reasons.len(), s.failures);
     for reason in &s.failure_reasons {
         assert!(
-            reason.contains("did not complete") || reason.contains("outside the declared range"),
+            reason.contains("instance 'probe'") && reason.contains("fmi2DoStep returned fmi2Error"),
             "{reason}"
         );
     }
     assert!(s.cost_after < 1.0, "a finite best: {}", s.cost_after);
     assert_eq!(s.history.len(), 2);
+}
+
+#[test]
+fn study_bounds_outside_the_declared_range_and_connected_inputs_are_refused() {
+    common::fmu_dir();
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "vehicle.tyre_D",
+            "0.0",
+            "0.3",
+            "the bounds [0, 0.3] of 'vehicle.tyre_D' leave its declared range [0.05, 3]",
+        ),
+        (
+            "vehicle.brake_pedal",
+            "0.0",
+            "1.0",
+            "'vehicle.brake_pedal' is an input connected to driver.brake_pedal",
+        ),
+    ];
+    for (name, min, max, expected) in cases {
+        let body = format!(
+            "[[step]]\nname = \"s\"\nsignals = [\"Fz_sum\"]\n[[step.parameter]]\nname = \"{name}\"\nmin = {min}\nmax = {max}\n"
+        );
+        let study = load(dir.path(), &study_text("ga", &body));
+        let e = run_study(&study, &options(1, &dir.path().join("cp.json")))
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains(expected), "{name}: {e}");
+    }
 }

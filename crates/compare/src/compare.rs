@@ -79,9 +79,10 @@ impl CompareSettings {
                 self.filter_order
             )));
         }
-        if !(self.distance_step_m.is_finite() && self.distance_step_m > 0.0) {
+        // At least 1 mm: a finer grid of a lap is tens of millions of points per signal.
+        if !(self.distance_step_m.is_finite() && self.distance_step_m >= 1e-3) {
             return Err(Error::Settings(format!(
-                "distance_step_m = {} must be positive",
+                "distance_step_m = {} must be at least 0.001 m",
                 self.distance_step_m
             )));
         }

@@ -74,9 +74,22 @@ impl Bench {
         // types are set once on every worker.
         let mut fixed = Vec::new();
         let study_dir = study.path.parent().unwrap_or(std::path::Path::new("."));
+        let not_connected = |slot: &ParamSlot| -> Result<(), OptimizeError> {
+            match plan.driving_connection(slot) {
+                Some(c) => Err(OptimizeError::File {
+                    path: study.path.clone(),
+                    message: format!(
+                        "'{}' is an input connected to {} (\"{}\"): the connection sets it every step, a study cannot",
+                        slot.name, c.from_name, c.text
+                    ),
+                }),
+                None => Ok(()),
+            }
+        };
         for (name, value) in &study.file.parameters {
             let ctx = format!("{}: parameter \"{name}\"", study.path.display());
             let slot = plan.parameter(name)?;
+            not_connected(&slot)?;
             let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, study_dir);
             match v {
                 ParamValue::Real(x) => {
@@ -95,6 +108,23 @@ impl Bench {
                     continue;
                 }
                 let slot = plan.parameter(&p.name)?;
+                not_connected(&slot)?;
+                // The bounds within the variable's declared range (else every candidate
+                // outside it fails, and the best point cannot be evaluated).
+                if slot.min.is_some_and(|m| p.min < m) || slot.max.is_some_and(|m| p.max > m) {
+                    return Err(OptimizeError::File {
+                        path: study.path.clone(),
+                        message: format!(
+                            "step '{}': the bounds [{}, {}] of '{}' leave its declared range [{}, {}]",
+                            step.name,
+                            p.min,
+                            p.max,
+                            p.name,
+                            slot.min.map_or("-inf".into(), |m| m.to_string()),
+                            slot.max.map_or("inf".into(), |m| m.to_string())
+                        ),
+                    });
+                }
                 let x = sim.value_of(&slot).unwrap_or(p.min);
                 slot.real(x)?;
                 slots.push(slot);

@@ -324,6 +324,29 @@ impl Optimizer for Cmaes {
                 "CMA-ES state has a different number of parameters".into(),
             ));
         }
+        // A damaged checkpoint must not run a study of failed candidates to its end.
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        let square =
+            |m: &[Vec<f64>]| m.len() == self.n && m.iter().all(|r| r.len() == self.n && finite(r));
+        if !(s.sigma.is_finite() && s.sigma > 0.0) {
+            return Err(OptimizeError::Checkpoint(format!(
+                "CMA-ES state: sigma = {} is not a positive number (a damaged checkpoint: start without --resume)",
+                s.sigma
+            )));
+        }
+        if !(finite(&s.mean)
+            && square(&s.c)
+            && square(&s.b)
+            && s.d.len() == self.n
+            && finite(&s.d)
+            && finite(&s.pc)
+            && finite(&s.ps)
+            && s.pending.iter().all(|x| finite(x)))
+        {
+            return Err(OptimizeError::Checkpoint(
+                "CMA-ES state holds a non-finite or misshapen mean, covariance or path (a damaged checkpoint: start without --resume)".into(),
+            ));
+        }
         self.s = s;
         Ok(())
     }

@@ -274,6 +274,17 @@ impl Optimizer for Ga {
                 "GA state has a different number of parameters".into(),
             ));
         }
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if !(s
+            .population
+            .iter()
+            .all(|i| finite(&i.x) && !i.cost.is_nan())
+            && s.pending.iter().all(|x| finite(x)))
+        {
+            return Err(OptimizeError::Checkpoint(
+                "GA state holds a non-finite candidate or cost (a damaged checkpoint: start without --resume)".into(),
+            ));
+        }
         self.s = s;
         Ok(())
     }

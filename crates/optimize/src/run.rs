@@ -209,8 +209,41 @@ struct Current {
 struct Checkpoint {
     version: u32,
     fingerprint: String,
+    /// The command line's overrides the study ran with (a resume must use the same).
+    #[serde(default)]
+    overrides: Overrides,
     completed: Vec<StepResult>,
     current: Option<Current>,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+struct Overrides {
+    optimizer: Option<OptimizerKind>,
+    generations: Option<usize>,
+}
+
+impl Overrides {
+    fn of(o: &RunOptions) -> Overrides {
+        Overrides {
+            optimizer: o.optimizer,
+            generations: o.generations,
+        }
+    }
+
+    fn describe(&self) -> String {
+        let mut v = Vec::new();
+        if let Some(k) = self.optimizer {
+            v.push(format!("--optimizer {}", k.name()));
+        }
+        if let Some(g) = self.generations {
+            v.push(format!("--generations {g}"));
+        }
+        if v.is_empty() {
+            "no overrides".into()
+        } else {
+            v.join(" ")
+        }
+    }
 }
 
 const CHECKPOINT_VERSION: u32 = 1;
@@ -504,6 +537,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
     let mut checkpoint = Checkpoint {
         version: CHECKPOINT_VERSION,
         fingerprint: study.fingerprint.clone(),
+        overrides: Overrides::of(options),
         completed: Vec::new(),
         current: None,
     };
@@ -511,6 +545,14 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
     if options.resume {
         if let Some(path) = options.checkpoint.as_ref().filter(|p| p.exists()) {
             checkpoint = read_checkpoint(path, study)?;
+            if checkpoint.overrides != Overrides::of(options) {
+                return Err(OptimizeError::Checkpoint(format!(
+                    "{} was made with {}, this run has {}: resume with the same options (a study mixing budgets or optimisers is no result)",
+                    path.display(),
+                    checkpoint.overrides.describe(),
+                    Overrides::of(options).describe()
+                )));
+            }
             resumed = true;
         }
     }
@@ -670,6 +712,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                     let cp = Checkpoint {
                         version: CHECKPOINT_VERSION,
                         fingerprint: study.fingerprint.clone(),
+                        overrides: Overrides::of(options),
                         completed: completed_so_far.clone(),
                         current: Some(Current {
                             step: k,

@@ -132,6 +132,15 @@ pub enum OptimizerKind {
     Cmaes,
 }
 
+impl OptimizerKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            OptimizerKind::Ga => "ga",
+            OptimizerKind::Cmaes => "cmaes",
+        }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OptimizerConfig {
@@ -269,9 +278,43 @@ impl Study {
         if f.optimizer.generations == 0 {
             return Err(bad("optimizer.generations must be at least 1".into()));
         }
-        if !(f.penalty.is_finite() && f.bias_weight >= 0.0 && f.null_ratio > 0.0) {
+        if !(f.penalty.is_finite()
+            && f.bias_weight.is_finite()
+            && f.bias_weight >= 0.0
+            && f.null_ratio.is_finite()
+            && f.null_ratio > 0.0)
+        {
+            return Err(bad(format!(
+                "penalty must be finite, bias_weight a finite number ≥ 0, null_ratio a finite number > 0 (got {}, {}, {})",
+                f.penalty, f.bias_weight, f.null_ratio
+            )));
+        }
+        // Sizes that would exhaust memory or never finish are refused up front.
+        const MAX_POPULATION: usize = 10_000;
+        const MAX_GENERATIONS: usize = 1_000_000;
+        if f.optimizer.ga.population > MAX_POPULATION
+            || f.optimizer
+                .cmaes
+                .population
+                .is_some_and(|p| p > MAX_POPULATION)
+        {
+            return Err(bad(format!(
+                "optimizer population: at most {MAX_POPULATION} candidates per generation"
+            )));
+        }
+        let too_many = |g: usize| g > MAX_GENERATIONS;
+        if too_many(f.optimizer.generations)
+            || f.steps.iter().any(|s| s.generations.is_some_and(too_many))
+        {
+            return Err(bad(format!("generations: at most {MAX_GENERATIONS}")));
+        }
+        let p = &f.plausibility;
+        if ![p.lap_length, p.lap_time, p.r_squared_v]
+            .iter()
+            .all(|x| x.is_finite() && *x >= 0.0)
+        {
             return Err(bad(
-                "penalty must be finite, bias_weight ≥ 0, null_ratio > 0".into(),
+                "[plausibility]: bounds must be finite numbers ≥ 0".into()
             ));
         }
         for s in &f.steps {
@@ -280,7 +323,7 @@ impl Study {
                 return Err(bad(format!("{ctx}: needs parameters and signals")));
             }
             if s.weights().len() != s.signals.len()
-                || s.weights().iter().any(|w| w.is_nan() || *w < 0.0)
+                || s.weights().iter().any(|w| !w.is_finite() || *w < 0.0)
             {
                 return Err(bad(format!(
                     "{ctx}: weights must be one non-negative number per signal"
@@ -288,6 +331,16 @@ impl Study {
             }
             if s.weights().iter().sum::<f64>() <= 0.0 {
                 return Err(bad(format!("{ctx}: the weights sum to zero")));
+            }
+            if let Some(b) = s.bias_weight {
+                if !(b.is_finite() && b >= 0.0) {
+                    return Err(bad(format!(
+                        "{ctx}: bias_weight must be a finite number ≥ 0, got {b}"
+                    )));
+                }
+            }
+            if s.generations == Some(0) {
+                return Err(bad(format!("{ctx}: generations must be at least 1")));
             }
             for p in &s.parameters {
                 if tb_cosim::split_name(&p.name).is_none() {

@@ -730,6 +730,14 @@ impl Plan {
         parameter_slot(&self.instances, name, &format!("parameter \"{name}\""))
     }
 
+    /// The connection that drives this input every step, if it is a connected input (a value
+    /// set for it would be overwritten at once).
+    pub fn driving_connection(&self, slot: &ParamSlot) -> Option<&ConnectionDef> {
+        self.connections
+            .iter()
+            .find(|c| c.to_unit == slot.unit && c.to_vr == slot.vr)
+    }
+
     /// A signal the system can read (`instance.variable` or `replay.column`).
     pub fn endpoint(&self, name: &str) -> Result<Endpoint, SystemError> {
         resolve_endpoint(
