@@ -63,16 +63,14 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if args.keep_extracted {
         eprintln!("unpacked FMUs kept in {}", cache.root().display());
     }
-    anyhow::ensure!(
-        args.worker_timeout > 0.0 && args.worker_timeout.is_finite(),
-        "--worker-timeout must be a positive number of seconds"
-    );
+    let timeout = tb_cosim::isolated::watchdog(args.worker_timeout)
+        .map_err(|m| anyhow::anyhow!("--worker-timeout: {m}"))?;
     let options = LoadOptions {
         native: args.native,
         native_models: crate::registry::native_models(),
         isolate: args.isolate,
         isolation: tb_cosim::isolated::IsolationOptions {
-            timeout: std::time::Duration::from_secs_f64(args.worker_timeout),
+            timeout,
             worker_exe: None,
         },
     };

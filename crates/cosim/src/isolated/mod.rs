@@ -31,6 +31,20 @@ use std::sync::Arc;
 use std::time::Duration;
 use tb_fmi::{FmuError, LoadedFmu};
 
+/// The longest watchdog accepted (a day): longer is a mistake, and beyond what a
+/// `Duration` holds it would panic.
+pub const MAX_TIMEOUT_S: f64 = 86_400.0;
+
+/// A watchdog of `seconds`, checked: positive, finite, at most [`MAX_TIMEOUT_S`].
+pub fn watchdog(seconds: f64) -> Result<Duration, String> {
+    if !(seconds.is_finite() && seconds > 0.0 && seconds <= MAX_TIMEOUT_S) {
+        return Err(format!(
+            "watchdog must be a number of seconds in (0, {MAX_TIMEOUT_S}], got {seconds:e}"
+        ));
+    }
+    Ok(Duration::from_secs_f64(seconds))
+}
+
 /// The default per-call watchdog.
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(10);
 /// Environment variable naming the executable that serves `worker` (default: this one).

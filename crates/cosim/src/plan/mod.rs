@@ -108,6 +108,9 @@ pub struct ConnectionDef {
     pub offset: f64,
 }
 
+/// The most macro steps a run may have (10¹²: days of a 1 µs step; more is a mistake).
+pub const MAX_STEPS: f64 = 1e12;
+
 /// Signals that must agree after initialisation, within a relative tolerance.
 #[derive(Clone, Debug)]
 pub struct Check {
@@ -253,7 +256,38 @@ impl Plan {
                 ),
             ));
         }
+        if !file.experiment.start.is_finite() {
+            return Err(invalid(
+                &ctx_file,
+                format!(
+                    "experiment.start must be a finite time, got {}",
+                    file.experiment.start
+                ),
+            ));
+        }
+        // The step count of the run (the stop time, or max_time with a condition) must be
+        // a number the master can count: a step count beyond it would wrap and run nothing.
+        let span = match &file.experiment.stop {
+            StopConfig::Time(t) => t - file.experiment.start,
+            StopConfig::Word(_) => file.experiment.max_time,
+        };
+        let steps = span / file.experiment.step;
+        if steps.is_finite() && steps > MAX_STEPS {
+            return Err(invalid(
+                &ctx_file,
+                format!(
+                    "experiment.step = {} s over {span} s is {steps:.3e} macro steps, more than {MAX_STEPS:.0e}: a larger step",
+                    file.experiment.step
+                ),
+            ));
+        }
         match &file.experiment.stop {
+            StopConfig::Time(t) if !t.is_finite() => {
+                return Err(invalid(
+                    &ctx_file,
+                    format!("experiment.stop must be a finite time, got {t}"),
+                ))
+            }
             StopConfig::Time(t) if *t <= file.experiment.start || t.is_nan() => {
                 return Err(invalid(
                     &ctx_file,
@@ -288,11 +322,12 @@ impl Plan {
             })?;
             if instances.iter().any(|i: &InstanceDef| i.name == inst.name)
                 || inst.name.contains('.')
+                || !valid_unit_name(&inst.name)
             {
                 return Err(invalid(
                     &ctx_file,
                     format!(
-                        "instance name '{}' is repeated or contains a '.'",
+                        "instance name '{}' is repeated, empty, or contains a '.', a quote, a separator or a control character",
                         inst.name
                     ),
                 ));
@@ -327,13 +362,8 @@ impl Plan {
             let factory: Arc<dyn BackendFactory> = if inst.isolate || options.isolate {
                 let mut iso = options.isolation.clone();
                 if let Some(w) = inst.watchdog {
-                    if !w.is_finite() || w <= 0.0 {
-                        return Err(invalid(
-                            format!("{ctx_file}: instance '{}'", inst.name),
-                            format!("watchdog must be a positive number of seconds, got {w}"),
-                        ));
-                    }
-                    iso.timeout = std::time::Duration::from_secs_f64(w);
+                    iso.timeout = crate::isolated::watchdog(w)
+                        .map_err(|m| invalid(format!("{ctx_file}: instance '{}'", inst.name), m))?;
                 }
                 Arc::new(IsolatedFactory {
                     fmu: fmu.clone(),
@@ -359,6 +389,15 @@ impl Plan {
         let n_fmu = instances.len();
         let mut replays = Vec::new();
         for r in &file.replay {
+            if !valid_unit_name(&r.name) || r.name.contains('.') {
+                return Err(invalid(
+                    &ctx_file,
+                    format!(
+                        "replay name '{}' is empty, or contains a '.', a quote, a separator or a control character",
+                        r.name
+                    ),
+                ));
+            }
             if instances.iter().any(|i| i.name == r.name) {
                 return Err(invalid(
                     &ctx_file,
@@ -758,6 +797,15 @@ impl Plan {
         }
         (names, units)
     }
+}
+
+/// A name that can head a result column as it is: no quote, no separator, no control
+/// character, not empty.
+fn valid_unit_name(name: &str) -> bool {
+    !name.is_empty()
+        && !name
+            .chars()
+            .any(|c| c.is_control() || matches!(c, '"' | ',' | ';' | '\t'))
 }
 
 /// Every output of every instance (under the system's names) and every replayed column.
