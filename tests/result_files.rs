@@ -122,3 +122,32 @@ impl FifoLike for std::fs::FileType {
         self.is_fifo()
     }
 }
+
+#[test]
+fn a_complete_run_keeps_its_results_when_an_instance_fails_to_end() {
+    let dir = tb_testkit::scratch("terminate");
+    let fmu = common::fmu("faulty");
+    let sys = dir.path().join("t.toml");
+    std::fs::write(
+        &sys,
+        format!(
+            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\"a.fault_kind\" = 9\n\"a.fault_time\" = 100.0\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n",
+            fmu.display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("r.csv");
+    let o = run_out(&sys, &out);
+    assert!(!o.status.success(), "the terminate error is an error");
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("fmi2Terminate returned fmi2Error"), "{e}");
+    assert!(e.contains("fault_kind = 9"), "{e}");
+    assert!(e.contains("the run completed (stop time 1 s)"), "{e}");
+    // The recording is complete: 1001 rows, y = 1 at the end.
+    let t = tb_table::Table::read_path(&out).unwrap();
+    assert_eq!(t.len(), 1001);
+    assert_eq!(
+        *t.require("a.y").unwrap().last().unwrap(),
+        1.0000000000000007
+    );
+}

@@ -104,11 +104,28 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         let cwd = std::env::current_dir().unwrap_or_default();
         sim.set(&slot, slot.resolve_path(v, &cwd));
     }
-    let summary = sim.run()?;
+    // A run that completed keeps its results even when an instance then fails to end.
+    let (summary, after_run) = match sim.run() {
+        Ok(s) => (s, None),
+        Err(tb_cosim::SystemError::AfterRun { summary, error }) => (*summary, Some(error)),
+        Err(e) => return Err(e.into()),
+    };
     if let Some(out) = &args.out {
         sim.recording
             .write_any(out)
             .with_context(|| format!("cannot write {}", out.display()))?;
+    }
+    if let Some(e) = after_run {
+        if let Some(out) = &args.out {
+            eprintln!(
+                "results written to {} (the run was complete)",
+                out.display()
+            );
+        }
+        return Err(anyhow::Error::new(*e).context(format!(
+            "the run completed ({}), then ending an instance failed",
+            summary.stopped_by
+        )));
     }
     let rtf = summary.simulated_time / summary.wall_time.max(1e-12);
     if args.json {

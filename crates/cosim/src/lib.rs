@@ -50,6 +50,13 @@ pub enum SystemError {
     },
     #[error("{0}")]
     Stop(String),
+    /// The run completed, then ending an instance failed: the recording is complete and
+    /// kept; the error is still an error.
+    #[error("the run completed ({}), then {error}; its recording is complete and kept", summary.stopped_by)]
+    AfterRun {
+        summary: Box<RunSummary>,
+        error: Box<SystemError>,
+    },
 }
 
 /// An error about the system, with where it is (file, connection, parameter).

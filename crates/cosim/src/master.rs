@@ -725,17 +725,29 @@ impl Simulation {
             stopped_by = c.to_string();
         }
         let reported = self.read_reported()?;
-        for u in &mut self.ex.units {
-            if let Unit::Fmu(f) = u {
-                f.backend().terminate()?;
-            }
-        }
-        Ok(RunSummary {
+        let summary = RunSummary {
             steps: k,
             simulated_time: t_end - start,
             wall_time: wall.elapsed().as_secs_f64(),
             stopped_by,
             reported,
-        })
+        };
+        // Every instance is ended, even after one fails to end; the first error is reported
+        // with the (complete) run's summary.
+        let mut first_error = None;
+        for u in &mut self.ex.units {
+            if let Unit::Fmu(f) = u {
+                if let Err(e) = f.backend().terminate() {
+                    first_error.get_or_insert(e);
+                }
+            }
+        }
+        match first_error {
+            None => Ok(summary),
+            Some(e) => Err(SystemError::AfterRun {
+                summary: Box::new(summary),
+                error: Box::new(e.into()),
+            }),
+        }
     }
 }

@@ -10,8 +10,8 @@ fmu_export::variables! {
     /// Variables of the faulty test model.
     pub struct FaultyVars {
         gain: Real = 1.0 => tunable(1).unit("1").range(-1e6, 1e6).describe("Integrator gain"),
-        fault_kind: Integer = 0 => parameter(2).range(0.0, 8.0)
-            .describe("0 none, 1 return an error, 2 panic, 3 output NaN, 4 abort the process, 5 never return, 6 error in initialization, 7 discard the step, 8 fatal error"),
+        fault_kind: Integer = 0 => parameter(2).range(0.0, 9.0)
+            .describe("0 none, 1 return an error, 2 panic, 3 output NaN, 4 abort the process, 5 never return, 6 error in initialization, 7 discard the step, 8 fatal error, 9 error in fmi2Terminate"),
         fault_time: Real = 1.0 => parameter(3).unit("s").describe("Time from which the fault occurs"),
         u: Real = 0.0 => input(4).unit("1").describe("Integrator input"),
         y: Real = 0.0 => output(5).unit("s").describe("Integral of gain·u"),
@@ -87,6 +87,15 @@ impl Model for Faulty {
         vars.steps = self.steps;
         vars.y_direct = vars.gain * vars.u;
         vars.tag_out = format!("{} {}", vars.tag, self.steps);
+        Ok(())
+    }
+
+    fn terminate(&mut self, vars: &FaultyVars) -> Result<(), ModelError> {
+        if vars.fault_kind == 9 {
+            return Err(ModelError::new(
+                "fault_kind = 9: fmi2Terminate fails on purpose",
+            ));
+        }
         Ok(())
     }
 

@@ -233,6 +233,11 @@ pub trait Model: Clone + Send + Sized + 'static {
         Ok(())
     }
 
+    /// fmi2Terminate: the run is over (flush, check what only the end can tell).
+    fn terminate(&mut self, _vars: &Self::Vars) -> Result<(), ModelError> {
+        Ok(())
+    }
+
     /// Append the dynamic state (not the variables, not resources) to `w`.
     fn save_state(&self, w: &mut StateWriter);
 

@@ -367,6 +367,13 @@ impl<M: Model> Runtime<M> {
         if let Err(s) = self.require(Function::Terminate) {
             return s;
         }
+        let r = match self.model.as_mut() {
+            Some(m) => m.terminate(&self.vars),
+            None => Ok(()),
+        };
+        if let Err(e) = r {
+            return self.fail("fmi2Terminate", e);
+        }
         self.phase = Phase::Terminated;
         fmi2Status::OK
     }

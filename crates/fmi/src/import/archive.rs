@@ -12,6 +12,8 @@ use std::sync::{Arc, Mutex};
 
 /// Limits against zip bombs.
 pub const MAX_ENTRIES: usize = 10_000;
+/// The largest modelDescription.xml read (64 MiB).
+pub const MAX_DESCRIPTION_BYTES: u64 = 64 << 20;
 pub const MAX_TOTAL_BYTES: u64 = 2 << 30;
 
 /// The zip-bomb limits of a cache (the defaults are [`MAX_ENTRIES`] and [`MAX_TOTAL_BYTES`]).
@@ -124,6 +126,22 @@ impl FmuCache {
 
     /// Check, unpack (once per content) and load an FMU.
     pub fn load(&self, fmu: &Path) -> Result<Arc<LoadedFmu>, FmuError> {
+        // Only a regular file, and not larger than what may be unpacked: a FIFO would hang
+        // the read, /dev/zero would fill the memory.
+        let meta = std::fs::metadata(fmu).map_err(|e| arch(fmu, format!("cannot read: {e}")))?;
+        if !meta.is_file() {
+            return Err(arch(fmu, "not a regular file (an FMU is a zip archive)"));
+        }
+        if meta.len() > self.limits.max_total_bytes {
+            return Err(arch(
+                fmu,
+                format!(
+                    "{} bytes, more than the limit of {} bytes",
+                    meta.len(),
+                    self.limits.max_total_bytes
+                ),
+            ));
+        }
         let bytes = std::fs::read(fmu).map_err(|e| arch(fmu, format!("cannot read: {e}")))?;
         let sha = format!("{:x}", Sha256::digest(&bytes));
         if let Some(l) = lock(&self.loaded).get(&sha) {
@@ -144,7 +162,7 @@ impl FmuCache {
             .join("binaries")
             .join("linux64")
             .join(format!("{id}.so"));
-        let library = Arc::new(Library::load(&lib_path)?);
+        let library = Arc::new(Library::load(&lib_path).map_err(|e| named_after(fmu, &id, e))?);
         let loaded = Arc::new(LoadedFmu {
             source: fmu.to_path_buf(),
             dir,
@@ -154,6 +172,28 @@ impl FmuCache {
         });
         lock(&self.loaded).insert(sha, loaded.clone());
         Ok(loaded)
+    }
+}
+
+/// A library error under the FMU's name (the unpacked copy is in a temporary folder the user
+/// never saw).
+fn named_after(fmu: &Path, id: &str, e: FmuError) -> FmuError {
+    let entry = format!("binaries/linux64/{id}.so");
+    match e {
+        FmuError::Load { message, .. } => FmuError::Load {
+            path: fmu.to_path_buf(),
+            message: format!(
+                "{entry}: {}",
+                message
+                    .rsplit_once(".so: ")
+                    .map_or(message.as_str(), |(_, m)| m)
+            ),
+        },
+        FmuError::MissingSymbol { symbol, .. } => FmuError::Archive {
+            path: fmu.to_path_buf(),
+            message: format!("{entry} does not export the required FMI 2.0 function {symbol}"),
+        },
+        other => other,
     }
 }
 
@@ -256,9 +296,18 @@ pub fn check_archive_with(
             .map_err(|_| arch(fmu, "no modelDescription.xml at the archive's root"))?;
         let mut raw = Vec::new();
         f.by_ref()
-            .take(64 << 20)
+            .take(MAX_DESCRIPTION_BYTES + 1)
             .read_to_end(&mut raw)
             .map_err(|e| arch(fmu, format!("cannot read modelDescription.xml: {e}")))?;
+        if raw.len() as u64 > MAX_DESCRIPTION_BYTES {
+            return Err(arch(
+                fmu,
+                format!(
+                    "modelDescription.xml is larger than {} MiB (the limit against a hostile archive)",
+                    MAX_DESCRIPTION_BYTES >> 20
+                ),
+            ));
+        }
         String::from_utf8(raw).map_err(|e| {
             arch(
                 fmu,

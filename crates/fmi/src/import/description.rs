@@ -382,6 +382,7 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
     if !saw_root {
         return Err("no <fmiModelDescription> element".into());
     }
+    check_names_and_aliases(&md)?;
     let n = md.variables.len();
     for u in md.outputs.iter().chain(&md.initial_unknowns) {
         if u.index == 0 || u.index > n {
@@ -398,6 +399,38 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
         }
     }
     Ok(md)
+}
+
+/// Variable names are unique; a value reference shared by several variables (an alias) is
+/// allowed among variables of one type, but never for an input or a parameter (a set would
+/// write the other variable too: the FMU's interface would not be what it says).
+fn check_names_and_aliases(md: &ModelDescription) -> Result<(), String> {
+    let mut by_name: HashMap<&str, u32> = HashMap::new();
+    let mut by_vr: HashMap<(u32, ScalarType), &ScalarVariable> = HashMap::new();
+    for v in &md.variables {
+        if let Some(vr) = by_name.insert(&v.name, v.value_reference) {
+            return Err(format!(
+                "variable name '{}' appears twice (value references {vr} and {})",
+                v.name, v.value_reference
+            ));
+        }
+        if let Some(first) = by_vr.insert((v.value_reference, v.ty), v) {
+            let settable =
+                |x: &ScalarVariable| matches!(x.causality, Causality::Input | Causality::Parameter);
+            if settable(first) || settable(v) {
+                return Err(format!(
+                    "value reference {} of {} is shared by '{}' ({}) and '{}' ({}): an input or a parameter cannot be an alias",
+                    v.value_reference,
+                    v.ty,
+                    first.name,
+                    first.causality,
+                    v.name,
+                    v.causality
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -451,6 +484,24 @@ mod tests {
             .unwrap_err()
             .contains("max=\"lots\" is not a number"));
         assert!(parse("<fmiModelDescription><broken").is_err());
+    }
+
+    #[test]
+    fn duplicate_names_and_aliased_inputs_are_refused() {
+        let two = XML.replace("name=\"p\"", "name=\"n\"");
+        assert!(parse(&two)
+            .unwrap_err()
+            .contains("variable name 'n' appears twice (value references 3 and 4)"));
+        let input = r#"<ScalarVariable name="u" valueReference="3" causality="input"><Real start="0"/></ScalarVariable>"#;
+        let aliased = XML.replace(
+            "<ScalarVariable name=\"p\"",
+            &format!("{input}\n    <ScalarVariable name=\"p\""),
+        );
+        let e = parse(&aliased).unwrap_err();
+        assert!(
+            e.contains("value reference 3 of Real is shared by 'n' (output) and 'u' (input)"),
+            "{e}"
+        );
     }
 
     #[test]
