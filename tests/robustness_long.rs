@@ -36,6 +36,7 @@ fn cache_dirs() -> Vec<PathBuf> {
         .filter(|p| {
             p.file_name()
                 .is_some_and(|n| n.to_string_lossy().starts_with(&mine))
+                && p.is_dir()
         })
         .collect();
     v.sort();
@@ -292,10 +293,32 @@ fn a_completed_run_leaves_its_result_and_no_temporary_file() {
 }
 
 #[test]
-fn caches_left_by_killed_processes_are_removed_by_the_next_one() {
-    // A cache folder of a process that no longer runs (pid beyond pid_max).
-    let stale = std::env::temp_dir().join("twinbench-fmu-99999999-deadbeef");
-    std::fs::create_dir_all(stale.join("x/binaries")).unwrap();
+fn caches_left_by_killed_processes_are_removed_by_the_next_one_and_live_ones_kept() {
+    use std::os::fd::AsRawFd;
+    let tmp = std::env::temp_dir();
+    let lock = |name: &str| -> std::fs::File {
+        let f = std::fs::File::create(tmp.join(format!("{name}.lock"))).unwrap();
+        f
+    };
+    // Abandoned: its lock file is not locked (the owner ended); the pid is this process's
+    // own, so a pid lookup would have kept it.
+    let dead = format!("twinbench-fmu-{}-dead-1", std::process::id());
+    std::fs::create_dir_all(tmp.join(&dead).join("x/binaries")).unwrap();
+    drop(lock(&dead));
+    // Alive: its lock is held (by this test, standing for another process, e.g. in another
+    // PID namespace with a pid that does not exist here).
+    let alive = "twinbench-fmu-99999999-alive-1";
+    std::fs::create_dir_all(tmp.join(alive)).unwrap();
+    let held = lock(alive);
+    assert_eq!(
+        unsafe { libc::flock(held.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) },
+        0
+    );
     let _cache = FmuCache::temporary(false).unwrap();
-    assert!(!stale.exists());
+    assert!(!tmp.join(&dead).exists(), "the abandoned cache is removed");
+    assert!(!tmp.join(format!("{dead}.lock")).exists());
+    assert!(tmp.join(alive).exists(), "a live cache is kept");
+    drop(held);
+    let _ = std::fs::remove_dir_all(tmp.join(alive));
+    let _ = std::fs::remove_file(tmp.join(format!("{alive}.lock")));
 }

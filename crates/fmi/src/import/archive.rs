@@ -69,6 +69,51 @@ pub struct FmuCache {
     /// One lock per content hash being loaded.
     loading: Mutex<HashMap<String, Arc<Mutex<()>>>>,
     limits: Limits,
+    /// A temporary cache's lock file (`<root>.lock`, flocked while the cache lives).
+    _owner: Option<OwnerLock>,
+}
+
+/// The lock file beside a temporary cache folder: while it is locked the owner lives.
+struct OwnerLock {
+    path: PathBuf,
+    _file: std::fs::File,
+}
+
+impl Drop for OwnerLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+fn lock_path(root: &Path) -> PathBuf {
+    let mut name = root.as_os_str().to_owned();
+    name.push(".lock");
+    PathBuf::from(name)
+}
+
+fn try_flock(f: &std::fs::File) -> bool {
+    use std::os::fd::AsRawFd;
+    // SAFETY: flock on a descriptor we own.
+    unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) == 0 }
+}
+
+/// Creates `<root>.lock` already locked: made and locked under a temporary name, then
+/// renamed, so that no sweeper ever sees it unlocked.
+fn owner_lock(root: &Path) -> Result<OwnerLock, FmuError> {
+    let path = lock_path(root);
+    let tmp = unique_sibling(&path);
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .map_err(|e| arch(&tmp, format!("cannot create the cache's lock: {e}")))?;
+    if !try_flock(&file) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(arch(&tmp, "cannot lock the cache's lock file"));
+    }
+    std::fs::rename(&tmp, &path)
+        .map_err(|e| arch(&path, format!("cannot create the cache's lock: {e}")))?;
+    Ok(OwnerLock { path, _file: file })
 }
 
 fn arch(path: &Path, message: impl Into<String>) -> FmuError {
@@ -82,19 +127,16 @@ impl FmuCache {
     /// A fresh cache under the system temporary folder, removed on drop unless `keep`.
     pub fn temporary(keep: bool) -> Result<FmuCache, FmuError> {
         remove_stale_caches();
-        let root = std::env::temp_dir().join(format!(
-            "twinbench-fmu-{}-{:x}",
-            std::process::id(),
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_nanos())
-                .unwrap_or(0)
-        ));
+        let root = std::env::temp_dir().join(unique_name("twinbench-fmu"));
+        // The owner's lock, taken before anything is visible under the final names: held
+        // for the cache's life, released by the kernel when the process ends however it ends.
+        let lock = owner_lock(&root)?;
         std::fs::create_dir_all(&root)
             .map_err(|e| arch(&root, format!("cannot create cache folder: {e}")))?;
         Ok(FmuCache {
             root,
             keep,
+            _owner: Some(lock),
             loaded: Mutex::new(HashMap::new()),
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
@@ -108,6 +150,7 @@ impl FmuCache {
         Ok(FmuCache {
             root: dir.to_path_buf(),
             keep: true,
+            _owner: None,
             loaded: Mutex::new(HashMap::new()),
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
@@ -203,24 +246,29 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Remove temporary caches left by twinbench processes that no longer run (killed with
-/// SIGKILL, or crashed): `twinbench-fmu-<pid>-<time>` whose process is gone.
+/// Remove temporary caches provably abandoned: a `twinbench-fmu-*.lock` that can be locked
+/// has no owner any more (its process ended, killed or crashed; the kernel released the
+/// lock). A process id says nothing here: another PID namespace (a container sharing /tmp)
+/// may run the same number.
 fn remove_stale_caches() {
     let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
         return;
     };
     for e in entries.flatten() {
         let name = e.file_name();
-        let Some(pid) = name
+        let Some(stem) = name
             .to_str()
-            .and_then(|n| n.strip_prefix("twinbench-fmu-"))
-            .and_then(|r| r.split_once('-'))
-            .and_then(|(pid, _)| pid.parse::<u32>().ok())
+            .filter(|n| n.starts_with("twinbench-fmu-"))
+            .and_then(|n| n.strip_suffix(".lock"))
         else {
             continue;
         };
-        if !Path::new(&format!("/proc/{pid}")).exists() {
-            let _ = std::fs::remove_dir_all(e.path());
+        let Ok(file) = std::fs::OpenOptions::new().write(true).open(e.path()) else {
+            continue;
+        };
+        if try_flock(&file) {
+            let _ = std::fs::remove_dir_all(std::env::temp_dir().join(stem));
+            let _ = std::fs::remove_file(e.path());
         }
     }
 }
@@ -231,6 +279,8 @@ impl Drop for FmuCache {
             // Libraries stay mapped until the process ends; removing their files is fine on Linux.
             let _ = std::fs::remove_dir_all(&self.root);
         }
+        // Then the owner's lock goes (field drop): a kept cache's lock file goes too, and
+        // with it nothing marks the folder for sweeping.
     }
 }
 
@@ -381,20 +431,28 @@ fn sniff_fmi_version(xml: &str) -> Option<&str> {
     Some(&rest[..rest.find(q)?])
 }
 
-/// A folder name no other thread or process uses: process id, a per-process counter, the
-/// clock (processes in other PID namespaces may share the id).
-fn unique_sibling(dir: &Path) -> PathBuf {
+/// `<prefix>-<pid>-<counter>-<clock>`: a name no other thread or process uses (the clock
+/// for processes in other PID namespaces, which may share the id).
+fn unique_name(prefix: &str) -> String {
     use std::sync::atomic::{AtomicU64, Ordering};
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
+        .map(|d| d.as_nanos())
         .unwrap_or(0);
-    dir.with_extension(format!(
-        "tmp-{}-{}-{nanos:x}",
+    format!(
+        "{prefix}-{}-{}-{nanos:x}",
         std::process::id(),
         COUNTER.fetch_add(1, Ordering::Relaxed)
-    ))
+    )
+}
+
+/// A sibling of `path` that no other thread or process uses.
+fn unique_sibling(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map_or("x".into(), |n| n.to_string_lossy().into_owned());
+    path.with_file_name(unique_name(&format!(".{name}.tmp")))
 }
 
 fn extract(fmu: &Path, bytes: &[u8], dir: &Path, limits: &Limits) -> Result<(), FmuError> {
