@@ -11,7 +11,7 @@ use tb_fmi::Instance;
 fn faulty(name: &str) -> (std::sync::Arc<tb_fmi::LoadedFmu>, Instance) {
     let f = load("faulty");
     let i = Instance::instantiate(
-        f.library.clone(),
+        f.library().unwrap(),
         name,
         &f.description.guid,
         Some(&f.resource_dir()),
@@ -116,7 +116,7 @@ fn bad_values_are_refused_naming_the_variable() {
 fn wrong_guid_is_refused_with_a_message() {
     let f = load("faulty");
     let e = Instance::instantiate(
-        f.library.clone(),
+        f.library().unwrap(),
         "guid",
         "{00000000-0000-0000-0000-000000000000}",
         None,
@@ -168,7 +168,8 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
 #[test]
 fn null_pointers_are_errors_not_crashes() {
     let (f, i) = faulty("nulls");
-    let api = &f.library.api;
+    let library = f.library().unwrap();
+    let api = &library.api;
     let c = i.raw();
     unsafe {
         assert_eq!(
@@ -317,7 +318,7 @@ fn many_instances_per_process() {
     let mut v: Vec<Instance> = (0..64)
         .map(|k| {
             Instance::instantiate(
-                f.library.clone(),
+                f.library().unwrap(),
                 &format!("i{k}"),
                 &f.description.guid,
                 None,
@@ -355,7 +356,7 @@ fn missing_or_malformed_resource_is_an_error_naming_the_file() {
     let scratch = tb_testkit::scratch("noresources");
     let empty = scratch.path().to_path_buf();
     let mut i = Instance::instantiate(
-        f.library.clone(),
+        f.library().unwrap(),
         "drv",
         &f.description.guid,
         Some(&empty),
@@ -373,7 +374,7 @@ fn missing_or_malformed_resource_is_an_error_naming_the_file() {
     // A malformed file: the row is named.
     std::fs::write(empty.join("target_speed.csv"), "s,v\n0,10\n1,abc\n2,12\n").unwrap();
     let mut i = Instance::instantiate(
-        f.library.clone(),
+        f.library().unwrap(),
         "drv2",
         &f.description.guid,
         Some(&empty),

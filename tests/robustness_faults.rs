@@ -52,6 +52,7 @@ fn options(isolate: bool, timeout: Duration) -> LoadOptions {
         isolation: IsolationOptions {
             timeout,
             worker_exe: Some(PathBuf::from(env!("CARGO_BIN_EXE_twinbench"))),
+            ..Default::default()
         },
         ..Default::default()
     }

@@ -153,8 +153,18 @@ fn the_supplier_edu_drives_the_lap_within_one_percent_of_the_reference() {
 
 /// Reference and supplier EDU side by side, inputs held (set in each FMU's own unit).
 fn open_loop(pedal: f64, omega_wheel: f64, omega_start: f64) -> Table {
+    let text = open_loop_system(pedal, omega_wheel, omega_start);
+    let path = std::env::temp_dir().join(format!("tb-supplier-open-{}.toml", std::process::id()));
+    let file = SystemFile::parse(&text, &path).unwrap();
+    let sys = Plan::from_file(file, &path, cache()).unwrap();
+    assert!(sys.warnings.is_empty(), "{:?}", sys.warnings);
+    run(sys).1
+}
+
+/// The open-loop system file (both EDUs, inputs held, libpython preloaded).
+fn open_loop_system(pedal: f64, omega_wheel: f64, omega_start: f64) -> String {
     let (fmu, lib) = supplier_fmu();
-    let text = format!(
+    format!(
         r#"preload = ["{lib}"]
 [fmus]
 edu = "{edu}"
@@ -193,12 +203,58 @@ signals = ["ref.motor_speed", "ref.motor_torque", "ref.torque_left", "ref.torque
         pct = 100.0 * pedal,
         n = omega_wheel / RPM,
         n0 = omega_start / RPM,
+    )
+}
+
+#[test]
+fn isolated_the_supplier_edu_is_preloaded_and_loaded_only_in_its_worker() {
+    // `preload` is applied in each worker; the host loads neither libpython nor the FMU's
+    // library (glibc's loader, with LD_DEBUG=files, names every library each process loads).
+    let dir = tb_testkit::scratch("supplier-iso");
+    let sys = dir.path().join("open.toml");
+    std::fs::write(&sys, open_loop_system(0.6, 150.0, 150.0)).unwrap();
+    let csv = dir.path().join("open.csv");
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(["run", sys.to_str().unwrap(), "--isolate", "--out"])
+        .arg(&csv)
+        .env("LD_DEBUG", "files")
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let host = child.id();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "{}",
+        &err[err.len().saturating_sub(3000)..]
     );
-    let path = std::env::temp_dir().join(format!("tb-supplier-open-{}.toml", std::process::id()));
-    let file = SystemFile::parse(&text, &path).unwrap();
-    let sys = Plan::from_file(file, &path, cache()).unwrap();
-    assert!(sys.warnings.is_empty(), "{:?}", sys.warnings);
-    run(sys).1
+    let loads = |pid: u32, what: &str| {
+        err.lines().any(|l| {
+            l.trim_start().starts_with(&format!("{pid}:"))
+                && l.contains("file=")
+                && l.contains(what)
+        })
+    };
+    assert!(
+        !loads(host, "SupplierEdu.so") && !loads(host, "libpython"),
+        "the host loaded FMU code"
+    );
+    assert!(
+        err.contains("SupplierEdu.so") && err.contains("libpython"),
+        "no worker loaded it"
+    );
+    // The same numbers as in-process.
+    let isolated = Table::read_any(&csv).unwrap();
+    let in_process = open_loop(0.6, 150.0, 150.0);
+    for name in ["sup.n_Motor", "sup.T_Motor", "ref.motor_speed"] {
+        assert_eq!(
+            isolated.require(name).unwrap(),
+            in_process.require(name).unwrap(),
+            "{name}"
+        );
+    }
 }
 
 #[test]

@@ -10,19 +10,55 @@ pub struct InfoArgs {
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
-    /// Load a shared library with RTLD_GLOBAL first (e.g. libpython for a pythonfmu FMU).
+    /// Also load the FMU's library here and check it (fmi2GetVersion, the required
+    /// functions). Without this or --isolate, none of the FMU's code runs.
+    #[arg(long)]
+    pub check: bool,
+    /// Check the library in a worker process: a crash or hang there cannot harm this one.
+    #[arg(long, conflicts_with = "check")]
+    pub isolate: bool,
+    /// Watchdog of the --isolate check [s].
+    #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
+    pub worker_timeout: f64,
+    /// Load a shared library with RTLD_GLOBAL first (e.g. libpython for a pythonfmu FMU);
+    /// with --isolate, in the worker.
     #[arg(long, value_name = "LIBRARY")]
     pub preload: Vec<PathBuf>,
 }
 
+/// The library check's outcome.
+enum LibraryCheck {
+    NotLoaded,
+    Loaded(tb_cosim::isolated::LibraryReport),
+}
+
 pub fn run(args: InfoArgs) -> anyhow::Result<()> {
-    for lib in &args.preload {
-        tb_fmi::library::preload_global(lib)?;
-    }
     let cache = FmuCache::temporary(false)?;
+    // Reading the archive and its model description runs none of the FMU's code.
     let fmu = cache.load(&args.fmu)?;
+    let check = if args.isolate {
+        let options = tb_cosim::isolated::IsolationOptions {
+            timeout: tb_cosim::isolated::watchdog(args.worker_timeout)
+                .map_err(|m| anyhow::anyhow!("--worker-timeout: {m}"))?,
+            preload: args.preload.clone(),
+            ..Default::default()
+        };
+        LibraryCheck::Loaded(tb_cosim::isolated::probe(&fmu, &options)?)
+    } else if args.check {
+        for lib in &args.preload {
+            tb_fmi::library::preload_global(lib)?;
+        }
+        let lib = fmu.library()?;
+        LibraryCheck::Loaded(tb_cosim::isolated::LibraryReport {
+            version: lib.version.clone(),
+            missing_optional: lib.missing_optional.iter().map(|s| s.to_string()).collect(),
+        })
+    } else {
+        LibraryCheck::NotLoaded
+    };
     let md = &fmu.description;
     let cs = md.co_simulation.clone().unwrap_or_default();
+    let gaps = md.model_structure_gaps();
     if args.json {
         let vars: Vec<serde_json::Value> = md
             .variables
@@ -43,6 +79,13 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             "can_be_instantiated_only_once_per_process": cs.can_be_instantiated_only_once_per_process,
             "can_handle_variable_communication_step_size": cs.can_handle_variable_communication_step_size,
             "default_experiment": md.default_experiment.map(|d| serde_json::json!({"start": d.start_time, "stop": d.stop_time, "step": d.step_size})),
+            "library": {
+                "entry": fmu.library_entry(),
+                "checked": matches!(check, LibraryCheck::Loaded(_)),
+                "fmi2GetVersion": match &check { LibraryCheck::Loaded(r) => Some(&r.version), LibraryCheck::NotLoaded => None },
+                "missing_optional_functions": match &check { LibraryCheck::Loaded(r) => Some(&r.missing_optional), LibraryCheck::NotLoaded => None },
+            },
+            "warnings": gaps,
             "variables": vars,
         });
         println!("{}", serde_json::to_string_pretty(&j)?);
@@ -76,6 +119,25 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             "default experiment: start {:?} stop {:?} step {:?}",
             d.start_time, d.stop_time, d.step_size
         );
+    }
+    match &check {
+        LibraryCheck::NotLoaded => println!(
+            "library: {} (not loaded; --check loads it here, --isolate in a worker)",
+            fmu.library_entry()
+        ),
+        LibraryCheck::Loaded(r) => println!(
+            "library: {} loads; fmi2GetVersion \"{}\"; optional functions missing: {}",
+            fmu.library_entry(),
+            r.version,
+            if r.missing_optional.is_empty() {
+                "none".to_string()
+            } else {
+                r.missing_optional.join(", ")
+            }
+        ),
+    }
+    for g in &gaps {
+        eprintln!("warning: {}: {g}", args.fmu.display());
     }
     println!();
     println!(

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 pub mod benchmark;
 pub mod compare;
@@ -75,10 +76,35 @@ pub fn lap_time(summary: &tb_cosim::RunSummary, plan: &tb_cosim::Plan) -> Option
         })
 }
 
+/// Set while a command runs. An FMU loaded in this process that calls `exit()` (some
+/// exporters do on a fatal error) would end twinbench with the FMU's exit code, often 0, and
+/// no word: the handler below turns that into a message and a failure.
+static COMMAND_RUNNING: AtomicBool = AtomicBool::new(false);
+
+/// The exit code when something called `exit()` in the middle of a command.
+pub const EXIT_BY_FMU: i32 = 3;
+
+extern "C" fn exit_guard() {
+    if COMMAND_RUNNING.load(Ordering::SeqCst) {
+        let message = b"error: the process was ended by a call to exit() before the command finished, from inside an FMU's code (twinbench never calls it); nothing more was written. Run the FMU with --isolate (or isolate = true) to keep twinbench alive and see where.\n";
+        // Only async-signal-safe calls here: the process is already ending.
+        unsafe {
+            libc::write(2, message.as_ptr().cast(), message.len());
+            libc::_exit(EXIT_BY_FMU);
+        }
+    }
+}
+
+/// The command is over: an exit from here on is twinbench's own.
+pub(crate) fn command_finished() {
+    COMMAND_RUNNING.store(false, Ordering::SeqCst);
+}
+
 pub fn main() -> ExitCode {
     // Die quietly on a closed pipe (`twinbench info X | head`) instead of panicking in println!.
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+        libc::atexit(exit_guard);
     }
     let cli = Cli::parse();
     let level = match cli.verbose {
@@ -89,6 +115,7 @@ pub fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(level))
         .format_timestamp(None)
         .init();
+    COMMAND_RUNNING.store(true, Ordering::SeqCst);
     let result = match cli.command {
         Command::Pack(a) => pack::run(a),
         Command::Demo(a) => demo::run(a),
@@ -103,6 +130,7 @@ pub fn main() -> ExitCode {
         Command::Identify(a) => identify::run(a),
         Command::Worker(a) => worker::run(a),
     };
+    command_finished();
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -71,7 +71,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         isolate: args.isolate,
         isolation: tb_cosim::isolated::IsolationOptions {
             timeout,
-            worker_exe: None,
+            ..Default::default()
         },
     };
     let system = Arc::new(Plan::load_with(&args.system, cache, &options)?);

@@ -5,5 +5,7 @@
 pub struct WorkerArgs {}
 
 pub fn run(_args: WorkerArgs) -> anyhow::Result<()> {
-    std::process::exit(tb_cosim::isolated::serve_stdio())
+    let code = tb_cosim::isolated::serve_stdio();
+    super::command_finished();
+    std::process::exit(code)
 }

@@ -49,7 +49,7 @@ impl BackendFactory for FmuFactory {
     fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError> {
         let fmu = &self.0;
         let mut inst = Instance::instantiate(
-            fmu.library.clone(),
+            fmu.library()?,
             instance_name,
             &fmu.description.guid,
             Some(&fmu.resource_dir()),

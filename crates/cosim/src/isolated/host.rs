@@ -4,11 +4,11 @@
 //! is checked (a malformed one kills the worker with a protocol error) and every round trip
 //! has a watchdog.
 
-use super::wire::{frame, function_of, kind, op, Dec, Enc, MAX_FRAME};
-use super::{IsolationOptions, STDERR_LINES};
+use super::wire::{frame, function_of, kind, op, Dec, Enc, LibraryTarget, MAX_FRAME};
+use super::{IsolationOptions, LibraryReport, STDERR_LINES};
 use crate::backend::Backend;
 use std::collections::VecDeque;
-use std::io::{BufRead, Read};
+use std::io::Read;
 use std::os::fd::{AsRawFd, OwnedFd};
 use std::os::unix::net::UnixStream;
 use std::process::{Child, Command, Stdio};
@@ -63,7 +63,7 @@ impl IsolatedBackend {
         let mut b = IsolatedBackend::spawn(name, options)?;
         let mut e = Enc::default();
         e.u8(op::INSTANTIATE);
-        e.str(&fmu.library.path.to_string_lossy());
+        library_target(fmu, options).encode(&mut e);
         e.str(name);
         e.str(&fmu.description.guid);
         e.str(&fmu.resource_dir().to_string_lossy());
@@ -73,6 +73,38 @@ impl IsolatedBackend {
             b.set_debug_logging(true)?;
         }
         Ok(b)
+    }
+
+    /// Load the FMU's library in a fresh worker and report on it.
+    pub(super) fn probe(
+        fmu: &LoadedFmu,
+        options: &IsolationOptions,
+    ) -> Result<LibraryReport, FmuError> {
+        let name = fmu.model_identifier().to_string();
+        let mut b = IsolatedBackend::spawn(&name, options)?;
+        let mut e = Enc::default();
+        e.u8(op::PROBE);
+        library_target(fmu, options).encode(&mut e);
+        let spec = GetSpec {
+            op: op::PROBE,
+            vrs: vec![0, 0],
+        };
+        let answer = b.call(Function::GetVersion.name(), e.0, &[spec])?;
+        match answer.as_slice() {
+            [Values::Text(t)] if t.len() == 2 => Ok(LibraryReport {
+                version: t[0].clone(),
+                missing_optional: t[1]
+                    .split(',')
+                    .filter(|s| !s.is_empty())
+                    .map(String::from)
+                    .collect(),
+            }),
+            _ => Err(b.isolated_error(
+                Function::GetVersion.name(),
+                "protocol error (no report on the library)".into(),
+                Vec::new(),
+            )),
+        }
     }
 
     fn spawn(name: &str, options: &IsolationOptions) -> Result<IsolatedBackend, FmuError> {
@@ -102,15 +134,17 @@ impl IsolatedBackend {
             std::thread::Builder::new()
                 .name(format!("worker-stderr-{name}"))
                 .spawn(move || {
-                    for line in std::io::BufReader::new(err).lines() {
-                        let Ok(line) = line else { break };
-                        log::warn!(target: "worker", "{who}: {line}");
-                        let mut t = tail.lock().unwrap();
-                        if t.len() == STDERR_LINES {
-                            t.pop_front();
-                        }
-                        t.push_back(line);
-                    }
+                    read_stderr(
+                        err,
+                        |line| {
+                            let mut t = tail.lock().unwrap_or_else(|p| p.into_inner());
+                            if t.len() == STDERR_LINES {
+                                t.pop_front();
+                            }
+                            t.push_back(line);
+                        },
+                        &who,
+                    );
                     done.store(true, std::sync::atomic::Ordering::Release);
                 })
                 .map_err(|e| fail(format!("cannot start a thread: {e}")))?;
@@ -152,6 +186,14 @@ impl IsolatedBackend {
             return "the worker process is gone".into();
         };
         if kill {
+            let _ = child.kill();
+        } else {
+            // A worker that closed its socket should be dying; one that lingers is killed
+            // (a hostile worker must not keep the host waiting).
+            let until = Instant::now() + Duration::from_secs(2);
+            while matches!(child.try_wait(), Ok(None)) && Instant::now() < until {
+                std::thread::sleep(Duration::from_millis(5));
+            }
             let _ = child.kill();
         }
         let status = match child.wait() {
@@ -256,11 +298,16 @@ impl IsolatedBackend {
             Err(e) => Err(Some(format!("cannot write to the worker: {e}"))),
         };
         let mut body = Vec::new();
+        let n = u32::from_le_bytes(len) as usize;
+        if got.is_ok() && n > MAX_FRAME {
+            let end = self.bury(true);
+            let cause = format!(
+                "protocol error (answer of {n} bytes is too large, the limit is {MAX_FRAME}); killed ({end})"
+            );
+            self.dead = Some(cause.clone());
+            return Err(self.isolated_error(function, cause, self.stderr_lines()));
+        }
         let got = got.and_then(|()| {
-            let n = u32::from_le_bytes(len) as usize;
-            if n > MAX_FRAME {
-                return Err(Some(format!("answer of {n} bytes is too large")));
-            }
             body.resize(n, 0);
             self.recv_exact(&mut body, deadline)
         });
@@ -315,7 +362,7 @@ impl IsolatedBackend {
                         .collect::<Result<_, _>>()
                         .map_err(p)?,
                 )
-            } else if g.op == op::GET_STRING {
+            } else if g.op == op::GET_STRING || g.op == op::PROBE {
                 Values::Text(
                     (0..g.vrs.len())
                         .map(|_| d.str())
@@ -432,6 +479,71 @@ impl IsolatedBackend {
         self.control("fmi2SetDebugLogging", op::SET_DEBUG_LOGGING, |e| {
             e.u8(on as u8)
         })
+    }
+}
+
+/// The longest line of a worker's stderr kept (longer ones are cut): a worker that writes
+/// without newlines must not grow the host's memory.
+const STDERR_LINE_BYTES: usize = 4096;
+/// Lines of a worker's stderr echoed to the log; later ones are only kept in the tail.
+const STDERR_ECHOED: usize = 200;
+
+/// Read a worker's stderr in bounded chunks, handing each (possibly cut) line to `keep`.
+fn read_stderr(mut err: impl Read, mut keep: impl FnMut(String), who: &str) {
+    let mut chunk = [0u8; 8192];
+    let mut line: Vec<u8> = Vec::new();
+    let mut cut = false;
+    let mut echoed = 0usize;
+    let mut emit = |line: &mut Vec<u8>, cut: &mut bool| {
+        let mut text = String::from_utf8_lossy(line).into_owned();
+        if *cut {
+            text.push_str(" [line cut]");
+        }
+        line.clear();
+        *cut = false;
+        match echoed.cmp(&STDERR_ECHOED) {
+            std::cmp::Ordering::Less => log::warn!(target: "worker", "{who}: {text}"),
+            std::cmp::Ordering::Equal => log::warn!(
+                target: "worker",
+                "{who}: more than {STDERR_ECHOED} lines on stderr; the rest is not shown"
+            ),
+            std::cmp::Ordering::Greater => {}
+        }
+        echoed = echoed.saturating_add(1);
+        keep(text);
+    };
+    loop {
+        let n = match err.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(_) => break,
+        };
+        for &b in &chunk[..n] {
+            if b == b'\n' {
+                emit(&mut line, &mut cut);
+            } else if line.len() < STDERR_LINE_BYTES {
+                line.push(b);
+            } else {
+                cut = true;
+            }
+        }
+    }
+    if !line.is_empty() || cut {
+        emit(&mut line, &mut cut);
+    }
+}
+
+fn library_target(fmu: &LoadedFmu, options: &IsolationOptions) -> LibraryTarget {
+    LibraryTarget {
+        path: fmu.library_path().to_string_lossy().into_owned(),
+        source: fmu.source.to_string_lossy().into_owned(),
+        model_identifier: fmu.model_identifier().to_string(),
+        preload: options
+            .preload
+            .iter()
+            .map(|p| p.to_string_lossy().into_owned())
+            .collect(),
     }
 }
 
@@ -615,5 +727,30 @@ impl Drop for IsolatedBackend {
             let _ = child.kill();
             let _ = child.wait();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stderr_without_newlines_is_kept_in_bounded_lines() {
+        // 10 MB without a newline, then a short line: the kept text is bounded.
+        let mut input = vec![b'x'; 10_000_000];
+        input.extend_from_slice(b"\nlast words\n");
+        let mut kept = Vec::new();
+        read_stderr(input.as_slice(), |l| kept.push(l), "test");
+        assert_eq!(kept.len(), 2);
+        assert!(kept[0].len() <= STDERR_LINE_BYTES + 16, "{}", kept[0].len());
+        assert!(kept[0].ends_with("[line cut]"));
+        assert_eq!(kept[1], "last words");
+    }
+
+    #[test]
+    fn a_last_line_without_newline_is_kept() {
+        let mut kept = Vec::new();
+        read_stderr(&b"a\nb"[..], |l| kept.push(l), "test");
+        assert_eq!(kept, ["a", "b"]);
     }
 }

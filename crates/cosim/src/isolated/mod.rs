@@ -60,6 +60,9 @@ pub struct IsolationOptions {
     /// The executable to run as `<exe> worker`; default: [`WORKER_EXE_ENV`], else this
     /// executable (or, from a test binary, `target/<profile>/twinbench`).
     pub worker_exe: Option<PathBuf>,
+    /// Libraries the worker loads with RTLD_GLOBAL before the FMU's (the system file's
+    /// `preload`, e.g. libpython for a pythonfmu FMU).
+    pub preload: Vec<PathBuf>,
 }
 
 impl Default for IsolationOptions {
@@ -67,6 +70,7 @@ impl Default for IsolationOptions {
         IsolationOptions {
             timeout: DEFAULT_TIMEOUT,
             worker_exe: None,
+            preload: Vec::new(),
         }
     }
 }
@@ -98,6 +102,21 @@ impl IsolationOptions {
             me.display()
         ))
     }
+}
+
+/// What loading an FMU's library found (`twinbench info --isolate`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LibraryReport {
+    /// What `fmi2GetVersion` returned.
+    pub version: String,
+    /// The optional FMI functions the library does not export.
+    pub missing_optional: Vec<String>,
+}
+
+/// Load an FMU's library in a worker process and report on it: none of the FMU's code runs
+/// in this process.
+pub fn probe(fmu: &LoadedFmu, options: &IsolationOptions) -> Result<LibraryReport, FmuError> {
+    IsolatedBackend::probe(fmu, options)
 }
 
 /// Creates instances that run in their own worker process.

@@ -1,8 +1,11 @@
 //! The worker protocol's codec: length-prefixed little-endian frames. A request is a list
 //! of operations; an FMI call's operation code is its number in [`tb_fmi::FUNCTIONS`]
 //! (`Function as u8`), so the table that loads an FMU's symbols also names the calls on the
-//! wire. Two codes of the protocol's own: [`op::INSTANTIATE`] (load the library, then
-//! `fmi2Instantiate`) and [`op::QUIT`].
+//! wire. Codes of the protocol's own: [`op::INSTANTIATE`] (load the library, then
+//! `fmi2Instantiate`), [`op::PROBE`] (load the library and report on it) and [`op::QUIT`].
+//!
+//! The library is named by [`LibraryTarget`]: its unpacked path, the .fmu and model
+//! identifier (for messages) and the libraries to preload in the worker.
 //!
 //! A response: `ok: u8`, the number of completed gets `u32`, the instance's time `f64`, the
 //! get results, then (when not ok) the error: a [`kind`] and its fields.
@@ -13,10 +16,14 @@ use tb_fmi::Function;
 pub mod op {
     use tb_fmi::Function;
 
-    /// Load the FMU's library (path), then instantiate (name, GUID, resource folder, logging).
+    /// Load the FMU's library (a [`super::LibraryTarget`]), then instantiate (name, GUID,
+    /// resource folder, logging).
     pub const INSTANTIATE: u8 = 200;
     /// Free the instance and end the worker.
     pub const QUIT: u8 = 201;
+    /// Load the FMU's library (a [`super::LibraryTarget`]) and answer with two strings:
+    /// what `fmi2GetVersion` returned and the missing optional functions (comma-separated).
+    pub const PROBE: u8 = 202;
 
     pub const SET_DEBUG_LOGGING: u8 = Function::SetDebugLogging as u8;
     pub const SETUP_EXPERIMENT: u8 = Function::SetupExperiment as u8;
@@ -51,13 +58,50 @@ pub mod kind {
 pub fn function_of(code: u8) -> Option<Function> {
     match code {
         op::INSTANTIATE => Some(Function::Instantiate),
+        op::PROBE => Some(Function::GetVersion),
         op::QUIT => Some(Function::FreeInstance),
         c => Function::from_u8(c),
     }
 }
 
-/// Largest frame accepted (a corrupted length must not allocate gigabytes).
-pub const MAX_FRAME: usize = 256 << 20;
+/// Largest frame accepted (a corrupted or forged length must not allocate gigabytes).
+/// A step's answer is a few kilobytes; 64 MiB leaves room for huge string outputs.
+pub const MAX_FRAME: usize = 64 << 20;
+
+/// The FMU library a worker loads, with what it needs to name it in messages.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LibraryTarget {
+    /// The unpacked library.
+    pub path: String,
+    /// The .fmu the user gave.
+    pub source: String,
+    pub model_identifier: String,
+    /// Libraries loaded with RTLD_GLOBAL first (the system file's `preload`).
+    pub preload: Vec<String>,
+}
+
+impl LibraryTarget {
+    pub fn encode(&self, e: &mut Enc) {
+        e.str(&self.path);
+        e.str(&self.source);
+        e.str(&self.model_identifier);
+        e.u32(self.preload.len() as u32);
+        self.preload.iter().for_each(|p| e.str(p));
+    }
+    pub fn decode(d: &mut Dec) -> Result<LibraryTarget, String> {
+        let path = d.str()?;
+        let source = d.str()?;
+        let model_identifier = d.str()?;
+        let n = d.count(4)?;
+        let preload = (0..n).map(|_| d.str()).collect::<Result<_, _>>()?;
+        Ok(LibraryTarget {
+            path,
+            source,
+            model_identifier,
+            preload,
+        })
+    }
+}
 
 /// A frame: the payload's length, then the payload.
 pub fn frame(payload: &[u8]) -> Vec<u8> {
@@ -168,6 +212,21 @@ mod tests {
     }
 
     #[test]
+    fn library_targets_round_trip_and_truncation_is_refused() {
+        let t = LibraryTarget {
+            path: "/c/x.so".into(),
+            source: "x.fmu".into(),
+            model_identifier: "x".into(),
+            preload: vec!["libpython3.11.so".into(), "b".into()],
+        };
+        let mut e = Enc::default();
+        t.encode(&mut e);
+        assert_eq!(LibraryTarget::decode(&mut Dec::new(&e.0)).unwrap(), t);
+        let cut = &e.0[..e.0.len() - 3];
+        assert!(LibraryTarget::decode(&mut Dec::new(cut)).is_err());
+    }
+
+    #[test]
     fn fmi_calls_are_coded_by_the_function_table() {
         assert_eq!(function_of(op::DO_STEP), Some(Function::DoStep));
         assert_eq!(function_of(op::GET_REAL).unwrap().name(), "fmi2GetReal");
@@ -175,6 +234,7 @@ mod tests {
         assert_eq!(function_of(150), None);
         // The protocol's own codes are outside the table.
         assert!(Function::from_u8(op::INSTANTIATE).is_none());
+        assert!(Function::from_u8(op::PROBE).is_none());
         assert!(Function::from_u8(op::QUIT).is_none());
     }
 }

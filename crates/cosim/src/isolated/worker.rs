@@ -1,7 +1,7 @@
 //! The worker's end: serves one instance over the socket on stdin until the host closes it
 //! or says quit. Runs in its own process (`twinbench worker`).
 
-use super::wire::{frame, kind, op, Dec, Enc, MAX_FRAME};
+use super::wire::{frame, kind, op, Dec, Enc, LibraryTarget, MAX_FRAME};
 use std::io::{Read, Write};
 use std::os::unix::net::UnixStream;
 use std::path::PathBuf;
@@ -72,6 +72,22 @@ fn serve(mut stream: UnixStream) -> i32 {
     }
 }
 
+/// The preloads, then the FMU's library; errors name the .fmu, not the unpacked copy.
+fn load_library(target: &LibraryTarget) -> Result<Arc<Library>, FmuError> {
+    for p in &target.preload {
+        tb_fmi::library::preload_global(std::path::Path::new(p))?;
+    }
+    Library::load(std::path::Path::new(&target.path))
+        .map(Arc::new)
+        .map_err(|e| {
+            tb_fmi::archive::library_error(
+                std::path::Path::new(&target.source),
+                &target.model_identifier,
+                e,
+            )
+        })
+}
+
 /// Run one request; write the response into `out`. Returns true on quit.
 fn run_ops(
     req: &[u8],
@@ -93,17 +109,23 @@ fn run_ops(
             if code == op::QUIT {
                 return Ok(true);
             }
-            if code == op::INSTANTIATE {
-                let lib = PathBuf::from(d.str().map_err(Err)?);
+            if code == op::INSTANTIATE || code == op::PROBE {
+                let target = LibraryTarget::decode(&mut d).map_err(Err)?;
+                let library = match lib_cache {
+                    Some(l) => l.clone(),
+                    None => load_library(&target).map_err(Ok)?,
+                };
+                *lib_cache = Some(library.clone());
+                if code == op::PROBE {
+                    results.str(&library.version);
+                    results.str(&library.missing_optional.join(","));
+                    n_gets += 1;
+                    return Ok(false);
+                }
                 let name = d.str().map_err(Err)?;
                 let guid = d.str().map_err(Err)?;
                 let res = PathBuf::from(d.str().map_err(Err)?);
                 let logging = d.u8().map_err(Err)? != 0;
-                let library = match lib_cache {
-                    Some(l) => l.clone(),
-                    None => Arc::new(Library::load(&lib).map_err(Ok)?),
-                };
-                *lib_cache = Some(library.clone());
                 *inst = None;
                 let mut i = Instance::instantiate(library, &name, &guid, Some(&res), logging)
                     .map_err(Ok)?;

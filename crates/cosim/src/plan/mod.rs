@@ -244,9 +244,6 @@ impl Plan {
         options: &LoadOptions,
     ) -> Result<Plan, SystemError> {
         let ctx_file = path.display().to_string();
-        for lib in &file.preload {
-            tb_fmi::library::preload_global(lib)?;
-        }
         if !(file.experiment.step > 0.0 && file.experiment.step.is_finite()) {
             return Err(invalid(
                 &ctx_file,
@@ -361,6 +358,7 @@ impl Plan {
             // Isolation (of this instance, or of all) wins over the in-process choices.
             let factory: Arc<dyn BackendFactory> = if inst.isolate || options.isolate {
                 let mut iso = options.isolation.clone();
+                iso.preload.extend(file.preload.iter().cloned());
                 if let Some(w) = inst.watchdog {
                     iso.timeout = crate::isolated::watchdog(w)
                         .map_err(|m| invalid(format!("{ctx_file}: instance '{}'", inst.name), m))?;
@@ -385,6 +383,13 @@ impl Plan {
                 }
             }
             instances.push(def);
+        }
+        // The preloads serve in-process FMU libraries; isolated ones get them in their
+        // worker, so a system of isolated instances loads nothing into this process.
+        if instances.iter().any(|i| i.factory.kind() != "isolated") {
+            for lib in &file.preload {
+                tb_fmi::library::preload_global(lib)?;
+            }
         }
         let n_fmu = instances.len();
         let mut replays = Vec::new();
@@ -689,6 +694,15 @@ impl Plan {
             });
         }
         let mut warnings = native_fallback;
+        for key in file.fmus.keys() {
+            let fmu = &loaded[key.as_str()];
+            for gap in fmu.description.model_structure_gaps() {
+                warnings.push(format!(
+                    "FMU '{key}' ({}): {gap}; twinbench assumes they depend on every input, other importers may refuse the FMU",
+                    fmu.source.display()
+                ));
+            }
+        }
         // Unconnected inputs without a start value.
         for (k, inst) in instances.iter().enumerate() {
             for v in inst

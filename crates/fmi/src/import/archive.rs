@@ -33,16 +33,42 @@ impl Default for Limits {
     }
 }
 
-/// An unpacked, checked FMU with its library loaded.
+/// An unpacked, checked FMU. Its library is loaded into this process only when an
+/// in-process instance first needs it ([`LoadedFmu::library`]): an FMU that runs isolated
+/// never executes code in the host, not even `fmi2GetVersion`.
 pub struct LoadedFmu {
     pub source: PathBuf,
     pub dir: PathBuf,
     pub sha256: String,
     pub description: ModelDescription,
-    pub library: Arc<Library>,
+    library: Mutex<Option<Arc<Library>>>,
 }
 
 impl LoadedFmu {
+    /// The unpacked library (`binaries/linux64/<modelIdentifier>.so`).
+    pub fn library_path(&self) -> PathBuf {
+        self.dir.join(self.library_entry())
+    }
+
+    /// The library's entry in the archive, for messages.
+    pub fn library_entry(&self) -> String {
+        format!("binaries/linux64/{}.so", self.model_identifier())
+    }
+
+    /// The library, loaded into this process on the first call (and checked: every
+    /// required function, `fmi2GetVersion` = "2.0"). Errors name the .fmu and its entry.
+    pub fn library(&self) -> Result<Arc<Library>, FmuError> {
+        let mut slot = lock(&self.library);
+        if let Some(l) = &*slot {
+            return Ok(l.clone());
+        }
+        let library = Library::load(&self.library_path())
+            .map(Arc::new)
+            .map_err(|e| library_error(&self.source, self.model_identifier(), e))?;
+        *slot = Some(library.clone());
+        Ok(library)
+    }
+
     pub fn resource_dir(&self) -> PathBuf {
         self.dir.join("resources")
     }
@@ -196,22 +222,17 @@ impl FmuCache {
         if let Some(l) = lock(&self.loaded).get(&sha) {
             return Ok(l.clone());
         }
-        let (md, id) = check_archive_with(fmu, &bytes, &self.limits)?;
+        let (md, _id) = check_archive_with(fmu, &bytes, &self.limits)?;
         let dir = self.root.join(&sha[..32]);
         if !dir.join(".complete").exists() {
             extract(fmu, &bytes, &dir, &self.limits)?;
         }
-        let lib_path = dir
-            .join("binaries")
-            .join("linux64")
-            .join(format!("{id}.so"));
-        let library = Arc::new(Library::load(&lib_path).map_err(|e| named_after(fmu, &id, e))?);
         let loaded = Arc::new(LoadedFmu {
             source: fmu.to_path_buf(),
             dir,
             sha256: sha.clone(),
             description: md,
-            library,
+            library: Mutex::new(None),
         });
         lock(&self.loaded).insert(sha, loaded.clone());
         Ok(loaded)
@@ -219,8 +240,8 @@ impl FmuCache {
 }
 
 /// A library error under the FMU's name (the unpacked copy is in a temporary folder the user
-/// never saw).
-fn named_after(fmu: &Path, id: &str, e: FmuError) -> FmuError {
+/// never saw). `id` is the model identifier. Also used by the isolation worker.
+pub fn library_error(fmu: &Path, id: &str, e: FmuError) -> FmuError {
     let entry = format!("binaries/linux64/{id}.so");
     match e {
         FmuError::Load { message, .. } => FmuError::Load {

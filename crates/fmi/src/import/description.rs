@@ -98,6 +98,60 @@ impl ModelDescription {
         })
     }
 
+    /// What the ModelStructure leaves out that the standard requires: outputs missing from
+    /// `<Outputs>`, and outputs or calculated parameters computed at initialisation
+    /// (`initial` approx or calculated, explicitly or by default) missing from
+    /// `<InitialUnknowns>`. Some exporters omit these; twinbench then assumes such a
+    /// variable depends on every input, but other importers may reject the FMU.
+    pub fn model_structure_gaps(&self) -> Vec<String> {
+        let listed = |list: &[Unknown], i: usize| list.iter().any(|u| u.index == i + 1);
+        let names = |pick: &dyn Fn(usize, &ScalarVariable) -> bool| -> Vec<&str> {
+            self.variables
+                .iter()
+                .enumerate()
+                .filter(|(i, v)| pick(*i, v))
+                .map(|(_, v)| v.name.as_str())
+                .collect()
+        };
+        let computed_at_init = |v: &ScalarVariable| match v.causality {
+            Causality::Output => {
+                v.variability != Variability::Constant && v.initial != Some(Initial::Exact)
+            }
+            Causality::CalculatedParameter => v.initial != Some(Initial::Exact),
+            _ => false,
+        };
+        let mut gaps = Vec::new();
+        let outputs = names(&|i, v| v.causality == Causality::Output && !listed(&self.outputs, i));
+        let initial = names(&|i, v| computed_at_init(v) && !listed(&self.initial_unknowns, i));
+        let show = |v: &[&str]| {
+            let mut s = v.iter().take(5).copied().collect::<Vec<_>>().join(", ");
+            if v.len() > 5 {
+                s.push_str(&format!(" and {} more", v.len() - 5));
+            }
+            s
+        };
+        if !outputs.is_empty() {
+            gaps.push(format!(
+                "ModelStructure/Outputs does not list {} output(s): {}",
+                outputs.len(),
+                show(&outputs)
+            ));
+        }
+        if !initial.is_empty() {
+            gaps.push(format!(
+                "ModelStructure/InitialUnknowns {} {} variable(s) computed at initialisation: {}",
+                if self.initial_unknowns.is_empty() {
+                    "is missing; it must list"
+                } else {
+                    "does not list"
+                },
+                initial.len(),
+                show(&initial)
+            ));
+        }
+        gaps
+    }
+
     pub fn unit_def(&self, name: &str) -> Option<&UnitDef> {
         self.units.iter().find(|u| u.0 == name).map(|u| &u.1)
     }
@@ -452,6 +506,34 @@ mod tests {
   </ModelVariables>
   <ModelStructure><Outputs><Unknown index="1" dependencies=""/></Outputs><InitialUnknowns><Unknown index="1"/></InitialUnknowns></ModelStructure>
 </fmiModelDescription>"#;
+
+    #[test]
+    fn model_structure_gaps_name_what_the_standard_requires() {
+        let md = parse(XML).unwrap();
+        assert!(md.model_structure_gaps().is_empty());
+        let none = XML.replace(
+            "<InitialUnknowns><Unknown index=\"1\"/></InitialUnknowns>",
+            "",
+        );
+        let gaps = parse(&none).unwrap().model_structure_gaps();
+        assert_eq!(gaps.len(), 1, "{gaps:?}");
+        assert!(gaps[0].contains("InitialUnknowns is missing") && gaps[0].contains(": n"));
+        // An output declared exact needs no entry; it must still be an Output.
+        let exact = none.replace(
+            "causality=\"output\" myAttr",
+            "causality=\"output\" initial=\"exact\" myAttr",
+        );
+        assert!(parse(&exact).unwrap().model_structure_gaps().is_empty());
+        let no_outputs = exact.replace(
+            "<Outputs><Unknown index=\"1\" dependencies=\"\"/></Outputs>",
+            "",
+        );
+        let gaps = parse(&no_outputs).unwrap().model_structure_gaps();
+        assert!(
+            gaps.len() == 1 && gaps[0].contains("Outputs does not list 1 output(s): n"),
+            "{gaps:?}"
+        );
+    }
 
     #[test]
     fn reads_tolerantly_and_keeps_units() {

@@ -6,6 +6,10 @@ use std::path::{Path, PathBuf};
 
 pub struct Library {
     pub path: PathBuf,
+    /// What `fmi2GetVersion` returned ("2.0": anything else is refused).
+    pub version: String,
+    /// The optional functions of [`crate::FUNCTIONS`] the library does not export.
+    pub missing_optional: Vec<&'static str>,
     pub api: Fmi2Api,
     // Declared last: dropped after nothing can call through `api` any more.
     _lib: libloading::Library,
@@ -34,11 +38,17 @@ impl Library {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
+        let mut missing_optional = Vec::new();
         let api = Fmi2Api::resolve(|spec| {
             let symbol = format!("{}\0", spec.name);
-            unsafe { lib.get::<*mut std::ffi::c_void>(symbol.as_bytes()) }
+            let address = unsafe { lib.get::<*mut std::ffi::c_void>(symbol.as_bytes()) }
                 .ok()
                 .map(|s| *s)
+                .filter(|p| !p.is_null());
+            if address.is_none() && !spec.required {
+                missing_optional.push(spec.name);
+            }
+            address
         })
         .map_err(|spec| FmuError::MissingSymbol {
             path: path.to_path_buf(),
@@ -60,6 +70,8 @@ impl Library {
         }
         Ok(Library {
             path: path.to_path_buf(),
+            version,
+            missing_optional,
             api,
             _lib: lib,
         })

@@ -1,0 +1,433 @@
+//! A hostile FMU written in C (`tests/hostile/hostile.c`, built here with gcc) and a forged
+//! worker: under `--isolate` none of the FMU's code runs in twinbench's process, so a
+//! segfault, a hang, an `exit(0)` or a NULL version (in the library's load, in
+//! `fmi2GetVersion` or in a step) and endless stderr end the run with a clear message and
+//! exit code 1, and twinbench lives. A worker that forges its answers is stopped with a
+//! protocol error, never a panic. In-process, an `exit(0)` from the FMU still leaves a
+//! message and a failure code.
+
+mod common;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+use tb_cosim::backend::BackendFactory;
+use tb_cosim::isolated::{IsolatedFactory, IsolationOptions};
+use zip::write::SimpleFileOptions;
+
+const MODEL_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="hostile" guid="{8c4e810f-3df3-4a00-8276-176fa3c9f000}" generationTool="twinbench tests (gcc)">
+  <CoSimulation modelIdentifier="hostile" canHandleVariableCommunicationStepSize="true"/>
+  <ModelVariables>
+    <ScalarVariable name="u" valueReference="0" causality="input" variability="continuous"><Real start="1"/></ScalarVariable>
+    <ScalarVariable name="y" valueReference="1" causality="output" variability="continuous" initial="calculated"><Real/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs><Unknown index="2" dependencies=""/></Outputs>
+    <InitialUnknowns><Unknown index="2" dependencies="1"/></InitialUnknowns>
+  </ModelStructure>
+</fmiModelDescription>
+"#;
+
+/// `hostile.fmu` built with `-DFAULT=<fault>` in `dir`.
+fn hostile_fmu(dir: &Path, fault: &str) -> PathBuf {
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hostile/hostile.c");
+    let so = dir.join(format!("hostile-{fault}.so"));
+    let out = Command::new("gcc")
+        .args(["-shared", "-fPIC", "-O1", "-Wall", "-Werror"])
+        .arg(format!("-DFAULT={fault}"))
+        .arg("-o")
+        .arg(&so)
+        .arg(&source)
+        .output()
+        .expect("gcc runs");
+    assert!(
+        out.status.success(),
+        "gcc: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let fmu = dir.join(format!("hostile-{fault}.fmu"));
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&fmu).unwrap());
+    let o = SimpleFileOptions::default();
+    zip.start_file("modelDescription.xml", o).unwrap();
+    zip.write_all(MODEL_DESCRIPTION.as_bytes()).unwrap();
+    zip.start_file("binaries/linux64/hostile.so", o).unwrap();
+    zip.write_all(&std::fs::read(&so).unwrap()).unwrap();
+    zip.finish().unwrap();
+    fmu
+}
+
+fn system(dir: &Path, fmu: &Path) -> PathBuf {
+    let sys = dir.join(format!(
+        "{}.toml",
+        fmu.file_stem().unwrap().to_string_lossy()
+    ));
+    std::fs::write(
+        &sys,
+        format!(
+            r#"[fmus]
+hostile = "{}"
+
+[[instance]]
+name = "h"
+fmu = "hostile"
+
+[experiment]
+step = 0.1
+stop = 1.0
+
+[record]
+signals = ["h.y"]
+"#,
+            fmu.display()
+        ),
+    )
+    .unwrap();
+    sys
+}
+
+fn twinbench(args: &[&str]) -> (Output, String, Duration) {
+    let started = Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out, err, started.elapsed())
+}
+
+/// `twinbench run SYSTEM --isolate` on the FMU built with `fault`: exit code 1 (twinbench
+/// reported it: not a signal, not the FMU's exit code) and the message.
+fn run_isolated(fault: &str) -> String {
+    let dir = tb_testkit::scratch("hostile");
+    let fmu = hostile_fmu(dir.path(), fault);
+    let sys = system(dir.path(), &fmu);
+    let csv = dir.path().join("out.csv");
+    let (out, err, _) = twinbench(&[
+        "run",
+        sys.to_str().unwrap(),
+        "--isolate",
+        "--worker-timeout",
+        "2",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{fault}: {err}");
+    assert!(
+        !csv.exists(),
+        "{fault}: a failed run wrote {}",
+        csv.display()
+    );
+    err
+}
+
+#[test]
+fn the_hostile_fmu_behaves_when_built_without_a_fault() {
+    let dir = tb_testkit::scratch("hostile");
+    let fmu = hostile_fmu(dir.path(), "NONE");
+    let sys = system(dir.path(), &fmu);
+    for isolate in [false, true] {
+        let csv = dir.path().join(format!("none-{isolate}.csv"));
+        let mut args = vec!["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()];
+        if isolate {
+            args.push("--isolate");
+        }
+        let (out, err, _) = twinbench(&args);
+        assert!(out.status.success(), "{err}");
+        let text = std::fs::read_to_string(&csv).unwrap();
+        // y follows u = 1 (its start value) from the first step.
+        let last = text.lines().last().unwrap();
+        assert!(last.ends_with(",1"), "{last}");
+    }
+}
+
+#[test]
+fn a_null_version_is_refused_in_process_and_isolated() {
+    let err = run_isolated("VERSION_NULL");
+    assert!(
+        err.contains("fmi2GetVersion returned 'NULL', expected '2.0'")
+            && err.contains("hostile-VERSION_NULL.fmu"),
+        "{err}"
+    );
+    let dir = tb_testkit::scratch("hostile");
+    let fmu = hostile_fmu(dir.path(), "VERSION_NULL");
+    let (out, err, _) = twinbench(&["run", system(dir.path(), &fmu).to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("hostile-VERSION_NULL.fmu: cannot load shared library: binaries/linux64/hostile.so: fmi2GetVersion returned 'NULL'"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_segfault_in_fmi2_get_version_leaves_the_host_alive() {
+    let err = run_isolated("VERSION_SEGV");
+    assert!(
+        err.contains("instance 'h' at t = 0 s: fmi2Instantiate in the isolated worker process: the worker process was killed by signal 11 (SIGSEGV: segmentation fault)"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_hang_in_fmi2_get_version_is_ended_by_the_watchdog() {
+    let err = run_isolated("VERSION_HANG");
+    assert!(
+        err.contains("no answer within 2s (watchdog): the FMU hangs; killed"),
+        "{err}"
+    );
+}
+
+#[test]
+fn exit_in_the_library_load_or_fmi2_get_version_is_a_crash_not_a_success() {
+    for fault in ["VERSION_EXIT", "LOAD_EXIT"] {
+        let err = run_isolated(fault);
+        assert!(
+            err.contains("fmi2Instantiate in the isolated worker process: the worker process exited with code 3 (crashed)")
+                && err.contains("exit() before the command finished, from inside an FMU's code"),
+            "{fault}: {err}"
+        );
+    }
+}
+
+#[test]
+fn a_segfault_a_hang_and_an_exit_in_a_step_leave_the_host_alive() {
+    let err = run_isolated("STEP_SEGV");
+    assert!(
+        err.contains("instance 'h' at t = 0.5 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 11"),
+        "{err}"
+    );
+    let err = run_isolated("STEP_HANG");
+    assert!(
+        err.contains("at t = 0.5 s: fmi2DoStep in the isolated worker process: no answer within 2s (watchdog)"),
+        "{err}"
+    );
+    let err = run_isolated("STEP_EXIT");
+    assert!(
+        err.contains("at t = 0.5 s: fmi2DoStep in the isolated worker process: the worker process exited with code 3"),
+        "{err}"
+    );
+}
+
+#[test]
+fn endless_stderr_without_newlines_keeps_the_host_bounded() {
+    // The worker writes gigabytes without a newline until the watchdog kills it; the host
+    // keeps cut lines (a reader that waited for a newline grew until an allocation aborted).
+    let err = run_isolated("STEP_FLOOD");
+    assert!(
+        err.contains("no answer within 2s (watchdog)") && err.contains("[line cut]"),
+        "{}",
+        &err[..err.len().min(2000)]
+    );
+    // One cut line of at most 4 KiB, echoed once and kept in the crash report.
+    assert!(err.len() < 20_000, "{} bytes on stderr", err.len());
+}
+
+#[test]
+fn exit_zero_inside_an_in_process_fmu_is_reported_with_a_failure_code() {
+    let dir = tb_testkit::scratch("hostile");
+    let fmu = hostile_fmu(dir.path(), "STEP_EXIT");
+    let sys = system(dir.path(), &fmu);
+    let csv = dir.path().join("out.csv");
+    let (out, err, _) = twinbench(&["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("error: the process was ended by a call to exit() before the command finished, from inside an FMU's code"),
+        "{err}"
+    );
+    assert!(!csv.exists());
+}
+
+#[test]
+fn info_runs_none_of_the_fmus_code_unless_asked_and_isolates_the_check() {
+    let dir = tb_testkit::scratch("hostile");
+    for fault in ["VERSION_SEGV", "VERSION_EXIT", "LOAD_EXIT", "VERSION_NULL"] {
+        let fmu = hostile_fmu(dir.path(), fault);
+        let path = fmu.to_str().unwrap();
+        // Reading the description runs no code: it works whatever the library does.
+        let (out, err, _) = twinbench(&["info", path]);
+        assert!(out.status.success(), "{fault}: {err}");
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.contains("library: binaries/linux64/hostile.so (not loaded"),
+            "{text}"
+        );
+        // The check in a worker: a clear error, exit code 1.
+        let (out, err, _) = twinbench(&["info", "--isolate", path]);
+        assert_eq!(out.status.code(), Some(1), "{fault}: {err}");
+        assert!(
+            err.contains("in the isolated worker process"),
+            "{fault}: {err}"
+        );
+    }
+    let fmu = hostile_fmu(dir.path(), "VERSION_HANG");
+    let (out, err, took) = twinbench(&[
+        "info",
+        "--isolate",
+        "--worker-timeout",
+        "1",
+        fmu.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("no answer within 1s (watchdog)"), "{err}");
+    assert!(took < Duration::from_secs(30), "{took:?}");
+    let fmu = hostile_fmu(dir.path(), "NONE");
+    let (out, err, _) = twinbench(&["info", "--isolate", fmu.to_str().unwrap()]);
+    assert!(out.status.success(), "{err}");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("library: binaries/linux64/hostile.so loads; fmi2GetVersion \"2.0\"; optional functions missing: fmi2GetFMUstate"),
+        "{text}"
+    );
+}
+
+// ---- a forged worker: the host checks every frame ----
+
+/// Answers of a worker, as frames.
+struct Frames(Vec<u8>);
+
+impl Frames {
+    fn new() -> Self {
+        Frames(Vec::new())
+    }
+    fn raw(mut self, bytes: &[u8]) -> Self {
+        self.0.extend_from_slice(bytes);
+        self
+    }
+    fn frame(self, body: &[u8]) -> Self {
+        let len = (body.len() as u32).to_le_bytes();
+        self.raw(&len).raw(body)
+    }
+    /// A well-formed "ok, no results" answer.
+    fn ok(self) -> Self {
+        self.frame(&answer(0, 0, &[]))
+    }
+}
+
+/// An answer's head: ok flag, number of results, time; then `rest`.
+fn answer(failed: u8, results: u32, rest: &[u8]) -> Vec<u8> {
+    let mut b = vec![failed];
+    b.extend_from_slice(&results.to_le_bytes());
+    b.extend_from_slice(&0.0f64.to_le_bytes());
+    b.extend_from_slice(rest);
+    b
+}
+
+/// A fake worker that writes `frames` onto its socket whatever it is asked, then waits.
+fn forged_worker(dir: &Path, name: &str, frames: Frames) -> PathBuf {
+    let data = dir.join(format!("{name}.bin"));
+    std::fs::write(&data, frames.0).unwrap();
+    let script = dir.join(format!("{name}.sh"));
+    std::fs::write(
+        &script,
+        format!("#!/bin/sh\ncat '{}' >&0\nexec sleep 30\n", data.display()),
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    script
+}
+
+fn factory(worker: PathBuf) -> IsolatedFactory {
+    IsolatedFactory {
+        fmu: common::load("dyno"),
+        options: IsolationOptions {
+            timeout: Duration::from_secs(2),
+            worker_exe: Some(worker),
+            ..Default::default()
+        },
+    }
+}
+
+#[test]
+fn forged_frames_are_protocol_errors_not_panics() {
+    let dir = tb_testkit::scratch("hostile");
+    // A length that would allocate 2 GiB.
+    let w = forged_worker(
+        dir.path(),
+        "huge",
+        Frames::new().raw(&[0xff, 0xff, 0xff, 0x7f]),
+    );
+    let e = factory(w)
+        .create("forged", false)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("answer of 2147483647 bytes is too large") && e.contains("killed"),
+        "{e}"
+    );
+    // Trailing bytes after an ok answer.
+    let w = forged_worker(
+        dir.path(),
+        "trailing",
+        Frames::new().frame(&answer(0, 0, &[1, 2, 3])),
+    );
+    let e = factory(w)
+        .create("forged", false)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("protocol error (trailing bytes)"), "{e}");
+
+    // Instantiated, then each forged answer to a get.
+    let get_answers: [(&str, Vec<u8>, &str); 5] = [
+        ("no_result", answer(0, 0, &[]), "no result for the get"),
+        ("too_many", answer(0, 5, &[]), "5 results for 1 gets"),
+        ("short", answer(0, 1, &[0, 0, 0]), "truncated message"),
+        (
+            "bad_function",
+            answer(1, 0, &[0, 250, 0, 0, 0, 0]),
+            "unknown function code 250",
+        ),
+        (
+            "huge_log",
+            {
+                let mut rest = vec![0u8, tb_fmi::Function::GetReal as u8]; // kind CALL
+                rest.extend_from_slice(&3i32.to_le_bytes());
+                rest.extend_from_slice(&0.0f64.to_le_bytes());
+                rest.extend_from_slice(&u32::MAX.to_le_bytes()); // log lines
+                answer(1, 0, &rest)
+            },
+            "exceeds the message",
+        ),
+    ];
+    for (name, body, expected) in get_answers {
+        let w = forged_worker(dir.path(), name, Frames::new().ok().frame(&body));
+        let mut b = factory(w).create("forged", false).unwrap();
+        let mut out = [0.0];
+        let e = b.get_real(&[0], &mut out).unwrap_err().to_string();
+        assert!(
+            e.contains("protocol error") && e.contains(expected),
+            "{name}: {e}"
+        );
+        // The worker is gone; the next call fails at once with the same cause.
+        let again = b.do_step(0.0, 0.1).unwrap_err().to_string();
+        assert!(again.contains(expected), "{name}: {again}");
+    }
+
+    // An unknown status is shown with its value.
+    let mut rest = vec![0u8, tb_fmi::Function::DoStep as u8];
+    rest.extend_from_slice(&77i32.to_le_bytes());
+    rest.extend_from_slice(&0.0f64.to_le_bytes());
+    rest.extend_from_slice(&0u32.to_le_bytes());
+    let w = forged_worker(
+        dir.path(),
+        "status",
+        Frames::new().ok().frame(&answer(1, 0, &rest)),
+    );
+    let mut b = factory(w).create("forged", false).unwrap();
+    let e = b.do_step(0.0, 0.1).unwrap_err().to_string();
+    assert!(e.contains("an unknown fmi2Status (77)"), "{e}");
+
+    // Half a frame, then silence: the watchdog.
+    let w = forged_worker(dir.path(), "half", Frames::new().raw(&[13, 0, 0, 0, 0, 0]));
+    let started = Instant::now();
+    let e = factory(w)
+        .create("forged", false)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("no answer within 2s (watchdog)"), "{e}");
+    assert!(started.elapsed() < Duration::from_secs(20));
+}
