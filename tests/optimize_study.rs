@@ -197,6 +197,13 @@ fn same_seed_same_result_any_threads_and_after_resume() {
     let other = load(dir.path(), &study_text("cmaes", TWO_STEPS));
     let err = run_study(&other, &o).err().expect("refused");
     assert!(err.to_string().contains("another study"), "{err}");
+    // A resume with another budget or optimiser than the checkpoint's is refused.
+    o.generations = Some(7);
+    let err = run_study(&study, &o).err().expect("refused").to_string();
+    assert!(
+        err.contains("was made with no overrides, this run has --generations 7: resume with the same options"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -413,3 +413,74 @@ fn not_a_zip_and_truncated_archives_are_refused() {
     let e = default_refused("truncated.fmu", &full[..full.len() / 2]);
     assert!(e.contains("not a valid zip archive"), "{e}");
 }
+
+#[test]
+fn a_fifo_or_a_device_given_as_an_fmu_is_refused_without_reading_it() {
+    // A FIFO would block the read forever, /dev/zero would fill the memory.
+    let s = Scratch::new();
+    let fifo = s.dir.path().join("pipe.fmu");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let cache = FmuCache::persistent(&s.cache_dir()).unwrap();
+    for path in [fifo.as_path(), Path::new("/dev/zero")] {
+        let err = cache.load(path).err().expect("refused").to_string();
+        assert!(
+            err.contains(&path.display().to_string())
+                && err.contains("not a regular file (an FMU is a zip archive)"),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn a_model_description_over_64_mib_is_an_error_not_cut() {
+    // Valid XML padded past the limit (it compresses to almost nothing): an error that says
+    // so, not an XML syntax error at the cut.
+    let md = model_description();
+    let padded = md.replacen(
+        "<ModelVariables>",
+        &format!("<ModelVariables>{}", " ".repeat(64 << 20)),
+        1,
+    );
+    let bytes = build(
+        &with_entry("modelDescription.xml", Some(padded.into_bytes())),
+        |_| {},
+    );
+    let err = default_refused("huge_md.fmu", &bytes);
+    assert!(
+        err.contains("modelDescription.xml is larger than 64 MiB"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_broken_or_foreign_binary_is_named_by_the_fmu_and_its_entry() {
+    let so = "binaries/linux64/faulty.so";
+    let real = base_entries().into_iter().find(|e| e.0 == so).unwrap().1;
+    // Not an ELF file, and a 32-bit ELF (the class byte of the real one flipped).
+    let mut elf32 = real.clone();
+    elf32[4] = 1;
+    for (name, binary, expected) in [
+        ("garbage.fmu", vec![b'x'; 4096], "invalid ELF header"),
+        ("elf32.fmu", elf32, "wrong ELF class: ELFCLASS32"),
+    ] {
+        let s = Scratch::new();
+        let fmu = s.dir.path().join(name);
+        std::fs::write(&fmu, build(&with_entry(so, Some(binary)), |_| {})).unwrap();
+        let cache = FmuCache::persistent(&s.cache_dir()).unwrap();
+        // Reading the archive runs no code: it loads; the library fails when first needed.
+        let loaded = cache.load(&fmu).unwrap();
+        let err = loaded.library().err().expect("refused").to_string();
+        assert!(
+            err.contains(&format!(
+                "{}: cannot load shared library: {so}: ",
+                fmu.display()
+            )) && err.contains(expected),
+            "{err}"
+        );
+        assert!(
+            !err.contains(&s.cache_dir().display().to_string()),
+            "the message names the unpacked copy: {err}"
+        );
+    }
+}

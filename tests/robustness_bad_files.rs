@@ -145,6 +145,48 @@ fn the_command_line_exits_with_1_and_the_message_on_stderr() {
 }
 
 #[test]
+fn numbers_on_the_command_line_are_checked_for_range() {
+    common::fmu_dir();
+    let root = twinbench::pack::workspace_root();
+    // A valid system to run with bad numbers: the faulty FMU alone.
+    let dir = tb_testkit::scratch("cli-numbers");
+    let sys = dir.path().join("sys.toml");
+    std::fs::write(
+        &sys,
+        format!(
+            "[fmus]\nf = \"{}\"\n\n[[instance]]\nname = \"f\"\nfmu = \"f\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n",
+            common::fmu("faulty").display()
+        ),
+    )
+    .unwrap();
+    let sys = sys.to_str().unwrap();
+    let meas = root.join("data/spielberg_lap.csv");
+    let meas = meas.to_str().unwrap();
+    for (args, expected) in [
+        (
+            vec!["run", sys, "--set", "f.fault_kind=4294967297"],
+            "4294967297 does not fit the 32-bit Integer 'f.fault_kind'",
+        ),
+        (
+            vec!["run", sys, "--set", "f.fault_time=nan"],
+            "'f.fault_time' must be a finite number, got NaN",
+        ),
+        (
+            vec!["run", sys, "--isolate", "--worker-timeout", "1e300"],
+            "--worker-timeout: watchdog must be a number of seconds in (0, 86400], got 1e300",
+        ),
+        (
+            vec!["compare", meas, meas, "--signals", "v", "--step", "1e-9"],
+            "must be at least 0.001 m",
+        ),
+    ] {
+        let (code, err) = cli(&args);
+        assert_eq!(code, Some(1), "{args:?}: {err}");
+        assert!(err.contains(expected), "{args:?}: {err}");
+    }
+}
+
+#[test]
 fn an_fmu_error_is_printed_once() {
     common::fmu_dir();
     let p = twinbench::pack::workspace_root().join("tests/bad_files/systems/missing_fmu_file.toml");

@@ -245,6 +245,39 @@ fn isolated_the_supplier_edu_is_preloaded_and_loaded_only_in_its_worker() {
         err.contains("SupplierEdu.so") && err.contains("libpython"),
         "no worker loaded it"
     );
+    // `info` checks the library in a worker too, with the preload; without it, the missing
+    // Python symbols are named with the .fmu (not the unpacked copy).
+    let (fmu, lib) = supplier_fmu();
+    let info = |args: &[&std::ffi::OsStr]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .arg("info")
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let out = info(&[
+        "--isolate".as_ref(),
+        "--preload".as_ref(),
+        lib.as_os_str(),
+        fmu.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout)
+        .contains("library: binaries/linux64/SupplierEdu.so loads; fmi2GetVersion \"2.0\""));
+    let out = info(&["--isolate".as_ref(), fmu.as_os_str()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "{}: cannot load shared library: binaries/linux64/SupplierEdu.so: undefined symbol",
+            fmu.display()
+        )),
+        "{err}"
+    );
     // The same numbers as in-process.
     let isolated = Table::read_any(&csv).unwrap();
     let in_process = open_loop(0.6, 150.0, 150.0);

@@ -192,25 +192,10 @@ fn fmus_with_extra_root_attributes_annotations_and_vendor_attributes_load_and_ru
 fn units_unknown_to_us_but_defined_by_the_fmus_are_converted() {
     let original = faulty_xml();
     let dir = tempfile::tempdir().unwrap();
-    let defs = "<UnitDefinitions>\n";
     // The source's y_direct is in hours and degrees Celsius; the sinks' u in minutes and
     // degrees Fahrenheit. None of these names is in our unit table.
     let with_unit = |name: &str, var: &str, unit: &str, base: &str| {
-        let xml = edit(
-            &original,
-            defs,
-            &format!(
-                "{defs}    <Unit name=\"{unit}\">\n      <BaseUnit {base}/>\n      <DisplayUnit name=\"x{unit}\" factor=\"2\"/>\n    </Unit>\n"
-            ),
-        );
-        let (from, to) = match var {
-            "u" => ("<Real unit=\"1\" start=\"0\"/>", format!("<Real unit=\"{unit}\" start=\"0\"/>")),
-            _ => (
-                "gain·u: direct feed-through of the input\" causality=\"output\" variability=\"continuous\">\n      <Real unit=\"1\"/>",
-                format!("gain·u: direct feed-through of the input\" causality=\"output\" variability=\"continuous\">\n      <Real unit=\"{unit}\"/>"),
-            ),
-        };
-        repack(dir.path(), name, &edit(&xml, from, &to))
+        with_unit(dir.path(), &original, name, var, unit, base)
     };
     assert!(tb_fmi::description::ModelDescription::default()
         .unit_def("hr")
@@ -310,6 +295,182 @@ signals = ["minutes.u", "fahrenheit.u"]
     assert!(
         e.contains("units 'hr' and 'furlong' differ and at least one has no definition"),
         "{e}"
+    );
+}
+
+/// `faulty` with `var` ("u" or "y_direct") declared in `unit`, defined by `<BaseUnit base/>`.
+fn with_unit(dir: &Path, original: &str, name: &str, var: &str, unit: &str, base: &str) -> PathBuf {
+    let defs = "<UnitDefinitions>\n";
+    let xml = edit(
+        original,
+        defs,
+        &format!(
+            "{defs}    <Unit name=\"{unit}\">\n      <BaseUnit {base}/>\n      <DisplayUnit name=\"x{unit}\" factor=\"2\"/>\n    </Unit>\n"
+        ),
+    );
+    let (from, to) = match var {
+        "u" => ("<Real unit=\"1\" start=\"0\"/>".to_string(), format!("<Real unit=\"{unit}\" start=\"0\"/>")),
+        _ => (
+            "gain·u: direct feed-through of the input\" causality=\"output\" variability=\"continuous\">\n      <Real unit=\"1\"/>".to_string(),
+            format!("gain·u: direct feed-through of the input\" causality=\"output\" variability=\"continuous\">\n      <Real unit=\"{unit}\"/>"),
+        ),
+    };
+    repack(dir, name, &edit(&xml, &from, &to))
+}
+
+/// Two instances `a` (of `src`, u = 1, gain 1: y_direct = 1) and `b` (of `dst`), joined by
+/// `connection`; b.u recorded.
+fn pair(dir: &Path, src: &Path, dst: &Path, connection: &str) -> Result<Plan, String> {
+    system(
+        dir,
+        &[("src", src), ("dst", dst)],
+        &format!(
+            "connections = [{connection}]\n[[instance]]\nname = \"a\"\nfmu = \"src\"\n\n[[instance]]\nname = \"b\"\nfmu = \"dst\"\n\n[parameters]\n\"a.u\" = 1.0\n\"a.gain\" = 1.0\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n\n[record]\nsignals = [\"b.u\"]\n"
+        ),
+    )
+}
+
+#[test]
+fn a_suppliers_rpm_without_rad_converts_and_the_system_file_can_override_units() {
+    let original = faulty_xml();
+    let dir = tb_testkit::scratch("rpm");
+    let d = dir.path();
+    // Ours: rad/s with the rad exponent; the supplier's: rpm as 1/s with a factor.
+    let rad_s = with_unit(
+        d,
+        &original,
+        "rad_s",
+        "y_direct",
+        "rad/s",
+        "s=\"-1\" rad=\"1\"",
+    );
+    let rpm = with_unit(
+        d,
+        &original,
+        "rpm_1_s",
+        "u",
+        "rpm",
+        "s=\"-1\" factor=\"0.10471975511965977\"",
+    );
+    let sys = pair(d, &rad_s, &rpm, "\"a.y_direct -> b.u\"").unwrap();
+    assert_eq!(sys.notes.len(), 1, "{:?}", sys.notes);
+    assert!(
+        sys.notes[0].contains("differ only in their rad exponent (1 and 0): rad taken as dimensionless (SI), 1 rad/s = 9.549"),
+        "{}",
+        sys.notes[0]
+    );
+    let rec = run(sys);
+    // 1 rad/s = 30/π rpm.
+    for x in rec.require("b.u").unwrap() {
+        assert!((x - 30.0 / std::f64::consts::PI).abs() < 1e-12, "{x}");
+    }
+    // A unit nobody defines: a gain given in the system file, or a unit named for it.
+    let furlong = with_unit(
+        d,
+        &original,
+        "furlong",
+        "u",
+        "furlong",
+        "m=\"1\" factor=\"201.168\"",
+    );
+    let undefined = repack(
+        d,
+        "undefined",
+        &edit(
+            &original,
+            "<Real unit=\"1\" start=\"0\"/>",
+            "<Real unit=\"fur\" start=\"0\"/>",
+        ),
+    );
+    let Err(e) = pair(d, &furlong, &undefined, "\"a.y_direct -> b.u\"") else {
+        panic!("a connection to an undefined unit was accepted")
+    };
+    assert!(
+        e.contains("give the connection a to_unit/from_unit or a scale"),
+        "{e}"
+    );
+    let by_gain = pair(
+        d,
+        &rad_s,
+        &undefined,
+        "{ from = \"a.y_direct\", to = \"b.u\", scale = 4.0, offset = 0.5 }",
+    )
+    .unwrap();
+    assert!(by_gain.notes[0].contains("scale 4 and offset 0.5 from the system file (declared units 'rad/s' and 'fur' not used)"), "{:?}", by_gain.notes);
+    for x in run(by_gain).require("b.u").unwrap() {
+        assert_eq!(*x, 4.5);
+    }
+    let by_unit = pair(
+        d,
+        &rad_s,
+        &undefined,
+        "{ from = \"a.y_direct\", to = \"b.u\", to_unit = \"deg/s\" }",
+    )
+    .unwrap();
+    assert!(
+        by_unit.notes[0].contains("units overridden in the system file: 'rad/s' -> 'deg/s'"),
+        "{:?}",
+        by_unit.notes
+    );
+    for x in run(by_unit).require("b.u").unwrap() {
+        assert!((x - 180.0 / std::f64::consts::PI).abs() < 1e-12, "{x}");
+    }
+    // The SSP export carries the gain as the connection's linear transformation.
+    let plan = pair(
+        d,
+        &rad_s,
+        &rpm,
+        "{ from = \"a.y_direct\", to = \"b.u\", scale = 2.0 }",
+    )
+    .unwrap();
+    let conn = &plan.connections[0];
+    assert_eq!((conn.scale, conn.offset), (2.0, 0.0));
+}
+
+#[test]
+fn missing_initial_unknowns_are_warned_about_as_fmpy_flags_them() {
+    let scratch = tb_testkit::scratch("noinitial");
+    let d = scratch.path();
+    let original = faulty_xml();
+    let start = original.find("    <InitialUnknowns>").unwrap();
+    let end = original.find("</InitialUnknowns>\n").unwrap() + "</InitialUnknowns>\n".len();
+    let stripped = format!("{}{}", &original[..start], &original[end..]);
+    let fmu = repack(d, "noinitial", &stripped);
+    let text = format!(
+        "[fmus]\nx = \"{}\"\n\n[[instance]]\nname = \"a\"\nfmu = \"x\"\n\n[experiment]\nstep = 1e-3\nstop = 0.01\n",
+        fmu.display()
+    );
+    let path = d.join("sys.toml");
+    let sys = Plan::from_file(SystemFile::parse(&text, &path).unwrap(), &path, cache()).unwrap();
+    let w = sys.warnings.join("\n");
+    assert!(
+        w.contains("ModelStructure/InitialUnknowns is missing; it must list 4 variable(s) computed at initialisation"),
+        "{w}"
+    );
+    // The original lists them all: no warning.
+    repack(d, "complete", &original);
+    let text = text.replace("noinitial.fmu", "complete.fmu");
+    let sys = Plan::from_file(SystemFile::parse(&text, &path).unwrap(), &path, cache()).unwrap();
+    assert!(
+        sys.warnings.iter().all(|w| !w.contains("ModelStructure")),
+        "{:?}",
+        sys.warnings
+    );
+    // FMPy's validator flags the stripped FMU too (the same standard rule).
+    let out = std::process::Command::new(common::python::python())
+        .args(["-c", "import sys; from fmpy.validation import validate_fmu; p = validate_fmu(sys.argv[1]); print(len(p)); print(*p, sep='\\n')"])
+        .arg(d.join("noinitial.fmu"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        said.lines().next().unwrap().trim() != "0",
+        "FMPy found nothing: {said}"
     );
 }
 

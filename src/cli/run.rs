@@ -86,6 +86,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     for w in &system.warnings {
         eprintln!("warning: {w}");
     }
+    for n in &system.notes {
+        eprintln!("note: {n}");
+    }
     let order: Vec<String> = system
         .order
         .iter()

@@ -17,9 +17,9 @@ pub struct SystemFile {
     /// Instances, in the order they are declared (the stepping order's tie-breaker).
     #[serde(rename = "instance", default)]
     pub instances: Vec<InstanceConfig>,
-    /// `"a.x -> b.y"` strings.
+    /// `"a.x -> b.y"`, or a table with a unit or gain override (see [`ConnectionConfig`]).
     #[serde(default)]
-    pub connections: Vec<String>,
+    pub connections: Vec<ConnectionConfig>,
     /// `"instance.variable" = value`.
     #[serde(default)]
     pub parameters: BTreeMap<String, toml::Value>,
@@ -35,6 +35,82 @@ pub struct SystemFile {
     /// Consistency checks after initialisation, before the first step.
     #[serde(rename = "check", default)]
     pub checks: Vec<CheckConfig>,
+}
+
+/// One connection: `"a.x -> b.y"`, converted by the units both FMUs declare; or a table
+/// for what the declarations cannot give:
+/// - `{ from = "a.x", to = "b.y", to_unit = "rpm" }`: the unit taken for one end (or
+///   `from_unit`), looked up in that FMU's unit definitions, then in twinbench's table;
+/// - `{ from = "a.x", to = "b.y", scale = 9.5493, offset = 0.0 }`: `to = scale·from +
+///   offset`, instead of any unit conversion.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ConnectionConfig {
+    /// `"a.x -> b.y"` (for a table: built from `from` and `to`).
+    pub text: String,
+    pub scale: Option<f64>,
+    pub offset: Option<f64>,
+    pub from_unit: Option<String>,
+    pub to_unit: Option<String>,
+}
+
+impl ConnectionConfig {
+    /// Whether the file overrides what the units would give.
+    pub fn overrides(&self) -> bool {
+        self.scale.is_some()
+            || self.offset.is_some()
+            || self.from_unit.is_some()
+            || self.to_unit.is_some()
+    }
+}
+
+impl From<&str> for ConnectionConfig {
+    fn from(text: &str) -> Self {
+        ConnectionConfig {
+            text: text.to_string(),
+            ..Default::default()
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for ConnectionConfig {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Table {
+            from: String,
+            to: String,
+            scale: Option<f64>,
+            offset: Option<f64>,
+            from_unit: Option<String>,
+            to_unit: Option<String>,
+        }
+        use serde::de::Error;
+        match toml::Value::deserialize(d)? {
+            toml::Value::String(text) => Ok(ConnectionConfig {
+                text,
+                ..Default::default()
+            }),
+            toml::Value::Table(t) => {
+                let t = Table::deserialize(toml::Value::Table(t)).map_err(|e| {
+                    D::Error::custom(format!(
+                        "connection table: {} (allowed keys: from, to, scale, offset, from_unit, to_unit)",
+                        e.message()
+                    ))
+                })?;
+                Ok(ConnectionConfig {
+                    text: format!("{} -> {}", t.from.trim(), t.to.trim()),
+                    scale: t.scale,
+                    offset: t.offset,
+                    from_unit: t.from_unit,
+                    to_unit: t.to_unit,
+                })
+            }
+            other => Err(D::Error::custom(format!(
+                "a connection is \"a.x -> b.y\" or {{ from = \"a.x\", to = \"b.y\", ... }}, got a TOML {}",
+                other.type_str()
+            ))),
+        }
+    }
 }
 
 /// Signals that must agree after initialisation (e.g. the lap lengths of the vehicle's track

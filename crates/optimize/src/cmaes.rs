@@ -357,6 +357,37 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_damaged_checkpoint_state_is_refused() {
+        let mut es = Cmaes::new(2, CmaesSettings::default(), 7, None).unwrap();
+        let x = es.ask();
+        es.tell(&vec![1.0; x.len()]);
+        let good = es.save();
+        let mut fresh = Cmaes::new(2, CmaesSettings::default(), 7, None).unwrap();
+        fresh.restore(&good).unwrap();
+        // Floats are kept as their bits: a NaN is what a damaged file can hold.
+        let bits = |x: f64| serde_json::json!(crate::exact::encode(x));
+        for (edit, expected) in [
+            (bits(f64::NAN), "sigma = NaN is not a positive number"),
+            (bits(0.0), "sigma = 0 is not a positive number"),
+            (bits(-1.0), "sigma = -1 is not a positive number"),
+            (serde_json::json!("zz"), "is not a 16-digit hex float"),
+        ] {
+            let mut bad = good.clone();
+            bad["sigma"] = edit;
+            let e = fresh.restore(&bad).unwrap_err().to_string();
+            assert!(e.contains(expected), "{e}");
+        }
+        let mut bad = good.clone();
+        bad["mean"][0] = bits(f64::INFINITY);
+        let e = fresh.restore(&bad).unwrap_err().to_string();
+        assert!(e.contains("non-finite"), "{e}");
+        let mut bad = good;
+        bad["c"][0] = serde_json::json!([crate::exact::encode(1.0)]);
+        let e = fresh.restore(&bad).unwrap_err().to_string();
+        assert!(e.contains("misshapen"), "{e}");
+    }
+
+    #[test]
     fn jacobi_eigen_reconstructs() {
         let a = vec![
             vec![4.0, 1.0, 0.5],

@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_fmi::description::{ModelDescription, ScalarVariable};
 use tb_fmi::{Causality, FmuCache, LoadedFmu, ScalarType, Variability};
-use units::unit_conversion;
+use units::{unit_conversion, Conversion};
 
 /// One FMU instance of the system, resolved.
 pub struct InstanceDef {
@@ -206,6 +206,8 @@ pub struct Plan {
     /// Stepping order over units (FMU instances and replays).
     pub order: Vec<usize>,
     pub warnings: Vec<String>,
+    /// What a reader of the run's log should know (unit conventions bridged, overrides).
+    pub notes: Vec<String>,
     /// Keeps the unpacked FMUs alive (and removes them at the end).
     pub cache: Arc<FmuCache>,
 }
@@ -428,7 +430,9 @@ impl Plan {
         let mut signals = SignalTable::default();
         // Connections.
         let mut connections: Vec<ConnectionDef> = Vec::new();
-        for text in &file.connections {
+        let mut notes = Vec::new();
+        for conn in &file.connections {
+            let text = &conn.text;
             let ctx = format!("{ctx_file}: connection \"{text}\"");
             let (a, b) = text
                 .split_once("->")
@@ -506,11 +510,19 @@ impl Plan {
                 ));
             }
             let empty = ModelDescription::default();
-            let (scale, offset) = unit_conversion(
-                (from_md.unwrap_or(&empty), from_unit_name.as_deref()),
-                (to_def.description(), to_def.description().unit_of(to_sv)),
+            let from_md = from_md.unwrap_or(&empty);
+            let to_md = to_def.description();
+            let conversion = connection_conversion(
+                conn,
+                (from_md, from_unit_name.as_deref()),
+                (to_md, to_md.unit_of(to_sv)),
+                to_sv.ty,
             )
             .map_err(|m| invalid(&ctx, m))?;
+            if let Some(note) = &conversion.note {
+                notes.push(format!("connection \"{text}\": {note}"));
+            }
+            let (scale, offset) = (conversion.scale, conversion.offset);
             if connections
                 .iter()
                 .any(|c| c.to_unit == to_unit && c.to_vr == to_sv.value_reference)
@@ -750,6 +762,9 @@ impl Plan {
         for w in &warnings {
             log::warn!("{ctx_file}: {w}");
         }
+        for n in &notes {
+            log::info!("{ctx_file}: {n}");
+        }
         Ok(Plan {
             file,
             path: path.to_path_buf(),
@@ -765,6 +780,7 @@ impl Plan {
             replay_basis,
             order,
             warnings,
+            notes,
             cache,
         })
     }
@@ -960,4 +976,76 @@ fn parameter_slot(
         start: sv.start_f64(),
         is_path: sv.ty == ScalarType::String && sv.name.ends_with("_file"),
     })
+}
+
+/// A connection's conversion: the file's gain, or the units (declared, or as the file
+/// overrides them).
+fn connection_conversion(
+    conn: &crate::config::ConnectionConfig,
+    from: (&ModelDescription, Option<&str>),
+    to: (&ModelDescription, Option<&str>),
+    to_ty: ScalarType,
+) -> Result<Conversion, String> {
+    let gain = conn.scale.is_some() || conn.offset.is_some();
+    let units = conn.from_unit.is_some() || conn.to_unit.is_some();
+    if gain && units {
+        return Err("give either scale/offset or from_unit/to_unit, not both".into());
+    }
+    if (gain || units) && to_ty != ScalarType::Real {
+        return Err(format!(
+            "a scale, an offset or a unit applies to Real inputs only, this one is {}",
+            to_ty.name()
+        ));
+    }
+    if gain {
+        let scale = conn.scale.unwrap_or(1.0);
+        let offset = conn.offset.unwrap_or(0.0);
+        if !(scale.is_finite() && scale != 0.0 && offset.is_finite()) {
+            return Err(format!(
+                "scale must be a finite non-zero number and offset a finite number, got scale = {scale}, offset = {offset}"
+            ));
+        }
+        let declared = |u: Option<&str>| u.map_or("none".to_string(), |u| format!("'{u}'"));
+        return Ok(Conversion {
+            scale,
+            offset,
+            note: Some(format!(
+                "scale {scale} and offset {offset} from the system file (declared units {} and {} not used)",
+                declared(from.1),
+                declared(to.1)
+            )),
+        });
+    }
+    let known = |md: &ModelDescription, u: &Option<String>, end: &str| -> Result<(), String> {
+        match u {
+            Some(u) if units::definition(md, u).is_none() => Err(format!(
+                "{end} = '{u}' is defined neither by the FMU nor in twinbench's unit table ({})",
+                tb_fmi::units::UNITS
+                    .iter()
+                    .map(|d| d.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )),
+            _ => Ok(()),
+        }
+    };
+    known(from.0, &conn.from_unit, "from_unit")?;
+    known(to.0, &conn.to_unit, "to_unit")?;
+    let from_unit = conn.from_unit.as_deref().or(from.1);
+    let to_unit = conn.to_unit.as_deref().or(to.1);
+    let mut c = unit_conversion((from.0, from_unit), (to.0, to_unit))?;
+    if units {
+        let said = format!(
+            "units overridden in the system file: '{}' -> '{}', scale {}, offset {}",
+            from_unit.unwrap_or("1"),
+            to_unit.unwrap_or("1"),
+            c.scale,
+            c.offset
+        );
+        c.note = Some(match c.note {
+            Some(n) => format!("{said}; {n}"),
+            None => said,
+        });
+    }
+    Ok(c)
 }

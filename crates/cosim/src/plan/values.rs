@@ -148,6 +148,15 @@ impl ParamSlot {
                 ),
             ));
         }
+        if let ParamValue::Real(x) = v {
+            // NaN passes every range check and would reach the FMU (or be caught by it, late).
+            if !x.is_finite() {
+                return Err(invalid(
+                    ctx,
+                    format!("'{}' must be a finite number, got {x}", self.name),
+                ));
+            }
+        }
         if let Some(x) = v.as_f64().filter(|_| self.ty != ScalarType::Boolean) {
             if self.min.is_some_and(|m| x < m) || self.max.is_some_and(|m| x > m) {
                 return Err(invalid(
