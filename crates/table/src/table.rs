@@ -320,7 +320,8 @@ impl Table {
         );
         out.push('\n');
         if let Some(u) = &self.units {
-            out.push_str(&u.join(","));
+            let quoted: Vec<String> = u.iter().map(|n| quote_if_needed(n)).collect();
+            out.push_str(&quoted.join(","));
             out.push('\n');
         }
         for r in 0..self.len() {
@@ -604,6 +605,25 @@ mod tests {
 
     fn parse(s: &str) -> Result<Table> {
         Table::from_reader(s.as_bytes(), "t.csv")
+    }
+
+    #[test]
+    fn names_and_units_with_separators_or_quotes_round_trip_through_csv() {
+        // Variable names come from FMUs: a comma or a quote must not shift the columns.
+        let names = vec![
+            "time".to_string(),
+            "a.x,y".into(),
+            "b.\"q\"".into(),
+            "c.z".into(),
+        ];
+        let units = vec!["s".to_string(), "N,m".into(), "1".into(), "m;s".into()];
+        let mut t = Table::new("t", names.clone(), units.clone()).unwrap();
+        t.push_row([0.0, 1.0, 2.0, 3.0]);
+        t.push_row([0.5, 4.0, 5.0, 6.0]);
+        let back = Table::from_reader(t.to_csv().as_slice(), "t.csv").unwrap();
+        assert_eq!(back.names(), names.as_slice());
+        assert_eq!(back.units().unwrap(), units.as_slice());
+        assert_eq!(back.require("b.\"q\"").unwrap(), &[2.0, 5.0]);
     }
 
     #[test]
