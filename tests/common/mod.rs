@@ -58,3 +58,4 @@ pub fn vr(fmu: &LoadedFmu, name: &str) -> u32 {
 }
 
 pub mod python;
+pub mod reference;

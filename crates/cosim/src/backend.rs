@@ -30,6 +30,11 @@ pub trait Backend: Send {
     fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError>;
     fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError>;
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError>;
+    /// After a step returned `fmi2Discard`: `Some(last successful time)` when the FMU asks
+    /// to end the simulation (`fmi2Terminated`), as FMPy's master asks it.
+    fn terminated_by_fmu(&mut self) -> Option<f64> {
+        None
+    }
 }
 
 /// Creates the running unit of one system instance.
@@ -122,5 +127,8 @@ impl Backend for Instance {
     #[inline]
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
         Instance::do_step(self, t, h)
+    }
+    fn terminated_by_fmu(&mut self) -> Option<f64> {
+        Instance::terminated_by_fmu(self)
     }
 }

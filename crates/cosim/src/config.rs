@@ -234,6 +234,16 @@ pub enum ReplayBasis {
     Distance,
 }
 
+/// How a replay finds values between its rows.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Interpolation {
+    #[default]
+    Auto,
+    Linear,
+    Hold,
+}
+
 /// Replay of measurement columns, by time or by a distance signal of the system.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -245,7 +255,14 @@ pub struct ReplayConfig {
     /// For `basis = "distance"`: the system signal giving the distance (e.g. `vehicle.distance`).
     #[serde(default)]
     pub by: Option<String>,
+    /// The replayed columns; empty: every numeric column of a time-based file.
+    #[serde(default)]
     pub columns: Vec<String>,
+    /// How values between rows are found: `"linear"`, `"hold"` (the last row at or before),
+    /// or `"auto"` (the default: hold for the inputs FMPy holds, Integer, Boolean,
+    /// Enumeration and discrete or tunable Reals; linear for continuous Reals).
+    #[serde(default)]
+    pub interpolation: Interpolation,
     /// Unit of each column (default: the column's SI unit from data/README.md, else "1").
     #[serde(default)]
     pub units: BTreeMap<String, String>,

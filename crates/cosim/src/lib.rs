@@ -50,6 +50,11 @@ pub enum SystemError {
     },
     #[error("{0}")]
     Stop(String),
+    /// An FMU asked to end the simulation (a step returned `fmi2Discard` with
+    /// `fmi2Terminated` true): the run ends normally at its last successful time. Only seen
+    /// between the master's step and its run loop.
+    #[error("instance '{instance}' asked to end the simulation at t = {time} s")]
+    EndedByFmu { instance: String, time: f64 },
     /// The run completed, then ending an instance failed: the recording is complete and
     /// kept; the error is still an error.
     #[error("the run completed ({}), then {error}; its recording is complete and kept", summary.stopped_by)]

@@ -11,7 +11,8 @@ use crate::replay::Cursor;
 use crate::{backend::Backend, invalid, SystemError};
 use std::sync::Arc;
 use std::time::Instant;
-use tb_fmi::ScalarType;
+use tb_fmi::fmi2::fmi2Status;
+use tb_fmi::{FmuError, Function, ScalarType};
 use tb_table::Table;
 
 #[derive(Default)]
@@ -197,21 +198,68 @@ impl Exchange {
     #[inline]
     pub fn do_step(&mut self, u: usize, t: f64, h: f64) -> Result<(), SystemError> {
         if let Unit::Fmu(f) = &mut self.units[u] {
-            f.backend().do_step(t, h)?;
+            match f.backend().do_step(t, h) {
+                Ok(()) => {}
+                // A discarded step may be the FMU's way to end the simulation (FMI 2.0,
+                // 4.2.3): then the run ends there, normally.
+                Err(
+                    e @ FmuError::Call {
+                        function: Function::DoStep,
+                        status: fmi2Status::DISCARD,
+                        ..
+                    },
+                ) => {
+                    return Err(match f.backend().terminated_by_fmu() {
+                        Some(time) => SystemError::EndedByFmu {
+                            instance: f.name.clone(),
+                            time,
+                        },
+                        None => e.into(),
+                    })
+                }
+                Err(e) => return Err(e.into()),
+            }
         }
         Ok(())
     }
 
-    /// Read unit `u`'s outputs into the exchange buffer; a replay takes its values at `t`.
+    /// Read unit `u`'s outputs into the exchange buffer. A replay by distance takes its
+    /// values at the distance signal's current value; a replay by time does nothing here:
+    /// the run sets it at the start of each step ([`Exchange::time_replays_at`]).
     #[inline]
     pub fn publish(&mut self, u: usize, t: f64) -> Result<(), SystemError> {
         match &mut self.units[u] {
             Unit::Fmu(f) => f.get_outputs(&mut self.signals, &mut self.texts, &self.plan),
-            Unit::Replay(_) => {
-                self.step_replay(u, t);
+            Unit::Replay(r) => {
+                if self.plan.replays[r.source].basis == ReplayBasis::Distance {
+                    self.step_replay(u, t);
+                }
                 Ok(())
             }
         }
+    }
+
+    /// Set every replay by time to its value at `t`. The run calls it at the start of each
+    /// step, so that the step t → t+h sees the input at t whatever the stepping order (as
+    /// FMPy applies an input file), and after it, for the recording.
+    #[inline]
+    pub fn time_replays_at(&mut self, t: f64) {
+        for u in self.plan.instances.len()..self.units.len() {
+            if let Unit::Replay(r) = &self.units[u] {
+                if self.plan.replays[r.source].basis == ReplayBasis::Time {
+                    self.step_replay(u, t);
+                }
+            }
+        }
+    }
+
+    /// Read every unit's outputs at `t` (the end of a run an FMU ended early).
+    pub fn publish_all(&mut self, t: f64) -> Result<(), SystemError> {
+        self.time_replays_at(t);
+        for u in 0..self.units.len() {
+            self.publish(u, t)?;
+        }
+        Ok(())
     }
 
     fn step_replay(&mut self, u: usize, t: f64) {
@@ -223,14 +271,30 @@ impl Exchange {
             (ReplayBasis::Distance, Some(s)) => self.signals[s],
             _ => t,
         };
-        let (i, w) = r.cursor.locate(src.basis_values(), q);
+        let x = src.basis_values();
+        let (mut i, mut w) = r.cursor.locate(x, q);
+        // A point within 1e-9 (relative) of the next row is at that row (FMPy's `isclose`):
+        // t = k·h lands a hair before a row's time, and a step there must take effect.
+        if i + 1 < x.len() && w < 1.0 {
+            let next = x[i + 1];
+            if (next - q).abs() <= 1e-9 * next.abs().max(q.abs()) {
+                (i, w) = r.cursor.locate(x, next);
+            }
+        }
         for (c, &sig) in r.out_sig.iter().enumerate() {
             if sig != usize::MAX {
                 let col = src.values(c);
-                self.signals[sig] = if col.len() > 1 {
-                    col[i] + w * (col[i + 1] - col[i])
-                } else {
+                self.signals[sig] = if col.len() < 2 {
                     col[0]
+                } else if src.hold[c] {
+                    // The last row at or before the point (after a step, its new value).
+                    if w >= 1.0 {
+                        col[i + 1]
+                    } else {
+                        col[i]
+                    }
+                } else {
+                    col[i] + w * (col[i + 1] - col[i])
                 };
             }
         }
@@ -526,6 +590,7 @@ impl Simulation {
         let mut previous = vec![f64::NAN; self.ex.signals.len()];
         let mut previous_texts: Option<Vec<String>> = None;
         let mut converged = false;
+        self.ex.time_replays_at(start);
         for _ in 0..50 {
             for &u in order {
                 self.ex.set_inputs(u)?;
@@ -693,16 +758,33 @@ impl Simulation {
         let mut k = 0u64;
         let mut t_end = start;
         let mut met = false;
+        let mut ended_by_fmu = false;
         while k < total_steps {
             let t = start + k as f64 * h;
             let step = if k == full_steps { last } else { h };
-            self.algorithm.step(&mut self.ex, order, t, step)?;
+            self.ex.time_replays_at(t);
+            if let Err(e) = self.algorithm.step(&mut self.ex, order, t, step) {
+                let SystemError::EndedByFmu { instance, time } = e else {
+                    return Err(e);
+                };
+                // As FMPy: the outputs at the FMU's last successful time, a last row, done.
+                self.ex.publish_all(time)?;
+                k += 1;
+                t_end = time;
+                self.record(t_end);
+                stopped_by = format!(
+                    "instance '{instance}' asked to end the simulation at t = {time} s (fmi2Discard with fmi2Terminated)"
+                );
+                ended_by_fmu = true;
+                break;
+            }
             k += 1;
             t_end = if k == total_steps && fixed_stop.is_some() {
                 start + span
             } else {
                 start + k as f64 * h
             };
+            self.ex.time_replays_at(t_end);
             met = condition.is_some_and(|(c, _)| c.holds(self.ex.signals[c.slot]));
             // Rows stay on the decimation grid (a uniform time base for filters); only a
             // fixed stop time adds its final row.
@@ -713,7 +795,7 @@ impl Simulation {
                 break;
             }
         }
-        if let Some((c, max_time)) = condition {
+        if let Some((c, max_time)) = condition.filter(|_| !ended_by_fmu) {
             if !met {
                 return Err(SystemError::Stop(format!(
                     "{}: the run did not complete within max_time = {max_time} s: the stop condition {c} never held ({} = {} at the end)",

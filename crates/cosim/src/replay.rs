@@ -1,7 +1,7 @@
 //! Replay of measurement channels (RLS/α and n/α modes): columns of a measurement CSV,
 //! interpolated by time or by a distance signal of the system.
 
-use super::config::{ReplayBasis, ReplayConfig};
+use super::config::{Interpolation, ReplayBasis, ReplayConfig};
 use super::SystemError;
 use std::path::PathBuf;
 use tb_table::Table;
@@ -28,6 +28,10 @@ pub struct ReplaySource {
     pub by: Option<String>,
     pub columns: Vec<String>,
     pub units: Vec<String>,
+    pub interpolation: Interpolation,
+    /// Per column: hold the last row's value instead of interpolating (decided by the plan
+    /// from `interpolation` and the inputs the column drives).
+    pub hold: Vec<bool>,
     /// The basis (time or distance, non-decreasing) first, then the replayed columns.
     pub table: Table,
 }
@@ -39,51 +43,152 @@ impl ReplaySource {
             path: cfg.file.clone(),
             message: m,
         };
-        let meas = tb_compare::Measurement::read_path(&cfg.file).map_err(|e| err(e.to_string()))?;
-        let x = match cfg.basis {
-            ReplayBasis::Time => meas.time().to_vec(),
-            ReplayBasis::Distance => {
-                if cfg.by.is_none() {
-                    return Err(err("basis = \"distance\" needs `by`, the signal giving the distance (e.g. \"vehicle.distance\")".into()));
-                }
-                meas.distance().to_vec()
-            }
+        let (x, columns, data, file_units) = match cfg.basis {
+            ReplayBasis::Time => Self::time_based(cfg).map_err(err)?,
+            ReplayBasis::Distance => Self::measurement(cfg).map_err(err)?,
         };
-        if cfg.columns.is_empty() {
-            return Err(err("no columns to replay".into()));
-        }
-        let mut data = vec![x];
-        let mut units = Vec::new();
-        for c in &cfg.columns {
-            let col = meas
-                .signal(c)
-                .map_err(|e| err(e.to_string()))?
-                .ok_or_else(|| err(format!("no column '{c}' in the file")))?;
-            data.push(col.to_vec());
-            units.push(
+        let units: Vec<String> = columns
+            .iter()
+            .zip(file_units)
+            .map(|(c, declared)| {
                 cfg.units
                     .get(c)
                     .cloned()
-                    .unwrap_or_else(|| default_unit(c).to_string()),
-            );
-        }
+                    .or(declared)
+                    .unwrap_or_else(|| default_unit(c).to_string())
+            })
+            .collect();
         let basis = match cfg.basis {
             ReplayBasis::Time => "time",
             ReplayBasis::Distance => "distance",
         };
         let mut names = vec![format!("{basis} (basis)")];
-        names.extend(cfg.columns.iter().cloned());
-        let table = Table::from_columns(cfg.file.display().to_string(), names, data)
+        names.extend(columns.iter().cloned());
+        let mut all = vec![x];
+        all.extend(data);
+        let table = Table::from_columns(cfg.file.display().to_string(), names, all)
             .map_err(|e| err(e.to_string()))?;
         Ok(ReplaySource {
             name: cfg.name.clone(),
             path: cfg.file.clone(),
             basis: cfg.basis,
             by: cfg.by.clone(),
-            columns: cfg.columns.clone(),
+            hold: vec![cfg.interpolation == Interpolation::Hold; columns.len()],
+            interpolation: cfg.interpolation,
+            columns,
             units,
             table,
         })
+    }
+
+    /// A vehicle measurement replayed by distance (the measurement format, SI units).
+    #[allow(clippy::type_complexity)]
+    fn measurement(
+        cfg: &ReplayConfig,
+    ) -> Result<(Vec<f64>, Vec<String>, Vec<Vec<f64>>, Vec<Option<String>>), String> {
+        let meas = tb_compare::Measurement::read_path(&cfg.file).map_err(|e| e.to_string())?;
+        if cfg.by.is_none() {
+            return Err("basis = \"distance\" needs `by`, the signal giving the distance (e.g. \"vehicle.distance\")".into());
+        }
+        if cfg.columns.is_empty() {
+            return Err("no columns to replay".into());
+        }
+        let mut data = Vec::new();
+        for c in &cfg.columns {
+            let col = meas
+                .signal(c)
+                .map_err(|e| e.to_string())?
+                .ok_or_else(|| format!("no column '{c}' in the file"))?;
+            data.push(col.to_vec());
+        }
+        let n = cfg.columns.len();
+        Ok((
+            meas.distance().to_vec(),
+            cfg.columns.clone(),
+            data,
+            vec![None; n],
+        ))
+    }
+
+    /// Any time-based file (CSV or MDF 4), as FMPy reads an input file: the `time` column
+    /// (else the first), any column names, columns not replayed are not even parsed, a
+    /// repeated time is a step (the value after it from that time on).
+    #[allow(clippy::type_complexity)]
+    fn time_based(
+        cfg: &ReplayConfig,
+    ) -> Result<(Vec<f64>, Vec<String>, Vec<Vec<f64>>, Vec<Option<String>>), String> {
+        let wanted = |name: &str| {
+            name == "time" || cfg.columns.is_empty() || cfg.columns.iter().any(|c| c == name)
+        };
+        let t = if tb_table::is_mdf(&cfg.file) {
+            Table::read_any(&cfg.file)
+        } else {
+            // Only the columns replayed and the time (named so, or the first) are parsed.
+            Table::read_path_keeping(&cfg.file, &|k, n| k == 0 || wanted(n))
+        }
+        .map_err(|e| e.to_string())?;
+        let time_index = t.names().iter().position(|n| n == "time").unwrap_or(0);
+        if t.is_text(time_index) {
+            return Err(format!(
+                "the time column '{}' is not numeric",
+                t.names()[time_index]
+            ));
+        }
+        let time = t.column_at(time_index).to_vec();
+        let row = |k: usize| format!("line {}", t.line_of(k));
+        for k in 0..time.len() {
+            if !time[k].is_finite() {
+                return Err(format!("{}: time {} is not finite", row(k), time[k]));
+            }
+            if k > 0 && time[k] < time[k - 1] {
+                return Err(format!(
+                    "{}: time {} after {}: the time of an input file must not decrease (a repeated time is a step)",
+                    row(k),
+                    time[k],
+                    time[k - 1]
+                ));
+            }
+        }
+        let columns: Vec<String> = if cfg.columns.is_empty() {
+            (0..t.names().len())
+                .filter(|&k| k != time_index && !t.is_text(k))
+                .map(|k| t.names()[k].clone())
+                .collect()
+        } else {
+            cfg.columns.clone()
+        };
+        if columns.is_empty() {
+            return Err("no numeric column to replay besides the time".into());
+        }
+        let mut data = Vec::new();
+        let mut units = Vec::new();
+        for c in &columns {
+            let k = t.names().iter().position(|n| n == c).ok_or_else(|| {
+                format!(
+                    "no column '{c}' in the file (columns: {})",
+                    t.names().join(", ")
+                )
+            })?;
+            if t.is_text(k) {
+                return Err(format!("column '{c}' is not numeric"));
+            }
+            let col = t.column_at(k);
+            if let Some(j) = col.iter().position(|x| !x.is_finite()) {
+                return Err(format!(
+                    "{}, column '{c}': value {} is not finite",
+                    row(j),
+                    col[j]
+                ));
+            }
+            data.push(col.to_vec());
+            units.push(
+                t.units()
+                    .and_then(|u| u.get(k))
+                    .filter(|u| !u.is_empty())
+                    .cloned(),
+            );
+        }
+        Ok((time, columns, data, units))
     }
 
     /// The basis values (time or distance), non-decreasing.

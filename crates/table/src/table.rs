@@ -112,8 +112,35 @@ impl Table {
         Self::from_reader(std::io::BufReader::new(file), &path.display().to_string())
     }
 
+    /// Reads a CSV file, parsing only the columns `keep(index, name)` accepts; the others
+    /// are kept as text, whatever they hold (an input file's unused columns must not fail it).
+    pub fn read_path_keeping(
+        path: impl AsRef<Path>,
+        keep: &dyn Fn(usize, &str) -> bool,
+    ) -> Result<Self> {
+        let path = path.as_ref();
+        let file = std::fs::File::open(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_reader_keeping(
+            std::io::BufReader::new(file),
+            &path.display().to_string(),
+            keep,
+        )
+    }
+
     /// Reads CSV from any reader; `source` names it in error messages.
     pub fn from_reader<R: Read>(reader: R, source: &str) -> Result<Self> {
+        Self::from_reader_keeping(reader, source, &|_, _| true)
+    }
+
+    /// [`Table::from_reader`], parsing only the columns `keep` accepts.
+    pub fn from_reader_keeping<R: Read>(
+        reader: R,
+        source: &str,
+        keep: &dyn Fn(usize, &str) -> bool,
+    ) -> Result<Self> {
         let mut rdr = BufReader::new(reader);
         let mut line = String::new();
         let mut lineno: u64 = 0;
@@ -153,7 +180,11 @@ impl Table {
         check_duplicates(source, &names)?;
         let ncol = names.len();
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); ncol];
-        let mut text: Vec<Option<Vec<String>>> = vec![None; ncol];
+        let mut text: Vec<Option<Vec<String>>> = names
+            .iter()
+            .enumerate()
+            .map(|(k, n)| (!keep(k, n)).then(Vec::new))
+            .collect();
         let mut lines = Vec::new();
         let mut units = None;
         let mut first = true;

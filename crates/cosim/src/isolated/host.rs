@@ -355,7 +355,7 @@ impl IsolatedBackend {
         }
         let mut out = Vec::with_capacity(n_gets);
         for g in &gets[..n_gets] {
-            out.push(if g.op == op::GET_REAL {
+            out.push(if g.op == op::GET_REAL || g.op == op::FMU_TERMINATED {
                 Values::Real(
                     (0..g.vrs.len())
                         .map(|_| d.f64())
@@ -663,6 +663,28 @@ impl Backend for IsolatedBackend {
             values.iter().for_each(|v| e.str(v))
         });
         Ok(())
+    }
+    fn terminated_by_fmu(&mut self) -> Option<f64> {
+        let spec = GetSpec {
+            op: op::FMU_TERMINATED,
+            vrs: vec![0, 0],
+        };
+        self.prefetched.clear();
+        match self
+            .call(
+                Function::GetBooleanStatus.name(),
+                vec![op::FMU_TERMINATED],
+                std::slice::from_ref(&spec),
+            )
+            .ok()?
+            .pop()
+        {
+            Some(Values::Real(v)) if v.len() == 2 && v[0] != 0.0 => {
+                self.time = v[1];
+                Some(v[1])
+            }
+            _ => None,
+        }
     }
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
         // The step, then the gets that followed the previous step: one round trip.

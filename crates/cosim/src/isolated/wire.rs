@@ -24,6 +24,9 @@ pub mod op {
     /// Load the FMU's library (a [`super::LibraryTarget`]) and answer with two strings:
     /// what `fmi2GetVersion` returned and the missing optional functions (comma-separated).
     pub const PROBE: u8 = 202;
+    /// After a discarded step: two Reals, whether the FMU asks to end the simulation (1 or
+    /// 0) and its last successful time.
+    pub const FMU_TERMINATED: u8 = 203;
 
     pub const SET_DEBUG_LOGGING: u8 = Function::SetDebugLogging as u8;
     pub const SETUP_EXPERIMENT: u8 = Function::SetupExperiment as u8;
@@ -59,6 +62,7 @@ pub fn function_of(code: u8) -> Option<Function> {
     match code {
         op::INSTANTIATE => Some(Function::Instantiate),
         op::PROBE => Some(Function::GetVersion),
+        op::FMU_TERMINATED => Some(Function::GetBooleanStatus),
         op::QUIT => Some(Function::FreeInstance),
         c => Function::from_u8(c),
     }

@@ -207,6 +207,12 @@ fn run_ops(
                     ints.iter().for_each(|&x| results.i32(x));
                     n_gets += 1;
                 }
+                op::FMU_TERMINATED => {
+                    let last = i.terminated_by_fmu();
+                    results.f64(last.is_some() as u8 as f64);
+                    results.f64(last.unwrap_or(0.0));
+                    n_gets += 1;
+                }
                 op::DO_STEP => {
                     let t = d.f64().map_err(Err)?;
                     let h = d.f64().map_err(Err)?;

@@ -491,7 +491,12 @@ impl Plan {
                 Endpoint::Fmu { ty, .. } => *ty,
                 Endpoint::Replay { .. } => ScalarType::Real,
             };
-            let type_ok = from_ty == to_sv.ty
+            // A replayed column drives any numeric input (held for the discrete ones; its
+            // values are checked against the input's type below).
+            let replayed =
+                matches!(from, Endpoint::Replay { .. }) && to_sv.ty != ScalarType::String;
+            let type_ok = replayed
+                || from_ty == to_sv.ty
                 || (to_sv.ty == ScalarType::Real
                     && matches!(
                         from_ty,
@@ -541,6 +546,75 @@ impl Plan {
                 scale,
                 offset,
             });
+        }
+        // Replayed columns: held or interpolated, and their values fit the inputs they drive.
+        let mut to_hold = Vec::new();
+        for c in &connections {
+            let Endpoint::Replay { unit, column, .. } = c.from else {
+                continue;
+            };
+            let to = &instances[c.to_unit];
+            let sv = to
+                .description()
+                .variables
+                .iter()
+                .find(|v| v.value_reference == c.to_vr && v.causality == Causality::Input)
+                .expect("resolved above");
+            let r = &replays[unit - n_fmu];
+            let discrete = sv.ty != ScalarType::Real
+                || matches!(sv.variability, Variability::Discrete | Variability::Tunable);
+            if r.interpolation == crate::config::Interpolation::Auto && discrete {
+                to_hold.push((unit - n_fmu, column));
+            }
+            let values = r.values(column);
+            let ctx = format!("{ctx_file}: connection \"{}\"", c.text);
+            let bad = |k: usize, why: String| {
+                invalid(
+                    &ctx,
+                    format!(
+                        "{}, row {}: value {} {why}",
+                        r.path.display(),
+                        k + 1,
+                        values[k]
+                    ),
+                )
+            };
+            match sv.ty {
+                ScalarType::Integer | ScalarType::Enumeration => {
+                    if let Some(k) = values.iter().position(|x| {
+                        x.fract() != 0.0 || *x < i32::MIN as f64 || *x > i32::MAX as f64
+                    }) {
+                        return Err(bad(
+                            k,
+                            format!(
+                                "is not a 32-bit integer for {} '{}'",
+                                sv.ty.name(),
+                                c.to_name
+                            ),
+                        ));
+                    }
+                    if let Some(items) = to.description().enumeration_items(sv) {
+                        if let Some(k) = values
+                            .iter()
+                            .position(|x| !items.iter().any(|(_, v)| *v as f64 == *x))
+                        {
+                            return Err(bad(
+                                k,
+                                format!("is not an item of the Enumeration '{}'", c.to_name),
+                            ));
+                        }
+                    }
+                }
+                ScalarType::Boolean => {
+                    if let Some(k) = values.iter().position(|x| *x != 0.0 && *x != 1.0) {
+                        return Err(bad(
+                            k,
+                            format!("is not 0 or 1 for the Boolean '{}'", c.to_name),
+                        ));
+                    }
+                }
+                _ => {}
+            }
         }
         // Parameters: typed and range-checked once, here.
         let mut parameters = Vec::new();
@@ -765,6 +839,9 @@ impl Plan {
         for n in &notes {
             log::info!("{ctx_file}: {n}");
         }
+        for (r, column) in to_hold {
+            replays[r].hold[column] = true;
+        }
         Ok(Plan {
             file,
             path: path.to_path_buf(),
@@ -975,6 +1052,10 @@ fn parameter_slot(
         max: sv.max,
         start: sv.start_f64(),
         is_path: sv.ty == ScalarType::String && sv.name.ends_with("_file"),
+        items: instances[k]
+            .description()
+            .enumeration_items(sv)
+            .map(<[_]>::to_vec),
     })
 }
 

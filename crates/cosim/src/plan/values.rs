@@ -20,6 +20,8 @@ pub struct ParamSlot {
     /// A String parameter whose FMU name ends in `_file`: it holds a path, and a relative
     /// one is taken relative to the file that sets it.
     pub is_path: bool,
+    /// An Enumeration's items (name, value): a value must be one of them.
+    pub items: Option<Vec<(String, i64)>>,
 }
 
 /// A typed parameter value.
@@ -154,6 +156,22 @@ impl ParamSlot {
                 return Err(invalid(
                     ctx,
                     format!("'{}' must be a finite number, got {x}", self.name),
+                ));
+            }
+        }
+        if let (ParamValue::Integer(i), Some(items)) = (&v, &self.items) {
+            if !items.iter().any(|(_, value)| *value == i64::from(*i)) {
+                return Err(invalid(
+                    ctx,
+                    format!(
+                        "{i} is not an item of the Enumeration '{}' ({})",
+                        self.name,
+                        items
+                            .iter()
+                            .map(|(n, value)| format!("{value} '{n}'"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
                 ));
             }
         }

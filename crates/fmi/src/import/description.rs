@@ -76,6 +76,8 @@ pub struct ModelDescription {
     pub units: Vec<(String, UnitDef)>,
     /// SimpleType name -> its unit.
     pub type_units: HashMap<String, String>,
+    /// Enumeration SimpleType name -> its items (name, value), in declaration order.
+    pub enumerations: HashMap<String, Vec<(String, i64)>>,
     pub log_categories: Vec<String>,
     pub default_experiment: Option<DefaultExperiment>,
     pub variables: Vec<ScalarVariable>,
@@ -150,6 +152,15 @@ impl ModelDescription {
             ));
         }
         gaps
+    }
+
+    /// The items of an Enumeration variable's declared type.
+    pub fn enumeration_items(&self, v: &ScalarVariable) -> Option<&[(String, i64)]> {
+        (v.ty == ScalarType::Enumeration)
+            .then_some(v.declared_type.as_ref())
+            .flatten()
+            .and_then(|t| self.enumerations.get(t))
+            .map(Vec::as_slice)
     }
 
     pub fn unit_def(&self, name: &str) -> Option<&UnitDef> {
@@ -362,6 +373,21 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
             ("SimpleType", "Real") => {
                 if let (Some(t), Some(u)) = (&current_type, m.get("unit")) {
                     md.type_units.insert(t.clone(), u.clone());
+                }
+            }
+            ("Enumeration", "Item") => {
+                if let Some(t) = &current_type {
+                    let item = m.get("name").cloned().unwrap_or_default();
+                    let value = m
+                        .get("value")
+                        .and_then(|v| v.trim().parse::<i64>().ok())
+                        .ok_or_else(|| {
+                            format!("Enumeration '{t}': item '{item}' has no integer value")
+                        })?;
+                    md.enumerations
+                        .entry(t.clone())
+                        .or_default()
+                        .push((item, value));
                 }
             }
             ("LogCategories", "Category") => {

@@ -300,6 +300,29 @@ impl Instance {
         }
     }
 
+    /// After a step returned `fmi2Discard`: whether the FMU asks to end the simulation
+    /// (`fmi2GetBooleanStatus(fmi2Terminated)`), and then its last successful time
+    /// (`fmi2GetRealStatus(fmi2LastSuccessfulTime)`, else the step's start). `None` when
+    /// it does not ask, or cannot say (the optional functions are missing or fail).
+    pub fn terminated_by_fmu(&mut self) -> Option<f64> {
+        let get_bool = self.lib.api.fmi2GetBooleanStatus?;
+        let mut terminated: fmi2Boolean = fmi2False;
+        let s = unsafe { get_bool(self.comp, fmi2StatusKind::TERMINATED, &mut terminated) };
+        if !s.is_ok() || terminated == fmi2False {
+            return None;
+        }
+        let mut last = self.time;
+        if let Some(get_real) = self.lib.api.fmi2GetRealStatus {
+            let mut t: fmi2Real = self.time;
+            let s = unsafe { get_real(self.comp, fmi2StatusKind::LAST_SUCCESSFUL_TIME, &mut t) };
+            if s.is_ok() && t.is_finite() {
+                last = t;
+            }
+        }
+        self.time = last;
+        Some(last)
+    }
+
     fn unsupported(&self, function: Function) -> FmuError {
         FmuError::Unsupported {
             instance: self.name.clone(),

@@ -1,0 +1,109 @@
+//! The Modelica Reference FMUs, built here from their sources (`../shared/reference-fmus`,
+//! or `TWINBENCH_REFERENCE_FMUS`) with gcc, as FMI 2.0 and FMI 3.0 Co-Simulation FMUs:
+//! the importer's conformance suite. Built once into `target/reference-fmus/fmi<N>/`
+//! (a lock file serialises test binaries that build at the same time).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The models with Co-Simulation in FMI 2.0.
+pub const FMI2_MODELS: &[&str] = &[
+    "BouncingBall",
+    "Dahlquist",
+    "Feedthrough",
+    "Resource",
+    "Stair",
+    "VanDerPol",
+];
+
+/// The sources; a clear failure (not a skip) when they are missing.
+pub fn sources() -> PathBuf {
+    let dir = std::env::var_os("TWINBENCH_REFERENCE_FMUS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| twinbench::pack::workspace_root().join("../shared/reference-fmus"));
+    assert!(
+        dir.join("src").is_dir() && dir.join("include").is_dir(),
+        "the Reference FMUs' sources are not at {} (set TWINBENCH_REFERENCE_FMUS)",
+        dir.display()
+    );
+    dir
+}
+
+/// `<Model>.fmu` for FMI `version` (2 or 3), built when missing or older than its sources.
+pub fn fmu(model: &str, version: u8) -> PathBuf {
+    let src = sources();
+    let out = twinbench::pack::workspace_root()
+        .join("target/reference-fmus")
+        .join(format!("fmi{version}"));
+    std::fs::create_dir_all(&out).unwrap();
+    let fmu = out.join(format!("{model}.fmu"));
+    // One builder at a time across test processes.
+    let lock = std::fs::File::create(out.join(".lock")).unwrap();
+    use std::os::fd::AsRawFd;
+    assert_eq!(unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX) }, 0);
+    let xml = src.join(model).join(format!("FMI{version}.xml"));
+    let newest_source = [
+        xml.clone(),
+        src.join(model).join("model.c"),
+        src.join(model).join("config.h"),
+    ]
+    .iter()
+    .filter_map(|p| std::fs::metadata(p).and_then(|m| m.modified()).ok())
+    .max()
+    .unwrap();
+    if std::fs::metadata(&fmu)
+        .and_then(|m| m.modified())
+        .is_ok_and(|t| t >= newest_source)
+    {
+        return fmu;
+    }
+    let so = out.join(format!("{model}.so"));
+    let functions = if version == 2 {
+        "fmi2Functions.c"
+    } else {
+        "fmi3Functions.c"
+    };
+    let result = Command::new("gcc")
+        .args(["-shared", "-fPIC", "-O2", "-DDISABLE_PREFIX"])
+        .arg(format!("-DFMI_VERSION={version}"))
+        .arg(format!("-I{}", src.join("include").display()))
+        .arg(format!("-I{}", src.join(model).display()))
+        .arg("-o")
+        .arg(&so)
+        .arg(src.join(model).join("model.c"))
+        .arg(src.join("src").join(functions))
+        .arg(src.join("src/cosimulation.c"))
+        .arg("-lm")
+        .output()
+        .expect("gcc runs");
+    assert!(
+        result.status.success(),
+        "gcc {model} (FMI {version}): {}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let platform = if version == 2 {
+        "linux64"
+    } else {
+        "x86_64-linux"
+    };
+    let tmp = out.join(format!(".{model}.fmu.tmp"));
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&tmp).unwrap());
+    let o = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated);
+    let mut add = |name: &str, path: &Path| {
+        zip.start_file(name, o).unwrap();
+        zip.write_all(&std::fs::read(path).unwrap()).unwrap();
+    };
+    add("modelDescription.xml", &xml);
+    add(&format!("binaries/{platform}/{model}.so"), &so);
+    // Resource reads resources/y.txt.
+    let y = src.join(model).join("y.txt");
+    if y.exists() {
+        add("resources/y.txt", &y);
+    }
+    zip.finish().unwrap();
+    std::fs::rename(&tmp, &fmu).unwrap();
+    std::fs::remove_file(&so).unwrap();
+    fmu
+}
