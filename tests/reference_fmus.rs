@@ -399,3 +399,54 @@ fn fmi2_stair_isolated_ends_where_in_process_does() {
     assert_eq!(sim.recording.column_at(1), in_process.column_at(1));
     assert_eq!(*sim.recording.column_at(0).last().unwrap(), 9.0);
 }
+
+#[test]
+fn export_ssp_types_strings_and_enumerations_as_ssp_does() {
+    let dir = tb_testkit::scratch("ssp-types");
+    let fmu = reference::fmu("Feedthrough", 2);
+    let text = format!(
+        "connections = [\"a.String_output -> b.String_input\", \"a.Enumeration_output -> b.Enumeration_input\"]\n[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"a\"\nfmu = \"m\"\n\n[[instance]]\nname = \"b\"\nfmu = \"m\"\n\n[parameters]\n\"a.String_input\" = \"<&>\"\n\"a.Enumeration_input\" = 2\n\"a.Int32_input\" = 7\n\n[experiment]\nstep = 0.5\nstop = 1.0\n",
+        fmu.display()
+    );
+    let path = dir.path().join("types.toml");
+    std::fs::write(&path, &text).unwrap();
+    let plan = Plan::load(&path, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    let ssp = dir.path().join("types.ssp");
+    let summary = tb_cosim::ssp::export(
+        &plan,
+        &ssp,
+        &tb_cosim::ssp::ExportOptions { stop_time: None },
+    )
+    .unwrap();
+    // Exactly the parameters the system file sets.
+    assert_eq!(summary.parameters, 3);
+    let mut zip = zip::ZipArchive::new(std::fs::File::open(&ssp).unwrap()).unwrap();
+    let mut ssd = String::new();
+    std::io::Read::read_to_string(&mut zip.by_name("SystemStructure.ssd").unwrap(), &mut ssd)
+        .unwrap();
+    for fragment in [
+        "<ssv:Parameter name=\"Enumeration_input\"><ssv:Enumeration value=\"Option 2\"/></ssv:Parameter>",
+        "<ssv:Parameter name=\"String_input\"><ssv:String value=\"&lt;&amp;&gt;\"/></ssv:Parameter>",
+        "<ssv:Parameter name=\"Int32_input\"><ssv:Integer value=\"7\"/></ssv:Parameter>",
+        "<ssd:Connector name=\"Enumeration_output\" kind=\"output\"><ssc:Enumeration name=\"Option\"/></ssd:Connector>",
+        "<ssd:Connector name=\"String_input\" kind=\"input\"><ssc:String/></ssd:Connector>",
+        "<ssc:Enumeration name=\"Option\">",
+        "<ssc:Item name=\"Option 1\" value=\"1\"/>",
+    ] {
+        assert!(ssd.contains(fragment), "{fragment} not in\n{ssd}");
+    }
+    // Valid against the SSP 1.0 schema FMPy ships.
+    let out = std::process::Command::new(common::python::python())
+        .arg(twinbench::pack::workspace_root().join("tools/ssp_check.py"))
+        .arg(&ssp)
+        .arg("--json")
+        .output()
+        .unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|_| panic!("{}", String::from_utf8_lossy(&out.stderr)));
+    assert_eq!(
+        j["validation"]["valid"], true,
+        "{}",
+        j["validation"]["problems"]
+    );
+}

@@ -83,15 +83,45 @@ fn real(x: f64) -> String {
     }
 }
 
-fn type_element(ty: ScalarType, unit: Option<&str>) -> String {
-    match (ty, unit) {
-        (ScalarType::Real, Some(u)) => format!("<ssc:Real unit=\"{}\"/>", esc(u)),
-        (ScalarType::Real, None) => "<ssc:Real/>".into(),
-        (ScalarType::Integer, _) => "<ssc:Integer/>".into(),
-        (ScalarType::Boolean, _) => "<ssc:Boolean/>".into(),
-        (ScalarType::String, _) => "<ssc:String/>".into(),
-        // Enumerations are exchanged as integers by twinbench.
-        (ScalarType::Enumeration, _) => "<ssc:Integer/>".into(),
+fn type_element(ty: ScalarType, unit: Option<&str>, enumeration: Option<&str>) -> String {
+    match (ty, unit, enumeration) {
+        (ScalarType::Real, Some(u), _) => format!("<ssc:Real unit=\"{}\"/>", esc(u)),
+        (ScalarType::Real, None, _) => "<ssc:Real/>".into(),
+        (ScalarType::Integer, ..) => "<ssc:Integer/>".into(),
+        (ScalarType::Boolean, ..) => "<ssc:Boolean/>".into(),
+        (ScalarType::String, ..) => "<ssc:String/>".into(),
+        // An Enumeration names its type in the SSD's <Enumerations>.
+        (ScalarType::Enumeration, _, Some(e)) => format!("<ssc:Enumeration name=\"{}\"/>", esc(e)),
+        (ScalarType::Enumeration, _, None) => "<ssc:Integer/>".into(),
+    }
+}
+
+/// The Enumeration types the SSD declares: name in the SSD, items (name, value).
+#[derive(Default)]
+struct Enumerations(Vec<(String, Vec<(String, i64)>)>);
+
+impl Enumerations {
+    /// The SSD name of a variable's enumeration type (declared on first use; a type of the
+    /// same name with other items gets the instance's name as a prefix).
+    fn name_of(
+        &mut self,
+        instance: &str,
+        md: &tb_fmi::ModelDescription,
+        sv: &tb_fmi::description::ScalarVariable,
+    ) -> Option<String> {
+        let items = md.enumeration_items(sv)?;
+        let ty = sv.declared_type.as_deref()?;
+        for candidate in [ty.to_string(), format!("{instance}.{ty}")] {
+            match self.0.iter().find(|(n, _)| *n == candidate) {
+                Some((n, i)) if i.as_slice() == items => return Some(n.clone()),
+                Some(_) => continue,
+                None => {
+                    self.0.push((candidate.clone(), items.to_vec()));
+                    return Some(candidate);
+                }
+            }
+        }
+        None
     }
 }
 
@@ -102,6 +132,7 @@ struct Conn {
     kind: &'static str,
     ty: ScalarType,
     unit: Option<String>,
+    enumeration: Option<String>,
 }
 
 /// Build the SystemStructure.ssd text and the list of (archive name, FMU file) to pack.
@@ -151,6 +182,7 @@ pub fn system_structure(
         .map(|_| BTreeMap::new())
         .collect();
     let mut units_used: BTreeSet<String> = BTreeSet::new();
+    let mut enumerations = Enumerations::default();
     for (k, inst) in system.instances.iter().enumerate() {
         let md = inst.description();
         for v in md
@@ -165,6 +197,7 @@ pub fn system_structure(
                     kind: "output",
                     ty: v.ty,
                     unit,
+                    enumeration: enumerations.name_of(&inst.name, md, v),
                 },
             );
         }
@@ -184,6 +217,7 @@ pub fn system_structure(
                 kind: "input",
                 ty: sv.ty,
                 unit: md.unit_of(sv).map(str::to_string),
+                enumeration: enumerations.name_of(&system.instances[to_k].name, md, sv),
             },
         );
         connections.push((from_k, from_var, to_k, to_var, c.scale, c.offset));
@@ -206,11 +240,22 @@ pub fn system_structure(
                     .unwrap_or_default();
                 format!("<ssv:Real value=\"{}\"{u}/>", real(num.unwrap_or(0.0)))
             }
-            ScalarType::Integer | ScalarType::Enumeration => {
+            ScalarType::Integer => {
                 format!(
                     "<ssv:Integer value=\"{}\"/>",
                     value.as_integer().unwrap_or(0)
                 )
+            }
+            // SSV gives an Enumeration by its item's name (checked against the items).
+            ScalarType::Enumeration => {
+                let i = value.as_integer().unwrap_or(0);
+                match md
+                    .enumeration_items(sv)
+                    .and_then(|items| items.iter().find(|(_, v)| *v == i))
+                {
+                    Some((item, _)) => format!("<ssv:Enumeration value=\"{}\"/>", esc(item)),
+                    None => format!("<ssv:Integer value=\"{i}\"/>"),
+                }
             }
             ScalarType::Boolean => {
                 format!(
@@ -231,6 +276,7 @@ pub fn system_structure(
                     kind: "parameter",
                     ty: sv.ty,
                     unit,
+                    enumeration: enumerations.name_of(&system.instances[k].name, md, sv),
                 },
             );
         } else {
@@ -307,7 +353,7 @@ pub fn system_structure(
                     x.push_str(&format!(
                         "          <ssd:Connector name=\"{}\" kind=\"{kind}\">{}</ssd:Connector>\n",
                         esc(name),
-                        type_element(c.ty, c.unit.as_deref())
+                        type_element(c.ty, c.unit.as_deref(), c.enumeration.as_deref())
                     ));
                 }
             }
@@ -353,6 +399,20 @@ pub fn system_structure(
         x.push_str("    </ssd:Connections>\n");
     }
     x.push_str("  </ssd:System>\n");
+    if !enumerations.0.is_empty() {
+        x.push_str("  <ssd:Enumerations>\n");
+        for (name, items) in &enumerations.0 {
+            x.push_str(&format!("    <ssc:Enumeration name=\"{}\">\n", esc(name)));
+            for (item, value) in items {
+                x.push_str(&format!(
+                    "      <ssc:Item name=\"{}\" value=\"{value}\"/>\n",
+                    esc(item)
+                ));
+            }
+            x.push_str("    </ssc:Enumeration>\n");
+        }
+        x.push_str("  </ssd:Enumerations>\n");
+    }
     // Units with their base units.
     let mut unit_xml = String::new();
     for u in &units_used {
