@@ -51,7 +51,9 @@ def main():
     p.add_argument("--set", action="append", default=[])
     a = p.parse_args()
     md = read_model_description(a.fmu)
-    outputs = [v.name for v in md.modelVariables if v.causality == "output"]
+    # Binary and Clock values have no column in twinbench.
+    outputs = [v.name for v in md.modelVariables
+               if v.causality == "output" and v.type not in ("Binary", "Clock")]
     start_values = {}
     for s in a.set:
         k, v = s.split("=", 1)
@@ -61,10 +63,24 @@ def main():
                        input=read_input(a.input, md) if a.input else None)
     with open(a.out, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(res.dtype.names)
+        # An FMI 3.0 array is one column per element, name[i] or name[i,j] (1-based).
+        header = []
+        for name in res.dtype.names:
+            shape = res.dtype[name].shape
+            if shape:
+                header += [f"{name}[{','.join(str(i + 1) for i in idx)}]" for idx in np.ndindex(shape)]
+            else:
+                header.append(name)
+        w.writerow(header)
         for row in res:
             out = []
+            flat = []
             for x in row:
+                if isinstance(x, np.ndarray):
+                    flat.extend(x.flatten().tolist())
+                else:
+                    flat.append(x)
+            for x in flat:
                 if isinstance(x, (bytes, str)):
                     out.append(x.decode() if isinstance(x, bytes) else x)
                 elif isinstance(x, (bool, np.bool_)):

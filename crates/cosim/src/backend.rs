@@ -4,7 +4,7 @@
 //! its unit.
 
 use std::sync::Arc;
-use tb_fmi::{FmuError, Instance, LoadedFmu};
+use tb_fmi::{FmuError, Instance, Instance3, LoadedFmu};
 
 /// One running instance, in FMI 2.0 Co-Simulation terms.
 pub trait Backend: Send {
@@ -53,6 +53,19 @@ impl BackendFactory for FmuFactory {
     }
     fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError> {
         let fmu = &self.0;
+        if fmu.is_fmi3() {
+            let mut inst = Instance3::instantiate(
+                fmu.library3()?,
+                &fmu.description,
+                instance_name,
+                Some(&fmu.resource_dir()),
+                logging,
+            )?;
+            if logging {
+                inst.set_debug_logging(true)?;
+            }
+            return Ok(Box::new(inst));
+        }
         let mut inst = Instance::instantiate(
             fmu.library()?,
             instance_name,
@@ -130,5 +143,68 @@ impl Backend for Instance {
     }
     fn terminated_by_fmu(&mut self) -> Option<f64> {
         Instance::terminated_by_fmu(self)
+    }
+}
+
+impl Backend for Instance3 {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn time(&self) -> f64 {
+        self.time
+    }
+    fn set_echo(&mut self, on: bool) {
+        Instance3::set_echo(self, on)
+    }
+    fn last_log_lines(&self) -> Vec<String> {
+        Instance3::last_log_lines(self)
+    }
+    fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
+        Instance3::set_debug_logging(self, on)
+    }
+    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+        Instance3::setup_experiment(self, start, stop)
+    }
+    fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        Instance3::enter_initialization_mode(self)
+    }
+    fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        Instance3::exit_initialization_mode(self)
+    }
+    fn terminate(&mut self) -> Result<(), FmuError> {
+        Instance3::terminate(self)
+    }
+    fn reset(&mut self) -> Result<(), FmuError> {
+        Instance3::reset(self)
+    }
+    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        Instance3::get_real(self, vrs, out)
+    }
+    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        Instance3::set_real(self, vrs, values)
+    }
+    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        Instance3::get_int(self, vrs, out)
+    }
+    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        Instance3::set_int(self, vrs, values)
+    }
+    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        Instance3::get_int(self, vrs, out)
+    }
+    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        Instance3::set_int(self, vrs, values)
+    }
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        Instance3::get_string(self, vrs, out)
+    }
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        Instance3::set_string(self, vrs, values)
+    }
+    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        Instance3::do_step(self, t, h)
+    }
+    fn terminated_by_fmu(&mut self) -> Option<f64> {
+        Instance3::terminated_by_fmu(self)
     }
 }

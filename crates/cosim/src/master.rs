@@ -773,7 +773,7 @@ impl Simulation {
                 t_end = time;
                 self.record(t_end);
                 stopped_by = format!(
-                    "instance '{instance}' asked to end the simulation at t = {time} s (fmi2Discard with fmi2Terminated)"
+                    "instance '{instance}' asked to end the simulation at t = {time} s (fmi2Discard with fmi2Terminated, or fmi3DoStep's terminateSimulation)"
                 );
                 ended_by_fmu = true;
                 break;

@@ -28,11 +28,17 @@ pub mod archive;
 #[path = "import/description.rs"]
 pub mod description;
 #[cfg(feature = "import")]
+#[path = "import/description3.rs"]
+pub mod description3;
+#[cfg(feature = "import")]
 #[path = "import/error.rs"]
 mod error;
 #[cfg(feature = "import")]
 #[path = "import/instance.rs"]
 pub mod instance;
+#[cfg(feature = "import")]
+#[path = "import/instance3.rs"]
+pub mod instance3;
 #[cfg(feature = "import")]
 #[path = "import/library.rs"]
 pub mod library;
@@ -51,5 +57,7 @@ pub use description::ModelDescription;
 pub use error::FmuError;
 #[cfg(feature = "import")]
 pub use instance::{FmuState, Instance};
+#[cfg(feature = "import")]
+pub use instance3::{Instance3, Library3};
 #[cfg(feature = "import")]
 pub use library::Library;

@@ -544,6 +544,14 @@ fn library_target(fmu: &LoadedFmu, options: &IsolationOptions) -> LibraryTarget 
             .iter()
             .map(|p| p.to_string_lossy().into_owned())
             .collect(),
+        description: if fmu.is_fmi3() {
+            fmu.dir
+                .join("modelDescription.xml")
+                .to_string_lossy()
+                .into_owned()
+        } else {
+            String::new()
+        },
     }
 }
 

@@ -82,6 +82,9 @@ pub struct LibraryTarget {
     pub model_identifier: String,
     /// Libraries loaded with RTLD_GLOBAL first (the system file's `preload`).
     pub preload: Vec<String>,
+    /// FMI 3.0: the unpacked modelDescription.xml (the worker needs its variables' types);
+    /// empty for FMI 2.0.
+    pub description: String,
 }
 
 impl LibraryTarget {
@@ -91,6 +94,7 @@ impl LibraryTarget {
         e.str(&self.model_identifier);
         e.u32(self.preload.len() as u32);
         self.preload.iter().for_each(|p| e.str(p));
+        e.str(&self.description);
     }
     pub fn decode(d: &mut Dec) -> Result<LibraryTarget, String> {
         let path = d.str()?;
@@ -98,11 +102,13 @@ impl LibraryTarget {
         let model_identifier = d.str()?;
         let n = d.count(4)?;
         let preload = (0..n).map(|_| d.str()).collect::<Result<_, _>>()?;
+        let description = d.str()?;
         Ok(LibraryTarget {
             path,
             source,
             model_identifier,
             preload,
+            description,
         })
     }
 }

@@ -2,12 +2,20 @@
 //! or says quit. Runs in its own process (`twinbench worker`).
 
 use super::wire::{frame, kind, op, Dec, Enc, LibraryTarget, MAX_FRAME};
+use crate::backend::Backend;
 use std::io::{Read, Write};
 use std::os::unix::net::UnixStream;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
-use tb_fmi::{FmuError, Instance, Library};
+use tb_fmi::{FmuError, Instance, Instance3, Library, Library3, ModelDescription};
+
+/// A library loaded in the worker: FMI 2.0, or FMI 3.0 with its description.
+#[derive(Clone)]
+enum Loaded {
+    V2(Arc<Library>),
+    V3(Arc<Library3>, Arc<ModelDescription>),
+}
 
 /// Serve the protocol on stdin until the host closes it or says quit. Returns the exit code.
 pub fn serve_stdio() -> i32 {
@@ -43,8 +51,8 @@ pub fn serve_stdio() -> i32 {
 }
 
 fn serve(mut stream: UnixStream) -> i32 {
-    let mut inst: Option<Instance> = None;
-    let mut lib_cache: Option<Arc<Library>> = None;
+    let mut inst: Option<Box<dyn Backend>> = None;
+    let mut lib_cache: Option<Loaded> = None;
     let mut buf = Vec::new();
     loop {
         let mut len = [0u8; 4];
@@ -73,9 +81,25 @@ fn serve(mut stream: UnixStream) -> i32 {
 }
 
 /// The preloads, then the FMU's library; errors name the .fmu, not the unpacked copy.
-fn load_library(target: &LibraryTarget) -> Result<Arc<Library>, FmuError> {
+fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
     for p in &target.preload {
         tb_fmi::library::preload_global(std::path::Path::new(p))?;
+    }
+    let source = std::path::Path::new(&target.source);
+    if !target.description.is_empty() {
+        let xml =
+            std::fs::read_to_string(&target.description).map_err(|e| FmuError::Description {
+                path: source.to_path_buf(),
+                message: e.to_string(),
+            })?;
+        let md = tb_fmi::description::parse(&xml).map_err(|message| FmuError::Description {
+            path: source.to_path_buf(),
+            message,
+        })?;
+        let entry = tb_fmi::archive::library_entry(&md.fmi_version, &target.model_identifier);
+        let lib = Library3::load(std::path::Path::new(&target.path))
+            .map_err(|e| tb_fmi::archive::library_error3(source, &entry, e))?;
+        return Ok(Loaded::V3(Arc::new(lib), Arc::new(md)));
     }
     Library::load(std::path::Path::new(&target.path))
         .map(Arc::new)
@@ -86,13 +110,14 @@ fn load_library(target: &LibraryTarget) -> Result<Arc<Library>, FmuError> {
                 e,
             )
         })
+        .map(Loaded::V2)
 }
 
 /// Run one request; write the response into `out`. Returns true on quit.
 fn run_ops(
     req: &[u8],
-    inst: &mut Option<Instance>,
-    lib_cache: &mut Option<Arc<Library>>,
+    inst: &mut Option<Box<dyn Backend>>,
+    lib_cache: &mut Option<Loaded>,
     out: &mut Enc,
 ) -> bool {
     let mut d = Dec::new(req);
@@ -117,8 +142,16 @@ fn run_ops(
                 };
                 *lib_cache = Some(library.clone());
                 if code == op::PROBE {
-                    results.str(&library.version);
-                    results.str(&library.missing_optional.join(","));
+                    match &library {
+                        Loaded::V2(l) => {
+                            results.str(&l.version);
+                            results.str(&l.missing_optional.join(","));
+                        }
+                        Loaded::V3(l, _) => {
+                            results.str(&l.version);
+                            results.str("");
+                        }
+                    }
                     n_gets += 1;
                     return Ok(false);
                 }
@@ -127,8 +160,14 @@ fn run_ops(
                 let res = PathBuf::from(d.str().map_err(Err)?);
                 let logging = d.u8().map_err(Err)? != 0;
                 *inst = None;
-                let mut i = Instance::instantiate(library, &name, &guid, Some(&res), logging)
-                    .map_err(Ok)?;
+                let mut i: Box<dyn Backend> = match library {
+                    Loaded::V2(l) => Box::new(
+                        Instance::instantiate(l, &name, &guid, Some(&res), logging).map_err(Ok)?,
+                    ),
+                    Loaded::V3(l, md) => Box::new(
+                        Instance3::instantiate(l, &md, &name, Some(&res), logging).map_err(Ok)?,
+                    ),
+                };
                 i.set_echo(false);
                 *inst = Some(i);
                 return Ok(false);
@@ -139,7 +178,7 @@ fn run_ops(
             match code {
                 op::SET_DEBUG_LOGGING => {
                     let on = d.u8().map_err(Err)? != 0;
-                    i.set_debug_logging(on, &[]).map_err(Ok)?
+                    i.set_debug_logging(on).map_err(Ok)?
                 }
                 op::SETUP_EXPERIMENT => {
                     let start = d.f64().map_err(Err)?;
@@ -239,7 +278,7 @@ fn run_ops(
     };
     out.u8(err.is_some() as u8);
     out.u32(n_gets);
-    out.f64(inst.as_ref().map_or(0.0, |i| i.time));
+    out.f64(inst.as_ref().map_or(0.0, |i| i.time()));
     out.0.extend_from_slice(&results.0);
     if let Some(e) = err {
         match e {

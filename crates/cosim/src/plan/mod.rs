@@ -194,6 +194,9 @@ pub struct Plan {
     pub signals: SignalTable,
     /// Slots recorded every `decimation` steps, in column order.
     pub record: Vec<usize>,
+    /// The recorded columns' names, as listed (an FMI 3.0 alias shares its original's
+    /// slot but keeps its own column name).
+    pub record_names: Vec<String>,
     /// Parameters of the system file, typed, applied before every run.
     pub parameters: Vec<(ParamSlot, ParamValue)>,
     pub stop: Stop,
@@ -850,6 +853,7 @@ impl Plan {
             connections,
             signals,
             record,
+            record_names,
             parameters,
             stop,
             report,
@@ -898,8 +902,8 @@ impl Plan {
     pub fn record_columns(&self) -> (Vec<String>, Vec<String>) {
         let mut names = vec!["time".to_string()];
         let mut units = vec!["s".to_string()];
-        for &s in &self.record {
-            names.push(self.signals.signals[s].name.clone());
+        for (k, &s) in self.record.iter().enumerate() {
+            names.push(self.record_names[k].clone());
             units.push(self.signals.signals[s].unit.clone());
         }
         (names, units)

@@ -2,6 +2,7 @@
 //! their shared library loaded once and shared by every instance.
 
 use crate::description::{self, ModelDescription};
+use crate::instance3::Library3;
 use crate::library::Library;
 use crate::FmuError;
 use sha2::{Digest, Sha256};
@@ -42,22 +43,48 @@ pub struct LoadedFmu {
     pub sha256: String,
     pub description: ModelDescription,
     library: Mutex<Option<Arc<Library>>>,
+    library3: Mutex<Option<Arc<Library3>>>,
 }
 
 impl LoadedFmu {
-    /// The unpacked library (`binaries/linux64/<modelIdentifier>.so`).
+    /// The unpacked library (`binaries/linux64/<modelIdentifier>.so`, FMI 3.0:
+    /// `binaries/x86_64-linux/`).
     pub fn library_path(&self) -> PathBuf {
         self.dir.join(self.library_entry())
     }
 
     /// The library's entry in the archive, for messages.
     pub fn library_entry(&self) -> String {
-        format!("binaries/linux64/{}.so", self.model_identifier())
+        library_entry(&self.description.fmi_version, self.model_identifier())
+    }
+
+    /// An FMI 3.0 FMU.
+    pub fn is_fmi3(&self) -> bool {
+        self.description.fmi_version.starts_with("3.")
+    }
+
+    /// The FMI 3.0 library, loaded into this process on the first call.
+    pub fn library3(&self) -> Result<Arc<Library3>, FmuError> {
+        let mut slot = lock(&self.library3);
+        if let Some(l) = &*slot {
+            return Ok(l.clone());
+        }
+        let library = Library3::load(&self.library_path())
+            .map(Arc::new)
+            .map_err(|e| library_error3(&self.source, &self.library_entry(), e))?;
+        *slot = Some(library.clone());
+        Ok(library)
     }
 
     /// The library, loaded into this process on the first call (and checked: every
     /// required function, `fmi2GetVersion` = "2.0"). Errors name the .fmu and its entry.
     pub fn library(&self) -> Result<Arc<Library>, FmuError> {
+        if self.is_fmi3() {
+            return Err(FmuError::Load {
+                path: self.source.clone(),
+                message: "an FMI 3.0 FMU has no FMI 2.0 library".into(),
+            });
+        }
         let mut slot = lock(&self.library);
         if let Some(l) = &*slot {
             return Ok(l.clone());
@@ -233,6 +260,7 @@ impl FmuCache {
             sha256: sha.clone(),
             description: md,
             library: Mutex::new(None),
+            library3: Mutex::new(None),
         });
         lock(&self.loaded).insert(sha, loaded.clone());
         Ok(loaded)
@@ -256,6 +284,26 @@ pub fn library_error(fmu: &Path, id: &str, e: FmuError) -> FmuError {
         FmuError::MissingSymbol { symbol, .. } => FmuError::Archive {
             path: fmu.to_path_buf(),
             message: format!("{entry} does not export the required FMI 2.0 function {symbol}"),
+        },
+        other => other,
+    }
+}
+
+/// An FMI 3.0 library error under the FMU's name and the library's entry.
+pub fn library_error3(fmu: &Path, entry: &str, e: FmuError) -> FmuError {
+    match e {
+        FmuError::Load { message, .. } => FmuError::Load {
+            path: fmu.to_path_buf(),
+            message: format!(
+                "{entry}: {}",
+                message
+                    .rsplit_once(".so: ")
+                    .map_or(message.as_str(), |(_, m)| m)
+            ),
+        },
+        FmuError::MissingSymbol { symbol, .. } => FmuError::Archive {
+            path: fmu.to_path_buf(),
+            message: format!("{entry} does not export the FMI 3.0 function {symbol}"),
         },
         other => other,
     }
@@ -391,33 +439,56 @@ pub fn check_archive_with(
     };
     let md = description::parse(&xml).map_err(|message| FmuError::Description {
         path: fmu.to_path_buf(),
-        // An FMI 1.0 or 3.0 description may not even parse as 2.0: name the version then.
+        // An FMI 1.0 description may not even parse as 2.0: name the version then.
         message: match sniff_fmi_version(&xml) {
-            Some(v) if v != "2.0" => {
-                format!("fmiVersion is \"{v}\"; twinbench runs FMI 2.0 FMUs only")
+            Some(v) if v != "2.0" && !v.starts_with("3.") => {
+                format!("fmiVersion is \"{v}\"; twinbench runs FMI 2.0 and 3.0 FMUs")
             }
             _ => message,
         },
     })?;
-    if md.fmi_version != "2.0" {
+    let fmi3 = md.fmi_version.starts_with("3.");
+    if md.fmi_version != "2.0" && !fmi3 {
         return Err(FmuError::Description {
             path: fmu.to_path_buf(),
             message: format!(
-                "fmiVersion is \"{}\"; twinbench runs FMI 2.0 FMUs only",
+                "fmiVersion is \"{}\"; twinbench runs FMI 2.0 and 3.0 FMUs",
                 md.fmi_version
             ),
         });
     }
     let Some(cs) = &md.co_simulation else {
+        let kinds: Vec<&str> = [
+            (md.has_model_exchange, "Model Exchange"),
+            (
+                md.unsupported.iter().any(|u| u.starts_with("Scheduled")),
+                "Scheduled Execution",
+            ),
+        ]
+        .iter()
+        .filter(|(has, _)| *has)
+        .map(|(_, k)| *k)
+        .collect();
         return Err(FmuError::Description {
             path: fmu.to_path_buf(),
-            message: if md.has_model_exchange {
-                "the FMU supports Model Exchange only; twinbench needs Co-Simulation".into()
-            } else {
+            message: if kinds.is_empty() {
                 "no <CoSimulation> element".into()
+            } else {
+                format!(
+                    "the FMU supports {} only; twinbench needs Co-Simulation",
+                    kinds.join(" and ")
+                )
             },
         });
     };
+    if let Some(what) = md.unsupported.first() {
+        return Err(FmuError::Description {
+            path: fmu.to_path_buf(),
+            message: format!(
+                "the FMU needs {what}; twinbench runs FMI 3.0 Co-Simulation without clocks"
+            ),
+        });
+    }
     let id = cs.model_identifier.clone();
     // Used as a file name and a C symbol prefix: a path here would load a library from
     // outside the cache.
@@ -432,18 +503,44 @@ pub fn check_archive_with(
             ),
         });
     }
-    let so = format!("binaries/linux64/{id}.so");
+    let so = library_entry(&md.fmi_version, &id);
     if !names.contains(&so) {
+        // Name the platforms the FMU has: a Windows- or macOS-only FMU is a common mistake.
+        let mut platforms: Vec<&str> = names
+            .iter()
+            .filter_map(|n| n.strip_prefix("binaries/"))
+            .filter_map(|n| n.split_once('/').map(|(p, _)| p))
+            .filter(|p| !p.is_empty())
+            .collect();
+        platforms.sort();
+        platforms.dedup();
         return Err(arch(
             fmu,
-            format!("no {so} (the FMU has no binary for this platform)"),
+            format!(
+                "no {so} (the FMU has no binary for this platform; it has {})",
+                if platforms.is_empty() {
+                    "no binaries at all".to_string()
+                } else {
+                    format!("binaries for {}", platforms.join(", "))
+                }
+            ),
         ));
     }
     Ok((md, id))
 }
 
+/// Where the Linux x86-64 library of an FMU lies in its archive: `binaries/linux64/` in
+/// FMI 2.0, `binaries/x86_64-linux/` in FMI 3.0.
+pub fn library_entry(fmi_version: &str, model_identifier: &str) -> String {
+    if fmi_version.starts_with("3.") {
+        format!("binaries/x86_64-linux/{model_identifier}.so")
+    } else {
+        format!("binaries/linux64/{model_identifier}.so")
+    }
+}
+
 /// The `fmiVersion` attribute's value, found without parsing the XML.
-fn sniff_fmi_version(xml: &str) -> Option<&str> {
+pub(crate) fn sniff_fmi_version(xml: &str) -> Option<&str> {
     let i = xml.find("fmiVersion")?;
     let rest = xml[i + "fmiVersion".len()..].trim_start();
     let rest = rest.strip_prefix('=')?.trim_start();

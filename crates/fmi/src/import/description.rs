@@ -22,6 +22,8 @@ pub struct ScalarVariable {
     pub min: Option<f64>,
     pub max: Option<f64>,
     pub nominal: Option<f64>,
+    /// FMI 3.0: the variable's own type and, for an array element, where it sits.
+    pub fmi3: Option<crate::description3::Fmi3Slot>,
 }
 
 impl ScalarVariable {
@@ -83,6 +85,11 @@ pub struct ModelDescription {
     pub variables: Vec<ScalarVariable>,
     pub outputs: Vec<Unknown>,
     pub initial_unknowns: Vec<Unknown>,
+    /// FMI 3.0: what the description has that twinbench cannot run (clocks, Scheduled
+    /// Execution), each named; the archive check refuses the FMU with them.
+    pub unsupported: Vec<String>,
+    /// FMI 3.0: variables twinbench does not exchange (Binary), as "name (type)".
+    pub skipped: Vec<String>,
 }
 
 impl ModelDescription {
@@ -195,7 +202,7 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
     prev[b.len()]
 }
 
-fn attrs(e: &BytesStart) -> Result<HashMap<String, String>, String> {
+pub(crate) fn attrs(e: &BytesStart) -> Result<HashMap<String, String>, String> {
     let mut m = HashMap::new();
     for a in e.attributes() {
         let a = a.map_err(|e| format!("bad attribute: {e}"))?;
@@ -208,7 +215,11 @@ fn attrs(e: &BytesStart) -> Result<HashMap<String, String>, String> {
     Ok(m)
 }
 
-fn num(m: &HashMap<String, String>, key: &str, ctx: &str) -> Result<Option<f64>, String> {
+pub(crate) fn num(
+    m: &HashMap<String, String>,
+    key: &str,
+    ctx: &str,
+) -> Result<Option<f64>, String> {
     match m.get(key) {
         None => Ok(None),
         Some(s) => s
@@ -219,11 +230,11 @@ fn num(m: &HashMap<String, String>, key: &str, ctx: &str) -> Result<Option<f64>,
     }
 }
 
-fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {
+pub(crate) fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {
     m.get(key).and_then(|s| s.trim().parse().ok()).unwrap_or(0)
 }
 
-fn flag(m: &HashMap<String, String>, key: &str) -> bool {
+pub(crate) fn flag(m: &HashMap<String, String>, key: &str) -> bool {
     m.get(key).is_some_and(|s| s == "true" || s == "1")
 }
 
@@ -249,8 +260,16 @@ fn unknown(m: &HashMap<String, String>) -> Result<Unknown, String> {
     })
 }
 
-/// Parse modelDescription.xml text. Errors say what is wrong; the caller adds the file.
+/// Parse modelDescription.xml text (FMI 2.0, or 3.0 by its `fmiVersion`). Errors say what
+/// is wrong; the caller adds the file.
 pub fn parse(xml: &str) -> Result<ModelDescription, String> {
+    if crate::archive::sniff_fmi_version(xml).is_some_and(|v| v.starts_with("3.")) {
+        return crate::description3::parse(xml);
+    }
+    parse2(xml)
+}
+
+fn parse2(xml: &str) -> Result<ModelDescription, String> {
     let mut reader = Reader::from_str(xml);
     let mut md = ModelDescription::default();
     let mut stack: Vec<String> = Vec::new();
@@ -431,6 +450,7 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                     min: None,
                     max: None,
                     nominal: None,
+                    fmi3: None,
                 });
                 if empty {
                     return Err(format!(
@@ -484,7 +504,7 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
 /// Variable names are unique; a value reference shared by several variables (an alias) is
 /// allowed among variables of one type, but never for an input or a parameter (a set would
 /// write the other variable too: the FMU's interface would not be what it says).
-fn check_names_and_aliases(md: &ModelDescription) -> Result<(), String> {
+pub(crate) fn check_names_and_aliases(md: &ModelDescription) -> Result<(), String> {
     let mut by_name: HashMap<&str, u32> = HashMap::new();
     let mut by_vr: HashMap<(u32, ScalarType), &ScalarVariable> = HashMap::new();
     for v in &md.variables {
@@ -497,7 +517,9 @@ fn check_names_and_aliases(md: &ModelDescription) -> Result<(), String> {
         if let Some(first) = by_vr.insert((v.value_reference, v.ty), v) {
             let settable =
                 |x: &ScalarVariable| matches!(x.causality, Causality::Input | Causality::Parameter);
-            if settable(first) || settable(v) {
+            // FMI 3.0 declares aliases explicitly (`<Alias>`): the same variable by design.
+            let declared_alias = md.fmi_version.starts_with("3.");
+            if !declared_alias && (settable(first) || settable(v)) {
                 return Err(format!(
                     "value reference {} of {} is shared by '{}' ({}) and '{}' ({}): an input or a parameter cannot be an alias",
                     v.value_reference,

@@ -23,6 +23,18 @@ pub enum FmuError {
         time: f64,
         log: Vec<String>,
     },
+    /// An FMI 3.0 call that did not return OK or Warning.
+    #[error(
+        "instance '{instance}' at t = {time} s: {function} returned {status}{}",
+        format_log(log)
+    )]
+    Call3 {
+        instance: String,
+        function: &'static str,
+        status: String,
+        time: f64,
+        log: Vec<String>,
+    },
     #[error("instance '{instance}': {what} is not provided by this FMU")]
     Unsupported {
         instance: String,

@@ -1,0 +1,724 @@
+//! modelDescription.xml reader for FMI 3.0, into the same [`ModelDescription`] as FMI 2.0
+//! so that everything after loading (plan, units, recording) is version-blind.
+//!
+//! How FMI 3.0 maps:
+//! - Float64 and Float32 are Real; Int8 … Int32, UInt8 and UInt16 are Integer; UInt32, Int64
+//!   and UInt64 travel as Real (f64), and a value an f64 cannot carry exactly is an error; Boolean, String and Enumeration keep their
+//!   kind; each variable keeps its exact type in [`Fmi3Slot`] for the C calls.
+//! - An array becomes one variable per element, `name[i]` or `name[i,j]` (1-based, row-major
+//!   as FMI 3.0 stores them), with its own value reference (the declared one for a scalar,
+//!   fresh ones past the largest declared for elements). Dimensions come from `start` or
+//!   from the structural parameter's start value.
+//! - `instantiationToken` is kept as the GUID; `ModelStructure` outputs and initial unknowns
+//!   become 1-based indices as in FMI 2.0.
+//! - Binary variables are listed in `skipped`; clocks and Scheduled Execution in
+//!   `unsupported` (the archive check refuses such an FMU before anything runs).
+
+use crate::description::{
+    attrs, check_names_and_aliases, flag, int_attr, num, CoSimulation, DefaultExperiment,
+    ModelDescription, ScalarVariable, Unknown,
+};
+use crate::schema::{Causality, Initial, ScalarType, Variability};
+use crate::units::UnitDef;
+use quick_xml::events::Event;
+use quick_xml::Reader;
+use std::collections::HashMap;
+
+/// An FMI 3.0 variable type (the element name in `ModelVariables`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Fmi3Type {
+    Float32,
+    Float64,
+    Int8,
+    UInt8,
+    Int16,
+    UInt16,
+    Int32,
+    UInt32,
+    Int64,
+    UInt64,
+    Boolean,
+    String,
+    Enumeration,
+}
+
+impl Fmi3Type {
+    fn parse(name: &str) -> Option<Fmi3Type> {
+        use Fmi3Type::*;
+        Some(match name {
+            "Float32" => Float32,
+            "Float64" => Float64,
+            "Int8" => Int8,
+            "UInt8" => UInt8,
+            "Int16" => Int16,
+            "UInt16" => UInt16,
+            "Int32" => Int32,
+            "UInt32" => UInt32,
+            "Int64" => Int64,
+            "UInt64" => UInt64,
+            "Boolean" => Boolean,
+            "String" => String,
+            "Enumeration" => Enumeration,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        use Fmi3Type::*;
+        match self {
+            Float32 => "Float32",
+            Float64 => "Float64",
+            Int8 => "Int8",
+            UInt8 => "UInt8",
+            Int16 => "Int16",
+            UInt16 => "UInt16",
+            Int32 => "Int32",
+            UInt32 => "UInt32",
+            Int64 => "Int64",
+            UInt64 => "UInt64",
+            Boolean => "Boolean",
+            String => "String",
+            Enumeration => "Enumeration",
+        }
+    }
+
+    /// The FMI 2.0 kind twinbench exchanges it as. Integers wider than 32 bits (UInt32,
+    /// Int64, UInt64) travel as Real (an f64: exact up to 2^53, and a value it cannot carry
+    /// exactly is an error naming the variable, never rounded in silence).
+    pub fn kind(self) -> ScalarType {
+        use Fmi3Type::*;
+        match self {
+            Float32 | Float64 | UInt32 | Int64 | UInt64 => ScalarType::Real,
+            Boolean => ScalarType::Boolean,
+            String => ScalarType::String,
+            Enumeration => ScalarType::Enumeration,
+            _ => ScalarType::Integer,
+        }
+    }
+}
+
+/// Where an FMI 3.0 value lives: its type, the FMU's value reference, and for an array
+/// element its position in the array (row-major) and the array's element count.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fmi3Slot {
+    pub ty: Fmi3Type,
+    pub vr: u32,
+    pub index: u32,
+    pub len: u32,
+    /// A structural parameter: it sizes arrays, so twinbench never changes it.
+    pub structural: bool,
+}
+
+/// A variable as declared, before arrays are expanded.
+struct Declared {
+    var: ScalarVariable,
+    ty: Fmi3Type,
+    structural: bool,
+    /// Each dimension: a fixed size, or the value reference of a structural parameter.
+    dims: Vec<Dim>,
+    /// `<Start value=…>` children (String), in order.
+    starts: Vec<String>,
+    /// `<Alias name=…>` children: other names of the same variable.
+    aliases: Vec<String>,
+}
+
+enum Dim {
+    Fixed(u64),
+    Parameter(u32),
+}
+
+/// An FMI 3.0 Unknown before value references become indices.
+struct Unknown3 {
+    vr: u32,
+    dependencies: Option<Vec<u32>>,
+}
+
+fn unknown3(m: &HashMap<String, String>, what: &str) -> Result<Unknown3, String> {
+    let vr = m
+        .get("valueReference")
+        .and_then(|s| s.trim().parse().ok())
+        .ok_or_else(|| format!("ModelStructure: <{what}> without a valid valueReference"))?;
+    let dependencies = match m.get("dependencies") {
+        None => None,
+        Some(s) => Some(
+            s.split_whitespace()
+                .map(|d| {
+                    d.parse()
+                        .map_err(|_| format!("ModelStructure: bad dependency '{d}' of <{what}>"))
+                })
+                .collect::<Result<Vec<u32>, String>>()?,
+        ),
+    };
+    Ok(Unknown3 { vr, dependencies })
+}
+
+/// Parse an FMI 3.0 modelDescription.xml.
+pub fn parse(xml: &str) -> Result<ModelDescription, String> {
+    let mut reader = Reader::from_str(xml);
+    let mut md = ModelDescription::default();
+    let mut stack: Vec<String> = Vec::new();
+    let mut declared: Vec<Declared> = Vec::new();
+    let mut current: Option<Declared> = None;
+    let mut current_unit: Option<(String, UnitDef)> = None;
+    let mut current_type: Option<String> = None;
+    let mut outputs: Vec<Unknown3> = Vec::new();
+    let mut initial_unknowns: Vec<Unknown3> = Vec::new();
+    let mut saw_root = false;
+    // Variables without a column (Binary, Clock): the ModelStructure may list them.
+    let mut skipped_vrs: Vec<u32> = Vec::new();
+    loop {
+        let ev = reader
+            .read_event()
+            .map_err(|e| format!("XML error at byte {}: {e}", reader.buffer_position()))?;
+        let (e, empty) = match &ev {
+            Event::Start(e) => (e.clone(), false),
+            Event::Empty(e) => (e.clone(), true),
+            Event::End(_) => {
+                let name = stack.pop().unwrap_or_default();
+                if stack.last().map(String::as_str) == Some("ModelVariables") {
+                    if let Some(d) = current.take() {
+                        declared.push(d);
+                    }
+                }
+                match name.as_str() {
+                    "Unit" => {
+                        if let Some(u) = current_unit.take() {
+                            md.units.push(u);
+                        }
+                    }
+                    n if n.ends_with("Type") => current_type = None,
+                    _ => {}
+                }
+                continue;
+            }
+            Event::Eof => break,
+            _ => continue,
+        };
+        let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
+        let m = attrs(&e)?;
+        let parent = stack.last().map(String::as_str).unwrap_or("");
+        match (parent, name.as_str()) {
+            ("", "fmiModelDescription") => {
+                saw_root = true;
+                md.fmi_version = m.get("fmiVersion").cloned().unwrap_or_default();
+                md.model_name = m.get("modelName").cloned().unwrap_or_default();
+                md.guid = m.get("instantiationToken").cloned().unwrap_or_default();
+                md.description = m.get("description").cloned().unwrap_or_default();
+                md.generation_tool = m.get("generationTool").cloned().unwrap_or_default();
+            }
+            ("", other) => {
+                return Err(format!(
+                    "root element is <{other}>, expected <fmiModelDescription>"
+                ))
+            }
+            ("fmiModelDescription", "CoSimulation") => {
+                md.co_simulation = Some(CoSimulation {
+                    model_identifier: m
+                        .get("modelIdentifier")
+                        .cloned()
+                        .ok_or("<CoSimulation> has no modelIdentifier")?,
+                    needs_execution_tool: flag(&m, "needsExecutionTool"),
+                    can_handle_variable_communication_step_size: flag(
+                        &m,
+                        "canHandleVariableCommunicationStepSize",
+                    ),
+                    can_be_instantiated_only_once_per_process: flag(
+                        &m,
+                        "canBeInstantiatedOnlyOncePerProcess",
+                    ),
+                    can_get_and_set_fmu_state: flag(&m, "canGetAndSetFMUState"),
+                    can_serialize_fmu_state: flag(&m, "canSerializeFMUState"),
+                    can_interpolate_inputs: false,
+                    provides_directional_derivative: flag(&m, "providesDirectionalDerivatives"),
+                })
+            }
+            ("fmiModelDescription", "ModelExchange") => md.has_model_exchange = true,
+            ("fmiModelDescription", "ScheduledExecution") => md
+                .unsupported
+                .push("Scheduled Execution (<ScheduledExecution>)".into()),
+            ("fmiModelDescription", "DefaultExperiment") => {
+                md.default_experiment = Some(DefaultExperiment {
+                    start_time: num(&m, "startTime", "DefaultExperiment")?,
+                    stop_time: num(&m, "stopTime", "DefaultExperiment")?,
+                    step_size: num(&m, "stepSize", "DefaultExperiment")?,
+                    tolerance: num(&m, "tolerance", "DefaultExperiment")?,
+                })
+            }
+            ("UnitDefinitions", "Unit") => {
+                let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
+                current_unit = Some((
+                    uname,
+                    UnitDef {
+                        name: "",
+                        kg: 0,
+                        m: 0,
+                        s: 0,
+                        a: 0,
+                        k: 0,
+                        mol: 0,
+                        cd: 0,
+                        rad: 0,
+                        factor: 1.0,
+                        offset: 0.0,
+                    },
+                ));
+                if empty {
+                    md.units.push(current_unit.take().expect("just set"));
+                }
+            }
+            ("Unit", "BaseUnit") => {
+                if let Some((_, u)) = current_unit.as_mut() {
+                    u.kg = int_attr(&m, "kg");
+                    u.m = int_attr(&m, "m");
+                    u.s = int_attr(&m, "s");
+                    u.a = int_attr(&m, "A");
+                    u.k = int_attr(&m, "K");
+                    u.mol = int_attr(&m, "mol");
+                    u.cd = int_attr(&m, "cd");
+                    u.rad = int_attr(&m, "rad");
+                    u.factor = num(&m, "factor", "BaseUnit")?.unwrap_or(1.0);
+                    u.offset = num(&m, "offset", "BaseUnit")?.unwrap_or(0.0);
+                }
+            }
+            ("TypeDefinitions", t) if t.ends_with("Type") => {
+                current_type = m.get("name").cloned();
+                if let (Some(tn), Some(u)) = (&current_type, m.get("unit")) {
+                    md.type_units.insert(tn.clone(), u.clone());
+                }
+                if empty {
+                    current_type = None;
+                }
+            }
+            ("EnumerationType", "Item") => {
+                if let Some(t) = &current_type {
+                    let item = m.get("name").cloned().unwrap_or_default();
+                    let value = m
+                        .get("value")
+                        .and_then(|v| v.trim().parse::<i64>().ok())
+                        .ok_or_else(|| {
+                            format!("Enumeration '{t}': item '{item}' has no integer value")
+                        })?;
+                    md.enumerations
+                        .entry(t.clone())
+                        .or_default()
+                        .push((item, value));
+                }
+            }
+            ("LogCategories", "Category") => {
+                if let Some(n) = m.get("name") {
+                    md.log_categories.push(n.clone());
+                }
+            }
+            ("ModelVariables", t) => {
+                let vname = m
+                    .get("name")
+                    .cloned()
+                    .ok_or_else(|| format!("<{t}> without a name"))?;
+                let vr: u32 = m
+                    .get("valueReference")
+                    .and_then(|s| s.trim().parse().ok())
+                    .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
+                if t == "Clock" {
+                    md.unsupported
+                        .push(format!("clocks (variable '{vname}' is a Clock)"));
+                }
+                if let Some(c) = m.get("clocks") {
+                    md.unsupported.push(format!(
+                        "clocks (variable '{vname}' is clocked by {})",
+                        c.trim()
+                    ));
+                }
+                let Some(ty) = Fmi3Type::parse(t) else {
+                    if t != "Clock" {
+                        md.skipped.push(format!("{vname} ({t})"));
+                    }
+                    skipped_vrs.push(vr);
+                    if !empty {
+                        stack.push(name);
+                    }
+                    continue;
+                };
+                let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
+                let structural =
+                    m.get("causality").map(String::as_str) == Some("structuralParameter");
+                let causality = match m.get("causality").map(String::as_str) {
+                    Some("structuralParameter") => Causality::Parameter,
+                    Some(c) => Causality::parse(c).map_err(ctx)?,
+                    None => Causality::DEFAULT,
+                };
+                // FMI 3.0: variables other than Float32/Float64 are discrete by default.
+                let variability = match m.get("variability") {
+                    Some(v) => Variability::parse(v).map_err(ctx)?,
+                    None if matches!(ty, Fmi3Type::Float32 | Fmi3Type::Float64) => {
+                        Variability::Continuous
+                    }
+                    None => Variability::Discrete,
+                };
+                let initial = match m.get("initial") {
+                    Some(i) => Some(Initial::parse(i).map_err(ctx)?),
+                    None => None,
+                };
+                let var = ScalarVariable {
+                    name: vname.clone(),
+                    value_reference: vr,
+                    description: m.get("description").cloned().unwrap_or_default(),
+                    causality,
+                    variability,
+                    initial,
+                    ty: ty.kind(),
+                    declared_type: m.get("declaredType").cloned(),
+                    unit: m.get("unit").cloned(),
+                    start: m.get("start").cloned(),
+                    min: if ty.kind() == ScalarType::Real {
+                        num(&m, "min", &format!("variable '{vname}'"))?
+                    } else {
+                        m.get("min").and_then(|s| s.trim().parse().ok())
+                    },
+                    max: if ty.kind() == ScalarType::Real {
+                        num(&m, "max", &format!("variable '{vname}'"))?
+                    } else {
+                        m.get("max").and_then(|s| s.trim().parse().ok())
+                    },
+                    nominal: num(&m, "nominal", &format!("variable '{vname}'"))?,
+                    fmi3: None,
+                };
+                let d = Declared {
+                    var,
+                    ty,
+                    structural,
+                    dims: Vec::new(),
+                    starts: Vec::new(),
+                    aliases: Vec::new(),
+                };
+                if empty {
+                    declared.push(d);
+                } else {
+                    current = Some(d);
+                }
+            }
+            (_, "Dimension") if stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables" => {
+                if let Some(d) = current.as_mut() {
+                    let dim = if let Some(s) = m.get("start") {
+                        Dim::Fixed(s.trim().parse().map_err(|_| {
+                            format!(
+                                "variable '{}': Dimension start=\"{s}\" is not a size",
+                                d.var.name
+                            )
+                        })?)
+                    } else if let Some(r) = m.get("valueReference") {
+                        Dim::Parameter(r.trim().parse().map_err(|_| {
+                            format!(
+                                "variable '{}': Dimension valueReference=\"{r}\" is not a value reference",
+                                d.var.name
+                            )
+                        })?)
+                    } else {
+                        return Err(format!(
+                            "variable '{}': <Dimension> has neither start nor valueReference",
+                            d.var.name
+                        ));
+                    };
+                    d.dims.push(dim);
+                }
+            }
+            (_, "Start") if stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables" => {
+                if let Some(d) = current.as_mut() {
+                    d.starts.push(m.get("value").cloned().unwrap_or_default());
+                }
+            }
+            (_, "Alias") if stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables" => {
+                if let Some(d) = current.as_mut() {
+                    let a = m.get("name").cloned().ok_or_else(|| {
+                        format!("variable '{}': <Alias> without a name", d.var.name)
+                    })?;
+                    d.aliases.push(a);
+                }
+            }
+            ("ModelStructure", "Output") => outputs.push(unknown3(&m, "Output")?),
+            ("ModelStructure", "InitialUnknown") => {
+                initial_unknowns.push(unknown3(&m, "InitialUnknown")?)
+            }
+            _ => {}
+        }
+        if !empty {
+            stack.push(name);
+        }
+    }
+    if !saw_root {
+        return Err("no <fmiModelDescription> element".into());
+    }
+    expand(&mut md, declared)?;
+    // Value references become 1-based indices (every element of an array).
+    let mut indices: HashMap<u32, Vec<usize>> = HashMap::new();
+    for (i, v) in md.variables.iter().enumerate() {
+        let vr = v.fmi3.map_or(v.value_reference, |s| s.vr);
+        indices.entry(vr).or_default().push(i + 1);
+    }
+    let to_unknowns = |list: Vec<Unknown3>, what: &str| -> Result<Vec<Unknown>, String> {
+        let mut out = Vec::new();
+        for u in list {
+            if skipped_vrs.contains(&u.vr) {
+                continue;
+            }
+            let idx = indices.get(&u.vr).ok_or_else(|| {
+                format!(
+                    "ModelStructure: <{what} valueReference=\"{}\"> names no variable",
+                    u.vr
+                )
+            })?;
+            let deps = match u.dependencies {
+                None => None,
+                Some(ds) => {
+                    let mut v = Vec::new();
+                    for d in ds {
+                        if skipped_vrs.contains(&d) {
+                            continue;
+                        }
+                        v.extend(indices.get(&d).ok_or_else(|| {
+                            format!("ModelStructure: dependency {d} of <{what} valueReference=\"{}\"> names no variable", u.vr)
+                        })?);
+                    }
+                    Some(v)
+                }
+            };
+            out.extend(idx.iter().map(|&index| Unknown {
+                index,
+                dependencies: deps.clone(),
+            }));
+        }
+        Ok(out)
+    };
+    md.outputs = to_unknowns(outputs, "Output")?;
+    md.initial_unknowns = to_unknowns(initial_unknowns, "InitialUnknown")?;
+    check_names_and_aliases(&md)?;
+    Ok(md)
+}
+
+/// The largest array twinbench expands into columns.
+const MAX_ELEMENTS: u64 = 100_000;
+
+/// Declared variables → one [`ScalarVariable`] per value (arrays element by element).
+fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), String> {
+    let structural_start: HashMap<u32, (String, Option<String>)> = declared
+        .iter()
+        .filter(|d| d.structural)
+        .map(|d| {
+            (
+                d.var.value_reference,
+                (d.var.name.clone(), d.var.start.clone()),
+            )
+        })
+        .collect();
+    let mut next_vr = declared
+        .iter()
+        .map(|d| d.var.value_reference)
+        .max()
+        .map_or(0u64, |v| v as u64 + 1);
+    for mut d in declared {
+        let name = d.var.name.clone();
+        // String and Binary starts are <Start value> children.
+        if d.var.start.is_none() && !d.starts.is_empty() {
+            d.var.start = Some(d.starts[0].clone());
+        }
+        if d.dims.is_empty() {
+            d.var.fmi3 = Some(Fmi3Slot {
+                ty: d.ty,
+                vr: d.var.value_reference,
+                index: 0,
+                len: 1,
+                structural: d.structural,
+            });
+            let aliases: Vec<ScalarVariable> = d
+                .aliases
+                .iter()
+                .map(|a| ScalarVariable {
+                    name: a.clone(),
+                    ..d.var.clone()
+                })
+                .collect();
+            md.variables.push(d.var);
+            md.variables.extend(aliases);
+            continue;
+        }
+        let mut sizes = Vec::new();
+        for dim in &d.dims {
+            sizes.push(match dim {
+                Dim::Fixed(n) => *n,
+                Dim::Parameter(vr) => {
+                    let (pname, start) = structural_start.get(vr).ok_or_else(|| {
+                        format!("variable '{name}': a Dimension refers to value reference {vr}, which is no structural parameter")
+                    })?;
+                    start
+                        .as_deref()
+                        .and_then(|s| s.trim().parse::<u64>().ok())
+                        .ok_or_else(|| {
+                            format!("variable '{name}': its dimension '{pname}' has no start value that is a size")
+                        })?
+                }
+            });
+        }
+        let total = sizes.iter().try_fold(1u64, |a, &n| a.checked_mul(n));
+        let total = match total {
+            Some(t) if t <= MAX_ELEMENTS => t,
+            _ => {
+                return Err(format!(
+                    "variable '{name}': an array of dimensions {sizes:?}, more than {MAX_ELEMENTS} elements"
+                ))
+            }
+        };
+        let starts: Vec<String> = if !d.starts.is_empty() {
+            d.starts.clone()
+        } else {
+            d.var
+                .start
+                .as_deref()
+                .map(|s| s.split_whitespace().map(str::to_string).collect())
+                .unwrap_or_default()
+        };
+        if !starts.is_empty() && starts.len() as u64 != total && starts.len() != 1 {
+            return Err(format!(
+                "variable '{name}': {} start values for an array of {total} elements",
+                starts.len()
+            ));
+        }
+        let first_vr = u32::try_from(next_vr).unwrap_or(u32::MAX);
+        for (base, alias) in
+            std::iter::once((&name, false)).chain(d.aliases.iter().map(|a| (a, true)))
+        {
+            for k in 0..total {
+                // Row-major position → 1-based subscripts.
+                let mut rest = k;
+                let mut subs = vec![0u64; sizes.len()];
+                for (j, &n) in sizes.iter().enumerate().rev() {
+                    subs[j] = rest % n + 1;
+                    rest /= n;
+                }
+                let subs: Vec<String> = subs.iter().map(u64::to_string).collect();
+                let mut v = d.var.clone();
+                v.name = format!("{base}[{}]", subs.join(","));
+                v.start = match starts.len() {
+                    0 => None,
+                    1 => Some(starts[0].clone()),
+                    _ => Some(starts[k as usize].clone()),
+                };
+                // An alias's element shares its original's value reference.
+                let vr = if alias {
+                    first_vr + k as u32
+                } else {
+                    u32::try_from(next_vr + k).map_err(|_| {
+                        format!("variable '{name}': no value reference left for its elements")
+                    })?
+                };
+                v.value_reference = vr;
+                v.fmi3 = Some(Fmi3Slot {
+                    ty: d.ty,
+                    vr: d.var.value_reference,
+                    index: k as u32,
+                    len: total as u32,
+                    structural: d.structural,
+                });
+                md.variables.push(v);
+            }
+        }
+        next_vr += total;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const XML: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="3.0" modelName="m" instantiationToken="{t}">
+  <CoSimulation modelIdentifier="m" canGetAndSetFMUState="true"/>
+  <UnitDefinitions><Unit name="rpm"><BaseUnit s="-1" rad="1" factor="0.10471975511965977"/></Unit></UnitDefinitions>
+  <TypeDefinitions><Float64Type name="Speed" unit="rpm"/>
+    <EnumerationType name="Mode"><Item name="a" value="1"/><Item name="b" value="2"/></EnumerationType></TypeDefinitions>
+  <ModelVariables>
+    <Float64 name="time" valueReference="0" causality="independent"/>
+    <UInt64 name="n" valueReference="1" causality="structuralParameter" variability="fixed" start="2"/>
+    <Float64 name="y" valueReference="5" causality="output" declaredType="Speed"><Dimension valueReference="1"/><Dimension start="3"/></Float64>
+    <Float32 name="u" valueReference="6" causality="input" start="1.5"/>
+    <Int16 name="k" valueReference="7" causality="parameter" variability="fixed" start="-3"/>
+    <Enumeration name="e" valueReference="8" causality="parameter" variability="fixed" declaredType="Mode" start="2"/>
+    <String name="s" valueReference="9" causality="parameter" variability="fixed"><Start value="hi"/></String>
+    <Binary name="b" valueReference="10" causality="output"/>
+  </ModelVariables>
+  <ModelStructure><Output valueReference="5" dependencies="6"/><Output valueReference="10"/><InitialUnknown valueReference="5"/></ModelStructure>
+</fmiModelDescription>"#;
+
+    #[test]
+    fn arrays_become_elements_and_types_map_to_their_kinds() {
+        let md = parse(XML).unwrap();
+        assert_eq!(md.fmi_version, "3.0");
+        assert_eq!(md.guid, "{t}");
+        let names: Vec<&str> = md.variables.iter().map(|v| v.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "time", "n", "y[1,1]", "y[1,2]", "y[1,3]", "y[2,1]", "y[2,2]", "y[2,3]", "u", "k",
+                "e", "s"
+            ]
+        );
+        let y23 = md.variable("y[2,3]").unwrap();
+        assert_eq!(y23.fmi3.unwrap().vr, 5);
+        assert_eq!(y23.fmi3.unwrap().index, 5);
+        assert_eq!(y23.fmi3.unwrap().len, 6);
+        assert_ne!(y23.value_reference, 5);
+        assert_eq!(md.unit_of(y23), Some("rpm"));
+        assert_eq!(md.variable("u").unwrap().ty, ScalarType::Real);
+        assert_eq!(md.variable("k").unwrap().ty, ScalarType::Integer);
+        assert_eq!(md.variable("k").unwrap().start.as_deref(), Some("-3"));
+        assert_eq!(md.variable("s").unwrap().start.as_deref(), Some("hi"));
+        assert_eq!(
+            md.enumeration_items(md.variable("e").unwrap())
+                .unwrap()
+                .len(),
+            2
+        );
+        assert!(md.variable("n").unwrap().fmi3.unwrap().structural);
+        assert_eq!(md.skipped, ["b (Binary)"]);
+        // y's six elements are outputs depending on u (index 9); Binary b has no column.
+        assert_eq!(md.outputs.len(), 6);
+        assert_eq!(md.outputs[0].dependencies, Some(vec![9]));
+        assert!(md.unsupported.is_empty());
+    }
+
+    #[test]
+    fn clocks_and_scheduled_execution_are_named() {
+        let xml = XML
+            .replace(
+                "<CoSimulation modelIdentifier=\"m\" canGetAndSetFMUState=\"true\"/>",
+                "<ScheduledExecution modelIdentifier=\"m\"/>",
+            )
+            .replace(
+                "<Binary name=\"b\" valueReference=\"10\" causality=\"output\"/>",
+                "<Clock name=\"tick\" valueReference=\"10\" causality=\"input\" intervalVariability=\"constant\"/>",
+            );
+        let md = parse(&xml).unwrap();
+        assert!(md.co_simulation.is_none());
+        assert_eq!(md.unsupported.len(), 2, "{:?}", md.unsupported);
+        assert!(md.unsupported[0].contains("Scheduled Execution"));
+        assert!(md.unsupported[1].contains("'tick' is a Clock"));
+    }
+
+    #[test]
+    fn a_wrong_start_count_or_a_missing_dimension_is_named() {
+        let xml = XML.replace(
+            "<Float64 name=\"y\" valueReference=\"5\" causality=\"output\" declaredType=\"Speed\">",
+            "<Float64 name=\"y\" valueReference=\"5\" causality=\"output\" start=\"1 2\">",
+        );
+        let e = parse(&xml).unwrap_err();
+        assert!(e.contains("'y': 2 start values for an array of 6"), "{e}");
+        let xml = XML.replace(
+            "<Dimension valueReference=\"1\"/>",
+            "<Dimension valueReference=\"4\"/>",
+        );
+        let e = parse(&xml).unwrap_err();
+        assert!(
+            e.contains("value reference 4, which is no structural parameter"),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,725 @@
+//! FMI 3.0 Co-Simulation: the library's functions and a safe instance with the same calls
+//! as an FMI 2.0 [`crate::Instance`], so every backend and the master stay version-blind.
+//!
+//! Values travel as twinbench's kinds (Real as f64, Integer and Boolean as i32, String);
+//! each value reference is one variable of the [`ModelDescription`] (array elements have
+//! their own, see [`crate::description3`]) and its [`Fmi3Slot`] says which typed call and
+//! which element it is. Instances are created with event mode and early return off, as
+//! FMPy's master does; `terminateSimulation` from `fmi3DoStep` ends the run at the step's end.
+
+use crate::description::ModelDescription;
+use crate::description3::{Fmi3Slot, Fmi3Type};
+use crate::fmi2::fmi2Status;
+use crate::functions::Function;
+use crate::log::LogSink;
+use crate::FmuError;
+use std::collections::HashMap;
+use std::ffi::{c_char, c_void, CStr, CString};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+type Inst = *mut c_void;
+type Vr = u32;
+type Status = i32;
+type Logger = unsafe extern "C" fn(*mut c_void, Status, *const c_char, *const c_char);
+
+macro_rules! api {
+    ($($field:ident : $sym:literal : fn($($arg:ty),*) $(-> $ret:ty)?;)*) => {
+        /// The FMI 3.0 functions twinbench calls, resolved once.
+        #[allow(non_snake_case)]
+        pub struct Fmi3Api {
+            $(pub $field: unsafe extern "C" fn($($arg),*) $(-> $ret)?,)*
+        }
+        impl Fmi3Api {
+            fn resolve(lib: &libloading::Library) -> Result<Fmi3Api, &'static str> {
+                Ok(Fmi3Api {
+                    $($field: unsafe {
+                        *lib.get::<unsafe extern "C" fn($($arg),*) $(-> $ret)?>(concat!($sym, "\0").as_bytes())
+                            .map_err(|_| $sym)?
+                    },)*
+                })
+            }
+        }
+    };
+}
+
+api! {
+    get_version: "fmi3GetVersion": fn() -> *const c_char;
+    set_debug_logging: "fmi3SetDebugLogging": fn(Inst, bool, usize, *const *const c_char) -> Status;
+    instantiate_co_simulation: "fmi3InstantiateCoSimulation": fn(
+        *const c_char, *const c_char, *const c_char, bool, bool, bool, bool,
+        *const Vr, usize, *mut c_void, Option<Logger>, *const c_void) -> Inst;
+    free_instance: "fmi3FreeInstance": fn(Inst);
+    enter_initialization_mode: "fmi3EnterInitializationMode": fn(Inst, bool, f64, f64, bool, f64) -> Status;
+    exit_initialization_mode: "fmi3ExitInitializationMode": fn(Inst) -> Status;
+    terminate: "fmi3Terminate": fn(Inst) -> Status;
+    reset: "fmi3Reset": fn(Inst) -> Status;
+    get_float32: "fmi3GetFloat32": fn(Inst, *const Vr, usize, *mut f32, usize) -> Status;
+    get_float64: "fmi3GetFloat64": fn(Inst, *const Vr, usize, *mut f64, usize) -> Status;
+    get_int8: "fmi3GetInt8": fn(Inst, *const Vr, usize, *mut i8, usize) -> Status;
+    get_uint8: "fmi3GetUInt8": fn(Inst, *const Vr, usize, *mut u8, usize) -> Status;
+    get_int16: "fmi3GetInt16": fn(Inst, *const Vr, usize, *mut i16, usize) -> Status;
+    get_uint16: "fmi3GetUInt16": fn(Inst, *const Vr, usize, *mut u16, usize) -> Status;
+    get_int32: "fmi3GetInt32": fn(Inst, *const Vr, usize, *mut i32, usize) -> Status;
+    get_uint32: "fmi3GetUInt32": fn(Inst, *const Vr, usize, *mut u32, usize) -> Status;
+    get_int64: "fmi3GetInt64": fn(Inst, *const Vr, usize, *mut i64, usize) -> Status;
+    get_uint64: "fmi3GetUInt64": fn(Inst, *const Vr, usize, *mut u64, usize) -> Status;
+    get_boolean: "fmi3GetBoolean": fn(Inst, *const Vr, usize, *mut u8, usize) -> Status;
+    get_string: "fmi3GetString": fn(Inst, *const Vr, usize, *mut *const c_char, usize) -> Status;
+    set_float32: "fmi3SetFloat32": fn(Inst, *const Vr, usize, *const f32, usize) -> Status;
+    set_float64: "fmi3SetFloat64": fn(Inst, *const Vr, usize, *const f64, usize) -> Status;
+    set_int8: "fmi3SetInt8": fn(Inst, *const Vr, usize, *const i8, usize) -> Status;
+    set_uint8: "fmi3SetUInt8": fn(Inst, *const Vr, usize, *const u8, usize) -> Status;
+    set_int16: "fmi3SetInt16": fn(Inst, *const Vr, usize, *const i16, usize) -> Status;
+    set_uint16: "fmi3SetUInt16": fn(Inst, *const Vr, usize, *const u16, usize) -> Status;
+    set_int32: "fmi3SetInt32": fn(Inst, *const Vr, usize, *const i32, usize) -> Status;
+    set_uint32: "fmi3SetUInt32": fn(Inst, *const Vr, usize, *const u32, usize) -> Status;
+    set_int64: "fmi3SetInt64": fn(Inst, *const Vr, usize, *const i64, usize) -> Status;
+    set_uint64: "fmi3SetUInt64": fn(Inst, *const Vr, usize, *const u64, usize) -> Status;
+    set_boolean: "fmi3SetBoolean": fn(Inst, *const Vr, usize, *const u8, usize) -> Status;
+    set_string: "fmi3SetString": fn(Inst, *const Vr, usize, *const *const c_char, usize) -> Status;
+    do_step: "fmi3DoStep": fn(Inst, f64, f64, bool, *mut u8, *mut u8, *mut u8, *mut f64) -> Status;
+    get_fmu_state: "fmi3GetFMUState": fn(Inst, *mut *mut c_void) -> Status;
+    set_fmu_state: "fmi3SetFMUState": fn(Inst, *mut c_void) -> Status;
+    free_fmu_state: "fmi3FreeFMUState": fn(Inst, *mut *mut c_void) -> Status;
+    serialized_fmu_state_size: "fmi3SerializedFMUStateSize": fn(Inst, *mut c_void, *mut usize) -> Status;
+    serialize_fmu_state: "fmi3SerializeFMUState": fn(Inst, *mut c_void, *mut u8, usize) -> Status;
+    deserialize_fmu_state: "fmi3DeserializeFMUState": fn(Inst, *const u8, usize, *mut *mut c_void) -> Status;
+}
+
+/// A loaded FMI 3.0 library.
+pub struct Library3 {
+    pub path: PathBuf,
+    /// What `fmi3GetVersion` returned (a "3.x" is required).
+    pub version: String,
+    pub api: Fmi3Api,
+    _lib: libloading::Library,
+}
+
+impl Library3 {
+    /// Load the library, resolve the functions (every one is required by FMI 3.0 for a
+    /// Co-Simulation FMU) and check `fmi3GetVersion`.
+    pub fn load(path: &Path) -> Result<Library3, FmuError> {
+        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let api = Fmi3Api::resolve(&lib).map_err(|symbol| FmuError::MissingSymbol {
+            path: path.to_path_buf(),
+            symbol,
+        })?;
+        let v = unsafe { (api.get_version)() };
+        let version = if v.is_null() {
+            "NULL".to_string()
+        } else {
+            unsafe { CStr::from_ptr(v) }.to_string_lossy().into_owned()
+        };
+        if !version.starts_with("3.") {
+            return Err(FmuError::Load {
+                path: path.to_path_buf(),
+                message: format!("fmi3GetVersion returned '{version}', expected '3.0'"),
+            });
+        }
+        Ok(Library3 {
+            path: path.to_path_buf(),
+            version,
+            api,
+            _lib: lib,
+        })
+    }
+}
+
+/// The FMI 3.0 logger: no format string, so it is plain Rust (panics never cross into C).
+unsafe extern "C" fn logger(
+    env: *mut c_void,
+    status: Status,
+    category: *const c_char,
+    message: *const c_char,
+) {
+    let _ = std::panic::catch_unwind(|| {
+        if env.is_null() {
+            return;
+        }
+        let sink = &*(env as *const LogSink);
+        let text = |p: *const c_char| {
+            if p.is_null() {
+                String::new()
+            } else {
+                CStr::from_ptr(p).to_string_lossy().into_owned()
+            }
+        };
+        sink.push(fmi2Status(status), &text(category), &text(message));
+    });
+}
+
+fn status3_name(s: Status) -> String {
+    match s {
+        0 => "fmi3OK".into(),
+        1 => "fmi3Warning".into(),
+        2 => "fmi3Discard".into(),
+        3 => "fmi3Error".into(),
+        4 => "fmi3Fatal".into(),
+        other => format!("an unknown fmi3Status ({other})"),
+    }
+}
+
+/// A saved FMI 3.0 state; free it with [`Instance3::free_state`].
+pub struct Fmu3State(*mut c_void);
+unsafe impl Send for Fmu3State {}
+
+pub struct Instance3 {
+    lib: Arc<Library3>,
+    inst: Inst,
+    pub name: String,
+    /// Simulation time of the last successful step.
+    pub time: f64,
+    slots: HashMap<u32, Fmi3Slot>,
+    names: HashMap<u32, String>,
+    /// Set when `fmi3DoStep` asked to end the simulation: the time reached.
+    terminate_requested: Option<f64>,
+    start: f64,
+    stop: Option<f64>,
+    sink: Box<LogSink>,
+}
+
+// One instance is used by one thread at a time.
+unsafe impl Send for Instance3 {}
+
+/// The `resourcePath` of FMI 3.0: a native path ending in a separator.
+fn resource_path(dir: &Path) -> String {
+    let mut s = dir.to_string_lossy().into_owned();
+    if !s.ends_with('/') {
+        s.push('/');
+    }
+    s
+}
+
+impl Instance3 {
+    pub fn instantiate(
+        lib: Arc<Library3>,
+        md: &ModelDescription,
+        name: &str,
+        resource_dir: Option<&Path>,
+        logging_on: bool,
+    ) -> Result<Instance3, FmuError> {
+        let sink = Box::new(LogSink::new(name));
+        let bad = |m: &str| FmuError::Instantiate {
+            instance: name.into(),
+            message: m.into(),
+        };
+        let c_name = CString::new(name).map_err(|_| bad("instance name contains a NUL byte"))?;
+        let c_token = CString::new(md.guid.as_str()).unwrap_or_default();
+        let c_res = resource_dir.map(|d| CString::new(resource_path(d)).unwrap_or_default());
+        let inst = unsafe {
+            (lib.api.instantiate_co_simulation)(
+                c_name.as_ptr(),
+                c_token.as_ptr(),
+                c_res.as_ref().map_or(std::ptr::null(), |c| c.as_ptr()),
+                false,
+                logging_on,
+                false, // eventModeUsed
+                false, // earlyReturnAllowed
+                std::ptr::null(),
+                0,
+                &*sink as *const LogSink as *mut c_void,
+                Some(logger),
+                std::ptr::null(),
+            )
+        };
+        if inst.is_null() {
+            return Err(bad(&format!(
+                "fmi3InstantiateCoSimulation returned NULL ({}); FMU log: {}",
+                lib.path.display(),
+                sink.last_lines().join(" | ")
+            )));
+        }
+        let mut slots = HashMap::new();
+        let mut names = HashMap::new();
+        for v in &md.variables {
+            if let Some(s) = v.fmi3 {
+                slots.insert(v.value_reference, s);
+                names.insert(v.value_reference, v.name.clone());
+            }
+        }
+        Ok(Instance3 {
+            lib,
+            inst,
+            name: name.to_string(),
+            time: 0.0,
+            slots,
+            names,
+            terminate_requested: None,
+            start: 0.0,
+            stop: None,
+            sink,
+        })
+    }
+
+    pub fn library(&self) -> &Arc<Library3> {
+        &self.lib
+    }
+    pub fn last_log_lines(&self) -> Vec<String> {
+        self.sink.last_lines()
+    }
+    pub fn set_echo(&mut self, on: bool) {
+        self.sink.set_echo(on)
+    }
+
+    fn check(&self, function: &'static str, status: Status) -> Result<(), FmuError> {
+        if status == 0 || status == 1 {
+            Ok(())
+        } else {
+            Err(self.call_error(function, status))
+        }
+    }
+
+    #[cold]
+    fn call_error(&self, function: &'static str, status: Status) -> FmuError {
+        FmuError::Call3 {
+            instance: self.name.clone(),
+            function,
+            status: status3_name(status),
+            time: self.time,
+            log: self.sink.last_lines(),
+        }
+    }
+
+    fn other(&self, message: String) -> FmuError {
+        FmuError::Instantiate {
+            instance: self.name.clone(),
+            message,
+        }
+    }
+
+    fn slot(&self, vr: u32) -> Result<Fmi3Slot, FmuError> {
+        self.slots
+            .get(&vr)
+            .copied()
+            .ok_or_else(|| self.other(format!("no FMI 3.0 variable has value reference {vr}")))
+    }
+
+    fn name_of(&self, vr: u32) -> &str {
+        self.names.get(&vr).map_or("?", String::as_str)
+    }
+
+    pub fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.set_debug_logging)(self.inst, on, 0, std::ptr::null()) };
+        self.check("fmi3SetDebugLogging", s)
+    }
+
+    /// FMI 3.0 has no fmi2SetupExperiment: start and stop go with the initialization mode.
+    pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+        self.start = start;
+        self.time = start;
+        self.stop = stop;
+        Ok(())
+    }
+
+    pub fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe {
+            (self.lib.api.enter_initialization_mode)(
+                self.inst,
+                false,
+                0.0,
+                self.start,
+                self.stop.is_some(),
+                self.stop.unwrap_or(0.0),
+            )
+        };
+        self.check("fmi3EnterInitializationMode", s)
+    }
+
+    pub fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.exit_initialization_mode)(self.inst) };
+        self.check("fmi3ExitInitializationMode", s)
+    }
+
+    pub fn terminate(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.terminate)(self.inst) };
+        self.check("fmi3Terminate", s)
+    }
+
+    pub fn reset(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.reset)(self.inst) };
+        self.sink.clear();
+        self.time = 0.0;
+        self.terminate_requested = None;
+        self.check("fmi3Reset", s)
+    }
+
+    /// Read one variable (an array element reads its whole array) as f64.
+    fn get_one(&mut self, slot: Fmi3Slot) -> Result<f64, FmuError> {
+        let n = slot.len as usize;
+        let vr = [slot.vr];
+        macro_rules! get {
+            ($f:ident, $t:ty, $name:literal) => {{
+                let mut buf: Vec<$t> = vec![Default::default(); n];
+                let s =
+                    unsafe { (self.lib.api.$f)(self.inst, vr.as_ptr(), 1, buf.as_mut_ptr(), n) };
+                self.check($name, s)?;
+                buf[slot.index as usize]
+            }};
+        }
+        Ok(match slot.ty {
+            Fmi3Type::Float32 => get!(get_float32, f32, "fmi3GetFloat32") as f64,
+            Fmi3Type::Float64 => get!(get_float64, f64, "fmi3GetFloat64"),
+            Fmi3Type::Int8 => get!(get_int8, i8, "fmi3GetInt8") as f64,
+            Fmi3Type::UInt8 => get!(get_uint8, u8, "fmi3GetUInt8") as f64,
+            Fmi3Type::Int16 => get!(get_int16, i16, "fmi3GetInt16") as f64,
+            Fmi3Type::UInt16 => get!(get_uint16, u16, "fmi3GetUInt16") as f64,
+            Fmi3Type::Int32 => get!(get_int32, i32, "fmi3GetInt32") as f64,
+            Fmi3Type::UInt32 => get!(get_uint32, u32, "fmi3GetUInt32") as f64,
+            Fmi3Type::Enumeration => get!(get_int64, i64, "fmi3GetInt64") as f64,
+            Fmi3Type::Int64 => {
+                let x = get!(get_int64, i64, "fmi3GetInt64");
+                self.exact_i64(slot, x)?
+            }
+            Fmi3Type::UInt64 => {
+                let x = get!(get_uint64, u64, "fmi3GetUInt64");
+                self.exact_u64(slot, x)?
+            }
+            Fmi3Type::Boolean => (get!(get_boolean, u8, "fmi3GetBoolean") != 0) as i32 as f64,
+            Fmi3Type::String => return Err(self.other("a String read as a number".into())),
+        })
+    }
+
+    /// A 64-bit integer as f64, when the f64 carries it exactly (it does up to 2^53, and at
+    /// the type's limits, where the conversion back saturates to the same value).
+    fn exact_i64(&self, slot: Fmi3Slot, x: i64) -> Result<f64, FmuError> {
+        let f = x as f64;
+        if f as i64 == x {
+            Ok(f)
+        } else {
+            Err(self.not_exact(slot, &x.to_string()))
+        }
+    }
+
+    fn exact_u64(&self, slot: Fmi3Slot, x: u64) -> Result<f64, FmuError> {
+        let f = x as f64;
+        if f as u64 == x {
+            Ok(f)
+        } else {
+            Err(self.not_exact(slot, &x.to_string()))
+        }
+    }
+
+    #[cold]
+    fn not_exact(&self, slot: Fmi3Slot, x: &str) -> FmuError {
+        let name = self
+            .slots
+            .iter()
+            .find(|(_, s)| **s == slot)
+            .map_or("?", |(vr, _)| self.name_of(*vr));
+        self.other(format!(
+            "'{name}' ({}) is {x}, which twinbench cannot carry exactly (64-bit integers travel as doubles, exact up to 2^53)",
+            slot.ty.name()
+        ))
+    }
+
+    /// Write one variable from f64 (an array element: read the array, change it, write it).
+    fn set_one(&mut self, vr_tb: u32, slot: Fmi3Slot, value: f64) -> Result<(), FmuError> {
+        if slot.structural {
+            return Err(self.other(format!(
+                "'{}' is a structural parameter (it sizes arrays); twinbench does not change it",
+                self.name_of(vr_tb)
+            )));
+        }
+        let n = slot.len as usize;
+        let vr = [slot.vr];
+        // fmi3Boolean is a C bool: only 0 or 1 may be written.
+        let value = if slot.ty == Fmi3Type::Boolean {
+            (value != 0.0) as u8 as f64
+        } else {
+            value
+        };
+        macro_rules! set {
+            ($get:ident, $set:ident, $t:ty, $gname:literal, $sname:literal) => {{
+                let mut buf: Vec<$t> = vec![Default::default(); n];
+                if n > 1 {
+                    let s = unsafe {
+                        (self.lib.api.$get)(self.inst, vr.as_ptr(), 1, buf.as_mut_ptr(), n)
+                    };
+                    self.check($gname, s)?;
+                }
+                buf[slot.index as usize] = value as $t;
+                let s = unsafe { (self.lib.api.$set)(self.inst, vr.as_ptr(), 1, buf.as_ptr(), n) };
+                self.check($sname, s)
+            }};
+        }
+        // An integer value must fit the FMU's type exactly: no wrapping, no truncation.
+        let fits = |lo: f64, hi: f64| value.fract() == 0.0 && value >= lo && value <= hi;
+        let ty = slot.ty;
+        let in_range = match ty {
+            Fmi3Type::Int8 => fits(i8::MIN as f64, i8::MAX as f64),
+            Fmi3Type::UInt8 => fits(0.0, u8::MAX as f64),
+            Fmi3Type::Int16 => fits(i16::MIN as f64, i16::MAX as f64),
+            Fmi3Type::UInt16 => fits(0.0, u16::MAX as f64),
+            Fmi3Type::Int32 => fits(i32::MIN as f64, i32::MAX as f64),
+            Fmi3Type::UInt32 => fits(0.0, u32::MAX as f64),
+            Fmi3Type::UInt64 => fits(0.0, f64::MAX),
+            Fmi3Type::Int64 | Fmi3Type::Enumeration => fits(f64::MIN, f64::MAX),
+            _ => true,
+        };
+        if !in_range {
+            return Err(self.other(format!(
+                "{value} does not fit '{}' ({})",
+                self.name_of(vr_tb),
+                ty.name()
+            )));
+        }
+        match ty {
+            Fmi3Type::Float32 => set!(
+                get_float32,
+                set_float32,
+                f32,
+                "fmi3GetFloat32",
+                "fmi3SetFloat32"
+            ),
+            Fmi3Type::Float64 => set!(
+                get_float64,
+                set_float64,
+                f64,
+                "fmi3GetFloat64",
+                "fmi3SetFloat64"
+            ),
+            Fmi3Type::Int8 => set!(get_int8, set_int8, i8, "fmi3GetInt8", "fmi3SetInt8"),
+            Fmi3Type::UInt8 => set!(get_uint8, set_uint8, u8, "fmi3GetUInt8", "fmi3SetUInt8"),
+            Fmi3Type::Int16 => set!(get_int16, set_int16, i16, "fmi3GetInt16", "fmi3SetInt16"),
+            Fmi3Type::UInt16 => set!(
+                get_uint16,
+                set_uint16,
+                u16,
+                "fmi3GetUInt16",
+                "fmi3SetUInt16"
+            ),
+            Fmi3Type::Int32 => set!(get_int32, set_int32, i32, "fmi3GetInt32", "fmi3SetInt32"),
+            Fmi3Type::UInt32 => set!(
+                get_uint32,
+                set_uint32,
+                u32,
+                "fmi3GetUInt32",
+                "fmi3SetUInt32"
+            ),
+            Fmi3Type::Int64 | Fmi3Type::Enumeration => {
+                set!(get_int64, set_int64, i64, "fmi3GetInt64", "fmi3SetInt64")
+            }
+            Fmi3Type::UInt64 => set!(
+                get_uint64,
+                set_uint64,
+                u64,
+                "fmi3GetUInt64",
+                "fmi3SetUInt64"
+            ),
+            Fmi3Type::Boolean => {
+                set!(
+                    get_boolean,
+                    set_boolean,
+                    u8,
+                    "fmi3GetBoolean",
+                    "fmi3SetBoolean"
+                )
+            }
+            Fmi3Type::String => Err(self.other("a String set from a number".into())),
+        }
+    }
+
+    /// Whether every reference is a scalar Float64 (one fmi3GetFloat64 call then).
+    fn all_scalar_float64(&self, vrs: &[u32]) -> bool {
+        vrs.iter().all(|vr| {
+            self.slots
+                .get(vr)
+                .is_some_and(|s| s.ty == Fmi3Type::Float64 && s.len == 1 && s.vr == *vr)
+        })
+    }
+
+    pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        if self.all_scalar_float64(vrs) {
+            let s = unsafe {
+                (self.lib.api.get_float64)(
+                    self.inst,
+                    vrs.as_ptr(),
+                    vrs.len(),
+                    out.as_mut_ptr(),
+                    out.len(),
+                )
+            };
+            return self.check("fmi3GetFloat64", s);
+        }
+        for (vr, o) in vrs.iter().zip(out.iter_mut()) {
+            let slot = self.slot(*vr)?;
+            *o = self.get_one(slot)?;
+        }
+        Ok(())
+    }
+
+    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        if self.all_scalar_float64(vrs) {
+            let s = unsafe {
+                (self.lib.api.set_float64)(
+                    self.inst,
+                    vrs.as_ptr(),
+                    vrs.len(),
+                    values.as_ptr(),
+                    values.len(),
+                )
+            };
+            return self.check("fmi3SetFloat64", s);
+        }
+        for (vr, v) in vrs.iter().zip(values) {
+            let slot = self.slot(*vr)?;
+            self.set_one(*vr, slot, *v)?;
+        }
+        Ok(())
+    }
+
+    /// Integer, Enumeration and Boolean values as i32; a value beyond 32 bits is an error
+    /// naming the variable (never wrapped).
+    pub fn get_int(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        for (vr, o) in vrs.iter().zip(out.iter_mut()) {
+            let slot = self.slot(*vr)?;
+            let x = self.get_one(slot)?;
+            if x < i32::MIN as f64 || x > i32::MAX as f64 {
+                return Err(self.other(format!(
+                    "'{}' ({}) is {x}, beyond the 32-bit integers twinbench exchanges",
+                    self.name_of(*vr),
+                    slot.ty.name()
+                )));
+            }
+            *o = x as i32;
+        }
+        Ok(())
+    }
+
+    pub fn set_int(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        for (vr, v) in vrs.iter().zip(values) {
+            let slot = self.slot(*vr)?;
+            self.set_one(*vr, slot, *v as f64)?;
+        }
+        Ok(())
+    }
+
+    pub fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        out.clear();
+        for vr in vrs {
+            let slot = self.slot(*vr)?;
+            let n = slot.len as usize;
+            let mut ptrs: Vec<*const c_char> = vec![std::ptr::null(); n];
+            let s =
+                unsafe { (self.lib.api.get_string)(self.inst, &slot.vr, 1, ptrs.as_mut_ptr(), n) };
+            self.check("fmi3GetString", s)?;
+            let p = ptrs[slot.index as usize];
+            out.push(if p.is_null() {
+                String::new()
+            } else {
+                unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
+            });
+        }
+        Ok(())
+    }
+
+    pub fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        for (vr, v) in vrs.iter().zip(values) {
+            let slot = self.slot(*vr)?;
+            if slot.len != 1 {
+                return Err(self.other(format!(
+                    "'{}': String arrays are not supported",
+                    self.name_of(*vr)
+                )));
+            }
+            let c = CString::new(*v)
+                .map_err(|_| self.other("fmi3SetString: a value contains a NUL byte".into()))?;
+            let p = c.as_ptr();
+            let s = unsafe { (self.lib.api.set_string)(self.inst, &slot.vr, 1, &p, 1) };
+            self.check("fmi3SetString", s)?;
+        }
+        Ok(())
+    }
+
+    /// One communication step. When the FMU asks to end the simulation the step still
+    /// counts (FMPy records its end and stops): the call then reports `fmi2Discard` so that
+    /// the master asks [`Instance3::terminated_by_fmu`], which gives the time reached.
+    pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        let (mut event, mut terminate, mut early) = (0u8, 0u8, 0u8);
+        let mut last = t + h;
+        let s = unsafe {
+            (self.lib.api.do_step)(
+                self.inst,
+                t,
+                h,
+                true,
+                &mut event,
+                &mut terminate,
+                &mut early,
+                &mut last,
+            )
+        };
+        self.time = t;
+        self.check("fmi3DoStep", s)?;
+        let reached = if early != 0 && last.is_finite() && last < t + h {
+            last
+        } else {
+            t + h
+        };
+        self.time = reached;
+        if terminate != 0 {
+            self.terminate_requested = Some(reached);
+            return Err(FmuError::call(
+                &self.name,
+                Function::DoStep,
+                fmi2Status::DISCARD,
+                reached,
+                Vec::new(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// After `fmi3DoStep` set `terminateSimulation`: the time reached.
+    pub fn terminated_by_fmu(&mut self) -> Option<f64> {
+        self.terminate_requested
+    }
+
+    pub fn get_state(&mut self) -> Result<Fmu3State, FmuError> {
+        let mut st = std::ptr::null_mut();
+        let s = unsafe { (self.lib.api.get_fmu_state)(self.inst, &mut st) };
+        self.check("fmi3GetFMUState", s)?;
+        Ok(Fmu3State(st))
+    }
+
+    pub fn set_state(&mut self, state: &Fmu3State, time: f64) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.set_fmu_state)(self.inst, state.0) };
+        self.time = time;
+        self.check("fmi3SetFMUState", s)
+    }
+
+    pub fn free_state(&mut self, mut state: Fmu3State) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.free_fmu_state)(self.inst, &mut state.0) };
+        self.check("fmi3FreeFMUState", s)
+    }
+
+    pub fn serialize_state(&mut self, state: &Fmu3State) -> Result<Vec<u8>, FmuError> {
+        let mut n = 0usize;
+        let s = unsafe { (self.lib.api.serialized_fmu_state_size)(self.inst, state.0, &mut n) };
+        self.check("fmi3SerializedFMUStateSize", s)?;
+        let mut buf = vec![0u8; n];
+        let s =
+            unsafe { (self.lib.api.serialize_fmu_state)(self.inst, state.0, buf.as_mut_ptr(), n) };
+        self.check("fmi3SerializeFMUState", s)?;
+        Ok(buf)
+    }
+
+    pub fn deserialize_state(&mut self, bytes: &[u8]) -> Result<Fmu3State, FmuError> {
+        let mut st = std::ptr::null_mut();
+        let s = unsafe {
+            (self.lib.api.deserialize_fmu_state)(self.inst, bytes.as_ptr(), bytes.len(), &mut st)
+        };
+        self.check("fmi3DeserializeFMUState", s)?;
+        Ok(Fmu3State(st))
+    }
+}
+
+impl Drop for Instance3 {
+    fn drop(&mut self) {
+        unsafe { (self.lib.api.free_instance)(self.inst) };
+    }
+}
