@@ -18,6 +18,8 @@ struct Case {
     stop: f64,
     step: f64,
     input: Option<std::path::PathBuf>,
+    /// Run the instance in a worker process.
+    isolate: bool,
 }
 
 fn case(model: &'static str, version: u8) -> Case {
@@ -39,6 +41,7 @@ fn case(model: &'static str, version: u8) -> Case {
         step,
         input: (model == "Feedthrough")
             .then(|| reference::sources().join("Feedthrough/Feedthrough_in.csv")),
+        isolate: false,
     }
 }
 
@@ -69,8 +72,9 @@ fn fmpy(c: &Case, fmu: &Path, dir: &Path) -> Table {
 /// twinbench's result for a case: one instance `m`, every output recorded.
 fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String> {
     let mut text = format!(
-        "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[experiment]\nstep = {}\nstop = {}\n",
+        "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\nisolate = {}\n\n[experiment]\nstep = {}\nstop = {}\n",
         fmu.display(),
+        c.isolate,
         c.step,
         c.stop
     );
@@ -107,8 +111,20 @@ fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String
     }
     let path = dir.join(format!("{}-fmi{}.toml", c.model, c.version));
     let file = SystemFile::parse(&text, &path).unwrap();
-    let plan = Plan::from_file(file, &path, Arc::new(FmuCache::temporary(false).unwrap()))
-        .map_err(|e| format!("{}: {e}", c.model))?;
+    let options = tb_cosim::LoadOptions {
+        isolation: tb_cosim::isolated::IsolationOptions {
+            worker_exe: Some(env!("CARGO_BIN_EXE_twinbench").into()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let plan = Plan::compile(
+        file,
+        &path,
+        Arc::new(FmuCache::temporary(false).unwrap()),
+        &options,
+    )
+    .map_err(|e| format!("{}: {e}", c.model))?;
     let mut sim = Simulation::new(plan).unwrap();
     sim.echo_fmu_log = false;
     let summary = sim.run().map_err(|e| format!("{}: {e}", c.model))?;
@@ -465,6 +481,35 @@ fn fmi2_stair_isolated_ends_where_in_process_does() {
     assert_eq!(sim.recording.column_at(0), in_process.column_at(0));
     assert_eq!(sim.recording.column_at(1), in_process.column_at(1));
     assert_eq!(*sim.recording.column_at(0).last().unwrap(), 9.0);
+}
+
+/// FMI 3.0 in a worker process: every column equal to the in-process run, bit for bit
+/// (arrays, every integer type and Strings through the protocol, the FMU's own end).
+#[test]
+fn fmi3_isolated_runs_equal_in_process_runs() {
+    let dir = tb_testkit::scratch("fmi3-iso");
+    for model in ["Feedthrough", "StateSpace", "Stair"] {
+        let fmu = reference::fmu(model, 3);
+        let (a, stop_a) = twinbench(&case(model, 3), &fmu, dir.path()).unwrap();
+        let c = Case {
+            isolate: true,
+            ..case(model, 3)
+        };
+        let (b, stop_b) = twinbench(&c, &fmu, dir.path()).unwrap();
+        assert_eq!(stop_a, stop_b, "{model}");
+        assert_eq!(a.names(), b.names(), "{model}");
+        for k in 0..a.names().len() {
+            if a.is_text(k) {
+                continue;
+            }
+            let (x, y) = (a.column_at(k), b.column_at(k));
+            assert!(
+                x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()) && x.len() == y.len(),
+                "{model}: column {} differs isolated",
+                a.names()[k]
+            );
+        }
+    }
 }
 
 #[test]

@@ -107,3 +107,36 @@ pub fn fmu(model: &str, version: u8) -> PathBuf {
     std::fs::remove_file(&so).unwrap();
     fmu
 }
+
+/// A copy of `fmu` as `dir/<name>.fmu` with its modelDescription.xml edited by `xml` and
+/// each entry renamed by `rename` (`None` drops it): a supplier's variant of a model.
+pub fn variant(
+    fmu: &Path,
+    dir: &Path,
+    name: &str,
+    xml: impl Fn(&str) -> String,
+    rename: impl Fn(&str) -> Option<String>,
+) -> PathBuf {
+    use std::io::Read;
+    let mut zin = zip::ZipArchive::new(std::fs::File::open(fmu).unwrap()).unwrap();
+    let out = dir.join(format!("{name}.fmu"));
+    let mut zout = zip::ZipWriter::new(std::fs::File::create(&out).unwrap());
+    let o = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated);
+    for k in 0..zin.len() {
+        let mut entry = zin.by_index(k).unwrap();
+        let mut bytes = Vec::new();
+        entry.read_to_end(&mut bytes).unwrap();
+        let entry_name = entry.name().to_string();
+        if entry_name == "modelDescription.xml" {
+            bytes = xml(&String::from_utf8(bytes).unwrap()).into_bytes();
+        }
+        let Some(new_name) = rename(&entry_name) else {
+            continue;
+        };
+        zout.start_file(new_name, o).unwrap();
+        zout.write_all(&bytes).unwrap();
+    }
+    zout.finish().unwrap();
+    out
+}

@@ -228,6 +228,7 @@ mod tests {
             source: "x.fmu".into(),
             model_identifier: "x".into(),
             preload: vec!["libpython3.11.so".into(), "b".into()],
+            description: "/c/modelDescription.xml".into(),
         };
         let mut e = Enc::default();
         t.encode(&mut e);

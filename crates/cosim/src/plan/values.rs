@@ -74,7 +74,17 @@ impl ParamSlot {
         let v = match self.ty {
             ScalarType::Real => match (value.as_float(), value.as_integer()) {
                 (Some(x), _) => ParamValue::Real(x),
-                (None, Some(i)) => ParamValue::Real(i as f64),
+                // An integer an f64 cannot hold exactly (beyond 2^53) is not rounded in
+                // silence (an FMI 3.0 Int64 travels as a Real).
+                (None, Some(i)) if (i as f64) as i64 == i => ParamValue::Real(i as f64),
+                (None, Some(i)) => {
+                    return Err(invalid(
+                        ctx,
+                        format!(
+                            "'{name}': {i} cannot be carried exactly as a double (integers are exact up to 2^53 = 9007199254740992)"
+                        ),
+                    ))
+                }
                 _ => return Err(mismatch()),
             },
             ScalarType::Integer | ScalarType::Enumeration => {

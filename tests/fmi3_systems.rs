@@ -1,0 +1,320 @@
+//! FMI 3.0 beside FMI 2.0: a system mixing a Reference FMU built as FMI 3.0 with
+//! twinbench's own FMI 2.0 FMUs, unit conversion across them, FMU state save/restore and
+//! serialization through the 3.0 API, and what is refused before the first step (clocks,
+//! Scheduled Execution, Model Exchange only, another platform's binary).
+
+mod common;
+
+use common::reference;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tb_cosim::{Plan, Simulation, SystemFile};
+use tb_fmi::FmuCache;
+
+/// FMI 3.0 Feedthrough as a supplier's speed sensor: its continuous Float64 input and output
+/// declared in `unit` (the C code passes the value through whatever the unit).
+fn sensor(dir: &Path, name: &str, unit: &str, base: &str) -> PathBuf {
+    let fmu = reference::fmu("Feedthrough", 3);
+    reference::variant(
+        &fmu,
+        dir,
+        name,
+        |xml| {
+            xml.replacen(
+                "<TypeDefinitions>",
+                &format!(
+                    "<UnitDefinitions><Unit name=\"{unit}\"><BaseUnit {base}/></Unit></UnitDefinitions>\n  <TypeDefinitions>"
+                ),
+                1,
+            )
+            .replace(
+                "name=\"Float64_continuous_input\"",
+                &format!("name=\"Float64_continuous_input\" unit=\"{unit}\""),
+            )
+            .replace(
+                "name=\"Float64_continuous_output\"",
+                &format!("name=\"Float64_continuous_output\" unit=\"{unit}\""),
+            )
+        },
+        |n| Some(n.to_string()),
+    )
+}
+
+fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), String> {
+    let path = dir.join("system.toml");
+    let file = SystemFile::parse(text, &path).map_err(|e| e.to_string())?;
+    let options = tb_cosim::LoadOptions {
+        isolation: tb_cosim::isolated::IsolationOptions {
+            worker_exe: Some(env!("CARGO_BIN_EXE_twinbench").into()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let plan = Plan::compile(
+        file,
+        &path,
+        Arc::new(FmuCache::temporary(false).unwrap()),
+        &options,
+    )
+    .map_err(|e| e.to_string())?;
+    let notes = plan.notes.clone();
+    let mut sim = Simulation::new(plan).map_err(|e| e.to_string())?;
+    sim.echo_fmu_log = false;
+    sim.run().map_err(|e| e.to_string())?;
+    Ok((sim.recording.clone(), notes))
+}
+
+/// The dyno (our FMI 2.0 FMU, rad/s) drives an FMI 3.0 sensor in rpm, whose output drives
+/// a second FMI 3.0 sensor in rad/s: the value arrives converted, and back to rad/s it
+/// equals the dyno's speed. Once in process, once with the FMI 3.0 units isolated.
+#[test]
+fn fmi3_and_fmi2_in_one_system_with_unit_conversion() {
+    let dir = tb_testkit::scratch("fmi3-mixed");
+    let rpm = sensor(
+        dir.path(),
+        "sensor_rpm",
+        "rpm",
+        "s=\"-1\" rad=\"1\" factor=\"0.10471975511965977\"",
+    );
+    let rad_s = sensor(dir.path(), "sensor_rad_s", "rad/s", "s=\"-1\" rad=\"1\"");
+    for isolate in [false, true] {
+        let text = format!(
+            r#"connections = [
+    "dyno.omega -> rpm.Float64_continuous_input",
+    "rpm.Float64_continuous_output -> back.Float64_continuous_input",
+]
+[fmus]
+dyno = "{dyno}"
+rpm = "{rpm}"
+back = "{back}"
+
+[[instance]]
+name = "dyno"
+fmu = "dyno"
+
+[[instance]]
+name = "rpm"
+fmu = "rpm"
+isolate = {isolate}
+
+[[instance]]
+name = "back"
+fmu = "back"
+isolate = {isolate}
+
+[parameters]
+"dyno.omega_start" = 151.971
+"dyno.torque_setpoint" = 0.0
+
+[experiment]
+step = 1e-3
+stop = 0.05
+algorithm = "gauss-seidel"
+
+[record]
+signals = ["dyno.omega", "rpm.Float64_continuous_output", "back.Float64_continuous_output"]
+"#,
+            dyno = common::fmu("dyno").display(),
+            rpm = rpm.display(),
+            back = rad_s.display(),
+        );
+        let (t, _) = run(dir.path(), &text).unwrap();
+        let omega = t.require("dyno.omega").unwrap();
+        let in_rpm = t.require("rpm.Float64_continuous_output").unwrap();
+        let back = t.require("back.Float64_continuous_output").unwrap();
+        // Torque-free, the dyno keeps its speed: every row compares with the same value
+        // whatever the exchange's one-step lag.
+        assert!(
+            omega.iter().all(|w| (w - 151.971).abs() < 1e-9),
+            "{omega:?}"
+        );
+        for k in 1..t.len() {
+            let expected = omega[k] * 60.0 / (2.0 * std::f64::consts::PI);
+            assert!(
+                (in_rpm[k] - expected).abs() <= 1e-12 * expected,
+                "row {k}: {} rpm, expected {expected} (isolate {isolate})",
+                in_rpm[k]
+            );
+            assert!(
+                (back[k] - omega[k]).abs() <= 1e-12 * omega[k],
+                "row {k}: {} rad/s back, dyno {} (isolate {isolate})",
+                back[k],
+                omega[k]
+            );
+        }
+    }
+}
+
+/// Save, restore and serialize through fmi3GetFMUState/SetFMUState/SerializeFMUState: a
+/// restored run repeats the original bit for bit; reset starts over.
+#[test]
+fn fmi3_state_save_restore_serialize_and_reset() {
+    let cache = FmuCache::temporary(false).unwrap();
+    let fmu = cache.load(&reference::fmu("VanDerPol", 3)).unwrap();
+    let md = &fmu.description;
+    let x0 = md.variable("x0").unwrap().value_reference;
+    let mut i = tb_fmi::Instance3::instantiate(
+        fmu.library3().unwrap(),
+        md,
+        "vdp",
+        Some(&fmu.resource_dir()),
+        false,
+    )
+    .unwrap();
+    i.setup_experiment(0.0, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap();
+    let h = 0.01;
+    let steps = |i: &mut tb_fmi::Instance3, from: usize, n: usize| -> Vec<f64> {
+        let mut out = Vec::new();
+        for k in from..from + n {
+            i.do_step(k as f64 * h, h).unwrap();
+            let mut x = [0.0];
+            i.get_real(&[x0], &mut x).unwrap();
+            out.push(x[0]);
+        }
+        out
+    };
+    steps(&mut i, 0, 50);
+    let state = i.get_state().unwrap();
+    let bytes = i.serialize_state(&state).unwrap();
+    assert!(!bytes.is_empty());
+    let first = steps(&mut i, 50, 50);
+    i.set_state(&state, 0.5).unwrap();
+    let again = steps(&mut i, 50, 50);
+    assert_eq!(
+        first.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        again.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    );
+    let restored = i.deserialize_state(&bytes).unwrap();
+    i.set_state(&restored, 0.5).unwrap();
+    let third = steps(&mut i, 50, 50);
+    assert_eq!(first, third);
+    i.free_state(state).unwrap();
+    i.free_state(restored).unwrap();
+    // Reset: back to the start values (x0 = 2).
+    i.reset().unwrap();
+    let mut x = [0.0];
+    i.get_real(&[x0], &mut x).unwrap();
+    assert_eq!(x[0], 2.0);
+    i.terminate().ok();
+}
+
+/// What twinbench cannot run is refused when the system loads, naming the .fmu and what
+/// it needs.
+fn refused(fmu: &Path, dir: &Path) -> String {
+    let text = format!(
+        "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n",
+        fmu.display()
+    );
+    let Err(e) = run(dir, &text) else {
+        panic!("{} was not refused", fmu.display())
+    };
+    assert!(
+        e.contains(&fmu.display().to_string()),
+        "names the file: {e}"
+    );
+    e
+}
+
+#[test]
+fn an_fmi3_fmu_that_needs_clocks_is_refused_before_the_first_step() {
+    let dir = tb_testkit::scratch("fmi3-clocks");
+    let vdp = reference::fmu("VanDerPol", 3);
+    let clocked = reference::variant(
+        &vdp,
+        dir.path(),
+        "clocked",
+        |xml| {
+            xml.replacen(
+                "</ModelVariables>",
+                "  <Clock name=\"tick\" valueReference=\"1001\" causality=\"input\" intervalVariability=\"constant\" intervalDecimal=\"0.1\"/>\n  </ModelVariables>",
+                1,
+            )
+        },
+        |n| Some(n.to_string()),
+    );
+    let e = refused(&clocked, dir.path());
+    assert!(
+        e.contains("clocks") && e.contains("'tick' is a Clock"),
+        "{e}"
+    );
+    // The Clocks Reference FMU: Scheduled Execution only.
+    let clocks = reference::variant(
+        &vdp,
+        dir.path(),
+        "scheduled",
+        |_| std::fs::read_to_string(reference::sources().join("Clocks/FMI3.xml")).unwrap(),
+        |n| Some(n.replace("VanDerPol", "Clocks")),
+    );
+    let e = refused(&clocks, dir.path());
+    assert!(
+        e.contains("supports Scheduled Execution only; twinbench needs Co-Simulation"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_model_exchange_only_fmi3_fmu_is_refused() {
+    let dir = tb_testkit::scratch("fmi3-me");
+    let vdp = reference::fmu("VanDerPol", 3);
+    let me = reference::variant(
+        &vdp,
+        dir.path(),
+        "me_only",
+        |xml| {
+            let a = xml.find("<CoSimulation").unwrap();
+            let b = a + xml[a..].find("/>").unwrap() + 2;
+            format!("{}{}", &xml[..a], &xml[b..])
+        },
+        |n| Some(n.to_string()),
+    );
+    let e = refused(&me, dir.path());
+    assert!(
+        e.contains("supports Model Exchange only; twinbench needs Co-Simulation"),
+        "{e}"
+    );
+}
+
+#[test]
+fn an_fmi3_fmu_built_for_another_platform_is_refused() {
+    let dir = tb_testkit::scratch("fmi3-platform");
+    let vdp = reference::fmu("VanDerPol", 3);
+    let windows = reference::variant(
+        &vdp,
+        dir.path(),
+        "windows",
+        |xml| xml.to_string(),
+        |n| {
+            Some(
+                n.replace("x86_64-linux", "x86_64-windows")
+                    .replace(".so", ".dll"),
+            )
+        },
+    );
+    let e = refused(&windows, dir.path());
+    assert!(
+        e.contains("no binaries/x86_64-linux/VanDerPol.so")
+            && e.contains("it has binaries for x86_64-windows"),
+        "{e}"
+    );
+}
+
+/// A 64-bit integer beyond 2^53 cannot travel exactly as a double: an error naming the
+/// variable, never a rounded value.
+#[test]
+fn a_64_bit_integer_an_f64_cannot_carry_is_an_error_naming_it() {
+    let dir = tb_testkit::scratch("fmi3-int64");
+    let fmu = reference::fmu("Feedthrough", 3);
+    let text = format!(
+        "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[parameters]\n\"m.Int64_input\" = 9007199254740993\n\n[experiment]\nstep = 0.1\nstop = 1.0\n\n[record]\nsignals = [\"m.Int64_output\"]\n",
+        fmu.display()
+    );
+    let Err(e) = run(dir.path(), &text) else {
+        panic!("not refused")
+    };
+    assert!(
+        e.contains("'m.Int64_input': 9007199254740993 cannot be carried exactly"),
+        "{e}"
+    );
+}
