@@ -278,14 +278,17 @@ fn a_missing_linux64_binary_is_refused() {
         &build(&with_entry("binaries/linux64/faulty.so", None), |_| {}),
     );
     assert!(
-        e.contains("no binaries/linux64/faulty.so (the FMU has no binary for this platform)"),
+        e.contains("no binaries/linux64/faulty.so (the FMU has no binary for this platform; it has no binaries at all)"),
         "{e}"
     );
     // Only a Windows binary.
     let mut entries = with_entry("binaries/linux64/faulty.so", None);
     entries.push(("binaries/win64/faulty.dll".into(), b"MZ".to_vec()));
     let e = default_refused("win64only.fmu", &build(&entries, |_| {}));
-    assert!(e.contains("no binaries/linux64/faulty.so"), "{e}");
+    assert!(
+        e.contains("no binaries/linux64/faulty.so") && e.contains("it has binaries for win64"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -321,9 +324,10 @@ fn a_non_utf8_model_description_is_refused() {
 }
 
 #[test]
-fn fmi_1_and_3_are_refused_with_their_version() {
+fn fmi_1_is_refused_with_its_version_and_3_0_is_read_as_3_0() {
     let md2 = model_description();
-    for v in ["1.0", "3.0"] {
+    {
+        let v = "1.0";
         let md = md2.replace("fmiVersion=\"2.0\"", &format!("fmiVersion=\"{v}\""));
         let e = default_refused(
             &format!("fmi{v}.fmu"),
@@ -334,7 +338,7 @@ fn fmi_1_and_3_are_refused_with_their_version() {
         );
         assert!(
             e.contains(&format!(
-                "fmiVersion is \"{v}\"; twinbench runs FMI 2.0 FMUs only"
+                "fmiVersion is \"{v}\"; twinbench runs FMI 2.0 and 3.0 FMUs"
             )),
             "{e}"
         );
@@ -353,7 +357,24 @@ fn fmi_1_and_3_are_refused_with_their_version() {
             |_| {},
         ),
     );
-    assert!(e.contains("fmiVersion is \"3.0\""), "{e}");
+    // Read as FMI 3.0: its library is looked for in the 3.0 platform folder.
+    assert!(
+        e.contains("no binaries/x86_64-linux/faulty.so") && e.contains("binaries for linux64"),
+        "{e}"
+    );
+    // An FMI 2.0 description that only claims 3.0: its variables are not 3.0 elements.
+    let claimed = md2.replace("fmiVersion=\"2.0\"", "fmiVersion=\"3.0\"");
+    let e = default_refused(
+        "claims3.fmu",
+        &build(
+            &with_entry("modelDescription.xml", Some(claimed.into_bytes())),
+            |_| {},
+        ),
+    );
+    assert!(
+        e.contains("<ScalarVariable> is not an FMI 3.0 variable element"),
+        "{e}"
+    );
     // FMI 1.0's CoSimulation_StandAlone description.
     let md1 = r#"<?xml version="1.0"?>
 <fmiModelDescription fmiVersion="1.0" modelName="faulty" modelIdentifier="faulty" guid="{x}">

@@ -328,6 +328,11 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                         c.trim()
                     ));
                 }
+                if Fmi3Type::parse(t).is_none() && !matches!(t, "Binary" | "Clock") {
+                    return Err(format!(
+                        "ModelVariables: <{t}> is not an FMI 3.0 variable element (Float64, Int32, Boolean, String, …; an FMI 2.0 description under fmiVersion=\"3.0\"?)"
+                    ));
+                }
                 let Some(ty) = Fmi3Type::parse(t) else {
                     if t != "Clock" {
                         md.skipped.push(format!("{vname} ({t})"));
