@@ -35,7 +35,7 @@ pub enum SystemError {
     Fmu(#[from] FmuError),
     /// An SSP package that cannot be run (named with the file and line inside it).
     #[error(transparent)]
-    Ssp(#[from] ssp_import::SspImportError),
+    Ssp(Box<ssp_import::SspImportError>),
     #[error("{context}: {message}")]
     Invalid { context: String, message: String },
     #[error("replay '{name}' ({path}): {message}")]
@@ -67,6 +67,12 @@ pub enum SystemError {
         summary: Box<RunSummary>,
         error: Box<SystemError>,
     },
+}
+
+impl From<ssp_import::SspImportError> for SystemError {
+    fn from(e: ssp_import::SspImportError) -> Self {
+        SystemError::Ssp(Box::new(e))
+    }
 }
 
 /// An error about the system, with where it is (file, connection, parameter).

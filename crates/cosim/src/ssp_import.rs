@@ -24,11 +24,11 @@
 //! Binary values) is refused with a [`SspImportError`] naming the package, the file, the line
 //! and what is supported; graphical elements and annotations of other tools are ignored.
 
+use crate::config::CheckConfig;
 use crate::config::{
     Algorithm, ConnectionConfig, ExperimentConfig, InstanceConfig, RecordConfig, StopConfig,
     SystemFile,
 };
-use crate::config::CheckConfig;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tb_fmi::units::UnitDef;
@@ -40,7 +40,7 @@ use tb_fmi::{FmuCache, FmuError, ModelDescription, ScalarType};
 pub enum SspImportError {
     /// The package as an archive (not a zip, an entry escaping it, a link, too large).
     #[error(transparent)]
-    Archive(FmuError),
+    Archive(Box<FmuError>),
     #[error("{ssp}: {file}, line {line}: malformed XML: {message}")]
     Xml {
         ssp: PathBuf,
@@ -67,7 +67,7 @@ pub enum SspImportError {
     Fmu {
         ssp: PathBuf,
         entry: String,
-        error: FmuError,
+        error: Box<FmuError>,
     },
     #[error("{ssp}: {file}, line {line}: {message}")]
     Invalid {
@@ -117,7 +117,11 @@ impl Node {
 
 fn line_of(text: &str, pos: u64) -> usize {
     let pos = (pos as usize).min(text.len());
-    text.as_bytes()[..pos].iter().filter(|&&b| b == b'\n').count() + 1
+    text.as_bytes()[..pos]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
 }
 
 /// A resolved namespace (empty: none), or the undeclared prefix.
@@ -169,7 +173,8 @@ fn parse_xml(text: &str, ssp: &Path, file: &str) -> Result<Node, SspImportError>
         if root.is_some() && stack.is_empty() {
             return Err(xml_err(line, "content after the root element".into()));
         }
-        let ns = ns.map_err(|p| xml_err(line, format!("namespace prefix '{p}' is not declared")))?;
+        let ns =
+            ns.map_err(|p| xml_err(line, format!("namespace prefix '{p}' is not declared")))?;
         let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
         let mut attrs = Vec::new();
         for a in e.attributes() {
@@ -324,10 +329,7 @@ impl Importer<'_> {
             return Err(self.invalid(
                 file,
                 0,
-                format!(
-                    "not a regular file of at most {} MiB",
-                    MAX_XML_BYTES >> 20
-                ),
+                format!("not a regular file of at most {} MiB", MAX_XML_BYTES >> 20),
             ));
         }
         let bytes = std::fs::read(path).map_err(|e| self.invalid(file, 0, e.to_string()))?;
@@ -336,7 +338,10 @@ impl Importer<'_> {
             SspImportError::Xml {
                 ssp: self.ssp.to_path_buf(),
                 file: file.to_string(),
-                line: line_of(&String::from_utf8_lossy(&e.into_bytes()[..valid]), valid as u64),
+                line: line_of(
+                    &String::from_utf8_lossy(&e.into_bytes()[..valid]),
+                    valid as u64,
+                ),
                 message: format!("not UTF-8 (byte {valid})"),
             }
         })?;
@@ -395,7 +400,7 @@ fn parse_bool(s: &str) -> Option<bool> {
 pub fn load(ssp: &Path, cache: &FmuCache) -> Result<SystemFile, SspImportError> {
     let dir = cache
         .unpack_package(ssp)
-        .map_err(SspImportError::Archive)?;
+        .map_err(|e| SspImportError::Archive(Box::new(e)))?;
     let imp = Importer {
         ssp,
         dir: dir.clone(),
@@ -415,7 +420,11 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             format!(
                 "the root element is <{}> ({}), not an SSP 1.0 <ssd:SystemStructureDescription>",
                 root.name,
-                if root.ns.is_empty() { "no namespace" } else { &root.ns }
+                if root.ns.is_empty() {
+                    "no namespace"
+                } else {
+                    &root.ns
+                }
             ),
         ));
     }
@@ -543,9 +552,9 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
                     ));
                 }
             }
-            let source = c
-                .attr("source")
-                .ok_or_else(|| imp.invalid(f, c.line, format!("component '{name}' has no source")))?;
+            let source = c.attr("source").ok_or_else(|| {
+                imp.invalid(f, c.line, format!("component '{name}' has no source"))
+            })?;
             let path = imp.read_entry(f, c.line, source)?;
             let entry = source.strip_prefix("./").unwrap_or(source).to_string();
             if !path.is_file() {
@@ -559,7 +568,7 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             let loaded = imp.cache.load(&path).map_err(|error| SspImportError::Fmu {
                 ssp: imp.ssp.to_path_buf(),
                 entry: entry.clone(),
-                error,
+                error: Box::new(error),
             })?;
             let key = match keys.get(&entry) {
                 Some(k) => k.clone(),
@@ -686,10 +695,8 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             for ann in &anns.children {
                 for x in &ann.children {
                     if x.ns == NS_OSP {
-                        if let Some(fixed) = x
-                            .children
-                            .iter()
-                            .find(|n| n.name == "FixedStepAlgorithm")
+                        if let Some(fixed) =
+                            x.children.iter().find(|n| n.name == "FixedStepAlgorithm")
                         {
                             osp_step = imp.f64_attr(f, fixed, "baseStepSize")?;
                         }
@@ -772,10 +779,7 @@ fn fmus_in(dir: &Path) -> String {
             let p = e.path();
             if p.is_dir() {
                 stack.push(p);
-            } else if p
-                .extension()
-                .is_some_and(|x| x.eq_ignore_ascii_case("fmu"))
-            {
+            } else if p.extension().is_some_and(|x| x.eq_ignore_ascii_case("fmu")) {
                 if let Ok(rel) = p.strip_prefix(dir) {
                     found.push(rel.display().to_string());
                 }
@@ -940,7 +944,12 @@ fn bind(
     }
     let mut ssv_units = Vec::new();
     let mut params = Vec::new();
-    for part in imp.children(&file, set, &["Parameters", "Units", "Enumerations"], &["MetaData"])? {
+    for part in imp.children(
+        &file,
+        set,
+        &["Parameters", "Units", "Enumerations"],
+        &["MetaData"],
+    )? {
         match part.name.as_str() {
             "Parameters" => params.extend(imp.children(&file, part, &["Parameter"], &[])?),
             "Units" => {
@@ -1014,7 +1023,11 @@ fn bind(
             return Err(imp.invalid(&file, p.line, format!("parameter '{full}' has no value")));
         };
         let text = v.attr("value").ok_or_else(|| {
-            imp.invalid(&file, v.line, format!("parameter '{full}': no value attribute"))
+            imp.invalid(
+                &file,
+                v.line,
+                format!("parameter '{full}': no value attribute"),
+            )
         })?;
         let bad = |what: &str| {
             imp.invalid(
@@ -1029,8 +1042,11 @@ fn bind(
                 if let (Some(u), Some(fu)) = (v.attr("unit"), comp.md.unit_of(sv)) {
                     if u != fu {
                         let md = imp.unit_md(&comp.md);
-                        let c = crate::plan::units::unit_conversion((&md, Some(u)), (&md, Some(fu)))
-                            .map_err(|m| imp.invalid(&file, v.line, format!("parameter '{full}': {m}")))?;
+                        let c =
+                            crate::plan::units::unit_conversion((&md, Some(u)), (&md, Some(fu)))
+                                .map_err(|m| {
+                                    imp.invalid(&file, v.line, format!("parameter '{full}': {m}"))
+                                })?;
                         x = c.scale * x + c.offset;
                     }
                 }
@@ -1185,7 +1201,10 @@ fn connection(
     }
     let (scale, offset) = if suppress {
         match lt {
-            None if fmu_units.0 == fmu_units.1 || fmu_units.0.is_none() || fmu_units.1.is_none() => {
+            None if fmu_units.0 == fmu_units.1
+                || fmu_units.0.is_none()
+                || fmu_units.1.is_none() =>
+            {
                 return Ok(plain)
             }
             None => (1.0, 0.0),

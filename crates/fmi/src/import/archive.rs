@@ -248,7 +248,10 @@ impl FmuCache {
         let meta =
             std::fs::metadata(package).map_err(|e| arch(package, format!("cannot read: {e}")))?;
         if !meta.is_file() {
-            return Err(arch(package, "not a regular file (a package is a zip archive)"));
+            return Err(arch(
+                package,
+                "not a regular file (a package is a zip archive)",
+            ));
         }
         if meta.len() > self.limits.max_total_bytes {
             return Err(arch(
@@ -343,6 +346,9 @@ impl Drop for FmuCache {
     }
 }
 
+/// An archive that passed [`check_entries`], and its entry names.
+pub type CheckedArchive<'a> = (zip::ZipArchive<std::io::Cursor<&'a [u8]>>, Vec<String>);
+
 /// The checks every archive twinbench unpacks passes before a byte is written (an FMU, an
 /// SSP package): a valid zip, entry names inside the archive (no `..`, no absolute paths),
 /// no symbolic links, the entry count and the declared uncompressed size within `limits`.
@@ -351,7 +357,7 @@ pub fn check_entries<'a>(
     fmu: &Path,
     bytes: &'a [u8],
     limits: &Limits,
-) -> Result<(zip::ZipArchive<std::io::Cursor<&'a [u8]>>, Vec<String>), FmuError> {
+) -> Result<CheckedArchive<'a>, FmuError> {
     let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
         .map_err(|e| arch(fmu, format!("not a valid zip archive: {e}")))?;
     if zip.len() > limits.max_entries {
