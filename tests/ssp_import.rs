@@ -477,6 +477,34 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
             && e.contains("inertia"),
         "{e}"
     );
+    // No SSD, a missing .ssv, an SSD nested too deep: named, no panic.
+    let ssp = hand_package(
+        dir.path(),
+        "nossd.ssp",
+        "",
+        ROTOR_SSV,
+        "SystemStructure.ssd",
+    );
+    let e = load_err(&ssp);
+    assert!(
+        e.contains("nossd.ssp: the package has no SystemStructure.ssd"),
+        "{e}"
+    );
+    let ssp = hand_package(
+        dir.path(),
+        "nossv.ssp",
+        &hand_ssd("", ""),
+        ROTOR_SSV,
+        "resources/speed.ssv",
+    );
+    let e = load_err(&ssp);
+    assert!(
+        e.contains("nossv.ssp") && e.contains("'resources/speed.ssv' is not in the package"),
+        "{e}"
+    );
+    let deep = format!("{HEAD}{}", "<ssd:System>".repeat(100_000));
+    let e = load_err(&hand_package(dir.path(), "deep.ssp", &deep, ROTOR_SSV, ""));
+    assert!(e.contains("nested deeper than"), "{e}");
     // An entry escaping the package is refused by the archive checks before anything is written.
     let evil = dir.path().join("evil.ssp");
     zip_package(

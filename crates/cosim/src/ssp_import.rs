@@ -41,6 +41,9 @@ pub enum SspImportError {
     /// The package as an archive (not a zip, an entry escaping it, a link, too large).
     #[error(transparent)]
     Archive(Box<FmuError>),
+    /// A file the package must hold is not there, or cannot be read.
+    #[error("{ssp}: {message}")]
+    Package { ssp: PathBuf, message: String },
     #[error("{ssp}: {file}, line {line}: malformed XML: {message}")]
     Xml {
         ssp: PathBuf,
@@ -90,6 +93,9 @@ pub const NS_SSV: &str = crate::ssp::NS_SSV;
 const NS_OSP: &str = "http://opensimulationplatform.com/SSP/OSPAnnotations";
 const NS_TB: &str = "https://github.com/twinbench/ssp";
 const SSD: &str = "SystemStructure.ssd";
+/// The deepest element nesting read (an SSD needs about ten levels; the tree is dropped
+/// recursively).
+const MAX_DEPTH: usize = 256;
 /// The largest SSD or SSV read (as for a modelDescription.xml).
 const MAX_XML_BYTES: u64 = tb_fmi::archive::MAX_DESCRIPTION_BYTES;
 
@@ -159,7 +165,12 @@ fn parse_xml(text: &str, ssp: &Path, file: &str) -> Result<Node, SspImportError>
             Event::Start(e) => (e, false),
             Event::Empty(e) => (e, true),
             Event::End(_) => {
-                let node = stack.pop().expect("quick-xml checks end names");
+                let Some(node) = stack.pop() else {
+                    return Err(xml_err(
+                        line_of(text, start),
+                        "an end tag without its start".into(),
+                    ));
+                };
                 match stack.last_mut() {
                     Some(parent) => parent.children.push(node),
                     None => root = Some(node),
@@ -205,6 +216,12 @@ fn parse_xml(text: &str, ssp: &Path, file: &str) -> Result<Node, SspImportError>
                 None => root = Some(node),
             }
         } else {
+            if stack.len() >= MAX_DEPTH {
+                return Err(xml_err(
+                    line,
+                    format!("elements nested deeper than {MAX_DEPTH} levels"),
+                ));
+            }
             stack.push(node);
         }
     }
@@ -319,20 +336,19 @@ impl Importer<'_> {
     }
 
     fn read_xml(&self, file: &str, path: &Path) -> Result<Node, SspImportError> {
-        let meta = std::fs::metadata(path).map_err(|_| SspImportError::Invalid {
+        let package = |message: String| SspImportError::Package {
             ssp: self.ssp.to_path_buf(),
-            file: file.to_string(),
-            line: 0,
-            message: "not in the package".into(),
-        })?;
+            message,
+        };
+        let meta =
+            std::fs::metadata(path).map_err(|_| package(format!("the package has no {file}")))?;
         if !meta.is_file() || meta.len() > MAX_XML_BYTES {
-            return Err(self.invalid(
-                file,
-                0,
-                format!("not a regular file of at most {} MiB", MAX_XML_BYTES >> 20),
-            ));
+            return Err(package(format!(
+                "{file} is not a regular file of at most {} MiB",
+                MAX_XML_BYTES >> 20
+            )));
         }
-        let bytes = std::fs::read(path).map_err(|e| self.invalid(file, 0, e.to_string()))?;
+        let bytes = std::fs::read(path).map_err(|e| package(format!("cannot read {file}: {e}")))?;
         let text = String::from_utf8(bytes).map_err(|e| {
             let valid = e.utf8_error().valid_up_to();
             SspImportError::Xml {
@@ -726,10 +742,7 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
     }
     experiment.stop = match (stop_time, tb_stop) {
         // A condition (a lap) is twinbench's; a time is the standard's stopTime.
-        (_, Some((s, line))) if parse_double(&s).is_none() => {
-            let _ = line;
-            StopConfig::Word(s)
-        }
+        (_, Some((s, _))) if parse_double(&s).is_none() => StopConfig::Word(s),
         (Some(t), _) => StopConfig::Time(t),
         (None, Some((s, line))) => StopConfig::Time(parse_double(&s).ok_or_else(|| {
             imp.invalid(f, line, format!("stop=\"{s}\" is not a time"))
@@ -917,6 +930,13 @@ fn bind(
         (Some(src), None) => {
             let path = imp.read_entry(f, b.line, src)?;
             let name = src.strip_prefix("./").unwrap_or(src).to_string();
+            if !path.is_file() {
+                return Err(imp.invalid(
+                    f,
+                    b.line,
+                    format!("ParameterBinding source '{name}' is not in the package"),
+                ));
+            }
             owned = imp.read_xml(&name, &path)?;
             (name, &owned)
         }
