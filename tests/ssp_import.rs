@@ -590,3 +590,32 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         std::fs::read_dir(tmp.path()).unwrap().collect::<Vec<_>>()
     );
 }
+
+/// Damaged SSDs (cut anywhere, a byte replaced by markup) are errors, never a panic.
+#[test]
+fn damaged_ssds_are_errors_not_panics() {
+    let dir = tempfile::tempdir().unwrap();
+    let ssd = hand_ssd("", "");
+    let bytes = ssd.as_bytes();
+    let cache = Arc::new(FmuCache::temporary(false).unwrap());
+    let mut cases = 0;
+    for k in (0..bytes.len()).step_by(13) {
+        let mut variants = vec![bytes[..k].to_vec()];
+        for c in [b'<', b'"', b'&', b'>', b'/', 0xff] {
+            let mut v = bytes.to_vec();
+            v[k] = c;
+            variants.push(v);
+        }
+        for v in variants {
+            let p = dir.path().join("damaged.ssp");
+            // No FMUs: the SSD is read before any component's FMU is looked for.
+            zip_package(&p, &[("SystemStructure.ssd", v)]);
+            let e = Plan::load(&p, cache.clone())
+                .err()
+                .expect("a damaged package loads");
+            assert!(e.to_string().contains("damaged.ssp"), "{e}");
+            cases += 1;
+        }
+    }
+    assert!(cases > 1000);
+}
