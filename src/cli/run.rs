@@ -8,7 +8,7 @@ use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
-    /// The system description (TOML).
+    /// The system description (TOML), or an SSP 1.0 package (`.ssp`).
     pub system: PathBuf,
     /// Write the recorded signals here, written atomically: MDF 4 for `.mf4`/`.mdf` (with
     /// units, `time` the master channel), CSV otherwise.

@@ -3,7 +3,8 @@
 //! runs a plan with a master algorithm ([`master`]) over units behind one small trait
 //! ([`backend`]: an FMU in-process, a model linked natively, an FMU isolated in a worker
 //! process), and records a [`tb_table::Table`]. Replayed measurement channels
-//! ([`replay`]) are units too. [`ssp`] writes a system as an SSP package.
+//! ([`replay`]) are units too. [`ssp`] writes a system as an SSP package, [`ssp_import`]
+//! reads one as a system file.
 
 pub mod backend;
 pub mod config;
@@ -13,6 +14,7 @@ pub mod native;
 pub mod plan;
 pub mod replay;
 pub mod ssp;
+pub mod ssp_import;
 
 pub use config::{Algorithm, StopConfig, SystemFile};
 pub use master::{RunSummary, Simulation};
@@ -31,6 +33,9 @@ pub enum SystemError {
     // Transparent: with "{0}" and #[from], `{:#}` printed the FMU error twice.
     #[error(transparent)]
     Fmu(#[from] FmuError),
+    /// An SSP package that cannot be run (named with the file and line inside it).
+    #[error(transparent)]
+    Ssp(Box<ssp_import::SspImportError>),
     #[error("{context}: {message}")]
     Invalid { context: String, message: String },
     #[error("replay '{name}' ({path}): {message}")]
@@ -62,6 +67,12 @@ pub enum SystemError {
         summary: Box<RunSummary>,
         error: Box<SystemError>,
     },
+}
+
+impl From<ssp_import::SspImportError> for SystemError {
+    fn from(e: ssp_import::SspImportError) -> Self {
+        SystemError::Ssp(Box::new(e))
+    }
 }
 
 /// An error about the system, with where it is (file, connection, parameter).

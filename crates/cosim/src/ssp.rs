@@ -11,8 +11,10 @@
 //! - parameter values inline (`ParameterBindings/ParameterValues/ssv:ParameterSet`) per
 //!   component, names relative to the component;
 //! - `Units` with their SI base units, `DefaultExperiment` (start, stop), and annotations:
-//!   twinbench's experiment (step, algorithm, stepping order, lap condition) and the Open
-//!   Simulation Platform's fixed-step algorithm (libcosim reads its `baseStepSize`).
+//!   twinbench's experiment (step, algorithm, stepping order, lap condition, recorded
+//!   signals and decimation, reported values, checks: what `twinbench run X.ssp` needs to
+//!   repeat the run, see [`crate::ssp_import`]) and the Open Simulation Platform's
+//!   fixed-step algorithm (libcosim reads its `baseStepSize`).
 //!
 //! Replayed measurement channels have no SSP 1.0 equivalent and are refused.
 
@@ -440,17 +442,60 @@ pub fn system_structure(
         crate::Algorithm::GaussSeidel => "gauss-seidel",
         crate::Algorithm::Jacobi => "jacobi",
     };
+    // Signals by the FMU's names (port maps resolved), as the connectors are named.
+    let ssp_name = |full: &str| -> Result<String, SspError> {
+        let (k, var) = fmu_var(full)?;
+        Ok(format!("{}.{var}", system.instances[k].name))
+    };
     let lap = match &system.stop {
         crate::Stop::When {
             condition,
             max_time,
         } => format!(
             " stop=\"{}\" maxTime=\"{}\"",
-            esc(&condition.to_string()),
+            esc(&format!(
+                "{} {} {}",
+                ssp_name(&condition.signal)?,
+                condition.op.symbol(),
+                condition.threshold
+            )),
             real(*max_time)
         ),
         crate::Stop::Time(t) => format!(" stop=\"{}\"", real(*t)),
     };
+    // What a twinbench import needs to reproduce the run (other tools ignore it): the
+    // recorded signals and decimation, the reported values, the checks.
+    let signal_list = |names: &[String]| -> Result<String, SspError> {
+        names
+            .iter()
+            .map(|n| Ok(format!("<tb:Signal name=\"{}\"/>", esc(&ssp_name(n)?))))
+            .collect()
+    };
+    let mut tb_children = String::new();
+    if !file.record.signals.is_empty() || file.record.decimation != 1 {
+        tb_children.push_str(&format!(
+            "<tb:Record decimation=\"{}\">{}</tb:Record>",
+            file.record.decimation,
+            signal_list(&file.record.signals)?
+        ));
+    }
+    if !exp.report.is_empty() {
+        tb_children.push_str(&format!(
+            "<tb:Report>{}</tb:Report>",
+            signal_list(&exp.report)?
+        ));
+    }
+    for c in &file.checks {
+        tb_children.push_str(&format!(
+            "<tb:Check relativeTolerance=\"{}\"{}>{}</tb:Check>",
+            real(c.relative_tolerance),
+            c.why
+                .as_deref()
+                .map(|w| format!(" why=\"{}\"", esc(w)))
+                .unwrap_or_default(),
+            signal_list(&c.equal)?
+        ));
+    }
     x.push_str(&format!(
         "  <ssd:DefaultExperiment startTime=\"{}\" stopTime=\"{}\">\n    <ssd:Annotations>\n",
         real(start),
@@ -461,9 +506,14 @@ pub fn system_structure(
         real(exp.step)
     ));
     x.push_str(&format!(
-        "      <ssc:Annotation type=\"org.twinbench.experiment\"><tb:Experiment stepSize=\"{}\" algorithm=\"{algorithm}\" order=\"{}\"{lap}/></ssc:Annotation>\n",
+        "      <ssc:Annotation type=\"org.twinbench.experiment\"><tb:Experiment stepSize=\"{}\" algorithm=\"{algorithm}\" order=\"{}\"{lap}{}</ssc:Annotation>\n",
         real(exp.step),
-        esc(&order.join(" "))
+        esc(&order.join(" ")),
+        if tb_children.is_empty() {
+            "/>".to_string()
+        } else {
+            format!(">{tb_children}</tb:Experiment>")
+        }
     ));
     x.push_str("    </ssd:Annotations>\n  </ssd:DefaultExperiment>\n");
     x.push_str("</ssd:SystemStructureDescription>\n");

@@ -9,7 +9,7 @@
 //! and declared ranges, unconnected inputs, direct-feed-through cycles, the stop condition.
 
 mod graph;
-mod units;
+pub(crate) mod units;
 mod values;
 
 pub use values::{Condition, Op, ParamSlot, ParamValue, Stop};
@@ -216,18 +216,23 @@ pub struct Plan {
 }
 
 impl Plan {
-    /// Load a system file and compile it.
+    /// Load a system file (TOML, or an SSP package) and compile it.
     pub fn load(path: &Path, cache: Arc<FmuCache>) -> Result<Plan, SystemError> {
         Self::load_with(path, cache, &LoadOptions::default())
     }
 
-    /// [`Plan::load`] with a choice of backends.
+    /// [`Plan::load`] with a choice of backends. `path` is a TOML system file or an SSP 1.0
+    /// package (`.ssp`, unpacked into `cache`'s folder: see [`crate::ssp_import`]).
     pub fn load_with(
         path: &Path,
         cache: Arc<FmuCache>,
         options: &LoadOptions,
     ) -> Result<Plan, SystemError> {
-        let file = SystemFile::load(path)?;
+        let file = if crate::ssp_import::is_ssp(path) {
+            crate::ssp_import::load(path, &cache)?
+        } else {
+            SystemFile::load(path)?
+        };
         Self::compile(file, path, cache, options)
     }
 

@@ -267,6 +267,47 @@ impl FmuCache {
     }
 }
 
+impl FmuCache {
+    /// Check and unpack any zip package (an SSP) into this cache, once per content, with the
+    /// FMU rules: a regular file within the size limit, [`check_entries`], the real
+    /// decompressed size bounded. Returns the folder (`<root>/pkg-<hash>`), removed with the
+    /// cache.
+    pub fn unpack_package(&self, package: &Path) -> Result<PathBuf, FmuError> {
+        let meta =
+            std::fs::metadata(package).map_err(|e| arch(package, format!("cannot read: {e}")))?;
+        if !meta.is_file() {
+            return Err(arch(
+                package,
+                "not a regular file (a package is a zip archive)",
+            ));
+        }
+        if meta.len() > self.limits.max_total_bytes {
+            return Err(arch(
+                package,
+                format!(
+                    "{} bytes, more than the limit of {} bytes",
+                    meta.len(),
+                    self.limits.max_total_bytes
+                ),
+            ));
+        }
+        let bytes =
+            std::fs::read(package).map_err(|e| arch(package, format!("cannot read: {e}")))?;
+        let sha = format!("{:x}", Sha256::digest(&bytes));
+        let key_lock = lock(&self.loading)
+            .entry(format!("pkg-{sha}"))
+            .or_default()
+            .clone();
+        let _loading = lock(&key_lock);
+        check_entries(package, &bytes, &self.limits)?;
+        let dir = self.root.join(format!("pkg-{}", &sha[..32]));
+        if !dir.join(".complete").exists() {
+            extract(package, &bytes, &dir, &self.limits)?;
+        }
+        Ok(dir)
+    }
+}
+
 /// A library error under the FMU's name (the unpacked copy is in a temporary folder the user
 /// never saw). `id` is the model identifier. Also used by the isolation worker.
 pub fn library_error(fmu: &Path, id: &str, e: FmuError) -> FmuError {
@@ -353,19 +394,18 @@ impl Drop for FmuCache {
     }
 }
 
-/// Everything checked before a byte is written: entry names (no `..`, no absolute paths),
-/// no symbolic links, size and count limits, a UTF-8 FMI 2.0 Co-Simulation
-/// modelDescription.xml, and the linux64 binary it names.
-pub fn check_archive(fmu: &Path, bytes: &[u8]) -> Result<(ModelDescription, String), FmuError> {
-    check_archive_with(fmu, bytes, &Limits::default())
-}
+/// An archive that passed [`check_entries`], and its entry names.
+pub type CheckedArchive<'a> = (zip::ZipArchive<std::io::Cursor<&'a [u8]>>, Vec<String>);
 
-/// [`check_archive`] with other limits.
-pub fn check_archive_with(
+/// The checks every archive twinbench unpacks passes before a byte is written (an FMU, an
+/// SSP package): a valid zip, entry names inside the archive (no `..`, no absolute paths),
+/// no symbolic links, the entry count and the declared uncompressed size within `limits`.
+/// Returns the open archive and its entry names.
+pub fn check_entries<'a>(
     fmu: &Path,
-    bytes: &[u8],
+    bytes: &'a [u8],
     limits: &Limits,
-) -> Result<(ModelDescription, String), FmuError> {
+) -> Result<CheckedArchive<'a>, FmuError> {
     let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
         .map_err(|e| arch(fmu, format!("not a valid zip archive: {e}")))?;
     if zip.len() > limits.max_entries {
@@ -409,6 +449,23 @@ pub fn check_archive_with(
         }
         names.push(name);
     }
+    Ok((zip, names))
+}
+
+/// Everything checked before a byte is written: entry names (no `..`, no absolute paths),
+/// no symbolic links, size and count limits, a UTF-8 FMI 2.0 Co-Simulation
+/// modelDescription.xml, and the linux64 binary it names.
+pub fn check_archive(fmu: &Path, bytes: &[u8]) -> Result<(ModelDescription, String), FmuError> {
+    check_archive_with(fmu, bytes, &Limits::default())
+}
+
+/// [`check_archive`] with other limits.
+pub fn check_archive_with(
+    fmu: &Path,
+    bytes: &[u8],
+    limits: &Limits,
+) -> Result<(ModelDescription, String), FmuError> {
+    let (mut zip, names) = check_entries(fmu, bytes, limits)?;
     let xml = {
         let mut f = zip
             .by_name("modelDescription.xml")
