@@ -33,6 +33,18 @@ pub struct RunArgs {
     /// Watchdog of isolated instances: the longest wait for one call [s].
     #[arg(long, value_name = "SECONDS", default_value_t = 10.0)]
     pub worker_timeout: f64,
+    /// Write every FMI call of the traced instances to FILE: the function, its arguments
+    /// with variable names and values, and the status (for debugging a supplier's FMU).
+    #[arg(long, value_name = "FILE")]
+    pub trace_fmi: Option<PathBuf>,
+    /// The instances `--trace-fmi` traces, comma-separated (default: all).
+    #[arg(
+        long,
+        value_name = "NAMES",
+        value_delimiter = ',',
+        requires = "trace_fmi"
+    )]
+    pub trace_instances: Vec<String>,
 }
 
 /// Parse `name=value` into a TOML value: an integer, a number, a boolean, else a string
@@ -73,6 +85,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             timeout,
             ..Default::default()
         },
+        trace: args
+            .trace_fmi
+            .as_ref()
+            .map(|path| tb_cosim::trace::TraceOptions {
+                sink: tb_cosim::trace::TraceSink::new(Box::new(tb_cosim::trace::TraceFile::new(
+                    path,
+                ))),
+                instances: args.trace_instances.clone(),
+            }),
     };
     let system = Arc::new(Plan::load_with(&args.system, cache, &options)?);
     if let Some(out) = &args.out {
@@ -82,6 +103,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         inputs.extend(system.file.replay.iter().map(|r| r.file.as_path()));
         inputs.extend(system.file.preload.iter().map(|p| p.as_path()));
         tb_table::check_output(out, &inputs)?;
+    }
+    // The trace file is created on its first line, after this check.
+    if let Some(trace) = &args.trace_fmi {
+        let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
+        inputs.extend(system.file.fmus.values().map(|p| p.as_path()));
+        inputs.extend(system.file.replay.iter().map(|r| r.file.as_path()));
+        inputs.extend(system.file.preload.iter().map(|p| p.as_path()));
+        inputs.extend(args.out.as_deref());
+        tb_table::check_output(trace, &inputs).context("--trace-fmi")?;
     }
     for w in &system.warnings {
         eprintln!("warning: {w}");
@@ -108,7 +138,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         sim.set(&slot, slot.resolve_path(v, &cwd));
     }
     // A run that completed keeps its results even when an instance then fails to end.
-    let (summary, after_run) = match sim.run() {
+    let trace = options.trace.as_ref().map(|t| t.sink.clone());
+    let result = sim.run();
+    if let (Some(sink), Some(path)) = (&trace, &args.trace_fmi) {
+        // The instances are freed first so that their last calls are in the trace; a
+        // failed run keeps its trace (it is what the trace is for).
+        sim.free_instances();
+        sink.finish()
+            .with_context(|| format!("--trace-fmi: cannot write {}", path.display()))?;
+        eprintln!("FMI call trace written to {}", path.display());
+    }
+    let (summary, after_run) = match result {
         Ok(s) => (s, None),
         Err(tb_cosim::SystemError::AfterRun { summary, error }) => (*summary, Some(error)),
         Err(e) => return Err(e.into()),

@@ -15,6 +15,7 @@ pub mod plan;
 pub mod replay;
 pub mod ssp;
 pub mod ssp_import;
+pub mod trace;
 
 pub use config::{Algorithm, StopConfig, SystemFile};
 pub use master::{RunSummary, Simulation};

@@ -539,6 +539,15 @@ impl Simulation {
         self.value_of(&slot)
     }
 
+    /// Free every instance now (a later run creates them again). The recording stays.
+    pub fn free_instances(&mut self) {
+        for unit in &mut self.ex.units {
+            if let Unit::Fmu(f) = unit {
+                f.instance = None;
+            }
+        }
+    }
+
     /// Names of the exchange slots.
     pub fn signal_names(&self) -> Vec<String> {
         self.plan

@@ -50,6 +50,8 @@ pub struct LoadOptions {
     pub isolate: bool,
     /// Watchdog and worker executable of isolated instances.
     pub isolation: IsolationOptions,
+    /// The FMI call trace (`--trace-fmi`): `None` wraps nothing, so it costs nothing.
+    pub trace: Option<crate::trace::TraceOptions>,
 }
 
 impl InstanceDef {
@@ -380,6 +382,16 @@ impl Plan {
             } else {
                 factory
             };
+            let factory: Arc<dyn BackendFactory> = match &options.trace {
+                Some(t) if t.instances.is_empty() || t.instances.contains(&inst.name) => {
+                    Arc::new(crate::trace::TracedFactory {
+                        inner: factory,
+                        sink: t.sink.clone(),
+                        fmu: fmu.clone(),
+                    })
+                }
+                _ => factory,
+            };
             let def = InstanceDef {
                 name: inst.name.clone(),
                 fmu: fmu.clone(),
@@ -393,6 +405,18 @@ impl Plan {
                 }
             }
             instances.push(def);
+        }
+        if let Some(t) = &options.trace {
+            let names: Vec<&str> = instances.iter().map(|i| i.name.as_str()).collect();
+            if let Some(unknown) = t.instances.iter().find(|n| !names.contains(&n.as_str())) {
+                return Err(invalid(
+                    "--trace-instances",
+                    format!(
+                        "no instance named '{unknown}' in {ctx_file} (instances: {})",
+                        names.join(", ")
+                    ),
+                ));
+            }
         }
         // The preloads serve in-process FMU libraries; isolated ones get them in their
         // worker, so a system of isolated instances loads nothing into this process.

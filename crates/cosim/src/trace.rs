@@ -1,0 +1,380 @@
+//! The FMI call trace (`--trace-fmi FILE`): every call twinbench makes on the chosen
+//! instances, with its arguments, values and status, one line per call, as FMPy's
+//! `fmiCallLogger` prints them. A traced instance's backend is wrapped in [`Traced`];
+//! an untraced one is not wrapped at all, so tracing costs nothing when it is off.
+//!
+//! A line: `t=0.1 edu: fmi2SetReal(vr=[3 accel_pedal=0.25]) -> fmi2OK`. FMI 3.0 instances
+//! show the 3.0 names, each value with its variable's type (`fmi3Set*(vr=[7
+//! Float64_continuous_input:Float64=0.5])`: the typed call that serves it). `t` is the
+//! instance's time before the call.
+
+use crate::backend::{Backend, BackendFactory};
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::io::Write;
+use std::sync::{Arc, Mutex};
+use tb_fmi::{FmuError, LoadedFmu};
+
+/// Where trace lines go (shared by every traced instance of a run).
+pub struct TraceSink {
+    out: Mutex<(Box<dyn Write + Send>, Option<std::io::Error>)>,
+}
+
+impl TraceSink {
+    pub fn new(out: Box<dyn Write + Send>) -> Arc<TraceSink> {
+        Arc::new(TraceSink {
+            out: Mutex::new((out, None)),
+        })
+    }
+
+    fn line(&self, text: &str) {
+        let mut g = self.out.lock().unwrap_or_else(|e| e.into_inner());
+        if g.1.is_none() {
+            if let Err(e) = writeln!(g.0, "{text}") {
+                g.1 = Some(e);
+            }
+        }
+    }
+
+    /// Flush; the first write error of the run, if any (a trace is never cut silently).
+    pub fn finish(&self) -> std::io::Result<()> {
+        let mut g = self.out.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(e) = g.1.take() {
+            return Err(e);
+        }
+        g.0.flush()
+    }
+}
+
+/// A trace file opened on its first line (after the caller has checked that the path
+/// names none of the run's inputs), written through a buffer.
+pub struct TraceFile {
+    path: std::path::PathBuf,
+    file: Option<std::io::BufWriter<std::fs::File>>,
+}
+
+impl TraceFile {
+    pub fn new(path: &std::path::Path) -> TraceFile {
+        TraceFile {
+            path: path.to_path_buf(),
+            file: None,
+        }
+    }
+}
+
+impl Write for TraceFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.file.is_none() {
+            let f = std::fs::File::create(&self.path).map_err(|e| {
+                std::io::Error::new(e.kind(), format!("{}: {e}", self.path.display()))
+            })?;
+            self.file = Some(std::io::BufWriter::new(f));
+        }
+        self.file.as_mut().expect("opened above").write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        match &mut self.file {
+            Some(f) => f.flush(),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Which instances to trace, and where.
+#[derive(Clone)]
+pub struct TraceOptions {
+    pub sink: Arc<TraceSink>,
+    /// Instance names; empty: every instance.
+    pub instances: Vec<String>,
+}
+
+impl std::fmt::Debug for TraceOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TraceOptions")
+            .field("instances", &self.instances)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Wraps a factory: its units are traced.
+pub struct TracedFactory {
+    pub inner: Arc<dyn BackendFactory>,
+    pub sink: Arc<TraceSink>,
+    pub fmu: Arc<LoadedFmu>,
+}
+
+impl BackendFactory for TracedFactory {
+    fn kind(&self) -> &'static str {
+        self.inner.kind()
+    }
+    fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError> {
+        let fmi3 = self.fmu.is_fmi3();
+        let p = if fmi3 { "fmi3" } else { "fmi2" };
+        let sink = self.sink.clone();
+        let r = self.inner.create(instance_name, logging);
+        sink.line(&format!(
+            "{instance_name}: {p}Instantiate{}(instanceName=\"{instance_name}\", token=\"{}\", loggingOn={logging}) -> {}",
+            if fmi3 { "CoSimulation" } else { "" },
+            self.fmu.description.guid,
+            match &r {
+                Ok(_) => "OK".to_string(),
+                Err(e) => format!("error: {e}"),
+            }
+        ));
+        // FMI 3.0 names carry the variable's own type (the typed call that serves it).
+        let names = self
+            .fmu
+            .description
+            .variables
+            .iter()
+            .rev() // the first name of a value reference wins
+            .map(|v| match v.fmi3 {
+                Some(s) if fmi3 => (v.value_reference, format!("{}:{}", v.name, s.ty.name())),
+                _ => (v.value_reference, v.name.clone()),
+            })
+            .collect();
+        Ok(Box::new(Traced {
+            inner: r?,
+            sink,
+            names,
+            fmi3,
+        }))
+    }
+}
+
+/// A traced unit: forwards every call and writes a line for it.
+pub struct Traced {
+    inner: Box<dyn Backend>,
+    sink: Arc<TraceSink>,
+    names: HashMap<u32, String>,
+    fmi3: bool,
+}
+
+impl Traced {
+    fn name2(&self, fmi2: &str, fmi3: &str) -> String {
+        if self.fmi3 {
+            fmi3.to_string()
+        } else {
+            fmi2.to_string()
+        }
+    }
+
+    fn status<T>(&self, r: &Result<T, FmuError>) -> String {
+        let ok = if self.fmi3 { "fmi3OK" } else { "fmi2OK" };
+        match r {
+            Ok(_) => ok.into(),
+            Err(FmuError::Call { status, .. }) => status.to_string(),
+            Err(FmuError::Call3 { status, .. }) => status.clone(),
+            Err(e) => format!("error ({e})"),
+        }
+    }
+
+    /// One line; `t` is the instance's time before the call.
+    fn emit(&self, t: f64, function: &str, args: &str, status: &str) {
+        self.sink.line(&format!(
+            "t={t} {}: {function}({args}) -> {status}",
+            self.inner.name()
+        ));
+    }
+
+    fn values<T: std::fmt::Display>(&self, vrs: &[u32], values: &[T]) -> String {
+        let mut s = String::from("vr=[");
+        for (k, vr) in vrs.iter().enumerate() {
+            if k > 0 {
+                s.push_str(", ");
+            }
+            let name = self.names.get(vr).map_or("?", String::as_str);
+            match values.get(k) {
+                Some(v) => {
+                    let _ = write!(s, "{vr} {name}={v}");
+                }
+                None => {
+                    let _ = write!(s, "{vr} {name}");
+                }
+            }
+        }
+        s.push(']');
+        s
+    }
+
+    fn traced<T>(
+        &mut self,
+        function: String,
+        args: String,
+        call: impl FnOnce(&mut dyn Backend) -> Result<T, FmuError>,
+    ) -> Result<T, FmuError> {
+        let t = self.inner.time();
+        let r = call(&mut *self.inner);
+        let status = self.status(&r);
+        self.emit(t, &function, &args, &status);
+        r
+    }
+}
+
+/// Reals as their shortest round-trip text.
+struct R(f64);
+impl std::fmt::Display for R {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:?}", self.0)
+    }
+}
+
+impl Backend for Traced {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+    fn time(&self) -> f64 {
+        self.inner.time()
+    }
+    fn set_echo(&mut self, on: bool) {
+        self.inner.set_echo(on)
+    }
+    fn last_log_lines(&self) -> Vec<String> {
+        self.inner.last_log_lines()
+    }
+    fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
+        let f = self.name2("fmi2SetDebugLogging", "fmi3SetDebugLogging");
+        self.traced(f, format!("loggingOn={on}"), |b| b.set_debug_logging(on))
+    }
+    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+        let stop_text = stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
+        if self.fmi3 {
+            // FMI 3.0 passes these to fmi3EnterInitializationMode.
+            return self.inner.setup_experiment(start, stop);
+        }
+        self.traced(
+            "fmi2SetupExperiment".into(),
+            format!("startTime={start:?}, stopTime={stop_text}"),
+            |b| b.setup_experiment(start, stop),
+        )
+    }
+    fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let f = self.name2("fmi2EnterInitializationMode", "fmi3EnterInitializationMode");
+        self.traced(f, String::new(), |b| b.enter_initialization_mode())
+    }
+    fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let f = self.name2("fmi2ExitInitializationMode", "fmi3ExitInitializationMode");
+        self.traced(f, String::new(), |b| b.exit_initialization_mode())
+    }
+    fn terminate(&mut self) -> Result<(), FmuError> {
+        let f = self.name2("fmi2Terminate", "fmi3Terminate");
+        self.traced(f, String::new(), |b| b.terminate())
+    }
+    fn reset(&mut self) -> Result<(), FmuError> {
+        let f = self.name2("fmi2Reset", "fmi3Reset");
+        self.traced(f, String::new(), |b| b.reset())
+    }
+    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        let t = self.inner.time();
+        let r = self.inner.get_real(vrs, out);
+        let v: Vec<R> = out.iter().map(|x| R(*x)).collect();
+        let args = if r.is_ok() {
+            self.values(vrs, &v)
+        } else {
+            self.values::<R>(vrs, &[])
+        };
+        let f = self.name2("fmi2GetReal", "fmi3Get*");
+        let status = self.status(&r);
+        self.emit(t, &f, &args, &status);
+        r
+    }
+    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        let v: Vec<R> = values.iter().map(|x| R(*x)).collect();
+        let args = self.values(vrs, &v);
+        let f = self.name2("fmi2SetReal", "fmi3Set*");
+        self.traced(f, args, |b| b.set_real(vrs, values))
+    }
+    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        let t = self.inner.time();
+        let r = self.inner.get_integer(vrs, out);
+        let args = if r.is_ok() {
+            self.values(vrs, out)
+        } else {
+            self.values::<i32>(vrs, &[])
+        };
+        let f = self.name2("fmi2GetInteger", "fmi3Get*");
+        let status = self.status(&r);
+        self.emit(t, &f, &args, &status);
+        r
+    }
+    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        let args = self.values(vrs, values);
+        let f = self.name2("fmi2SetInteger", "fmi3Set*");
+        self.traced(f, args, |b| b.set_integer(vrs, values))
+    }
+    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        let t = self.inner.time();
+        let r = self.inner.get_boolean(vrs, out);
+        let args = if r.is_ok() {
+            self.values(vrs, out)
+        } else {
+            self.values::<i32>(vrs, &[])
+        };
+        let f = self.name2("fmi2GetBoolean", "fmi3GetBoolean");
+        let status = self.status(&r);
+        self.emit(t, &f, &args, &status);
+        r
+    }
+    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        let args = self.values(vrs, values);
+        let f = self.name2("fmi2SetBoolean", "fmi3SetBoolean");
+        self.traced(f, args, |b| b.set_boolean(vrs, values))
+    }
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        let t = self.inner.time();
+        let r = self.inner.get_string(vrs, out);
+        let quoted: Vec<String> = out.iter().map(|s| format!("{s:?}")).collect();
+        let args = if r.is_ok() {
+            self.values(vrs, &quoted)
+        } else {
+            self.values::<String>(vrs, &[])
+        };
+        let f = self.name2("fmi2GetString", "fmi3GetString");
+        let status = self.status(&r);
+        self.emit(t, &f, &args, &status);
+        r
+    }
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        let quoted: Vec<String> = values.iter().map(|s| format!("{s:?}")).collect();
+        let args = self.values(vrs, &quoted);
+        let f = self.name2("fmi2SetString", "fmi3SetString");
+        self.traced(f, args, |b| b.set_string(vrs, values))
+    }
+    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        let f = self.name2("fmi2DoStep", "fmi3DoStep");
+        self.traced(
+            f,
+            format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}"),
+            |b| b.do_step(t, h),
+        )
+    }
+    fn terminated_by_fmu(&mut self) -> Option<f64> {
+        let t = self.inner.time();
+        let r = self.inner.terminated_by_fmu();
+        let what = if self.fmi3 {
+            "fmi3DoStep terminateSimulation"
+        } else {
+            "fmi2GetBooleanStatus(fmi2Terminated), fmi2GetRealStatus(fmi2LastSuccessfulTime)"
+        };
+        self.sink.line(&format!(
+            "t={t} {}: {what} -> {}",
+            self.inner.name(),
+            match r {
+                Some(t) => format!("terminated at {t:?}"),
+                None => "not terminated".into(),
+            }
+        ));
+        r
+    }
+}
+
+impl Drop for Traced {
+    fn drop(&mut self) {
+        let f = self.name2("fmi2FreeInstance", "fmi3FreeInstance");
+        self.sink.line(&format!(
+            "t={} {}: {f}()",
+            self.inner.time(),
+            self.inner.name()
+        ));
+    }
+}

@@ -1,0 +1,141 @@
+//! `twinbench run --trace-fmi FILE`: every FMI call of the traced instances with its
+//! arguments, values and status, FMI 2.0 and 3.0, in a run that ends normally and in one
+//! the FMU ends; the chosen instances only; a path that is an input is refused.
+
+mod common;
+
+use common::reference;
+use std::path::Path;
+use std::process::Command;
+
+fn system(dir: &Path) -> std::path::PathBuf {
+    let text = format!(
+        "[fmus]\nm = \"{}\"\nf = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[[instance]]\nname = \"f\"\nfmu = \"f\"\n\n[parameters]\n\"f.String_input\" = \"hello\"\n\"f.Int8_input\" = -3\n\n[experiment]\nstep = 0.2\nstop = 10.0\n",
+        reference::fmu("Stair", 2).display(),
+        reference::fmu("Feedthrough", 3).display()
+    );
+    let path = dir.join("s.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn twinbench(args: &[&std::ffi::OsStr]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn the_trace_has_every_call_with_names_values_and_status() {
+    let dir = tb_testkit::scratch("trace");
+    let s = system(dir.path());
+    let trace = dir.path().join("trace.txt");
+    let out_traced = dir.path().join("traced.csv");
+    let r = twinbench(&[
+        "run".as_ref(),
+        s.as_os_str(),
+        "--trace-fmi".as_ref(),
+        trace.as_os_str(),
+        "-o".as_ref(),
+        out_traced.as_os_str(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let has = |needle: &str| lines.iter().any(|l| l.contains(needle));
+    for needle in [
+        "m: fmi2Instantiate(instanceName=\"m\"",
+        "t=0 m: fmi2SetupExperiment(startTime=0.0, stopTime=10.0) -> fmi2OK",
+        "f: fmi3InstantiateCoSimulation(instanceName=\"f\"",
+        "t=0 f: fmi3Set*(vr=[11 Int8_input:Int8=-3]) -> fmi3OK",
+        "t=0 f: fmi3SetString(vr=[29 String_input:String=\"hello\"]) -> fmi3OK",
+        "t=0 f: fmi3GetString(vr=[30 String_output:String=\"hello\"]) -> fmi3OK",
+        "t=0 m: fmi2GetInteger(vr=[1 counter=1]) -> fmi2OK",
+        // Stair asks to end the run at 9 s: the refused step, the question, the end.
+        "m: fmi2DoStep(currentCommunicationPoint=8.8, communicationStepSize=0.2) -> fmi2Discard",
+        "m: fmi2GetBooleanStatus(fmi2Terminated), fmi2GetRealStatus(fmi2LastSuccessfulTime) -> terminated at 9.0",
+        "m: fmi2Terminate() -> fmi2OK",
+        "m: fmi2FreeInstance()",
+        "f: fmi3Terminate() -> fmi3OK",
+        "f: fmi3FreeInstance()",
+    ] {
+        assert!(has(needle), "no line with `{needle}` in:\n{}", &text[..text.len().min(3000)]);
+    }
+    // One DoStep line per step: 44 accepted and the refused one for m.
+    let steps = |who: &str| {
+        lines
+            .iter()
+            .filter(|l| l.contains(&format!(" {who}: fmi")) && l.contains("DoStep("))
+            .count()
+    };
+    assert_eq!(steps("m"), 45);
+    assert_eq!(steps("f"), 44);
+    // Tracing changes nothing in the results.
+    let out_plain = dir.path().join("plain.csv");
+    let r = twinbench(&[
+        "run".as_ref(),
+        s.as_os_str(),
+        "-o".as_ref(),
+        out_plain.as_os_str(),
+    ]);
+    assert!(r.status.success());
+    assert_eq!(
+        std::fs::read(&out_traced).unwrap(),
+        std::fs::read(&out_plain).unwrap()
+    );
+}
+
+#[test]
+fn only_the_chosen_instances_are_traced_and_unknown_ones_are_named() {
+    let dir = tb_testkit::scratch("trace-some");
+    let s = system(dir.path());
+    let trace = dir.path().join("trace.txt");
+    let r = twinbench(&[
+        "run".as_ref(),
+        s.as_os_str(),
+        "--trace-fmi".as_ref(),
+        trace.as_os_str(),
+        "--trace-instances".as_ref(),
+        "f".as_ref(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let text = std::fs::read_to_string(&trace).unwrap();
+    assert!(text.lines().count() > 100);
+    assert!(
+        text.lines()
+            .all(|l| l.contains(" f: ") || l.starts_with("f: ")),
+        "{text}"
+    );
+    let r = twinbench(&[
+        "run".as_ref(),
+        s.as_os_str(),
+        "--trace-fmi".as_ref(),
+        trace.as_os_str(),
+        "--trace-instances".as_ref(),
+        "f,edu".as_ref(),
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        !r.status.success()
+            && err.contains("no instance named 'edu'")
+            && err.contains("instances: m, f"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_trace_path_that_is_an_input_is_refused_and_the_input_kept() {
+    let dir = tb_testkit::scratch("trace-input");
+    let s = system(dir.path());
+    let before = std::fs::read(&s).unwrap();
+    let r = twinbench(&[
+        "run".as_ref(),
+        s.as_os_str(),
+        "--trace-fmi".as_ref(),
+        s.as_os_str(),
+    ]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success() && err.contains("--trace-fmi"), "{err}");
+    assert_eq!(std::fs::read(&s).unwrap(), before);
+}
