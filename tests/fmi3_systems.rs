@@ -318,3 +318,61 @@ fn a_64_bit_integer_an_f64_cannot_carry_is_an_error_naming_it() {
         "{e}"
     );
 }
+
+/// Binary variables are not exchanged: the load warns with their names, and a system that
+/// names one is refused saying why.
+#[test]
+fn binary_variables_are_named_when_skipped_and_refused_when_used() {
+    let dir = tb_testkit::scratch("fmi3-binary");
+    let fmu = reference::fmu("Feedthrough", 3);
+    let text = format!(
+        "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n",
+        fmu.display()
+    );
+    let path = dir.path().join("s.toml");
+    let plan = Plan::from_file(
+        SystemFile::parse(&text, &path).unwrap(),
+        &path,
+        Arc::new(FmuCache::temporary(false).unwrap()),
+    )
+    .unwrap();
+    assert!(
+        plan.warnings.iter().any(|w| w
+            .contains("does not exchange, record or set these variables: Binary_input (Binary), Binary_output (Binary)")),
+        "{:?}",
+        plan.warnings
+    );
+    let Err(e) = run(
+        dir.path(),
+        &format!("{text}\n[record]\nsignals = [\"m.Binary_output\"]\n"),
+    ) else {
+        panic!("a Binary output was recorded")
+    };
+    assert!(
+        e.contains("'m.Binary_output (Binary)' is a type twinbench does not exchange"),
+        "{e}"
+    );
+}
+
+/// The FMU's log messages reach the error of a refused call (the FMI 3.0 logger).
+#[test]
+fn an_fmi3_error_carries_the_fmus_log() {
+    let cache = FmuCache::temporary(false).unwrap();
+    let fmu = cache.load(&reference::fmu("Dahlquist", 3)).unwrap();
+    let mut i = tb_fmi::Instance3::instantiate(
+        fmu.library3().unwrap(),
+        &fmu.description,
+        "d",
+        Some(&fmu.resource_dir()),
+        true,
+    )
+    .unwrap();
+    i.set_echo(false);
+    // A step before initialisation is an illegal call sequence.
+    let e = i.do_step(0.0, 0.1).unwrap_err().to_string();
+    assert!(
+        e.contains("instance 'd' at t = 0 s: fmi3DoStep returned fmi3Error")
+            && e.contains("the FMU's last messages"),
+        "{e}"
+    );
+}

@@ -48,17 +48,31 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
         for lib in &args.preload {
             tb_fmi::library::preload_global(lib)?;
         }
-        let lib = fmu.library()?;
-        LibraryCheck::Loaded(tb_cosim::isolated::LibraryReport {
-            version: lib.version.clone(),
-            missing_optional: lib.missing_optional.iter().map(|s| s.to_string()).collect(),
-        })
+        if fmu.is_fmi3() {
+            let lib = fmu.library3()?;
+            LibraryCheck::Loaded(tb_cosim::isolated::LibraryReport {
+                version: lib.version.clone(),
+                missing_optional: Vec::new(),
+            })
+        } else {
+            let lib = fmu.library()?;
+            LibraryCheck::Loaded(tb_cosim::isolated::LibraryReport {
+                version: lib.version.clone(),
+                missing_optional: lib.missing_optional.iter().map(|s| s.to_string()).collect(),
+            })
+        }
     } else {
         LibraryCheck::NotLoaded
     };
     let md = &fmu.description;
     let cs = md.co_simulation.clone().unwrap_or_default();
-    let gaps = md.model_structure_gaps();
+    let mut gaps = md.model_structure_gaps();
+    if !md.skipped.is_empty() {
+        gaps.push(format!(
+            "twinbench does not exchange these variables: {}",
+            md.skipped.join(", ")
+        ));
+    }
     if args.json {
         let vars: Vec<serde_json::Value> = md
             .variables
@@ -66,6 +80,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             .map(|v| {
                 serde_json::json!({
                     "name": v.name, "value_reference": v.value_reference, "type": v.ty.name(),
+                    "fmi3_type": v.fmi3.map(|s| s.ty.name()),
                     "causality": v.causality.xml_name(), "variability": v.variability.xml_name(), "unit": md.unit_of(v),
                     "start": v.start, "min": v.min, "max": v.max, "description": v.description,
                 })
@@ -126,8 +141,9 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             fmu.library_entry()
         ),
         LibraryCheck::Loaded(r) => println!(
-            "library: {} loads; fmi2GetVersion \"{}\"; optional functions missing: {}",
+            "library: {} loads; {}GetVersion \"{}\"; optional functions missing: {}",
             fmu.library_entry(),
+            if fmu.is_fmi3() { "fmi3" } else { "fmi2" },
             r.version,
             if r.missing_optional.is_empty() {
                 "none".to_string()
@@ -157,9 +173,9 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             "{:<28} {:>4} {:<8} {:<11} {:<10} {:<10} {:>12} {:>22}  {}",
             v.name,
             v.value_reference,
-            v.ty.name(),
-            v.causality,
-            v.variability,
+            v.fmi3.map_or(v.ty.name(), |s| s.ty.name()),
+            v.causality.xml_name(),
+            v.variability.xml_name(),
             md.unit_of(v).unwrap_or(""),
             v.start.as_deref().unwrap_or(""),
             range,
