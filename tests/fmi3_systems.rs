@@ -319,37 +319,30 @@ fn a_64_bit_integer_an_f64_cannot_carry_is_an_error_naming_it() {
     );
 }
 
-/// Binary variables are not exchanged: the load warns with their names, and a system that
-/// names one is refused saying why.
+/// Binary values travel as hexadecimal text: set from the system file, connected from one
+/// instance to another and recorded; text that is not hexadecimal is refused naming the
+/// variable.
 #[test]
-fn binary_variables_are_named_when_skipped_and_refused_when_used() {
+fn binary_variables_are_set_connected_and_recorded_as_hex_text() {
     let dir = tb_testkit::scratch("fmi3-binary");
     let fmu = reference::fmu("Feedthrough", 3);
-    let text = format!(
-        "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n",
-        fmu.display()
-    );
-    let path = dir.path().join("s.toml");
-    let plan = Plan::from_file(
-        SystemFile::parse(&text, &path).unwrap(),
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-    )
-    .unwrap();
-    assert!(
-        plan.warnings.iter().any(|w| w
-            .contains("does not exchange, record or set these variables: Binary_input (Binary), Binary_output (Binary)")),
-        "{:?}",
-        plan.warnings
-    );
-    let Err(e) = run(
-        dir.path(),
-        &format!("{text}\n[record]\nsignals = [\"m.Binary_output\"]\n"),
-    ) else {
-        panic!("a Binary output was recorded")
+    let text = |value: &str| {
+        format!(
+            "connections = [\"a.Binary_output -> b.Binary_input\"]\n[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"a\"\nfmu = \"m\"\n\n[[instance]]\nname = \"b\"\nfmu = \"m\"\n\n[parameters]\n\"a.Binary_input\" = \"{value}\"\n\n[experiment]\nstep = 0.5\nstop = 1.0\n\n[record]\nsignals = [\"a.Binary_output\", \"b.Binary_output\"]\n",
+            fmu.display()
+        )
+    };
+    let (t, _) = run(dir.path(), &text("00ff 7F")).unwrap();
+    for k in [1, 2] {
+        let col = t.text_at(k).unwrap();
+        assert_eq!(col.len(), 3);
+        assert!(col.iter().all(|v| v == "00ff7f"), "{col:?}");
+    }
+    let Err(e) = run(dir.path(), &text("abc")) else {
+        panic!("odd hex digits accepted")
     };
     assert!(
-        e.contains("'m.Binary_output (Binary)' is a type twinbench does not exchange"),
+        e.contains("'Binary_input' is Binary: \"abc\" is not an even number of hexadecimal digits"),
         "{e}"
     );
 }

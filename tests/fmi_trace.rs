@@ -49,8 +49,8 @@ fn the_trace_has_every_call_with_names_values_and_status() {
         "t=0 m: fmi2SetupExperiment(startTime=0.0, stopTime=10.0) -> fmi2OK",
         "f: fmi3InstantiateCoSimulation(instanceName=\"f\"",
         "t=0 f: fmi3Set*(vr=[11 Int8_input:Int8=-3]) -> fmi3OK",
-        "t=0 f: fmi3SetString(vr=[29 String_input:String=\"hello\"]) -> fmi3OK",
-        "t=0 f: fmi3GetString(vr=[30 String_output:String=\"hello\"]) -> fmi3OK",
+        "t=0 f: fmi3Set*(vr=[29 String_input:String=\"hello\"]) -> fmi3OK",
+        "t=0 f: fmi3Get*(vr=[30 String_output:String=\"hello\", 32 Binary_output:Binary=\"666f6f\"]) -> fmi3OK",
         "t=0 m: fmi2GetInteger(vr=[1 counter=1]) -> fmi2OK",
         // Stair asks to end the run at 9 s: the refused step, the question, the end.
         "m: fmi2DoStep(currentCommunicationPoint=8.8, communicationStepSize=0.2) -> fmi2Discard",

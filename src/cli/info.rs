@@ -66,13 +66,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
     };
     let md = &fmu.description;
     let cs = md.co_simulation.clone().unwrap_or_default();
-    let mut gaps = md.model_structure_gaps();
-    if !md.skipped.is_empty() {
-        gaps.push(format!(
-            "twinbench does not exchange these variables: {}",
-            md.skipped.join(", ")
-        ));
-    }
+    let gaps = md.model_structure_gaps();
     if args.json {
         let vars: Vec<serde_json::Value> = md
             .variables

@@ -329,7 +329,7 @@ impl Backend for Traced {
         } else {
             self.values::<String>(vrs, &[])
         };
-        let f = self.name2("fmi2GetString", "fmi3GetString");
+        let f = self.name2("fmi2GetString", "fmi3Get*");
         let status = self.status(&r);
         self.emit(t, &f, &args, &status);
         r
@@ -337,7 +337,7 @@ impl Backend for Traced {
     fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
         let quoted: Vec<String> = values.iter().map(|s| format!("{s:?}")).collect();
         let args = self.values(vrs, &quoted);
-        let f = self.name2("fmi2SetString", "fmi3SetString");
+        let f = self.name2("fmi2SetString", "fmi3Set*");
         self.traced(f, args, |b| b.set_string(vrs, values))
     }
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {

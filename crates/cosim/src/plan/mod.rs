@@ -62,21 +62,6 @@ impl InstanceDef {
     /// Resolve a variable by the name the system file uses (through the port map).
     pub fn variable(&self, name: &str, context: &str) -> Result<&ScalarVariable, SystemError> {
         let fmu_name = self.ports.get(name).map(String::as_str).unwrap_or(name);
-        let skipped = format!("{fmu_name} (");
-        if let Some(s) = self
-            .description()
-            .skipped
-            .iter()
-            .find(|s| s.starts_with(&skipped))
-        {
-            return Err(invalid(
-                context,
-                format!(
-                    "'{}.{s}' is a type twinbench does not exchange (FMI 3.0 Binary values are not supported)",
-                    self.name
-                ),
-            ));
-        }
         self.description().variable(fmu_name).ok_or_else(|| {
             let mut close = self.description().closest_names(fmu_name, 3);
             close.retain(|c| !c.is_empty());
@@ -833,13 +818,6 @@ impl Plan {
                 warnings.push(format!(
                     "FMU '{key}' ({}): {gap}; twinbench assumes they depend on every input, other importers may refuse the FMU",
                     fmu.source.display()
-                ));
-            }
-            if !fmu.description.skipped.is_empty() {
-                warnings.push(format!(
-                    "FMU '{key}' ({}): twinbench does not exchange, record or set these variables: {}",
-                    fmu.source.display(),
-                    fmu.description.skipped.join(", ")
                 ));
             }
         }

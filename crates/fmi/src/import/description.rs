@@ -88,8 +88,6 @@ pub struct ModelDescription {
     /// FMI 3.0: what the description has that twinbench cannot run (clocks, Scheduled
     /// Execution), each named; the archive check refuses the FMU with them.
     pub unsupported: Vec<String>,
-    /// FMI 3.0: variables twinbench does not exchange (Binary), as "name (type)".
-    pub skipped: Vec<String>,
 }
 
 impl ModelDescription {

@@ -11,8 +11,10 @@
 //!   from the structural parameter's start value.
 //! - `instantiationToken` is kept as the GUID; `ModelStructure` outputs and initial unknowns
 //!   become 1-based indices as in FMI 2.0.
-//! - Binary variables are listed in `skipped`; clocks and Scheduled Execution in
-//!   `unsupported` (the archive check refuses such an FMU before anything runs).
+//! - Binary is exchanged as text: its bytes in hexadecimal (as FMI 3.0 writes Binary start
+//!   values), so it is set, connected and recorded like a String; clocks and Scheduled
+//!   Execution are listed in `unsupported` (the archive check refuses such an FMU before
+//!   anything runs).
 
 use crate::description::{
     attrs, check_names_and_aliases, flag, int_attr, num, CoSimulation, DefaultExperiment,
@@ -39,6 +41,7 @@ pub enum Fmi3Type {
     UInt64,
     Boolean,
     String,
+    Binary,
     Enumeration,
 }
 
@@ -58,6 +61,7 @@ impl Fmi3Type {
             "UInt64" => UInt64,
             "Boolean" => Boolean,
             "String" => String,
+            "Binary" => Binary,
             "Enumeration" => Enumeration,
             _ => return None,
         })
@@ -78,6 +82,7 @@ impl Fmi3Type {
             UInt64 => "UInt64",
             Boolean => "Boolean",
             String => "String",
+            Binary => "Binary",
             Enumeration => "Enumeration",
         }
     }
@@ -90,7 +95,7 @@ impl Fmi3Type {
         match self {
             Float32 | Float64 | UInt32 | Int64 | UInt64 => ScalarType::Real,
             Boolean => ScalarType::Boolean,
-            String => ScalarType::String,
+            String | Binary => ScalarType::String,
             Enumeration => ScalarType::Enumeration,
             _ => ScalarType::Integer,
         }
@@ -164,7 +169,7 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
     let mut outputs: Vec<Unknown3> = Vec::new();
     let mut initial_unknowns: Vec<Unknown3> = Vec::new();
     let mut saw_root = false;
-    // Variables without a column (Binary, Clock): the ModelStructure may list them.
+    // Variables without a column (Clock): the ModelStructure may list them.
     let mut skipped_vrs: Vec<u32> = Vec::new();
     loop {
         let ev = reader
@@ -328,15 +333,12 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                         c.trim()
                     ));
                 }
-                if Fmi3Type::parse(t).is_none() && !matches!(t, "Binary" | "Clock") {
+                if Fmi3Type::parse(t).is_none() && t != "Clock" {
                     return Err(format!(
                         "ModelVariables: <{t}> is not an FMI 3.0 variable element (Float64, Int32, Boolean, String, …; an FMI 2.0 description under fmiVersion=\"3.0\"?)"
                     ));
                 }
                 let Some(ty) = Fmi3Type::parse(t) else {
-                    if t != "Clock" {
-                        md.skipped.push(format!("{vname} ({t})"));
-                    }
                     skipped_vrs.push(vr);
                     if !empty {
                         stack.push(name);
@@ -663,7 +665,7 @@ mod tests {
             names,
             [
                 "time", "n", "y[1,1]", "y[1,2]", "y[1,3]", "y[2,1]", "y[2,2]", "y[2,3]", "u", "k",
-                "e", "s"
+                "e", "s", "b"
             ]
         );
         let y23 = md.variable("y[2,3]").unwrap();
@@ -683,9 +685,10 @@ mod tests {
             2
         );
         assert!(md.variable("n").unwrap().fmi3.unwrap().structural);
-        assert_eq!(md.skipped, ["b (Binary)"]);
-        // y's six elements are outputs depending on u (index 9); Binary b has no column.
-        assert_eq!(md.outputs.len(), 6);
+        // Binary b is text (hexadecimal).
+        assert_eq!(md.variable("b").unwrap().ty, ScalarType::String);
+        // y's six elements are outputs depending on u (index 9), then b.
+        assert_eq!(md.outputs.len(), 7);
         assert_eq!(md.outputs[0].dependencies, Some(vec![9]));
         assert!(md.unsupported.is_empty());
     }

@@ -78,6 +78,8 @@ api! {
     set_uint64: "fmi3SetUInt64": fn(Inst, *const Vr, usize, *const u64, usize) -> Status;
     set_boolean: "fmi3SetBoolean": fn(Inst, *const Vr, usize, *const u8, usize) -> Status;
     set_string: "fmi3SetString": fn(Inst, *const Vr, usize, *const *const c_char, usize) -> Status;
+    get_binary: "fmi3GetBinary": fn(Inst, *const Vr, usize, *mut usize, *mut *const u8, usize) -> Status;
+    set_binary: "fmi3SetBinary": fn(Inst, *const Vr, usize, *const usize, *const *const u8, usize) -> Status;
     do_step: "fmi3DoStep": fn(Inst, f64, f64, bool, *mut u8, *mut u8, *mut u8, *mut f64) -> Status;
     get_fmu_state: "fmi3GetFMUState": fn(Inst, *mut *mut c_void) -> Status;
     set_fmu_state: "fmi3SetFMUState": fn(Inst, *mut c_void) -> Status;
@@ -161,6 +163,18 @@ fn status3_name(s: Status) -> String {
         4 => "fmi3Fatal".into(),
         other => format!("an unknown fmi3Status ({other})"),
     }
+}
+
+/// Hexadecimal text (FMI 3.0's notation of Binary values, spaces allowed) to bytes.
+fn hex_bytes(text: &str) -> Option<Vec<u8>> {
+    let digits: Vec<u8> = text.bytes().filter(|b| !b.is_ascii_whitespace()).collect();
+    if !digits.len().is_multiple_of(2) {
+        return None;
+    }
+    digits
+        .chunks(2)
+        .map(|p| u8::from_str_radix(std::str::from_utf8(p).ok()?, 16).ok())
+        .collect()
 }
 
 /// A saved FMI 3.0 state; free it with [`Instance3::free_state`].
@@ -379,7 +393,9 @@ impl Instance3 {
                 self.exact_u64(slot, x)?
             }
             Fmi3Type::Boolean => (get!(get_boolean, u8, "fmi3GetBoolean") != 0) as i32 as f64,
-            Fmi3Type::String => return Err(self.other("a String read as a number".into())),
+            Fmi3Type::String | Fmi3Type::Binary => {
+                return Err(self.other("a String read as a number".into()))
+            }
         })
     }
 
@@ -519,7 +535,9 @@ impl Instance3 {
                     "fmi3SetBoolean"
                 )
             }
-            Fmi3Type::String => Err(self.other("a String set from a number".into())),
+            Fmi3Type::String | Fmi3Type::Binary => {
+                Err(self.other("a String set from a number".into()))
+            }
         }
     }
 
@@ -603,6 +621,29 @@ impl Instance3 {
         for vr in vrs {
             let slot = self.slot(*vr)?;
             let n = slot.len as usize;
+            if slot.ty == Fmi3Type::Binary {
+                let mut sizes = vec![0usize; n];
+                let mut ptrs: Vec<*const u8> = vec![std::ptr::null(); n];
+                let s = unsafe {
+                    (self.lib.api.get_binary)(
+                        self.inst,
+                        &slot.vr,
+                        1,
+                        sizes.as_mut_ptr(),
+                        ptrs.as_mut_ptr(),
+                        n,
+                    )
+                };
+                self.check("fmi3GetBinary", s)?;
+                let (p, len) = (ptrs[slot.index as usize], sizes[slot.index as usize]);
+                let bytes = if p.is_null() || len == 0 {
+                    &[][..]
+                } else {
+                    unsafe { std::slice::from_raw_parts(p, len) }
+                };
+                out.push(bytes.iter().map(|b| format!("{b:02x}")).collect());
+                continue;
+            }
             let mut ptrs: Vec<*const c_char> = vec![std::ptr::null(); n];
             let s =
                 unsafe { (self.lib.api.get_string)(self.inst, &slot.vr, 1, ptrs.as_mut_ptr(), n) };
@@ -625,6 +666,18 @@ impl Instance3 {
                     "'{}': String arrays are not supported",
                     self.name_of(*vr)
                 )));
+            }
+            if slot.ty == Fmi3Type::Binary {
+                let bytes = hex_bytes(v).ok_or_else(|| {
+                    self.other(format!(
+                        "'{}' is Binary: \"{v}\" is not an even number of hexadecimal digits",
+                        self.name_of(*vr)
+                    ))
+                })?;
+                let (p, len) = (bytes.as_ptr(), bytes.len());
+                let s = unsafe { (self.lib.api.set_binary)(self.inst, &slot.vr, 1, &len, &p, 1) };
+                self.check("fmi3SetBinary", s)?;
+                continue;
             }
             let c = CString::new(*v)
                 .map_err(|_| self.other("fmi3SetString: a value contains a NUL byte".into()))?;
