@@ -228,6 +228,38 @@ pub(crate) fn num(
     }
 }
 
+/// A `<DisplayUnit name factor offset>` of `unit` as a unit definition of its own:
+/// display = factor·value + offset, so SI = base.factor·(display − offset)/factor +
+/// base.offset. An FMI 3.0 `inverse` display unit is not linear and is left out.
+pub(crate) fn display_unit(
+    m: &HashMap<String, String>,
+    unit: &(String, UnitDef),
+) -> Result<Option<(String, UnitDef)>, String> {
+    let Some(name) = m.get("name") else {
+        return Err(format!("unit '{}': <DisplayUnit> without a name", unit.0));
+    };
+    if flag(m, "inverse") {
+        return Ok(None);
+    }
+    let ctx = format!("unit '{}': DisplayUnit '{name}'", unit.0);
+    let factor = num(m, "factor", &ctx)?.unwrap_or(1.0);
+    let offset = num(m, "offset", &ctx)?.unwrap_or(0.0);
+    if factor == 0.0 || !factor.is_finite() || !offset.is_finite() {
+        return Err(format!(
+            "{ctx}: factor {factor} and offset {offset} do not define a unit"
+        ));
+    }
+    let base = &unit.1;
+    Ok(Some((
+        name.clone(),
+        UnitDef {
+            factor: base.factor / factor,
+            offset: base.offset - base.factor * offset / factor,
+            ..*base
+        },
+    )))
+}
+
 pub(crate) fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {
     m.get(key).and_then(|s| s.trim().parse().ok()).unwrap_or(0)
 }
@@ -273,6 +305,8 @@ fn parse2(xml: &str) -> Result<ModelDescription, String> {
     let mut stack: Vec<String> = Vec::new();
     let mut current: Option<ScalarVariable> = None;
     let mut current_unit: Option<(String, UnitDef)> = None;
+    // Display units become units of their own (after the FMU's own, which win a name).
+    let mut display_units: Vec<(String, UnitDef)> = Vec::new();
     let mut current_type: Option<String> = None;
     let mut saw_root = false;
     loop {
@@ -370,6 +404,13 @@ fn parse2(xml: &str) -> Result<ModelDescription, String> {
                 ));
                 if empty {
                     md.units.push(current_unit.take().unwrap());
+                }
+            }
+            ("Unit", "DisplayUnit") => {
+                if let Some(u) = &current_unit {
+                    if let Some(d) = crate::description::display_unit(&m, u)? {
+                        display_units.push(d);
+                    }
                 }
             }
             ("Unit", "BaseUnit") => {
@@ -480,6 +521,11 @@ fn parse2(xml: &str) -> Result<ModelDescription, String> {
     if !saw_root {
         return Err("no <fmiModelDescription> element".into());
     }
+    for d in display_units {
+        if md.unit_def(&d.0).is_none() {
+            md.units.push(d);
+        }
+    }
     check_names_and_aliases(&md)?;
     let n = md.variables.len();
     for u in md.outputs.iter().chain(&md.initial_unknowns) {
@@ -552,6 +598,22 @@ mod tests {
   </ModelVariables>
   <ModelStructure><Outputs><Unknown index="1" dependencies=""/></Outputs><InitialUnknowns><Unknown index="1"/></InitialUnknowns></ModelStructure>
 </fmiModelDescription>"#;
+
+    #[test]
+    fn display_units_are_units_of_their_own() {
+        let xml = XML.replace(
+            "<Unit name=\"1\"/>",
+            "<Unit name=\"K\"><BaseUnit K=\"1\"/><DisplayUnit name=\"degC\" offset=\"-273.15\"/></Unit><Unit name=\"m\"><BaseUnit m=\"1\"/><DisplayUnit name=\"ft\" factor=\"3.280839895\"/></Unit>",
+        );
+        let md = parse(&xml).unwrap();
+        let c = md.unit_def("degC").unwrap();
+        // 20 degC = 293.15 K.
+        assert!((c.factor * 20.0 + c.offset - 293.15).abs() < 1e-12);
+        assert_eq!(c.k, 1);
+        let ft = md.unit_def("ft").unwrap();
+        assert!((ft.factor * 3.280839895 - 1.0).abs() < 1e-15);
+        assert_eq!(ft.m, 1);
+    }
 
     #[test]
     fn model_structure_gaps_name_what_the_standard_requires() {

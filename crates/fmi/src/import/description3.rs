@@ -165,6 +165,8 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
     let mut declared: Vec<Declared> = Vec::new();
     let mut current: Option<Declared> = None;
     let mut current_unit: Option<(String, UnitDef)> = None;
+    // Display units become units of their own (after the FMU's own, which win a name).
+    let mut display_units: Vec<(String, UnitDef)> = Vec::new();
     let mut current_type: Option<String> = None;
     let mut outputs: Vec<Unknown3> = Vec::new();
     let mut initial_unknowns: Vec<Unknown3> = Vec::new();
@@ -269,6 +271,13 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                 ));
                 if empty {
                     md.units.push(current_unit.take().expect("just set"));
+                }
+            }
+            ("Unit", "DisplayUnit") => {
+                if let Some(u) = &current_unit {
+                    if let Some(d) = crate::description::display_unit(&m, u)? {
+                        display_units.push(d);
+                    }
                 }
             }
             ("Unit", "BaseUnit") => {
@@ -453,6 +462,11 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
     }
     if !saw_root {
         return Err("no <fmiModelDescription> element".into());
+    }
+    for d in display_units {
+        if md.unit_def(&d.0).is_none() {
+            md.units.push(d);
+        }
     }
     expand(&mut md, declared)?;
     // Value references become 1-based indices (every element of an array).
