@@ -20,12 +20,13 @@ fn fnv1a_128(data: &[u8]) -> u128 {
 pub fn canonical_interface<M: Model>() -> String {
     let i = M::INFO;
     let mut s = format!(
-        "fmi2.0|cs|{}|{}|{}|{}\n",
+        // initial-deps: InitialUnknowns declare their dependencies (inputs and parameters).
+        "fmi2.0|cs|initial-deps|{}|{}|{}|{}\n",
         i.name, i.identifier, i.version, i.description
     );
     for v in M::Vars::VARIABLES {
         s.push_str(&format!(
-            "{}|{}|{}|{}|{}|{:?}|{:?}|{}|{:?}|{:?}|{}|{:?}\n",
+            "{}|{}|{}|{}|{}|{:?}|{:?}|{}|{:?}|{:?}|{}|{:?}|{:?}\n",
             v.name,
             v.value_reference,
             v.var_type().xml_name(),
@@ -37,7 +38,8 @@ pub fn canonical_interface<M: Model>() -> String {
             v.min.map(format_real),
             v.max.map(format_real),
             v.description,
-            v.depends_on
+            v.depends_on,
+            v.init_depends_on
         ));
     }
     s
@@ -102,7 +104,7 @@ pub fn validate_table<V: VarTable>() -> Result<(), String> {
                 a.start.xml_text()
             ));
         }
-        for d in a.depends_on {
+        for d in a.depends_on.iter().chain(a.init_depends_on) {
             match t.iter().find(|v| v.value_reference == *d) {
                 Some(v) if v.causality == Causality::Input => {}
                 _ => errors.push(format!(
@@ -111,7 +113,9 @@ pub fn validate_table<V: VarTable>() -> Result<(), String> {
                 )),
             }
         }
-        if !a.depends_on.is_empty() && a.causality != Causality::Output {
+        if !(a.depends_on.is_empty() && a.init_depends_on.is_empty())
+            && a.causality != Causality::Output
+        {
             errors.push(format!(
                 "'{}' declares dependencies but is not an output",
                 a.name
@@ -178,6 +182,26 @@ fn scalar_variable(v: &VarInfo) -> String {
     s
 }
 
+/// What an initial unknown depends on in initialization mode (1-based indices): the inputs
+/// it feeds through (`depends_on`) and every parameter (what initialisation computes from;
+/// listing a parameter it does not use is allowed, leaving one out would not be). Without
+/// the attribute a host must assume every input, which turns a bench of FMUs into one
+/// algebraic loop at initialisation.
+pub fn initial_dependencies(table: &[VarInfo], v: &VarInfo) -> Vec<usize> {
+    let mut deps: Vec<usize> = table
+        .iter()
+        .enumerate()
+        .filter(|(_, k)| {
+            v.depends_on.contains(&k.value_reference)
+                || v.init_depends_on.contains(&k.value_reference)
+                || k.causality == Causality::Parameter
+        })
+        .map(|(j, _)| j + 1)
+        .collect();
+    deps.sort_unstable();
+    deps
+}
+
 /// Fill the modelDescription.xml template (fmu-templates/modelDescription.xml).
 pub fn render_model_description<M: Model>(template: &str, generation_tool: &str) -> String {
     let info = M::INFO;
@@ -224,7 +248,15 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
             ))
             || v.causality == Causality::CalculatedParameter;
         if initial_unknown {
-            initial_unknowns.push_str(&format!("      <Unknown index=\"{}\"/>\n", i + 1));
+            initial_unknowns.push_str(&format!(
+                "      <Unknown index=\"{}\" dependencies=\"{}\"/>\n",
+                i + 1,
+                initial_dependencies(table, v)
+                    .iter()
+                    .map(usize::to_string)
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            ));
         }
     }
     let mut structure = String::new();

@@ -69,6 +69,9 @@ pub struct VarInfo {
     pub description: &'static str,
     /// For outputs: value references of the inputs it depends on directly (feed-through).
     pub depends_on: &'static [u32],
+    /// For outputs: the further inputs it depends on in initialization mode only (where the
+    /// model computes it from its inputs before the first step).
+    pub init_depends_on: &'static [u32],
 }
 
 const fn base(vr: u32, causality: Causality, variability: Variability) -> VarInfo {
@@ -84,6 +87,7 @@ const fn base(vr: u32, causality: Causality, variability: Variability) -> VarInf
         max: None,
         description: "",
         depends_on: &[],
+        init_depends_on: &[],
     }
 }
 
@@ -148,6 +152,11 @@ impl VarInfo {
     }
     pub const fn depends_on(mut self, inputs: &'static [u32]) -> Self {
         self.depends_on = inputs;
+        self
+    }
+    /// Inputs an output depends on in initialization mode beyond [`Self::depends_on`].
+    pub const fn init_depends_on(mut self, inputs: &'static [u32]) -> Self {
+        self.init_depends_on = inputs;
         self
     }
     #[doc(hidden)]
