@@ -364,6 +364,26 @@ impl<M: Model> Runtime<M> {
     }
 
     pub fn terminate(&mut self) -> fmi2Status {
+        // Hosts (OMSimulator, libcosim) end an instance whose initialisation or step failed
+        // with fmi2Terminate. FMI 2.0 allows only fmi2Reset and fmi2FreeInstance there; the
+        // call changes nothing, so it is answered with a warning instead of an error and the
+        // instance stays where it is (ready to be freed or reset).
+        if self.poisoned.is_some()
+            || matches!(
+                self.phase,
+                Phase::Error | Phase::Instantiated | Phase::InitializationMode
+            )
+        {
+            let why = self.poisoned.as_deref().unwrap_or(match self.phase {
+                Phase::Error => "the instance is in the error state",
+                _ => "the instance was never initialised",
+            });
+            self.warning(&format!(
+                "fmi2Terminate in state '{}' ignored ({why}): FMI 2.0 allows only fmi2Reset or fmi2FreeInstance here",
+                self.phase.name()
+            ));
+            return fmi2Status::WARNING;
+        }
         if let Err(s) = self.require(Function::Terminate) {
             return s;
         }
@@ -410,7 +430,10 @@ impl<M: Model> Runtime<M> {
             ));
         }
         if let Some(stop) = self.stop_time {
-            if current_time + step > stop + 1e-9 * step.max(stop.abs() * 1e-6) {
+            // A host that sums its steps overshoots by accumulated rounding (1e5 steps of
+            // 1 ms: 1.1e-10 s past 100 s): a step may end up to 1e-9·max(|stopTime|, 1 s)
+            // past stopTime.
+            if current_time + step > stop + 1e-9 * stop.abs().max(1.0) {
                 return self.error(&format!(
                     "fmi2DoStep: step from {current_time} by {step} ends after stopTime {stop}"
                 ));

@@ -1,0 +1,67 @@
+//! What other hosts do at the edges, through the C API of our FMUs: a host that sums its
+//! steps in floating point reaches the stop time a little late, and a host that ends an
+//! instance whose initialisation failed calls fmi2Terminate from the error state.
+
+mod common;
+
+use tb_fmi::Instance;
+
+fn instance(model: &str) -> Instance {
+    let fmu = common::load(model);
+    let mut i = Instance::instantiate(
+        fmu.library().unwrap(),
+        "host",
+        &fmu.description.guid,
+        Some(&fmu.resource_dir()),
+        true,
+    )
+    .unwrap();
+    i.set_echo(false);
+    i.set_debug_logging(true, &[]).unwrap();
+    i
+}
+
+/// 100,000 steps of 1 ms summed as a host does end 1.1e-10 s past stopTime = 100 s: every
+/// step is accepted (the rule: up to 1e-9·max(|stopTime|, 1 s) past it).
+#[test]
+fn a_host_that_sums_its_steps_reaches_the_stop_time_with_fmi2ok() {
+    let mut i = instance("dyno");
+    i.setup_experiment(0.0, Some(100.0)).unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap();
+    let mut t = 0.0f64;
+    for k in 0..100_000 {
+        i.do_step(t, 0.001)
+            .unwrap_or_else(|e| panic!("step {k} at t = {t}: {e}"));
+        t += 0.001;
+    }
+    assert!(t > 100.0 && t - 100.0 < 1e-9, "t = {t}");
+    // Well past the stop time is still refused.
+    let e = i.do_step(t, 0.001).unwrap_err().to_string();
+    assert!(e.contains("ends after stopTime 100"), "{e}");
+    i.terminate().ok();
+}
+
+/// fmi2Terminate after a failed initialisation: a warning saying what the standard allows
+/// there, not an error; the instance is then freed cleanly.
+#[test]
+fn terminate_after_a_failed_initialisation_is_a_warning() {
+    let mut i = instance("driver");
+    let fmu = common::load("driver");
+    let vr = common::vr(&fmu, "target_speed_file");
+    i.set_string(&[vr], &["/nonexistent/target.csv"]).unwrap();
+    i.setup_experiment(0.0, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    let e = i.exit_initialization_mode();
+    assert!(e.is_err(), "a missing target file fails the initialisation");
+    i.terminate()
+        .expect("fmi2Terminate is accepted with a warning");
+    let log = i.last_log_lines().join("\n");
+    assert!(
+        log.contains("fmi2Terminate in state 'error' ignored")
+            && log.contains("FMI 2.0 allows only fmi2Reset or fmi2FreeInstance here"),
+        "{log}"
+    );
+    // Reset brings it back to a usable instance.
+    i.reset().unwrap();
+}
