@@ -65,3 +65,31 @@ fn terminate_after_a_failed_initialisation_is_a_warning() {
     // Reset brings it back to a usable instance.
     i.reset().unwrap();
 }
+
+/// A Real input a float32 rounding outside its range is taken as the bound; further out it
+/// is refused as before.
+#[test]
+fn an_input_a_rounding_outside_its_range_is_the_bound() {
+    let mut i = instance("edu");
+    let fmu = common::load("edu");
+    let pedal = common::vr(&fmu, "accel_pedal");
+    i.setup_experiment(0.0, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    // 1 as float32, widened: what OMSimulator's solver sent.
+    i.set_real(&[pedal], &[1.0f32 as f64 + f32::EPSILON as f64 / 8.0])
+        .unwrap();
+    i.set_real(&[pedal], &[1.0000000149011612]).unwrap();
+    let mut x = [0.0];
+    i.get_real(&[pedal], &mut x).unwrap();
+    assert_eq!(x[0], 1.0);
+    i.set_real(&[pedal], &[-1.0000009]).unwrap();
+    i.get_real(&[pedal], &mut x).unwrap();
+    assert_eq!(x[0], -1.0);
+    let e = i.set_real(&[pedal], &[1.01]).unwrap_err().to_string();
+    assert!(e.contains("fmi2Error"), "{e}");
+    let log = i.last_log_lines().join("\n");
+    assert!(
+        log.contains("'accel_pedal' = 1.01 is outside its range [-1, 1]"),
+        "{log}"
+    );
+}

@@ -29,6 +29,10 @@ pub trait Logger: Send {
 }
 
 /// A logger that drops everything.
+/// How far (relative to the bound, at least to 1) a Real input may lie outside its declared
+/// range and still be accepted, as the bound: a float32 rounding is 6e-8 relative.
+pub const RANGE_SLACK: f64 = 1e-6;
+
 pub struct NullLogger;
 impl Logger for NullLogger {
     fn log(&self, _: fmi2Status, _: &str, _: &str) {}
@@ -591,7 +595,21 @@ impl<M: Model> Runtime<M> {
             } else {
                 sl.settable_run
             };
-            let accepted = settable && x.is_finite() && (sl.min..=sl.max).contains(&x);
+            let mut value = value;
+            let mut accepted = settable && x.is_finite() && (sl.min..=sl.max).contains(&x);
+            // A Real input a hair outside its range (a host's float32 rounding: 1 arrives as
+            // 1.0000000149011612) is taken as the bound: up to RANGE_SLACK of the bound's
+            // size (at least of 1) beyond it.
+            if !accepted && settable && sl.is_input && ty == ScalarType::Real && x.is_finite() {
+                let slack = |b: f64| RANGE_SLACK * b.abs().max(1.0);
+                if x < sl.min && sl.min - x <= slack(sl.min) {
+                    value = Value::Real(sl.min);
+                    accepted = true;
+                } else if x > sl.max && x - sl.max <= slack(sl.max) {
+                    value = Value::Real(sl.max);
+                    accepted = true;
+                }
+            }
             if !accepted {
                 return self.set_error(function, ty, vr, value);
             }
