@@ -93,3 +93,41 @@ fn an_input_a_rounding_outside_its_range_is_the_bound() {
         "{log}"
     );
 }
+
+/// FMPy runs the vehicle alone with its wheel-speed inputs at 0 (locked rear wheels): it
+/// brakes to rest and stays there; the distance never decreases.
+#[test]
+fn fmpy_the_vehicle_with_locked_wheels_ends_at_rest() {
+    let dir = tb_testkit::scratch("locked");
+    let out = dir.path().join("locked.csv");
+    let r = std::process::Command::new(common::python::python())
+        .arg(twinbench::pack::workspace_root().join("tools/fmpy_simulate.py"))
+        .arg(common::fmu("vehicle"))
+        .arg(&out)
+        .args(["--stop", "15", "--step", "0.001", "--set", "v_start=20"])
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let t = tb_cosim::Table::read_any(&out).unwrap();
+    let v = t.require("v").unwrap();
+    let d = t.require("distance").unwrap();
+    let stopped = v
+        .iter()
+        .position(|x| *x == 0.0)
+        .expect("the car comes to rest");
+    assert!(
+        t.column_at(0)[stopped] < 10.0,
+        "at rest after {} s",
+        t.column_at(0)[stopped]
+    );
+    assert!(
+        v[stopped..].iter().all(|x| *x == 0.0),
+        "stays at rest: min v {}",
+        v.iter().cloned().fold(f64::INFINITY, f64::min)
+    );
+    assert!(v.iter().all(|x| *x >= 0.0));
+    assert!(
+        d.windows(2).all(|w| w[1] >= w[0]),
+        "distance never decreases"
+    );
+}

@@ -316,11 +316,21 @@ impl Vehicle {
         let p = self.p;
         let st = &mut self.st;
         let a = (f.fx.iter().sum::<f64>() - f.resistance) / p.loads.m;
-        let v_new = st.v + a * h;
+        let mut v_new = st.v + a * h;
         let mut omega_front = st.omega_front;
         for (k, w) in omega_front.iter_mut().enumerate() {
             let tb = p.brake_torque(pedal, true, *w);
             *w += h * (-p.r * f.fx[k] - tb) / p.j_front;
+        }
+        // Standstill: tyre friction and resistance bring the car to rest but cannot drive it
+        // backwards. A sub-step that would carry the speed from rest or forward through zero
+        // ends at rest while no rear wheel turns backwards (the relaxed slip of a locked
+        // wheel would otherwise push the car back); the front wheels stop with it.
+        if st.v >= 0.0 && v_new < 0.0 && omega_rear.iter().all(|w| *w >= 0.0) {
+            v_new = 0.0;
+            for w in omega_front.iter_mut() {
+                *w = w.max(0.0);
+            }
         }
         // Transient slip σ·dκ/dt = (ω·r − v) − max(|v|, v_min)·κ, solved exactly over the
         // sub-step (inputs frozen): stable however short σ/|v| gets.
