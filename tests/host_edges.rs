@@ -131,3 +131,56 @@ fn fmpy_the_vehicle_with_locked_wheels_ends_at_rest() {
         "distance never decreases"
     );
 }
+
+/// The bench at a 5 ms communication step: a parallel (Jacobi) master makes the EDU-dyno
+/// coupling diverge, which the EDU stops within the first fraction of a second naming the
+/// coupling; the sequential master still drives the lap.
+#[test]
+fn a_diverging_coupling_is_stopped_early_and_named() {
+    let root = twinbench::pack::workspace_root();
+    common::fmu_dir();
+    let text = std::fs::read_to_string(root.join("systems/rls_v.toml")).unwrap();
+    let dir = tb_testkit::scratch("diverge");
+    let run = |algorithm: &str| {
+        let t = text
+            .replace(
+                "../target/fmu",
+                &root.join("target/fmu").display().to_string(),
+            )
+            .replace("step = 1e-3", "step = 5e-3")
+            .replace(
+                "algorithm = \"gauss-seidel\"",
+                &format!("algorithm = \"{algorithm}\""),
+            );
+        let path = dir.path().join(format!("{algorithm}.toml"));
+        std::fs::write(&path, t).unwrap();
+        let plan = tb_cosim::Plan::load(
+            &path,
+            std::sync::Arc::new(tb_fmi::FmuCache::temporary(false).unwrap()),
+        )
+        .unwrap();
+        let mut sim = tb_cosim::Simulation::new(plan).unwrap();
+        sim.echo_fmu_log = false;
+        sim.run()
+    };
+    let e = run("jacobi").unwrap_err().to_string();
+    assert!(
+        e.contains("instance 'edu'") && e.contains("the EDU-dyno coupling is diverging"),
+        "{e}"
+    );
+    let t: f64 = e
+        .split("at t = ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|x| x.parse().ok())
+        .unwrap();
+    assert!(t < 1.0, "stopped at {t} s");
+    let lap = run("gauss-seidel").unwrap();
+    let lap_time = lap
+        .reported
+        .iter()
+        .find(|(n, _)| n == "vehicle.lap_time")
+        .unwrap()
+        .1;
+    assert!((lap_time - 98.116).abs() < 0.2, "lap {lap_time} s");
+}
