@@ -57,6 +57,8 @@ pub const NS_SSD: &str = "http://ssp-standard.org/SSP1/SystemStructureDescriptio
 pub const NS_SSC: &str = "http://ssp-standard.org/SSP1/SystemStructureCommon";
 pub const NS_SSV: &str = "http://ssp-standard.org/SSP1/SystemStructureParameterValues";
 const NS_OSP: &str = "http://opensimulationplatform.com/SSP/OSPAnnotations";
+/// OMSimulator's annotation namespace (its importer matches the `oms:` prefix literally).
+const NS_OMS: &str = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd";
 const NS_TB: &str = "https://github.com/twinbench/ssp";
 
 fn esc(s: &str) -> String {
@@ -325,7 +327,7 @@ pub fn system_structure(
     });
     x.push_str("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
     x.push_str(&format!(
-        "<ssd:SystemStructureDescription xmlns:ssd=\"{NS_SSD}\" xmlns:ssc=\"{NS_SSC}\" xmlns:ssv=\"{NS_SSV}\" xmlns:osp=\"{NS_OSP}\" xmlns:tb=\"{NS_TB}\" version=\"1.0\" name=\"{}\" generationTool=\"twinbench {}\">\n",
+        "<ssd:SystemStructureDescription xmlns:ssd=\"{NS_SSD}\" xmlns:ssc=\"{NS_SSC}\" xmlns:ssv=\"{NS_SSV}\" xmlns:osp=\"{NS_OSP}\" xmlns:oms=\"{NS_OMS}\" xmlns:tb=\"{NS_TB}\" version=\"1.0\" name=\"{}\" generationTool=\"twinbench {}\">\n",
         esc(&sys_name),
         env!("CARGO_PKG_VERSION")
     ));
@@ -400,6 +402,12 @@ pub fn system_structure(
         }
         x.push_str("    </ssd:Connections>\n");
     }
+    // OMSimulator decides the system's kind from its own annotation and cannot open a
+    // system without one: a weakly coupled system with its fixed-step master.
+    x.push_str(&format!(
+        "    <ssd:Annotations>\n      <ssc:Annotation type=\"org.openmodelica\"><oms:Annotations><oms:SimulationInformation><oms:FixedStepMaster description=\"oms-ma\" stepSize=\"{}\" relativeTolerance=\"0.0001\"/></oms:SimulationInformation></oms:Annotations></ssc:Annotation>\n    </ssd:Annotations>\n",
+        real(system.file.experiment.step)
+    ));
     x.push_str("  </ssd:System>\n");
     if !enumerations.0.is_empty() {
         x.push_str("  <ssd:Enumerations>\n");
