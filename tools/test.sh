@@ -15,6 +15,9 @@ export TWINBENCH_PYTHON="$PWD/target/venv/bin/python"
 # The pythonfmu supplier EDU (tests/supplier_edu.rs, systems/rls_v_supplier.toml) and the
 # link to the libpython a native host must preload for it.
 "$TWINBENCH_PYTHON" tools/supplier_edu/build.py
+# OMSimulator for the host tests (built once per machine into ~/.cache/twinbench).
+TWINBENCH_OMSIMULATOR="$(tools/omsimulator.sh)"
+export TWINBENCH_OMSIMULATOR
 # Everything the tests and the processes they start put in the temporary directory goes to
 # a fresh folder, which must be empty at the end: the suite leaves nothing behind.
 export TMPDIR="$PWD/target/test-tmp"
@@ -23,10 +26,10 @@ mkdir -p "$TMPDIR"
 # The fast tier: every crate's tests, the FMUs through their C symbols, the orchestrator.
 cargo test --release --workspace "$@"
 # The slow tier: whole optimisations (Spielberg, and a lap the suite makes itself), FMPy's
-# master over a lap, the SSP in FMPy and libcosim.
+# master over a lap, the SSP in FMPy, libcosim and OMSimulator.
 cargo test --release -p twinbench --features slow-tests \
     --test optimize_spielberg --test optimize_study --test robustness_optimize \
-    --test ssp_export --test cross_validation --test own_lap "$@"
+    --test ssp_export --test cross_validation --test own_lap --test omsimulator "$@"
 if [ -n "$(ls -A "$TMPDIR")" ]; then
     echo "error: the tests left files in the temporary directory ($TMPDIR):" >&2
     ls -lA "$TMPDIR" >&2

@@ -58,7 +58,8 @@ pub const NS_SSC: &str = "http://ssp-standard.org/SSP1/SystemStructureCommon";
 pub const NS_SSV: &str = "http://ssp-standard.org/SSP1/SystemStructureParameterValues";
 const NS_OSP: &str = "http://opensimulationplatform.com/SSP/OSPAnnotations";
 /// OMSimulator's annotation namespace (its importer matches the `oms:` prefix literally).
-const NS_OMS: &str = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd";
+const NS_OMS: &str =
+    "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd";
 const NS_TB: &str = "https://github.com/twinbench/ssp";
 
 fn esc(s: &str) -> String {

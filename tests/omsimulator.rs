@@ -1,0 +1,158 @@
+//! OMSimulator 3.0 (built from source by tools/omsimulator.sh; its path in
+//! TWINBENCH_OMSIMULATOR) as a host of our FMUs: each FMU alone with its default settings,
+//! and the exported bench SSP over a lap, compared with twinbench's Jacobi run.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn omsimulator() -> PathBuf {
+    let exe = std::env::var_os("TWINBENCH_OMSIMULATOR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            let out = Command::new(twinbench::pack::workspace_root().join("tools/omsimulator.sh"))
+                .output()
+                .expect("tools/omsimulator.sh runs");
+            assert!(
+                out.status.success(),
+                "tools/omsimulator.sh: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            PathBuf::from(String::from_utf8_lossy(&out.stdout).trim())
+        });
+    assert!(exe.is_file(), "no OMSimulator at {}", exe.display());
+    exe
+}
+
+/// Run OMSimulator in `dir` (its temporary folders go there); its log on failure.
+fn run(dir: &Path, args: &[&std::ffi::OsStr]) -> String {
+    let out = Command::new(omsimulator())
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap();
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.status.success(), "OMSimulator {args:?}: {log}");
+    assert!(!log.contains("error:"), "{log}");
+    log
+}
+
+/// The last row of an OMSimulator CSV result: the column named `name`.
+fn last_value(csv: &Path, name: &str) -> f64 {
+    use std::io::BufRead;
+    let f = std::io::BufReader::new(std::fs::File::open(csv).unwrap());
+    let mut lines = f.lines();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .unwrap()
+        .split(',')
+        .map(|s| s.trim().trim_matches('"').to_string())
+        .collect();
+    let k = header
+        .iter()
+        .position(|h| h == name || h.ends_with(&format!(".{name}")))
+        .unwrap_or_else(|| panic!("no column {name} in {}", csv.display()));
+    let last = lines
+        .map(|l| l.unwrap())
+        .filter(|l| !l.is_empty())
+        .last()
+        .unwrap();
+    last.split(',').nth(k).unwrap().trim().parse().unwrap()
+}
+
+/// Each FMU alone, as a user opens it first: OMSimulator's defaults (co-simulation, 1 s),
+/// no error, every value finite, the run reaching its stop time.
+#[test]
+fn omsimulator_runs_each_fmu_alone() {
+    let dir = tb_testkit::scratch("oms-alone");
+    for model in ["vehicle", "driver", "dyno", "edu"] {
+        let out = dir.path().join(format!("{model}.csv"));
+        run(
+            dir.path(),
+            &[
+                common::fmu(model).as_os_str(),
+                "--mode=cs".as_ref(),
+                "--stopTime=1".as_ref(),
+                format!("--resultFile={}", out.display()).as_ref(),
+            ],
+        );
+        let text = std::fs::read_to_string(&out).unwrap();
+        let last = text.lines().filter(|l| !l.is_empty()).last().unwrap();
+        let values: Vec<f64> = last.split(',').map(|x| x.trim().parse().unwrap()).collect();
+        assert_eq!(values[0], 1.0, "{model}: ends at 1 s");
+        assert!(values.iter().all(|x| x.is_finite()), "{model}: {last}");
+    }
+}
+
+/// The exported bench with OMSimulator's default settings: it initialises (the declared
+/// dependencies leave no algebraic loop) and drives the lap; the lap time agrees with
+/// twinbench's Jacobi run within 10 ms (the difference: OMSimulator passes each output to
+/// its input in the connections' dependency order after the step, so the EDU's torques see
+/// the dyno's new speeds through their declared feed-through in the same step; twinbench's
+/// Jacobi master gives each unit the values of the step's start).
+#[test]
+fn omsimulator_runs_the_exported_bench_lap() {
+    let root = twinbench::pack::workspace_root();
+    common::fmu_dir();
+    let dir = tb_testkit::scratch("oms-lap");
+    let ssp = dir.path().join("rls_v.ssp");
+    let exe = env!("CARGO_BIN_EXE_twinbench");
+    let status = Command::new(exe)
+        .arg("export-ssp")
+        .arg(root.join("systems/rls_v.toml"))
+        .arg("-o")
+        .arg(&ssp)
+        .args(["--stop-time", "99"])
+        .output()
+        .unwrap();
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let out = dir.path().join("lap.csv");
+    run(
+        dir.path(),
+        &[
+            ssp.as_os_str(),
+            "--stopTime=99".as_ref(),
+            format!("--resultFile={}", out.display()).as_ref(),
+        ],
+    );
+    let oms_lap = last_value(&out, "vehicle.lap_time");
+    std::fs::remove_file(&out).unwrap(); // 190 MB
+                                         // twinbench, Jacobi, the same system.
+    let text = std::fs::read_to_string(root.join("systems/rls_v.toml"))
+        .unwrap()
+        .replace(
+            "../target/fmu",
+            &root.join("target/fmu").display().to_string(),
+        )
+        .replace("algorithm = \"gauss-seidel\"", "algorithm = \"jacobi\"");
+    let path = dir.path().join("jacobi.toml");
+    std::fs::write(&path, text).unwrap();
+    let plan = tb_cosim::Plan::load(
+        &path,
+        std::sync::Arc::new(tb_fmi::FmuCache::temporary(false).unwrap()),
+    )
+    .unwrap();
+    let mut sim = tb_cosim::Simulation::new(plan).unwrap();
+    let s = sim.run().unwrap();
+    let ours = s
+        .reported
+        .iter()
+        .find(|(n, _)| n == "vehicle.lap_time")
+        .unwrap()
+        .1;
+    eprintln!("lap time: OMSimulator {oms_lap} s, twinbench Jacobi {ours} s");
+    assert!(
+        (oms_lap - ours).abs() < 0.010,
+        "OMSimulator {oms_lap} s, twinbench Jacobi {ours} s"
+    );
+}
