@@ -77,15 +77,16 @@ fn max_abs(c: &serde_json::Value, signal: &str) -> f64 {
     c["signals"][signal]["max_abs"].as_f64().unwrap()
 }
 
-/// The lap-level tolerances of docs/cross_validation.md (SSP tools vs twinbench Jacobi).
-fn assert_within_lap_tolerance(c: &serde_json::Value, what: &str) {
+/// The tolerances of docs/cross_validation.md (SSP tools vs twinbench Jacobi): speed [m/s],
+/// distance [m], dyno speed [rad/s].
+fn assert_within_lap_tolerance(c: &serde_json::Value, what: &str, limits: [f64; 3]) {
     let v = max_abs(c, "vehicle.v");
     let d = max_abs(c, "vehicle.distance");
     let w = max_abs(c, "dyno_rl.omega");
-    eprintln!("{what}: max |dv| {v:.4} m/s, |ds| {d:.4} m, |d omega| {w:.4} rad/s");
-    assert!(v <= 0.3, "{what}: vehicle.v differs by {v} m/s");
-    assert!(d <= 1.0, "{what}: vehicle.distance differs by {d} m");
-    assert!(w <= 2.0, "{what}: dyno_rl.omega differs by {w} rad/s");
+    eprintln!("{what}: max |dv| {v:.2e} m/s, |ds| {d:.2e} m, |d omega| {w:.2e} rad/s");
+    assert!(v <= limits[0], "{what}: vehicle.v differs by {v} m/s");
+    assert!(d <= limits[1], "{what}: vehicle.distance differs by {d} m");
+    assert!(w <= limits[2], "{what}: dyno_rl.omega differs by {w} rad/s");
 }
 
 #[test]
@@ -151,7 +152,12 @@ fn ssp_validates_and_runs_in_fmpy_exactly_as_its_semantics_predict() {
     let c = &j["fmpy"]["compare"];
     assert!(c["points"].as_u64().unwrap() >= 3990);
     assert!(max_abs(c, "vehicle.v") <= 0.3 && max_abs(c, "vehicle.distance") <= 1.0);
-    assert_within_lap_tolerance(&j["fmpy"]["compare_after"], "simulate_ssp, 1-4 s");
+    // simulate_ssp's own semantics (zero start, summed time) differ from twinbench's.
+    assert_within_lap_tolerance(
+        &j["fmpy"]["compare_after"],
+        "simulate_ssp, 1-4 s",
+        [0.02, 0.05, 0.1],
+    );
 }
 
 #[test]
@@ -177,7 +183,8 @@ fn ssp_runs_in_libcosim_over_a_lap() {
     assert!(j["libcosim"]["error"].is_null(), "{}", j["libcosim"]);
     let c = &j["libcosim"]["compare"];
     assert!(c["points"].as_u64().unwrap() as f64 >= stop * 1000.0 - 1.0);
-    assert_within_lap_tolerance(c, "libcosim, one lap");
+    // Only libcosim's nanosecond clock differs (measured 1.4e-11 m/s over the lap).
+    assert_within_lap_tolerance(c, "libcosim, one lap", [1e-8, 1e-8, 1e-8]);
 }
 
 #[test]
