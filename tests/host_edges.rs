@@ -184,3 +184,27 @@ fn a_diverging_coupling_is_stopped_early_and_named() {
         .1;
     assert!((lap_time - 98.116).abs() < 0.2, "lap {lap_time} s");
 }
+
+/// `range_check = 0`: an input outside its range is used as it is, with a warning.
+#[test]
+fn range_check_0_uses_an_out_of_range_input_with_a_warning() {
+    let mut i = instance("edu");
+    let fmu = common::load("edu");
+    let pedal = common::vr(&fmu, "accel_pedal");
+    let check = common::vr(&fmu, "range_check");
+    i.set_integer(&[check], &[0]).unwrap();
+    i.setup_experiment(0.0, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.set_real(&[pedal], &[1.5])
+        .expect("accepted with a warning");
+    let mut x = [0.0];
+    i.get_real(&[pedal], &mut x).unwrap();
+    assert_eq!(x[0], 1.5);
+    let log = i.last_log_lines().join("\n");
+    assert!(
+        log.contains(
+            "'accel_pedal' = 1.5 is outside its range [-1, 1]; used as it is (range_check = 0)"
+        ),
+        "{log}"
+    );
+}

@@ -32,6 +32,8 @@ fmu_export::variables! {
             .describe("Initial wheel-side speed: the motor starts at gear_ratio x this with untwisted shafts (default: the vehicle's v_start / wheel_radius)"),
         substep_max: Real = 1e-4 => parameter(11).unit("s").range(1e-6, 0.01)
             .describe("Largest internal integration step"),
+        range_check: Integer = 1 => parameter(12).range(0.0, 1.0)
+            .describe("An input outside its declared range (beyond a float32 rounding): 1 refuses it with fmi2Error, 0 uses it with a warning"),
 
         accel_pedal: Real = 0.0 => input(50).unit("1").range(-1.0, 1.0)
             .describe("Torque request as a share of the available torque; 0..1 drives, negative values request regenerative braking"),

@@ -33,6 +33,9 @@ pub trait Logger: Send {
 /// range and still be accepted, as the bound: a float32 rounding is 6e-8 relative.
 pub const RANGE_SLACK: f64 = 1e-6;
 
+/// The parameter a model declares to let hosts choose what an input outside its range does.
+pub const RANGE_CHECK: &str = "range_check";
+
 pub struct NullLogger;
 impl Logger for NullLogger {
     fn log(&self, _: fmi2Status, _: &str, _: &str) {}
@@ -104,6 +107,9 @@ pub struct Runtime<M: Model> {
     /// value reference -> checks of the fast get/set path.
     slots: Vec<Slot>,
     has_feedthrough: bool,
+    /// Index of the model's `range_check` parameter, if it declares one (0: an input
+    /// outside its range is accepted with a warning; 1, the default: refused).
+    range_check: Option<usize>,
     logger: Box<dyn Logger>,
     logging_on: bool,
     categories: u8,
@@ -157,6 +163,9 @@ impl<M: Model> Runtime<M> {
             vr_index,
             slots,
             has_feedthrough: table.iter().any(|v| !v.depends_on.is_empty()),
+            range_check: table
+                .iter()
+                .position(|v| v.name == RANGE_CHECK && v.causality == Causality::Parameter),
             logger,
             logging_on,
             categories: LOG_EVERYTHING,
@@ -584,6 +593,7 @@ impl<M: Model> Runtime<M> {
             ));
         }
         let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
+        let mut status = fmi2Status::OK;
         for (&vr, value) in vrs.iter().zip(values) {
             let sl = match self.slots.get(vr as usize) {
                 Some(sl) if sl.index != u32::MAX && sl.ty == ty => *sl,
@@ -610,6 +620,21 @@ impl<M: Model> Runtime<M> {
                     accepted = true;
                 }
             }
+            if !accepted && settable && sl.is_input && x.is_finite() && !self.range_checked() {
+                // range_check = 0: the host's value is used as it is, with a warning.
+                self.logger.log(
+                    fmi2Status::WARNING,
+                    "logStatusWarning",
+                    &format!(
+                        "{function}: '{}' = {x} is outside its range [{}, {}]; used as it is (range_check = 0)",
+                        M::Vars::VARIABLES[sl.index as usize].name,
+                        sl.min,
+                        sl.max
+                    ),
+                );
+                status = fmi2Status::WARNING;
+                accepted = true;
+            }
             if !accepted {
                 return self.set_error(function, ty, vr, value);
             }
@@ -622,7 +647,13 @@ impl<M: Model> Runtime<M> {
                 self.params_changed = true;
             }
         }
-        fmi2Status::OK
+        status
+    }
+
+    /// Whether inputs outside their range are refused (no `range_check`, or it is not 0).
+    fn range_checked(&self) -> bool {
+        self.range_check
+            .is_none_or(|i| self.vars.get(i).as_f64() != 0.0)
     }
 
     /// The message of a refused set (off the fast path).

@@ -86,6 +86,8 @@ fmu_export::variables! {
             .describe("Initial position along the track (less than the lap length)"),
         substep_max: Real = 1e-3 => parameter(31).unit("s").range(1e-6, 0.01)
             .describe("Largest internal integration step (the step is split into equal sub-steps no longer than this)"),
+        range_check: Integer = 1 => parameter(41).range(0.0, 1.0)
+            .describe("An input outside its declared range (beyond a float32 rounding): 1 refuses it with fmi2Error, 0 uses it with a warning"),
 
         omega_rl: Real = 0.0 => input(50).unit("rad/s")
             .describe("Rear left wheel speed (from the dyno speed sensor)"),
