@@ -43,13 +43,7 @@ fn sensor(dir: &Path, name: &str, unit: &str, base: &str) -> PathBuf {
 fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), String> {
     let path = dir.join("system.toml");
     let file = SystemFile::parse(text, &path).map_err(|e| e.to_string())?;
-    let options = tb_cosim::LoadOptions {
-        isolation: tb_cosim::isolated::IsolationOptions {
-            worker_exe: Some(env!("CARGO_BIN_EXE_twinbench").into()),
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let options = common::worker_options();
     let plan = Plan::compile(
         file,
         &path,

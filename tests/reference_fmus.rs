@@ -114,13 +114,7 @@ fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String
     }
     let path = dir.join(format!("{}-fmi{}.toml", c.model, c.version));
     let file = SystemFile::parse(&text, &path).unwrap();
-    let options = tb_cosim::LoadOptions {
-        isolation: tb_cosim::isolated::IsolationOptions {
-            worker_exe: Some(env!("CARGO_BIN_EXE_twinbench").into()),
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let options = common::worker_options();
     let plan = Plan::compile(
         file,
         &path,
@@ -487,13 +481,7 @@ fn fmi2_stair_isolated_ends_where_in_process_does() {
         fmu.display()
     );
     let path = dir.path().join("iso.toml");
-    let options = tb_cosim::LoadOptions {
-        isolation: tb_cosim::isolated::IsolationOptions {
-            worker_exe: Some(env!("CARGO_BIN_EXE_twinbench").into()),
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let options = common::worker_options();
     let plan = Plan::compile(
         SystemFile::parse(&text, &path).unwrap(),
         &path,

@@ -57,5 +57,16 @@ pub fn vr(fmu: &LoadedFmu, name: &str) -> u32 {
         .value_reference
 }
 
+/// Load options whose isolated instances run in this build's `twinbench worker`.
+pub fn worker_options() -> tb_cosim::LoadOptions {
+    tb_cosim::LoadOptions {
+        isolation: tb_cosim::isolated::IsolationOptions {
+            worker_exe: Some(env!("CARGO_BIN_EXE_twinbench").into()),
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
 pub mod python;
 pub mod reference;

@@ -464,19 +464,7 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
         for unit in imp.children(f, u, &["Unit"], &[])? {
             let name = unit.attr("name").unwrap_or_default().to_string();
             let base = imp.children(f, unit, &["BaseUnit"], &[])?;
-            let mut def = UnitDef {
-                name: "",
-                kg: 0,
-                m: 0,
-                s: 0,
-                a: 0,
-                k: 0,
-                mol: 0,
-                cd: 0,
-                rad: 0,
-                factor: 1.0,
-                offset: 0.0,
-            };
+            let mut def = UnitDef::DIMENSIONLESS;
             if let Some(b) = base.first() {
                 let exp = |key: &str| -> Result<i32, SspImportError> {
                     b.attr(key).map_or(Ok(0), |v| {

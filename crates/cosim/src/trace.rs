@@ -197,6 +197,28 @@ impl Traced {
         s
     }
 
+    /// A get: the values read (or none when it failed) and the status.
+    fn traced_get<O: ?Sized, T: std::fmt::Display>(
+        &mut self,
+        fmi2: &str,
+        fmi3: &str,
+        vrs: &[u32],
+        out: &mut O,
+        call: impl FnOnce(&mut dyn Backend, &mut O) -> Result<(), FmuError>,
+        show: impl FnOnce(&O) -> Vec<T>,
+    ) -> Result<(), FmuError> {
+        let t = self.inner.time();
+        let r = call(&mut *self.inner, out);
+        let args = match r {
+            Ok(()) => self.values(vrs, &show(out)),
+            Err(_) => self.values::<T>(vrs, &[]),
+        };
+        let f = self.name2(fmi2, fmi3);
+        let status = self.status(&r);
+        self.emit(t, &f, &args, &status);
+        r
+    }
+
     fn traced<T>(
         &mut self,
         function: String,
@@ -265,18 +287,14 @@ impl Backend for Traced {
         self.traced(f, String::new(), |b| b.reset())
     }
     fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        let t = self.inner.time();
-        let r = self.inner.get_real(vrs, out);
-        let v: Vec<R> = out.iter().map(|x| R(*x)).collect();
-        let args = if r.is_ok() {
-            self.values(vrs, &v)
-        } else {
-            self.values::<R>(vrs, &[])
-        };
-        let f = self.name2("fmi2GetReal", "fmi3Get*");
-        let status = self.status(&r);
-        self.emit(t, &f, &args, &status);
-        r
+        self.traced_get(
+            "fmi2GetReal",
+            "fmi3Get*",
+            vrs,
+            out,
+            |b, o| b.get_real(vrs, o),
+            |o| o.iter().map(|x| R(*x)).collect(),
+        )
     }
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
         let v: Vec<R> = values.iter().map(|x| R(*x)).collect();
@@ -285,17 +303,14 @@ impl Backend for Traced {
         self.traced(f, args, |b| b.set_real(vrs, values))
     }
     fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let t = self.inner.time();
-        let r = self.inner.get_integer(vrs, out);
-        let args = if r.is_ok() {
-            self.values(vrs, out)
-        } else {
-            self.values::<i32>(vrs, &[])
-        };
-        let f = self.name2("fmi2GetInteger", "fmi3Get*");
-        let status = self.status(&r);
-        self.emit(t, &f, &args, &status);
-        r
+        self.traced_get(
+            "fmi2GetInteger",
+            "fmi3Get*",
+            vrs,
+            out,
+            |b, o| b.get_integer(vrs, o),
+            |o| o.to_vec(),
+        )
     }
     fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
         let args = self.values(vrs, values);
@@ -303,17 +318,14 @@ impl Backend for Traced {
         self.traced(f, args, |b| b.set_integer(vrs, values))
     }
     fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let t = self.inner.time();
-        let r = self.inner.get_boolean(vrs, out);
-        let args = if r.is_ok() {
-            self.values(vrs, out)
-        } else {
-            self.values::<i32>(vrs, &[])
-        };
-        let f = self.name2("fmi2GetBoolean", "fmi3GetBoolean");
-        let status = self.status(&r);
-        self.emit(t, &f, &args, &status);
-        r
+        self.traced_get(
+            "fmi2GetBoolean",
+            "fmi3GetBoolean",
+            vrs,
+            out,
+            |b, o| b.get_boolean(vrs, o),
+            |o| o.to_vec(),
+        )
     }
     fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
         let args = self.values(vrs, values);
@@ -321,18 +333,14 @@ impl Backend for Traced {
         self.traced(f, args, |b| b.set_boolean(vrs, values))
     }
     fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
-        let t = self.inner.time();
-        let r = self.inner.get_string(vrs, out);
-        let quoted: Vec<String> = out.iter().map(|s| format!("{s:?}")).collect();
-        let args = if r.is_ok() {
-            self.values(vrs, &quoted)
-        } else {
-            self.values::<String>(vrs, &[])
-        };
-        let f = self.name2("fmi2GetString", "fmi3Get*");
-        let status = self.status(&r);
-        self.emit(t, &f, &args, &status);
-        r
+        self.traced_get(
+            "fmi2GetString",
+            "fmi3Get*",
+            vrs,
+            out,
+            |b, o| b.get_string(vrs, o),
+            |o| o.iter().map(|s| format!("{s:?}")).collect(),
+        )
     }
     fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
         let quoted: Vec<String> = values.iter().map(|s| format!("{s:?}")).collect();

@@ -34,6 +34,11 @@ const fn unit(name: &'static str, kg: i32, m: i32, s: i32, rad: i32, factor: f64
     }
 }
 
+impl UnitDef {
+    /// A `<Unit>` before its `<BaseUnit>` is read: dimensionless, factor 1.
+    pub const DIMENSIONLESS: UnitDef = unit("", 0, 0, 0, 0, 1.0);
+}
+
 /// Every unit twinbench knows: the ones a model may declare, and a logger's.
 pub const UNITS: &[UnitDef] = &[
     unit("1", 0, 0, 0, 0, 1.0),

@@ -222,14 +222,14 @@ impl Model for Edu {
         // Divergence found early: a side-shaft torque many times what the motor can deliver
         // is no physical state but a host's coupling going unstable (a parallel master's
         // communication step too long for the shaft stiffness against the dyno inertia).
-        let torque = self.shaft_torque(wl, wr);
+        self.write_outputs(vars);
+        let torque = vars.torque_left; // both shafts carry the same torque
         let bound = DIVERGENCE_FACTOR * self.p.torque_max * self.p.ratio;
         if torque.abs() > bound {
             return Err(ModelError::new(format!(
                 "side-shaft torque {torque:.4e} N.m exceeds {DIVERGENCE_FACTOR}x the motor's largest wheel torque ({bound:.4e} N.m = {DIVERGENCE_FACTOR} x torque_max x gear_ratio): the EDU-dyno coupling is diverging; the communication step ({step} s) is too long for a parallel (Jacobi) master with this shaft stiffness (see the EDU's documentation for the stable steps): use a shorter step or a sequential (Gauss-Seidel) master"
             )));
         }
-        self.write_outputs(vars);
         Ok(())
     }
 

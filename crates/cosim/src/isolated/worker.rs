@@ -96,20 +96,14 @@ fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
             path: source.to_path_buf(),
             message,
         })?;
-        let entry = tb_fmi::archive::library_entry(&md.fmi_version, &target.model_identifier);
-        let lib = Library3::load(std::path::Path::new(&target.path))
-            .map_err(|e| tb_fmi::archive::library_error3(source, &entry, e))?;
+        let lib = Library3::load(std::path::Path::new(&target.path)).map_err(|e| {
+            tb_fmi::archive::library_error(source, &md.fmi_version, &target.model_identifier, e)
+        })?;
         return Ok(Loaded::V3(Arc::new(lib), Arc::new(md)));
     }
     Library::load(std::path::Path::new(&target.path))
         .map(Arc::new)
-        .map_err(|e| {
-            tb_fmi::archive::library_error(
-                std::path::Path::new(&target.source),
-                &target.model_identifier,
-                e,
-            )
-        })
+        .map_err(|e| tb_fmi::archive::library_error(source, "2.0", &target.model_identifier, e))
         .map(Loaded::V2)
 }
 

@@ -71,7 +71,14 @@ impl LoadedFmu {
         }
         let library = Library3::load(&self.library_path())
             .map(Arc::new)
-            .map_err(|e| library_error3(&self.source, &self.library_entry(), e))?;
+            .map_err(|e| {
+                library_error(
+                    &self.source,
+                    &self.description.fmi_version,
+                    self.model_identifier(),
+                    e,
+                )
+            })?;
         *slot = Some(library.clone());
         Ok(library)
     }
@@ -91,7 +98,14 @@ impl LoadedFmu {
         }
         let library = Library::load(&self.library_path())
             .map(Arc::new)
-            .map_err(|e| library_error(&self.source, self.model_identifier(), e))?;
+            .map_err(|e| {
+                library_error(
+                    &self.source,
+                    &self.description.fmi_version,
+                    self.model_identifier(),
+                    e,
+                )
+            })?;
         *slot = Some(library.clone());
         Ok(library)
     }
@@ -308,10 +322,16 @@ impl FmuCache {
     }
 }
 
-/// A library error under the FMU's name (the unpacked copy is in a temporary folder the user
-/// never saw). `id` is the model identifier. Also used by the isolation worker.
-pub fn library_error(fmu: &Path, id: &str, e: FmuError) -> FmuError {
-    let entry = format!("binaries/linux64/{id}.so");
+/// A library error under the FMU's name and the library's entry in the archive (the
+/// unpacked copy is in a temporary folder the user never saw). Also used by the isolation
+/// worker.
+pub fn library_error(fmu: &Path, fmi_version: &str, id: &str, e: FmuError) -> FmuError {
+    let entry = library_entry(fmi_version, id);
+    let version = if fmi_version.starts_with("3.") {
+        "3.0"
+    } else {
+        "2.0"
+    };
     match e {
         FmuError::Load { message, .. } => FmuError::Load {
             path: fmu.to_path_buf(),
@@ -324,27 +344,9 @@ pub fn library_error(fmu: &Path, id: &str, e: FmuError) -> FmuError {
         },
         FmuError::MissingSymbol { symbol, .. } => FmuError::Archive {
             path: fmu.to_path_buf(),
-            message: format!("{entry} does not export the required FMI 2.0 function {symbol}"),
-        },
-        other => other,
-    }
-}
-
-/// An FMI 3.0 library error under the FMU's name and the library's entry.
-pub fn library_error3(fmu: &Path, entry: &str, e: FmuError) -> FmuError {
-    match e {
-        FmuError::Load { message, .. } => FmuError::Load {
-            path: fmu.to_path_buf(),
             message: format!(
-                "{entry}: {}",
-                message
-                    .rsplit_once(".so: ")
-                    .map_or(message.as_str(), |(_, m)| m)
+                "{entry} does not export the required FMI {version} function {symbol}"
             ),
-        },
-        FmuError::MissingSymbol { symbol, .. } => FmuError::Archive {
-            path: fmu.to_path_buf(),
-            message: format!("{entry} does not export the FMI 3.0 function {symbol}"),
         },
         other => other,
     }

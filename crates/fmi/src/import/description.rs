@@ -228,6 +228,44 @@ pub(crate) fn num(
     }
 }
 
+/// `<BaseUnit>` (the same in FMI 2.0 and 3.0) into `u`.
+pub(crate) fn base_unit(m: &HashMap<String, String>, u: &mut UnitDef) -> Result<(), String> {
+    u.kg = int_attr(m, "kg");
+    u.m = int_attr(m, "m");
+    u.s = int_attr(m, "s");
+    u.a = int_attr(m, "A");
+    u.k = int_attr(m, "K");
+    u.mol = int_attr(m, "mol");
+    u.cd = int_attr(m, "cd");
+    u.rad = int_attr(m, "rad");
+    u.factor = num(m, "factor", "BaseUnit")?.unwrap_or(1.0);
+    u.offset = num(m, "offset", "BaseUnit")?.unwrap_or(0.0);
+    Ok(())
+}
+
+/// `<DefaultExperiment>` (the same in FMI 2.0 and 3.0).
+pub(crate) fn default_experiment(m: &HashMap<String, String>) -> Result<DefaultExperiment, String> {
+    Ok(DefaultExperiment {
+        start_time: num(m, "startTime", "DefaultExperiment")?,
+        stop_time: num(m, "stopTime", "DefaultExperiment")?,
+        step_size: num(m, "stepSize", "DefaultExperiment")?,
+        tolerance: num(m, "tolerance", "DefaultExperiment")?,
+    })
+}
+
+/// An enumeration `<Item name value>` of type `ty`: (name, value).
+pub(crate) fn enumeration_item(
+    m: &HashMap<String, String>,
+    ty: &str,
+) -> Result<(String, i64), String> {
+    let item = m.get("name").cloned().unwrap_or_default();
+    let value = m
+        .get("value")
+        .and_then(|v| v.trim().parse::<i64>().ok())
+        .ok_or_else(|| format!("Enumeration '{ty}': item '{item}' has no integer value"))?;
+    Ok((item, value))
+}
+
 /// A `<DisplayUnit name factor offset>` of `unit` as a unit definition of its own:
 /// display = factor·value + offset, so SI = base.factor·(display − offset)/factor +
 /// base.offset. An FMI 3.0 `inverse` display unit is not linear and is left out.
@@ -377,31 +415,11 @@ fn parse2(xml: &str) -> Result<ModelDescription, String> {
             }
             ("fmiModelDescription", "ModelExchange") => md.has_model_exchange = true,
             ("fmiModelDescription", "DefaultExperiment") => {
-                md.default_experiment = Some(DefaultExperiment {
-                    start_time: num(&m, "startTime", "DefaultExperiment")?,
-                    stop_time: num(&m, "stopTime", "DefaultExperiment")?,
-                    step_size: num(&m, "stepSize", "DefaultExperiment")?,
-                    tolerance: num(&m, "tolerance", "DefaultExperiment")?,
-                })
+                md.default_experiment = Some(crate::description::default_experiment(&m)?)
             }
             ("UnitDefinitions", "Unit") => {
                 let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
-                current_unit = Some((
-                    uname,
-                    UnitDef {
-                        name: "",
-                        kg: 0,
-                        m: 0,
-                        s: 0,
-                        a: 0,
-                        k: 0,
-                        mol: 0,
-                        cd: 0,
-                        rad: 0,
-                        factor: 1.0,
-                        offset: 0.0,
-                    },
-                ));
+                current_unit = Some((uname, UnitDef::DIMENSIONLESS));
                 if empty {
                     md.units.push(current_unit.take().unwrap());
                 }
@@ -415,16 +433,7 @@ fn parse2(xml: &str) -> Result<ModelDescription, String> {
             }
             ("Unit", "BaseUnit") => {
                 if let Some((_, u)) = current_unit.as_mut() {
-                    u.kg = int_attr(&m, "kg");
-                    u.m = int_attr(&m, "m");
-                    u.s = int_attr(&m, "s");
-                    u.a = int_attr(&m, "A");
-                    u.k = int_attr(&m, "K");
-                    u.mol = int_attr(&m, "mol");
-                    u.cd = int_attr(&m, "cd");
-                    u.rad = int_attr(&m, "rad");
-                    u.factor = num(&m, "factor", "BaseUnit")?.unwrap_or(1.0);
-                    u.offset = num(&m, "offset", "BaseUnit")?.unwrap_or(0.0);
+                    crate::description::base_unit(&m, u)?;
                 }
             }
             ("TypeDefinitions", "SimpleType") => current_type = m.get("name").cloned(),
@@ -435,17 +444,8 @@ fn parse2(xml: &str) -> Result<ModelDescription, String> {
             }
             ("Enumeration", "Item") => {
                 if let Some(t) = &current_type {
-                    let item = m.get("name").cloned().unwrap_or_default();
-                    let value = m
-                        .get("value")
-                        .and_then(|v| v.trim().parse::<i64>().ok())
-                        .ok_or_else(|| {
-                            format!("Enumeration '{t}': item '{item}' has no integer value")
-                        })?;
-                    md.enumerations
-                        .entry(t.clone())
-                        .or_default()
-                        .push((item, value));
+                    let item = crate::description::enumeration_item(&m, t)?;
+                    md.enumerations.entry(t.clone()).or_default().push(item);
                 }
             }
             ("LogCategories", "Category") => {

@@ -17,8 +17,8 @@
 //!   anything runs).
 
 use crate::description::{
-    attrs, check_names_and_aliases, flag, int_attr, num, CoSimulation, DefaultExperiment,
-    ModelDescription, ScalarVariable, Unknown,
+    attrs, check_names_and_aliases, flag, num, CoSimulation, ModelDescription, ScalarVariable,
+    Unknown,
 };
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 use crate::units::UnitDef;
@@ -204,6 +204,8 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
         let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
         let m = attrs(&e)?;
         let parent = stack.last().map(String::as_str).unwrap_or("");
+        // A child of a variable element (Dimension, Start, Alias).
+        let in_variable = stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables";
         match (parent, name.as_str()) {
             ("", "fmiModelDescription") => {
                 saw_root = true;
@@ -244,31 +246,11 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                 .unsupported
                 .push("Scheduled Execution (<ScheduledExecution>)".into()),
             ("fmiModelDescription", "DefaultExperiment") => {
-                md.default_experiment = Some(DefaultExperiment {
-                    start_time: num(&m, "startTime", "DefaultExperiment")?,
-                    stop_time: num(&m, "stopTime", "DefaultExperiment")?,
-                    step_size: num(&m, "stepSize", "DefaultExperiment")?,
-                    tolerance: num(&m, "tolerance", "DefaultExperiment")?,
-                })
+                md.default_experiment = Some(crate::description::default_experiment(&m)?)
             }
             ("UnitDefinitions", "Unit") => {
                 let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
-                current_unit = Some((
-                    uname,
-                    UnitDef {
-                        name: "",
-                        kg: 0,
-                        m: 0,
-                        s: 0,
-                        a: 0,
-                        k: 0,
-                        mol: 0,
-                        cd: 0,
-                        rad: 0,
-                        factor: 1.0,
-                        offset: 0.0,
-                    },
-                ));
+                current_unit = Some((uname, UnitDef::DIMENSIONLESS));
                 if empty {
                     md.units.push(current_unit.take().expect("just set"));
                 }
@@ -282,16 +264,7 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
             }
             ("Unit", "BaseUnit") => {
                 if let Some((_, u)) = current_unit.as_mut() {
-                    u.kg = int_attr(&m, "kg");
-                    u.m = int_attr(&m, "m");
-                    u.s = int_attr(&m, "s");
-                    u.a = int_attr(&m, "A");
-                    u.k = int_attr(&m, "K");
-                    u.mol = int_attr(&m, "mol");
-                    u.cd = int_attr(&m, "cd");
-                    u.rad = int_attr(&m, "rad");
-                    u.factor = num(&m, "factor", "BaseUnit")?.unwrap_or(1.0);
-                    u.offset = num(&m, "offset", "BaseUnit")?.unwrap_or(0.0);
+                    crate::description::base_unit(&m, u)?;
                 }
             }
             ("TypeDefinitions", t) if t.ends_with("Type") => {
@@ -305,17 +278,8 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
             }
             ("EnumerationType", "Item") => {
                 if let Some(t) = &current_type {
-                    let item = m.get("name").cloned().unwrap_or_default();
-                    let value = m
-                        .get("value")
-                        .and_then(|v| v.trim().parse::<i64>().ok())
-                        .ok_or_else(|| {
-                            format!("Enumeration '{t}': item '{item}' has no integer value")
-                        })?;
-                    md.enumerations
-                        .entry(t.clone())
-                        .or_default()
-                        .push((item, value));
+                    let item = crate::description::enumeration_item(&m, t)?;
+                    md.enumerations.entry(t.clone()).or_default().push(item);
                 }
             }
             ("LogCategories", "Category") => {
@@ -412,7 +376,7 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                     current = Some(d);
                 }
             }
-            (_, "Dimension") if stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables" => {
+            (_, "Dimension") if in_variable => {
                 if let Some(d) = current.as_mut() {
                     let dim = if let Some(s) = m.get("start") {
                         Dim::Fixed(s.trim().parse().map_err(|_| {
@@ -437,12 +401,12 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
                     d.dims.push(dim);
                 }
             }
-            (_, "Start") if stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables" => {
+            (_, "Start") if in_variable => {
                 if let Some(d) = current.as_mut() {
                     d.starts.push(m.get("value").cloned().unwrap_or_default());
                 }
             }
-            (_, "Alias") if stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables" => {
+            (_, "Alias") if in_variable => {
                 if let Some(d) = current.as_mut() {
                     let a = m.get("name").cloned().ok_or_else(|| {
                         format!("variable '{}': <Alias> without a name", d.var.name)
