@@ -30,14 +30,15 @@ fn a_candidate_gives_the_same_bits_on_a_fresh_and_on_a_used_worker() {
     let fresh_bench = Bench::new(&study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
     let x: Vec<f64> = fresh_bench.assignment().iter().map(|a| a.1).collect();
     let fresh = fresh_bench.run(&x, &prepared).unwrap();
-    // Another bench's only worker runs other candidates first.
+    // Another bench's only worker runs 50 other candidates first (spread over the study's
+    // bounds, as an optimiser's would be, and some that fail).
     let used_bench = Bench::new(&study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
-    for k in 0..6 {
+    for k in 0..50 {
         let mut other = x.clone();
         for (i, v) in other.iter_mut().enumerate() {
-            *v *= 1.0 + 0.03 * ((k + i) % 3) as f64 - 0.02;
+            *v *= 1.0 + 0.03 * ((k + i) % 5) as f64 - 0.06;
         }
-        used_bench.run(&other, &prepared).unwrap();
+        let _ = used_bench.run(&other, &prepared);
     }
     let used = used_bench.run(&x, &prepared).unwrap();
     assert_eq!(used_bench.workers_created(), 1, "one worker ran everything");
@@ -58,4 +59,51 @@ fn a_candidate_gives_the_same_bits_on_a_fresh_and_on_a_used_worker() {
         used.comparison.get("Fz_sum").unwrap().e,
     );
     assert_eq!(ea.to_bits(), eb.to_bits());
+}
+
+/// The worker side of a distributed study: a cost computed by a worker process's
+/// `StudyEvaluator` after 50 other candidates equals a fresh one's and the local bench's.
+#[test]
+fn a_remote_workers_cost_does_not_depend_on_what_it_ran_before() {
+    use tb_optimize::{Candidate, StepCost, StudyEvaluator};
+    common::fmu_dir();
+    let path = twinbench::pack::workspace_root().join("studies/spielberg.toml");
+    let fresh = StudyEvaluator::load(&path).unwrap();
+    let x: Vec<f64> = fresh.bench().assignment().iter().map(|a| a.1).collect();
+    let candidate = Candidate {
+        step: 1,
+        values: x.clone(),
+    };
+    let first = fresh.cost(&candidate).unwrap();
+    let used = StudyEvaluator::load(&path).unwrap();
+    for k in 0..50 {
+        let values = x
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v * (1.0 + 0.01 * ((3 * k + i) % 7) as f64 - 0.03))
+            .collect();
+        let _ = used.cost(&Candidate {
+            step: k % 2,
+            values,
+        });
+    }
+    let after = used.cost(&candidate).unwrap();
+    assert_eq!(first.to_bits(), after.to_bits(), "{first} vs {after}");
+    // And the coordinator's own evaluation of the same candidate.
+    let study = fresh.study();
+    let cost = StepCost::of_step(study, 1).unwrap();
+    let prepared = tb_compare::PreparedMeasurement::from_path(
+        &study.measurement_path,
+        &cost.signals,
+        &study.file.compare,
+    )
+    .unwrap();
+    let bench = Bench::new(study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    let local = cost.of(&bench, &x, &prepared).unwrap();
+    assert_eq!(first.to_bits(), local.to_bits(), "{first} vs {local}");
+    // A worker with other files refuses, naming the file.
+    let mut other = fresh.digest().clone();
+    other.files[1].1 = "0".repeat(64);
+    let why = fresh.digest().mismatch(&other).unwrap();
+    assert!(why.contains("spielberg_lap.csv"), "{why}");
 }

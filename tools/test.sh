@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The test command (README): prepares the Python tools' virtual environment (FMPy, numpy,
-# scipy, pythonfmu) under target/venv, then runs every test of the workspace, optimised.
+# scipy, pythonfmu, dask, maturin) under target/venv, then runs every test of the workspace,
+# optimised, and the Python package's tests.
 # The tests pack the FMUs themselves (cargo run --release -- pack does the same); the
 # pythonfmu supplier EDU is built here.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if ! target/venv/bin/python -c "import fmpy, numpy, scipy, pythonfmu, libcosimpy, asammdf" 2>/dev/null; then
+if ! target/venv/bin/python -c "import fmpy, numpy, scipy, pythonfmu, libcosimpy, asammdf, distributed, pandas, pytest, maturin" 2>/dev/null; then
     echo "== creating target/venv (tools/requirements.txt)"
     python3 -m venv target/venv
     target/venv/bin/pip install --quiet --upgrade pip
@@ -30,6 +31,14 @@ cargo test --release --workspace "$@"
 cargo test --release -p twinbench --features slow-tests \
     --test optimize_spielberg --test optimize_study --test robustness_optimize \
     --test ssp_export --test cross_validation --test own_lap --test omsimulator "$@"
+# The Python package: its wheel (abi3) built from the workspace into the venv, then its
+# tests against the command line the slow tier built (studies on a Dask LocalCluster).
+rm -rf target/wheels
+(cd crates/python && ../../target/venv/bin/maturin build --release --quiet \
+    --interpreter ../../target/venv/bin/python --out ../../target/wheels)
+target/venv/bin/pip install --quiet --force-reinstall --no-deps target/wheels/twinbench-*.whl
+TWINBENCH_EXE="$PWD/target/release/twinbench" target/venv/bin/python -m pytest -q \
+    -p no:cacheprovider --basetemp="$PWD/target/pytest" crates/python/tests
 if [ -n "$(ls -A "$TMPDIR")" ]; then
     echo "error: the tests left files in the temporary directory ($TMPDIR):" >&2
     ls -lA "$TMPDIR" >&2

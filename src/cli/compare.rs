@@ -50,29 +50,46 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
         min_coverage: args.min_coverage,
         ..CompareSettings::default()
     };
-    let signals: Vec<&str> = args
-        .signals
-        .iter()
-        .map(|s| s.trim())
-        .filter(|s| !s.is_empty())
-        .collect();
-    anyhow::ensure!(!signals.is_empty(), "--signals names no signal");
-    let map = match &args.channels {
-        Some(p) => ChannelMap::read_path(p)?,
-        None => ChannelMap::default(),
-    };
-    let meas = Measurement::load(&args.measurement, &map)?;
-    let prepared = PreparedMeasurement::new(&meas, &signals, &settings)
-        .context("preparing the measurement")?;
     let sim = Table::read_any(&args.sim).context("reading the simulation")?;
-    let cmp = prepared
-        .compare(&sim, &mut Workspace::new())
-        .context("comparing")?;
+    let cmp = compare_table(
+        &sim,
+        &args.measurement,
+        args.channels.as_deref(),
+        &args.signals,
+        &settings,
+    )?;
     match print(&args, &settings, &cmp) {
         // `twinbench compare ... | head` is not an error.
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         r => Ok(r?),
     }
+}
+
+/// A simulation (as a table) against a measurement file: what `compare` prints, and what
+/// the Python package's `compare` returns.
+pub fn compare_table(
+    sim: &Table,
+    measurement: &std::path::Path,
+    channels: Option<&std::path::Path>,
+    signals: &[String],
+    settings: &CompareSettings,
+) -> anyhow::Result<Comparison> {
+    let signals: Vec<&str> = signals
+        .iter()
+        .map(|s| s.trim())
+        .filter(|s| !s.is_empty())
+        .collect();
+    anyhow::ensure!(!signals.is_empty(), "--signals names no signal");
+    let map = match channels {
+        Some(p) => ChannelMap::read_path(p)?,
+        None => ChannelMap::default(),
+    };
+    let meas = Measurement::load(measurement, &map)?;
+    let prepared =
+        PreparedMeasurement::new(&meas, &signals, settings).context("preparing the measurement")?;
+    prepared
+        .compare(sim, &mut Workspace::new())
+        .context("comparing")
 }
 
 fn print(args: &CompareArgs, settings: &CompareSettings, cmp: &Comparison) -> std::io::Result<()> {

@@ -3,7 +3,10 @@
 
 use anyhow::Context;
 use std::path::PathBuf;
-use tb_optimize::{run_study, OptimizerKind, RunOptions, Study, StudyOutcome};
+use std::sync::Arc;
+use tb_optimize::{
+    run_study, Evaluator, OptimizerKind, Progress, RunOptions, Study, StudyOutcome, StudyResult,
+};
 
 #[derive(clap::Args, Debug)]
 pub struct OptimizeArgs {
@@ -44,7 +47,20 @@ fn parse_kind(s: &str) -> Result<OptimizerKind, String> {
     }
 }
 
-pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
+/// What an optimisation made: the result, its report (unless `--no-report`), its checkpoint.
+pub struct Optimized {
+    pub result: Box<StudyResult>,
+    pub report: Option<crate::report::ReportFiles>,
+    pub checkpoint: PathBuf,
+}
+
+/// `twinbench optimize` without its printing: the Python package runs the same (with its
+/// own evaluator and progress), so both write the same files and fail with the same messages.
+pub fn optimize(
+    args: &OptimizeArgs,
+    evaluator: Option<Arc<dyn Evaluator>>,
+    progress: Option<Arc<dyn Progress>>,
+) -> anyhow::Result<Optimized> {
     let study = Study::load(&args.study)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
@@ -72,7 +88,7 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
     }
     let options = RunOptions {
         threads: args.threads,
-        progress: (!args.json).then(super::progress::Bars::shared),
+        progress,
         checkpoint: Some(checkpoint.clone()),
         resume: args.resume,
         stop_after: None,
@@ -80,6 +96,7 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
         generations: args.generations,
         verbose: !args.json,
         force: args.force,
+        evaluator,
     };
     let result = match run_study(&study, &options)? {
         StudyOutcome::Finished(r) => r,
@@ -90,6 +107,20 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
     } else {
         Some(crate::report::write_report(&study, &result, &args.out)?)
     };
+    Ok(Optimized {
+        result,
+        report,
+        checkpoint,
+    })
+}
+
+pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
+    let progress = (!args.json).then(super::progress::Bars::shared);
+    let Optimized {
+        result,
+        report,
+        checkpoint,
+    } = optimize(&args, None, progress)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&result)?);
     } else {

@@ -70,6 +70,21 @@ pub fn parse_assignment(s: &str) -> anyhow::Result<(String, toml::Value)> {
     Ok((name.trim().to_string(), v))
 }
 
+/// Sets a parameter of a run by its system name, checked against its variable (type,
+/// range); a relative path is relative to the working directory.
+pub fn set_parameter(
+    system: &Plan,
+    sim: &mut Simulation,
+    name: &str,
+    value: &toml::Value,
+) -> anyhow::Result<()> {
+    let slot = system.parameter(name)?;
+    let v = slot.value_from_toml(value, &format!("parameter \"{name}\""))?;
+    let cwd = std::env::current_dir().unwrap_or_default();
+    sim.set(&slot, slot.resolve_path(v, &cwd));
+    Ok(())
+}
+
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let cache = Arc::new(FmuCache::temporary(args.keep_extracted)?);
     if args.keep_extracted {
@@ -98,18 +113,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let system = Arc::new(Plan::load_with(&args.system, cache, &options)?);
     if let Some(out) = &args.out {
         // Before the run: a result must not replace a device, a link, a folder or an input.
+        let files = system.input_files();
         let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
-        inputs.extend(system.file.fmus.values().map(|p| p.as_path()));
-        inputs.extend(system.file.replay.iter().map(|r| r.file.as_path()));
-        inputs.extend(system.file.preload.iter().map(|p| p.as_path()));
+        inputs.extend(files.iter().map(|p| p.as_path()));
         tb_table::check_output(out, &inputs)?;
     }
     // The trace file is created on its first line, after this check.
     if let Some(trace) = &args.trace_fmi {
+        let files = system.input_files();
         let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
-        inputs.extend(system.file.fmus.values().map(|p| p.as_path()));
-        inputs.extend(system.file.replay.iter().map(|r| r.file.as_path()));
-        inputs.extend(system.file.preload.iter().map(|p| p.as_path()));
+        inputs.extend(files.iter().map(|p| p.as_path()));
         inputs.extend(args.out.as_deref());
         tb_table::check_output(trace, &inputs).context("--trace-fmi")?;
     }
@@ -127,15 +140,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut sim = Simulation::new(system.clone())?;
     for s in &args.set {
         let (name, value) = parse_assignment(s)?;
-        // A relative path on the command line is relative to the working directory.
-        let slot = system
-            .parameter(&name)
-            .with_context(|| format!("--set {s}"))?;
-        let v = slot
-            .value_from_toml(&value, &format!("parameter \"{name}\""))
-            .with_context(|| format!("--set {s}"))?;
-        let cwd = std::env::current_dir().unwrap_or_default();
-        sim.set(&slot, slot.resolve_path(v, &cwd));
+        set_parameter(&system, &mut sim, &name, &value).with_context(|| format!("--set {s}"))?;
     }
     // A run that completed keeps its results even when an instance then fails to end.
     let trace = options.trace.as_ref().map(|t| t.sink.clone());

@@ -7,6 +7,8 @@
 //! - [`ga`]: real-coded GA (tournament, SBX, polynomial mutation, elitism); [`cmaes`]: CMA-ES.
 //! - [`bench`]: candidates on the co-simulated bench: the system compiled once into a plan,
 //!   one reused `Simulation` of it per worker, every study parameter resolved to a slot.
+//! - [`remote`]: candidates evaluated in other processes or on other machines (the
+//!   [`Evaluator`] a distributed study uses, the [`StudyEvaluator`] a worker holds).
 //! - [`rng`]: the seeded generator every random draw comes from; [`exact`]: bit-exact
 //!   floats in checkpoints.
 //! - [`identify`]: identifiability check (finite-difference Jacobian, near-null directions).
@@ -24,6 +26,7 @@ pub mod exact;
 pub mod ga;
 pub mod identify;
 pub mod optimizer;
+pub mod remote;
 pub mod rng;
 pub mod run;
 pub mod study;
@@ -32,6 +35,7 @@ pub use cmaes::{Cmaes, CmaesSettings};
 pub use ga::{Ga, GaSettings};
 pub use identify::Identifiability;
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
+pub use remote::{Candidate, Evaluator, InputDigest, StepCost, StudyEvaluator};
 pub use rng::Rng;
 pub use run::{run_study, Progress, RunOptions, StepResult, StudyOutcome, StudyResult};
 pub use study::{OptimizerKind, Study, StudyFile};
@@ -60,4 +64,8 @@ pub enum OptimizeError {
     Start { step: String, reason: String },
     #[error(transparent)]
     Io(#[from] std::io::Error),
+    /// The evaluator of a distributed study failed (not a candidate: the study stops, its
+    /// checkpoint holds the last whole generation).
+    #[error("evaluating candidates: {0}")]
+    Evaluator(String),
 }

@@ -41,6 +41,26 @@ pub trait Problem: Sync {
     /// `(lower, upper)` per parameter, in the problem's own units.
     fn bounds(&self) -> Vec<(f64, f64)>;
     fn evaluate(&self, x: &[f64]) -> Result<f64, String>;
+    /// A generation's candidates, results in the given order: by default on `pool`'s
+    /// threads. A problem evaluated elsewhere (other processes, a cluster) overrides it;
+    /// `Err` is a failure of that elsewhere, not of a candidate, and ends the run.
+    fn evaluate_many(
+        &self,
+        pool: &rayon::ThreadPool,
+        xs: &[Vec<f64>],
+    ) -> Result<Vec<Result<f64, String>>, OptimizeError> {
+        Ok(evaluate_all(pool, self, xs))
+    }
+}
+
+/// A candidate's result as the generation loop takes it: a cost that is not finite is a
+/// failure.
+pub fn finite(r: Result<f64, String>) -> Result<f64, String> {
+    match r {
+        Ok(c) if c.is_finite() => Ok(c),
+        Ok(c) => Err(format!("cost is not finite ({c})")),
+        Err(e) => Err(e),
+    }
 }
 
 /// From the unit box to the bounds.
@@ -118,11 +138,7 @@ pub fn evaluate_all<P: Problem + ?Sized>(
     pool.install(|| {
         xs.par_iter()
             .with_max_len(1)
-            .map(|x| match problem.evaluate(x) {
-                Ok(c) if c.is_finite() => Ok(c),
-                Ok(c) => Err(format!("cost is not finite ({c})")),
-                Err(e) => Err(e),
-            })
+            .map(|x| finite(problem.evaluate(x)))
             .collect()
     })
 }
@@ -149,7 +165,7 @@ pub fn minimize<P: Problem + ?Sized>(
     while optimizer.generation() < settings.max_generations {
         let unit = optimizer.ask();
         let xs: Vec<Vec<f64>> = unit.iter().map(|u| to_bounds(u, &bounds)).collect();
-        let results = evaluate_all(&pool, problem, &xs);
+        let results = problem.evaluate_many(&pool, &xs)?;
         let mut failures = 0;
         let costs: Vec<f64> = results
             .into_iter()

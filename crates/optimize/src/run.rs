@@ -8,8 +8,10 @@ use super::exact;
 use super::ga::Ga;
 use super::identify::{analyse, Identifiability};
 use super::optimizer::{
-    minimize, thread_pool, to_unit, GenerationRecord, Optimizer, Problem, RunSettings, RunState,
+    evaluate_all, finite, minimize, thread_pool, to_unit, GenerationRecord, Optimizer, Problem,
+    RunSettings, RunState,
 };
+use super::remote::{Candidate, Evaluator, StepCost};
 use super::study::{OptimizerKind, StepConfig, Study};
 use super::OptimizeError;
 use rayon::prelude::*;
@@ -54,6 +56,9 @@ pub struct RunOptions {
     pub verbose: bool,
     /// Optimise even when the first run says measurement and twin do not belong together.
     pub force: bool,
+    /// Evaluate the generations' candidates here instead of on `threads` threads (the
+    /// start, identifiability and result runs stay local).
+    pub evaluator: Option<Arc<dyn Evaluator>>,
 }
 
 impl std::fmt::Debug for RunOptions {
@@ -68,6 +73,7 @@ impl std::fmt::Debug for RunOptions {
             .field("generations", &self.generations)
             .field("verbose", &self.verbose)
             .field("force", &self.force)
+            .field("evaluator", &self.evaluator.is_some())
             .finish()
     }
 }
@@ -267,14 +273,16 @@ pub fn cost_of(cmp: &Comparison, signals: &[String], weights: &[f64], bias_weigh
 struct StepProblem<'a> {
     bench: &'a Bench,
     prepared: &'a PreparedMeasurement,
+    /// The step (0-based) and its cost.
+    step: usize,
+    cost: StepCost,
     /// Every parameter of the study with its current value.
     assignment: Vec<(String, f64)>,
     /// Indices into `assignment` of the step's parameters.
     index: Vec<usize>,
     bounds: Vec<(f64, f64)>,
-    signals: Vec<String>,
-    weights: Vec<f64>,
-    bias_weight: f64,
+    /// Where generations are evaluated when not on this process's threads.
+    remote: Option<&'a dyn Evaluator>,
 }
 
 impl StepProblem<'_> {
@@ -298,13 +306,35 @@ impl Problem for StepProblem<'_> {
     }
 
     fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
-        let o = self.outcome(x)?;
-        Ok(cost_of(
-            &o.comparison,
-            &self.signals,
-            &self.weights,
-            self.bias_weight,
-        ))
+        self.cost.of(self.bench, &self.params(x), self.prepared)
+    }
+
+    fn evaluate_many(
+        &self,
+        pool: &rayon::ThreadPool,
+        xs: &[Vec<f64>],
+    ) -> Result<Vec<Result<f64, String>>, OptimizeError> {
+        let Some(remote) = self.remote else {
+            return Ok(evaluate_all(pool, self, xs));
+        };
+        let candidates: Vec<Candidate> = xs
+            .iter()
+            .map(|x| Candidate {
+                step: self.step,
+                values: self.params(x),
+            })
+            .collect();
+        let results = remote
+            .evaluate(&candidates)
+            .map_err(OptimizeError::Evaluator)?;
+        if results.len() != xs.len() {
+            return Err(OptimizeError::Evaluator(format!(
+                "{} results for {} candidates",
+                results.len(),
+                xs.len()
+            )));
+        }
+        Ok(results.into_iter().map(finite).collect())
     }
 }
 
@@ -587,16 +617,17 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         }
         let prepared = PreparedMeasurement::new(&measurement, &step.signals, &study.file.compare)?;
         let bounds: Vec<(f64, f64)> = step.parameters.iter().map(|p| (p.min, p.max)).collect();
-        let bias_weight = step.bias_weight.unwrap_or(study.file.bias_weight);
+        let cost = StepCost::of_step(study, k).expect("a step of the study");
+        let bias_weight = cost.bias_weight;
         let mut problem = StepProblem {
             bench: &bench,
             prepared: &prepared,
+            step: k,
+            cost,
             assignment: assignment.clone(),
             index: index.clone(),
             bounds: bounds.clone(),
-            signals: step.signals.clone(),
-            weights: step.weights(),
-            bias_weight,
+            remote: options.evaluator.as_deref(),
         };
         let seed = step_seed(study.file.seed, k);
         let generations = options

@@ -165,3 +165,13 @@ impl FolderLock {
         Ok(FolderLock { _file: file, path })
     }
 }
+
+impl Drop for FolderLock {
+    fn drop(&mut self) {
+        // Unlocked explicitly, not only by closing: a process forked while the lock was
+        // held (a process pool evaluating candidates) shares the open file description,
+        // and closing our descriptor alone would leave the folder locked while it lives.
+        // SAFETY: flock on an open descriptor of ours.
+        unsafe { libc::flock(self._file.as_raw_fd(), libc::LOCK_UN) };
+    }
+}

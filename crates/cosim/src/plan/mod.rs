@@ -230,12 +230,17 @@ impl Plan {
         cache: Arc<FmuCache>,
         options: &LoadOptions,
     ) -> Result<Plan, SystemError> {
-        let file = if crate::ssp_import::is_ssp(path) {
-            crate::ssp_import::load(path, &cache)?
-        } else {
-            SystemFile::load(path)?
-        };
+        let file = Self::read_system(path, &cache)?;
         Self::compile(file, path, cache, options)
+    }
+
+    /// A system file (TOML) or SSP package read, not yet compiled (to change it first).
+    pub fn read_system(path: &Path, cache: &FmuCache) -> Result<SystemFile, SystemError> {
+        if crate::ssp_import::is_ssp(path) {
+            Ok(crate::ssp_import::load(path, cache)?)
+        } else {
+            SystemFile::load(path)
+        }
     }
 
     /// [`Plan::compile`] with the default backends.
@@ -901,6 +906,24 @@ impl Plan {
         } else {
             &self.replays[k - self.instances.len()].name
         }
+    }
+
+    /// Every file a run of this system reads: the system file, the FMUs, the replayed
+    /// measurements, the preloaded libraries and the files named by `*_file` parameters.
+    /// (A result must replace none of them; a remote worker checks it has the same ones.)
+    pub fn input_files(&self) -> Vec<PathBuf> {
+        let mut files = vec![self.path.clone()];
+        files.extend(self.file.fmus.values().cloned());
+        files.extend(self.file.replay.iter().map(|r| r.file.clone()));
+        files.extend(self.file.preload.iter().cloned());
+        for (slot, value) in &self.parameters {
+            if let ParamValue::String(v) = value {
+                if slot.is_path && !v.is_empty() && !v.starts_with("file:") {
+                    files.push(PathBuf::from(v));
+                }
+            }
+        }
+        files
     }
 
     /// Resolve a parameter or input by its system name (`instance.variable`, through the

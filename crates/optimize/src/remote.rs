@@ -1,0 +1,196 @@
+//! Candidates evaluated somewhere else: in other processes, on other machines (a Dask
+//! cluster through the Python package, `docs/distributed.md`).
+//!
+//! The study driver hands a generation to an [`Evaluator`] as [`Candidate`]s: the step and
+//! every parameter's value, nothing else. A worker process holds one [`StudyEvaluator`] per
+//! study, loaded once and kept between candidates; it computes the same cost, to the bit,
+//! as the local evaluation (one function, [`StepCost::of`], for both). Whether the worker
+//! has run other candidates before does not matter: a candidate sets every parameter and
+//! every FMU instance is reset (`tests/determinism.rs`).
+//!
+//! A worker can only compute the right cost from the right files, so a task carries the
+//! [`InputDigest`] of the study's files and a worker that sees other contents refuses,
+//! naming the file.
+
+use super::bench::Bench;
+use super::run::cost_of;
+use super::study::Study;
+use super::OptimizeError;
+use serde::{Deserialize, Serialize};
+use sha2::Digest;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use tb_compare::{Measurement, PreparedMeasurement};
+use tb_fmi::FmuCache;
+
+/// One candidate of a study step: the step (0-based) and the value of every parameter of
+/// the study, in [`Bench::assignment`]'s order.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    pub step: usize,
+    pub values: Vec<f64>,
+}
+
+/// Evaluates a generation's candidates (a process pool, a cluster). The inner results are
+/// the candidates' costs or the reasons they failed (penalised, the study goes on), in the
+/// order given; the outer `Err` is a failure of the evaluator itself (a lost cluster, an
+/// interruption), which ends the study with the checkpoint of the last whole generation.
+pub trait Evaluator: Send + Sync {
+    fn evaluate(&self, candidates: &[Candidate]) -> Result<Vec<Result<f64, String>>, String>;
+}
+
+/// The cost of a step's comparison: its signals, their weights and the bias weight.
+#[derive(Clone, Debug)]
+pub struct StepCost {
+    pub signals: Vec<String>,
+    pub weights: Vec<f64>,
+    pub bias_weight: f64,
+}
+
+impl StepCost {
+    pub fn of_step(study: &Study, step: usize) -> Option<StepCost> {
+        let s = study.file.steps.get(step)?;
+        Some(StepCost {
+            signals: s.signals.clone(),
+            weights: s.weights(),
+            bias_weight: s.bias_weight.unwrap_or(study.file.bias_weight),
+        })
+    }
+
+    /// The cost of one run on the bench (the one function local and remote evaluation share).
+    pub fn of(
+        &self,
+        bench: &Bench,
+        values: &[f64],
+        prepared: &PreparedMeasurement,
+    ) -> Result<f64, String> {
+        let o = bench.run(values, prepared)?;
+        Ok(cost_of(
+            &o.comparison,
+            &self.signals,
+            &self.weights,
+            self.bias_weight,
+        ))
+    }
+}
+
+/// SHA-256 of each file a study reads, in a fixed order: the study, its measurement and
+/// every input of its system ([`tb_cosim::Plan::input_files`]).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InputDigest {
+    pub files: Vec<(PathBuf, String)>,
+}
+
+impl InputDigest {
+    pub fn of(study: &Study, bench: &Bench) -> Result<InputDigest, OptimizeError> {
+        let mut paths = vec![study.path.clone(), study.measurement_path.clone()];
+        paths.extend(bench.plan().input_files());
+        let files = paths
+            .into_iter()
+            .map(|p| {
+                let bytes = std::fs::read(&p).map_err(|e| OptimizeError::File {
+                    path: p.clone(),
+                    message: format!("cannot read: {e}"),
+                })?;
+                Ok((p, format!("{:x}", sha2::Sha256::digest(&bytes))))
+            })
+            .collect::<Result<_, OptimizeError>>()?;
+        Ok(InputDigest { files })
+    }
+
+    /// Why `theirs` (the coordinator's) is not this worker's, naming the first file that
+    /// differs; `None` when they agree.
+    pub fn mismatch(&self, theirs: &InputDigest) -> Option<String> {
+        if self.files.len() != theirs.files.len() {
+            return Some(format!(
+                "the study reads {} files here and {} on the coordinator (the system file differs)",
+                self.files.len(),
+                theirs.files.len()
+            ));
+        }
+        self.files
+            .iter()
+            .zip(&theirs.files)
+            .find(|(a, b)| a.1 != b.1)
+            .map(|(mine, _)| {
+                format!(
+                    "{} differs from the coordinator's copy (its SHA-256 here is {}): every worker needs the same files on a shared path",
+                    mine.0.display(),
+                    mine.1
+                )
+            })
+    }
+}
+
+/// A study ready to evaluate candidates in a worker process: the bench (its simulations
+/// kept between candidates), the measurement prepared once per step.
+pub struct StudyEvaluator {
+    study: Study,
+    bench: Bench,
+    measurement: Measurement,
+    digest: InputDigest,
+    prepared: Mutex<HashMap<usize, Arc<PreparedMeasurement>>>,
+}
+
+impl StudyEvaluator {
+    pub fn load(path: &Path) -> Result<StudyEvaluator, OptimizeError> {
+        let study = Study::load(path)?;
+        let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
+        let bench = Bench::new(&study, cache)?;
+        let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
+        let digest = InputDigest::of(&study, &bench)?;
+        Ok(StudyEvaluator {
+            study,
+            bench,
+            measurement,
+            digest,
+            prepared: Mutex::new(HashMap::new()),
+        })
+    }
+
+    pub fn study(&self) -> &Study {
+        &self.study
+    }
+
+    pub fn bench(&self) -> &Bench {
+        &self.bench
+    }
+
+    pub fn digest(&self) -> &InputDigest {
+        &self.digest
+    }
+
+    /// The candidate's cost, or why its run failed. An error of the worker itself (a step
+    /// the study does not have, a measurement that cannot be prepared) is an `Err` too: the
+    /// coordinator checked both before sending, so it cannot happen with the same files.
+    pub fn cost(&self, c: &Candidate) -> Result<f64, String> {
+        let cost = StepCost::of_step(&self.study, c.step).ok_or_else(|| {
+            format!(
+                "{} has {} steps, the candidate is for step {}",
+                self.study.path.display(),
+                self.study.file.steps.len(),
+                c.step + 1
+            )
+        })?;
+        let prepared = self.prepared(c.step, &cost.signals)?;
+        cost.of(&self.bench, &c.values, &prepared)
+    }
+
+    fn prepared(
+        &self,
+        step: usize,
+        signals: &[String],
+    ) -> Result<Arc<PreparedMeasurement>, String> {
+        let mut map = self.prepared.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(p) = map.get(&step) {
+            return Ok(p.clone());
+        }
+        let p = Arc::new(
+            PreparedMeasurement::new(&self.measurement, signals, &self.study.file.compare)
+                .map_err(|e| e.to_string())?,
+        );
+        map.insert(step, p.clone());
+        Ok(p)
+    }
+}

@@ -1,0 +1,461 @@
+"""twinbench: the digital twin of a powertrain test bench, from Python.
+
+A thin layer over the same Rust libraries as the ``twinbench`` command line:
+
+- :func:`run` runs a system file (TOML or SSP) and returns a :class:`Result` whose
+  ``signals`` map ``instance.variable`` names to numpy arrays;
+- :func:`compare` compares a result with a vehicle measurement on a distance basis
+  (the paper's m, R², e, and the bias);
+- :class:`Study` runs an optimisation study, on this machine's threads or on any
+  ``concurrent.futures.Executor`` (a Dask cluster's ``Client.get_executor()``), and
+  offers the ask/tell steps for an optimiser of your own.
+
+The simulations release the GIL. Every error is a :class:`TwinbenchError` with the
+command line's message.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _native
+from ._native import TwinbenchError
+
+__all__ = [
+    "run",
+    "compare",
+    "Result",
+    "Comparison",
+    "Metrics",
+    "Study",
+    "StudyStep",
+    "Optimizer",
+    "TwinbenchError",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+@dataclass
+class Result:
+    """A simulation's recording and summary.
+
+    Attributes:
+        signals: ``instance.variable`` (and ``time``) → numpy float64 array, in the
+            recorded order, the exact values the command line writes with ``--out``.
+        units: the unit of each signal (``""`` when it has none).
+        text: the recorded String signals, name → list of str.
+        summary: steps, simulated_time [s], wall_time [s], lap_time [s] (or None),
+            stopped_by, reported (name → value at the end), order (stepping order),
+            warnings.
+    """
+
+    signals: Dict[str, np.ndarray]
+    units: Dict[str, str]
+    summary: Dict[str, Any]
+    text: Dict[str, List[str]] = field(default_factory=dict)
+
+    def to_pandas(self):
+        """The signals as a pandas DataFrame indexed by ``time`` (needs pandas)."""
+        import pandas as pd
+
+        frame = pd.DataFrame({k: v for k, v in self.signals.items() if k != "time"})
+        if "time" in self.signals:
+            frame.index = pd.Index(self.signals["time"], name="time")
+        for name, values in self.text.items():
+            frame[name] = values
+        return frame
+
+    def __repr__(self) -> str:
+        s = self.summary
+        return (
+            f"Result({len(self.signals)} signals, {len(next(iter(self.signals.values()), []))} rows, "
+            f"simulated {s.get('simulated_time', 0):.3f} s, stopped by {s.get('stopped_by')!r})"
+        )
+
+
+def run(
+    system: PathLike,
+    parameters: Optional[Mapping[str, Union[float, int, bool, str]]] = None,
+    stop: Optional[Union[float, str]] = None,
+) -> Result:
+    """Run a system file and return its recording.
+
+    Args:
+        system: the system description (TOML) or an SSP 1.0 package (``.ssp``).
+        parameters: ``{"instance.variable": value}``, as ``twinbench run --set`` (checked
+            against the variable's type and range before the run).
+        stop: a stop time in s, or a condition such as ``"vehicle.lap >= 1"``; None keeps
+            the system file's.
+
+    Returns:
+        A :class:`Result`: ``result.signals["vehicle.v"]`` is a numpy array.
+
+    Raises:
+        TwinbenchError: a bad system file, a wrong name or value, a failed run (the
+            message is the command line's).
+    """
+    items = list((parameters or {}).items())
+    raw = _native.run(os.fspath(system), items, stop)
+    names = raw["names"]
+    units = raw["units"] or [""] * len(names)
+    signals = {
+        name: np.frombuffer(col, dtype="<f8").copy() for name, col in zip(names, raw["columns"])
+    }
+    text = dict(raw["text"])
+    for name in text:
+        signals.pop(name, None)
+    summary = dict(raw["summary"])
+    summary["reported"] = dict(summary["reported"])
+    return Result(signals=signals, units=dict(zip(names, units)), summary=summary, text=text)
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """One signal's agreement on the distance grid (paper §4.2).
+
+    ``m`` slope and ``intercept`` of simulated on measured, ``r_squared`` R², ``e`` Eq. 16
+    ((1 − R²)/2 + |m − 1|/2), ``bias`` mean(sim − meas)/mean(meas), ``rms`` in the
+    signal's unit, ``points`` compared.
+    """
+
+    m: float
+    intercept: float
+    r_squared: float
+    e: float
+    bias: float
+    rms: float
+    points: int
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """A comparison: ``signals`` name → :class:`Metrics`, the distance range [m] and the
+    coverage (fraction of the measured distance the simulation covers)."""
+
+    signals: Dict[str, Metrics]
+    distance_range: Tuple[float, float]
+    coverage: float
+
+    def __getitem__(self, signal: str) -> Metrics:
+        return self.signals[signal]
+
+
+def compare(
+    result: Union[Result, Mapping[str, Sequence[float]]],
+    measurement: PathLike,
+    signals: Union[str, Sequence[str]] = ("Fz_sum",),
+    cutoff_hz: float = 2.0,
+    filter_order: int = 2,
+    distance_step_m: float = 1.0,
+    min_coverage: float = 0.9,
+    channels: Optional[PathLike] = None,
+) -> Comparison:
+    """Compare a simulation with a vehicle measurement on a distance basis.
+
+    As ``twinbench compare``: both are low-pass filtered alike (zero-phase Butterworth)
+    and resampled on a distance grid; per signal the regression slope m, R², e and the
+    bias.
+
+    Args:
+        result: a :class:`Result`, or a mapping of column name → values (``time`` and a
+            distance or speed column, and the signals).
+        measurement: the measurement file, CSV or MDF 4.
+        signals: the signals to compare (a name or a list; derived: Fz_sum, Fz_front,
+            Fz_rear).
+        cutoff_hz: the filter's cutoff [Hz].
+        filter_order: Butterworth order of one pass.
+        distance_step_m: the distance grid's step [m].
+        min_coverage: least fraction of the measured distance the simulation must cover.
+        channels: a TOML file mapping signals to the measurement's own channel names.
+
+    Raises:
+        TwinbenchError: a missing signal, a bad file, too little coverage.
+    """
+    columns = result.signals if isinstance(result, Result) else result
+    names = list(columns.keys())
+    data = [np.ascontiguousarray(columns[n], dtype="<f8").tobytes() for n in names]
+    if isinstance(signals, str):
+        signals = [s for s in signals.split(",")]
+    import json
+
+    raw = json.loads(
+        _native.compare(
+            names,
+            data,
+            os.fspath(measurement),
+            list(signals),
+            float(cutoff_hz),
+            int(filter_order),
+            float(distance_step_m),
+            float(min_coverage),
+            None if channels is None else os.fspath(channels),
+        )
+    )
+    metrics = {
+        s["signal"]: Metrics(
+            m=s["slope"],
+            intercept=s["intercept"],
+            r_squared=s["r_squared"],
+            e=s["e"],
+            bias=s["bias"],
+            rms=s["rms"],
+            points=s["points"],
+        )
+        for s in raw["signals"]
+    }
+    return Comparison(
+        signals=metrics,
+        distance_range=tuple(raw["distance_range_m"]),
+        coverage=raw["coverage"],
+    )
+
+
+class Optimizer:
+    """One of twinbench's optimisers (``"ga"`` or ``"cmaes"``), ask/tell, in the
+    parameters' own units.
+
+    >>> opt = Optimizer("cmaes", bounds=[(0.5, 1.5), (0.5, 1.5)], seed=1)
+    >>> xs = opt.ask()                     # a generation, each within the bounds
+    >>> opt.tell([f(x) for x in xs])       # their costs, in the same order
+
+    ``best()`` is the best candidate so far and its cost; ``save()``/``restore()`` carry
+    the whole state (bit-exact) for a checkpoint.
+    """
+
+    def __init__(
+        self,
+        kind: str,
+        bounds: Sequence[Tuple[float, float]],
+        seed: int = 0,
+        start: Optional[Sequence[float]] = None,
+    ):
+        self._inner = _native.OptimizerPy(
+            kind, [tuple(map(float, b)) for b in bounds], int(seed), None if start is None else list(start)
+        )
+
+    def ask(self) -> List[List[float]]:
+        """The next generation's candidates."""
+        return self._inner.ask()
+
+    def tell(self, costs: Sequence[float]) -> None:
+        """The costs of the last ``ask``'s candidates, in its order (lower is better)."""
+        self._inner.tell([float(c) for c in costs])
+
+    def best(self) -> Optional[Tuple[List[float], float]]:
+        """The best candidate so far and its cost (None before the first ``tell``)."""
+        return self._inner.best()
+
+    @property
+    def generation(self) -> int:
+        """Completed generations."""
+        return self._inner.generation
+
+    def save(self) -> str:
+        """The whole state as JSON."""
+        return self._inner.save()
+
+    def restore(self, state: str) -> None:
+        """Continue from ``save()``'s JSON."""
+        self._inner.restore(state)
+
+
+@dataclass(frozen=True)
+class StudyStep:
+    """A step of a study: its parameters, their bounds and start values (None: the
+    value before the step)."""
+
+    index: int
+    name: str
+    parameters: List[str]
+    bounds: List[Tuple[float, float]]
+    start: List[Optional[float]]
+
+
+class Study:
+    """An optimisation study file (``twinbench optimize``'s input).
+
+    >>> study = Study("studies/spielberg.toml")
+    >>> result = study.optimize()                            # this machine's threads
+    >>> result = study.optimize(executor=client.get_executor())   # a Dask cluster
+
+    For an optimiser of your own, :meth:`evaluate` gives the costs of candidates of a
+    step (on threads or an executor), and :class:`Optimizer` twinbench's own ask/tell.
+    """
+
+    def __init__(self, path: PathLike):
+        self.path = Path(path).absolute()
+        (
+            self.name,
+            self.system,
+            self.measurement,
+            self.fingerprint,
+            self.penalty,
+            self.seed,
+        ) = _native.load_study(os.fspath(self.path))
+        self._evaluator = None
+
+    def __repr__(self) -> str:
+        return f"Study({str(self.path)!r}, name={self.name!r})"
+
+    def _loaded(self):
+        # The bench (FMUs unpacked, measurement read) only when candidates are evaluated.
+        if self._evaluator is None:
+            self._evaluator = _native.StudyEvaluatorPy(os.fspath(self.path))
+        return self._evaluator
+
+    @property
+    def steps(self) -> List[StudyStep]:
+        """The study's steps, in order."""
+        return [
+            StudyStep(k, name, list(params), [tuple(b) for b in bounds], list(start))
+            for k, (name, params, bounds, start) in enumerate(self._loaded().steps())
+        ]
+
+    def assignment(self) -> Dict[str, float]:
+        """Every parameter the study touches, with its value before the study."""
+        return dict(self._loaded().assignment())
+
+    def optimize(
+        self,
+        executor: Any = None,
+        threads: Optional[int] = None,
+        resume: bool = False,
+        generations: Optional[int] = None,
+        optimizer: Optional[str] = None,
+        out: Optional[PathLike] = None,
+        force: bool = False,
+        report: bool = True,
+        progress: Optional[Callable[[Dict[str, Any]], None]] = None,
+    ) -> Dict[str, Any]:
+        """Run the study, as ``twinbench optimize --json``, and return its result.
+
+        Writes the same files (checkpoint after every generation, ``result.json``,
+        ``table1.json``, the report) into ``out``.
+
+        Args:
+            executor: a ``concurrent.futures.Executor`` for the generations' candidates,
+                one task per candidate (Dask: ``Client.get_executor()``). Every worker
+                process needs twinbench installed and the study's files at the same
+                paths; it loads the study once and keeps it. None: this process's
+                threads.
+            threads: threads for the local runs (all of them without an executor: the
+                generations; with one: the start, identifiability and result runs).
+                None: all cores.
+            resume: continue from the checkpoint in ``out`` (same result as an
+                uninterrupted run, wherever the candidates ran).
+            generations: override every step's generations.
+            optimizer: override the study's optimiser, ``"ga"`` or ``"cmaes"``.
+            out: output folder (default ``target/optimize``, as the command line).
+            force: optimise even when the measurement and the twin do not belong together.
+            report: write Tab. 1 and the plots.
+            progress: called after every generation with a dict (generation,
+                evaluations, best_cost, best_x, failures).
+
+        Returns:
+            The result as a dict (per step: parameters before/after, e before/after,
+            history, identifiability).
+
+        Raises:
+            TwinbenchError: a bad study, system or measurement; a checkpoint of other
+                options; files that differ on a worker.
+        """
+        import json
+
+        function = digest = None
+        if executor is not None:
+            from . import _worker
+
+            function = _worker.cost
+            digest = self._loaded().digest
+        text = _native.optimize(
+            os.fspath(self.path),
+            os.fspath(out if out is not None else "target/optimize"),
+            int(threads or 0),
+            bool(resume),
+            generations,
+            optimizer,
+            bool(force),
+            not report,
+            executor,
+            function,
+            digest,
+            progress,
+        )
+        return json.loads(text)
+
+    def evaluate(
+        self,
+        step: int,
+        candidates: Sequence[Sequence[float]],
+        values: Optional[Mapping[str, float]] = None,
+        executor: Any = None,
+        threads: Optional[int] = None,
+        penalty: Optional[float] = None,
+    ) -> List[float]:
+        """The costs of candidates of one step, for an optimiser of your own.
+
+        Args:
+            step: the step (0-based) whose signals and weights make the cost.
+            candidates: values of the step's parameters (``steps[step].parameters``
+                order), one list per candidate.
+            values: the other parameters' values (default: before the study; pass the
+                earlier steps' results here).
+            executor: a ``concurrent.futures.Executor`` (one task per candidate); None:
+                ``threads`` threads here.
+            penalty: the cost of a candidate whose run fails (default: the study's);
+                its reason is given as a warning.
+
+        Returns:
+            One cost per candidate, in order, the same bits wherever it ran.
+        """
+        loaded = self._loaded()
+        names = [n for n, _ in loaded.assignment()]
+        base = dict(loaded.assignment())
+        if values:
+            unknown = [k for k in values if k not in base]
+            if unknown:
+                raise TwinbenchError(
+                    f"{self.path}: values for parameters the study does not touch: {', '.join(unknown)} (it touches {', '.join(names)})"
+                )
+            base.update({k: float(v) for k, v in values.items()})
+        steps = self.steps
+        if not 0 <= step < len(steps):
+            raise TwinbenchError(f"{self.path}: step {step} (the study has {len(steps)} steps, 0-based)")
+        params = steps[step].parameters
+        full = []
+        for k, x in enumerate(candidates):
+            x = [float(v) for v in x]
+            if len(x) != len(params):
+                raise TwinbenchError(
+                    f"candidate {k} has {len(x)} values for the {len(params)} parameters of step '{steps[step].name}' ({', '.join(params)})"
+                )
+            v = dict(base)
+            v.update(zip(params, x))
+            full.append([v[n] for n in names])
+        if executor is None:
+            results = loaded.costs(step, full, int(threads or 0))
+        else:
+            from . import _worker
+
+            futures = [
+                executor.submit(_worker.cost, os.fspath(self.path), loaded.digest, step, v)
+                for v in full
+            ]
+            results = [f.result() for f in futures]
+        penalty = self.penalty if penalty is None else float(penalty)
+        costs = []
+        for k, r in enumerate(results):
+            if isinstance(r, str):
+                warnings.warn(f"candidate {k} failed (cost {penalty}): {r}", stacklevel=2)
+                costs.append(penalty)
+            else:
+                costs.append(float(r))
+        return costs

@@ -1,0 +1,45 @@
+"""What runs on a worker process of a distributed study (a Dask worker, a process pool).
+
+Each task is one candidate: ``cost(study_path, digest, step, values)``. The first task
+of a study loads it (FMUs unpacked, measurement read) and the process keeps it for every
+later task, so a worker pays the start-up once. The coordinator's ``digest`` (SHA-256 of
+every file the study reads) must match this worker's files: a worker that sees other
+files refuses, naming the file, rather than computing a cost of another study.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Dict, List, Union
+
+from . import _native
+from ._native import TwinbenchError
+
+_lock = threading.Lock()
+_loaded: Dict[str, "_native.StudyEvaluatorPy"] = {}
+
+
+def _evaluator(study: str, digest: str):
+    with _lock:
+        ev = _loaded.get(study)
+        if ev is not None and ev.digest == digest:
+            return ev
+        # New to this process, or its files changed since: (re)load from disk.
+        ev = _native.StudyEvaluatorPy(study)
+        _loaded[study] = ev
+    if ev.digest != digest:
+        why = ev.mismatch(digest) or "the study's files differ from the coordinator's"
+        raise TwinbenchError(f"{study} on this worker: {why}")
+    return ev
+
+
+def cost(study: str, digest: str, step: int, values: List[float]) -> Union[float, str]:
+    """The candidate's cost (a float), or the reason its run failed (a str: the study
+    penalises it and goes on). Raises when the worker cannot evaluate at all."""
+    return _evaluator(study, digest).cost(step, values)
+
+
+def loaded() -> int:
+    """Studies this process holds (for tests and diagnostics)."""
+    with _lock:
+        return len(_loaded)

@@ -1,0 +1,600 @@
+//! `twinbench._native`: the Rust side of the Python package (`python/twinbench`). Each
+//! function is a thin call into the same library code the command line runs, with the GIL
+//! released while it simulates; errors are `twinbench.TwinbenchError` with the command
+//! line's message. The Python modules add the types, docstrings and numpy/pandas views.
+
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyBytes, PyDict, PyList};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use tb_cosim::config::StopConfig;
+use tb_cosim::{LoadOptions, Plan, Simulation};
+use tb_fmi::FmuCache;
+use tb_optimize::optimizer::{to_bounds, to_unit};
+use tb_optimize::{
+    Candidate, Cmaes, Evaluator, Ga, GenerationRecord, OptimizerKind, Progress, Study,
+    StudyEvaluator,
+};
+
+create_exception!(
+    _native,
+    TwinbenchError,
+    PyException,
+    "An error of twinbench: a bad file, a wrong name, a failed run (the message is the command line's)."
+);
+
+/// An error as the command line prints it (the whole chain, `error: ` left off).
+fn error(e: impl Into<anyhow::Error>) -> PyErr {
+    TwinbenchError::new_err(format!("{:#}", e.into()))
+}
+
+/// A Python value as the TOML value `--set` would give the same text.
+fn toml_value(v: &Bound<'_, PyAny>, name: &str) -> PyResult<toml::Value> {
+    if v.is_instance_of::<PyBool>() {
+        return Ok(toml::Value::Boolean(v.extract()?));
+    }
+    if let Ok(i) = v.extract::<i64>() {
+        return Ok(toml::Value::Integer(i));
+    }
+    if let Ok(x) = v.extract::<f64>() {
+        return Ok(toml::Value::Float(x));
+    }
+    if let Ok(s) = v.extract::<String>() {
+        return Ok(toml::Value::String(s));
+    }
+    Err(TwinbenchError::new_err(format!(
+        "parameter \"{name}\": expected a number, a boolean or a string, got {}",
+        v.get_type().name()?
+    )))
+}
+
+/// Runs a system; returns a dict with `names`, `units`, `columns` (little-endian float64
+/// bytes per column), `text` (the String columns) and `summary`.
+#[pyfunction]
+#[pyo3(signature = (system, parameters=None, stop=None))]
+fn run(
+    py: Python<'_>,
+    system: PathBuf,
+    parameters: Option<Vec<(String, Bound<'_, PyAny>)>>,
+    stop: Option<Bound<'_, PyAny>>,
+) -> PyResult<Py<PyAny>> {
+    let parameters: Vec<(String, toml::Value)> = parameters
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(n, v)| toml_value(&v, &n).map(|t| (n, t)))
+        .collect::<PyResult<_>>()?;
+    let stop = match stop {
+        None => None,
+        Some(s) if s.is_instance_of::<PyBool>() => {
+            return Err(TwinbenchError::new_err(
+                "stop: expected a time in s or a condition such as \"vehicle.lap >= 1\"",
+            ))
+        }
+        Some(s) => Some(match s.extract::<f64>() {
+            Ok(t) => StopConfig::Time(t),
+            Err(_) => StopConfig::Word(s.extract::<String>().map_err(|_| {
+                TwinbenchError::new_err(
+                    "stop: expected a time in s or a condition such as \"vehicle.lap >= 1\"",
+                )
+            })?),
+        }),
+    };
+    let outcome = py.detach(move || -> anyhow::Result<_> {
+        let cache = Arc::new(FmuCache::temporary(false)?);
+        let mut file = Plan::read_system(&system, &cache)?;
+        if let Some(s) = stop {
+            file.experiment.stop = s;
+        }
+        let options = LoadOptions {
+            native_models: twinbench::registry::native_models(),
+            ..LoadOptions::default()
+        };
+        let plan = Arc::new(Plan::compile(file, &system, cache, &options)?);
+        let mut sim = Simulation::new(plan.clone())?;
+        sim.echo_fmu_log = false;
+        for (name, value) in &parameters {
+            twinbench::cli::run::set_parameter(&plan, &mut sim, name, value)
+                .map_err(|e| e.context(format!("parameters[\"{name}\"]")))?;
+        }
+        let summary = sim.run()?;
+        let lap_time = twinbench::cli::lap_time(&summary, &plan);
+        let order: Vec<String> = plan
+            .order
+            .iter()
+            .map(|&k| plan.unit_name(k).to_string())
+            .collect();
+        Ok((summary, lap_time, order, plan.warnings.clone(), sim))
+    });
+    let (summary, lap_time, order, warnings, sim) = outcome.map_err(error)?;
+    let rec = &sim.recording;
+    let d = PyDict::new(py);
+    d.set_item("names", rec.names().to_vec())?;
+    d.set_item("units", rec.units().map(|u| u.to_vec()))?;
+    let columns = PyList::empty(py);
+    let text = PyDict::new(py);
+    for (k, name) in rec.names().iter().enumerate() {
+        let bytes: Vec<u8> = rec
+            .column_at(k)
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        columns.append(PyBytes::new(py, &bytes))?;
+        if let Some(t) = rec.text_at(k) {
+            text.set_item(name, t.to_vec())?;
+        }
+    }
+    d.set_item("columns", columns)?;
+    d.set_item("text", text)?;
+    let s = PyDict::new(py);
+    s.set_item("system", system_name(&sim))?;
+    s.set_item("steps", summary.steps)?;
+    s.set_item("simulated_time", summary.simulated_time)?;
+    s.set_item("wall_time", summary.wall_time)?;
+    s.set_item("lap_time", lap_time)?;
+    s.set_item("stopped_by", summary.stopped_by.clone())?;
+    s.set_item("reported", summary.reported.clone())?;
+    s.set_item("order", order)?;
+    s.set_item("warnings", warnings)?;
+    d.set_item("summary", s)?;
+    Ok(d.into_any().unbind())
+}
+
+fn system_name(sim: &Simulation) -> String {
+    sim.plan().path.display().to_string()
+}
+
+/// Compares named columns (little-endian float64 bytes each) with a measurement file;
+/// returns the comparison as JSON.
+#[pyfunction]
+#[pyo3(signature = (names, columns, measurement, signals, cutoff_hz, filter_order, distance_step_m, min_coverage, channels=None))]
+#[allow(clippy::too_many_arguments)]
+fn compare(
+    py: Python<'_>,
+    names: Vec<String>,
+    columns: Vec<Vec<u8>>,
+    measurement: PathBuf,
+    signals: Vec<String>,
+    cutoff_hz: f64,
+    filter_order: usize,
+    distance_step_m: f64,
+    min_coverage: f64,
+    channels: Option<PathBuf>,
+) -> PyResult<String> {
+    py.detach(move || -> anyhow::Result<String> {
+        let columns: Vec<Vec<f64>> = columns
+            .iter()
+            .map(|b| {
+                b.chunks_exact(8)
+                    .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+                    .collect()
+            })
+            .collect();
+        let sim = tb_table::Table::from_columns("simulation", names, columns)?;
+        let settings = tb_compare::CompareSettings {
+            cutoff_hz,
+            filter_order,
+            distance_step_m,
+            min_coverage,
+            ..tb_compare::CompareSettings::default()
+        };
+        let cmp = twinbench::cli::compare::compare_table(
+            &sim,
+            &measurement,
+            channels.as_deref(),
+            &signals,
+            &settings,
+        )?;
+        Ok(serde_json::to_string(&cmp)?)
+    })
+    .map_err(error)
+}
+
+/// Hands a study's generations to a `concurrent.futures.Executor`: one task per candidate,
+/// `function(study_path, digest_json, step, values)` returning the cost or the reason it
+/// failed. A Python exception (a lost cluster, Ctrl-C) stops the study; it is kept and
+/// raised as itself once the study has returned.
+struct ExecutorEvaluator {
+    executor: Py<PyAny>,
+    function: Py<PyAny>,
+    study: String,
+    digest: String,
+    raised: Mutex<Option<PyErr>>,
+}
+
+impl Evaluator for ExecutorEvaluator {
+    fn evaluate(&self, candidates: &[Candidate]) -> Result<Vec<Result<f64, String>>, String> {
+        Python::attach(|py| {
+            let run = || -> PyResult<Vec<Result<f64, String>>> {
+                let submit = self.executor.bind(py).getattr("submit")?;
+                let mut futures = Vec::with_capacity(candidates.len());
+                for c in candidates {
+                    let f = submit.call1((
+                        self.function.bind(py),
+                        &self.study,
+                        &self.digest,
+                        c.step,
+                        c.values.clone(),
+                    ));
+                    match f {
+                        Ok(f) => futures.push(f),
+                        Err(e) => {
+                            cancel(&futures);
+                            return Err(e);
+                        }
+                    }
+                }
+                let mut out = Vec::with_capacity(futures.len());
+                for (k, f) in futures.iter().enumerate() {
+                    let r = match f.call_method0("result") {
+                        Ok(r) => r,
+                        Err(e) => {
+                            cancel(&futures[k..]);
+                            return Err(e);
+                        }
+                    };
+                    out.push(match r.extract::<f64>() {
+                        Ok(x) => Ok(x),
+                        Err(_) => Err(r.str()?.to_string()),
+                    });
+                }
+                py.check_signals()?;
+                Ok(out)
+            };
+            run().map_err(|e| {
+                let text = e.to_string();
+                *self.raised.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+                text
+            })
+        })
+    }
+}
+
+fn cancel(futures: &[Bound<'_, PyAny>]) {
+    for f in futures {
+        let _ = f.call_method0("cancel");
+    }
+}
+
+/// Tells a Python callable about every generation (a dict per generation).
+struct PyProgress {
+    callback: Py<PyAny>,
+}
+
+impl Progress for PyProgress {
+    fn generation(&self, record: &GenerationRecord) {
+        Python::attach(|py| {
+            let d = PyDict::new(py);
+            let _ = d.set_item("generation", record.generation);
+            let _ = d.set_item("evaluations", record.evaluations);
+            let _ = d.set_item("best_cost", record.best_cost);
+            let _ = d.set_item("best_x", record.best_x.clone());
+            let _ = d.set_item("failures", record.failures);
+            if let Err(e) = self.callback.bind(py).call1((d,)) {
+                // A progress callback cannot stop the study; its error is shown, not lost.
+                e.print(py);
+            }
+        })
+    }
+}
+
+/// Runs a study as `twinbench optimize --json` does (same files in `out`); returns the
+/// result as JSON. `executor` and `function`: evaluate the generations there.
+#[pyfunction]
+#[pyo3(signature = (study, out, threads, resume, generations, optimizer, force, no_report, executor=None, function=None, digest=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn optimize(
+    py: Python<'_>,
+    study: PathBuf,
+    out: PathBuf,
+    threads: usize,
+    resume: bool,
+    generations: Option<usize>,
+    optimizer: Option<String>,
+    force: bool,
+    no_report: bool,
+    executor: Option<Py<PyAny>>,
+    function: Option<Py<PyAny>>,
+    digest: Option<String>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<String> {
+    let optimizer = optimizer
+        .map(|o| match o.as_str() {
+            "ga" => Ok(OptimizerKind::Ga),
+            "cmaes" | "cma-es" => Ok(OptimizerKind::Cmaes),
+            _ => Err(TwinbenchError::new_err(format!(
+                "unknown optimiser '{o}' (ga, cmaes)"
+            ))),
+        })
+        .transpose()?;
+    let evaluator = match (executor, function) {
+        (Some(executor), Some(function)) => Some(Arc::new(ExecutorEvaluator {
+            executor,
+            function,
+            study: study.display().to_string(),
+            digest: digest.unwrap_or_default(),
+            raised: Mutex::new(None),
+        })),
+        _ => None,
+    };
+    let args = twinbench::cli::optimize::OptimizeArgs {
+        study,
+        resume,
+        json: true,
+        threads,
+        out,
+        optimizer,
+        generations,
+        no_report,
+        force,
+    };
+    let dyn_evaluator = evaluator.clone().map(|e| e as Arc<dyn Evaluator>);
+    let progress = progress.map(|callback| Arc::new(PyProgress { callback }) as Arc<dyn Progress>);
+    let result = py.detach(move || {
+        twinbench::cli::optimize::optimize(&args, dyn_evaluator, progress)
+            .and_then(|o| Ok(serde_json::to_string(&o.result)?))
+    });
+    if let Some(e) = evaluator.and_then(|e| e.raised.lock().ok().and_then(|mut r| r.take())) {
+        return Err(e);
+    }
+    result.map_err(error)
+}
+
+/// A step as Python sees it: name, parameter names, bounds, start values.
+type StepInfo = (String, Vec<String>, Vec<(f64, f64)>, Vec<Option<f64>>);
+
+/// A study loaded for evaluating candidates: in a worker process (kept between tasks) or
+/// for the ask/tell loop of an optimiser of the user's own.
+#[pyclass(frozen)]
+struct StudyEvaluatorPy {
+    inner: Arc<StudyEvaluator>,
+    digest: String,
+}
+
+#[pymethods]
+impl StudyEvaluatorPy {
+    #[new]
+    fn new(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let inner = py
+            .detach(move || StudyEvaluator::load(&path))
+            .map_err(error)?;
+        let digest = serde_json::to_string(inner.digest()).map_err(error)?;
+        Ok(StudyEvaluatorPy {
+            inner: Arc::new(inner),
+            digest,
+        })
+    }
+
+    /// The SHA-256 of every file the study reads, as JSON.
+    #[getter]
+    fn digest(&self) -> String {
+        self.digest.clone()
+    }
+
+    /// Why the coordinator's digest is not this one (None when equal).
+    fn mismatch(&self, theirs: &str) -> PyResult<Option<String>> {
+        let theirs: tb_optimize::InputDigest = serde_json::from_str(theirs).map_err(error)?;
+        Ok(self.inner.digest().mismatch(&theirs))
+    }
+
+    /// Every parameter of the study with its value before the study.
+    fn assignment(&self) -> Vec<(String, f64)> {
+        self.inner.bench().assignment()
+    }
+
+    /// The study's steps: name, parameter names, bounds, start values (None: the current
+    /// value), generations.
+    fn steps(&self) -> Vec<StepInfo> {
+        self.inner
+            .study()
+            .file
+            .steps
+            .iter()
+            .map(|s| {
+                (
+                    s.name.clone(),
+                    s.parameter_names(),
+                    s.parameters.iter().map(|p| (p.min, p.max)).collect(),
+                    s.parameters.iter().map(|p| p.start).collect(),
+                )
+            })
+            .collect()
+    }
+
+    /// One candidate's cost (every parameter's value): a float, or the reason its run
+    /// failed (a str).
+    fn cost(&self, py: Python<'_>, step: usize, values: Vec<f64>) -> PyResult<Py<PyAny>> {
+        let inner = self.inner.clone();
+        let result = py.detach(move || {
+            tb_optimize::optimizer::finite(inner.cost(&Candidate { step, values }))
+        });
+        outcome_object(py, result)
+    }
+
+    /// Many candidates' costs on `threads` threads (0: all cores): each a float, or the
+    /// reason its run failed (a str).
+    fn costs(
+        &self,
+        py: Python<'_>,
+        step: usize,
+        candidates: Vec<Vec<f64>>,
+        threads: usize,
+    ) -> PyResult<Vec<Py<PyAny>>> {
+        let inner = self.inner.clone();
+        let results = py
+            .detach(
+                move || -> Result<Vec<Result<f64, String>>, tb_optimize::OptimizeError> {
+                    let pool = tb_optimize::optimizer::thread_pool(threads)?;
+                    Ok(pool.install(|| {
+                        use rayon::prelude::*;
+                        candidates
+                            .par_iter()
+                            .with_max_len(1)
+                            .map(|values| {
+                                tb_optimize::optimizer::finite(inner.cost(&Candidate {
+                                    step,
+                                    values: values.clone(),
+                                }))
+                            })
+                            .collect()
+                    }))
+                },
+            )
+            .map_err(error)?;
+        results.into_iter().map(|r| outcome_object(py, r)).collect()
+    }
+}
+
+/// A cost as a float, a failure as its reason (a str).
+fn outcome_object(py: Python<'_>, r: Result<f64, String>) -> PyResult<Py<PyAny>> {
+    Ok(match r {
+        Ok(c) => c.into_pyobject(py)?.into_any().unbind(),
+        Err(s) => s.into_pyobject(py)?.into_any().unbind(),
+    })
+}
+
+/// One of twinbench's optimisers, ask/tell, in the problem's own units (its bounds).
+#[pyclass]
+struct OptimizerPy {
+    inner: Mutex<Box<dyn tb_optimize::Optimizer>>,
+    bounds: Vec<(f64, f64)>,
+    /// Candidates of the last `ask` (a `tell` must bring as many costs).
+    asked: usize,
+}
+
+#[pymethods]
+impl OptimizerPy {
+    #[new]
+    #[pyo3(signature = (kind, bounds, seed, start=None))]
+    fn new(
+        kind: &str,
+        bounds: Vec<(f64, f64)>,
+        seed: u64,
+        start: Option<Vec<f64>>,
+    ) -> PyResult<Self> {
+        for (k, &(lo, hi)) in bounds.iter().enumerate() {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(TwinbenchError::new_err(format!(
+                    "bounds[{k}] = ({lo}, {hi}): expected finite lower < upper"
+                )));
+            }
+        }
+        if let Some(s) = &start {
+            if s.len() != bounds.len() {
+                return Err(TwinbenchError::new_err(format!(
+                    "start has {} values for {} bounds",
+                    s.len(),
+                    bounds.len()
+                )));
+            }
+        }
+        let dim = bounds.len();
+        let start_unit = start.map(|s| to_unit(&s, &bounds));
+        let inner: Box<dyn tb_optimize::Optimizer> = match kind {
+            "ga" => Box::new(Ga::new(dim, Default::default(), seed, start_unit).map_err(error)?),
+            "cmaes" | "cma-es" => {
+                Box::new(Cmaes::new(dim, Default::default(), seed, start_unit).map_err(error)?)
+            }
+            other => {
+                return Err(TwinbenchError::new_err(format!(
+                    "unknown optimiser '{other}' (ga, cmaes)"
+                )))
+            }
+        };
+        Ok(OptimizerPy {
+            inner: Mutex::new(inner),
+            bounds,
+            asked: 0,
+        })
+    }
+
+    /// The next generation's candidates (each within the bounds).
+    fn ask(&mut self) -> Vec<Vec<f64>> {
+        let asked = self.lock().ask();
+        self.asked = asked.len();
+        asked.iter().map(|u| to_bounds(u, &self.bounds)).collect()
+    }
+
+    /// The costs of the last `ask`'s candidates, in its order (lower is better).
+    fn tell(&mut self, costs: Vec<f64>) -> PyResult<()> {
+        if costs.len() != self.asked {
+            return Err(TwinbenchError::new_err(format!(
+                "tell: {} costs for the {} candidates of the last ask",
+                costs.len(),
+                self.asked
+            )));
+        }
+        if let Some(k) = costs.iter().position(|c| c.is_nan()) {
+            return Err(TwinbenchError::new_err(format!(
+                "tell: cost {k} is NaN (give a failed candidate a penalty)"
+            )));
+        }
+        self.lock().tell(&costs);
+        self.asked = 0;
+        Ok(())
+    }
+
+    /// The best candidate so far and its cost (None before the first tell).
+    fn best(&self) -> Option<(Vec<f64>, f64)> {
+        self.lock()
+            .best()
+            .map(|(u, c)| (to_bounds(u, &self.bounds), c))
+    }
+
+    #[getter]
+    fn generation(&self) -> usize {
+        self.lock().generation()
+    }
+
+    #[getter]
+    fn name(&self) -> &'static str {
+        self.lock().name()
+    }
+
+    /// The whole state as JSON (bit-exact), for a checkpoint.
+    fn save(&self) -> PyResult<String> {
+        serde_json::to_string(&self.lock().save()).map_err(error)
+    }
+
+    /// Continue from `save()`'s JSON.
+    fn restore(&mut self, state: &str) -> PyResult<()> {
+        let v: serde_json::Value = serde_json::from_str(state).map_err(error)?;
+        self.lock().restore(&v).map_err(error)?;
+        self.asked = 0;
+        Ok(())
+    }
+}
+
+impl OptimizerPy {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Box<dyn tb_optimize::Optimizer>> {
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// A study file read and checked (for `twinbench.Study`): its name, the paths of its
+/// system and measurement, its fingerprint, penalty and seed.
+#[pyfunction]
+fn load_study(path: PathBuf) -> PyResult<(String, String, String, String, f64, u64)> {
+    let s = Study::load(&path).map_err(error)?;
+    Ok((
+        s.name(),
+        s.system_path.display().to_string(),
+        s.measurement_path.display().to_string(),
+        s.fingerprint.clone(),
+        s.file.penalty,
+        s.file.seed,
+    ))
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("TwinbenchError", m.py().get_type::<TwinbenchError>())?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(optimize, m)?)?;
+    m.add_function(wrap_pyfunction!(load_study, m)?)?;
+    m.add_class::<StudyEvaluatorPy>()?;
+    m.add_class::<OptimizerPy>()?;
+    Ok(())
+}

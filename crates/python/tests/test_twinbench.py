@@ -1,0 +1,266 @@
+"""The Python package against the command line: the same numbers, the same messages, the
+same Tab. 1 wherever the candidates run (threads, a process pool, a Dask LocalCluster,
+one of whose workers is killed mid-study), and resume after an interrupted distributed
+study. Run by tools/test.sh after the wheel is installed into target/venv.
+
+Needs TWINBENCH_EXE (the command line built from the same sources) and the packed FMUs.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import json
+import math
+import os
+import signal
+import subprocess
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import twinbench
+
+ROOT = Path(__file__).resolve().parents[3]
+EXE = Path(os.environ.get("TWINBENCH_EXE", ROOT / "target/release/twinbench"))
+STUDY = ROOT / "studies/spielberg.toml"
+SYSTEM = ROOT / "systems/rls_v.toml"
+
+
+def cli(*args, check=True):
+    p = subprocess.run([str(EXE), *map(str, args)], capture_output=True, text=True, cwd=ROOT)
+    if check and p.returncode != 0:
+        raise AssertionError(f"twinbench {' '.join(map(str, args))} failed:\n{p.stderr}")
+    return p
+
+
+@pytest.fixture(scope="session", autouse=True)
+def worker_temporary_files(tmp_path_factory):
+    """Unpacked FMUs of worker processes go below pytest's folder: a worker killed on
+    purpose cannot clean up after itself, and the suite's TMPDIR must stay empty."""
+    folder = tmp_path_factory.getbasetemp() / "tmp"
+    folder.mkdir(exist_ok=True)
+    old = os.environ.get("TMPDIR")
+    os.environ["TMPDIR"] = str(folder)
+    yield
+    if old is None:
+        del os.environ["TMPDIR"]
+    else:
+        os.environ["TMPDIR"] = old
+
+
+@pytest.fixture(scope="session", autouse=True)
+def packed_fmus():
+    assert EXE.exists(), f"{EXE}: build twinbench first (cargo build --release)"
+    if not (ROOT / "target/fmu/vehicle.fmu").exists():
+        cli("pack")
+
+
+@pytest.fixture(scope="session")
+def cli_study(tmp_path_factory):
+    """`twinbench optimize` of the Spielberg study: the reference every other run must equal."""
+    out = tmp_path_factory.mktemp("cli_study")
+    cli("optimize", STUDY, "--out", out, "--json", "--threads", "2")
+    return out
+
+
+def read_csv(path: Path):
+    with open(path) as f:
+        names = f.readline().rstrip("\n").split(",")
+        f.readline()  # units
+        rows = [line.rstrip("\n").split(",") for line in f]
+    return {n: np.array([float(r[k]) for r in rows]) for k, n in enumerate(names)}
+
+
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
+
+
+# ---- run and compare ----
+
+
+def test_run_gives_the_bits_of_run_out(tmp_path):
+    out = tmp_path / "lap.csv"
+    cli("run", SYSTEM, "--out", out, "--set", "vehicle.c_lift_front=0.9")
+    expected = read_csv(out)
+    result = twinbench.run(SYSTEM, parameters={"vehicle.c_lift_front": 0.9})
+    assert list(result.signals) == list(expected)
+    for name, column in expected.items():
+        assert same_bits(result.signals[name], column), name
+    assert result.units["vehicle.v"] == "m/s"
+    # A lap of the Spielberg track: about 98 s (the bench's lap time, not a figure we fix).
+    assert 95.0 < result.summary["lap_time"] < 101.0
+    assert result.summary["stopped_by"] == "vehicle.lap >= 1"
+    frame = result.to_pandas()
+    assert frame.index.name == "time" and len(frame) == len(expected["time"])
+
+
+def test_stop_override_and_condition():
+    r = twinbench.run(SYSTEM, stop=2.0)
+    assert r.signals["time"][-1] == pytest.approx(2.0, abs=1e-12)
+    r = twinbench.run(SYSTEM, stop="vehicle.distance >= 100")
+    # Stops at the first communication point where it holds; the recording (100 Hz) ends
+    # within one recording interval before it (v ≈ 52 m/s: 0.53 m per 10 ms).
+    assert r.summary["stopped_by"] == "vehicle.distance >= 100"
+    assert 1.85 < r.summary["simulated_time"] < 1.95
+    assert 99.4 < r.signals["vehicle.distance"][-1] < 100.06
+
+
+def test_a_bad_system_raises_the_command_lines_message(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text((SYSTEM.read_text()).replace('"vehicle.v -> driver.v"', '"vehicle.vv -> driver.v"'))
+    # The FMU paths are relative to the system file: keep it beside the original.
+    bad_here = SYSTEM.parent / f"bad-{os.getpid()}.toml"
+    bad_here.write_text(bad.read_text())
+    try:
+        p = cli("run", bad_here, check=False)
+        assert p.returncode != 0
+        message = p.stderr.strip().splitlines()[-1]
+        assert message.startswith("error: ")
+        with pytest.raises(twinbench.TwinbenchError) as e:
+            twinbench.run(bad_here)
+        assert str(e.value) == message[len("error: "):]
+        assert "vehicle.vv" in str(e.value)
+    finally:
+        bad_here.unlink()
+    with pytest.raises(twinbench.TwinbenchError, match="cannot read"):
+        twinbench.run(tmp_path / "missing.toml")
+    with pytest.raises(twinbench.TwinbenchError, match="c_lift_frnt"):
+        twinbench.run(SYSTEM, parameters={"vehicle.c_lift_frnt": 1.0})
+
+
+def test_compare_gives_the_command_lines_metrics(tmp_path):
+    out = tmp_path / "lap.csv"
+    cli("run", SYSTEM, "--out", out)
+    p = cli("compare", out, ROOT / "data/spielberg_lap.csv", "--signals", "Fz_sum,Fz_rl", "--json")
+    expected = {s["signal"]: s for s in json.loads(p.stdout)["comparison"]["signals"]}
+    c = twinbench.compare(twinbench.run(SYSTEM), ROOT / "data/spielberg_lap.csv", signals=["Fz_sum", "Fz_rl"])
+    for name in ["Fz_sum", "Fz_rl"]:
+        assert c[name].e == expected[name]["e"]
+        assert c[name].m == expected[name]["slope"]
+        assert c[name].r_squared == expected[name]["r_squared"]
+        assert c[name].bias == expected[name]["bias"]
+    with pytest.raises(twinbench.TwinbenchError, match="Fz_nope"):
+        twinbench.compare(twinbench.run(SYSTEM, stop=5.0), ROOT / "data/spielberg_lap.csv", signals="Fz_nope", min_coverage=0.0)
+
+
+def test_help_reads_well():
+    doc = twinbench.run.__doc__
+    assert "instance.variable" in doc and "Raises" in doc
+    assert "executor" in twinbench.Study.optimize.__doc__
+
+
+# ---- studies ----
+
+
+def table1(folder: Path) -> bytes:
+    return (folder / "table1.json").read_bytes()
+
+
+def local_cluster(tmp_path, n=2):
+    from dask.distributed import Client, LocalCluster
+
+    cluster = LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        local_directory=str(tmp_path / "dask"),
+    )
+    return cluster, Client(cluster)
+
+
+def test_a_dask_study_gives_the_command_lines_table1(cli_study, tmp_path):
+    cluster, client = local_cluster(tmp_path)
+    try:
+        out = tmp_path / "dask"
+        result = twinbench.Study(STUDY).optimize(executor=client.get_executor(), out=out)
+        # Every worker process loaded the study once and kept it.
+        loaded = client.run(lambda: __import__("twinbench._worker")._worker.loaded())
+        assert loaded == {w: 1 for w in client.scheduler_info()["workers"]}
+    finally:
+        client.close()
+        cluster.close()
+    assert table1(out) == table1(cli_study)
+    expected = json.loads((cli_study / "result.json").read_text())
+    for a, b in zip(result["steps"], expected["steps"], strict=True):
+        assert a["after_exact"] == b["after_exact"] and a["history"] == b["history"]
+
+
+def test_a_worker_killed_mid_study_changes_nothing(cli_study, tmp_path):
+    cluster, client = local_cluster(tmp_path)
+    killed = []
+
+    def kill_one():
+        pids = client.run(os.getpid)
+        victim = sorted(pids.values())[0]
+        os.kill(victim, signal.SIGKILL)
+        killed.append(victim)
+
+    def progress(record):
+        # In the second generation's candidates: kill a worker while it runs one.
+        if record["generation"] == 1 and not killed:
+            threading.Timer(0.4, kill_one).start()
+
+    try:
+        out = tmp_path / "killed"
+        twinbench.Study(STUDY).optimize(executor=client.get_executor(), out=out, progress=progress)
+    finally:
+        client.close()
+        cluster.close()
+    assert killed, "no worker was killed"
+    assert table1(out) == table1(cli_study)
+
+
+class FailingExecutor(concurrent.futures.Executor):
+    """A process pool that is lost after `tasks` tasks (a cluster gone mid-study)."""
+
+    def __init__(self, pool, tasks):
+        self.pool, self.left = pool, tasks
+
+    def submit(self, fn, *args, **kwargs):
+        self.left -= 1
+        if self.left < 0:
+            raise RuntimeError("the cluster went away")
+        return self.pool.submit(fn, *args, **kwargs)
+
+
+def test_an_interrupted_distributed_study_resumes_to_the_same_table1(cli_study, tmp_path):
+    out = tmp_path / "resumed"
+    study = twinbench.Study(STUDY)
+    with concurrent.futures.ProcessPoolExecutor(2) as pool:
+        with pytest.raises(RuntimeError, match="the cluster went away"):
+            study.optimize(executor=FailingExecutor(pool, 45), out=out)
+        checkpoint = json.loads((out / "spielberg.checkpoint.json").read_text())
+        assert checkpoint["current"]["run"]["history"], "a generation was checkpointed"
+        assert not (out / "table1.json").exists()
+        study.optimize(executor=pool, out=out, resume=True)
+    assert table1(out) == table1(cli_study)
+
+
+def test_ask_tell_with_an_optimiser_of_ones_own(cli_study):
+    study = twinbench.Study(STUDY)
+    step = study.steps[0]
+    reference = json.loads((cli_study / "result.json").read_text())["steps"][0]
+    start = [p["before"] for p in reference["parameters"]]
+    costs = study.evaluate(0, [start], threads=1)
+    # The same candidate, the same cost as the study's own start point, to the bit.
+    assert costs[0] == reference["cost_before"]
+    opt = twinbench.Optimizer("cmaes", step.bounds, seed=7, start=start)
+    told = []
+    for _ in range(2):
+        xs = opt.ask()
+        assert all(lo <= v <= hi for x in xs for v, (lo, hi) in zip(x, step.bounds))
+        c = study.evaluate(0, xs)
+        opt.tell(c)
+        told += c
+    best_x, best_cost = opt.best()
+    assert opt.generation == 2
+    assert best_cost == min(told)
+    assert all(lo <= v <= hi for v, (lo, hi) in zip(best_x, step.bounds))
+    with pytest.raises(twinbench.TwinbenchError, match="costs for the"):
+        opt.ask()
+        opt.tell([1.0])
+    with pytest.raises(twinbench.TwinbenchError, match="values for the"):
+        study.evaluate(0, [[1.0]])
