@@ -24,6 +24,9 @@ export TWINBENCH_OMSIMULATOR
 export TMPDIR="$PWD/target/test-tmp"
 rm -rf "$TMPDIR"
 mkdir -p "$TMPDIR"
+# The store of unpacked FMUs the tests and their processes share: under target/, never in
+# the home folder (docs/robustness.md, "The store of unpacked FMUs").
+export TWINBENCH_CACHE="$PWD/target/unpack-cache"
 # The fast tier: every crate's tests, the FMUs through their C symbols, the orchestrator.
 cargo test --release --workspace "$@"
 # The slow tier: whole optimisations (Spielberg, and a lap the suite makes itself), FMPy's

@@ -9,7 +9,8 @@
 //!
 //! With the `import` feature (the default), the importer:
 //! - [`description`]: the modelDescription.xml reader;
-//! - [`archive`]: archive checks (untrusted input) and the unpack cache;
+//! - [`archive`]: archive checks (untrusted input), the unpack cache and the machine-wide
+//!   store of unpacked FMUs with its stat index;
 //! - [`library`]: a loaded shared library with its function table resolved;
 //! - [`instance`]: a safe handle on one FMU instance;
 //! - [`log`]: the log sink every backend's messages go to;
@@ -45,6 +46,9 @@ pub mod library;
 #[cfg(feature = "import")]
 #[path = "import/log.rs"]
 pub mod log;
+#[cfg(feature = "import")]
+#[path = "import/store.rs"]
+mod store;
 
 pub use functions::{Function, FunctionSpec, Phase, PhaseSet, FUNCTIONS};
 pub use schema::{Causality, Initial, ScalarType, Variability};

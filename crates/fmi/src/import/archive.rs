@@ -1,15 +1,21 @@
-//! FMU archives: checked as untrusted input, unzipped once into a content-addressed cache,
-//! their shared library loaded once and shared by every instance.
+//! FMU archives: checked as untrusted input, unzipped once into a content-addressed store
+//! shared by every twinbench process, their shared library loaded once and shared by every
+//! instance.
 
 use crate::description::{self, ModelDescription};
 use crate::instance3::Library3;
 use crate::library::Library;
+use crate::store::{self, CdEntry, IndexEntry};
 use crate::FmuError;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
-use std::io::Read;
+use std::fs::{File, Metadata};
+use std::io::{Read, Seek};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+
+pub use crate::store::default_store_dir;
 
 /// Limits against zip bombs.
 pub const MAX_ENTRIES: usize = 10_000;
@@ -123,8 +129,12 @@ impl LoadedFmu {
     }
 }
 
-/// The unpack cache: a folder per FMU content hash. A temporary cache is removed when
-/// dropped; a kept one stays for later runs.
+/// The unpack cache. Unpacked FMUs live in a *store*, a folder per archive content hash:
+/// the machine-wide one ([`default_store_dir`]) shared by every process, or one a caller
+/// names. The store's stat index lets a load of an unchanged archive file skip reading,
+/// hashing and inflating it (see `docs/robustness.md`, "The store of unpacked FMUs").
+/// The cache's own folder (`root`) holds what lives only as long as the cache (SSP
+/// packages); a temporary cache removes it when dropped, never the store.
 ///
 /// Safe to share between threads and processes: one thread of a process unpacks a given
 /// content while the others wait for it (a lock per content hash), and every unpacking
@@ -132,12 +142,33 @@ impl LoadedFmu {
 pub struct FmuCache {
     root: PathBuf,
     keep: bool,
+    /// Where FMUs are unpacked and indexed; `None`: into `root`, without an index.
+    store: Option<PathBuf>,
     loaded: Mutex<HashMap<String, Arc<LoadedFmu>>>,
     /// One lock per content hash being loaded.
     loading: Mutex<HashMap<String, Arc<Mutex<()>>>>,
     limits: Limits,
+    counters: Counters,
     /// A temporary cache's lock file (`<root>.lock`, flocked while the cache lives).
     _owner: Option<OwnerLock>,
+}
+
+#[derive(Default)]
+struct Counters {
+    index_hits: AtomicUsize,
+    archives_read: AtomicUsize,
+    extractions: AtomicUsize,
+}
+
+/// What a cache has done so far (for tests and diagnostics).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CacheStats {
+    /// Loads served by the stat index: only the archive's central directory was read.
+    pub index_hits: usize,
+    /// Archives read and hashed whole.
+    pub archives_read: usize,
+    /// Archives unpacked (the others were found unpacked already).
+    pub extractions: usize,
 }
 
 /// The lock file beside a temporary cache folder: while it is locked the owner lives.
@@ -190,42 +221,105 @@ fn arch(path: &Path, message: impl Into<String>) -> FmuError {
     }
 }
 
+fn create_folder(dir: &Path) -> Result<(), FmuError> {
+    std::fs::create_dir_all(dir).map_err(|e| arch(dir, format!("cannot create cache folder: {e}")))
+}
+
+/// The machine-wide store, created if needed; `None` (FMUs unpacked per process, as without
+/// a store) when there is no place for it or it cannot be trusted.
+fn machine_store() -> Option<PathBuf> {
+    let dir = default_store_dir()?;
+    match store::prepare(&dir) {
+        Ok(()) => Some(dir),
+        Err(reason) => {
+            // Not an error: the run goes on, only without sharing its unpacked FMUs.
+            log::warn!(
+                "{}: not used as the store of unpacked FMUs: {reason}; unpacking into a temporary folder",
+                dir.display()
+            );
+            None
+        }
+    }
+}
+
 impl FmuCache {
-    /// A fresh cache under the system temporary folder, removed on drop unless `keep`.
+    /// A fresh cache under the system temporary folder, removed on drop unless `keep`. Its
+    /// FMUs come from the machine-wide store; a kept cache (`--keep-extracted`, for looking
+    /// into the FMUs) unpacks them into its own folder instead, so that it shows them and
+    /// nothing done there changes the store.
     pub fn temporary(keep: bool) -> Result<FmuCache, FmuError> {
+        let store = if keep { None } else { machine_store() };
+        Self::temporary_root(keep, store)
+    }
+
+    /// A temporary cache (removed on drop) whose FMUs come from the store `store` (created
+    /// if needed, kept).
+    pub fn temporary_with_store(store: &Path) -> Result<FmuCache, FmuError> {
+        create_folder(store)?;
+        Self::temporary_root(false, Some(store.to_path_buf()))
+    }
+
+    fn temporary_root(keep: bool, store: Option<PathBuf>) -> Result<FmuCache, FmuError> {
         remove_stale_caches();
         let root = std::env::temp_dir().join(unique_name("twinbench-fmu"));
         // The owner's lock, taken before anything is visible under the final names: held
         // for the cache's life, released by the kernel when the process ends however it ends.
         let lock = owner_lock(&root)?;
-        std::fs::create_dir_all(&root)
-            .map_err(|e| arch(&root, format!("cannot create cache folder: {e}")))?;
+        create_folder(&root)?;
         Ok(FmuCache {
             root,
             keep,
+            store,
             _owner: Some(lock),
             loaded: Mutex::new(HashMap::new()),
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
+            counters: Counters::default(),
         })
     }
 
-    /// A cache in `dir` that is kept (reused across runs).
+    /// A cache in `dir` that is kept (reused across runs): `dir` is its folder and its store.
     pub fn persistent(dir: &Path) -> Result<FmuCache, FmuError> {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| arch(dir, format!("cannot create cache folder: {e}")))?;
+        Self::with_store(dir, dir)
+    }
+
+    /// A kept cache in `root` whose FMUs come from the store `store` (both created if needed).
+    pub fn with_store(root: &Path, store: &Path) -> Result<FmuCache, FmuError> {
+        create_folder(root)?;
+        create_folder(store)?;
         Ok(FmuCache {
-            root: dir.to_path_buf(),
+            root: root.to_path_buf(),
             keep: true,
+            store: Some(store.to_path_buf()),
             _owner: None,
             loaded: Mutex::new(HashMap::new()),
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
+            counters: Counters::default(),
         })
     }
 
+    /// The cache's own folder (SSP packages; FMUs too when it has no store).
     pub fn root(&self) -> &Path {
         &self.root
+    }
+
+    /// The store the FMUs are unpacked into, if any.
+    pub fn store(&self) -> Option<&Path> {
+        self.store.as_deref()
+    }
+
+    /// Where unpacked FMUs go.
+    fn fmu_folder(&self) -> &Path {
+        self.store.as_deref().unwrap_or(&self.root)
+    }
+
+    pub fn stats(&self) -> CacheStats {
+        CacheStats {
+            index_hits: self.counters.index_hits.load(Ordering::Relaxed),
+            archives_read: self.counters.archives_read.load(Ordering::Relaxed),
+            extractions: self.counters.extractions.load(Ordering::Relaxed),
+        }
     }
 
     /// Other zip-bomb limits (tests use small ones).
@@ -236,23 +330,72 @@ impl FmuCache {
 
     /// Check, unpack (once per content) and load an FMU.
     pub fn load(&self, fmu: &Path) -> Result<Arc<LoadedFmu>, FmuError> {
-        // Only a regular file, and not larger than what may be unpacked: a FIFO would hang
-        // the read, /dev/zero would fill the memory.
-        let meta = std::fs::metadata(fmu).map_err(|e| arch(fmu, format!("cannot read: {e}")))?;
-        if !meta.is_file() {
-            return Err(arch(fmu, "not a regular file (an FMU is a zip archive)"));
+        let (file, meta) = open_regular(fmu, &self.limits, "an FMU is a zip archive")?;
+        if let Some(store) = &self.store {
+            if let Some(l) = self.load_indexed(fmu, &file, &meta, store) {
+                self.counters.index_hits.fetch_add(1, Ordering::Relaxed);
+                return Ok(l);
+            }
         }
-        if meta.len() > self.limits.max_total_bytes {
-            return Err(arch(
-                fmu,
-                format!(
-                    "{} bytes, more than the limit of {} bytes",
-                    meta.len(),
-                    self.limits.max_total_bytes
-                ),
-            ));
+        self.load_full(fmu, &file, &meta)
+    }
+
+    /// A load through the stat index: the file's `stat` finds its entry, the archive's
+    /// central directory (read, nothing inflated) must match the entry's fingerprint and
+    /// pass the entry checks again, and the description is read from the unpacked folder and
+    /// checked again. `None` on any doubt: the caller takes the full path.
+    fn load_indexed(
+        &self,
+        fmu: &Path,
+        file: &File,
+        meta: &Metadata,
+        store: &Path,
+    ) -> Option<Arc<LoadedFmu>> {
+        let canonical = std::fs::canonicalize(fmu).ok()?;
+        let key = store::index_key(&canonical, meta);
+        let entry = store::read_entry(store, &key)?;
+        let dir = store.join(&entry.sha256[..32]);
+        if !dir.join(".complete").is_file() {
+            return None;
         }
-        let bytes = std::fs::read(fmu).map_err(|e| arch(fmu, format!("cannot read: {e}")))?;
+        let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file)).ok()?;
+        let entries = check_entries_of(fmu, &mut zip, &self.limits).ok()?;
+        if entries.len() != entry.entries || store::fingerprint(&entries) != entry.directory {
+            return None;
+        }
+        let key_lock = lock(&self.loading)
+            .entry(entry.sha256.clone())
+            .or_default()
+            .clone();
+        let _loading = lock(&key_lock);
+        if let Some(l) = lock(&self.loaded).get(&entry.sha256) {
+            return Some(l.clone());
+        }
+        let xml = read_unpacked_description(fmu, &dir).ok()?;
+        let names: Vec<String> = entries.into_iter().map(|e| e.name).collect();
+        let (md, _id) = check_description(fmu, &xml, &names).ok()?;
+        let loaded = Arc::new(LoadedFmu {
+            source: fmu.to_path_buf(),
+            dir,
+            sha256: entry.sha256.clone(),
+            description: md,
+            library: Mutex::new(None),
+            library3: Mutex::new(None),
+        });
+        lock(&self.loaded).insert(entry.sha256, loaded.clone());
+        Some(loaded)
+    }
+
+    /// The full path: read and hash the archive, check it whole, unpack it unless its
+    /// content is unpacked already, and (re)write its index entry.
+    fn load_full(
+        &self,
+        fmu: &Path,
+        file: &File,
+        meta: &Metadata,
+    ) -> Result<Arc<LoadedFmu>, FmuError> {
+        let bytes = read_regular(fmu, file, &self.limits)?;
+        self.counters.archives_read.fetch_add(1, Ordering::Relaxed);
         let sha = format!("{:x}", Sha256::digest(&bytes));
         if let Some(l) = lock(&self.loaded).get(&sha) {
             return Ok(l.clone());
@@ -263,10 +406,17 @@ impl FmuCache {
         if let Some(l) = lock(&self.loaded).get(&sha) {
             return Ok(l.clone());
         }
-        let (md, _id) = check_archive_with(fmu, &bytes, &self.limits)?;
-        let dir = self.root.join(&sha[..32]);
+        let (md, _id, entries) = check_archive_entries(fmu, &bytes, &self.limits)?;
+        let dir = self.fmu_folder().join(&sha[..32]);
         if !dir.join(".complete").exists() {
+            if let Some(store) = &self.store {
+                store::sweep_temporaries(store);
+            }
             extract(fmu, &bytes, &dir, &self.limits)?;
+            self.counters.extractions.fetch_add(1, Ordering::Relaxed);
+        }
+        if let Some(store) = &self.store {
+            self.remember(store, fmu, file, meta, &sha, &entries);
         }
         let loaded = Arc::new(LoadedFmu {
             source: fmu.to_path_buf(),
@@ -279,6 +429,126 @@ impl FmuCache {
         lock(&self.loaded).insert(sha, loaded.clone());
         Ok(loaded)
     }
+
+    /// Writes the index entry of an archive checked and unpacked in full. Skipped when the
+    /// file changed while it was read (its `stat` then names other bytes) and for an FMU in
+    /// this temporary cache's own folder (an SSP's: gone with the cache). A failure only
+    /// costs the next load its shortcut.
+    fn remember(
+        &self,
+        store: &Path,
+        fmu: &Path,
+        file: &File,
+        before: &Metadata,
+        sha: &str,
+        entries: &[CdEntry],
+    ) {
+        let Ok(after) = file.metadata() else {
+            return;
+        };
+        if !store::same_stat(before, &after) {
+            return;
+        }
+        let Ok(canonical) = std::fs::canonicalize(fmu) else {
+            return;
+        };
+        if !self.keep
+            && std::fs::canonicalize(&self.root).is_ok_and(|root| canonical.starts_with(root))
+        {
+            return;
+        }
+        let entry = IndexEntry {
+            key: store::index_key(&canonical, before),
+            sha256: sha.to_string(),
+            entries: entries.len(),
+            directory: store::fingerprint(entries),
+        };
+        if let Err(e) = store::write_entry(store, &entry) {
+            log::debug!(
+                "{}: cannot write the unpack index entry of {}: {e}",
+                store.display(),
+                fmu.display()
+            );
+        }
+    }
+}
+
+/// Opens `path` for reading if it is a regular file within the size limit. A FIFO would
+/// hang the read, `/dev/zero` would fill the memory: the name is checked before anything is
+/// opened, and the open file again (the name may point elsewhere by then; `O_NONBLOCK` so
+/// that a FIFO swapped in cannot block the open).
+fn open_regular(path: &Path, limits: &Limits, what: &str) -> Result<(File, Metadata), FmuError> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let check = |meta: &Metadata| {
+        if !meta.is_file() {
+            return Err(arch(path, format!("not a regular file ({what})")));
+        }
+        if meta.len() > limits.max_total_bytes {
+            return Err(arch(
+                path,
+                format!(
+                    "{} bytes, more than the limit of {} bytes",
+                    meta.len(),
+                    limits.max_total_bytes
+                ),
+            ));
+        }
+        Ok(())
+    };
+    let meta = std::fs::metadata(path).map_err(|e| arch(path, format!("cannot read: {e}")))?;
+    check(&meta)?;
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(|e| arch(path, format!("cannot read: {e}")))?;
+    let meta = file
+        .metadata()
+        .map_err(|e| arch(path, format!("cannot read: {e}")))?;
+    check(&meta)?;
+    Ok((file, meta))
+}
+
+/// The whole content of a file from [`open_regular`], bounded by the size limit (it may
+/// have grown since its `stat`).
+fn read_regular(path: &Path, mut file: &File, limits: &Limits) -> Result<Vec<u8>, FmuError> {
+    let cannot = |e: std::io::Error| arch(path, format!("cannot read: {e}"));
+    file.rewind().map_err(cannot)?;
+    let mut bytes = Vec::new();
+    file.take(limits.max_total_bytes + 1)
+        .read_to_end(&mut bytes)
+        .map_err(cannot)?;
+    if bytes.len() as u64 > limits.max_total_bytes {
+        return Err(arch(
+            path,
+            format!("more than the limit of {} bytes", limits.max_total_bytes),
+        ));
+    }
+    Ok(bytes)
+}
+
+/// The modelDescription.xml of an unpacked FMU, read as from its archive (a regular file,
+/// bounded, UTF-8); errors name the `.fmu`.
+fn read_unpacked_description(fmu: &Path, dir: &Path) -> Result<String, FmuError> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let path = dir.join("modelDescription.xml");
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+        .open(&path)
+        .map_err(|e| {
+            arch(
+                fmu,
+                format!("cannot read the unpacked modelDescription.xml: {e}"),
+            )
+        })?;
+    if !f.metadata().is_ok_and(|m| m.is_file()) {
+        return Err(arch(
+            fmu,
+            "the unpacked modelDescription.xml is not a regular file",
+        ));
+    }
+    read_description(fmu, f)
 }
 
 impl FmuCache {
@@ -287,26 +557,8 @@ impl FmuCache {
     /// decompressed size bounded. Returns the folder (`<root>/pkg-<hash>`), removed with the
     /// cache.
     pub fn unpack_package(&self, package: &Path) -> Result<PathBuf, FmuError> {
-        let meta =
-            std::fs::metadata(package).map_err(|e| arch(package, format!("cannot read: {e}")))?;
-        if !meta.is_file() {
-            return Err(arch(
-                package,
-                "not a regular file (a package is a zip archive)",
-            ));
-        }
-        if meta.len() > self.limits.max_total_bytes {
-            return Err(arch(
-                package,
-                format!(
-                    "{} bytes, more than the limit of {} bytes",
-                    meta.len(),
-                    self.limits.max_total_bytes
-                ),
-            ));
-        }
-        let bytes =
-            std::fs::read(package).map_err(|e| arch(package, format!("cannot read: {e}")))?;
+        let (file, _) = open_regular(package, &self.limits, "a package is a zip archive")?;
+        let bytes = read_regular(package, &file, &self.limits)?;
         let sha = format!("{:x}", Sha256::digest(&bytes));
         let key_lock = lock(&self.loading)
             .entry(format!("pkg-{sha}"))
@@ -323,7 +575,7 @@ impl FmuCache {
 }
 
 /// A library error under the FMU's name and the library's entry in the archive (the
-/// unpacked copy is in a temporary folder the user never saw). Also used by the isolation
+/// unpacked copy is in a store or temporary folder the user never named). Also used by the isolation
 /// worker.
 pub fn library_error(fmu: &Path, fmi_version: &str, id: &str, e: FmuError) -> FmuError {
     let entry = library_entry(fmi_version, id);
@@ -410,6 +662,17 @@ pub fn check_entries<'a>(
 ) -> Result<CheckedArchive<'a>, FmuError> {
     let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
         .map_err(|e| arch(fmu, format!("not a valid zip archive: {e}")))?;
+    let entries = check_entries_of(fmu, &mut zip, limits)?;
+    Ok((zip, entries.into_iter().map(|e| e.name).collect()))
+}
+
+/// [`check_entries`] on an open archive, in memory or a file (then only its central
+/// directory and local headers are read). Returns the central directory's entries.
+fn check_entries_of<R: Read + Seek>(
+    fmu: &Path,
+    zip: &mut zip::ZipArchive<R>,
+    limits: &Limits,
+) -> Result<Vec<CdEntry>, FmuError> {
     if zip.len() > limits.max_entries {
         return Err(arch(
             fmu,
@@ -421,7 +684,7 @@ pub fn check_entries<'a>(
         ));
     }
     let mut total: u64 = 0;
-    let mut names = Vec::with_capacity(zip.len());
+    let mut entries = Vec::with_capacity(zip.len());
     for i in 0..zip.len() {
         let f = zip
             .by_index_raw(i)
@@ -449,9 +712,14 @@ pub fn check_entries<'a>(
                 ),
             ));
         }
-        names.push(name);
+        entries.push(CdEntry {
+            compressed: f.compressed_size(),
+            size: f.size(),
+            crc32: f.crc32(),
+            name,
+        });
     }
-    Ok((zip, names))
+    Ok(entries)
 }
 
 /// Everything checked before a byte is written: entry names (no `..`, no absolute paths),
@@ -467,39 +735,68 @@ pub fn check_archive_with(
     bytes: &[u8],
     limits: &Limits,
 ) -> Result<(ModelDescription, String), FmuError> {
-    let (mut zip, names) = check_entries(fmu, bytes, limits)?;
+    check_archive_entries(fmu, bytes, limits).map(|(md, id, _)| (md, id))
+}
+
+/// [`check_archive_with`], also returning the central directory's entries.
+fn check_archive_entries(
+    fmu: &Path,
+    bytes: &[u8],
+    limits: &Limits,
+) -> Result<(ModelDescription, String, Vec<CdEntry>), FmuError> {
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
+        .map_err(|e| arch(fmu, format!("not a valid zip archive: {e}")))?;
+    let entries = check_entries_of(fmu, &mut zip, limits)?;
     let xml = {
-        let mut f = zip
+        let f = zip
             .by_name("modelDescription.xml")
             .map_err(|_| arch(fmu, "no modelDescription.xml at the archive's root"))?;
-        let mut raw = Vec::new();
-        f.by_ref()
-            .take(MAX_DESCRIPTION_BYTES + 1)
-            .read_to_end(&mut raw)
-            .map_err(|e| arch(fmu, format!("cannot read modelDescription.xml: {e}")))?;
-        if raw.len() as u64 > MAX_DESCRIPTION_BYTES {
-            return Err(arch(
-                fmu,
-                format!(
-                    "modelDescription.xml is larger than {} MiB (the limit against a hostile archive)",
-                    MAX_DESCRIPTION_BYTES >> 20
-                ),
-            ));
-        }
-        String::from_utf8(raw).map_err(|e| {
-            arch(
-                fmu,
-                format!(
-                    "modelDescription.xml is not UTF-8 (byte {})",
-                    e.utf8_error().valid_up_to()
-                ),
-            )
-        })?
+        read_description(fmu, f)?
     };
-    let md = description::parse(&xml).map_err(|message| FmuError::Description {
+    let names: Vec<String> = entries.iter().map(|e| e.name.clone()).collect();
+    let (md, id) = check_description(fmu, &xml, &names)?;
+    Ok((md, id, entries))
+}
+
+/// A modelDescription.xml's text: at most [`MAX_DESCRIPTION_BYTES`] (an error past it,
+/// not a cut), UTF-8.
+fn read_description(fmu: &Path, r: impl Read) -> Result<String, FmuError> {
+    let mut raw = Vec::new();
+    r.take(MAX_DESCRIPTION_BYTES + 1)
+        .read_to_end(&mut raw)
+        .map_err(|e| arch(fmu, format!("cannot read modelDescription.xml: {e}")))?;
+    if raw.len() as u64 > MAX_DESCRIPTION_BYTES {
+        return Err(arch(
+            fmu,
+            format!(
+                "modelDescription.xml is larger than {} MiB (the limit against a hostile archive)",
+                MAX_DESCRIPTION_BYTES >> 20
+            ),
+        ));
+    }
+    String::from_utf8(raw).map_err(|e| {
+        arch(
+            fmu,
+            format!(
+                "modelDescription.xml is not UTF-8 (byte {})",
+                e.utf8_error().valid_up_to()
+            ),
+        )
+    })
+}
+
+/// The description's checks: FMI 2.0 or 3.0, Co-Simulation, nothing unsupported, a
+/// `modelIdentifier` that is a C identifier, and its library among the archive's `names`.
+/// Returns the description and the model identifier.
+fn check_description(
+    fmu: &Path,
+    xml: &str,
+    names: &[String],
+) -> Result<(ModelDescription, String), FmuError> {
+    let md = description::parse(xml).map_err(|message| FmuError::Description {
         path: fmu.to_path_buf(),
         // An FMI 1.0 description may not even parse as 2.0: name the version then.
-        message: match sniff_fmi_version(&xml) {
+        message: match sniff_fmi_version(xml) {
             Some(v) if v != "2.0" && !v.starts_with("3.") => {
                 format!("fmiVersion is \"{v}\"; twinbench runs FMI 2.0 and 3.0 FMUs")
             }
@@ -610,7 +907,7 @@ pub(crate) fn sniff_fmi_version(xml: &str) -> Option<&str> {
 
 /// `<prefix>-<pid>-<counter>-<clock>`: a name no other thread or process uses (the clock
 /// for processes in other PID namespaces, which may share the id).
-fn unique_name(prefix: &str) -> String {
+pub(crate) fn unique_name(prefix: &str) -> String {
     use std::sync::atomic::{AtomicU64, Ordering};
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let nanos = std::time::SystemTime::now()
@@ -625,7 +922,7 @@ fn unique_name(prefix: &str) -> String {
 }
 
 /// A sibling of `path` that no other thread or process uses.
-fn unique_sibling(path: &Path) -> PathBuf {
+pub(crate) fn unique_sibling(path: &Path) -> PathBuf {
     let name = path
         .file_name()
         .map_or("x".into(), |n| n.to_string_lossy().into_owned());
@@ -638,7 +935,17 @@ fn extract(fmu: &Path, bytes: &[u8], dir: &Path, limits: &Limits) -> Result<(), 
     extract_into(fmu, bytes, &tmp, limits).inspect_err(|_| {
         let _ = std::fs::remove_dir_all(&tmp);
     })?;
-    match std::fs::rename(&tmp, dir) {
+    let mut moved = std::fs::rename(&tmp, dir);
+    if moved.is_err() && dir.is_dir() && !dir.join(".complete").exists() {
+        // A folder without `.complete` under the final name was not made by an unpacking
+        // (those are renamed in whole); set it aside and take its place.
+        let aside = unique_sibling(dir);
+        if std::fs::rename(dir, &aside).is_ok() {
+            let _ = std::fs::remove_dir_all(&aside);
+        }
+        moved = std::fs::rename(&tmp, dir);
+    }
+    match moved {
         Ok(()) => Ok(()),
         // Another process unpacked the same content first: use theirs.
         Err(_) if dir.join(".complete").exists() => {
@@ -692,4 +999,252 @@ fn extract_into(fmu: &Path, bytes: &[u8], tmp: &Path, limits: &Limits) -> Result
     }
     std::fs::write(tmp.join(".complete"), b"").map_err(|e| arch(tmp, e.to_string()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    /// A small FMU whose description's `description` attribute is `tag` (keep the length
+    /// for a rewrite of the same size).
+    fn fmu_bytes(tag: &str) -> Vec<u8> {
+        let md = format!(
+            r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="m" guid="{{g}}" description="{tag}">
+  <CoSimulation modelIdentifier="m"/>
+  <ModelVariables>
+    <ScalarVariable name="y" valueReference="1" causality="output" initial="calculated"><Real/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure><Outputs><Unknown index="1" dependencies=""/></Outputs><InitialUnknowns><Unknown index="1"/></InitialUnknowns></ModelStructure>
+</fmiModelDescription>"#
+        );
+        let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        // Stored and with a fixed time: a rewrite with an equal-length tag is the same size.
+        let opt = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Stored)
+            .last_modified_time(zip::DateTime::default());
+        for (name, data) in [
+            ("modelDescription.xml", md.as_bytes()),
+            (
+                "binaries/linux64/m.so",
+                b"not loaded by these tests".as_slice(),
+            ),
+            ("resources/data.txt", tag.as_bytes()),
+        ] {
+            w.start_file(name, opt).unwrap();
+            w.write_all(data).unwrap();
+        }
+        w.finish().unwrap().into_inner()
+    }
+
+    struct Scratch {
+        dir: store::TestDir,
+    }
+
+    impl Scratch {
+        fn new() -> Scratch {
+            Scratch {
+                dir: store::TestDir::new(),
+            }
+        }
+        fn store(&self) -> PathBuf {
+            self.dir.path().join("store")
+        }
+        /// A cache as a new process has it: nothing loaded, the shared store.
+        fn cache(&self) -> FmuCache {
+            FmuCache::with_store(&self.dir.path().join("root"), &self.store()).unwrap()
+        }
+        fn fmu(&self, tag: &str) -> PathBuf {
+            let p = self.dir.path().join("m.fmu");
+            std::fs::write(&p, fmu_bytes(tag)).unwrap();
+            p
+        }
+        fn index_entries(&self) -> usize {
+            std::fs::read_dir(self.store().join(store::INDEX_DIR))
+                .map_or(0, |d| d.flatten().count())
+        }
+    }
+
+    fn stats(index_hits: usize, archives_read: usize, extractions: usize) -> CacheStats {
+        CacheStats {
+            index_hits,
+            archives_read,
+            extractions,
+        }
+    }
+
+    /// Sets a file's mtime (and atime) to the given one.
+    fn set_mtime(path: &Path, mtime: std::time::SystemTime) {
+        std::fs::File::options()
+            .write(true)
+            .open(path)
+            .unwrap()
+            .set_times(
+                std::fs::FileTimes::new()
+                    .set_modified(mtime)
+                    .set_accessed(mtime),
+            )
+            .unwrap();
+    }
+
+    #[test]
+    fn a_second_process_finds_the_fmu_through_the_index_without_reading_the_archive() {
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        let a = s.cache();
+        let la = a.load(&fmu).unwrap();
+        assert_eq!(a.stats(), stats(0, 1, 1));
+        assert_eq!(s.index_entries(), 1);
+        // In-process, the same path again: through the index too.
+        let again = a.load(&fmu).unwrap();
+        assert!(Arc::ptr_eq(&la, &again));
+        assert_eq!(a.stats(), stats(1, 1, 1));
+        let b = s.cache();
+        let lb = b.load(&fmu).unwrap();
+        assert_eq!(b.stats(), stats(1, 0, 0));
+        assert_eq!((&lb.dir, &lb.sha256), (&la.dir, &la.sha256));
+        assert_eq!(lb.description.description, "first");
+        assert_eq!(lb.source, fmu);
+    }
+
+    #[test]
+    fn a_temporary_cache_on_a_store_removes_its_folder_and_keeps_the_store() {
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        let cache = FmuCache::temporary_with_store(&s.store()).unwrap();
+        let root = cache.root().to_path_buf();
+        let l = cache.load(&fmu).unwrap();
+        assert!(l.dir.starts_with(s.store()));
+        assert!(root.is_dir());
+        drop(cache);
+        assert!(!root.exists());
+        assert!(l.dir.join(".complete").is_file());
+        assert!(l.dir.join("binaries/linux64/m.so").is_file());
+    }
+
+    #[test]
+    fn a_rewrite_in_place_under_a_forged_stat_is_caught_by_the_central_directory() {
+        // The stat key cannot match after a rewrite (the ctime changes); forge the index
+        // entry of the rewritten file from the old one, so that only the central directory
+        // check stands between the new bytes and the old unpacked folder.
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        let mtime = std::fs::metadata(&fmu).unwrap().modified().unwrap();
+        let old = s.cache().load(&fmu).unwrap();
+        let old_key = store::index_key(
+            &std::fs::canonicalize(&fmu).unwrap(),
+            &std::fs::metadata(&fmu).unwrap(),
+        );
+        let old_entry = store::read_entry(&s.store(), &old_key).unwrap();
+        let size = std::fs::metadata(&fmu).unwrap().len();
+        std::fs::write(&fmu, fmu_bytes("secnd")).unwrap();
+        set_mtime(&fmu, mtime);
+        let meta = std::fs::metadata(&fmu).unwrap();
+        assert_eq!((meta.len(), meta.modified().unwrap()), (size, mtime));
+        let new_key = store::index_key(&std::fs::canonicalize(&fmu).unwrap(), &meta);
+        store::write_entry(
+            &s.store(),
+            &IndexEntry {
+                key: new_key.clone(),
+                ..old_entry
+            },
+        )
+        .unwrap();
+        let cache = s.cache();
+        let new = cache.load(&fmu).unwrap();
+        assert_eq!(cache.stats(), stats(0, 1, 1));
+        assert_eq!(new.description.description, "secnd");
+        assert_ne!(new.dir, old.dir);
+        assert_eq!(
+            std::fs::read_to_string(new.dir.join("resources/data.txt")).unwrap(),
+            "secnd"
+        );
+        // The entry was rewritten: the next process hits it.
+        assert_eq!(
+            store::read_entry(&s.store(), &new_key).unwrap().sha256,
+            new.sha256
+        );
+        let next = s.cache();
+        assert_eq!(next.load(&fmu).unwrap().dir, new.dir);
+        assert_eq!(next.stats(), stats(1, 0, 0));
+    }
+
+    #[test]
+    fn a_damaged_index_or_an_incomplete_folder_takes_the_full_path() {
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        let first = s.cache().load(&fmu).unwrap();
+        let entry_file = std::fs::read_dir(s.store().join(store::INDEX_DIR))
+            .unwrap()
+            .flatten()
+            .next()
+            .unwrap()
+            .path();
+        // A damaged entry: read again, not unpacked again, the entry rewritten.
+        std::fs::write(&entry_file, b"twinbench-unpack-index 1\nkey zz\n").unwrap();
+        let c = s.cache();
+        assert_eq!(c.load(&fmu).unwrap().dir, first.dir);
+        assert_eq!(c.stats(), stats(0, 1, 0));
+        let c = s.cache();
+        c.load(&fmu).unwrap();
+        assert_eq!(c.stats(), stats(1, 0, 0));
+        // A folder without `.complete` (emptied behind its back): unpacked again in its place.
+        std::fs::remove_file(first.dir.join(".complete")).unwrap();
+        std::fs::remove_file(first.dir.join("binaries/linux64/m.so")).unwrap();
+        let c = s.cache();
+        let l = c.load(&fmu).unwrap();
+        assert_eq!(c.stats(), stats(0, 1, 1));
+        assert_eq!(l.dir, first.dir);
+        assert!(l.dir.join("binaries/linux64/m.so").is_file());
+        // An unpacked description that is not the archive's: the full path (the content
+        // hash keeps the folder; only an index hit would read it).
+        let c = s.cache();
+        c.load(&fmu).unwrap();
+        assert_eq!(c.stats(), stats(1, 0, 0));
+        std::fs::write(l.dir.join("modelDescription.xml"), b"<not xml").unwrap();
+        let c = s.cache();
+        let e = c.load(&fmu).err();
+        assert!(e.is_none(), "{e:?}");
+        assert_eq!(c.stats(), stats(0, 1, 0));
+        // No temporaries left in the store.
+        let names: Vec<String> = std::fs::read_dir(s.store())
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        assert!(names.iter().all(|n| !n.contains("tmp")), "{names:?}");
+    }
+
+    #[test]
+    fn a_hit_still_applies_this_caches_limits() {
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        s.cache().load(&fmu).unwrap();
+        let few = s.cache().with_limits(Limits {
+            max_entries: 2,
+            max_total_bytes: MAX_TOTAL_BYTES,
+        });
+        let e = few.load(&fmu).err().expect("refused").to_string();
+        assert!(
+            e.contains(&fmu.display().to_string())
+                && e.contains("3 entries, more than the limit of 2"),
+            "{e}"
+        );
+        assert_eq!(few.stats(), stats(0, 1, 0));
+    }
+
+    #[test]
+    fn another_file_with_the_same_content_shares_the_folder_with_an_entry_of_its_own() {
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        let copy = s.dir.path().join("copy.fmu");
+        std::fs::copy(&fmu, &copy).unwrap();
+        let a = s.cache().load(&fmu).unwrap();
+        let c = s.cache();
+        let b = c.load(&copy).unwrap();
+        assert_eq!(a.dir, b.dir);
+        assert_eq!(c.stats(), stats(0, 1, 0));
+        assert_eq!(s.index_entries(), 2);
+    }
 }

@@ -1,0 +1,399 @@
+//! The machine-wide store of unpacked FMUs, shared by every twinbench process of a user, and
+//! its stat index: what lets a second process use an FMU without reading, hashing or
+//! inflating its archive again.
+//!
+//! Layout of a store folder:
+//! - `<sha256[..32]>/`: an unpacked FMU, keyed by the archive's content hash, with
+//!   `.complete` inside (only ever renamed into place whole);
+//! - `index/<key[..32]>`: one small text file per archive file seen, keyed by a hash of its
+//!   canonical path and `stat` (device, inode, size, mtime and ctime in ns), holding the
+//!   archive's content hash and a fingerprint of its central directory;
+//! - `.<name>.tmp-*`: unpackings and index entries being written (a killed process may leave
+//!   one; they are removed after a day).
+
+use sha2::{Digest, Sha256};
+use std::ffi::OsString;
+use std::fs::Metadata;
+use std::io::{Read, Write};
+use std::os::unix::ffi::OsStrExt;
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
+
+/// The index's format: part of every key and the first line of every entry, so that an
+/// entry of another format is never read as this one.
+const INDEX_FORMAT: &str = "twinbench-unpack-index 1";
+/// The index's folder in a store (never a content hash: those are hexadecimal).
+pub(crate) const INDEX_DIR: &str = "index";
+/// The largest index entry read (they are about 250 bytes).
+const MAX_ENTRY_BYTES: u64 = 4096;
+/// Temporaries older than this are left by a killed process (an unpacking takes seconds).
+const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
+
+/// Where the machine-wide store is: `$TWINBENCH_CACHE` if set, else
+/// `$XDG_CACHE_HOME/twinbench/unpacked`, else `$HOME/.cache/twinbench/unpacked`. The first
+/// of these that is set decides (a store named by `TWINBENCH_CACHE` that cannot be used is
+/// not replaced by one in the home folder); `None` when none is set.
+pub fn default_store_dir() -> Option<PathBuf> {
+    store_dir_from(|k| std::env::var_os(k))
+}
+
+pub(crate) fn store_dir_from(var: impl Fn(&str) -> Option<OsString>) -> Option<PathBuf> {
+    let set = |k: &str| var(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+    if let Some(p) = set("TWINBENCH_CACHE") {
+        // Absolute, so that the unpacked folders' paths do not depend on the working folder.
+        return std::path::absolute(p).ok();
+    }
+    // The XDG rules: a relative value is invalid and ignored.
+    if let Some(p) = set("XDG_CACHE_HOME").filter(|p| p.is_absolute()) {
+        return Some(p.join("twinbench").join("unpacked"));
+    }
+    set("HOME")
+        .filter(|p| p.is_absolute())
+        .map(|h| h.join(".cache").join("twinbench").join("unpacked"))
+}
+
+/// Creates the machine-wide store if needed (its own folder private to the user) and checks
+/// that it can be trusted with libraries that twinbench loads: a folder of this user that
+/// no other user can write into, and that this user can write into. The reason otherwise.
+pub(crate) fn prepare(dir: &Path) -> Result<(), String> {
+    use std::os::unix::fs::DirBuilderExt;
+    if let Some(parent) = dir.parent() {
+        std::fs::create_dir_all(parent).map_err(|e| format!("cannot create it: {e}"))?;
+    }
+    match std::fs::DirBuilder::new().mode(0o700).create(dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(format!("cannot create it: {e}")),
+    }
+    let meta = std::fs::metadata(dir).map_err(|e| format!("cannot read it: {e}"))?;
+    if !meta.is_dir() {
+        return Err("it is not a folder".into());
+    }
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let me = unsafe { libc::geteuid() };
+    if meta.uid() != me {
+        return Err(format!(
+            "it belongs to user id {}, not to this user ({me})",
+            meta.uid()
+        ));
+    }
+    if meta.mode() & 0o022 != 0 {
+        return Err(format!(
+            "other users can write into it (mode {:o}; expected no group or other write permission)",
+            meta.mode() & 0o7777
+        ));
+    }
+    let c = std::ffi::CString::new(dir.as_os_str().as_bytes())
+        .map_err(|_| "its path holds a NUL byte".to_string())?;
+    // SAFETY: access on a NUL-terminated path we own.
+    if unsafe { libc::access(c.as_ptr(), libc::W_OK | libc::X_OK) } != 0 {
+        return Err("this user cannot write into it".into());
+    }
+    Ok(())
+}
+
+/// One entry of an archive's central directory, as the index fingerprints it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct CdEntry {
+    pub name: String,
+    pub compressed: u64,
+    pub size: u64,
+    pub crc32: u32,
+}
+
+/// A hash of the central directory: every entry's name, compressed and uncompressed size
+/// and CRC-32, in order. A change of any entry's content changes its CRC.
+pub(crate) fn fingerprint(entries: &[CdEntry]) -> String {
+    let mut h = Sha256::new();
+    h.update((entries.len() as u64).to_le_bytes());
+    for e in entries {
+        h.update((e.name.len() as u64).to_le_bytes());
+        h.update(e.name.as_bytes());
+        h.update(e.compressed.to_le_bytes());
+        h.update(e.size.to_le_bytes());
+        h.update(e.crc32.to_le_bytes());
+    }
+    format!("{:x}", h.finalize())
+}
+
+/// The index key of a file: its canonical path and its `stat` identity (device, inode, size,
+/// mtime and ctime to the nanosecond). A rewrite, a replacement or a move gives another key.
+pub(crate) fn index_key(canonical: &Path, meta: &Metadata) -> String {
+    let mut h = Sha256::new();
+    h.update(INDEX_FORMAT.as_bytes());
+    // Paths hold no NUL byte: the separator keeps the fields apart.
+    h.update([0]);
+    h.update(canonical.as_os_str().as_bytes());
+    h.update([0]);
+    for v in [meta.dev(), meta.ino(), meta.size()] {
+        h.update(v.to_le_bytes());
+    }
+    for v in [
+        meta.mtime(),
+        meta.mtime_nsec(),
+        meta.ctime(),
+        meta.ctime_nsec(),
+    ] {
+        h.update(v.to_le_bytes());
+    }
+    format!("{:x}", h.finalize())
+}
+
+/// Whether two `stat`s of one open file show no change in between.
+pub(crate) fn same_stat(a: &Metadata, b: &Metadata) -> bool {
+    (a.dev(), a.ino(), a.size(), a.mtime(), a.mtime_nsec())
+        == (b.dev(), b.ino(), b.size(), b.mtime(), b.mtime_nsec())
+        && (a.ctime(), a.ctime_nsec()) == (b.ctime(), b.ctime_nsec())
+}
+
+/// What the index knows of one archive file.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct IndexEntry {
+    /// The full [`index_key`] (the file name holds only its first half).
+    pub key: String,
+    /// The archive's content hash: its unpacked folder is `<store>/<sha256[..32]>`.
+    pub sha256: String,
+    /// The central directory's entry count and [`fingerprint`].
+    pub entries: usize,
+    pub directory: String,
+}
+
+impl IndexEntry {
+    fn to_text(&self) -> String {
+        format!(
+            "{INDEX_FORMAT}\nkey {}\nsha256 {}\nentries {}\ndirectory {}\n",
+            self.key, self.sha256, self.entries, self.directory
+        )
+    }
+
+    /// Strict: anything else than what [`IndexEntry::to_text`] writes is no entry. The
+    /// hashes are checked to be hexadecimal, so that a damaged entry cannot name a folder
+    /// outside the store.
+    fn parse(text: &str) -> Option<IndexEntry> {
+        let mut lines = text.strip_suffix('\n')?.split('\n');
+        if lines.next()? != INDEX_FORMAT {
+            return None;
+        }
+        let mut field = |name: &str| lines.next()?.strip_prefix(name)?.strip_prefix(' ');
+        let key = hex64(field("key")?)?;
+        let sha256 = hex64(field("sha256")?)?;
+        let entries = field("entries")?.parse().ok()?;
+        let directory = hex64(field("directory")?)?;
+        if lines.next().is_some() {
+            return None;
+        }
+        Some(IndexEntry {
+            key,
+            sha256,
+            entries,
+            directory,
+        })
+    }
+}
+
+fn hex64(s: &str) -> Option<String> {
+    (s.len() == 64 && s.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))).then(|| s.into())
+}
+
+fn entry_path(store: &Path, key: &str) -> PathBuf {
+    store.join(INDEX_DIR).join(&key[..32])
+}
+
+/// The index entry of `key`, if there is a valid one for exactly that key.
+pub(crate) fn read_entry(store: &Path, key: &str) -> Option<IndexEntry> {
+    let f = std::fs::File::open(entry_path(store, key)).ok()?;
+    let mut text = String::new();
+    f.take(MAX_ENTRY_BYTES).read_to_string(&mut text).ok()?;
+    IndexEntry::parse(&text).filter(|e| e.key == key)
+}
+
+/// Writes an index entry atomically: a reader sees the old entry or the new one, whole.
+pub(crate) fn write_entry(store: &Path, entry: &IndexEntry) -> std::io::Result<()> {
+    let path = entry_path(store, &entry.key);
+    std::fs::create_dir_all(store.join(INDEX_DIR))?;
+    let tmp = crate::archive::unique_sibling(&path);
+    let written = (|| {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)?;
+        f.write_all(entry.to_text().as_bytes())?;
+        std::fs::rename(&tmp, &path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
+/// Removes what killed processes left in the store: unpackings and index entries that were
+/// being written (`.<name>.tmp-*`) more than a day ago. Only temporaries: an unpacked FMU
+/// may be in use by any process at any time.
+pub(crate) fn sweep_temporaries(store: &Path) {
+    for dir in [store.to_path_buf(), store.join(INDEX_DIR)] {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let name = e.file_name();
+            let name = name.to_string_lossy();
+            if !(name.starts_with('.') && name.contains(".tmp-")) {
+                continue;
+            }
+            let old = e
+                .metadata()
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age > STALE_AFTER);
+            if old {
+                let p = e.path();
+                let _ = std::fs::remove_dir_all(&p).or_else(|_| std::fs::remove_file(&p));
+            }
+        }
+    }
+}
+
+/// A scratch folder in the temporary directory, removed when dropped (the crate's tests
+/// have no dependencies of their own).
+#[cfg(test)]
+pub(crate) struct TestDir(PathBuf);
+
+#[cfg(test)]
+impl TestDir {
+    pub(crate) fn new() -> TestDir {
+        let dir = std::env::temp_dir().join(crate::archive::unique_name("tb-fmi-test"));
+        std::fs::create_dir_all(&dir).unwrap();
+        TestDir(dir)
+    }
+    pub(crate) fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+#[cfg(test)]
+impl Drop for TestDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_store_is_found_in_the_documented_order() {
+        let env = |pairs: &'static [(&'static str, &'static str)]| {
+            move |k: &str| {
+                pairs
+                    .iter()
+                    .find(|(n, _)| *n == k)
+                    .map(|(_, v)| OsString::from(*v))
+            }
+        };
+        assert_eq!(
+            store_dir_from(env(&[
+                ("TWINBENCH_CACHE", "/s"),
+                ("XDG_CACHE_HOME", "/x"),
+                ("HOME", "/h")
+            ])),
+            Some(PathBuf::from("/s"))
+        );
+        assert_eq!(
+            store_dir_from(env(&[("XDG_CACHE_HOME", "/x"), ("HOME", "/h")])),
+            Some(PathBuf::from("/x/twinbench/unpacked"))
+        );
+        // Empty is unset; a relative XDG_CACHE_HOME is invalid.
+        assert_eq!(
+            store_dir_from(env(&[
+                ("TWINBENCH_CACHE", ""),
+                ("XDG_CACHE_HOME", "rel"),
+                ("HOME", "/h")
+            ])),
+            Some(PathBuf::from("/h/.cache/twinbench/unpacked"))
+        );
+        assert_eq!(store_dir_from(env(&[("HOME", "")])), None);
+        // A relative TWINBENCH_CACHE is taken from the working folder.
+        let rel = store_dir_from(env(&[("TWINBENCH_CACHE", "target/s")])).unwrap();
+        assert!(rel.is_absolute() && rel.ends_with("target/s"), "{rel:?}");
+    }
+
+    #[test]
+    fn a_store_other_users_can_write_into_is_refused() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = TestDir::new();
+        let store = dir.path().join("a/store");
+        prepare(&store).unwrap();
+        let mode = std::fs::metadata(&store).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o700);
+        std::fs::set_permissions(&store, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let e = prepare(&store).unwrap_err();
+        assert!(e.contains("other users can write into it (mode 777"), "{e}");
+        let file = dir.path().join("file");
+        std::fs::write(&file, b"").unwrap();
+        assert!(prepare(&file).is_err());
+    }
+
+    #[test]
+    fn index_entries_round_trip_and_damaged_ones_are_none() {
+        let h = |c: char| c.to_string().repeat(64);
+        let e = IndexEntry {
+            key: h('a'),
+            sha256: h('b'),
+            entries: 7,
+            directory: h('c'),
+        };
+        let text = e.to_text();
+        assert_eq!(IndexEntry::parse(&text), Some(e.clone()));
+        for bad in [
+            text.replace("sha256 b", "sha256 ../"),
+            text.replace('b', "B"),
+            text.replace("entries 7", "entries x"),
+            text.replace(INDEX_FORMAT, "twinbench-unpack-index 0"),
+            format!("{text}extra\n"),
+            text[..text.len() - 1].to_string(),
+            text[..text.len() / 2].to_string(),
+            String::new(),
+        ] {
+            assert_eq!(IndexEntry::parse(&bad), None, "{bad:?}");
+        }
+        // Written and read back; another key in the same file is no entry.
+        let dir = TestDir::new();
+        write_entry(dir.path(), &e).unwrap();
+        assert_eq!(read_entry(dir.path(), &e.key), Some(e.clone()));
+        let other = format!("{}{}", &e.key[..32], "d".repeat(32));
+        assert_eq!(read_entry(dir.path(), &other), None);
+        // Nothing but the entry: the temporary was renamed.
+        let names: Vec<_> = std::fs::read_dir(dir.path().join(INDEX_DIR))
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert_eq!(names, vec![OsString::from(&e.key[..32])]);
+    }
+
+    #[test]
+    fn old_temporaries_are_swept_and_everything_else_kept() {
+        let dir = TestDir::new();
+        let s = dir.path();
+        let old_dir = s.join(".abc.tmp-1-2-3");
+        let new_dir = s.join(".abd.tmp-1-2-4");
+        let old_entry = s.join(INDEX_DIR).join(".k.tmp-1-2-3");
+        let fmu = s.join("0123456789abcdef0123456789abcdef");
+        for d in [&old_dir, &new_dir, &fmu, &s.join(INDEX_DIR)] {
+            std::fs::create_dir_all(d).unwrap();
+        }
+        std::fs::write(&old_entry, b"x").unwrap();
+        let two_days_ago = std::time::SystemTime::now() - 2 * STALE_AFTER;
+        for p in [&old_dir, &old_entry, &fmu] {
+            std::fs::File::open(p)
+                .unwrap()
+                .set_modified(two_days_ago)
+                .unwrap();
+        }
+        sweep_temporaries(s);
+        assert!(!old_dir.exists() && !old_entry.exists());
+        assert!(new_dir.exists() && fmu.exists());
+    }
+}
