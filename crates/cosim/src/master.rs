@@ -39,7 +39,11 @@ struct FmuUnit {
     in_real_offset: Vec<f64>,
     in_int: Batch<i32>,
     in_bool: Batch<i32>,
+    /// Real outputs read after every step: what connections, the stop condition or a
+    /// replay's distance basis read.
     out_real: Batch<f64>,
+    /// Real outputs only the recording reads: read at recorded steps only.
+    rec_real: Batch<f64>,
     out_int: Batch<i32>,
     out_bool: Batch<i32>,
     in_str: Batch<String>,
@@ -128,21 +132,7 @@ impl FmuUnit {
             .instance
             .as_deref_mut()
             .expect("instances are created before the first step");
-        if !self.out_real.vr.is_empty() {
-            i.get_real(&self.out_real.vr, &mut self.out_real.buf)?;
-            for k in 0..self.out_real.vr.len() {
-                let x = self.out_real.buf[k];
-                if !x.is_finite() {
-                    return Err(SystemError::NotFinite {
-                        instance: self.name.clone(),
-                        signal: plan.signals.signals[self.out_real.sig[k]].name.clone(),
-                        value: x,
-                        time: i.time(),
-                    });
-                }
-                signals[self.out_real.sig[k]] = x;
-            }
-        }
+        read_reals(i, &mut self.out_real, &self.name, signals, plan)?;
         if !self.out_int.vr.is_empty() {
             i.get_integer(&self.out_int.vr, &mut self.out_int.buf)?;
             for k in 0..self.out_int.vr.len() {
@@ -165,7 +155,54 @@ impl FmuUnit {
     }
 }
 
+/// Reads a batch of Real outputs into the exchange buffer; a value that is not finite is
+/// an error naming the instance, the signal and the time.
+#[inline]
+fn read_reals(
+    i: &mut dyn Backend,
+    batch: &mut Batch<f64>,
+    name: &str,
+    signals: &mut [f64],
+    plan: &Plan,
+) -> Result<(), SystemError> {
+    if batch.vr.is_empty() {
+        return Ok(());
+    }
+    i.get_real(&batch.vr, &mut batch.buf)?;
+    for k in 0..batch.vr.len() {
+        let x = batch.buf[k];
+        if !x.is_finite() {
+            return Err(SystemError::NotFinite {
+                instance: name.to_string(),
+                signal: plan.signals.signals[batch.sig[k]].name.clone(),
+                value: x,
+                time: i.time(),
+            });
+        }
+        signals[batch.sig[k]] = x;
+    }
+    Ok(())
+}
+
 impl Exchange {
+    /// Read every unit's record-only outputs (before a recorded row: the values at the
+    /// same communication point as the others', as no input changed since each unit's step).
+    pub fn publish_recorded(&mut self) -> Result<(), SystemError> {
+        for u in &mut self.units {
+            if let Unit::Fmu(f) = u {
+                if f.rec_real.vr.is_empty() {
+                    continue;
+                }
+                let i = f
+                    .instance
+                    .as_deref_mut()
+                    .expect("instances are created before the first step");
+                read_reals(i, &mut f.rec_real, &f.name, &mut self.signals, &self.plan)?;
+            }
+        }
+        Ok(())
+    }
+
     /// Set unit `u`'s inputs from the exchange buffer (a replay has none).
     #[inline]
     pub fn set_inputs(&mut self, u: usize) -> Result<(), SystemError> {
@@ -259,7 +296,7 @@ impl Exchange {
         for u in 0..self.units.len() {
             self.publish(u, t)?;
         }
-        Ok(())
+        self.publish_recorded()
     }
 
     fn step_replay(&mut self, u: usize, t: f64) {
@@ -410,6 +447,7 @@ impl Simulation {
                     in_int: Batch::default(),
                     in_bool: Batch::default(),
                     out_real: Batch::default(),
+                    rec_real: Batch::default(),
                     out_int: Batch::default(),
                     out_bool: Batch::default(),
                     in_str: Batch::default(),
@@ -437,10 +475,23 @@ impl Simulation {
                 cursor: Cursor::default(),
             }));
         }
+        // The slots read between steps; every other Real output is read for the recording
+        // only, at the recorded steps (a tenth of them at 1 ms and 100 Hz).
+        let mut every_step = vec![false; plan.signals.signals.len()];
+        for c in &plan.connections {
+            every_step[c.from_slot] = true;
+        }
+        if let Stop::When { condition, .. } = &plan.stop {
+            every_step[condition.slot] = true;
+        }
+        for &s in plan.replay_basis.iter().flatten() {
+            every_step[s] = true;
+        }
         for (slot, s) in plan.signals.signals.iter().enumerate() {
             if let Endpoint::Fmu { unit, vr, ty, .. } = s.source {
                 if let Unit::Fmu(f) = &mut units[unit] {
                     match ty {
+                        ScalarType::Real if !every_step[slot] => f.rec_real.push(vr, slot),
                         ScalarType::Real => f.out_real.push(vr, slot),
                         ScalarType::Integer | ScalarType::Enumeration => f.out_int.push(vr, slot),
                         ScalarType::Boolean => f.out_bool.push(vr, slot),
@@ -635,7 +686,8 @@ impl Simulation {
     }
 
     #[inline]
-    fn record(&mut self, t: f64) {
+    fn record(&mut self, t: f64) -> Result<(), SystemError> {
+        self.ex.publish_recorded()?;
         let signals = &self.ex.signals;
         self.recording
             .push_row(std::iter::once(t).chain(self.plan.record.iter().map(|&s| signals[s])));
@@ -646,6 +698,7 @@ impl Simulation {
                 }
             }
         }
+        Ok(())
     }
 
     /// The plan's consistency checks, after initialisation.
@@ -755,7 +808,7 @@ impl Simulation {
         self.instantiate_all(start, fixed_stop)?;
         self.initialize(start)?;
         self.check_consistency()?;
-        self.record(start);
+        self.record(start)?;
         // Integer ticks: t_k = start + k·h exactly, no accumulated drift.
         let span = fixed_stop.unwrap_or(start + condition.map_or(0.0, |c| c.1)) - start;
         let full_steps = (span / h * (1.0 + 1e-12)).floor() as u64;
@@ -780,7 +833,7 @@ impl Simulation {
                 self.ex.publish_all(time)?;
                 k += 1;
                 t_end = time;
-                self.record(t_end);
+                self.record(t_end)?;
                 stopped_by = format!(
                     "instance '{instance}' asked to end the simulation at t = {time} s (fmi2Discard with fmi2Terminated, or fmi3DoStep's terminateSimulation)"
                 );
@@ -798,7 +851,7 @@ impl Simulation {
             // Rows stay on the decimation grid (a uniform time base for filters); only a
             // fixed stop time adds its final row.
             if k.is_multiple_of(decimation) || (k == total_steps && fixed_stop.is_some()) {
-                self.record(t_end);
+                self.record(t_end)?;
             }
             if met {
                 break;

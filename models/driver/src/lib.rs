@@ -12,11 +12,16 @@ use fmu_export::variables::*;
 use fmu_export::{
     Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter,
 };
+use std::cell::Cell;
 use std::sync::Arc;
 pub use target::TargetSpeed;
 
 /// Name of the target speed file in the FMU's `resources/`.
 pub const TARGET_FILE: &str = "target_speed.csv";
+
+/// The bundled target as the build script parsed it (`fmu_export::sidecar`; empty if the
+/// bundled file does not parse, then the resource is parsed at run time and its error shown).
+const TARGET_SIDECAR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/target_speed.sidecar"));
 
 const G: f64 = 9.81;
 
@@ -76,6 +81,10 @@ pub struct Driver {
     target: Arc<TargetSpeed>,
     /// ∫ speed error dt [m], the PI's integral state.
     error_integral: f64,
+    /// Segments of the last target lookups at the car and at the preview point (search
+    /// hints only: results do not depend on them).
+    hint_here: Cell<usize>,
+    hint_preview: Cell<usize>,
 }
 
 impl Driver {
@@ -92,7 +101,7 @@ impl Driver {
     /// Target at the preview point: (v_preview, a_target).
     fn preview(&self, vars: &DriverVars) -> (f64, f64) {
         let distance = (vars.v.max(0.0) * vars.preview_time).max(vars.preview_distance_min);
-        let (vp, slope) = self.target.at(vars.s + distance);
+        let (vp, slope) = self.target.at_near(vars.s + distance, &self.hint_preview);
         (vp, vp * slope)
     }
 
@@ -100,7 +109,7 @@ impl Driver {
     /// pedal saturation: +1 accelerator at its stop, −1 brake at its stop, 0 neither.
     fn write_outputs(&self, vars: &mut DriverVars) -> i32 {
         let (vp, a_target) = self.preview(vars);
-        let v_target = self.target.at(vars.s).0;
+        let v_target = self.target.at_near(vars.s, &self.hint_here).0;
         let error = v_target - vars.v;
         let a_fb = Self::kp(vars) * error + self.integral_part(vars);
         let ff = vars.feed_forward_gain;
@@ -150,7 +159,14 @@ impl Model for Driver {
         let target = if vars.target_speed_file.is_empty() {
             ctx.cached(TARGET_FILE, || {
                 let (path, text) = ctx.read_resource(TARGET_FILE)?;
-                TargetSpeed::parse(&text, &path.display().to_string())
+                // The bundled file as the build parsed it, unless it was changed since.
+                let digest = fmu_export::sidecar::digest(text.as_bytes());
+                match fmu_export::sidecar::decode(TARGET_SIDECAR, digest, 2)
+                    .and_then(|v| TargetSpeed::from_values(&v))
+                {
+                    Some(target) => Ok(target),
+                    None => TargetSpeed::parse(&text, &path.display().to_string()),
+                }
             })?
         } else {
             let path =
@@ -163,6 +179,8 @@ impl Model for Driver {
         let driver = Driver {
             target,
             error_integral: 0.0,
+            hint_here: Cell::new(0),
+            hint_preview: Cell::new(0),
         };
         driver.write_outputs(vars);
         Ok(driver)

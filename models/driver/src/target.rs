@@ -1,6 +1,7 @@
 //! The distance-based target speed: a periodic, piecewise-linear `v(s)` from a CSV file.
 
 use fmu_export::ModelError;
+use std::cell::Cell;
 
 /// Target speed over distance; periodic with the lap length (the file's last `s`).
 #[derive(Debug, PartialEq)]
@@ -78,12 +79,36 @@ impl TargetSpeed {
                 s.len()
             )));
         }
+        Ok(Self::from_columns(s, v))
+    }
+
+    fn from_columns(s: Vec<f64>, v: Vec<f64>) -> TargetSpeed {
         let spacing = (s[s.len() - 1] - s[0]) / (s.len() - 1) as f64;
         let even = s
             .windows(2)
             .all(|w| ((w[1] - w[0]) - spacing).abs() <= 1e-9 * spacing);
         let inv_spacing = even.then_some(1.0 / spacing);
-        Ok(TargetSpeed { s, v, inv_spacing })
+        TargetSpeed { s, v, inv_spacing }
+    }
+
+    /// The rows as numbers, (s, v) pairs (a build script stores them: `sidecar`).
+    pub fn values(&self) -> Vec<f64> {
+        self.s
+            .iter()
+            .zip(&self.v)
+            .flat_map(|(&s, &v)| [s, v])
+            .collect()
+    }
+
+    /// A target from [`TargetSpeed::values`] of a parsed file (the same numbers, the
+    /// same target).
+    pub fn from_values(values: &[f64]) -> Option<TargetSpeed> {
+        if !values.len().is_multiple_of(2) || values.len() < 4 {
+            return None;
+        }
+        let s = values.chunks_exact(2).map(|r| r[0]).collect();
+        let v = values.chunks_exact(2).map(|r| r[1]).collect();
+        Some(Self::from_columns(s, v))
     }
 
     /// Lap length: the last `s` of the file; positions wrap modulo it.
@@ -94,11 +119,47 @@ impl TargetSpeed {
     /// Target speed and its slope dv/ds at distance `s` (any real; wrapped into the lap).
     /// Before the file's first `s` the first value holds.
     pub fn at(&self, s: f64) -> (f64, f64) {
-        let x = s.rem_euclid(self.lap_length());
+        self.at_near(s, &Cell::new(0))
+    }
+
+    /// [`TargetSpeed::at`] starting the search at the segment of the last lookup (`hint`,
+    /// updated): the driver moves a few centimetres per step, so the segment is almost
+    /// always the same or the next one. Same segment, same bits as without the hint.
+    pub fn at_near(&self, s: f64, hint: &Cell<usize>) -> (f64, f64) {
+        let length = self.lap_length();
+        // The usual cases without libm's fmod, bit-identical to rem_euclid: s itself inside
+        // the lap, s − length on the next lap (exact: Sterbenz's lemma, length ≤ s < 2·length).
+        let x = if (0.0..length).contains(&s) {
+            s
+        } else if s >= length && s < 2.0 * length {
+            s - length
+        } else {
+            s.rem_euclid(length)
+        };
         let n = self.s.len();
-        // Index of the segment [s_k, s_{k+1}] containing x: partition_point's answer, found
-        // directly on an even grid (the guess is corrected by a step if rounding missed).
-        let k = match self.inv_spacing {
+        // k: the number of rows with s_k <= x (partition_point's answer).
+        let h = hint.get();
+        let k = if h > 0 && h < n && self.s[h - 1] <= x && x < self.s[h] {
+            h
+        } else if h < n && self.s[h] <= x && (h + 1 == n || x < self.s[h + 1]) {
+            h + 1
+        } else {
+            self.segment(x)
+        };
+        hint.set(k);
+        if k == 0 {
+            return (self.v[0], 0.0);
+        }
+        let k = (k - 1).min(n - 2);
+        let slope = (self.v[k + 1] - self.v[k]) / (self.s[k + 1] - self.s[k]);
+        (self.v[k] + slope * (x - self.s[k]), slope)
+    }
+
+    /// The number of rows with s_k <= x, found directly on an even grid (the guess is
+    /// corrected by a step if rounding missed), else by bisection.
+    fn segment(&self, x: f64) -> usize {
+        let n = self.s.len();
+        match self.inv_spacing {
             Some(inv) if x >= self.s[0] => {
                 let mut k = (((x - self.s[0]) * inv) as usize + 1).min(n);
                 while k < n && self.s[k] <= x {
@@ -110,13 +171,7 @@ impl TargetSpeed {
                 k
             }
             _ => self.s.partition_point(|&sk| sk <= x),
-        };
-        if k == 0 {
-            return (self.v[0], 0.0);
         }
-        let k = (k - 1).min(n - 2);
-        let slope = (self.v[k + 1] - self.v[k]) / (self.s[k + 1] - self.s[k]);
-        (self.v[k] + slope * (x - self.s[k]), slope)
     }
 }
 

@@ -124,7 +124,8 @@ fn snap(x: f64) -> f64 {
 
 impl Dyno {
     fn tick_time(&self) -> f64 {
-        self.start_time + self.tick as f64 * self.cycle
+        // Through i64: one conversion instruction (tick < 2^63, the same value as u64's).
+        self.start_time + self.tick as i64 as f64 * self.cycle
     }
 
     fn clip(x: f64, limit: f64) -> f64 {
@@ -310,18 +311,21 @@ impl Model for Dyno {
                 .max(0.0) as u64;
         }
         // The bench's usual case: the step starts on a tick and spans whole controller cycles
-        // (1 ms over 0.1 ms): tick, then one full cycle, n times, without locating ticks.
-        let cycles = step / self.cycle;
-        let whole = cycles.round();
+        // (1 ms over 0.1 ms): tick, then integrate to the next tick, n times, without
+        // locating ticks. The sub-steps are the general loop's below, to the bit (the same
+        // tick times, the last one ending at `end`), so either path gives the same result.
+        let whole = (step / self.cycle).round();
+        let n = whole as u64;
         if whole >= 1.0
-            && (cycles - whole).abs() <= TICK_EPS * whole
             && (self.tick_time() - t).abs() <= eps
+            && (self.start_time + (self.tick + n) as i64 as f64 * self.cycle - end).abs() <= eps
         {
-            for _ in 0..whole as u64 {
+            for i in 1..=n {
                 self.controller_tick(vars);
-                self.advance(vars, self.cycle);
+                let t_next = if i == n { end } else { self.tick_time() };
+                self.advance(vars, t_next - t);
+                t = t_next;
             }
-            t = end;
         }
         loop {
             // A tick exactly at the end belongs to the next step, with its new inputs.

@@ -16,6 +16,7 @@ pub mod description;
 pub mod ffi;
 pub mod model;
 pub mod runtime;
+pub mod sidecar;
 pub mod variables;
 
 pub use tb_fmi::{fmi2, units, Function, Phase, PhaseSet};

@@ -69,9 +69,12 @@ struct Slot {
     is_input: bool,
     min: f64,
     max: f64,
+    /// A Real's byte offset in `M::Vars` (`usize::MAX`: not a Real).
+    offset: usize,
 }
 
 const NO_SLOT: Slot = Slot {
+    offset: usize::MAX,
     index: u32::MAX,
     ty: ScalarType::Real,
     has_start: false,
@@ -140,6 +143,7 @@ impl<M: Model> Runtime<M> {
                 is_input: v.causality == Causality::Input,
                 min: v.min.unwrap_or(f64::NEG_INFINITY),
                 max: v.max.unwrap_or(f64::INFINITY),
+                offset: M::Vars::REAL_OFFSETS[i],
             };
         }
         Runtime {
@@ -551,6 +555,98 @@ impl<M: Model> Runtime<M> {
                     out[k] = conv(self.vars.get(sl.index as usize));
                 }
                 _ => return self.get_error(function, ty, vr),
+            }
+        }
+        fmi2Status::OK
+    }
+
+    /// fmi2GetReal: [`Runtime::get`] with each value read straight from its field.
+    pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> fmi2Status {
+        const F: &str = "fmi2GetReal";
+        if let Err(s) = self.require_named(F, Function::GetReal.allowed()) {
+            return s;
+        }
+        if vrs.len() != out.len() {
+            return self.error(&format!(
+                "{F}: {} value references but {} values",
+                vrs.len(),
+                out.len()
+            ));
+        }
+        match self.phase {
+            Phase::InitializationMode => self.try_initialize(),
+            Phase::StepComplete if self.inputs_changed && self.has_feedthrough => {
+                if let Some(m) = self.model.as_mut() {
+                    m.update_outputs(&mut self.vars);
+                }
+                self.inputs_changed = false;
+            }
+            _ => {}
+        }
+        let instantiated = self.phase == Phase::Instantiated;
+        let base = (&self.vars as *const M::Vars).cast::<u8>();
+        for (k, &vr) in vrs.iter().enumerate() {
+            match self.slots.get(vr as usize) {
+                Some(sl) if sl.offset != usize::MAX && (sl.has_start || !instantiated) => {
+                    // SAFETY: `offset` is `offset_of!` of an f64 field of M::Vars
+                    // (REAL_OFFSETS), so the pointer is in bounds and aligned.
+                    out[k] = unsafe { base.add(sl.offset).cast::<f64>().read() };
+                }
+                _ => return self.get_error(F, ScalarType::Real, vr),
+            }
+        }
+        fmi2Status::OK
+    }
+
+    /// fmi2SetReal: [`Runtime::set`] with each accepted value written straight to its
+    /// field; the first value that needs more (a rounding outside its range, a refusal, a
+    /// warning) and every later one go through [`Runtime::set`].
+    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> fmi2Status {
+        const F: &str = "fmi2SetReal";
+        if let Err(s) = self.require_named(F, Function::SetReal.allowed()) {
+            return s;
+        }
+        if vrs.len() != values.len() {
+            return self.error(&format!(
+                "{F}: {} value references but {} values",
+                vrs.len(),
+                values.len()
+            ));
+        }
+        let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
+        let base = (&mut self.vars as *mut M::Vars).cast::<u8>();
+        for (k, (&vr, &x)) in vrs.iter().zip(values).enumerate() {
+            let accepted = match self.slots.get(vr as usize) {
+                Some(sl)
+                    if sl.offset != usize::MAX
+                        && (if init {
+                            sl.settable_init
+                        } else {
+                            sl.settable_run
+                        })
+                        && x.is_finite()
+                        && (sl.min..=sl.max).contains(&x) =>
+                {
+                    Some((sl.offset, sl.is_input))
+                }
+                _ => None,
+            };
+            let Some((offset, is_input)) = accepted else {
+                return self.set(
+                    F,
+                    ScalarType::Real,
+                    &vrs[k..],
+                    values[k..].iter().map(|&x| Value::Real(x)),
+                );
+            };
+            // SAFETY: `offset` is `offset_of!` of an f64 field of M::Vars (REAL_OFFSETS).
+            unsafe { base.add(offset).cast::<f64>().write(x) };
+            if init {
+                self.init_dirty = true;
+            } else if is_input {
+                self.inputs_changed = true;
+            } else {
+                self.params_changed = true;
             }
         }
         fmi2Status::OK

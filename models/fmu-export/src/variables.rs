@@ -200,6 +200,10 @@ pub trait VarTable: Clone + Default + Send + 'static {
     /// The table, in declaration order.
     const VARIABLES: &'static [VarInfo];
 
+    /// Byte offset of each variable's field in the struct when it is a Real (an `f64`),
+    /// `usize::MAX` otherwise: the runtime reads and writes Reals there directly.
+    const REAL_OFFSETS: &'static [usize];
+
     /// Value of the variable at `index` in [`Self::VARIABLES`].
     fn get(&self, index: usize) -> Value;
 
@@ -343,6 +347,17 @@ macro_rules! __fmi_set {
     }};
 }
 
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi_real_offset {
+    (Real, $name:ident, $field:ident) => {
+        ::core::mem::offset_of!($name, $field)
+    };
+    ($other:ident, $name:ident, $field:ident) => {
+        usize::MAX
+    };
+}
+
 /// Declare a model's variables once: a typed struct plus its [`VarTable`].
 ///
 /// ```
@@ -386,6 +401,10 @@ macro_rules! variables {
         impl $crate::variables::VarTable for $name {
             const VARIABLES: &'static [$crate::variables::VarInfo] = &[
                 $( ($info).named(stringify!($field), $crate::__fmi_value!($ty, $start)), )*
+            ];
+
+            const REAL_OFFSETS: &'static [usize] = &[
+                $( $crate::__fmi_real_offset!($ty, $name, $field), )*
             ];
 
             #[inline]

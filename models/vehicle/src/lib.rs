@@ -18,6 +18,10 @@ use track::{Track, TrackPoint};
 /// Name of the track file in the FMU's resources.
 pub const TRACK_FILE: &str = "track.csv";
 
+/// The bundled track as the build script parsed it (`fmu_export::sidecar`; empty if the
+/// bundled file does not parse, then the resource is parsed at run time and its error shown).
+const TRACK_SIDECAR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/track.sidecar"));
+
 fmu_export::variables! {
     /// Variables of the vehicle model (names as in docs/bench.md and the paper, hence the case).
     #[allow(non_snake_case)]
@@ -437,7 +441,14 @@ impl Model for Vehicle {
         let (track, track_path) = if vars.track_file.is_empty() {
             let track = ctx.cached(TRACK_FILE, || {
                 let (path, text) = ctx.read_resource(TRACK_FILE)?;
-                Track::parse(&path.display().to_string(), &text)
+                // The bundled file as the build parsed it, unless it was changed since.
+                let digest = fmu_export::sidecar::digest(text.as_bytes());
+                match fmu_export::sidecar::decode(TRACK_SIDECAR, digest, 5)
+                    .and_then(|v| Track::from_values(&v))
+                {
+                    Some(track) => Ok(track),
+                    None => Track::parse(&path.display().to_string(), &text),
+                }
             })?;
             (track, ctx.resource(TRACK_FILE)?)
         } else {

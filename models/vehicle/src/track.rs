@@ -108,6 +108,35 @@ impl Track {
         Ok(Track { s, rows, length })
     }
 
+    /// The rows as numbers, `COLUMNS` order (a build script stores them: `sidecar`).
+    pub fn values(&self) -> Vec<f64> {
+        self.s
+            .iter()
+            .zip(&self.rows)
+            .flat_map(|(&s, r)| [s, r.curvature, r.grade, r.z_left, r.z_right])
+            .collect()
+    }
+
+    /// A track from [`Track::values`] of a parsed file (the same numbers, the same track).
+    pub fn from_values(values: &[f64]) -> Option<Track> {
+        if !values.len().is_multiple_of(5) || values.len() < 10 {
+            return None;
+        }
+        let s: Vec<f64> = values.chunks_exact(5).map(|r| r[0]).collect();
+        let rows = values
+            .chunks_exact(5)
+            .map(|r| TrackPoint {
+                curvature: r[1],
+                grade: r[2],
+                z_left: r[3],
+                z_right: r[4],
+            })
+            .collect();
+        let n = s.len();
+        let length = s[n - 1] + (s[n - 1] - s[n - 2]);
+        Some(Track { s, rows, length })
+    }
+
     /// Number of data rows.
     pub fn rows(&self) -> usize {
         self.s.len()
@@ -119,6 +148,14 @@ impl Track {
 
     /// Map any distance into `[0, length)`.
     pub fn wrap(&self, s: f64) -> f64 {
+        // The usual cases without libm's fmod, bit-identical to rem_euclid: s itself inside
+        // the lap, s − length on the next lap (exact: Sterbenz's lemma, length ≤ s < 2·length).
+        if (0.0..self.length).contains(&s) {
+            return s;
+        }
+        if s >= self.length && s < 2.0 * self.length {
+            return s - self.length;
+        }
         let w = s.rem_euclid(self.length);
         // rem_euclid can round up to exactly `length`.
         if w >= self.length {

@@ -212,13 +212,27 @@ macro_rules! setter {
     };
 }
 
-getter!(
-    get_real,
-    "fmi2GetReal",
-    fmi2Real,
-    ScalarType::Real,
-    |v: Value| v.as_f64()
-);
+/// fmi2GetReal: the runtime's direct path for Reals.
+pub unsafe fn get_real<M: Model>(
+    c: fmi2Component,
+    vr: *const fmi2ValueReference,
+    n: usize,
+    value: *mut fmi2Real,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2GetReal", |rt| {
+        let (vrs, ptr) = match arrays(rt, "fmi2GetReal", vr, n, value as *const fmi2Real) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        let out: &mut [fmi2Real] = if n == 0 {
+            &mut []
+        } else {
+            std::slice::from_raw_parts_mut(ptr as *mut fmi2Real, n)
+        };
+        rt.get_real(vrs, out)
+    })
+}
+
 getter!(
     get_integer,
     "fmi2GetInteger",
@@ -233,13 +247,27 @@ getter!(
     ScalarType::Boolean,
     |v: Value| v.as_f64() as i32
 );
-setter!(
-    set_real,
-    "fmi2SetReal",
-    fmi2Real,
-    ScalarType::Real,
-    |x: &f64| Value::Real(*x)
-);
+/// fmi2SetReal: the runtime's direct path for Reals.
+pub unsafe fn set_real<M: Model>(
+    c: fmi2Component,
+    vr: *const fmi2ValueReference,
+    n: usize,
+    value: *const fmi2Real,
+) -> fmi2Status {
+    guarded::<M>(c, "fmi2SetReal", |rt| {
+        let (vrs, ptr) = match arrays(rt, "fmi2SetReal", vr, n, value) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        let vals: &[fmi2Real] = if n == 0 {
+            &[]
+        } else {
+            std::slice::from_raw_parts(ptr, n)
+        };
+        rt.set_real(vrs, vals)
+    })
+}
+
 setter!(
     set_integer,
     "fmi2SetInteger",

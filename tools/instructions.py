@@ -1,0 +1,83 @@
+#!/usr/bin/env python3
+"""Instruction counts (callgrind), the stable measure of docs/benchmark.md: machines and
+their load change wall times, not the instructions a run executes.
+
+- start-up: `twinbench run` of the RLS/v bench stopped after one 1 ms step, twice in a row
+  (the second finds the FMUs already unpacked);
+- lap loop: instructions per macro step of a whole Spielberg lap, i.e. (lap − one-step
+  run) / (steps − 1), masters, FMI calls and models included.
+
+Usage: tools/instructions.py [--json]   (needs valgrind; run tools/benchmark.sh first, or
+  `cargo build --release` and `target/release/twinbench pack`)
+"""
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TB = os.path.join(ROOT, "target", "release", "twinbench")
+SYSTEM = os.path.join(ROOT, "systems", "rls_v.toml")
+
+
+def system_variant(tmp, stop=None):
+    text = open(SYSTEM).read().replace('"../target/fmu/', '"' + os.path.join(ROOT, "target", "fmu") + "/")
+    if stop is not None:
+        text = text.replace('stop = "vehicle.lap >= 1"', f"stop = {stop!r}")
+    p = os.path.join(tmp, f"rls_v_{stop or 'lap'}.toml")
+    with open(p, "w") as f:
+        f.write(text)
+    return p
+
+
+def callgrind(system, tmp, env):
+    out = os.path.join(tmp, "callgrind.out")
+    p = subprocess.run(
+        ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", TB, "run", system, "--json"],
+        capture_output=True, text=True, env=env,
+    )
+    if p.returncode != 0:
+        raise RuntimeError(p.stderr[-2000:])
+    total = int(re.search(r"Collected : (\d+)", p.stderr).group(1))
+    steps = json.loads(p.stdout)["steps"]
+    os.remove(out)
+    return total, steps
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--json", action="store_true")
+    a = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ)
+        # A store of unpacked FMUs of this measurement's own: the first run fills it.
+        env["TWINBENCH_CACHE"] = os.path.join(tmp, "unpacked")
+        short = system_variant(tmp, 0.001)
+        first, _ = callgrind(short, tmp, env)
+        second, one = callgrind(short, tmp, env)
+        lap, steps = callgrind(system_variant(tmp), tmp, env)
+    per_step = (lap - second) / (steps - one)
+    result = {
+        "startup_first_run": first,
+        "startup_second_run": second,
+        "lap_total": lap,
+        "lap_steps": steps,
+        "lap_loop_per_step": per_step,
+    }
+    if a.json:
+        print(json.dumps(result, indent=1))
+        return 0
+    print("| measure (callgrind) | instructions |")
+    print("|---|---:|")
+    print(f"| start-up, first `run` (one 1 ms step) | {first / 1e6:,.1f} M |")
+    print(f"| start-up, second `run` on the same FMUs | {second / 1e6:,.1f} M |")
+    print(f"| whole lap ({steps:,} steps) | {lap / 1e6:,.1f} M |")
+    print(f"| lap loop, per macro step | {per_step:,.0f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
