@@ -39,11 +39,19 @@ def cli(*args, check=True):
 def worker_temporary_files(tmp_path_factory):
     """Unpacked FMUs of worker processes go below pytest's folder: a worker killed on
     purpose cannot clean up after itself, and the suite's TMPDIR must stay empty."""
+    import tempfile
+
+    import dask
+
     folder = tmp_path_factory.getbasetemp() / "tmp"
     folder.mkdir(exist_ok=True)
     old = os.environ.get("TMPDIR")
     os.environ["TMPDIR"] = str(folder)
-    yield
+    # Python caches its temporary folder on first use (Dask's scratch space goes there).
+    old_tempdir, tempfile.tempdir = tempfile.tempdir, str(folder)
+    with dask.config.set({"temporary-directory": str(folder)}):
+        yield
+    tempfile.tempdir = old_tempdir
     if old is None:
         del os.environ["TMPDIR"]
     else:
