@@ -87,9 +87,15 @@ impl FmuUnit {
         for k in 0..self.in_str.vr.len() {
             self.in_str.buf[k].clone_from(&texts[self.in_str.sig[k]]);
         }
-        for k in 0..self.in_real.vr.len() {
-            self.in_real.buf[k] =
-                self.in_real_scale[k] * signals[self.in_real.sig[k]] + self.in_real_offset[k];
+        for (((b, &sig), &scale), &offset) in self
+            .in_real
+            .buf
+            .iter_mut()
+            .zip(&self.in_real.sig)
+            .zip(&self.in_real_scale)
+            .zip(&self.in_real_offset)
+        {
+            *b = scale * signals[sig] + offset;
         }
         for k in 0..self.in_int.vr.len() {
             self.in_int.buf[k] = signals[self.in_int.sig[k]].round() as i32;
@@ -169,19 +175,23 @@ fn read_reals(
         return Ok(());
     }
     i.get_real(&batch.vr, &mut batch.buf)?;
-    for k in 0..batch.vr.len() {
-        let x = batch.buf[k];
+    for (&x, &sig) in batch.buf.iter().zip(&batch.sig) {
         if !x.is_finite() {
-            return Err(SystemError::NotFinite {
-                instance: name.to_string(),
-                signal: plan.signals.signals[batch.sig[k]].name.clone(),
-                value: x,
-                time: i.time(),
-            });
+            return Err(not_finite(i, name, plan, sig, x));
         }
-        signals[batch.sig[k]] = x;
+        signals[sig] = x;
     }
     Ok(())
+}
+
+#[cold]
+fn not_finite(i: &dyn Backend, name: &str, plan: &Plan, sig: usize, x: f64) -> SystemError {
+    SystemError::NotFinite {
+        instance: name.to_string(),
+        signal: plan.signals.signals[sig].name.clone(),
+        value: x,
+        time: i.time(),
+    }
 }
 
 impl Exchange {

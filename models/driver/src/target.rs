@@ -179,6 +179,38 @@ impl TargetSpeed {
 mod tests {
     use super::*;
 
+    #[test]
+    fn the_embedded_sidecar_is_the_bundled_target_parsed() {
+        use fmu_export::sidecar::{decode, digest};
+        let text = std::str::from_utf8(include_bytes!("../resources/target_speed.csv")).unwrap();
+        let parsed = TargetSpeed::parse(text, "target_speed.csv").unwrap();
+        let values = decode(crate::TARGET_SIDECAR, digest(text.as_bytes()), 2)
+            .expect("the build embeds the bundled target");
+        let from = TargetSpeed::from_values(&values).unwrap();
+        assert_eq!(from, parsed);
+        let changed = text.replacen("52.4390", "52.4391", 1);
+        assert_ne!(changed, text);
+        assert!(decode(crate::TARGET_SIDECAR, digest(changed.as_bytes()), 2).is_none());
+    }
+
+    #[test]
+    fn a_lookup_from_any_hint_is_the_lookup_without_one() {
+        let t = TargetSpeed::parse("s,v\n0,10\n1,12\n2.5,11\n4,15\n", "t.csv").unwrap();
+        for k in 0..=80 {
+            let s = -1.0 + 0.1 * k as f64;
+            // A hint past the end takes the search path (bisection or the even grid).
+            let plain = t.at_near(s, &Cell::new(usize::MAX));
+            for h in 0..6 {
+                let got = t.at_near(s, &Cell::new(h));
+                assert_eq!(
+                    (got.0.to_bits(), got.1.to_bits()),
+                    (plain.0.to_bits(), plain.1.to_bits()),
+                    "s = {s}, hint {h}"
+                );
+            }
+        }
+    }
+
     fn msg(text: &str) -> String {
         TargetSpeed::parse(text, "t.csv").unwrap_err().0
     }

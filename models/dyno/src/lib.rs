@@ -205,7 +205,82 @@ impl Dyno {
         self.tick += 1;
     }
 
+    /// `n` whole cycles from the tick at `t` to `end` in plain torque control (no
+    /// compensation, no jitter, no switch of mode): [`Dyno::controller_tick`] and
+    /// [`Dyno::advance`] with what does not change within the step worked out once (the
+    /// clipped demand, the delay's index and fraction). The same operations on the same
+    /// values as the general path, so the same bits. Returns `end`.
+    fn whole_cycles_torque_control(
+        &mut self,
+        vars: &mut DynoVars,
+        n: u64,
+        t: f64,
+        end: f64,
+    ) -> f64 {
+        let demand = Self::clip(vars.torque_setpoint, vars.torque_max);
+        vars.torque_demand = demand;
+        let delay = self.dead_cycles.clamp(0.0, self.max_delay_cycles);
+        let i = delay as usize;
+        let frac = delay - i as f64;
+        let len = self.hist.len();
+        let first_order = match self.lag_cycle {
+            LagStep::First { a, b } if vars.lag_order != 2 => Some((a, b)),
+            _ => None,
+        };
+        let (start, cycle, inertia, shaft) =
+            (self.start_time, self.cycle, self.inertia, vars.shaft_torque);
+        // The state in locals: the delay line's stores cannot alias them.
+        let mut head = self.hist_head;
+        let mut tick = self.tick;
+        let mut omega = self.omega;
+        let mut lag_x = self.lag_x;
+        let mut lag_dx = self.lag_dx;
+        let mut lag_input = self.lag_input;
+        let mut t = t;
+        for k in 1..=n {
+            self.omega_prev_tick = omega;
+            head = wrap_next(head, len);
+            self.hist[head] = demand;
+            let newer = self.hist[wrap_back(head + len - i, len)];
+            lag_input = if frac > 0.0 {
+                let older = self.hist[wrap_back(head + len - i - 1, len)];
+                newer + frac * (older - newer)
+            } else {
+                newer
+            };
+            tick += 1;
+            let t_next = if k == n {
+                end
+            } else {
+                start + tick as i64 as f64 * cycle
+            };
+            let dt = t_next - t;
+            match first_order {
+                // LagStep::advance of the cycle's first-order step and the rotor, written out.
+                Some((a, b)) if (dt - cycle).abs() <= TICK_EPS * cycle => {
+                    let e = lag_x - lag_input;
+                    lag_x = lag_input + e * a;
+                    lag_dx = 0.0;
+                    let torque_integral = lag_input * dt + e * b;
+                    omega += (shaft * dt - torque_integral) / inertia;
+                }
+                _ => {
+                    (self.omega, self.lag_x, self.lag_dx, self.lag_input) =
+                        (omega, lag_x, lag_dx, lag_input);
+                    self.advance(vars, dt);
+                    (omega, lag_x, lag_dx) = (self.omega, self.lag_x, self.lag_dx);
+                }
+            }
+            t = t_next;
+        }
+        self.hist_head = head;
+        self.tick = tick;
+        (self.omega, self.lag_x, self.lag_dx, self.lag_input) = (omega, lag_x, lag_dx, lag_input);
+        t
+    }
+
     /// Integrate lag and rotor over `dt` with the lag input and shaft torque held.
+    #[inline(always)]
     fn advance(&mut self, vars: &DynoVars, dt: f64) {
         let full = (dt - self.cycle).abs() <= TICK_EPS * self.cycle;
         let step = if full {
@@ -314,17 +389,27 @@ impl Model for Dyno {
         // (1 ms over 0.1 ms): tick, then integrate to the next tick, n times, without
         // locating ticks. The sub-steps are the general loop's below, to the bit (the same
         // tick times, the last one ending at `end`), so either path gives the same result.
-        let whole = (step / self.cycle).round();
-        let n = whole as u64;
-        if whole >= 1.0
+        // The nearest whole number of cycles (without libm's round: the check of the tick
+        // at `end` below decides whether n is right).
+        let n = (step / self.cycle + 0.5) as u64;
+        if n >= 1
             && (self.tick_time() - t).abs() <= eps
             && (self.start_time + (self.tick + n) as i64 as f64 * self.cycle - end).abs() <= eps
         {
-            for i in 1..=n {
-                self.controller_tick(vars);
-                let t_next = if i == n { end } else { self.tick_time() };
-                self.advance(vars, t_next - t);
-                t = t_next;
+            if vars.control_mode == 0
+                && self.last_mode == 0
+                && !vars.inertia_compensation
+                && !vars.dead_time_compensation
+                && self.jitter_cycles == 0.0
+            {
+                t = self.whole_cycles_torque_control(vars, n, t, end);
+            } else {
+                for i in 1..=n {
+                    self.controller_tick(vars);
+                    let t_next = if i == n { end } else { self.tick_time() };
+                    self.advance(vars, t_next - t);
+                    t = t_next;
+                }
             }
         }
         loop {

@@ -21,6 +21,8 @@ pub struct Track {
     s: Vec<f64>,
     rows: Vec<TrackPoint>,
     length: f64,
+    /// A lookup this far from its cursor bisects instead of walking (50 mean row spacings).
+    far: f64,
 }
 
 impl Track {
@@ -103,9 +105,19 @@ impl Track {
                 s.len()
             )));
         }
+        Ok(Track::from_rows(s, rows))
+    }
+
+    fn from_rows(s: Vec<f64>, rows: Vec<TrackPoint>) -> Track {
         let n = s.len();
         let length = s[n - 1] + (s[n - 1] - s[n - 2]);
-        Ok(Track { s, rows, length })
+        let far = 50.0 * (length / n as f64);
+        Track {
+            s,
+            rows,
+            length,
+            far,
+        }
     }
 
     /// The rows as numbers, `COLUMNS` order (a build script stores them: `sidecar`).
@@ -132,9 +144,7 @@ impl Track {
                 z_right: r[4],
             })
             .collect();
-        let n = s.len();
-        let length = s[n - 1] + (s[n - 1] - s[n - 2]);
-        Some(Track { s, rows, length })
+        Some(Track::from_rows(s, rows))
     }
 
     /// Number of data rows.
@@ -172,7 +182,7 @@ impl Track {
         let n = self.s.len();
         let mut i = (*cursor).min(n - 1);
         // Far jumps (wrap, restore): bisect instead of walking.
-        if (self.s[i] - s).abs() > 50.0 * (self.length / n as f64) {
+        if (self.s[i] - s).abs() > self.far {
             i = self.s.partition_point(|&x| x <= s).saturating_sub(1);
         }
         while i + 1 < n && self.s[i + 1] <= s {
@@ -202,6 +212,23 @@ impl Track {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_embedded_sidecar_is_the_bundled_track_parsed() {
+        use fmu_export::sidecar::{decode, digest};
+        let text = std::str::from_utf8(include_bytes!("../resources/track.csv")).unwrap();
+        let parsed = Track::parse("track.csv", text).unwrap();
+        let values = decode(crate::TRACK_SIDECAR, digest(text.as_bytes()), 5)
+            .expect("the build embeds the bundled track");
+        let bits = |v: Vec<f64>| v.into_iter().map(f64::to_bits).collect::<Vec<_>>();
+        let from = Track::from_values(&values).unwrap();
+        assert_eq!(bits(from.values()), bits(parsed.values()));
+        assert_eq!(from.length().to_bits(), parsed.length().to_bits());
+        // A changed file is parsed, not taken from the sidecar.
+        let changed = text.replacen("\n0.25,", "\n0.26,", 1);
+        assert_ne!(changed, text);
+        assert!(decode(crate::TRACK_SIDECAR, digest(changed.as_bytes()), 5).is_none());
+    }
 
     const GOOD: &str =
         "s,curvature,grade,z_road_left,z_road_right\n0,0.01,0,0,0\n1,0.02,0,0.1,0\n2,0.03,0,0,0\n";

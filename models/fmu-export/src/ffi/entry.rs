@@ -148,6 +148,7 @@ pub unsafe fn reset<M: Model>(c: fmi2Component) -> fmi2Status {
 }
 
 /// Borrow the (vr, value) arrays, NULL-checked (NULL is fine when n is 0).
+#[inline(always)]
 unsafe fn arrays<'a, T>(
     rt: &Runtime<impl Model>,
     function: &str,
@@ -159,9 +160,14 @@ unsafe fn arrays<'a, T>(
         return Ok((&[], values));
     }
     if vr.is_null() || values.is_null() {
-        return Err(rt.error(&format!("{function}: NULL array with nvr = {n}")));
+        return Err(null_arrays(rt, function, n));
     }
     Ok((std::slice::from_raw_parts(vr, n), values))
+}
+
+#[cold]
+fn null_arrays(rt: &Runtime<impl Model>, function: &str, n: usize) -> fmi2Status {
+    rt.error(&format!("{function}: NULL array with nvr = {n}"))
 }
 
 macro_rules! getter {
