@@ -20,17 +20,8 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TB = os.path.join(ROOT, "target", "release", "twinbench")
-SYSTEM = os.path.join(ROOT, "systems", "rls_v.toml")
-
-
-def system_variant(tmp, stop=None):
-    text = open(SYSTEM).read().replace('"../target/fmu/', '"' + os.path.join(ROOT, "target", "fmu") + "/")
-    if stop is not None:
-        text = text.replace('stop = "vehicle.lap >= 1"', f"stop = {stop!r}")
-    p = os.path.join(tmp, f"rls_v_{stop or 'lap'}.toml")
-    with open(p, "w") as f:
-        f.write(text)
-    return p
+sys.path.insert(0, os.path.join(ROOT, "tools"))
+from benchmark import system_variant  # noqa: E402
 
 
 def callgrind(system, tmp, env):
@@ -55,7 +46,7 @@ def main():
         env = dict(os.environ)
         # A store of unpacked FMUs of this measurement's own: the first run fills it.
         env["TWINBENCH_CACHE"] = os.path.join(tmp, "unpacked")
-        short = system_variant(tmp, 0.001)
+        short = system_variant(tmp, stop=0.001)
         first, _ = callgrind(short, tmp, env)
         second, one = callgrind(short, tmp, env)
         lap, steps = callgrind(system_variant(tmp), tmp, env)

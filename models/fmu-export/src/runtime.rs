@@ -517,24 +517,13 @@ impl<M: Model> Runtime<M> {
         }
     }
 
-    /// Read variables of type `ty` into `out`, converted by `conv`.
-    pub fn get<T>(
-        &mut self,
-        function: &str,
-        ty: ScalarType,
-        vrs: &[u32],
-        out: &mut [T],
-        conv: impl Fn(Value) -> T,
-    ) -> fmi2Status {
-        if let Err(s) = self.require_named(function, Function::GetReal.allowed()) {
-            return s;
-        }
-        if vrs.len() != out.len() {
-            return self.error(&format!(
-                "{function}: {} value references but {} values",
-                vrs.len(),
-                out.len()
-            ));
+    /// What every get does first: the state check, the array lengths, a pending (lazy)
+    /// initialisation or output update. Returns whether the instance is only instantiated.
+    #[inline(always)]
+    fn before_get(&mut self, function: &str, vrs: usize, out: usize) -> Result<bool, fmi2Status> {
+        self.require_named(function, Function::GetReal.allowed())?;
+        if vrs != out {
+            return Err(self.length_mismatch(function, vrs, out));
         }
         match self.phase {
             Phase::InitializationMode => self.try_initialize(),
@@ -546,7 +535,22 @@ impl<M: Model> Runtime<M> {
             }
             _ => {}
         }
-        let instantiated = self.phase == Phase::Instantiated;
+        Ok(self.phase == Phase::Instantiated)
+    }
+
+    /// Read variables of type `ty` into `out`, converted by `conv`.
+    pub fn get<T>(
+        &mut self,
+        function: &str,
+        ty: ScalarType,
+        vrs: &[u32],
+        out: &mut [T],
+        conv: impl Fn(Value) -> T,
+    ) -> fmi2Status {
+        let instantiated = match self.before_get(function, vrs.len(), out.len()) {
+            Ok(i) => i,
+            Err(s) => return s,
+        };
         for (k, &vr) in vrs.iter().enumerate() {
             match self.slots.get(vr as usize) {
                 Some(sl)
@@ -563,27 +567,10 @@ impl<M: Model> Runtime<M> {
     /// fmi2GetReal: [`Runtime::get`] with each value read straight from its field.
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> fmi2Status {
         const F: &str = "fmi2GetReal";
-        if let Err(s) = self.require_named(F, Function::GetReal.allowed()) {
-            return s;
-        }
-        if vrs.len() != out.len() {
-            return self.error(&format!(
-                "{F}: {} value references but {} values",
-                vrs.len(),
-                out.len()
-            ));
-        }
-        match self.phase {
-            Phase::InitializationMode => self.try_initialize(),
-            Phase::StepComplete if self.inputs_changed && self.has_feedthrough => {
-                if let Some(m) = self.model.as_mut() {
-                    m.update_outputs(&mut self.vars);
-                }
-                self.inputs_changed = false;
-            }
-            _ => {}
-        }
-        let instantiated = self.phase == Phase::Instantiated;
+        let instantiated = match self.before_get(F, vrs.len(), out.len()) {
+            Ok(i) => i,
+            Err(s) => return s,
+        };
         let base = (&self.vars as *const M::Vars).cast::<u8>();
         for (k, &vr) in vrs.iter().enumerate() {
             match self.slots.get(vr as usize) {
@@ -603,15 +590,8 @@ impl<M: Model> Runtime<M> {
     /// warning) and every later one go through [`Runtime::set`].
     pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> fmi2Status {
         const F: &str = "fmi2SetReal";
-        if let Err(s) = self.require_named(F, Function::SetReal.allowed()) {
+        if let Err(s) = self.before_set(F, vrs.len(), values.len()) {
             return s;
-        }
-        if vrs.len() != values.len() {
-            return self.error(&format!(
-                "{F}: {} value references but {} values",
-                vrs.len(),
-                values.len()
-            ));
         }
         let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
         let base = (&mut self.vars as *mut M::Vars).cast::<u8>();
@@ -669,6 +649,23 @@ impl<M: Model> Runtime<M> {
         ))
     }
 
+    /// What every set does first: the state check and the array lengths.
+    #[inline(always)]
+    fn before_set(&self, function: &str, vrs: usize, values: usize) -> Result<(), fmi2Status> {
+        self.require_named(function, Function::SetReal.allowed())?;
+        if vrs != values {
+            return Err(self.length_mismatch(function, vrs, values));
+        }
+        Ok(())
+    }
+
+    #[cold]
+    fn length_mismatch(&self, function: &str, vrs: usize, values: usize) -> fmi2Status {
+        self.error(&format!(
+            "{function}: {vrs} value references but {values} values"
+        ))
+    }
+
     /// Set variables of type `ty` from `values`, each checked for causality, variability,
     /// finiteness and declared min/max.
     pub fn set(
@@ -678,15 +675,8 @@ impl<M: Model> Runtime<M> {
         vrs: &[u32],
         values: impl ExactSizeIterator<Item = Value>,
     ) -> fmi2Status {
-        if let Err(s) = self.require_named(function, Function::SetReal.allowed()) {
+        if let Err(s) = self.before_set(function, vrs.len(), values.len()) {
             return s;
-        }
-        if vrs.len() != values.len() {
-            return self.error(&format!(
-                "{function}: {} value references but {} values",
-                vrs.len(),
-                values.len()
-            ));
         }
         let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
         let mut status = fmi2Status::OK;
