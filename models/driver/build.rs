@@ -7,20 +7,11 @@
 mod target;
 
 fn main() {
-    let csv = "resources/target_speed.csv";
-    println!("cargo:rerun-if-changed={csv}");
     println!("cargo:rerun-if-changed=src/target.rs");
-    let out = std::path::PathBuf::from(std::env::var("OUT_DIR").expect("set by cargo"));
-    let blob = std::fs::read_to_string(csv)
-        .ok()
-        .and_then(|text| {
-            let t = target::TargetSpeed::parse(&text, csv).ok()?;
-            Some(fmu_export::sidecar::encode(
-                fmu_export::sidecar::digest(text.as_bytes()),
-                2,
-                &t.values(),
-            ))
-        })
-        .unwrap_or_default();
-    std::fs::write(out.join("target_speed.sidecar"), blob).expect("OUT_DIR is writable");
+    let csv = "resources/target_speed.csv";
+    fmu_export::sidecar::build(csv, "target_speed.sidecar", 2, |text| {
+        target::TargetSpeed::parse(text, csv)
+            .ok()
+            .map(|t| t.values())
+    });
 }

@@ -300,13 +300,14 @@ impl Exchange {
         }
     }
 
-    /// Read every unit's outputs at `t` (the end of a run an FMU ended early).
+    /// Read every unit's outputs read between steps at `t` (the end of a run an FMU ended
+    /// early; the recorded row that follows reads the record-only ones).
     pub fn publish_all(&mut self, t: f64) -> Result<(), SystemError> {
         self.time_replays_at(t);
         for u in 0..self.units.len() {
             self.publish(u, t)?;
         }
-        self.publish_recorded()
+        Ok(())
     }
 
     fn step_replay(&mut self, u: usize, t: f64) {

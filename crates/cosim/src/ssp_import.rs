@@ -256,6 +256,15 @@ struct Component {
     connectors: BTreeMap<String, (Option<String>, usize)>,
 }
 
+/// The components' names, for a message naming a missing one.
+fn component_names(components: &[Component]) -> String {
+    components
+        .iter()
+        .map(|c| c.name.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 impl Importer<'_> {
     fn invalid(&self, file: &str, line: usize, message: impl Into<String>) -> SspImportError {
         SspImportError::Invalid {
@@ -994,11 +1003,7 @@ fn bind(
                         p.line,
                         format!(
                             "parameter '{pname}': no component '{e}' (components: {})",
-                            components
-                                .iter()
-                                .map(|c| c.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
+                            component_names(components)
                         ),
                     )
                 })?;
@@ -1138,11 +1143,7 @@ fn connection(
                 c.line,
                 format!(
                     "{el}=\"{e}\" is not a component (components: {})",
-                    components
-                        .iter()
-                        .map(|c| c.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    component_names(components)
                 ),
             )
         })?;

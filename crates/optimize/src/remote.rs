@@ -84,11 +84,23 @@ pub struct InputDigest {
 
 impl InputDigest {
     pub fn of(study: &Study, bench: &Bench) -> Result<InputDigest, OptimizeError> {
+        let plan = bench.plan();
         let mut paths = vec![study.path.clone(), study.measurement_path.clone()];
-        paths.extend(bench.plan().input_files());
+        paths.extend(plan.input_files());
         let files = paths
             .into_iter()
             .map(|p| {
+                // An FMU's content hash is the unpack cache's (kept in its index: no
+                // second read and hash of the archive).
+                if plan.file.fmus.values().any(|f| *f == p) {
+                    let sha = plan
+                        .cache
+                        .load(&p)
+                        .map_err(tb_cosim::SystemError::from)?
+                        .sha256
+                        .clone();
+                    return Ok((p, sha));
+                }
                 let bytes = std::fs::read(&p).map_err(|e| OptimizeError::File {
                     path: p.clone(),
                     message: format!("cannot read: {e}"),

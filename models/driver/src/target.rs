@@ -126,16 +126,7 @@ impl TargetSpeed {
     /// updated): the driver moves a few centimetres per step, so the segment is almost
     /// always the same or the next one. Same segment, same bits as without the hint.
     pub fn at_near(&self, s: f64, hint: &Cell<usize>) -> (f64, f64) {
-        let length = self.lap_length();
-        // The usual cases without libm's fmod, bit-identical to rem_euclid: s itself inside
-        // the lap, s − length on the next lap (exact: Sterbenz's lemma, length ≤ s < 2·length).
-        let x = if (0.0..length).contains(&s) {
-            s
-        } else if s >= length && s < 2.0 * length {
-            s - length
-        } else {
-            s.rem_euclid(length)
-        };
+        let x = fmu_export::model::wrap_distance(s, self.lap_length());
         let n = self.s.len();
         // k: the number of rows with s_k <= x (partition_point's answer).
         let h = hint.get();

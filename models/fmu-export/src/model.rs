@@ -143,6 +143,20 @@ impl Context {
     }
 }
 
+/// `s.rem_euclid(length)` for a distance on a closed lap, bit for bit, without libm's
+/// `fmod` in the usual cases (it runs every step): s itself inside the lap, s − length on
+/// the next lap (exact by Sterbenz's lemma, length ≤ s < 2·length).
+#[inline]
+pub fn wrap_distance(s: f64, length: f64) -> f64 {
+    if (0.0..length).contains(&s) {
+        s
+    } else if s >= length && s < 2.0 * length {
+        s - length
+    } else {
+        s.rem_euclid(length)
+    }
+}
+
 /// The path a String parameter names: an absolute path or a `file://` URI. A relative path
 /// is refused: the host resolves it (the orchestrator against the system file's folder).
 pub fn parameter_path(parameter: &str, value: &str) -> Result<PathBuf, ModelError> {
@@ -345,5 +359,32 @@ impl<'a> StateReader<'a> {
     }
     pub fn is_at_end(&self) -> bool {
         self.pos == self.bytes.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn wrap_distance_is_rem_euclid_to_the_bit() {
+        let length = 4284.25;
+        let mut s: f64 = -3.0 * length;
+        while s < 4.0 * length {
+            for x in [
+                s,
+                s.next_up(),
+                s.next_down(),
+                -0.0,
+                0.0,
+                length,
+                2.0 * length,
+            ] {
+                assert_eq!(
+                    super::wrap_distance(x, length).to_bits(),
+                    x.rem_euclid(length).to_bits(),
+                    "s = {x}"
+                );
+            }
+            s += 0.37;
+        }
     }
 }

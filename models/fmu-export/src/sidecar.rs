@@ -65,6 +65,20 @@ pub fn decode(blob: &[u8], digest: u64, columns: usize) -> Option<Vec<f64>> {
     )
 }
 
+/// For a model's build script: parses the bundled file `csv` with the model's own parser
+/// (`parse`: the rows as `columns` numbers each) and writes the blob to `$OUT_DIR/out`. The
+/// blob is empty when the file does not parse: the model then parses it at run time and
+/// reports the error there.
+pub fn build(csv: &str, out: &str, columns: usize, parse: impl FnOnce(&str) -> Option<Vec<f64>>) {
+    println!("cargo:rerun-if-changed={csv}");
+    let dir = std::path::PathBuf::from(std::env::var("OUT_DIR").expect("set by cargo"));
+    let blob = std::fs::read_to_string(csv)
+        .ok()
+        .and_then(|text| Some(encode(digest(text.as_bytes()), columns, &parse(&text)?)))
+        .unwrap_or_default();
+    std::fs::write(dir.join(out), blob).expect("OUT_DIR is writable");
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -158,15 +158,7 @@ impl Track {
 
     /// Map any distance into `[0, length)`.
     pub fn wrap(&self, s: f64) -> f64 {
-        // The usual cases without libm's fmod, bit-identical to rem_euclid: s itself inside
-        // the lap, s − length on the next lap (exact: Sterbenz's lemma, length ≤ s < 2·length).
-        if (0.0..self.length).contains(&s) {
-            return s;
-        }
-        if s >= self.length && s < 2.0 * self.length {
-            return s - self.length;
-        }
-        let w = s.rem_euclid(self.length);
+        let w = fmu_export::model::wrap_distance(s, self.length);
         // rem_euclid can round up to exactly `length`.
         if w >= self.length {
             0.0

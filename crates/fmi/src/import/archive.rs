@@ -71,22 +71,7 @@ impl LoadedFmu {
 
     /// The FMI 3.0 library, loaded into this process on the first call.
     pub fn library3(&self) -> Result<Arc<Library3>, FmuError> {
-        let mut slot = lock(&self.library3);
-        if let Some(l) = &*slot {
-            return Ok(l.clone());
-        }
-        let library = Library3::load(&self.library_path())
-            .map(Arc::new)
-            .map_err(|e| {
-                library_error(
-                    &self.source,
-                    &self.description.fmi_version,
-                    self.model_identifier(),
-                    e,
-                )
-            })?;
-        *slot = Some(library.clone());
-        Ok(library)
+        self.load_once(&self.library3, Library3::load)
     }
 
     /// The library, loaded into this process on the first call (and checked: every
@@ -98,20 +83,28 @@ impl LoadedFmu {
                 message: "an FMI 3.0 FMU has no FMI 2.0 library".into(),
             });
         }
-        let mut slot = lock(&self.library);
+        self.load_once(&self.library, Library::load)
+    }
+
+    /// The library in `slot`, loaded by `load` on the first call; its errors name the .fmu
+    /// and the library's entry (the unpacked copy is in a folder the user never saw).
+    fn load_once<L>(
+        &self,
+        slot: &Mutex<Option<Arc<L>>>,
+        load: impl FnOnce(&Path) -> Result<L, FmuError>,
+    ) -> Result<Arc<L>, FmuError> {
+        let mut slot = lock(slot);
         if let Some(l) = &*slot {
             return Ok(l.clone());
         }
-        let library = Library::load(&self.library_path())
-            .map(Arc::new)
-            .map_err(|e| {
-                library_error(
-                    &self.source,
-                    &self.description.fmi_version,
-                    self.model_identifier(),
-                    e,
-                )
-            })?;
+        let library = load(&self.library_path()).map(Arc::new).map_err(|e| {
+            library_error(
+                &self.source,
+                &self.description.fmi_version,
+                self.model_identifier(),
+                e,
+            )
+        })?;
         *slot = Some(library.clone());
         Ok(library)
     }

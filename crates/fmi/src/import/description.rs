@@ -298,6 +298,17 @@ pub(crate) fn display_unit(
     )))
 }
 
+/// The `<fmiModelDescription>` attributes both versions share; `token` names the GUID's
+/// attribute (`guid` in 2.0, `instantiationToken` in 3.0).
+pub(crate) fn root_attributes(md: &mut ModelDescription, m: &HashMap<String, String>, token: &str) {
+    let get = |key: &str| m.get(key).cloned().unwrap_or_default();
+    md.fmi_version = get("fmiVersion");
+    md.model_name = get("modelName");
+    md.guid = get(token);
+    md.description = get("description");
+    md.generation_tool = get("generationTool");
+}
+
 pub(crate) fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {
     m.get(key).and_then(|s| s.trim().parse().ok()).unwrap_or(0)
 }
@@ -381,11 +392,7 @@ fn parse2(xml: &str) -> Result<ModelDescription, String> {
         match (parent, name.as_str()) {
             ("", "fmiModelDescription") => {
                 saw_root = true;
-                md.fmi_version = m.get("fmiVersion").cloned().unwrap_or_default();
-                md.model_name = m.get("modelName").cloned().unwrap_or_default();
-                md.guid = m.get("guid").cloned().unwrap_or_default();
-                md.description = m.get("description").cloned().unwrap_or_default();
-                md.generation_tool = m.get("generationTool").cloned().unwrap_or_default();
+                root_attributes(&mut md, &m, "guid");
             }
             ("", other) => {
                 return Err(format!(

@@ -17,8 +17,8 @@
 //!   anything runs).
 
 use crate::description::{
-    attrs, check_names_and_aliases, flag, num, CoSimulation, ModelDescription, ScalarVariable,
-    Unknown,
+    attrs, check_names_and_aliases, flag, num, root_attributes, CoSimulation, ModelDescription,
+    ScalarVariable, Unknown,
 };
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 use crate::units::UnitDef;
@@ -209,11 +209,7 @@ pub fn parse(xml: &str) -> Result<ModelDescription, String> {
         match (parent, name.as_str()) {
             ("", "fmiModelDescription") => {
                 saw_root = true;
-                md.fmi_version = m.get("fmiVersion").cloned().unwrap_or_default();
-                md.model_name = m.get("modelName").cloned().unwrap_or_default();
-                md.guid = m.get("instantiationToken").cloned().unwrap_or_default();
-                md.description = m.get("description").cloned().unwrap_or_default();
-                md.generation_tool = m.get("generationTool").cloned().unwrap_or_default();
+                root_attributes(&mut md, &m, "instantiationToken");
             }
             ("", other) => {
                 return Err(format!(

@@ -417,8 +417,8 @@ class Study:
             One cost per candidate, in order, the same bits wherever it ran.
         """
         loaded = self._loaded()
-        names = [n for n, _ in loaded.assignment()]
         base = dict(loaded.assignment())
+        names = list(base)
         if values:
             unknown = [k for k in values if k not in base]
             if unknown:

@@ -170,123 +170,108 @@ fn null_arrays(rt: &Runtime<impl Model>, function: &str, n: usize) -> fmi2Status
     rt.error(&format!("{function}: NULL array with nvr = {n}"))
 }
 
+/// An `fmi2Get<Type>`: the arrays checked, then `$call` with the runtime, the value
+/// references and the output slice.
 macro_rules! getter {
-    ($fn:ident, $cname:literal, $t:ty, $vt:expr, $conv:expr) => {
+    ($fn:ident, $cname:literal, $t:ty, |$rt:ident, $vrs:ident, $out:ident| $call:expr) => {
         pub unsafe fn $fn<M: Model>(
             c: fmi2Component,
             vr: *const fmi2ValueReference,
             n: usize,
             value: *mut $t,
         ) -> fmi2Status {
-            guarded::<M>(c, $cname, |rt| {
-                let (vrs, ptr) = match arrays(rt, $cname, vr, n, value as *const $t) {
+            guarded::<M>(c, $cname, |$rt| {
+                let ($vrs, ptr) = match arrays($rt, $cname, vr, n, value as *const $t) {
                     Ok(x) => x,
                     Err(s) => return s,
                 };
-                let out: &mut [$t] = if n == 0 {
+                let $out: &mut [$t] = if n == 0 {
                     &mut []
                 } else {
                     std::slice::from_raw_parts_mut(ptr as *mut $t, n)
                 };
-                rt.get($cname, $vt, vrs, out, $conv)
+                $call
             })
         }
     };
 }
 
+/// An `fmi2Set<Type>`: the arrays checked, then `$call` with the runtime, the value
+/// references and the values.
 macro_rules! setter {
-    ($fn:ident, $cname:literal, $t:ty, $vt:expr, $conv:expr) => {
+    ($fn:ident, $cname:literal, $t:ty, |$rt:ident, $vrs:ident, $vals:ident| $call:expr) => {
         pub unsafe fn $fn<M: Model>(
             c: fmi2Component,
             vr: *const fmi2ValueReference,
             n: usize,
             value: *const $t,
         ) -> fmi2Status {
-            guarded::<M>(c, $cname, |rt| {
-                let (vrs, ptr) = match arrays(rt, $cname, vr, n, value) {
+            guarded::<M>(c, $cname, |$rt| {
+                let ($vrs, ptr) = match arrays($rt, $cname, vr, n, value) {
                     Ok(x) => x,
                     Err(s) => return s,
                 };
-                let vals: &[$t] = if n == 0 {
+                let $vals: &[$t] = if n == 0 {
                     &[]
                 } else {
                     std::slice::from_raw_parts(ptr, n)
                 };
-                rt.set($cname, $vt, vrs, vals.iter().map($conv))
+                $call
             })
         }
     };
 }
 
-/// fmi2GetReal: the runtime's direct path for Reals.
-pub unsafe fn get_real<M: Model>(
-    c: fmi2Component,
-    vr: *const fmi2ValueReference,
-    n: usize,
-    value: *mut fmi2Real,
-) -> fmi2Status {
-    guarded::<M>(c, "fmi2GetReal", |rt| {
-        let (vrs, ptr) = match arrays(rt, "fmi2GetReal", vr, n, value as *const fmi2Real) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
-        let out: &mut [fmi2Real] = if n == 0 {
-            &mut []
-        } else {
-            std::slice::from_raw_parts_mut(ptr as *mut fmi2Real, n)
-        };
-        rt.get_real(vrs, out)
-    })
-}
-
+// Reals take the runtime's direct path (each value at its field's offset).
+getter!(get_real, "fmi2GetReal", fmi2Real, |rt, vrs, out| rt
+    .get_real(vrs, out));
 getter!(
     get_integer,
     "fmi2GetInteger",
     fmi2Integer,
-    ScalarType::Integer,
-    |v: Value| v.as_f64() as i32
+    |rt, vrs, out| rt.get(
+        "fmi2GetInteger",
+        ScalarType::Integer,
+        vrs,
+        out,
+        |v: Value| v.as_f64() as i32
+    )
 );
 getter!(
     get_boolean,
     "fmi2GetBoolean",
     fmi2Boolean,
-    ScalarType::Boolean,
-    |v: Value| v.as_f64() as i32
+    |rt, vrs, out| rt.get(
+        "fmi2GetBoolean",
+        ScalarType::Boolean,
+        vrs,
+        out,
+        |v: Value| v.as_f64() as i32
+    )
 );
-/// fmi2SetReal: the runtime's direct path for Reals.
-pub unsafe fn set_real<M: Model>(
-    c: fmi2Component,
-    vr: *const fmi2ValueReference,
-    n: usize,
-    value: *const fmi2Real,
-) -> fmi2Status {
-    guarded::<M>(c, "fmi2SetReal", |rt| {
-        let (vrs, ptr) = match arrays(rt, "fmi2SetReal", vr, n, value) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
-        let vals: &[fmi2Real] = if n == 0 {
-            &[]
-        } else {
-            std::slice::from_raw_parts(ptr, n)
-        };
-        rt.set_real(vrs, vals)
-    })
-}
-
+setter!(set_real, "fmi2SetReal", fmi2Real, |rt, vrs, vals| rt
+    .set_real(vrs, vals));
 setter!(
     set_integer,
     "fmi2SetInteger",
     fmi2Integer,
-    ScalarType::Integer,
-    |x: &i32| Value::Integer(*x)
+    |rt, vrs, vals| rt.set(
+        "fmi2SetInteger",
+        ScalarType::Integer,
+        vrs,
+        vals.iter().map(|x: &i32| Value::Integer(*x))
+    )
 );
 setter!(
     set_boolean,
     "fmi2SetBoolean",
     fmi2Boolean,
-    ScalarType::Boolean,
-    |x: &i32| Value::Boolean(*x != 0)
+    |rt, vrs, vals| rt.set(
+        "fmi2SetBoolean",
+        ScalarType::Boolean,
+        vrs,
+        vals.iter().map(|x: &i32| Value::Boolean(*x != 0))
+    )
 );
 
 pub unsafe fn get_string<M: Model>(
