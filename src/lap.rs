@@ -42,8 +42,9 @@ pub struct LapOptions {
     /// A track file to use; None: derive one from the measurement.
     pub track: Option<PathBuf>,
     pub out: PathBuf,
-    /// Where the packed FMUs are.
-    pub fmu_dir: PathBuf,
+    /// Where the packed FMUs are; None: pack them into `<out>/fmu`, so that the lap's folder
+    /// needs nothing else (it survives the removal of the checkout twinbench was built in).
+    pub fmu_dir: Option<PathBuf>,
 }
 
 /// What `lap` wrote.
@@ -53,6 +54,8 @@ pub struct LapFiles {
     pub track: PathBuf,
     pub system: PathBuf,
     pub study: PathBuf,
+    /// The FMUs packed beside the lap (empty when `--fmus` named packed ones).
+    pub fmus: Vec<PathBuf>,
     /// Measured lap length [m] and time [s].
     pub lap_length: f64,
     pub lap_time: f64,
@@ -176,95 +179,62 @@ fn toml_string(s: &str) -> String {
     toml::Value::String(s.to_string()).to_string()
 }
 
-/// The system file of the RLS/v bench for the lap.
-fn system_toml(o: &LapOptions, name: &str, v0: f64, w0: f64, lap_time: f64) -> String {
-    let fmu = |f: &str| toml_string(&o.fmu_dir.join(f).display().to_string());
-    format!(
-        r#"# The RLS/v bench on a lap of its own: prepared by `twinbench lap` from
-# {meas}. The FMUs are the packed ones; the track and the driver's target speed are the
-# files beside this one (a relative *_file path is relative to this file).
-name = {name}
+/// The bench's own RLS/v system file, which `lap` edits for a lap (one copy of the bench:
+/// a connection or a recorded signal added there is in every lap's system too).
+const BENCH_SYSTEM: &str = include_str!("../systems/rls_v.toml");
 
-connections = [
-    "vehicle.v -> driver.v",
-    "vehicle.s -> driver.s",
-    "driver.accel_pedal -> edu.accel_pedal",
-    "driver.brake_pedal -> vehicle.brake_pedal",
-    "vehicle.torque_setpoint_rl -> dyno_rl.torque_setpoint",
-    "vehicle.torque_setpoint_rr -> dyno_rr.torque_setpoint",
-    "edu.torque_left -> dyno_rl.shaft_torque",
-    "edu.torque_right -> dyno_rr.shaft_torque",
-    "dyno_rl.omega -> vehicle.omega_rl",
-    "dyno_rr.omega -> vehicle.omega_rr",
-    "dyno_rl.omega -> edu.omega_left",
-    "dyno_rr.omega -> edu.omega_right",
-]
+/// The system file of the RLS/v bench for the lap: `systems/rls_v.toml` with the lap's
+/// FMUs, files, start values and time budget.
+fn system_toml(
+    fmu_dir: &Path,
+    o: &LapOptions,
+    name: &str,
+    v0: f64,
+    w0: f64,
+    lap_time: f64,
+) -> String {
+    use toml_edit::{value, DocumentMut};
+    let mut doc: DocumentMut = BENCH_SYSTEM
+        .parse()
+        .expect("systems/rls_v.toml is valid TOML (tests/registry.rs parses it)");
+    doc["name"] = value(name);
+    if let Some(mut key) = doc.key_mut("name") {
+        key.leaf_decor_mut().set_prefix(format!(
+            "# The RLS/v bench on a lap of its own: prepared by `twinbench lap` from\n# {}.\n# Paths are relative to this file's folder.\n",
+            one_line(&o.measurement.display().to_string())
+        ));
+    }
+    let fmus = doc["fmus"]
+        .as_table_mut()
+        .expect("systems/rls_v.toml has [fmus]");
+    let models: Vec<String> = fmus.iter().map(|(k, _)| k.to_string()).collect();
+    for model in models {
+        fmus[model.as_str()] = value(fmu_dir.join(format!("{model}.fmu")).display().to_string());
+    }
+    let parameters = doc["parameters"]
+        .as_table_mut()
+        .expect("systems/rls_v.toml has [parameters]");
+    parameters.clear();
+    parameters.decor_mut().set_prefix(
+        "\n# The lap's track and target speed; the flying lap starts at the measured speed.\n",
+    );
+    parameters["vehicle.track_file"] = value("track.csv");
+    parameters["driver.target_speed_file"] = value("target_speed.csv");
+    parameters["vehicle.v_start"] = value(v0);
+    for p in [
+        "dyno_rl.omega_start",
+        "dyno_rr.omega_start",
+        "edu.omega_wheel_start",
+    ] {
+        parameters[p] = value(w0);
+    }
+    doc["experiment"]["max_time"] = value((2.0 * lap_time + 30.0).ceil());
+    doc.to_string()
+}
 
-[fmus]
-vehicle = {vehicle}
-driver = {driver}
-dyno = {dyno}
-edu = {edu}
-
-[[instance]]
-name = "vehicle"
-fmu = "vehicle"
-
-[[instance]]
-name = "driver"
-fmu = "driver"
-
-[[instance]]
-name = "dyno_rl"
-fmu = "dyno"
-
-[[instance]]
-name = "dyno_rr"
-fmu = "dyno"
-
-[[instance]]
-name = "edu"
-fmu = "edu"
-
-# The flying lap starts at the measured speed: vehicle, wheels and EDU.
-[parameters]
-"vehicle.track_file" = "track.csv"
-"driver.target_speed_file" = "target_speed.csv"
-"vehicle.v_start" = {v0:?}
-"dyno_rl.omega_start" = {w0:?}
-"dyno_rr.omega_start" = {w0:?}
-"edu.omega_wheel_start" = {w0:?}
-
-# The vehicle's track and the driver's target speed must be the same lap.
-[[check]]
-equal = ["vehicle.lap_length", "driver.lap_length"]
-relative_tolerance = 0.005
-why = "the vehicle's track and the driver's target speed are not the same lap"
-
-[experiment]
-step = 1e-3
-stop = "vehicle.lap >= 1"
-report = ["vehicle.lap_time"]
-max_time = {max_time:?}
-algorithm = "gauss-seidel"
-
-[record]
-signals = [
-    "vehicle.distance", "vehicle.s", "vehicle.v", "vehicle.a_x", "vehicle.a_y",
-    "vehicle.Fz_fl", "vehicle.Fz_fr", "vehicle.Fz_rl", "vehicle.Fz_rr", "vehicle.Fz_sum",
-    "driver.v_target", "driver.accel_pedal", "driver.brake_pedal",
-    "dyno_rl.omega", "dyno_rr.omega", "edu.motor_speed", "edu.motor_torque",
-]
-decimation = 5
-"#,
-        meas = o.measurement.display(),
-        name = toml_string(name),
-        vehicle = fmu("vehicle.fmu"),
-        driver = fmu("driver.fmu"),
-        dyno = fmu("dyno.fmu"),
-        edu = fmu("edu.fmu"),
-        max_time = (2.0 * lap_time + 30.0).ceil(),
-    )
+/// A name for a comment line: no line breaks.
+fn one_line(s: &str) -> String {
+    s.replace(['\n', '\r'], " ")
 }
 
 /// The paper's two-step study against the measurement.
@@ -344,16 +314,62 @@ max = 2.0
 "#,
         study_path = o.out.join("study.toml").display(),
         name = toml_string(name),
-        file = toml_string(&absolute(&o.measurement).display().to_string()),
+        file = toml_string(
+            &as_written_from(&o.out, &o.measurement)
+                .display()
+                .to_string()
+        ),
     )
 }
 
-fn absolute(p: &Path) -> PathBuf {
-    if p.is_absolute() {
-        p.to_path_buf()
-    } else {
-        std::env::current_dir().unwrap_or_default().join(p)
+/// `path` (as given on the command line) as a file in folder `out` must name it: an
+/// absolute path as it is, a relative one made relative to `out`, so that the lap's files
+/// find it from any working directory (and a tree moved as a whole still does).
+fn as_written_from(out: &Path, path: &Path) -> PathBuf {
+    if path.is_absolute() {
+        return tb_files::normalize(path);
     }
+    tb_files::relative_to(&tb_files::absolute(path), &tb_files::absolute(out))
+}
+
+/// The bench's check that the vehicle's track and the driver's target are one lap: its
+/// relative tolerance, which `lap` also holds a given track to.
+fn lap_length_tolerance() -> f64 {
+    let doc: toml::Value = toml::from_str(BENCH_SYSTEM).expect("systems/rls_v.toml is valid TOML");
+    doc.get("check")
+        .and_then(|c| c.as_array())
+        .into_iter()
+        .flatten()
+        .find(|c| {
+            c.get("equal")
+                .is_some_and(|e| e.to_string().contains("lap_length"))
+        })
+        .and_then(|c| c.get("relative_tolerance"))
+        .and_then(|t| t.as_float())
+        .expect("systems/rls_v.toml checks the lap lengths with a relative_tolerance")
+}
+
+/// A given track, read and held to the measured lap: a track whose length is not the
+/// measured lap's (within the bench's check) is another circuit, or another line on it.
+fn given_track(path: &Path, lap: f64) -> Result<String, LapError> {
+    let text = std::fs::read_to_string(path).map_err(|source| LapError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let track = vehicle::track::Track::parse(&path.display().to_string(), &text)
+        .map_err(|e| LapError::Invalid(e.to_string()))?;
+    let tolerance = lap_length_tolerance();
+    let deviation = (track.length() - lap) / lap;
+    if !(deviation.abs() <= tolerance) {
+        return Err(LapError::Invalid(format!(
+            "{}: the track is {:.1} m long, the measured lap {lap:.1} m ({:+.1} %, the bench accepts ±{:.1} %): give the track of the measured circuit, or leave out --track to derive one from the measurement",
+            path.display(),
+            track.length(),
+            100.0 * deviation,
+            100.0 * tolerance
+        )));
+    }
+    Ok(text)
 }
 
 /// The wheel radius the vehicle model starts with (the start values of the wheels' speeds).
@@ -365,35 +381,48 @@ fn wheel_radius() -> f64 {
 pub fn prepare(o: &LapOptions) -> Result<LapFiles, LapError> {
     let m = Measurement::load(&o.measurement, &o.channels)?;
     let mut warnings = Vec::new();
-    std::fs::create_dir_all(&o.out).map_err(|source| LapError::Io {
-        path: o.out.clone(),
-        source,
+    std::fs::create_dir_all(&o.out).map_err(|e| {
+        LapError::Invalid(format!(
+            "{}: cannot create the output folder: {e}",
+            o.out.display()
+        ))
     })?;
     let mut inputs = vec![o.measurement.as_path()];
     if let Some(t) = &o.track {
         inputs.push(t.as_path());
     }
-    for name in ["target_speed.csv", "track.csv", "system.toml", "study.toml"] {
-        tb_table::check_output(&o.out.join(name), &inputs).map_err(|source| LapError::Io {
-            path: o.out.join(name),
+    let packed: Vec<PathBuf> = match &o.fmu_dir {
+        Some(_) => Vec::new(),
+        None => crate::pack::models()
+            .iter()
+            .filter(|s| !s.test_only)
+            .map(|s| crate::pack::fmu_path(&o.out.join("fmu"), s))
+            .collect(),
+    };
+    let names = ["target_speed.csv", "track.csv", "system.toml", "study.toml"];
+    for path in names
+        .iter()
+        .map(|n| o.out.join(n))
+        .chain(packed.iter().cloned())
+    {
+        tb_table::check_output(&path, &inputs).map_err(|source| LapError::Io {
+            path: path.clone(),
             source,
         })?;
     }
     let lap = lap_length(&m)?;
+    let track_text = match &o.track {
+        Some(p) => Some(given_track(p, lap)?),
+        None => None,
+    };
     let t = m.time();
     let lap_time = t[t.len() - 1] - t[0];
     let target_speed = o.out.join("target_speed.csv");
     write(&target_speed, &target_speed_csv(&m)?)?;
     let track = o.out.join("track.csv");
     let track_derived = o.track.is_none();
-    match &o.track {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|source| LapError::Io {
-                path: p.clone(),
-                source,
-            })?;
-            write(&track, &text)?;
-        }
+    match &track_text {
+        Some(text) => write(&track, text)?,
         None => {
             write(&track, &derived_track_csv(&m)?)?;
             warnings.push(format!(
@@ -409,8 +438,16 @@ pub fn prepare(o: &LapOptions) -> Result<LapFiles, LapError> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "lap".into());
+    let fmu_dir = match &o.fmu_dir {
+        Some(d) => as_written_from(&o.out, d),
+        None => {
+            crate::pack::pack(&[], &o.out.join("fmu"))
+                .map_err(|e| LapError::Invalid(e.to_string()))?;
+            PathBuf::from("fmu")
+        }
+    };
     let system = o.out.join("system.toml");
-    write(&system, &system_toml(o, &name, v0, w0, lap_time))?;
+    write(&system, &system_toml(&fmu_dir, o, &name, v0, w0, lap_time))?;
     let study = o.out.join("study.toml");
     write(&study, &study_toml(o, &name))?;
     Ok(LapFiles {
@@ -418,6 +455,7 @@ pub fn prepare(o: &LapOptions) -> Result<LapFiles, LapError> {
         track,
         system,
         study,
+        fmus: packed,
         lap_length: lap,
         lap_time,
         v_start: v0,

@@ -71,25 +71,24 @@ pub fn models() -> Vec<ModelSpec> {
         .collect()
 }
 
-/// Where twinbench was built from (its `Cargo.toml`), if that folder is still there: the
-/// tests and the bundled system files use it; an installed binary does not need it.
+/// Where twinbench was built from (its `Cargo.toml`): the tests use it; the commands do
+/// not (an installed binary needs no sources).
 pub fn workspace_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// Default output folder of `pack`: `target/fmu` of the source tree the binary was built
-/// from, if it is still there (the bundled system files name it); else
-/// `$XDG_DATA_HOME/twinbench/fmu` (`~/.local/share/twinbench/fmu`).
+/// Default output folder of `pack`, the same for every binary wherever it was built:
+/// `$XDG_DATA_HOME/twinbench/fmu`, that is `~/.local/share/twinbench/fmu` (`fmu` in the
+/// working directory when neither `XDG_DATA_HOME` nor `HOME` is set).
 pub fn default_fmu_dir() -> PathBuf {
-    let root = workspace_root();
-    if root.join("Cargo.toml").is_file() {
-        return root.join("target").join("fmu");
-    }
     let data = std::env::var_os("XDG_DATA_HOME")
+        .filter(|d| Path::new(d).is_absolute())
         .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local/share")))
-        .unwrap_or_else(|| PathBuf::from("."));
-    data.join("twinbench").join("fmu")
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local/share")));
+    match data {
+        Some(d) => d.join("twinbench").join("fmu"),
+        None => PathBuf::from("fmu"),
+    }
 }
 
 /// Path of a packed FMU (test FMUs under `test/`).
@@ -146,11 +145,12 @@ pub fn fmu_archive(spec: &ModelSpec, library: &[u8]) -> Result<Vec<u8>, PackErro
     Ok(zip.finish()?.into_inner())
 }
 
-/// Pack the given models (all when `names` is empty) into `out_dir`; returns the FMU paths.
+/// Pack the given models (when `names` is empty: every shipped model, not the test FMUs)
+/// into `out_dir`; returns the FMU paths.
 pub fn pack(names: &[String], out_dir: &Path) -> Result<Vec<PathBuf>, PackError> {
     let all = models();
     let specs: Vec<ModelSpec> = if names.is_empty() {
-        all
+        all.into_iter().filter(|s| !s.test_only).collect()
     } else {
         names
             .iter()

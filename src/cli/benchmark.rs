@@ -8,7 +8,8 @@ use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
 pub struct BenchmarkArgs {
-    /// The system to time (default: the RLS/v bench).
+    /// The system to time (default: the bundled RLS/v bench, written with the shipped FMUs
+    /// into a temporary folder).
     #[arg(long)]
     pub system: Option<PathBuf>,
     /// Timed laps (after one warm-up lap); the best and the median are reported.
@@ -20,16 +21,16 @@ pub struct BenchmarkArgs {
 }
 
 pub fn run(args: BenchmarkArgs) -> anyhow::Result<()> {
-    let fmu_dir = crate::pack::default_fmu_dir();
-    if crate::pack::models()
-        .iter()
-        .any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists())
-    {
-        crate::pack::pack(&[], &fmu_dir)?;
-    }
-    let path = args
-        .system
-        .unwrap_or_else(|| crate::pack::workspace_root().join("systems/rls_v.toml"));
+    let bundle = tempfile::Builder::new()
+        .prefix("twinbench-benchmark-")
+        .tempdir()?;
+    let path = match args.system {
+        Some(p) => p,
+        None => {
+            super::demo::prepare_bundle(bundle.path(), false)?;
+            bundle.path().join("systems/rls_v.toml")
+        }
+    };
     let cache = Arc::new(FmuCache::temporary(false)?);
     let plan = Arc::new(Plan::load(&path, cache)?);
     let mut sim = Simulation::new(plan.clone())?;

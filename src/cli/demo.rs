@@ -29,15 +29,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let wall = Instant::now();
     let _lock = tb_table::FolderLock::acquire(&args.out)?;
     let bundle = args.out.join("bundle");
-    write_bundle(&bundle)?;
-    let fmu_dir = bundle.join("target").join("fmu");
-    let missing = crate::pack::models()
-        .iter()
-        .any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists());
-    if missing || args.repack {
-        eprintln!("packing the FMUs into {} ...", fmu_dir.display());
-        crate::pack::pack(&[], &fmu_dir)?;
-    }
+    prepare_bundle(&bundle, args.repack)?;
     let study_path = args
         .study
         .unwrap_or_else(|| bundle.join("studies/spielberg.toml"));
@@ -67,12 +59,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let optimise_seconds = optimise_start.elapsed().as_secs_f64();
     let report = crate::report::write_report(&study, &result, &args.out)?;
     println!();
+    // The identifiability of each step was printed when the step began (stderr).
     println!("{}", report.table_markdown);
-    for s in &result.steps {
-        for l in s.identifiability.report_lines() {
-            println!("identifiability, step {}: {l}", s.step);
-        }
-    }
     println!();
     println!(
         "optimisation  {} full-lap simulations in {:.1} s: {:.2} laps per second on {} threads \
@@ -111,6 +99,23 @@ const BUNDLE: &[(&str, &[u8])] = &[
     ),
     ("data/README.md", include_bytes!("../../data/README.md")),
 ];
+
+/// The bundled lap and the shipped FMUs in `dir`, at the paths the bundled files name
+/// (`systems/rls_v.toml` finds its FMUs in `target/fmu`): what the demo and the benchmark
+/// run, with no sources needed. The FMUs are packed when missing or when `repack`.
+pub(crate) fn prepare_bundle(dir: &std::path::Path, repack: bool) -> anyhow::Result<()> {
+    write_bundle(dir)?;
+    let fmu_dir = dir.join("target").join("fmu");
+    let missing = crate::pack::models()
+        .iter()
+        .filter(|s| !s.test_only)
+        .any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists());
+    if missing || repack {
+        eprintln!("packing the FMUs into {} ...", fmu_dir.display());
+        crate::pack::pack(&[], &fmu_dir)?;
+    }
+    Ok(())
+}
 
 /// Writes the bundle into `dir` (files already there with the same content stay untouched).
 fn write_bundle(dir: &std::path::Path) -> anyhow::Result<()> {

@@ -19,7 +19,9 @@ pub struct LapArgs {
     /// The folder to write target_speed.csv, track.csv, system.toml and study.toml into.
     #[arg(long, short)]
     pub out: PathBuf,
-    /// Where the packed FMUs are (default: where `twinbench pack` puts them).
+    /// Where packed FMUs are, to use instead of packing them into `<out>/fmu` (the
+    /// default: the lap's folder then needs nothing else). A relative path is written
+    /// relative to the output folder, so that it resolves from there.
     #[arg(long)]
     pub fmus: Option<PathBuf>,
     /// Print a JSON summary.
@@ -37,10 +39,7 @@ pub fn run(args: LapArgs) -> anyhow::Result<()> {
         channels,
         track: args.track.clone(),
         out: args.out.clone(),
-        fmu_dir: args
-            .fmus
-            .clone()
-            .unwrap_or_else(crate::pack::default_fmu_dir),
+        fmu_dir: args.fmus.clone(),
     };
     let files = crate::lap::prepare(&options)?;
     for w in &files.warnings {
@@ -64,6 +63,13 @@ pub fn run(args: LapArgs) -> anyhow::Result<()> {
                 ""
             }
         );
+        if let Some(first) = files.fmus.first() {
+            println!(
+                "  FMUs          {} ({} packed)",
+                first.parent().unwrap_or(first).display(),
+                files.fmus.len()
+            );
+        }
         println!("  system        {}", files.system.display());
         println!("  study         {}", files.study.display());
         println!("next: twinbench optimize {}", files.study.display());

@@ -10,6 +10,7 @@ pub mod demo;
 pub mod export_ssp;
 pub mod identify;
 pub mod info;
+pub mod interrupt;
 pub mod lap;
 pub mod modal;
 pub mod optimize;
@@ -133,9 +134,30 @@ pub fn main() -> ExitCode {
     command_finished();
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.downcast_ref::<interrupt::Interrupted>().is_some() => {
+            eprintln!("{e}");
+            ExitCode::from(interrupt::EXIT_INTERRUPTED)
+        }
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", message(&e));
             ExitCode::FAILURE
         }
     }
+}
+
+/// An error and its causes in one line, each part said once. Errors print as
+/// `path: what: why` and many also carry their cause, which prints again (`path: No such
+/// file` under `path: cannot read: No such file`): the line is built from the `": "`-separated
+/// parts of the error and of every cause, leaving out a part already said.
+pub fn message(e: &anyhow::Error) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for cause in e.chain() {
+        for part in cause.to_string().split(": ") {
+            let part = part.trim();
+            if !part.is_empty() && !parts.iter().any(|p| p == part) {
+                parts.push(part.to_string());
+            }
+        }
+    }
+    parts.join(": ")
 }

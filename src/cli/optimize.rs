@@ -3,6 +3,7 @@
 
 use anyhow::Context;
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use tb_optimize::{
     run_study, Evaluator, OptimizerKind, Progress, RunOptions, Study, StudyOutcome, StudyResult,
@@ -22,7 +23,7 @@ pub struct OptimizeArgs {
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Output folder: checkpoint, result JSON, Tab. 1 and plots.
-    #[arg(long, short, default_value = "target/optimize")]
+    #[arg(long, short, default_value = DEFAULT_OUT)]
     pub out: PathBuf,
     /// Override the study's optimiser (ga or cmaes).
     #[arg(long, value_parser = parse_kind)]
@@ -38,6 +39,36 @@ pub struct OptimizeArgs {
     #[arg(long)]
     pub force: bool,
 }
+
+impl OptimizeArgs {
+    /// The command line that continues this study from its checkpoint.
+    pub fn resume_command(&self) -> String {
+        let quote = |p: &std::path::Path| {
+            let s = p.display().to_string();
+            match s
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "/._-+".contains(c))
+            {
+                true => s,
+                false => format!("'{}'", s.replace('\'', "'\\''")),
+            }
+        };
+        let mut c = format!("twinbench optimize {} --resume", quote(&self.study));
+        if self.out != std::path::Path::new(DEFAULT_OUT) {
+            c.push_str(&format!(" --out {}", quote(&self.out)));
+        }
+        if let Some(k) = self.optimizer {
+            c.push_str(&format!(" --optimizer {}", k.name()));
+        }
+        if let Some(g) = self.generations {
+            c.push_str(&format!(" --generations {g}"));
+        }
+        c
+    }
+}
+
+/// Where `optimize` writes without `--out`.
+pub const DEFAULT_OUT: &str = "target/optimize";
 
 fn parse_kind(s: &str) -> Result<OptimizerKind, String> {
     match s {
@@ -56,10 +87,14 @@ pub struct Optimized {
 
 /// `twinbench optimize` without its printing: the Python package runs the same (with its
 /// own evaluator and progress), so both write the same files and fail with the same messages.
+///
+/// `interrupt`: set (by Ctrl-C) to stop after the generation under way; the error is then
+/// [`super::interrupt::Interrupted`], saying how to resume.
 pub fn optimize(
     args: &OptimizeArgs,
     evaluator: Option<Arc<dyn Evaluator>>,
     progress: Option<Arc<dyn Progress>>,
+    interrupt: Option<Arc<AtomicBool>>,
 ) -> anyhow::Result<Optimized> {
     let study = Study::load(&args.study)?;
     std::fs::create_dir_all(&args.out)
@@ -92,6 +127,7 @@ pub fn optimize(
         checkpoint: Some(checkpoint.clone()),
         resume: args.resume,
         stop_after: None,
+        interrupt,
         optimizer: args.optimizer,
         generations: args.generations,
         verbose: !args.json,
@@ -100,7 +136,11 @@ pub fn optimize(
     };
     let result = match run_study(&study, &options)? {
         StudyOutcome::Finished(r) => r,
-        StudyOutcome::Interrupted { .. } => anyhow::bail!("interrupted"),
+        StudyOutcome::Interrupted { .. } => {
+            return Err(
+                super::interrupt::Interrupted::new(&checkpoint, args.resume_command()).into(),
+            )
+        }
     };
     let report = if args.no_report {
         None
@@ -120,7 +160,7 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
         result,
         report,
         checkpoint,
-    } = optimize(&args, None, progress)?;
+    } = optimize(&args, None, progress, Some(super::interrupt::flag()?))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&result)?);
     } else {

@@ -4,10 +4,12 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct PackArgs {
-    /// Models to pack (default: all).
+    /// Models to pack (default: every shipped model: vehicle, driver, dyno, edu; the test
+    /// FMU `faulty` only when named).
     pub models: Vec<String>,
-    /// Output folder (default: target/fmu of the source tree, if it is there; else
-    /// ~/.local/share/twinbench/fmu).
+    /// Output folder (default: $XDG_DATA_HOME/twinbench/fmu, that is
+    /// ~/.local/share/twinbench/fmu; the repository's system files name target/fmu:
+    /// `twinbench pack -o target/fmu` there).
     #[arg(long, short)]
     pub out: Option<PathBuf>,
 }

@@ -1,7 +1,7 @@
 //! `twinbench run`: run a system file.
 
 use anyhow::Context;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::{LoadOptions, Plan, Simulation};
 use tb_fmi::FmuCache;
@@ -80,8 +80,10 @@ pub fn set_parameter(
 ) -> anyhow::Result<()> {
     let slot = system.parameter(name)?;
     let v = slot.value_from_toml(value, &format!("parameter \"{name}\""))?;
-    let cwd = std::env::current_dir().unwrap_or_default();
-    sim.set(&slot, slot.resolve_path(v, &cwd));
+    sim.set(
+        &slot,
+        slot.resolve_path(v, &tb_files::absolute(Path::new("."))),
+    );
     Ok(())
 }
 

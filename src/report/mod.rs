@@ -8,7 +8,10 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use tb_compare::{Measurement, PreparedMeasurement, Table, Workspace};
 use tb_optimize::{OptimizeError, Study, StudyResult};
-use tb_plot::LinePlot;
+use tb_plot::{Figure, LinePlot, Style};
+
+/// The stretch of the lap the unfiltered wheel loads are drawn over [m].
+const UNFILTERED_WINDOW_M: f64 = 500.0;
 use tb_table::write_atomic;
 
 #[derive(Debug, thiserror::Error)]
@@ -208,10 +211,12 @@ pub fn write_report(
 
     // Best cost per generation, per step.
     let mut plot = LinePlot::new(
-        "Best cost per generation (weighted e + bias term)",
+        "How the optimiser converged: the best cost so far in each generation (weighted e + bias term)",
         "generation",
-        "best cost",
-    );
+        "best cost (log scale)",
+    )
+    .log_y(true)
+    .integer_x(true);
     for s in &result.steps {
         let pts: Vec<(f64, f64)> = s
             .history
@@ -245,39 +250,81 @@ pub fn write_report(
     let mut ws = Workspace::new();
     let meas: &Table = measurement.table();
 
-    for (filtered, stem, title) in [
+    // The sum of the wheel loads (the lift coefficients' signal): the whole lap filtered, as
+    // the comparison sees it; unfiltered over the first stretch, where the road's
+    // excitation is readable (over a whole lap it is a band).
+    let cutoff = study.file.compare.cutoff_hz;
+    for (filtered, stem, title, window) in [
         (
             true,
             "fz_sum_filtered",
-            "Fz_sum over distance, low-pass filtered (Fig. 7 top)",
+            format!("Sum of the four wheel loads over the lap, low-pass filtered at {cutoff} Hz: vehicle against twin"),
+            None,
         ),
         (
             false,
             "fz_sum_unfiltered",
-            "Fz_sum over distance, unfiltered (Fig. 7 bottom)",
+            format!("Sum of the four wheel loads, unfiltered, first {UNFILTERED_WINDOW_M} m of the lap: vehicle against twin"),
+            Some(UNFILTERED_WINDOW_M),
         ),
     ] {
         let (rm, m) = prepared.on_grid(meas, "Fz_sum", filtered, &mut ws)?;
         let (ri, i) = prepared.on_grid(initial, "Fz_sum", filtered, &mut ws)?;
         let (ro, o) = prepared.on_grid(optimised, "Fz_sum", filtered, &mut ws)?;
+        let within = |p: Vec<(f64, f64)>| match window {
+            Some(w) => p.into_iter().filter(|q| q.0 <= w).collect(),
+            None => p,
+        };
         let plot = LinePlot::new(title, "distance [m]", "Fz_sum [N]")
-            .series("measured (vehicle)", &points(grid, rm, &m))
-            .series("twin, initial", &points(grid, ri, &i))
-            .series("twin, optimised", &points(grid, ro, &o));
+            .styled("twin, initial parameters", &within(points(grid, ri, &i)), Style::Faint)
+            .series("twin, optimised parameters", &within(points(grid, ro, &o)))
+            .reference("vehicle (measured)", &within(points(grid, rm, &m)));
         let stem = folder.join(stem);
         plot.save_both(&stem)?;
         files.push(stem.with_extension("svg"));
         files.push(stem.with_extension("png"));
     }
 
-    // Fig. 6: time over distance.
+    // Time over distance, and below it the twin's time minus the vehicle's: the lap times'
+    // difference is a fraction of a percent, invisible on the lap's scale.
     let (rm, m) = prepared.on_grid(meas, "time", false, &mut ws)?;
     let (ro, o) = prepared.on_grid(optimised, "time", false, &mut ws)?;
-    let plot = LinePlot::new("Time over distance (Fig. 6)", "distance [m]", "time [s]")
-        .series("vehicle", &points(grid, rm, &m))
-        .series("twin (bench), optimised", &points(grid, ro, &o));
+    let vehicle = points(grid, rm.clone(), &m);
+    let twin = points(grid, ro.clone(), &o);
+    let gap: Vec<(f64, f64)> = {
+        let (a, b) = (rm.start.max(ro.start), rm.end.min(ro.end));
+        (a..b)
+            .map(|g| {
+                (
+                    grid.at(g),
+                    (o[g - ro.start] - o[0]) - (m[g - rm.start] - m[0]),
+                )
+            })
+            .collect()
+    };
+    let end_gap = gap.last().map(|q| q.1).unwrap_or(f64::NAN);
+    let figure = Figure::new(1200)
+        .panel(
+            LinePlot::new(
+                "Time over distance: vehicle against the twin (bench) with the optimised parameters",
+                "distance [m]",
+                "time [s]",
+            )
+            .series("twin (bench), optimised parameters", &twin)
+            .reference("vehicle (measured)", &vehicle),
+            500,
+        )
+        .panel(
+            LinePlot::new(
+                format!("Twin's time minus the vehicle's over distance ({end_gap:+.2} s at the end of the lap)"),
+                "distance [m]",
+                "time difference [s]",
+            )
+            .series("twin − vehicle", &gap),
+            300,
+        );
     let stem = folder.join("time_over_distance");
-    plot.save_both(&stem)?;
+    figure.save_both(&stem)?;
     files.push(stem.with_extension("svg"));
     files.push(stem.with_extension("png"));
 
@@ -285,12 +332,12 @@ pub fn write_report(
     let (rm, m) = prepared.on_grid(meas, "a_x", true, &mut ws)?;
     let (ro, o) = prepared.on_grid(optimised, "a_x", true, &mut ws)?;
     let plot = LinePlot::new(
-        "Longitudinal acceleration over distance, low-pass filtered",
+        format!("Longitudinal acceleration over distance, low-pass filtered at {cutoff} Hz: vehicle against twin"),
         "distance [m]",
         "a_x [m/s²]",
     )
-    .series("vehicle", &points(grid, rm, &m))
-    .series("twin (bench), optimised", &points(grid, ro, &o));
+    .series("twin (bench), optimised parameters", &points(grid, ro, &o))
+    .reference("vehicle (measured)", &points(grid, rm, &m));
     let stem = folder.join("a_x_over_distance");
     plot.save_both(&stem)?;
     files.push(stem.with_extension("svg"));

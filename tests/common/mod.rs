@@ -5,14 +5,19 @@ use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 use tb_fmi::{FmuCache, LoadedFmu};
 
-/// Pack every model once per test binary (a no-op build when nothing changed), so that the
-/// tests always run the FMUs of the current sources.
+/// Pack every model and test FMU once per test binary into `target/fmu` (where the
+/// repository's system files find them), so that the tests always run the FMUs of the
+/// current sources.
 pub fn fmu_dir() -> PathBuf {
     static PACKED: OnceLock<PathBuf> = OnceLock::new();
     PACKED
         .get_or_init(|| {
-            let dir = twinbench::pack::default_fmu_dir();
-            twinbench::pack::pack(&[], &dir).expect("packing the FMUs failed");
+            let dir = twinbench::pack::workspace_root().join("target/fmu");
+            let all: Vec<String> = twinbench::pack::models()
+                .iter()
+                .map(|s| s.info.name.to_string())
+                .collect();
+            twinbench::pack::pack(&all, &dir).expect("packing the FMUs failed");
             dir
         })
         .clone()

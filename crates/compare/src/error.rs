@@ -77,6 +77,16 @@ pub enum Error {
         available: String,
     },
 
+    /// A channel map names a channel the file does not have.
+    #[error("{file}: no channel `{channel}` (the channel map's name for signal `{signal}`); closest channels: {closest} (channels in the file: {available})")]
+    MissingChannel {
+        file: String,
+        signal: String,
+        channel: String,
+        closest: String,
+        available: String,
+    },
+
     #[error("{file}: column `{column}` is ambiguous: matches {candidates}")]
     AmbiguousColumn {
         file: String,

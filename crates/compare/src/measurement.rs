@@ -228,9 +228,16 @@ impl Measurement {
                 .names()
                 .iter()
                 .position(|n| n == channel)
-                .ok_or_else(|| Error::MissingColumn {
+                .ok_or_else(|| Error::MissingChannel {
                     file: file.clone(),
-                    column: format!("{channel}` (mapped to `{signal}`"),
+                    signal: signal.clone(),
+                    channel: channel.clone(),
+                    closest: tb_fmi::description::closest(
+                        channel,
+                        table.names().iter().map(String::as_str),
+                        3,
+                    )
+                    .join(", "),
                     available: table.names().join(", "),
                 })?;
             table.rename(i, signal)?;

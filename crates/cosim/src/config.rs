@@ -271,9 +271,19 @@ pub struct ReplayConfig {
 impl SystemFile {
     /// Read and parse; relative paths are resolved against the file's folder.
     pub fn load(path: &Path) -> Result<SystemFile, super::SystemError> {
-        let text = std::fs::read_to_string(path).map_err(|e| super::SystemError::File {
+        let bytes = std::fs::read(path).map_err(|e| super::SystemError::File {
             path: path.to_path_buf(),
             message: format!("cannot read: {e}"),
+        })?;
+        let text = String::from_utf8(bytes).map_err(|e| super::SystemError::File {
+            path: path.to_path_buf(),
+            message: match e.as_bytes().starts_with(b"PK\x03\x04") {
+                true => "is a ZIP archive (an FMU?), not a system file: `run` takes a system file (TOML) or an SSP 1.0 package (.ssp); a system with one instance runs one FMU".into(),
+                false => format!(
+                    "is not a text file (byte {} is not UTF-8): a system file is TOML",
+                    e.utf8_error().valid_up_to()
+                ),
+            },
         })?;
         Self::parse(&text, path)
     }
@@ -283,20 +293,18 @@ impl SystemFile {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        let base = path.parent().unwrap_or(Path::new("."));
+        // Names in the file are relative to its folder, whatever the working directory.
+        let base = tb_files::folder_of(path);
         for p in sys.fmus.values_mut() {
-            if p.is_relative() {
-                *p = base.join(&*p);
-            }
+            *p = tb_files::resolve(&base, p);
         }
         for r in &mut sys.replay {
-            if r.file.is_relative() {
-                r.file = base.join(&r.file);
-            }
+            r.file = tb_files::resolve(&base, &r.file);
         }
         for p in &mut sys.preload {
-            if p.is_relative() && p.components().count() > 1 {
-                *p = base.join(&*p);
+            // A bare library name is looked up by the loader, as dlopen does.
+            if p.is_absolute() || p.components().count() > 1 {
+                *p = tb_files::resolve(&base, p);
             }
         }
         Ok(sys)

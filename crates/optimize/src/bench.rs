@@ -73,7 +73,7 @@ impl Bench {
         // Fixed values: numbers join the assignment (reported with the results); other
         // types are set once on every worker.
         let mut fixed = Vec::new();
-        let study_dir = study.path.parent().unwrap_or(std::path::Path::new("."));
+        let study_dir = tb_files::folder_of(&study.path);
         let not_connected = |slot: &ParamSlot| -> Result<(), OptimizeError> {
             match plan.driving_connection(slot) {
                 Some(c) => Err(OptimizeError::File {
@@ -90,7 +90,7 @@ impl Bench {
             let ctx = format!("{}: parameter \"{name}\"", study.path.display());
             let slot = plan.parameter(name)?;
             not_connected(&slot)?;
-            let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, study_dir);
+            let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, &study_dir);
             match v {
                 ParamValue::Real(x) => {
                     slots.push(slot);

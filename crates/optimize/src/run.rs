@@ -48,6 +48,9 @@ pub struct RunOptions {
     pub resume: bool,
     /// Stop after this many generations in this session (a test hook for an interruption).
     pub stop_after: Option<usize>,
+    /// Set from outside (Ctrl-C, a signal): the study stops once the generation under way
+    /// is done and checkpointed, as [`StudyOutcome::Interrupted`].
+    pub interrupt: Option<Arc<std::sync::atomic::AtomicBool>>,
     /// Override the study's optimiser.
     pub optimizer: Option<OptimizerKind>,
     /// Override the generations of every step.
@@ -69,6 +72,7 @@ impl std::fmt::Debug for RunOptions {
             .field("checkpoint", &self.checkpoint)
             .field("resume", &self.resume)
             .field("stop_after", &self.stop_after)
+            .field("interrupt", &self.interrupt.is_some())
             .field("optimizer", &self.optimizer)
             .field("generations", &self.generations)
             .field("verbose", &self.verbose)
@@ -646,6 +650,19 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                     to_unit(&c.start.x0, &bounds),
                 )?;
                 opt.restore(&c.optimizer)?;
+                if options.verbose {
+                    eprintln!(
+                        "resuming step {} '{}' from generation {} of {generations} (checkpoint {})",
+                        k + 1,
+                        step.name,
+                        opt.generation() + 1,
+                        options
+                            .checkpoint
+                            .as_deref()
+                            .map(|p| p.display().to_string())
+                            .unwrap_or_default()
+                    );
+                }
                 (c.start, opt, c.run)
             }
             None => {
@@ -757,7 +774,11 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                         return ControlFlow::Break(());
                     }
                 }
-                if options.stop_after.is_some_and(|n| session_generations >= n)
+                let asked = options
+                    .interrupt
+                    .as_ref()
+                    .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst));
+                if (asked || options.stop_after.is_some_and(|n| session_generations >= n))
                     && opt.generation() < generations
                 {
                     interrupted = true;

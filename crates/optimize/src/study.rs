@@ -236,9 +236,10 @@ impl Study {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        let dir = path.parent().unwrap_or(Path::new("."));
-        let system_path = dir.join(&file.system);
-        let measurement_path = dir.join(file.measurement.file());
+        // Names in the study are relative to its folder, whatever the working directory.
+        let dir = tb_files::folder_of(path);
+        let system_path = tb_files::resolve(&dir, &file.system);
+        let measurement_path = tb_files::resolve(&dir, file.measurement.file());
         let channels = file.measurement.channels();
         use sha2::Digest;
         let fingerprint = format!("{:x}", sha2::Sha256::digest(text.as_bytes()));

@@ -8,6 +8,7 @@ use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyDict, PyList};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use tb_cosim::config::StopConfig;
 use tb_cosim::{LoadOptions, Plan, Simulation};
@@ -27,7 +28,7 @@ create_exception!(
 
 /// An error as the command line prints it (the whole chain, `error: ` left off).
 fn error(e: impl Into<anyhow::Error>) -> PyErr {
-    TwinbenchError::new_err(format!("{:#}", e.into()))
+    TwinbenchError::new_err(twinbench::cli::message(&e.into()))
 }
 
 /// A Python value as the TOML value `--set` would give the same text.
@@ -331,14 +332,46 @@ fn optimize(
     };
     let dyn_evaluator = evaluator.clone().map(|e| e as Arc<dyn Evaluator>);
     let progress = progress.map(|callback| Arc::new(PyProgress { callback }) as Arc<dyn Progress>);
-    let result = py.detach(move || {
-        twinbench::cli::optimize::optimize(&args, dyn_evaluator, progress)
-            .and_then(|o| Ok(serde_json::to_string(&o.result)?))
+    // The study runs on a thread of its own while this one, Python's main thread, looks
+    // for Ctrl-C: Python sees a signal only where it holds the GIL, never inside the
+    // study. On KeyboardInterrupt the study stops after the generation under way, its
+    // checkpoint kept, and the KeyboardInterrupt says how to resume.
+    let interrupt = Arc::new(AtomicBool::new(false));
+    let result = std::thread::scope(|scope| {
+        let flag = interrupt.clone();
+        let study = scope.spawn(move || {
+            twinbench::cli::optimize::optimize(&args, dyn_evaluator, progress, Some(flag))
+                .and_then(|o| Ok(serde_json::to_string(&o.result)?))
+        });
+        while !study.is_finished() {
+            py.detach(|| std::thread::sleep(std::time::Duration::from_millis(50)));
+            if py.check_signals().is_err() && !interrupt.swap(true, Ordering::SeqCst) {
+                eprintln!("interrupt: stopping after the generation under way");
+            }
+        }
+        study.join().unwrap_or_else(|p| {
+            Err(anyhow::anyhow!(
+                "the study panicked: {}",
+                p.downcast_ref::<String>()
+                    .map(String::as_str)
+                    .or_else(|| p.downcast_ref::<&str>().copied())
+                    .unwrap_or("(no message)")
+            ))
+        })
     });
     if let Some(e) = evaluator.and_then(|e| e.raised.lock().ok().and_then(|mut r| r.take())) {
         return Err(e);
     }
-    result.map_err(error)
+    match result {
+        Err(e) => match e.downcast_ref::<twinbench::cli::interrupt::Interrupted>() {
+            Some(i) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(format!(
+                "interrupted: checkpoint kept ({}); resume with study.optimize(..., resume=True) or `{}`",
+                i.checkpoint, i.resume
+            ))),
+            None => Err(error(e)),
+        },
+        Ok(r) => Ok(r),
+    }
 }
 
 /// A step as Python sees it: name, parameter names, bounds, start values.
@@ -590,6 +623,8 @@ fn load_study(path: PathBuf) -> PyResult<(String, String, String, String, f64, u
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("TwinbenchError", m.py().get_type::<TwinbenchError>())?;
+    // The package's version is the workspace's (the wheel's metadata says the same).
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;

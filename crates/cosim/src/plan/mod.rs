@@ -319,6 +319,9 @@ impl Plan {
         // FMUs and instances.
         let mut loaded: HashMap<&str, Arc<LoadedFmu>> = HashMap::new();
         for (key, p) in &file.fmus {
+            if std::fs::symlink_metadata(p).is_err() {
+                return Err(missing_fmu(&ctx_file, key, p));
+            }
             loaded.insert(key, cache.load(p)?);
         }
         let mut instances = Vec::new();
@@ -659,7 +662,7 @@ impl Plan {
             let ctx = format!("{ctx_file}: parameter \"{name}\"");
             let slot = parameter_slot(&instances, name, &ctx)?;
             let value = slot.value_from_toml(value, &ctx)?;
-            let value = slot.resolve_path(value, path.parent().unwrap_or(Path::new(".")));
+            let value = slot.resolve_path(value, &tb_files::folder_of(path));
             parameters.push((slot, value));
         }
         // Recorded signals: as listed, or every output and replayed column.
@@ -1023,6 +1026,20 @@ fn unknown_instance(
 
 /// A signal the system can read, `instance.variable`: an FMU variable (through the port
 /// map) or a replayed column. Instances come first in the unit numbering, then replays.
+/// An FMU the system file names that is not there: the system file, the entry and, as
+/// twinbench's own FMUs are written by `pack`, the command that writes them there.
+fn missing_fmu(ctx_file: &str, key: &str, path: &Path) -> SystemError {
+    let folder = path.parent().unwrap_or(Path::new("."));
+    invalid(
+        ctx_file,
+        format!(
+            "[fmus] {key}: {} does not exist (paths in a system file are relative to its folder); twinbench's own FMUs are written there by `twinbench pack -o {}`",
+            path.display(),
+            folder.display()
+        ),
+    )
+}
+
 pub(crate) fn resolve_endpoint(
     instances: &[InstanceDef],
     replays: &[ReplaySource],

@@ -108,17 +108,17 @@ impl ParamSlot {
         self.check(v, ctx)
     }
 
-    /// A path value made absolute against `base` (the folder of the system or study file,
-    /// or the working directory for the command line). Other values pass unchanged.
+    /// A path value made absolute against `base` (the absolute folder of the system or
+    /// study file, or the working directory for the command line; see
+    /// [`tb_files::folder_of`]) and normalised. Other values pass unchanged.
     pub fn resolve_path(&self, value: ParamValue, base: &std::path::Path) -> ParamValue {
         match value {
-            ParamValue::String(v)
-                if self.is_path
-                    && !v.is_empty()
-                    && !v.starts_with("file:")
-                    && std::path::Path::new(&v).is_relative() =>
-            {
-                ParamValue::String(base.join(&v).display().to_string())
+            ParamValue::String(v) if self.is_path && !v.is_empty() && !v.starts_with("file:") => {
+                ParamValue::String(
+                    tb_files::resolve(base, std::path::Path::new(&v))
+                        .display()
+                        .to_string(),
+                )
             }
             other => other,
         }

@@ -174,14 +174,23 @@ impl ModelDescription {
 
     /// Up to `n` variable names closest to `name` (for "did you mean" messages).
     pub fn closest_names(&self, name: &str, n: usize) -> Vec<&str> {
-        let mut scored: Vec<(usize, &str)> = self
-            .variables
-            .iter()
-            .map(|v| (edit_distance(name, &v.name), v.name.as_str()))
-            .collect();
-        scored.sort();
-        scored.into_iter().take(n).map(|(_, s)| s).collect()
+        closest(name, self.variables.iter().map(|v| v.name.as_str()), n)
     }
+}
+
+/// Up to `n` of `candidates` closest to `name` by [`edit_distance`], closest first (for
+/// "closest names" in messages).
+pub fn closest<'a>(
+    name: &str,
+    candidates: impl IntoIterator<Item = &'a str>,
+    n: usize,
+) -> Vec<&'a str> {
+    let mut scored: Vec<(usize, &str)> = candidates
+        .into_iter()
+        .map(|c| (edit_distance(name, c), c))
+        .collect();
+    scored.sort();
+    scored.into_iter().take(n).map(|(_, s)| s).collect()
 }
 
 /// Levenshtein distance, case-insensitive.

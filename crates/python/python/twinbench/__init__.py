@@ -26,9 +26,10 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from . import _native
-from ._native import TwinbenchError
+from ._native import TwinbenchError, __version__
 
 __all__ = [
+    "__version__",
     "run",
     "compare",
     "Result",
@@ -63,8 +64,17 @@ class Result:
     text: Dict[str, List[str]] = field(default_factory=dict)
 
     def to_pandas(self):
-        """The signals as a pandas DataFrame indexed by ``time`` (needs pandas)."""
-        import pandas as pd
+        """The signals as a pandas DataFrame indexed by ``time``.
+
+        Needs pandas: ``pip install 'twinbench[pandas]'`` (or ``pip install pandas``).
+        """
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError(
+                "Result.to_pandas() needs pandas, which is not installed: "
+                "pip install 'twinbench[pandas]' (or pip install pandas)"
+            ) from None
 
         frame = pd.DataFrame({k: v for k, v in self.signals.items() if k != "time"})
         if "time" in self.signals:

@@ -1,0 +1,50 @@
+//! Ctrl-C (or SIGTERM, as a cluster's scheduler sends before it kills a job) during a
+//! study: the first asks the study to stop once the generation under way is done and
+//! checkpointed, so that `--resume` continues it; a second ends the process at once (the
+//! checkpoint of the last finished generation is still there).
+
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// The exit code of an interrupted command (128 + SIGINT, as a shell reports it).
+pub const EXIT_INTERRUPTED: u8 = 130;
+
+/// A study stopped on request; its checkpoint holds every finished generation.
+#[derive(Debug, thiserror::Error)]
+#[error("interrupted: checkpoint kept ({checkpoint}); resume with `{resume}`")]
+pub struct Interrupted {
+    pub checkpoint: String,
+    pub resume: String,
+}
+
+impl Interrupted {
+    pub fn new(checkpoint: &Path, resume: String) -> Self {
+        Interrupted {
+            checkpoint: checkpoint.display().to_string(),
+            resume,
+        }
+    }
+}
+
+/// Installs the handlers; the flag is set on the first SIGINT or SIGTERM.
+pub fn flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        let f = flag.clone();
+        // SAFETY: the handler only swaps an atomic, writes to stderr and exits: all
+        // async-signal-safe.
+        unsafe {
+            signal_hook::low_level::register(signal, move || {
+                if f.swap(true, Ordering::SeqCst) {
+                    let m = b"\ninterrupted again: stopping now (the checkpoint of the last finished generation is kept)\n";
+                    libc::write(2, m.as_ptr().cast(), m.len());
+                    libc::_exit(i32::from(EXIT_INTERRUPTED));
+                }
+                let m = b"\ninterrupt: stopping after the generation under way (Ctrl-C again to stop at once)\n";
+                libc::write(2, m.as_ptr().cast(), m.len());
+            })?;
+        }
+    }
+    Ok(flag)
+}
