@@ -6,6 +6,19 @@
 # pythonfmu supplier EDU is built here.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# What the suite builds from third-party sources (tools/pins.sh): found before anything
+# else, or one line that says what is missing and where to get it.
+. tools/pins.sh
+export TWINBENCH_REFERENCE_FMUS="${TWINBENCH_REFERENCE_FMUS:-$(cd .. && pwd)/shared/reference-fmus}"
+missing=()
+[ -f "$TWINBENCH_REFERENCE_FMUS/src/fmi2Functions.c" ] \
+    || missing+=("the Modelica Reference FMUs' sources ($REFERENCE_FMUS_REPOSITORY at commit $REFERENCE_FMUS_COMMIT) at $TWINBENCH_REFERENCE_FMUS (or set TWINBENCH_REFERENCE_FMUS)")
+tools/omsimulator.sh --check \
+    || missing+=("OMSimulator's source archive $OMSIMULATOR_ARCHIVE (SHA-256 $OMSIMULATOR_SHA256; $OMSIMULATOR_REPOSITORY at $OMSIMULATOR_COMMIT) in ../shared/omsimulator (or set TWINBENCH_OMSIMULATOR_SOURCES)")
+if [ ${#missing[@]} -gt 0 ]; then
+    echo "error: the tests need $(IFS=';'; echo "${missing[*]}" | sed 's/;/, and /g'): see README, 'What the tests need'" >&2
+    exit 2
+fi
 if ! target/venv/bin/python -c "import fmpy, numpy, scipy, pythonfmu, libcosimpy, asammdf, distributed, pandas, pytest, maturin" 2>/dev/null; then
     echo "== creating target/venv (tools/requirements.txt)"
     python3 -m venv target/venv
