@@ -97,7 +97,7 @@ fn a_missing_channel_and_an_unknown_unit_name_the_file_and_the_channel() {
     ]);
     assert!(e.contains("spielberg_lap.csv"), "{e}");
     assert!(
-        e.contains("GPS_Speed") && e.contains("mapped to `v`"),
+        e.contains("no channel `GPS_Speed` (the channel map's name for signal `v`)"),
         "{e}"
     );
     // A units row with a unit twinbench does not know.

@@ -16,7 +16,9 @@ missing=()
 tools/omsimulator.sh --check \
     || missing+=("OMSimulator's source archive $OMSIMULATOR_ARCHIVE (SHA-256 $OMSIMULATOR_SHA256; $OMSIMULATOR_REPOSITORY at $OMSIMULATOR_COMMIT) in ../shared/omsimulator (or set TWINBENCH_OMSIMULATOR_SOURCES)")
 if [ ${#missing[@]} -gt 0 ]; then
-    echo "error: the tests need $(IFS=';'; echo "${missing[*]}" | sed 's/;/, and /g'): see README, 'What the tests need'" >&2
+    line="${missing[0]}"
+    [ ${#missing[@]} -eq 1 ] || line="$line, and ${missing[1]}"
+    echo "error: the tests need $line: see README, 'What the tests need'" >&2
     exit 2
 fi
 if ! target/venv/bin/python -c "import fmpy, numpy, scipy, pythonfmu, libcosimpy, asammdf, distributed, pandas, pytest, maturin" 2>/dev/null; then

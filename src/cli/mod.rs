@@ -23,7 +23,7 @@ pub mod worker;
 #[command(
     name = "twinbench",
     version,
-    about = "Digital twin of a powertrain test bench (FMI 2.0 Co-Simulation)"
+    about = "Digital twin of a powertrain test bench: FMI Co-Simulation models (exports FMI 2.0; imports FMI 2.0 and 3.0 FMUs and SSP 1.0 packages), orchestrator, optimiser, bench analysis"
 )]
 pub struct Cli {
     /// More log output (repeat for more).
@@ -35,7 +35,7 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Write the FMUs (the model libraries are built into this binary): target/fmu/<model>.fmu, or -o DIR.
+    /// Write the FMUs (their libraries are built into this binary) to ~/.local/share/twinbench/fmu, or -o DIR.
     Pack(pack::PackArgs),
     /// The main job on the bundled data (packs the FMUs if needed).
     Demo(demo::DemoArgs),

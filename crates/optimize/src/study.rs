@@ -245,7 +245,7 @@ impl Study {
         let fingerprint = format!("{:x}", sha2::Sha256::digest(text.as_bytes()));
         let study = Study {
             file,
-            path: path.to_path_buf(),
+            path: tb_files::normalize(path),
             system_path,
             measurement_path,
             channels,

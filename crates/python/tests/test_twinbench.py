@@ -62,7 +62,7 @@ def worker_temporary_files(tmp_path_factory):
 def packed_fmus():
     assert EXE.exists(), f"{EXE}: build twinbench first (cargo build --release)"
     if not (ROOT / "target/fmu/vehicle.fmu").exists():
-        cli("pack")
+        cli("pack", "-o", ROOT / "target/fmu")
 
 
 @pytest.fixture(scope="session")
@@ -272,3 +272,133 @@ def test_ask_tell_with_an_optimiser_of_ones_own(cli_study):
         opt.tell([1.0])
     with pytest.raises(twinbench.TwinbenchError, match="values for the"):
         study.evaluate(0, [[1.0]])
+
+
+# ---- the first hour ----
+
+
+def test_a_lap_of_ones_own_runs_by_a_relative_name(tmp_path, monkeypatch):
+    """`twinbench.run("mylap/system.toml")` from the folder above the lap, and
+    `twinbench.run("system.toml")` from inside it, as the command line does."""
+    p = subprocess.run(
+        [str(EXE), "lap", str(ROOT / "data/spielberg_lap.csv"), "--track",
+         str(ROOT / "data/spielberg_lap_track.csv"), "--out", "mylap"],
+        capture_output=True, text=True, cwd=tmp_path,
+    )
+    assert p.returncode == 0, p.stderr
+    monkeypatch.chdir(tmp_path)
+    above = twinbench.run("mylap/system.toml", stop=1.0)
+    monkeypatch.chdir(tmp_path / "mylap")
+    inside = twinbench.run("system.toml", stop=1.0)
+    assert same_bits(above.signals["vehicle.v"], inside.signals["vehicle.v"])
+    # A relative path parameter is relative to the working directory, as --set is.
+    inside = twinbench.run("system.toml", stop=1.0, parameters={"vehicle.track_file": "track.csv"})
+    assert same_bits(above.signals["vehicle.v"], inside.signals["vehicle.v"])
+
+
+def test_version_is_the_workspaces():
+    cargo = (ROOT / "Cargo.toml").read_text()
+    version = cargo.split("[workspace.package]", 1)[1].split('version = "', 1)[1].split('"', 1)[0]
+    assert twinbench.__version__ == version
+
+
+def test_to_pandas_without_pandas_names_the_extra(monkeypatch):
+    import sys
+
+    result = twinbench.run(SYSTEM, stop=0.1)
+    monkeypatch.setitem(sys.modules, "pandas", None)  # import pandas then fails
+    with pytest.raises(ImportError, match=r"pip install 'twinbench\[pandas\]'"):
+        result.to_pandas()
+
+
+CTRL_C = """
+import sys, twinbench
+twinbench.Study(sys.argv[1]).optimize(out=sys.argv[2], threads=2)
+print("finished")
+"""
+
+
+def test_ctrl_c_stops_a_study_after_its_generation_and_says_how_to_resume(tmp_path):
+    out = tmp_path / "opt"
+    child = subprocess.Popen(
+        [sys_executable(), "-c", CTRL_C, str(STUDY), str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    checkpoint = out / "spielberg.checkpoint.json"
+    import time
+
+    started = time.monotonic()
+    while not checkpoint.exists():
+        assert child.poll() is None, child.communicate()
+        assert time.monotonic() - started < 120, "no checkpoint after 2 minutes"
+        time.sleep(0.05)
+    child.send_signal(signal.SIGINT)
+    stdout, stderr = child.communicate(timeout=120)
+    assert child.returncode != 0
+    assert "finished" not in stdout
+    assert "interrupt: stopping after the generation under way" in stderr
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith("KeyboardInterrupt: interrupted: checkpoint kept"), stderr
+    assert "resume=True" in last and "--resume" in last, last
+    assert checkpoint.exists()
+    # Resumed, it finishes with the Tab. 1 of an uninterrupted study.
+    result = twinbench.Study(STUDY).optimize(out=out, threads=2, resume=True)
+    assert result["steps"][-1]["name"] == "geometry"
+
+
+def sys_executable():
+    import sys
+
+    return sys.executable
+
+
+def snippets():
+    """Every ```python block of the README and docs/, with where it stands."""
+    blocks = []
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        lines = doc.read_text().splitlines()
+        k = 0
+        while k < len(lines):
+            if lines[k].strip() == "```python":
+                start = k + 1
+                k += 1
+                while lines[k].strip() != "```":
+                    k += 1
+                blocks.append((f"{doc.relative_to(ROOT)}:{start}", "\n".join(lines[start:k])))
+            k += 1
+    return blocks
+
+
+@pytest.mark.parametrize("where,code", snippets(), ids=[w for w, _ in snippets()])
+def test_every_python_snippet_in_the_docs_runs_as_a_script(where, code, tmp_path):
+    if "not run by the tests" in code.splitlines()[0]:
+        pytest.skip(code.splitlines()[0])
+    script = tmp_path / "snippet.py"
+    script.write_text(code)
+    p = subprocess.run([sys_executable(), str(script)], capture_output=True, text=True, cwd=ROOT)
+    assert p.returncode == 0, f"{where}:\n{p.stderr[-3000:]}"
+
+
+def test_every_documented_python_m_twinbench_command_parses():
+    """`python -m twinbench ...` lines of the README's and docs/' shell blocks parse with the
+    package's own argument parser (a renamed flag fails here)."""
+    import shlex
+
+    from twinbench.__main__ import _parser
+
+    checked = 0
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        shell = False
+        for n, line in enumerate(doc.read_text().splitlines(), 1):
+            s = line.strip()
+            if s.startswith("```"):
+                shell = not shell and s[3:] in ("sh", "bash", "console", "shell")
+                continue
+            if shell and s.startswith("python -m twinbench "):
+                words = shlex.split(s[len("python -m twinbench "):], comments=True)
+                try:
+                    _parser().parse_args(words)
+                except SystemExit as e:
+                    raise AssertionError(f"{doc.relative_to(ROOT)}:{n}: {s}") from e
+                checked += 1
+    assert checked >= 2

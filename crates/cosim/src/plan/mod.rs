@@ -260,6 +260,8 @@ impl Plan {
         cache: Arc<FmuCache>,
         options: &LoadOptions,
     ) -> Result<Plan, SystemError> {
+        // Named as the user named it, without `a/..` steps.
+        let path = &tb_files::normalize(path);
         let ctx_file = path.display().to_string();
         if !(file.experiment.step > 0.0 && file.experiment.step.is_finite()) {
             return Err(invalid(
@@ -1024,8 +1026,6 @@ fn unknown_instance(
     )
 }
 
-/// A signal the system can read, `instance.variable`: an FMU variable (through the port
-/// map) or a replayed column. Instances come first in the unit numbering, then replays.
 /// An FMU the system file names that is not there: the system file, the entry and, as
 /// twinbench's own FMUs are written by `pack`, the command that writes them there.
 fn missing_fmu(ctx_file: &str, key: &str, path: &Path) -> SystemError {
@@ -1040,6 +1040,8 @@ fn missing_fmu(ctx_file: &str, key: &str, path: &Path) -> SystemError {
     )
 }
 
+/// A signal the system can read, `instance.variable`: an FMU variable (through the port
+/// map) or a replayed column. Instances come first in the unit numbering, then replays.
 pub(crate) fn resolve_endpoint(
     instances: &[InstanceDef],
     replays: &[ReplaySource],

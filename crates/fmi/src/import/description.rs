@@ -193,18 +193,24 @@ pub fn closest<'a>(
     scored.into_iter().take(n).map(|(_, s)| s).collect()
 }
 
-/// Levenshtein distance, case-insensitive.
+/// Edit distance, case-insensitive: insertions, deletions, substitutions and swaps of two
+/// neighbouring characters (the commonest typo, `Fz_lr` for `Fz_rl`) cost one each (the
+/// optimal string alignment distance).
 pub fn edit_distance(a: &str, b: &str) -> usize {
     let a: Vec<char> = a.to_lowercase().chars().collect();
     let b: Vec<char> = b.to_lowercase().chars().collect();
+    let mut before: Vec<usize> = Vec::new();
     let mut prev: Vec<usize> = (0..=b.len()).collect();
     for i in 1..=a.len() {
         let mut cur = vec![i; b.len() + 1];
         for j in 1..=b.len() {
             let cost = usize::from(a[i - 1] != b[j - 1]);
             cur[j] = (prev[j] + 1).min(cur[j - 1] + 1).min(prev[j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                cur[j] = cur[j].min(before[j - 2] + 1);
+            }
         }
-        prev = cur;
+        before = std::mem::replace(&mut prev, cur);
     }
     prev[b.len()]
 }
@@ -715,5 +721,8 @@ mod tests {
         let md = parse(XML).unwrap();
         assert_eq!(md.closest_names("N", 1), vec!["n"]);
         assert_eq!(edit_distance("omega_rl", "omega_rr"), 1);
+        assert_eq!(edit_distance("Fz_lr", "Fz_rl"), 1, "a swap is one edit");
+        assert_eq!(edit_distance("", "abc"), 3);
+        assert_eq!(edit_distance("abc", "ca"), 3);
     }
 }
