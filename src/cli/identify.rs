@@ -417,28 +417,28 @@ fn plots(frf: &Frf, f: &FrfFit, stem: &Path) -> anyhow::Result<()> {
     .collect();
     let out = [
         (
-            tb_plot::LinePlot::new("Bode magnitude", "f [Hz]", "|H| [dB]")
-                .series("H1 estimate", &pts(&db))
-                .series("fit", &pts(&model_db))
+            tb_plot::LinePlot::new("Dyno loop frequency response: magnitude of the torque transfer, measured (H1) against the fitted model", "f [Hz]", "|H| [dB]")
+                .series("fitted model", &pts(&model_db))
+                .reference("measured (H1 estimate)", &pts(&db))
                 .log_x(true),
             with("-bode-magnitude"),
         ),
         (
-            tb_plot::LinePlot::new("Bode phase (unwrapped, Eq. 9)", "f [Hz]", "phase [°]")
-                .series("H1 estimate", &pts(&deg))
-                .series("fit", &pts(&model_deg))
+            tb_plot::LinePlot::new("Dyno loop frequency response: phase (unwrapped), measured (H1) against the fitted model", "f [Hz]", "phase [°]")
+                .series("fitted model", &pts(&model_deg))
+                .reference("measured (H1 estimate)", &pts(&deg))
                 .log_x(true),
             with("-bode-phase"),
         ),
         (
-            tb_plot::LinePlot::new("Group delay −dφ/dω (Eq. 10)", "f [Hz]", "τ_gr [ms]")
-                .series("H1 estimate", &pts(&gd))
-                .series("fit", &pts(&model_gd))
+            tb_plot::LinePlot::new("Dyno loop group delay −dφ/dω: the loop's dead time plus its lag, measured (H1) against the fitted model", "f [Hz]", "τ_gr [ms]")
+                .series("fitted model", &pts(&model_gd))
+                .reference("measured (H1 estimate)", &pts(&gd))
                 .log_x(true),
             with("-group-delay"),
         ),
         (
-            tb_plot::LinePlot::new("Coherence", "f [Hz]", "γ² [-]")
+            tb_plot::LinePlot::new("Coherence of setpoint and response: where near 1, the estimate above is trustworthy", "f [Hz]", "γ² [-]")
                 .series("coherence", &pts(&frf.coherence))
                 .log_x(true),
             with("-coherence"),

@@ -235,10 +235,14 @@ pub fn comparison_table(c: &Comparison) -> String {
 
 fn plot_shapes(r: &ModalResult, stem: &Path) -> anyhow::Result<()> {
     let mut plot = tb_plot::LinePlot::new(
-        format!("Mode shapes: {}", r.chain),
-        "inertia (1 = left end)",
+        format!(
+            "Torsional mode shapes of {}: each inertia's angle in the mode, normalised",
+            r.chain
+        ),
+        "inertia along the chain (1 = left end)",
         "normalised angle v_k",
-    );
+    )
+    .integer_x(true);
     for m in &r.modes {
         let pts: Vec<(f64, f64)> = m
             .shape
