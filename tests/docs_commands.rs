@@ -128,8 +128,14 @@ fn the_word_splitter_reads_documented_commands_as_a_shell_would() {
         words("run systems/rls_v.toml --out lap.csv [--set vehicle.c_lift_front=0.9] [--json]   # comment"),
         ["run", "systems/rls_v.toml", "--out", "lap.csv", "--set", "vehicle.c_lift_front=0.9", "--json"]
     );
-    assert_eq!(words("identify step STEP.csv ..."), ["identify", "step", "STEP.csv"]);
-    assert_eq!(words("lap 'my lap.csv' --out x"), ["lap", "my lap.csv", "--out", "x"]);
+    assert_eq!(
+        words("identify step STEP.csv ..."),
+        ["identify", "step", "STEP.csv"]
+    );
+    assert_eq!(
+        words("lap 'my lap.csv' --out x"),
+        ["lap", "my lap.csv", "--out", "x"]
+    );
     // A renamed flag is caught.
     let e = Cli::try_parse_from(["twinbench", "run", "x.toml", "--no-such-flag"]).unwrap_err();
     assert_eq!(e.kind(), ErrorKind::UnknownArgument);

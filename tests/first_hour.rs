@@ -69,12 +69,18 @@ fn a_lap_of_ones_own_is_prepared_optimised_and_run_by_relative_names_from_any_fo
             "mylap",
         ],
     );
-    assert!(out.contains("next: twinbench optimize mylap/study.toml"), "{out}");
+    assert!(
+        out.contains("next: twinbench optimize mylap/study.toml"),
+        "{out}"
+    );
     // The FMUs are packed beside the lap and named relative to its system file.
     let system = std::fs::read_to_string(d.join("mylap/system.toml")).unwrap();
     assert!(system.contains("vehicle = \"fmu/vehicle.fmu\""), "{system}");
     assert!(d.join("mylap/fmu/vehicle.fmu").is_file());
-    assert!(!d.join("mylap/fmu/test").exists(), "the test FMU is not packed");
+    assert!(
+        !d.join("mylap/fmu/test").exists(),
+        "the test FMU is not packed"
+    );
     // The study by a relative name from the folder above...
     let opt = success(
         d,
@@ -90,7 +96,10 @@ fn a_lap_of_ones_own_is_prepared_optimised_and_run_by_relative_names_from_any_fo
     );
     assert_normalised(&opt);
     // ...the system from inside its own folder...
-    let run = success(&d.join("mylap"), &["run", "system.toml", "--out", "lap.csv"]);
+    let run = success(
+        &d.join("mylap"),
+        &["run", "system.toml", "--out", "lap.csv"],
+    );
     assert!(run.contains("lap time"), "{run}");
     // ...and the whole folder moved elsewhere (the checkout it was made from need not exist).
     std::fs::create_dir(d.join("elsewhere")).unwrap();
@@ -205,11 +214,11 @@ fn pack_writes_the_shipped_fmus_to_one_documented_place_and_the_test_fmu_only_wh
 
 #[test]
 fn run_on_an_fmu_says_what_run_takes() {
-    let e = failure(
-        &root(),
-        &["run", common::fmu("vehicle").to_str().unwrap()],
+    let e = failure(&root(), &["run", common::fmu("vehicle").to_str().unwrap()]);
+    assert!(
+        e.contains("is a ZIP archive (an FMU?), not a system file"),
+        "{e}"
     );
-    assert!(e.contains("is a ZIP archive (an FMU?), not a system file"), "{e}");
     assert!(e.contains("SSP"), "{e}");
     assert!(!e.contains("UTF-8"), "{e}");
 }
@@ -250,10 +259,16 @@ fn a_channel_map_typo_names_channel_signal_and_the_closest_channels() {
         e.contains("no channel `Fz_lr` (the channel map's name for signal `Fz_rl`)"),
         "{e}"
     );
-    let closest = e.split("closest channels: ").nth(1).expect("closest channels");
+    let closest = e
+        .split("closest channels: ")
+        .nth(1)
+        .expect("closest channels");
     let closest: Vec<&str> = closest.split(" (").next().unwrap().split(", ").collect();
     assert_eq!(closest.len(), 3, "{e}");
-    assert!(closest.contains(&"Fz_rl"), "the swapped letters are one edit away: {e}");
+    assert!(
+        closest.contains(&"Fz_rl"),
+        "the swapped letters are one edit away: {e}"
+    );
     assert_eq!(e.matches('`').count() % 2, 0, "unbalanced quotes: {e}");
     assert_eq!(e.matches('(').count(), e.matches(')').count(), "{e}");
 }
@@ -322,7 +337,13 @@ fn ctrl_c_keeps_the_checkpoint_and_says_how_to_resume() {
         ],
     );
     let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["optimize", "mylap/study.toml", "--no-report", "--out", "opt"])
+        .args([
+            "optimize",
+            "mylap/study.toml",
+            "--no-report",
+            "--out",
+            "opt",
+        ])
         .current_dir(d)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
@@ -332,7 +353,10 @@ fn ctrl_c_keeps_the_checkpoint_and_says_how_to_resume() {
     let checkpoint = d.join("opt/mylap.checkpoint.json");
     let started = std::time::Instant::now();
     while !checkpoint.exists() {
-        assert!(started.elapsed().as_secs() < 120, "no checkpoint after 2 minutes");
+        assert!(
+            started.elapsed().as_secs() < 120,
+            "no checkpoint after 2 minutes"
+        );
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
@@ -362,5 +386,8 @@ fn ctrl_c_keeps_the_checkpoint_and_says_how_to_resume() {
             "--no-report",
         ],
     );
-    assert!(out.contains("resuming step 1 'lift' from generation "), "{out}");
+    assert!(
+        out.contains("resuming step 1 'lift' from generation "),
+        "{out}"
+    );
 }

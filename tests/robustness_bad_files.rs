@@ -192,5 +192,9 @@ fn an_fmu_error_is_printed_once() {
     let p = twinbench::pack::workspace_root().join("tests/bad_files/systems/missing_fmu_file.toml");
     let (code, err) = cli(&["run", p.to_str().unwrap()]);
     assert_eq!(code, Some(1), "{err}");
-    assert_eq!(err.matches("vehicle_v2.fmu does not exist").count(), 1, "{err}");
+    assert_eq!(
+        err.matches("vehicle_v2.fmu does not exist").count(),
+        1,
+        "{err}"
+    );
 }
