@@ -35,7 +35,6 @@ import argparse
 import csv
 import json
 import math
-import re
 import os
 import sys
 import time
@@ -49,10 +48,39 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 
+# twinbench's master algorithms and stop operators (crates/cosim: Algorithm::ALL, Op::ALL);
+# tests/stop_condition_parsers.rs checks that these and parse_condition agree with Rust's.
+ALGORITHMS = ("gauss-seidel", "jacobi")
+OPS = {">=": lambda x, t: x >= t, "<=": lambda x, t: x <= t, ">": lambda x, t: x > t, "<": lambda x, t: x < t}
+
+
 def holds(condition, x):
     """Whether `signal OP threshold` holds for the signal's value x."""
     _, op, threshold = condition
-    return {">=": x >= threshold, "<=": x <= threshold, ">": x > threshold, "<": x < threshold}[op]
+    return OPS[op](x, threshold)
+
+
+def parse_condition(text):
+    """`instance.variable OP number` as (signal, op, threshold), or None: the rules of
+    twinbench's Condition::parse (the longer of two operators sharing a start first; the
+    first occurrence splits; a finite number as Rust parses one)."""
+    for op in sorted(OPS, key=len, reverse=True):
+        a, found, b = text.partition(op)
+        if not found:
+            continue
+        signal, number = a.strip(), b.strip()
+        # Rust's f64 parser takes no underscores and no digits other than ASCII ones.
+        if "_" in number or not number or not number.isascii():
+            return None
+        try:
+            threshold = float(number)
+        except ValueError:
+            return None
+        first, _, rest = signal.partition(".")
+        if not first or not rest or not math.isfinite(threshold):
+            return None
+        return (signal, op, threshold)
+    return None
 
 
 class Error(Exception):
@@ -189,13 +217,12 @@ class System:
                     raise Error('stop = "lap" needs lap_signal')
                 self.condition = (exp["lap_signal"], ">=", float(exp.get("lap_count", 1.0)))
             else:
-                m = re.fullmatch(r"\s*(\S+)\s*(>=|<=|>|<)\s*(\S+)\s*", self.stop)
-                if not m:
+                self.condition = parse_condition(self.stop)
+                if self.condition is None:
                     raise Error(f"experiment.stop: not a time or a condition: {self.stop!r}")
-                self.condition = (m.group(1), m.group(2), float(m.group(3)))
         self.max_time = float(exp.get("max_time", 600.0))
         self.algorithm = exp.get("algorithm", "gauss-seidel")
-        if self.algorithm not in ("gauss-seidel", "jacobi"):
+        if self.algorithm not in ALGORITHMS:
             raise Error(f"unknown algorithm {self.algorithm}")
         fmus = {k: (p if os.path.isabs(p) else os.path.join(base, p)) for k, p in sysf["fmus"].items()}
         self.unzipdirs = {}
@@ -448,7 +475,7 @@ def compare(names, rows, ref_names, ref_cols):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("system")
-    ap.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"])
+    ap.add_argument("--algorithm", choices=ALGORITHMS)
     ap.add_argument("--stop", help="a time in s, or a condition such as 'vehicle.lap >= 1'")
     ap.add_argument("--order", help="comma-separated instance names")
     ap.add_argument("--set", action="append", default=[], help="instance.variable=value")

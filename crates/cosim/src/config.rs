@@ -153,12 +153,46 @@ pub struct InstanceConfig {
     pub watchdog: Option<f64>,
 }
 
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
-#[serde(rename_all = "kebab-case")]
+/// The master algorithm a system runs with. Its names are one list ([`Algorithm::ALL`],
+/// [`Algorithm::name`]): the system file, the master, SSP export and import and
+/// `tools/fmpy_cosim.py` (tested against it) read them from here.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Algorithm {
     #[default]
     GaussSeidel,
     Jacobi,
+}
+
+impl Algorithm {
+    pub const ALL: [Algorithm; 2] = [Algorithm::GaussSeidel, Algorithm::Jacobi];
+
+    /// The name in system files, SSP packages and messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            Algorithm::GaussSeidel => "gauss-seidel",
+            Algorithm::Jacobi => "jacobi",
+        }
+    }
+
+    /// The algorithm of a name; the error lists the names there are.
+    pub fn from_name(name: &str) -> Result<Algorithm, String> {
+        Algorithm::ALL
+            .into_iter()
+            .find(|a| a.name() == name)
+            .ok_or_else(|| format!("unknown algorithm \"{name}\" ({})", Algorithm::names()))
+    }
+
+    /// `gauss-seidel, jacobi`.
+    pub fn names() -> String {
+        Algorithm::ALL.map(Algorithm::name).join(", ")
+    }
+}
+
+impl<'de> Deserialize<'de> for Algorithm {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        Algorithm::from_name(&name).map_err(serde::de::Error::custom)
+    }
 }
 
 /// `stop = 100.0` (a time, s) or `stop = "vehicle.lap >= 1"` (a condition on a signal);

@@ -351,8 +351,12 @@ impl Exchange {
 
 /// How the units are advanced over one macro step.
 pub trait MasterAlgorithm: Send + Sync {
-    /// The name in the system file and in messages.
-    fn name(&self) -> &'static str;
+    /// Which algorithm it is (its name in the system file and in messages:
+    /// [`Algorithm::name`]).
+    fn kind(&self) -> Algorithm;
+    fn name(&self) -> &'static str {
+        self.kind().name()
+    }
     /// Advance every unit in `order` from `t` by `h`; the exchange buffer holds the outputs
     /// at `t + h` afterwards.
     fn step(&self, ex: &mut Exchange, order: &[usize], t: f64, h: f64) -> Result<(), SystemError>;
@@ -362,8 +366,8 @@ pub trait MasterAlgorithm: Send + Sync {
 pub struct GaussSeidel;
 
 impl MasterAlgorithm for GaussSeidel {
-    fn name(&self) -> &'static str {
-        "gauss-seidel"
+    fn kind(&self) -> Algorithm {
+        Algorithm::GaussSeidel
     }
     #[inline]
     fn step(&self, ex: &mut Exchange, order: &[usize], t: f64, h: f64) -> Result<(), SystemError> {
@@ -381,8 +385,8 @@ impl MasterAlgorithm for GaussSeidel {
 pub struct Jacobi;
 
 impl MasterAlgorithm for Jacobi {
-    fn name(&self) -> &'static str {
-        "jacobi"
+    fn kind(&self) -> Algorithm {
+        Algorithm::Jacobi
     }
     #[inline]
     fn step(&self, ex: &mut Exchange, order: &[usize], t: f64, h: f64) -> Result<(), SystemError> {
@@ -486,18 +490,9 @@ impl Simulation {
                 cursor: Cursor::default(),
             }));
         }
-        // The slots read between steps; every other Real output is read for the recording
-        // only, at the recorded steps (a tenth of them at 1 ms and 100 Hz).
-        let mut every_step = vec![false; plan.signals.signals.len()];
-        for c in &plan.connections {
-            every_step[c.from_slot] = true;
-        }
-        if let Stop::When { condition, .. } = &plan.stop {
-            every_step[condition.slot] = true;
-        }
-        for &s in plan.replay_basis.iter().flatten() {
-            every_step[s] = true;
-        }
+        // The slots a reader needs between steps; every other Real output is read for the
+        // recording only, at the recorded steps (a tenth of them at 1 ms and 100 Hz).
+        let every_step = plan.read_every_step();
         for (slot, s) in plan.signals.signals.iter().enumerate() {
             if let Endpoint::Fmu { unit, vr, ty, .. } = s.source {
                 if let Unit::Fmu(f) = &mut units[unit] {

@@ -7,16 +7,9 @@ use std::path::PathBuf;
 use tb_table::Table;
 
 /// SI unit of the columns of the measurement format (data/README.md).
+/// The measurement's own table ([`tb_compare::si_unit`]), "1" for any other column.
 pub fn default_unit(column: &str) -> &'static str {
-    match column {
-        "time" => "s",
-        "distance" => "m",
-        "v" => "m/s",
-        "a_x" | "a_y" => "m/s2",
-        c if c.starts_with("Fz") => "N",
-        c if c.starts_with("omega") => "rad/s",
-        _ => "1",
-    }
+    tb_compare::si_unit(column).unwrap_or("1")
 }
 
 #[derive(Clone, Debug)]

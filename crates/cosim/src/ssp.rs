@@ -447,10 +447,7 @@ pub fn system_structure(
         x.push_str("  </ssd:Units>\n");
     }
     let order: Vec<&str> = system.order.iter().map(|&k| system.unit_name(k)).collect();
-    let algorithm = match exp.algorithm {
-        crate::Algorithm::GaussSeidel => "gauss-seidel",
-        crate::Algorithm::Jacobi => "jacobi",
-    };
+    let algorithm = exp.algorithm.name();
     // Signals by the FMU's names (port maps resolved), as the connectors are named.
     let ssp_name = |full: &str| -> Result<String, SspError> {
         let (k, var) = fmu_var(full)?;

@@ -818,17 +818,7 @@ fn tb_experiment(
         experiment.step = h;
     }
     if let Some(a) = x.attr("algorithm") {
-        experiment.algorithm = match a {
-            "gauss-seidel" => Algorithm::GaussSeidel,
-            "jacobi" => Algorithm::Jacobi,
-            other => {
-                return Err(imp.invalid(
-                    f,
-                    x.line,
-                    format!("algorithm=\"{other}\": gauss-seidel or jacobi"),
-                ))
-            }
-        }
+        experiment.algorithm = Algorithm::from_name(a).map_err(|m| imp.invalid(f, x.line, m))?;
     }
     if let Some(o) = x.attr("order") {
         experiment.order = o.split_whitespace().map(str::to_string).collect();

@@ -1,8 +1,9 @@
-//! The connection graph: direct feed-through cycles and the stepping order.
+//! Stage "order": the connection graph's direct feed-through cycles, and the stepping
+//! order.
 
+use super::instances::Units;
 use super::{ConnectionDef, Endpoint, InstanceDef};
 use crate::config::SystemFile;
-use crate::replay::ReplaySource;
 use crate::split_name;
 use std::collections::HashMap;
 use tb_fmi::description::ScalarVariable;
@@ -123,12 +124,16 @@ pub(crate) fn check_feedthrough_cycles(
 /// (sources before their consumers), ties and cycles broken by declaration order.
 pub(crate) fn stepping_order(
     file: &SystemFile,
-    unit_names: &[String],
-    n_fmu: usize,
+    units: Units<'_>,
     connections: &[ConnectionDef],
-    replays: &[ReplaySource],
-    instances: &[InstanceDef],
 ) -> Result<Vec<usize>, String> {
+    let (instances, replays) = (units.instances, units.replays);
+    let n_fmu = instances.len();
+    let unit_names: Vec<&str> = instances
+        .iter()
+        .map(|i| i.name.as_str())
+        .chain(replays.iter().map(|r| r.name.as_str()))
+        .collect();
     let n = unit_names.len();
     if !file.experiment.order.is_empty() {
         let mut order = Vec::new();

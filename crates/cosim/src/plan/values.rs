@@ -1,4 +1,5 @@
-//! Typed values of the plan: parameter slots and values, the stop condition.
+//! Stage "parameters": settable variables resolved into typed slots, and the values of
+//! the system file checked against them (type, declared range, Enumeration items).
 
 use crate::{invalid, SystemError};
 use std::fmt;
@@ -202,108 +203,22 @@ impl ParamSlot {
     }
 }
 
-/// How a condition compares the signal with its threshold.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Op {
-    AtLeast,
-    AtMost,
-    Above,
-    Below,
-}
-
-impl Op {
-    pub fn symbol(self) -> &'static str {
-        match self {
-            Op::AtLeast => ">=",
-            Op::AtMost => "<=",
-            Op::Above => ">",
-            Op::Below => "<",
-        }
+/// Stage "parameters": the system file's `[parameters]`, typed and range-checked once,
+/// a path made absolute against the file's folder.
+pub(super) fn parameters(
+    file: &crate::config::SystemFile,
+    instances: &[super::InstanceDef],
+    path: &std::path::Path,
+    ctx_file: &str,
+) -> Result<Vec<(ParamSlot, ParamValue)>, SystemError> {
+    let folder = tb_files::folder_of(path);
+    let mut parameters = Vec::new();
+    for (name, value) in &file.parameters {
+        let ctx = format!("{ctx_file}: parameter \"{name}\"");
+        let slot = super::instances::parameter_slot(instances, name, &ctx)?;
+        let value = slot.value_from_toml(value, &ctx)?;
+        let value = slot.resolve_path(value, &folder);
+        parameters.push((slot, value));
     }
-}
-
-/// `signal OP threshold`, e.g. `vehicle.lap >= 1`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Condition {
-    pub signal: String,
-    /// The signal's exchange slot.
-    pub slot: usize,
-    pub op: Op,
-    pub threshold: f64,
-}
-
-impl Condition {
-    /// Parse `instance.variable OP number` (OP one of `>=`, `<=`, `>`, `<`).
-    pub fn parse(text: &str) -> Option<(String, Op, f64)> {
-        for (sym, op) in [
-            (">=", Op::AtLeast),
-            ("<=", Op::AtMost),
-            (">", Op::Above),
-            ("<", Op::Below),
-        ] {
-            if let Some((a, b)) = text.split_once(sym) {
-                let signal = a.trim();
-                let threshold: f64 = b.trim().parse().ok()?;
-                if crate::split_name(signal).is_none() || !threshold.is_finite() {
-                    return None;
-                }
-                return Some((signal.to_string(), op, threshold));
-            }
-        }
-        None
-    }
-
-    #[inline]
-    pub fn holds(&self, x: f64) -> bool {
-        match self.op {
-            Op::AtLeast => x >= self.threshold,
-            Op::AtMost => x <= self.threshold,
-            Op::Above => x > self.threshold,
-            Op::Below => x < self.threshold,
-        }
-    }
-}
-
-impl fmt::Display for Condition {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} {} {}", self.signal, self.op.symbol(), self.threshold)
-    }
-}
-
-/// When a run ends.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Stop {
-    /// At this time (the last step clamped to it).
-    Time(f64),
-    /// When the condition holds after a step; an error after `max_time` of simulated time.
-    When { condition: Condition, max_time: f64 },
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn conditions_parse_and_hold() {
-        let (s, op, t) = Condition::parse(" vehicle.lap >= 1 ").unwrap();
-        assert_eq!((s.as_str(), op, t), ("vehicle.lap", Op::AtLeast, 1.0));
-        let c = Condition {
-            signal: s,
-            slot: 0,
-            op,
-            threshold: t,
-        };
-        assert!(c.holds(1.0) && !c.holds(0.999));
-        assert_eq!(c.to_string(), "vehicle.lap >= 1");
-        assert_eq!(Condition::parse("x.y < -2.5").unwrap().1, Op::Below);
-        for bad in [
-            "lap",
-            "vehicle.lap >= ",
-            "lap >= 1",
-            "a.b >= nan",
-            "a.b = 1",
-        ] {
-            assert!(Condition::parse(bad).is_none(), "{bad}");
-        }
-    }
+    Ok(parameters)
 }

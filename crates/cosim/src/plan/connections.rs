@@ -1,0 +1,370 @@
+//! Stage "connections": every `from -> to` checked (causality, types, units, converted
+//! where compatible), a replayed column's values checked against the input it drives, and
+//! the inputs left unconnected.
+
+use super::instances::Units;
+use super::units::{self, unit_conversion, Conversion};
+use super::{ConnectionDef, Endpoint, SignalTable};
+use crate::config::{ConnectionConfig, Interpolation, SystemFile};
+use crate::{invalid, split_name, SystemError};
+use tb_fmi::description::{ModelDescription, ScalarVariable};
+use tb_fmi::{Causality, ScalarType, Variability};
+
+/// The checked connections (each source given its exchange slot), and the notes on unit
+/// conventions bridged or overridden.
+pub(super) fn connections(
+    file: &SystemFile,
+    units: Units<'_>,
+    signals: &mut SignalTable,
+    ctx_file: &str,
+) -> Result<(Vec<ConnectionDef>, Vec<String>), SystemError> {
+    let mut connections: Vec<ConnectionDef> = Vec::new();
+    let mut notes = Vec::new();
+    for conn in &file.connections {
+        let ctx = format!("{ctx_file}: connection \"{}\"", conn.text);
+        let c = connection(conn, units, signals, &ctx, &mut notes)?;
+        if connections
+            .iter()
+            .any(|d| d.to_unit == c.to_unit && d.to_vr == c.to_vr)
+        {
+            return Err(invalid(
+                &ctx,
+                format!("'{}' is already connected", c.to_name),
+            ));
+        }
+        connections.push(c);
+    }
+    Ok((connections, notes))
+}
+
+/// One connection, resolved and checked.
+fn connection(
+    conn: &ConnectionConfig,
+    units: Units<'_>,
+    signals: &mut SignalTable,
+    ctx: &str,
+    notes: &mut Vec<String>,
+) -> Result<ConnectionDef, SystemError> {
+    let text = &conn.text;
+    let (a, b) = text
+        .split_once("->")
+        .ok_or_else(|| invalid(ctx, "expected \"instance.output -> instance.input\""))?;
+    let (a, b) = (a.trim(), b.trim());
+    let from = units.endpoint(ctx, a)?;
+    let (tu, tv) = split_name(b)
+        .ok_or_else(|| invalid(ctx, format!("'{b}' is not of the form instance.variable")))?;
+    let to_unit = units.index(tu).ok_or_else(|| units.unknown(ctx, tu))?;
+    if units.is_replay(to_unit) {
+        return Err(invalid(
+            ctx,
+            format!("'{b}' is a replayed channel; it cannot be an input"),
+        ));
+    }
+    let to_def = &units.instances[to_unit];
+    let to_sv = to_def.variable(tv, ctx)?;
+    if to_sv.causality != Causality::Input {
+        return Err(invalid(
+            ctx,
+            format!(
+                "'{b}' is {} {}, not an input: it cannot be connected to",
+                to_sv.variability, to_sv.causality
+            ),
+        ));
+    }
+    let (from_unit_name, from_md) = match &from {
+        Endpoint::Fmu {
+            unit, unit_name, ..
+        } => {
+            let sv = units
+                .variable(&from)
+                .expect("an FMU endpoint names a variable");
+            if sv.causality != Causality::Output {
+                return Err(invalid(
+                    ctx,
+                    format!(
+                        "'{a}' is {} {}, not an output",
+                        sv.variability, sv.causality
+                    ),
+                ));
+            }
+            (
+                unit_name.clone(),
+                Some(units.instances[*unit].description()),
+            )
+        }
+        Endpoint::Replay { unit_name, .. } => (Some(unit_name.clone()), None),
+    };
+    check_types(&from, a, to_sv, b, ctx)?;
+    let empty = ModelDescription::default();
+    let to_md = to_def.description();
+    let conversion = connection_conversion(
+        conn,
+        (from_md.unwrap_or(&empty), from_unit_name.as_deref()),
+        (to_md, to_md.unit_of(to_sv)),
+        to_sv.ty,
+    )
+    .map_err(|m| invalid(ctx, m))?;
+    if let Some(note) = &conversion.note {
+        notes.push(format!("connection \"{text}\": {note}"));
+    }
+    Ok(ConnectionDef {
+        text: text.clone(),
+        from_slot: signals.slot(&from, a),
+        from,
+        from_name: a.to_string(),
+        to_unit,
+        to_vr: to_sv.value_reference,
+        to_ty: to_sv.ty,
+        to_name: b.to_string(),
+        scale: conversion.scale,
+        offset: conversion.offset,
+    })
+}
+
+/// Which source types can drive which input: the same type, a number into a Real, an
+/// Integer or Enumeration into either; a replayed column drives any numeric input (held
+/// for the discrete ones; its values are checked against the input's type).
+fn check_types(
+    from: &Endpoint,
+    a: &str,
+    to: &ScalarVariable,
+    b: &str,
+    ctx: &str,
+) -> Result<(), SystemError> {
+    let from_ty = match from {
+        Endpoint::Fmu { ty, .. } => *ty,
+        Endpoint::Replay { .. } => ScalarType::Real,
+    };
+    let replayed = matches!(from, Endpoint::Replay { .. }) && to.ty != ScalarType::String;
+    let type_ok = replayed
+        || from_ty == to.ty
+        || (to.ty == ScalarType::Real
+            && matches!(
+                from_ty,
+                ScalarType::Integer | ScalarType::Boolean | ScalarType::Enumeration
+            ))
+        || (matches!(to.ty, ScalarType::Integer | ScalarType::Enumeration)
+            && matches!(from_ty, ScalarType::Integer | ScalarType::Enumeration));
+    if !type_ok {
+        return Err(invalid(
+            ctx,
+            format!(
+                "type mismatch: '{a}' is {}, '{b}' is {}",
+                from_ty.name(),
+                to.ty.name()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Replayed columns: which are held (the inputs FMPy holds: discrete and non-Real ones,
+/// under `interpolation = "auto"`), as (replay, column); and their values fit the inputs
+/// they drive.
+pub(super) fn replayed_columns(
+    connections: &[ConnectionDef],
+    units: Units<'_>,
+    ctx_file: &str,
+) -> Result<Vec<(usize, usize)>, SystemError> {
+    let mut to_hold = Vec::new();
+    for c in connections {
+        let Endpoint::Replay { unit, column, .. } = c.from else {
+            continue;
+        };
+        let to = &units.instances[c.to_unit];
+        let sv = to
+            .description()
+            .variables
+            .iter()
+            .find(|v| v.value_reference == c.to_vr && v.causality == Causality::Input)
+            .expect("resolved by the connections stage");
+        let r = units.replay(unit);
+        let discrete = sv.ty != ScalarType::Real
+            || matches!(sv.variability, Variability::Discrete | Variability::Tunable);
+        if r.interpolation == Interpolation::Auto && discrete {
+            to_hold.push((unit - units.instances.len(), column));
+        }
+        let ctx = format!("{ctx_file}: connection \"{}\"", c.text);
+        check_replayed_values(r.values(column), &r.path, to.description(), sv, c, &ctx)?;
+    }
+    Ok(to_hold)
+}
+
+/// A replayed column's values against the input they drive: 32-bit integers for an
+/// Integer, items for an Enumeration, 0 or 1 for a Boolean.
+fn check_replayed_values(
+    values: &[f64],
+    path: &std::path::Path,
+    md: &ModelDescription,
+    sv: &ScalarVariable,
+    c: &ConnectionDef,
+    ctx: &str,
+) -> Result<(), SystemError> {
+    let bad = |k: usize, why: String| {
+        invalid(
+            ctx,
+            format!(
+                "{}, row {}: value {} {why}",
+                path.display(),
+                k + 1,
+                values[k]
+            ),
+        )
+    };
+    match sv.ty {
+        ScalarType::Integer | ScalarType::Enumeration => {
+            if let Some(k) = values
+                .iter()
+                .position(|x| x.fract() != 0.0 || *x < i32::MIN as f64 || *x > i32::MAX as f64)
+            {
+                return Err(bad(
+                    k,
+                    format!(
+                        "is not a 32-bit integer for {} '{}'",
+                        sv.ty.name(),
+                        c.to_name
+                    ),
+                ));
+            }
+            if let Some(items) = md.enumeration_items(sv) {
+                if let Some(k) = values
+                    .iter()
+                    .position(|x| !items.iter().any(|(_, v)| *v as f64 == *x))
+                {
+                    return Err(bad(
+                        k,
+                        format!("is not an item of the Enumeration '{}'", c.to_name),
+                    ));
+                }
+            }
+        }
+        ScalarType::Boolean => {
+            if let Some(k) = values.iter().position(|x| *x != 0.0 && *x != 1.0) {
+                return Err(bad(
+                    k,
+                    format!("is not 0 or 1 for the Boolean '{}'", c.to_name),
+                ));
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// A warning for every input that is neither connected nor set and has no start value.
+pub(super) fn unconnected_inputs(
+    file: &SystemFile,
+    units: Units<'_>,
+    connections: &[ConnectionDef],
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    for (k, inst) in units.instances.iter().enumerate() {
+        for v in inst
+            .description()
+            .variables
+            .iter()
+            .filter(|v| v.causality == Causality::Input)
+        {
+            let connected = connections
+                .iter()
+                .any(|c| c.to_unit == k && c.to_vr == v.value_reference);
+            let set = file
+                .parameters
+                .contains_key(&format!("{}.{}", inst.name, v.name))
+                || inst.ports.iter().any(|(ours, theirs)| {
+                    theirs == &v.name
+                        && file
+                            .parameters
+                            .contains_key(&format!("{}.{ours}", inst.name))
+                });
+            if !connected && !set && v.start.is_none() {
+                warnings.push(format!(
+                    "input '{}.{}' is not connected and has no start value",
+                    inst.name, v.name
+                ));
+            }
+        }
+    }
+    warnings
+}
+
+/// A connection's conversion: the file's gain, or the units (declared, or as the file
+/// overrides them).
+fn connection_conversion(
+    conn: &ConnectionConfig,
+    from: (&ModelDescription, Option<&str>),
+    to: (&ModelDescription, Option<&str>),
+    to_ty: ScalarType,
+) -> Result<Conversion, String> {
+    let gain = conn.scale.is_some() || conn.offset.is_some();
+    let overridden = conn.from_unit.is_some() || conn.to_unit.is_some();
+    if gain && overridden {
+        return Err("give either scale/offset or from_unit/to_unit, not both".into());
+    }
+    if (gain || overridden) && to_ty != ScalarType::Real {
+        return Err(format!(
+            "a scale, an offset or a unit applies to Real inputs only, this one is {}",
+            to_ty.name()
+        ));
+    }
+    if gain {
+        return gain_conversion(conn, from.1, to.1);
+    }
+    let known = |md: &ModelDescription, u: &Option<String>, end: &str| -> Result<(), String> {
+        match u {
+            Some(u) if units::definition(md, u).is_none() => Err(format!(
+                "{end} = '{u}' is defined neither by the FMU nor in twinbench's unit table ({})",
+                tb_fmi::units::UNITS
+                    .iter()
+                    .map(|d| d.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )),
+            _ => Ok(()),
+        }
+    };
+    known(from.0, &conn.from_unit, "from_unit")?;
+    known(to.0, &conn.to_unit, "to_unit")?;
+    let from_unit = conn.from_unit.as_deref().or(from.1);
+    let to_unit = conn.to_unit.as_deref().or(to.1);
+    let mut c = unit_conversion((from.0, from_unit), (to.0, to_unit))?;
+    if overridden {
+        let said = format!(
+            "units overridden in the system file: '{}' -> '{}', scale {}, offset {}",
+            from_unit.unwrap_or("1"),
+            to_unit.unwrap_or("1"),
+            c.scale,
+            c.offset
+        );
+        c.note = Some(match c.note {
+            Some(n) => format!("{said}; {n}"),
+            None => said,
+        });
+    }
+    Ok(c)
+}
+
+/// The system file's own `scale`/`offset`, instead of the declared units.
+fn gain_conversion(
+    conn: &ConnectionConfig,
+    from_unit: Option<&str>,
+    to_unit: Option<&str>,
+) -> Result<Conversion, String> {
+    let scale = conn.scale.unwrap_or(1.0);
+    let offset = conn.offset.unwrap_or(0.0);
+    if !(scale.is_finite() && scale != 0.0 && offset.is_finite()) {
+        return Err(format!(
+            "scale must be a finite non-zero number and offset a finite number, got scale = {scale}, offset = {offset}"
+        ));
+    }
+    let declared = |u: Option<&str>| u.map_or("none".to_string(), |u| format!("'{u}'"));
+    Ok(Conversion {
+        scale,
+        offset,
+        note: Some(format!(
+            "scale {scale} and offset {offset} from the system file (declared units {} and {} not used)",
+            declared(from_unit),
+            declared(to_unit)
+        )),
+    })
+}
