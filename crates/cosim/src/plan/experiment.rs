@@ -44,7 +44,7 @@ pub(super) fn check(file: &SystemFile, ctx_file: &str) -> Result<(), SystemError
         StopConfig::Word(_) => e.max_time,
     };
     let steps = span / e.step;
-    if span.is_finite() && !(steps <= MAX_STEPS) {
+    if span.is_finite() && (steps.is_nan() || steps > MAX_STEPS) {
         return Err(invalid(
             ctx_file,
             format!(
