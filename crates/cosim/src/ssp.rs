@@ -133,6 +133,7 @@ impl Enumerations {
 /// The SSD text, the FMU files to pack (archive name, source path), and the summary.
 pub type SystemStructure = (String, Vec<(String, std::path::PathBuf)>, ExportSummary);
 
+/// A connector of a component: its kind (`input`, `output`, `parameter`) and type.
 struct Conn {
     kind: &'static str,
     ty: ScalarType,
@@ -140,186 +141,35 @@ struct Conn {
     enumeration: Option<String>,
 }
 
+/// A connection by the FMUs' names: (from instance, its variable, to instance, its
+/// variable, scale, offset).
+type SspConnection = (usize, String, usize, String, f64, f64);
+
+/// What the export gathers from the plan before it writes the document.
+struct Exporter<'a> {
+    system: &'a Plan,
+    /// Connectors per instance, by the FMU's variable name.
+    connectors: Vec<BTreeMap<String, Conn>>,
+    enumerations: Enumerations,
+    connections: Vec<SspConnection>,
+    /// Parameter values per instance: (FMU variable name, `<ssv:...>` element).
+    params: Vec<Vec<(String, String)>>,
+    notes: Vec<String>,
+}
+
 /// Build the SystemStructure.ssd text and the list of (archive name, FMU file) to pack.
 pub fn system_structure(
     system: &Plan,
     options: &ExportOptions,
 ) -> Result<SystemStructure, SspError> {
-    if let Some(r) = system.replays.first() {
-        return Err(SspError::Unsupported(format!(
-            "{}: replayed measurement channels (replay '{}', {}) cannot be expressed in SSP 1.0 \
-             (it has no data-source element); export a system without [[replay]] (e.g. RLS/v), \
-             or replace the replay by an FMU that plays the measurement",
-            system.path.display(),
-            r.name,
-            r.path.display()
-        )));
-    }
-    let file = &system.file;
-    let exp = &file.experiment;
-    let mut notes = Vec::new();
-    if !file.preload.is_empty() {
-        notes.push(format!(
-            "the system preloads {} (needed by its FMUs); an SSP importer must do the same",
-            file.preload
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ));
-    }
-    // FMU variable name of a system-file name `instance.variable`.
-    let fmu_var = |full: &str| -> Result<(usize, String), SspError> {
-        let (u, v) = split_name(full)
-            .ok_or_else(|| SspError::Unsupported(format!("'{full}' is not instance.variable")))?;
-        let k = system
-            .instances
-            .iter()
-            .position(|i| i.name == u)
-            .ok_or_else(|| SspError::Unsupported(format!("'{full}': not an FMU instance")))?;
-        let sv = system.instances[k]
-            .variable(v, "ssp export")
-            .map_err(|e| SspError::Unsupported(e.to_string()))?;
-        Ok((k, sv.name.clone()))
-    };
-    // Connectors per instance.
-    let mut connectors: Vec<BTreeMap<String, Conn>> = (0..system.instances.len())
-        .map(|_| BTreeMap::new())
-        .collect();
-    let mut units_used: BTreeSet<String> = BTreeSet::new();
-    let mut enumerations = Enumerations::default();
-    for (k, inst) in system.instances.iter().enumerate() {
-        let md = inst.description();
-        for v in md
-            .variables
-            .iter()
-            .filter(|v| v.causality == Causality::Output)
-        {
-            let unit = md.unit_of(v).map(str::to_string);
-            connectors[k].insert(
-                v.name.clone(),
-                Conn {
-                    kind: "output",
-                    ty: v.ty,
-                    unit,
-                    enumeration: enumerations.name_of(&inst.name, md, v),
-                },
-            );
-        }
-    }
-    let mut connections = Vec::new();
-    for c in &system.connections {
-        let Endpoint::Fmu { unit: from_k, .. } = c.from else {
-            unreachable!("replays are refused above")
-        };
-        let (_, from_var) = fmu_var(&c.from_name)?;
-        let (to_k, to_var) = fmu_var(&c.to_name)?;
-        let md = system.instances[to_k].description();
-        let sv = md.variable(&to_var).expect("resolved");
-        connectors[to_k].insert(
-            to_var.clone(),
-            Conn {
-                kind: "input",
-                ty: sv.ty,
-                unit: md.unit_of(sv).map(str::to_string),
-                enumeration: enumerations.name_of(&system.instances[to_k].name, md, sv),
-            },
-        );
-        connections.push((from_k, from_var, to_k, to_var, c.scale, c.offset));
-    }
-    // Parameters per instance (FMU names), typed values.
-    let mut params: Vec<Vec<(String, String)>> = vec![Vec::new(); system.instances.len()];
-    for (name, value) in &file.parameters {
-        let (k, var) = fmu_var(name)?;
-        let md = system.instances[k].description();
-        let sv = md.variable(&var).expect("resolved");
-        let unit = md.unit_of(sv).map(str::to_string);
-        let num = value
-            .as_float()
-            .or_else(|| value.as_integer().map(|i| i as f64));
-        let elem = match sv.ty {
-            ScalarType::Real => {
-                let u = unit
-                    .as_deref()
-                    .map(|u| format!(" unit=\"{}\"", esc(u)))
-                    .unwrap_or_default();
-                format!("<ssv:Real value=\"{}\"{u}/>", real(num.unwrap_or(0.0)))
-            }
-            ScalarType::Integer => {
-                format!(
-                    "<ssv:Integer value=\"{}\"/>",
-                    value.as_integer().unwrap_or(0)
-                )
-            }
-            // SSV gives an Enumeration by its item's name (checked against the items).
-            ScalarType::Enumeration => {
-                let i = value.as_integer().unwrap_or(0);
-                match md
-                    .enumeration_items(sv)
-                    .and_then(|items| items.iter().find(|(_, v)| *v == i))
-                {
-                    Some((item, _)) => format!("<ssv:Enumeration value=\"{}\"/>", esc(item)),
-                    None => format!("<ssv:Integer value=\"{i}\"/>"),
-                }
-            }
-            ScalarType::Boolean => {
-                format!(
-                    "<ssv:Boolean value=\"{}\"/>",
-                    value.as_bool().unwrap_or(false)
-                )
-            }
-            ScalarType::String => format!(
-                "<ssv:String value=\"{}\"/>",
-                esc(value.as_str().unwrap_or(""))
-            ),
-        };
-        params[k].push((var.clone(), elem));
-        if sv.causality == Causality::Parameter {
-            connectors[k].insert(
-                var.clone(),
-                Conn {
-                    kind: "parameter",
-                    ty: sv.ty,
-                    unit,
-                    enumeration: enumerations.name_of(&system.instances[k].name, md, sv),
-                },
-            );
-        } else {
-            notes.push(format!(
-                "'{name}' is an input set as a start value: it has no connector, so that an importer does not overwrite it with an unconnected connector's value"
-            ));
-        }
-    }
-    for cs in &connectors {
-        for c in cs.values() {
-            if let Some(u) = &c.unit {
-                units_used.insert(u.clone());
-            }
-        }
-    }
-    // FMU files: one per [fmus] key that an instance uses.
-    let mut fmu_files: Vec<(String, std::path::PathBuf)> = Vec::new();
-    let mut source_of: Vec<String> = Vec::new();
-    for inst_cfg in &file.instances {
-        let name = format!("resources/{}.fmu", inst_cfg.fmu);
-        if !fmu_files.iter().any(|(n, _)| *n == name) {
-            fmu_files.push((name.clone(), file.fmus[&inst_cfg.fmu].clone()));
-        }
-        source_of.push(name);
-    }
-    let start = exp.start;
-    let stop = options.stop_time.unwrap_or(match &exp.stop {
-        StopConfig::Time(t) => *t,
-        StopConfig::Word(_) => start + exp.max_time,
-    });
-    if stop <= start || stop.is_nan() {
-        return Err(SspError::Unsupported(format!(
-            "stop time {stop} is not after the start time {start}"
-        )));
-    }
-    // The document.
+    let mut ex = Exporter::new(system)?;
+    ex.outputs();
+    ex.connections()?;
+    ex.parameters()?;
+    let (fmu_files, source_of) = fmu_files(&system.file);
+    let (start, stop) = time_span(system, options)?;
     let mut x = String::new();
-    let sys_name = file.name.clone().unwrap_or_else(|| {
+    let sys_name = system.file.name.clone().unwrap_or_else(|| {
         system
             .path
             .file_stem()
@@ -341,54 +191,251 @@ pub fn system_structure(
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default())
     ));
-    x.push_str("    <ssd:Elements>\n");
-    let mut n_connectors = 0;
-    for (k, inst) in system.instances.iter().enumerate() {
-        x.push_str(&format!(
-            "      <ssd:Component name=\"{}\" type=\"application/x-fmu-sharedlibrary\" source=\"{}\">\n",
-            esc(&inst.name),
-            esc(&source_of[k])
-        ));
-        if !connectors[k].is_empty() {
-            x.push_str("        <ssd:Connectors>\n");
-            // Inputs, outputs, parameters, each by name.
-            for kind in ["input", "output", "parameter"] {
-                for (name, c) in connectors[k].iter().filter(|(_, c)| c.kind == kind) {
-                    n_connectors += 1;
-                    x.push_str(&format!(
-                        "          <ssd:Connector name=\"{}\" kind=\"{kind}\">{}</ssd:Connector>\n",
-                        esc(name),
-                        type_element(c.ty, c.unit.as_deref(), c.enumeration.as_deref())
-                    ));
-                }
-            }
-            x.push_str("        </ssd:Connectors>\n");
+    let n_connectors = ex.write_elements(&mut x, &source_of);
+    ex.write_connections(&mut x);
+    // OMSimulator decides the system's kind from its own annotation and cannot open a
+    // system without one: a weakly coupled system with its fixed-step master.
+    x.push_str(&format!(
+        "    <ssd:Annotations>\n      <ssc:Annotation type=\"org.openmodelica\"><oms:Annotations><oms:SimulationInformation><oms:FixedStepMaster description=\"oms-ma\" stepSize=\"{}\" relativeTolerance=\"0.0001\"/></oms:SimulationInformation></oms:Annotations></ssc:Annotation>\n    </ssd:Annotations>\n",
+        real(system.file.experiment.step)
+    ));
+    x.push_str("  </ssd:System>\n");
+    ex.write_enumerations(&mut x);
+    ex.write_units(&mut x);
+    ex.write_default_experiment(&mut x, start, stop)?;
+    x.push_str("</ssd:SystemStructureDescription>\n");
+    let summary = ExportSummary {
+        components: system.instances.len(),
+        connectors: n_connectors,
+        connections: ex.connections.len(),
+        parameters: ex.params.iter().map(Vec::len).sum(),
+        fmus: fmu_files.iter().map(|f| f.0.clone()).collect(),
+        start_time: start,
+        stop_time: stop,
+        step: system.file.experiment.step,
+        notes: ex.notes,
+    };
+    Ok((x, fmu_files, summary))
+}
+
+/// FMU files: one per `[fmus]` key that an instance uses, and each instance's source.
+fn fmu_files(file: &crate::SystemFile) -> (Vec<(String, std::path::PathBuf)>, Vec<String>) {
+    let mut fmu_files: Vec<(String, std::path::PathBuf)> = Vec::new();
+    let mut source_of: Vec<String> = Vec::new();
+    for inst_cfg in &file.instances {
+        let name = format!("resources/{}.fmu", inst_cfg.fmu);
+        if !fmu_files.iter().any(|(n, _)| *n == name) {
+            fmu_files.push((name.clone(), file.fmus[&inst_cfg.fmu].clone()));
         }
-        if !params[k].is_empty() {
-            x.push_str("        <ssd:ParameterBindings>\n          <ssd:ParameterBinding>\n            <ssd:ParameterValues>\n");
-            x.push_str(&format!(
-                "              <ssv:ParameterSet version=\"1.0\" name=\"{}\">\n                <ssv:Parameters>\n",
-                esc(&inst.name)
+        source_of.push(name);
+    }
+    (fmu_files, source_of)
+}
+
+/// `DefaultExperiment`'s start and stop: the fixed stop time, or the start plus `max_time`
+/// for a run that stops on a condition (or the option's).
+fn time_span(system: &Plan, options: &ExportOptions) -> Result<(f64, f64), SspError> {
+    let exp = &system.file.experiment;
+    let start = exp.start;
+    let stop = options.stop_time.unwrap_or(match &exp.stop {
+        StopConfig::Time(t) => *t,
+        StopConfig::Word(_) => start + exp.max_time,
+    });
+    if stop <= start || stop.is_nan() {
+        return Err(SspError::Unsupported(format!(
+            "stop time {stop} is not after the start time {start}"
+        )));
+    }
+    Ok((start, stop))
+}
+
+impl<'a> Exporter<'a> {
+    /// A system SSP 1.0 can express (no replays), and the notes on what it needs.
+    fn new(system: &'a Plan) -> Result<Exporter<'a>, SspError> {
+        if let Some(r) = system.replays.first() {
+            return Err(SspError::Unsupported(format!(
+                "{}: replayed measurement channels (replay '{}', {}) cannot be expressed in SSP 1.0 \
+                 (it has no data-source element); export a system without [[replay]] (e.g. RLS/v), \
+                 or replace the replay by an FMU that plays the measurement",
+                system.path.display(),
+                r.name,
+                r.path.display()
+            )));
+        }
+        let mut notes = Vec::new();
+        let preload = &system.file.preload;
+        if !preload.is_empty() {
+            notes.push(format!(
+                "the system preloads {} (needed by its FMUs); an SSP importer must do the same",
+                preload
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ));
-            for (name, elem) in &params[k] {
-                x.push_str(&format!(
-                    "                  <ssv:Parameter name=\"{}\">{elem}</ssv:Parameter>\n",
-                    esc(name)
+        }
+        let n = system.instances.len();
+        Ok(Exporter {
+            system,
+            connectors: (0..n).map(|_| BTreeMap::new()).collect(),
+            enumerations: Enumerations::default(),
+            connections: Vec::new(),
+            params: vec![Vec::new(); n],
+            notes,
+        })
+    }
+
+    /// The instance and FMU variable name of a system-file name `instance.variable`.
+    fn fmu_var(&self, full: &str) -> Result<(usize, String), SspError> {
+        let system = self.system;
+        let (u, v) = split_name(full)
+            .ok_or_else(|| SspError::Unsupported(format!("'{full}' is not instance.variable")))?;
+        let k = system
+            .instances
+            .iter()
+            .position(|i| i.name == u)
+            .ok_or_else(|| SspError::Unsupported(format!("'{full}': not an FMU instance")))?;
+        let sv = system.instances[k]
+            .variable(v, "ssp export")
+            .map_err(|e| SspError::Unsupported(e.to_string()))?;
+        Ok((k, sv.name.clone()))
+    }
+
+    /// A connector of instance `k` for its variable `sv`.
+    fn connector(
+        &mut self,
+        k: usize,
+        sv: &tb_fmi::description::ScalarVariable,
+        kind: &'static str,
+    ) {
+        let inst = &self.system.instances[k];
+        let md = inst.description();
+        let conn = Conn {
+            kind,
+            ty: sv.ty,
+            unit: md.unit_of(sv).map(str::to_string),
+            enumeration: self.enumerations.name_of(&inst.name, md, sv),
+        };
+        self.connectors[k].insert(sv.name.clone(), conn);
+    }
+
+    /// Every output of every instance is a connector.
+    fn outputs(&mut self) {
+        let system = self.system;
+        for (k, inst) in system.instances.iter().enumerate() {
+            for v in inst
+                .description()
+                .variables
+                .iter()
+                .filter(|v| v.causality == Causality::Output)
+            {
+                self.connector(k, v, "output");
+            }
+        }
+    }
+
+    /// The system's connections, by the FMUs' names, with their connected inputs.
+    fn connections(&mut self) -> Result<(), SspError> {
+        let system = self.system;
+        for c in &system.connections {
+            let Endpoint::Fmu { unit: from_k, .. } = c.from else {
+                unreachable!("replays are refused by Exporter::new")
+            };
+            let (_, from_var) = self.fmu_var(&c.from_name)?;
+            let (to_k, to_var) = self.fmu_var(&c.to_name)?;
+            let sv = system.instances[to_k]
+                .description()
+                .variable(&to_var)
+                .expect("resolved");
+            self.connector(to_k, sv, "input");
+            self.connections
+                .push((from_k, from_var, to_k, to_var, c.scale, c.offset));
+        }
+        Ok(())
+    }
+
+    /// Parameters per instance (FMU names), typed values; a set parameter is a connector,
+    /// a set input is not (an importer would overwrite it with the unconnected connector's
+    /// value).
+    fn parameters(&mut self) -> Result<(), SspError> {
+        let system = self.system;
+        for (name, value) in &system.file.parameters {
+            let (k, var) = self.fmu_var(name)?;
+            let md = system.instances[k].description();
+            let sv = md.variable(&var).expect("resolved");
+            let elem = parameter_value(md, sv, value);
+            self.params[k].push((var.clone(), elem));
+            if sv.causality == Causality::Parameter {
+                self.connector(k, sv, "parameter");
+            } else {
+                self.notes.push(format!(
+                    "'{name}' is an input set as a start value: it has no connector, so that an importer does not overwrite it with an unconnected connector's value"
                 ));
             }
-            x.push_str("                </ssv:Parameters>\n              </ssv:ParameterSet>\n            </ssd:ParameterValues>\n          </ssd:ParameterBinding>\n        </ssd:ParameterBindings>\n");
         }
-        x.push_str("      </ssd:Component>\n");
+        Ok(())
     }
-    x.push_str("    </ssd:Elements>\n");
-    if !connections.is_empty() {
+
+    /// `<ssd:Elements>`: a component per instance with its connectors and parameter
+    /// values; returns the number of connectors.
+    fn write_elements(&self, x: &mut String, source_of: &[String]) -> usize {
+        x.push_str("    <ssd:Elements>\n");
+        let mut n_connectors = 0;
+        for (k, inst) in self.system.instances.iter().enumerate() {
+            x.push_str(&format!(
+                "      <ssd:Component name=\"{}\" type=\"application/x-fmu-sharedlibrary\" source=\"{}\">\n",
+                esc(&inst.name),
+                esc(&source_of[k])
+            ));
+            if !self.connectors[k].is_empty() {
+                x.push_str("        <ssd:Connectors>\n");
+                // Inputs, outputs, parameters, each by name.
+                for kind in ["input", "output", "parameter"] {
+                    for (name, c) in self.connectors[k].iter().filter(|(_, c)| c.kind == kind) {
+                        n_connectors += 1;
+                        x.push_str(&format!(
+                            "          <ssd:Connector name=\"{}\" kind=\"{kind}\">{}</ssd:Connector>\n",
+                            esc(name),
+                            type_element(c.ty, c.unit.as_deref(), c.enumeration.as_deref())
+                        ));
+                    }
+                }
+                x.push_str("        </ssd:Connectors>\n");
+            }
+            if !self.params[k].is_empty() {
+                x.push_str("        <ssd:ParameterBindings>\n          <ssd:ParameterBinding>\n            <ssd:ParameterValues>\n");
+                x.push_str(&format!(
+                    "              <ssv:ParameterSet version=\"1.0\" name=\"{}\">\n                <ssv:Parameters>\n",
+                    esc(&inst.name)
+                ));
+                for (name, elem) in &self.params[k] {
+                    x.push_str(&format!(
+                        "                  <ssv:Parameter name=\"{}\">{elem}</ssv:Parameter>\n",
+                        esc(name)
+                    ));
+                }
+                x.push_str("                </ssv:Parameters>\n              </ssv:ParameterSet>\n            </ssd:ParameterValues>\n          </ssd:ParameterBinding>\n        </ssd:ParameterBindings>\n");
+            }
+            x.push_str("      </ssd:Component>\n");
+        }
+        x.push_str("    </ssd:Elements>\n");
+        n_connectors
+    }
+
+    /// `<ssd:Connections>`; a unit conversion as a `LinearTransformation` with the unit
+    /// conversion suppressed (the factor and offset are exactly twinbench's).
+    fn write_connections(&self, x: &mut String) {
+        if self.connections.is_empty() {
+            return;
+        }
+        let names = &self.system.instances;
         x.push_str("    <ssd:Connections>\n");
-        for (fk, fv, tk, tv, scale, offset) in &connections {
+        for (fk, fv, tk, tv, scale, offset) in &self.connections {
             let attrs = format!(
                 "startElement=\"{}\" startConnector=\"{}\" endElement=\"{}\" endConnector=\"{}\"",
-                esc(&system.instances[*fk].name),
+                esc(&names[*fk].name),
                 esc(fv),
-                esc(&system.instances[*tk].name),
+                esc(&names[*tk].name),
                 esc(tv)
             );
             if *scale == 1.0 && *offset == 0.0 {
@@ -403,16 +450,14 @@ pub fn system_structure(
         }
         x.push_str("    </ssd:Connections>\n");
     }
-    // OMSimulator decides the system's kind from its own annotation and cannot open a
-    // system without one: a weakly coupled system with its fixed-step master.
-    x.push_str(&format!(
-        "    <ssd:Annotations>\n      <ssc:Annotation type=\"org.openmodelica\"><oms:Annotations><oms:SimulationInformation><oms:FixedStepMaster description=\"oms-ma\" stepSize=\"{}\" relativeTolerance=\"0.0001\"/></oms:SimulationInformation></oms:Annotations></ssc:Annotation>\n    </ssd:Annotations>\n",
-        real(system.file.experiment.step)
-    ));
-    x.push_str("  </ssd:System>\n");
-    if !enumerations.0.is_empty() {
+
+    /// `<ssd:Enumerations>`: the Enumeration types the connectors use.
+    fn write_enumerations(&self, x: &mut String) {
+        if self.enumerations.0.is_empty() {
+            return;
+        }
         x.push_str("  <ssd:Enumerations>\n");
-        for (name, items) in &enumerations.0 {
+        for (name, items) in &self.enumerations.0 {
             x.push_str(&format!("    <ssc:Enumeration name=\"{}\">\n", esc(name)));
             for (item, value) in items {
                 x.push_str(&format!(
@@ -424,117 +469,177 @@ pub fn system_structure(
         }
         x.push_str("  </ssd:Enumerations>\n");
     }
-    // Units with their base units.
-    let mut unit_xml = String::new();
-    for u in &units_used {
-        let def = system
-            .instances
+
+    /// `<ssd:Units>`: the connectors' units with their base units.
+    fn write_units(&mut self, x: &mut String) {
+        let units_used: BTreeSet<String> = self
+            .connectors
             .iter()
-            .find_map(|i| i.description().unit_def(u).copied())
-            .or_else(|| tb_fmi::units::lookup(u).copied());
-        match def {
-            Some(d) => unit_xml.push_str(&format!(
-                "    <ssc:Unit name=\"{}\"><ssc:BaseUnit{}/></ssc:Unit>\n",
-                esc(u),
-                d.base_unit_attributes()
-            )),
-            None => notes.push(format!("unit '{u}' has no definition; left out of <Units>")),
+            .flat_map(|cs| cs.values().filter_map(|c| c.unit.clone()))
+            .collect();
+        let mut unit_xml = String::new();
+        for u in &units_used {
+            let def = self
+                .system
+                .instances
+                .iter()
+                .find_map(|i| i.description().unit_def(u).copied())
+                .or_else(|| tb_fmi::units::lookup(u).copied());
+            match def {
+                Some(d) => unit_xml.push_str(&format!(
+                    "    <ssc:Unit name=\"{}\"><ssc:BaseUnit{}/></ssc:Unit>\n",
+                    esc(u),
+                    d.base_unit_attributes()
+                )),
+                None => self
+                    .notes
+                    .push(format!("unit '{u}' has no definition; left out of <Units>")),
+            }
+        }
+        if !unit_xml.is_empty() {
+            x.push_str("  <ssd:Units>\n");
+            x.push_str(&unit_xml);
+            x.push_str("  </ssd:Units>\n");
         }
     }
-    if !unit_xml.is_empty() {
-        x.push_str("  <ssd:Units>\n");
-        x.push_str(&unit_xml);
-        x.push_str("  </ssd:Units>\n");
+
+    /// A system-file name as the SSP names it (by the FMU's variable name).
+    fn ssp_name(&self, full: &str) -> Result<String, SspError> {
+        let (k, var) = self.fmu_var(full)?;
+        Ok(format!("{}.{var}", self.system.instances[k].name))
     }
-    let order: Vec<&str> = system.order.iter().map(|&k| system.unit_name(k)).collect();
-    let algorithm = exp.algorithm.name();
-    // Signals by the FMU's names (port maps resolved), as the connectors are named.
-    let ssp_name = |full: &str| -> Result<String, SspError> {
-        let (k, var) = fmu_var(full)?;
-        Ok(format!("{}.{var}", system.instances[k].name))
-    };
-    let lap = match &system.stop {
-        crate::Stop::When {
-            condition,
-            max_time,
-        } => format!(
-            " stop=\"{}\" maxTime=\"{}\"",
-            esc(&format!(
-                "{} {} {}",
-                ssp_name(&condition.signal)?,
-                condition.op.symbol(),
-                condition.threshold
-            )),
-            real(*max_time)
-        ),
-        crate::Stop::Time(t) => format!(" stop=\"{}\"", real(*t)),
-    };
-    // What a twinbench import needs to reproduce the run (other tools ignore it): the
-    // recorded signals and decimation, the reported values, the checks.
-    let signal_list = |names: &[String]| -> Result<String, SspError> {
+
+    fn signal_list(&self, names: &[String]) -> Result<String, SspError> {
         names
             .iter()
-            .map(|n| Ok(format!("<tb:Signal name=\"{}\"/>", esc(&ssp_name(n)?))))
+            .map(|n| Ok(format!("<tb:Signal name=\"{}\"/>", esc(&self.ssp_name(n)?))))
             .collect()
-    };
-    let mut tb_children = String::new();
-    if !file.record.signals.is_empty() || file.record.decimation != 1 {
-        tb_children.push_str(&format!(
-            "<tb:Record decimation=\"{}\">{}</tb:Record>",
-            file.record.decimation,
-            signal_list(&file.record.signals)?
-        ));
     }
-    if !exp.report.is_empty() {
-        tb_children.push_str(&format!(
-            "<tb:Report>{}</tb:Report>",
-            signal_list(&exp.report)?
-        ));
-    }
-    for c in &file.checks {
-        tb_children.push_str(&format!(
-            "<tb:Check relativeTolerance=\"{}\"{}>{}</tb:Check>",
-            real(c.relative_tolerance),
-            c.why
-                .as_deref()
-                .map(|w| format!(" why=\"{}\"", esc(w)))
-                .unwrap_or_default(),
-            signal_list(&c.equal)?
-        ));
-    }
-    x.push_str(&format!(
-        "  <ssd:DefaultExperiment startTime=\"{}\" stopTime=\"{}\">\n    <ssd:Annotations>\n",
-        real(start),
-        real(stop)
-    ));
-    x.push_str(&format!(
-        "      <ssc:Annotation type=\"com.opensimulationplatform\"><osp:Algorithm><osp:FixedStepAlgorithm baseStepSize=\"{}\"/></osp:Algorithm></ssc:Annotation>\n",
-        real(exp.step)
-    ));
-    x.push_str(&format!(
-        "      <ssc:Annotation type=\"org.twinbench.experiment\"><tb:Experiment stepSize=\"{}\" algorithm=\"{algorithm}\" order=\"{}\"{lap}{}</ssc:Annotation>\n",
-        real(exp.step),
-        esc(&order.join(" ")),
-        if tb_children.is_empty() {
-            "/>".to_string()
-        } else {
-            format!(">{tb_children}</tb:Experiment>")
+
+    /// `<ssd:DefaultExperiment>` with the Open Simulation Platform's fixed-step algorithm
+    /// (libcosim reads its `baseStepSize`) and twinbench's own experiment: what a
+    /// twinbench import needs to reproduce the run (other tools ignore it).
+    fn write_default_experiment(
+        &self,
+        x: &mut String,
+        start: f64,
+        stop: f64,
+    ) -> Result<(), SspError> {
+        let system = self.system;
+        let (file, exp) = (&system.file, &system.file.experiment);
+        let order: Vec<&str> = system.order.iter().map(|&k| system.unit_name(k)).collect();
+        let lap = match &system.stop {
+            crate::Stop::When {
+                condition,
+                max_time,
+            } => format!(
+                " stop=\"{}\" maxTime=\"{}\"",
+                esc(&format!(
+                    "{} {} {}",
+                    self.ssp_name(&condition.signal)?,
+                    condition.op.symbol(),
+                    condition.threshold
+                )),
+                real(*max_time)
+            ),
+            crate::Stop::Time(t) => format!(" stop=\"{}\"", real(*t)),
+        };
+        // The recorded signals and decimation, the reported values, the checks.
+        let mut tb_children = String::new();
+        if !file.record.signals.is_empty() || file.record.decimation != 1 {
+            tb_children.push_str(&format!(
+                "<tb:Record decimation=\"{}\">{}</tb:Record>",
+                file.record.decimation,
+                self.signal_list(&file.record.signals)?
+            ));
         }
-    ));
-    x.push_str("    </ssd:Annotations>\n  </ssd:DefaultExperiment>\n");
-    x.push_str("</ssd:SystemStructureDescription>\n");
-    let summary = ExportSummary {
-        components: system.instances.len(),
-        connectors: n_connectors,
-        connections: connections.len(),
-        parameters: params.iter().map(Vec::len).sum(),
-        fmus: fmu_files.iter().map(|f| f.0.clone()).collect(),
-        start_time: start,
-        stop_time: stop,
-        step: exp.step,
-        notes,
-    };
-    Ok((x, fmu_files, summary))
+        if !exp.report.is_empty() {
+            tb_children.push_str(&format!(
+                "<tb:Report>{}</tb:Report>",
+                self.signal_list(&exp.report)?
+            ));
+        }
+        for c in &file.checks {
+            tb_children.push_str(&format!(
+                "<tb:Check relativeTolerance=\"{}\"{}>{}</tb:Check>",
+                real(c.relative_tolerance),
+                c.why
+                    .as_deref()
+                    .map(|w| format!(" why=\"{}\"", esc(w)))
+                    .unwrap_or_default(),
+                self.signal_list(&c.equal)?
+            ));
+        }
+        x.push_str(&format!(
+            "  <ssd:DefaultExperiment startTime=\"{}\" stopTime=\"{}\">\n    <ssd:Annotations>\n",
+            real(start),
+            real(stop)
+        ));
+        x.push_str(&format!(
+            "      <ssc:Annotation type=\"com.opensimulationplatform\"><osp:Algorithm><osp:FixedStepAlgorithm baseStepSize=\"{}\"/></osp:Algorithm></ssc:Annotation>\n",
+            real(exp.step)
+        ));
+        x.push_str(&format!(
+            "      <ssc:Annotation type=\"org.twinbench.experiment\"><tb:Experiment stepSize=\"{}\" algorithm=\"{}\" order=\"{}\"{lap}{}</ssc:Annotation>\n",
+            real(exp.step),
+            exp.algorithm.name(),
+            esc(&order.join(" ")),
+            if tb_children.is_empty() {
+                "/>".to_string()
+            } else {
+                format!(">{tb_children}</tb:Experiment>")
+            }
+        ));
+        x.push_str("    </ssd:Annotations>\n  </ssd:DefaultExperiment>\n");
+        Ok(())
+    }
+}
+
+/// A parameter's value as its `<ssv:...>` element (SSV gives an Enumeration by its item's
+/// name).
+fn parameter_value(
+    md: &tb_fmi::ModelDescription,
+    sv: &tb_fmi::description::ScalarVariable,
+    value: &toml::Value,
+) -> String {
+    let num = value
+        .as_float()
+        .or_else(|| value.as_integer().map(|i| i as f64));
+    match sv.ty {
+        ScalarType::Real => {
+            let u = md
+                .unit_of(sv)
+                .map(|u| format!(" unit=\"{}\"", esc(u)))
+                .unwrap_or_default();
+            format!("<ssv:Real value=\"{}\"{u}/>", real(num.unwrap_or(0.0)))
+        }
+        ScalarType::Integer => {
+            format!(
+                "<ssv:Integer value=\"{}\"/>",
+                value.as_integer().unwrap_or(0)
+            )
+        }
+        ScalarType::Enumeration => {
+            let i = value.as_integer().unwrap_or(0);
+            match md
+                .enumeration_items(sv)
+                .and_then(|items| items.iter().find(|(_, v)| *v == i))
+            {
+                Some((item, _)) => format!("<ssv:Enumeration value=\"{}\"/>", esc(item)),
+                None => format!("<ssv:Integer value=\"{i}\"/>"),
+            }
+        }
+        ScalarType::Boolean => {
+            format!(
+                "<ssv:Boolean value=\"{}\"/>",
+                value.as_bool().unwrap_or(false)
+            )
+        }
+        ScalarType::String => format!(
+            "<ssv:String value=\"{}\"/>",
+            esc(value.as_str().unwrap_or(""))
+        ),
+    }
 }
 
 /// Write the SSP archive (atomically).
