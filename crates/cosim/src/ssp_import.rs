@@ -121,13 +121,38 @@ impl Node {
     }
 }
 
-fn line_of(text: &str, pos: u64) -> usize {
-    let pos = (pos as usize).min(text.len());
-    text.as_bytes()[..pos]
-        .iter()
-        .filter(|&&b| b == b'\n')
-        .count()
-        + 1
+/// Line numbers of positions in a text, counted on from the last position asked for:
+/// positions come in order while parsing, so the whole count stays linear in the text's
+/// size (counting from the start each time made a file of many small elements quadratic).
+struct Lines<'t> {
+    text: &'t [u8],
+    pos: usize,
+    line: usize,
+}
+
+impl<'t> Lines<'t> {
+    fn new(text: &'t str) -> Self {
+        Lines {
+            text: text.as_bytes(),
+            pos: 0,
+            line: 1,
+        }
+    }
+
+    fn at(&mut self, pos: u64) -> usize {
+        let pos = (pos as usize).min(self.text.len());
+        if pos < self.pos {
+            // Backwards (an error position before the last element): count afresh.
+            self.pos = 0;
+            self.line = 1;
+        }
+        self.line += self.text[self.pos..pos]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
+        self.pos = pos;
+        self.line
+    }
 }
 
 /// A resolved namespace (empty: none), or the undeclared prefix.
@@ -152,13 +177,14 @@ fn parse_xml(text: &str, ssp: &Path, file: &str) -> Result<Node, SspImportError>
     };
     let mut stack: Vec<Node> = Vec::new();
     let mut root: Option<Node> = None;
+    let mut lines = Lines::new(text);
     loop {
         let start = reader.buffer_position();
         let (ns, ev) = match reader.read_resolved_event() {
             Ok((ns, ev)) => (ns_uri(ns), ev),
             Err(e) => {
                 let message = e.to_string();
-                return Err(xml_err(line_of(text, reader.error_position()), message));
+                return Err(xml_err(lines.at(reader.error_position()), message));
             }
         };
         let (e, empty) = match ev {
@@ -167,7 +193,7 @@ fn parse_xml(text: &str, ssp: &Path, file: &str) -> Result<Node, SspImportError>
             Event::End(_) => {
                 let Some(node) = stack.pop() else {
                     return Err(xml_err(
-                        line_of(text, start),
+                        lines.at(start),
                         "an end tag without its start".into(),
                     ));
                 };
@@ -180,7 +206,7 @@ fn parse_xml(text: &str, ssp: &Path, file: &str) -> Result<Node, SspImportError>
             Event::Eof => break,
             _ => continue,
         };
-        let line = line_of(text, start);
+        let line = lines.at(start);
         if root.is_some() && stack.is_empty() {
             return Err(xml_err(line, "content after the root element".into()));
         }
@@ -227,7 +253,7 @@ fn parse_xml(text: &str, ssp: &Path, file: &str) -> Result<Node, SspImportError>
     }
     if let Some(open) = stack.last() {
         return Err(xml_err(
-            line_of(text, text.len() as u64),
+            lines.at(text.len() as u64),
             format!(
                 "unexpected end of the file: <{}> (line {}) is not closed",
                 open.name, open.line
@@ -363,10 +389,10 @@ impl Importer<'_> {
             SspImportError::Xml {
                 ssp: self.ssp.to_path_buf(),
                 file: file.to_string(),
-                line: line_of(
-                    &String::from_utf8_lossy(&e.into_bytes()[..valid]),
-                    valid as u64,
-                ),
+                line: 1 + e.as_bytes()[..valid]
+                    .iter()
+                    .filter(|&&b| b == b'\n')
+                    .count(),
                 message: format!("not UTF-8 (byte {valid})"),
             }
         })?;
@@ -438,6 +464,72 @@ pub fn load(ssp: &Path, cache: &FmuCache) -> Result<SystemFile, SspImportError> 
 
 fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImportError> {
     let f = SSD;
+    check_root(&imp, root)?;
+    let top = imp.children(
+        f,
+        root,
+        &["System", "Enumerations", "Units", "DefaultExperiment"],
+        &["MetaData"],
+    )?;
+    // Units first: connectors and parameters use them.
+    imp.units = read_units(&imp, &top)?;
+    let Some(system) = top.iter().find(|n| n.name == "System") else {
+        return Err(imp.invalid(f, root.line, "no <ssd:System>"));
+    };
+    let parts = system_parts(&imp, system)?;
+    let (components, fmus, mut bindings) = read_components(&imp, &parts)?;
+    for p in parts.iter().filter(|n| n.name == "ParameterBindings") {
+        bindings.push((None, p));
+    }
+    for p in parts.iter().filter(|n| n.name == "Connectors") {
+        // The system's own connectors are harmless unless connected (refused below).
+        imp.children(f, p, &["Connector"], &[])?;
+    }
+    // Parameter bindings (component or system level).
+    let mut parameters = BTreeMap::new();
+    for (k, pb) in bindings {
+        for b in imp.children(f, pb, &["ParameterBinding"], &[])? {
+            bind(&imp, &components, k, b, &mut parameters)?;
+        }
+    }
+    let mut connections = Vec::new();
+    for cs in parts.iter().filter(|n| n.name == "Connections") {
+        for c in imp.children(f, cs, &["Connection"], &[])? {
+            connections.push(connection(&imp, &components, c)?);
+        }
+    }
+    let (experiment, record, checks) = read_experiment(&imp, &top, root)?;
+    let instances = components
+        .iter()
+        .map(|c| InstanceConfig {
+            name: c.name.clone(),
+            fmu: c.fmu_key.clone(),
+            ports: BTreeMap::new(),
+            logging: false,
+            isolate: false,
+            watchdog: None,
+        })
+        .collect();
+    Ok(SystemFile {
+        name: root
+            .attr("name")
+            .or_else(|| system.attr("name"))
+            .map(str::to_string),
+        fmus,
+        instances,
+        connections,
+        parameters,
+        experiment,
+        record,
+        replay: Vec::new(),
+        preload: Vec::new(),
+        checks,
+    })
+}
+
+/// The root is an SSP 1.0 `<ssd:SystemStructureDescription>`.
+fn check_root(imp: &Importer<'_>, root: &Node) -> Result<(), SspImportError> {
+    let f = SSD;
     if root.ns != NS_SSD || root.name != "SystemStructureDescription" {
         return Err(imp.invalid(
             f,
@@ -462,13 +554,13 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             ));
         }
     }
-    let top = imp.children(
-        f,
-        root,
-        &["System", "Enumerations", "Units", "DefaultExperiment"],
-        &["MetaData"],
-    )?;
-    // Units first: connectors and parameters use them.
+    Ok(())
+}
+
+/// The SSD's `<ssd:Units>`: each name with its SI base units, factor and offset.
+fn read_units(imp: &Importer<'_>, top: &[&Node]) -> Result<Vec<(String, UnitDef)>, SspImportError> {
+    let f = SSD;
+    let mut units = Vec::new();
     for u in top.iter().filter(|n| n.name == "Units") {
         for unit in imp.children(f, u, &["Unit"], &[])? {
             let name = unit.attr("name").unwrap_or_default().to_string();
@@ -497,15 +589,16 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
                 def.factor = imp.f64_attr(f, b, "factor")?.unwrap_or(1.0);
                 def.offset = imp.f64_attr(f, b, "offset")?.unwrap_or(0.0);
             }
-            imp.units.push((name, def));
+            units.push((name, def));
         }
     }
-    let systems: Vec<&&Node> = top.iter().filter(|n| n.name == "System").collect();
-    let Some(system) = systems.first() else {
-        return Err(imp.invalid(f, root.line, "no <ssd:System>"));
-    };
-    let parts = imp.children(
-        f,
+    Ok(units)
+}
+
+/// The parts of `<ssd:System>` twinbench runs; signal dictionaries refused with the reason.
+fn system_parts<'n>(imp: &Importer<'_>, system: &'n Node) -> Result<Vec<&'n Node>, SspImportError> {
+    imp.children(
+        SSD,
         system,
         &["Connectors", "ParameterBindings", "Elements", "Connections"],
         &["ElementGeometry", "SystemGeometry", "GraphicalElements"],
@@ -525,161 +618,187 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             supported: format!("signal dictionaries have no twinbench equivalent; connect the components directly ({supported})"),
         },
         other => other,
-    })?;
-    // Components.
+    })
+}
+
+/// A component's parameter bindings: which component (None: the system's) and the node.
+type Bindings<'n> = Vec<(Option<usize>, &'n Node)>;
+
+/// The components of `<ssd:Elements>` with their FMUs (one `[fmus]` key per FMU entry of
+/// the package) and their parameter bindings.
+fn read_components<'n>(
+    imp: &Importer<'_>,
+    parts: &[&'n Node],
+) -> Result<(Vec<Component>, BTreeMap<String, PathBuf>, Bindings<'n>), SspImportError> {
     let mut components: Vec<Component> = Vec::new();
     let mut fmus: BTreeMap<String, PathBuf> = BTreeMap::new();
     let mut keys: BTreeMap<String, String> = BTreeMap::new(); // entry -> key
-    let mut parameters: BTreeMap<String, toml::Value> = BTreeMap::new();
-    let mut bindings: Vec<(Option<usize>, &Node)> = Vec::new();
+    let mut bindings = Vec::new();
     for el in parts.iter().filter(|n| n.name == "Elements") {
         for c in &el.children {
-            if !c.is_ssp() || c.name != "Component" {
-                let why = match c.name.as_str() {
-                    "System" => "nested systems (an <ssd:System> inside <ssd:Elements>) are not supported; flatten the system into one level of components",
-                    "SignalDictionaryReference" => "signal dictionaries are not supported; connect the components directly",
-                    _ => "<ssd:Elements> may contain <ssd:Component> (FMUs) only",
-                };
-                return Err(imp.unsupported(f, c, why));
-            }
-            let name = c.attr("name").unwrap_or_default().to_string();
-            if let Some(t) = c.attr("type") {
-                if t != "application/x-fmu-sharedlibrary" {
-                    return Err(imp.unsupported(
-                        f,
-                        c,
-                        &format!(
-                            "component '{name}' has type=\"{t}\"; components are FMUs (application/x-fmu-sharedlibrary)"
-                        ),
-                    ));
-                }
-            }
-            if let Some(i) = c.attr("implementation") {
-                if !matches!(i, "CoSimulation" | "any") {
-                    return Err(imp.unsupported(
-                        f,
-                        c,
-                        &format!(
-                            "component '{name}' asks for implementation=\"{i}\"; twinbench runs Co-Simulation FMUs (CoSimulation or any)"
-                        ),
-                    ));
-                }
-            }
-            let source = c.attr("source").ok_or_else(|| {
-                imp.invalid(f, c.line, format!("component '{name}' has no source"))
-            })?;
-            let path = imp.read_entry(f, c.line, source)?;
-            let entry = source.strip_prefix("./").unwrap_or(source).to_string();
-            if !path.is_file() {
-                return Err(SspImportError::MissingFmu {
-                    ssp: imp.ssp.to_path_buf(),
-                    component: name,
-                    fmu: entry,
-                    available: fmus_in(&imp.dir),
-                });
-            }
-            let loaded = imp.cache.load(&path).map_err(|error| SspImportError::Fmu {
-                ssp: imp.ssp.to_path_buf(),
-                entry: entry.clone(),
-                error: Box::new(error),
-            })?;
+            let (entry, path) = component_fmu(imp, c)?;
             let key = match keys.get(&entry) {
                 Some(k) => k.clone(),
                 None => {
-                    let stem = Path::new(&entry)
-                        .file_stem()
-                        .map(|s| s.to_string_lossy().into_owned())
-                        .unwrap_or_else(|| "fmu".into());
-                    let mut key = stem.clone();
-                    let mut n = 2;
-                    while fmus.contains_key(&key) {
-                        key = format!("{stem}_{n}");
-                        n += 1;
-                    }
+                    let key = fmu_key(&entry, &fmus);
                     fmus.insert(key.clone(), path.clone());
                     keys.insert(entry.clone(), key.clone());
                     key
                 }
             };
-            let mut comp = Component {
-                name: name.clone(),
-                fmu_key: key,
+            let loaded = imp.cache.load(&path).map_err(|error| SspImportError::Fmu {
+                ssp: imp.ssp.to_path_buf(),
                 entry: entry.clone(),
+                error: Box::new(error),
+            })?;
+            let mut comp = Component {
+                name: c.attr("name").unwrap_or_default().to_string(),
+                fmu_key: key,
+                entry,
                 md: loaded.description.clone(),
                 connectors: BTreeMap::new(),
             };
             let k = components.len();
             for part in imp.children(
-                f,
+                SSD,
                 c,
                 &["Connectors", "ParameterBindings"],
                 &["ElementGeometry"],
             )? {
                 match part.name.as_str() {
-                    "Connectors" => {
-                        for con in imp.children(f, part, &["Connector"], &[])? {
-                            let cname = con.attr("name").unwrap_or_default().to_string();
-                            if comp.md.variable(&cname).is_none() {
-                                return Err(imp.invalid(
-                                    f,
-                                    con.line,
-                                    format!(
-                                        "connector '{name}.{cname}': the FMU {entry} has no variable '{cname}' (closest: {})",
-                                        comp.md.closest_names(&cname, 3).join(", ")
-                                    ),
-                                ));
-                            }
-                            let mut unit = None;
-                            for ty in imp.children(
-                                f,
-                                con,
-                                &["Real", "Integer", "Boolean", "String", "Enumeration"],
-                                &["ConnectorGeometry", "Description"],
-                            )? {
-                                if ty.name == "Real" {
-                                    unit = ty.attr("unit").map(str::to_string);
-                                }
-                            }
-                            if let Some(u) = &unit {
-                                let md = imp.unit_md(&comp.md);
-                                if crate::plan::units::definition(&md, u).is_none() {
-                                    return Err(imp.invalid(
-                                        f,
-                                        con.line,
-                                        format!("connector '{name}.{cname}': unit '{u}' is defined neither in the SSD's <Units>, nor by the FMU, nor in twinbench's unit table"),
-                                    ));
-                                }
-                            }
-                            comp.connectors.insert(cname, (unit, con.line));
-                        }
-                    }
+                    "Connectors" => read_connectors(imp, part, &mut comp)?,
                     _ => bindings.push((Some(k), part)),
                 }
             }
             components.push(comp);
         }
     }
-    for p in parts.iter().filter(|n| n.name == "ParameterBindings") {
-        bindings.push((None, p));
+    Ok((components, fmus, bindings))
+}
+
+/// A `[fmus]` key for an FMU entry of the package: its file stem, numbered when taken.
+fn fmu_key(entry: &str, fmus: &BTreeMap<String, PathBuf>) -> String {
+    let stem = Path::new(entry)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "fmu".into());
+    let mut key = stem.clone();
+    let mut n = 2;
+    while fmus.contains_key(&key) {
+        key = format!("{stem}_{n}");
+        n += 1;
     }
-    for p in parts.iter().filter(|n| n.name == "Connectors") {
-        // The system's own connectors are harmless unless connected (refused below).
-        imp.children(f, p, &["Connector"], &[])?;
+    key
+}
+
+/// A component element that twinbench runs (a Co-Simulation FMU in the package): its
+/// FMU's entry in the package and unpacked path.
+fn component_fmu(imp: &Importer<'_>, c: &Node) -> Result<(String, PathBuf), SspImportError> {
+    let f = SSD;
+    if !c.is_ssp() || c.name != "Component" {
+        let why = match c.name.as_str() {
+            "System" => "nested systems (an <ssd:System> inside <ssd:Elements>) are not supported; flatten the system into one level of components",
+            "SignalDictionaryReference" => "signal dictionaries are not supported; connect the components directly",
+            _ => "<ssd:Elements> may contain <ssd:Component> (FMUs) only",
+        };
+        return Err(imp.unsupported(f, c, why));
     }
-    // Parameter bindings (component or system level).
-    for (k, pb) in bindings {
-        for b in imp.children(f, pb, &["ParameterBinding"], &[])? {
-            bind(&imp, &components, k, b, &mut parameters)?;
+    let name = c.attr("name").unwrap_or_default().to_string();
+    if let Some(t) = c.attr("type") {
+        if t != "application/x-fmu-sharedlibrary" {
+            return Err(imp.unsupported(
+                f,
+                c,
+                &format!(
+                    "component '{name}' has type=\"{t}\"; components are FMUs (application/x-fmu-sharedlibrary)"
+                ),
+            ));
         }
     }
-    // Connections.
-    let mut connections = Vec::new();
-    for cs in parts.iter().filter(|n| n.name == "Connections") {
-        for c in imp.children(f, cs, &["Connection"], &[])? {
-            connections.push(connection(&imp, &components, c)?);
+    if let Some(i) = c.attr("implementation") {
+        if !matches!(i, "CoSimulation" | "any") {
+            return Err(imp.unsupported(
+                f,
+                c,
+                &format!(
+                    "component '{name}' asks for implementation=\"{i}\"; twinbench runs Co-Simulation FMUs (CoSimulation or any)"
+                ),
+            ));
         }
     }
-    // The experiment.
+    let source = c
+        .attr("source")
+        .ok_or_else(|| imp.invalid(f, c.line, format!("component '{name}' has no source")))?;
+    let path = imp.read_entry(f, c.line, source)?;
+    let entry = source.strip_prefix("./").unwrap_or(source).to_string();
+    if !path.is_file() {
+        return Err(SspImportError::MissingFmu {
+            ssp: imp.ssp.to_path_buf(),
+            component: name,
+            fmu: entry,
+            available: fmus_in(&imp.dir),
+        });
+    }
+    Ok((entry, path))
+}
+
+/// A component's `<ssd:Connectors>`: each names a variable of its FMU, with a unit some
+/// table defines.
+fn read_connectors(
+    imp: &Importer<'_>,
+    part: &Node,
+    comp: &mut Component,
+) -> Result<(), SspImportError> {
+    let f = SSD;
+    let name = &comp.name;
+    for con in imp.children(f, part, &["Connector"], &[])? {
+        let cname = con.attr("name").unwrap_or_default().to_string();
+        if comp.md.variable(&cname).is_none() {
+            return Err(imp.invalid(
+                f,
+                con.line,
+                format!(
+                    "connector '{name}.{cname}': the FMU {} has no variable '{cname}' (closest: {})",
+                    comp.entry,
+                    comp.md.closest_names(&cname, 3).join(", ")
+                ),
+            ));
+        }
+        let mut unit = None;
+        for ty in imp.children(
+            f,
+            con,
+            &["Real", "Integer", "Boolean", "String", "Enumeration"],
+            &["ConnectorGeometry", "Description"],
+        )? {
+            if ty.name == "Real" {
+                unit = ty.attr("unit").map(str::to_string);
+            }
+        }
+        if let Some(u) = &unit {
+            let md = imp.unit_md(&comp.md);
+            if crate::plan::units::definition(&md, u).is_none() {
+                return Err(imp.invalid(
+                    f,
+                    con.line,
+                    format!("connector '{name}.{cname}': unit '{u}' is defined neither in the SSD's <Units>, nor by the FMU, nor in twinbench's unit table"),
+                ));
+            }
+        }
+        comp.connectors.insert(cname, (unit, con.line));
+    }
+    Ok(())
+}
+
+/// `<ssd:DefaultExperiment>`: start and stop, the step (twinbench's annotation, else the
+/// Open Simulation Platform's), and what twinbench's annotation adds (record, report,
+/// checks, a stop condition).
+fn read_experiment(
+    imp: &Importer<'_>,
+    top: &[&Node],
+    root: &Node,
+) -> Result<(ExperimentConfig, RecordConfig, Vec<CheckConfig>), SspImportError> {
+    let f = SSD;
     let mut experiment = ExperimentConfig {
         start: 0.0,
         step: f64::NAN,
@@ -705,25 +824,22 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
         }
         stop_time = imp.f64_attr(f, de, "stopTime")?;
         for anns in de.children.iter().filter(|n| n.name == "Annotations") {
-            for ann in &anns.children {
-                for x in &ann.children {
-                    if x.ns == NS_OSP {
-                        if let Some(fixed) =
-                            x.children.iter().find(|n| n.name == "FixedStepAlgorithm")
-                        {
-                            osp_step = imp.f64_attr(f, fixed, "baseStepSize")?;
-                        }
+            for x in anns.children.iter().flat_map(|ann| &ann.children) {
+                if x.ns == NS_OSP {
+                    if let Some(fixed) = x.children.iter().find(|n| n.name == "FixedStepAlgorithm")
+                    {
+                        osp_step = imp.f64_attr(f, fixed, "baseStepSize")?;
                     }
-                    if x.ns == NS_TB && x.name == "Experiment" {
-                        tb_experiment(
-                            &imp,
-                            x,
-                            &mut experiment,
-                            &mut record,
-                            &mut checks,
-                            &mut tb_stop,
-                        )?;
-                    }
+                }
+                if x.ns == NS_TB && x.name == "Experiment" {
+                    tb_experiment(
+                        imp,
+                        x,
+                        &mut experiment,
+                        &mut record,
+                        &mut checks,
+                        &mut tb_stop,
+                    )?;
                 }
             }
         }
@@ -741,9 +857,10 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
         // A condition (a lap) is twinbench's; a time is the standard's stopTime.
         (_, Some((s, _))) if parse_double(&s).is_none() => StopConfig::Word(s),
         (Some(t), _) => StopConfig::Time(t),
-        (None, Some((s, line))) => StopConfig::Time(parse_double(&s).ok_or_else(|| {
-            imp.invalid(f, line, format!("stop=\"{s}\" is not a time"))
-        })?),
+        (None, Some((s, line))) => StopConfig::Time(
+            parse_double(&s)
+                .ok_or_else(|| imp.invalid(f, line, format!("stop=\"{s}\" is not a time")))?,
+        ),
         (None, None) => {
             return Err(imp.invalid(
                 f,
@@ -752,32 +869,7 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             ))
         }
     };
-    let instances = components
-        .iter()
-        .map(|c| InstanceConfig {
-            name: c.name.clone(),
-            fmu: c.fmu_key.clone(),
-            ports: BTreeMap::new(),
-            logging: false,
-            isolate: false,
-            watchdog: None,
-        })
-        .collect();
-    Ok(SystemFile {
-        name: root
-            .attr("name")
-            .or_else(|| system.attr("name"))
-            .map(str::to_string),
-        fmus,
-        instances,
-        connections,
-        parameters,
-        experiment,
-        record,
-        replay: Vec::new(),
-        preload: Vec::new(),
-        checks,
-    })
+    Ok((experiment, record, checks))
 }
 
 /// The FMUs in an unpacked package, for a message.
@@ -904,16 +996,18 @@ fn bind(
         },
         other => other,
     })?;
-    // The parameter set and the file it is in.
-    let owned;
-    let (file, set): (String, &Node) = match (b.attr("source"), inner.first()) {
-        (Some(_), Some(v)) => {
-            return Err(imp.invalid(
-                f,
-                v.line,
-                "a ParameterBinding has either a source or inline ParameterValues, not both",
-            ))
-        }
+    let target = Target {
+        components,
+        component,
+        prefix,
+    };
+    // The parameter set: in an .ssv file of the package, or inline.
+    match (b.attr("source"), inner.first()) {
+        (Some(_), Some(v)) => Err(imp.invalid(
+            f,
+            v.line,
+            "a ParameterBinding has either a source or inline ParameterValues, not both",
+        )),
         (Some(src), None) => {
             let path = imp.read_entry(f, b.line, src)?;
             let name = src.strip_prefix("./").unwrap_or(src).to_string();
@@ -924,172 +1018,201 @@ fn bind(
                     format!("ParameterBinding source '{name}' is not in the package"),
                 ));
             }
-            owned = imp.read_xml(&name, &path)?;
-            (name, &owned)
+            let set = imp.read_xml(&name, &path)?;
+            bind_set(imp, &target, &name, &set, parameters)
         }
-        (None, Some(v)) => {
-            let sets = imp.children(f, v, &["ParameterSet"], &[])?;
-            match sets.first() {
-                Some(s) => (f.to_string(), *s),
-                None => return Ok(()),
-            }
-        }
-        (None, None) => {
-            return Err(imp.invalid(
-                f,
-                b.line,
-                "a ParameterBinding without a source or ParameterValues",
-            ))
-        }
-    };
+        (None, Some(v)) => match imp.children(f, v, &["ParameterSet"], &[])?.first() {
+            Some(set) => bind_set(imp, &target, f, set, parameters),
+            None => Ok(()),
+        },
+        (None, None) => Err(imp.invalid(
+            f,
+            b.line,
+            "a ParameterBinding without a source or ParameterValues",
+        )),
+    }
+}
+
+/// Whose parameters a set holds: one component's (names relative to it) or the system's
+/// (`element.variable`), each name after `prefix`.
+struct Target<'a> {
+    components: &'a [Component],
+    component: Option<usize>,
+    prefix: &'a str,
+}
+
+/// The values of one `<ssv:ParameterSet>` (in `file`) into `parameters`.
+fn bind_set(
+    imp: &Importer<'_>,
+    target: &Target<'_>,
+    file: &str,
+    set: &Node,
+    parameters: &mut BTreeMap<String, toml::Value>,
+) -> Result<(), SspImportError> {
     if set.ns != NS_SSV || set.name != "ParameterSet" {
         return Err(imp.invalid(
-            &file,
+            file,
             set.line,
             format!("<{}> is not an SSP 1.0 <ssv:ParameterSet>", set.name),
         ));
     }
-    let mut ssv_units = Vec::new();
     let mut params = Vec::new();
     for part in imp.children(
-        &file,
+        file,
         set,
         &["Parameters", "Units", "Enumerations"],
         &["MetaData"],
     )? {
         match part.name.as_str() {
-            "Parameters" => params.extend(imp.children(&file, part, &["Parameter"], &[])?),
+            "Parameters" => params.extend(imp.children(file, part, &["Parameter"], &[])?),
             "Units" => {
-                // The SSV's units add to the SSD's (the same base-unit form).
-                for u in imp.children(&file, part, &["Unit"], &[])? {
-                    ssv_units.push(u);
+                if let Some(u) = imp.children(file, part, &["Unit"], &[])?.first() {
+                    return Err(imp.unsupported(
+                        file,
+                        u,
+                        "units of a parameter set are not supported: declare them in the SSD's <ssd:Units>",
+                    ));
                 }
             }
             _ => {}
         }
     }
-    if !ssv_units.is_empty() {
-        return Err(imp.unsupported(
-            &file,
-            ssv_units[0],
-            "units of a parameter set are not supported: declare them in the SSD's <ssd:Units>",
-        ));
-    }
     for p in params {
-        let pname = format!("{prefix}{}", p.attr("name").unwrap_or_default());
-        let (k, var) = match component {
-            Some(k) => (k, pname.clone()),
-            None => {
-                let (e, v) = pname.split_once('.').ok_or_else(|| {
-                    imp.invalid(
-                        &file,
-                        p.line,
-                        format!("parameter '{pname}' of the system is not element.variable"),
-                    )
-                })?;
-                let k = components.iter().position(|c| c.name == e).ok_or_else(|| {
-                    imp.invalid(
-                        &file,
-                        p.line,
-                        format!(
-                            "parameter '{pname}': no component '{e}' (components: {})",
-                            component_names(components)
-                        ),
-                    )
-                })?;
-                (k, v.to_string())
-            }
-        };
-        let comp = &components[k];
+        let (k, var) = parameter_target(imp, target, file, p)?;
+        let comp = &target.components[k];
         let full = format!("{}.{var}", comp.name);
-        let sv = comp.md.variable(&var).ok_or_else(|| {
-            let mut close = comp.md.closest_names(&var, 3);
-            close.retain(|c| !c.is_empty());
-            imp.invalid(
-                &file,
-                p.line,
-                format!(
-                    "parameter '{var}' of component '{}': the FMU {} has no variable '{var}' (closest: {})",
-                    comp.name,
-                    comp.entry,
-                    close.join(", ")
-                ),
-            )
-        })?;
-        let vals = imp.children(
-            &file,
-            p,
-            &["Real", "Integer", "Boolean", "String", "Enumeration"],
-            &["Description"],
-        )?;
-        let Some(v) = vals.first() else {
-            return Err(imp.invalid(&file, p.line, format!("parameter '{full}' has no value")));
-        };
-        let text = v.attr("value").ok_or_else(|| {
-            imp.invalid(
-                &file,
-                v.line,
-                format!("parameter '{full}': no value attribute"),
-            )
-        })?;
-        let bad = |what: &str| {
-            imp.invalid(
-                &file,
-                v.line,
-                format!("parameter '{full}': value=\"{text}\" is not {what}"),
-            )
-        };
-        let value = match v.name.as_str() {
-            "Real" => {
-                let mut x = parse_double(text).ok_or_else(|| bad("a number"))?;
-                if let (Some(u), Some(fu)) = (v.attr("unit"), comp.md.unit_of(sv)) {
-                    if u != fu {
-                        let md = imp.unit_md(&comp.md);
-                        let c =
-                            crate::plan::units::unit_conversion((&md, Some(u)), (&md, Some(fu)))
-                                .map_err(|m| {
-                                    imp.invalid(&file, v.line, format!("parameter '{full}': {m}"))
-                                })?;
-                        x = c.scale * x + c.offset;
-                    }
-                }
-                toml::Value::Float(x)
-            }
-            "Integer" => toml::Value::Integer(text.trim().parse().map_err(|_| bad("an integer"))?),
-            "Boolean" => toml::Value::Boolean(parse_bool(text).ok_or_else(|| bad("a boolean"))?),
-            "String" => toml::Value::String(text.to_string()),
-            _ => {
-                // By item name, in the FMU's enumeration type.
-                let items = comp.md.enumeration_items(sv).ok_or_else(|| {
-                    imp.invalid(
-                        &file,
-                        v.line,
-                        format!(
-                            "parameter '{full}' is {}, not an Enumeration of the FMU",
-                            sv.ty.name()
-                        ),
-                    )
-                })?;
-                let (_, i) = items.iter().find(|(n, _)| n == text).ok_or_else(|| {
-                    imp.invalid(
-                        &file,
-                        v.line,
-                        format!(
-                            "parameter '{full}': '{text}' is not an item of its Enumeration ({})",
-                            items
-                                .iter()
-                                .map(|(n, _)| n.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    )
-                })?;
-                toml::Value::Integer(*i)
-            }
-        };
+        let value = parameter_value(imp, comp, &var, &full, file, p)?;
         parameters.insert(full, value);
     }
     Ok(())
+}
+
+/// The component and FMU variable a `<ssv:Parameter>` sets.
+fn parameter_target(
+    imp: &Importer<'_>,
+    target: &Target<'_>,
+    file: &str,
+    p: &Node,
+) -> Result<(usize, String), SspImportError> {
+    let pname = format!("{}{}", target.prefix, p.attr("name").unwrap_or_default());
+    if let Some(k) = target.component {
+        return Ok((k, pname));
+    }
+    let (e, v) = pname.split_once('.').ok_or_else(|| {
+        imp.invalid(
+            file,
+            p.line,
+            format!("parameter '{pname}' of the system is not element.variable"),
+        )
+    })?;
+    let components = target.components;
+    let k = components.iter().position(|c| c.name == e).ok_or_else(|| {
+        imp.invalid(
+            file,
+            p.line,
+            format!(
+                "parameter '{pname}': no component '{e}' (components: {})",
+                component_names(components)
+            ),
+        )
+    })?;
+    Ok((k, v.to_string()))
+}
+
+/// A `<ssv:Parameter>`'s value for the FMU's variable `var`: a Real converted from its
+/// unit, an Integer, a Boolean, a String, an Enumeration by item name.
+fn parameter_value(
+    imp: &Importer<'_>,
+    comp: &Component,
+    var: &str,
+    full: &str,
+    file: &str,
+    p: &Node,
+) -> Result<toml::Value, SspImportError> {
+    let sv = comp.md.variable(var).ok_or_else(|| {
+        let mut close = comp.md.closest_names(var, 3);
+        close.retain(|c| !c.is_empty());
+        imp.invalid(
+            file,
+            p.line,
+            format!(
+                "parameter '{var}' of component '{}': the FMU {} has no variable '{var}' (closest: {})",
+                comp.name,
+                comp.entry,
+                close.join(", ")
+            ),
+        )
+    })?;
+    let vals = imp.children(
+        file,
+        p,
+        &["Real", "Integer", "Boolean", "String", "Enumeration"],
+        &["Description"],
+    )?;
+    let Some(v) = vals.first() else {
+        return Err(imp.invalid(file, p.line, format!("parameter '{full}' has no value")));
+    };
+    let text = v.attr("value").ok_or_else(|| {
+        imp.invalid(
+            file,
+            v.line,
+            format!("parameter '{full}': no value attribute"),
+        )
+    })?;
+    let bad = |what: &str| {
+        imp.invalid(
+            file,
+            v.line,
+            format!("parameter '{full}': value=\"{text}\" is not {what}"),
+        )
+    };
+    Ok(match v.name.as_str() {
+        "Real" => {
+            let mut x = parse_double(text).ok_or_else(|| bad("a number"))?;
+            if let (Some(u), Some(fu)) = (v.attr("unit"), comp.md.unit_of(sv)) {
+                if u != fu {
+                    let md = imp.unit_md(&comp.md);
+                    let c = crate::plan::units::unit_conversion((&md, Some(u)), (&md, Some(fu)))
+                        .map_err(|m| {
+                            imp.invalid(file, v.line, format!("parameter '{full}': {m}"))
+                        })?;
+                    x = c.scale * x + c.offset;
+                }
+            }
+            toml::Value::Float(x)
+        }
+        "Integer" => toml::Value::Integer(text.trim().parse().map_err(|_| bad("an integer"))?),
+        "Boolean" => toml::Value::Boolean(parse_bool(text).ok_or_else(|| bad("a boolean"))?),
+        "String" => toml::Value::String(text.to_string()),
+        _ => {
+            // By item name, in the FMU's enumeration type.
+            let items = comp.md.enumeration_items(sv).ok_or_else(|| {
+                imp.invalid(
+                    file,
+                    v.line,
+                    format!(
+                        "parameter '{full}' is {}, not an Enumeration of the FMU",
+                        sv.ty.name()
+                    ),
+                )
+            })?;
+            let (_, i) = items.iter().find(|(n, _)| n == text).ok_or_else(|| {
+                imp.invalid(
+                    file,
+                    v.line,
+                    format!(
+                        "parameter '{full}': '{text}' is not an item of its Enumeration ({})",
+                        items
+                            .iter()
+                            .map(|(n, _)| n.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?;
+            toml::Value::Integer(*i)
+        }
+    })
 }
 
 /// One `Connection` between two components.
@@ -1117,46 +1240,8 @@ fn connection(
             },
             other => other,
         })?;
-    let end = |el: &str, con: &str| -> Result<(usize, String), SspImportError> {
-        let Some(e) = c.attr(el) else {
-            return Err(imp.unsupported(
-                f,
-                c,
-                &format!(
-                    "a connection without {el} uses the system's own connectors, which are not supported: connect components directly"
-                ),
-            ));
-        };
-        let k = components.iter().position(|x| x.name == e).ok_or_else(|| {
-            imp.invalid(
-                f,
-                c.line,
-                format!(
-                    "{el}=\"{e}\" is not a component (components: {})",
-                    component_names(components)
-                ),
-            )
-        })?;
-        let name = c.attr(con).unwrap_or_default().to_string();
-        if !components[k].connectors.contains_key(&name) {
-            return Err(imp.invalid(
-                f,
-                c.line,
-                format!(
-                    "{con}=\"{name}\" is not a connector of component '{e}' (declared: {})",
-                    components[k]
-                        .connectors
-                        .keys()
-                        .cloned()
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            ));
-        }
-        Ok((k, name))
-    };
-    let (fk, fv) = end("startElement", "startConnector")?;
-    let (tk, tv) = end("endElement", "endConnector")?;
+    let (fk, fv) = connection_end(imp, components, c, "startElement", "startConnector")?;
+    let (tk, tv) = connection_end(imp, components, c, "endElement", "endConnector")?;
     let (from, to) = (&components[fk], &components[tk]);
     let text = format!("{}.{fv} -> {}.{tv}", from.name, to.name);
     let suppress = match c.attr("suppressUnitConversion") {
@@ -1176,13 +1261,7 @@ fn connection(
         )),
         None => None,
     };
-    let fsv = from.md.variable(&fv).expect("checked with the connectors");
     let tsv = to.md.variable(&tv).expect("checked with the connectors");
-    let fmu_units = (from.md.unit_of(fsv), to.md.unit_of(tsv));
-    let con_units = (
-        from.connectors[&fv].0.as_deref().or(fmu_units.0),
-        to.connectors[&tv].0.as_deref().or(fmu_units.1),
-    );
     let plain = ConnectionConfig::from(text.as_str());
     if tsv.ty != ScalarType::Real {
         if lt.is_some() {
@@ -1198,33 +1277,11 @@ fn connection(
         }
         return Ok(plain);
     }
-    let (scale, offset) = if suppress {
-        match lt {
-            None if fmu_units.0 == fmu_units.1
-                || fmu_units.0.is_none()
-                || fmu_units.1.is_none() =>
-            {
-                return Ok(plain)
-            }
-            None => (1.0, 0.0),
-            Some(t) => t,
-        }
-    } else {
-        if lt.is_none() && con_units == fmu_units {
-            // The plan converts the FMUs' own units, exactly as the SSD says.
-            return Ok(plain);
-        }
-        let conv = crate::plan::units::unit_conversion(
-            (&imp.unit_md(&from.md), con_units.0),
-            (&imp.unit_md(&to.md), con_units.1),
-        )
-        .map_err(|m| imp.invalid(f, c.line, format!("connection \"{text}\": {m}")))?;
-        let (factor, off) = lt.unwrap_or((1.0, 0.0));
-        if lt.is_none() {
-            (conv.scale, conv.offset)
-        } else {
-            (factor * conv.scale, factor * conv.offset + off)
-        }
+    let ends = ((from, fv.as_str()), (to, tv.as_str()));
+    let Some((scale, offset)) = connection_gain(imp, ends, suppress, lt)
+        .map_err(|m| imp.invalid(f, c.line, format!("connection \"{text}\": {m}")))?
+    else {
+        return Ok(plain);
     };
     if !(scale.is_finite() && scale != 0.0 && offset.is_finite()) {
         return Err(imp.invalid(
@@ -1240,4 +1297,94 @@ fn connection(
         from_unit: None,
         to_unit: None,
     })
+}
+
+/// One end of a connection: a component and one of its declared connectors.
+fn connection_end(
+    imp: &Importer<'_>,
+    components: &[Component],
+    c: &Node,
+    el: &str,
+    con: &str,
+) -> Result<(usize, String), SspImportError> {
+    let f = SSD;
+    let Some(e) = c.attr(el) else {
+        return Err(imp.unsupported(
+            f,
+            c,
+            &format!(
+                "a connection without {el} uses the system's own connectors, which are not supported: connect components directly"
+            ),
+        ));
+    };
+    let k = components.iter().position(|x| x.name == e).ok_or_else(|| {
+        imp.invalid(
+            f,
+            c.line,
+            format!(
+                "{el}=\"{e}\" is not a component (components: {})",
+                component_names(components)
+            ),
+        )
+    })?;
+    let name = c.attr(con).unwrap_or_default().to_string();
+    if !components[k].connectors.contains_key(&name) {
+        return Err(imp.invalid(
+            f,
+            c.line,
+            format!(
+                "{con}=\"{name}\" is not a connector of component '{e}' (declared: {})",
+                components[k]
+                    .connectors
+                    .keys()
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ));
+    }
+    Ok((k, name))
+}
+
+/// The gain of a Real connection as `(scale, offset)`, or None where the plan's own unit
+/// conversion of the FMUs' units is exactly what the SSD says: with the unit conversion
+/// suppressed, the `LinearTransformation` alone (or none); else the connectors' units
+/// converted, then the transformation applied.
+fn connection_gain(
+    imp: &Importer<'_>,
+    ((from, fv), (to, tv)): ((&Component, &str), (&Component, &str)),
+    suppress: bool,
+    lt: Option<(f64, f64)>,
+) -> Result<Option<(f64, f64)>, String> {
+    let fsv = from.md.variable(fv).expect("checked with the connectors");
+    let tsv = to.md.variable(tv).expect("checked with the connectors");
+    let fmu_units = (from.md.unit_of(fsv), to.md.unit_of(tsv));
+    let con_units = (
+        from.connectors[fv].0.as_deref().or(fmu_units.0),
+        to.connectors[tv].0.as_deref().or(fmu_units.1),
+    );
+    if suppress {
+        return Ok(match lt {
+            None if fmu_units.0 == fmu_units.1
+                || fmu_units.0.is_none()
+                || fmu_units.1.is_none() =>
+            {
+                None
+            }
+            None => Some((1.0, 0.0)),
+            Some(t) => Some(t),
+        });
+    }
+    if lt.is_none() && con_units == fmu_units {
+        // The plan converts the FMUs' own units, exactly as the SSD says.
+        return Ok(None);
+    }
+    let conv = crate::plan::units::unit_conversion(
+        (&imp.unit_md(&from.md), con_units.0),
+        (&imp.unit_md(&to.md), con_units.1),
+    )?;
+    Ok(Some(match lt {
+        None => (conv.scale, conv.offset),
+        Some((factor, off)) => (factor * conv.scale, factor * conv.offset + off),
+    }))
 }
