@@ -624,12 +624,15 @@ fn system_parts<'n>(imp: &Importer<'_>, system: &'n Node) -> Result<Vec<&'n Node
 /// A component's parameter bindings: which component (None: the system's) and the node.
 type Bindings<'n> = Vec<(Option<usize>, &'n Node)>;
 
+/// The components, the FMUs by `[fmus]` key, and the parameter bindings.
+type Elements<'n> = (Vec<Component>, BTreeMap<String, PathBuf>, Bindings<'n>);
+
 /// The components of `<ssd:Elements>` with their FMUs (one `[fmus]` key per FMU entry of
 /// the package) and their parameter bindings.
 fn read_components<'n>(
     imp: &Importer<'_>,
     parts: &[&'n Node],
-) -> Result<(Vec<Component>, BTreeMap<String, PathBuf>, Bindings<'n>), SspImportError> {
+) -> Result<Elements<'n>, SspImportError> {
     let mut components: Vec<Component> = Vec::new();
     let mut fmus: BTreeMap<String, PathBuf> = BTreeMap::new();
     let mut keys: BTreeMap<String, String> = BTreeMap::new(); // entry -> key
