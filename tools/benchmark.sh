@@ -5,5 +5,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --quiet
-target/release/twinbench pack >/dev/null
+target/release/twinbench pack -o target/fmu >/dev/null
 exec target/venv/bin/python tools/benchmark.py "$@"

@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release --quiet
-target/release/twinbench pack >/dev/null
+target/release/twinbench pack -o target/fmu >/dev/null
 target/venv/bin/python tools/supplier_edu/build.py >/dev/null
 rm -rf target/wheels
 (cd crates/python && ../../target/venv/bin/maturin build --release --quiet \

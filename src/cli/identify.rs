@@ -104,7 +104,8 @@ pub struct FrfArgs {
     /// Also write the parameter snippet to this file.
     #[arg(long, value_name = "FILE")]
     pub snippet: Option<PathBuf>,
-    /// Write Bode (STEM-bode.*) and group-delay (STEM-group-delay.*) plots, SVG and PNG.
+    /// Write the plots STEM-bode-magnitude, STEM-bode-phase, STEM-group-delay and
+    /// STEM-coherence, each as SVG and PNG.
     #[arg(long, value_name = "STEM")]
     pub plot: Option<PathBuf>,
     /// Rows of the FRF table (log-spaced frequencies).
