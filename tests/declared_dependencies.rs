@@ -8,7 +8,7 @@ mod common;
 
 use tb_fmi::{Causality, Instance, ScalarType};
 
-fn perturbed(v: &tb_fmi::description::ScalarVariable) -> f64 {
+fn perturbed(v: &tb_fmi::import::description::ScalarVariable) -> f64 {
     let x = v.start_f64().unwrap_or(0.0);
     let dx = 0.25 * x.abs().max(1.0);
     let up = x + dx;
@@ -39,7 +39,7 @@ fn check(model: &str) {
             .unwrap()
             + 1
     };
-    let outputs: Vec<&tb_fmi::description::ScalarVariable> = md
+    let outputs: Vec<&tb_fmi::import::description::ScalarVariable> = md
         .variables
         .iter()
         .filter(|v| v.causality == Causality::Output && v.ty == ScalarType::Real)
@@ -50,7 +50,7 @@ fn check(model: &str) {
         inst.get_real(&out_vrs, &mut y).unwrap();
         y
     };
-    let inputs: Vec<&tb_fmi::description::ScalarVariable> = md
+    let inputs: Vec<&tb_fmi::import::description::ScalarVariable> = md
         .variables
         .iter()
         .filter(|v| v.causality == Causality::Input && v.ty == ScalarType::Real)

@@ -9,7 +9,7 @@ mod common;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Barrier};
-use tb_fmi::archive::CacheStats;
+use tb_fmi::import::archive::CacheStats;
 use tb_fmi::FmuCache;
 
 /// The cache folder's entries: unpacked FMUs (and, if the race were back, temporaries);

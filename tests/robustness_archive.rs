@@ -6,7 +6,7 @@ mod common;
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use tb_fmi::archive::Limits;
+use tb_fmi::import::archive::Limits;
 use tb_fmi::FmuCache;
 use zip::write::SimpleFileOptions;
 
@@ -199,7 +199,7 @@ fn symbolic_links_are_refused() {
 fn too_many_entries_are_refused() {
     let bytes = build(&base_entries(), |w| {
         let opt = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
-        for i in 0..tb_fmi::archive::MAX_ENTRIES {
+        for i in 0..tb_fmi::import::archive::MAX_ENTRIES {
             w.start_file(format!("resources/{i}"), opt).unwrap();
         }
     });

@@ -111,12 +111,12 @@ proptest! {
     fn model_description_never_panics_on_edits(k in 0..64usize, edits in prop::collection::vec(edit(), 1..6)) {
         let s = md_seeds();
         let text = apply(&s[k % s.len()], &edits);
-        let _ = tb_fmi::description::parse(&String::from_utf8_lossy(&text));
+        let _ = tb_fmi::import::description::parse(&String::from_utf8_lossy(&text));
     }
 
     #[test]
     fn model_description_never_panics_on_arbitrary_text(text in "\\PC{0,400}") {
-        let _ = tb_fmi::description::parse(&text);
+        let _ = tb_fmi::import::description::parse(&text);
     }
 }
 

@@ -197,7 +197,7 @@ fn units_unknown_to_us_but_defined_by_the_fmus_are_converted() {
     let with_unit = |name: &str, var: &str, unit: &str, base: &str| {
         with_unit(dir.path(), &original, name, var, unit, base)
     };
-    assert!(tb_fmi::description::ModelDescription::default()
+    assert!(tb_fmi::import::description::ModelDescription::default()
         .unit_def("hr")
         .is_none());
     for u in ["hr", "mins", "degC", "degF", "furlong"] {

@@ -46,7 +46,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
         LibraryCheck::Loaded(tb_cosim::isolated::probe(&fmu, &options)?)
     } else if args.check {
         for lib in &args.preload {
-            tb_fmi::library::preload_global(lib)?;
+            tb_fmi::import::library::preload_global(lib)?;
         }
         if fmu.is_fmi3() {
             let lib = fmu.library3()?;

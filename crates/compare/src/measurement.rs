@@ -232,7 +232,7 @@ impl Measurement {
                     file: file.clone(),
                     signal: signal.clone(),
                     channel: channel.clone(),
-                    closest: tb_fmi::description::closest(
+                    closest: tb_fmi::import::description::closest(
                         channel,
                         table.names().iter().map(String::as_str),
                         3,

@@ -16,7 +16,7 @@ use fmu_export::{Logger, Model, Runtime};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::Arc;
-use tb_fmi::log::LogSink;
+use tb_fmi::import::log::LogSink;
 use tb_fmi::{FmuError, Function, LoadedFmu};
 
 /// Forwards the runtime's messages to the instance's log sink.

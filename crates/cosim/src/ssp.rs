@@ -112,7 +112,7 @@ impl Enumerations {
         &mut self,
         instance: &str,
         md: &tb_fmi::ModelDescription,
-        sv: &tb_fmi::description::ScalarVariable,
+        sv: &tb_fmi::import::description::ScalarVariable,
     ) -> Option<String> {
         let items = md.enumeration_items(sv)?;
         let ty = sv.declared_type.as_deref()?;
@@ -305,7 +305,7 @@ impl<'a> Exporter<'a> {
     fn connector(
         &mut self,
         k: usize,
-        sv: &tb_fmi::description::ScalarVariable,
+        sv: &tb_fmi::import::description::ScalarVariable,
         kind: &'static str,
     ) {
         let inst = &self.system.instances[k];
@@ -599,7 +599,7 @@ impl<'a> Exporter<'a> {
 /// name).
 fn parameter_value(
     md: &tb_fmi::ModelDescription,
-    sv: &tb_fmi::description::ScalarVariable,
+    sv: &tb_fmi::import::description::ScalarVariable,
     value: &toml::Value,
 ) -> String {
     let num = value

@@ -97,7 +97,7 @@ const SSD: &str = "SystemStructure.ssd";
 /// recursively).
 const MAX_DEPTH: usize = 256;
 /// The largest SSD or SSV read (as for a modelDescription.xml).
-const MAX_XML_BYTES: u64 = tb_fmi::archive::MAX_DESCRIPTION_BYTES;
+const MAX_XML_BYTES: u64 = tb_fmi::import::archive::MAX_DESCRIPTION_BYTES;
 
 /// One XML element: namespace, local name, attributes (unprefixed), children, line.
 #[derive(Debug)]

@@ -15,7 +15,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tb_fmi::fmi2::fmi2Status;
-use tb_fmi::log::LogSink;
+use tb_fmi::import::log::LogSink;
 use tb_fmi::{FmuError, Function, LoadedFmu};
 
 /// A kind of get, with the value references asked for.

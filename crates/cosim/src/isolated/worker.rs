@@ -83,7 +83,7 @@ fn serve(mut stream: UnixStream) -> i32 {
 /// The preloads, then the FMU's library; errors name the .fmu, not the unpacked copy.
 fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
     for p in &target.preload {
-        tb_fmi::library::preload_global(std::path::Path::new(p))?;
+        tb_fmi::import::library::preload_global(std::path::Path::new(p))?;
     }
     let source = std::path::Path::new(&target.source);
     if !target.description.is_empty() {
@@ -92,18 +92,26 @@ fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
                 path: source.to_path_buf(),
                 message: e.to_string(),
             })?;
-        let md = tb_fmi::description::parse(&xml).map_err(|message| FmuError::Description {
-            path: source.to_path_buf(),
-            message,
-        })?;
+        let md =
+            tb_fmi::import::description::parse(&xml).map_err(|message| FmuError::Description {
+                path: source.to_path_buf(),
+                message,
+            })?;
         let lib = Library3::load(std::path::Path::new(&target.path)).map_err(|e| {
-            tb_fmi::archive::library_error(source, &md.fmi_version, &target.model_identifier, e)
+            tb_fmi::import::archive::library_error(
+                source,
+                &md.fmi_version,
+                &target.model_identifier,
+                e,
+            )
         })?;
         return Ok(Loaded::V3(Arc::new(lib), Arc::new(md)));
     }
     Library::load(std::path::Path::new(&target.path))
         .map(Arc::new)
-        .map_err(|e| tb_fmi::archive::library_error(source, "2.0", &target.model_identifier, e))
+        .map_err(|e| {
+            tb_fmi::import::archive::library_error(source, "2.0", &target.model_identifier, e)
+        })
         .map(Loaded::V2)
 }
 

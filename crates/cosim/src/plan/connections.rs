@@ -7,7 +7,7 @@ use super::units::{self, unit_conversion, Conversion};
 use super::{ConnectionDef, Endpoint, SignalTable};
 use crate::config::{ConnectionConfig, Interpolation, SystemFile};
 use crate::{invalid, split_name, SystemError};
-use tb_fmi::description::{ModelDescription, ScalarVariable};
+use tb_fmi::import::description::{ModelDescription, ScalarVariable};
 use tb_fmi::{Causality, ScalarType, Variability};
 
 /// The checked connections (each source given its exchange slot), and the notes on unit

@@ -6,7 +6,7 @@ use super::{ConnectionDef, Endpoint, InstanceDef};
 use crate::config::SystemFile;
 use crate::split_name;
 use std::collections::HashMap;
-use tb_fmi::description::ScalarVariable;
+use tb_fmi::import::description::ScalarVariable;
 use tb_fmi::Causality;
 
 /// Direct feed-through cycles: output -> input (connection) -> output of the same instance

@@ -12,7 +12,7 @@ use crate::{invalid, split_name, SystemError};
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
-use tb_fmi::description::ScalarVariable;
+use tb_fmi::import::description::ScalarVariable;
 use tb_fmi::{Causality, FmuCache, LoadedFmu, ScalarType, Variability};
 
 /// The FMUs of `[fmus]`, loaded once each (an FMU shared by instances is unpacked once).
@@ -174,7 +174,7 @@ fn backend(
 pub(super) fn preload(file: &SystemFile, instances: &[InstanceDef]) -> Result<(), SystemError> {
     if instances.iter().any(|i| i.factory.kind() != "isolated") {
         for lib in &file.preload {
-            tb_fmi::library::preload_global(lib)?;
+            tb_fmi::import::library::preload_global(lib)?;
         }
     }
     Ok(())
@@ -259,7 +259,7 @@ impl<'a> Units<'a> {
             ctx,
             format!(
                 "unknown instance '{name}'; instances: {}",
-                tb_fmi::description::closest(name, names, all.len()).join(", ")
+                tb_fmi::import::description::closest(name, names, all.len()).join(", ")
             ),
         )
     }

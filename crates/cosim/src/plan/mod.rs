@@ -38,7 +38,7 @@ use instances::Units;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tb_fmi::description::{ModelDescription, ScalarVariable};
+use tb_fmi::import::description::{ModelDescription, ScalarVariable};
 use tb_fmi::{FmuCache, LoadedFmu, ScalarType};
 
 /// One FMU instance of the system, resolved.

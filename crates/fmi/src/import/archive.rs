@@ -2,10 +2,10 @@
 //! shared by every twinbench process, their shared library loaded once and shared by every
 //! instance.
 
-use crate::description::{self, ModelDescription};
-use crate::instance3::Library3;
-use crate::library::Library;
-use crate::store::{self, CdEntry, IndexEntry};
+use super::description::{self, ModelDescription};
+use super::library::Library;
+use super::library3::Library3;
+use super::store::{self, CdEntry, IndexEntry};
 use crate::FmuError;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
-pub use crate::store::default_store_dir;
+pub use super::store::default_store_dir;
 
 /// Limits against zip bombs.
 pub const MAX_ENTRIES: usize = 10_000;

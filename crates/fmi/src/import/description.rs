@@ -1,10 +1,11 @@
-//! modelDescription.xml reader (FMI 2.0). Tolerant as the standard asks: unknown
-//! attributes and elements (vendor annotations, tool extensions) are ignored.
+//! The model description: what twinbench knows of an FMU (FMI 2.0 and 3.0 alike), and the
+//! FMI 2.0 reader of modelDescription.xml (FMI 3.0: [`super::description3`]; what both
+//! share: [`super::reader`]). Tolerant as the standard asks: unknown attributes and elements
+//! (vendor annotations, tool extensions) are ignored.
 
+use super::reader::{num, walk, Attrs, Shared, Version, Visit};
 pub use crate::schema::{Causality, Initial, ScalarType, Variability};
 use crate::units::UnitDef;
-use quick_xml::events::{BytesStart, Event};
-use quick_xml::Reader;
 use std::collections::HashMap;
 
 #[derive(Clone, Debug, PartialEq)]
@@ -23,7 +24,7 @@ pub struct ScalarVariable {
     pub max: Option<f64>,
     pub nominal: Option<f64>,
     /// FMI 3.0: the variable's own type and, for an array element, where it sits.
-    pub fmi3: Option<crate::description3::Fmi3Slot>,
+    pub fmi3: Option<super::description3::Fmi3Slot>,
 }
 
 impl ScalarVariable {
@@ -215,124 +216,7 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
     prev[b.len()]
 }
 
-pub(crate) fn attrs(e: &BytesStart) -> Result<HashMap<String, String>, String> {
-    let mut m = HashMap::new();
-    for a in e.attributes() {
-        let a = a.map_err(|e| format!("bad attribute: {e}"))?;
-        let key = String::from_utf8_lossy(a.key.as_ref()).into_owned();
-        let val = a
-            .unescape_value()
-            .map_err(|e| format!("bad attribute value of '{key}': {e}"))?;
-        m.insert(key, val.into_owned());
-    }
-    Ok(m)
-}
-
-pub(crate) fn num(
-    m: &HashMap<String, String>,
-    key: &str,
-    ctx: &str,
-) -> Result<Option<f64>, String> {
-    match m.get(key) {
-        None => Ok(None),
-        Some(s) => s
-            .trim()
-            .parse()
-            .map(Some)
-            .map_err(|_| format!("{ctx}: attribute {key}=\"{s}\" is not a number")),
-    }
-}
-
-/// `<BaseUnit>` (the same in FMI 2.0 and 3.0) into `u`.
-pub(crate) fn base_unit(m: &HashMap<String, String>, u: &mut UnitDef) -> Result<(), String> {
-    u.kg = int_attr(m, "kg");
-    u.m = int_attr(m, "m");
-    u.s = int_attr(m, "s");
-    u.a = int_attr(m, "A");
-    u.k = int_attr(m, "K");
-    u.mol = int_attr(m, "mol");
-    u.cd = int_attr(m, "cd");
-    u.rad = int_attr(m, "rad");
-    u.factor = num(m, "factor", "BaseUnit")?.unwrap_or(1.0);
-    u.offset = num(m, "offset", "BaseUnit")?.unwrap_or(0.0);
-    Ok(())
-}
-
-/// `<DefaultExperiment>` (the same in FMI 2.0 and 3.0).
-pub(crate) fn default_experiment(m: &HashMap<String, String>) -> Result<DefaultExperiment, String> {
-    Ok(DefaultExperiment {
-        start_time: num(m, "startTime", "DefaultExperiment")?,
-        stop_time: num(m, "stopTime", "DefaultExperiment")?,
-        step_size: num(m, "stepSize", "DefaultExperiment")?,
-        tolerance: num(m, "tolerance", "DefaultExperiment")?,
-    })
-}
-
-/// An enumeration `<Item name value>` of type `ty`: (name, value).
-pub(crate) fn enumeration_item(
-    m: &HashMap<String, String>,
-    ty: &str,
-) -> Result<(String, i64), String> {
-    let item = m.get("name").cloned().unwrap_or_default();
-    let value = m
-        .get("value")
-        .and_then(|v| v.trim().parse::<i64>().ok())
-        .ok_or_else(|| format!("Enumeration '{ty}': item '{item}' has no integer value"))?;
-    Ok((item, value))
-}
-
-/// A `<DisplayUnit name factor offset>` of `unit` as a unit definition of its own:
-/// display = factor·value + offset, so SI = base.factor·(display − offset)/factor +
-/// base.offset. An FMI 3.0 `inverse` display unit is not linear and is left out.
-pub(crate) fn display_unit(
-    m: &HashMap<String, String>,
-    unit: &(String, UnitDef),
-) -> Result<Option<(String, UnitDef)>, String> {
-    let Some(name) = m.get("name") else {
-        return Err(format!("unit '{}': <DisplayUnit> without a name", unit.0));
-    };
-    if flag(m, "inverse") {
-        return Ok(None);
-    }
-    let ctx = format!("unit '{}': DisplayUnit '{name}'", unit.0);
-    let factor = num(m, "factor", &ctx)?.unwrap_or(1.0);
-    let offset = num(m, "offset", &ctx)?.unwrap_or(0.0);
-    if factor == 0.0 || !factor.is_finite() || !offset.is_finite() {
-        return Err(format!(
-            "{ctx}: factor {factor} and offset {offset} do not define a unit"
-        ));
-    }
-    let base = &unit.1;
-    Ok(Some((
-        name.clone(),
-        UnitDef {
-            factor: base.factor / factor,
-            offset: base.offset - base.factor * offset / factor,
-            ..*base
-        },
-    )))
-}
-
-/// The `<fmiModelDescription>` attributes both versions share; `token` names the GUID's
-/// attribute (`guid` in 2.0, `instantiationToken` in 3.0).
-pub(crate) fn root_attributes(md: &mut ModelDescription, m: &HashMap<String, String>, token: &str) {
-    let get = |key: &str| m.get(key).cloned().unwrap_or_default();
-    md.fmi_version = get("fmiVersion");
-    md.model_name = get("modelName");
-    md.guid = get(token);
-    md.description = get("description");
-    md.generation_tool = get("generationTool");
-}
-
-pub(crate) fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {
-    m.get(key).and_then(|s| s.trim().parse().ok()).unwrap_or(0)
-}
-
-pub(crate) fn flag(m: &HashMap<String, String>, key: &str) -> bool {
-    m.get(key).is_some_and(|s| s == "true" || s == "1")
-}
-
-fn unknown(m: &HashMap<String, String>) -> Result<Unknown, String> {
+fn unknown(m: &Attrs) -> Result<Unknown, String> {
     let index = m
         .get("index")
         .and_then(|s| s.trim().parse().ok())
@@ -357,214 +241,138 @@ fn unknown(m: &HashMap<String, String>) -> Result<Unknown, String> {
 /// Parse modelDescription.xml text (FMI 2.0, or 3.0 by its `fmiVersion`). Errors say what
 /// is wrong; the caller adds the file.
 pub fn parse(xml: &str) -> Result<ModelDescription, String> {
-    if crate::archive::sniff_fmi_version(xml).is_some_and(|v| v.starts_with("3.")) {
-        return crate::description3::parse(xml);
+    if super::archive::sniff_fmi_version(xml).is_some_and(|v| v.starts_with("3.")) {
+        return super::description3::parse(xml);
     }
-    parse2(xml)
+    let mut r = Reader2::default();
+    walk(xml, &mut r)?;
+    r.finish()
 }
 
-fn parse2(xml: &str) -> Result<ModelDescription, String> {
-    let mut reader = Reader::from_str(xml);
-    let mut md = ModelDescription::default();
-    let mut stack: Vec<String> = Vec::new();
-    let mut current: Option<ScalarVariable> = None;
-    let mut current_unit: Option<(String, UnitDef)> = None;
-    // Display units become units of their own (after the FMU's own, which win a name).
-    let mut display_units: Vec<(String, UnitDef)> = Vec::new();
-    let mut current_type: Option<String> = None;
-    let mut saw_root = false;
-    loop {
-        let ev = reader
-            .read_event()
-            .map_err(|e| format!("XML error at byte {}: {e}", reader.buffer_position()))?;
-        let (e, empty) = match &ev {
-            Event::Start(e) => (e.clone(), false),
-            Event::Empty(e) => (e.clone(), true),
-            Event::End(_) => {
-                let name = stack.pop().unwrap_or_default();
-                match name.as_str() {
-                    "ScalarVariable" => {
-                        if let Some(v) = current.take() {
-                            md.variables.push(v);
-                        }
-                    }
-                    "Unit" => {
-                        if let Some(u) = current_unit.take() {
-                            md.units.push(u);
-                        }
-                    }
-                    "SimpleType" => current_type = None,
-                    _ => {}
-                }
-                continue;
-            }
-            Event::Eof => break,
-            _ => continue,
-        };
-        let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
-        let m = attrs(&e)?;
+/// The FMI 2.0 reader: the shared elements, then `<ScalarVariable>`s and the model
+/// structure.
+#[derive(Default)]
+struct Reader2 {
+    md: ModelDescription,
+    shared: Shared,
+    current: Option<ScalarVariable>,
+}
+
+impl Visit for Reader2 {
+    fn start(
+        &mut self,
+        stack: &[String],
+        name: &str,
+        m: &Attrs,
+        empty: bool,
+    ) -> Result<(), String> {
         let parent = stack.last().map(String::as_str).unwrap_or("");
-        match (parent, name.as_str()) {
-            ("", "fmiModelDescription") => {
-                saw_root = true;
-                root_attributes(&mut md, &m, "guid");
-            }
-            ("", other) => {
-                return Err(format!(
-                    "root element is <{other}>, expected <fmiModelDescription>"
-                ))
-            }
-            ("fmiModelDescription", "CoSimulation") => {
-                md.co_simulation = Some(CoSimulation {
-                    model_identifier: m
-                        .get("modelIdentifier")
-                        .cloned()
-                        .ok_or("<CoSimulation> has no modelIdentifier")?,
-                    needs_execution_tool: flag(&m, "needsExecutionTool"),
-                    can_handle_variable_communication_step_size: flag(
-                        &m,
-                        "canHandleVariableCommunicationStepSize",
-                    ),
-                    can_be_instantiated_only_once_per_process: flag(
-                        &m,
-                        "canBeInstantiatedOnlyOncePerProcess",
-                    ),
-                    can_get_and_set_fmu_state: flag(&m, "canGetAndSetFMUstate"),
-                    can_serialize_fmu_state: flag(&m, "canSerializeFMUstate"),
-                    can_interpolate_inputs: flag(&m, "canInterpolateInputs"),
-                    provides_directional_derivative: flag(&m, "providesDirectionalDerivative"),
-                })
-            }
-            ("fmiModelDescription", "ModelExchange") => md.has_model_exchange = true,
-            ("fmiModelDescription", "DefaultExperiment") => {
-                md.default_experiment = Some(crate::description::default_experiment(&m)?)
-            }
-            ("UnitDefinitions", "Unit") => {
-                let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
-                current_unit = Some((uname, UnitDef::DIMENSIONLESS));
-                if empty {
-                    md.units.push(current_unit.take().unwrap());
-                }
-            }
-            ("Unit", "DisplayUnit") => {
-                if let Some(u) = &current_unit {
-                    if let Some(d) = crate::description::display_unit(&m, u)? {
-                        display_units.push(d);
-                    }
-                }
-            }
-            ("Unit", "BaseUnit") => {
-                if let Some((_, u)) = current_unit.as_mut() {
-                    crate::description::base_unit(&m, u)?;
-                }
-            }
-            ("TypeDefinitions", "SimpleType") => current_type = m.get("name").cloned(),
-            ("SimpleType", "Real") => {
-                if let (Some(t), Some(u)) = (&current_type, m.get("unit")) {
-                    md.type_units.insert(t.clone(), u.clone());
-                }
-            }
-            ("Enumeration", "Item") => {
-                if let Some(t) = &current_type {
-                    let item = crate::description::enumeration_item(&m, t)?;
-                    md.enumerations.entry(t.clone()).or_default().push(item);
-                }
-            }
-            ("LogCategories", "Category") => {
-                if let Some(n) = m.get("name") {
-                    md.log_categories.push(n.clone());
-                }
-            }
+        if self
+            .shared
+            .start(&mut self.md, Version::V2, parent, name, m, empty)?
+        {
+            return Ok(());
+        }
+        match (parent, name) {
             ("ModelVariables", "ScalarVariable") => {
-                let vname = m
-                    .get("name")
-                    .cloned()
-                    .ok_or("<ScalarVariable> without a name")?;
-                let vr = m
-                    .get("valueReference")
-                    .and_then(|s| s.trim().parse().ok())
-                    .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
-                let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
-                let causality = match m.get("causality") {
-                    Some(c) => Causality::parse(c).map_err(ctx)?,
-                    None => Causality::DEFAULT,
-                };
-                let variability = match m.get("variability") {
-                    Some(v) => Variability::parse(v).map_err(ctx)?,
-                    None => Variability::DEFAULT,
-                };
-                let initial = match m.get("initial") {
-                    Some(i) => Some(Initial::parse(i).map_err(ctx)?),
-                    None => None,
-                };
-                current = Some(ScalarVariable {
-                    name: vname,
-                    value_reference: vr,
-                    description: m.get("description").cloned().unwrap_or_default(),
-                    causality,
-                    variability,
-                    initial,
-                    ty: ScalarType::Real,
-                    declared_type: None,
-                    unit: None,
-                    start: None,
-                    min: None,
-                    max: None,
-                    nominal: None,
-                    fmi3: None,
-                });
+                let v = scalar_variable(m)?;
                 if empty {
-                    return Err(format!(
-                        "variable '{}' has no type element",
-                        current.unwrap().name
-                    ));
+                    return Err(format!("variable '{}' has no type element", v.name));
                 }
+                self.current = Some(v);
             }
             ("ScalarVariable", t @ ("Real" | "Integer" | "Boolean" | "String" | "Enumeration")) => {
-                if let Some(v) = current.as_mut() {
+                if let Some(v) = self.current.as_mut() {
                     let ctx = format!("variable '{}'", v.name);
                     v.ty = ScalarType::parse(t).expect("matched above");
                     v.declared_type = m.get("declaredType").cloned();
                     v.unit = m.get("unit").cloned();
                     v.start = m.get("start").cloned();
-                    v.min = num(&m, "min", &ctx)?;
-                    v.max = num(&m, "max", &ctx)?;
-                    v.nominal = num(&m, "nominal", &ctx)?;
+                    v.min = num(m, "min", &ctx)?;
+                    v.max = num(m, "max", &ctx)?;
+                    v.nominal = num(m, "nominal", &ctx)?;
                 }
             }
-            ("Outputs", "Unknown") => md.outputs.push(unknown(&m)?),
-            ("InitialUnknowns", "Unknown") => md.initial_unknowns.push(unknown(&m)?),
+            ("Outputs", "Unknown") => self.md.outputs.push(unknown(m)?),
+            ("InitialUnknowns", "Unknown") => self.md.initial_unknowns.push(unknown(m)?),
             _ => {}
         }
-        if !empty {
-            stack.push(name);
-        }
+        Ok(())
     }
-    if !saw_root {
-        return Err("no <fmiModelDescription> element".into());
-    }
-    for d in display_units {
-        if md.unit_def(&d.0).is_none() {
-            md.units.push(d);
+
+    fn end(&mut self, _stack: &[String], name: &str) {
+        if name == "ScalarVariable" {
+            self.md.variables.extend(self.current.take());
         }
+        self.shared.end(&mut self.md, Version::V2, name);
     }
-    check_names_and_aliases(&md)?;
-    let n = md.variables.len();
-    for u in md.outputs.iter().chain(&md.initial_unknowns) {
-        if u.index == 0 || u.index > n {
-            return Err(format!(
-                "ModelStructure refers to variable index {} of {n}",
-                u.index
-            ));
+}
+
+impl Reader2 {
+    /// The description, checked: unique names, aliases as the standard allows them, model
+    /// structure indices in range.
+    fn finish(mut self) -> Result<ModelDescription, String> {
+        self.shared.finish(&mut self.md)?;
+        let md = self.md;
+        check_names_and_aliases(&md)?;
+        let n = md.variables.len();
+        for u in md.outputs.iter().chain(&md.initial_unknowns) {
+            if u.index == 0 || u.index > n {
+                return Err(format!(
+                    "ModelStructure refers to variable index {} of {n}",
+                    u.index
+                ));
+            }
+            if let Some(d) = u.dependencies.iter().flatten().find(|&&d| d == 0 || d > n) {
+                return Err(format!(
+                    "ModelStructure: dependency index {d} of variable {} is not in 1..={n}",
+                    u.index
+                ));
+            }
         }
-        if let Some(d) = u.dependencies.iter().flatten().find(|&&d| d == 0 || d > n) {
-            return Err(format!(
-                "ModelStructure: dependency index {d} of variable {} is not in 1..={n}",
-                u.index
-            ));
-        }
+        Ok(md)
     }
-    Ok(md)
+}
+
+/// A `<ScalarVariable>`'s own attributes (its type comes with its child element).
+fn scalar_variable(m: &Attrs) -> Result<ScalarVariable, String> {
+    let vname = m
+        .get("name")
+        .cloned()
+        .ok_or("<ScalarVariable> without a name")?;
+    let vr = m
+        .get("valueReference")
+        .and_then(|s| s.trim().parse().ok())
+        .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
+    let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
+    let causality = match m.get("causality") {
+        Some(c) => Causality::parse(c).map_err(ctx)?,
+        None => Causality::DEFAULT,
+    };
+    let variability = match m.get("variability") {
+        Some(v) => Variability::parse(v).map_err(ctx)?,
+        None => Variability::DEFAULT,
+    };
+    let initial = match m.get("initial") {
+        Some(i) => Some(Initial::parse(i).map_err(ctx)?),
+        None => None,
+    };
+    Ok(ScalarVariable {
+        name: vname,
+        value_reference: vr,
+        description: m.get("description").cloned().unwrap_or_default(),
+        causality,
+        variability,
+        initial,
+        ty: ScalarType::Real,
+        declared_type: None,
+        unit: None,
+        start: None,
+        min: None,
+        max: None,
+        nominal: None,
+        fmi3: None,
+    })
 }
 
 /// Variable names are unique; a value reference shared by several variables (an alias) is
@@ -696,6 +504,28 @@ mod tests {
             .unwrap_err()
             .contains("max=\"lots\" is not a number"));
         assert!(parse("<fmiModelDescription><broken").is_err());
+    }
+
+    #[test]
+    fn a_truncated_description_is_refused_not_read_as_a_shorter_model() {
+        // Cut after the first variable: without the check, a model of one variable.
+        let cut = &XML[..XML.find("</ScalarVariable>").unwrap() + "</ScalarVariable>".len()];
+        let e = parse(cut).unwrap_err();
+        assert!(
+            e.contains("the file ends before <ModelVariables> is closed (truncated?)"),
+            "{e}"
+        );
+        // FMI 3.0 alike.
+        let v3 = r#"<fmiModelDescription fmiVersion="3.0" modelName="m" instantiationToken="t">
+  <CoSimulation modelIdentifier="m"/>
+  <ModelVariables>
+    <Float64 name="x" valueReference="1" causality="output"/>"#;
+        let e = parse(v3).unwrap_err();
+        assert!(
+            e.contains("the file ends before <ModelVariables> is closed"),
+            "{e}"
+        );
+        assert!(parse(&format!("{v3}</ModelVariables><ModelStructure><Output valueReference=\"1\"/></ModelStructure></fmiModelDescription>")).is_ok());
     }
 
     #[test]

@@ -16,14 +16,9 @@
 //!   Execution are listed in `unsupported` (the archive check refuses such an FMU before
 //!   anything runs).
 
-use crate::description::{
-    attrs, check_names_and_aliases, flag, num, root_attributes, CoSimulation, ModelDescription,
-    ScalarVariable, Unknown,
-};
+use super::description::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
+use super::reader::{num, walk, Attrs, Shared, Version, Visit};
 use crate::schema::{Causality, Initial, ScalarType, Variability};
-use crate::units::UnitDef;
-use quick_xml::events::Event;
-use quick_xml::Reader;
 use std::collections::HashMap;
 
 /// An FMI 3.0 variable type (the element name in `ModelVariables`).
@@ -138,7 +133,7 @@ struct Unknown3 {
     dependencies: Option<Vec<u32>>,
 }
 
-fn unknown3(m: &HashMap<String, String>, what: &str) -> Result<Unknown3, String> {
+fn unknown3(m: &Attrs, what: &str) -> Result<Unknown3, String> {
     let vr = m
         .get("valueReference")
         .and_then(|s| s.trim().parse().ok())
@@ -159,320 +154,253 @@ fn unknown3(m: &HashMap<String, String>, what: &str) -> Result<Unknown3, String>
 
 /// Parse an FMI 3.0 modelDescription.xml.
 pub fn parse(xml: &str) -> Result<ModelDescription, String> {
-    let mut reader = Reader::from_str(xml);
-    let mut md = ModelDescription::default();
-    let mut stack: Vec<String> = Vec::new();
-    let mut declared: Vec<Declared> = Vec::new();
-    let mut current: Option<Declared> = None;
-    let mut current_unit: Option<(String, UnitDef)> = None;
-    // Display units become units of their own (after the FMU's own, which win a name).
-    let mut display_units: Vec<(String, UnitDef)> = Vec::new();
-    let mut current_type: Option<String> = None;
-    let mut outputs: Vec<Unknown3> = Vec::new();
-    let mut initial_unknowns: Vec<Unknown3> = Vec::new();
-    let mut saw_root = false;
-    // Variables without a column (Clock): the ModelStructure may list them.
-    let mut skipped_vrs: Vec<u32> = Vec::new();
-    loop {
-        let ev = reader
-            .read_event()
-            .map_err(|e| format!("XML error at byte {}: {e}", reader.buffer_position()))?;
-        let (e, empty) = match &ev {
-            Event::Start(e) => (e.clone(), false),
-            Event::Empty(e) => (e.clone(), true),
-            Event::End(_) => {
-                let name = stack.pop().unwrap_or_default();
-                if stack.last().map(String::as_str) == Some("ModelVariables") {
-                    if let Some(d) = current.take() {
-                        declared.push(d);
-                    }
-                }
-                match name.as_str() {
-                    "Unit" => {
-                        if let Some(u) = current_unit.take() {
-                            md.units.push(u);
-                        }
-                    }
-                    n if n.ends_with("Type") => current_type = None,
-                    _ => {}
-                }
-                continue;
-            }
-            Event::Eof => break,
-            _ => continue,
-        };
-        let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
-        let m = attrs(&e)?;
+    let mut r = Reader3::default();
+    walk(xml, &mut r)?;
+    r.finish()
+}
+
+/// The FMI 3.0 reader: the shared elements, then the typed variables (with their
+/// dimensions, start values and aliases) and the model structure by value reference.
+#[derive(Default)]
+struct Reader3 {
+    md: ModelDescription,
+    shared: Shared,
+    declared: Vec<Declared>,
+    current: Option<Declared>,
+    outputs: Vec<Unknown3>,
+    initial_unknowns: Vec<Unknown3>,
+    /// Variables without a column (Clock): the ModelStructure may list them.
+    skipped_vrs: Vec<u32>,
+}
+
+impl Visit for Reader3 {
+    fn start(
+        &mut self,
+        stack: &[String],
+        name: &str,
+        m: &Attrs,
+        empty: bool,
+    ) -> Result<(), String> {
         let parent = stack.last().map(String::as_str).unwrap_or("");
+        if self
+            .shared
+            .start(&mut self.md, Version::V3, parent, name, m, empty)?
+        {
+            return Ok(());
+        }
         // A child of a variable element (Dimension, Start, Alias).
         let in_variable = stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables";
-        match (parent, name.as_str()) {
-            ("", "fmiModelDescription") => {
-                saw_root = true;
-                root_attributes(&mut md, &m, "instantiationToken");
-            }
-            ("", other) => {
-                return Err(format!(
-                    "root element is <{other}>, expected <fmiModelDescription>"
-                ))
-            }
-            ("fmiModelDescription", "CoSimulation") => {
-                md.co_simulation = Some(CoSimulation {
-                    model_identifier: m
-                        .get("modelIdentifier")
-                        .cloned()
-                        .ok_or("<CoSimulation> has no modelIdentifier")?,
-                    needs_execution_tool: flag(&m, "needsExecutionTool"),
-                    can_handle_variable_communication_step_size: flag(
-                        &m,
-                        "canHandleVariableCommunicationStepSize",
-                    ),
-                    can_be_instantiated_only_once_per_process: flag(
-                        &m,
-                        "canBeInstantiatedOnlyOncePerProcess",
-                    ),
-                    can_get_and_set_fmu_state: flag(&m, "canGetAndSetFMUState"),
-                    can_serialize_fmu_state: flag(&m, "canSerializeFMUState"),
-                    can_interpolate_inputs: false,
-                    provides_directional_derivative: flag(&m, "providesDirectionalDerivatives"),
-                })
-            }
-            ("fmiModelDescription", "ModelExchange") => md.has_model_exchange = true,
-            ("fmiModelDescription", "ScheduledExecution") => md
+        match (parent, name) {
+            ("fmiModelDescription", "ScheduledExecution") => self
+                .md
                 .unsupported
                 .push("Scheduled Execution (<ScheduledExecution>)".into()),
-            ("fmiModelDescription", "DefaultExperiment") => {
-                md.default_experiment = Some(crate::description::default_experiment(&m)?)
-            }
-            ("UnitDefinitions", "Unit") => {
-                let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
-                current_unit = Some((uname, UnitDef::DIMENSIONLESS));
-                if empty {
-                    md.units.push(current_unit.take().expect("just set"));
-                }
-            }
-            ("Unit", "DisplayUnit") => {
-                if let Some(u) = &current_unit {
-                    if let Some(d) = crate::description::display_unit(&m, u)? {
-                        display_units.push(d);
-                    }
-                }
-            }
-            ("Unit", "BaseUnit") => {
-                if let Some((_, u)) = current_unit.as_mut() {
-                    crate::description::base_unit(&m, u)?;
-                }
-            }
-            ("TypeDefinitions", t) if t.ends_with("Type") => {
-                current_type = m.get("name").cloned();
-                if let (Some(tn), Some(u)) = (&current_type, m.get("unit")) {
-                    md.type_units.insert(tn.clone(), u.clone());
-                }
-                if empty {
-                    current_type = None;
-                }
-            }
-            ("EnumerationType", "Item") => {
-                if let Some(t) = &current_type {
-                    let item = crate::description::enumeration_item(&m, t)?;
-                    md.enumerations.entry(t.clone()).or_default().push(item);
-                }
-            }
-            ("LogCategories", "Category") => {
-                if let Some(n) = m.get("name") {
-                    md.log_categories.push(n.clone());
-                }
-            }
             ("ModelVariables", t) => {
-                let vname = m
-                    .get("name")
-                    .cloned()
-                    .ok_or_else(|| format!("<{t}> without a name"))?;
-                let vr: u32 = m
-                    .get("valueReference")
-                    .and_then(|s| s.trim().parse().ok())
-                    .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
-                if t == "Clock" {
-                    md.unsupported
-                        .push(format!("clocks (variable '{vname}' is a Clock)"));
-                }
-                if let Some(c) = m.get("clocks") {
-                    md.unsupported.push(format!(
-                        "clocks (variable '{vname}' is clocked by {})",
-                        c.trim()
-                    ));
-                }
-                if Fmi3Type::parse(t).is_none() && t != "Clock" {
-                    return Err(format!(
-                        "ModelVariables: <{t}> is not an FMI 3.0 variable element (Float64, Int32, Boolean, String, …; an FMI 2.0 description under fmiVersion=\"3.0\"?)"
-                    ));
-                }
-                let Some(ty) = Fmi3Type::parse(t) else {
-                    skipped_vrs.push(vr);
-                    if !empty {
-                        stack.push(name);
+                if let Some(d) = self.variable(t, m)? {
+                    match empty {
+                        true => self.declared.push(d),
+                        false => self.current = Some(d),
                     }
-                    continue;
-                };
-                let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
-                let structural =
-                    m.get("causality").map(String::as_str) == Some("structuralParameter");
-                let causality = match m.get("causality").map(String::as_str) {
-                    Some("structuralParameter") => Causality::Parameter,
-                    Some(c) => Causality::parse(c).map_err(ctx)?,
-                    None => Causality::DEFAULT,
-                };
-                // FMI 3.0: variables other than Float32/Float64 are discrete by default.
-                let variability = match m.get("variability") {
-                    Some(v) => Variability::parse(v).map_err(ctx)?,
-                    None if matches!(ty, Fmi3Type::Float32 | Fmi3Type::Float64) => {
-                        Variability::Continuous
-                    }
-                    None => Variability::Discrete,
-                };
-                let initial = match m.get("initial") {
-                    Some(i) => Some(Initial::parse(i).map_err(ctx)?),
-                    None => None,
-                };
-                let var = ScalarVariable {
-                    name: vname.clone(),
-                    value_reference: vr,
-                    description: m.get("description").cloned().unwrap_or_default(),
-                    causality,
-                    variability,
-                    initial,
-                    ty: ty.kind(),
-                    declared_type: m.get("declaredType").cloned(),
-                    unit: m.get("unit").cloned(),
-                    start: m.get("start").cloned(),
-                    min: if ty.kind() == ScalarType::Real {
-                        num(&m, "min", &format!("variable '{vname}'"))?
-                    } else {
-                        m.get("min").and_then(|s| s.trim().parse().ok())
-                    },
-                    max: if ty.kind() == ScalarType::Real {
-                        num(&m, "max", &format!("variable '{vname}'"))?
-                    } else {
-                        m.get("max").and_then(|s| s.trim().parse().ok())
-                    },
-                    nominal: num(&m, "nominal", &format!("variable '{vname}'"))?,
-                    fmi3: None,
-                };
-                let d = Declared {
-                    var,
-                    ty,
-                    structural,
-                    dims: Vec::new(),
-                    starts: Vec::new(),
-                    aliases: Vec::new(),
-                };
-                if empty {
-                    declared.push(d);
-                } else {
-                    current = Some(d);
                 }
             }
             (_, "Dimension") if in_variable => {
-                if let Some(d) = current.as_mut() {
-                    let dim = if let Some(s) = m.get("start") {
-                        Dim::Fixed(s.trim().parse().map_err(|_| {
-                            format!(
-                                "variable '{}': Dimension start=\"{s}\" is not a size",
-                                d.var.name
-                            )
-                        })?)
-                    } else if let Some(r) = m.get("valueReference") {
-                        Dim::Parameter(r.trim().parse().map_err(|_| {
-                            format!(
-                                "variable '{}': Dimension valueReference=\"{r}\" is not a value reference",
-                                d.var.name
-                            )
-                        })?)
-                    } else {
-                        return Err(format!(
-                            "variable '{}': <Dimension> has neither start nor valueReference",
-                            d.var.name
-                        ));
-                    };
-                    d.dims.push(dim);
+                if let Some(d) = self.current.as_mut() {
+                    d.dims.push(dimension(m, &d.var.name)?);
                 }
             }
             (_, "Start") if in_variable => {
-                if let Some(d) = current.as_mut() {
+                if let Some(d) = self.current.as_mut() {
                     d.starts.push(m.get("value").cloned().unwrap_or_default());
                 }
             }
             (_, "Alias") if in_variable => {
-                if let Some(d) = current.as_mut() {
+                if let Some(d) = self.current.as_mut() {
                     let a = m.get("name").cloned().ok_or_else(|| {
                         format!("variable '{}': <Alias> without a name", d.var.name)
                     })?;
                     d.aliases.push(a);
                 }
             }
-            ("ModelStructure", "Output") => outputs.push(unknown3(&m, "Output")?),
+            ("ModelStructure", "Output") => self.outputs.push(unknown3(m, "Output")?),
             ("ModelStructure", "InitialUnknown") => {
-                initial_unknowns.push(unknown3(&m, "InitialUnknown")?)
+                self.initial_unknowns.push(unknown3(m, "InitialUnknown")?)
             }
             _ => {}
         }
-        if !empty {
-            stack.push(name);
+        Ok(())
+    }
+
+    fn end(&mut self, stack: &[String], name: &str) {
+        if stack.last().map(String::as_str) == Some("ModelVariables") {
+            self.declared.extend(self.current.take());
         }
+        self.shared.end(&mut self.md, Version::V3, name);
     }
-    if !saw_root {
-        return Err("no <fmiModelDescription> element".into());
-    }
-    for d in display_units {
-        if md.unit_def(&d.0).is_none() {
-            md.units.push(d);
+}
+
+impl Reader3 {
+    /// A variable element of `<ModelVariables>` (None: a Clock, which has no column).
+    fn variable(&mut self, t: &str, m: &Attrs) -> Result<Option<Declared>, String> {
+        let vname = m
+            .get("name")
+            .cloned()
+            .ok_or_else(|| format!("<{t}> without a name"))?;
+        let vr: u32 = m
+            .get("valueReference")
+            .and_then(|s| s.trim().parse().ok())
+            .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
+        if t == "Clock" {
+            self.md
+                .unsupported
+                .push(format!("clocks (variable '{vname}' is a Clock)"));
         }
-    }
-    expand(&mut md, declared)?;
-    // Value references become 1-based indices (every element of an array).
-    let mut indices: HashMap<u32, Vec<usize>> = HashMap::new();
-    for (i, v) in md.variables.iter().enumerate() {
-        let vr = v.fmi3.map_or(v.value_reference, |s| s.vr);
-        indices.entry(vr).or_default().push(i + 1);
-    }
-    let to_unknowns = |list: Vec<Unknown3>, what: &str| -> Result<Vec<Unknown>, String> {
-        let mut out = Vec::new();
-        for u in list {
-            if skipped_vrs.contains(&u.vr) {
-                continue;
+        if let Some(c) = m.get("clocks") {
+            self.md.unsupported.push(format!(
+                "clocks (variable '{vname}' is clocked by {})",
+                c.trim()
+            ));
+        }
+        let Some(ty) = Fmi3Type::parse(t) else {
+            if t != "Clock" {
+                return Err(format!(
+                    "ModelVariables: <{t}> is not an FMI 3.0 variable element (Float64, Int32, Boolean, String, …; an FMI 2.0 description under fmiVersion=\"3.0\"?)"
+                ));
             }
-            let idx = indices.get(&u.vr).ok_or_else(|| {
-                format!(
-                    "ModelStructure: <{what} valueReference=\"{}\"> names no variable",
-                    u.vr
-                )
-            })?;
-            let deps = match u.dependencies {
-                None => None,
-                Some(ds) => {
-                    let mut v = Vec::new();
-                    for d in ds {
-                        if skipped_vrs.contains(&d) {
-                            continue;
-                        }
-                        v.extend(indices.get(&d).ok_or_else(|| {
-                            format!("ModelStructure: dependency {d} of <{what} valueReference=\"{}\"> names no variable", u.vr)
-                        })?);
-                    }
-                    Some(v)
-                }
-            };
-            out.extend(idx.iter().map(|&index| Unknown {
-                index,
-                dependencies: deps.clone(),
-            }));
+            self.skipped_vrs.push(vr);
+            return Ok(None);
+        };
+        Ok(Some(declared(vname, vr, ty, m)?))
+    }
+
+    /// Arrays expanded, value references of the model structure turned into indices, names
+    /// and aliases checked.
+    fn finish(mut self) -> Result<ModelDescription, String> {
+        self.shared.finish(&mut self.md)?;
+        let mut md = self.md;
+        expand(&mut md, self.declared)?;
+        // Value references become 1-based indices (every element of an array).
+        let mut indices: HashMap<u32, Vec<usize>> = HashMap::new();
+        for (i, v) in md.variables.iter().enumerate() {
+            let vr = v.fmi3.map_or(v.value_reference, |s| s.vr);
+            indices.entry(vr).or_default().push(i + 1);
         }
-        Ok(out)
+        let skipped = &self.skipped_vrs;
+        md.outputs = to_unknowns(self.outputs, "Output", &indices, skipped)?;
+        md.initial_unknowns =
+            to_unknowns(self.initial_unknowns, "InitialUnknown", &indices, skipped)?;
+        check_names_and_aliases(&md)?;
+        Ok(md)
+    }
+}
+
+/// A declared variable's attributes (FMI 3.0: variables other than Float32/Float64 are
+/// discrete by default; a structural parameter is a parameter twinbench never changes).
+fn declared(vname: String, vr: u32, ty: Fmi3Type, m: &Attrs) -> Result<Declared, String> {
+    let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
+    let structural = m.get("causality").map(String::as_str) == Some("structuralParameter");
+    let causality = match m.get("causality").map(String::as_str) {
+        Some("structuralParameter") => Causality::Parameter,
+        Some(c) => Causality::parse(c).map_err(ctx)?,
+        None => Causality::DEFAULT,
     };
-    md.outputs = to_unknowns(outputs, "Output")?;
-    md.initial_unknowns = to_unknowns(initial_unknowns, "InitialUnknown")?;
-    check_names_and_aliases(&md)?;
-    Ok(md)
+    let variability = match m.get("variability") {
+        Some(v) => Variability::parse(v).map_err(ctx)?,
+        None if matches!(ty, Fmi3Type::Float32 | Fmi3Type::Float64) => Variability::Continuous,
+        None => Variability::Discrete,
+    };
+    let initial = match m.get("initial") {
+        Some(i) => Some(Initial::parse(i).map_err(ctx)?),
+        None => None,
+    };
+    let at = format!("variable '{vname}'");
+    let bound = |key: &str| -> Result<Option<f64>, String> {
+        match ty.kind() == ScalarType::Real {
+            true => num(m, key, &at),
+            false => Ok(m.get(key).and_then(|s| s.trim().parse().ok())),
+        }
+    };
+    let var = ScalarVariable {
+        name: vname.clone(),
+        value_reference: vr,
+        description: m.get("description").cloned().unwrap_or_default(),
+        causality,
+        variability,
+        initial,
+        ty: ty.kind(),
+        declared_type: m.get("declaredType").cloned(),
+        unit: m.get("unit").cloned(),
+        start: m.get("start").cloned(),
+        min: bound("min")?,
+        max: bound("max")?,
+        nominal: num(m, "nominal", &at)?,
+        fmi3: None,
+    };
+    Ok(Declared {
+        var,
+        ty,
+        structural,
+        dims: Vec::new(),
+        starts: Vec::new(),
+        aliases: Vec::new(),
+    })
+}
+
+/// A `<Dimension>`: a fixed size, or a structural parameter's value reference.
+fn dimension(m: &Attrs, variable: &str) -> Result<Dim, String> {
+    if let Some(s) = m.get("start") {
+        return Ok(Dim::Fixed(s.trim().parse().map_err(|_| {
+            format!("variable '{variable}': Dimension start=\"{s}\" is not a size")
+        })?));
+    }
+    if let Some(r) = m.get("valueReference") {
+        return Ok(Dim::Parameter(r.trim().parse().map_err(|_| {
+            format!(
+                "variable '{variable}': Dimension valueReference=\"{r}\" is not a value reference"
+            )
+        })?));
+    }
+    Err(format!(
+        "variable '{variable}': <Dimension> has neither start nor valueReference"
+    ))
+}
+
+/// Model-structure entries by value reference → by 1-based index (an array's entry for
+/// each of its elements); entries of Clocks are left out.
+fn to_unknowns(
+    list: Vec<Unknown3>,
+    what: &str,
+    indices: &HashMap<u32, Vec<usize>>,
+    skipped: &[u32],
+) -> Result<Vec<Unknown>, String> {
+    let mut out = Vec::new();
+    for u in list {
+        if skipped.contains(&u.vr) {
+            continue;
+        }
+        let idx = indices.get(&u.vr).ok_or_else(|| {
+            format!(
+                "ModelStructure: <{what} valueReference=\"{}\"> names no variable",
+                u.vr
+            )
+        })?;
+        let deps = match u.dependencies {
+            None => None,
+            Some(ds) => {
+                let mut v = Vec::new();
+                for d in ds.into_iter().filter(|d| !skipped.contains(d)) {
+                    v.extend(indices.get(&d).ok_or_else(|| {
+                        format!("ModelStructure: dependency {d} of <{what} valueReference=\"{}\"> names no variable", u.vr)
+                    })?);
+                }
+                Some(v)
+            }
+        };
+        out.extend(idx.iter().map(|&index| Unknown {
+            index,
+            dependencies: deps.clone(),
+        }));
+    }
+    Ok(out)
 }
 
 /// The largest array twinbench expands into columns.

@@ -1,10 +1,10 @@
 //! A safe handle on one FMU instance: every call checked, errors carry the instance name,
 //! the simulation time and the FMU's last log lines.
 
+use super::library::Library;
+use super::log::{fmi2_logger, log_env, LogEnv, LogSink};
 use crate::fmi2::*;
 use crate::functions::Function;
-use crate::library::Library;
-use crate::log::{fmi2_logger, log_env, LogEnv, LogSink};
 use crate::FmuError;
 use std::ffi::{c_void, CString};
 use std::path::Path;

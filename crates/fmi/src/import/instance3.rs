@@ -1,135 +1,25 @@
-//! FMI 3.0 Co-Simulation: the library's functions and a safe instance with the same calls
-//! as an FMI 2.0 [`crate::Instance`], so every backend and the master stay version-blind.
+//! FMI 3.0 Co-Simulation: a safe instance with the same calls as an FMI 2.0
+//! [`crate::Instance`], so every backend and the master stay version-blind (the library and
+//! its functions: [`super::library3`]).
 //!
 //! Values travel as twinbench's kinds (Real as f64, Integer and Boolean as i32, String);
 //! each value reference is one variable of the [`ModelDescription`] (array elements have
-//! their own, see [`crate::description3`]) and its [`Fmi3Slot`] says which typed call and
+//! their own, see [`super::description3`]) and its [`Fmi3Slot`] says which typed call and
 //! which element it is. Instances are created with event mode and early return off, as
 //! FMPy's master does; `terminateSimulation` from `fmi3DoStep` ends the run at the step's end.
 
-use crate::description::ModelDescription;
-use crate::description3::{Fmi3Slot, Fmi3Type};
+use super::description::ModelDescription;
+use super::description3::{Fmi3Slot, Fmi3Type};
+use super::log::LogSink;
 use crate::fmi2::fmi2Status;
 use crate::functions::Function;
-use crate::log::LogSink;
 use crate::FmuError;
 use std::collections::HashMap;
 use std::ffi::{c_char, c_void, CStr, CString};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 
-type Inst = *mut c_void;
-type Vr = u32;
-type Status = i32;
-type Logger = unsafe extern "C" fn(*mut c_void, Status, *const c_char, *const c_char);
-
-macro_rules! api {
-    ($($field:ident : $sym:literal : fn($($arg:ty),*) $(-> $ret:ty)?;)*) => {
-        /// The FMI 3.0 functions twinbench calls, resolved once.
-        #[allow(non_snake_case)]
-        pub struct Fmi3Api {
-            $(pub $field: unsafe extern "C" fn($($arg),*) $(-> $ret)?,)*
-        }
-        impl Fmi3Api {
-            fn resolve(lib: &libloading::Library) -> Result<Fmi3Api, &'static str> {
-                Ok(Fmi3Api {
-                    $($field: unsafe {
-                        *lib.get::<unsafe extern "C" fn($($arg),*) $(-> $ret)?>(concat!($sym, "\0").as_bytes())
-                            .map_err(|_| $sym)?
-                    },)*
-                })
-            }
-        }
-    };
-}
-
-api! {
-    get_version: "fmi3GetVersion": fn() -> *const c_char;
-    set_debug_logging: "fmi3SetDebugLogging": fn(Inst, bool, usize, *const *const c_char) -> Status;
-    instantiate_co_simulation: "fmi3InstantiateCoSimulation": fn(
-        *const c_char, *const c_char, *const c_char, bool, bool, bool, bool,
-        *const Vr, usize, *mut c_void, Option<Logger>, *const c_void) -> Inst;
-    free_instance: "fmi3FreeInstance": fn(Inst);
-    enter_initialization_mode: "fmi3EnterInitializationMode": fn(Inst, bool, f64, f64, bool, f64) -> Status;
-    exit_initialization_mode: "fmi3ExitInitializationMode": fn(Inst) -> Status;
-    terminate: "fmi3Terminate": fn(Inst) -> Status;
-    reset: "fmi3Reset": fn(Inst) -> Status;
-    get_float32: "fmi3GetFloat32": fn(Inst, *const Vr, usize, *mut f32, usize) -> Status;
-    get_float64: "fmi3GetFloat64": fn(Inst, *const Vr, usize, *mut f64, usize) -> Status;
-    get_int8: "fmi3GetInt8": fn(Inst, *const Vr, usize, *mut i8, usize) -> Status;
-    get_uint8: "fmi3GetUInt8": fn(Inst, *const Vr, usize, *mut u8, usize) -> Status;
-    get_int16: "fmi3GetInt16": fn(Inst, *const Vr, usize, *mut i16, usize) -> Status;
-    get_uint16: "fmi3GetUInt16": fn(Inst, *const Vr, usize, *mut u16, usize) -> Status;
-    get_int32: "fmi3GetInt32": fn(Inst, *const Vr, usize, *mut i32, usize) -> Status;
-    get_uint32: "fmi3GetUInt32": fn(Inst, *const Vr, usize, *mut u32, usize) -> Status;
-    get_int64: "fmi3GetInt64": fn(Inst, *const Vr, usize, *mut i64, usize) -> Status;
-    get_uint64: "fmi3GetUInt64": fn(Inst, *const Vr, usize, *mut u64, usize) -> Status;
-    get_boolean: "fmi3GetBoolean": fn(Inst, *const Vr, usize, *mut u8, usize) -> Status;
-    get_string: "fmi3GetString": fn(Inst, *const Vr, usize, *mut *const c_char, usize) -> Status;
-    set_float32: "fmi3SetFloat32": fn(Inst, *const Vr, usize, *const f32, usize) -> Status;
-    set_float64: "fmi3SetFloat64": fn(Inst, *const Vr, usize, *const f64, usize) -> Status;
-    set_int8: "fmi3SetInt8": fn(Inst, *const Vr, usize, *const i8, usize) -> Status;
-    set_uint8: "fmi3SetUInt8": fn(Inst, *const Vr, usize, *const u8, usize) -> Status;
-    set_int16: "fmi3SetInt16": fn(Inst, *const Vr, usize, *const i16, usize) -> Status;
-    set_uint16: "fmi3SetUInt16": fn(Inst, *const Vr, usize, *const u16, usize) -> Status;
-    set_int32: "fmi3SetInt32": fn(Inst, *const Vr, usize, *const i32, usize) -> Status;
-    set_uint32: "fmi3SetUInt32": fn(Inst, *const Vr, usize, *const u32, usize) -> Status;
-    set_int64: "fmi3SetInt64": fn(Inst, *const Vr, usize, *const i64, usize) -> Status;
-    set_uint64: "fmi3SetUInt64": fn(Inst, *const Vr, usize, *const u64, usize) -> Status;
-    set_boolean: "fmi3SetBoolean": fn(Inst, *const Vr, usize, *const u8, usize) -> Status;
-    set_string: "fmi3SetString": fn(Inst, *const Vr, usize, *const *const c_char, usize) -> Status;
-    get_binary: "fmi3GetBinary": fn(Inst, *const Vr, usize, *mut usize, *mut *const u8, usize) -> Status;
-    set_binary: "fmi3SetBinary": fn(Inst, *const Vr, usize, *const usize, *const *const u8, usize) -> Status;
-    do_step: "fmi3DoStep": fn(Inst, f64, f64, bool, *mut u8, *mut u8, *mut u8, *mut f64) -> Status;
-    get_fmu_state: "fmi3GetFMUState": fn(Inst, *mut *mut c_void) -> Status;
-    set_fmu_state: "fmi3SetFMUState": fn(Inst, *mut c_void) -> Status;
-    free_fmu_state: "fmi3FreeFMUState": fn(Inst, *mut *mut c_void) -> Status;
-    serialized_fmu_state_size: "fmi3SerializedFMUStateSize": fn(Inst, *mut c_void, *mut usize) -> Status;
-    serialize_fmu_state: "fmi3SerializeFMUState": fn(Inst, *mut c_void, *mut u8, usize) -> Status;
-    deserialize_fmu_state: "fmi3DeserializeFMUState": fn(Inst, *const u8, usize, *mut *mut c_void) -> Status;
-}
-
-/// A loaded FMI 3.0 library.
-pub struct Library3 {
-    pub path: PathBuf,
-    /// What `fmi3GetVersion` returned (a "3.x" is required).
-    pub version: String,
-    pub api: Fmi3Api,
-    _lib: libloading::Library,
-}
-
-impl Library3 {
-    /// Load the library, resolve the functions (every one is required by FMI 3.0 for a
-    /// Co-Simulation FMU) and check `fmi3GetVersion`.
-    pub fn load(path: &Path) -> Result<Library3, FmuError> {
-        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
-        let api = Fmi3Api::resolve(&lib).map_err(|symbol| FmuError::MissingSymbol {
-            path: path.to_path_buf(),
-            symbol,
-        })?;
-        let v = unsafe { (api.get_version)() };
-        let version = if v.is_null() {
-            "NULL".to_string()
-        } else {
-            unsafe { CStr::from_ptr(v) }.to_string_lossy().into_owned()
-        };
-        if !version.starts_with("3.") {
-            return Err(FmuError::Load {
-                path: path.to_path_buf(),
-                message: format!("fmi3GetVersion returned '{version}', expected '3.0'"),
-            });
-        }
-        Ok(Library3 {
-            path: path.to_path_buf(),
-            version,
-            api,
-            _lib: lib,
-        })
-    }
-}
+use super::library3::{Inst, Library3, Status};
 
 /// The FMI 3.0 logger: no format string, so it is plain Rust (panics never cross into C).
 unsafe extern "C" fn logger(

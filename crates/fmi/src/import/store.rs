@@ -211,7 +211,7 @@ pub(crate) fn read_entry(store: &Path, key: &str) -> Option<IndexEntry> {
 pub(crate) fn write_entry(store: &Path, entry: &IndexEntry) -> std::io::Result<()> {
     let path = entry_path(store, &entry.key);
     std::fs::create_dir_all(store.join(INDEX_DIR))?;
-    let tmp = crate::archive::unique_sibling(&path);
+    let tmp = super::archive::unique_sibling(&path);
     let written = (|| {
         let mut f = std::fs::OpenOptions::new()
             .write(true)
@@ -262,7 +262,7 @@ pub(crate) struct TestDir(PathBuf);
 #[cfg(test)]
 impl TestDir {
     pub(crate) fn new() -> TestDir {
-        let dir = std::env::temp_dir().join(crate::archive::unique_name("tb-fmi-test"));
+        let dir = std::env::temp_dir().join(super::archive::unique_name("tb-fmi-test"));
         std::fs::create_dir_all(&dir).unwrap();
         TestDir(dir)
     }

@@ -1,0 +1,349 @@
+//! What the FMI 2.0 and FMI 3.0 modelDescription.xml readers share: the walk over the
+//! XML (with the check that the document is complete), the attribute helpers, and the
+//! elements both versions have (the root, `<CoSimulation>`, `<DefaultExperiment>`, unit
+//! definitions with display units, type definitions and their enumeration items, log
+//! categories). Each version's reader adds its variables and model structure.
+
+use super::description::{CoSimulation, DefaultExperiment, ModelDescription};
+use crate::units::UnitDef;
+use quick_xml::events::{BytesStart, Event};
+use quick_xml::Reader;
+use std::collections::HashMap;
+
+/// An element's attributes by name.
+pub(crate) type Attrs = HashMap<String, String>;
+
+/// The FMI version of the document being read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Version {
+    V2,
+    V3,
+}
+
+/// A reader of the elements as the walk meets them.
+pub(crate) trait Visit {
+    /// An element opens: `stack` holds its ancestors (the root first), `empty` is true for
+    /// `<a/>` (no end follows).
+    fn start(&mut self, stack: &[String], name: &str, m: &Attrs, empty: bool)
+        -> Result<(), String>;
+    /// An element (with children) closes: `stack` holds its ancestors.
+    fn end(&mut self, stack: &[String], name: &str);
+}
+
+/// Walks `xml`, telling `v` every element; refuses a document that ends before its root
+/// closes (a truncated file must not pass for a shorter model).
+pub(crate) fn walk(xml: &str, v: &mut impl Visit) -> Result<(), String> {
+    let mut reader = Reader::from_str(xml);
+    let mut stack: Vec<String> = Vec::new();
+    loop {
+        let ev = reader
+            .read_event()
+            .map_err(|e| format!("XML error at byte {}: {e}", reader.buffer_position()))?;
+        let (e, empty) = match &ev {
+            Event::Start(e) => (e, false),
+            Event::Empty(e) => (e, true),
+            Event::End(_) => {
+                let name = stack.pop().unwrap_or_default();
+                v.end(&stack, &name);
+                continue;
+            }
+            Event::Eof => break,
+            _ => continue,
+        };
+        let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
+        let m = attrs(e)?;
+        v.start(&stack, &name, &m, empty)?;
+        if !empty {
+            stack.push(name);
+        }
+    }
+    if let Some(open) = stack.last() {
+        return Err(format!(
+            "the file ends before <{open}> is closed (truncated?): {} element{} open",
+            stack.len(),
+            if stack.len() == 1 { "" } else { "s" }
+        ));
+    }
+    Ok(())
+}
+
+/// The elements both versions share, read into the description as they come.
+#[derive(Default)]
+pub(crate) struct Shared {
+    current_unit: Option<(String, UnitDef)>,
+    /// Display units become units of their own (after the FMU's own, which win a name).
+    display_units: Vec<(String, UnitDef)>,
+    current_type: Option<String>,
+    saw_root: bool,
+}
+
+impl Shared {
+    /// Reads the element if it is one of the shared ones (true), else leaves it to the
+    /// version's reader (false).
+    pub fn start(
+        &mut self,
+        md: &mut ModelDescription,
+        version: Version,
+        parent: &str,
+        name: &str,
+        m: &Attrs,
+        empty: bool,
+    ) -> Result<bool, String> {
+        match (parent, name) {
+            ("", "fmiModelDescription") => {
+                self.saw_root = true;
+                let token = match version {
+                    Version::V2 => "guid",
+                    Version::V3 => "instantiationToken",
+                };
+                root_attributes(md, m, token);
+            }
+            ("", other) => {
+                return Err(format!(
+                    "root element is <{other}>, expected <fmiModelDescription>"
+                ))
+            }
+            ("fmiModelDescription", "CoSimulation") => {
+                md.co_simulation = Some(co_simulation(m, version)?)
+            }
+            ("fmiModelDescription", "ModelExchange") => md.has_model_exchange = true,
+            ("fmiModelDescription", "DefaultExperiment") => {
+                md.default_experiment = Some(default_experiment(m)?)
+            }
+            ("UnitDefinitions", "Unit") => {
+                let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
+                self.current_unit = Some((uname, UnitDef::DIMENSIONLESS));
+                if empty {
+                    md.units.extend(self.current_unit.take());
+                }
+            }
+            ("Unit", "DisplayUnit") => {
+                if let Some(u) = &self.current_unit {
+                    self.display_units.extend(display_unit(m, u)?);
+                }
+            }
+            ("Unit", "BaseUnit") => {
+                if let Some((_, u)) = self.current_unit.as_mut() {
+                    base_unit(m, u)?;
+                }
+            }
+            ("LogCategories", "Category") => md.log_categories.extend(m.get("name").cloned()),
+            _ => return self.type_definition(md, version, parent, name, m, empty),
+        }
+        Ok(true)
+    }
+
+    /// Type definitions: a Real type's unit, an Enumeration type's items (FMI 2.0
+    /// `<SimpleType name><Real unit/>`, FMI 3.0 `<Float64Type name unit/>`,
+    /// `<EnumerationType name><Item/>`).
+    fn type_definition(
+        &mut self,
+        md: &mut ModelDescription,
+        version: Version,
+        parent: &str,
+        name: &str,
+        m: &Attrs,
+        empty: bool,
+    ) -> Result<bool, String> {
+        match (version, parent, name) {
+            (Version::V2, "TypeDefinitions", "SimpleType") => {
+                self.current_type = m.get("name").cloned()
+            }
+            (Version::V2, "SimpleType", "Real") => {
+                if let (Some(t), Some(u)) = (&self.current_type, m.get("unit")) {
+                    md.type_units.insert(t.clone(), u.clone());
+                }
+            }
+            (Version::V3, "TypeDefinitions", t) if t.ends_with("Type") => {
+                self.current_type = m.get("name").cloned();
+                if let (Some(tn), Some(u)) = (&self.current_type, m.get("unit")) {
+                    md.type_units.insert(tn.clone(), u.clone());
+                }
+                if empty {
+                    self.current_type = None;
+                }
+            }
+            (Version::V2, "Enumeration", "Item") | (Version::V3, "EnumerationType", "Item") => {
+                if let Some(t) = &self.current_type {
+                    let item = enumeration_item(m, t)?;
+                    md.enumerations.entry(t.clone()).or_default().push(item);
+                }
+            }
+            _ => return Ok(false),
+        }
+        Ok(true)
+    }
+
+    /// An element closes.
+    pub fn end(&mut self, md: &mut ModelDescription, version: Version, name: &str) {
+        match (version, name) {
+            (_, "Unit") => md.units.extend(self.current_unit.take()),
+            (Version::V2, "SimpleType") => self.current_type = None,
+            (Version::V3, n) if n.ends_with("Type") => self.current_type = None,
+            _ => {}
+        }
+    }
+
+    /// The document is read: it had its root; the display units join the units.
+    pub fn finish(self, md: &mut ModelDescription) -> Result<(), String> {
+        if !self.saw_root {
+            return Err("no <fmiModelDescription> element".into());
+        }
+        for d in self.display_units {
+            if md.unit_def(&d.0).is_none() {
+                md.units.push(d);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `<CoSimulation>`'s capabilities (FMI 3.0 spells two flags `FMUState` and has no input
+/// interpolation flag).
+fn co_simulation(m: &Attrs, version: Version) -> Result<CoSimulation, String> {
+    let (state, serialize, derivatives) = match version {
+        Version::V2 => (
+            "canGetAndSetFMUstate",
+            "canSerializeFMUstate",
+            "providesDirectionalDerivative",
+        ),
+        Version::V3 => (
+            "canGetAndSetFMUState",
+            "canSerializeFMUState",
+            "providesDirectionalDerivatives",
+        ),
+    };
+    Ok(CoSimulation {
+        model_identifier: m
+            .get("modelIdentifier")
+            .cloned()
+            .ok_or("<CoSimulation> has no modelIdentifier")?,
+        needs_execution_tool: flag(m, "needsExecutionTool"),
+        can_handle_variable_communication_step_size: flag(
+            m,
+            "canHandleVariableCommunicationStepSize",
+        ),
+        can_be_instantiated_only_once_per_process: flag(m, "canBeInstantiatedOnlyOncePerProcess"),
+        can_get_and_set_fmu_state: flag(m, state),
+        can_serialize_fmu_state: flag(m, serialize),
+        can_interpolate_inputs: version == Version::V2 && flag(m, "canInterpolateInputs"),
+        provides_directional_derivative: flag(m, derivatives),
+    })
+}
+
+pub(crate) fn attrs(e: &BytesStart) -> Result<Attrs, String> {
+    let mut m = HashMap::new();
+    for a in e.attributes() {
+        let a = a.map_err(|e| format!("bad attribute: {e}"))?;
+        let key = String::from_utf8_lossy(a.key.as_ref()).into_owned();
+        let val = a
+            .unescape_value()
+            .map_err(|e| format!("bad attribute value of '{key}': {e}"))?;
+        m.insert(key, val.into_owned());
+    }
+    Ok(m)
+}
+
+pub(crate) fn num(
+    m: &HashMap<String, String>,
+    key: &str,
+    ctx: &str,
+) -> Result<Option<f64>, String> {
+    match m.get(key) {
+        None => Ok(None),
+        Some(s) => s
+            .trim()
+            .parse()
+            .map(Some)
+            .map_err(|_| format!("{ctx}: attribute {key}=\"{s}\" is not a number")),
+    }
+}
+
+/// `<BaseUnit>` (the same in FMI 2.0 and 3.0) into `u`.
+pub(crate) fn base_unit(m: &HashMap<String, String>, u: &mut UnitDef) -> Result<(), String> {
+    u.kg = int_attr(m, "kg");
+    u.m = int_attr(m, "m");
+    u.s = int_attr(m, "s");
+    u.a = int_attr(m, "A");
+    u.k = int_attr(m, "K");
+    u.mol = int_attr(m, "mol");
+    u.cd = int_attr(m, "cd");
+    u.rad = int_attr(m, "rad");
+    u.factor = num(m, "factor", "BaseUnit")?.unwrap_or(1.0);
+    u.offset = num(m, "offset", "BaseUnit")?.unwrap_or(0.0);
+    Ok(())
+}
+
+/// `<DefaultExperiment>` (the same in FMI 2.0 and 3.0).
+pub(crate) fn default_experiment(m: &HashMap<String, String>) -> Result<DefaultExperiment, String> {
+    Ok(DefaultExperiment {
+        start_time: num(m, "startTime", "DefaultExperiment")?,
+        stop_time: num(m, "stopTime", "DefaultExperiment")?,
+        step_size: num(m, "stepSize", "DefaultExperiment")?,
+        tolerance: num(m, "tolerance", "DefaultExperiment")?,
+    })
+}
+
+/// An enumeration `<Item name value>` of type `ty`: (name, value).
+pub(crate) fn enumeration_item(
+    m: &HashMap<String, String>,
+    ty: &str,
+) -> Result<(String, i64), String> {
+    let item = m.get("name").cloned().unwrap_or_default();
+    let value = m
+        .get("value")
+        .and_then(|v| v.trim().parse::<i64>().ok())
+        .ok_or_else(|| format!("Enumeration '{ty}': item '{item}' has no integer value"))?;
+    Ok((item, value))
+}
+
+/// A `<DisplayUnit name factor offset>` of `unit` as a unit definition of its own:
+/// display = factor·value + offset, so SI = base.factor·(display − offset)/factor +
+/// base.offset. An FMI 3.0 `inverse` display unit is not linear and is left out.
+pub(crate) fn display_unit(
+    m: &HashMap<String, String>,
+    unit: &(String, UnitDef),
+) -> Result<Option<(String, UnitDef)>, String> {
+    let Some(name) = m.get("name") else {
+        return Err(format!("unit '{}': <DisplayUnit> without a name", unit.0));
+    };
+    if flag(m, "inverse") {
+        return Ok(None);
+    }
+    let ctx = format!("unit '{}': DisplayUnit '{name}'", unit.0);
+    let factor = num(m, "factor", &ctx)?.unwrap_or(1.0);
+    let offset = num(m, "offset", &ctx)?.unwrap_or(0.0);
+    if factor == 0.0 || !factor.is_finite() || !offset.is_finite() {
+        return Err(format!(
+            "{ctx}: factor {factor} and offset {offset} do not define a unit"
+        ));
+    }
+    let base = &unit.1;
+    Ok(Some((
+        name.clone(),
+        UnitDef {
+            factor: base.factor / factor,
+            offset: base.offset - base.factor * offset / factor,
+            ..*base
+        },
+    )))
+}
+
+/// The `<fmiModelDescription>` attributes both versions share; `token` names the GUID's
+/// attribute (`guid` in 2.0, `instantiationToken` in 3.0).
+pub(crate) fn root_attributes(md: &mut ModelDescription, m: &HashMap<String, String>, token: &str) {
+    let get = |key: &str| m.get(key).cloned().unwrap_or_default();
+    md.fmi_version = get("fmiVersion");
+    md.model_name = get("modelName");
+    md.guid = get(token);
+    md.description = get("description");
+    md.generation_tool = get("generationTool");
+}
+
+pub(crate) fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {
+    m.get(key).and_then(|s| s.trim().parse().ok()).unwrap_or(0)
+}
+
+pub(crate) fn flag(m: &HashMap<String, String>, key: &str) -> bool {
+    m.get(key).is_some_and(|s| s == "true" || s == "1")
+}
