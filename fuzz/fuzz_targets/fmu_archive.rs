@@ -3,5 +3,5 @@
 #![no_main]
 
 libfuzzer_sys::fuzz_target!(|data: &[u8]| {
-    let _ = tb_fmi::archive::check_archive(std::path::Path::new("fuzz.fmu"), data);
+    let _ = tb_fmi::import::archive::check_archive(std::path::Path::new("fuzz.fmu"), data);
 });
