@@ -352,9 +352,11 @@ fn lap_length_tolerance() -> f64 {
 /// A given track, read and held to the measured lap: a track whose length is not the
 /// measured lap's (within the bench's check) is another circuit, or another line on it.
 fn given_track(path: &Path, lap: f64) -> Result<String, LapError> {
-    let text = std::fs::read_to_string(path).map_err(|source| LapError::Io {
-        path: path.to_path_buf(),
-        source,
+    let text = tb_files::input::read_to_string(path, tb_files::Limit::DATA).map_err(|source| {
+        LapError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     })?;
     let track = vehicle::track::Track::parse(&path.display().to_string(), &text)
         .map_err(|e| LapError::Invalid(e.to_string()))?;

@@ -73,10 +73,13 @@ impl Chain {
     /// Read and validate a chain from a TOML file.
     pub fn from_file(path: &Path) -> Result<Chain> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| AnalysisError::Io {
-            file: file.clone(),
-            source,
-        })?;
+        let text =
+            tb_files::input::read_to_string(path, tb_files::Limit::CONFIG).map_err(|source| {
+                AnalysisError::Io {
+                    file: file.clone(),
+                    source,
+                }
+            })?;
         Chain::from_toml_str(&text, &file)
     }
 

@@ -305,9 +305,12 @@ pub struct ReplayConfig {
 impl SystemFile {
     /// Read and parse; relative paths are resolved against the file's folder.
     pub fn load(path: &Path) -> Result<SystemFile, super::SystemError> {
-        let bytes = std::fs::read(path).map_err(|e| super::SystemError::File {
-            path: path.to_path_buf(),
-            message: format!("cannot read: {e}"),
+        // A regular file within the limit of a configuration file.
+        let bytes = tb_files::input::read(path, tb_files::Limit::CONFIG).map_err(|e| {
+            super::SystemError::File {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            }
         })?;
         let text = String::from_utf8(bytes).map_err(|e| super::SystemError::File {
             path: path.to_path_buf(),

@@ -3,7 +3,12 @@
 //! [`paths`]: a path written in a system, study or lap file is relative to that file's
 //! folder, whatever folder the command runs from; every resolved path is absolute and
 //! printed without `.` or `a/..` steps.
+//!
+//! [`input`]: an input file is read only when it is a regular file within the limit of
+//! its kind (never a FIFO, a device or a file that grows without end).
 
+pub mod input;
 pub mod paths;
 
+pub use input::Limit;
 pub use paths::{absolute, folder_of, normalize, relative_to, resolve};

@@ -35,10 +35,18 @@ struct Group {
 
 /// Reads an MDF 4 file into a table (see the module's documentation).
 pub fn read(path: &Path) -> Result<Table> {
-    let text = path
-        .to_str()
-        .ok_or_else(|| mdf_error(path, "the path is not UTF-8"))?;
-    let mdf = MDF::from_file(text).map_err(|e| mdf_error(path, e))?;
+    // A regular file within the data limit (the crate would read whatever the path gives,
+    // a device included): opened and checked here, and the crate reads that same open file
+    // through /proc, so it cannot be swapped in between.
+    let (file, _) =
+        tb_files::input::open(path, tb_files::Limit::DATA).map_err(|source| TableError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    use std::os::fd::AsRawFd;
+    let opened = format!("/proc/self/fd/{}", file.as_raw_fd());
+    let mdf = MDF::from_file(&opened).map_err(|e| mdf_error(path, e))?;
+    drop(file);
     let mut groups = Vec::new();
     for g in mdf.channel_groups() {
         let mut time = None;

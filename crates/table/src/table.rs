@@ -104,12 +104,7 @@ impl Table {
 
     /// Reads a CSV file.
     pub fn read_path(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let file = std::fs::File::open(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_reader(std::io::BufReader::new(file), &path.display().to_string())
+        Self::read_path_keeping(path, &|_, _| true)
     }
 
     /// Reads a CSV file, parsing only the columns `keep(index, name)` accepts; the others
@@ -119,12 +114,15 @@ impl Table {
         keep: &dyn Fn(usize, &str) -> bool,
     ) -> Result<Self> {
         let path = path.as_ref();
-        let file = std::fs::File::open(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        // A regular file within the data limit, read no further than that.
+        let (file, _) =
+            tb_files::input::open(path, tb_files::Limit::DATA).map_err(|source| Error::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        use std::io::Read as _;
         Self::from_reader_keeping(
-            std::io::BufReader::new(file),
+            std::io::BufReader::new(file.take(tb_files::Limit::DATA.bytes)),
             &path.display().to_string(),
             keep,
         )
