@@ -27,8 +27,41 @@ impl Interrupted {
     }
 }
 
-/// Installs the handlers; the flag is set on the first SIGINT or SIGTERM.
+/// The handlers of every command but a study's: a SIGINT or SIGTERM ends the process at
+/// once, with the result files being written removed (nothing half-written stays behind).
+static DEFAULT_HANDLERS: std::sync::Mutex<Vec<signal_hook::SigId>> =
+    std::sync::Mutex::new(Vec::new());
+
+/// Installs the default handlers (see [`DEFAULT_HANDLERS`]); a run file size limit
+/// (`ulimit -f`) becomes a write error naming the file instead of a silent SIGXFSZ death.
+pub fn install_default() {
+    // SAFETY: setting a signal's disposition to ignore has no preconditions.
+    unsafe { libc::signal(libc::SIGXFSZ, libc::SIG_IGN) };
+    let mut ids = DEFAULT_HANDLERS.lock().unwrap_or_else(|p| p.into_inner());
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // SAFETY: the handler only removes files (unlink), writes to stderr and exits: all
+        // async-signal-safe.
+        let id = unsafe {
+            signal_hook::low_level::register(signal, move || {
+                tb_table::remove_in_flight();
+                let m = b"\ninterrupted\n";
+                libc::write(2, m.as_ptr().cast(), m.len());
+                libc::_exit(128 + signal);
+            })
+        };
+        ids.extend(id.ok());
+    }
+}
+
+/// Installs the handlers of a study; the flag is set on the first SIGINT or SIGTERM.
 pub fn flag() -> anyhow::Result<Arc<AtomicBool>> {
+    for id in DEFAULT_HANDLERS
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .drain(..)
+    {
+        signal_hook::low_level::unregister(id);
+    }
     let flag = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         let f = flag.clone();
@@ -37,6 +70,7 @@ pub fn flag() -> anyhow::Result<Arc<AtomicBool>> {
         unsafe {
             signal_hook::low_level::register(signal, move || {
                 if f.swap(true, Ordering::SeqCst) {
+                    tb_table::remove_in_flight();
                     let m = b"\ninterrupted again: stopping now (the checkpoint of the last finished generation is kept)\n";
                     libc::write(2, m.as_ptr().cast(), m.len());
                     libc::_exit(i32::from(EXIT_INTERRUPTED));

@@ -107,6 +107,7 @@ pub fn main() -> ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
         libc::atexit(exit_guard);
     }
+    interrupt::install_default();
     let cli = Cli::parse();
     let level = match cli.verbose {
         0 => "warn",

@@ -41,4 +41,4 @@ impl Table {
 
 use std::path::Path;
 
-pub use output::{check_output, write_atomic, FolderLock};
+pub use output::{check_output, remove_in_flight, write_atomic, FolderLock};
