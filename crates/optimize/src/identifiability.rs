@@ -1,5 +1,5 @@
-//! Identifiability check before a step: which parameter directions the step's validation
-//! signals cannot see.
+//! The identifiability check before a step: which parameter directions the step's
+//! validation signals cannot see.
 //!
 //! Around the start point, every parameter is moved by ±`rel_step` of its scale (its start
 //! value, or the span of its bounds when that is 0) and the comparison residual of each

@@ -2,15 +2,15 @@
 //! identifiability check and e before each step, the optimiser's generations with a
 //! checkpoint after every one, e after, and the whole result as a serialisable value.
 
-use super::bench::{Bench, Outcome};
 use super::cmaes::Cmaes;
 use super::exact;
 use super::ga::Ga;
-use super::identify::{analyse, Identifiability};
+use super::identifiability::{analyse, Identifiability};
 use super::optimizer::{
     evaluate_all, finite, minimize, thread_pool, to_unit, GenerationRecord, Optimizer, Problem,
     RunSettings, RunState,
 };
+use super::pool::{Outcome, WorkerPool};
 use super::remote::{Candidate, Evaluator, StepCost};
 use super::study::{OptimizerKind, StepConfig, Study};
 use super::OptimizeError;
@@ -275,7 +275,7 @@ pub fn cost_of(cmp: &Comparison, signals: &[String], weights: &[f64], bias_weigh
 
 /// One step's cost over the bench.
 struct StepProblem<'a> {
-    bench: &'a Bench,
+    workers: &'a WorkerPool,
     prepared: &'a PreparedMeasurement,
     /// The step (0-based) and its cost.
     step: usize,
@@ -300,7 +300,7 @@ impl StepProblem<'_> {
     }
 
     fn outcome(&self, x: &[f64]) -> Result<Outcome, String> {
-        self.bench.run(&self.params(x), self.prepared)
+        self.workers.run(&self.params(x), self.prepared)
     }
 }
 
@@ -310,7 +310,7 @@ impl Problem for StepProblem<'_> {
     }
 
     fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
-        self.cost.of(self.bench, &self.params(x), self.prepared)
+        self.cost.of(self.workers, &self.params(x), self.prepared)
     }
 
     fn evaluate_many(
@@ -558,14 +558,14 @@ fn check_plausible(
 pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, OptimizeError> {
     let wall = Instant::now();
     let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
-    let bench = Bench::new(study, cache)?;
+    let workers = WorkerPool::new(study, cache)?;
     let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
     let pool = thread_pool(options.threads)?;
     let threads = pool.current_num_threads();
     let kind = options.optimizer.unwrap_or(study.file.optimizer.kind);
 
     // Every parameter the study touches, with its initial value.
-    let mut assignment: Vec<(String, f64)> = bench.assignment();
+    let mut assignment: Vec<(String, f64)> = workers.assignment();
     let initial = assignment.clone();
 
     let mut checkpoint = Checkpoint {
@@ -605,7 +605,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         let index: Vec<usize> = names
             .iter()
             .map(|n| {
-                bench.index_of(n).ok_or_else(|| {
+                workers.index_of(n).ok_or_else(|| {
                     OptimizeError::Invalid(format!("step '{}': unknown parameter '{n}'", step.name))
                 })
             })
@@ -624,7 +624,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         let cost = StepCost::of_step(study, k).expect("a step of the study");
         let bias_weight = cost.bias_weight;
         let mut problem = StepProblem {
-            bench: &bench,
+            workers: &workers,
             prepared: &prepared,
             step: k,
             cost,
@@ -677,13 +677,12 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                 }
                 if k == 0 && !options.force {
                     // Before any optimising: do the measurement and the twin belong together?
-                    let lap =
-                        bench
-                            .lap(&problem.params(&x0))
-                            .map_err(|reason| OptimizeError::Start {
-                                step: step.name.clone(),
-                                reason,
-                            })?;
+                    let lap = workers.lap(&problem.params(&x0)).map_err(|reason| {
+                        OptimizeError::Start {
+                            step: step.name.clone(),
+                            reason,
+                        }
+                    })?;
                     check_plausible(study, &measurement, &lap)?;
                 }
                 let ident = identifiability(study, &problem, step, &x0, &pool);
@@ -875,7 +874,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
     let all: Vec<f64> = assignment.iter().map(|p| p.1).collect();
     let lap = |values: &[f64]| -> Result<Table, OptimizeError> {
         let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum"], &study.file.compare)?;
-        bench
+        workers
             .run(values, &prepared)
             .map(|o| o.table)
             .map_err(|reason| OptimizeError::Start {
@@ -890,14 +889,14 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         if let Some(x0) = &first_x0 {
             let mut values: Vec<f64> = initial.iter().map(|p| p.1).collect();
             for (j, p) in study.file.steps[0].parameters.iter().enumerate() {
-                if let Some(i) = bench.index_of(&p.name) {
+                if let Some(i) = workers.index_of(&p.name) {
                     values[i] = x0[j];
                 }
             }
             laps.initial = Some(lap(&values)?);
         }
     }
-    let (simulations, simulation_seconds) = bench.runs();
+    let (simulations, simulation_seconds) = workers.runs();
     Ok(StudyOutcome::Finished(Box::new(StudyResult {
         study: study.name(),
         system: study.system_path.clone(),
@@ -910,7 +909,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         simulations,
         simulation_seconds,
         wall_seconds: wall.elapsed().as_secs_f64(),
-        workers_created: bench.workers_created(),
+        workers_created: workers.workers_created(),
         resumed,
         laps,
     })))
