@@ -196,6 +196,32 @@ impl WorkerPool {
     /// Runs with `values` (one per parameter of [`WorkerPool::assignment`], in its order) and
     /// compares with the measurement.
     pub fn run(&self, values: &[f64], prepared: &PreparedMeasurement) -> Result<Outcome, String> {
+        self.with_worker(values, |w| self.run_on(w, values, prepared))
+    }
+
+    /// Runs with `values` and returns the recording on its uniform grid, without comparing
+    /// (a first look at a lap that may not match the measurement at all).
+    pub fn lap(&self, values: &[f64]) -> Result<Table, String> {
+        self.with_worker(values, |w| {
+            for (slot, &x) in self.slots.iter().zip(values) {
+                let v = slot.real(x).map_err(|e| describe_failure(&e))?;
+                w.sim.set(slot, v);
+            }
+            let summary = w.sim.run();
+            self.runs.fetch_add(1, Ordering::Relaxed);
+            summary.map_err(|e| describe_failure(&e))?;
+            uniform_table(&w.sim.recording).map_err(|e| e.to_string())
+        })
+    }
+
+    /// The pool's one sequence: checks that `values` has one value per parameter, takes a
+    /// worker (a new one when every worker is busy), runs `job` on it and puts it back,
+    /// whatever `job` returned.
+    fn with_worker<T>(
+        &self,
+        values: &[f64],
+        job: impl FnOnce(&mut Worker) -> Result<T, String>,
+    ) -> Result<T, String> {
         if values.len() != self.slots.len() {
             return Err(format!(
                 "{} values for {} parameters",
@@ -208,37 +234,8 @@ impl WorkerPool {
             Some(w) => w,
             None => self.new_worker().map_err(|e| describe_failure(&e))?,
         };
-        let result = self.run_on(&mut worker, values, prepared);
+        let result = job(&mut worker);
         self.lock_workers().push(worker);
-        result
-    }
-
-    /// Runs with `values` and returns the recording on its uniform grid, without comparing
-    /// (a first look at a lap that may not match the measurement at all).
-    pub fn lap(&self, values: &[f64]) -> Result<Table, String> {
-        if values.len() != self.slots.len() {
-            return Err(format!(
-                "{} values for {} parameters",
-                values.len(),
-                self.slots.len()
-            ));
-        }
-        let worker = self.lock_workers().pop();
-        let mut w = match worker {
-            Some(w) => w,
-            None => self.new_worker().map_err(|e| describe_failure(&e))?,
-        };
-        let result = (|| {
-            for (slot, &x) in self.slots.iter().zip(values) {
-                let v = slot.real(x).map_err(|e| describe_failure(&e))?;
-                w.sim.set(slot, v);
-            }
-            let summary = w.sim.run();
-            self.runs.fetch_add(1, Ordering::Relaxed);
-            summary.map_err(|e| describe_failure(&e))?;
-            uniform_table(&w.sim.recording).map_err(|e| e.to_string())
-        })();
-        self.lock_workers().push(w);
         result
     }
 
