@@ -2,6 +2,7 @@
 //! identifiability check and e before each step, the optimiser's generations with a
 //! checkpoint after every one, e after, and the whole result as a serialisable value.
 
+use super::checkpoint::{initial_lap_path, Checkpoint, Current, StepStart};
 use super::cmaes::Cmaes;
 use super::exact;
 use super::ga::Ga;
@@ -168,11 +169,6 @@ impl PartialEq for StudyLaps {
     }
 }
 
-/// Where a study with a checkpoint keeps its initial lap (written once, read on resume).
-pub fn initial_lap_path(checkpoint: &std::path::Path) -> PathBuf {
-    checkpoint.with_extension("initial-lap.csv")
-}
-
 impl StudyResult {
     pub fn initial_value(&self, name: &str) -> Option<f64> {
         self.parameters_initial
@@ -196,67 +192,6 @@ pub enum StudyOutcome {
         generations: usize,
     },
 }
-
-/// What a step knows before its first generation (checkpointed, so a resume does not redo it).
-#[derive(Clone, Debug, Serialize, Deserialize)]
-struct StepStart {
-    #[serde(with = "exact::vec")]
-    x0: Vec<f64>,
-    before: Comparison,
-    cost_before: f64,
-    identifiability: Identifiability,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-struct Current {
-    step: usize,
-    start: StepStart,
-    optimizer: serde_json::Value,
-    run: RunState,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-struct Checkpoint {
-    version: u32,
-    fingerprint: String,
-    /// The command line's overrides the study ran with (a resume must use the same).
-    #[serde(default)]
-    overrides: Overrides,
-    completed: Vec<StepResult>,
-    current: Option<Current>,
-}
-
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-struct Overrides {
-    optimizer: Option<OptimizerKind>,
-    generations: Option<usize>,
-}
-
-impl Overrides {
-    fn of(o: &RunOptions) -> Overrides {
-        Overrides {
-            optimizer: o.optimizer,
-            generations: o.generations,
-        }
-    }
-
-    fn describe(&self) -> String {
-        let mut v = Vec::new();
-        if let Some(k) = self.optimizer {
-            v.push(format!("--optimizer {}", k.name()));
-        }
-        if let Some(g) = self.generations {
-            v.push(format!("--generations {g}"));
-        }
-        if v.is_empty() {
-            "no overrides".into()
-        } else {
-            v.join(" ")
-        }
-    }
-}
-
-const CHECKPOINT_VERSION: u32 = 1;
 
 /// The cost of a comparison: Σ w·(e + β·|bias|) / Σ w over the step's signals.
 pub fn cost_of(cmp: &Comparison, signals: &[String], weights: &[f64], bias_weight: f64) -> f64 {
@@ -340,34 +275,6 @@ impl Problem for StepProblem<'_> {
         }
         Ok(results.into_iter().map(finite).collect())
     }
-}
-
-fn read_checkpoint(path: &std::path::Path, study: &Study) -> Result<Checkpoint, OptimizeError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| OptimizeError::Checkpoint(format!("{}: {e}", path.display())))?;
-    let c: Checkpoint = serde_json::from_str(&text)
-        .map_err(|e| OptimizeError::Checkpoint(format!("{}: {e}", path.display())))?;
-    if c.version != CHECKPOINT_VERSION {
-        return Err(OptimizeError::Checkpoint(format!(
-            "{}: version {} (expected {CHECKPOINT_VERSION})",
-            path.display(),
-            c.version
-        )));
-    }
-    if c.fingerprint != study.fingerprint {
-        return Err(OptimizeError::Checkpoint(format!(
-            "{} belongs to another study (or the study file changed): start without --resume",
-            path.display()
-        )));
-    }
-    Ok(c)
-}
-
-fn write_checkpoint(path: &std::path::Path, c: &Checkpoint) -> Result<(), OptimizeError> {
-    let text = serde_json::to_vec_pretty(c)
-        .map_err(|e| OptimizeError::Checkpoint(format!("serialising: {e}")))?;
-    write_atomic(path, &text)
-        .map_err(|e| OptimizeError::Checkpoint(format!("writing {}: {e}", path.display())))
 }
 
 fn step_seed(seed: u64, step: usize) -> u64 {
@@ -568,28 +475,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
     let mut assignment: Vec<(String, f64)> = workers.assignment();
     let initial = assignment.clone();
 
-    let mut checkpoint = Checkpoint {
-        version: CHECKPOINT_VERSION,
-        fingerprint: study.fingerprint.clone(),
-        overrides: Overrides::of(options),
-        completed: Vec::new(),
-        current: None,
-    };
-    let mut resumed = false;
-    if options.resume {
-        if let Some(path) = options.checkpoint.as_ref().filter(|p| p.exists()) {
-            checkpoint = read_checkpoint(path, study)?;
-            if checkpoint.overrides != Overrides::of(options) {
-                return Err(OptimizeError::Checkpoint(format!(
-                    "{} was made with {}, this run has {}: resume with the same options (a study mixing budgets or optimisers is no result)",
-                    path.display(),
-                    checkpoint.overrides.describe(),
-                    Overrides::of(options).describe()
-                )));
-            }
-            resumed = true;
-        }
-    }
+    let (mut checkpoint, resumed) = Checkpoint::resume_or_new(study, options)?;
     let mut session_generations = 0usize;
     let mut laps = StudyLaps::default();
     if resumed {
@@ -756,19 +642,18 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                     p.generation(rec);
                 }
                 if let Some(path) = &options.checkpoint {
-                    let cp = Checkpoint {
-                        version: CHECKPOINT_VERSION,
-                        fingerprint: study.fingerprint.clone(),
-                        overrides: Overrides::of(options),
-                        completed: completed_so_far.clone(),
-                        current: Some(Current {
+                    let cp = Checkpoint::new(
+                        study,
+                        options,
+                        completed_so_far.clone(),
+                        Some(Current {
                             step: k,
                             start: start_for_cp.clone(),
                             optimizer: opt.save(),
                             run: state.clone(),
                         }),
-                    };
-                    if let Err(e) = write_checkpoint(path, &cp) {
+                    );
+                    if let Err(e) = cp.write(path) {
                         write_error = Some(e);
                         return ControlFlow::Break(());
                     }
@@ -867,7 +752,7 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         checkpoint.completed.push(res);
         checkpoint.current = None;
         if let Some(path) = &options.checkpoint {
-            write_checkpoint(path, &checkpoint)?;
+            checkpoint.write(path)?;
         }
     }
     // Laps a resumed session did not run itself: once each, before the summary counts runs.

@@ -16,12 +16,15 @@
 //!   near-null directions).
 //! - [`driver`]: the study driver: steps in order, each starting from the earlier results,
 //!   identifiability check, e before/after, a checkpoint after every generation, resume.
+//! - [`checkpoint`]: the checkpoint file the driver writes after every generation and
+//!   resumes from.
 //!
 //! Determinism: every random number is drawn on the calling thread in `ask`/`tell`, a
 //! candidate's cost depends on the candidate only, and costs go back in the asked order, so
 //! the same seed gives the same result with any number of threads, and a resumed study
 //! (bit-exact optimiser state in the checkpoint) the same result as an uninterrupted one.
 
+pub mod checkpoint;
 pub mod cmaes;
 pub mod driver;
 pub mod exact;
