@@ -234,6 +234,13 @@ impl StepProblem<'_> {
         a
     }
 
+    /// Puts the step's parameters at `x` in the assignment the step starts from.
+    fn set(&mut self, x: &[f64]) {
+        for (j, &i) in self.index.iter().enumerate() {
+            self.assignment[i].1 = x[j];
+        }
+    }
+
     fn outcome(&self, x: &[f64]) -> Result<Outcome, String> {
         self.workers.run(&self.params(x), self.prepared)
     }
@@ -461,304 +468,468 @@ fn check_plausible(
     )))
 }
 
-/// Runs a study (or continues it from its checkpoint).
+/// Runs a study (or continues it from its checkpoint): the steps in order, each passed over
+/// when the checkpoint has it completed, then the result with the laps a report draws.
 pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, OptimizeError> {
     let wall = Instant::now();
-    let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
-    let workers = WorkerPool::new(study, cache)?;
-    let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
-    let pool = thread_pool(options.threads)?;
-    let threads = pool.current_num_threads();
-    let kind = options.optimizer.unwrap_or(study.file.optimizer.kind);
-
-    // Every parameter the study touches, with its initial value.
-    let mut assignment: Vec<(String, f64)> = workers.assignment();
-    let initial = assignment.clone();
-
-    let (mut checkpoint, resumed) = Checkpoint::resume_or_new(study, options)?;
-    let mut session_generations = 0usize;
-    let mut laps = StudyLaps::default();
-    if resumed {
-        if let Some(path) = options.checkpoint.as_ref().map(|c| initial_lap_path(c)) {
-            laps.initial = Table::read_path(&path).ok();
-        }
-    }
-    // The first step's start point (for the initial lap when it has to be made again).
-    let mut first_x0: Option<Vec<f64>> = None;
-
-    for (k, step) in study.file.steps.iter().enumerate() {
-        let names = step.parameter_names();
-        let index: Vec<usize> = names
-            .iter()
-            .map(|n| {
-                workers.index_of(n).ok_or_else(|| {
-                    OptimizeError::Invalid(format!("step '{}': unknown parameter '{n}'", step.name))
-                })
-            })
-            .collect::<Result<_, _>>()?;
-        if let Some(done) = checkpoint.completed.get(k) {
-            if k == 0 {
-                first_x0 = Some(done.parameters.iter().map(|p| p.before).collect());
-            }
-            for (j, &i) in index.iter().enumerate() {
-                assignment[i].1 = done.after_exact[j];
-            }
-            continue;
-        }
-        let prepared = PreparedMeasurement::new(&measurement, &step.signals, &study.file.compare)?;
-        let bounds: Vec<(f64, f64)> = step.parameters.iter().map(|p| (p.min, p.max)).collect();
-        let cost = StepCost::of_step(study, k).expect("a step of the study");
-        let bias_weight = cost.bias_weight;
-        let mut problem = StepProblem {
-            workers: &workers,
-            prepared: &prepared,
-            step: k,
-            cost,
-            assignment: assignment.clone(),
-            index: index.clone(),
-            bounds: bounds.clone(),
-            remote: options.evaluator.as_deref(),
-        };
-        let seed = step_seed(study.file.seed, k);
-        let generations = options
-            .generations
-            .or(step.generations)
-            .unwrap_or(study.file.optimizer.generations);
-
-        let current = checkpoint.current.take().filter(|c| c.step == k);
-        let (start, mut optimizer, mut run_state) = match current {
-            Some(c) => {
-                let mut opt = make_optimizer(
-                    study,
-                    kind,
-                    names.len(),
-                    seed,
-                    to_unit(&c.start.x0, &bounds),
-                )?;
-                opt.restore(&c.optimizer)?;
-                if options.verbose {
-                    eprintln!(
-                        "resuming step {} '{}' from generation {} of {generations} (checkpoint {})",
-                        k + 1,
-                        step.name,
-                        opt.generation() + 1,
-                        options
-                            .checkpoint
-                            .as_deref()
-                            .map(|p| p.display().to_string())
-                            .unwrap_or_default()
-                    );
-                }
-                (c.start, opt, c.run)
-            }
-            None => {
-                let x0: Vec<f64> = step
-                    .parameters
-                    .iter()
-                    .zip(&index)
-                    .map(|(p, &i)| p.start.unwrap_or(assignment[i].1).clamp(p.min, p.max))
-                    .collect();
-                for (j, &i) in index.iter().enumerate() {
-                    problem.assignment[i].1 = x0[j];
-                }
-                if k == 0 && !options.force {
-                    // Before any optimising: do the measurement and the twin belong together?
-                    let lap = workers.lap(&problem.params(&x0)).map_err(|reason| {
-                        OptimizeError::Start {
-                            step: step.name.clone(),
-                            reason,
-                        }
-                    })?;
-                    check_plausible(study, &measurement, &lap)?;
-                }
-                let ident = identifiability(study, &problem, step, &x0, &pool);
-                let before = problem
-                    .outcome(&x0)
-                    .map_err(|reason| OptimizeError::Start {
-                        step: step.name.clone(),
-                        reason,
-                    })?;
-                let cost_before = cost_of(
-                    &before.comparison,
-                    &step.signals,
-                    &step.weights(),
-                    bias_weight,
-                );
-                if k == 0 {
-                    if let Some(c) = &options.checkpoint {
-                        let path = initial_lap_path(c);
-                        write_atomic(&path, &before.table.to_csv()).map_err(|e| {
-                            OptimizeError::Checkpoint(format!("writing {}: {e}", path.display()))
-                        })?;
-                    }
-                    laps.initial = Some(before.table.clone());
-                }
-                let opt = make_optimizer(study, kind, names.len(), seed, to_unit(&x0, &bounds))?;
-                (
-                    StepStart {
-                        x0,
-                        before: before.comparison,
-                        cost_before,
-                        identifiability: ident,
-                    },
-                    opt,
-                    RunState::default(),
-                )
-            }
-        };
-        for (j, &i) in index.iter().enumerate() {
-            problem.assignment[i].1 = start.x0[j];
-        }
-        if k == 0 {
-            first_x0 = Some(start.x0.clone());
-        }
-        if options.verbose {
-            eprintln!("step {} '{}': identifiability", k + 1, step.name);
-            for l in start.identifiability.report_lines() {
-                eprintln!("  {l}");
-            }
-        }
-
-        if let Some(p) = &options.progress {
-            p.step_started(k + 1, &step.name, generations, optimizer.generation());
-        }
-        let settings = RunSettings {
-            max_generations: generations,
-            threads: options.threads,
-            penalty: study.file.penalty,
-        };
-        let mut interrupted = false;
-        let mut write_error = None;
-        let start_for_cp = start.clone();
-        let completed_so_far = checkpoint.completed.clone();
-        let result = minimize(
-            optimizer.as_mut(),
-            &problem,
-            &settings,
-            &mut run_state,
-            |opt, state| {
-                session_generations += 1;
-                if let (Some(p), Some(rec)) = (&options.progress, state.history.last()) {
-                    p.generation(rec);
-                }
-                if let Some(path) = &options.checkpoint {
-                    let cp = Checkpoint::new(
-                        study,
-                        options,
-                        completed_so_far.clone(),
-                        Some(Current {
-                            step: k,
-                            start: start_for_cp.clone(),
-                            optimizer: opt.save(),
-                            run: state.clone(),
-                        }),
-                    );
-                    if let Err(e) = cp.write(path) {
-                        write_error = Some(e);
-                        return ControlFlow::Break(());
-                    }
-                }
-                let asked = options
-                    .interrupt
-                    .as_ref()
-                    .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst));
-                if (asked || options.stop_after.is_some_and(|n| session_generations >= n))
-                    && opt.generation() < generations
-                {
-                    interrupted = true;
-                    return ControlFlow::Break(());
-                }
-                ControlFlow::Continue(())
-            },
-        );
-        if let Some(p) = &options.progress {
-            p.step_finished();
-        }
-        if let Some(e) = write_error {
-            return Err(e);
-        }
-        if interrupted {
+    let session = Session::open(study, options)?;
+    let mut state = StudyState::begin(&session)?;
+    for k in 0..study.file.steps.len() {
+        if run_step(&session, &mut state, k)?.is_break() {
             return Ok(StudyOutcome::Interrupted {
-                generations: session_generations,
+                generations: state.session_generations,
             });
         }
-        let (best, best_cost) = result?;
-        let after = problem
-            .outcome(&best)
-            .map_err(|reason| OptimizeError::Start {
-                step: step.name.clone(),
-                reason: format!("the best point cannot be re-evaluated: {reason}"),
-            })?;
-        let weights = step.weights();
-        let cost_after = cost_of(&after.comparison, &step.signals, &weights, bias_weight);
-        if k + 1 == study.file.steps.len() {
-            laps.optimized = Some(after.table.clone());
+    }
+    let result = finish_study(&session, state, wall)?;
+    Ok(StudyOutcome::Finished(Box::new(result)))
+}
+
+/// What every stage of a study reads: the study, how it is run, the worker pool on its
+/// compiled system, the measurement, the threads of the start's runs and the optimiser.
+struct Session<'a> {
+    study: &'a Study,
+    options: &'a RunOptions,
+    workers: WorkerPool,
+    measurement: Measurement,
+    /// The identifiability check's threads (the generations' are `minimize`'s own).
+    pool: rayon::ThreadPool,
+    kind: OptimizerKind,
+}
+
+impl<'a> Session<'a> {
+    /// Compiles the system, loads the measurement, builds the threads.
+    fn open(study: &'a Study, options: &'a RunOptions) -> Result<Session<'a>, OptimizeError> {
+        let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
+        let workers = WorkerPool::new(study, cache)?;
+        let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
+        let pool = thread_pool(options.threads)?;
+        Ok(Session {
+            study,
+            options,
+            workers,
+            measurement,
+            pool,
+            kind: options.optimizer.unwrap_or(study.file.optimizer.kind),
+        })
+    }
+}
+
+/// Where the study stands, carried from step to step.
+struct StudyState {
+    /// The completed steps and the step under way (what the checkpoint file holds).
+    checkpoint: Checkpoint,
+    resumed: bool,
+    /// Every parameter the study touches, with its initial value.
+    initial: Vec<(String, f64)>,
+    /// The same parameters with their values after the steps done so far.
+    assignment: Vec<(String, f64)>,
+    laps: StudyLaps,
+    /// The first step's start point (for the initial lap when it has to be made again).
+    first_x0: Option<Vec<f64>>,
+    /// Generations run in this session.
+    session_generations: usize,
+}
+
+impl StudyState {
+    /// The study's state from its checkpoint (resume), else before its first step.
+    fn begin(session: &Session) -> Result<StudyState, OptimizeError> {
+        let assignment = session.workers.assignment();
+        let (checkpoint, resumed) = Checkpoint::resume_or_new(session.study, session.options)?;
+        let mut laps = StudyLaps::default();
+        if resumed {
+            if let Some(path) = session
+                .options
+                .checkpoint
+                .as_ref()
+                .map(|c| initial_lap_path(c))
+            {
+                laps.initial = Table::read_path(&path).ok();
+            }
         }
-        if cost_after.to_bits() != best_cost.to_bits() {
-            log::warn!(
-                "step '{}': the best point re-evaluated to {cost_after} (optimiser saw {best_cost})",
-                step.name
-            );
-        }
-        let parameters = step
-            .parameters
-            .iter()
-            .enumerate()
-            .map(|(j, p)| ParameterChange {
-                name: p.name.clone(),
-                min: p.min,
-                max: p.max,
-                before: start.x0[j],
-                after: best[j],
-                change_percent: if start.x0[j] != 0.0 {
-                    (best[j] / start.x0[j] - 1.0) * 100.0
-                } else {
-                    f64::NAN
-                },
-            })
-            .collect();
-        let e = step
-            .signals
-            .iter()
-            .zip(&weights)
-            .map(|(s, &w)| SignalChange {
-                signal: s.clone(),
-                weight: w,
-                before: start.before.get(s).cloned().expect("compared"),
-                after: after.comparison.get(s).cloned().expect("compared"),
-            })
-            .collect();
-        let res = StepResult {
-            step: k + 1,
-            name: step.name.clone(),
-            signals: step.signals.clone(),
-            bias_weight,
-            optimizer: optimizer.name().into(),
-            seed,
-            parameters,
-            e,
-            cost_before: start.cost_before,
-            cost_after,
-            identifiability: start.identifiability.clone(),
-            history: run_state.history.clone(),
-            evaluations: run_state.evaluations,
-            failures: run_state.failures,
-            failure_reasons: run_state.failure_reasons.clone(),
-            after_exact: best.clone(),
-        };
+        Ok(StudyState {
+            checkpoint,
+            resumed,
+            initial: assignment.clone(),
+            assignment,
+            laps,
+            first_x0: None,
+            session_generations: 0,
+        })
+    }
+
+    /// Sets the step's parameters (at `index` in the assignment) to `values`.
+    fn set(&mut self, index: &[usize], values: &[f64]) {
         for (j, &i) in index.iter().enumerate() {
-            assignment[i].1 = best[j];
-        }
-        checkpoint.completed.push(res);
-        checkpoint.current = None;
-        if let Some(path) = &options.checkpoint {
-            checkpoint.write(path)?;
+            self.assignment[i].1 = values[j];
         }
     }
-    // Laps a resumed session did not run itself: once each, before the summary counts runs.
-    let all: Vec<f64> = assignment.iter().map(|p| p.1).collect();
+}
+
+/// One step as this session runs it: its configuration, seed and generations, and its
+/// cost over the bench.
+struct Step<'a> {
+    config: &'a StepConfig,
+    seed: u64,
+    generations: usize,
+    problem: StepProblem<'a>,
+}
+
+/// A step ready for its generations: what it knew before the first one, the optimiser and
+/// the generation loop's bookkeeping (restored from the checkpoint, or new).
+struct StepBegun {
+    start: StepStart,
+    optimizer: Box<dyn Optimizer>,
+    run: RunState,
+}
+
+/// Runs step `k`, or passes over it when the checkpoint has it completed. `Break` when the
+/// session stops before the step is done (its checkpoint kept).
+fn run_step(
+    session: &Session,
+    state: &mut StudyState,
+    k: usize,
+) -> Result<ControlFlow<()>, OptimizeError> {
+    let config = &session.study.file.steps[k];
+    let index = parameter_index(session, config)?;
+    if let Some(done) = state.checkpoint.completed.get(k) {
+        if k == 0 {
+            state.first_x0 = Some(done.parameters.iter().map(|p| p.before).collect());
+        }
+        let after = done.after_exact.clone();
+        state.set(&index, &after);
+        return Ok(ControlFlow::Continue(()));
+    }
+    let prepared = PreparedMeasurement::new(
+        &session.measurement,
+        &config.signals,
+        &session.study.file.compare,
+    )?;
+    let mut step = Step {
+        config,
+        seed: step_seed(session.study.file.seed, k),
+        generations: session
+            .options
+            .generations
+            .or(config.generations)
+            .unwrap_or(session.study.file.optimizer.generations),
+        problem: StepProblem {
+            workers: &session.workers,
+            prepared: &prepared,
+            step: k,
+            cost: StepCost::of_step(session.study, k).expect("a step of the study"),
+            assignment: state.assignment.clone(),
+            index,
+            bounds: config.parameters.iter().map(|p| (p.min, p.max)).collect(),
+            remote: session.options.evaluator.as_deref(),
+        },
+    };
+    let mut begun = match state.checkpoint.current.take().filter(|c| c.step == k) {
+        Some(current) => resume_step(session, &step, current)?,
+        None => start_step(session, &mut step, &mut state.laps)?,
+    };
+    step.problem.set(&begun.start.x0);
+    if k == 0 {
+        state.first_x0 = Some(begun.start.x0.clone());
+    }
+    if session.options.verbose {
+        eprintln!("step {} '{}': identifiability", k + 1, config.name);
+        for l in begun.start.identifiability.report_lines() {
+            eprintln!("  {l}");
+        }
+    }
+    let Some((best, best_cost)) = run_generations(session, state, &step, &mut begun)? else {
+        return Ok(ControlFlow::Break(()));
+    };
+    let (result, after) = finish_step(&step, begun, best, best_cost)?;
+    if k + 1 == session.study.file.steps.len() {
+        state.laps.optimized = Some(after);
+    }
+    state.set(&step.problem.index, &result.after_exact);
+    state.checkpoint.completed.push(result);
+    state.checkpoint.current = None;
+    if let Some(path) = &session.options.checkpoint {
+        state.checkpoint.write(path)?;
+    }
+    Ok(ControlFlow::Continue(()))
+}
+
+/// Where each of the step's parameters sits in the worker pool's assignment.
+fn parameter_index(session: &Session, config: &StepConfig) -> Result<Vec<usize>, OptimizeError> {
+    config
+        .parameter_names()
+        .iter()
+        .map(|n| {
+            session.workers.index_of(n).ok_or_else(|| {
+                OptimizeError::Invalid(format!("step '{}': unknown parameter '{n}'", config.name))
+            })
+        })
+        .collect()
+}
+
+/// The step under way in the checkpoint: its start as it was, the optimiser restored.
+fn resume_step(
+    session: &Session,
+    step: &Step,
+    current: Current,
+) -> Result<StepBegun, OptimizeError> {
+    let start = to_unit(&current.start.x0, &step.problem.bounds);
+    let dim = step.config.parameters.len();
+    let mut optimizer = make_optimizer(session.study, session.kind, dim, step.seed, start)?;
+    optimizer.restore(&current.optimizer)?;
+    if session.options.verbose {
+        eprintln!(
+            "resuming step {} '{}' from generation {} of {} (checkpoint {})",
+            step.problem.step + 1,
+            step.config.name,
+            optimizer.generation() + 1,
+            step.generations,
+            session
+                .options
+                .checkpoint
+                .as_deref()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default()
+        );
+    }
+    Ok(StepBegun {
+        start: current.start,
+        optimizer,
+        run: current.run,
+    })
+}
+
+/// A new step: its start point; before the first step, whether the measurement and the
+/// twin belong together at all; the identifiability check; e before (the first step's run
+/// is the initial lap, kept beside the checkpoint); a new optimiser.
+fn start_step(
+    session: &Session,
+    step: &mut Step,
+    laps: &mut StudyLaps,
+) -> Result<StepBegun, OptimizeError> {
+    let (study, options, config) = (session.study, session.options, step.config);
+    let problem = &mut step.problem;
+    let k = problem.step;
+    let x0: Vec<f64> = config
+        .parameters
+        .iter()
+        .zip(&problem.index)
+        .map(|(p, &i)| {
+            p.start
+                .unwrap_or(problem.assignment[i].1)
+                .clamp(p.min, p.max)
+        })
+        .collect();
+    problem.set(&x0);
+    let failed = |reason| OptimizeError::Start {
+        step: config.name.clone(),
+        reason,
+    };
+    if k == 0 && !options.force {
+        // Before any optimising: do the measurement and the twin belong together?
+        let lap = session.workers.lap(&problem.params(&x0)).map_err(failed)?;
+        check_plausible(study, &session.measurement, &lap)?;
+    }
+    let identifiability = identifiability(study, problem, config, &x0, &session.pool);
+    let before = problem.outcome(&x0).map_err(failed)?;
+    let cost = &problem.cost;
+    let cost_before = cost_of(
+        &before.comparison,
+        &config.signals,
+        &config.weights(),
+        cost.bias_weight,
+    );
+    if k == 0 {
+        if let Some(c) = &options.checkpoint {
+            let path = initial_lap_path(c);
+            write_atomic(&path, &before.table.to_csv()).map_err(|e| {
+                OptimizeError::Checkpoint(format!("writing {}: {e}", path.display()))
+            })?;
+        }
+        laps.initial = Some(before.table);
+    }
+    let start = to_unit(&x0, &problem.bounds);
+    let optimizer = make_optimizer(study, session.kind, x0.len(), step.seed, start)?;
+    Ok(StepBegun {
+        start: StepStart {
+            x0,
+            before: before.comparison,
+            cost_before,
+            identifiability,
+        },
+        optimizer,
+        run: RunState::default(),
+    })
+}
+
+/// The step's generations from where `begun` stands, with a checkpoint after every one.
+/// The best point and its cost; `None` when the session stops (`RunOptions::interrupt` or
+/// `stop_after`) before the last generation, the checkpoint of the last one kept.
+fn run_generations(
+    session: &Session,
+    state: &mut StudyState,
+    step: &Step,
+    begun: &mut StepBegun,
+) -> Result<Option<(Vec<f64>, f64)>, OptimizeError> {
+    let (study, options) = (session.study, session.options);
+    if let Some(p) = &options.progress {
+        p.step_started(
+            step.problem.step + 1,
+            &step.config.name,
+            step.generations,
+            begun.optimizer.generation(),
+        );
+    }
+    let settings = RunSettings {
+        max_generations: step.generations,
+        threads: options.threads,
+        penalty: study.file.penalty,
+    };
+    let mut interrupted = false;
+    let mut write_error = None;
+    let completed = &state.checkpoint.completed;
+    let session_generations = &mut state.session_generations;
+    let start = &begun.start;
+    let result = minimize(
+        begun.optimizer.as_mut(),
+        &step.problem,
+        &settings,
+        &mut begun.run,
+        |opt, run| {
+            *session_generations += 1;
+            if let (Some(p), Some(rec)) = (&options.progress, run.history.last()) {
+                p.generation(rec);
+            }
+            if let Some(path) = &options.checkpoint {
+                let current = Current {
+                    step: step.problem.step,
+                    start: start.clone(),
+                    optimizer: opt.save(),
+                    run: run.clone(),
+                };
+                let cp = Checkpoint::new(study, options, completed.clone(), Some(current));
+                if let Err(e) = cp.write(path) {
+                    write_error = Some(e);
+                    return ControlFlow::Break(());
+                }
+            }
+            let asked = options
+                .interrupt
+                .as_ref()
+                .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst));
+            if (asked
+                || options
+                    .stop_after
+                    .is_some_and(|n| *session_generations >= n))
+                && opt.generation() < step.generations
+            {
+                interrupted = true;
+                return ControlFlow::Break(());
+            }
+            ControlFlow::Continue(())
+        },
+    );
+    if let Some(p) = &options.progress {
+        p.step_finished();
+    }
+    if let Some(e) = write_error {
+        return Err(e);
+    }
+    if interrupted {
+        return Ok(None);
+    }
+    result.map(Some)
+}
+
+/// The step's result: the best point run once more for e after, each parameter's change
+/// and each signal's e before and after. With it the best point's lap.
+fn finish_step(
+    step: &Step,
+    begun: StepBegun,
+    best: Vec<f64>,
+    best_cost: f64,
+) -> Result<(StepResult, Table), OptimizeError> {
+    let (config, problem) = (step.config, &step.problem);
+    let after = problem
+        .outcome(&best)
+        .map_err(|reason| OptimizeError::Start {
+            step: config.name.clone(),
+            reason: format!("the best point cannot be re-evaluated: {reason}"),
+        })?;
+    let weights = config.weights();
+    let bias_weight = problem.cost.bias_weight;
+    let cost_after = cost_of(&after.comparison, &config.signals, &weights, bias_weight);
+    if cost_after.to_bits() != best_cost.to_bits() {
+        log::warn!(
+            "step '{}': the best point re-evaluated to {cost_after} (optimiser saw {best_cost})",
+            config.name
+        );
+    }
+    let StepBegun {
+        start,
+        optimizer,
+        run,
+    } = begun;
+    let parameters = config
+        .parameters
+        .iter()
+        .enumerate()
+        .map(|(j, p)| ParameterChange {
+            name: p.name.clone(),
+            min: p.min,
+            max: p.max,
+            before: start.x0[j],
+            after: best[j],
+            change_percent: if start.x0[j] != 0.0 {
+                (best[j] / start.x0[j] - 1.0) * 100.0
+            } else {
+                f64::NAN
+            },
+        })
+        .collect();
+    let e = config
+        .signals
+        .iter()
+        .zip(&weights)
+        .map(|(s, &w)| SignalChange {
+            signal: s.clone(),
+            weight: w,
+            before: start.before.get(s).cloned().expect("compared"),
+            after: after.comparison.get(s).cloned().expect("compared"),
+        })
+        .collect();
+    let result = StepResult {
+        step: problem.step + 1,
+        name: config.name.clone(),
+        signals: config.signals.clone(),
+        bias_weight,
+        optimizer: optimizer.name().into(),
+        seed: step.seed,
+        parameters,
+        e,
+        cost_before: start.cost_before,
+        cost_after,
+        identifiability: start.identifiability,
+        history: run.history,
+        evaluations: run.evaluations,
+        failures: run.failures,
+        failure_reasons: run.failure_reasons,
+        after_exact: best,
+    };
+    Ok((result, after.table))
+}
+
+/// The study's result, with the laps a resumed session did not run itself made once each
+/// (before the runs are counted).
+fn finish_study(
+    session: &Session,
+    mut state: StudyState,
+    wall: Instant,
+) -> Result<StudyResult, OptimizeError> {
+    let (study, workers) = (session.study, &session.workers);
     let lap = |values: &[f64]| -> Result<Table, OptimizeError> {
-        let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum"], &study.file.compare)?;
+        let prepared =
+            PreparedMeasurement::new(&session.measurement, &["Fz_sum"], &study.file.compare)?;
         workers
             .run(values, &prepared)
             .map(|o| o.table)
@@ -767,35 +938,36 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
                 reason,
             })
     };
-    if laps.optimized.is_none() {
-        laps.optimized = Some(lap(&all)?);
+    if state.laps.optimized.is_none() {
+        let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
+        state.laps.optimized = Some(lap(&all)?);
     }
-    if laps.initial.is_none() {
-        if let Some(x0) = &first_x0 {
-            let mut values: Vec<f64> = initial.iter().map(|p| p.1).collect();
+    if state.laps.initial.is_none() {
+        if let Some(x0) = &state.first_x0 {
+            let mut values: Vec<f64> = state.initial.iter().map(|p| p.1).collect();
             for (j, p) in study.file.steps[0].parameters.iter().enumerate() {
                 if let Some(i) = workers.index_of(&p.name) {
                     values[i] = x0[j];
                 }
             }
-            laps.initial = Some(lap(&values)?);
+            state.laps.initial = Some(lap(&values)?);
         }
     }
     let (simulations, simulation_seconds) = workers.runs();
-    Ok(StudyOutcome::Finished(Box::new(StudyResult {
+    Ok(StudyResult {
         study: study.name(),
         system: study.system_path.clone(),
         measurement: study.measurement_path.clone(),
         seed: study.file.seed,
-        threads,
-        steps: checkpoint.completed,
-        parameters_initial: initial,
-        parameters_final: assignment,
+        threads: session.pool.current_num_threads(),
+        steps: state.checkpoint.completed,
+        parameters_initial: state.initial,
+        parameters_final: state.assignment,
         simulations,
         simulation_seconds,
         wall_seconds: wall.elapsed().as_secs_f64(),
         workers_created: workers.workers_created(),
-        resumed,
-        laps,
-    })))
+        resumed: state.resumed,
+        laps: state.laps,
+    })
 }
