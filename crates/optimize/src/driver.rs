@@ -6,7 +6,7 @@ use super::checkpoint::{initial_lap_path, Checkpoint, Current, StepStart};
 use super::cmaes::Cmaes;
 use super::exact;
 use super::ga::Ga;
-use super::identifiability::{analyse, Identifiability};
+use super::identifiability::{self, Identifiability};
 use super::optimizer::{
     evaluate_all, finite, minimize, thread_pool, to_unit, GenerationRecord, Optimizer, Problem,
     RunSettings, RunState,
@@ -15,7 +15,6 @@ use super::pool::{Outcome, WorkerPool};
 use super::remote::{Candidate, Evaluator, StepCost};
 use super::study::{OptimizerKind, StepConfig, Study};
 use super::OptimizeError;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -300,117 +299,6 @@ fn make_optimizer(
         OptimizerKind::Ga => Box::new(Ga::new(dim, o.ga.clone(), seed, Some(start))?),
         OptimizerKind::Cmaes => Box::new(Cmaes::new(dim, o.cmaes.clone(), seed, Some(start))?),
     })
-}
-
-/// Per run: each signal's covered grid range and filtered values on it.
-type Residuals = Result<Vec<(std::ops::Range<usize>, Vec<f64>)>, String>;
-
-/// Finite-difference identifiability check around `x0` (2 runs per parameter, in parallel).
-fn identifiability(
-    study: &Study,
-    problem: &StepProblem,
-    step: &StepConfig,
-    x0: &[f64],
-    pool: &rayon::ThreadPool,
-) -> Identifiability {
-    const REL_STEP: f64 = 0.02;
-    let p = x0.len();
-    let scale: Vec<f64> = x0
-        .iter()
-        .zip(&problem.bounds)
-        .map(|(&x, &(lo, hi))| if x.abs() > 1e-12 { x.abs() } else { hi - lo })
-        .collect();
-    let points: Vec<Vec<f64>> = (0..2 * p)
-        .map(|j| {
-            let i = j / 2;
-            let sign = if j % 2 == 0 { 1.0 } else { -1.0 };
-            let mut x = x0.to_vec();
-            x[i] += sign * REL_STEP * scale[i];
-            x
-        })
-        .collect();
-    let prepared = problem.prepared;
-    let residuals: Vec<Residuals> = pool.install(|| {
-        points
-            .par_iter()
-            .with_max_len(1)
-            .map(|x| {
-                let o = problem.outcome(x)?;
-                let mut ws = Workspace::new();
-                step.signals
-                    .iter()
-                    .map(|s| {
-                        prepared
-                            .on_grid(&o.table, s, true, &mut ws)
-                            .map_err(|e| e.to_string())
-                    })
-                    .collect()
-            })
-            .collect()
-    });
-    let mut failures = Vec::new();
-    let weights = step.weights();
-    // Per signal, per parameter: the column of J.
-    let mut blocks: Vec<Vec<Vec<f64>>> = vec![vec![Vec::new(); p]; step.signals.len()];
-    if residuals.iter().all(|r| r.is_ok()) {
-        let res: Vec<_> = residuals.into_iter().map(|r| r.unwrap()).collect();
-        for (s, name) in step.signals.iter().enumerate() {
-            // The grid points every run covers.
-            let lo = res.iter().map(|r| r[s].0.start).max().unwrap_or(0);
-            let hi = res.iter().map(|r| r[s].0.end).min().unwrap_or(0);
-            let meas = prepared.measured(name).unwrap_or(&[]);
-            let n = hi.saturating_sub(lo);
-            let m = &meas[lo.min(meas.len())..hi.min(meas.len())];
-            let mean = m.iter().sum::<f64>() / n.max(1) as f64;
-            let sd = (m.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n.max(1) as f64)
-                .sqrt()
-                .max(1e-12);
-            let norm = weights[s].sqrt() / (sd * (n.max(1) as f64).sqrt());
-            for i in 0..p {
-                let (plus, minus) = (&res[2 * i][s], &res[2 * i + 1][s]);
-                let col: Vec<f64> = (lo..hi)
-                    .map(|g| {
-                        let a = plus.1[g - plus.0.start];
-                        let b = minus.1[g - minus.0.start];
-                        (a - b) / (2.0 * REL_STEP) * norm
-                    })
-                    .collect();
-                blocks[s][i] = col;
-            }
-        }
-    } else {
-        for r in residuals.into_iter().filter_map(|r| r.err()) {
-            failures.push(r);
-        }
-        for b in blocks.iter_mut() {
-            for c in b.iter_mut() {
-                *c = vec![0.0];
-            }
-        }
-    }
-    let combined = analyse(&step.signals, &blocks, &scale, study.file.null_ratio);
-    let per_signal = step
-        .signals
-        .iter()
-        .enumerate()
-        .map(|(s, name)| {
-            analyse(
-                std::slice::from_ref(name),
-                std::slice::from_ref(&blocks[s]),
-                &scale,
-                study.file.null_ratio,
-            )
-        })
-        .collect();
-    Identifiability {
-        parameters: step.parameter_names(),
-        start: x0.to_vec(),
-        rel_step: REL_STEP,
-        null_ratio: study.file.null_ratio,
-        combined,
-        per_signal,
-        failures,
-    }
 }
 
 /// Do the measurement and the twin's first run belong together? Lap length, lap time and
@@ -730,7 +618,15 @@ fn start_step(
         let lap = session.workers.lap(&problem.params(&x0)).map_err(failed)?;
         check_plausible(study, &session.measurement, &lap)?;
     }
-    let identifiability = identifiability(study, problem, config, &x0, &session.pool);
+    let identifiability = identifiability::check(
+        config,
+        study.file.null_ratio,
+        &x0,
+        &problem.bounds,
+        problem.prepared,
+        &session.pool,
+        |x| problem.outcome(x).map(|o| o.table),
+    );
     let before = problem.outcome(&x0).map_err(failed)?;
     let cost = &problem.cost;
     let cost_before = cost_of(
