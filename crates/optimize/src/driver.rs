@@ -463,6 +463,39 @@ struct Step<'a> {
     problem: StepProblem<'a>,
 }
 
+impl<'a> Step<'a> {
+    /// Step `k` with its parameters at `index` in `assignment` (every parameter's value
+    /// after the earlier steps) and the measurement prepared for its signals.
+    fn new(
+        session: &'a Session,
+        k: usize,
+        index: Vec<usize>,
+        prepared: &'a PreparedMeasurement,
+        assignment: Vec<(String, f64)>,
+    ) -> Step<'a> {
+        let (study, options) = (session.study, session.options);
+        let config = &study.file.steps[k];
+        Step {
+            config,
+            seed: step_seed(study.file.seed, k),
+            generations: options
+                .generations
+                .or(config.generations)
+                .unwrap_or(study.file.optimizer.generations),
+            problem: StepProblem {
+                workers: &session.workers,
+                prepared,
+                step: k,
+                cost: StepCost::of_step(study, k).expect("a step of the study"),
+                assignment,
+                index,
+                bounds: config.parameters.iter().map(|p| (p.min, p.max)).collect(),
+                remote: options.evaluator.as_deref(),
+            },
+        }
+    }
+}
+
 /// A step ready for its generations: what it knew before the first one, the optimiser and
 /// the generation loop's bookkeeping (restored from the checkpoint, or new).
 struct StepBegun {
@@ -493,25 +526,7 @@ fn run_step(
         &config.signals,
         &session.study.file.compare,
     )?;
-    let mut step = Step {
-        config,
-        seed: step_seed(session.study.file.seed, k),
-        generations: session
-            .options
-            .generations
-            .or(config.generations)
-            .unwrap_or(session.study.file.optimizer.generations),
-        problem: StepProblem {
-            workers: &session.workers,
-            prepared: &prepared,
-            step: k,
-            cost: StepCost::of_step(session.study, k).expect("a step of the study"),
-            assignment: state.assignment.clone(),
-            index,
-            bounds: config.parameters.iter().map(|p| (p.min, p.max)).collect(),
-            remote: session.options.evaluator.as_deref(),
-        },
-    };
+    let mut step = Step::new(session, k, index, &prepared, state.assignment.clone());
     let mut begun = match state.checkpoint.current.take().filter(|c| c.step == k) {
         Some(current) => resume_step(session, &step, current)?,
         None => start_step(session, &mut step, &mut state.laps)?,
@@ -628,12 +643,11 @@ fn start_step(
         |x| problem.outcome(x).map(|o| o.table),
     );
     let before = problem.outcome(&x0).map_err(failed)?;
-    let cost = &problem.cost;
     let cost_before = cost_of(
         &before.comparison,
         &config.signals,
         &config.weights(),
-        cost.bias_weight,
+        problem.cost.bias_weight,
     );
     if k == 0 {
         if let Some(c) = &options.checkpoint {
