@@ -6,8 +6,8 @@ mod common;
 
 use std::sync::Arc;
 use tb_fmi::FmuCache;
-use tb_optimize::bench::Bench;
 use tb_optimize::Study;
+use tb_optimize::WorkerPool;
 
 fn columns_bits(t: &tb_table::Table) -> Vec<Vec<u64>> {
     t.columns()
@@ -27,12 +27,14 @@ fn a_candidate_gives_the_same_bits_on_a_fresh_and_on_a_used_worker() {
         &study.file.compare,
     )
     .unwrap();
-    let fresh_bench = Bench::new(&study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    let fresh_bench =
+        WorkerPool::new(&study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
     let x: Vec<f64> = fresh_bench.assignment().iter().map(|a| a.1).collect();
     let fresh = fresh_bench.run(&x, &prepared).unwrap();
     // Another bench's only worker runs 50 other candidates first (spread over the study's
     // bounds, as an optimiser's would be, and some that fail).
-    let used_bench = Bench::new(&study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    let used_bench =
+        WorkerPool::new(&study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
     for k in 0..50 {
         let mut other = x.clone();
         for (i, v) in other.iter_mut().enumerate() {
@@ -69,7 +71,7 @@ fn a_remote_workers_cost_does_not_depend_on_what_it_ran_before() {
     common::fmu_dir();
     let path = twinbench::pack::workspace_root().join("studies/spielberg.toml");
     let fresh = StudyEvaluator::load(&path).unwrap();
-    let x: Vec<f64> = fresh.bench().assignment().iter().map(|a| a.1).collect();
+    let x: Vec<f64> = fresh.workers().assignment().iter().map(|a| a.1).collect();
     let candidate = Candidate {
         step: 1,
         values: x.clone(),
@@ -98,7 +100,7 @@ fn a_remote_workers_cost_does_not_depend_on_what_it_ran_before() {
         &study.file.compare,
     )
     .unwrap();
-    let bench = Bench::new(study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    let bench = WorkerPool::new(study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
     let local = cost.of(&bench, &x, &prepared).unwrap();
     assert_eq!(first.to_bits(), local.to_bits(), "{first} vs {local}");
     // A worker with other files refuses, naming the file.

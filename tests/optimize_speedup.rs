@@ -7,13 +7,13 @@ mod common;
 
 use std::time::Instant;
 use tb_fmi::FmuCache;
-use tb_optimize::bench::Bench;
+use tb_optimize::driver::cost_of;
 use tb_optimize::optimizer::{evaluate_all, thread_pool};
-use tb_optimize::run::cost_of;
+use tb_optimize::WorkerPool;
 use tb_optimize::{Problem, Study};
 
 struct Lift<'a> {
-    bench: &'a Bench,
+    bench: &'a WorkerPool,
     prepared: &'a tb_compare::PreparedMeasurement,
     /// Summed CPU time of the evaluating threads [s].
     cpu: std::sync::Mutex<f64>,
@@ -53,7 +53,7 @@ fn speedup_from_1_to_2_threads() {
     let root = twinbench::pack::workspace_root();
     let study = Study::load(&root.join("studies/spielberg.toml")).unwrap();
     let cache = std::sync::Arc::new(FmuCache::temporary(false).unwrap());
-    let bench = Bench::new(&study, cache).unwrap();
+    let bench = WorkerPool::new(&study, cache).unwrap();
     let prepared = tb_compare::PreparedMeasurement::from_path(
         &study.measurement_path,
         &["Fz_front", "Fz_rear"],

@@ -20,7 +20,7 @@ use crate::resample::{interpolate_onto, DistanceGrid};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::Path;
-use tb_table::Table;
+use tb_table::{Table, TableError};
 
 /// Derived signals and the columns they sum.
 pub const DERIVED_SIGNALS: [(&str, &[&str]); 3] = [
@@ -422,13 +422,13 @@ impl PreparedMeasurement {
                 sim.column_at(i)
             }
             None => {
-                let v = sim
-                    .require_index(&s.speed_signal)
-                    .map_err(|_| Error::MissingColumn {
+                let v = sim.require_index(&s.speed_signal).map_err(|_| {
+                    Error::Table(TableError::MissingColumn {
                         file: sim.source().into(),
                         column: format!("{}` or `{}", s.distance_signal, s.speed_signal),
                         available: sim.names().join(", "),
-                    })?;
+                    })
+                })?;
                 sim.check_finite(v)?;
                 cumulative_trapezoid_into(sim.column_at(tcol), sim.column_at(v), &mut ws.distance);
                 &ws.distance

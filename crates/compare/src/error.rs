@@ -1,8 +1,9 @@
 //! The crate's error type. Every error about a data cell names the source (file path, or
 //! the label of an in-memory table), the row as the 1-based line in the file, and the
-//! column.
+//! column. Errors of the table itself (reading, parsing, its shape) are `tb-table`'s,
+//! wrapped as they are in [`Error::Table`].
 
-use std::path::PathBuf;
+use tb_table::TableError;
 
 /// Result alias of this crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -11,42 +12,10 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
-    #[error("{}: cannot read: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-
-    #[error("{file}: empty file: {what}")]
-    Empty { file: String, what: &'static str },
-
-    #[error("{file}: line {row}: expected {expected} fields as in the header, found {found}")]
-    RaggedRow {
-        file: String,
-        row: u64,
-        expected: usize,
-        found: usize,
-    },
-
-    #[error("{file}: line 1: duplicate column name `{column}`")]
-    DuplicateColumn { file: String, column: String },
-
-    #[error("{file}: line {row}, column `{column}`: malformed number {value:?}")]
-    Malformed {
-        file: String,
-        row: u64,
-        column: String,
-        value: String,
-    },
-
-    #[error("{file}: line {row}, column `{column}`: value {value} is not finite (NaN or Inf)")]
-    NonFinite {
-        file: String,
-        row: u64,
-        column: String,
-        value: f64,
-    },
+    /// Reading or checking a table (a file, a simulation result): the table's own error,
+    /// message and source as they are.
+    #[error(transparent)]
+    Table(#[from] TableError),
 
     #[error(
         "{file}: line {row}, column `{column}`: time does not increase ({value} after {previous})"
@@ -70,13 +39,6 @@ pub enum Error {
         value: f64,
     },
 
-    #[error("{file}: missing required column `{column}` (columns present: {available})")]
-    MissingColumn {
-        file: String,
-        column: String,
-        available: String,
-    },
-
     /// A channel map names a channel the file does not have.
     #[error("{file}: no channel `{channel}` (the channel map's name for signal `{signal}`); closest channels: {closest} (channels in the file: {available})")]
     MissingChannel {
@@ -85,13 +47,6 @@ pub enum Error {
         channel: String,
         closest: String,
         available: String,
-    },
-
-    #[error("{file}: column `{column}` is ambiguous: matches {candidates}")]
-    AmbiguousColumn {
-        file: String,
-        column: String,
-        candidates: String,
     },
 
     #[error(
@@ -128,67 +83,20 @@ pub enum Error {
     Settings(String),
 }
 
-/// Table errors keep their message (the same variants, converted one to one).
-impl From<tb_table::TableError> for Error {
-    fn from(e: tb_table::TableError) -> Self {
-        use tb_table::TableError as T;
-        match e {
-            T::Io { path, source } => Error::Io { path, source },
-            T::Empty { file, what } => Error::Empty { file, what },
-            T::RaggedRow {
-                file,
-                row,
-                expected,
-                found,
-            } => Error::RaggedRow {
-                file,
-                row,
-                expected,
-                found,
-            },
-            T::DuplicateColumn { file, column } => Error::DuplicateColumn { file, column },
-            T::Malformed {
-                file,
-                row,
-                column,
-                value,
-            } => Error::Malformed {
-                file,
-                row,
-                column,
-                value,
-            },
-            T::NonFinite {
-                file,
-                row,
-                column,
-                value,
-            } => Error::NonFinite {
-                file,
-                row,
-                column,
-                value,
-            },
-            T::MissingColumn {
-                file,
-                column,
-                available,
-            } => Error::MissingColumn {
-                file,
-                column,
-                available,
-            },
-            T::AmbiguousColumn {
-                file,
-                column,
-                candidates,
-            } => Error::AmbiguousColumn {
-                file,
-                column,
-                candidates,
-            },
-            T::Shape(m) => Error::Settings(m),
-            other => Error::Settings(other.to_string()),
-        }
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_table_error_keeps_its_message_and_source() {
+        let shape = Error::from(TableError::Shape("lap.mf4: MDF 4: no data group".into()));
+        assert_eq!(shape.to_string(), "lap.mf4: MDF 4: no data group");
+        let io = Error::from(TableError::Io {
+            path: "lap.csv".into(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "gone"),
+        });
+        assert_eq!(io.to_string(), "lap.csv: cannot read: gone");
+        let source = std::error::Error::source(&io).expect("the io error");
+        assert_eq!(source.to_string(), "gone");
     }
 }

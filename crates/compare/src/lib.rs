@@ -9,7 +9,7 @@
 //! - [`metrics`]: regression slope m, intercept, R², e (Eq. 16), bias, RMS.
 //! - [`compare`]: the pipeline; [`PreparedMeasurement`] holds what depends on the
 //!   measurement only, [`Workspace`] the per-thread buffers.
-//! - [`error`]: the crate's error type (table errors converted one to one).
+//! - [`error`]: the crate's error type (table errors wrapped as they are).
 //!
 //! ```no_run
 //! use tb_compare::{CompareSettings, PreparedMeasurement, Table, Workspace};

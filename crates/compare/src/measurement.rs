@@ -11,7 +11,7 @@
 
 use crate::error::{Error, Result};
 use std::path::Path;
-use tb_table::Table;
+use tb_table::{Table, TableError};
 
 /// Columns that must be present in a measurement.
 pub const REQUIRED_COLUMNS: [&str; 6] = ["time", "v", "Fz_fl", "Fz_fr", "Fz_rl", "Fz_rr"];
@@ -205,9 +205,11 @@ impl ChannelMap {
         struct File {
             channels: ChannelMap,
         }
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
+        let text = std::fs::read_to_string(path).map_err(|source| {
+            Error::Table(TableError::Io {
+                path: path.to_path_buf(),
+                source,
+            })
         })?;
         let f: File = toml::from_str(&text)
             .map_err(|e| Error::Settings(format!("{}: {e}", path.display())))?;

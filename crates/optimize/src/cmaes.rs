@@ -6,7 +6,7 @@
 //! The covariance is decomposed every generation (cyclic Jacobi; n is small here).
 
 use super::exact;
-use super::optimizer::Optimizer;
+use super::optimizer::{all_finite, restore_state, Optimizer, SavedState};
 use super::rng::Rng;
 use super::OptimizeError;
 use serde::{Deserialize, Serialize};
@@ -317,38 +317,41 @@ impl Optimizer for Cmaes {
     }
 
     fn restore(&mut self, state: &serde_json::Value) -> Result<(), OptimizeError> {
-        let s: CmaState = serde_json::from_value(state.clone())
-            .map_err(|e| OptimizeError::Checkpoint(format!("CMA-ES state: {e}")))?;
-        if s.mean.len() != self.n {
-            return Err(OptimizeError::Checkpoint(
-                "CMA-ES state has a different number of parameters".into(),
-            ));
-        }
-        // A damaged checkpoint must not run a study of failed candidates to its end.
-        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-        let square =
-            |m: &[Vec<f64>]| m.len() == self.n && m.iter().all(|r| r.len() == self.n && finite(r));
-        if !(s.sigma.is_finite() && s.sigma > 0.0) {
-            return Err(OptimizeError::Checkpoint(format!(
-                "CMA-ES state: sigma = {} is not a positive number (a damaged checkpoint: start without --resume)",
-                s.sigma
-            )));
-        }
-        if !(finite(&s.mean)
-            && square(&s.c)
-            && square(&s.b)
-            && s.d.len() == self.n
-            && finite(&s.d)
-            && finite(&s.pc)
-            && finite(&s.ps)
-            && s.pending.iter().all(|x| finite(x)))
-        {
-            return Err(OptimizeError::Checkpoint(
-                "CMA-ES state holds a non-finite or misshapen mean, covariance or path (a damaged checkpoint: start without --resume)".into(),
-            ));
-        }
-        self.s = s;
+        self.s = restore_state(state, self.n)?;
         Ok(())
+    }
+}
+
+impl SavedState for CmaState {
+    const LABEL: &'static str = "CMA-ES";
+
+    fn has_dim(&self, dim: usize) -> bool {
+        self.mean.len() == dim
+    }
+
+    fn damage(&self, dim: usize) -> Option<String> {
+        let square =
+            |m: &[Vec<f64>]| m.len() == dim && m.iter().all(|r| r.len() == dim && all_finite(r));
+        if !(self.sigma.is_finite() && self.sigma > 0.0) {
+            return Some(format!(
+                "CMA-ES state: sigma = {} is not a positive number",
+                self.sigma
+            ));
+        }
+        if !(all_finite(&self.mean)
+            && square(&self.c)
+            && square(&self.b)
+            && self.d.len() == dim
+            && all_finite(&self.d)
+            && all_finite(&self.pc)
+            && all_finite(&self.ps)
+            && self.pending.iter().all(|x| all_finite(x)))
+        {
+            return Some(
+                "CMA-ES state holds a non-finite or misshapen mean, covariance or path".into(),
+            );
+        }
+        None
     }
 }
 
@@ -367,7 +370,10 @@ mod tests {
         // Floats are kept as their bits: a NaN is what a damaged file can hold.
         let bits = |x: f64| serde_json::json!(crate::exact::encode(x));
         for (edit, expected) in [
-            (bits(f64::NAN), "sigma = NaN is not a positive number"),
+            (
+                bits(f64::NAN),
+                "checkpoint: CMA-ES state: sigma = NaN is not a positive number (a damaged checkpoint: start without --resume)",
+            ),
             (bits(0.0), "sigma = 0 is not a positive number"),
             (bits(-1.0), "sigma = -1 is not a positive number"),
             (serde_json::json!("zz"), "is not a 16-digit hex float"),
@@ -380,7 +386,10 @@ mod tests {
         let mut bad = good.clone();
         bad["mean"][0] = bits(f64::INFINITY);
         let e = fresh.restore(&bad).unwrap_err().to_string();
-        assert!(e.contains("non-finite"), "{e}");
+        assert_eq!(
+            e,
+            "checkpoint: CMA-ES state holds a non-finite or misshapen mean, covariance or path (a damaged checkpoint: start without --resume)"
+        );
         let mut bad = good;
         bad["c"][0] = serde_json::json!([crate::exact::encode(1.0)]);
         let e = fresh.restore(&bad).unwrap_err().to_string();

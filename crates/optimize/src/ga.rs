@@ -6,7 +6,7 @@
 //! generation costs `population − elites` evaluations.
 
 use super::exact;
-use super::optimizer::Optimizer;
+use super::optimizer::{all_finite, restore_state, Optimizer, SavedState};
 use super::rng::Rng;
 use super::OptimizeError;
 use serde::{Deserialize, Serialize};
@@ -267,26 +267,25 @@ impl Optimizer for Ga {
     }
 
     fn restore(&mut self, state: &serde_json::Value) -> Result<(), OptimizeError> {
-        let s: GaState = serde_json::from_value(state.clone())
-            .map_err(|e| OptimizeError::Checkpoint(format!("GA state: {e}")))?;
-        if s.population.iter().any(|i| i.x.len() != self.dim) {
-            return Err(OptimizeError::Checkpoint(
-                "GA state has a different number of parameters".into(),
-            ));
-        }
-        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-        if !(s
+        self.s = restore_state(state, self.dim)?;
+        Ok(())
+    }
+}
+
+impl SavedState for GaState {
+    const LABEL: &'static str = "GA";
+
+    fn has_dim(&self, dim: usize) -> bool {
+        self.population.iter().all(|i| i.x.len() == dim)
+    }
+
+    fn damage(&self, _dim: usize) -> Option<String> {
+        let usable = self
             .population
             .iter()
-            .all(|i| finite(&i.x) && !i.cost.is_nan())
-            && s.pending.iter().all(|x| finite(x)))
-        {
-            return Err(OptimizeError::Checkpoint(
-                "GA state holds a non-finite candidate or cost (a damaged checkpoint: start without --resume)".into(),
-            ));
-        }
-        self.s = s;
-        Ok(())
+            .all(|i| all_finite(&i.x) && !i.cost.is_nan())
+            && self.pending.iter().all(|x| all_finite(x));
+        (!usable).then(|| "GA state holds a non-finite candidate or cost".into())
     }
 }
 
@@ -305,10 +304,16 @@ mod tests {
         let mut bad = good.clone();
         bad["population"][0]["x"][0] = serde_json::json!(crate::exact::encode(f64::NAN));
         let e = fresh.restore(&bad).unwrap_err().to_string();
-        assert!(e.contains("GA state holds a non-finite candidate"), "{e}");
+        assert_eq!(
+            e,
+            "checkpoint: GA state holds a non-finite candidate or cost (a damaged checkpoint: start without --resume)"
+        );
         let mut bad = good;
         bad["population"][0]["x"] = serde_json::json!([crate::exact::encode(0.5)]);
         let e = fresh.restore(&bad).unwrap_err().to_string();
-        assert!(e.contains("different number of parameters"), "{e}");
+        assert_eq!(
+            e,
+            "checkpoint: GA state has a different number of parameters"
+        );
     }
 }

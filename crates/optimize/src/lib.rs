@@ -5,39 +5,45 @@
 //! - [`optimizer`]: the ask/tell [`Optimizer`] trait, the [`Problem`] trait and the
 //!   generation loop [`minimize`] (parallel evaluation with rayon, failures penalised).
 //! - [`ga`]: real-coded GA (tournament, SBX, polynomial mutation, elitism); [`cmaes`]: CMA-ES.
-//! - [`bench`]: candidates on the co-simulated bench: the system compiled once into a plan,
-//!   one reused `Simulation` of it per worker, every study parameter resolved to a slot.
+//! - [`pool`]: the worker pool, candidates on the co-simulated bench: the system compiled
+//!   once into a plan, one reused `Simulation` of it per worker, every study parameter
+//!   resolved to a slot.
 //! - [`remote`]: candidates evaluated in other processes or on other machines (the
 //!   [`Evaluator`] a distributed study uses, the [`StudyEvaluator`] a worker holds).
 //! - [`rng`]: the seeded generator every random draw comes from; [`exact`]: bit-exact
 //!   floats in checkpoints.
-//! - [`identify`]: identifiability check (finite-difference Jacobian, near-null directions).
-//! - [`run`]: the study driver: steps in order, each starting from the earlier results,
+//! - [`identifiability`]: the identifiability check (finite-difference Jacobian,
+//!   near-null directions).
+//! - [`driver`]: the study driver: steps in order, each starting from the earlier results,
 //!   identifiability check, e before/after, a checkpoint after every generation, resume.
+//! - [`checkpoint`]: the checkpoint file the driver writes after every generation and
+//!   resumes from.
 //!
 //! Determinism: every random number is drawn on the calling thread in `ask`/`tell`, a
 //! candidate's cost depends on the candidate only, and costs go back in the asked order, so
 //! the same seed gives the same result with any number of threads, and a resumed study
 //! (bit-exact optimiser state in the checkpoint) the same result as an uninterrupted one.
 
-pub mod bench;
+pub mod checkpoint;
 pub mod cmaes;
+pub mod driver;
 pub mod exact;
 pub mod ga;
-pub mod identify;
+pub mod identifiability;
 pub mod optimizer;
+pub mod pool;
 pub mod remote;
 pub mod rng;
-pub mod run;
 pub mod study;
 
 pub use cmaes::{Cmaes, CmaesSettings};
+pub use driver::{run_study, Progress, RunOptions, StepResult, StudyOutcome, StudyResult};
 pub use ga::{Ga, GaSettings};
-pub use identify::Identifiability;
+pub use identifiability::Identifiability;
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
+pub use pool::WorkerPool;
 pub use remote::{Candidate, Evaluator, InputDigest, StepCost, StudyEvaluator};
 pub use rng::Rng;
-pub use run::{run_study, Progress, RunOptions, StepResult, StudyOutcome, StudyResult};
 pub use study::{OptimizerKind, Study, StudyFile};
 
 use std::path::PathBuf;

@@ -35,6 +35,46 @@ pub trait Optimizer: Send {
     fn restore(&mut self, state: &serde_json::Value) -> Result<(), OptimizeError>;
 }
 
+/// An optimiser's state as [`Optimizer::save`] writes it into a checkpoint, read back by
+/// [`restore_state`].
+pub(crate) trait SavedState: serde::de::DeserializeOwned {
+    /// The optimiser's name in messages ("GA", "CMA-ES").
+    const LABEL: &'static str;
+    /// Whether the state is of an optimiser with `dim` parameters.
+    fn has_dim(&self, dim: usize) -> bool;
+    /// Why a state of the right dimension cannot be used (a non-finite number, a misshapen
+    /// matrix): the message up to the advice that follows it; `None` when it can.
+    fn damage(&self, dim: usize) -> Option<String>;
+}
+
+/// The one check of a restored optimiser state, before it replaces the running one: it
+/// parses, it has the optimiser's dimension, and nothing in it is damaged (a damaged
+/// checkpoint must not run a study of failed candidates to its end).
+pub(crate) fn restore_state<S: SavedState>(
+    state: &serde_json::Value,
+    dim: usize,
+) -> Result<S, OptimizeError> {
+    let s: S = serde_json::from_value(state.clone())
+        .map_err(|e| OptimizeError::Checkpoint(format!("{} state: {e}", S::LABEL)))?;
+    if !s.has_dim(dim) {
+        return Err(OptimizeError::Checkpoint(format!(
+            "{} state has a different number of parameters",
+            S::LABEL
+        )));
+    }
+    if let Some(damage) = s.damage(dim) {
+        return Err(OptimizeError::Checkpoint(format!(
+            "{damage} (a damaged checkpoint: start without --resume)"
+        )));
+    }
+    Ok(s)
+}
+
+/// Whether every number of `v` is finite.
+pub(crate) fn all_finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
 /// What is minimised: a cost over a box. `evaluate` is called from several threads at once;
 /// `Err` is a failed evaluation (its text says why) that the driver penalises.
 pub trait Problem: Sync {

@@ -12,8 +12,8 @@
 //! [`InputDigest`] of the study's files and a worker that sees other contents refuses,
 //! naming the file.
 
-use super::bench::Bench;
-use super::run::cost_of;
+use super::driver::cost_of;
+use super::pool::WorkerPool;
 use super::study::Study;
 use super::OptimizeError;
 use serde::{Deserialize, Serialize};
@@ -25,7 +25,7 @@ use tb_compare::{Measurement, PreparedMeasurement};
 use tb_fmi::FmuCache;
 
 /// One candidate of a study step: the step (0-based) and the value of every parameter of
-/// the study, in [`Bench::assignment`]'s order.
+/// the study, in [`WorkerPool::assignment`]'s order.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Candidate {
     pub step: usize,
@@ -61,11 +61,11 @@ impl StepCost {
     /// The cost of one run on the bench (the one function local and remote evaluation share).
     pub fn of(
         &self,
-        bench: &Bench,
+        workers: &WorkerPool,
         values: &[f64],
         prepared: &PreparedMeasurement,
     ) -> Result<f64, String> {
-        let o = bench.run(values, prepared)?;
+        let o = workers.run(values, prepared)?;
         Ok(cost_of(
             &o.comparison,
             &self.signals,
@@ -83,8 +83,8 @@ pub struct InputDigest {
 }
 
 impl InputDigest {
-    pub fn of(study: &Study, bench: &Bench) -> Result<InputDigest, OptimizeError> {
-        let plan = bench.plan();
+    pub fn of(study: &Study, workers: &WorkerPool) -> Result<InputDigest, OptimizeError> {
+        let plan = workers.plan();
         let mut paths = vec![study.path.clone(), study.measurement_path.clone()];
         paths.extend(plan.input_files());
         let files = paths
@@ -135,11 +135,11 @@ impl InputDigest {
     }
 }
 
-/// A study ready to evaluate candidates in a worker process: the bench (its simulations
-/// kept between candidates), the measurement prepared once per step.
+/// A study ready to evaluate candidates in a worker process: the worker pool (its
+/// simulations kept between candidates), the measurement prepared once per step.
 pub struct StudyEvaluator {
     study: Study,
-    bench: Bench,
+    workers: WorkerPool,
     measurement: Measurement,
     digest: InputDigest,
     prepared: Mutex<HashMap<usize, Arc<PreparedMeasurement>>>,
@@ -149,12 +149,12 @@ impl StudyEvaluator {
     pub fn load(path: &Path) -> Result<StudyEvaluator, OptimizeError> {
         let study = Study::load(path)?;
         let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
-        let bench = Bench::new(&study, cache)?;
+        let workers = WorkerPool::new(&study, cache)?;
         let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
-        let digest = InputDigest::of(&study, &bench)?;
+        let digest = InputDigest::of(&study, &workers)?;
         Ok(StudyEvaluator {
             study,
-            bench,
+            workers,
             measurement,
             digest,
             prepared: Mutex::new(HashMap::new()),
@@ -165,8 +165,8 @@ impl StudyEvaluator {
         &self.study
     }
 
-    pub fn bench(&self) -> &Bench {
-        &self.bench
+    pub fn workers(&self) -> &WorkerPool {
+        &self.workers
     }
 
     pub fn digest(&self) -> &InputDigest {
@@ -186,7 +186,7 @@ impl StudyEvaluator {
             )
         })?;
         let prepared = self.prepared(c.step, &cost.signals)?;
-        cost.of(&self.bench, &c.values, &prepared)
+        cost.of(&self.workers, &c.values, &prepared)
     }
 
     fn prepared(

@@ -413,7 +413,7 @@ impl StudyEvaluatorPy {
 
     /// Every parameter of the study with its value before the study.
     fn assignment(&self) -> Vec<(String, f64)> {
-        self.inner.bench().assignment()
+        self.inner.workers().assignment()
     }
 
     /// The study's steps: name, parameter names, bounds, start values (None: the current

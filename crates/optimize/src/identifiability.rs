@@ -1,5 +1,5 @@
-//! Identifiability check before a step: which parameter directions the step's validation
-//! signals cannot see.
+//! The identifiability check before a step: which parameter directions the step's
+//! validation signals cannot see.
 //!
 //! Around the start point, every parameter is moved by ±`rel_step` of its scale (its start
 //! value, or the span of its bounds when that is 0) and the comparison residual of each
@@ -10,9 +10,16 @@
 //! eigenvalues) and those they cannot (eigenvalue below `null_ratio` of the largest).
 //! Each signal alone is checked too, from the same runs: `Fz_sum` alone sees only
 //! `c_lift_front + c_lift_rear` (Eq. 18), the axle sums see the split.
+//!
+//! `check` makes the runs and J (the study driver calls it before each new step);
+//! [`analyse`] is the eigen-analysis of one set of signals.
 
 use super::cmaes::symmetric_eigen;
+use super::study::StepConfig;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use tb_compare::{PreparedMeasurement, Table, Workspace};
 
 /// A linear combination of parameters, in their own units.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -46,6 +53,152 @@ pub struct Identifiability {
     pub per_signal: Vec<SignalSetCheck>,
     /// Runs that failed (the check is then incomplete).
     pub failures: Vec<String>,
+}
+
+/// Each parameter's step, relative to its scale.
+const REL_STEP: f64 = 0.02;
+
+/// Per run: each signal's covered grid range and filtered values on it.
+type Residuals = Result<Vec<(Range<usize>, Vec<f64>)>, String>;
+
+/// The check of a step around `x0`: 2 runs per parameter, in parallel on `pool`, each a
+/// lap of the twin that `run` makes with the step's parameters at a point, its signals
+/// compared with `prepared`.
+pub(crate) fn check(
+    step: &StepConfig,
+    null_ratio: f64,
+    x0: &[f64],
+    bounds: &[(f64, f64)],
+    prepared: &PreparedMeasurement,
+    pool: &rayon::ThreadPool,
+    run: impl Fn(&[f64]) -> Result<Table, String> + Sync,
+) -> Identifiability {
+    // A parameter's scale: its start value, or the span of its bounds when that is 0.
+    let scale: Vec<f64> = x0
+        .iter()
+        .zip(bounds)
+        .map(|(&x, &(lo, hi))| if x.abs() > 1e-12 { x.abs() } else { hi - lo })
+        .collect();
+    let residuals = residuals(&perturbed(x0, &scale), step, prepared, pool, run);
+    let (blocks, failures) = jacobian(residuals, step, prepared, x0.len());
+    let combined = analyse(&step.signals, &blocks, &scale, null_ratio);
+    let per_signal = step
+        .signals
+        .iter()
+        .enumerate()
+        .map(|(s, name)| {
+            analyse(
+                std::slice::from_ref(name),
+                std::slice::from_ref(&blocks[s]),
+                &scale,
+                null_ratio,
+            )
+        })
+        .collect();
+    Identifiability {
+        parameters: step.parameter_names(),
+        start: x0.to_vec(),
+        rel_step: REL_STEP,
+        null_ratio,
+        combined,
+        per_signal,
+        failures,
+    }
+}
+
+/// The points of the central differences: each parameter moved by +`REL_STEP` and then
+/// −`REL_STEP` of its scale.
+fn perturbed(x0: &[f64], scale: &[f64]) -> Vec<Vec<f64>> {
+    (0..2 * x0.len())
+        .map(|j| {
+            let i = j / 2;
+            let sign = if j % 2 == 0 { 1.0 } else { -1.0 };
+            let mut x = x0.to_vec();
+            x[i] += sign * REL_STEP * scale[i];
+            x
+        })
+        .collect()
+}
+
+/// Each point's run: the step's signals filtered on the distance grid (one run per thread
+/// at a time, results in the points' order).
+fn residuals(
+    points: &[Vec<f64>],
+    step: &StepConfig,
+    prepared: &PreparedMeasurement,
+    pool: &rayon::ThreadPool,
+    run: impl Fn(&[f64]) -> Result<Table, String> + Sync,
+) -> Vec<Residuals> {
+    pool.install(|| {
+        points
+            .par_iter()
+            .with_max_len(1)
+            .map(|x| {
+                let table = run(x)?;
+                let mut ws = Workspace::new();
+                step.signals
+                    .iter()
+                    .map(|s| {
+                        prepared
+                            .on_grid(&table, s, true, &mut ws)
+                            .map_err(|e| e.to_string())
+                    })
+                    .collect()
+            })
+            .collect()
+    })
+}
+
+/// J from the runs' residuals: per signal, per parameter, its column on the grid points
+/// every run covers, divided by the measured signal's standard deviation and √N, times
+/// √weight. When a run failed, every column is a single 0 and the failures say why.
+fn jacobian(
+    residuals: Vec<Residuals>,
+    step: &StepConfig,
+    prepared: &PreparedMeasurement,
+    p: usize,
+) -> (Vec<Vec<Vec<f64>>>, Vec<String>) {
+    let mut failures = Vec::new();
+    let weights = step.weights();
+    // Per signal, per parameter: the column of J.
+    let mut blocks: Vec<Vec<Vec<f64>>> = vec![vec![Vec::new(); p]; step.signals.len()];
+    if residuals.iter().all(|r| r.is_ok()) {
+        let res: Vec<_> = residuals.into_iter().map(|r| r.unwrap()).collect();
+        for (s, name) in step.signals.iter().enumerate() {
+            // The grid points every run covers.
+            let lo = res.iter().map(|r| r[s].0.start).max().unwrap_or(0);
+            let hi = res.iter().map(|r| r[s].0.end).min().unwrap_or(0);
+            let meas = prepared.measured(name).unwrap_or(&[]);
+            let n = hi.saturating_sub(lo);
+            let m = &meas[lo.min(meas.len())..hi.min(meas.len())];
+            let mean = m.iter().sum::<f64>() / n.max(1) as f64;
+            let sd = (m.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n.max(1) as f64)
+                .sqrt()
+                .max(1e-12);
+            let norm = weights[s].sqrt() / (sd * (n.max(1) as f64).sqrt());
+            for i in 0..p {
+                let (plus, minus) = (&res[2 * i][s], &res[2 * i + 1][s]);
+                let col: Vec<f64> = (lo..hi)
+                    .map(|g| {
+                        let a = plus.1[g - plus.0.start];
+                        let b = minus.1[g - minus.0.start];
+                        (a - b) / (2.0 * REL_STEP) * norm
+                    })
+                    .collect();
+                blocks[s][i] = col;
+            }
+        }
+    } else {
+        for r in residuals.into_iter().filter_map(|r| r.err()) {
+            failures.push(r);
+        }
+        for b in blocks.iter_mut() {
+            for c in b.iter_mut() {
+                *c = vec![0.0];
+            }
+        }
+    }
+    (blocks, failures)
 }
 
 fn normalise(v: &[f64]) -> Vec<f64> {

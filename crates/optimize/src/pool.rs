@@ -1,8 +1,8 @@
-//! Candidates on the co-simulated bench. The study's system is compiled once into a plan;
-//! a pool of workers, each owning one [`Simulation`] of that plan (its FMU instances are
-//! reset and reused between candidates, never re-instantiated) and one comparison
-//! [`Workspace`]. A worker is created the first time a thread finds the pool empty, so
-//! there are at most as many as evaluations run at once.
+//! The worker pool: candidates run on the co-simulated bench. The study's system is
+//! compiled once into a plan; a pool of workers, each owning one [`Simulation`] of that
+//! plan (its FMU instances are reset and reused between candidates, never
+//! re-instantiated) and one comparison [`Workspace`]. A worker is created the first time a
+//! thread finds the pool empty, so there are at most as many as evaluations run at once.
 //!
 //! Every parameter the study touches is resolved to a [`ParamSlot`] once; a candidate is a
 //! value for each of them (all of them, on every run: a worker keeps nothing of the
@@ -21,8 +21,9 @@ struct Worker {
     ws: Workspace,
 }
 
-/// The system of a study, ready to run candidates from several threads.
-pub struct Bench {
+/// The system of a study compiled once, with the pool of workers that run candidates on
+/// it from several threads.
+pub struct WorkerPool {
     plan: Arc<Plan>,
     /// Every parameter the study touches, in the study's order (fixed ones first).
     slots: Vec<ParamSlot>,
@@ -51,10 +52,10 @@ pub fn describe_failure(e: &SystemError) -> String {
     }
 }
 
-impl Bench {
+impl WorkerPool {
     /// Compiles the study's system (with its record override) and resolves every parameter
     /// the study touches: a bad system or study parameter is an error here, up front.
-    pub fn new(study: &Study, cache: Arc<FmuCache>) -> Result<Bench, OptimizeError> {
+    pub fn new(study: &Study, cache: Arc<FmuCache>) -> Result<WorkerPool, OptimizeError> {
         let mut file = SystemFile::load(&study.system_path)?;
         if let Some(r) = &study.file.record {
             file.record.signals = r.signals.clone();
@@ -131,7 +132,7 @@ impl Bench {
                 initial.push(x);
             }
         }
-        let bench = Bench {
+        let pool = WorkerPool {
             plan,
             slots,
             initial,
@@ -144,7 +145,7 @@ impl Bench {
             runs: AtomicUsize::new(0),
             run_seconds: Mutex::new(0.0),
         };
-        Ok(bench)
+        Ok(pool)
     }
 
     fn new_worker(&self) -> Result<Worker, SystemError> {
@@ -174,7 +175,7 @@ impl Bench {
             .collect()
     }
 
-    /// Position of a parameter in [`Bench::assignment`].
+    /// Position of a parameter in [`WorkerPool::assignment`].
     pub fn index_of(&self, name: &str) -> Option<usize> {
         self.slots.iter().position(|s| s.name == name)
     }
@@ -192,9 +193,35 @@ impl Bench {
         )
     }
 
-    /// Runs with `values` (one per parameter of [`Bench::assignment`], in its order) and
+    /// Runs with `values` (one per parameter of [`WorkerPool::assignment`], in its order) and
     /// compares with the measurement.
     pub fn run(&self, values: &[f64], prepared: &PreparedMeasurement) -> Result<Outcome, String> {
+        self.with_worker(values, |w| self.run_on(w, values, prepared))
+    }
+
+    /// Runs with `values` and returns the recording on its uniform grid, without comparing
+    /// (a first look at a lap that may not match the measurement at all).
+    pub fn lap(&self, values: &[f64]) -> Result<Table, String> {
+        self.with_worker(values, |w| {
+            for (slot, &x) in self.slots.iter().zip(values) {
+                let v = slot.real(x).map_err(|e| describe_failure(&e))?;
+                w.sim.set(slot, v);
+            }
+            let summary = w.sim.run();
+            self.runs.fetch_add(1, Ordering::Relaxed);
+            summary.map_err(|e| describe_failure(&e))?;
+            uniform_table(&w.sim.recording).map_err(|e| e.to_string())
+        })
+    }
+
+    /// The pool's one sequence: checks that `values` has one value per parameter, takes a
+    /// worker (a new one when every worker is busy), runs `job` on it and puts it back,
+    /// whatever `job` returned.
+    fn with_worker<T>(
+        &self,
+        values: &[f64],
+        job: impl FnOnce(&mut Worker) -> Result<T, String>,
+    ) -> Result<T, String> {
         if values.len() != self.slots.len() {
             return Err(format!(
                 "{} values for {} parameters",
@@ -207,37 +234,8 @@ impl Bench {
             Some(w) => w,
             None => self.new_worker().map_err(|e| describe_failure(&e))?,
         };
-        let result = self.run_on(&mut worker, values, prepared);
+        let result = job(&mut worker);
         self.lock_workers().push(worker);
-        result
-    }
-
-    /// Runs with `values` and returns the recording on its uniform grid, without comparing
-    /// (a first look at a lap that may not match the measurement at all).
-    pub fn lap(&self, values: &[f64]) -> Result<Table, String> {
-        if values.len() != self.slots.len() {
-            return Err(format!(
-                "{} values for {} parameters",
-                values.len(),
-                self.slots.len()
-            ));
-        }
-        let worker = self.lock_workers().pop();
-        let mut w = match worker {
-            Some(w) => w,
-            None => self.new_worker().map_err(|e| describe_failure(&e))?,
-        };
-        let result = (|| {
-            for (slot, &x) in self.slots.iter().zip(values) {
-                let v = slot.real(x).map_err(|e| describe_failure(&e))?;
-                w.sim.set(slot, v);
-            }
-            let summary = w.sim.run();
-            self.runs.fetch_add(1, Ordering::Relaxed);
-            summary.map_err(|e| describe_failure(&e))?;
-            uniform_table(&w.sim.recording).map_err(|e| e.to_string())
-        })();
-        self.lock_workers().push(w);
         result
     }
 

@@ -1,0 +1,883 @@
+//! The study driver: the steps in order (each starts from the earlier steps' results), an
+//! identifiability check and e before each step, the optimiser's generations with a
+//! checkpoint after every one, e after, and the whole result as a serialisable value.
+
+use super::checkpoint::{initial_lap_path, Checkpoint, Current, StepStart};
+use super::cmaes::Cmaes;
+use super::exact;
+use super::ga::Ga;
+use super::identifiability::{self, Identifiability};
+use super::optimizer::{
+    evaluate_all, finite, minimize, thread_pool, to_unit, GenerationRecord, Optimizer, Problem,
+    RunSettings, RunState,
+};
+use super::pool::{Outcome, WorkerPool};
+use super::remote::{Candidate, Evaluator, StepCost};
+use super::study::{OptimizerKind, StepConfig, Study};
+use super::OptimizeError;
+use serde::{Deserialize, Serialize};
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+use tb_compare::{Comparison, Measurement, Metrics, PreparedMeasurement, Table, Workspace};
+use tb_fmi::FmuCache;
+use tb_table::write_atomic;
+
+/// What a study reports while it runs: the library draws nothing, a front end (the CLI's
+/// progress bars, a notebook) implements what it wants.
+pub trait Progress: Send + Sync {
+    /// A step starts (or resumes at generation `done` of `generations`).
+    fn step_started(&self, _step: usize, _name: &str, _generations: usize, _done: usize) {}
+    /// A generation of the current step is complete.
+    fn generation(&self, _record: &GenerationRecord) {}
+    /// The current step's optimiser is done.
+    fn step_finished(&self) {}
+}
+
+/// How to run a study.
+#[derive(Clone, Default)]
+pub struct RunOptions {
+    /// Evaluation threads (0: all cores).
+    pub threads: usize,
+    /// Told about every step and generation (None: silent).
+    pub progress: Option<Arc<dyn Progress>>,
+    /// Checkpoint file, written after every generation (None: no checkpoint).
+    pub checkpoint: Option<PathBuf>,
+    /// Continue from the checkpoint when it exists.
+    pub resume: bool,
+    /// Stop after this many generations in this session (a test hook for an interruption).
+    pub stop_after: Option<usize>,
+    /// Set from outside (Ctrl-C, a signal): the study stops once the generation under way
+    /// is done and checkpointed, as [`StudyOutcome::Interrupted`].
+    pub interrupt: Option<Arc<std::sync::atomic::AtomicBool>>,
+    /// Override the study's optimiser.
+    pub optimizer: Option<OptimizerKind>,
+    /// Override the generations of every step.
+    pub generations: Option<usize>,
+    /// Print the identifiability report and step summaries to stderr.
+    pub verbose: bool,
+    /// Optimise even when the first run says measurement and twin do not belong together.
+    pub force: bool,
+    /// Evaluate the generations' candidates here instead of on `threads` threads (the
+    /// start, identifiability and result runs stay local).
+    pub evaluator: Option<Arc<dyn Evaluator>>,
+}
+
+impl std::fmt::Debug for RunOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RunOptions")
+            .field("threads", &self.threads)
+            .field("progress", &self.progress.is_some())
+            .field("checkpoint", &self.checkpoint)
+            .field("resume", &self.resume)
+            .field("stop_after", &self.stop_after)
+            .field("interrupt", &self.interrupt.is_some())
+            .field("optimizer", &self.optimizer)
+            .field("generations", &self.generations)
+            .field("verbose", &self.verbose)
+            .field("force", &self.force)
+            .field("evaluator", &self.evaluator.is_some())
+            .finish()
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParameterChange {
+    pub name: String,
+    pub min: f64,
+    pub max: f64,
+    pub before: f64,
+    pub after: f64,
+    pub change_percent: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SignalChange {
+    pub signal: String,
+    pub weight: f64,
+    pub before: Metrics,
+    pub after: Metrics,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepResult {
+    pub step: usize,
+    pub name: String,
+    pub signals: Vec<String>,
+    pub bias_weight: f64,
+    pub optimizer: String,
+    pub seed: u64,
+    pub parameters: Vec<ParameterChange>,
+    pub e: Vec<SignalChange>,
+    pub cost_before: f64,
+    pub cost_after: f64,
+    pub identifiability: Identifiability,
+    pub history: Vec<GenerationRecord>,
+    pub evaluations: usize,
+    pub failures: usize,
+    pub failure_reasons: Vec<String>,
+    /// The parameter values after the step, bit-exact (the next step starts from them).
+    #[serde(with = "exact::vec")]
+    pub after_exact: Vec<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StudyResult {
+    pub study: String,
+    pub system: PathBuf,
+    pub measurement: PathBuf,
+    pub seed: u64,
+    pub threads: usize,
+    pub steps: Vec<StepResult>,
+    /// Every parameter the study touches: initial and final values.
+    pub parameters_initial: Vec<(String, f64)>,
+    pub parameters_final: Vec<(String, f64)>,
+    /// Full-lap simulations in this session, their summed wall time, and the session's
+    /// wall time [s].
+    pub simulations: usize,
+    pub simulation_seconds: f64,
+    pub wall_seconds: f64,
+    /// `Simulation`s (sets of FMU instances) created: one per worker, reused.
+    pub workers_created: usize,
+    pub resumed: bool,
+    /// The recorded laps a report draws (not serialised: tables of samples).
+    #[serde(skip)]
+    pub laps: StudyLaps,
+}
+
+/// The twin's laps of a study, on the comparison's uniform time grid: at the first step's
+/// start (Tab. 1's "initial") and at the result. Kept from the runs the study made, so a
+/// report simulates nothing.
+#[derive(Clone, Debug, Default)]
+pub struct StudyLaps {
+    pub initial: Option<Table>,
+    pub optimized: Option<Table>,
+}
+
+impl PartialEq for StudyLaps {
+    fn eq(&self, other: &Self) -> bool {
+        fn same(a: &Option<Table>, b: &Option<Table>) -> bool {
+            match (a, b) {
+                (Some(a), Some(b)) => a.names() == b.names() && a.columns() == b.columns(),
+                (None, None) => true,
+                _ => false,
+            }
+        }
+        same(&self.initial, &other.initial) && same(&self.optimized, &other.optimized)
+    }
+}
+
+impl StudyResult {
+    pub fn initial_value(&self, name: &str) -> Option<f64> {
+        self.parameters_initial
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|p| p.1)
+    }
+
+    pub fn final_value(&self, name: &str) -> Option<f64> {
+        self.parameters_final
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|p| p.1)
+    }
+}
+
+pub enum StudyOutcome {
+    Finished(Box<StudyResult>),
+    /// Stopped by `RunOptions::stop_after`; the checkpoint holds the state.
+    Interrupted {
+        generations: usize,
+    },
+}
+
+/// The cost of a comparison: Σ w·(e + β·|bias|) / Σ w over the step's signals.
+pub fn cost_of(cmp: &Comparison, signals: &[String], weights: &[f64], bias_weight: f64) -> f64 {
+    let mut num = 0.0;
+    let mut den = 0.0;
+    for (s, w) in signals.iter().zip(weights) {
+        let m = match cmp.get(s) {
+            Some(m) => m,
+            None => return f64::NAN,
+        };
+        num += w * (m.e + bias_weight * m.bias.abs());
+        den += w;
+    }
+    num / den
+}
+
+/// One step's cost over the bench.
+struct StepProblem<'a> {
+    workers: &'a WorkerPool,
+    prepared: &'a PreparedMeasurement,
+    /// The step (0-based) and its cost.
+    step: usize,
+    cost: StepCost,
+    /// Every parameter of the study with its current value.
+    assignment: Vec<(String, f64)>,
+    /// Indices into `assignment` of the step's parameters.
+    index: Vec<usize>,
+    bounds: Vec<(f64, f64)>,
+    /// Where generations are evaluated when not on this process's threads.
+    remote: Option<&'a dyn Evaluator>,
+}
+
+impl StepProblem<'_> {
+    /// Every parameter's value with the step's parameters at `x`.
+    fn params(&self, x: &[f64]) -> Vec<f64> {
+        let mut a: Vec<f64> = self.assignment.iter().map(|p| p.1).collect();
+        for (k, &i) in self.index.iter().enumerate() {
+            a[i] = x[k];
+        }
+        a
+    }
+
+    /// Puts the step's parameters at `x` in the assignment the step starts from.
+    fn set(&mut self, x: &[f64]) {
+        for (j, &i) in self.index.iter().enumerate() {
+            self.assignment[i].1 = x[j];
+        }
+    }
+
+    fn outcome(&self, x: &[f64]) -> Result<Outcome, String> {
+        self.workers.run(&self.params(x), self.prepared)
+    }
+}
+
+impl Problem for StepProblem<'_> {
+    fn bounds(&self) -> Vec<(f64, f64)> {
+        self.bounds.clone()
+    }
+
+    fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
+        self.cost.of(self.workers, &self.params(x), self.prepared)
+    }
+
+    fn evaluate_many(
+        &self,
+        pool: &rayon::ThreadPool,
+        xs: &[Vec<f64>],
+    ) -> Result<Vec<Result<f64, String>>, OptimizeError> {
+        let Some(remote) = self.remote else {
+            return Ok(evaluate_all(pool, self, xs));
+        };
+        let candidates: Vec<Candidate> = xs
+            .iter()
+            .map(|x| Candidate {
+                step: self.step,
+                values: self.params(x),
+            })
+            .collect();
+        let results = remote
+            .evaluate(&candidates)
+            .map_err(OptimizeError::Evaluator)?;
+        if results.len() != xs.len() {
+            return Err(OptimizeError::Evaluator(format!(
+                "{} results for {} candidates",
+                results.len(),
+                xs.len()
+            )));
+        }
+        Ok(results.into_iter().map(finite).collect())
+    }
+}
+
+fn step_seed(seed: u64, step: usize) -> u64 {
+    seed ^ (step as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+fn make_optimizer(
+    study: &Study,
+    kind: OptimizerKind,
+    dim: usize,
+    seed: u64,
+    start: Vec<f64>,
+) -> Result<Box<dyn Optimizer>, OptimizeError> {
+    let o = &study.file.optimizer;
+    Ok(match kind {
+        OptimizerKind::Ga => Box::new(Ga::new(dim, o.ga.clone(), seed, Some(start))?),
+        OptimizerKind::Cmaes => Box::new(Cmaes::new(dim, o.cmaes.clone(), seed, Some(start))?),
+    })
+}
+
+/// Do the measurement and the twin's first run belong together? Lap length, lap time and
+/// the speed over distance, each against the study's `[plausibility]` bounds.
+fn check_plausible(
+    study: &Study,
+    measurement: &Measurement,
+    lap: &Table,
+) -> Result<(), OptimizeError> {
+    let p = &study.file.plausibility;
+    let mut problems = Vec::new();
+    let rel = |a: f64, b: f64| (a - b).abs() / b.abs().max(1e-12);
+    let (mt, md) = (measurement.time(), measurement.distance());
+    let measured_length = md[md.len() - 1] - md[0];
+    let measured_time = mt[mt.len() - 1] - mt[0];
+    if let Ok(d) = lap.require("distance") {
+        let twin = d[d.len() - 1] - d[0];
+        if rel(twin, measured_length) > p.lap_length {
+            problems.push(format!(
+                "lap length {twin:.1} m (twin) against {measured_length:.1} m (measured), {:.1} % apart (at most {} %)",
+                100.0 * rel(twin, measured_length),
+                100.0 * p.lap_length
+            ));
+        }
+    }
+    let t = lap.column_at(0);
+    let twin_time = t[t.len() - 1] - t[0];
+    if rel(twin_time, measured_time) > p.lap_time {
+        problems.push(format!(
+            "lap time {twin_time:.2} s (twin) against {measured_time:.2} s (measured), {:.1} % apart (at most {} %)",
+            100.0 * rel(twin_time, measured_time),
+            100.0 * p.lap_time
+        ));
+    }
+    if lap.find("v").ok().flatten().is_some() {
+        let speed = PreparedMeasurement::new(measurement, &["v"], &study.file.compare)
+            .and_then(|prep| prep.compare(lap, &mut Workspace::new()));
+        match speed.as_ref().map(|c| c.get("v").map(|m| m.r_squared)) {
+            Ok(Some(r2)) if r2 < p.r_squared_v => problems.push(format!(
+                "the speed over distance agrees with R² = {r2:.3} (at least {} required)",
+                p.r_squared_v
+            )),
+            Err(e) => problems.push(format!("the speeds cannot be compared: {e}")),
+            _ => {}
+        }
+    }
+    if problems.is_empty() {
+        return Ok(());
+    }
+    Err(OptimizeError::Implausible(format!(
+        "{} and the twin of {} do not belong together: {}. Is the measurement of this circuit, and are the track and the target speed its own (twinbench lap)? `--force` optimises anyway",
+        study.measurement_path.display(),
+        study.system_path.display(),
+        problems.join("; ")
+    )))
+}
+
+/// Runs a study (or continues it from its checkpoint): the steps in order, each passed over
+/// when the checkpoint has it completed, then the result with the laps a report draws.
+pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, OptimizeError> {
+    let wall = Instant::now();
+    let session = Session::open(study, options)?;
+    let mut state = StudyState::begin(&session)?;
+    for k in 0..study.file.steps.len() {
+        if run_step(&session, &mut state, k)?.is_break() {
+            return Ok(StudyOutcome::Interrupted {
+                generations: state.session_generations,
+            });
+        }
+    }
+    let result = finish_study(&session, state, wall)?;
+    Ok(StudyOutcome::Finished(Box::new(result)))
+}
+
+/// What every stage of a study reads: the study, how it is run, the worker pool on its
+/// compiled system, the measurement, the threads of the start's runs and the optimiser.
+struct Session<'a> {
+    study: &'a Study,
+    options: &'a RunOptions,
+    workers: WorkerPool,
+    measurement: Measurement,
+    /// The identifiability check's threads (the generations' are `minimize`'s own).
+    pool: rayon::ThreadPool,
+    kind: OptimizerKind,
+}
+
+impl<'a> Session<'a> {
+    /// Compiles the system, loads the measurement, builds the threads.
+    fn open(study: &'a Study, options: &'a RunOptions) -> Result<Session<'a>, OptimizeError> {
+        let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
+        let workers = WorkerPool::new(study, cache)?;
+        let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
+        let pool = thread_pool(options.threads)?;
+        Ok(Session {
+            study,
+            options,
+            workers,
+            measurement,
+            pool,
+            kind: options.optimizer.unwrap_or(study.file.optimizer.kind),
+        })
+    }
+}
+
+/// Where the study stands, carried from step to step.
+struct StudyState {
+    /// The completed steps and the step under way (what the checkpoint file holds).
+    checkpoint: Checkpoint,
+    resumed: bool,
+    /// Every parameter the study touches, with its initial value.
+    initial: Vec<(String, f64)>,
+    /// The same parameters with their values after the steps done so far.
+    assignment: Vec<(String, f64)>,
+    laps: StudyLaps,
+    /// The first step's start point (for the initial lap when it has to be made again).
+    first_x0: Option<Vec<f64>>,
+    /// Generations run in this session.
+    session_generations: usize,
+}
+
+impl StudyState {
+    /// The study's state from its checkpoint (resume), else before its first step.
+    fn begin(session: &Session) -> Result<StudyState, OptimizeError> {
+        let assignment = session.workers.assignment();
+        let (checkpoint, resumed) = Checkpoint::resume_or_new(session.study, session.options)?;
+        let mut laps = StudyLaps::default();
+        if resumed {
+            if let Some(path) = session
+                .options
+                .checkpoint
+                .as_ref()
+                .map(|c| initial_lap_path(c))
+            {
+                laps.initial = Table::read_path(&path).ok();
+            }
+        }
+        Ok(StudyState {
+            checkpoint,
+            resumed,
+            initial: assignment.clone(),
+            assignment,
+            laps,
+            first_x0: None,
+            session_generations: 0,
+        })
+    }
+
+    /// Sets the step's parameters (at `index` in the assignment) to `values`.
+    fn set(&mut self, index: &[usize], values: &[f64]) {
+        for (j, &i) in index.iter().enumerate() {
+            self.assignment[i].1 = values[j];
+        }
+    }
+}
+
+/// One step as this session runs it: its configuration, seed and generations, and its
+/// cost over the bench.
+struct Step<'a> {
+    config: &'a StepConfig,
+    seed: u64,
+    generations: usize,
+    problem: StepProblem<'a>,
+}
+
+impl<'a> Step<'a> {
+    /// Step `k` with its parameters at `index` in `assignment` (every parameter's value
+    /// after the earlier steps) and the measurement prepared for its signals.
+    fn new(
+        session: &'a Session,
+        k: usize,
+        index: Vec<usize>,
+        prepared: &'a PreparedMeasurement,
+        assignment: Vec<(String, f64)>,
+    ) -> Step<'a> {
+        let (study, options) = (session.study, session.options);
+        let config = &study.file.steps[k];
+        Step {
+            config,
+            seed: step_seed(study.file.seed, k),
+            generations: options
+                .generations
+                .or(config.generations)
+                .unwrap_or(study.file.optimizer.generations),
+            problem: StepProblem {
+                workers: &session.workers,
+                prepared,
+                step: k,
+                cost: StepCost::of_step(study, k).expect("a step of the study"),
+                assignment,
+                index,
+                bounds: config.parameters.iter().map(|p| (p.min, p.max)).collect(),
+                remote: options.evaluator.as_deref(),
+            },
+        }
+    }
+}
+
+/// A step ready for its generations: what it knew before the first one, the optimiser and
+/// the generation loop's bookkeeping (restored from the checkpoint, or new).
+struct StepBegun {
+    start: StepStart,
+    optimizer: Box<dyn Optimizer>,
+    run: RunState,
+}
+
+/// Runs step `k`, or passes over it when the checkpoint has it completed. `Break` when the
+/// session stops before the step is done (its checkpoint kept).
+fn run_step(
+    session: &Session,
+    state: &mut StudyState,
+    k: usize,
+) -> Result<ControlFlow<()>, OptimizeError> {
+    let config = &session.study.file.steps[k];
+    let index = parameter_index(session, config)?;
+    if let Some(done) = state.checkpoint.completed.get(k) {
+        if k == 0 {
+            state.first_x0 = Some(done.parameters.iter().map(|p| p.before).collect());
+        }
+        let after = done.after_exact.clone();
+        state.set(&index, &after);
+        return Ok(ControlFlow::Continue(()));
+    }
+    let prepared = PreparedMeasurement::new(
+        &session.measurement,
+        &config.signals,
+        &session.study.file.compare,
+    )?;
+    let mut step = Step::new(session, k, index, &prepared, state.assignment.clone());
+    let mut begun = match state.checkpoint.current.take().filter(|c| c.step == k) {
+        Some(current) => resume_step(session, &step, current)?,
+        None => start_step(session, &mut step, &mut state.laps)?,
+    };
+    step.problem.set(&begun.start.x0);
+    if k == 0 {
+        state.first_x0 = Some(begun.start.x0.clone());
+    }
+    if session.options.verbose {
+        eprintln!("step {} '{}': identifiability", k + 1, config.name);
+        for l in begun.start.identifiability.report_lines() {
+            eprintln!("  {l}");
+        }
+    }
+    let Some((best, best_cost)) = run_generations(session, state, &step, &mut begun)? else {
+        return Ok(ControlFlow::Break(()));
+    };
+    let (result, after) = finish_step(&step, begun, best, best_cost)?;
+    if k + 1 == session.study.file.steps.len() {
+        state.laps.optimized = Some(after);
+    }
+    state.set(&step.problem.index, &result.after_exact);
+    state.checkpoint.completed.push(result);
+    state.checkpoint.current = None;
+    if let Some(path) = &session.options.checkpoint {
+        state.checkpoint.write(path)?;
+    }
+    Ok(ControlFlow::Continue(()))
+}
+
+/// Where each of the step's parameters sits in the worker pool's assignment.
+fn parameter_index(session: &Session, config: &StepConfig) -> Result<Vec<usize>, OptimizeError> {
+    config
+        .parameter_names()
+        .iter()
+        .map(|n| {
+            session.workers.index_of(n).ok_or_else(|| {
+                OptimizeError::Invalid(format!("step '{}': unknown parameter '{n}'", config.name))
+            })
+        })
+        .collect()
+}
+
+/// The step under way in the checkpoint: its start as it was, the optimiser restored.
+fn resume_step(
+    session: &Session,
+    step: &Step,
+    current: Current,
+) -> Result<StepBegun, OptimizeError> {
+    let start = to_unit(&current.start.x0, &step.problem.bounds);
+    let dim = step.config.parameters.len();
+    let mut optimizer = make_optimizer(session.study, session.kind, dim, step.seed, start)?;
+    optimizer.restore(&current.optimizer)?;
+    if session.options.verbose {
+        eprintln!(
+            "resuming step {} '{}' from generation {} of {} (checkpoint {})",
+            step.problem.step + 1,
+            step.config.name,
+            optimizer.generation() + 1,
+            step.generations,
+            session
+                .options
+                .checkpoint
+                .as_deref()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default()
+        );
+    }
+    Ok(StepBegun {
+        start: current.start,
+        optimizer,
+        run: current.run,
+    })
+}
+
+/// A new step: its start point; before the first step, whether the measurement and the
+/// twin belong together at all; the identifiability check; e before (the first step's run
+/// is the initial lap, kept beside the checkpoint); a new optimiser.
+fn start_step(
+    session: &Session,
+    step: &mut Step,
+    laps: &mut StudyLaps,
+) -> Result<StepBegun, OptimizeError> {
+    let (study, options, config) = (session.study, session.options, step.config);
+    let problem = &mut step.problem;
+    let k = problem.step;
+    let x0: Vec<f64> = config
+        .parameters
+        .iter()
+        .zip(&problem.index)
+        .map(|(p, &i)| {
+            p.start
+                .unwrap_or(problem.assignment[i].1)
+                .clamp(p.min, p.max)
+        })
+        .collect();
+    problem.set(&x0);
+    let failed = |reason| OptimizeError::Start {
+        step: config.name.clone(),
+        reason,
+    };
+    if k == 0 && !options.force {
+        // Before any optimising: do the measurement and the twin belong together?
+        let lap = session.workers.lap(&problem.params(&x0)).map_err(failed)?;
+        check_plausible(study, &session.measurement, &lap)?;
+    }
+    let identifiability = identifiability::check(
+        config,
+        study.file.null_ratio,
+        &x0,
+        &problem.bounds,
+        problem.prepared,
+        &session.pool,
+        |x| problem.outcome(x).map(|o| o.table),
+    );
+    let before = problem.outcome(&x0).map_err(failed)?;
+    let cost_before = cost_of(
+        &before.comparison,
+        &config.signals,
+        &config.weights(),
+        problem.cost.bias_weight,
+    );
+    if k == 0 {
+        if let Some(c) = &options.checkpoint {
+            let path = initial_lap_path(c);
+            write_atomic(&path, &before.table.to_csv()).map_err(|e| {
+                OptimizeError::Checkpoint(format!("writing {}: {e}", path.display()))
+            })?;
+        }
+        laps.initial = Some(before.table);
+    }
+    let start = to_unit(&x0, &problem.bounds);
+    let optimizer = make_optimizer(study, session.kind, x0.len(), step.seed, start)?;
+    Ok(StepBegun {
+        start: StepStart {
+            x0,
+            before: before.comparison,
+            cost_before,
+            identifiability,
+        },
+        optimizer,
+        run: RunState::default(),
+    })
+}
+
+/// The step's generations from where `begun` stands, with a checkpoint after every one.
+/// The best point and its cost; `None` when the session stops (`RunOptions::interrupt` or
+/// `stop_after`) before the last generation, the checkpoint of the last one kept.
+fn run_generations(
+    session: &Session,
+    state: &mut StudyState,
+    step: &Step,
+    begun: &mut StepBegun,
+) -> Result<Option<(Vec<f64>, f64)>, OptimizeError> {
+    let (study, options) = (session.study, session.options);
+    if let Some(p) = &options.progress {
+        p.step_started(
+            step.problem.step + 1,
+            &step.config.name,
+            step.generations,
+            begun.optimizer.generation(),
+        );
+    }
+    let settings = RunSettings {
+        max_generations: step.generations,
+        threads: options.threads,
+        penalty: study.file.penalty,
+    };
+    let mut interrupted = false;
+    let mut write_error = None;
+    let completed = &state.checkpoint.completed;
+    let session_generations = &mut state.session_generations;
+    let start = &begun.start;
+    let result = minimize(
+        begun.optimizer.as_mut(),
+        &step.problem,
+        &settings,
+        &mut begun.run,
+        |opt, run| {
+            *session_generations += 1;
+            if let (Some(p), Some(rec)) = (&options.progress, run.history.last()) {
+                p.generation(rec);
+            }
+            if let Some(path) = &options.checkpoint {
+                let current = Current {
+                    step: step.problem.step,
+                    start: start.clone(),
+                    optimizer: opt.save(),
+                    run: run.clone(),
+                };
+                let cp = Checkpoint::new(study, options, completed.clone(), Some(current));
+                if let Err(e) = cp.write(path) {
+                    write_error = Some(e);
+                    return ControlFlow::Break(());
+                }
+            }
+            let asked = options
+                .interrupt
+                .as_ref()
+                .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst));
+            if (asked
+                || options
+                    .stop_after
+                    .is_some_and(|n| *session_generations >= n))
+                && opt.generation() < step.generations
+            {
+                interrupted = true;
+                return ControlFlow::Break(());
+            }
+            ControlFlow::Continue(())
+        },
+    );
+    if let Some(p) = &options.progress {
+        p.step_finished();
+    }
+    if let Some(e) = write_error {
+        return Err(e);
+    }
+    if interrupted {
+        return Ok(None);
+    }
+    result.map(Some)
+}
+
+/// The step's result: the best point run once more for e after, each parameter's change
+/// and each signal's e before and after. With it the best point's lap.
+fn finish_step(
+    step: &Step,
+    begun: StepBegun,
+    best: Vec<f64>,
+    best_cost: f64,
+) -> Result<(StepResult, Table), OptimizeError> {
+    let (config, problem) = (step.config, &step.problem);
+    let after = problem
+        .outcome(&best)
+        .map_err(|reason| OptimizeError::Start {
+            step: config.name.clone(),
+            reason: format!("the best point cannot be re-evaluated: {reason}"),
+        })?;
+    let weights = config.weights();
+    let bias_weight = problem.cost.bias_weight;
+    let cost_after = cost_of(&after.comparison, &config.signals, &weights, bias_weight);
+    if cost_after.to_bits() != best_cost.to_bits() {
+        log::warn!(
+            "step '{}': the best point re-evaluated to {cost_after} (optimiser saw {best_cost})",
+            config.name
+        );
+    }
+    let StepBegun {
+        start,
+        optimizer,
+        run,
+    } = begun;
+    let parameters = config
+        .parameters
+        .iter()
+        .enumerate()
+        .map(|(j, p)| ParameterChange {
+            name: p.name.clone(),
+            min: p.min,
+            max: p.max,
+            before: start.x0[j],
+            after: best[j],
+            change_percent: if start.x0[j] != 0.0 {
+                (best[j] / start.x0[j] - 1.0) * 100.0
+            } else {
+                f64::NAN
+            },
+        })
+        .collect();
+    let e = config
+        .signals
+        .iter()
+        .zip(&weights)
+        .map(|(s, &w)| SignalChange {
+            signal: s.clone(),
+            weight: w,
+            before: start.before.get(s).cloned().expect("compared"),
+            after: after.comparison.get(s).cloned().expect("compared"),
+        })
+        .collect();
+    let result = StepResult {
+        step: problem.step + 1,
+        name: config.name.clone(),
+        signals: config.signals.clone(),
+        bias_weight,
+        optimizer: optimizer.name().into(),
+        seed: step.seed,
+        parameters,
+        e,
+        cost_before: start.cost_before,
+        cost_after,
+        identifiability: start.identifiability,
+        history: run.history,
+        evaluations: run.evaluations,
+        failures: run.failures,
+        failure_reasons: run.failure_reasons,
+        after_exact: best,
+    };
+    Ok((result, after.table))
+}
+
+/// The study's result, with the laps a resumed session did not run itself made once each
+/// (before the runs are counted).
+fn finish_study(
+    session: &Session,
+    mut state: StudyState,
+    wall: Instant,
+) -> Result<StudyResult, OptimizeError> {
+    let (study, workers) = (session.study, &session.workers);
+    let lap = |values: &[f64]| -> Result<Table, OptimizeError> {
+        let prepared =
+            PreparedMeasurement::new(&session.measurement, &["Fz_sum"], &study.file.compare)?;
+        workers
+            .run(values, &prepared)
+            .map(|o| o.table)
+            .map_err(|reason| OptimizeError::Start {
+                step: "report".into(),
+                reason,
+            })
+    };
+    if state.laps.optimized.is_none() {
+        let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
+        state.laps.optimized = Some(lap(&all)?);
+    }
+    if state.laps.initial.is_none() {
+        if let Some(x0) = &state.first_x0 {
+            let mut values: Vec<f64> = state.initial.iter().map(|p| p.1).collect();
+            for (j, p) in study.file.steps[0].parameters.iter().enumerate() {
+                if let Some(i) = workers.index_of(&p.name) {
+                    values[i] = x0[j];
+                }
+            }
+            state.laps.initial = Some(lap(&values)?);
+        }
+    }
+    let (simulations, simulation_seconds) = workers.runs();
+    Ok(StudyResult {
+        study: study.name(),
+        system: study.system_path.clone(),
+        measurement: study.measurement_path.clone(),
+        seed: study.file.seed,
+        threads: session.pool.current_num_threads(),
+        steps: state.checkpoint.completed,
+        parameters_initial: state.initial,
+        parameters_final: state.assignment,
+        simulations,
+        simulation_seconds,
+        wall_seconds: wall.elapsed().as_secs_f64(),
+        workers_created: workers.workers_created(),
+        resumed: state.resumed,
+        laps: state.laps,
+    })
+}
