@@ -85,7 +85,19 @@ static COMMAND_RUNNING: AtomicBool = AtomicBool::new(false);
 /// The exit code when something called `exit()` in the middle of a command.
 pub const EXIT_BY_FMU: i32 = 3;
 
+/// Set by the panic hook: a panic of twinbench's own is reported as such (with its location,
+/// printed by the default hook), never as an FMU's `exit()`.
+static PANICKED: AtomicBool = AtomicBool::new(false);
+
 extern "C" fn exit_guard() {
+    if PANICKED.load(Ordering::SeqCst) {
+        let message = b"error: twinbench stopped on an internal error (the panic above, with its location): this is a bug in twinbench, please report it with the command that caused it\n";
+        // SAFETY: only async-signal-safe calls; the process is already ending.
+        unsafe {
+            libc::write(2, message.as_ptr().cast(), message.len());
+            libc::_exit(101);
+        }
+    }
     if COMMAND_RUNNING.load(Ordering::SeqCst) {
         let message = b"error: the process was ended by a call to exit() before the command finished, from inside an FMU's code (twinbench never calls it); nothing more was written. Run the FMU with --isolate (or isolate = true) to keep twinbench alive and see where.\n";
         // Only async-signal-safe calls here: the process is already ending.
@@ -96,9 +108,11 @@ extern "C" fn exit_guard() {
     }
 }
 
-/// The command is over: an exit from here on is twinbench's own.
+/// The command is over: an exit from here on is twinbench's own (and a panic caught and
+/// handled on the way is not the cause of the exit).
 pub(crate) fn command_finished() {
     COMMAND_RUNNING.store(false, Ordering::SeqCst);
+    PANICKED.store(false, Ordering::SeqCst);
 }
 
 pub fn main() -> ExitCode {
@@ -108,6 +122,11 @@ pub fn main() -> ExitCode {
         libc::atexit(exit_guard);
     }
     interrupt::install_default();
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        PANICKED.store(true, Ordering::SeqCst);
+        default_hook(info);
+    }));
     let cli = Cli::parse();
     let level = match cli.verbose {
         0 => "warn",
@@ -118,6 +137,10 @@ pub fn main() -> ExitCode {
         .format_timestamp(None)
         .init();
     COMMAND_RUNNING.store(true, Ordering::SeqCst);
+    // The test suite's way to a panic of twinbench's own (tests/robustness_faults.rs).
+    if std::env::var_os("TWINBENCH_TEST_PANIC").is_some() {
+        panic!("a panic on purpose (TWINBENCH_TEST_PANIC is set)");
+    }
     let result = match cli.command {
         Command::Pack(a) => pack::run(a),
         Command::Demo(a) => demo::run(a),

@@ -205,12 +205,13 @@ impl ChannelMap {
         struct File {
             channels: ChannelMap,
         }
-        let text = std::fs::read_to_string(path).map_err(|source| {
-            Error::Table(TableError::Io {
-                path: path.to_path_buf(),
-                source,
-            })
-        })?;
+        let text =
+            tb_files::input::read_to_string(path, tb_files::Limit::CONFIG).map_err(|source| {
+                Error::Table(TableError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                })
+            })?;
         let f: File = toml::from_str(&text)
             .map_err(|e| Error::Settings(format!("{}: {e}", path.display())))?;
         Ok(f.channels)

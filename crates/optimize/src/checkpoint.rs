@@ -126,8 +126,8 @@ impl Checkpoint {
     }
 
     fn read(path: &Path, study: &Study) -> Result<Checkpoint, OptimizeError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| OptimizeError::Checkpoint(format!("{}: {e}", path.display())))?;
+        let text = tb_files::input::read_to_string(path, tb_files::Limit::CONFIG)
+            .map_err(|e| OptimizeError::Checkpoint(e.to_string()))?;
         let c: Checkpoint = serde_json::from_str(&text)
             .map_err(|e| OptimizeError::Checkpoint(format!("{}: {e}", path.display())))?;
         if c.version != CHECKPOINT_VERSION {

@@ -224,9 +224,11 @@ impl StepConfig {
 
 impl Study {
     pub fn load(path: &Path) -> Result<Study, OptimizeError> {
-        let text = std::fs::read_to_string(path).map_err(|e| OptimizeError::File {
-            path: path.to_path_buf(),
-            message: e.to_string(),
+        let text = tb_files::input::read_to_string(path, tb_files::Limit::CONFIG).map_err(|e| {
+            OptimizeError::File {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            }
         })?;
         Self::parse(&text, path)
     }
