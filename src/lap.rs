@@ -20,6 +20,12 @@ pub const TARGET_WINDOW: usize = 9;
 pub const TRACK_WINDOW: usize = 9;
 /// Below this speed a_y/v² says nothing about the curvature [m/s].
 pub const MIN_SPEED_FOR_CURVATURE: f64 = 5.0;
+/// The shortest lap `lap` prepares [m]: shorter is a car that did not drive a lap (a
+/// standing measurement, a few metres of a pit lane).
+pub const MIN_LAP_LENGTH_M: f64 = 100.0;
+/// The fastest speed a measured sample may have [m/s] (720 km/h): faster is a logger's
+/// error value, not a car, and would become the driver's target.
+pub const MAX_SPEED_M_S: f64 = 200.0;
 
 #[derive(Debug, thiserror::Error)]
 pub enum LapError {
@@ -78,7 +84,24 @@ pub fn lap_length(m: &Measurement) -> Result<f64, LapError> {
             m.table().source()
         )));
     }
-    Ok(d[n - 1] + v[n - 1] * (t[n - 1] - t[n - 2]))
+    if let Some(k) = v.iter().position(|x| x.abs() > MAX_SPEED_M_S) {
+        return Err(LapError::Invalid(format!(
+            "{}: sample {} (t = {} s) has v = {:?} m/s, more than the {MAX_SPEED_M_S} m/s a car's lap may have: a logger's error value?",
+            m.table().source(),
+            k + 1,
+            t[k],
+            v[k]
+        )));
+    }
+    let length = d[n - 1] + v[n - 1] * (t[n - 1] - t[n - 2]);
+    if !(length >= MIN_LAP_LENGTH_M) {
+        return Err(LapError::Invalid(format!(
+            "{}: the car covers {length:.1} m in {:.1} s: not a lap (at least {MIN_LAP_LENGTH_M} m; a standing measurement?)",
+            m.table().source(),
+            t[n - 1] - t[0]
+        )));
+    }
+    Ok(length)
 }
 
 /// `v` resampled onto `grid` by distance (linear, held at the ends).

@@ -89,6 +89,11 @@ impl Cmaes {
                 settings.sigma0
             )));
         }
+        if let Some(p) = settings.population.filter(|&p| p < 4) {
+            return Err(OptimizeError::Invalid(format!(
+                "CMA-ES: population {p}: at least 4 candidates per generation"
+            )));
+        }
         let n = dim;
         let nf = n as f64;
         let lambda = settings

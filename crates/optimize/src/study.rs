@@ -295,6 +295,12 @@ impl Study {
         // Sizes that would exhaust memory or never finish are refused up front.
         const MAX_POPULATION: usize = 10_000;
         const MAX_GENERATIONS: usize = 1_000_000;
+        if f.optimizer.cmaes.population.is_some_and(|p| p < 4) {
+            return Err(bad(format!(
+                "optimizer.cmaes.population = {}: CMA-ES needs at least 4 candidates per generation",
+                f.optimizer.cmaes.population.unwrap_or_default()
+            )));
+        }
         if f.optimizer.ga.population > MAX_POPULATION
             || f.optimizer
                 .cmaes
@@ -332,8 +338,16 @@ impl Study {
                     "{ctx}: weights must be one non-negative number per signal"
                 )));
             }
-            if s.weights().iter().sum::<f64>() <= 0.0 {
+            // The cost divides by the sum: zero, or a sum that overflows (two weights of
+            // 1e308), would make every candidate's cost 0 or NaN.
+            let sum = s.weights().iter().sum::<f64>();
+            if sum <= 0.0 {
                 return Err(bad(format!("{ctx}: the weights sum to zero")));
+            }
+            if !sum.is_finite() {
+                return Err(bad(format!(
+                    "{ctx}: the weights sum to {sum} (they overflow a double): scale them down, only their ratios matter"
+                )));
             }
             if let Some(b) = s.bias_weight {
                 if !(b.is_finite() && b >= 0.0) {

@@ -1,0 +1,268 @@
+//! The third red-team pass's findings (N1–N29), one test (or bad-file case) each where it
+//! is not elsewhere; `docs/robustness.md` lists which test proves which finding. Each of
+//! these failed before its fix.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn root() -> PathBuf {
+    twinbench::pack::workspace_root()
+}
+
+fn twinbench_in(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+fn failure_in(cwd: &Path, args: &[&str]) -> String {
+    let o = twinbench_in(cwd, args);
+    assert!(!o.status.success(), "twinbench {args:?} succeeded");
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A measurement CSV of `rows` samples at 100 Hz: distance and speed from `sample(k)`.
+fn measurement(path: &Path, rows: usize, sample: impl Fn(usize) -> (f64, f64)) {
+    let mut text = String::from("time,distance,v,a_x,a_y,Fz_fl,Fz_fr,Fz_rl,Fz_rr\n");
+    for k in 0..rows {
+        let (d, v) = sample(k);
+        text.push_str(&format!(
+            "{},{d},{v},0,0,3000,3000,3000,3000\n",
+            k as f64 * 0.01
+        ));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// N1: the folder lock never follows a planted link (whose target it truncated), never
+/// uses a lock that is not a regular file, and results go only into a folder of this user.
+#[test]
+fn n01_the_folder_lock_follows_no_link_and_takes_no_other_users_folder() {
+    let dir = tb_testkit::scratch("n01");
+    let d = dir.path();
+    let victim = d.join("victim.txt");
+    std::fs::write(&victim, "precious").unwrap();
+    std::fs::create_dir(d.join("out")).unwrap();
+    std::os::unix::fs::symlink(&victim, d.join("out/.twinbench.lock")).unwrap();
+    let e = tb_table::FolderLock::acquire(&d.join("out"))
+        .err()
+        .expect("a linked lock is refused")
+        .to_string();
+    assert!(e.contains(".twinbench.lock: is a symbolic link"), "{e}");
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+    // A FIFO as the lock: refused, not waited on.
+    std::fs::create_dir(d.join("out2")).unwrap();
+    let fifo = std::ffi::CString::new(d.join("out2/.twinbench.lock").to_str().unwrap()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(fifo.as_ptr(), 0o600) }, 0);
+    let e = tb_table::FolderLock::acquire(&d.join("out2"))
+        .err()
+        .expect("a FIFO lock is refused")
+        .to_string();
+    assert!(e.contains("is not a regular file"), "{e}");
+    // Another user's folder (only root can make one here).
+    if unsafe { libc::geteuid() } == 0 {
+        let other = d.join("theirs");
+        std::fs::create_dir(&other).unwrap();
+        let c = std::ffi::CString::new(other.to_str().unwrap()).unwrap();
+        assert_eq!(unsafe { libc::chown(c.as_ptr(), 1234, 1234) }, 0);
+        let e = tb_table::FolderLock::acquire(&other)
+            .err()
+            .expect("another user's folder is refused")
+            .to_string();
+        assert!(
+            e.contains("the folder belongs to user id 1234, not to this user (0)"),
+            "{e}"
+        );
+    }
+}
+
+/// N7: a step count that overflows (a subnormal step, a stop time near the largest
+/// double) ran nothing and succeeded.
+#[test]
+fn n07_an_infinite_step_count_is_refused() {
+    let fmus = common::fmu_dir();
+    let dir = tb_testkit::scratch("n07");
+    let text = std::fs::read_to_string(root().join("systems/rls_v.toml"))
+        .unwrap()
+        .replace("\"../target/fmu/", &format!("\"{}/", fmus.display()));
+    for (what, edit) in [
+        ("step = 1e-3", "step = 1e-320"),
+        ("stop = \"vehicle.lap >= 1\"", "stop = 1e308"),
+    ] {
+        let p = dir.path().join("sys.toml");
+        std::fs::write(&p, text.replace(what, edit)).unwrap();
+        let e = failure_in(dir.path(), &["run", "sys.toml"]);
+        assert!(e.contains("macro steps, more than 1e12"), "{edit}: {e}");
+    }
+}
+
+/// N16, N29: a standing measurement panicked `lap`; a logger's 1e308 became a target speed.
+#[test]
+fn n16_n29_lap_refuses_a_standing_measurement_and_absurd_speeds() {
+    let dir = tb_testkit::scratch("n16");
+    let d = dir.path();
+    measurement(&d.join("standing.csv"), 200, |_| (0.0, 0.0));
+    let e = failure_in(d, &["lap", "standing.csv", "--out", "x"]);
+    assert!(
+        e.contains("the car covers 0.0 m in 2.0 s: not a lap"),
+        "{e}"
+    );
+    assert!(!e.contains("panicked"), "{e}");
+    measurement(&d.join("huge.csv"), 1000, |k| {
+        (k as f64 * 0.5, if k == 50 { 1e308 } else { 50.0 })
+    });
+    let e = failure_in(d, &["lap", "huge.csv", "--out", "x"]);
+    assert!(e.contains("sample 51 (t = 0.5 s) has v = 1e308 m/s"), "{e}");
+    // A lap of a metre.
+    measurement(&d.join("metre.csv"), 100, |k| (k as f64 * 0.01, 1.0));
+    let e = failure_in(d, &["lap", "metre.csv", "--out", "x"]);
+    assert!(e.contains("not a lap (at least 100 m"), "{e}");
+}
+
+/// N17: a panic of twinbench's own was reported as an FMU's `exit()`.
+#[test]
+fn n17_a_panic_is_reported_as_a_panic_with_its_location() {
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(["pack", "-o", "/nonexistent/never"])
+        .env("TWINBENCH_TEST_PANIC", "1")
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(101), "{e}");
+    assert!(e.contains("panicked at src/cli/mod.rs:"), "{e}");
+    assert!(e.contains("an internal error"), "{e}");
+    assert!(!e.contains("exit()"), "{e}");
+}
+
+/// N20: a FIFO hung and /dev/zero exhausted memory as an input file.
+#[test]
+fn n20_fifos_and_devices_are_refused_as_every_kind_of_input() {
+    let dir = tb_testkit::scratch("n20");
+    let d = dir.path();
+    let fifo = d.join("fifo");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let meas = root().join("data/spielberg_lap.csv");
+    let meas = meas.to_str().unwrap();
+    for bad in ["fifo", "/dev/zero"] {
+        let kind = if bad == "fifo" { "a FIFO" } else { "a device" };
+        for args in [
+            vec!["run", bad],
+            vec!["optimize", bad],
+            vec!["compare", bad, meas],
+            vec!["compare", meas, bad],
+            vec!["lap", bad, "--out", "x"],
+            vec!["lap", meas, "--channels", bad, "--out", "x"],
+            vec!["lap", meas, "--track", bad, "--out", "x"],
+            vec!["modal", bad],
+        ] {
+            // A FIFO without a writer: every read must be refused at once, not wait.
+            let e = failure_in(d, &args);
+            assert!(
+                e.contains(&format!("is {kind}, not a regular file")),
+                "{args:?}: {e}"
+            );
+        }
+    }
+    // An MDF 4 measurement: the same.
+    let e = failure_in(d, &["lap", "/dev/zero", "--out", "x"]);
+    assert!(e.contains("is a device"), "{e}");
+    std::os::unix::fs::symlink("/dev/zero", d.join("zero.mf4")).unwrap();
+    let e = failure_in(d, &["lap", "zero.mf4", "--out", "x"]);
+    assert!(e.contains("is a device, not a regular file"), "{e}");
+}
+
+/// N21: an interrupted write left its temporary behind, and nothing removed it later; a
+/// file size limit killed the process with no word.
+#[test]
+fn n21_temporaries_are_removed_and_swept_and_a_size_limit_is_an_error() {
+    let dir = tb_testkit::scratch("n21");
+    let d = dir.path();
+    // A temporary of a killed writer, an hour old and unlocked: swept by the next write.
+    let stale = d.join(".lap.csv.0123456789abcdef.tmp");
+    std::fs::write(&stale, "half a result").unwrap();
+    let an_hour_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+    std::fs::File::options()
+        .write(true)
+        .open(&stale)
+        .unwrap()
+        .set_modified(an_hour_ago)
+        .unwrap();
+    // Someone's own file of a similar name stays.
+    let theirs = d.join(".notes.tmp");
+    std::fs::write(&theirs, "mine").unwrap();
+    tb_table::write_atomic(&d.join("other.csv"), b"x").unwrap();
+    assert!(!stale.exists(), "the stale temporary is swept");
+    assert!(theirs.exists(), "a file twinbench did not name stays");
+    // A fresh one (a writer at work) stays.
+    let fresh = d.join(".lap.csv.fedcba9876543210.tmp");
+    std::fs::write(&fresh, "being written").unwrap();
+    tb_table::write_atomic(&d.join("other.csv"), b"y").unwrap();
+    assert!(fresh.exists());
+    std::fs::remove_file(&fresh).unwrap();
+
+    // SIGTERM while a big result is written: no temporary stays.
+    let fmus = common::fmu_dir();
+    let text = std::fs::read_to_string(root().join("systems/rls_v.toml"))
+        .unwrap()
+        .replace("\"../target/fmu/", &format!("\"{}/", fmus.display()))
+        .replace("decimation = 5", "decimation = 1");
+    std::fs::write(d.join("sys.toml"), text).unwrap();
+    let mut caught = false;
+    for _ in 0..5 {
+        let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .args(["run", "sys.toml", "--out", "big.csv"])
+            .current_dir(d)
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Wait until the temporary appears, then stop the process.
+        let started = std::time::Instant::now();
+        let tmp_seen = loop {
+            let seen = std::fs::read_dir(d).unwrap().flatten().any(|e| {
+                let n = e.file_name().to_string_lossy().into_owned();
+                n.starts_with(".big.csv.") && n.ends_with(".tmp")
+            });
+            if seen || started.elapsed().as_secs() > 60 {
+                break seen;
+            }
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        };
+        unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+        let o = child.wait_with_output().unwrap();
+        assert!(!o.status.success());
+        let left: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".tmp") && n != ".notes.tmp")
+            .collect();
+        assert!(left.is_empty(), "left behind: {left:?}");
+        if tmp_seen {
+            caught = true;
+            break;
+        }
+    }
+    assert!(caught, "no write in progress caught in five runs");
+    // A file size limit: an error naming the file, not a silent death by SIGXFSZ.
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -f 64; exec '{}' run sys.toml --out limited.csv",
+            env!("CARGO_BIN_EXE_twinbench")
+        ))
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("limited.csv") && e.contains("File too large"),
+        "{e}"
+    );
+}
