@@ -106,25 +106,32 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| refuse(dir, e))?;
     sweep(dir);
     let name = path.file_name().unwrap_or_default().to_string_lossy();
-    let (tmp, mut file) = {
+    // Armed before it exists: a signal from the moment it is created removes it.
+    let (tmp, mut file, slot) = {
         let mut attempt = 0;
         loop {
             let tmp = dir.join(format!(".{name}.{:016x}.tmp", random()));
+            let slot = in_flight::arm(&tmp);
             match std::fs::OpenOptions::new()
                 .write(true)
                 .create_new(true)
                 .open(&tmp)
             {
-                Ok(f) => break (tmp, f),
-                Err(e) if e.kind() == ErrorKind::AlreadyExists && attempt < 16 => attempt += 1,
-                Err(e) => return Err(refuse(&tmp, e)),
+                Ok(f) => break (tmp, f, slot),
+                Err(e) if e.kind() == ErrorKind::AlreadyExists && attempt < 16 => {
+                    in_flight::disarm(slot);
+                    attempt += 1
+                }
+                Err(e) => {
+                    in_flight::disarm(slot);
+                    return Err(refuse(&tmp, e));
+                }
             }
         }
     };
     // Locked while written: a sweep by another process leaves it alone.
     // SAFETY: flock on an open descriptor of ours.
     unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
-    let slot = in_flight::arm(&tmp);
     let written = (|| {
         let named = |e: Error| refuse(path, e);
         file.write_all(bytes).map_err(named)?;
