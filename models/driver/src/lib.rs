@@ -19,9 +19,9 @@ pub use target::TargetSpeed;
 /// Name of the target speed file in the FMU's `resources/`.
 pub const TARGET_FILE: &str = "target_speed.csv";
 
-/// The bundled target as the build script parsed it (`fmu_export::sidecar`; empty if the
+/// The bundled target as the build script parsed it (`fmu_export::preparsed`; empty if the
 /// bundled file does not parse, then the resource is parsed at run time and its error shown).
-const TARGET_SIDECAR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/target_speed.sidecar"));
+const TARGET_PREPARSED: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/target_speed.preparsed"));
 
 const G: f64 = 9.81;
 
@@ -160,8 +160,8 @@ impl Model for Driver {
             ctx.cached(TARGET_FILE, || {
                 let (path, text) = ctx.read_resource(TARGET_FILE)?;
                 // The bundled file as the build parsed it, unless it was changed since.
-                let digest = fmu_export::sidecar::digest(text.as_bytes());
-                match fmu_export::sidecar::decode(TARGET_SIDECAR, digest, 2)
+                let digest = fmu_export::preparsed::digest(text.as_bytes());
+                match fmu_export::preparsed::decode(TARGET_PREPARSED, digest, 2)
                     .and_then(|v| TargetSpeed::from_values(&v))
                 {
                     Some(target) => Ok(target),
@@ -169,9 +169,11 @@ impl Model for Driver {
                 }
             })?
         } else {
-            let path =
-                fmu_export::model::parameter_path("target_speed_file", &vars.target_speed_file)?;
-            fmu_export::model::shared_file(&path, |p, text| {
+            let path = fmu_export::resources::parameter_path(
+                "target_speed_file",
+                &vars.target_speed_file,
+            )?;
+            fmu_export::resources::shared_file(&path, |p, text| {
                 TargetSpeed::parse(text, &p.display().to_string())
             })?
         };

@@ -2,8 +2,10 @@
 //! causality/variability/range checks, stepping, FMU states. The FFI layer is a thin,
 //! panic-guarded shell around this; tests and native hosts can use it directly.
 
+use crate::context::Context;
 use crate::fmi2::fmi2Status;
-use crate::model::{Context, Model, ModelError, Severity, StateReader, StateWriter};
+use crate::model::{Model, ModelError, Severity};
+use crate::state::{StateReader, StateWriter};
 use crate::variables::{Causality, ScalarType, Value, VarInfo, VarTable, Variability};
 use std::path::PathBuf;
 use tb_fmi::{Function, Phase, PhaseSet};

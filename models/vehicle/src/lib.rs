@@ -18,9 +18,9 @@ use track::{Track, TrackPoint};
 /// Name of the track file in the FMU's resources.
 pub const TRACK_FILE: &str = "track.csv";
 
-/// The bundled track as the build script parsed it (`fmu_export::sidecar`; empty if the
+/// The bundled track as the build script parsed it (`fmu_export::preparsed`; empty if the
 /// bundled file does not parse, then the resource is parsed at run time and its error shown).
-const TRACK_SIDECAR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/track.sidecar"));
+const TRACK_PREPARSED: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/track.preparsed"));
 
 fmu_export::variables! {
     /// Variables of the vehicle model (names as in docs/bench.md and the paper, hence the case).
@@ -442,8 +442,8 @@ impl Model for Vehicle {
             let track = ctx.cached(TRACK_FILE, || {
                 let (path, text) = ctx.read_resource(TRACK_FILE)?;
                 // The bundled file as the build parsed it, unless it was changed since.
-                let digest = fmu_export::sidecar::digest(text.as_bytes());
-                match fmu_export::sidecar::decode(TRACK_SIDECAR, digest, 5)
+                let digest = fmu_export::preparsed::digest(text.as_bytes());
+                match fmu_export::preparsed::decode(TRACK_PREPARSED, digest, 5)
                     .and_then(|v| Track::from_values(&v))
                 {
                     Some(track) => Ok(track),
@@ -452,8 +452,8 @@ impl Model for Vehicle {
             })?;
             (track, ctx.resource(TRACK_FILE)?)
         } else {
-            let path = fmu_export::model::parameter_path("track_file", &vars.track_file)?;
-            let track = fmu_export::model::shared_file(&path, |p, text| {
+            let path = fmu_export::resources::parameter_path("track_file", &vars.track_file)?;
+            let track = fmu_export::resources::shared_file(&path, |p, text| {
                 Track::parse(&p.display().to_string(), text)
             })?;
             (track, path)
