@@ -35,7 +35,7 @@ fmu_export::variables! {
             .describe("Accelerator pedal, 0..1 (share of the available drive force)"),
         brake_pedal: Real = 0.0 => output(11).unit("1").range(0.0, 1.0)
             .describe("Brake pedal, 0..1 (share of the full braking deceleration); never together with the accelerator"),
-        v_target: Real = 0.0 => output(12).unit("m/s").init_depends_on(&[2])
+        v_target: Real = 0.0 => output(12).unit("m/s").init_depends_on(&[s])
             .describe("Target speed at the current distance s"),
         lap_length: Real = 0.0 => output(13).unit("m")
             .describe("Length of the target's lap (the last s of the target file)"),

@@ -26,9 +26,9 @@ fmu_export::variables! {
             .describe("Rotor speed setpoint in speed control (control_mode = 1)"),
         omega: Real = 0.0 => output(10).unit("rad/s")
             .describe("Rotor speed (speed sensor)"),
-        torque_measured: Real = 0.0 => output(11).unit("N.m").init_depends_on(&[1, 2, 3])
+        torque_measured: Real = 0.0 => output(11).unit("N.m").init_depends_on(&[shaft_torque, torque_setpoint, speed_setpoint])
             .describe("Transducer torque at the drive side: torque_dyno + (inertia − inertia_drive_side)·dω/dt"),
-        torque_dyno: Real = 0.0 => output(12).unit("N.m").init_depends_on(&[2, 3])
+        torque_dyno: Real = 0.0 => output(12).unit("N.m").init_depends_on(&[torque_setpoint, speed_setpoint])
             .describe("Air-gap torque the dyno applies (after dead time, lag and limit)"),
         inertia: Real = 0.8 => parameter(20).unit("kg.m2").range(1e-4, 1e3)
             .describe("Rotating inertia on the speed sensor: rotor + adapter + tyre part"),

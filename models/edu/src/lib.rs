@@ -42,16 +42,16 @@ fmu_export::variables! {
         omega_right: Real = 0.0 => input(52).unit("rad/s")
             .describe("Right side shaft speed at the wheel side (from the dyno)"),
 
-        torque_left: Real = 0.0 => output(100).unit("N.m").depends_on(&[51, 52])
+        torque_left: Real = 0.0 => output(100).unit("N.m").depends_on(&[omega_left, omega_right])
             .describe("Left side shaft torque at the wheel side, positive drives the wheel forward"),
-        torque_right: Real = 0.0 => output(101).unit("N.m").depends_on(&[51, 52])
+        torque_right: Real = 0.0 => output(101).unit("N.m").depends_on(&[omega_left, omega_right])
             .describe("Right side shaft torque at the wheel side, positive drives the wheel forward"),
         motor_speed: Real = 0.0 => output(102).unit("rad/s").describe("Motor speed"),
         motor_torque: Real = 0.0 => output(103).unit("N.m").describe("Motor air-gap torque (after the current-loop lag)"),
         electric_power: Real = 0.0 => output(104).unit("W")
             .describe("Electric power drawn from the battery (negative when generating)"),
         mechanical_power: Real = 0.0 => output(105).unit("W").describe("Motor shaft power, motor_torque x motor_speed"),
-        shaft_power: Real = 0.0 => output(106).unit("W").depends_on(&[51, 52])
+        shaft_power: Real = 0.0 => output(106).unit("W").depends_on(&[omega_left, omega_right])
             .describe("Power delivered to the wheels: torque_left x omega_left + torque_right x omega_right"),
         torque_limit: Real = 0.0 => output(107).unit("N.m")
             .describe("Motor torque available at the present speed: min(torque_max, power_max / |motor_speed|)"),

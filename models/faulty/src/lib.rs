@@ -16,10 +16,10 @@ fmu_export::variables! {
         u: Real = 0.0 => input(4).unit("1").describe("Integrator input"),
         y: Real = 0.0 => output(5).unit("s").describe("Integral of gain·u"),
         steps: Integer = 0 => discrete_output(6).describe("Steps taken"),
-        y_direct: Real = 0.0 => output(7).unit("1").depends_on(&[4])
+        y_direct: Real = 0.0 => output(7).unit("1").depends_on(&[u])
             .describe("gain·u: direct feed-through of the input"),
         tag: String = "" => discrete_input(8).describe("A text input (for hosts' tests of String variables)"),
-        tag_out: String = "" => discrete_output(9).depends_on(&[8])
+        tag_out: String = "" => discrete_output(9).depends_on(&[tag])
             .describe("tag and the steps taken, e.g. \"lap 3\" after 3 steps of tag \"lap\""),
     }
 }

@@ -6,7 +6,8 @@
 //!
 //! - [`fmi2`], [`units`], [`Phase`], [`Function`]: re-exported from `tb-fmi`, the FMI vocabulary
 //!   shared with the importer (C types, unit table, states and the function table).
-//! - [`variables`]: the variable table, one source of truth per variable.
+//! - [`variables`]: the variable table, one source of truth per variable; [`check`]: its
+//!   rules, evaluated at compile time.
 //! - [`model`]: the trait a model implements, [`ModelInfo`] and [`ModelError`].
 //! - [`context`]: what a model knows of its instance (resource folder, start time, the
 //!   resources it parsed).
@@ -18,6 +19,7 @@
 //! - [`description`]: modelDescription.xml, documentation and GUID from the table.
 //! - [`ffi`]: the panic-guarded C entry points.
 
+pub mod check;
 pub mod context;
 pub mod description;
 pub mod ffi;

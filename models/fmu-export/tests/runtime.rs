@@ -16,7 +16,7 @@ fmu_export::variables! {
         offset: Real = 0.0 => parameter(2).unit("1").describe("Offset of the direct output"),
         u: Real = 0.0 => input(3).unit("1").range(-100.0, 100.0).describe("Input"),
         y: Real = 0.0 => output(4).unit("s").describe("Integral of gain·u"),
-        y_direct: Real = 0.0 => output(5).unit("1").depends_on(&[3])
+        y_direct: Real = 0.0 => output(5).unit("1").depends_on(&[u])
             .describe("gain·u + offset"),
         fault: Integer = 0 => parameter(6).range(0.0, 3.0)
             .describe("From t = 1 s: 0 none, 1 error, 2 panic, 3 discard"),
