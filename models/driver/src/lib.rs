@@ -10,7 +10,8 @@ mod target;
 
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter,
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource, StateReader,
+    StateWriter,
 };
 use std::cell::Cell;
 use std::sync::Arc;
@@ -184,7 +185,6 @@ impl Model for Driver {
             hint_here: Cell::new(0),
             hint_preview: Cell::new(0),
         };
-        driver.write_outputs(vars);
         Ok(driver)
     }
 
@@ -195,7 +195,8 @@ impl Model for Driver {
                 vars.v, vars.s
             )));
         }
-        // Conditional integration: no integrating further into a pedal's stop.
+        // Conditional integration: no integrating further into a pedal's stop (the pedals
+        // before the integral moves; the outputs after it are calculate_outputs').
         let saturation = self.write_outputs(vars);
         let error = vars.v_target - vars.v;
         let winds_up = (saturation > 0 && error > 0.0) || (saturation < 0 && error < 0.0);
@@ -204,10 +205,15 @@ impl Model for Driver {
             let bound = vars.integral_limit * vars.integral_time / Self::kp(vars);
             self.error_integral = self.error_integral.clamp(-bound, bound);
         }
-        self.write_outputs(vars);
         Ok(())
     }
 
+    fn calculate_outputs(&mut self, vars: &mut DriverVars) {
+        self.write_outputs(vars);
+    }
+}
+
+impl ModelState for Driver {
     fn save_state(&self, w: &mut StateWriter) {
         w.f64(self.error_integral);
     }

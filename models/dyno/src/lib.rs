@@ -11,7 +11,7 @@ mod lag;
 
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, StateReader, StateWriter,
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, StateReader, StateWriter,
 };
 use lag::LagStep;
 
@@ -296,13 +296,6 @@ impl Dyno {
         }
         self.omega += (vars.shaft_torque * dt - torque_integral) / self.inertia;
     }
-
-    fn write_outputs(&self, vars: &mut DynoVars) {
-        vars.omega = self.omega;
-        vars.torque_dyno = self.lag_x;
-        // The rotor part behind the transducer needs (J_rotor/J)(shaft − T_dyno) to accelerate.
-        vars.torque_measured = self.lag_x + self.rotor_share * (vars.shaft_torque - self.lag_x);
-    }
 }
 
 impl Model for Dyno {
@@ -371,7 +364,6 @@ impl Model for Dyno {
         dyno.lag_x = demand;
         dyno.lag_input = demand;
         vars.torque_demand = demand;
-        dyno.write_outputs(vars);
         Ok(dyno)
     }
 
@@ -426,7 +418,6 @@ impl Model for Dyno {
             self.advance(vars, t_next - t);
             t = t_next;
         }
-        self.write_outputs(vars);
         if !self.omega.is_finite() || !self.lag_x.is_finite() {
             return Err(ModelError::new(format!(
                 "non-finite state (omega = {}, torque_dyno = {})",
@@ -436,11 +427,20 @@ impl Model for Dyno {
         Ok(())
     }
 
+    fn calculate_outputs(&mut self, vars: &mut DynoVars) {
+        vars.omega = self.omega;
+        vars.torque_dyno = self.lag_x;
+        // The rotor part behind the transducer needs (J_rotor/J)(shaft − T_dyno) to accelerate.
+        vars.torque_measured = self.lag_x + self.rotor_share * (vars.shaft_torque - self.lag_x);
+    }
+
     fn parameters_changed(&mut self, vars: &DynoVars) -> Result<(), ModelError> {
         self.lag_cycle = LagStep::new(vars.lag_order, vars.time_constant, vars.damping, self.cycle);
         Ok(())
     }
+}
 
+impl ModelState for Dyno {
     fn save_state(&self, w: &mut StateWriter) {
         // The tick clock's origin: a deserializing host re-initialises at another time.
         w.f64(self.start_time);

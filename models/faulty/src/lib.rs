@@ -3,7 +3,7 @@
 
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, StateReader, StateWriter,
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, StateReader, StateWriter,
 };
 
 fmu_export::variables! {
@@ -50,8 +50,6 @@ impl Model for Faulty {
         }
         vars.y = 0.0;
         vars.steps = 0;
-        vars.y_direct = vars.gain * vars.u;
-        vars.tag_out = format!("{} 0", vars.tag);
         Ok(Faulty { y: 0.0, steps: 0 })
     }
 
@@ -85,8 +83,6 @@ impl Model for Faulty {
         self.steps += 1;
         vars.y = self.y;
         vars.steps = self.steps;
-        vars.y_direct = vars.gain * vars.u;
-        vars.tag_out = format!("{} {}", vars.tag, self.steps);
         Ok(())
     }
 
@@ -99,11 +95,13 @@ impl Model for Faulty {
         Ok(())
     }
 
-    fn update_outputs(&mut self, vars: &mut FaultyVars) {
+    fn calculate_outputs(&mut self, vars: &mut FaultyVars) {
         vars.y_direct = vars.gain * vars.u;
         vars.tag_out = format!("{} {}", vars.tag, self.steps);
     }
+}
 
+impl ModelState for Faulty {
     fn save_state(&self, w: &mut StateWriter) {
         w.f64(self.y);
         w.i32(self.steps);

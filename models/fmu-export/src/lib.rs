@@ -35,5 +35,5 @@ pub use tb_fmi::{fmi2, units, Function, Phase, PhaseSet};
 pub use context::{Context, ResourceCache};
 pub use model::{DefaultExperiment, Model, ModelError, ModelInfo, Resource, Severity};
 pub use runtime::{Logger, NullLogger, Runtime};
-pub use state::{StateReader, StateWriter};
+pub use state::{ModelState, StateReader, StateWriter, Stateless};
 pub use variables::{Value, VarInfo, VarTable};

@@ -4,7 +4,7 @@
 //! FMU states), [`crate::resources`] (files and their parsing).
 
 use crate::context::Context;
-use crate::state::{StateReader, StateWriter};
+use crate::state::ModelState;
 use crate::variables::VarTable;
 use std::fmt;
 
@@ -84,23 +84,33 @@ impl std::error::Error for ModelError {}
 /// A model: its variable table, and the equations.
 ///
 /// The runtime owns the variables (`Self::Vars`), checks every set against causality,
-/// variability and min/max, and calls the model at initialisation and at each step.
-pub trait Model: Clone + Send + Sized + 'static {
+/// variability and min/max, and calls the model: [`Model::initialize`] to build it,
+/// [`Model::do_step`] to advance its state, and [`Model::calculate_outputs`] after each of
+/// them (and when the host changed inputs an output depends on directly), so that an
+/// output's formula is written once. Its dynamic state for serialized FMU states comes
+/// from [`ModelState`] (`impl Stateless for M {}` for a model without one).
+pub trait Model: ModelState + Clone + Send + Sized + 'static {
     type Vars: VarTable;
     const INFO: ModelInfo;
 
-    /// Check parameters, load resources, set the initial state and write the initial outputs
-    /// into `vars`. Called in initialization mode (when outputs are read) and at
-    /// fmi2ExitInitializationMode, again whenever parameters or inputs changed in between.
+    /// Check parameters, load resources and set the initial state (and any local the state
+    /// gives). The runtime then calls [`Model::calculate_outputs`]. Called in initialization
+    /// mode (when outputs are read) and at fmi2ExitInitializationMode, again whenever
+    /// parameters or inputs changed in between.
     fn initialize(vars: &mut Self::Vars, ctx: &Context) -> Result<Self, ModelError>;
 
-    /// Advance from `time` by `step` (> 0) with the inputs in `vars`; write the outputs.
-    /// Must not allocate.
+    /// Advance the state from `time` by `step` (> 0) with the inputs in `vars`. After a
+    /// step that succeeded the runtime calls [`Model::calculate_outputs`]; a step that
+    /// computes an output as part of its integration (a state exposed as it is) may write
+    /// it here. Must not allocate.
     fn do_step(&mut self, vars: &mut Self::Vars, time: f64, step: f64) -> Result<(), ModelError>;
 
-    /// Recompute outputs that depend directly on inputs (those with `depends_on`), after the
-    /// host set inputs between steps. The default does nothing (no feed-through).
-    fn update_outputs(&mut self, _vars: &mut Self::Vars) {}
+    /// Write the outputs (and the exposed locals) computed from the state, the parameters
+    /// and the inputs in `vars`: the Modelica Reference FMUs' `calculateValues`. The runtime
+    /// calls it after [`Model::initialize`], after every [`Model::do_step`] that succeeded,
+    /// and, for a model that declares direct feed-through (`depends_on`), before outputs are
+    /// read after the host set inputs between steps. Must not allocate.
+    fn calculate_outputs(&mut self, vars: &mut Self::Vars);
 
     /// A tunable parameter changed between steps: refresh anything derived from it.
     fn parameters_changed(&mut self, _vars: &Self::Vars) -> Result<(), ModelError> {
@@ -111,11 +121,4 @@ pub trait Model: Clone + Send + Sized + 'static {
     fn terminate(&mut self, _vars: &Self::Vars) -> Result<(), ModelError> {
         Ok(())
     }
-
-    /// Append the dynamic state (not the variables, not resources) to `w`.
-    fn save_state(&self, w: &mut StateWriter);
-
-    /// Read back what [`Model::save_state`] wrote, into a model initialised with the same
-    /// parameters and resources.
-    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError>;
 }

@@ -334,7 +334,8 @@ impl<M: Model> Runtime<M> {
         }
         self.init_failed = false;
         match M::initialize(&mut self.vars, &self.ctx) {
-            Ok(m) => {
+            Ok(mut m) => {
+                m.calculate_outputs(&mut self.vars);
                 self.model = Some(m);
                 self.init_dirty = false;
                 self.inputs_changed = false;
@@ -356,7 +357,8 @@ impl<M: Model> Runtime<M> {
             return;
         }
         match M::initialize(&mut self.vars, &self.ctx) {
-            Ok(m) => {
+            Ok(mut m) => {
+                m.calculate_outputs(&mut self.vars);
                 self.model = Some(m);
                 self.init_failed = false;
                 self.inputs_changed = false;
@@ -469,7 +471,9 @@ impl<M: Model> Runtime<M> {
             }
         }
         let r = match self.model.as_mut() {
-            Some(m) => m.do_step(&mut self.vars, current_time, step),
+            Some(m) => m
+                .do_step(&mut self.vars, current_time, step)
+                .map(|()| m.calculate_outputs(&mut self.vars)),
             None => Err(ModelError::new("model not initialised")),
         };
         match r {
@@ -531,7 +535,7 @@ impl<M: Model> Runtime<M> {
             Phase::InitializationMode => self.try_initialize(),
             Phase::StepComplete if self.inputs_changed && self.has_feedthrough => {
                 if let Some(m) = self.model.as_mut() {
-                    m.update_outputs(&mut self.vars);
+                    m.calculate_outputs(&mut self.vars);
                 }
                 self.inputs_changed = false;
             }

@@ -1,8 +1,36 @@
-//! Serialized FMU states: the little-endian writer and reader a model's
-//! `save_state`/`load_state` use (the runtime writes its own fields and the variables with
-//! the same pair).
+//! Serialized FMU states: what a model saves of itself ([`ModelState`], or nothing for a
+//! [`Stateless`] one) and the little-endian writer and reader it uses (the runtime writes
+//! its own fields and the variables with the same pair).
 
 use crate::model::ModelError;
+
+/// The dynamic state of a model in a serialized FMU state (fmi2SerializeFMUstate): what
+/// [`crate::Model::initialize`] does not rebuild from the parameters and resources. Every
+/// model implements it, or is [`Stateless`].
+#[diagnostic::on_unimplemented(
+    message = "the model `{Self}` neither saves its dynamic state nor is `Stateless`",
+    note = "implement `fmu_export::ModelState` (save_state and load_state) for a model with dynamic state, or write `impl fmu_export::Stateless for {Self} {{}}` for a model without"
+)]
+pub trait ModelState {
+    /// Append the dynamic state (not the variables, not resources) to `w`.
+    fn save_state(&self, w: &mut StateWriter);
+
+    /// Read back what [`ModelState::save_state`] wrote, into a model initialised with the
+    /// same parameters and resources.
+    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError>;
+}
+
+/// A model without dynamic state (its outputs follow from parameters and inputs):
+/// `impl Stateless for MyModel {}` gives it the [`ModelState`] that saves nothing.
+pub trait Stateless {}
+
+impl<M: Stateless> ModelState for M {
+    fn save_state(&self, _: &mut StateWriter) {}
+
+    fn load_state(&mut self, _: &mut StateReader<'_>) -> Result<(), ModelError> {
+        Ok(())
+    }
+}
 
 /// Little-endian writer for serialized FMU states.
 #[derive(Default, Debug)]
