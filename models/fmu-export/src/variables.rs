@@ -200,6 +200,18 @@ impl VarInfo {
     }
 }
 
+/// Whether a variable of `table` declares direct feed-through.
+pub const fn declares_feedthrough(table: &[VarInfo]) -> bool {
+    let mut i = 0;
+    while i < table.len() {
+        if !table[i].depends_on.is_empty() {
+            return true;
+        }
+        i += 1;
+    }
+    false
+}
+
 /// What the generated variable struct provides to the runtime.
 pub trait VarTable: Clone + Default + Send + 'static {
     /// The table, in declaration order.
@@ -208,6 +220,10 @@ pub trait VarTable: Clone + Default + Send + 'static {
     /// Byte offset of each variable's field in the struct when it is a Real (an `f64`),
     /// `usize::MAX` otherwise: the runtime reads and writes Reals there directly.
     const REAL_OFFSETS: &'static [usize];
+
+    /// Whether an output declares direct feed-through (`depends_on`): the runtime then
+    /// recalculates the outputs when inputs change between steps.
+    const HAS_FEEDTHROUGH: bool = declares_feedthrough(Self::VARIABLES);
 
     /// Value of the variable at `index` in [`Self::VARIABLES`].
     fn get(&self, index: usize) -> Value;
