@@ -360,7 +360,7 @@ fn given_track(path: &Path, lap: f64) -> Result<String, LapError> {
         .map_err(|e| LapError::Invalid(e.to_string()))?;
     let tolerance = lap_length_tolerance();
     let deviation = (track.length() - lap) / lap;
-    if !(deviation.abs() <= tolerance) {
+    if deviation.is_nan() || deviation.abs() > tolerance {
         return Err(LapError::Invalid(format!(
             "{}: the track is {:.1} m long, the measured lap {lap:.1} m ({:+.1} %, the bench accepts ±{:.1} %): give the track of the measured circuit, or leave out --track to derive one from the measurement",
             path.display(),
