@@ -3,10 +3,15 @@
 //! handed lives beside it: [`crate::context`] (its instance), [`crate::state`] (serialized
 //! FMU states), [`crate::resources`] (files and their parsing).
 
-use crate::context::Context;
 use crate::state::ModelState;
 use crate::variables::VarTable;
 use std::fmt;
+
+// What lived in this module before context.rs, state.rs and resources.rs, still reachable
+// by its old path (`fmu_export::model::shared_file`, ...); new code names those modules.
+pub use crate::context::{Context, ResourceCache};
+pub use crate::resources::{parameter_path, read_text, shared_file, wrap_distance};
+pub use crate::state::{StateReader, StateWriter};
 
 /// Static facts about a model, written to modelDescription.xml and the documentation.
 #[derive(Clone, Copy, Debug)]
