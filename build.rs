@@ -1,59 +1,158 @@
-//! Builds the model crates as FMU libraries (`cdylib`, release, their `fmu` feature) with a
-//! cargo of their own, into `target/fmu-build`, and tells the crate where they are: the
-//! binary embeds them, so `twinbench pack` needs neither the sources nor cargo (an installed
-//! binary packs the FMUs anywhere). The models are the crates under `models/` with an `fmu`
-//! feature; the registry (`src/registry.rs`) lists the same ones (a test checks).
+//! The model registry's build half. The models are the path dependencies of this crate
+//! (`[dependencies]` of the root `Cargo.toml`) whose manifest declares an `fmu` feature:
+//! one line there registers a model. For them this script
+//!
+//! - builds the FMU libraries (`cdylib`, release, their `fmu` feature) with a cargo of its
+//!   own, into `$CARGO_TARGET_DIR/fmu-build` (`<root>/target/fmu-build` when the variable is
+//!   not set; a relative one is taken from the workspace root), and tells the crate where
+//!   they are: the binary embeds them, so `twinbench pack` needs neither the sources nor
+//!   cargo (an installed binary packs the FMUs anywhere);
+//! - writes the registry's entries (`$OUT_DIR/registry.rs`, included by `src/registry.rs`):
+//!   the model type is the crate's name in UpperCamelCase (`gain` → `gain::Gain`) unless its
+//!   manifest says otherwise in `[package.metadata.twinbench] model = "..."`; `test = true`
+//!   there marks a test FMU (packed under `test/`, only when named).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// Crates under `models/` whose manifest declares an `fmu` feature.
-fn model_crates(root: &Path) -> Vec<String> {
-    let mut names = Vec::new();
-    let Ok(entries) = std::fs::read_dir(root.join("models")) else {
-        return names;
+/// One model crate of the registry.
+struct ModelCrate {
+    /// Cargo package name (`-p`, the library's file stem, `TWINBENCH_LIB_<package>`).
+    package: String,
+    /// The crate's name in Rust (the dependency's key, `-` as `_`).
+    krate: String,
+    /// The type that implements `fmu_export::Model`.
+    model: String,
+    test_only: bool,
+    dir: PathBuf,
+}
+
+fn read_toml(path: &Path) -> toml::Table {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    toml::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// `gain` → `Gain`, `my-model` → `MyModel`.
+fn upper_camel_case(name: &str) -> String {
+    name.split(['-', '_'])
+        .map(|w| {
+            let mut c = w.chars();
+            c.next()
+                .map(|f| f.to_uppercase().chain(c).collect::<String>())
+                .unwrap_or_default()
+        })
+        .collect()
+}
+
+/// The root manifest's path dependencies that declare an `fmu` feature, in its order.
+fn model_crates(root: &Path) -> Vec<ModelCrate> {
+    let manifest = read_toml(&root.join("Cargo.toml"));
+    let Some(deps) = manifest.get("dependencies").and_then(|d| d.as_table()) else {
+        return Vec::new();
     };
-    for e in entries.flatten() {
-        let Ok(text) = std::fs::read_to_string(e.path().join("Cargo.toml")) else {
+    let mut models = Vec::new();
+    for (key, spec) in deps {
+        let Some(path) = spec.get("path").and_then(|p| p.as_str()) else {
             continue;
         };
-        let has_fmu_feature = text
-            .lines()
-            .skip_while(|l| l.trim() != "[features]")
-            .take_while(|l| !l.trim().starts_with('[') || l.trim() == "[features]")
-            .any(|l| l.trim_start().starts_with("fmu ") || l.trim_start().starts_with("fmu="));
-        let name = text
-            .lines()
-            .find_map(|l| l.trim().strip_prefix("name = "))
-            .map(|n| n.trim_matches('"').to_string());
-        if let (true, Some(name)) = (has_fmu_feature, name) {
-            names.push(name);
+        let dir = root.join(path);
+        let krate = read_toml(&dir.join("Cargo.toml"));
+        let has_fmu_feature = krate.get("features").and_then(|f| f.get("fmu")).is_some();
+        if !has_fmu_feature {
+            continue;
         }
+        let package = krate
+            .get("package")
+            .and_then(|p| p.get("name"))
+            .and_then(|n| n.as_str())
+            .unwrap_or_else(|| panic!("{path}/Cargo.toml: no package name"))
+            .to_string();
+        let meta = krate
+            .get("package")
+            .and_then(|p| p.get("metadata"))
+            .and_then(|m| m.get("twinbench"));
+        let model = meta
+            .and_then(|m| m.get("model"))
+            .and_then(|m| m.as_str())
+            .map(str::to_string)
+            .unwrap_or_else(|| upper_camel_case(&package));
+        let test_only = meta
+            .and_then(|m| m.get("test"))
+            .and_then(|t| t.as_bool())
+            .unwrap_or(false);
+        models.push(ModelCrate {
+            krate: key.replace('-', "_"),
+            package,
+            model,
+            test_only,
+            dir,
+        });
     }
-    names.sort();
-    names
+    models
+}
+
+/// Where the model libraries are built.
+fn fmu_build_dir(root: &Path) -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR").filter(|d| !d.is_empty()) {
+        Some(dir) => root.join(dir).join("fmu-build"),
+        None => root.join("target").join("fmu-build"),
+    }
+}
+
+/// The registry's entries for `src/registry.rs`'s `registry!`.
+fn registry_entries(models: &[ModelCrate]) -> String {
+    let mut out = String::from(
+        "// Generated by build.rs from the model crates of the root Cargo.toml.\nregistry! {\n",
+    );
+    for m in models {
+        out.push_str(&format!(
+            "    {:?} => {}::{}, {};\n",
+            m.package,
+            m.krate,
+            m.model,
+            if m.test_only { "test" } else { "shipped" }
+        ));
+    }
+    out.push_str("}\n");
+    out
 }
 
 fn main() {
     let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("set by cargo"));
-    for p in [
-        "models",
-        "crates/fmi/src",
-        "crates/fmi/Cargo.toml",
-        "Cargo.lock",
-    ] {
-        println!("cargo:rerun-if-changed={}", root.join(p).display());
-    }
     let models = model_crates(&root);
-    let target = root.join("target").join("fmu-build");
+    for p in [
+        root.join("Cargo.toml"),
+        root.join("models"),
+        root.join("crates/fmi/src"),
+        root.join("crates/fmi/Cargo.toml"),
+        root.join("Cargo.lock"),
+    ]
+    .into_iter()
+    .chain(models.iter().map(|m| m.dir.clone()))
+    {
+        println!("cargo:rerun-if-changed={}", p.display());
+    }
+    println!("cargo:rerun-if-env-changed=CARGO_TARGET_DIR");
+    let out_dir = PathBuf::from(std::env::var("OUT_DIR").expect("set by cargo"));
+    std::fs::write(out_dir.join("registry.rs"), registry_entries(&models))
+        .expect("OUT_DIR is writable");
+
+    if models.is_empty() {
+        return;
+    }
+    let target = fmu_build_dir(&root);
     let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
     cmd.current_dir(&root)
         .args(["build", "--release", "--offline", "--target-dir"])
         .arg(&target);
     for m in &models {
-        cmd.args(["-p", m]);
+        cmd.args(["-p", &m.package]);
     }
-    let features: Vec<String> = models.iter().map(|m| format!("{m}/fmu")).collect();
+    let features: Vec<String> = models
+        .iter()
+        .map(|m| format!("{}/fmu", m.package))
+        .collect();
     cmd.arg("--features").arg(features.join(","));
     // This build's wrappers and flags are not the models' (clippy, a target of its own).
     for v in [
@@ -78,10 +177,11 @@ fn main() {
     }
     for m in &models {
         println!(
-            "cargo:rustc-env=TWINBENCH_LIB_{m}={}",
+            "cargo:rustc-env=TWINBENCH_LIB_{}={}",
+            m.package,
             target
                 .join("release")
-                .join(format!("lib{}.so", m.replace('-', "_")))
+                .join(format!("lib{}.so", m.package.replace('-', "_")))
                 .display()
         );
     }

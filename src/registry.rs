@@ -1,7 +1,14 @@
 //! The model registry: every model twinbench ships, and the test FMUs of the suite. The one
 //! list that `pack` (what to build and package), the native backend (which models are
-//! linked) and the test suite read. Each model is a crate under `models/`, which the
-//! workspace includes by folder; a test checks that the folder and this list agree.
+//! linked) and the test suite read.
+//!
+//! A model is registered by one line in the root `Cargo.toml`'s `[dependencies]`, the path
+//! of its crate (`gain = { path = "models/gain" }`): `build.rs` takes every path dependency
+//! whose crate has an `fmu` feature, in that order, builds its FMU library and writes the
+//! entries below (`$OUT_DIR/registry.rs`). The model type is the crate's name in
+//! UpperCamelCase (`gain::Gain`) unless the crate's `[package.metadata.twinbench]` names it
+//! (`model = "..."`); `test = true` there makes it a test FMU. A test checks that every
+//! workspace crate with an `fmu` feature is registered.
 
 use crate::pack::ModelSpec;
 use tb_cosim::native::NativeModel;
@@ -33,14 +40,8 @@ macro_rules! registry {
     (@test_only test) => { true };
 }
 
-registry! {
-    "dyno" => dyno::Dyno, shipped;
-    "driver" => driver::Driver, shipped;
-    "vehicle" => vehicle::Vehicle, shipped;
-    "edu" => edu::Edu, shipped;
-    // A test FMU (faults on purpose), packed under target/fmu/test/.
-    "faulty" => faulty::Faulty, test;
-}
+// `registry! { "dyno" => dyno::Dyno, shipped; ... "faulty" => faulty::Faulty, test; }`
+include!(concat!(env!("OUT_DIR"), "/registry.rs"));
 
 /// The models `run --native` can call directly.
 pub fn native_models() -> Vec<NativeModel> {

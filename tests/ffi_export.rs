@@ -388,9 +388,18 @@ fn missing_or_malformed_resource_is_an_error_naming_the_file() {
     std::fs::remove_dir_all(&empty).unwrap();
 }
 
+/// Every shipped model (the registry's): its documentation page lists every variable; a
+/// model that ships data files ships a NOTICE naming each of them, and data from the
+/// Spielberg lap carries its licences.
 #[test]
 fn every_fmu_ships_its_documentation_and_notices() {
-    for name in ["vehicle", "driver", "dyno", "edu"] {
+    let shipped: Vec<_> = twinbench::pack::models()
+        .into_iter()
+        .filter(|s| !s.test_only)
+        .collect();
+    assert!(shipped.len() >= 4, "the registry lists the bench's models");
+    for spec in shipped {
+        let name = spec.info.name;
         let f = load(name);
         let doc = std::fs::read_to_string(f.dir.join("documentation/index.html")).unwrap();
         assert!(
@@ -404,13 +413,29 @@ fn every_fmu_ships_its_documentation_and_notices() {
                 v.name
             );
         }
-    }
-    for name in ["vehicle", "driver"] {
-        let f = load(name);
-        let notice = std::fs::read_to_string(f.resource_dir().join("NOTICE")).unwrap();
-        assert!(
-            notice.contains("LGPL-3.0") && notice.contains("OpenStreetMap"),
-            "{name}: {notice}"
-        );
+        let data: Vec<&str> = spec
+            .info
+            .resources
+            .iter()
+            .map(|r| r.name)
+            .filter(|n| *n != "NOTICE")
+            .collect();
+        if data.is_empty() {
+            continue;
+        }
+        let notice = std::fs::read_to_string(f.resource_dir().join("NOTICE"))
+            .unwrap_or_else(|e| panic!("{name} ships {data:?} but no NOTICE: {e}"));
+        for file in &data {
+            assert!(
+                notice.contains(file),
+                "{name}: the NOTICE does not name {file}"
+            );
+        }
+        if notice.contains("Spielberg") {
+            assert!(
+                notice.contains("LGPL-3.0") && notice.contains("OpenStreetMap"),
+                "{name}: {notice}"
+            );
+        }
     }
 }

@@ -71,7 +71,10 @@ fn last_value(csv: &Path, name: &str) -> f64 {
 #[test]
 fn omsimulator_runs_each_fmu_alone() {
     let dir = tb_testkit::scratch("oms-alone");
-    for model in ["vehicle", "driver", "dyno", "edu"] {
+    let shipped = twinbench::pack::models()
+        .into_iter()
+        .filter(|s| !s.test_only);
+    for model in shipped.map(|s| s.info.name) {
         let out = dir.path().join(format!("{model}.csv"));
         run(
             dir.path(),

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct PackArgs {
-    /// Models to pack (default: every shipped model: vehicle, driver, dyno, edu; the test
-    /// FMU `faulty` only when named).
+    /// Models to pack (default: every shipped model of the registry, e.g. vehicle, driver,
+    /// dyno, edu; a test FMU such as `faulty` only when named).
     pub models: Vec<String>,
     /// Output folder (default: $XDG_DATA_HOME/twinbench/fmu, that is
     /// ~/.local/share/twinbench/fmu; the repository's system files name target/fmu:

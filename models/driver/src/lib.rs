@@ -10,7 +10,8 @@ mod target;
 
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter,
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource, StateReader,
+    StateWriter,
 };
 use std::cell::Cell;
 use std::sync::Arc;
@@ -19,9 +20,9 @@ pub use target::TargetSpeed;
 /// Name of the target speed file in the FMU's `resources/`.
 pub const TARGET_FILE: &str = "target_speed.csv";
 
-/// The bundled target as the build script parsed it (`fmu_export::sidecar`; empty if the
+/// The bundled target as the build script parsed it (`fmu_export::preparsed`; empty if the
 /// bundled file does not parse, then the resource is parsed at run time and its error shown).
-const TARGET_SIDECAR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/target_speed.sidecar"));
+const TARGET_PREPARSED: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/target_speed.preparsed"));
 
 const G: f64 = 9.81;
 
@@ -35,7 +36,7 @@ fmu_export::variables! {
             .describe("Accelerator pedal, 0..1 (share of the available drive force)"),
         brake_pedal: Real = 0.0 => output(11).unit("1").range(0.0, 1.0)
             .describe("Brake pedal, 0..1 (share of the full braking deceleration); never together with the accelerator"),
-        v_target: Real = 0.0 => output(12).unit("m/s").init_depends_on(&[2])
+        v_target: Real = 0.0 => output(12).unit("m/s").init_depends_on(&[s])
             .describe("Target speed at the current distance s"),
         lap_length: Real = 0.0 => output(13).unit("m")
             .describe("Length of the target's lap (the last s of the target file)"),
@@ -160,8 +161,8 @@ impl Model for Driver {
             ctx.cached(TARGET_FILE, || {
                 let (path, text) = ctx.read_resource(TARGET_FILE)?;
                 // The bundled file as the build parsed it, unless it was changed since.
-                let digest = fmu_export::sidecar::digest(text.as_bytes());
-                match fmu_export::sidecar::decode(TARGET_SIDECAR, digest, 2)
+                let digest = fmu_export::preparsed::digest(text.as_bytes());
+                match fmu_export::preparsed::decode(TARGET_PREPARSED, digest, 2)
                     .and_then(|v| TargetSpeed::from_values(&v))
                 {
                     Some(target) => Ok(target),
@@ -169,9 +170,11 @@ impl Model for Driver {
                 }
             })?
         } else {
-            let path =
-                fmu_export::model::parameter_path("target_speed_file", &vars.target_speed_file)?;
-            fmu_export::model::shared_file(&path, |p, text| {
+            let path = fmu_export::resources::parameter_path(
+                "target_speed_file",
+                &vars.target_speed_file,
+            )?;
+            fmu_export::resources::shared_file(&path, |p, text| {
                 TargetSpeed::parse(text, &p.display().to_string())
             })?
         };
@@ -182,7 +185,6 @@ impl Model for Driver {
             hint_here: Cell::new(0),
             hint_preview: Cell::new(0),
         };
-        driver.write_outputs(vars);
         Ok(driver)
     }
 
@@ -193,7 +195,8 @@ impl Model for Driver {
                 vars.v, vars.s
             )));
         }
-        // Conditional integration: no integrating further into a pedal's stop.
+        // Conditional integration: no integrating further into a pedal's stop (the pedals
+        // before the integral moves; the outputs after it are calculate_outputs').
         let saturation = self.write_outputs(vars);
         let error = vars.v_target - vars.v;
         let winds_up = (saturation > 0 && error > 0.0) || (saturation < 0 && error < 0.0);
@@ -202,10 +205,15 @@ impl Model for Driver {
             let bound = vars.integral_limit * vars.integral_time / Self::kp(vars);
             self.error_integral = self.error_integral.clamp(-bound, bound);
         }
-        self.write_outputs(vars);
         Ok(())
     }
 
+    fn calculate_outputs(&mut self, vars: &mut DriverVars) {
+        self.write_outputs(vars);
+    }
+}
+
+impl ModelState for Driver {
     fn save_state(&self, w: &mut StateWriter) {
         w.f64(self.error_integral);
     }

@@ -91,7 +91,7 @@ impl TargetSpeed {
         TargetSpeed { s, v, inv_spacing }
     }
 
-    /// The rows as numbers, (s, v) pairs (a build script stores them: `sidecar`).
+    /// The rows as numbers, (s, v) pairs (a build script stores them: `preparsed`).
     pub fn values(&self) -> Vec<f64> {
         self.s
             .iter()
@@ -126,7 +126,7 @@ impl TargetSpeed {
     /// updated): the driver moves a few centimetres per step, so the segment is almost
     /// always the same or the next one. Same segment, same bits as without the hint.
     pub fn at_near(&self, s: f64, hint: &Cell<usize>) -> (f64, f64) {
-        let x = fmu_export::model::wrap_distance(s, self.lap_length());
+        let x = fmu_export::resources::wrap_distance(s, self.lap_length());
         let n = self.s.len();
         // k: the number of rows with s_k <= x (partition_point's answer).
         let h = hint.get();
@@ -171,17 +171,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_embedded_sidecar_is_the_bundled_target_parsed() {
-        use fmu_export::sidecar::{decode, digest};
+    fn the_preparsed_blob_is_the_bundled_target_parsed() {
+        use fmu_export::preparsed::{decode, digest};
         let text = std::str::from_utf8(include_bytes!("../resources/target_speed.csv")).unwrap();
         let parsed = TargetSpeed::parse(text, "target_speed.csv").unwrap();
-        let values = decode(crate::TARGET_SIDECAR, digest(text.as_bytes()), 2)
+        let values = decode(crate::TARGET_PREPARSED, digest(text.as_bytes()), 2)
             .expect("the build embeds the bundled target");
         let from = TargetSpeed::from_values(&values).unwrap();
         assert_eq!(from, parsed);
         let changed = text.replacen("52.4390", "52.4391", 1);
         assert_ne!(changed, text);
-        assert!(decode(crate::TARGET_SIDECAR, digest(changed.as_bytes()), 2).is_none());
+        assert!(decode(crate::TARGET_PREPARSED, digest(changed.as_bytes()), 2).is_none());
     }
 
     #[test]

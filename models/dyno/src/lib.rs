@@ -11,7 +11,7 @@ mod lag;
 
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, StateReader, StateWriter,
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, StateReader, StateWriter,
 };
 use lag::LagStep;
 
@@ -26,9 +26,9 @@ fmu_export::variables! {
             .describe("Rotor speed setpoint in speed control (control_mode = 1)"),
         omega: Real = 0.0 => output(10).unit("rad/s")
             .describe("Rotor speed (speed sensor)"),
-        torque_measured: Real = 0.0 => output(11).unit("N.m").init_depends_on(&[1, 2, 3])
+        torque_measured: Real = 0.0 => output(11).unit("N.m").init_depends_on(&[shaft_torque, torque_setpoint, speed_setpoint])
             .describe("Transducer torque at the drive side: torque_dyno + (inertia − inertia_drive_side)·dω/dt"),
-        torque_dyno: Real = 0.0 => output(12).unit("N.m").init_depends_on(&[2, 3])
+        torque_dyno: Real = 0.0 => output(12).unit("N.m").init_depends_on(&[torque_setpoint, speed_setpoint])
             .describe("Air-gap torque the dyno applies (after dead time, lag and limit)"),
         inertia: Real = 0.8 => parameter(20).unit("kg.m2").range(1e-4, 1e3)
             .describe("Rotating inertia on the speed sensor: rotor + adapter + tyre part"),
@@ -296,13 +296,6 @@ impl Dyno {
         }
         self.omega += (vars.shaft_torque * dt - torque_integral) / self.inertia;
     }
-
-    fn write_outputs(&self, vars: &mut DynoVars) {
-        vars.omega = self.omega;
-        vars.torque_dyno = self.lag_x;
-        // The rotor part behind the transducer needs (J_rotor/J)(shaft − T_dyno) to accelerate.
-        vars.torque_measured = self.lag_x + self.rotor_share * (vars.shaft_torque - self.lag_x);
-    }
 }
 
 impl Model for Dyno {
@@ -371,7 +364,6 @@ impl Model for Dyno {
         dyno.lag_x = demand;
         dyno.lag_input = demand;
         vars.torque_demand = demand;
-        dyno.write_outputs(vars);
         Ok(dyno)
     }
 
@@ -426,7 +418,6 @@ impl Model for Dyno {
             self.advance(vars, t_next - t);
             t = t_next;
         }
-        self.write_outputs(vars);
         if !self.omega.is_finite() || !self.lag_x.is_finite() {
             return Err(ModelError::new(format!(
                 "non-finite state (omega = {}, torque_dyno = {})",
@@ -436,11 +427,20 @@ impl Model for Dyno {
         Ok(())
     }
 
+    fn calculate_outputs(&mut self, vars: &mut DynoVars) {
+        vars.omega = self.omega;
+        vars.torque_dyno = self.lag_x;
+        // The rotor part behind the transducer needs (J_rotor/J)(shaft − T_dyno) to accelerate.
+        vars.torque_measured = self.lag_x + self.rotor_share * (vars.shaft_torque - self.lag_x);
+    }
+
     fn parameters_changed(&mut self, vars: &DynoVars) -> Result<(), ModelError> {
         self.lag_cycle = LagStep::new(vars.lag_order, vars.time_constant, vars.damping, self.cycle);
         Ok(())
     }
+}
 
+impl ModelState for Dyno {
     fn save_state(&self, w: &mut StateWriter) {
         // The tick clock's origin: a deserializing host re-initialises at another time.
         w.f64(self.start_time);

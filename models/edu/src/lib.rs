@@ -4,7 +4,7 @@
 
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, StateReader, StateWriter,
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, StateReader, StateWriter,
 };
 
 fmu_export::variables! {
@@ -42,16 +42,16 @@ fmu_export::variables! {
         omega_right: Real = 0.0 => input(52).unit("rad/s")
             .describe("Right side shaft speed at the wheel side (from the dyno)"),
 
-        torque_left: Real = 0.0 => output(100).unit("N.m").depends_on(&[51, 52])
+        torque_left: Real = 0.0 => output(100).unit("N.m").depends_on(&[omega_left, omega_right])
             .describe("Left side shaft torque at the wheel side, positive drives the wheel forward"),
-        torque_right: Real = 0.0 => output(101).unit("N.m").depends_on(&[51, 52])
+        torque_right: Real = 0.0 => output(101).unit("N.m").depends_on(&[omega_left, omega_right])
             .describe("Right side shaft torque at the wheel side, positive drives the wheel forward"),
         motor_speed: Real = 0.0 => output(102).unit("rad/s").describe("Motor speed"),
         motor_torque: Real = 0.0 => output(103).unit("N.m").describe("Motor air-gap torque (after the current-loop lag)"),
         electric_power: Real = 0.0 => output(104).unit("W")
             .describe("Electric power drawn from the battery (negative when generating)"),
         mechanical_power: Real = 0.0 => output(105).unit("W").describe("Motor shaft power, motor_torque x motor_speed"),
-        shaft_power: Real = 0.0 => output(106).unit("W").depends_on(&[51, 52])
+        shaft_power: Real = 0.0 => output(106).unit("W").depends_on(&[omega_left, omega_right])
             .describe("Power delivered to the wheels: torque_left x omega_left + torque_right x omega_right"),
         torque_limit: Real = 0.0 => output(107).unit("N.m")
             .describe("Motor torque available at the present speed: min(torque_max, power_max / |motor_speed|)"),
@@ -162,21 +162,6 @@ impl Edu {
         // Clamp at the limit of the new speed: the lag must not carry torque past it.
         st.torque_m = lagged.clamp(-limit, limit);
     }
-
-    fn write_outputs(&self, x: &mut EduVars) {
-        let st = &self.st;
-        let t = self.shaft_torque(x.omega_left, x.omega_right);
-        x.torque_left = t;
-        x.torque_right = t;
-        x.motor_speed = st.omega_m;
-        x.motor_torque = st.torque_m;
-        x.mechanical_power = st.torque_m * st.omega_m;
-        x.electric_power = self.p.electric_power(x.mechanical_power);
-        x.shaft_power = t * (x.omega_left + x.omega_right);
-        x.torque_limit = self.p.torque_limit(st.omega_m);
-        x.shaft_twist_left = st.twist_mean + 0.5 * st.twist_diff;
-        x.shaft_twist_right = st.twist_mean - 0.5 * st.twist_diff;
-    }
 }
 
 impl Model for Edu {
@@ -199,9 +184,7 @@ impl Model for Edu {
             twist_mean: 0.0,
             twist_diff: 0.0,
         };
-        let m = Edu { p, st };
-        m.write_outputs(vars);
-        Ok(m)
+        Ok(Edu { p, st })
     }
 
     fn do_step(&mut self, vars: &mut EduVars, _time: f64, step: f64) -> Result<(), ModelError> {
@@ -222,8 +205,7 @@ impl Model for Edu {
         // Divergence found early: a side-shaft torque many times what the motor can deliver
         // is no physical state but a host's coupling going unstable (a parallel master's
         // communication step too long for the shaft stiffness against the dyno inertia).
-        self.write_outputs(vars);
-        let torque = vars.torque_left; // both shafts carry the same torque
+        let torque = self.shaft_torque(wl, wr); // both shafts carry the same torque
         let bound = DIVERGENCE_FACTOR * self.p.torque_max * self.p.ratio;
         if torque.abs() > bound {
             return Err(ModelError::new(format!(
@@ -233,10 +215,23 @@ impl Model for Edu {
         Ok(())
     }
 
-    fn update_outputs(&mut self, vars: &mut EduVars) {
-        self.write_outputs(vars);
+    fn calculate_outputs(&mut self, x: &mut EduVars) {
+        let st = &self.st;
+        let t = self.shaft_torque(x.omega_left, x.omega_right);
+        x.torque_left = t;
+        x.torque_right = t;
+        x.motor_speed = st.omega_m;
+        x.motor_torque = st.torque_m;
+        x.mechanical_power = st.torque_m * st.omega_m;
+        x.electric_power = self.p.electric_power(x.mechanical_power);
+        x.shaft_power = t * (x.omega_left + x.omega_right);
+        x.torque_limit = self.p.torque_limit(st.omega_m);
+        x.shaft_twist_left = st.twist_mean + 0.5 * st.twist_diff;
+        x.shaft_twist_right = st.twist_mean - 0.5 * st.twist_diff;
     }
+}
 
+impl ModelState for Edu {
     fn save_state(&self, w: &mut StateWriter) {
         let st = &self.st;
         for x in [st.omega_m, st.torque_m, st.twist_mean, st.twist_diff] {

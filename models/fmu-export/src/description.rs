@@ -59,69 +59,16 @@ pub fn guid<M: Model>() -> String {
     )
 }
 
-/// Consistency of a variable table; the packer refuses a model that fails it.
+/// Consistency of a variable table, by the rules of [`crate::check`]: the first broken rule
+/// of each variable, all of them in one message. A table made by `variables!` passed them at
+/// compile time already; the packer still refuses any table that fails them (a
+/// [`VarTable`] written by hand).
 pub fn validate_table<V: VarTable>() -> Result<(), String> {
     let t = V::VARIABLES;
-    let mut errors = Vec::new();
-    for (i, a) in t.iter().enumerate() {
-        for b in &t[i + 1..] {
-            if a.name == b.name {
-                errors.push(format!("duplicate name '{}'", a.name));
-            }
-            if a.value_reference == b.value_reference {
-                errors.push(format!(
-                    "'{}' and '{}' share value reference {}",
-                    a.name, b.name, a.value_reference
-                ));
-            }
-        }
-        if let Some(u) = a.unit {
-            if units::lookup(u).is_none() {
-                errors.push(format!("'{}': unknown unit '{u}'", a.name));
-            }
-        }
-        if a.description.is_empty() {
-            errors.push(format!("'{}' has no description", a.name));
-        }
-        if a.var_type() == crate::variables::ScalarType::String
-            && (a.unit.is_some() || a.min.is_some() || a.max.is_some())
-        {
-            errors.push(format!("'{}': a String has no unit and no range", a.name));
-        }
-        if a.var_type() != crate::variables::ScalarType::Real
-            && a.variability == crate::variables::Variability::Continuous
-        {
-            errors.push(format!(
-                "'{}': only a Real can be continuous (FMI 2.0 §2.2.7); declare it discrete",
-                a.name
-            ));
-        }
-        let x = a.start.as_f64();
-        if a.has_start() && (a.min.is_some_and(|m| x < m) || a.max.is_some_and(|m| x > m)) {
-            errors.push(format!(
-                "'{}': start {} outside [min, max]",
-                a.name,
-                a.start.xml_text()
-            ));
-        }
-        for d in a.depends_on.iter().chain(a.init_depends_on) {
-            match t.iter().find(|v| v.value_reference == *d) {
-                Some(v) if v.causality == Causality::Input => {}
-                _ => errors.push(format!(
-                    "'{}' depends on vr {d}, which is not an input",
-                    a.name
-                )),
-            }
-        }
-        if !(a.depends_on.is_empty() && a.init_depends_on.is_empty())
-            && a.causality != Causality::Output
-        {
-            errors.push(format!(
-                "'{}' declares dependencies but is not an output",
-                a.name
-            ));
-        }
-    }
+    let errors: Vec<String> = (0..t.len())
+        .filter_map(|i| crate::check::check_variable(t, i).err())
+        .map(|e| e.to_string())
+        .collect();
     if errors.is_empty() {
         Ok(())
     } else {

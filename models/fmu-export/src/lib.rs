@@ -6,24 +6,34 @@
 //!
 //! - [`fmi2`], [`units`], [`Phase`], [`Function`]: re-exported from `tb-fmi`, the FMI vocabulary
 //!   shared with the importer (C types, unit table, states and the function table).
-//! - [`variables`]: the variable table, one source of truth per variable.
-//! - [`model`]: the trait a model implements.
+//! - [`variables`]: the variable table, one source of truth per variable; [`check`]: its
+//!   rules, evaluated at compile time.
+//! - [`model`]: the trait a model implements, [`ModelInfo`] and [`ModelError`].
+//! - [`context`]: what a model knows of its instance (resource folder, start time, the
+//!   resources it parsed).
+//! - [`state`]: the writer and reader of serialized FMU states.
+//! - [`resources`]: files a model reads (resource text, data files shared by instances,
+//!   paths named by parameters).
+//! - [`preparsed`]: bundled CSV resources parsed at build time by the model's own parser.
 //! - [`runtime`]: the safe instance and its FMI state machine (also usable natively).
 //! - [`description`]: modelDescription.xml, documentation and GUID from the table.
 //! - [`ffi`]: the panic-guarded C entry points.
 
+pub mod check;
+pub mod context;
 pub mod description;
 pub mod ffi;
 pub mod model;
+pub mod preparsed;
+pub mod resources;
 pub mod runtime;
-pub mod sidecar;
+pub mod state;
 pub mod variables;
 
 pub use tb_fmi::{fmi2, units, Function, Phase, PhaseSet};
 
-pub use model::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, Severity, StateReader,
-    StateWriter,
-};
+pub use context::{Context, ResourceCache};
+pub use model::{DefaultExperiment, Model, ModelError, ModelInfo, Resource, Severity};
 pub use runtime::{Logger, NullLogger, Runtime};
+pub use state::{ModelState, StateReader, StateWriter, Stateless};
 pub use variables::{Value, VarInfo, VarTable};

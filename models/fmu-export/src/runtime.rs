@@ -2,8 +2,10 @@
 //! causality/variability/range checks, stepping, FMU states. The FFI layer is a thin,
 //! panic-guarded shell around this; tests and native hosts can use it directly.
 
+use crate::context::Context;
 use crate::fmi2::fmi2Status;
-use crate::model::{Context, Model, ModelError, Severity, StateReader, StateWriter};
+use crate::model::{Model, ModelError, Severity};
+use crate::state::{StateReader, StateWriter};
 use crate::variables::{Causality, ScalarType, Value, VarInfo, VarTable, Variability};
 use std::path::PathBuf;
 use tb_fmi::{Function, Phase, PhaseSet};
@@ -28,7 +30,6 @@ pub trait Logger: Send {
     fn log(&self, status: fmi2Status, category: &str, message: &str);
 }
 
-/// A logger that drops everything.
 /// How far (relative to the bound, at least to 1) a Real input may lie outside its declared
 /// range and still be accepted, as the bound: a float32 rounding is 6e-8 relative.
 pub const RANGE_SLACK: f64 = 1e-6;
@@ -36,23 +37,107 @@ pub const RANGE_SLACK: f64 = 1e-6;
 /// The parameter a model declares to let hosts choose what an input outside its range does.
 pub const RANGE_CHECK: &str = "range_check";
 
+/// A logger that drops everything.
 pub struct NullLogger;
 impl Logger for NullLogger {
     fn log(&self, _: fmi2Status, _: &str, _: &str) {}
 }
 
-/// A saved FMU state (fmi2GetFMUstate).
+/// A saved FMU state (fmi2GetFMUstate): the variables, the model and the run state.
 #[derive(Clone)]
 pub struct Snapshot<M: Model> {
     vars: M::Vars,
     model: Option<M>,
+    run: RunState,
+}
+
+/// Where an instance stands, besides its variables and its model: the phase, the time and
+/// what changed since the model last saw it. An FMU state saves and restores it whole, and
+/// (de)serialises it in one place ([`RunState::write`], [`RunState::read`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct RunState {
     phase: Phase,
     time: f64,
+    /// `startTime` of fmi2SetupExperiment (the model sees it as `Context::start_time`).
     start_time: f64,
     stop_time: Option<f64>,
+    /// Parameters or inputs changed in initialization mode since the model was initialised.
     init_dirty: bool,
+    /// Inputs set since the last step (feed-through outputs need recomputing).
     inputs_changed: bool,
+    /// Tunable parameters set since the last step.
     params_changed: bool,
+}
+
+impl RunState {
+    /// A freshly instantiated (or reset) instance.
+    const INSTANTIATED: RunState = RunState {
+        phase: Phase::Instantiated,
+        time: 0.0,
+        start_time: 0.0,
+        stop_time: None,
+        init_dirty: true,
+        inputs_changed: false,
+        params_changed: false,
+    };
+
+    /// Whether sets now are those of instantiated / initialization mode.
+    #[inline(always)]
+    fn initializing(&self) -> bool {
+        matches!(self.phase, Phase::Instantiated | Phase::InitializationMode)
+    }
+
+    /// A variable was set (`init`: in instantiated / initialization mode): what must be
+    /// redone before it takes effect.
+    #[inline(always)]
+    fn mark_set(&mut self, init: bool, is_input: bool) {
+        if init {
+            self.init_dirty = true;
+        } else if is_input {
+            self.inputs_changed = true;
+        } else {
+            self.params_changed = true;
+        }
+    }
+
+    /// The model was (re)initialised from the variables as they are.
+    fn initialized(&mut self) {
+        self.init_dirty = false;
+        self.inputs_changed = false;
+        self.params_changed = false;
+    }
+
+    fn write(&self, w: &mut StateWriter) {
+        w.u64(self.phase as u8 as u64);
+        w.f64(self.time);
+        w.f64(self.start_time);
+        w.bool(self.stop_time.is_some());
+        w.f64(self.stop_time.unwrap_or(0.0));
+        w.bool(self.init_dirty);
+        w.bool(self.inputs_changed);
+        w.bool(self.params_changed);
+    }
+
+    fn read(r: &mut StateReader<'_>) -> Result<RunState, ModelError> {
+        let p = r.u64()?;
+        let phase = u8::try_from(p)
+            .ok()
+            .and_then(Phase::from_u8)
+            .ok_or_else(|| ModelError::new(format!("bad phase {p}")))?;
+        let time = r.f64()?;
+        let start_time = r.f64()?;
+        let has_stop = r.bool()?;
+        let stop = r.f64()?;
+        Ok(RunState {
+            phase,
+            time,
+            start_time,
+            stop_time: has_stop.then_some(stop),
+            init_dirty: r.bool()?,
+            inputs_changed: r.bool()?,
+            params_changed: r.bool()?,
+        })
+    }
 }
 
 /// Per value reference, what get/set must check: precomputed so the numeric calls of
@@ -73,6 +158,34 @@ struct Slot {
     offset: usize,
 }
 
+impl Slot {
+    /// Whether a get may read the variable (a calculated one has no value before
+    /// initialisation).
+    #[inline(always)]
+    fn readable(&self, instantiated: bool) -> bool {
+        self.has_start || !instantiated
+    }
+
+    /// Whether a set may write the variable (`init`: in instantiated / initialization mode).
+    #[inline(always)]
+    fn settable(&self, init: bool) -> bool {
+        if init {
+            self.settable_init
+        } else {
+            self.settable_run
+        }
+    }
+
+    /// The rules every set obeys, as the fast path and [`Runtime::set`] both check them:
+    /// settable now, finite, within min/max. A value they refuse may still be taken by
+    /// [`Runtime::set`]'s exceptions (a rounding just outside an input's range, `range_check
+    /// = 0`).
+    #[inline(always)]
+    fn accepts(&self, x: f64, init: bool) -> bool {
+        self.settable(init) && x.is_finite() && (self.min..=self.max).contains(&x)
+    }
+}
+
 const NO_SLOT: Slot = Slot {
     offset: usize::MAX,
     index: u32::MAX,
@@ -90,17 +203,9 @@ const STATE_MAGIC: &[u8; 8] = b"TBFMUST1";
 pub struct Runtime<M: Model> {
     pub vars: M::Vars,
     model: Option<M>,
-    phase: Phase,
-    time: f64,
-    stop_time: Option<f64>,
-    /// Parameters or inputs changed in initialization mode since the model was initialised.
-    init_dirty: bool,
+    run: RunState,
     /// The last lazy initialisation (by a getter in initialization mode) failed.
     init_failed: bool,
-    /// Inputs set since the last step (feed-through outputs need recomputing).
-    inputs_changed: bool,
-    /// Tunable parameters set since the last step.
-    params_changed: bool,
     /// A panic left the model in an unknown state: only reset, restore or free.
     poisoned: Option<String>,
     ctx: Context,
@@ -109,7 +214,6 @@ pub struct Runtime<M: Model> {
     vr_index: Vec<u32>,
     /// value reference -> checks of the fast get/set path.
     slots: Vec<Slot>,
-    has_feedthrough: bool,
     /// Index of the model's `range_check` parameter, if it declares one (0: an input
     /// outside its range is accepted with a warning; 1, the default: refused).
     range_check: Option<usize>,
@@ -149,13 +253,8 @@ impl<M: Model> Runtime<M> {
         Runtime {
             vars: M::Vars::default(),
             model: None,
-            phase: Phase::Instantiated,
-            time: 0.0,
-            stop_time: None,
-            init_dirty: true,
+            run: RunState::INSTANTIATED,
             init_failed: false,
-            inputs_changed: false,
-            params_changed: false,
             poisoned: None,
             ctx: Context {
                 instance_name: instance_name.to_string(),
@@ -166,7 +265,6 @@ impl<M: Model> Runtime<M> {
             guid: crate::description::guid::<M>(),
             vr_index,
             slots,
-            has_feedthrough: table.iter().any(|v| !v.depends_on.is_empty()),
             range_check: table
                 .iter()
                 .position(|v| v.name == RANGE_CHECK && v.causality == Causality::Parameter),
@@ -177,10 +275,10 @@ impl<M: Model> Runtime<M> {
     }
 
     pub fn phase(&self) -> Phase {
-        self.phase
+        self.run.phase
     }
     pub fn time(&self) -> f64 {
-        self.time
+        self.run.time
     }
     pub fn guid(&self) -> &str {
         &self.guid
@@ -221,7 +319,7 @@ impl<M: Model> Runtime<M> {
         );
         self.error(&msg);
         self.poisoned = Some(msg);
-        self.phase = Phase::Error;
+        self.run.phase = Phase::Error;
         fmi2Status::ERROR
     }
 
@@ -262,7 +360,7 @@ impl<M: Model> Runtime<M> {
 
     #[inline]
     fn require_named(&self, name: &str, allowed: PhaseSet) -> Result<(), fmi2Status> {
-        if self.poisoned.is_none() && allowed.contains(self.phase) {
+        if self.poisoned.is_none() && allowed.contains(self.run.phase) {
             Ok(())
         } else {
             Err(self.refuse(name, allowed))
@@ -277,13 +375,13 @@ impl<M: Model> Runtime<M> {
         }
         self.error(&format!(
             "{function} is not allowed in state '{}' (allowed in: {})",
-            self.phase.name(),
+            self.run.phase.name(),
             allowed.describe()
         ))
     }
 
     fn fail(&mut self, function: &str, e: ModelError) -> fmi2Status {
-        self.phase = Phase::Error;
+        self.run.phase = Phase::Error;
         let msg = format!("{function}: {e}");
         if e.severity() == Severity::Fatal {
             // Irreparable: every later call is refused until the instance is reset.
@@ -310,9 +408,9 @@ impl<M: Model> Runtime<M> {
                 ));
             }
         }
-        self.time = start_time;
-        self.ctx.start_time = start_time;
-        self.stop_time = stop_time;
+        self.run.time = start_time;
+        self.run.start_time = start_time;
+        self.run.stop_time = stop_time;
         fmi2Status::OK
     }
 
@@ -320,52 +418,44 @@ impl<M: Model> Runtime<M> {
         if let Err(s) = self.require(Function::EnterInitializationMode) {
             return s;
         }
-        self.phase = Phase::InitializationMode;
-        self.init_dirty = true;
+        self.run.phase = Phase::InitializationMode;
+        self.run.init_dirty = true;
         fmi2Status::OK
     }
 
     /// (Re)initialise the model from the current parameters and inputs if they changed.
     fn ensure_initialized(&mut self, function: &str) -> fmi2Status {
-        if self.model.is_some() && !self.init_dirty {
+        if self.model.is_some() && !self.run.init_dirty {
             return fmi2Status::OK;
         }
         self.init_failed = false;
-        match M::initialize(&mut self.vars, &self.ctx) {
-            Ok(m) => {
-                self.model = Some(m);
-                self.init_dirty = false;
-                self.inputs_changed = false;
-                self.params_changed = false;
-                fmi2Status::OK
-            }
-            Err(e) => {
-                self.model = None;
-                self.fail(function, e)
-            }
+        match self.initialize_model() {
+            Ok(()) => fmi2Status::OK,
+            Err(e) => self.fail(function, e),
         }
+    }
+
+    /// Build the model from the variables as they are and calculate its outputs (no model
+    /// when that fails).
+    fn initialize_model(&mut self) -> Result<(), ModelError> {
+        self.model = None;
+        self.ctx.start_time = self.run.start_time;
+        let mut m = M::initialize(&mut self.vars, &self.ctx)?;
+        m.calculate_outputs(&mut self.vars);
+        self.model = Some(m);
+        self.run.initialized();
+        Ok(())
     }
 
     /// A getter in initialization mode initialises the model lazily (a host propagating
     /// outputs to inputs reads them). A failure there is not the getter's: the values stay
     /// as they are and fmi2ExitInitializationMode, which initialises again, reports it once.
     fn try_initialize(&mut self) {
-        if (self.model.is_some() || self.init_failed) && !self.init_dirty {
+        if (self.model.is_some() || self.init_failed) && !self.run.init_dirty {
             return;
         }
-        match M::initialize(&mut self.vars, &self.ctx) {
-            Ok(m) => {
-                self.model = Some(m);
-                self.init_failed = false;
-                self.inputs_changed = false;
-                self.params_changed = false;
-            }
-            Err(_) => {
-                self.model = None;
-                self.init_failed = true;
-            }
-        }
-        self.init_dirty = false;
+        self.init_failed = self.initialize_model().is_err();
+        self.run.init_dirty = false;
     }
 
     pub fn exit_initialization_mode(&mut self) -> fmi2Status {
@@ -374,7 +464,7 @@ impl<M: Model> Runtime<M> {
         }
         let s = self.ensure_initialized("fmi2ExitInitializationMode");
         if s == fmi2Status::OK {
-            self.phase = Phase::StepComplete;
+            self.run.phase = Phase::StepComplete;
             self.event("initialized");
         }
         s
@@ -387,17 +477,17 @@ impl<M: Model> Runtime<M> {
         // instance stays where it is (ready to be freed or reset).
         if self.poisoned.is_some()
             || matches!(
-                self.phase,
+                self.run.phase,
                 Phase::Error | Phase::Instantiated | Phase::InitializationMode
             )
         {
-            let why = self.poisoned.as_deref().unwrap_or(match self.phase {
+            let why = self.poisoned.as_deref().unwrap_or(match self.run.phase {
                 Phase::Error => "the instance is in the error state",
                 _ => "the instance was never initialised",
             });
             self.warning(&format!(
                 "fmi2Terminate in state '{}' ignored ({why}): FMI 2.0 allows only fmi2Reset or fmi2FreeInstance here",
-                self.phase.name()
+                self.run.phase.name()
             ));
             return fmi2Status::WARNING;
         }
@@ -411,7 +501,7 @@ impl<M: Model> Runtime<M> {
         if let Err(e) = r {
             return self.fail("fmi2Terminate", e);
         }
-        self.phase = Phase::Terminated;
+        self.run.phase = Phase::Terminated;
         fmi2Status::OK
     }
 
@@ -419,14 +509,8 @@ impl<M: Model> Runtime<M> {
     pub fn reset(&mut self) -> fmi2Status {
         self.vars = M::Vars::default();
         self.model = None;
-        self.phase = Phase::Instantiated;
-        self.time = 0.0;
-        self.ctx.start_time = 0.0;
-        self.stop_time = None;
-        self.init_dirty = true;
+        self.run = RunState::INSTANTIATED;
         self.init_failed = false;
-        self.inputs_changed = false;
-        self.params_changed = false;
         self.poisoned = None;
         self.event("reset");
         fmi2Status::OK
@@ -436,6 +520,42 @@ impl<M: Model> Runtime<M> {
         if let Err(s) = self.require(Function::DoStep) {
             return s;
         }
+        // A host that sums its steps overshoots by accumulated rounding (1e5 steps of 1 ms:
+        // 1.1e-10 s past 100 s): a step may end up to 1e-9·max(|stopTime|, 1 s) past stopTime.
+        let past_stop = self
+            .run
+            .stop_time
+            .is_some_and(|stop| current_time + step > stop + 1e-9 * stop.abs().max(1.0));
+        if step <= 0.0 || !step.is_finite() || !current_time.is_finite() || past_stop {
+            return self.refuse_step(current_time, step);
+        }
+        if self.run.params_changed {
+            self.run.params_changed = false;
+            let r = match self.model.as_mut() {
+                Some(m) => m.parameters_changed(&self.vars),
+                None => Ok(()),
+            };
+            if let Err(e) = r {
+                return self.fail("fmi2DoStep", e);
+            }
+        }
+        let Some(m) = self.model.as_mut() else {
+            return self.step_failed(current_time, ModelError::new("model not initialised"));
+        };
+        match m.do_step(&mut self.vars, current_time, step) {
+            Ok(()) => {
+                m.calculate_outputs(&mut self.vars);
+                self.run.time = current_time + step;
+                self.run.inputs_changed = false;
+                fmi2Status::OK
+            }
+            Err(e) => self.step_failed(current_time, e),
+        }
+    }
+
+    /// The message of a step refused for its arguments (off the fast path).
+    #[cold]
+    fn refuse_step(&self, current_time: f64, step: f64) -> fmi2Status {
         if step <= 0.0 || !step.is_finite() {
             return self.error(&format!(
                 "fmi2DoStep: communicationStepSize must be positive and finite, got {step}"
@@ -446,49 +566,25 @@ impl<M: Model> Runtime<M> {
                 "fmi2DoStep: currentCommunicationPoint {current_time} is not finite"
             ));
         }
-        if let Some(stop) = self.stop_time {
-            // A host that sums its steps overshoots by accumulated rounding (1e5 steps of
-            // 1 ms: 1.1e-10 s past 100 s): a step may end up to 1e-9·max(|stopTime|, 1 s)
-            // past stopTime.
-            if current_time + step > stop + 1e-9 * stop.abs().max(1.0) {
-                return self.error(&format!(
-                    "fmi2DoStep: step from {current_time} by {step} ends after stopTime {stop}"
-                ));
-            }
+        let stop = self.run.stop_time.unwrap_or(f64::NAN);
+        self.error(&format!(
+            "fmi2DoStep: step from {current_time} by {step} ends after stopTime {stop}"
+        ))
+    }
+
+    /// A step the model did not complete (off the fast path).
+    #[cold]
+    fn step_failed(&mut self, current_time: f64, e: ModelError) -> fmi2Status {
+        if e.severity() == Severity::Discard {
+            // The step was not completed: time stays at the last successful point and the
+            // instance stays usable (read, terminate, reset, restore a state).
+            let msg = format!("fmi2DoStep: at t = {current_time} s: {e}");
+            self.logger
+                .log(fmi2Status::DISCARD, "logStatusWarning", &msg);
+            return fmi2Status::DISCARD;
         }
-        if self.params_changed {
-            self.params_changed = false;
-            let r = match self.model.as_mut() {
-                Some(m) => m.parameters_changed(&self.vars),
-                None => Ok(()),
-            };
-            if let Err(e) = r {
-                return self.fail("fmi2DoStep", e);
-            }
-        }
-        let r = match self.model.as_mut() {
-            Some(m) => m.do_step(&mut self.vars, current_time, step),
-            None => Err(ModelError::new("model not initialised")),
-        };
-        match r {
-            Ok(()) => {
-                self.time = current_time + step;
-                self.inputs_changed = false;
-                fmi2Status::OK
-            }
-            Err(e) if e.severity() == Severity::Discard => {
-                // The step was not completed: time stays at the last successful point and
-                // the instance stays usable (read, terminate, reset, restore a state).
-                let msg = format!("fmi2DoStep: at t = {current_time} s: {e}");
-                self.logger
-                    .log(fmi2Status::DISCARD, "logStatusWarning", &msg);
-                fmi2Status::DISCARD
-            }
-            Err(e) => {
-                let msg = format!("at t = {current_time} s: {e}");
-                self.fail("fmi2DoStep", ModelError(msg, e.severity()))
-            }
-        }
+        let msg = format!("at t = {current_time} s: {e}");
+        self.fail("fmi2DoStep", ModelError(msg, e.severity()))
     }
 
     // ---- variables ----
@@ -525,17 +621,17 @@ impl<M: Model> Runtime<M> {
         if vrs != out {
             return Err(self.length_mismatch(function, vrs, out));
         }
-        match self.phase {
+        match self.run.phase {
             Phase::InitializationMode => self.try_initialize(),
-            Phase::StepComplete if self.inputs_changed && self.has_feedthrough => {
+            Phase::StepComplete if M::Vars::HAS_FEEDTHROUGH && self.run.inputs_changed => {
                 if let Some(m) = self.model.as_mut() {
-                    m.update_outputs(&mut self.vars);
+                    m.calculate_outputs(&mut self.vars);
                 }
-                self.inputs_changed = false;
+                self.run.inputs_changed = false;
             }
             _ => {}
         }
-        Ok(self.phase == Phase::Instantiated)
+        Ok(self.run.phase == Phase::Instantiated)
     }
 
     /// Read variables of type `ty` into `out`, converted by `conv`.
@@ -553,9 +649,7 @@ impl<M: Model> Runtime<M> {
         };
         for (k, &vr) in vrs.iter().enumerate() {
             match self.slots.get(vr as usize) {
-                Some(sl)
-                    if sl.index != u32::MAX && sl.ty == ty && (sl.has_start || !instantiated) =>
-                {
+                Some(sl) if sl.index != u32::MAX && sl.ty == ty && sl.readable(instantiated) => {
                     out[k] = conv(self.vars.get(sl.index as usize));
                 }
                 _ => return self.get_error(function, ty, vr),
@@ -574,7 +668,7 @@ impl<M: Model> Runtime<M> {
         let base = (&self.vars as *const M::Vars).cast::<u8>();
         for (k, &vr) in vrs.iter().enumerate() {
             match self.slots.get(vr as usize) {
-                Some(sl) if sl.offset != usize::MAX && (sl.has_start || !instantiated) => {
+                Some(sl) if sl.offset != usize::MAX && sl.readable(instantiated) => {
                     // SAFETY: `offset` is `offset_of!` of an f64 field of M::Vars
                     // (REAL_OFFSETS), so the pointer is in bounds and aligned.
                     out[k] = unsafe { base.add(sl.offset).cast::<f64>().read() };
@@ -593,40 +687,24 @@ impl<M: Model> Runtime<M> {
         if let Err(s) = self.before_set(F, vrs.len(), values.len()) {
             return s;
         }
-        let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
+        let init = self.run.initializing();
         let base = (&mut self.vars as *mut M::Vars).cast::<u8>();
         for (k, (&vr, &x)) in vrs.iter().zip(values).enumerate() {
-            let accepted = match self.slots.get(vr as usize) {
-                Some(sl)
-                    if sl.offset != usize::MAX
-                        && (if init {
-                            sl.settable_init
-                        } else {
-                            sl.settable_run
-                        })
-                        && x.is_finite()
-                        && (sl.min..=sl.max).contains(&x) =>
-                {
-                    Some((sl.offset, sl.is_input))
+            match self.slots.get(vr as usize) {
+                Some(sl) if sl.offset != usize::MAX && sl.accepts(x, init) => {
+                    // SAFETY: `offset` is `offset_of!` of an f64 field of M::Vars
+                    // (REAL_OFFSETS), so the pointer is in bounds and aligned.
+                    unsafe { base.add(sl.offset).cast::<f64>().write(x) };
+                    self.run.mark_set(init, sl.is_input);
                 }
-                _ => None,
-            };
-            let Some((offset, is_input)) = accepted else {
-                return self.set(
-                    F,
-                    ScalarType::Real,
-                    &vrs[k..],
-                    values[k..].iter().map(|&x| Value::Real(x)),
-                );
-            };
-            // SAFETY: `offset` is `offset_of!` of an f64 field of M::Vars (REAL_OFFSETS).
-            unsafe { base.add(offset).cast::<f64>().write(x) };
-            if init {
-                self.init_dirty = true;
-            } else if is_input {
-                self.inputs_changed = true;
-            } else {
-                self.params_changed = true;
+                _ => {
+                    return self.set(
+                        F,
+                        ScalarType::Real,
+                        &vrs[k..],
+                        values[k..].iter().map(|&x| Value::Real(x)),
+                    )
+                }
             }
         }
         fmi2Status::OK
@@ -678,62 +756,72 @@ impl<M: Model> Runtime<M> {
         if let Err(s) = self.before_set(function, vrs.len(), values.len()) {
             return s;
         }
-        let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
+        let init = self.run.initializing();
         let mut status = fmi2Status::OK;
         for (&vr, value) in vrs.iter().zip(values) {
             let sl = match self.slots.get(vr as usize) {
                 Some(sl) if sl.index != u32::MAX && sl.ty == ty => *sl,
                 _ => return self.set_error(function, ty, vr, value),
             };
-            let x = value.as_f64();
-            let settable = if init {
-                sl.settable_init
+            let value = if sl.accepts(value.as_f64(), init) {
+                value
             } else {
-                sl.settable_run
-            };
-            let mut value = value;
-            let mut accepted = settable && x.is_finite() && (sl.min..=sl.max).contains(&x);
-            // A Real input a hair outside its range (a host's float32 rounding: 1 arrives as
-            // 1.0000000149011612) is taken as the bound: up to RANGE_SLACK of the bound's
-            // size (at least of 1) beyond it.
-            if !accepted && settable && sl.is_input && ty == ScalarType::Real && x.is_finite() {
-                let slack = |b: f64| RANGE_SLACK * b.abs().max(1.0);
-                if x < sl.min && sl.min - x <= slack(sl.min) {
-                    value = Value::Real(sl.min);
-                    accepted = true;
-                } else if x > sl.max && x - sl.max <= slack(sl.max) {
-                    value = Value::Real(sl.max);
-                    accepted = true;
+                match self.accept_out_of_range(function, &sl, value, init) {
+                    Some((value, s)) => {
+                        if s == fmi2Status::WARNING {
+                            status = s;
+                        }
+                        value
+                    }
+                    None => return self.set_error(function, ty, vr, value),
                 }
-            }
-            if !accepted && settable && sl.is_input && x.is_finite() && !self.range_checked() {
-                // range_check = 0: the host's value is used as it is, with a warning.
-                self.logger.log(
-                    fmi2Status::WARNING,
-                    "logStatusWarning",
-                    &format!(
-                        "{function}: '{}' = {x} is outside its range [{}, {}]; used as it is (range_check = 0)",
-                        M::Vars::VARIABLES[sl.index as usize].name,
-                        sl.min,
-                        sl.max
-                    ),
-                );
-                status = fmi2Status::WARNING;
-                accepted = true;
-            }
-            if !accepted {
-                return self.set_error(function, ty, vr, value);
-            }
+            };
             self.vars.set(sl.index as usize, value);
-            if init {
-                self.init_dirty = true;
-            } else if sl.is_input {
-                self.inputs_changed = true;
-            } else {
-                self.params_changed = true;
-            }
+            self.run.mark_set(init, sl.is_input);
         }
         status
+    }
+
+    /// The exceptions to [`Slot::accepts`], for a finite value of an input that may be set
+    /// now: a Real a hair outside its range (a host's float32 rounding: 1 arrives as
+    /// 1.0000000149011612) is taken as the bound, up to RANGE_SLACK of the bound's size (at
+    /// least of 1) beyond it; with `range_check` = 0 any value is used as it is, with a
+    /// warning. `None`: refused.
+    #[cold]
+    fn accept_out_of_range(
+        &self,
+        function: &str,
+        sl: &Slot,
+        value: Value,
+        init: bool,
+    ) -> Option<(Value, fmi2Status)> {
+        let x = value.as_f64();
+        if !(sl.settable(init) && sl.is_input && x.is_finite()) {
+            return None;
+        }
+        if sl.ty == ScalarType::Real {
+            let slack = |b: f64| RANGE_SLACK * b.abs().max(1.0);
+            if x < sl.min && sl.min - x <= slack(sl.min) {
+                return Some((Value::Real(sl.min), fmi2Status::OK));
+            }
+            if x > sl.max && x - sl.max <= slack(sl.max) {
+                return Some((Value::Real(sl.max), fmi2Status::OK));
+            }
+        }
+        if self.range_checked() {
+            return None;
+        }
+        self.logger.log(
+            fmi2Status::WARNING,
+            "logStatusWarning",
+            &format!(
+                "{function}: '{}' = {x} is outside its range [{}, {}]; used as it is (range_check = 0)",
+                M::Vars::VARIABLES[sl.index as usize].name,
+                sl.min,
+                sl.max
+            ),
+        );
+        Some((value, fmi2Status::WARNING))
     }
 
     /// Whether inputs outside their range are refused (no `range_check`, or it is not 0).
@@ -753,19 +841,13 @@ impl<M: Model> Runtime<M> {
         if let Err(s) = self.check_type(function, info, ty) {
             return s;
         }
-        let sl = self.slots[vr as usize];
-        let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
-        if !(if init {
-            sl.settable_init
-        } else {
-            sl.settable_run
-        }) {
+        if !self.slots[vr as usize].settable(self.run.initializing()) {
             return self.error(&format!(
                 "{function}: '{}' ({} {}) cannot be set in state '{}'",
                 info.name,
                 info.variability.xml_name(),
                 info.causality.xml_name(),
-                self.phase.name()
+                self.run.phase.name()
             ));
         }
         if let Value::Real(r) = value {
@@ -797,16 +879,16 @@ impl<M: Model> Runtime<M> {
         if let Err(s) = self.require_named(function, Function::GetString.allowed()) {
             return s;
         }
-        if self.phase == Phase::InitializationMode {
+        if self.run.phase == Phase::InitializationMode {
             self.try_initialize();
         }
-        let instantiated = self.phase == Phase::Instantiated;
+        let instantiated = self.run.phase == Phase::Instantiated;
         for (k, &vr) in vrs.iter().enumerate() {
             match self.slots.get(vr as usize) {
                 Some(sl)
                     if sl.index != u32::MAX
                         && sl.ty == ScalarType::String
-                        && (sl.has_start || !instantiated) =>
+                        && sl.readable(instantiated) =>
                 {
                     out(k, self.vars.get_str(sl.index as usize).unwrap_or(""));
                 }
@@ -828,28 +910,17 @@ impl<M: Model> Runtime<M> {
                 values.len()
             ));
         }
-        let init = matches!(self.phase, Phase::Instantiated | Phase::InitializationMode);
+        let init = self.run.initializing();
         for (&vr, value) in vrs.iter().zip(values) {
             let sl = match self.slots.get(vr as usize) {
                 Some(sl) if sl.index != u32::MAX && sl.ty == ScalarType::String => *sl,
                 _ => return self.set_error(function, ScalarType::String, vr, Value::Str("")),
             };
-            let settable = if init {
-                sl.settable_init
-            } else {
-                sl.settable_run
-            };
-            if !settable {
+            if !sl.settable(init) {
                 return self.set_error(function, ScalarType::String, vr, Value::Str(""));
             }
             self.vars.set_str(sl.index as usize, value);
-            if init {
-                self.init_dirty = true;
-            } else if sl.is_input {
-                self.inputs_changed = true;
-            } else {
-                self.params_changed = true;
-            }
+            self.run.mark_set(init, sl.is_input);
         }
         fmi2Status::OK
     }
@@ -906,13 +977,7 @@ impl<M: Model> Runtime<M> {
         Ok(Snapshot {
             vars: self.vars.clone(),
             model: self.model.clone(),
-            phase: self.phase,
-            time: self.time,
-            start_time: self.ctx.start_time,
-            stop_time: self.stop_time,
-            init_dirty: self.init_dirty,
-            inputs_changed: self.inputs_changed,
-            params_changed: self.params_changed,
+            run: self.run,
         })
     }
 
@@ -923,46 +988,27 @@ impl<M: Model> Runtime<M> {
         }
         snap.vars.clone_from(&self.vars);
         snap.model.clone_from(&self.model);
-        snap.phase = self.phase;
-        snap.time = self.time;
-        snap.start_time = self.ctx.start_time;
-        snap.stop_time = self.stop_time;
-        snap.init_dirty = self.init_dirty;
-        snap.inputs_changed = self.inputs_changed;
-        snap.params_changed = self.params_changed;
+        snap.run = self.run;
         fmi2Status::OK
     }
 
     pub fn restore(&mut self, snap: &Snapshot<M>) -> fmi2Status {
-        if snap.phase == Phase::Error {
+        if snap.run.phase == Phase::Error {
             return self.error("fmi2SetFMUstate: the state was saved in the error state");
         }
         self.vars.clone_from(&snap.vars);
         self.model.clone_from(&snap.model);
-        self.phase = snap.phase;
-        self.time = snap.time;
-        self.ctx.start_time = snap.start_time;
-        self.stop_time = snap.stop_time;
-        self.init_dirty = snap.init_dirty;
-        self.inputs_changed = snap.inputs_changed;
-        self.params_changed = snap.params_changed;
+        self.run = snap.run;
         self.poisoned = None;
         fmi2Status::OK
     }
 
-    /// Serialize a snapshot: magic, GUID, runtime fields, variables, model state.
+    /// Serialize a snapshot: magic, GUID, run state, variables, model state.
     pub fn serialize(&self, snap: &Snapshot<M>) -> Vec<u8> {
         let mut w = StateWriter::default();
         w.bytes.extend_from_slice(STATE_MAGIC);
         w.bytes(self.guid.as_bytes());
-        w.u64(snap.phase as u8 as u64);
-        w.f64(snap.time);
-        w.f64(snap.start_time);
-        w.bool(snap.stop_time.is_some());
-        w.f64(snap.stop_time.unwrap_or(0.0));
-        w.bool(snap.init_dirty);
-        w.bool(snap.inputs_changed);
-        w.bool(snap.params_changed);
+        snap.run.write(&mut w);
         for i in 0..M::Vars::VARIABLES.len() {
             match snap.vars.get(i) {
                 Value::Real(x) => w.f64(x),
@@ -981,88 +1027,73 @@ impl<M: Model> Runtime<M> {
     /// Rebuild a snapshot from bytes written by [`Runtime::serialize`]. The model part is
     /// re-initialised from the saved parameters (loading resources) and then overwritten.
     pub fn deserialize(&self, bytes: &[u8]) -> Result<Snapshot<M>, fmi2Status> {
-        let e = |m: String| self.error(&format!("fmi2DeSerializeFMUstate: {m}"));
         if bytes.len() < 8 || &bytes[..8] != STATE_MAGIC {
-            return Err(e("not a serialized twinbench FMU state (bad magic)".into()));
+            return Err(self.error(
+                "fmi2DeSerializeFMUstate: not a serialized twinbench FMU state (bad magic)",
+            ));
         }
-        let mut r = StateReader::new(&bytes[8..]);
-        let mut inner = || -> Result<Snapshot<M>, ModelError> {
-            let guid = r.bytes()?;
-            if guid != self.guid.as_bytes() {
-                return Err(ModelError::new(format!(
-                    "state belongs to another model (GUID {}, this FMU is {})",
-                    String::from_utf8_lossy(guid),
-                    self.guid
-                )));
-            }
-            let p = r.u64()?;
-            let phase = u8::try_from(p)
-                .ok()
-                .and_then(Phase::from_u8)
-                .ok_or_else(|| ModelError::new(format!("bad phase {p}")))?;
-            let time = r.f64()?;
-            let start_time = r.f64()?;
-            let has_stop = r.bool()?;
-            let stop = r.f64()?;
-            let init_dirty = r.bool()?;
-            let inputs_changed = r.bool()?;
-            let params_changed = r.bool()?;
-            let mut vars = M::Vars::default();
-            for (i, info) in M::Vars::VARIABLES.iter().enumerate() {
-                let v = match info.var_type() {
-                    ScalarType::Real => Value::Real(r.f64()?),
-                    ScalarType::Integer => Value::Integer(r.i32()?),
-                    ScalarType::Boolean => Value::Boolean(r.bool()?),
-                    ScalarType::String => {
-                        let text = std::str::from_utf8(r.bytes()?).map_err(|_| {
-                            ModelError::new(format!(
-                                "'{}': the saved string is not UTF-8",
-                                info.name
-                            ))
-                        })?;
-                        vars.set_str(i, text);
-                        continue;
-                    }
-                    other => {
-                        return Err(ModelError::new(format!(
-                            "variable '{}' is {other}, which the export framework does not support",
-                            info.name
-                        )))
-                    }
-                };
-                vars.set(i, v);
-            }
-            let model = if r.bool()? {
-                let mut scratch = vars.clone();
-                let mut ctx = self.ctx.clone();
-                ctx.start_time = start_time;
-                let mut m = M::initialize(&mut scratch, &ctx)?;
-                m.load_state(&mut r)?;
-                Some(m)
-            } else {
-                None
-            };
-            if !r.is_at_end() {
-                return Err(ModelError::new(
-                    "trailing bytes after the model state".to_string(),
-                ));
-            }
-            Ok(Snapshot {
-                vars,
-                model,
-                phase,
-                time,
-                start_time,
-                stop_time: has_stop.then_some(stop),
-                init_dirty,
-                inputs_changed,
-                params_changed,
-            })
+        self.read_snapshot(&mut StateReader::new(&bytes[8..]))
+            .map_err(|m| self.error(&format!("fmi2DeSerializeFMUstate: {}", m.0)))
+    }
+
+    /// What [`Runtime::deserialize`] reads after the magic.
+    fn read_snapshot(&self, r: &mut StateReader<'_>) -> Result<Snapshot<M>, ModelError> {
+        let guid = r.bytes()?;
+        if guid != self.guid.as_bytes() {
+            return Err(ModelError::new(format!(
+                "state belongs to another model (GUID {}, this FMU is {})",
+                String::from_utf8_lossy(guid),
+                self.guid
+            )));
+        }
+        let run = RunState::read(r)?;
+        let vars = read_variables::<M::Vars>(r)?;
+        let model = if r.bool()? {
+            let mut scratch = vars.clone();
+            let mut ctx = self.ctx.clone();
+            ctx.start_time = run.start_time;
+            let mut m = M::initialize(&mut scratch, &ctx)?;
+            m.load_state(r)?;
+            Some(m)
+        } else {
+            None
         };
-        inner().map_err(|m| e(m.0))
+        if !r.is_at_end() {
+            return Err(ModelError::new(
+                "trailing bytes after the model state".to_string(),
+            ));
+        }
+        Ok(Snapshot { vars, model, run })
     }
 
     pub fn last_successful_time(&self) -> f64 {
-        self.time
+        self.run.time
     }
+}
+
+/// Every variable of a serialized state, in table order.
+fn read_variables<V: VarTable>(r: &mut StateReader<'_>) -> Result<V, ModelError> {
+    let mut vars = V::default();
+    for (i, info) in V::VARIABLES.iter().enumerate() {
+        let v = match info.var_type() {
+            ScalarType::Real => Value::Real(r.f64()?),
+            ScalarType::Integer => Value::Integer(r.i32()?),
+            ScalarType::Boolean => Value::Boolean(r.bool()?),
+            ScalarType::String => {
+                let text = std::str::from_utf8(r.bytes()?).map_err(|_| {
+                    ModelError::new(format!("'{}': the saved string is not UTF-8", info.name))
+                })?;
+                vars.set_str(i, text);
+                continue;
+            }
+            other => {
+                return Err(ModelError::new(format!(
+                    "variable '{}' is {other}, which the export framework does not support",
+                    info.name
+                )))
+            }
+        };
+        vars.set(i, v);
+    }
+    Ok(vars)
 }

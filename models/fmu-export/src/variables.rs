@@ -19,7 +19,7 @@ pub enum Value {
 }
 
 impl Value {
-    pub fn var_type(self) -> ScalarType {
+    pub const fn var_type(self) -> ScalarType {
         match self {
             Value::Real(_) => ScalarType::Real,
             Value::Integer(_) => ScalarType::Integer,
@@ -30,7 +30,7 @@ impl Value {
 
     /// The value as a number (booleans as 0/1), for range checks and documentation; NaN for
     /// a string.
-    pub fn as_f64(self) -> f64 {
+    pub const fn as_f64(self) -> f64 {
         match self {
             Value::Real(x) => x,
             Value::Integer(i) => i as f64,
@@ -68,9 +68,10 @@ pub struct VarInfo {
     pub max: Option<f64>,
     pub description: &'static str,
     /// For outputs: value references of the inputs it depends on directly (feed-through).
+    /// In [`variables!`](crate::variables!) written as the inputs' names.
     pub depends_on: &'static [u32],
-    /// For outputs: the further inputs it depends on in initialization mode only (where the
-    /// model computes it from its inputs before the first step).
+    /// For outputs: the further inputs (or parameters) it depends on in initialization mode
+    /// only (where the model computes it from its inputs before the first step).
     pub init_depends_on: &'static [u32],
 }
 
@@ -150,11 +151,15 @@ impl VarInfo {
         self.initial = Some(initial);
         self
     }
+    /// The inputs an output depends on directly (feed-through). In
+    /// [`variables!`](crate::variables!) name them: `.depends_on(&[omega_left, omega_right])`
+    /// (each field name is a constant holding its value reference there).
     pub const fn depends_on(mut self, inputs: &'static [u32]) -> Self {
         self.depends_on = inputs;
         self
     }
-    /// Inputs an output depends on in initialization mode beyond [`Self::depends_on`].
+    /// Inputs (or parameters) an output depends on in initialization mode beyond
+    /// [`Self::depends_on`], named like them.
     pub const fn init_depends_on(mut self, inputs: &'static [u32]) -> Self {
         self.init_depends_on = inputs;
         self
@@ -166,12 +171,12 @@ impl VarInfo {
         self
     }
 
-    pub fn var_type(&self) -> ScalarType {
+    pub const fn var_type(&self) -> ScalarType {
         self.start.var_type()
     }
 
     /// The `initial` attribute in force (explicit or the standard's default, FMI 2.0 §2.2.7).
-    pub fn effective_initial(&self) -> Option<Initial> {
+    pub const fn effective_initial(&self) -> Option<Initial> {
         if self.initial.is_some() {
             return self.initial;
         }
@@ -186,13 +191,25 @@ impl VarInfo {
     }
 
     /// Whether modelDescription.xml carries a start value for this variable.
-    pub fn has_start(&self) -> bool {
+    pub const fn has_start(&self) -> bool {
         matches!(self.causality, Causality::Input)
             || matches!(
                 self.effective_initial(),
                 Some(Initial::Exact) | Some(Initial::Approx)
             )
     }
+}
+
+/// Whether a variable of `table` declares direct feed-through.
+pub const fn declares_feedthrough(table: &[VarInfo]) -> bool {
+    let mut i = 0;
+    while i < table.len() {
+        if !table[i].depends_on.is_empty() {
+            return true;
+        }
+        i += 1;
+    }
+    false
 }
 
 /// What the generated variable struct provides to the runtime.
@@ -203,6 +220,10 @@ pub trait VarTable: Clone + Default + Send + 'static {
     /// Byte offset of each variable's field in the struct when it is a Real (an `f64`),
     /// `usize::MAX` otherwise: the runtime reads and writes Reals there directly.
     const REAL_OFFSETS: &'static [usize];
+
+    /// Whether an output declares direct feed-through (`depends_on`): the runtime then
+    /// recalculates the outputs when inputs change between steps.
+    const HAS_FEEDTHROUGH: bool = declares_feedthrough(Self::VARIABLES);
 
     /// Value of the variable at `index` in [`Self::VARIABLES`].
     fn get(&self, index: usize) -> Value;
@@ -360,6 +381,14 @@ macro_rules! __fmi_real_offset {
 
 /// Declare a model's variables once: a typed struct plus its [`VarTable`].
 ///
+/// Each line is `name: Type = start => kind(value_reference).attributes…`. Value references
+/// are explicit numbers (a published FMU's references never change); dependencies name
+/// variables: inside the table every field name is a constant holding its value reference.
+/// The table is checked at compile time ([`crate::check`]): a duplicate value reference, a
+/// `depends_on` naming something other than an input, a start value outside min/max, an
+/// unknown unit, a missing description, ... fail the build with a message naming the
+/// variables.
+///
 /// ```
 /// use fmu_export::variables::*;
 /// fmu_export::variables! {
@@ -368,12 +397,15 @@ macro_rules! __fmi_real_offset {
 ///         /// The spring rate.
 ///         stiffness: Real = 1000.0 => parameter(1).unit("N/m").range(1.0, 1e9)
 ///             .describe("Spring rate"),
-///         force: Real = 0.0 => output(2).unit("N").describe("Spring force"),
+///         travel: Real = 0.0 => input(3).unit("m").describe("Spring travel"),
+///         force: Real = 0.0 => output(2).unit("N").depends_on(&[travel])
+///             .describe("Spring force"),
 ///     }
 /// }
 /// let v = SpringVars::default();
 /// assert_eq!(v.stiffness, 1000.0);
 /// assert_eq!(SpringVars::vr_of("force"), Some(2));
+/// assert_eq!(SpringVars::VARIABLES[2].depends_on, &[3]);
 /// ```
 #[macro_export]
 macro_rules! variables {
@@ -399,9 +431,16 @@ macro_rules! variables {
         }
 
         impl $crate::variables::VarTable for $name {
-            const VARIABLES: &'static [$crate::variables::VarInfo] = &[
-                $( ($info).named(stringify!($field), $crate::__fmi_value!($ty, $start)), )*
-            ];
+            const VARIABLES: &'static [$crate::variables::VarInfo] = {
+                // Every field's name as a constant holding its value reference, so that
+                // `depends_on(&[u, v])` names variables (macro_rules items are not hygienic:
+                // the names in `$info` resolve to these).
+                $(
+                    #[allow(non_upper_case_globals, dead_code)]
+                    const $field: u32 = ($info).value_reference;
+                )*
+                &[ $( ($info).named(stringify!($field), $crate::__fmi_value!($ty, $start)), )* ]
+            };
 
             const REAL_OFFSETS: &'static [usize] = &[
                 $( $crate::__fmi_real_offset!($ty, $name, $field), )*
@@ -433,5 +472,10 @@ macro_rules! variables {
                 SET[index](self, value)
             }
         }
+
+        // The table's rules (crate::check), at compile time: a broken one fails the build.
+        const _: () = $crate::check::assert_table(
+            <$name as $crate::variables::VarTable>::VARIABLES,
+        );
     };
 }

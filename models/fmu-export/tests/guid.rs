@@ -2,9 +2,7 @@
 
 use fmu_export::description::{guid, render_model_description, validate_table};
 use fmu_export::variables::*;
-use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, StateReader, StateWriter,
-};
+use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, Stateless};
 
 macro_rules! spring_model {
     ($model:ident, $vars:ident, $unit:literal, $max:expr) => {
@@ -33,11 +31,9 @@ macro_rules! spring_model {
             fn do_step(&mut self, _: &mut $vars, _: f64, _: f64) -> Result<(), ModelError> {
                 Ok(())
             }
-            fn save_state(&self, _: &mut StateWriter) {}
-            fn load_state(&mut self, _: &mut StateReader<'_>) -> Result<(), ModelError> {
-                Ok(())
-            }
+            fn calculate_outputs(&mut self, _: &mut $vars) {}
         }
+        impl Stateless for $model {}
     };
 }
 

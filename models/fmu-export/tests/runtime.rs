@@ -4,7 +4,7 @@
 use fmu_export::fmi2::*;
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Function, Model, ModelError, ModelInfo, Phase, Runtime,
+    Context, DefaultExperiment, Function, Model, ModelError, ModelInfo, ModelState, Phase, Runtime,
     StateReader, StateWriter, Value,
 };
 use tb_testkit::Capture;
@@ -16,7 +16,7 @@ fmu_export::variables! {
         offset: Real = 0.0 => parameter(2).unit("1").describe("Offset of the direct output"),
         u: Real = 0.0 => input(3).unit("1").range(-100.0, 100.0).describe("Input"),
         y: Real = 0.0 => output(4).unit("s").describe("Integral of gain·u"),
-        y_direct: Real = 0.0 => output(5).unit("1").depends_on(&[3])
+        y_direct: Real = 0.0 => output(5).unit("1").depends_on(&[u])
             .describe("gain·u + offset"),
         fault: Integer = 0 => parameter(6).range(0.0, 3.0)
             .describe("From t = 1 s: 0 none, 1 error, 2 panic, 3 discard"),
@@ -48,7 +48,6 @@ impl Model for Counter {
 
     fn initialize(vars: &mut CounterVars, _ctx: &Context) -> Result<Self, ModelError> {
         vars.y = 0.0;
-        vars.y_direct = vars.gain * vars.u + vars.offset;
         Ok(Counter { y: 0.0 })
     }
 
@@ -63,14 +62,15 @@ impl Model for Counter {
         }
         self.y += vars.gain * vars.u * step;
         vars.y = self.y;
-        vars.y_direct = vars.gain * vars.u + vars.offset;
         Ok(())
     }
 
-    fn update_outputs(&mut self, vars: &mut CounterVars) {
+    fn calculate_outputs(&mut self, vars: &mut CounterVars) {
         vars.y_direct = vars.gain * vars.u + vars.offset;
     }
+}
 
+impl ModelState for Counter {
     fn save_state(&self, w: &mut StateWriter) {
         w.f64(self.y);
     }

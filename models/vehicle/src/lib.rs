@@ -9,7 +9,8 @@ pub mod track;
 
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, Resource, StateReader, StateWriter,
+    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource, StateReader,
+    StateWriter,
 };
 use physics::{soft_sign, wheel_loads, LoadParams, Loads, MagicFormula};
 use std::sync::Arc;
@@ -18,9 +19,9 @@ use track::{Track, TrackPoint};
 /// Name of the track file in the FMU's resources.
 pub const TRACK_FILE: &str = "track.csv";
 
-/// The bundled track as the build script parsed it (`fmu_export::sidecar`; empty if the
+/// The bundled track as the build script parsed it (`fmu_export::preparsed`; empty if the
 /// bundled file does not parse, then the resource is parsed at run time and its error shown).
-const TRACK_SIDECAR: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/track.sidecar"));
+const TRACK_PREPARSED: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/track.preparsed"));
 
 fmu_export::variables! {
     /// Variables of the vehicle model (names as in docs/bench.md and the paper, hence the case).
@@ -379,43 +380,6 @@ impl Vehicle {
         }
     }
 
-    /// Write every output from the current state (the inputs as held over the last step).
-    fn write_outputs(&mut self, x: &mut VehicleVars) {
-        let f = self.forces([x.omega_rl, x.omega_rr]);
-        let st = self.st;
-        let r = self.p.r;
-        x.v = st.v;
-        x.s = st.s;
-        x.distance = st.distance;
-        x.lap = st.lap;
-        x.lap_time = st.lap_time;
-        x.lap_length = self.track.length();
-        x.a_x = st.ax;
-        x.a_y = st.ay;
-        x.a_x_raw = st.ax_raw;
-        x.a_y_raw = st.v * st.v * f.at.curvature;
-        x.Fz_fl = f.loads.fl;
-        x.Fz_fr = f.loads.fr;
-        x.Fz_rl = f.loads.rl;
-        x.Fz_rr = f.loads.rr;
-        x.Fz_sum = f.loads.sum();
-        x.slip_fl = st.kappa[0];
-        x.slip_fr = st.kappa[1];
-        x.slip_rl = st.kappa[2];
-        x.slip_rr = st.kappa[3];
-        x.Fx_fl = f.fx[0];
-        x.Fx_fr = f.fx[1];
-        x.Fx_rl = f.fx[2];
-        x.Fx_rr = f.fx[3];
-        x.omega_fl = st.omega_front[0];
-        x.omega_fr = st.omega_front[1];
-        x.curvature = f.at.curvature;
-        x.grade = f.at.grade;
-        x.F_resistance = f.resistance;
-        x.torque_setpoint_rl = r * f.fx[2] + self.p.brake_torque(x.brake_pedal, false, x.omega_rl);
-        x.torque_setpoint_rr = r * f.fx[3] + self.p.brake_torque(x.brake_pedal, false, x.omega_rr);
-    }
-
     /// The parsed track (for hosts and tests).
     pub fn track(&self) -> &Track {
         &self.track
@@ -442,8 +406,8 @@ impl Model for Vehicle {
             let track = ctx.cached(TRACK_FILE, || {
                 let (path, text) = ctx.read_resource(TRACK_FILE)?;
                 // The bundled file as the build parsed it, unless it was changed since.
-                let digest = fmu_export::sidecar::digest(text.as_bytes());
-                match fmu_export::sidecar::decode(TRACK_SIDECAR, digest, 5)
+                let digest = fmu_export::preparsed::digest(text.as_bytes());
+                match fmu_export::preparsed::decode(TRACK_PREPARSED, digest, 5)
                     .and_then(|v| Track::from_values(&v))
                 {
                     Some(track) => Ok(track),
@@ -452,8 +416,8 @@ impl Model for Vehicle {
             })?;
             (track, ctx.resource(TRACK_FILE)?)
         } else {
-            let path = fmu_export::model::parameter_path("track_file", &vars.track_file)?;
-            let track = fmu_export::model::shared_file(&path, |p, text| {
+            let path = fmu_export::resources::parameter_path("track_file", &vars.track_file)?;
+            let track = fmu_export::resources::shared_file(&path, |p, text| {
                 Track::parse(&p.display().to_string(), text)
             })?;
             (track, path)
@@ -489,16 +453,14 @@ impl Model for Vehicle {
             ay: v0 * v0 * at.curvature,
             ax_raw: 0.0,
         };
-        let mut m = Vehicle {
+        Ok(Vehicle {
             track,
             p,
             st,
             cursor_front: cursor,
             cursor_rear: 0,
             mu_cache: [(f64::NAN, 0.0); 4],
-        };
-        m.write_outputs(vars);
-        Ok(m)
+        })
     }
 
     fn do_step(&mut self, vars: &mut VehicleVars, time: f64, step: f64) -> Result<(), ModelError> {
@@ -517,15 +479,53 @@ impl Model for Vehicle {
                 self.st.v, self.st.kappa
             )));
         }
-        self.write_outputs(vars);
         Ok(())
+    }
+
+    /// Every output from the current state (the inputs as held over the last step).
+    fn calculate_outputs(&mut self, x: &mut VehicleVars) {
+        let f = self.forces([x.omega_rl, x.omega_rr]);
+        let st = self.st;
+        let r = self.p.r;
+        x.v = st.v;
+        x.s = st.s;
+        x.distance = st.distance;
+        x.lap = st.lap;
+        x.lap_time = st.lap_time;
+        x.lap_length = self.track.length();
+        x.a_x = st.ax;
+        x.a_y = st.ay;
+        x.a_x_raw = st.ax_raw;
+        x.a_y_raw = st.v * st.v * f.at.curvature;
+        x.Fz_fl = f.loads.fl;
+        x.Fz_fr = f.loads.fr;
+        x.Fz_rl = f.loads.rl;
+        x.Fz_rr = f.loads.rr;
+        x.Fz_sum = f.loads.sum();
+        x.slip_fl = st.kappa[0];
+        x.slip_fr = st.kappa[1];
+        x.slip_rl = st.kappa[2];
+        x.slip_rr = st.kappa[3];
+        x.Fx_fl = f.fx[0];
+        x.Fx_fr = f.fx[1];
+        x.Fx_rl = f.fx[2];
+        x.Fx_rr = f.fx[3];
+        x.omega_fl = st.omega_front[0];
+        x.omega_fr = st.omega_front[1];
+        x.curvature = f.at.curvature;
+        x.grade = f.at.grade;
+        x.F_resistance = f.resistance;
+        x.torque_setpoint_rl = r * f.fx[2] + self.p.brake_torque(x.brake_pedal, false, x.omega_rl);
+        x.torque_setpoint_rr = r * f.fx[3] + self.p.brake_torque(x.brake_pedal, false, x.omega_rr);
     }
 
     fn parameters_changed(&mut self, vars: &VehicleVars) -> Result<(), ModelError> {
         self.p = Params::from_vars(vars);
         Ok(())
     }
+}
 
+impl ModelState for Vehicle {
     fn save_state(&self, w: &mut StateWriter) {
         let st = &self.st;
         for x in [

@@ -120,7 +120,7 @@ impl Track {
         }
     }
 
-    /// The rows as numbers, `COLUMNS` order (a build script stores them: `sidecar`).
+    /// The rows as numbers, `COLUMNS` order (a build script stores them: `preparsed`).
     pub fn values(&self) -> Vec<f64> {
         self.s
             .iter()
@@ -158,7 +158,7 @@ impl Track {
 
     /// Map any distance into `[0, length)`.
     pub fn wrap(&self, s: f64) -> f64 {
-        let w = fmu_export::model::wrap_distance(s, self.length);
+        let w = fmu_export::resources::wrap_distance(s, self.length);
         // rem_euclid can round up to exactly `length`.
         if w >= self.length {
             0.0
@@ -206,20 +206,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_embedded_sidecar_is_the_bundled_track_parsed() {
-        use fmu_export::sidecar::{decode, digest};
+    fn the_preparsed_blob_is_the_bundled_track_parsed() {
+        use fmu_export::preparsed::{decode, digest};
         let text = std::str::from_utf8(include_bytes!("../resources/track.csv")).unwrap();
         let parsed = Track::parse("track.csv", text).unwrap();
-        let values = decode(crate::TRACK_SIDECAR, digest(text.as_bytes()), 5)
+        let values = decode(crate::TRACK_PREPARSED, digest(text.as_bytes()), 5)
             .expect("the build embeds the bundled track");
         let bits = |v: Vec<f64>| v.into_iter().map(f64::to_bits).collect::<Vec<_>>();
         let from = Track::from_values(&values).unwrap();
         assert_eq!(bits(from.values()), bits(parsed.values()));
         assert_eq!(from.length().to_bits(), parsed.length().to_bits());
-        // A changed file is parsed, not taken from the sidecar.
+        // A changed file is parsed, not taken from the preparsed blob.
         let changed = text.replacen("\n0.25,", "\n0.26,", 1);
         assert_ne!(changed, text);
-        assert!(decode(crate::TRACK_SIDECAR, digest(changed.as_bytes()), 5).is_none());
+        assert!(decode(crate::TRACK_PREPARSED, digest(changed.as_bytes()), 5).is_none());
     }
 
     const GOOD: &str =

@@ -8,7 +8,7 @@
 //! changed (another digest) is parsed as it is. Start-up of a process then costs a read
 //! and a digest of the file, not a parse (the bundled track is 85,000 numbers).
 
-const MAGIC: &[u8; 8] = b"TBSIDE01";
+const MAGIC: &[u8; 8] = b"TBSIDE01"; // the blob's magic (its first name, kept: blobs stay the same bytes)
 
 /// A 64-bit digest of `bytes` (8 bytes at a time, multiply-rotate mixing, the length
 /// folded in): a changed resource gets another digest with overwhelming probability.

@@ -1,0 +1,533 @@
+//! The rules of a variable table, as `const fn`s: [`variables!`](crate::variables!) evaluates
+//! them at compile time (a table that breaks one fails the build with a message naming the
+//! variables), and [`validate_table`](crate::description::validate_table) applies the same
+//! rules at run time to any [`VarTable`](crate::variables::VarTable).
+//!
+//! The rules: names and value references are unique; a unit is one of
+//! [`crate::units::UNITS`]; every variable has a description; a String has no unit and no
+//! range; only a Real is continuous; a start value lies within min/max; only an output
+//! declares dependencies; `depends_on` names inputs, `init_depends_on` inputs or parameters.
+//!
+//! Each mistake fails the build; for example a `depends_on` naming a parameter:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         k: Real = 1.0 => parameter(1).unit("1").describe("Gain"),
+//!         u: Real = 0.0 => input(2).unit("1").describe("Input"),
+//!         y: Real = 0.0 => output(3).unit("1").depends_on(&[k]).describe("k·u"),
+//!     }
+//! }
+//! ```
+//!
+//! fails with `evaluation panicked: variables!: 'y' depends on 'k', which is not an input
+//! (depends_on names inputs)`. The others:
+//!
+//! Two variables with one value reference:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         u: Real = 0.0 => input(1).unit("1").describe("Input"),
+//!         y: Real = 0.0 => output(1).unit("1").describe("Output"),
+//!     }
+//! }
+//! ```
+//!
+//! `init_depends_on` naming an output (neither an input nor a parameter):
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         u: Real = 0.0 => input(1).unit("1").describe("Input"),
+//!         y: Real = 0.0 => output(2).unit("1").describe("Output"),
+//!         z: Real = 0.0 => output(3).unit("1").init_depends_on(&[y]).describe("Output"),
+//!     }
+//! }
+//! ```
+//!
+//! Dependencies declared by a variable that is not an output:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         u: Real = 0.0 => input(1).unit("1").describe("Input"),
+//!         x: Real = 0.0 => local(2).unit("1").depends_on(&[u]).describe("A local"),
+//!     }
+//! }
+//! ```
+//!
+//! A start value outside min/max:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         k: Real = 5.0 => parameter(1).unit("1").range(0.0, 1.0).describe("Gain"),
+//!     }
+//! }
+//! ```
+//!
+//! An unknown unit:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         k: Real = 1.0 => parameter(1).unit("furlong").describe("Gain"),
+//!     }
+//! }
+//! ```
+//!
+//! No description:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         k: Real = 1.0 => parameter(1).unit("1"),
+//!     }
+//! }
+//! ```
+//!
+//! A String with a unit:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         file: String = "" => parameter(1).unit("m").describe("A file"),
+//!     }
+//! }
+//! ```
+//!
+//! A continuous Integer:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         n: Integer = 0 => input(1).describe("A count"),
+//!     }
+//! }
+//! ```
+//!
+//! Two variables with one name are refused by Rust itself (a struct has one field per name):
+//!
+//! ```compile_fail
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         u: Real = 0.0 => input(1).unit("1").describe("Input"),
+//!         u: Real = 0.0 => input(2).unit("1").describe("Input"),
+//!     }
+//! }
+//! ```
+//!
+//! and a dependency on a name that is no variable is an unknown name:
+//!
+//! ```compile_fail,E0425
+//! use fmu_export::variables::*;
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         u: Real = 0.0 => input(1).unit("1").describe("Input"),
+//!         y: Real = 0.0 => output(2).unit("1").depends_on(&[v]).describe("Output"),
+//!     }
+//! }
+//! ```
+
+use crate::units::UNITS;
+use crate::variables::{Causality, ScalarType, Value, VarInfo, Variability};
+use std::fmt;
+
+/// A mistake in a variable table: which rule, and the variables it concerns.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TableError {
+    /// Two variables share a name.
+    DuplicateName { name: &'static str },
+    /// Two variables share a value reference.
+    SharedValueReference {
+        first: &'static str,
+        second: &'static str,
+        value_reference: u32,
+    },
+    /// A unit that is not in [`crate::units::UNITS`].
+    UnknownUnit {
+        name: &'static str,
+        unit: &'static str,
+    },
+    /// A variable without description.
+    NoDescription { name: &'static str },
+    /// A String with a unit, a min or a max.
+    StringWithUnitOrRange { name: &'static str },
+    /// An Integer, Boolean or String declared continuous.
+    ContinuousNonReal { name: &'static str },
+    /// A start value below min or above max.
+    StartOutsideRange { name: &'static str },
+    /// A variable that is not an output declares dependencies.
+    DependenciesOfNonOutput { name: &'static str },
+    /// A `depends_on` entry that is not the value reference of an input (`dependency`: its
+    /// name, `None` when no variable has it).
+    DependsOnNonInput {
+        name: &'static str,
+        dependency: Option<&'static str>,
+        value_reference: u32,
+    },
+    /// An `init_depends_on` entry that is neither an input nor a parameter.
+    InitDependsOnNeitherInputNorParameter {
+        name: &'static str,
+        dependency: Option<&'static str>,
+        value_reference: u32,
+    },
+}
+
+/// A message built in const context (a fixed buffer: const code cannot allocate).
+pub struct Message {
+    buf: [u8; 320],
+    len: usize,
+}
+
+impl Message {
+    const fn new() -> Self {
+        Message {
+            buf: [0; 320],
+            len: 0,
+        }
+    }
+
+    /// Append `s` whole, or nothing when it does not fit (the text stays UTF-8).
+    const fn push(mut self, s: &str) -> Self {
+        let b = s.as_bytes();
+        if self.len + b.len() > self.buf.len() {
+            return self;
+        }
+        let mut i = 0;
+        while i < b.len() {
+            self.buf[self.len] = b[i];
+            self.len += 1;
+            i += 1;
+        }
+        self
+    }
+
+    const fn push_u32(mut self, x: u32) -> Self {
+        let mut digits = [0u8; 10];
+        let mut n = 0;
+        let mut x = x;
+        loop {
+            digits[n] = b'0' + (x % 10) as u8;
+            n += 1;
+            x /= 10;
+            if x == 0 {
+                break;
+            }
+        }
+        while n > 0 && self.len < self.buf.len() {
+            n -= 1;
+            self.buf[self.len] = digits[n];
+            self.len += 1;
+        }
+        self
+    }
+
+    /// A variable's name in quotes, or its value reference when no variable has it.
+    const fn push_dependency(self, dependency: Option<&str>, value_reference: u32) -> Self {
+        match dependency {
+            Some(d) => self.push("'").push(d).push("'"),
+            None => self.push("value reference ").push_u32(value_reference),
+        }
+    }
+
+    pub const fn as_str(&self) -> &str {
+        let (text, _) = self.buf.split_at(self.len);
+        match std::str::from_utf8(text) {
+            Ok(s) => s,
+            Err(_) => "variables!: inconsistent variable table",
+        }
+    }
+}
+
+impl TableError {
+    /// What is wrong, naming the variables (const: the build's panic message).
+    pub const fn message(&self) -> Message {
+        let m = Message::new();
+        match *self {
+            TableError::DuplicateName { name } => m.push("duplicate name '").push(name).push("'"),
+            TableError::SharedValueReference {
+                first,
+                second,
+                value_reference,
+            } => m
+                .push("'")
+                .push(first)
+                .push("' and '")
+                .push(second)
+                .push("' share value reference ")
+                .push_u32(value_reference),
+            TableError::UnknownUnit { name, unit } => m
+                .push("'")
+                .push(name)
+                .push("': unknown unit '")
+                .push(unit)
+                .push("' (not in fmu_export::units::UNITS)"),
+            TableError::NoDescription { name } => {
+                m.push("'").push(name).push("' has no description")
+            }
+            TableError::StringWithUnitOrRange { name } => m
+                .push("'")
+                .push(name)
+                .push("': a String has no unit and no range"),
+            TableError::ContinuousNonReal { name } => m
+                .push("'")
+                .push(name)
+                .push("': only a Real can be continuous (FMI 2.0 §2.2.7); declare it discrete"),
+            TableError::StartOutsideRange { name } => m
+                .push("'")
+                .push(name)
+                .push("': start value outside [min, max]"),
+            TableError::DependenciesOfNonOutput { name } => m
+                .push("'")
+                .push(name)
+                .push("' declares dependencies but is not an output"),
+            TableError::DependsOnNonInput {
+                name,
+                dependency,
+                value_reference,
+            } => m
+                .push("'")
+                .push(name)
+                .push("' depends on ")
+                .push_dependency(dependency, value_reference)
+                .push(", which is not an input (depends_on names inputs)"),
+            TableError::InitDependsOnNeitherInputNorParameter {
+                name,
+                dependency,
+                value_reference,
+            } => m
+                .push("'")
+                .push(name)
+                .push("' depends in initialization mode on ")
+                .push_dependency(dependency, value_reference)
+                .push(", which is neither an input nor a parameter"),
+        }
+    }
+}
+
+impl fmt::Display for TableError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.message().as_str())
+    }
+}
+
+const fn str_eq(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+const fn known_unit(unit: &str) -> bool {
+    let mut i = 0;
+    while i < UNITS.len() {
+        if str_eq(UNITS[i].name, unit) {
+            return true;
+        }
+        i += 1;
+    }
+    false
+}
+
+/// The variable with value reference `vr`, if any.
+const fn find(table: &[VarInfo], vr: u32) -> Option<&VarInfo> {
+    let mut i = 0;
+    while i < table.len() {
+        if table[i].value_reference == vr {
+            return Some(&table[i]);
+        }
+        i += 1;
+    }
+    None
+}
+
+/// The rules for the variable at `index`: against the later variables (names and value
+/// references), then its own attributes, then its dependencies. The first broken rule.
+pub const fn check_variable(table: &[VarInfo], index: usize) -> Result<(), TableError> {
+    let a = &table[index];
+    let mut j = index + 1;
+    while j < table.len() {
+        let b = &table[j];
+        if str_eq(a.name, b.name) {
+            return Err(TableError::DuplicateName { name: a.name });
+        }
+        if a.value_reference == b.value_reference {
+            return Err(TableError::SharedValueReference {
+                first: a.name,
+                second: b.name,
+                value_reference: a.value_reference,
+            });
+        }
+        j += 1;
+    }
+    if let Some(unit) = a.unit {
+        if !known_unit(unit) {
+            return Err(TableError::UnknownUnit { name: a.name, unit });
+        }
+    }
+    if a.description.is_empty() {
+        return Err(TableError::NoDescription { name: a.name });
+    }
+    let ty = a.var_type();
+    if matches!(ty, ScalarType::String) && (a.unit.is_some() || a.min.is_some() || a.max.is_some())
+    {
+        return Err(TableError::StringWithUnitOrRange { name: a.name });
+    }
+    if !matches!(ty, ScalarType::Real) && matches!(a.variability, Variability::Continuous) {
+        return Err(TableError::ContinuousNonReal { name: a.name });
+    }
+    if a.has_start() && !matches!(a.start, Value::Str(_)) {
+        let x = a.start.as_f64();
+        let below = match a.min {
+            Some(m) => x < m,
+            None => false,
+        };
+        let above = match a.max {
+            Some(m) => x > m,
+            None => false,
+        };
+        if below || above {
+            return Err(TableError::StartOutsideRange { name: a.name });
+        }
+    }
+    let declares = !a.depends_on.is_empty() || !a.init_depends_on.is_empty();
+    if declares && !matches!(a.causality, Causality::Output) {
+        return Err(TableError::DependenciesOfNonOutput { name: a.name });
+    }
+    let mut k = 0;
+    while k < a.depends_on.len() {
+        let vr = a.depends_on[k];
+        match find(table, vr) {
+            Some(d) if matches!(d.causality, Causality::Input) => {}
+            other => {
+                return Err(TableError::DependsOnNonInput {
+                    name: a.name,
+                    dependency: match other {
+                        Some(d) => Some(d.name),
+                        None => None,
+                    },
+                    value_reference: vr,
+                })
+            }
+        }
+        k += 1;
+    }
+    let mut k = 0;
+    while k < a.init_depends_on.len() {
+        let vr = a.init_depends_on[k];
+        match find(table, vr) {
+            Some(d) if matches!(d.causality, Causality::Input | Causality::Parameter) => {}
+            other => {
+                return Err(TableError::InitDependsOnNeitherInputNorParameter {
+                    name: a.name,
+                    dependency: match other {
+                        Some(d) => Some(d.name),
+                        None => None,
+                    },
+                    value_reference: vr,
+                })
+            }
+        }
+        k += 1;
+    }
+    Ok(())
+}
+
+/// The first broken rule of the table, if any.
+pub const fn check_table(table: &[VarInfo]) -> Result<(), TableError> {
+    let mut i = 0;
+    while i < table.len() {
+        if let Err(e) = check_variable(table, i) {
+            return Err(e);
+        }
+        i += 1;
+    }
+    Ok(())
+}
+
+/// For `variables!`: panics (at compile time, in its `const _: () = ...;`) with the message
+/// of the table's first broken rule.
+#[doc(hidden)]
+pub const fn assert_table(table: &[VarInfo]) {
+    if let Err(e) = check_table(table) {
+        let m = Message::new()
+            .push("variables!: ")
+            .push(e.message().as_str());
+        panic!("{}", m.as_str());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::variables::{input, output, parameter, Value};
+
+    const fn v(info: VarInfo, name: &'static str) -> VarInfo {
+        info.named(name, Value::Real(0.0))
+    }
+
+    #[test]
+    fn each_broken_rule_is_found_at_run_time_too_naming_the_variables() {
+        let ok = [
+            v(parameter(1).unit("1").describe("k"), "k"),
+            v(input(2).unit("1").describe("u"), "u"),
+            v(
+                output(3)
+                    .depends_on(&[2])
+                    .init_depends_on(&[1])
+                    .describe("y"),
+                "y",
+            ),
+        ];
+        assert_eq!(check_table(&ok), Ok(()));
+        let cases: [(&[VarInfo], &str); 4] = [
+            (
+                &[
+                    ok[0],
+                    ok[1],
+                    v(output(3).depends_on(&[1]).describe("y"), "y"),
+                ],
+                "'y' depends on 'k', which is not an input (depends_on names inputs)",
+            ),
+            (
+                &[
+                    ok[0],
+                    ok[1],
+                    v(output(3).depends_on(&[7]).describe("y"), "y"),
+                ],
+                "'y' depends on value reference 7, which is not an input (depends_on names inputs)",
+            ),
+            (
+                &[ok[0], v(input(1).describe("u"), "u")],
+                "'k' and 'u' share value reference 1",
+            ),
+            (
+                &[v(parameter(1).range(1.0, 2.0).describe("k"), "k")],
+                "'k': start value outside [min, max]",
+            ),
+        ];
+        for (table, message) in cases {
+            assert_eq!(check_table(table).unwrap_err().to_string(), message);
+        }
+    }
+}

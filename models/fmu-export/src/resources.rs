@@ -1,0 +1,114 @@
+//! Files a model reads: a resource's text, a data file parsed once per process and shared by
+//! every instance that names it, the path a String parameter names, and the wrap of a
+//! distance on a closed lap (the lookups of distance-based resources: track, target).
+
+use crate::model::ModelError;
+use std::any::Any;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// `s.rem_euclid(length)` for a distance on a closed lap, bit for bit, without libm's
+/// `fmod` in the usual cases (it runs every step): s itself inside the lap, s − length on
+/// the next lap (exact by Sterbenz's lemma, length ≤ s < 2·length).
+#[inline]
+pub fn wrap_distance(s: f64, length: f64) -> f64 {
+    if (0.0..length).contains(&s) {
+        s
+    } else if s >= length && s < 2.0 * length {
+        s - length
+    } else {
+        s.rem_euclid(length)
+    }
+}
+
+/// The path a String parameter names: an absolute path or a `file://` URI. A relative path
+/// is refused: the host resolves it (the orchestrator against the system file's folder).
+pub fn parameter_path(parameter: &str, value: &str) -> Result<PathBuf, ModelError> {
+    let path = if value.starts_with("file:") {
+        crate::ffi::resource_dir_from_uri(value)
+            .map_err(|e| ModelError::new(format!("'{parameter}': {e}")))?
+    } else {
+        PathBuf::from(value)
+    };
+    if !path.is_absolute() {
+        return Err(ModelError::new(format!(
+            "'{parameter}' = \"{value}\" is a relative path; give an absolute path or a file:// URI (twinbench resolves a relative path in a system file against the file's folder)"
+        )));
+    }
+    Ok(path)
+}
+
+/// Files parsed once per process, by the parsed type, the path, its size and modification
+/// time (an edited file is read again).
+type SharedFiles = HashMap<
+    (
+        std::any::TypeId,
+        PathBuf,
+        u64,
+        Option<std::time::SystemTime>,
+    ),
+    Arc<dyn Any + Send + Sync>,
+>;
+
+/// A data file parsed once per process and shared by every instance that names it (and kept
+/// across re-initialisation and fmi2Reset): `parse(path, text)` runs on the first request.
+pub fn shared_file<T: Any + Send + Sync>(
+    path: &Path,
+    parse: impl FnOnce(&Path, &str) -> Result<T, ModelError>,
+) -> Result<Arc<T>, ModelError> {
+    static FILES: std::sync::OnceLock<Mutex<SharedFiles>> = std::sync::OnceLock::new();
+    let meta = std::fs::metadata(path)
+        .map_err(|e| ModelError::new(format!("cannot read {}: {e}", path.display())))?;
+    let key = (
+        std::any::TypeId::of::<T>(),
+        path.to_path_buf(),
+        meta.len(),
+        meta.modified().ok(),
+    );
+    let files = FILES.get_or_init(Default::default);
+    if let Some(hit) = files.lock().ok().and_then(|m| m.get(&key).cloned()) {
+        if let Ok(t) = hit.downcast::<T>() {
+            return Ok(t);
+        }
+    }
+    let text = read_text(path)?;
+    let value = Arc::new(parse(path, &text)?);
+    if let Ok(mut m) = files.lock() {
+        m.insert(key, value.clone());
+    }
+    Ok(value)
+}
+
+/// Read a text file with the path in the error message.
+pub fn read_text(path: &Path) -> Result<String, ModelError> {
+    std::fs::read_to_string(path)
+        .map_err(|e| ModelError::new(format!("cannot read {}: {e}", path.display())))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn wrap_distance_is_rem_euclid_to_the_bit() {
+        let length = 4284.25;
+        let mut s: f64 = -3.0 * length;
+        while s < 4.0 * length {
+            for x in [
+                s,
+                s.next_up(),
+                s.next_down(),
+                -0.0,
+                0.0,
+                length,
+                2.0 * length,
+            ] {
+                assert_eq!(
+                    super::wrap_distance(x, length).to_bits(),
+                    x.rem_euclid(length).to_bits(),
+                    "s = {x}"
+                );
+            }
+            s += 0.37;
+        }
+    }
+}
