@@ -405,9 +405,28 @@ fn to_unknowns(
 
 /// The largest array twinbench expands into columns.
 const MAX_ELEMENTS: u64 = 100_000;
+/// The most values all variables may expand into together (elements and their aliases): a
+/// small file declaring many large arrays must not exhaust memory before anything runs.
+const MAX_TOTAL_ELEMENTS: u64 = 1_000_000;
+
+/// Value references are unique among the declared variables (FMI 3.0 §2.4.7: one value
+/// reference names one variable; other names of it are `<Alias>`es).
+fn unique_value_references(declared: &[Declared]) -> Result<(), String> {
+    let mut seen: HashMap<u32, &str> = HashMap::with_capacity(declared.len());
+    for d in declared {
+        if let Some(first) = seen.insert(d.var.value_reference, &d.var.name) {
+            return Err(format!(
+                "value reference {} is declared twice, for '{first}' and '{}' (FMI 3.0 gives every variable its own; another name of one variable is an <Alias>)",
+                d.var.value_reference, d.var.name
+            ));
+        }
+    }
+    Ok(())
+}
 
 /// Declared variables → one [`ScalarVariable`] per value (arrays element by element).
 fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), String> {
+    unique_value_references(&declared)?;
     let structural_start: HashMap<u32, (String, Option<String>)> = declared
         .iter()
         .filter(|d| d.structural)
@@ -423,6 +442,18 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
         .map(|d| d.var.value_reference)
         .max()
         .map_or(0u64, |v| v as u64 + 1);
+    // The total first, before a single element is made.
+    let mut expanded = 0u64;
+    for d in &declared {
+        let total = element_count(d, &structural_start)?;
+        expanded = expanded.saturating_add(total.saturating_mul(1 + d.aliases.len() as u64));
+        if expanded > MAX_TOTAL_ELEMENTS {
+            return Err(format!(
+                "variable '{}': the arrays so far hold more than {MAX_TOTAL_ELEMENTS} values in all (elements and their aliases): more than twinbench expands into columns",
+                d.var.name
+            ));
+        }
+    }
     for mut d in declared {
         let name = d.var.name.clone();
         // String and Binary starts are <Start value> children.
@@ -449,32 +480,8 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
             md.variables.extend(aliases);
             continue;
         }
-        let mut sizes = Vec::new();
-        for dim in &d.dims {
-            sizes.push(match dim {
-                Dim::Fixed(n) => *n,
-                Dim::Parameter(vr) => {
-                    let (pname, start) = structural_start.get(vr).ok_or_else(|| {
-                        format!("variable '{name}': a Dimension refers to value reference {vr}, which is no structural parameter")
-                    })?;
-                    start
-                        .as_deref()
-                        .and_then(|s| s.trim().parse::<u64>().ok())
-                        .ok_or_else(|| {
-                            format!("variable '{name}': its dimension '{pname}' has no start value that is a size")
-                        })?
-                }
-            });
-        }
-        let total = sizes.iter().try_fold(1u64, |a, &n| a.checked_mul(n));
-        let total = match total {
-            Some(t) if t <= MAX_ELEMENTS => t,
-            _ => {
-                return Err(format!(
-                    "variable '{name}': an array of dimensions {sizes:?}, more than {MAX_ELEMENTS} elements"
-                ))
-            }
-        };
+        let sizes = dimension_sizes(&d, &structural_start)?;
+        let total = element_count(&d, &structural_start)?;
         let starts: Vec<String> = if !d.starts.is_empty() {
             d.starts.clone()
         } else {
@@ -532,6 +539,47 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
         next_vr += total;
     }
     Ok(())
+}
+
+/// The sizes of a declared array's dimensions (a structural parameter's by its start).
+fn dimension_sizes(
+    d: &Declared,
+    structural_start: &HashMap<u32, (String, Option<String>)>,
+) -> Result<Vec<u64>, String> {
+    let name = &d.var.name;
+    let mut sizes = Vec::new();
+    for dim in &d.dims {
+        sizes.push(match dim {
+            Dim::Fixed(n) => *n,
+            Dim::Parameter(vr) => {
+                let (pname, start) = structural_start.get(vr).ok_or_else(|| {
+                    format!("variable '{name}': a Dimension refers to value reference {vr}, which is no structural parameter")
+                })?;
+                start
+                    .as_deref()
+                    .and_then(|s| s.trim().parse::<u64>().ok())
+                    .ok_or_else(|| {
+                        format!("variable '{name}': its dimension '{pname}' has no start value that is a size")
+                    })?
+            }
+        });
+    }
+    Ok(sizes)
+}
+
+/// How many elements a declared variable has (1 for a scalar), at most [`MAX_ELEMENTS`].
+fn element_count(
+    d: &Declared,
+    structural_start: &HashMap<u32, (String, Option<String>)>,
+) -> Result<u64, String> {
+    let sizes = dimension_sizes(d, structural_start)?;
+    match sizes.iter().try_fold(1u64, |a, &n| a.checked_mul(n)) {
+        Some(t) if t <= MAX_ELEMENTS => Ok(t),
+        _ => Err(format!(
+            "variable '{}': an array of dimensions {sizes:?}, more than {MAX_ELEMENTS} elements",
+            d.var.name
+        )),
+    }
 }
 
 #[cfg(test)]
@@ -628,6 +676,45 @@ mod tests {
         let e = parse(&xml).unwrap_err();
         assert!(
             e.contains("value reference 4, which is no structural parameter"),
+            "{e}"
+        );
+    }
+
+    /// Red team N6: 1000 arrays of 100 000 elements each (an 11 KB file) made the reader
+    /// allocate 6.7 GB.
+    #[test]
+    fn many_large_arrays_are_refused_by_their_total() {
+        let mut vars = String::new();
+        for k in 0..1000 {
+            vars.push_str(&format!(
+                "<Float64 name=\"a{k}\" valueReference=\"{}\" causality=\"output\"><Dimension start=\"100000\"/></Float64>\n",
+                k + 1
+            ));
+        }
+        let xml = format!(
+            "<fmiModelDescription fmiVersion=\"3.0\" modelName=\"m\" instantiationToken=\"t\"><CoSimulation modelIdentifier=\"m\"/><ModelVariables>{vars}</ModelVariables><ModelStructure/></fmiModelDescription>"
+        );
+        let e = parse(&xml).unwrap_err();
+        assert!(
+            e.contains("'a10': the arrays so far hold more than 1000000 values in all"),
+            "{e}"
+        );
+    }
+
+    /// Red team N25: two FMI 3.0 inputs on one value reference were accepted.
+    #[test]
+    fn two_variables_on_one_value_reference_are_refused() {
+        let xml = r#"<fmiModelDescription fmiVersion="3.0" modelName="m" instantiationToken="t">
+  <CoSimulation modelIdentifier="m"/>
+  <ModelVariables>
+    <Float64 name="u1" valueReference="1" causality="input" start="0"/>
+    <Float64 name="u2" valueReference="1" causality="input" start="0"/>
+  </ModelVariables>
+  <ModelStructure/>
+</fmiModelDescription>"#;
+        let e = parse(xml).unwrap_err();
+        assert!(
+            e.contains("value reference 1 is declared twice, for 'u1' and 'u2'"),
             "{e}"
         );
     }

@@ -259,14 +259,9 @@ impl Instance {
         };
         self.check(Function::GetString, s)?;
         out.clear();
-        for p in ptrs {
-            out.push(if p.is_null() {
-                String::new()
-            } else {
-                unsafe { std::ffi::CStr::from_ptr(p) }
-                    .to_string_lossy()
-                    .into_owned()
-            });
+        for (p, vr) in ptrs.into_iter().zip(vrs) {
+            // SAFETY: the FMU keeps its strings valid until its next call.
+            out.push(unsafe { super::string_from_fmu(p, &self.name, "fmi2GetString", *vr) }?);
         }
         Ok(())
     }

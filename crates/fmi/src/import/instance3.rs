@@ -526,6 +526,7 @@ impl Instance3 {
                 };
                 self.check("fmi3GetBinary", s)?;
                 let (p, len) = (ptrs[slot.index as usize], sizes[slot.index as usize]);
+                super::too_long(len, &self.name, "fmi3GetBinary", *vr)?;
                 let bytes = if p.is_null() || len == 0 {
                     &[][..]
                 } else {
@@ -538,12 +539,10 @@ impl Instance3 {
             let s =
                 unsafe { (self.lib.api.get_string)(self.inst, &slot.vr, 1, ptrs.as_mut_ptr(), n) };
             self.check("fmi3GetString", s)?;
-            let p = ptrs[slot.index as usize];
-            out.push(if p.is_null() {
-                String::new()
-            } else {
-                unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
-            });
+            // SAFETY: the FMU keeps its strings valid until its next call.
+            out.push(unsafe {
+                super::string_from_fmu(ptrs[slot.index as usize], &self.name, "fmi3GetString", *vr)
+            }?);
         }
         Ok(())
     }
@@ -603,6 +602,21 @@ impl Instance3 {
         } else {
             t + h
         };
+        // Instantiated with earlyReturnAllowed = false: a step that returns early anyway
+        // (and does not end the run) did not reach t + h, and taking it as if it had would
+        // be a silent wrong result.
+        if early != 0 && terminate == 0 {
+            return Err(FmuError::Call3 {
+                instance: self.name.clone(),
+                function: "fmi3DoStep",
+                status: format!(
+                    "earlyReturn = true with lastSuccessfulTime = {last:?} s instead of completing the step to {:?} s, although it was instantiated with earlyReturnAllowed = false (FMI 3.0 §4.2.1)",
+                    t + h
+                ),
+                time: t,
+                log: self.sink.last_lines(),
+            });
+        }
         self.time = reached;
         if terminate != 0 {
             self.terminate_requested = Some(reached);

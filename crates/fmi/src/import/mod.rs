@@ -22,3 +22,45 @@ pub(crate) mod reader;
 mod store;
 
 pub use error::FmuError;
+
+/// The longest String (or Binary, in bytes) value read from an FMU: a value is copied into
+/// every recorded row, so an FMU handing out 100 MB strings would exhaust memory.
+pub const MAX_STRING_BYTES: usize = 1 << 20;
+
+/// A String value read from an FMU, or an error naming the instance, the value reference
+/// and the length when it is longer than [`MAX_STRING_BYTES`].
+///
+/// # Safety
+/// `p` is NULL or a NUL-terminated string the FMU keeps valid during the call.
+pub(crate) unsafe fn string_from_fmu(
+    p: *const std::ffi::c_char,
+    instance: &str,
+    function: &str,
+    vr: u32,
+) -> Result<String, FmuError> {
+    if p.is_null() {
+        return Ok(String::new());
+    }
+    let bytes = std::ffi::CStr::from_ptr(p).to_bytes();
+    too_long(bytes.len(), instance, function, vr)?;
+    Ok(String::from_utf8_lossy(bytes).into_owned())
+}
+
+/// A String or Binary value of `len` bytes is refused when longer than [`MAX_STRING_BYTES`].
+pub(crate) fn too_long(
+    len: usize,
+    instance: &str,
+    function: &str,
+    vr: u32,
+) -> Result<(), FmuError> {
+    if len > MAX_STRING_BYTES {
+        return Err(FmuError::Instantiate {
+            instance: instance.to_string(),
+            message: format!(
+                "{function}: value reference {vr} holds {len} bytes, more than the {} MiB twinbench exchanges and records",
+                MAX_STRING_BYTES >> 20
+            ),
+        });
+    }
+    Ok(())
+}
