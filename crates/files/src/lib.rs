@@ -6,9 +6,14 @@
 //!
 //! [`input`]: an input file is read only when it is a regular file within the limit of
 //! its kind (never a FIFO, a device or a file that grows without end).
+//!
+//! [`shown`]: what a message may show of text twinbench did not write (cut, control
+//! characters escaped).
 
 pub mod input;
 pub mod paths;
+pub mod shown;
 
 pub use input::Limit;
 pub use paths::{absolute, folder_of, normalize, relative_to, resolve};
+pub use shown::{excerpt, shown};

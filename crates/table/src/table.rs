@@ -224,7 +224,7 @@ impl Table {
                     file: source.into(),
                     row,
                     column: names[j].clone(),
-                    value: field.to_owned(),
+                    value: tb_files::excerpt(field),
                 })?;
                 columns[j].push(v);
             }
@@ -465,7 +465,7 @@ impl Table {
                 file: self.source.clone(),
                 row: if t.is_empty() { 0 } else { self.line_of(0) },
                 column: self.names[i].clone(),
-                value: t.first().cloned().unwrap_or_default(),
+                value: t.first().map(|v| tb_files::excerpt(v)).unwrap_or_default(),
             }),
         }
     }

@@ -32,7 +32,10 @@ impl TargetSpeed {
             names.iter().position(|n| *n == name).ok_or_else(|| {
                 err(
                     header_line,
-                    format!("no column '{name}' in the header '{header}' (expected 's,v')"),
+                    format!(
+                        "no column '{name}' in the header '{}' (expected 's,v')",
+                        fmu_export::excerpt(header)
+                    ),
                 )
             })
         };
@@ -48,9 +51,12 @@ impl TargetSpeed {
                         format!("missing value of '{name}' ({} fields)", fields.len()),
                     )
                 })?;
-                let x: f64 = text
-                    .parse()
-                    .map_err(|_| err(line, format!("'{name}' = '{text}' is not a number")))?;
+                let x: f64 = text.parse().map_err(|_| {
+                    err(
+                        line,
+                        format!("'{name}' = '{}' is not a number", fmu_export::excerpt(text)),
+                    )
+                })?;
                 if !x.is_finite() {
                     return Err(err(line, format!("'{name}' = {x} is not finite")));
                 }

@@ -36,4 +36,6 @@ pub use context::{Context, ResourceCache};
 pub use model::{DefaultExperiment, Model, ModelError, ModelInfo, Resource, Severity};
 pub use runtime::{Logger, NullLogger, Runtime};
 pub use state::{ModelState, StateReader, StateWriter, Stateless};
+/// A short, escaped excerpt of user text for a message (a field of a file, a value).
+pub use tb_files::excerpt;
 pub use variables::{Value, VarInfo, VarTable};

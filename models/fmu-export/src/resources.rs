@@ -33,7 +33,8 @@ pub fn parameter_path(parameter: &str, value: &str) -> Result<PathBuf, ModelErro
     };
     if !path.is_absolute() {
         return Err(ModelError::new(format!(
-            "'{parameter}' = \"{value}\" is a relative path; give an absolute path or a file:// URI (twinbench resolves a relative path in a system file against the file's folder)"
+            "'{parameter}' = \"{}\" is a relative path; give an absolute path or a file:// URI (twinbench resolves a relative path in a system file against the file's folder)",
+            tb_files::excerpt(value)
         )));
     }
     Ok(path)
@@ -81,9 +82,11 @@ pub fn shared_file<T: Any + Send + Sync>(
 }
 
 /// Read a text file with the path in the error message.
+/// A file a parameter names, as text: a regular file within the data limit (never a FIFO,
+/// which would hang the host, nor a device, which would fill its memory).
 pub fn read_text(path: &Path) -> Result<String, ModelError> {
-    std::fs::read_to_string(path)
-        .map_err(|e| ModelError::new(format!("cannot read {}: {e}", path.display())))
+    tb_files::input::read_to_string(path, tb_files::Limit::DATA)
+        .map_err(|e| ModelError::new(e.to_string()))
 }
 
 #[cfg(test)]

@@ -68,7 +68,11 @@ impl Track {
                 x[k] = f.parse::<f64>().map_err(|_| {
                     err(
                         line,
-                        format!("column '{}': '{f}' is not a number", COLUMNS[k]),
+                        format!(
+                            "column '{}': '{}' is not a number",
+                            COLUMNS[k],
+                            fmu_export::excerpt(f)
+                        ),
                     )
                 })?;
                 if !x[k].is_finite() {

@@ -10,6 +10,8 @@ use std::sync::Mutex;
 
 /// How many of an instance's last log lines an error report carries.
 pub const KEPT_LINES: usize = 20;
+/// The longest message of an FMU's shown (in characters; more is cut, saying how much).
+pub const MAX_LINE_CHARS: usize = 4096;
 
 /// Where one instance's messages go.
 pub struct LogSink {
@@ -32,8 +34,15 @@ impl LogSink {
         self.echo.store(on, Ordering::Relaxed);
     }
 
+    /// A message of the FMU's, cut at [`MAX_LINE_CHARS`] and with control characters
+    /// escaped (an FMU's text reaches a terminal: no escape sequences, no 10 MB lines).
     pub fn push(&self, status: fmi2Status, category: &str, message: &str) {
-        let line = format!("[{}] {category}: {message}", status.name());
+        let line = format!(
+            "[{}] {}: {}",
+            status.name(),
+            tb_files::shown(category, 64, false),
+            tb_files::shown(message, MAX_LINE_CHARS, true)
+        );
         // Errors are not echoed: the call that failed reports them with its error (once).
         let level = match status {
             fmi2Status::OK => Some(log::Level::Debug),

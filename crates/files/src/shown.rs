@@ -1,0 +1,48 @@
+//! What a message may show of text it did not write: a field of a user's file, a path
+//! parameter's value, an FMU's log message. Cut to a length a terminal can take, with the
+//! cut said; control characters (a terminal's escape sequences, carriage returns) shown
+//! as escapes, never sent to the terminal.
+
+/// `text` for a message: at most `max_chars` characters (then `… (N more bytes)`), each
+/// control character escaped (`\u{1b}`), line breaks kept only when `lines` is true.
+pub fn shown(text: &str, max_chars: usize, lines: bool) -> String {
+    let mut out = String::with_capacity(text.len().min(max_chars * 4 + 32));
+    let mut count = 0;
+    for (i, c) in text.char_indices() {
+        if count == max_chars {
+            out.push_str(&format!("… ({} more bytes)", text.len() - i));
+            return out;
+        }
+        match c {
+            '\n' if lines => out.push(c),
+            '\t' => out.push(c),
+            c if c.is_control() => out.extend(c.escape_unicode()),
+            c => out.push(c),
+        }
+        count += 1;
+    }
+    out
+}
+
+/// A short excerpt of a field or a value (one line, 60 characters).
+pub fn excerpt(text: &str) -> String {
+    shown(text, 60, false)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn control_characters_are_escaped_and_long_text_cut() {
+        assert_eq!(shown("ok\tfine", 10, false), "ok\tfine");
+        assert_eq!(shown("\u{1b}[31mred", 20, false), "\\u{1b}[31mred");
+        assert_eq!(shown("a\nb\rc", 20, false), "a\\u{a}b\\u{d}c");
+        assert_eq!(shown("a\nb", 20, true), "a\nb");
+        assert_eq!(shown("abcdef", 3, false), "abc… (3 more bytes)");
+        assert_eq!(
+            excerpt(&"x".repeat(100_000_000)).len(),
+            60 + "… (99999940 more bytes)".len()
+        );
+    }
+}
