@@ -582,14 +582,6 @@ impl Response {
     }
 }
 
-/// A frame: the payload's length, then the payload.
-pub fn frame(payload: &[u8]) -> Vec<u8> {
-    let mut v = Vec::with_capacity(payload.len() + 4);
-    v.extend_from_slice(&(payload.len() as u32).to_le_bytes());
-    v.extend_from_slice(payload);
-    v
-}
-
 /// Writes values in the protocol's encoding.
 #[derive(Default)]
 pub struct Enc(pub Vec<u8>);
@@ -1053,7 +1045,10 @@ mod tests {
         e.start_frame();
         Request::DoStep { t: 0.0, h: 1.0 }.encode(&mut e);
         let bytes = e.finish_frame().to_vec();
-        assert_eq!(bytes, frame(&bytes[4..]));
+        assert_eq!(bytes.len(), 4 + 17);
         assert_eq!(u32::from_le_bytes(bytes[..4].try_into().unwrap()), 17);
+        // Started again, the frame is empty (its buffer kept).
+        e.start_frame();
+        assert_eq!(e.finish_frame(), [0, 0, 0, 0]);
     }
 }
