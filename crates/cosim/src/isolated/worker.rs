@@ -110,11 +110,12 @@ fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
         .map(Loaded::V2)
 }
 
-/// What a worker holds between requests: the library (loaded once) and the instance.
+/// What a worker holds between requests: the instance and the library (loaded once; the
+/// instance, dropped first, holds it too).
 #[derive(Default)]
 struct Worker {
-    library: Option<Loaded>,
     instance: Option<Box<dyn Backend>>,
+    library: Option<Loaded>,
 }
 
 /// A malformed request or one out of order.
@@ -327,8 +328,8 @@ mod tests {
     /// A worker serving a natively run instance (no library, no process).
     fn worker() -> Worker {
         Worker {
-            library: None,
             instance: Some(Box::new(NativeBackend::<Twice>::new("w", None, false))),
+            library: None,
         }
     }
 
