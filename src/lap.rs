@@ -94,7 +94,7 @@ pub fn lap_length(m: &Measurement) -> Result<f64, LapError> {
         )));
     }
     let length = d[n - 1] + v[n - 1] * (t[n - 1] - t[n - 2]);
-    if !(length >= MIN_LAP_LENGTH_M) {
+    if length.is_nan() || length < MIN_LAP_LENGTH_M {
         return Err(LapError::Invalid(format!(
             "{}: the car covers {length:.1} m in {:.1} s: not a lap (at least {MIN_LAP_LENGTH_M} m; a standing measurement?)",
             m.table().source(),

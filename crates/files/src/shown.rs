@@ -7,8 +7,7 @@
 /// control character escaped (`\u{1b}`), line breaks kept only when `lines` is true.
 pub fn shown(text: &str, max_chars: usize, lines: bool) -> String {
     let mut out = String::with_capacity(text.len().min(max_chars * 4 + 32));
-    let mut count = 0;
-    for (i, c) in text.char_indices() {
+    for (count, (i, c)) in text.char_indices().enumerate() {
         if count == max_chars {
             out.push_str(&format!("… ({} more bytes)", text.len() - i));
             return out;
@@ -19,7 +18,6 @@ pub fn shown(text: &str, max_chars: usize, lines: bool) -> String {
             c if c.is_control() => out.extend(c.escape_unicode()),
             c => out.push(c),
         }
-        count += 1;
     }
     out
 }

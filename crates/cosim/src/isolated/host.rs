@@ -4,7 +4,7 @@
 //! is checked (a malformed one kills the worker with a protocol error) and every round trip
 //! has a watchdog.
 
-use super::wire::{frame, function_of, kind, op, Dec, Enc, LibraryTarget, MAX_FRAME};
+use super::wire::{Enc, Failure, LibraryTarget, Request, Response, Values, MAX_FRAME};
 use super::{IsolationOptions, LibraryReport, STDERR_LINES};
 use crate::backend::Backend;
 use std::collections::VecDeque;
@@ -14,22 +14,8 @@ use std::os::unix::net::UnixStream;
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use tb_fmi::fmi2::fmi2Status;
 use tb_fmi::import::log::LogSink;
 use tb_fmi::{FmuError, Function, LoadedFmu};
-
-/// A kind of get, with the value references asked for.
-#[derive(Clone, Debug, PartialEq)]
-struct GetSpec {
-    op: u8,
-    vrs: Vec<u32>,
-}
-
-enum Values {
-    Real(Vec<f64>),
-    Int(Vec<i32>),
-    Text(Vec<String>),
-}
 
 /// One instance in a worker process.
 pub struct IsolatedBackend {
@@ -40,12 +26,14 @@ pub struct IsolatedBackend {
     stderr_tail: Arc<Mutex<VecDeque<String>>>,
     stderr_done: Arc<std::sync::atomic::AtomicBool>,
     timeout: Duration,
-    /// Queued set operations (sent with the next call).
-    pending: Enc,
+    /// The next request's frame: the queued sets, sent with the next call (reused).
+    request: Enc,
+    /// The last answer's bytes (reused).
+    answer: Vec<u8>,
     /// Gets made since the last step (the prediction for the next step).
-    observed: Vec<GetSpec>,
+    observed: Vec<Request<'static>>,
     /// Results of the gets sent with the last step, in order.
-    prefetched: VecDeque<(GetSpec, Values)>,
+    prefetched: VecDeque<(Request<'static>, Values)>,
     /// Why the worker is gone; every later call fails at once.
     dead: Option<String>,
     /// The FMU's last messages, as the worker reported them with an error.
@@ -61,14 +49,14 @@ impl IsolatedBackend {
         logging: bool,
     ) -> Result<IsolatedBackend, FmuError> {
         let mut b = IsolatedBackend::spawn(name, options)?;
-        let mut e = Enc::default();
-        e.u8(op::INSTANTIATE);
-        library_target(fmu, options).encode(&mut e);
-        e.str(name);
-        e.str(&fmu.description.guid);
-        e.str(&fmu.resource_dir().to_string_lossy());
-        e.u8(logging as u8);
-        b.call(Function::Instantiate.name(), e.0, &[])?;
+        b.queue(&Request::Instantiate {
+            library: library_target(fmu, options),
+            name: name.to_string(),
+            guid: fmu.description.guid.clone(),
+            resources: fmu.resource_dir().to_string_lossy().into_owned(),
+            logging,
+        });
+        b.call(Function::Instantiate.name(), &[])?;
         if logging {
             b.set_debug_logging(true)?;
         }
@@ -82,14 +70,9 @@ impl IsolatedBackend {
     ) -> Result<LibraryReport, FmuError> {
         let name = fmu.model_identifier().to_string();
         let mut b = IsolatedBackend::spawn(&name, options)?;
-        let mut e = Enc::default();
-        e.u8(op::PROBE);
-        library_target(fmu, options).encode(&mut e);
-        let spec = GetSpec {
-            op: op::PROBE,
-            vrs: vec![0, 0],
-        };
-        let answer = b.call(Function::GetVersion.name(), e.0, &[spec])?;
+        let probe = Request::Probe(library_target(fmu, options));
+        b.queue(&probe);
+        let answer = b.call(Function::GetVersion.name(), std::slice::from_ref(&probe))?;
         match answer.as_slice() {
             [Values::Text(t)] if t.len() == 2 => Ok(LibraryReport {
                 version: t[0].clone(),
@@ -149,7 +132,7 @@ impl IsolatedBackend {
                 })
                 .map_err(|e| fail(format!("cannot start a thread: {e}")))?;
         }
-        Ok(IsolatedBackend {
+        let mut b = IsolatedBackend {
             name: name.to_string(),
             time: 0.0,
             sock: host,
@@ -157,12 +140,15 @@ impl IsolatedBackend {
             stderr_tail,
             stderr_done,
             timeout: options.timeout,
-            pending: Enc::default(),
+            request: Enc::default(),
+            answer: Vec::new(),
             observed: Vec::new(),
             prefetched: VecDeque::new(),
             dead: None,
             sink: LogSink::new(name),
-        })
+        };
+        b.request.start_frame();
+        Ok(b)
     }
 
     /// The worker's process id (tests).
@@ -224,262 +210,197 @@ impl IsolatedBackend {
             .unwrap_or_default()
     }
 
-    fn send(&self, bytes: &[u8]) -> std::io::Result<()> {
-        let mut off = 0;
-        while off < bytes.len() {
-            // MSG_NOSIGNAL: a dead worker is an error here, never a SIGPIPE.
-            let n = unsafe {
-                libc::send(
-                    self.sock.as_raw_fd(),
-                    bytes[off..].as_ptr().cast(),
-                    bytes.len() - off,
-                    libc::MSG_NOSIGNAL,
-                )
-            };
-            if n < 0 {
-                let e = std::io::Error::last_os_error();
-                if e.kind() == std::io::ErrorKind::Interrupted {
-                    continue;
-                }
-                return Err(e);
-            }
-            off += n as usize;
-        }
-        Ok(())
-    }
-
-    /// Read exactly `buf.len()` bytes before `deadline`. Err(None): timed out.
-    fn recv_exact(&mut self, buf: &mut [u8], deadline: Instant) -> Result<(), Option<String>> {
-        let mut off = 0;
-        while off < buf.len() {
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Err(None);
-            }
-            self.sock
-                .set_read_timeout(Some(left))
-                .map_err(|e| Some(e.to_string()))?;
-            match self.sock.read(&mut buf[off..]) {
-                Ok(0) => return Err(Some("end of stream".into())),
-                Ok(n) => off += n,
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                    ) =>
-                {
-                    return Err(None)
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(Some(e.to_string())),
-            }
-        }
-        Ok(())
-    }
-
-    /// Send the queued sets plus `ops`, and decode the answer. `gets` lists the get
-    /// operations among `ops`, in order, with their counts (to decode their results).
-    fn call(
-        &mut self,
-        function: &str,
-        ops: Vec<u8>,
-        gets: &[GetSpec],
-    ) -> Result<Vec<Values>, FmuError> {
-        if let Some(cause) = &self.dead {
-            return Err(self.isolated_error(function, cause.clone(), self.stderr_lines()));
-        }
-        let mut payload = std::mem::take(&mut self.pending).0;
-        payload.extend_from_slice(&ops);
+    /// Send the request (the queued sets and what was queued since) and take its answer
+    /// into `self.answer`; the worker killed, and why, when it fails to answer in time or
+    /// in form. The next request starts empty either way.
+    fn exchange(&mut self) -> Result<(), String> {
         let deadline = Instant::now() + self.timeout;
-        let sent = self.send(&frame(&payload));
+        let sent = send(&self.sock, self.request.finish_frame());
+        self.request.start_frame();
         let mut len = [0u8; 4];
         let got = match sent {
-            Ok(()) => self.recv_exact(&mut len, deadline),
+            Ok(()) => recv_exact(&self.sock, &mut len, deadline),
             Err(e) => Err(Some(format!("cannot write to the worker: {e}"))),
         };
-        let mut body = Vec::new();
         let n = u32::from_le_bytes(len) as usize;
         if got.is_ok() && n > MAX_FRAME {
             let end = self.bury(true);
-            let cause = format!(
+            return Err(format!(
                 "protocol error (answer of {n} bytes is too large, the limit is {MAX_FRAME}); killed ({end})"
-            );
-            self.dead = Some(cause.clone());
-            return Err(self.isolated_error(function, cause, self.stderr_lines()));
+            ));
         }
         let got = got.and_then(|()| {
-            body.resize(n, 0);
-            self.recv_exact(&mut body, deadline)
+            self.answer.resize(n, 0);
+            recv_exact(&self.sock, &mut self.answer, deadline)
         });
-        if let Err(why) = got {
-            let cause = match why {
-                None => {
-                    let end = self.bury(true);
-                    format!(
-                        "no answer within {:?} (watchdog): the FMU hangs; killed ({end})",
-                        self.timeout
-                    )
-                }
-                Some(_) => {
-                    let end = self.bury(false);
-                    format!("{end} (crashed)")
-                }
-            };
-            self.dead = Some(cause.clone());
-            return Err(self.isolated_error(function, cause, self.stderr_lines()));
-        }
-        self.decode(function, &body, gets).map_err(|e| match e {
-            Decoded::Fmu(e) => e,
-            Decoded::Protocol(m) => {
+        match got {
+            Ok(()) => Ok(()),
+            Err(None) => {
                 let end = self.bury(true);
-                let cause = format!("protocol error ({m}); killed ({end})");
-                self.dead = Some(cause.clone());
-                self.isolated_error(function, cause, self.stderr_lines())
+                Err(format!(
+                    "no answer within {:?} (watchdog): the FMU hangs; killed ({end})",
+                    self.timeout
+                ))
             }
-        })
+            Err(Some(_)) => Err(format!("{} (crashed)", self.bury(false))),
+        }
     }
 
-    fn decode(
-        &mut self,
-        function: &str,
-        body: &[u8],
-        gets: &[GetSpec],
-    ) -> Result<Vec<Values>, Decoded> {
-        let mut d = Dec::new(body);
-        let p = |m: String| Decoded::Protocol(m);
-        let ok = d.u8().map_err(p)? == 0;
-        let n_gets = d.u32().map_err(p)? as usize;
-        let time = d.f64().map_err(p)?;
-        if n_gets > gets.len() {
-            return Err(p(format!("{n_gets} results for {} gets", gets.len())));
+    /// Send the request and decode its answer: the values of the gets among `answered`
+    /// (the operations queued since the last call that are answered, in order).
+    fn call(&mut self, function: &str, answered: &[Request<'_>]) -> Result<Vec<Values>, FmuError> {
+        if let Some(cause) = &self.dead {
+            self.request.start_frame();
+            return Err(self.isolated_error(function, cause.clone(), self.stderr_lines()));
         }
-        let mut out = Vec::with_capacity(n_gets);
-        for g in &gets[..n_gets] {
-            out.push(if g.op == op::GET_REAL || g.op == op::FMU_TERMINATED {
-                Values::Real(
-                    (0..g.vrs.len())
-                        .map(|_| d.f64())
-                        .collect::<Result<_, _>>()
-                        .map_err(p)?,
-                )
-            } else if g.op == op::GET_STRING || g.op == op::PROBE {
-                Values::Text(
-                    (0..g.vrs.len())
-                        .map(|_| d.str())
-                        .collect::<Result<_, _>>()
-                        .map_err(p)?,
-                )
-            } else {
-                Values::Int(
-                    (0..g.vrs.len())
-                        .map(|_| d.i32())
-                        .collect::<Result<_, _>>()
-                        .map_err(p)?,
-                )
-            });
+        let response = self
+            .exchange()
+            .and_then(|()| {
+                Response::decode(&self.answer, answered).map_err(|m| {
+                    let end = self.bury(true);
+                    format!("protocol error ({m}); killed ({end})")
+                })
+            })
+            .map_err(|cause| self.died(function, cause))?;
+        match response.error {
+            None => Ok(response.results),
+            Some(f) => Err(self.failure(function, f)),
         }
-        if ok {
-            if !d.at_end() {
-                return Err(p("trailing bytes".into()));
-            }
-            return Ok(out);
-        }
-        let _ = time;
-        let k = d.u8().map_err(p)?;
-        let e = match k {
-            kind::CALL => {
-                let code = d.u8().map_err(p)?;
-                let f =
-                    function_of(code).ok_or_else(|| p(format!("unknown function code {code}")))?;
-                let status = fmi2Status(d.i32().map_err(p)?);
-                let t = d.f64().map_err(p)?;
-                let n = d.count(4).map_err(p)?;
-                let log: Vec<String> = (0..n)
-                    .map(|_| d.str())
-                    .collect::<Result<_, _>>()
-                    .map_err(p)?;
+    }
+
+    /// The worker is gone for `cause`: this call's error, and every later call's.
+    fn died(&mut self, function: &str, cause: String) -> FmuError {
+        self.dead = Some(cause.clone());
+        self.isolated_error(function, cause, self.stderr_lines())
+    }
+
+    /// The error a request stopped with, as the FMU's (its log kept for reports).
+    fn failure(&mut self, function: &str, f: Failure) -> FmuError {
+        match f {
+            Failure::Call {
+                function,
+                status,
+                time,
+                log,
+            } => {
                 self.sink.clear();
                 for l in &log {
                     self.sink.keep(l.clone());
                 }
-                FmuError::call(&self.name, f, status, t, log)
+                FmuError::call(&self.name, function, status, time, log)
             }
-            kind::INSTANTIATE => FmuError::Instantiate {
+            Failure::Instantiate(message) => FmuError::Instantiate {
                 instance: self.name.clone(),
-                message: d.str().map_err(p)?,
+                message,
             },
-            kind::UNSUPPORTED => {
-                let code = d.u8().map_err(p)?;
-                FmuError::Unsupported {
-                    instance: self.name.clone(),
-                    what: function_of(code).map_or("a function", Function::name),
-                }
-            }
-            _ => {
-                let m = d.str().map_err(p)?;
-                self.isolated_error(function, m, Vec::new())
-            }
-        };
-        Err(Decoded::Fmu(e))
+            Failure::Unsupported(f) => FmuError::Unsupported {
+                instance: self.name.clone(),
+                what: f.map_or("a function", Function::name),
+            },
+            Failure::Other(m) => self.isolated_error(function, m, Vec::new()),
+        }
     }
 
-    fn control(
-        &mut self,
-        function: &str,
-        code: u8,
-        args: impl FnOnce(&mut Enc),
-    ) -> Result<(), FmuError> {
+    /// Add an operation to the next request.
+    fn queue(&mut self, op: &Request<'_>) {
+        op.encode(&mut self.request);
+    }
+
+    /// A call that changes the instance's state (no answer but its status).
+    fn control(&mut self, function: &str, op: Request<'_>) -> Result<(), FmuError> {
         self.prefetched.clear();
         // Gets before a state change are no guide to those after the next step.
         self.observed.clear();
-        let mut e = Enc::default();
-        e.u8(code);
-        args(&mut e);
-        self.call(function, e.0, &[]).map(|_| ())
+        self.queue(&op);
+        self.call(function, &[]).map(|_| ())
     }
 
-    fn queue_set(&mut self, code: u8, vrs: &[u32], write: impl FnOnce(&mut Enc)) {
+    /// A set, sent with the next call.
+    fn queue_set(&mut self, op: Request<'_>) {
         // A set may change outputs (direct feed-through): what was fetched is stale.
         self.prefetched.clear();
-        self.pending.u8(code);
-        self.pending.vrs(vrs);
-        write(&mut self.pending);
+        self.queue(&op);
     }
 
-    fn get(&mut self, function: &str, code: u8, vrs: &[u32]) -> Result<Values, FmuError> {
-        let spec = GetSpec {
-            op: code,
-            vrs: vrs.to_vec(),
+    /// A get: its prefetched values when it is the one predicted, else a round trip.
+    fn get(&mut self, function: &str, op: Request<'_>) -> Result<Values, FmuError> {
+        if self.prefetched.front().is_some_and(|(p, _)| *p == op) {
+            let (op, values) = self.prefetched.pop_front().expect("a prefetched get");
+            self.observed.push(op);
+            return Ok(values);
+        }
+        self.prefetched.clear();
+        self.queue(&op);
+        let Some(values) = self.call(function, std::slice::from_ref(&op))?.pop() else {
+            // A worker that answers a get with no result is broken or hostile.
+            let end = self.bury(true);
+            let cause = format!("protocol error (no result for the get); killed ({end})");
+            return Err(self.died(function, cause));
         };
-        let hit = self.prefetched.front().is_some_and(|(s, _)| *s == spec);
-        let values = if hit {
-            self.prefetched.pop_front().unwrap().1
-        } else {
-            self.prefetched.clear();
-            let mut e = Enc::default();
-            e.u8(code);
-            e.vrs(vrs);
-            let mut r = self.call(function, e.0, std::slice::from_ref(&spec))?;
-            match r.pop() {
-                Some(v) => v,
-                // A worker that answers a get with no result is broken or hostile.
-                None => {
-                    let end = self.bury(true);
-                    let cause = format!("protocol error (no result for the get); killed ({end})");
-                    self.dead = Some(cause.clone());
-                    return Err(self.isolated_error(function, cause, self.stderr_lines()));
-                }
-            }
-        };
-        self.observed.push(spec);
+        self.observed.push(op.into_owned());
         Ok(values)
     }
 
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
-        self.control("fmi2SetDebugLogging", op::SET_DEBUG_LOGGING, |e| {
-            e.u8(on as u8)
-        })
+        self.control("fmi2SetDebugLogging", Request::SetDebugLogging(on))
     }
+}
+
+/// Write all of `bytes`.
+fn send(sock: &UnixStream, bytes: &[u8]) -> std::io::Result<()> {
+    let mut off = 0;
+    while off < bytes.len() {
+        // MSG_NOSIGNAL: a dead worker is an error here, never a SIGPIPE.
+        let n = unsafe {
+            libc::send(
+                sock.as_raw_fd(),
+                bytes[off..].as_ptr().cast(),
+                bytes.len() - off,
+                libc::MSG_NOSIGNAL,
+            )
+        };
+        if n < 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                continue;
+            }
+            return Err(e);
+        }
+        off += n as usize;
+    }
+    Ok(())
+}
+
+/// Read exactly `buf.len()` bytes before `deadline`. Err(None): timed out.
+fn recv_exact(
+    mut sock: &UnixStream,
+    buf: &mut [u8],
+    deadline: Instant,
+) -> Result<(), Option<String>> {
+    let mut off = 0;
+    while off < buf.len() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(None);
+        }
+        sock.set_read_timeout(Some(left))
+            .map_err(|e| Some(e.to_string()))?;
+        match sock.read(&mut buf[off..]) {
+            Ok(0) => return Err(Some("end of stream".into())),
+            Ok(n) => off += n,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                return Err(None)
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(Some(e.to_string())),
+        }
+    }
+    Ok(())
 }
 
 /// The longest line of a worker's stderr kept (longer ones are cut): a worker that writes
@@ -555,11 +476,6 @@ fn library_target(fmu: &LoadedFmu, options: &IsolationOptions) -> LibraryTarget 
     }
 }
 
-enum Decoded {
-    Fmu(FmuError),
-    Protocol(String),
-}
-
 fn signal_name(sig: i32) -> &'static str {
     match sig {
         libc::SIGABRT => "SIGABRT: abort",
@@ -603,58 +519,67 @@ impl Backend for IsolatedBackend {
     }
     fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
         self.time = start;
-        self.control("fmi2SetupExperiment", op::SETUP_EXPERIMENT, |e| {
-            e.f64(start);
-            e.u8(stop.is_some() as u8);
-            e.f64(stop.unwrap_or(0.0));
-        })
+        self.control(
+            "fmi2SetupExperiment",
+            Request::SetupExperiment { start, stop },
+        )
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
-        self.control("fmi2EnterInitializationMode", op::ENTER_INIT, |_| {})
+        self.control("fmi2EnterInitializationMode", Request::EnterInit)
     }
     fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
-        self.control("fmi2ExitInitializationMode", op::EXIT_INIT, |_| {})
+        self.control("fmi2ExitInitializationMode", Request::ExitInit)
     }
     fn terminate(&mut self) -> Result<(), FmuError> {
-        self.control("fmi2Terminate", op::TERMINATE, |_| {})
+        self.control("fmi2Terminate", Request::Terminate)
     }
     fn reset(&mut self) -> Result<(), FmuError> {
-        self.pending = Enc::default();
+        // Sets queued before a reset would land after it.
+        self.request.start_frame();
         self.observed.clear();
-        let r = self.control("fmi2Reset", op::RESET, |_| {});
+        let r = self.control("fmi2Reset", Request::Reset);
         self.time = 0.0;
         r
     }
     fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        copy_real(self.get("fmi2GetReal", op::GET_REAL, vrs)?, out);
+        let op = Request::GetReal { vrs: vrs.into() };
+        copy_real(self.get("fmi2GetReal", op)?, out);
         Ok(())
     }
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        self.queue_set(op::SET_REAL, vrs, |e| values.iter().for_each(|&x| e.f64(x)));
+        self.queue_set(Request::SetReal {
+            vrs: vrs.into(),
+            values: values.into(),
+        });
         Ok(())
     }
     fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        copy_int(self.get("fmi2GetInteger", op::GET_INTEGER, vrs)?, out);
+        let op = Request::GetInteger { vrs: vrs.into() };
+        copy_int(self.get("fmi2GetInteger", op)?, out);
         Ok(())
     }
     fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        self.queue_set(op::SET_INTEGER, vrs, |e| {
-            values.iter().for_each(|&x| e.i32(x))
+        self.queue_set(Request::SetInteger {
+            vrs: vrs.into(),
+            values: values.into(),
         });
         Ok(())
     }
     fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        copy_int(self.get("fmi2GetBoolean", op::GET_BOOLEAN, vrs)?, out);
+        let op = Request::GetBoolean { vrs: vrs.into() };
+        copy_int(self.get("fmi2GetBoolean", op)?, out);
         Ok(())
     }
     fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        self.queue_set(op::SET_BOOLEAN, vrs, |e| {
-            values.iter().for_each(|&x| e.i32(x))
+        self.queue_set(Request::SetBoolean {
+            vrs: vrs.into(),
+            values: values.into(),
         });
         Ok(())
     }
     fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
-        match self.get("fmi2GetString", op::GET_STRING, vrs)? {
+        let op = Request::GetString { vrs: vrs.into() };
+        match self.get("fmi2GetString", op)? {
             Values::Text(t) if t.len() == vrs.len() => {
                 *out = t;
                 Ok(())
@@ -667,23 +592,18 @@ impl Backend for IsolatedBackend {
         }
     }
     fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
-        self.queue_set(op::SET_STRING, vrs, |e| {
-            values.iter().for_each(|v| e.str(v))
+        self.queue_set(Request::SetString {
+            vrs: vrs.into(),
+            values: values.iter().map(|&v| v.into()).collect(),
         });
         Ok(())
     }
     fn terminated_by_fmu(&mut self) -> Option<f64> {
-        let spec = GetSpec {
-            op: op::FMU_TERMINATED,
-            vrs: vec![0, 0],
-        };
         self.prefetched.clear();
+        self.queue(&Request::FmuTerminated);
+        let answered = [Request::FmuTerminated];
         match self
-            .call(
-                Function::GetBooleanStatus.name(),
-                vec![op::FMU_TERMINATED],
-                std::slice::from_ref(&spec),
-            )
+            .call(Function::GetBooleanStatus.name(), &answered)
             .ok()?
             .pop()
         {
@@ -696,23 +616,20 @@ impl Backend for IsolatedBackend {
     }
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
         // The step, then the gets that followed the previous step: one round trip.
-        let predicted = std::mem::take(&mut self.observed);
-        let mut e = Enc::default();
-        e.u8(op::DO_STEP);
-        e.f64(t);
-        e.f64(h);
+        let mut predicted = std::mem::take(&mut self.observed);
+        self.queue(&Request::DoStep { t, h });
         for g in &predicted {
-            e.u8(g.op);
-            e.vrs(&g.vrs);
+            self.queue(g);
         }
         self.prefetched.clear();
         self.time = t;
         // Results are counted over the gets only; the step itself yields none.
-        let r = self.call("fmi2DoStep", e.0, &predicted);
-        match r {
+        match self.call("fmi2DoStep", &predicted) {
             Ok(values) => {
                 self.time = t + h;
-                self.prefetched = predicted.into_iter().zip(values).collect();
+                self.prefetched.extend(predicted.drain(..).zip(values));
+                // The emptied list keeps its room for this step's gets.
+                self.observed = predicted;
                 Ok(())
             }
             Err(e) => {
@@ -741,7 +658,9 @@ impl Drop for IsolatedBackend {
             return;
         }
         // Ask the worker to free the instance and leave; kill it if it does not.
-        let _ = self.send(&frame(&[op::QUIT]));
+        self.request.start_frame();
+        self.queue(&Request::Quit);
+        let _ = send(&self.sock, self.request.finish_frame());
         let _ = self.sock.shutdown(std::net::Shutdown::Write);
         let until = Instant::now() + Duration::from_secs(1);
         if let Some(child) = self.child.as_mut() {

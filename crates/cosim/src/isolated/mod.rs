@@ -13,8 +13,9 @@
 //! complete answer in time, and the worker is killed.
 
 //! - this module: the options and the factory;
-//! - [`wire`]: the frame codec and the operation codes (FMI calls by their number in
-//!   [`tb_fmi::FUNCTIONS`]);
+//! - [`wire`]: the protocol described once, used by both ends: the operations
+//!   ([`wire::Request`]: FMI calls by their number in [`tb_fmi::FUNCTIONS`]), the answer
+//!   ([`wire::Response`]: get results, the error with its kind and fields) and their encoding;
 //! - [`host`]: the backend that talks to a worker;
 //! - [`worker`]: the server that runs in the worker process.
 

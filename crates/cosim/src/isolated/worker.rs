@@ -1,7 +1,7 @@
 //! The worker's end: serves one instance over the socket on stdin until the host closes it
 //! or says quit. Runs in its own process (`twinbench worker`).
 
-use super::wire::{frame, kind, op, Dec, Enc, LibraryTarget, MAX_FRAME};
+use super::wire::{Dec, Enc, Failure, LibraryTarget, Request, Response, Values, MAX_FRAME};
 use crate::backend::Backend;
 use std::io::{Read, Write};
 use std::os::unix::net::UnixStream;
@@ -50,13 +50,16 @@ pub fn serve_stdio() -> i32 {
     serve(stream)
 }
 
-fn serve(mut stream: UnixStream) -> i32 {
-    let mut inst: Option<Box<dyn Backend>> = None;
-    let mut lib_cache: Option<Loaded> = None;
-    let mut buf = Vec::new();
+fn serve(stream: UnixStream) -> i32 {
+    let mut worker = Worker::default();
+    // A request's length and body usually come in one read.
+    let mut reader = std::io::BufReader::new(&stream);
+    // Both buffers are reused from request to request.
+    let mut request = Vec::new();
+    let mut answer = Enc::default();
     loop {
         let mut len = [0u8; 4];
-        if stream.read_exact(&mut len).is_err() {
+        if reader.read_exact(&mut len).is_err() {
             return 0; // the host is gone
         }
         let n = u32::from_le_bytes(len) as usize;
@@ -64,17 +67,17 @@ fn serve(mut stream: UnixStream) -> i32 {
             eprintln!("twinbench worker: request of {n} bytes refused");
             return 2;
         }
-        buf.resize(n, 0);
-        if stream.read_exact(&mut buf).is_err() {
+        request.resize(n, 0);
+        if reader.read_exact(&mut request).is_err() {
             return 0;
         }
-        let mut out = Enc::default();
-        let quit = run_ops(&buf, &mut inst, &mut lib_cache, &mut out);
-        if quit {
-            drop(inst);
+        let Some(response) = worker.serve(&request) else {
+            drop(worker);
             return 0;
-        }
-        if stream.write_all(&frame(&out.0)).is_err() {
+        };
+        answer.start_frame();
+        response.encode(&mut answer);
+        if (&stream).write_all(answer.finish_frame()).is_err() {
             return 0;
         }
     }
@@ -115,225 +118,345 @@ fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
         .map(Loaded::V2)
 }
 
-/// Run one request; write the response into `out`. Returns true on quit.
-fn run_ops(
-    req: &[u8],
-    inst: &mut Option<Box<dyn Backend>>,
-    lib_cache: &mut Option<Loaded>,
-    out: &mut Enc,
-) -> bool {
-    let mut d = Dec::new(req);
-    let mut results = Enc::default();
-    let mut n_gets = 0u32;
-    let mut reals = Vec::new();
-    let mut ints = Vec::new();
-    let err: Option<FmuError> = loop {
-        if d.at_end() {
-            break None;
-        }
-        let r = (|| -> Result<bool, Result<FmuError, String>> {
-            let code = d.u8().map_err(Err)?;
-            if code == op::QUIT {
-                return Ok(true);
-            }
-            if code == op::INSTANTIATE || code == op::PROBE {
-                let target = LibraryTarget::decode(&mut d).map_err(Err)?;
-                let library = match lib_cache {
-                    Some(l) => l.clone(),
-                    None => load_library(&target).map_err(Ok)?,
-                };
-                *lib_cache = Some(library.clone());
-                if code == op::PROBE {
-                    match &library {
-                        Loaded::V2(l) => {
-                            results.str(&l.version);
-                            results.str(&l.missing_optional.join(","));
-                        }
-                        Loaded::V3(l, _) => {
-                            results.str(&l.version);
-                            results.str("");
-                        }
-                    }
-                    n_gets += 1;
-                    return Ok(false);
+/// What a worker holds between requests: the instance and the library (loaded once; the
+/// instance, dropped first, holds it too).
+#[derive(Default)]
+struct Worker {
+    instance: Option<Box<dyn Backend>>,
+    library: Option<Loaded>,
+}
+
+/// A malformed request or one out of order.
+fn protocol(message: impl Into<String>) -> Failure {
+    Failure::Other(message.into())
+}
+
+impl Worker {
+    /// Run one request's operations in order until the first error, and answer; `None`
+    /// when the host says quit.
+    fn serve(&mut self, request: &[u8]) -> Option<Response> {
+        let mut d = Dec::new(request);
+        let mut results = Vec::new();
+        let mut error = None;
+        while !d.at_end() {
+            let outcome = match Request::decode(&mut d) {
+                Ok(Request::Quit) => return None,
+                Ok(op) => self.run(op),
+                Err(m) => Err(protocol(m)),
+            };
+            match outcome {
+                Ok(Some(values)) => results.push(values),
+                Ok(None) => {}
+                Err(e) => {
+                    error = Some(e);
+                    break;
                 }
-                let name = d.str().map_err(Err)?;
-                let guid = d.str().map_err(Err)?;
-                let res = PathBuf::from(d.str().map_err(Err)?);
-                let logging = d.u8().map_err(Err)? != 0;
-                *inst = None;
-                let mut i: Box<dyn Backend> = match library {
-                    Loaded::V2(l) => Box::new(
-                        Instance::instantiate(l, &name, &guid, Some(&res), logging).map_err(Ok)?,
-                    ),
-                    Loaded::V3(l, md) => Box::new(
-                        Instance3::instantiate(l, &md, &name, Some(&res), logging).map_err(Ok)?,
-                    ),
-                };
-                i.set_echo(false);
-                *inst = Some(i);
-                return Ok(false);
-            }
-            let i = inst
-                .as_mut()
-                .ok_or_else(|| Err("no instance: instantiate first".to_string()))?;
-            match code {
-                op::SET_DEBUG_LOGGING => {
-                    let on = d.u8().map_err(Err)? != 0;
-                    i.set_debug_logging(on).map_err(Ok)?
-                }
-                op::SETUP_EXPERIMENT => {
-                    let start = d.f64().map_err(Err)?;
-                    let has = d.u8().map_err(Err)? != 0;
-                    let stop = d.f64().map_err(Err)?;
-                    i.setup_experiment(start, has.then_some(stop)).map_err(Ok)?
-                }
-                op::ENTER_INIT => i.enter_initialization_mode().map_err(Ok)?,
-                op::EXIT_INIT => i.exit_initialization_mode().map_err(Ok)?,
-                op::TERMINATE => i.terminate().map_err(Ok)?,
-                op::RESET => i.reset().map_err(Ok)?,
-                op::SET_REAL => {
-                    let vrs = d.vrs().map_err(Err)?;
-                    reals.clear();
-                    for _ in 0..vrs.len() {
-                        reals.push(d.f64().map_err(Err)?);
-                    }
-                    i.set_real(&vrs, &reals).map_err(Ok)?
-                }
-                op::SET_INTEGER | op::SET_BOOLEAN => {
-                    let vrs = d.vrs().map_err(Err)?;
-                    ints.clear();
-                    for _ in 0..vrs.len() {
-                        ints.push(d.i32().map_err(Err)?);
-                    }
-                    if code == op::SET_INTEGER {
-                        i.set_integer(&vrs, &ints).map_err(Ok)?
-                    } else {
-                        i.set_boolean(&vrs, &ints).map_err(Ok)?
-                    }
-                }
-                op::SET_STRING => {
-                    let vrs = d.vrs().map_err(Err)?;
-                    let mut texts = Vec::with_capacity(vrs.len());
-                    for _ in 0..vrs.len() {
-                        texts.push(d.str().map_err(Err)?);
-                    }
-                    let refs: Vec<&str> = texts.iter().map(String::as_str).collect();
-                    i.set_string(&vrs, &refs).map_err(Ok)?
-                }
-                op::GET_STRING => {
-                    let vrs = d.vrs().map_err(Err)?;
-                    let mut texts = Vec::new();
-                    i.get_string(&vrs, &mut texts).map_err(Ok)?;
-                    texts.iter().for_each(|t| results.str(t));
-                    n_gets += 1;
-                }
-                op::GET_REAL => {
-                    let vrs = d.vrs().map_err(Err)?;
-                    reals.clear();
-                    reals.resize(vrs.len(), 0.0);
-                    i.get_real(&vrs, &mut reals).map_err(Ok)?;
-                    reals.iter().for_each(|&x| results.f64(x));
-                    n_gets += 1;
-                }
-                op::GET_INTEGER | op::GET_BOOLEAN => {
-                    let vrs = d.vrs().map_err(Err)?;
-                    ints.clear();
-                    ints.resize(vrs.len(), 0);
-                    if code == op::GET_INTEGER {
-                        i.get_integer(&vrs, &mut ints).map_err(Ok)?
-                    } else {
-                        i.get_boolean(&vrs, &mut ints).map_err(Ok)?
-                    }
-                    ints.iter().for_each(|&x| results.i32(x));
-                    n_gets += 1;
-                }
-                op::FMU_TERMINATED => {
-                    let last = i.terminated_by_fmu();
-                    results.f64(last.is_some() as u8 as f64);
-                    results.f64(last.unwrap_or(0.0));
-                    n_gets += 1;
-                }
-                op::DO_STEP => {
-                    let t = d.f64().map_err(Err)?;
-                    let h = d.f64().map_err(Err)?;
-                    i.do_step(t, h).map_err(Ok)?
-                }
-                c => return Err(Err(format!("unknown operation {c}"))),
-            }
-            Ok(false)
-        })();
-        match r {
-            Ok(true) => return true,
-            Ok(false) => {}
-            Err(Ok(e)) => break Some(e),
-            Err(Err(m)) => {
-                break Some(FmuError::Isolated {
-                    instance: String::new(),
-                    function: "the protocol".into(),
-                    time: 0.0,
-                    cause: m,
-                    log: Vec::new(),
-                })
             }
         }
-    };
-    out.u8(err.is_some() as u8);
-    out.u32(n_gets);
-    out.f64(inst.as_ref().map_or(0.0, |i| i.time()));
-    out.0.extend_from_slice(&results.0);
-    if let Some(e) = err {
-        match e {
-            FmuError::Call {
-                function,
-                status,
-                time,
-                log,
-                ..
+        Some(Response {
+            time: self.instance.as_ref().map_or(0.0, |i| i.time()),
+            results,
+            error,
+        })
+    }
+
+    /// One operation; a get's values.
+    fn run(&mut self, op: Request<'_>) -> Result<Option<Values>, Failure> {
+        match op {
+            Request::Instantiate {
+                library,
+                name,
+                guid,
+                resources,
+                logging,
             } => {
-                out.u8(kind::CALL);
-                out.u8(function as u8);
-                out.i32(status.0);
-                out.f64(time);
-                out.u32(log.len() as u32);
-                log.iter().for_each(|l| out.str(l));
+                let library = self.load(&library)?;
+                self.instantiate(library, &name, &guid, &resources, logging)?;
+                Ok(None)
             }
-            FmuError::Instantiate { message, .. } => {
-                out.u8(kind::INSTANTIATE);
-                out.str(&message);
-            }
-            FmuError::Unsupported { what, .. } => {
-                out.u8(kind::UNSUPPORTED);
-                out.u8(tb_fmi::Function::from_name(what).map_or(u8::MAX, |f| f as u8));
-            }
-            FmuError::Isolated { cause, .. } => {
-                out.u8(kind::OTHER);
-                out.str(&cause);
-            }
-            other => {
-                out.u8(kind::OTHER);
-                out.str(&other.to_string());
+            Request::Probe(library) => Ok(Some(probe(&self.load(&library)?))),
+            op => {
+                let i = self
+                    .instance
+                    .as_deref_mut()
+                    .ok_or_else(|| protocol("no instance: instantiate first"))?;
+                Ok(call(i, op)?)
             }
         }
     }
-    false
+
+    /// The FMU's library, loaded on the first request that names it.
+    fn load(&mut self, target: &LibraryTarget) -> Result<Loaded, FmuError> {
+        if let Some(l) = &self.library {
+            return Ok(l.clone());
+        }
+        let l = load_library(target)?;
+        self.library = Some(l.clone());
+        Ok(l)
+    }
+
+    /// A fresh instance (the previous one freed first).
+    fn instantiate(
+        &mut self,
+        library: Loaded,
+        name: &str,
+        guid: &str,
+        resources: &str,
+        logging: bool,
+    ) -> Result<(), FmuError> {
+        self.instance = None;
+        let res = PathBuf::from(resources);
+        let mut i: Box<dyn Backend> = match library {
+            Loaded::V2(l) => Box::new(Instance::instantiate(l, name, guid, Some(&res), logging)?),
+            Loaded::V3(l, md) => {
+                Box::new(Instance3::instantiate(l, &md, name, Some(&res), logging)?)
+            }
+        };
+        i.set_echo(false);
+        self.instance = Some(i);
+        Ok(())
+    }
+}
+
+/// What a loaded library reports: its version and the optional functions it lacks.
+fn probe(library: &Loaded) -> Values {
+    Values::Text(match library {
+        Loaded::V2(l) => vec![l.version.clone(), l.missing_optional.join(",")],
+        Loaded::V3(l, _) => vec![l.version.clone(), String::new()],
+    })
+}
+
+/// One call on the instance; a get's values.
+fn call(i: &mut dyn Backend, op: Request<'_>) -> Result<Option<Values>, Failure> {
+    match op {
+        Request::SetDebugLogging(on) => i.set_debug_logging(on)?,
+        Request::SetupExperiment { start, stop } => i.setup_experiment(start, stop)?,
+        Request::EnterInit => i.enter_initialization_mode()?,
+        Request::ExitInit => i.exit_initialization_mode()?,
+        Request::Terminate => i.terminate()?,
+        Request::Reset => i.reset()?,
+        Request::SetReal { vrs, values } => i.set_real(&vrs, &values)?,
+        Request::SetInteger { vrs, values } => i.set_integer(&vrs, &values)?,
+        Request::SetBoolean { vrs, values } => i.set_boolean(&vrs, &values)?,
+        Request::SetString { vrs, values } => {
+            let refs: Vec<&str> = values.iter().map(|s| s.as_ref()).collect();
+            i.set_string(&vrs, &refs)?
+        }
+        Request::DoStep { t, h } => i.do_step(t, h)?,
+        op => return get(i, op).map(Some),
+    }
+    Ok(None)
+}
+
+/// A get's values (the operations that are answered).
+fn get(i: &mut dyn Backend, op: Request<'_>) -> Result<Values, Failure> {
+    Ok(match op {
+        Request::GetReal { vrs } => {
+            let mut out = vec![0.0; vrs.len()];
+            i.get_real(&vrs, &mut out)?;
+            Values::Real(out)
+        }
+        Request::GetInteger { vrs } => {
+            let mut out = vec![0; vrs.len()];
+            i.get_integer(&vrs, &mut out)?;
+            Values::Int(out)
+        }
+        Request::GetBoolean { vrs } => {
+            let mut out = vec![0; vrs.len()];
+            i.get_boolean(&vrs, &mut out)?;
+            Values::Int(out)
+        }
+        Request::GetString { vrs } => {
+            let mut out = Vec::new();
+            i.get_string(&vrs, &mut out)?;
+            Values::Text(out)
+        }
+        Request::FmuTerminated => {
+            let last = i.terminated_by_fmu();
+            Values::Real(vec![last.is_some() as u8 as f64, last.unwrap_or(0.0)])
+        }
+        other => return Err(protocol(format!("operation {} out of place", other.code()))),
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::native::NativeBackend;
+    use fmu_export::variables::*;
+    use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo};
+    use tb_fmi::fmi2::fmi2Status;
+    use tb_fmi::Function;
+
+    fmu_export::variables! {
+        pub struct TwiceVars {
+            u: Real = 0.0 => input(1).describe("Input"),
+            y: Real = 0.0 => output(2).depends_on(&[u]).describe("2·u"),
+            steps: Integer = 0 => discrete_output(3).describe("Steps taken"),
+        }
+    }
+
+    /// y = 2·u.
+    #[derive(Clone)]
+    struct Twice;
+
+    impl Model for Twice {
+        type Vars = TwiceVars;
+        const INFO: ModelInfo = ModelInfo {
+            name: "twice",
+            identifier: "twice",
+            description: "y = 2·u",
+            version: "1",
+            default_experiment: DefaultExperiment {
+                start_time: 0.0,
+                stop_time: 1.0,
+                step_size: 0.5,
+            },
+            documentation: "",
+            resources: &[],
+        };
+        fn initialize(_v: &mut TwiceVars, _ctx: &Context) -> Result<Self, ModelError> {
+            Ok(Twice)
+        }
+        fn do_step(&mut self, v: &mut TwiceVars, _t: f64, _h: f64) -> Result<(), ModelError> {
+            v.steps += 1;
+            Ok(())
+        }
+        fn calculate_outputs(&mut self, v: &mut TwiceVars) {
+            v.y = 2.0 * v.u;
+        }
+    }
+
+    impl fmu_export::Stateless for Twice {}
+
+    /// A worker serving a natively run instance (no library, no process).
+    fn worker() -> Worker {
+        Worker {
+            instance: Some(Box::new(NativeBackend::<Twice>::new("w", None, false))),
+            library: None,
+        }
+    }
+
+    fn request(ops: &[Request]) -> Vec<u8> {
+        let mut e = Enc::default();
+        ops.iter().for_each(|op| op.encode(&mut e));
+        e.0
+    }
 
     #[test]
     fn a_request_without_an_instance_is_an_error_not_a_panic() {
-        let mut out = Enc::default();
+        let mut w = Worker::default();
+        let r = w
+            .serve(&request(&[Request::DoStep { t: 0.0, h: 1.0 }]))
+            .unwrap();
+        assert_eq!(
+            r.error,
+            Some(Failure::Other("no instance: instantiate first".into()))
+        );
+        assert_eq!((r.time, r.results.len()), (0.0, 0));
+        // An instantiation cut short is a protocol error, not a panic.
+        let r = w.serve(&[200]).unwrap();
+        assert!(
+            matches!(&r.error, Some(Failure::Other(m)) if m.contains("truncated message")),
+            "{r:?}"
+        );
+        assert!(w.serve(&request(&[Request::Quit])).is_none());
+    }
+
+    #[test]
+    fn a_request_runs_in_order_and_answers_its_gets() {
+        let mut w = worker();
+        let ops = [
+            Request::SetupExperiment {
+                start: 0.0,
+                stop: Some(1.0),
+            },
+            Request::EnterInit,
+            Request::SetReal {
+                vrs: vec![1].into(),
+                values: vec![1.5].into(),
+            },
+            Request::ExitInit,
+            Request::GetReal {
+                vrs: vec![2, 1].into(),
+            },
+            Request::DoStep { t: 0.0, h: 0.5 },
+            Request::GetInteger {
+                vrs: vec![3].into(),
+            },
+            Request::FmuTerminated,
+        ];
+        let bytes = request(&ops);
+        let r = w.serve(&bytes).unwrap();
+        assert_eq!(
+            r,
+            Response {
+                time: 0.5,
+                results: vec![
+                    Values::Real(vec![3.0, 1.5]),
+                    Values::Int(vec![1]),
+                    Values::Real(vec![0.0, 0.0]),
+                ],
+                error: None,
+            }
+        );
+        // As the host reads it.
         let mut e = Enc::default();
-        e.u8(op::DO_STEP);
-        e.f64(0.0);
-        e.f64(1.0);
-        assert!(!run_ops(&e.0, &mut None, &mut None, &mut out));
-        assert_eq!(out.0[0], 1);
-        let mut out = Enc::default();
-        assert!(!run_ops(&[200], &mut None, &mut None, &mut out));
-        assert_eq!(out.0[0], 1);
+        r.encode(&mut e);
+        assert_eq!(Response::decode(&e.0, &ops).unwrap(), r);
+    }
+
+    #[test]
+    fn a_request_stops_at_its_first_error() {
+        let mut w = worker();
+        let setup = [
+            Request::SetupExperiment {
+                start: 0.0,
+                stop: None,
+            },
+            Request::EnterInit,
+            Request::ExitInit,
+        ];
+        assert_eq!(w.serve(&request(&setup)).unwrap().error, None);
+        let ops = [
+            Request::GetReal {
+                vrs: vec![2].into(),
+            },
+            // y is a Real: as an Integer it is refused.
+            Request::GetInteger {
+                vrs: vec![2].into(),
+            },
+            Request::DoStep { t: 0.0, h: 0.5 },
+        ];
+        let r = w.serve(&request(&ops)).unwrap();
+        assert_eq!(r.results, [Values::Real(vec![0.0])]);
+        let Some(Failure::Call {
+            function,
+            status,
+            time,
+            log,
+        }) = &r.error
+        else {
+            panic!("{r:?}")
+        };
+        assert_eq!(
+            (*function, *status, *time),
+            (Function::GetInteger, fmi2Status::ERROR, 0.0)
+        );
+        assert!(
+            log.iter().any(|l| l.contains("is Real, not Integer")),
+            "{log:?}"
+        );
+        // The step after the error was not taken.
+        assert_eq!(r.time, 0.0);
+        // A malformed operation after good ones: they ran, then the protocol error.
+        let mut bytes = request(&[Request::DoStep { t: 0.0, h: 0.5 }]);
+        bytes.push(150);
+        let r = w.serve(&bytes).unwrap();
+        assert_eq!(r.time, 0.5);
+        assert_eq!(
+            r.error,
+            Some(Failure::Other("unknown operation 150".into()))
+        );
     }
 }

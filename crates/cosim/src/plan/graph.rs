@@ -105,8 +105,9 @@ pub(crate) fn check_feedthrough_cycles(
         if color.get(&n).copied().unwrap_or(0) == 0 {
             let mut path = vec![(n, true)];
             if let Some(cycle) = dfs(n, &edges, &mut color, &mut path) {
+                // The cycle starts and ends at the same node.
                 let text = cycle.iter().map(|(n, _)| name(n)).collect::<Vec<_>>();
-                let text = format!("{} -> {}", text.join(" -> "), text[0]);
+                let text = text.join(" -> ");
                 if cycle.iter().all(|c| c.1) {
                     return Err(format!(
                         "direct feed-through cycle (an algebraic loop): {text}"

@@ -141,6 +141,9 @@ pub struct FmuCache {
     /// One lock per content hash being loaded.
     loading: Mutex<HashMap<String, Arc<Mutex<()>>>>,
     limits: Limits,
+    /// Whether an FMU must carry a binary for this platform (see
+    /// [`FmuCache::description_only`]).
+    binary_required: bool,
     counters: Counters,
     /// A temporary cache's lock file (`<root>.lock`, flocked while the cache lives).
     _owner: Option<OwnerLock>,
@@ -267,6 +270,7 @@ impl FmuCache {
             loaded: Mutex::new(HashMap::new()),
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
+            binary_required: true,
             counters: Counters::default(),
         })
     }
@@ -288,6 +292,7 @@ impl FmuCache {
             loaded: Mutex::new(HashMap::new()),
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
+            binary_required: true,
             counters: Counters::default(),
         })
     }
@@ -318,6 +323,14 @@ impl FmuCache {
     /// Other zip-bomb limits (tests use small ones).
     pub fn with_limits(mut self, limits: Limits) -> Self {
         self.limits = limits;
+        self
+    }
+
+    /// A cache that also accepts FMUs without a binary for this platform, for hosts that run
+    /// their models natively and read only the description (`tb-cosim`'s tests). Every other
+    /// check stays; an instance that needs such an FMU's library fails when loading it.
+    pub fn description_only(mut self) -> Self {
+        self.binary_required = false;
         self
     }
 
@@ -366,7 +379,7 @@ impl FmuCache {
         }
         let xml = read_unpacked_description(fmu, &dir).ok()?;
         let names: Vec<String> = entries.into_iter().map(|e| e.name).collect();
-        let (md, _id) = check_description(fmu, &xml, &names).ok()?;
+        let (md, _id) = check_description(fmu, &xml, &names, self.binary_required).ok()?;
         let loaded = Arc::new(LoadedFmu {
             source: fmu.to_path_buf(),
             dir,
@@ -399,7 +412,8 @@ impl FmuCache {
         if let Some(l) = lock(&self.loaded).get(&sha) {
             return Ok(l.clone());
         }
-        let (md, _id, entries) = check_archive_entries(fmu, &bytes, &self.limits)?;
+        let (md, _id, entries) =
+            check_archive_entries(fmu, &bytes, &self.limits, self.binary_required)?;
         let dir = self.fmu_folder().join(&sha[..32]);
         if !dir.join(".complete").exists() {
             if let Some(store) = &self.store {
@@ -728,14 +742,16 @@ pub fn check_archive_with(
     bytes: &[u8],
     limits: &Limits,
 ) -> Result<(ModelDescription, String), FmuError> {
-    check_archive_entries(fmu, bytes, limits).map(|(md, id, _)| (md, id))
+    check_archive_entries(fmu, bytes, limits, true).map(|(md, id, _)| (md, id))
 }
 
-/// [`check_archive_with`], also returning the central directory's entries.
+/// [`check_archive_with`], also returning the central directory's entries; the binary for
+/// this platform only when `binary_required`.
 fn check_archive_entries(
     fmu: &Path,
     bytes: &[u8],
     limits: &Limits,
+    binary_required: bool,
 ) -> Result<(ModelDescription, String, Vec<CdEntry>), FmuError> {
     let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
         .map_err(|e| arch(fmu, format!("not a valid zip archive: {e}")))?;
@@ -747,7 +763,7 @@ fn check_archive_entries(
         read_description(fmu, f)?
     };
     let names: Vec<String> = entries.iter().map(|e| e.name.clone()).collect();
-    let (md, id) = check_description(fmu, &xml, &names)?;
+    let (md, id) = check_description(fmu, &xml, &names, binary_required)?;
     Ok((md, id, entries))
 }
 
@@ -779,12 +795,13 @@ fn read_description(fmu: &Path, r: impl Read) -> Result<String, FmuError> {
 }
 
 /// The description's checks: FMI 2.0 or 3.0, Co-Simulation, nothing unsupported, a
-/// `modelIdentifier` that is a C identifier, and its library among the archive's `names`.
-/// Returns the description and the model identifier.
+/// `modelIdentifier` that is a C identifier, and (when `binary_required`) its library among
+/// the archive's `names`. Returns the description and the model identifier.
 fn check_description(
     fmu: &Path,
     xml: &str,
     names: &[String],
+    binary_required: bool,
 ) -> Result<(ModelDescription, String), FmuError> {
     let md = description::parse(xml).map_err(|message| FmuError::Description {
         path: fmu.to_path_buf(),
@@ -853,7 +870,7 @@ fn check_description(
         });
     }
     let so = library_entry(&md.fmi_version, &id);
-    if !names.contains(&so) {
+    if binary_required && !names.contains(&so) {
         // Name the platforms the FMU has: a Windows- or macOS-only FMU is a common mistake.
         let mut platforms: Vec<&str> = names
             .iter()
@@ -1002,6 +1019,11 @@ mod tests {
     /// A small FMU whose description's `description` attribute is `tag` (keep the length
     /// for a rewrite of the same size).
     fn fmu_bytes(tag: &str) -> Vec<u8> {
+        fmu_bytes_with(tag, true)
+    }
+
+    /// [`fmu_bytes`], with or without its binary.
+    fn fmu_bytes_with(tag: &str, binary: bool) -> Vec<u8> {
         let md = format!(
             r#"<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="m" guid="{{g}}" description="{tag}">
@@ -1025,6 +1047,9 @@ mod tests {
             ),
             ("resources/data.txt", tag.as_bytes()),
         ] {
+            if name.starts_with("binaries/") && !binary {
+                continue;
+            }
             w.start_file(name, opt).unwrap();
             w.write_all(data).unwrap();
         }
@@ -1239,5 +1264,28 @@ mod tests {
         assert_eq!(a.dir, b.dir);
         assert_eq!(c.stats(), stats(0, 1, 0));
         assert_eq!(s.index_entries(), 2);
+    }
+
+    #[test]
+    fn only_a_description_only_cache_takes_an_fmu_without_a_binary() {
+        let s = Scratch::new();
+        let fmu = s.dir.path().join("m.fmu");
+        std::fs::write(&fmu, fmu_bytes_with("first", false)).unwrap();
+        let refused = |c: &FmuCache| {
+            let e = c.load(&fmu).err().expect("refused").to_string();
+            assert!(
+                e.contains("no binaries/linux64/m.so (the FMU has no binary for this platform; it has no binaries at all)"),
+                "{e}"
+            );
+        };
+        refused(&s.cache());
+        let l = s.cache().description_only().load(&fmu).unwrap();
+        assert_eq!(l.description.model_name, "m");
+        // Its library is not there to load, and the error says which.
+        let e = l.library().err().expect("no library").to_string();
+        assert!(e.contains("binaries/linux64/m.so"), "{e}");
+        // The store now indexes it: an ordinary cache on the same store still refuses it.
+        assert_eq!(s.index_entries(), 1);
+        refused(&s.cache());
     }
 }

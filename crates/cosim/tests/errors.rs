@@ -1,0 +1,409 @@
+//! What is refused before the first step (names with suggestions, causality, types, double
+//! connections, feed-through cycles, experiment values, files) and the errors of a run
+//! (a model's error, a value that is not finite), each with where it is.
+
+mod support;
+
+use support::{assert_contains, Bench};
+use tb_cosim::{SystemError, SystemFile};
+
+/// A gain `g`, an integrator `int` and a sink `snk`, with `connections`.
+fn wired(connections: &str) -> String {
+    format!(
+        r#"connections = [{connections}]
+
+[[instance]]
+name = "g"
+fmu = "gain"
+
+[[instance]]
+name = "int"
+fmu = "integrator"
+
+[[instance]]
+name = "snk"
+fmu = "sink"
+
+[experiment]
+step = 0.5
+stop = 1.0
+"#
+    )
+}
+
+#[test]
+fn an_unknown_instance_is_named_with_the_instances_closest_first() {
+    let b = Bench::new();
+    let e = b.error(&wired("\"itn.x -> g.u\""));
+    assert_contains(
+        &e,
+        &[
+            "connection \"itn.x -> g.u\"",
+            "unknown instance 'itn'; instances: int, g, snk",
+        ],
+    );
+    let e = b.error(&wired("\"int.x -> sink.v\""));
+    assert_contains(&e, &["unknown instance 'sink'; instances: snk,"]);
+}
+
+#[test]
+fn an_unknown_variable_is_named_with_the_closest_names() {
+    let b = Bench::new();
+    let e = b.error(&wired("\"int.x -> snk.vv\""));
+    assert_contains(
+        &e,
+        &[
+            "unknown variable 'snk.vv' (FMU",
+            "sink.fmu); closest names: v, n, on",
+        ],
+    );
+    // A swap of two letters is one edit.
+    let e = b.error(&wired("\"int.x -> snk.v_uot\""));
+    assert_contains(&e, &["closest names: v_out"]);
+}
+
+#[test]
+fn a_connection_runs_from_an_output_to_an_input() {
+    let b = Bench::new();
+    let cases = [
+        (
+            "\"int.x -> snk.v_out\"",
+            "'snk.v_out' is continuous output, not an input: it cannot be connected to",
+        ),
+        (
+            "\"int.x -> snk.limit\"",
+            "'snk.limit' is fixed parameter, not an input",
+        ),
+        (
+            "\"int.u -> g.u\"",
+            "'int.u' is continuous input, not an output",
+        ),
+        (
+            "\"int.x0 -> g.u\"",
+            "'int.x0' is fixed parameter, not an output",
+        ),
+        (
+            "\"int.x g.u\"",
+            "expected \"instance.output -> instance.input\"",
+        ),
+        (
+            "\"int.x -> gu\"",
+            "'gu' is not of the form instance.variable",
+        ),
+    ];
+    for (connection, expected) in cases {
+        assert_contains(&b.error(&wired(connection)), &[expected]);
+    }
+}
+
+#[test]
+fn an_input_is_connected_once() {
+    let b = Bench::new();
+    let e = b.error(&wired("\"int.x -> g.u\", \"snk.x_out -> g.u\""));
+    assert_contains(
+        &e,
+        &[
+            "connection \"snk.x_out -> g.u\"",
+            "'g.u' is already connected",
+        ],
+    );
+}
+
+#[test]
+fn types_must_match_or_widen_to_real() {
+    let b = Bench::new();
+    let cases = [
+        (
+            "\"snk.text_out -> g.u\"",
+            "type mismatch: 'snk.text_out' is String, 'g.u' is Real",
+        ),
+        (
+            "\"int.x -> snk.n\"",
+            "type mismatch: 'int.x' is Real, 'snk.n' is Integer",
+        ),
+        (
+            "\"int.x -> snk.text\"",
+            "type mismatch: 'int.x' is Real, 'snk.text' is String",
+        ),
+        (
+            "\"snk.on_out -> snk.n\"",
+            "type mismatch: 'snk.on_out' is Boolean, 'snk.n' is Integer",
+        ),
+        (
+            "\"int.steps -> snk.on\"",
+            "type mismatch: 'int.steps' is Integer, 'snk.on' is Boolean",
+        ),
+    ];
+    for (connection, expected) in cases {
+        assert_contains(&b.error(&wired(connection)), &[expected]);
+    }
+    // Integer into an Enumeration and back, and any number into a Real, pass.
+    b.plan(&wired(
+        "\"int.steps -> snk.gear_in\", \"snk.gear_out -> snk.n\", \"snk.on_out -> g.u\"",
+    ))
+    .unwrap();
+}
+
+#[test]
+fn a_loop_of_declared_feedthrough_is_an_algebraic_loop() {
+    let b = Bench::new();
+    let text = r#"connections = ["a.y -> b.u", "b.y -> a.u"]
+[[instance]]
+name = "a"
+fmu = "gain"
+[[instance]]
+name = "b"
+fmu = "gain"
+[experiment]
+step = 0.5
+stop = 1.0
+"#;
+    let e = b.error(text);
+    assert_contains(
+        &e,
+        &["direct feed-through cycle (an algebraic loop): a.u -> a.y -> b.u -> b.y -> a.u"],
+    );
+    assert!(e.ends_with("b.y -> a.u"), "{e}");
+    // Through an integrator (no feed-through) the loop is fine, without a warning.
+    let plan = b
+        .plan(&wired("\"int.x -> g.u\", \"g.y -> int.u\""))
+        .unwrap();
+    assert!(
+        plan.warnings.iter().all(|w| !w.contains("cycle")),
+        "{:?}",
+        plan.warnings
+    );
+}
+
+#[test]
+fn a_loop_through_outputs_without_declared_dependencies_is_a_warning() {
+    let b = Bench::new();
+    let text = r#"connections = ["a.y -> b.u", "b.y -> a.u"]
+[[instance]]
+name = "a"
+fmu = "gain_nodeps"
+[[instance]]
+name = "b"
+fmu = "gain"
+[experiment]
+step = 0.5
+stop = 1.0
+"#;
+    let plan = b.plan(text).unwrap();
+    assert_contains(
+        &plan.warnings.join("\n"),
+        &[
+            "possible feed-through cycle through outputs that declare no dependencies: a.u -> a.y -> b.u -> b.y -> a.u",
+        ],
+    );
+    assert!(
+        plan.warnings.iter().any(|w| w.ends_with("b.y -> a.u")),
+        "{:?}",
+        plan.warnings
+    );
+}
+
+#[test]
+fn instances_and_fmus_are_named_once_and_must_exist() {
+    let b = Bench::new();
+    let cases = [
+        (
+            "[[instance]]\nname = \"g\"\nfmu = \"gian\"\n",
+            "instance 'g': fmu 'gian' is not in [fmus] (known: gain, gain_nodeps, integrator, sink, source)",
+        ),
+        (
+            "[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[[instance]]\nname = \"g\"\nfmu = \"gain\"\n",
+            "instance name 'g' is repeated",
+        ),
+        ("[[instance]]\nname = \"g.1\"\nfmu = \"gain\"\n", "instance name 'g.1' is repeated, empty, or contains a '.'"),
+        ("[[instance]]\nname = \"\"\nfmu = \"gain\"\n", "instance name '' is repeated, empty"),
+    ];
+    for (instances, expected) in cases {
+        let e = b.error(&format!(
+            "{instances}[experiment]\nstep = 0.5\nstop = 1.0\n"
+        ));
+        assert_contains(&e, &[expected]);
+    }
+    // An FMU file that is not there: the system file, the entry, and how to make it.
+    let path = b.write(
+        "lap/system.toml",
+        "[fmus]\ngain = \"fmu/gain.fmu\"\n[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[experiment]\nstep = 0.5\nstop = 1.0\n",
+    );
+    let e = b.load(&path).err().expect("refused").to_string();
+    assert_contains(
+        &e,
+        &[
+            "lap/system.toml: [fmus] gain: ",
+            "lap/fmu/gain.fmu does not exist (paths in a system file are relative to its folder)",
+            "twinbench pack -o ",
+        ],
+    );
+}
+
+/// One integrator with the given `[experiment]` lines.
+fn experiment(lines: &str) -> String {
+    format!("[[instance]]\nname = \"int\"\nfmu = \"integrator\"\n[experiment]\n{lines}\n")
+}
+
+#[test]
+fn experiment_values_that_cannot_be_run_are_refused() {
+    let b = Bench::new();
+    let cases = [
+        (
+            "step = 0.0\nstop = 1.0",
+            "experiment.step must be positive, got 0",
+        ),
+        (
+            "step = -0.1\nstop = 1.0",
+            "experiment.step must be positive, got -0.1",
+        ),
+        (
+            "step = nan\nstop = 1.0",
+            "experiment.step must be positive, got NaN",
+        ),
+        (
+            "step = inf\nstop = 1.0",
+            "experiment.step must be positive, got inf",
+        ),
+        (
+            "step = 0.1\nstart = inf\nstop = 1.0",
+            "experiment.start must be a finite time, got inf",
+        ),
+        (
+            "step = 0.1\nstop = inf",
+            "experiment.stop must be a finite time, got inf",
+        ),
+        (
+            "step = 0.1\nstart = 2.0\nstop = 1.0",
+            "experiment.stop 1 is not after start 2",
+        ),
+        (
+            "step = 0.1\nstop = 0.0",
+            "experiment.stop 0 is not after start 0",
+        ),
+        (
+            "step = 1e-300\nstop = 1.0",
+            "s over 1 s is 1.000e300 macro steps, more than 1e12: a larger step",
+        ),
+        (
+            "step = 1e-9\nstop = \"int.x >= 1\"\nmax_time = 1e4",
+            "is 1.000e13 macro steps, more than 1e12",
+        ),
+        (
+            "step = 0.1\nstop = 1.0\nalgorithm = \"newton\"",
+            "unknown algorithm \"newton\" (gauss-seidel, jacobi)",
+        ),
+        (
+            "step = 0.1\nstop = 1.0\norder = [\"int\", \"int\"]",
+            "experiment.order: 'int' appears twice",
+        ),
+        (
+            "step = 0.1\nstop = 1.0\norder = [\"nope\"]",
+            "experiment.order: unknown instance 'nope'",
+        ),
+        (
+            "step = 0.1\nstop = 1.0\nstep_size = 0.1",
+            "unknown field `step_size`",
+        ),
+    ];
+    for (lines, expected) in cases {
+        let e = b.error(&experiment(lines));
+        assert_contains(&e, &["system.toml", expected]);
+    }
+    let e = b.error(&format!(
+        "{}[[instance]]\nname = \"g\"\nfmu = \"gain\"\n",
+        experiment("step = 0.1\nstop = 1.0\norder = [\"int\"]")
+    ));
+    assert_contains(&e, &["experiment.order: 'g' is missing"]);
+    let e = b.error(&format!(
+        "{}[record]\ndecimation = 0\n",
+        experiment("step = 0.1\nstop = 1.0")
+    ));
+    assert_contains(&e, &["record.decimation must be at least 1"]);
+}
+
+#[test]
+fn a_file_that_is_not_a_system_file_says_what_it_is() {
+    let b = Bench::new();
+    let e = SystemFile::load(&b.path("fmu/gain.fmu"))
+        .unwrap_err()
+        .to_string();
+    assert_contains(
+        &e,
+        &["gain.fmu: is a ZIP archive (an FMU?), not a system file: `run` takes a system file (TOML) or an SSP 1.0 package (.ssp)"],
+    );
+    let bin = b.path("bin.toml");
+    std::fs::write(&bin, [b'a', 0xff, b'b']).unwrap();
+    let e = SystemFile::load(&bin).unwrap_err().to_string();
+    assert_contains(
+        &e,
+        &["is not a text file (byte 1 is not UTF-8): a system file is TOML"],
+    );
+    let e = SystemFile::load(&b.path("none.toml"))
+        .unwrap_err()
+        .to_string();
+    assert_contains(&e, &["none.toml: cannot read:"]);
+    let e = b.error(
+        "[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[experiment]\nstep = 0.5\nstop = true\n",
+    );
+    assert_contains(&e, &["system.toml", "stop"]);
+    let e = b.error(&wired("[\"int.x\", \"g.u\"]"));
+    assert_contains(&e, &["a connection is \"a.x -> b.y\" or { from = \"a.x\", to = \"b.y\", ... }, got a TOML array"]);
+}
+
+#[test]
+fn a_models_error_in_a_step_names_the_instance_the_call_and_the_time() {
+    let b = Bench::new();
+    let text = "[[instance]]\nname = \"int\"\nfmu = \"integrator\"\n[parameters]\n\"int.u\" = 1.0\n\"int.x_max\" = 0.6\n[experiment]\nstep = 0.25\nstop = 2.0\n";
+    let mut sim = b.sim(text);
+    let e = sim.run().unwrap_err();
+    let SystemError::Fmu(fmu) = &e else {
+        panic!("{e:?}")
+    };
+    assert_contains(
+        &fmu.to_string(),
+        &[
+            "int",
+            "fmi2DoStep",
+            "0.5",
+            "x = 0.75 exceeds x_max = 0.6 in the step from t = 0.5",
+        ],
+    );
+    // The rows up to the failed step are kept.
+    assert_eq!(support::column(&sim, "time"), [0.0, 0.25, 0.5]);
+}
+
+#[test]
+fn a_value_that_is_not_finite_stops_the_run_naming_the_signal() {
+    let b = Bench::new();
+    let text = "connections = [\"int.x -> g.u\"]\n[[instance]]\nname = \"int\"\nfmu = \"integrator\"\n[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[parameters]\n\"int.x0\" = 1e308\n\"int.u\" = 1e308\n\"g.k\" = 1.0\n[experiment]\nstep = 1.0\nstop = 3.0\n";
+    let e = b.sim(text).run().unwrap_err();
+    let SystemError::NotFinite {
+        instance,
+        signal,
+        value,
+        time,
+    } = &e
+    else {
+        panic!("{e:?}")
+    };
+    // 1e308 + 1e308·1 overflows in the first step.
+    assert_eq!((instance.as_str(), signal.as_str()), ("int", "int.x"));
+    assert_eq!((*value, *time), (f64::INFINITY, 1.0));
+    assert_eq!(
+        e.to_string(),
+        "int.x is not finite (inf) at t = 1 s after the step of instance 'int'"
+    );
+}
+
+#[test]
+fn a_record_only_output_that_is_not_finite_is_caught_at_its_recorded_row() {
+    let b = Bench::new();
+    // g.y = 2·1e308 overflows at initialisation; only the recording reads it.
+    let text = "connections = [\"int.x -> g.u\"]\n[[instance]]\nname = \"int\"\nfmu = \"integrator\"\n[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[parameters]\n\"int.x0\" = 1e308\n[experiment]\nstep = 1.0\nstop = 3.0\n[record]\nsignals = [\"g.y\"]\n";
+    let e = b.sim(text).run().unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "g.y is not finite (inf) at t = 0 s after the step of instance 'g'"
+    );
+}
