@@ -266,3 +266,115 @@ fn n21_temporaries_are_removed_and_swept_and_a_size_limit_is_an_error() {
         "{e}"
     );
 }
+
+/// N9: an output folder that cannot be written was found only after the run.
+#[test]
+fn n09_an_unwritable_output_folder_is_refused_before_the_run() {
+    let fmus = common::fmu_dir();
+    let dir = tb_testkit::scratch("n09");
+    let d = dir.path();
+    let text = std::fs::read_to_string(root().join("systems/rls_v.toml"))
+        .unwrap()
+        .replace("\"../target/fmu/", &format!("\"{}/", fmus.display()));
+    std::fs::write(d.join("sys.toml"), text).unwrap();
+    // /proc takes no files, whoever we are (a read-only folder does not stop root).
+    let started = std::time::Instant::now();
+    let e = failure_in(d, &["run", "sys.toml", "--out", "/proc/twinbench/lap.csv"]);
+    assert!(e.contains("cannot write into /proc"), "{e}");
+    assert!(e.contains("(checked before the run)"), "{e}");
+    assert!(!e.contains("steps"), "no run happened: {e}");
+    let _ = started;
+}
+
+/// A checkpoint's JSON inside its wrapper, and the wrapper around edited JSON (an edit
+/// made on purpose, with a digest to match).
+fn checkpoint_parts(text: &str) -> serde_json::Value {
+    let body = &text[text.find(",\"checkpoint\":").unwrap() + 14..text.trim_end().len() - 1];
+    serde_json::from_str(body).unwrap()
+}
+
+fn rewrap(v: &serde_json::Value) -> String {
+    use sha2::Digest;
+    let body = serde_json::to_string_pretty(v).unwrap();
+    let digest = format!("{:x}", sha2::Sha256::digest(body.as_bytes()));
+    format!("{{\"sha256\":\"{digest}\",\"checkpoint\":{body}}}\n")
+}
+
+/// N13: a damaged or edited checkpoint was accepted and changed the result (or panicked).
+#[test]
+fn n13_an_edited_checkpoint_is_refused_whatever_was_edited() {
+    let dir = tb_testkit::scratch("n13");
+    let d = dir.path();
+    let study = root().join("studies/spielberg.toml");
+    let study = study.to_str().unwrap();
+    let run = |resume: bool| {
+        let mut args = vec![
+            "optimize",
+            study,
+            "--generations",
+            "1",
+            "--no-report",
+            "--json",
+            "--out",
+            "o",
+        ];
+        if resume {
+            args.push("--resume");
+        }
+        twinbench_in(d, &args)
+    };
+    let first = run(false);
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let path = d.join("o/spielberg.checkpoint.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(
+        run(true).status.success(),
+        "an untouched checkpoint resumes"
+    );
+    // One changed byte of a value: the digest no longer matches.
+    let at = text.find("\"cost_after\": ").unwrap() + 14;
+    let mut edited = text.clone().into_bytes();
+    edited[at] = if edited[at] == b'0' { b'1' } else { b'0' };
+    std::fs::write(&path, &edited).unwrap();
+    let e = String::from_utf8_lossy(&run(true).stderr).into_owned();
+    assert!(e.contains("does not match its SHA-256"), "{e}");
+    // Edits made on purpose, digest recomputed: what they say is checked.
+    let v = checkpoint_parts(&text);
+    let mut renamed = v.clone();
+    renamed["completed"][0]["parameters"][0]["name"] = "vehicle.c_lift_frnt".into();
+    let mut tripled = v.clone();
+    let c = tripled["completed"][0].clone();
+    tripled["completed"].as_array_mut().unwrap().push(c);
+    let mut swapped = v.clone();
+    swapped["completed"].as_array_mut().unwrap().swap(0, 1);
+    let mut printed = v.clone();
+    printed["completed"][1]["parameters"][0]["after"] = 3.333.into();
+    let mut outside = v.clone();
+    outside["completed"][0]["after_exact"][0] = "4059000000000000".into(); // 100.0
+    for (what, edit, expected) in [
+        ("a renamed parameter", renamed, "the study's are"),
+        (
+            "three completed steps",
+            tripled,
+            "3 completed steps, the study has 2",
+        ),
+        ("swapped steps", swapped, "completed step 1 is 'geometry'"),
+        ("an edited printed value", printed, "(printed 3.333)"),
+        (
+            "a value outside the bounds",
+            outside,
+            "is not a value within",
+        ),
+    ] {
+        std::fs::write(&path, rewrap(&edit)).unwrap();
+        let o = run(true);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{what}: accepted");
+        assert!(e.contains(expected), "{what}: {e}");
+        assert!(!e.contains("panicked"), "{what}: {e}");
+    }
+}

@@ -173,7 +173,12 @@ fn numbers_on_the_command_line_are_checked_for_range() {
         ),
         (
             vec!["run", sys, "--isolate", "--worker-timeout", "1e300"],
-            "--worker-timeout: watchdog must be a number of seconds in (0, 86400], got 1e300",
+            "--worker-timeout: watchdog must be a number of seconds in [0.001, 86400], got 1e300",
+        ),
+        // Red team N23: a watchdog far below any round trip made every call a "hang".
+        (
+            vec!["run", sys, "--isolate", "--worker-timeout", "1e-12"],
+            "--worker-timeout: watchdog must be a number of seconds in [0.001, 86400], got 1e-12",
         ),
         (
             vec!["compare", meas, meas, "--signals", "v", "--step", "1e-9"],

@@ -4,7 +4,10 @@
 //! refuses another version, another study and other command-line overrides.
 //!
 //! The format is JSON of the structs below, field by field in their order: changing a
-//! field's name, order or serde attribute changes the format (`CHECKPOINT_VERSION`).
+//! field's name, order or serde attribute changes the format (`CHECKPOINT_VERSION`). The
+//! file wraps it with its SHA-256 (`{"sha256":"…","checkpoint":{…}}`): an edited or damaged
+//! checkpoint is refused, not trusted; and what it says is checked against the study
+//! (steps, parameters, bounds, finite costs) before anything is taken from it.
 
 use super::driver::{RunOptions, StepResult};
 use super::exact;
@@ -82,7 +85,29 @@ impl Overrides {
     }
 }
 
-const CHECKPOINT_VERSION: u32 = 1;
+const CHECKPOINT_VERSION: u32 = 2;
+
+/// The head of a checkpoint file, before the checkpoint's JSON and after it.
+const HEAD: &str = "{\"sha256\":\"";
+const MIDDLE: &str = "\",\"checkpoint\":";
+
+/// The checkpoint's JSON inside a file, its digest checked.
+fn unwrap_digest(text: &str) -> Result<&str, String> {
+    let rest = text
+        .strip_prefix(HEAD)
+        .ok_or("not a twinbench checkpoint of this version (no digest at its start)")?;
+    let (digest, rest) = rest.split_at_checked(64).ok_or("a truncated digest")?;
+    let body = rest
+        .strip_prefix(MIDDLE)
+        .and_then(|b| b.trim_end().strip_suffix('}'))
+        .ok_or("not a twinbench checkpoint (its wrapping is damaged)")?;
+    use sha2::Digest;
+    let actual = format!("{:x}", sha2::Sha256::digest(body.as_bytes()));
+    if actual != digest {
+        return Err("its content does not match its SHA-256: the file was edited or damaged (start without --resume)".into());
+    }
+    Ok(body)
+}
 
 impl Checkpoint {
     /// A checkpoint of this study run with these options.
@@ -128,8 +153,9 @@ impl Checkpoint {
     fn read(path: &Path, study: &Study) -> Result<Checkpoint, OptimizeError> {
         let text = tb_files::input::read_to_string(path, tb_files::Limit::CONFIG)
             .map_err(|e| OptimizeError::Checkpoint(e.to_string()))?;
-        let c: Checkpoint = serde_json::from_str(&text)
-            .map_err(|e| OptimizeError::Checkpoint(format!("{}: {e}", path.display())))?;
+        let bad = |m: String| OptimizeError::Checkpoint(format!("{}: {m}", path.display()));
+        let body = unwrap_digest(&text).map_err(bad)?;
+        let c: Checkpoint = serde_json::from_str(body).map_err(|e| bad(e.to_string()))?;
         if c.version != CHECKPOINT_VERSION {
             return Err(OptimizeError::Checkpoint(format!(
                 "{}: version {} (expected {CHECKPOINT_VERSION})",
@@ -143,14 +169,95 @@ impl Checkpoint {
                 path.display()
             )));
         }
+        c.check(study).map_err(bad)?;
         Ok(c)
+    }
+
+    /// What the checkpoint says fits the study: the completed steps are its first steps in
+    /// order, with its parameters, values within their bounds (the printed ones the exact
+    /// ones), finite costs; the step under way is the next one, its start within bounds.
+    fn check(&self, study: &Study) -> Result<(), String> {
+        let steps = &study.file.steps;
+        if self.completed.len() > steps.len() {
+            return Err(format!(
+                "{} completed steps, the study has {}",
+                self.completed.len(),
+                steps.len()
+            ));
+        }
+        for (k, (done, step)) in self.completed.iter().zip(steps).enumerate() {
+            let at = format!("completed step {}", k + 1);
+            if done.step != k + 1 || done.name != step.name {
+                return Err(format!(
+                    "{at} is '{}' (number {}), the study's step {} is '{}'",
+                    done.name,
+                    done.step,
+                    k + 1,
+                    step.name
+                ));
+            }
+            let names: Vec<&str> = done.parameters.iter().map(|p| p.name.as_str()).collect();
+            if names != step.parameter_names() || done.after_exact.len() != names.len() {
+                return Err(format!(
+                    "{at}: parameters {names:?}, the study's are {:?}",
+                    step.parameter_names()
+                ));
+            }
+            for ((p, exact), bound) in done
+                .parameters
+                .iter()
+                .zip(&done.after_exact)
+                .zip(&step.parameters)
+            {
+                if p.after.to_bits() != exact.to_bits() || !(bound.min..=bound.max).contains(exact)
+                {
+                    return Err(format!(
+                        "{at}: '{}' = {:?} (printed {:?}) is not a value within [{}, {}]",
+                        p.name, exact, p.after, bound.min, bound.max
+                    ));
+                }
+            }
+            for x in [done.cost_before, done.cost_after] {
+                if !(x.is_finite() && x >= 0.0) {
+                    return Err(format!("{at}: a cost of {x:?}"));
+                }
+            }
+        }
+        if let Some(c) = &self.current {
+            let step = steps.get(c.step).filter(|_| c.step == self.completed.len());
+            let Some(step) = step else {
+                return Err(format!(
+                    "the step under way is number {}, after {} completed",
+                    c.step + 1,
+                    self.completed.len()
+                ));
+            };
+            let inside = c.start.x0.len() == step.parameters.len()
+                && c.start
+                    .x0
+                    .iter()
+                    .zip(&step.parameters)
+                    .all(|(x, p)| (p.min..=p.max).contains(x));
+            if !inside || !(c.start.cost_before.is_finite() && c.start.cost_before >= 0.0) {
+                return Err(format!(
+                    "step {} under way: its start {:?} (cost {:?}) is not within the step's bounds",
+                    c.step + 1,
+                    c.start.x0,
+                    c.start.cost_before
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Writes the checkpoint atomically (a reader sees the old file or the new one).
     pub(crate) fn write(&self, path: &Path) -> Result<(), OptimizeError> {
-        let text = serde_json::to_vec_pretty(self)
+        let body = serde_json::to_string_pretty(self)
             .map_err(|e| OptimizeError::Checkpoint(format!("serialising: {e}")))?;
-        write_atomic(path, &text)
+        use sha2::Digest;
+        let digest = format!("{:x}", sha2::Sha256::digest(body.as_bytes()));
+        let text = format!("{HEAD}{digest}{MIDDLE}{body}}}\n");
+        write_atomic(path, text.as_bytes())
             .map_err(|e| OptimizeError::Checkpoint(format!("writing {}: {e}", path.display())))
     }
 }

@@ -38,9 +38,54 @@ fn resolved(path: &Path) -> Option<PathBuf> {
 }
 
 /// Can `path` take a result file? Refused: anything that exists and is not a regular file
-/// (a symbolic link, a FIFO, a device, a socket, a folder), and any of `inputs` (the files
-/// the run reads). Checked before a run, so that a bad `--out` fails before the work.
+/// (a symbolic link, a FIFO, a device, a socket, a folder), any of `inputs` (the files the
+/// run reads), and a folder this process cannot create files in (tried, not guessed from
+/// mode bits). Checked before a run, so that a bad `--out` fails before the work.
 pub fn check_output(path: &Path, inputs: &[&Path]) -> std::io::Result<()> {
+    check_target(path, inputs)?;
+    probe_writable(path)
+}
+
+/// Whether a file can be created beside `path` (in its folder, or in the nearest existing
+/// folder above it, which the write would create the rest in): a probe file is created
+/// and removed.
+fn probe_writable(path: &Path) -> std::io::Result<()> {
+    let mut dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    while !dir.exists() {
+        match dir.parent() {
+            Some(p) if !p.as_os_str().is_empty() => dir = p.to_path_buf(),
+            _ => {
+                dir = PathBuf::from(".");
+                break;
+            }
+        }
+    }
+    let probe = dir.join(format!(".twinbench-probe.{:016x}.tmp", random()));
+    match std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(&probe)
+    {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(refuse(
+            path,
+            format!(
+                "cannot write into {}: {e} (checked before the run)",
+                dir.display()
+            ),
+        )),
+    }
+}
+
+/// [`check_output`] without the probe (a write finds out for itself).
+fn check_target(path: &Path, inputs: &[&Path]) -> std::io::Result<()> {
     if path.file_name().is_none() {
         return Err(refuse(path, "not a file name"));
     }
@@ -98,7 +143,7 @@ fn random() -> u64 {
 /// Write a file atomically: a reader sees the old file or the new one, never a part; see
 /// the module's documentation for what is refused.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    check_output(path, &[])?;
+    check_target(path, &[])?;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -138,7 +183,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         file.sync_all().map_err(named)?;
         drop(file);
         // The target may have changed while writing: check it again.
-        check_output(path, &[])?;
+        check_target(path, &[])?;
         std::fs::rename(&tmp, path).map_err(named)
     })();
     if written.is_err() {

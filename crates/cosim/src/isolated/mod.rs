@@ -36,11 +36,16 @@ use tb_fmi::{FmuError, LoadedFmu};
 /// `Duration` holds it would panic.
 pub const MAX_TIMEOUT_S: f64 = 86_400.0;
 
-/// A watchdog of `seconds`, checked: positive, finite, at most [`MAX_TIMEOUT_S`].
+/// A watchdog of `seconds`, checked: finite, in [`MIN_TIMEOUT_S`, `MAX_TIMEOUT_S`].
+/// The shortest watchdog accepted [s].
+pub const MIN_TIMEOUT_S: f64 = 1e-3;
+
 pub fn watchdog(seconds: f64) -> Result<Duration, String> {
-    if !(seconds.is_finite() && seconds > 0.0 && seconds <= MAX_TIMEOUT_S) {
+    // Below a millisecond no answer arrives (a round trip to the worker takes tens of
+    // microseconds, a step of a real FMU more): every call would look like a hang.
+    if !(seconds.is_finite() && (MIN_TIMEOUT_S..=MAX_TIMEOUT_S).contains(&seconds)) {
         return Err(format!(
-            "watchdog must be a number of seconds in (0, {MAX_TIMEOUT_S}], got {seconds:e}"
+            "watchdog must be a number of seconds in [{MIN_TIMEOUT_S}, {MAX_TIMEOUT_S}], got {seconds:e}"
         ));
     }
     Ok(Duration::from_secs_f64(seconds))
