@@ -760,6 +760,23 @@ fn finish_step(
     best_cost: f64,
 ) -> Result<(StepResult, Table), OptimizeError> {
     let (config, problem) = (step.config, &step.problem);
+    // A step whose every candidate failed found nothing: its "best" is a failure's penalty.
+    let run = &begun.run;
+    if run.evaluations > 0 && run.failures == run.evaluations {
+        return Err(OptimizeError::StepFailed {
+            step: config.name.clone(),
+            reason: format!(
+                "every one of its {} candidates failed, nothing was optimised; the first reasons: {}",
+                run.evaluations,
+                run.failure_reasons
+                    .iter()
+                    .take(3)
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ),
+        });
+    }
     let after = problem
         .outcome(&best)
         .map_err(|reason| OptimizeError::Start {

@@ -68,6 +68,9 @@ pub enum OptimizeError {
     Threads(String),
     #[error("step '{step}': the start point cannot be evaluated: {reason}")]
     Start { step: String, reason: String },
+    /// A step that ran and found nothing (every candidate failed).
+    #[error("step '{step}': {reason}")]
+    StepFailed { step: String, reason: String },
     #[error(transparent)]
     Io(#[from] std::io::Error),
     /// The evaluator of a distributed study failed (not a candidate: the study stops, its

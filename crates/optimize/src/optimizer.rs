@@ -160,8 +160,19 @@ pub struct RunState {
 
 const MAX_REASONS: usize = 20;
 
+/// The most evaluation threads a pool may have.
+pub const MAX_THREADS: usize = 1024;
+
 /// Builds the evaluation thread pool (0: all cores).
 pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, OptimizeError> {
+    // More threads than candidates ever run at once only cost memory (a million threads
+    // would exhaust the machine before the first lap).
+    if threads > MAX_THREADS {
+        return Err(OptimizeError::Threads(format!(
+            "{threads} threads asked for: at most {MAX_THREADS} (this machine has {} cores; 0 uses them all)",
+            std::thread::available_parallelism().map_or(1, |n| n.get())
+        )));
+    }
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("tb-eval-{i}"))

@@ -281,6 +281,12 @@ impl Study {
         if f.optimizer.generations == 0 {
             return Err(bad("optimizer.generations must be at least 1".into()));
         }
+        if !(f.penalty.is_finite() && f.penalty > 0.0) {
+            return Err(bad(format!(
+                "penalty = {:?}: the cost a failed run gets must be a positive number, larger than any real cost (a cost near or below zero would make failures look best)",
+                f.penalty
+            )));
+        }
         if !(f.penalty.is_finite()
             && f.bias_weight.is_finite()
             && f.bias_weight >= 0.0

@@ -236,8 +236,25 @@ impl Evaluator for ExecutorEvaluator {
                         }
                     };
                     out.push(match r.extract::<f64>() {
-                        Ok(x) => Ok(x),
-                        Err(_) => Err(r.str()?.to_string()),
+                        // A cost is e plus a bias term: finite and not negative. Anything
+                        // else is a broken task or cluster, not a candidate's result.
+                        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+                        Ok(x) => {
+                            return Err(TwinbenchError::new_err(format!(
+                                "the executor returned {x:?} as the cost of candidate {k} of step {}: a cost is a finite number ≥ 0 (is the task or the cluster broken?)",
+                                candidates[k].step + 1
+                            )))
+                        }
+                        Err(_) if r.is_instance_of::<pyo3::types::PyString>() => {
+                            Err(r.str()?.to_string())
+                        }
+                        Err(_) => {
+                            return Err(TwinbenchError::new_err(format!(
+                                "the executor returned {} for candidate {k} of step {}: a task returns a cost (a float) or why the run failed (a str)",
+                                r.repr()?,
+                                candidates[k].step + 1
+                            )))
+                        }
                     });
                 }
                 py.check_signals()?;
@@ -258,9 +275,13 @@ fn cancel(futures: &[Bound<'_, PyAny>]) {
     }
 }
 
-/// Tells a Python callable about every generation (a dict per generation).
+/// Tells a Python callable about every generation (a dict per generation). An exception
+/// of the callback stops the study after that generation (its checkpoint kept) and is
+/// raised as itself: a broken callback is not silently skipped.
 struct PyProgress {
     callback: Py<PyAny>,
+    raised: Mutex<Option<PyErr>>,
+    stop: Arc<AtomicBool>,
 }
 
 impl Progress for PyProgress {
@@ -273,8 +294,9 @@ impl Progress for PyProgress {
             let _ = d.set_item("best_x", record.best_x.clone());
             let _ = d.set_item("failures", record.failures);
             if let Err(e) = self.callback.bind(py).call1((d,)) {
-                // A progress callback cannot stop the study; its error is shown, not lost.
-                e.print(py);
+                let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
+                raised.get_or_insert(e);
+                self.stop.store(true, Ordering::SeqCst);
             }
         })
     }
@@ -331,12 +353,19 @@ fn optimize(
         force,
     };
     let dyn_evaluator = evaluator.clone().map(|e| e as Arc<dyn Evaluator>);
-    let progress = progress.map(|callback| Arc::new(PyProgress { callback }) as Arc<dyn Progress>);
     // The study runs on a thread of its own while this one, Python's main thread, looks
     // for Ctrl-C: Python sees a signal only where it holds the GIL, never inside the
     // study. On KeyboardInterrupt the study stops after the generation under way, its
     // checkpoint kept, and the KeyboardInterrupt says how to resume.
     let interrupt = Arc::new(AtomicBool::new(false));
+    let py_progress = progress.map(|callback| {
+        Arc::new(PyProgress {
+            callback,
+            raised: Mutex::new(None),
+            stop: interrupt.clone(),
+        })
+    });
+    let progress = py_progress.clone().map(|p| p as Arc<dyn Progress>);
     let result = std::thread::scope(|scope| {
         let flag = interrupt.clone();
         let study = scope.spawn(move || {
@@ -360,6 +389,9 @@ fn optimize(
         })
     });
     if let Some(e) = evaluator.and_then(|e| e.raised.lock().ok().and_then(|mut r| r.take())) {
+        return Err(e);
+    }
+    if let Some(e) = py_progress.and_then(|p| p.raised.lock().ok().and_then(|mut r| r.take())) {
         return Err(e);
     }
     match result {
@@ -407,7 +439,11 @@ impl StudyEvaluatorPy {
 
     /// Why the coordinator's digest is not this one (None when equal).
     fn mismatch(&self, theirs: &str) -> PyResult<Option<String>> {
-        let theirs: tb_optimize::InputDigest = serde_json::from_str(theirs).map_err(error)?;
+        let theirs: tb_optimize::InputDigest = serde_json::from_str(theirs).map_err(|e| {
+            TwinbenchError::new_err(format!(
+                "the coordinator's input digest is not a twinbench digest (JSON of the study's files and their SHA-256): {e}"
+            ))
+        })?;
         Ok(self.inner.digest().mismatch(&theirs))
     }
 
@@ -558,9 +594,10 @@ impl OptimizerPy {
                 self.asked
             )));
         }
-        if let Some(k) = costs.iter().position(|c| c.is_nan()) {
+        if let Some(k) = costs.iter().position(|c| !c.is_finite()) {
             return Err(TwinbenchError::new_err(format!(
-                "tell: cost {k} is NaN (give a failed candidate a penalty)"
+                "tell: cost {k} is {:?}: costs are finite numbers (give a failed candidate a penalty)",
+                costs[k]
             )));
         }
         self.lock().tell(&costs);

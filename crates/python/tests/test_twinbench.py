@@ -402,3 +402,62 @@ def test_every_documented_python_m_twinbench_command_parses():
                     raise AssertionError(f"{doc.relative_to(ROOT)}:{n}: {s}") from e
                 checked += 1
     assert checked >= 2
+
+
+# ---- red team N15, N26: what the package is handed is checked ----
+
+
+class _Fixed:
+    """An executor whose every task returns `value` (a broken task or cluster)."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def submit(self, fn, *args):
+        f = concurrent.futures.Future()
+        f.set_result(self.value)
+        return f
+
+
+@pytest.mark.parametrize("value", [float("nan"), -1e300, float("inf"), object()])
+def test_an_executors_impossible_cost_stops_the_study(value, tmp_path):
+    with pytest.raises(twinbench.TwinbenchError, match="candidate 0 of step 1"):
+        twinbench.Study(STUDY).optimize(executor=_Fixed(value), out=tmp_path, generations=1, report=False)
+
+
+def test_a_study_whose_every_candidate_failed_is_an_error(tmp_path):
+    with pytest.raises(twinbench.TwinbenchError, match="every one of its 8 candidates failed"):
+        twinbench.Study(STUDY).optimize(executor=_Fixed("the FMU crashed"), out=tmp_path, generations=1, report=False)
+
+
+def test_a_million_threads_are_refused():
+    with pytest.raises(twinbench.TwinbenchError, match="at most 1024"):
+        twinbench.Study(STUDY).optimize(threads=10**6, generations=1, report=False)
+
+
+def test_a_progress_callback_that_raises_stops_the_study(tmp_path):
+    seen = []
+
+    def progress(record):
+        seen.append(record["generation"])
+        raise ValueError("my callback is broken")
+
+    with pytest.raises(ValueError, match="my callback is broken"):
+        twinbench.Study(STUDY).optimize(out=tmp_path, progress=progress, report=False)
+    assert seen == [1], "stopped after the generation that raised"
+    assert (tmp_path / "spielberg.checkpoint.json").exists()
+
+
+def test_tell_refuses_costs_that_are_not_finite():
+    opt = twinbench.Optimizer("cmaes", bounds=[(0.0, 1.0), (0.0, 1.0)], seed=1)
+    xs = opt.ask()
+    with pytest.raises(twinbench.TwinbenchError, match="is -inf: costs are finite numbers"):
+        opt.tell([float("-inf")] + [1.0] * (len(xs) - 1))
+
+
+def test_a_malformed_digest_says_what_it_is():
+    from twinbench import _native
+
+    worker = _native.StudyEvaluatorPy(str(STUDY))
+    with pytest.raises(twinbench.TwinbenchError, match="not a twinbench digest"):
+        worker.mismatch("{not json")
