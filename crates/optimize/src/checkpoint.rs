@@ -238,7 +238,7 @@ impl Checkpoint {
                     .iter()
                     .zip(&step.parameters)
                     .all(|(x, p)| (p.min..=p.max).contains(x));
-            if !inside || !(c.start.cost_before.is_finite() && c.start.cost_before >= 0.0) {
+            if !(inside && c.start.cost_before.is_finite() && c.start.cost_before >= 0.0) {
                 return Err(format!(
                     "step {} under way: its start {:?} (cost {:?}) is not within the step's bounds",
                     c.step + 1,
