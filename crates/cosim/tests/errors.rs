@@ -203,13 +203,27 @@ stop = 1.0
     );
 }
 
+/// Red team N18: an output the ModelStructure leaves out may depend on every input; a
+/// self-loop through it ran with no word.
+#[test]
+fn a_loop_through_an_output_missing_from_the_model_structure_is_a_warning() {
+    let b = Bench::new();
+    let plan = b
+        .plan("connections = [\"g.y -> g.u\"]\n[[instance]]\nname = \"g\"\nfmu = \"gain_unlisted\"\n[experiment]\nstep = 0.5\nstop = 1.0\n")
+        .unwrap();
+    assert_contains(
+        &plan.warnings.join("\n"),
+        &["possible feed-through cycle through outputs that declare no dependencies: g.u -> g.y -> g.u"],
+    );
+}
+
 #[test]
 fn instances_and_fmus_are_named_once_and_must_exist() {
     let b = Bench::new();
     let cases = [
         (
             "[[instance]]\nname = \"g\"\nfmu = \"gian\"\n",
-            "instance 'g': fmu 'gian' is not in [fmus] (known: gain, gain_nodeps, integrator, sink, source)",
+            "instance 'g': fmu 'gian' is not in [fmus] (known: gain, gain_nodeps, gain_unlisted, integrator, sink, source)",
         ),
         (
             "[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[[instance]]\nname = \"g\"\nfmu = \"gain\"\n",

@@ -31,24 +31,32 @@ pub(crate) fn check_feedthrough_cycles(
     }
     for (k, inst) in instances.iter().enumerate() {
         let md = inst.description();
-        for o in &md.outputs {
-            let out = &md.variables[o.index - 1];
-            let (deps, declared): (Vec<&ScalarVariable>, bool) = match &o.dependencies {
-                Some(d) => (
-                    d.iter()
-                        .filter_map(|i| md.variables.get(i - 1))
-                        .filter(|v| v.causality == Causality::Input)
-                        .collect(),
-                    true,
-                ),
-                None => (
-                    md.variables
-                        .iter()
-                        .filter(|v| v.causality == Causality::Input)
-                        .collect(),
-                    false,
-                ),
-            };
+        // Every output: the ModelStructure's entry, or none (an output missing from it may
+        // depend on every input, as one without a `dependencies` attribute).
+        let outputs = md
+            .variables
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.causality == Causality::Output)
+            .map(|(i, v)| (v, md.outputs.iter().find(|o| o.index == i + 1)));
+        for (out, o) in outputs {
+            let (deps, declared): (Vec<&ScalarVariable>, bool) =
+                match o.and_then(|o| o.dependencies.as_ref()) {
+                    Some(d) => (
+                        d.iter()
+                            .filter_map(|i| md.variables.get(i - 1))
+                            .filter(|v| v.causality == Causality::Input)
+                            .collect(),
+                        true,
+                    ),
+                    None => (
+                        md.variables
+                            .iter()
+                            .filter(|v| v.causality == Causality::Input)
+                            .collect(),
+                        false,
+                    ),
+                };
             for inp in deps {
                 edges
                     .entry((k, inp.value_reference))

@@ -93,6 +93,24 @@ pub fn with_units(xml: &str, units: &[(&str, &str)]) -> String {
     format!("{}{defs}{}", &xml[..at], &xml[at..])
 }
 
+/// `xml` without the output `name`'s entry in `<Outputs>` (an FMU whose ModelStructure
+/// leaves an output out: it may depend on every input).
+pub fn unlisted_output(xml: &str, name: &str) -> String {
+    let names: Vec<&str> = xml
+        .match_indices("<ScalarVariable name=\"")
+        .map(|(i, m)| {
+            let rest = &xml[i + m.len()..];
+            &rest[..rest.find('"').unwrap()]
+        })
+        .collect();
+    let index = names.iter().position(|n| *n == name).unwrap() + 1;
+    let outputs = xml.find("<Outputs>").unwrap();
+    let unknown = format!("<Unknown index=\"{index}\"");
+    let at = outputs + xml[outputs..].find(&unknown).unwrap();
+    let end = at + xml[at..].find("/>").unwrap() + 2;
+    format!("{}{}", &xml[..at], &xml[end..])
+}
+
 /// `xml` without the `dependencies` attribute of the output `name` in `<Outputs>`: "may
 /// depend on every input", as the standard reads it.
 pub fn without_dependencies(xml: &str, name: &str) -> String {
@@ -131,8 +149,9 @@ const MODES: &[(&str, i32)] = &[("eco", 1), ("normal", 2), ("sport", 3)];
 /// Units the FMUs define themselves (not in twinbench's table).
 const OWN_UNITS: &[(&str, &str)] = &[("degC", "K=\"1\" offset=\"273.15\""), ("K", "K=\"1\"")];
 
-/// The test FMUs' descriptions by file stem: the four models, and `gain_nodeps` (a gain
-/// whose output declares no dependencies).
+/// The test FMUs' descriptions by file stem: the four models, `gain_nodeps` (a gain whose
+/// output declares no dependencies) and `gain_unlisted` (one whose output is missing from
+/// the ModelStructure).
 pub fn descriptions() -> Vec<(&'static str, String)> {
     let source = as_enumeration(&description::<Source>(), "gear", "Gear");
     let source = with_units(&with_enumerations(&source, &[("Gear", GEARS)]), OWN_UNITS);
@@ -147,6 +166,10 @@ pub fn descriptions() -> Vec<(&'static str, String)> {
         (
             "gain_nodeps",
             without_dependencies(&description::<Gain>(), "y"),
+        ),
+        (
+            "gain_unlisted",
+            unlisted_output(&description::<Gain>(), "y"),
         ),
         ("integrator", description::<Integrator>()),
         ("source", source),
