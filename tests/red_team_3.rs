@@ -378,3 +378,110 @@ fn n13_an_edited_checkpoint_is_refused_whatever_was_edited() {
         assert!(!e.contains("panicked"), "{what}: {e}");
     }
 }
+
+/// N4: a path parameter read any file (a device until memory ran out, a FIFO for ever) and
+/// echoed its content; an SSP package could make an FMU read any file of the user's.
+#[test]
+fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
+    let dir = tb_testkit::scratch("n04");
+    let d = dir.path();
+    let meas = root().join("data/spielberg_lap.csv");
+    let track = root().join("data/spielberg_lap_track.csv");
+    let lap = twinbench_in(
+        d,
+        &[
+            "lap",
+            meas.to_str().unwrap(),
+            "--track",
+            track.to_str().unwrap(),
+            "--out",
+            "lap",
+        ],
+    );
+    assert!(
+        lap.status.success(),
+        "{}",
+        String::from_utf8_lossy(&lap.stderr)
+    );
+    let fifo = d.join("fifo");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    for (file, expected) in [
+        ("/dev/zero", "/dev/zero: is a device, not a regular file"),
+        (fifo.to_str().unwrap(), "is a FIFO, not a regular file"),
+    ] {
+        let set = format!("vehicle.track_file={file}");
+        let e = failure_in(d, &["run", "lap/system.toml", "--set", &set]);
+        assert!(e.contains(expected), "{file}: {e}");
+    }
+    // A file whose first line is long and holds terminal escapes: a short excerpt, escaped.
+    let secret = d.join("secret.csv");
+    std::fs::write(
+        &secret,
+        format!("\u{1b}[31m{}\n1,2\n", "s3cret".repeat(2000)),
+    )
+    .unwrap();
+    let set = format!("driver.target_speed_file={}", secret.display());
+    let e = failure_in(d, &["run", "lap/system.toml", "--set", &set]);
+    assert!(e.contains("no column"), "{e}");
+    assert!(
+        e.len() < 2000,
+        "the content is echoed at length: {} bytes",
+        e.len()
+    );
+    assert!(!e.contains('\u{1b}'), "{e}");
+    // An SSP package: its path parameters are packed inside it, and one that climbs out
+    // (or is absolute) is refused.
+    let export = twinbench_in(d, &["export-ssp", "lap/system.toml", "-o", "lap.ssp"]);
+    assert!(
+        export.status.success(),
+        "{}",
+        String::from_utf8_lossy(&export.stderr)
+    );
+    let run = twinbench_in(d, &["run", "lap.ssp"]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let ssd = {
+        let f = std::fs::File::open(d.join("lap.ssp")).unwrap();
+        let mut z = zip::ZipArchive::new(f).unwrap();
+        let mut s = String::new();
+        std::io::Read::read_to_string(&mut z.by_name("SystemStructure.ssd").unwrap(), &mut s)
+            .unwrap();
+        s
+    };
+    assert!(
+        ssd.contains("resources/files/vehicle_track_file_track.csv"),
+        "packed"
+    );
+    for escape in [
+        "../../../../etc/passwd",
+        "/etc/passwd",
+        "file:///etc/passwd",
+    ] {
+        let evil = ssd.replace("resources/files/vehicle_track_file_track.csv", escape);
+        let src = std::fs::File::open(d.join("lap.ssp")).unwrap();
+        let mut z = zip::ZipArchive::new(src).unwrap();
+        let out = std::fs::File::create(d.join("evil.ssp")).unwrap();
+        let mut w = zip::ZipWriter::new(out);
+        for i in 0..z.len() {
+            let mut entry = z.by_index(i).unwrap();
+            let name = entry.name().to_string();
+            w.start_file(name.as_str(), zip::write::SimpleFileOptions::default())
+                .unwrap();
+            if name == "SystemStructure.ssd" {
+                std::io::Write::write_all(&mut w, evil.as_bytes()).unwrap();
+            } else {
+                std::io::copy(&mut entry, &mut w).unwrap();
+            }
+        }
+        w.finish().unwrap();
+        let e = failure_in(d, &["run", "evil.ssp"]);
+        assert!(
+            e.contains("a path an SSP package sets must name a file inside the package"),
+            "{escape}: {e}"
+        );
+    }
+}

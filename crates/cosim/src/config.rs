@@ -35,6 +35,11 @@ pub struct SystemFile {
     /// Consistency checks after initialisation, before the first step.
     #[serde(rename = "check", default)]
     pub checks: Vec<CheckConfig>,
+    /// For a system read from an SSP package: the unpacked package, the one folder its
+    /// path parameters may name files in (a colleague's package is untrusted input: it
+    /// must not make an FMU read `/etc/shadow`). None for a system file.
+    #[serde(skip)]
+    pub package: Option<PathBuf>,
 }
 
 /// One connection: `"a.x -> b.y"`, converted by the units both FMUs declare; or a table

@@ -154,6 +154,8 @@ struct Exporter<'a> {
     connections: Vec<SspConnection>,
     /// Parameter values per instance: (FMU variable name, `<ssv:...>` element).
     params: Vec<Vec<(String, String)>>,
+    /// Files of path parameters packed with the FMUs: (archive name, source).
+    files: Vec<(String, std::path::PathBuf)>,
     notes: Vec<String>,
 }
 
@@ -166,7 +168,8 @@ pub fn system_structure(
     ex.outputs();
     ex.connections()?;
     ex.parameters()?;
-    let (fmu_files, source_of) = fmu_files(&system.file);
+    let (mut fmu_files, source_of) = fmu_files(&system.file);
+    fmu_files.append(&mut ex.files);
     let (start, stop) = time_span(system, options)?;
     let mut x = String::new();
     let sys_name = system.file.name.clone().unwrap_or_else(|| {
@@ -209,7 +212,11 @@ pub fn system_structure(
         connectors: n_connectors,
         connections: ex.connections.len(),
         parameters: ex.params.iter().map(Vec::len).sum(),
-        fmus: fmu_files.iter().map(|f| f.0.clone()).collect(),
+        fmus: fmu_files
+            .iter()
+            .filter(|f| f.0.ends_with(".fmu"))
+            .map(|f| f.0.clone())
+            .collect(),
         start_time: start,
         stop_time: stop,
         step: system.file.experiment.step,
@@ -281,6 +288,7 @@ impl<'a> Exporter<'a> {
             enumerations: Enumerations::default(),
             connections: Vec::new(),
             params: vec![Vec::new(); n],
+            files: Vec::new(),
             notes,
         })
     }
@@ -363,7 +371,8 @@ impl<'a> Exporter<'a> {
             let (k, var) = self.fmu_var(name)?;
             let md = system.instances[k].description();
             let sv = md.variable(&var).expect("resolved");
-            let elem = parameter_value(md, sv, value);
+            let value = self.packed_file(name, sv, value);
+            let elem = parameter_value(md, sv, &value);
             self.params[k].push((var.clone(), elem));
             if sv.causality == Causality::Parameter {
                 self.connector(k, sv, "parameter");
@@ -374,6 +383,34 @@ impl<'a> Exporter<'a> {
             }
         }
         Ok(())
+    }
+
+    /// A path parameter's file goes into the package (`resources/files/`) and the parameter
+    /// names it there: an importer finds it inside the package, the only place a package's
+    /// path parameters may point to. Other values as they are.
+    fn packed_file(
+        &mut self,
+        name: &str,
+        sv: &tb_fmi::import::description::ScalarVariable,
+        value: &toml::Value,
+    ) -> toml::Value {
+        let Some(text) = value
+            .as_str()
+            .filter(|t| !t.is_empty() && !t.starts_with("file:"))
+        else {
+            return value.clone();
+        };
+        if !(sv.ty == ScalarType::String && sv.name.ends_with("_file")) {
+            return value.clone();
+        }
+        let source = tb_files::resolve(&tb_files::folder_of(&self.system.path), Path::new(text));
+        let file_name = source
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "file".into());
+        let entry = format!("resources/files/{}_{file_name}", name.replace('.', "_"));
+        self.files.push((entry.clone(), source));
+        toml::Value::String(entry)
     }
 
     /// `<ssd:Elements>`: a component per instance with its connectors and parameter

@@ -524,6 +524,7 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
         replay: Vec::new(),
         preload: Vec::new(),
         checks,
+        package: Some(imp.dir.clone()),
     })
 }
 
@@ -588,6 +589,18 @@ fn read_units(imp: &Importer<'_>, top: &[&Node]) -> Result<Vec<(String, UnitDef)
                 def.rad = exp("rad")?;
                 def.factor = imp.f64_attr(f, b, "factor")?.unwrap_or(1.0);
                 def.offset = imp.f64_attr(f, b, "offset")?.unwrap_or(0.0);
+                // A factor of 0 maps every value to the offset (N29: a start value silently
+                // zeroed); an infinite one is no unit either.
+                if !(def.factor.is_finite() && def.factor != 0.0 && def.offset.is_finite()) {
+                    return Err(imp.invalid(
+                        f,
+                        b.line,
+                        format!(
+                            "unit '{name}': factor {:?} and offset {:?} do not define a unit (a finite, non-zero factor)",
+                            def.factor, def.offset
+                        ),
+                    ));
+                }
             }
             units.push((name, def));
         }
@@ -1080,10 +1093,22 @@ fn bind_set(
             _ => {}
         }
     }
+    let mut set_here: Vec<(String, usize)> = Vec::new();
     for p in params {
         let (k, var) = parameter_target(imp, target, file, p)?;
         let comp = &target.components[k];
         let full = format!("{}.{var}", comp.name);
+        // One value per parameter in a set (N29: a second silently won).
+        if let Some((_, line)) = set_here.iter().find(|(n, _)| *n == full) {
+            return Err(imp.invalid(
+                file,
+                p.line,
+                format!(
+                    "parameter '{full}' is set twice in this parameter set (first at line {line})"
+                ),
+            ));
+        }
+        set_here.push((full.clone(), p.line));
         let value = parameter_value(imp, comp, &var, &full, file, p)?;
         parameters.insert(full, value);
     }
@@ -1172,15 +1197,14 @@ fn parameter_value(
     Ok(match v.name.as_str() {
         "Real" => {
             let mut x = parse_double(text).ok_or_else(|| bad("a number"))?;
-            if let (Some(u), Some(fu)) = (v.attr("unit"), comp.md.unit_of(sv)) {
-                if u != fu {
-                    let md = imp.unit_md(&comp.md);
-                    let c = crate::plan::units::unit_conversion((&md, Some(u)), (&md, Some(fu)))
-                        .map_err(|m| {
-                            imp.invalid(file, v.line, format!("parameter '{full}': {m}"))
-                        })?;
-                    x = c.scale * x + c.offset;
-                }
+            // A value in a unit is converted to the variable's, also to a variable without
+            // one (N29: 500 ms for a unitless variable was taken as 500).
+            let fu = comp.md.unit_of(sv);
+            if let Some(u) = v.attr("unit").filter(|u| Some(*u) != fu) {
+                let md = imp.unit_md(&comp.md);
+                let c = crate::plan::units::unit_conversion((&md, Some(u)), (&md, fu))
+                    .map_err(|m| imp.invalid(file, v.line, format!("parameter '{full}': {m}")))?;
+                x = c.scale * x + c.offset;
             }
             toml::Value::Float(x)
         }

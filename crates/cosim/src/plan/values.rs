@@ -125,6 +125,35 @@ impl ParamSlot {
         }
     }
 
+    /// A path value set by an SSP package: a file inside the unpacked package, named
+    /// relative to it; an absolute path, a URI or a name that climbs out is refused.
+    pub fn inside_package(
+        &self,
+        value: ParamValue,
+        package: &std::path::Path,
+        ctx: &str,
+    ) -> Result<ParamValue, SystemError> {
+        let ParamValue::String(v) = &value else {
+            return Ok(value);
+        };
+        if !self.is_path || v.is_empty() {
+            return Ok(value);
+        }
+        let name = std::path::Path::new(v);
+        let resolved = tb_files::resolve(package, name);
+        if v.starts_with("file:") || name.is_absolute() || !resolved.starts_with(package) {
+            return Err(invalid(
+                ctx,
+                format!(
+                    "'{}' = \"{}\": a path an SSP package sets must name a file inside the package (relative to its root, without climbing out)",
+                    self.name,
+                    tb_files::excerpt(v)
+                ),
+            ));
+        }
+        Ok(ParamValue::String(resolved.display().to_string()))
+    }
+
     /// A number for this slot (the optimiser's candidates), checked like any value.
     pub fn real(&self, x: f64) -> Result<ParamValue, SystemError> {
         let v = match self.ty {
@@ -217,7 +246,10 @@ pub(super) fn parameters(
         let ctx = format!("{ctx_file}: parameter \"{name}\"");
         let slot = super::instances::parameter_slot(instances, name, &ctx)?;
         let value = slot.value_from_toml(value, &ctx)?;
-        let value = slot.resolve_path(value, &folder);
+        let value = match &file.package {
+            Some(package) => slot.inside_package(value, package, &ctx)?,
+            None => slot.resolve_path(value, &folder),
+        };
         parameters.push((slot, value));
     }
     Ok(parameters)
