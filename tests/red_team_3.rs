@@ -485,3 +485,55 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
         );
     }
 }
+
+/// N29: degenerate tracks and targets ran (a lap of 1e-323 m in 0 s, a grade of 1e308
+/// rad, a target of 1e308 m/s) and exited 0.
+#[test]
+fn n29_degenerate_tracks_and_targets_are_refused() {
+    let dir = tb_testkit::scratch("n29");
+    let d = dir.path();
+    let meas = root().join("data/spielberg_lap.csv");
+    let track = root().join("data/spielberg_lap_track.csv");
+    let lap = twinbench_in(
+        d,
+        &[
+            "lap",
+            meas.to_str().unwrap(),
+            "--track",
+            track.to_str().unwrap(),
+            "--out",
+            "lap",
+        ],
+    );
+    assert!(
+        lap.status.success(),
+        "{}",
+        String::from_utf8_lossy(&lap.stderr)
+    );
+    let header = "s,curvature,grade,z_road_left,z_road_right\n";
+    for (name, text, param, expected) in [
+        (
+            "tiny.csv",
+            format!("{header}0,0,0,0,0\n5e-324,0,0,0,0\n"),
+            "vehicle.track_file",
+            "is not a circuit (at least 10 m)",
+        ),
+        (
+            "steep.csv",
+            format!("{header}0,0,0,0,0\n10,0,1e308,0,0\n20,0,0,0,0\n"),
+            "vehicle.track_file",
+            "column 'grade': 1e308 is more than a circuit has",
+        ),
+        (
+            "fast.csv",
+            "s,v\n0,50\n100,1e308\n200,50\n".to_string(),
+            "driver.target_speed_file",
+            "v = 1e308 m/s is faster than a car's target may be",
+        ),
+    ] {
+        std::fs::write(d.join(name), text).unwrap();
+        let set = format!("{param}={}", d.join(name).display());
+        let e = failure_in(d, &["run", "lap/system.toml", "--set", &set]);
+        assert!(e.contains(expected), "{name}: {e}");
+    }
+}

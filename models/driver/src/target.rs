@@ -3,6 +3,11 @@
 use fmu_export::ModelError;
 use std::cell::Cell;
 
+/// The fastest target speed a lap may hold [m/s] (720 km/h): faster is an error value.
+pub const MAX_SPEED: f64 = 200.0;
+/// The shortest lap a target may describe [m].
+pub const MIN_LAP_LENGTH: f64 = 10.0;
+
 /// Target speed over distance; periodic with the lap length (the file's last `s`).
 #[derive(Debug, PartialEq)]
 pub struct TargetSpeed {
@@ -76,6 +81,14 @@ impl TargetSpeed {
             if vi < 0.0 {
                 return Err(err(line, format!("v = {vi} m/s is negative")));
             }
+            if vi > MAX_SPEED {
+                return Err(err(
+                    line,
+                    format!(
+                        "v = {vi:?} m/s is faster than a car's target may be ({MAX_SPEED} m/s)"
+                    ),
+                ));
+            }
             s.push(si);
             v.push(vi);
         }
@@ -83,6 +96,12 @@ impl TargetSpeed {
             return Err(ModelError::new(format!(
                 "{file}: {} data rows, at least 2 needed for a target speed over distance",
                 s.len()
+            )));
+        }
+        let lap = s[s.len() - 1];
+        if lap < MIN_LAP_LENGTH {
+            return Err(ModelError::new(format!(
+                "{file}: a lap of {lap:?} m is not a circuit (at least {MIN_LAP_LENGTH} m)"
             )));
         }
         Ok(Self::from_columns(s, v))

@@ -4,6 +4,12 @@ use fmu_export::ModelError;
 
 /// Columns the track file must have (in any order; extra columns are ignored).
 pub const COLUMNS: [&str; 5] = ["s", "curvature", "grade", "z_road_left", "z_road_right"];
+/// What a row of a circuit may hold, per column after `s` (a logger's error value or a
+/// unit mix-up gives absurd physics, not an error, if taken): |curvature| ≤ 1 1/m (a 1 m
+/// radius), |grade| ≤ 1 rad (57°), |z_road| ≤ 1 m.
+pub const LIMITS: [f64; 4] = [1.0, 1.0, 1.0, 1.0];
+/// The shortest lap a track may describe [m].
+pub const MIN_LENGTH: f64 = 10.0;
 
 /// One interpolated track sample.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -82,6 +88,17 @@ impl Track {
                     ));
                 }
             }
+            if let Some(k) = (1..5).find(|&k| x[k].abs() > LIMITS[k - 1]) {
+                return Err(err(
+                    line,
+                    format!(
+                        "column '{}': {:?} is more than a circuit has (at most {} in size)",
+                        COLUMNS[k],
+                        x[k],
+                        LIMITS[k - 1]
+                    ),
+                ));
+            }
             if let Some(&prev) = s.last() {
                 if x[0] <= prev {
                     return Err(err(
@@ -109,7 +126,14 @@ impl Track {
                 s.len()
             )));
         }
-        Ok(Track::from_rows(s, rows))
+        let track = Track::from_rows(s, rows);
+        if track.length.is_nan() || track.length < MIN_LENGTH {
+            return Err(ModelError::new(format!(
+                "{file}: a lap of {:?} m is not a circuit (at least {MIN_LENGTH} m)",
+                track.length
+            )));
+        }
+        Ok(track)
     }
 
     fn from_rows(s: Vec<f64>, rows: Vec<TrackPoint>) -> Track {
