@@ -211,9 +211,9 @@ mod tests {
 
     #[test]
     fn a_lookup_from_any_hint_is_the_lookup_without_one() {
-        let t = TargetSpeed::parse("s,v\n0,10\n1,12\n2.5,11\n4,15\n", "t.csv").unwrap();
+        let t = TargetSpeed::parse("s,v\n0,10\n10,12\n25,11\n40,15\n", "t.csv").unwrap();
         for k in 0..=80 {
-            let s = -1.0 + 0.1 * k as f64;
+            let s = -10.0 + 1.0 * k as f64;
             // A hint past the end takes the search path (bisection or the even grid).
             let plain = t.at_near(s, &Cell::new(usize::MAX));
             for h in 0..6 {
