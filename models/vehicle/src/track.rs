@@ -251,25 +251,25 @@ mod tests {
     }
 
     const GOOD: &str =
-        "s,curvature,grade,z_road_left,z_road_right\n0,0.01,0,0,0\n1,0.02,0,0.1,0\n2,0.03,0,0,0\n";
+        "s,curvature,grade,z_road_left,z_road_right\n0,0.01,0,0,0\n10,0.02,0,0.1,0\n20,0.03,0,0,0\n";
 
     #[test]
     fn interpolates_and_wraps() {
         let t = Track::parse("t.csv", GOOD).unwrap();
-        assert_eq!(t.length(), 3.0);
+        assert_eq!(t.length(), 30.0);
         let mut c = 0;
-        assert!((t.at(0.5, &mut c).curvature - 0.015).abs() < 1e-15);
+        assert!((t.at(5.0, &mut c).curvature - 0.015).abs() < 1e-15);
         // The last interval runs back to row 0.
-        assert!((t.at(2.5, &mut c).curvature - 0.02).abs() < 1e-15);
-        assert!((t.at(3.5, &mut c).curvature - 0.015).abs() < 1e-15);
-        assert!((t.at(-0.5, &mut c).curvature - 0.02).abs() < 1e-15);
-        assert!((t.at(1.0, &mut c).z_left - 0.1).abs() < 1e-15);
+        assert!((t.at(25.0, &mut c).curvature - 0.02).abs() < 1e-15);
+        assert!((t.at(35.0, &mut c).curvature - 0.015).abs() < 1e-15);
+        assert!((t.at(-5.0, &mut c).curvature - 0.02).abs() < 1e-15);
+        assert!((t.at(10.0, &mut c).z_left - 0.1).abs() < 1e-15);
     }
 
     #[test]
     fn cursor_does_not_change_results() {
         let t = Track::parse("t.csv", GOOD).unwrap();
-        for s in [0.0, 0.3, 1.7, 2.9, 1.1, 0.2] {
+        for s in [0.0, 3.0, 17.0, 29.0, 11.0, 2.0] {
             let mut c0 = 0;
             let mut c2 = 2;
             assert_eq!(t.at(s, &mut c0), t.at(s, &mut c2));
