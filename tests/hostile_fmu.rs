@@ -122,6 +122,48 @@ fn run_isolated(fault: &str) -> String {
     err
 }
 
+/// An FMU that kills its parent (`kill(getppid(), SIGKILL)`) under `--isolate` ends the
+/// worker's guard, not twinbench: the run completes with the right values.
+#[test]
+fn an_isolated_fmu_that_kills_its_parent_leaves_the_host_alive() {
+    let dir = tb_testkit::scratch("hostile");
+    let fmu = hostile_fmu(dir.path(), "KILL_PARENT");
+    let sys = system(dir.path(), &fmu);
+    let csv = dir.path().join("out.csv");
+    let (out, err, _) = twinbench(&[
+        "run",
+        sys.to_str().unwrap(),
+        "--isolate",
+        "--out",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{:?}: {err}", out.status);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.lines().last().unwrap().ends_with(",1"), "{text}");
+}
+
+/// An in-process FMU that prints to stdout does not corrupt `--json`: the document is
+/// stdout's only content (the FMU's text goes to stderr).
+#[test]
+fn an_in_process_fmus_stdout_stays_out_of_json() {
+    let dir = tb_testkit::scratch("hostile");
+    let fmu = hostile_fmu(dir.path(), "STDOUT_JSON");
+    let sys = system(dir.path(), &fmu);
+    let (out, err, _) = twinbench(&["run", sys.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{err}");
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "stdout is not one JSON document ({e}): {:?}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    });
+    assert!(doc.get("steps").is_some(), "{doc}");
+    assert!(
+        err.contains("{\"lap_time\": 1.0}"),
+        "the FMU's print went to stderr: {err}"
+    );
+}
+
 #[test]
 fn the_hostile_fmu_behaves_when_built_without_a_fault() {
     let dir = tb_testkit::scratch("hostile");

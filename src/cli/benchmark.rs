@@ -48,16 +48,13 @@ pub fn run(args: BenchmarkArgs) -> anyhow::Result<()> {
     let ns = |w: f64| w * 1e9 / r.steps as f64;
     let instances = plan.instances.len();
     if args.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&serde_json::json!({
-                "system": path, "instances": instances, "steps": r.steps, "simulated_time": r.simulated_time,
-                "lap_time": super::lap_time(r, &plan), "laps_timed": walls.len(),
-                "wall_time_best": best, "wall_time_median": median,
-                "real_time_factor": r.simulated_time / median,
-                "ns_per_macro_step_best": ns(best), "ns_per_macro_step_median": ns(median),
-            }))?
-        );
+        super::json::print(&serde_json::to_string_pretty(&serde_json::json!({
+            "system": path, "instances": instances, "steps": r.steps, "simulated_time": r.simulated_time,
+            "lap_time": super::lap_time(r, &plan), "laps_timed": walls.len(),
+            "wall_time_best": best, "wall_time_median": median,
+            "real_time_factor": r.simulated_time / median,
+            "ns_per_macro_step_best": ns(best), "ns_per_macro_step_median": ns(median),
+        }))?)?;
     } else {
         println!(
             "system            {} ({instances} instances)",

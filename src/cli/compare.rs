@@ -108,7 +108,8 @@ fn print(args: &CompareArgs, settings: &CompareSettings, cmp: &Comparison) -> st
             settings,
             comparison: cmp,
         };
-        writeln!(out, "{}", serde_json::to_string_pretty(&doc)?)?;
+        drop(out);
+        super::json::print(&serde_json::to_string_pretty(&doc)?)?;
     } else {
         out.write_all(render_table(cmp, settings).as_bytes())?;
     }

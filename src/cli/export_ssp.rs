@@ -35,7 +35,7 @@ pub fn run(args: ExportSspArgs) -> anyhow::Result<()> {
     if args.json {
         let mut j = serde_json::to_value(&s)?;
         j["out"] = serde_json::json!(args.out);
-        println!("{}", serde_json::to_string_pretty(&j)?);
+        super::json::print(&serde_json::to_string_pretty(&j)?)?;
     } else {
         println!("wrote           {}", args.out.display());
         println!(

@@ -15,6 +15,16 @@ pub struct IdentifyArgs {
     pub command: IdentifyCommand,
 }
 
+impl IdentifyArgs {
+    /// Whether the subcommand prints JSON.
+    pub fn json(&self) -> bool {
+        match &self.command {
+            IdentifyCommand::Step(a) => a.json,
+            IdentifyCommand::Frf(a) => a.json,
+        }
+    }
+}
+
 #[derive(clap::Subcommand, Debug)]
 pub enum IdentifyCommand {
     /// Dead time, rise time (10–90 %) and transient time (±2 % band) of a step response.
@@ -131,7 +141,7 @@ fn run_step(a: StepArgs) -> anyhow::Result<()> {
     };
     let r = step::analyse(&ts, &a.setpoint, &a.response, &cfg)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        super::json::print(&serde_json::to_string_pretty(&r)?)?;
     } else {
         print!("{}", step_table(&r, &a, &cfg));
     }
@@ -270,7 +280,7 @@ fn run_frf(a: FrfArgs) -> anyhow::Result<()> {
             "fit": fitted,
             "snippet": snippet,
         });
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        super::json::print(&serde_json::to_string_pretty(&doc)?)?;
     } else {
         print!("{}", frf_table(&frf, &fitted, &a, &ts, &welch));
         println!("\n{snippet}");

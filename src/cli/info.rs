@@ -97,7 +97,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             "warnings": gaps,
             "variables": vars,
         });
-        println!("{}", serde_json::to_string_pretty(&j)?);
+        super::json::print(&serde_json::to_string_pretty(&j)?)?;
         return Ok(());
     }
     println!("{}  ({})", md.model_name, args.fmu.display());

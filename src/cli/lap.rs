@@ -46,7 +46,7 @@ pub fn run(args: LapArgs) -> anyhow::Result<()> {
         eprintln!("warning: {w}");
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&files)?);
+        super::json::print(&serde_json::to_string_pretty(&files)?)?;
     } else {
         println!("lap of {}", args.measurement.display());
         println!(

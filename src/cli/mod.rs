@@ -11,6 +11,7 @@ pub mod export_ssp;
 pub mod identify;
 pub mod info;
 pub mod interrupt;
+pub mod json;
 pub mod lap;
 pub mod modal;
 pub mod optimize;
@@ -60,6 +61,24 @@ pub enum Command {
     /// Serve one isolated FMU instance over stdin (started by `run --isolate`).
     #[command(hide = true)]
     Worker(worker::WorkerArgs),
+}
+
+impl Command {
+    /// Whether the command prints a JSON document (stdout is then the document alone).
+    pub fn json(&self) -> bool {
+        match self {
+            Command::Benchmark(a) => a.json,
+            Command::Run(a) => a.json,
+            Command::Info(a) => a.json,
+            Command::Lap(a) => a.json,
+            Command::ExportSsp(a) => a.json,
+            Command::Compare(a) => a.json,
+            Command::Optimize(a) => a.json,
+            Command::Modal(a) => a.json,
+            Command::Identify(a) => a.json(),
+            Command::Pack(_) | Command::Demo(_) | Command::Worker(_) => false,
+        }
+    }
 }
 
 /// The bench's lap time of a run: a reported `*.lap_time` signal (the vehicle interpolates
@@ -136,6 +155,9 @@ pub fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or(level))
         .format_timestamp(None)
         .init();
+    if cli.command.json() {
+        json::protect();
+    }
     COMMAND_RUNNING.store(true, Ordering::SeqCst);
     // The test suite's way to a panic of twinbench's own (tests/robustness_faults.rs).
     if std::env::var_os("TWINBENCH_TEST_PANIC").is_some() {

@@ -38,12 +38,12 @@ pub fn run(args: ModalArgs) -> anyhow::Result<()> {
         }
     }
     match (&b, args.json) {
-        (None, true) => println!("{}", serde_json::to_string_pretty(&a)?),
+        (None, true) => super::json::print(&serde_json::to_string_pretty(&a)?)?,
         (None, false) => print!("{}", table(&a)),
         (Some(b), json) => {
             let cmp = modal::compare(&a, b);
             if json {
-                println!("{}", serde_json::to_string_pretty(&cmp)?);
+                super::json::print(&serde_json::to_string_pretty(&cmp)?)?;
             } else {
                 print!("{}\n{}\n{}", table(&a), table(b), comparison_table(&cmp));
             }

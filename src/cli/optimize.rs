@@ -162,7 +162,7 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
         checkpoint,
     } = optimize(&args, None, progress, Some(super::interrupt::flag()?))?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&result)?);
+        super::json::print(&serde_json::to_string_pretty(&result)?)?;
     } else {
         if let Some(r) = &report {
             println!("{}", r.table_markdown);

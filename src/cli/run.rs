@@ -194,7 +194,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "recorded_rows": sim.recording.len(),
             "out": args.out,
         });
-        println!("{}", serde_json::to_string_pretty(&j)?);
+        super::json::print(&serde_json::to_string_pretty(&j)?)?;
     } else {
         println!("system          {}", args.system.display());
         println!("stopped by      {}", summary.stopped_by);

@@ -12,12 +12,16 @@
  *   STEP_HANG     fmi2DoStep never returns at t >= 0.5 s
  *   STEP_EXIT     fmi2DoStep calls exit(0) at t >= 0.5 s
  *   STEP_FLOOD    fmi2DoStep writes to stderr without end, and no newline, at t >= 0.5 s
+ *   STDOUT_JSON   fmi2Instantiate prints a forged JSON document to stdout
+ *   KILL_PARENT   fmi2DoStep sends SIGKILL to its parent process at t >= 0.5 s, once
  *
  * Only the C types are used (no FMI headers): the functions keep the standard's
  * signatures, with fmi2Component = void*, fmi2Status = int, fmi2Boolean = int. */
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
+#include <signal.h>
+#include <stdio.h>
 
 #define NONE 0
 #define LOAD_EXIT 1
@@ -29,6 +33,8 @@
 #define STEP_HANG 7
 #define STEP_EXIT 8
 #define STEP_FLOOD 9
+#define STDOUT_JSON 10
+#define KILL_PARENT 11
 
 #ifndef FAULT
 #define FAULT NONE
@@ -90,6 +96,10 @@ void *fmi2Instantiate(const char *name, int type, const char *guid, const char *
     Model *m = calloc(1, sizeof(Model));
     if (m)
         m->u = 1.0; /* the start value in the model description */
+#if FAULT == STDOUT_JSON
+    printf("{\"lap_time\": 1.0}\n");
+    fflush(stdout);
+#endif
     return m;
 }
 
@@ -150,6 +160,12 @@ int fmi2DoStep(void *c, double t, double h, int no_prior) {
         exit(0);
 #elif FAULT == STEP_FLOOD
         flood();
+#elif FAULT == KILL_PARENT
+        static int killed = 0;
+        if (!killed) {
+            killed = 1;
+            kill(getppid(), SIGKILL);
+        }
 #endif
     }
     m->y = m->u;

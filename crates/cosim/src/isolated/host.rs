@@ -101,6 +101,10 @@ impl IsolatedBackend {
         let exe = options.resolve_exe().map_err(fail)?;
         let (host, worker) = UnixStream::pair().map_err(|e| fail(format!("socketpair: {e}")))?;
         let mut cmd = Command::new(&exe);
+        // A process group of its own: a terminal's Ctrl-C reaches the host, which stops the
+        // study cleanly, not the worker; and killing the group ends the worker and its
+        // guard together.
+        std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
         cmd.arg("worker")
             .stdin(Stdio::from(OwnedFd::from(worker)))
             .stdout(Stdio::null())
@@ -171,8 +175,14 @@ impl IsolatedBackend {
         let Some(mut child) = self.child.take() else {
             return "the worker process is gone".into();
         };
+        // The worker runs in a child of the process started here (its guard), in their
+        // own process group: the whole group is killed.
+        let kill_group = |child: &Child| {
+            // SAFETY: a signal to the process group we created.
+            unsafe { libc::kill(-(child.id() as libc::pid_t), libc::SIGKILL) };
+        };
         if kill {
-            let _ = child.kill();
+            kill_group(&child);
         } else {
             // A worker that closed its socket should be dying; one that lingers is killed
             // (a hostile worker must not keep the host waiting).
@@ -180,7 +190,7 @@ impl IsolatedBackend {
             while matches!(child.try_wait(), Ok(None)) && Instant::now() < until {
                 std::thread::sleep(Duration::from_millis(5));
             }
-            let _ = child.kill();
+            kill_group(&child);
         }
         let status = match child.wait() {
             Ok(s) => s,
@@ -666,14 +676,16 @@ impl Drop for IsolatedBackend {
         if let Some(child) = self.child.as_mut() {
             loop {
                 match child.try_wait() {
-                    Ok(Some(_)) => return,
                     Ok(None) if Instant::now() < until => {
                         std::thread::sleep(Duration::from_millis(2))
                     }
                     _ => break,
                 }
             }
-            let _ = child.kill();
+            // The group, not only the guard (a guard the FMU killed leaves the worker):
+            // before the guard is reaped, so that its group id cannot have been reused.
+            // SAFETY: a signal to the process group we created.
+            unsafe { libc::kill(-(child.id() as libc::pid_t), libc::SIGKILL) };
             let _ = child.wait();
         }
     }

@@ -18,6 +18,49 @@ enum Loaded {
 }
 
 /// Serve the protocol on stdin until the host closes it or says quit. Returns the exit code.
+/// Splits the worker in two: this process becomes a guard that only waits, and the worker
+/// goes on in a child. An FMU that kills its parent (`kill(getppid(), SIGKILL)`) then ends
+/// the guard, not the host. The guard ends as the worker does (the same exit code, the same
+/// signal), and kills the worker's process group when the host is gone. Called before any
+/// thread is started (fork).
+fn guard(host: libc::pid_t) {
+    // SAFETY: no other thread runs yet; the child continues as the worker.
+    let worker = unsafe { libc::fork() };
+    if worker <= 0 {
+        // The worker (or, when fork fails, the worker unguarded).
+        return;
+    }
+    let mut status = 0;
+    loop {
+        // SAFETY: waitpid on our child.
+        let r = unsafe { libc::waitpid(worker, &mut status, libc::WNOHANG) };
+        if r == worker {
+            break;
+        }
+        if unsafe { libc::getppid() } != host || r < 0 {
+            // The host is gone: end the worker with it (the group is the guard's own).
+            unsafe {
+                libc::kill(-libc::getpid(), libc::SIGKILL);
+                libc::_exit(4);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // SAFETY: ending as the worker ended; a signal is re-raised with its default action.
+    unsafe {
+        if libc::WIFSIGNALED(status) {
+            let sig = libc::WTERMSIG(status);
+            libc::signal(sig, libc::SIG_DFL);
+            libc::kill(libc::getpid(), sig);
+        }
+        libc::_exit(if libc::WIFEXITED(status) {
+            libc::WEXITSTATUS(status)
+        } else {
+            1
+        });
+    }
+}
+
 pub fn serve_stdio() -> i32 {
     // Take the socket off fd 0, and point fd 0 at /dev/null and fd 1 at stderr, so that
     // an FMU that reads stdin or prints to stdout cannot touch the protocol.
@@ -34,15 +77,18 @@ pub fn serve_stdio() -> i32 {
         }
         libc::dup2(2, 1);
     }
+    let host = unsafe { libc::getppid() };
+    guard(host);
     // Die with the host even when stuck inside the FMU (a closed socket is noticed only
     // between calls). Not PR_SET_PDEATHSIG: that fires when the host *thread* that started
-    // the worker ends, and hosts move simulations between threads.
-    let parent = unsafe { libc::getppid() };
+    // the worker ends, and hosts move simulations between threads. The host is watched by
+    // its pid, not as the parent: the parent is the guard, which the FMU may kill.
     let _ = std::thread::Builder::new()
         .name("host-watch".into())
         .spawn(move || loop {
             std::thread::sleep(Duration::from_millis(250));
-            if unsafe { libc::getppid() } != parent {
+            // SAFETY: signal 0 only asks whether the process exists.
+            if unsafe { libc::kill(host, 0) } != 0 {
                 unsafe { libc::_exit(4) };
             }
         });
