@@ -363,3 +363,23 @@ fn an_fmi3_error_carries_the_fmus_log() {
         "{e}"
     );
 }
+
+/// Red team N28: an isolated FMI 3.0 FMU's error was named `fmi2DoStep` and `[fmi2Error]`.
+#[test]
+fn an_isolated_fmi3_error_names_the_fmi3_call_and_status() {
+    use tb_cosim::backend::BackendFactory;
+    let cache = FmuCache::temporary(false).unwrap();
+    let fmu = cache.load(&reference::fmu("Dahlquist", 3)).unwrap();
+    let factory = tb_cosim::isolated::IsolatedFactory {
+        fmu,
+        options: common::worker_options().isolation,
+    };
+    let mut b = factory.create("d", true).unwrap();
+    // A step before initialisation is an illegal call sequence.
+    let e = b.do_step(0.0, 0.1).unwrap_err().to_string();
+    assert!(
+        e.contains("instance 'd' at t = 0 s: fmi3DoStep returned fmi3Error"),
+        "{e}"
+    );
+    assert!(!e.contains("fmi2"), "{e}");
+}

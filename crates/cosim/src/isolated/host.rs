@@ -299,6 +299,24 @@ impl IsolatedBackend {
                 }
                 FmuError::call(&self.name, function, status, time, log)
             }
+            Failure::Call3 {
+                function,
+                status,
+                time,
+                log,
+            } => {
+                self.sink.clear();
+                for l in &log {
+                    self.sink.keep(l.clone());
+                }
+                FmuError::Call3 {
+                    instance: self.name.clone(),
+                    function,
+                    status,
+                    time,
+                    log,
+                }
+            }
             Failure::Instantiate(message) => FmuError::Instantiate {
                 instance: self.name.clone(),
                 message,

@@ -62,6 +62,9 @@ pub mod kind {
     pub const UNSUPPORTED: u8 = 2;
     /// Anything else: a message.
     pub const OTHER: u8 = 3;
+    /// An FMI 3.0 call returned a status that stops the caller: function name, status
+    /// name, time, log.
+    pub const CALL3: u8 = 4;
 }
 
 /// The function an operation code stands for (for messages).
@@ -430,6 +433,13 @@ pub enum Failure {
         time: f64,
         log: Vec<String>,
     },
+    /// An FMI 3.0 call did (named as the FMU's functions are, with its status's name).
+    Call3 {
+        function: String,
+        status: String,
+        time: f64,
+        log: Vec<String>,
+    },
     /// `fmi2Instantiate` failed.
     Instantiate(String),
     /// An optional function the FMU does not export (None: a code the host does not know).
@@ -448,6 +458,18 @@ impl From<FmuError> for Failure {
                 log,
                 ..
             } => Failure::Call {
+                function,
+                status,
+                time,
+                log,
+            },
+            FmuError::Call3 {
+                function,
+                status,
+                time,
+                log,
+                ..
+            } => Failure::Call3 {
                 function,
                 status,
                 time,
@@ -477,6 +499,19 @@ impl Failure {
                 e.u32(log.len() as u32);
                 log.iter().for_each(|l| e.str(l));
             }
+            Failure::Call3 {
+                function,
+                status,
+                time,
+                log,
+            } => {
+                e.u8(kind::CALL3);
+                e.str(function);
+                e.str(status);
+                e.f64(*time);
+                e.u32(log.len() as u32);
+                log.iter().for_each(|l| e.str(l));
+            }
             Failure::Instantiate(message) => {
                 e.u8(kind::INSTANTIATE);
                 e.str(message);
@@ -502,6 +537,18 @@ impl Failure {
                 let time = d.f64()?;
                 let n = d.count(4)?;
                 Failure::Call {
+                    function,
+                    status,
+                    time,
+                    log: d.each(n, Dec::str)?,
+                }
+            }
+            kind::CALL3 => {
+                let function = d.str()?;
+                let status = d.str()?;
+                let time = d.f64()?;
+                let n = d.count(4)?;
+                Failure::Call3 {
                     function,
                     status,
                     time,
@@ -948,6 +995,12 @@ mod tests {
                 status: fmi2Status(77),
                 time: 0.0,
                 log: vec![],
+            },
+            Failure::Call3 {
+                function: "fmi3DoStep".into(),
+                status: "fmi3Error".into(),
+                time: 0.25,
+                log: vec!["[Error] a step of an FMI 3.0 FMU".into()],
             },
             Failure::Instantiate("GUID {a} differs".into()),
             Failure::Unsupported(Some(Function::GetBooleanStatus)),

@@ -30,7 +30,7 @@ pub enum FmuError {
     )]
     Call3 {
         instance: String,
-        function: &'static str,
+        function: String,
         status: String,
         time: f64,
         log: Vec<String>,

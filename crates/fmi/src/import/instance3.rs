@@ -106,7 +106,7 @@ impl Instance3 {
         resource_dir: Option<&Path>,
         logging_on: bool,
     ) -> Result<Instance3, FmuError> {
-        let sink = Box::new(LogSink::new(name));
+        let sink = Box::new(LogSink::new3(name));
         let bad = |m: &str| FmuError::Instantiate {
             instance: name.into(),
             message: m.into(),
@@ -181,7 +181,7 @@ impl Instance3 {
     fn call_error(&self, function: &'static str, status: Status) -> FmuError {
         FmuError::Call3 {
             instance: self.name.clone(),
-            function,
+            function: function.to_string(),
             status: status3_name(status),
             time: self.time,
             log: self.sink.last_lines(),
@@ -608,7 +608,7 @@ impl Instance3 {
         if early != 0 && terminate == 0 {
             return Err(FmuError::Call3 {
                 instance: self.name.clone(),
-                function: "fmi3DoStep",
+                function: "fmi3DoStep".into(),
                 status: format!(
                     "earlyReturn = true with lastSuccessfulTime = {last:?} s instead of completing the step to {:?} s, although it was instantiated with earlyReturnAllowed = false (FMI 3.0 §4.2.1)",
                     t + h

@@ -16,6 +16,8 @@ pub const MAX_LINE_CHARS: usize = 4096;
 /// Where one instance's messages go.
 pub struct LogSink {
     pub instance: String,
+    /// The FMI version whose status names the lines carry (`fmi2Error`, `fmi3Error`).
+    fmi3: bool,
     lines: Mutex<VecDeque<String>>,
     /// Forward messages to `log` (off: kept only for error reports).
     echo: AtomicBool,
@@ -25,8 +27,25 @@ impl LogSink {
     pub fn new(instance: &str) -> Self {
         LogSink {
             instance: instance.to_string(),
+            fmi3: false,
             lines: Mutex::new(VecDeque::new()),
             echo: AtomicBool::new(true),
+        }
+    }
+
+    /// The sink of an FMI 3.0 instance: its lines carry FMI 3.0's status names.
+    pub fn new3(instance: &str) -> Self {
+        LogSink {
+            fmi3: true,
+            ..LogSink::new(instance)
+        }
+    }
+
+    /// A status's name in this instance's FMI version.
+    fn status_name(&self, status: fmi2Status) -> std::borrow::Cow<'static, str> {
+        match self.fmi3 {
+            true => status.name().replacen("fmi2", "fmi3", 1).into(),
+            false => status.name().into(),
         }
     }
 
@@ -39,7 +58,7 @@ impl LogSink {
     pub fn push(&self, status: fmi2Status, category: &str, message: &str) {
         let line = format!(
             "[{}] {}: {}",
-            status.name(),
+            self.status_name(status),
             tb_files::shown(category, 64, false),
             tb_files::shown(message, MAX_LINE_CHARS, true)
         );
