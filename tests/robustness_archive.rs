@@ -478,12 +478,21 @@ fn a_model_description_over_64_mib_is_an_error_not_cut() {
 fn a_broken_or_foreign_binary_is_named_by_the_fmu_and_its_entry() {
     let so = "binaries/linux64/faulty.so";
     let real = base_entries().into_iter().find(|e| e.0 == so).unwrap().1;
-    // Not an ELF file, and a 32-bit ELF (the class byte of the real one flipped).
+    // Not an ELF file, a 32-bit ELF (the class byte of the real one flipped), and a
+    // library for aarch64 (its machine field changed; red team N28: the loader said "No
+    // such file or directory").
     let mut elf32 = real.clone();
     elf32[4] = 1;
+    let mut aarch64 = real.clone();
+    aarch64[18..20].copy_from_slice(&183u16.to_le_bytes());
     for (name, binary, expected) in [
-        ("garbage.fmu", vec![b'x'; 4096], "invalid ELF header"),
-        ("elf32.fmu", elf32, "wrong ELF class: ELFCLASS32"),
+        ("garbage.fmu", vec![b'x'; 4096], "not an ELF shared library"),
+        (
+            "elf32.fmu",
+            elf32,
+            "a library for x86-64 but not 64-bit little-endian (ELF machine 62)",
+        ),
+        ("aarch64.fmu", aarch64, "a library for aarch64 (ELF machine 183)"),
     ] {
         let s = Scratch::new();
         let fmu = s.dir.path().join(name);

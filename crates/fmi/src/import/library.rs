@@ -34,6 +34,7 @@ impl Library {
     /// Load the library, resolve every function of [`crate::FUNCTIONS`] (the required ones
     /// must be there) and check `fmi2GetVersion`.
     pub fn load(path: &Path) -> Result<Library, FmuError> {
+        super::check_elf(path)?;
         let lib = unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
             path: path.to_path_buf(),
             message: e.to_string(),

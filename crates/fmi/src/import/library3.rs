@@ -90,6 +90,7 @@ impl Library3 {
     /// Load the library, resolve the functions (every one is required by FMI 3.0 for a
     /// Co-Simulation FMU) and check `fmi3GetVersion`.
     pub fn load(path: &Path) -> Result<Library3, FmuError> {
+        super::check_elf(path)?;
         let lib = unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
             path: path.to_path_buf(),
             message: e.to_string(),

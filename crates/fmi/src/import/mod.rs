@@ -23,6 +23,40 @@ mod store;
 
 pub use error::FmuError;
 
+/// Whether `path` is a shared library this process can load, read from its ELF header:
+/// an x86-64 library, 64-bit, little-endian. The dynamic loader reports a library for
+/// another machine as "No such file or directory" (N28); this says what it is.
+pub(crate) fn check_elf(path: &std::path::Path) -> Result<(), FmuError> {
+    use std::io::Read;
+    let bad = |message: String| FmuError::Load {
+        path: path.to_path_buf(),
+        message,
+    };
+    let mut head = [0u8; 20];
+    let n = std::fs::File::open(path)
+        .and_then(|f| f.take(20).read(&mut head))
+        .map_err(|e| bad(format!("cannot read: {e}")))?;
+    if n < 20 || &head[..4] != b"\x7fELF" {
+        return Err(bad("not an ELF shared library".into()));
+    }
+    let machine = u16::from_le_bytes([head[18], head[19]]);
+    const EM_X86_64: u16 = 62;
+    if head[4] != 2 || head[5] != 1 || machine != EM_X86_64 {
+        let name = match machine {
+            3 => "x86 (32-bit)",
+            40 => "ARM (32-bit)",
+            183 => "aarch64",
+            243 => "RISC-V",
+            62 => "x86-64 but not 64-bit little-endian",
+            _ => "another machine",
+        };
+        return Err(bad(format!(
+            "a library for {name} (ELF machine {machine}), not for this x86-64 machine: the FMU has no binary this host can run"
+        )));
+    }
+    Ok(())
+}
+
 /// The longest String (or Binary, in bytes) value read from an FMU: a value is copied into
 /// every recorded row, so an FMU handing out 100 MB strings would exhaust memory.
 pub const MAX_STRING_BYTES: usize = 1 << 20;
@@ -63,4 +97,26 @@ pub(crate) fn too_long(
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_library_for_another_machine_is_named_as_such() {
+        let dir = std::env::temp_dir().join(format!("tb-elf-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut head = vec![0u8; 64];
+        head[..4].copy_from_slice(b"\x7fELF");
+        head[4] = 2; // 64-bit
+        head[5] = 1; // little-endian
+        head[18..20].copy_from_slice(&183u16.to_le_bytes()); // aarch64
+        let so = dir.join("arm.so");
+        std::fs::write(&so, &head).unwrap();
+        let e = super::check_elf(&so).unwrap_err().to_string();
+        assert!(e.contains("a library for aarch64 (ELF machine 183)"), "{e}");
+        std::fs::write(&so, b"not a library at all, just text").unwrap();
+        let e = super::check_elf(&so).unwrap_err().to_string();
+        assert!(e.contains("not an ELF shared library"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -110,6 +110,18 @@ pub(crate) unsafe fn guarded<M: Model>(
 
 /// Decode `fmuResourceLocation` (a file URI, percent-encoded) into a folder path.
 pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
+    // `file://host/path` names a file on another machine (N28: it was read as the local
+    // path /host/path).
+    if let Some(authority) = uri.strip_prefix("file://") {
+        let host = authority.split('/').next().unwrap_or_default();
+        if !host.is_empty() && host != "localhost" {
+            return Err(format!(
+                "'{}' names a file on the host '{}': only local files (file:///path) can be read",
+                tb_files::excerpt(uri),
+                tb_files::excerpt(host)
+            ));
+        }
+    }
     let rest = uri
         .strip_prefix("file://localhost/")
         .map(|r| format!("/{r}"))
@@ -148,3 +160,24 @@ pub mod entry;
 mod export;
 
 pub use entry::*;
+
+#[cfg(test)]
+mod tests {
+    use super::resource_dir_from_uri;
+    use std::path::Path;
+
+    #[test]
+    fn file_uris_name_local_files_only() {
+        for (uri, path) in [
+            ("file:///a/b%20c", "/a/b c"),
+            ("file://localhost/a", "/a"),
+            ("file:/a", "/a"),
+        ] {
+            assert_eq!(resource_dir_from_uri(uri).unwrap(), Path::new(path), "{uri}");
+        }
+        // Red team N28: another host's file was read as a local path.
+        let e = resource_dir_from_uri("file://server/etc/data").unwrap_err();
+        assert!(e.contains("names a file on the host 'server'"), "{e}");
+        assert!(resource_dir_from_uri("http://x/y").is_err());
+    }
+}
