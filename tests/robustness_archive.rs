@@ -492,7 +492,11 @@ fn a_broken_or_foreign_binary_is_named_by_the_fmu_and_its_entry() {
             elf32,
             "a library for x86-64 but not 64-bit little-endian (ELF machine 62)",
         ),
-        ("aarch64.fmu", aarch64, "a library for aarch64 (ELF machine 183)"),
+        (
+            "aarch64.fmu",
+            aarch64,
+            "a library for aarch64 (ELF machine 183)",
+        ),
     ] {
         let s = Scratch::new();
         let fmu = s.dir.path().join(name);

@@ -16,4 +16,4 @@ pub mod shown;
 
 pub use input::Limit;
 pub use paths::{absolute, folder_of, normalize, relative_to, resolve};
-pub use shown::{excerpt, shown};
+pub use shown::{excerpt, number, shown};

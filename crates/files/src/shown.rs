@@ -22,6 +22,17 @@ pub fn shown(text: &str, max_chars: usize, lines: bool) -> String {
     out
 }
 
+/// A number a user gave, for a message: as written for ordinary sizes (`0.5`, `200`), in
+/// exponent form for huge or tiny ones (`1e308`, not 309 digits; `5e-324`, not 324 zeros).
+pub fn number(x: f64) -> String {
+    let a = x.abs();
+    if x != 0.0 && a.is_finite() && !(1e-5..1e15).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 /// A short excerpt of a field or a value (one line, 60 characters).
 pub fn excerpt(text: &str) -> String {
     shown(text, 60, false)
@@ -30,6 +41,15 @@ pub fn excerpt(text: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_read_as_written_and_huge_ones_short() {
+        assert_eq!(number(0.5), "0.5");
+        assert_eq!(number(200.0), "200");
+        assert_eq!(number(1e308), "1e308");
+        assert_eq!(number(5e-324), "5e-324");
+        assert_eq!(number(f64::NAN), "NaN");
+    }
 
     #[test]
     fn control_characters_are_escaped_and_long_text_cut() {

@@ -11,7 +11,10 @@ pub(super) fn check(file: &SystemFile, ctx_file: &str) -> Result<(), SystemError
     if !(e.step > 0.0 && e.step.is_finite()) {
         return Err(invalid(
             ctx_file,
-            format!("experiment.step must be positive, got {}", e.step),
+            format!(
+                "experiment.step must be positive, got {}",
+                tb_files::number(e.step)
+            ),
         ));
     }
     if !e.start.is_finite() {
@@ -48,8 +51,9 @@ pub(super) fn check(file: &SystemFile, ctx_file: &str) -> Result<(), SystemError
         return Err(invalid(
             ctx_file,
             format!(
-                "experiment.step = {} s over {span} s is {steps:.3e} macro steps, more than {MAX_STEPS:.0e}: a larger step",
-                e.step
+                "experiment.step = {} s over {} s is {steps:.3e} macro steps, more than {MAX_STEPS:.0e}: a larger step",
+                tb_files::number(e.step),
+                tb_files::number(span)
             ),
         ));
     }

@@ -220,9 +220,10 @@ impl ParamSlot {
                 return Err(invalid(
                     ctx,
                     format!(
-                        "{x} is outside the declared range [{}, {}] of '{}'",
-                        self.min.map_or("-inf".into(), |m| m.to_string()),
-                        self.max.map_or("inf".into(), |m| m.to_string()),
+                        "{} is outside the declared range [{}, {}] of '{}'",
+                        tb_files::number(x),
+                        self.min.map_or("-inf".into(), tb_files::number),
+                        self.max.map_or("inf".into(), tb_files::number),
                         self.name
                     ),
                 ));
