@@ -537,3 +537,52 @@ fn n29_degenerate_tracks_and_targets_are_refused() {
         assert!(e.contains(expected), "{name}: {e}");
     }
 }
+
+/// N28, the cosmetic ones: a UTF-8 byte order mark in a track or target file, a huge
+/// number printed as 309 digits (the rest: tests/robustness_archive.rs for a library of
+/// another machine, tests/fmi3_systems.rs for isolated FMI 3.0 names, fmu-export's
+/// file URI test for `file://host/`).
+#[test]
+fn n28_a_byte_order_mark_is_read_and_huge_numbers_print_short() {
+    let dir = tb_testkit::scratch("n28");
+    let d = dir.path();
+    let meas = root().join("data/spielberg_lap.csv");
+    let track = root().join("data/spielberg_lap_track.csv");
+    let lap = twinbench_in(
+        d,
+        &[
+            "lap",
+            meas.to_str().unwrap(),
+            "--track",
+            track.to_str().unwrap(),
+            "--out",
+            "lap",
+        ],
+    );
+    assert!(
+        lap.status.success(),
+        "{}",
+        String::from_utf8_lossy(&lap.stderr)
+    );
+    for file in ["lap/track.csv", "lap/target_speed.csv"] {
+        let text = std::fs::read_to_string(d.join(file)).unwrap();
+        std::fs::write(d.join(file), format!("\u{feff}{text}")).unwrap();
+    }
+    let run = twinbench_in(d, &["run", "lap/system.toml"]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let e = failure_in(
+        d,
+        &[
+            "run",
+            "lap/system.toml",
+            "--set",
+            "vehicle.c_lift_front=1e308",
+        ],
+    );
+    assert!(e.contains("1e308 is outside the declared range"), "{e}");
+    assert!(!e.contains("0000000000"), "{e}");
+}
