@@ -96,8 +96,7 @@ impl Instance {
             return Err(FmuError::Instantiate {
                 instance: name.into(),
                 message: format!(
-                    "fmi2Instantiate returned NULL ({}); FMU log: {}",
-                    lib.path.display(),
+                    "fmi2Instantiate returned NULL; the FMU's log: {}",
                     sink.last_lines().join(" | ")
                 ),
             });

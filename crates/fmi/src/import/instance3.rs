@@ -132,8 +132,7 @@ impl Instance3 {
         };
         if inst.is_null() {
             return Err(bad(&format!(
-                "fmi3InstantiateCoSimulation returned NULL ({}); FMU log: {}",
-                lib.path.display(),
+                "fmi3InstantiateCoSimulation returned NULL; the FMU's log: {}",
                 sink.last_lines().join(" | ")
             )));
         }

@@ -173,7 +173,11 @@ mod tests {
             ("file://localhost/a", "/a"),
             ("file:/a", "/a"),
         ] {
-            assert_eq!(resource_dir_from_uri(uri).unwrap(), Path::new(path), "{uri}");
+            assert_eq!(
+                resource_dir_from_uri(uri).unwrap(),
+                Path::new(path),
+                "{uri}"
+            );
         }
         // Red team N28: another host's file was read as a local path.
         let e = resource_dir_from_uri("file://server/etc/data").unwrap_err();
