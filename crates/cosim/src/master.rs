@@ -565,7 +565,11 @@ impl Simulation {
     /// [`Plan::parameter`] and checked with [`ParamSlot::check`].
     pub fn set(&mut self, slot: &ParamSlot, value: ParamValue) {
         if let Unit::Fmu(f) = &mut self.ex.units[slot.unit] {
-            match f.params.iter_mut().find(|p| p.0 == slot.vr) {
+            match f
+                .params
+                .iter_mut()
+                .find(|p| p.0 == slot.vr && p.1.space() == slot.ty.value_space())
+            {
                 Some(p) => p.1 = value,
                 None => f.params.push((slot.vr, value)),
             }
@@ -583,7 +587,8 @@ impl Simulation {
     /// Current value of a parameter set through the system (else the FMU's start value).
     pub fn value_of(&self, slot: &ParamSlot) -> Option<f64> {
         if let Unit::Fmu(f) = &self.ex.units[slot.unit] {
-            if let Some(p) = f.params.iter().find(|p| p.0 == slot.vr) {
+            let key = slot.key();
+            if let Some(p) = f.params.iter().find(|p| (p.1.space(), p.0) == key) {
                 return p.1.as_f64();
             }
         }

@@ -25,7 +25,7 @@ pub(super) fn connections(
         let c = connection(conn, units, signals, &ctx, &mut notes)?;
         if connections
             .iter()
-            .any(|d| d.to_unit == c.to_unit && d.to_vr == c.to_vr)
+            .any(|d| d.to_unit == c.to_unit && d.to_key() == c.to_key())
         {
             return Err(invalid(
                 &ctx,
@@ -176,7 +176,7 @@ pub(super) fn replayed_columns(
             .description()
             .variables
             .iter()
-            .find(|v| v.value_reference == c.to_vr && v.causality == Causality::Input)
+            .find(|v| v.has_key(c.to_key()) && v.causality == Causality::Input)
             .expect("resolved by the connections stage");
         let r = units.replay(unit);
         let discrete = sv.ty != ScalarType::Real
@@ -267,7 +267,7 @@ pub(super) fn unconnected_inputs(
         {
             let connected = connections
                 .iter()
-                .any(|c| c.to_unit == k && c.to_vr == v.value_reference);
+                .any(|c| c.to_unit == k && c.to_key() == v.key());
             let set = file
                 .parameters
                 .contains_key(&format!("{}.{}", inst.name, v.name))

@@ -309,11 +309,11 @@ impl<'a> Units<'a> {
     /// The FMU variable behind an FMU endpoint.
     pub fn variable(&self, e: &Endpoint) -> Option<&'a ScalarVariable> {
         match e {
-            Endpoint::Fmu { unit, vr, .. } => self.instances[*unit]
+            Endpoint::Fmu { unit, vr, ty, .. } => self.instances[*unit]
                 .description()
                 .variables
                 .iter()
-                .find(|v| v.value_reference == *vr),
+                .find(|v| v.has_key((ty.value_space(), *vr))),
             Endpoint::Replay { .. } => None,
         }
     }

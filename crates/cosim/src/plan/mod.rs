@@ -39,7 +39,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_fmi::import::description::{ModelDescription, ScalarVariable};
-use tb_fmi::{FmuCache, LoadedFmu, ScalarType};
+use tb_fmi::{FmuCache, LoadedFmu, ScalarType, VarKey};
 
 /// One FMU instance of the system, resolved.
 pub struct InstanceDef {
@@ -123,6 +123,13 @@ pub struct ConnectionDef {
     pub offset: f64,
 }
 
+impl ConnectionDef {
+    /// The input's [`VarKey`]: (value space, value reference).
+    pub fn to_key(&self) -> VarKey {
+        (self.to_ty.value_space(), self.to_vr)
+    }
+}
+
 /// The most macro steps a run may have (10¹²: days of a 1 µs step; more is a mistake).
 pub const MAX_STEPS: f64 = 1e12;
 
@@ -149,7 +156,8 @@ pub struct Signal {
 #[derive(Clone, Debug, Default)]
 pub struct SignalTable {
     pub signals: Vec<Signal>,
-    index: HashMap<(bool, usize, u64), usize>,
+    /// (replay?, unit, value space, value reference or column).
+    index: HashMap<(bool, usize, Option<ScalarType>, u64), usize>,
 }
 
 impl Signal {
@@ -169,8 +177,10 @@ impl SignalTable {
     /// The slot of a source (a new one the first time).
     pub fn slot(&mut self, e: &Endpoint, name: &str) -> usize {
         let key = match e {
-            Endpoint::Fmu { unit, vr, .. } => (false, *unit, *vr as u64),
-            Endpoint::Replay { unit, column, .. } => (true, *unit, *column as u64),
+            Endpoint::Fmu { unit, vr, ty, .. } => {
+                (false, *unit, Some(ty.value_space()), *vr as u64)
+            }
+            Endpoint::Replay { unit, column, .. } => (true, *unit, None, *column as u64),
         };
         if let Some(&k) = self.index.get(&key) {
             return k;
@@ -390,7 +400,7 @@ impl Plan {
     pub fn driving_connection(&self, slot: &ParamSlot) -> Option<&ConnectionDef> {
         self.connections
             .iter()
-            .find(|c| c.to_unit == slot.unit && c.to_vr == slot.vr)
+            .find(|c| c.to_unit == slot.unit && c.to_key() == slot.key())
     }
 
     /// A signal the system can read (`instance.variable` or `replay.column`).
