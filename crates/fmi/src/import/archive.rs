@@ -126,8 +126,8 @@ impl LoadedFmu {
         &self.sha256[..32]
     }
 
-    /// The check of an unpacked file of the manifest.
-    fn file_check(&self, entry: &str) -> Option<FileCheck> {
+    /// The check of an unpacked file of the manifest (`entry`: its name in the archive).
+    pub fn unpacked_file(&self, entry: &str) -> Option<FileCheck> {
         let f = self.manifest.file(entry)?;
         Some(FileCheck {
             base: self.base.clone(),
@@ -146,7 +146,7 @@ impl LoadedFmu {
             return Ok(c.clone());
         }
         let entry = self.library_entry();
-        let Some(check) = self.file_check(&entry) else {
+        let Some(check) = self.unpacked_file(&entry) else {
             return Err(FmuError::Load {
                 path: self.source.clone(),
                 message: format!("{entry}: the FMU has no such file"),
