@@ -353,6 +353,8 @@ pub struct FmuCache {
     /// Whether an FMU must carry a binary for this platform (see
     /// [`FmuCache::description_only`]).
     binary_required: bool,
+    /// Whether every unpacked file is verified on load (see [`FmuCache::verifying_all`]).
+    verify_all: bool,
     counters: Counters,
     /// A temporary cache's lock file (`<root>.lock`, flocked while the cache lives).
     _owner: Option<OwnerLock>,
@@ -486,6 +488,7 @@ impl FmuCache {
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
             binary_required: true,
+            verify_all: false,
             counters: Counters::default(),
         })
     }
@@ -508,6 +511,7 @@ impl FmuCache {
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
             binary_required: true,
+            verify_all: false,
             counters: Counters::default(),
         })
     }
@@ -549,16 +553,33 @@ impl FmuCache {
         self
     }
 
+    /// A cache that verifies every unpacked file of an FMU when it loads it, resources
+    /// included (repairing a folder that differs), not only the description and, before
+    /// it is loaded, the library: for a remote worker, whose input digest says which
+    /// unpacked content it runs on.
+    pub fn verifying_all(mut self) -> Self {
+        self.verify_all = true;
+        self
+    }
+
     /// Check, unpack (once per content) and load an FMU.
     pub fn load(&self, fmu: &Path) -> Result<Arc<LoadedFmu>, FmuError> {
         let (file, meta) = open_regular(fmu, &self.limits, "an FMU is a zip archive")?;
-        if let Some(store) = &self.store {
-            if let Some(l) = self.load_indexed(fmu, &file, &meta, store) {
+        let indexed = match &self.store {
+            Some(store) => self.load_indexed(fmu, &file, &meta, store),
+            None => None,
+        };
+        let loaded = match indexed {
+            Some(l) => {
                 self.counters.index_hits.fetch_add(1, Ordering::Relaxed);
-                return Ok(l);
+                l
             }
+            None => self.load_full(fmu, &file, &meta)?,
+        };
+        if self.verify_all {
+            loaded.verify_all()?;
         }
-        self.load_full(fmu, &file, &meta)
+        Ok(loaded)
     }
 
     /// A load through the stat index: the file's `stat` finds its entry, the archive's
