@@ -409,3 +409,51 @@ fn a_remote_workers_digest_covers_the_unpacked_content_it_runs_on() {
     let why = worker.digest().mismatch(&other).unwrap();
     assert!(why.contains("driver.fmu"), "{why}");
 }
+
+/// The store keeps every FMU ever run (the finding's 1.9 GB bomb stayed): `twinbench cache
+/// prune` removes the folders no running process uses, and keeps the one this test holds.
+#[test]
+fn cache_prune_removes_unused_folders_and_keeps_those_in_use() {
+    let dir = tb_testkit::scratch("prune");
+    let store = dir.path().join("store");
+    let (a, _) = hostile_fmu(dir.path(), "NONE");
+    let (b, _) = hostile_fmu(dir.path(), "STEP_EXIT");
+    let cache = tb_fmi::FmuCache::temporary_with_store(&store).unwrap();
+    let held = cache.load(&a).unwrap();
+    drop(
+        tb_fmi::FmuCache::temporary_with_store(&store)
+            .unwrap()
+            .load(&b)
+            .unwrap(),
+    );
+    let twinbench = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .args(args)
+            .env("TWINBENCH_CACHE", &store)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let info = twinbench(&["cache", "info"]);
+    assert!(
+        info.contains("folders  2 (") && info.contains("1 in use"),
+        "{info}"
+    );
+    let pruned = twinbench(&["cache", "prune", "--older-than", "0"]);
+    assert!(
+        pruned.contains("removed  1 folders") && pruned.contains("kept     1 folders in use"),
+        "{pruned}"
+    );
+    assert!(held.dir.join(".complete").is_file());
+    assert!(!folder_of(&store, &b).exists());
+    drop(held);
+    drop(cache);
+    let pruned = twinbench(&["cache", "prune", "--max-size", "0"]);
+    assert!(pruned.contains("removed  1 folders"), "{pruned}");
+    assert!(!folder_of(&store, &a).exists());
+    // The next run unpacks again.
+    let (out, err, y) = run(&store, &system(dir.path(), &a), false, &[], None);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(y, Some(1.0));
+}
