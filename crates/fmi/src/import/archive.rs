@@ -669,12 +669,18 @@ impl FmuCache {
         let (manifest, trusted) = match found {
             Some(Ok((m, _))) => (m, false),
             found => {
-                if let Some(Err(reason)) = found {
-                    log::warn!(
+                if let Some(Err(reason)) = &found {
+                    if !dir.join(manifest::MANIFEST).exists() {
+                        // A folder without a manifest was unpacked by a twinbench before
+                        // manifests: unpacked again, nothing to report.
+                        log::info!("{}: no manifest; unpacking again", dir.display());
+                    } else {
+                        log::warn!(
                         "{}: the unpacked FMU {} differs from what was unpacked ({reason}); unpacking it again",
                         dir.display(),
                         fmu.display()
                     );
+                    }
                 }
                 drop(held);
                 if let Some(store) = &self.store {
