@@ -195,11 +195,10 @@ impl LoadedFmu {
         if self.trusted || super::sandbox::available().is_ok() {
             return Ok(());
         }
+        // The archive as it is now: if it changed since it was loaded, its library differs
+        // and the repair below says so.
         let (file, _) = open_regular(&self.source, &self.limits, "an FMU is a zip archive")?;
         let bytes = read_regular(&self.source, &file, &self.limits)?;
-        if format!("{:x}", Sha256::digest(&bytes)) != self.sha256 {
-            return Err(changed_since(&self.source));
-        }
         let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&bytes[..]))
             .map_err(|e| arch(&self.source, e.to_string()))?;
         let mut f = zip
@@ -242,6 +241,7 @@ impl LoadedFmu {
         let (fresh, _) = replace_folder(
             &self.source,
             &bytes,
+            &self.sha256,
             &self.base,
             self.dir_rel(),
             &self.limits,
@@ -690,6 +690,7 @@ impl FmuCache {
                 let (m, ours) = replace_folder(
                     fmu,
                     &bytes,
+                    &sha,
                     base,
                     rel,
                     &self.limits,
@@ -840,7 +841,7 @@ impl FmuCache {
         check_entries(package, &bytes, &self.limits)?;
         let dir = self.root.join(format!("pkg-{}", &sha[..32]));
         if !dir.join(".complete").exists() {
-            extract(package, &bytes, &dir, &self.limits, None)?;
+            extract(package, &bytes, &sha, &dir, &self.limits, None)?;
         }
         Ok(dir)
     }
@@ -1327,6 +1328,7 @@ fn check_folder(
 fn replace_folder(
     fmu: &Path,
     bytes: &[u8],
+    sha: &str,
     base: &Path,
     rel: &str,
     limits: &Limits,
@@ -1341,14 +1343,13 @@ fn replace_folder(
     } else {
         None
     };
-    let sha = format!("{:x}", Sha256::digest(bytes));
     let mut zip =
         zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| arch(fmu, e.to_string()))?;
     let entries = check_entries_of(fmu, &mut zip, limits)?;
     let current = std::fs::symlink_metadata(&dir).ok().map(|m| m.ino());
     let replaced_meanwhile = stale.is_none() || current != stale;
     if current.is_some() && replaced_meanwhile && dir.join(".complete").is_file() {
-        if let Ok((m, _)) = check_folder(base, rel, &sha, &entries) {
+        if let Ok((m, _)) = check_folder(base, rel, sha, &entries) {
             return Ok((m, false));
         }
     }
@@ -1358,9 +1359,9 @@ fn replace_folder(
             let _ = std::fs::remove_dir_all(&aside);
         }
     }
-    match extract(fmu, bytes, &dir, limits, exec)? {
+    match extract(fmu, bytes, sha, &dir, limits, exec)? {
         Some(m) => Ok((m, true)),
-        None => check_folder(base, rel, &sha, &entries)
+        None => check_folder(base, rel, sha, &entries)
             .map(|(m, _)| (m, false))
             .map_err(|why| arch(&dir, format!("cannot use the unpacked FMU: {why}"))),
     }
@@ -1372,14 +1373,14 @@ fn replace_folder(
 fn extract(
     fmu: &Path,
     bytes: &[u8],
+    sha: &str,
     dir: &Path,
     limits: &Limits,
     exec: Option<&str>,
 ) -> Result<Option<Manifest>, FmuError> {
     let tmp = unique_sibling(dir);
-    let sha = format!("{:x}", Sha256::digest(bytes));
     // Nothing half-extracted stays behind in the cache.
-    let manifest = extract_into(fmu, bytes, &tmp, limits, &sha, exec).inspect_err(|_| {
+    let manifest = extract_into(fmu, bytes, &tmp, limits, sha, exec).inspect_err(|_| {
         let _ = std::fs::remove_dir_all(&tmp);
     })?;
     let mut moved = std::fs::rename(&tmp, dir);

@@ -9,9 +9,9 @@
 //!   canonical path and `stat` (device, inode, size, mtime and ctime in ns), holding the
 //!   archive's content hash and a fingerprint of its central directory;
 //! - `.<name>.tmp-*`: unpackings and index entries being written (a killed process may leave
-//!   one; they are removed after a day);
-//! - `.unpack.lock`: held while a process unpacks into the store.
+//!   one; they are removed after a day).
 //!
+//! A process that unpacks into the store holds an exclusive `flock` on the store's folder.
 //! Every unpacked folder holds its manifest (`.manifest`, see [`super::manifest`]); a
 //! process that uses a folder holds a shared lock on its `.complete`, which `cache prune`
 //! ([`prune`]) must take exclusively to remove it.
@@ -31,8 +31,6 @@ const INDEX_FORMAT: &str = "twinbench-unpack-index 1";
 pub(crate) const INDEX_DIR: &str = "index";
 /// The largest index entry read (they are about 250 bytes).
 const MAX_ENTRY_BYTES: u64 = 4096;
-/// The store's unpack lock file (see [`unpack_lock`]).
-const UNPACK_LOCK: &str = ".unpack.lock";
 /// Temporaries older than this are left by a killed process (an unpacking takes seconds).
 const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(24 * 3600);
 
@@ -271,23 +269,18 @@ fn sweep_older_than(store: &Path, stale_after: std::time::Duration) -> usize {
     removed
 }
 
-/// The store's unpack lock (`.unpack.lock`, flocked exclusively while one process
-/// unpacks into the store): processes that start together on a new FMU unpack it once, not
+/// The store's unpack lock (the store's folder itself, flocked exclusively while one
+/// process unpacks into it): processes that start together on a new FMU unpack it once, not
 /// each a copy. `None` when it cannot be had (the unpacking goes on without it; after ten
 /// minutes of waiting too: a stopped process must not stop every other).
 pub(crate) fn unpack_lock(store: &Path) -> Option<std::fs::File> {
     use std::os::fd::AsRawFd;
-    use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
-    let path = store.join(UNPACK_LOCK);
+    use std::os::unix::fs::OpenOptionsExt;
     let f = std::fs::OpenOptions::new()
         .read(true)
-        .write(true)
-        .create(true)
-        .mode(0o600)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-        .open(&path)
+        .custom_flags(libc::O_DIRECTORY | libc::O_CLOEXEC)
+        .open(store)
         .ok()?;
-    let _ = f.set_permissions(std::fs::Permissions::from_mode(0o600));
     let until = std::time::Instant::now() + std::time::Duration::from_secs(600);
     loop {
         // SAFETY: flock on a descriptor we own.
