@@ -55,7 +55,7 @@ fn parse_size(s: &str) -> anyhow::Result<u64> {
         other => bail!("--max-size {s}: unknown unit '{other}' (B, K, M, G, T; KiB, MiB, GiB)"),
     };
     let bytes = n * scale;
-    if !bytes.is_finite() || bytes < 0.0 || bytes > 1e18 {
+    if !bytes.is_finite() || !(0.0..=1e18).contains(&bytes) {
         bail!("--max-size {s}: out of range");
     }
     Ok(bytes as u64)
