@@ -294,6 +294,19 @@ pub(crate) fn unpack_lock(store: &Path) -> Option<std::fs::File> {
     }
 }
 
+/// The unpack lock if no process holds it now.
+fn try_unpack_lock(store: &Path) -> Option<std::fs::File> {
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::OpenOptionsExt;
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_DIRECTORY | libc::O_CLOEXEC)
+        .open(store)
+        .ok()?;
+    // SAFETY: flock on a descriptor we own.
+    (unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0).then_some(f)
+}
+
 /// Whether a store entry's name is an unpacked FMU's folder (32 hexadecimal digits).
 fn is_unpacked(name: &str) -> bool {
     name.len() == 32 && name.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
@@ -381,7 +394,8 @@ pub struct Pruned {
 /// Removes from `store` the unpacked FMUs no running process uses that were last used more
 /// than `older_than` ago, then, least recently used first, unused ones until the folders
 /// take at most `max_bytes`; folders without `.complete`; temporaries of killed processes
-/// (`older_than`, or a day, old); index entries whose folder is gone. A folder is removed
+/// (when no process is unpacking, else those a day old); index entries whose folder is
+/// gone. A folder is removed
 /// only while holding its `.complete` lock exclusively (a process that loads it takes it
 /// shared, and after waiting for it finds the folder gone and unpacks again).
 pub fn prune(
@@ -420,7 +434,14 @@ pub fn prune(
             report.removed.push(f);
         }
     }
-    report.temporaries = sweep_older_than(store, older_than.unwrap_or(STALE_AFTER));
+    // Temporaries: with the unpack lock no process is unpacking, and any unpacking left is
+    // a killed one's (an index entry is written in microseconds: a minute is plenty);
+    // without it (a process is unpacking) only those a day old.
+    let stale_after = match try_unpack_lock(store) {
+        Some(_lock) => std::time::Duration::from_secs(60),
+        None => STALE_AFTER,
+    };
+    report.temporaries = sweep_older_than(store, stale_after);
     // Index entries whose folder is gone.
     if let Ok(entries) = std::fs::read_dir(store.join(INDEX_DIR)) {
         for e in entries.flatten() {
