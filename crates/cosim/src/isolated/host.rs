@@ -48,9 +48,10 @@ impl IsolatedBackend {
         options: &IsolationOptions,
         logging: bool,
     ) -> Result<IsolatedBackend, FmuError> {
-        let mut b = IsolatedBackend::spawn(name, options)?;
+        let library = library_target(fmu, options)?;
+        let mut b = IsolatedBackend::spawn(name, options, fmu.store())?;
         b.queue(&Request::Instantiate {
-            library: library_target(fmu, options),
+            library,
             name: name.to_string(),
             guid: fmu.description.guid.clone(),
             resources: fmu.resource_dir().to_string_lossy().into_owned(),
@@ -69,8 +70,9 @@ impl IsolatedBackend {
         options: &IsolationOptions,
     ) -> Result<LibraryReport, FmuError> {
         let name = fmu.model_identifier().to_string();
-        let mut b = IsolatedBackend::spawn(&name, options)?;
-        let probe = Request::Probe(library_target(fmu, options));
+        let library = library_target(fmu, options)?;
+        let mut b = IsolatedBackend::spawn(&name, options, fmu.store())?;
+        let probe = Request::Probe(library);
         b.queue(&probe);
         let answer = b.call(Function::GetVersion.name(), std::slice::from_ref(&probe))?;
         match answer.as_slice() {
@@ -90,7 +92,13 @@ impl IsolatedBackend {
         }
     }
 
-    fn spawn(name: &str, options: &IsolationOptions) -> Result<IsolatedBackend, FmuError> {
+    /// A worker process; `store`, the store of unpacked FMUs it is to make read-only for
+    /// itself before it loads anything.
+    fn spawn(
+        name: &str,
+        options: &IsolationOptions,
+        store: Option<&std::path::Path>,
+    ) -> Result<IsolatedBackend, FmuError> {
         let fail = |cause: String| FmuError::Isolated {
             instance: name.to_string(),
             function: "starting the worker".into(),
@@ -105,6 +113,24 @@ impl IsolatedBackend {
         // study cleanly, not the worker; and killing the group ends the worker and its
         // guard together.
         std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
+        match (store, tb_fmi::import::sandbox::available()) {
+            (Some(store), Ok(())) => {
+                cmd.env(super::READ_ONLY_ENV, store);
+            }
+            (Some(store), Err(why)) => {
+                static ONCE: std::sync::Once = std::sync::Once::new();
+                ONCE.call_once(|| {
+                    log::warn!(
+                        "isolated workers cannot be kept from writing the store of unpacked FMUs {} ({why}); a library this process loads is verified against its FMU's archive instead",
+                        store.display()
+                    )
+                });
+                cmd.env_remove(super::READ_ONLY_ENV);
+            }
+            (None, _) => {
+                cmd.env_remove(super::READ_ONLY_ENV);
+            }
+        }
         cmd.arg("worker")
             .stdin(Stdio::from(OwnedFd::from(worker)))
             .stdout(Stdio::null())
@@ -483,9 +509,16 @@ fn read_stderr(mut err: impl Read, mut keep: impl FnMut(String), who: &str) {
     }
 }
 
-fn library_target(fmu: &LoadedFmu, options: &IsolationOptions) -> LibraryTarget {
-    LibraryTarget {
-        path: fmu.library_path().to_string_lossy().into_owned(),
+/// What the worker loads, with the checks it makes first: the library verified here
+/// (repaired when it differs from its manifest), and again by the worker.
+fn library_target(fmu: &LoadedFmu, options: &IsolationOptions) -> Result<LibraryTarget, FmuError> {
+    let library = fmu.checked_library()?;
+    let mut checks = vec![library.clone()];
+    if fmu.is_fmi3() {
+        checks.extend(fmu.unpacked_file("modelDescription.xml"));
+    }
+    Ok(LibraryTarget {
+        path: library.path().to_string_lossy().into_owned(),
         source: fmu.source.to_string_lossy().into_owned(),
         model_identifier: fmu.model_identifier().to_string(),
         preload: options
@@ -501,7 +534,8 @@ fn library_target(fmu: &LoadedFmu, options: &IsolationOptions) -> LibraryTarget 
         } else {
             String::new()
         },
-    }
+        checks,
+    })
 }
 
 fn signal_name(sig: i32) -> &'static str {

@@ -17,6 +17,7 @@
 
 use std::borrow::Cow;
 use tb_fmi::fmi2::fmi2Status;
+pub use tb_fmi::import::archive::FileCheck;
 use tb_fmi::{FmuError, Function};
 
 /// Operation codes.
@@ -95,6 +96,9 @@ pub struct LibraryTarget {
     /// FMI 3.0: the unpacked modelDescription.xml (the worker needs its variables' types);
     /// empty for FMI 2.0.
     pub description: String,
+    /// The unpacked files the worker verifies before it loads anything (the library, and
+    /// FMI 3.0's description): where, size, mode, BLAKE3.
+    pub checks: Vec<FileCheck>,
 }
 
 impl LibraryTarget {
@@ -105,6 +109,15 @@ impl LibraryTarget {
         e.u32(self.preload.len() as u32);
         self.preload.iter().for_each(|p| e.str(p));
         e.str(&self.description);
+        e.u32(self.checks.len() as u32);
+        for c in &self.checks {
+            e.str(&c.base.to_string_lossy());
+            e.str(&c.rel);
+            // Sizes are within the unpack limit (2 GiB): exact as a double.
+            e.f64(c.size as f64);
+            e.u32(c.mode);
+            e.str(&c.hash);
+        }
     }
     pub fn decode(d: &mut Dec) -> Result<LibraryTarget, String> {
         let path = d.str()?;
@@ -113,12 +126,23 @@ impl LibraryTarget {
         let n = d.count(4)?;
         let preload = (0..n).map(|_| d.str()).collect::<Result<_, _>>()?;
         let description = d.str()?;
+        let n = d.count(4 + 4 + 8 + 4 + 4)?;
+        let checks = d.each(n, |d| {
+            Ok(FileCheck {
+                base: d.str()?.into(),
+                rel: d.str()?,
+                size: d.f64()? as u64,
+                mode: d.u32()?,
+                hash: d.str()?,
+            })
+        })?;
         Ok(LibraryTarget {
             path,
             source,
             model_identifier,
             preload,
             description,
+            checks,
         })
     }
 }
@@ -759,6 +783,13 @@ mod tests {
             model_identifier: "x".into(),
             preload: vec!["libpython3.11.so".into(), "b".into()],
             description: "/c/modelDescription.xml".into(),
+            checks: vec![FileCheck {
+                base: "/c".into(),
+                rel: "0123/x.so".into(),
+                size: 1 << 31,
+                mode: 0o700,
+                hash: "ab".repeat(32),
+            }],
         }
     }
 
