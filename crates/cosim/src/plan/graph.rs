@@ -57,7 +57,8 @@ pub(crate) fn check_feedthrough_cycles(
                         false,
                     ),
                 };
-            for inp in deps {
+            // An output that is an alias of an input is that input, not a loop through it.
+            for inp in deps.into_iter().filter(|i| i.key() != out.key()) {
                 edges
                     .entry((k, inp.key()))
                     .or_default()
