@@ -3,7 +3,7 @@
 communication point, for comparison with twinbench.
 
 Usage: fmpy_simulate.py FMU OUT.csv --stop T --step H [--start T0] [--input IN.csv]
-                        [--set NAME=VALUE ...]
+                        [--set NAME=VALUE ...] [--tolerance RTOL]
 
 OUT.csv: a header (time, then the outputs in model order), then one row per communication
 point; Real values as repr() (shortest round trip), Booleans as 0/1, Strings quoted."""
@@ -49,6 +49,8 @@ def main():
     p.add_argument("--start", type=float, default=0.0)
     p.add_argument("--input")
     p.add_argument("--set", action="append", default=[])
+    # Default: the DefaultExperiment's tolerance (FMPy's own default).
+    p.add_argument("--tolerance", type=float)
     a = p.parse_args()
     md = read_model_description(a.fmu)
     # Binary and Clock values have no column in twinbench.
@@ -60,6 +62,7 @@ def main():
         start_values[k] = float(v) if v.replace(".", "", 1).replace("e", "", 1).lstrip("-").isdigit() else v
     res = simulate_fmu(a.fmu, fmi_type="CoSimulation", start_time=a.start, stop_time=a.stop,
                        output_interval=a.step, output=outputs, start_values=start_values,
+                       relative_tolerance=a.tolerance,
                        input=read_input(a.input, md) if a.input else None)
     with open(a.out, "w", newline="") as f:
         w = csv.writer(f)

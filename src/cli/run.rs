@@ -45,6 +45,14 @@ pub struct RunArgs {
         requires = "trace_fmi"
     )]
     pub trace_instances: Vec<String>,
+    /// The relative tolerance of every FMU with an internal solver (over the system file's
+    /// and the FMUs' DefaultExperiment tolerance).
+    #[arg(long, value_name = "TOLERANCE")]
+    pub tolerance: Option<f64>,
+    /// The step size each doStep is given: `h` (the step itself, default) or `grid`
+    /// (t[n+1] - t[n], as FMPy passes it).
+    #[arg(long, value_name = "h|grid", value_parser = |s: &str| tb_cosim::StepConvention::from_name(s))]
+    pub step_convention: Option<tb_cosim::StepConvention>,
 }
 
 /// Parse `name=value` into a TOML value: an integer, a number, a boolean, else a string
@@ -111,7 +119,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                 ))),
                 instances: args.trace_instances.clone(),
             }),
+        tolerance: args.tolerance,
+        step_convention: args.step_convention,
     };
+    if let Some(t) = args.tolerance {
+        if !(t > 0.0 && t < 1.0) {
+            anyhow::bail!(
+                "--tolerance {}: a relative tolerance is a number between 0 and 1 (e.g. 1e-6)",
+                tb_files::number(t)
+            );
+        }
+    }
     let system = Arc::new(Plan::load_with(&args.system, cache, &options)?);
     if let Some(out) = &args.out {
         // Before the run: a result must not replace a device, a link, a folder or an input.

@@ -271,16 +271,26 @@ impl Backend for Traced {
         let f = self.name2("fmi2SetDebugLogging", "fmi3SetDebugLogging");
         self.traced(f, format!("loggingOn={on}"), |b| b.set_debug_logging(on))
     }
-    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
         let stop_text = stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
         if self.fmi3 {
             // FMI 3.0 passes these to fmi3EnterInitializationMode.
-            return self.inner.setup_experiment(start, stop);
+            return self.inner.setup_experiment(start, stop, tolerance);
         }
         self.traced(
             "fmi2SetupExperiment".into(),
-            format!("startTime={start:?}, stopTime={stop_text}"),
-            |b| b.setup_experiment(start, stop),
+            match tolerance {
+                Some(tol) => {
+                    format!("tolerance={tol:?}, startTime={start:?}, stopTime={stop_text}")
+                }
+                None => format!("startTime={start:?}, stopTime={stop_text}"),
+            },
+            |b| b.setup_experiment(start, stop, tolerance),
         )
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {

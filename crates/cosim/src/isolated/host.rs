@@ -579,11 +579,20 @@ impl Backend for IsolatedBackend {
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
         IsolatedBackend::set_debug_logging(self, on)
     }
-    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
         self.time = start;
         self.control(
             "fmi2SetupExperiment",
-            Request::SetupExperiment { start, stop },
+            Request::SetupExperiment {
+                start,
+                stop,
+                tolerance,
+            },
         )
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {

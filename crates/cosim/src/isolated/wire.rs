@@ -168,6 +168,7 @@ pub enum Request<'a> {
     SetupExperiment {
         start: f64,
         stop: Option<f64>,
+        tolerance: Option<f64>,
     },
     EnterInit,
     ExitInit,
@@ -277,10 +278,16 @@ impl Request<'_> {
             }
             Request::Probe(library) => library.encode(e),
             Request::SetDebugLogging(on) => e.u8(*on as u8),
-            Request::SetupExperiment { start, stop } => {
+            Request::SetupExperiment {
+                start,
+                stop,
+                tolerance,
+            } => {
                 e.f64(*start);
                 e.u8(stop.is_some() as u8);
                 e.f64(stop.unwrap_or(0.0));
+                e.u8(tolerance.is_some() as u8);
+                e.f64(tolerance.unwrap_or(0.0));
             }
             Request::SetReal { vrs, values } => {
                 e.vrs(vrs);
@@ -329,9 +336,12 @@ impl Request<'_> {
                 let start = d.f64()?;
                 let has_stop = d.u8()? != 0;
                 let stop = d.f64()?;
+                let has_tolerance = d.u8()? != 0;
+                let tolerance = d.f64()?;
                 Request::SetupExperiment {
                     start,
                     stop: has_stop.then_some(stop),
+                    tolerance: has_tolerance.then_some(tolerance),
                 }
             }
             op::ENTER_INIT => Request::EnterInit,
@@ -404,7 +414,15 @@ impl Request<'_> {
             Request::Probe(library) => Request::Probe(library),
             Request::Quit => Request::Quit,
             Request::SetDebugLogging(on) => Request::SetDebugLogging(on),
-            Request::SetupExperiment { start, stop } => Request::SetupExperiment { start, stop },
+            Request::SetupExperiment {
+                start,
+                stop,
+                tolerance,
+            } => Request::SetupExperiment {
+                start,
+                stop,
+                tolerance,
+            },
             Request::EnterInit => Request::EnterInit,
             Request::ExitInit => Request::ExitInit,
             Request::Terminate => Request::Terminate,
@@ -859,10 +877,12 @@ mod tests {
             Request::SetupExperiment {
                 start: 0.5,
                 stop: Some(98.5),
+                tolerance: Some(1e-6),
             },
             Request::SetupExperiment {
                 start: -1.0,
                 stop: None,
+                tolerance: None,
             },
             Request::EnterInit,
             Request::ExitInit,

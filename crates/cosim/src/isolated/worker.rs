@@ -305,7 +305,11 @@ fn probe(library: &Loaded) -> Values {
 fn call(i: &mut dyn Backend, op: Request<'_>) -> Result<Option<Values>, Failure> {
     match op {
         Request::SetDebugLogging(on) => i.set_debug_logging(on)?,
-        Request::SetupExperiment { start, stop } => i.setup_experiment(start, stop)?,
+        Request::SetupExperiment {
+            start,
+            stop,
+            tolerance,
+        } => i.setup_experiment(start, stop, tolerance)?,
         Request::EnterInit => i.enter_initialization_mode()?,
         Request::ExitInit => i.exit_initialization_mode()?,
         Request::Terminate => i.terminate()?,
@@ -445,6 +449,7 @@ mod tests {
             Request::SetupExperiment {
                 start: 0.0,
                 stop: Some(1.0),
+                tolerance: None,
             },
             Request::EnterInit,
             Request::SetReal {
@@ -488,6 +493,7 @@ mod tests {
             Request::SetupExperiment {
                 start: 0.0,
                 stop: None,
+                tolerance: Some(1e-6),
             },
             Request::EnterInit,
             Request::ExitInit,

@@ -57,6 +57,9 @@ pub(super) fn check(file: &SystemFile, ctx_file: &str) -> Result<(), SystemError
             ),
         ));
     }
+    if let Some(t) = e.tolerance {
+        super::instances::check_tolerance(t, &format!("{ctx_file}: experiment.tolerance"))?;
+    }
     if file.record.decimation == 0 {
         return Err(invalid(ctx_file, "record.decimation must be at least 1"));
     }

@@ -45,6 +45,20 @@ fn missing_fmu(ctx_file: &str, key: &str, path: &Path) -> SystemError {
     )
 }
 
+/// A relative tolerance: a number in (0, 1).
+pub(super) fn check_tolerance(t: f64, ctx: &str) -> Result<(), SystemError> {
+    if t > 0.0 && t < 1.0 {
+        return Ok(());
+    }
+    Err(invalid(
+        ctx,
+        format!(
+            "{} is not a relative tolerance: expected a number between 0 and 1 (e.g. 1e-6)",
+            tb_files::number(t)
+        ),
+    ))
+}
+
 /// The instances, each with the factory of its backend (in-process FMU, native model,
 /// isolated worker, traced); and a warning for every instance `--native` could not link.
 pub(super) fn instances(
@@ -93,11 +107,31 @@ pub(super) fn instances(
             ));
         }
         let factory = backend(file, inst, fmu, ctx_file, options, &mut native_fallback)?;
+        let ctx = format!("{ctx_file}: instance '{}'", inst.name);
+        let tolerance = inst
+            .tolerance
+            .or(file.experiment.tolerance)
+            .or_else(|| fmu.description.default_experiment.as_ref()?.tolerance);
+        if let Some(t) = inst.tolerance {
+            check_tolerance(t, &format!("{ctx}: tolerance"))?;
+        }
+        if let Some(t) =
+            tolerance.filter(|_| inst.tolerance.is_none() && file.experiment.tolerance.is_none())
+        {
+            check_tolerance(
+                t,
+                &format!(
+                    "{ctx}: the DefaultExperiment tolerance of {}",
+                    fmu.source.display()
+                ),
+            )?;
+        }
         let def = InstanceDef {
             name: inst.name.clone(),
             fmu: fmu.clone(),
             ports: inst.ports.clone(),
             logging: inst.logging,
+            tolerance,
             factory,
         };
         for theirs in inst.ports.values() {

@@ -48,6 +48,9 @@ pub struct InstanceDef {
     /// Name in the system file -> the FMU's variable name.
     pub ports: BTreeMap<String, String>,
     pub logging: bool,
+    /// The relative tolerance it is given (`toleranceDefined` when Some): the instance's,
+    /// else the experiment's, else the FMU's DefaultExperiment tolerance.
+    pub tolerance: Option<f64>,
     /// Creates the running unit (in-process FMU by default).
     pub factory: Arc<dyn BackendFactory>,
 }
@@ -65,6 +68,10 @@ pub struct LoadOptions {
     pub isolation: IsolationOptions,
     /// The FMI call trace (`--trace-fmi`): `None` wraps nothing, so it costs nothing.
     pub trace: Option<crate::trace::TraceOptions>,
+    /// Every FMU's relative tolerance (`run --tolerance`), over the system file's.
+    pub tolerance: Option<f64>,
+    /// The step size convention (`run --step-convention`), over the system file's.
+    pub step_convention: Option<crate::config::StepConvention>,
 }
 
 impl InstanceDef {
@@ -288,6 +295,14 @@ impl Plan {
     ) -> Result<Plan, SystemError> {
         // Named as the user named it, without `a/..` steps.
         let path = tb_files::normalize(path);
+        let mut file = file;
+        if let Some(t) = options.tolerance {
+            file.experiment.tolerance = Some(t);
+            file.instances.iter_mut().for_each(|i| i.tolerance = None);
+        }
+        if let Some(c) = options.step_convention {
+            file.experiment.step_convention = c;
+        }
         let ctx = path.display().to_string();
         experiment::check(&file, &ctx)?;
         let loaded = instances::load_fmus(&file, &ctx, &cache)?;
