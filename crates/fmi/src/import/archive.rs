@@ -1137,26 +1137,42 @@ fn check_description(
     }
     let so = library_entry(&md.fmi_version, &id);
     if binary_required && !names.contains(&so) {
-        // Name the platforms the FMU has: a Windows- or macOS-only FMU is a common mistake.
+        // Name the platforms the FMU has binaries for (a Windows- or macOS-only FMU is a
+        // common mistake); a platform folder with no file in it has none.
         let mut platforms: Vec<&str> = names
             .iter()
             .filter_map(|n| n.strip_prefix("binaries/"))
-            .filter_map(|n| n.split_once('/').map(|(p, _)| p))
-            .filter(|p| !p.is_empty())
+            .filter_map(|n| n.split_once('/'))
+            .filter(|(p, rest)| !p.is_empty() && !rest.is_empty() && !rest.ends_with('/'))
+            .map(|(p, _)| p)
             .collect();
         platforms.sort();
         platforms.dedup();
-        return Err(arch(
-            fmu,
+        let has = if platforms.is_empty() {
+            "no binaries at all".to_string()
+        } else {
+            format!("binaries for {}", platforms.join(", "))
+        };
+        let dir = &so[..=so.rfind('/').expect("a folder")];
+        let mut here: Vec<&str> = names
+            .iter()
+            .filter_map(|n| n.strip_prefix(dir))
+            .filter(|n| !n.is_empty() && !n.ends_with('/'))
+            .collect();
+        here.sort();
+        let why = if !here.is_empty() {
+            let shown: Vec<&str> = here.iter().take(5).copied().collect();
             format!(
-                "no {so} (the FMU has no binary for this platform; it has {})",
-                if platforms.is_empty() {
-                    "no binaries at all".to_string()
-                } else {
-                    format!("binaries for {}", platforms.join(", "))
-                }
-            ),
-        ));
+                "{dir} holds {}{} but not the library its modelIdentifier \"{id}\" names",
+                shown.join(", "),
+                if here.len() > 5 { ", ..." } else { "" }
+            )
+        } else if names.iter().any(|n| n.starts_with(dir)) {
+            format!("the folder {dir} is empty (the FMU has {has})")
+        } else {
+            format!("the FMU has no binary for this platform; it has {has}")
+        };
+        return Err(arch(fmu, format!("no {so} ({why})")));
     }
     Ok((md, id))
 }
