@@ -9,9 +9,9 @@
 //! skipped (`check::reads_channel`).
 //!
 //! The file is untrusted input: it is read once (a regular file within the data limit),
-//! its block graph is checked (`mdf/check.rs`: links inside the file at block headers, no cycle,
-//! bounded work and memory) and only then handed to the crate, as an in-memory copy of the
-//! bytes checked. A panic inside the crate that the check did not foresee is caught and
+//! its block graph is checked (`mdf/check.rs`: links inside the file at block headers, no
+//! cycle, bounded work and memory) and only then handed to the crate, as an in-memory copy
+//! of the bytes checked. A panic inside the crate that the check did not foresee is caught and
 //! becomes an error naming the file.
 //!
 //! Writing: one channel group, `time` as the master channel, every numeric column as a
@@ -192,10 +192,12 @@ fn table(groups: Vec<Group>, name: &str) -> Result<Table> {
 /// Linear interpolation of `y(x)` at `q`, held at the ends.
 fn interpolate(x: &[f64], y: &[f64], q: f64) -> f64 {
     let n = x.len().min(y.len());
-    if n == 0 {
+    // A time that is not a number has no place on the other time base (NaN fails every
+    // comparison below, and with one sample the search below has no interval).
+    if n == 0 || q.is_nan() {
         return f64::NAN;
     }
-    if q <= x[0] {
+    if n == 1 || q <= x[0] {
         return y[0];
     }
     if q >= x[n - 1] {
@@ -260,6 +262,22 @@ pub fn to_bytes(table: &Table) -> Result<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn interpolation_takes_nan_times_and_single_samples() {
+        // Found by the mdf4 fuzz target: a NaN time on the base and a group of one sample
+        // indexed past the group's end (fuzz/corpus/mdf4/crash-interpolate-nan-time.mf4).
+        assert!(interpolate(&[1.0], &[5.0], f64::NAN).is_nan());
+        assert_eq!(interpolate(&[1.0], &[5.0], 3.0), 5.0);
+        assert_eq!(interpolate(&[f64::NAN], &[5.0], 3.0), 5.0);
+        assert!(interpolate(&[0.0, 1.0], &[0.0, 2.0], f64::NAN).is_nan());
+        assert_eq!(
+            interpolate(&[0.0, f64::NAN, 2.0], &[0.0, 1.0, 2.0], 1.5),
+            0.0
+        );
+        assert_eq!(interpolate(&[0.0, 1.0], &[0.0, 2.0], 0.25), 0.5);
+        assert!(interpolate(&[], &[], 1.0).is_nan());
+    }
 
     #[test]
     fn a_panic_inside_the_crate_is_an_error_naming_the_file() {
