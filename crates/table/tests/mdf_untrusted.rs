@@ -336,6 +336,9 @@ fn records_of_zero_bytes_and_impossible_fields_are_refused() {
         &b,
         &["version \"999.99  \": twinbench reads MDF 4.10 and later"],
     );
+    // One that overflowed the check's own arithmetic (found by the mdf4 fuzz target).
+    b[8..16].copy_from_slice(b"42949673");
+    refused(&b, &["version \"42949673\""]);
 
     // A block whose length is shorter than its links.
     let mut b = valid(50);

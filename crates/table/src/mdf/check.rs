@@ -291,7 +291,7 @@ impl<'a> File<'a> {
             let mut parts = v.split('.');
             let major: u32 = parts.next()?.parse().ok()?;
             let minor: u32 = parts.next().unwrap_or("0").parse().ok()?;
-            (major == 4 && minor < 100).then_some(major * 100 + minor)
+            (major == 4 && minor < 100).then(|| major * 100 + minor)
         });
         if number.is_none_or(|n| n < 410) {
             return Err(format!(
