@@ -99,6 +99,7 @@ fn refused(bytes: &[u8], fragments: &[&str]) -> String {
     for f in fragments {
         assert!(e.contains(f), "expected {f:?} in: {e}");
     }
+    eprintln!("{e}");
     e
 }
 

@@ -223,14 +223,25 @@ impl<'a> File<'a> {
         Ok(b)
     }
 
-    /// The links of a block, with the `##HL` address the crate reads after the links when
-    /// they are all 0 (as link number `links`).
-    fn links_of(&self, b: &Block) -> Vec<(u64, u64)> {
-        let mut out: Vec<(u64, u64)> = (0..b.links).map(|i| (i, self.link(b, i))).collect();
-        if b.is(b"##HL") && out.iter().all(|&(_, t)| t == 0) && 24 + 8 * b.links + 8 <= b.len {
-            out.push((b.links, self.u64(b.at + 24 + 8 * b.links)));
+    /// Link `i` of a block; for `i` = its link count, the address after the links of an
+    /// `##HL` whose links are all 0 (the crate reads it as its next block); `None` after the
+    /// last.
+    fn edge(&self, b: &Block, i: u64) -> Option<u64> {
+        if i < b.links {
+            return Some(self.link(b, i));
         }
-        out
+        let hl_next = i == b.links
+            && b.is(b"##HL")
+            && 24 + 8 * b.links + 8 <= b.len
+            && (0..b.links).all(|k| self.link(b, k) == 0);
+        hl_next.then(|| self.u64(b.at + 24 + 8 * b.links))
+    }
+
+    /// The links of a block as (number, target), [`File::edge`] by [`File::edge`].
+    fn links_of(&self, b: &Block) -> Vec<(u64, u64)> {
+        (0..)
+            .map_while(|i| self.edge(b, i).map(|t| (i, t)))
+            .collect()
     }
 
     /// The blocks the crate reads at fixed offsets are long enough for them.
@@ -353,15 +364,15 @@ impl<'a> File<'a> {
         let mut path: Vec<Frame> = Vec::new();
         let hd = self.blocks[&64];
         colour.insert(hd.at, GREY);
-        path.push((hd, self.links_of(&hd), 0));
-        while let Some((b, links, next)) = path.last_mut() {
-            let b = *b;
-            let Some(&(i, target)) = links.get(*next) else {
+        path.push((hd, 0));
+        while let Some(frame) = path.last_mut() {
+            let (b, i) = *frame;
+            let Some(target) = self.edge(&b, i) else {
                 colour.insert(b.at, BLACK);
                 path.pop();
                 continue;
             };
-            *next += 1;
+            frame.1 += 1;
             if target == 0 {
                 continue;
             }
@@ -371,13 +382,10 @@ impl<'a> File<'a> {
             }
             match colour.get(&target) {
                 Some(&GREY) => {
-                    let start = path
-                        .iter()
-                        .position(|(p, _, _)| p.at == target)
-                        .unwrap_or(0);
+                    let start = path.iter().position(|(p, _)| p.at == target).unwrap_or(0);
                     let mut cycle: Vec<String> = path[start..]
                         .iter()
-                        .map(|(p, _, _)| format!("{} at {}", p.id(), p.at))
+                        .map(|(p, _)| format!("{} at {}", p.id(), p.at))
                         .collect();
                     if cycle.len() > 8 {
                         let n = cycle.len();
@@ -398,7 +406,7 @@ impl<'a> File<'a> {
                 Some(_) => {}
                 None => {
                     colour.insert(target, GREY);
-                    path.push((t, self.links_of(&t), 0));
+                    path.push((t, 0));
                 }
             }
         }
@@ -428,9 +436,8 @@ impl<'a> File<'a> {
     }
 }
 
-/// A block on the search's path: the block, its links (number, target) and the next link
-/// to look at.
-type Frame = (Block, Vec<(u64, u64)>, usize);
+/// A block on the search's path and the number of the next link to look at.
+type Frame = (Block, u64);
 
 /// A channel as the crate reads it (fields at the crate's fixed offsets).
 struct Channel {
