@@ -156,6 +156,20 @@ pub struct InstanceConfig {
     /// With `isolate`: the longest wait for one call of this instance [s] (default 10 s).
     #[serde(default)]
     pub watchdog: Option<f64>,
+    /// The FMI interface: `"co-simulation"` or `"model-exchange"` (twinbench integrates
+    /// the FMU with CVODE). Default: Co-Simulation when the FMU has it, else Model
+    /// Exchange. Refused when the FMU lacks the interface.
+    #[serde(default, deserialize_with = "interface")]
+    pub interface: Option<tb_fmi::Interface>,
+}
+
+fn interface<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Option<tb_fmi::Interface>, D::Error> {
+    let name = String::deserialize(d)?;
+    tb_fmi::Interface::from_name(&name)
+        .map(Some)
+        .map_err(serde::de::Error::custom)
 }
 
 /// The master algorithm a system runs with. Its names are one list ([`Algorithm::ALL`],
@@ -233,6 +247,11 @@ pub struct ExperimentConfig {
     /// Explicit stepping order (instance names); default: derived from the connections.
     #[serde(default)]
     pub order: Vec<String>,
+    /// The relative tolerance of the solver (CVODE) that integrates Model Exchange
+    /// instances; default: each FMU's DefaultExperiment tolerance, else 1e-5 (FMPy's).
+    /// Co-Simulation FMUs are not given it.
+    #[serde(default)]
+    pub tolerance: Option<f64>,
 }
 
 fn one() -> f64 {

@@ -278,6 +278,8 @@ struct Component {
     fmu_key: String,
     entry: String,
     md: ModelDescription,
+    /// `implementation="CoSimulation"` or `"ModelExchange"` (None: "any").
+    interface: Option<tb_fmi::Interface>,
     /// Connector name -> (declared unit, line).
     connectors: BTreeMap<String, (Option<String>, usize)>,
 }
@@ -508,6 +510,7 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             logging: false,
             isolate: false,
             watchdog: None,
+            interface: c.interface,
         })
         .collect();
     Ok(SystemFile {
@@ -672,6 +675,11 @@ fn read_components<'n>(
                 fmu_key: key,
                 entry,
                 md: loaded.description.clone(),
+                interface: match c.attr("implementation") {
+                    Some("ModelExchange") => Some(tb_fmi::Interface::ModelExchange),
+                    Some("CoSimulation") => Some(tb_fmi::Interface::CoSimulation),
+                    _ => None,
+                },
                 connectors: BTreeMap::new(),
             };
             let k = components.len();
@@ -732,12 +740,12 @@ fn component_fmu(imp: &Importer<'_>, c: &Node) -> Result<(String, PathBuf), SspI
         }
     }
     if let Some(i) = c.attr("implementation") {
-        if !matches!(i, "CoSimulation" | "any") {
+        if !matches!(i, "CoSimulation" | "ModelExchange" | "any") {
             return Err(imp.unsupported(
                 f,
                 c,
                 &format!(
-                    "component '{name}' asks for implementation=\"{i}\"; twinbench runs Co-Simulation FMUs (CoSimulation or any)"
+                    "component '{name}' asks for implementation=\"{i}\"; twinbench runs FMUs through Co-Simulation or Model Exchange (CoSimulation, ModelExchange or any)"
                 ),
             ));
         }
@@ -825,6 +833,7 @@ fn read_experiment(
         report: Vec::new(),
         algorithm: Algorithm::GaussSeidel,
         order: Vec::new(),
+        tolerance: None,
     };
     let mut record = RecordConfig::default();
     let mut checks = Vec::new();

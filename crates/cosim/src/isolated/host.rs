@@ -6,7 +6,7 @@
 
 use super::wire::{Enc, Failure, LibraryTarget, Request, Response, Values, MAX_FRAME};
 use super::{IsolationOptions, LibraryReport, STDERR_LINES};
-use crate::backend::Backend;
+use crate::backend::{Backend, RunAs};
 use std::collections::VecDeque;
 use std::io::Read;
 use std::os::fd::{AsRawFd, OwnedFd};
@@ -15,7 +15,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tb_fmi::import::log::LogSink;
-use tb_fmi::{FmuError, Function, LoadedFmu};
+use tb_fmi::{FmuError, Function, Interface, LoadedFmu};
 
 /// One instance in a worker process.
 pub struct IsolatedBackend {
@@ -47,10 +47,11 @@ impl IsolatedBackend {
         fmu: &LoadedFmu,
         options: &IsolationOptions,
         logging: bool,
+        run: RunAs,
     ) -> Result<IsolatedBackend, FmuError> {
         let mut b = IsolatedBackend::spawn(name, options)?;
         b.queue(&Request::Instantiate {
-            library: library_target(fmu, options),
+            library: library_target(fmu, options, run),
             name: name.to_string(),
             guid: fmu.description.guid.clone(),
             resources: fmu.resource_dir().to_string_lossy().into_owned(),
@@ -70,7 +71,7 @@ impl IsolatedBackend {
     ) -> Result<LibraryReport, FmuError> {
         let name = fmu.model_identifier().to_string();
         let mut b = IsolatedBackend::spawn(&name, options)?;
-        let probe = Request::Probe(library_target(fmu, options));
+        let probe = Request::Probe(library_target(fmu, options, RunAs::default_for(fmu)));
         b.queue(&probe);
         let answer = b.call(Function::GetVersion.name(), std::slice::from_ref(&probe))?;
         match answer.as_slice() {
@@ -317,6 +318,26 @@ impl IsolatedBackend {
                     log,
                 }
             }
+            Failure::ModelExchange {
+                fmu,
+                call,
+                problem,
+                time,
+                log,
+            } => {
+                self.sink.clear();
+                for l in &log {
+                    self.sink.keep(l.clone());
+                }
+                FmuError::ModelExchange {
+                    fmu: fmu.into(),
+                    instance: self.name.clone(),
+                    time,
+                    call,
+                    problem,
+                    log,
+                }
+            }
             Failure::Instantiate(message) => FmuError::Instantiate {
                 instance: self.name.clone(),
                 message,
@@ -483,17 +504,25 @@ fn read_stderr(mut err: impl Read, mut keep: impl FnMut(String), who: &str) {
     }
 }
 
-fn library_target(fmu: &LoadedFmu, options: &IsolationOptions) -> LibraryTarget {
+fn library_target(fmu: &LoadedFmu, options: &IsolationOptions, run: RunAs) -> LibraryTarget {
+    let me = run.interface == Interface::ModelExchange;
+    let id = fmu
+        .description
+        .model_identifier(run.interface)
+        .unwrap_or(fmu.model_identifier());
+    let entry = tb_fmi::import::archive::library_entry(&fmu.description.fmi_version, id);
     LibraryTarget {
-        path: fmu.library_path().to_string_lossy().into_owned(),
+        path: fmu.dir.join(entry).to_string_lossy().into_owned(),
         source: fmu.source.to_string_lossy().into_owned(),
-        model_identifier: fmu.model_identifier().to_string(),
+        model_identifier: id.to_string(),
         preload: options
             .preload
             .iter()
             .map(|p| p.to_string_lossy().into_owned())
             .collect(),
-        description: if fmu.is_fmi3() {
+        model_exchange: me,
+        tolerance: run.me.relative_tolerance.unwrap_or(f64::NAN),
+        description: if fmu.is_fmi3() || me {
             fmu.dir
                 .join("modelDescription.xml")
                 .to_string_lossy()

@@ -65,6 +65,9 @@ pub mod kind {
     /// An FMI 3.0 call returned a status that stops the caller: function name, status
     /// name, time, log.
     pub const CALL3: u8 = 4;
+    /// A Model Exchange instance's call or its solver failed: the .fmu, the call, what
+    /// went wrong, time, log.
+    pub const MODEL_EXCHANGE: u8 = 5;
 }
 
 /// The function an operation code stands for (for messages).
@@ -92,9 +95,14 @@ pub struct LibraryTarget {
     pub model_identifier: String,
     /// Libraries loaded with RTLD_GLOBAL first (the system file's `preload`).
     pub preload: Vec<String>,
-    /// FMI 3.0: the unpacked modelDescription.xml (the worker needs its variables' types);
-    /// empty for FMI 2.0.
+    /// FMI 3.0 and Model Exchange: the unpacked modelDescription.xml (the worker needs its
+    /// variables' types, its states and event indicators); empty otherwise.
     pub description: String,
+    /// Model Exchange: the worker runs the whole integration (the instance the master
+    /// steps is the same backend as in-process). False: Co-Simulation.
+    pub model_exchange: bool,
+    /// Model Exchange: the solver's relative tolerance from the system (NaN: none).
+    pub tolerance: f64,
 }
 
 impl LibraryTarget {
@@ -105,6 +113,8 @@ impl LibraryTarget {
         e.u32(self.preload.len() as u32);
         self.preload.iter().for_each(|p| e.str(p));
         e.str(&self.description);
+        e.u8(self.model_exchange as u8);
+        e.f64(self.tolerance);
     }
     pub fn decode(d: &mut Dec) -> Result<LibraryTarget, String> {
         let path = d.str()?;
@@ -113,12 +123,16 @@ impl LibraryTarget {
         let n = d.count(4)?;
         let preload = (0..n).map(|_| d.str()).collect::<Result<_, _>>()?;
         let description = d.str()?;
+        let model_exchange = d.u8()? != 0;
+        let tolerance = d.f64()?;
         Ok(LibraryTarget {
             path,
             source,
             model_identifier,
             preload,
             description,
+            model_exchange,
+            tolerance,
         })
     }
 }
@@ -440,6 +454,14 @@ pub enum Failure {
         time: f64,
         log: Vec<String>,
     },
+    /// A Model Exchange instance's FMI call or its solver (CVODE) failed.
+    ModelExchange {
+        fmu: String,
+        call: String,
+        problem: String,
+        time: f64,
+        log: Vec<String>,
+    },
     /// `fmi2Instantiate` failed.
     Instantiate(String),
     /// An optional function the FMU does not export (None: a code the host does not know).
@@ -472,6 +494,20 @@ impl From<FmuError> for Failure {
             } => Failure::Call3 {
                 function,
                 status,
+                time,
+                log,
+            },
+            FmuError::ModelExchange {
+                fmu,
+                call,
+                problem,
+                time,
+                log,
+                ..
+            } => Failure::ModelExchange {
+                fmu: fmu.to_string_lossy().into_owned(),
+                call,
+                problem,
                 time,
                 log,
             },
@@ -508,6 +544,21 @@ impl Failure {
                 e.u8(kind::CALL3);
                 e.str(function);
                 e.str(status);
+                e.f64(*time);
+                e.u32(log.len() as u32);
+                log.iter().for_each(|l| e.str(l));
+            }
+            Failure::ModelExchange {
+                fmu,
+                call,
+                problem,
+                time,
+                log,
+            } => {
+                e.u8(kind::MODEL_EXCHANGE);
+                e.str(fmu);
+                e.str(call);
+                e.str(problem);
                 e.f64(*time);
                 e.u32(log.len() as u32);
                 log.iter().for_each(|l| e.str(l));
@@ -551,6 +602,18 @@ impl Failure {
                 Failure::Call3 {
                     function,
                     status,
+                    time,
+                    log: d.each(n, Dec::str)?,
+                }
+            }
+            kind::MODEL_EXCHANGE => {
+                let (fmu, call, problem) = (d.str()?, d.str()?, d.str()?);
+                let time = d.f64()?;
+                let n = d.count(4)?;
+                Failure::ModelExchange {
+                    fmu,
+                    call,
+                    problem,
                     time,
                     log: d.each(n, Dec::str)?,
                 }
@@ -759,6 +822,8 @@ mod tests {
             model_identifier: "x".into(),
             preload: vec!["libpython3.11.so".into(), "b".into()],
             description: "/c/modelDescription.xml".into(),
+            model_exchange: true,
+            tolerance: 1e-6,
         }
     }
 
@@ -1001,6 +1066,13 @@ mod tests {
                 status: "fmi3Error".into(),
                 time: 0.25,
                 log: vec!["[Error] a step of an FMI 3.0 FMU".into()],
+            },
+            Failure::ModelExchange {
+                fmu: "m.fmu".into(),
+                call: "CVode".into(),
+                problem: "returned CV_CONV_FAILURE (-4): failed".into(),
+                time: 0.125,
+                log: vec!["[Error] no".into()],
             },
             Failure::Instantiate("GUID {a} differs".into()),
             Failure::Unsupported(Some(Function::GetBooleanStatus)),

@@ -48,6 +48,8 @@ pub struct InstanceDef {
     /// Name in the system file -> the FMU's variable name.
     pub ports: BTreeMap<String, String>,
     pub logging: bool,
+    /// The FMI interface it runs through (Model Exchange: integrated by twinbench).
+    pub interface: tb_fmi::Interface,
     /// Creates the running unit (in-process FMU by default).
     pub factory: Arc<dyn BackendFactory>,
 }

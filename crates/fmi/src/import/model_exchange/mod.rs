@@ -125,7 +125,12 @@ pub struct MeInstance {
     event_pending: bool,
     /// Set when the FMU asked to end the simulation: the time reached.
     terminated_at: Option<f64>,
+    /// The times of the events handled since initialisation (the first [`MAX_EVENTS_KEPT`]).
+    events: Vec<f64>,
 }
+
+/// The most event times an instance keeps ([`MeInstance::events`]).
+pub const MAX_EVENTS_KEPT: usize = 100_000;
 
 // One instance is used by one thread at a time; FMI 2.0 allows moving it between threads,
 // and CVODE's memory belongs to this instance alone.
@@ -212,7 +217,14 @@ impl MeInstance {
             inputs_changed: false,
             event_pending: false,
             terminated_at: None,
+            events: Vec::new(),
         })
+    }
+
+    /// The times of the events handled since initialisation (time, state, step and input
+    /// events, after the initial one; at most [`MAX_EVENTS_KEPT`]).
+    pub fn events(&self) -> &[f64] {
+        &self.events
     }
 
     pub fn name(&self) -> &str {
@@ -330,6 +342,7 @@ impl MeInstance {
 
     pub fn reset(&mut self) -> Result<(), FmuError> {
         self.solver = None;
+        self.events.clear();
         self.mode = Mode::Instantiated;
         self.next_event = None;
         self.terminated_at = None;
@@ -460,6 +473,9 @@ impl MeInstance {
     /// continuous-time mode, the integrator started again from the states after the event.
     /// True when the FMU asked to end the simulation.
     fn event_iteration(&mut self, enter: bool) -> Result<bool, FmuError> {
+        if self.events.len() < MAX_EVENTS_KEPT {
+            self.events.push(self.inst.time);
+        }
         if enter {
             let s = unsafe { (self.api.fmi2EnterEventMode)(self.inst.raw()) };
             self.check("fmi2EnterEventMode", s)?;
