@@ -62,8 +62,9 @@ fn eight_threads_load_the_same_fmu_into_one_cache_a_hundred_times() {
 
 #[test]
 fn caches_of_several_processes_share_one_folder_without_losing_an_unpacking() {
-    // Eight caches on one folder stand for eight processes: each unpacks into a folder of
-    // its own and renames it into place; the losers use the winner's.
+    // Eight caches on one folder stand for eight processes: one unpacks (the store's
+    // unpack lock), the others wait and use its folder; none unpacks a copy of its own
+    // (eight used to, briefly taking several times the FMU's size on disk).
     let fmu = common::fmu("faulty");
     for round in 0..20 {
         let dir = tb_testkit::scratch("cache-procs");
@@ -78,12 +79,15 @@ fn caches_of_several_processes_share_one_folder_without_losing_an_unpacking() {
                         let l = cache
                             .load(&fmu)
                             .unwrap_or_else(|e| panic!("round {round}: {e}"));
-                        l.dir.clone()
+                        (l.dir.clone(), cache.stats().extractions)
                     })
                 })
                 .collect();
             handles.into_iter().map(|h| h.join().unwrap()).collect()
         });
+        let unpackings: usize = dirs.iter().map(|d| d.1).sum();
+        assert_eq!(unpackings, 1, "round {round}");
+        let dirs: Vec<PathBuf> = dirs.into_iter().map(|d| d.0).collect();
         assert!(dirs.iter().all(|d| *d == dirs[0]), "round {round}");
         let e = entries(&root);
         assert_eq!(e.len(), 1, "round {round}: {e:?}");

@@ -26,7 +26,7 @@ fn instance(model: &str) -> Instance {
 #[test]
 fn a_host_that_sums_its_steps_reaches_the_stop_time_with_fmi2ok() {
     let mut i = instance("dyno");
-    i.setup_experiment(0.0, Some(100.0)).unwrap();
+    i.setup_experiment(0.0, Some(100.0), None).unwrap();
     i.enter_initialization_mode().unwrap();
     i.exit_initialization_mode().unwrap();
     let mut t = 0.0f64;
@@ -50,7 +50,7 @@ fn terminate_after_a_failed_initialisation_is_a_warning() {
     let fmu = common::load("driver");
     let vr = common::vr(&fmu, "target_speed_file");
     i.set_string(&[vr], &["/nonexistent/target.csv"]).unwrap();
-    i.setup_experiment(0.0, None).unwrap();
+    i.setup_experiment(0.0, None, None).unwrap();
     i.enter_initialization_mode().unwrap();
     let e = i.exit_initialization_mode();
     assert!(e.is_err(), "a missing target file fails the initialisation");
@@ -73,7 +73,7 @@ fn an_input_a_rounding_outside_its_range_is_the_bound() {
     let mut i = instance("edu");
     let fmu = common::load("edu");
     let pedal = common::vr(&fmu, "accel_pedal");
-    i.setup_experiment(0.0, None).unwrap();
+    i.setup_experiment(0.0, None, None).unwrap();
     i.enter_initialization_mode().unwrap();
     // 1 as float32, widened: what OMSimulator's solver sent.
     i.set_real(&[pedal], &[1.0f32 as f64 + f32::EPSILON as f64 / 8.0])
@@ -193,7 +193,7 @@ fn range_check_0_uses_an_out_of_range_input_with_a_warning() {
     let pedal = common::vr(&fmu, "accel_pedal");
     let check = common::vr(&fmu, "range_check");
     i.set_integer(&[check], &[0]).unwrap();
-    i.setup_experiment(0.0, None).unwrap();
+    i.setup_experiment(0.0, None, None).unwrap();
     i.enter_initialization_mode().unwrap();
     i.set_real(&[pedal], &[1.5])
         .expect("accepted with a warning");

@@ -82,7 +82,7 @@ fn native_errors_name_the_instance_and_keep_the_log() {
     let f = NativeFactory::for_fmu(&fmu, &twinbench::registry::native_models()).unwrap();
     assert_eq!(f.model(), "dyno");
     let mut b = f.create("dyno_x", false).unwrap();
-    b.setup_experiment(0.0, Some(1.0)).unwrap();
+    b.setup_experiment(0.0, Some(1.0), None).unwrap();
     // Stepping before initialisation is refused like the FMU refuses it.
     let e = b.do_step(0.0, 1e-3).unwrap_err().to_string();
     assert!(e.contains("dyno_x") && e.contains("fmi2DoStep"), "{e}");

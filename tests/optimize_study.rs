@@ -139,7 +139,7 @@ fn same_seed_same_result_any_threads_and_after_resume() {
     ));
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&cp).unwrap()).unwrap();
-    assert_eq!(saved["current"]["step"], 0);
+    assert_eq!(saved["checkpoint"]["current"]["step"], 0);
     o.resume = true;
     o.stop_after = Some(2);
     o.threads = 1;
@@ -150,10 +150,13 @@ fn same_seed_same_result_any_threads_and_after_resume() {
     let saved: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&cp).unwrap()).unwrap();
     assert_eq!(
-        saved["current"]["step"], 1,
+        saved["checkpoint"]["current"]["step"], 1,
         "the second interruption is in step 2"
     );
-    assert_eq!(saved["completed"].as_array().unwrap().len(), 1);
+    assert_eq!(
+        saved["checkpoint"]["completed"].as_array().unwrap().len(),
+        1
+    );
     o.stop_after = None;
     o.threads = 2;
     let resumed = finished(run_study(&study, &o).unwrap());

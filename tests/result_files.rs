@@ -151,3 +151,80 @@ fn a_complete_run_keeps_its_results_when_an_instance_fails_to_end() {
         1.0000000000000007
     );
 }
+
+#[test]
+fn a_failed_run_keeps_what_it_recorded_in_a_file_named_incomplete() {
+    let dir = tb_testkit::scratch("incomplete");
+    let fmu = common::fmu("faulty");
+    let sys = dir.path().join("t.toml");
+    std::fs::write(
+        &sys,
+        format!(
+            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\"a.fault_kind\" = 1\n\"a.fault_time\" = 0.5\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n",
+            fmu.display().to_string()
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("r.csv");
+    // A complete result from an earlier run stays where it is.
+    std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(["run", sys.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(!o.status.success(), "the step error is an error");
+    let e = String::from_utf8_lossy(&o.stderr);
+    let partial = dir.path().join("r.incomplete.csv");
+    assert!(e.contains("fault_kind = 1"), "{e}");
+    assert!(
+        e.contains(&format!("{} (incomplete)", partial.display())),
+        "{e}"
+    );
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "time,a.y\n0,0\n");
+    // Recorded up to the failing step at t = 0.5 s: y = t (gain 1, u 1) within rounding.
+    let t = tb_table::Table::read_path(&partial).unwrap();
+    let last_t = *t.require("time").unwrap().last().unwrap();
+    assert!((last_t - 0.5).abs() < 2e-3, "recorded until {last_t}");
+    let last_y = *t.require("a.y").unwrap().last().unwrap();
+    assert!(
+        (last_y - last_t).abs() < 1e-9,
+        "y = {last_y} at t = {last_t}"
+    );
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["complete"], false);
+    assert_eq!(j["recorded_rows"].as_u64().unwrap() as usize, t.len());
+}
+
+#[test]
+fn a_replayed_column_without_a_unit_takes_the_inputs_and_a_wrong_one_names_the_fix() {
+    let dir = tb_testkit::scratch("replayunit");
+    let fmu = common::fmu("faulty");
+    let sys = dir.path().join("t.toml");
+    let system = |units: &str| {
+        format!(
+            "connections = [\"in.drive -> a.u\"]\n\n[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[[replay]]\nname = \"in\"\nfile = \"in.csv\"\nbasis = \"time\"\n{units}\n[experiment]\nstep = 1e-2\nstop = 1.0\n",
+            fmu.display().to_string()
+        )
+    };
+    // An FMPy-style input file: a header, no unit row.
+    std::fs::write(dir.path().join("in.csv"), "time,drive\n0,2\n1,2\n").unwrap();
+    std::fs::write(&sys, system("")).unwrap();
+    let out = dir.path().join("r.csv");
+    let o = run_out(&sys, &out);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("'in.drive' has no unit; taken as 'a.u''s unit 1"),
+        "{e}"
+    );
+    let t = tb_table::Table::read_path(&out).unwrap();
+    let y = *t.require("a.y").unwrap().last().unwrap();
+    assert!((y - 2.0).abs() < 1e-9, "y = ∫ 2 dt over 1 s = {y}");
+    // A unit that does not fit the input: the message names the [[replay]] fix.
+    std::fs::write(&sys, system("units = { drive = \"m\" }\n")).unwrap();
+    let o = run_out(&sys, &out);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "m into a unit 1 input was accepted");
+    assert!(e.contains("units = { drive = \"1\" }"), "{e}");
+}

@@ -289,6 +289,21 @@ fn a_missing_linux64_binary_is_refused() {
         e.contains("no binaries/linux64/faulty.so") && e.contains("it has binaries for win64"),
         "{e}"
     );
+    // An empty linux64 folder beside a Windows binary: empty, not a binary for linux64.
+    entries.push(("binaries/linux64/".into(), Vec::new()));
+    let e = default_refused("emptylinux.fmu", &build(&entries, |_| {}));
+    assert!(
+        e.contains("no binaries/linux64/faulty.so (the folder binaries/linux64/ is empty (the FMU has binaries for win64))"),
+        "{e}"
+    );
+    // A library of another name there.
+    let mut entries = with_entry("binaries/linux64/faulty.so", None);
+    entries.push(("binaries/linux64/Faulty.so".into(), b"\x7fELF".to_vec()));
+    let e = default_refused("othername.fmu", &build(&entries, |_| {}));
+    assert!(
+        e.contains("binaries/linux64/ holds Faulty.so but not the library its modelIdentifier \"faulty\" names"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -4,7 +4,7 @@ Model Exchange loop with its CVode solver) and write every output at every commu
 point, for comparison with twinbench.
 
 Usage: fmpy_simulate.py FMU OUT.csv --stop T --step H [--start T0] [--input IN.csv]
-                        [--set NAME=VALUE ...] [--model-exchange [--tolerance RTOL]]
+                        [--set NAME=VALUE ...] [--tolerance RTOL] [--model-exchange]
 
 OUT.csv: a header (time, then the outputs in model order), then one row per communication
 point; Real values as repr() (shortest round trip), Booleans as 0/1, Strings quoted."""
@@ -65,11 +65,11 @@ def main():
     for s in a.set:
         k, v = s.split("=", 1)
         start_values[k] = float(v) if v.replace(".", "", 1).replace("e", "", 1).lstrip("-").isdigit() else v
-    extra = {"solver": "CVode", "relative_tolerance": a.tolerance,
-             "record_events": a.record_events} if a.model_exchange else {}
+    extra = {"solver": "CVode", "record_events": a.record_events} if a.model_exchange else {}
     res = simulate_fmu(a.fmu, fmi_type="ModelExchange" if a.model_exchange else "CoSimulation",
                        start_time=a.start, stop_time=a.stop,
                        output_interval=a.step, output=outputs, start_values=start_values,
+                       relative_tolerance=a.tolerance,
                        input=read_input(a.input, md) if a.input else None, **extra)
     with open(a.out, "w", newline="") as f:
         w = csv.writer(f)

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 pub mod benchmark;
+pub mod cache;
 pub mod compare;
 pub mod demo;
 pub mod export_ssp;
@@ -58,6 +59,8 @@ pub enum Command {
     Modal(modal::ModalArgs),
     /// Identify the dyno loop from a step response or a frequency sweep.
     Identify(identify::IdentifyArgs),
+    /// The store of unpacked FMUs: `cache info`, `cache prune [--older-than DAYS] [--max-size SIZE]`.
+    Cache(cache::CacheArgs),
     /// Serve one isolated FMU instance over stdin (started by `run --isolate`).
     #[command(hide = true)]
     Worker(worker::WorkerArgs),
@@ -76,7 +79,7 @@ impl Command {
             Command::Optimize(a) => a.json,
             Command::Modal(a) => a.json,
             Command::Identify(a) => a.json(),
-            Command::Pack(_) | Command::Demo(_) | Command::Worker(_) => false,
+            Command::Pack(_) | Command::Demo(_) | Command::Cache(_) | Command::Worker(_) => false,
         }
     }
 }
@@ -175,6 +178,7 @@ pub fn main() -> ExitCode {
         Command::Optimize(a) => optimize::run(a),
         Command::Modal(a) => modal::run(a),
         Command::Identify(a) => identify::run(a),
+        Command::Cache(a) => cache::run(a),
         Command::Worker(a) => worker::run(a),
     };
     command_finished();

@@ -45,6 +45,68 @@ pub struct RunArgs {
         requires = "trace_fmi"
     )]
     pub trace_instances: Vec<String>,
+    /// The relative tolerance of every FMU with an internal solver (over the system file's
+    /// and the FMUs' DefaultExperiment tolerance).
+    #[arg(long, value_name = "TOLERANCE")]
+    pub tolerance: Option<f64>,
+    /// The step size each doStep is given: `h` (the step itself, default) or `grid`
+    /// (t[n+1] - t[n], as FMPy passes it).
+    #[arg(long, value_name = "h|grid", value_parser = |s: &str| tb_cosim::StepConvention::from_name(s))]
+    pub step_convention: Option<tb_cosim::StepConvention>,
+}
+
+/// A run that failed: what it recorded up to the failure is kept, in a file named as
+/// incomplete beside `--out` (a complete result there from an earlier run stays), and said
+/// so in the message and, with `--json`, in a document with `"complete": false`.
+fn failed_run(args: &RunArgs, sim: &Simulation, error: tb_cosim::SystemError) -> anyhow::Error {
+    let error = anyhow::Error::new(error);
+    let rows = sim.recording.len();
+    let reached = sim.recording.column_at(0).last().copied();
+    let mut kept = None;
+    if let (Some(out), Some(t)) = (&args.out, reached) {
+        let partial = incomplete_path(out);
+        match sim.recording.write_any(&partial) {
+            Ok(()) => kept = Some((partial, t)),
+            Err(e) => eprintln!(
+                "warning: the rows recorded before the failure could not be written to {}: {e}",
+                partial.display()
+            ),
+        }
+    }
+    if args.json {
+        let j = serde_json::json!({
+            "system": args.system,
+            "complete": false,
+            "error": format!("{error:#}"),
+            "recorded_rows": rows,
+            "recorded_until": reached,
+            "out": kept.as_ref().map(|k| &k.0),
+        });
+        if let Ok(text) = serde_json::to_string_pretty(&j) {
+            let _ = super::json::print(&text);
+        }
+    }
+    match kept {
+        Some((path, t)) => error.context(format!(
+            "the run failed; the {rows} rows recorded up to t = {} s are in {} (incomplete)",
+            tb_files::number(t),
+            path.display()
+        )),
+        None => error,
+    }
+}
+
+/// `out.csv` -> `out.incomplete.csv` (the format kept by the extension).
+pub fn incomplete_path(out: &Path) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match out.extension() {
+        Some(ext) => format!("{stem}.incomplete.{}", ext.to_string_lossy()),
+        None => format!("{stem}.incomplete"),
+    };
+    out.with_file_name(name)
 }
 
 /// Parse `name=value` into a TOML value: an integer, a number, a boolean, else a string
@@ -111,7 +173,17 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                 ))),
                 instances: args.trace_instances.clone(),
             }),
+        tolerance: args.tolerance,
+        step_convention: args.step_convention,
     };
+    if let Some(t) = args.tolerance {
+        if !(t > 0.0 && t < 1.0) {
+            anyhow::bail!(
+                "--tolerance {}: a relative tolerance is a number between 0 and 1 (e.g. 1e-6)",
+                tb_files::number(t)
+            );
+        }
+    }
     let system = Arc::new(Plan::load_with(&args.system, cache, &options)?);
     if let Some(out) = &args.out {
         // Before the run: a result must not replace a device, a link, a folder or an input.
@@ -158,7 +230,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let (summary, after_run) = match result {
         Ok(s) => (s, None),
         Err(tb_cosim::SystemError::AfterRun { summary, error }) => (*summary, Some(error)),
-        Err(e) => return Err(e.into()),
+        Err(e) => return Err(failed_run(&args, &sim, e)),
     };
     if let Some(out) = &args.out {
         sim.recording
@@ -181,6 +253,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if args.json {
         let j = serde_json::json!({
             "system": args.system,
+            "complete": true,
             "steps": summary.steps,
             "simulated_time": summary.simulated_time,
             "wall_time": summary.wall_time,

@@ -73,5 +73,6 @@ pub fn worker_options() -> tb_cosim::LoadOptions {
     }
 }
 
+pub mod cfmu;
 pub mod python;
 pub mod reference;

@@ -15,7 +15,14 @@ pub trait Backend: Send {
     fn set_echo(&mut self, on: bool);
     fn last_log_lines(&self) -> Vec<String>;
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError>;
-    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError>;
+    /// `tolerance`: the relative tolerance an FMU with an internal solver should use
+    /// (`toleranceDefined` when Some).
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError>;
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError>;
     fn exit_initialization_mode(&mut self) -> Result<(), FmuError>;
     fn terminate(&mut self) -> Result<(), FmuError>;
@@ -153,8 +160,13 @@ impl Backend for Instance {
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
         Instance::set_debug_logging(self, on, &[])
     }
-    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
-        Instance::setup_experiment(self, start, stop)
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
+        Instance::setup_experiment(self, start, stop, tolerance)
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
         Instance::enter_initialization_mode(self)
@@ -219,8 +231,13 @@ impl Backend for Instance3 {
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
         Instance3::set_debug_logging(self, on)
     }
-    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
-        Instance3::setup_experiment(self, start, stop)
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
+        Instance3::setup_experiment(self, start, stop, tolerance)
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
         Instance3::enter_initialization_mode(self)
@@ -282,7 +299,13 @@ impl Backend for MeInstance {
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
         MeInstance::set_debug_logging(self, on)
     }
-    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+    /// The tolerance was resolved when the instance was made (it is CVODE's too).
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        _tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
         MeInstance::setup_experiment(self, start, stop)
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {

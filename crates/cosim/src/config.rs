@@ -156,6 +156,10 @@ pub struct InstanceConfig {
     /// With `isolate`: the longest wait for one call of this instance [s] (default 10 s).
     #[serde(default)]
     pub watchdog: Option<f64>,
+    /// The relative tolerance of this FMU's internal solver (default: the experiment's,
+    /// else the FMU's DefaultExperiment tolerance).
+    #[serde(default)]
+    pub tolerance: Option<f64>,
     /// The FMI interface: `"co-simulation"` or `"model-exchange"` (twinbench integrates
     /// the FMU with CVODE). Default: Co-Simulation when the FMU has it, else Model
     /// Exchange. Refused when the FMU lacks the interface.
@@ -214,6 +218,46 @@ impl<'de> Deserialize<'de> for Algorithm {
     }
 }
 
+/// The communication step size each `fmi2DoStep` is given.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum StepConvention {
+    /// `h` itself, every step (the last one to a stop time aside): what the system file
+    /// says, the same bits at every step.
+    #[default]
+    H,
+    /// `t[n+1] − t[n]` of the grid `t[n] = start + n·h`, as FMPy passes it: an ulp off `h`
+    /// at some steps, so that an FMU that counts its own time from the step sizes lands on
+    /// the grid's times exactly.
+    Grid,
+}
+
+impl StepConvention {
+    pub const ALL: [StepConvention; 2] = [StepConvention::H, StepConvention::Grid];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            StepConvention::H => "h",
+            StepConvention::Grid => "grid",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|c| c.name() == name)
+            .ok_or_else(|| {
+                format!("step_convention = \"{name}\" is not one of \"h\" (the step h itself) or \"grid\" (t[n+1] - t[n], as FMPy)")
+            })
+    }
+}
+
+impl<'de> Deserialize<'de> for StepConvention {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        StepConvention::from_name(&name).map_err(serde::de::Error::custom)
+    }
+}
+
 /// `stop = 100.0` (a time, s) or `stop = "vehicle.lap >= 1"` (a condition on a signal);
 /// `stop = "lap"` is the older spelling of `"<lap_signal> >= <lap_count>"`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -247,11 +291,15 @@ pub struct ExperimentConfig {
     /// Explicit stepping order (instance names); default: derived from the connections.
     #[serde(default)]
     pub order: Vec<String>,
-    /// The relative tolerance of the solver (CVODE) that integrates Model Exchange
-    /// instances; default: each FMU's DefaultExperiment tolerance, else 1e-5 (FMPy's).
-    /// Co-Simulation FMUs are not given it.
+    /// The relative tolerance passed to every FMU (`fmi2SetupExperiment`,
+    /// `fmi3EnterInitializationMode`), for FMUs with an internal variable-step solver,
+    /// and to CVODE for Model Exchange instances; default: each FMU's DefaultExperiment
+    /// tolerance (as FMPy), else none (Model Exchange: 1e-5, FMPy's).
     #[serde(default)]
     pub tolerance: Option<f64>,
+    /// The step size each `fmi2DoStep` is given: `"h"` (default) or `"grid"` (as FMPy).
+    #[serde(default)]
+    pub step_convention: StepConvention,
 }
 
 fn one() -> f64 {

@@ -17,7 +17,7 @@ pub mod ssp;
 pub mod ssp_import;
 pub mod trace;
 
-pub use config::{Algorithm, StopConfig, SystemFile};
+pub use config::{Algorithm, StepConvention, StopConfig, SystemFile};
 pub use master::{RunSummary, Simulation};
 pub use plan::{
     ConnectionDef, Endpoint, InstanceDef, LoadOptions, ParamSlot, ParamValue, Plan, Stop,

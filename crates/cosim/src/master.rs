@@ -565,7 +565,11 @@ impl Simulation {
     /// [`Plan::parameter`] and checked with [`ParamSlot::check`].
     pub fn set(&mut self, slot: &ParamSlot, value: ParamValue) {
         if let Unit::Fmu(f) = &mut self.ex.units[slot.unit] {
-            match f.params.iter_mut().find(|p| p.0 == slot.vr) {
+            match f
+                .params
+                .iter_mut()
+                .find(|p| p.0 == slot.vr && p.1.space() == slot.ty.value_space())
+            {
                 Some(p) => p.1 = value,
                 None => f.params.push((slot.vr, value)),
             }
@@ -583,7 +587,8 @@ impl Simulation {
     /// Current value of a parameter set through the system (else the FMU's start value).
     pub fn value_of(&self, slot: &ParamSlot) -> Option<f64> {
         if let Unit::Fmu(f) = &self.ex.units[slot.unit] {
-            if let Some(p) = f.params.iter().find(|p| p.0 == slot.vr) {
+            let key = slot.key();
+            if let Some(p) = f.params.iter().find(|p| (p.1.space(), p.0) == key) {
                 return p.1.as_f64();
             }
         }
@@ -630,7 +635,7 @@ impl Simulation {
             }
             let inst = f.backend();
             inst.set_echo(echo);
-            inst.setup_experiment(start, stop)?;
+            inst.setup_experiment(start, stop, def.tolerance)?;
             for (vr, v) in &f.params {
                 let inst = f.instance.as_deref_mut().expect("created above");
                 match v {
@@ -821,6 +826,7 @@ impl Simulation {
         let last = span - full_steps as f64 * h;
         let total_steps = full_steps + u64::from(last > h * 1e-9);
         let decimation = plan.file.record.decimation as u64;
+        let grid = plan.file.experiment.step_convention == crate::config::StepConvention::Grid;
         let order = &plan.order;
         let mut stopped_by = format!("stop time {} s", start + span);
         let mut k = 0u64;
@@ -829,7 +835,13 @@ impl Simulation {
         let mut ended_by_fmu = false;
         while k < total_steps {
             let t = start + k as f64 * h;
-            let step = if k == full_steps { last } else { h };
+            let step = match (grid, k == full_steps) {
+                (false, false) => h,
+                (false, true) => last,
+                // FMPy's: the difference of the grid's times (the stop time last).
+                (true, false) => (start + (k + 1) as f64 * h) - t,
+                (true, true) => (start + span) - t,
+            };
             self.ex.time_replays_at(t);
             if let Err(e) = self.algorithm.step(&mut self.ex, order, t, step) {
                 let SystemError::EndedByFmu { instance, time } = e else {

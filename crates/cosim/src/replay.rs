@@ -6,12 +6,6 @@ use super::SystemError;
 use std::path::PathBuf;
 use tb_table::Table;
 
-/// SI unit of the columns of the measurement format (data/README.md).
-/// The measurement's own table ([`tb_compare::si_unit`]), "1" for any other column.
-pub fn default_unit(column: &str) -> &'static str {
-    tb_compare::si_unit(column).unwrap_or("1")
-}
-
 #[derive(Clone, Debug)]
 pub struct ReplaySource {
     pub name: String,
@@ -20,6 +14,9 @@ pub struct ReplaySource {
     /// The system signal giving the basis (distance mode).
     pub by: Option<String>,
     pub columns: Vec<String>,
+    /// Per column its unit; "" where neither the file, nor `units`, nor the measurement
+    /// format names one (an FMPy input file): the column then takes the unit of the input
+    /// it drives.
     pub units: Vec<String>,
     pub interpolation: Interpolation,
     /// Per column: hold the last row's value instead of interpolating (decided by the plan
@@ -48,7 +45,8 @@ impl ReplaySource {
                     .get(c)
                     .cloned()
                     .or(declared)
-                    .unwrap_or_else(|| default_unit(c).to_string())
+                    .or_else(|| tb_compare::si_unit(c).map(str::to_string))
+                    .unwrap_or_default()
             })
             .collect();
         let basis = match cfg.basis {

@@ -199,8 +199,9 @@ pub fn system_structure(
     // OMSimulator decides the system's kind from its own annotation and cannot open a
     // system without one: a weakly coupled system with its fixed-step master.
     x.push_str(&format!(
-        "    <ssd:Annotations>\n      <ssc:Annotation type=\"org.openmodelica\"><oms:Annotations><oms:SimulationInformation><oms:FixedStepMaster description=\"oms-ma\" stepSize=\"{}\" relativeTolerance=\"0.0001\"/></oms:SimulationInformation></oms:Annotations></ssc:Annotation>\n    </ssd:Annotations>\n",
-        real(system.file.experiment.step)
+        "    <ssd:Annotations>\n      <ssc:Annotation type=\"org.openmodelica\"><oms:Annotations><oms:SimulationInformation><oms:FixedStepMaster description=\"oms-ma\" stepSize=\"{}\" relativeTolerance=\"{}\"/></oms:SimulationInformation></oms:Annotations></ssc:Annotation>\n    </ssd:Annotations>\n",
+        real(system.file.experiment.step),
+        real(system.file.experiment.tolerance.unwrap_or(1e-4))
     ));
     x.push_str("  </ssd:System>\n");
     ex.write_enumerations(&mut x);
@@ -601,6 +602,17 @@ impl<'a> Exporter<'a> {
                 self.signal_list(&exp.report)?
             ));
         }
+        // Tolerances of FMUs with an internal solver: the experiment's (an attribute) and
+        // each instance's own.
+        for i in file.instances.iter() {
+            if let Some(t) = i.tolerance {
+                tb_children.push_str(&format!(
+                    "<tb:Tolerance instance=\"{}\" value=\"{}\"/>",
+                    esc(&i.name),
+                    real(t)
+                ));
+            }
+        }
         for c in &file.checks {
             tb_children.push_str(&format!(
                 "<tb:Check relativeTolerance=\"{}\"{}>{}</tb:Check>",
@@ -622,10 +634,17 @@ impl<'a> Exporter<'a> {
             real(exp.step)
         ));
         x.push_str(&format!(
-            "      <ssc:Annotation type=\"org.twinbench.experiment\"><tb:Experiment stepSize=\"{}\" algorithm=\"{}\" order=\"{}\"{lap}{}</ssc:Annotation>\n",
+            "      <ssc:Annotation type=\"org.twinbench.experiment\"><tb:Experiment stepSize=\"{}\" algorithm=\"{}\" order=\"{}\"{}{lap}{}</ssc:Annotation>\n",
             real(exp.step),
             exp.algorithm.name(),
             esc(&order.join(" ")),
+            exp.tolerance
+                .map(|t| format!(" tolerance=\"{}\"", real(t)))
+                .unwrap_or_default()
+                + &match exp.step_convention {
+                    crate::config::StepConvention::H => String::new(),
+                    c => format!(" stepConvention=\"{}\"", c.name()),
+                },
             if tb_children.is_empty() {
                 "/>".to_string()
             } else {

@@ -500,7 +500,7 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             connections.push(connection(&imp, &components, c)?);
         }
     }
-    let (experiment, record, checks) = read_experiment(&imp, &top, root)?;
+    let (experiment, record, checks, tolerances) = read_experiment(&imp, &top, root)?;
     let instances = components
         .iter()
         .map(|c| InstanceConfig {
@@ -511,8 +511,19 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             isolate: false,
             watchdog: None,
             interface: c.interface,
+            tolerance: tolerances.get(&c.name).copied(),
         })
         .collect();
+    if let Some(name) = tolerances
+        .keys()
+        .find(|n| !components.iter().any(|c| &c.name == *n))
+    {
+        return Err(imp.invalid(
+            SSD,
+            root.line,
+            format!("twinbench's experiment annotation gives a tolerance for '{name}', which is not a component of the system"),
+        ));
+    }
     Ok(SystemFile {
         name: root
             .attr("name")
@@ -814,6 +825,15 @@ fn read_connectors(
     Ok(())
 }
 
+/// What `<ssd:DefaultExperiment>` gives: the experiment, the recording, the checks and the
+/// instances' own tolerances.
+type Experiment = (
+    ExperimentConfig,
+    RecordConfig,
+    Vec<CheckConfig>,
+    BTreeMap<String, f64>,
+);
+
 /// `<ssd:DefaultExperiment>`: start and stop, the step (twinbench's annotation, else the
 /// Open Simulation Platform's), and what twinbench's annotation adds (record, report,
 /// checks, a stop condition).
@@ -821,8 +841,9 @@ fn read_experiment(
     imp: &Importer<'_>,
     top: &[&Node],
     root: &Node,
-) -> Result<(ExperimentConfig, RecordConfig, Vec<CheckConfig>), SspImportError> {
+) -> Result<Experiment, SspImportError> {
     let f = SSD;
+    let mut tolerances = BTreeMap::new();
     let mut experiment = ExperimentConfig {
         start: 0.0,
         step: f64::NAN,
@@ -834,6 +855,7 @@ fn read_experiment(
         algorithm: Algorithm::GaussSeidel,
         order: Vec::new(),
         tolerance: None,
+        step_convention: Default::default(),
     };
     let mut record = RecordConfig::default();
     let mut checks = Vec::new();
@@ -864,6 +886,7 @@ fn read_experiment(
                         &mut record,
                         &mut checks,
                         &mut tb_stop,
+                        &mut tolerances,
                     )?;
                 }
             }
@@ -894,7 +917,7 @@ fn read_experiment(
             ))
         }
     };
-    Ok((experiment, record, checks))
+    Ok((experiment, record, checks, tolerances))
 }
 
 /// The FMUs in an unpacked package, for a message.
@@ -929,10 +952,16 @@ fn tb_experiment(
     record: &mut RecordConfig,
     checks: &mut Vec<CheckConfig>,
     stop: &mut Option<(String, usize)>,
+    tolerances: &mut BTreeMap<String, f64>,
 ) -> Result<(), SspImportError> {
     let f = SSD;
     if let Some(h) = imp.f64_attr(f, x, "stepSize")? {
         experiment.step = h;
+    }
+    experiment.tolerance = imp.f64_attr(f, x, "tolerance")?;
+    if let Some(c) = x.attr("stepConvention") {
+        experiment.step_convention =
+            crate::config::StepConvention::from_name(c).map_err(|m| imp.invalid(f, x.line, m))?;
     }
     if let Some(a) = x.attr("algorithm") {
         experiment.algorithm = Algorithm::from_name(a).map_err(|m| imp.invalid(f, x.line, m))?;
@@ -968,6 +997,13 @@ fn tb_experiment(
                 }
             }
             "Report" => experiment.report.extend(names(c)),
+            "Tolerance" => {
+                let instance = c.attr("instance").unwrap_or_default().to_string();
+                let value = imp
+                    .f64_attr(f, c, "value")?
+                    .ok_or_else(|| imp.invalid(f, c.line, "<tb:Tolerance> without a value"))?;
+                tolerances.insert(instance, value);
+            }
             "Check" => checks.push(CheckConfig {
                 equal: names(c),
                 relative_tolerance: imp.f64_attr(f, c, "relativeTolerance")?.unwrap_or(0.005),

@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::Write;
 use std::sync::{Arc, Mutex};
-use tb_fmi::{FmuError, LoadedFmu};
+use tb_fmi::{FmuError, LoadedFmu, ScalarType};
 
 /// Where trace lines go (shared by every traced instance of a run).
 pub struct TraceSink {
@@ -129,8 +129,16 @@ impl BackendFactory for TracedFactory {
             .iter()
             .rev() // the first name of a value reference wins
             .map(|v| match v.fmi3 {
-                Some(s) if fmi3 => (v.value_reference, format!("{}:{}", v.name, s.ty.name())),
-                _ => (v.value_reference, v.name.clone()),
+                // FMI 3.0 value references are unique over every type.
+                Some(s) if fmi3 => (
+                    (None, v.value_reference),
+                    format!("{}:{}", v.name, s.ty.name()),
+                ),
+                // FMI 2.0: one per value space (a Real and a Boolean may share one).
+                _ => (
+                    (Some(v.ty.value_space()), v.value_reference),
+                    v.name.clone(),
+                ),
             })
             .collect();
         Ok(Box::new(Traced {
@@ -146,7 +154,8 @@ impl BackendFactory for TracedFactory {
 pub struct Traced {
     inner: Box<dyn Backend>,
     sink: Arc<TraceSink>,
-    names: HashMap<u32, String>,
+    /// Variable names by (value space, value reference); FMI 3.0: by value reference.
+    names: HashMap<(Option<ScalarType>, u32), String>,
     fmi3: bool,
 }
 
@@ -177,13 +186,15 @@ impl Traced {
         ));
     }
 
-    fn values<T: std::fmt::Display>(&self, vrs: &[u32], values: &[T]) -> String {
+    /// `vr=[...]` with each value reference's name in the value space of the call.
+    fn values<T: std::fmt::Display>(&self, space: ScalarType, vrs: &[u32], values: &[T]) -> String {
+        let space = (!self.fmi3).then_some(space);
         let mut s = String::from("vr=[");
         for (k, vr) in vrs.iter().enumerate() {
             if k > 0 {
                 s.push_str(", ");
             }
-            let name = self.names.get(vr).map_or("?", String::as_str);
+            let name = self.names.get(&(space, *vr)).map_or("?", String::as_str);
             match values.get(k) {
                 Some(v) => {
                     let _ = write!(s, "{vr} {name}={v}");
@@ -198,8 +209,10 @@ impl Traced {
     }
 
     /// A get: the values read (or none when it failed) and the status.
+    #[allow(clippy::too_many_arguments)]
     fn traced_get<O: ?Sized, T: std::fmt::Display>(
         &mut self,
+        space: ScalarType,
         fmi2: &str,
         fmi3: &str,
         vrs: &[u32],
@@ -210,8 +223,8 @@ impl Traced {
         let t = self.inner.time();
         let r = call(&mut *self.inner, out);
         let args = match r {
-            Ok(()) => self.values(vrs, &show(out)),
-            Err(_) => self.values::<T>(vrs, &[]),
+            Ok(()) => self.values(space, vrs, &show(out)),
+            Err(_) => self.values::<T>(space, vrs, &[]),
         };
         let f = self.name2(fmi2, fmi3);
         let status = self.status(&r);
@@ -258,16 +271,26 @@ impl Backend for Traced {
         let f = self.name2("fmi2SetDebugLogging", "fmi3SetDebugLogging");
         self.traced(f, format!("loggingOn={on}"), |b| b.set_debug_logging(on))
     }
-    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
         let stop_text = stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
         if self.fmi3 {
             // FMI 3.0 passes these to fmi3EnterInitializationMode.
-            return self.inner.setup_experiment(start, stop);
+            return self.inner.setup_experiment(start, stop, tolerance);
         }
         self.traced(
             "fmi2SetupExperiment".into(),
-            format!("startTime={start:?}, stopTime={stop_text}"),
-            |b| b.setup_experiment(start, stop),
+            match tolerance {
+                Some(tol) => {
+                    format!("tolerance={tol:?}, startTime={start:?}, stopTime={stop_text}")
+                }
+                None => format!("startTime={start:?}, stopTime={stop_text}"),
+            },
+            |b| b.setup_experiment(start, stop, tolerance),
         )
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
@@ -288,6 +311,7 @@ impl Backend for Traced {
     }
     fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
         self.traced_get(
+            ScalarType::Real,
             "fmi2GetReal",
             "fmi3Get*",
             vrs,
@@ -298,12 +322,13 @@ impl Backend for Traced {
     }
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
         let v: Vec<R> = values.iter().map(|x| R(*x)).collect();
-        let args = self.values(vrs, &v);
+        let args = self.values(ScalarType::Real, vrs, &v);
         let f = self.name2("fmi2SetReal", "fmi3Set*");
         self.traced(f, args, |b| b.set_real(vrs, values))
     }
     fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
         self.traced_get(
+            ScalarType::Integer,
             "fmi2GetInteger",
             "fmi3Get*",
             vrs,
@@ -313,12 +338,13 @@ impl Backend for Traced {
         )
     }
     fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let args = self.values(vrs, values);
+        let args = self.values(ScalarType::Integer, vrs, values);
         let f = self.name2("fmi2SetInteger", "fmi3Set*");
         self.traced(f, args, |b| b.set_integer(vrs, values))
     }
     fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
         self.traced_get(
+            ScalarType::Boolean,
             "fmi2GetBoolean",
             "fmi3GetBoolean",
             vrs,
@@ -328,12 +354,13 @@ impl Backend for Traced {
         )
     }
     fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let args = self.values(vrs, values);
+        let args = self.values(ScalarType::Boolean, vrs, values);
         let f = self.name2("fmi2SetBoolean", "fmi3SetBoolean");
         self.traced(f, args, |b| b.set_boolean(vrs, values))
     }
     fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
         self.traced_get(
+            ScalarType::String,
             "fmi2GetString",
             "fmi3Get*",
             vrs,
@@ -344,7 +371,7 @@ impl Backend for Traced {
     }
     fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
         let quoted: Vec<String> = values.iter().map(|s| format!("{s:?}")).collect();
-        let args = self.values(vrs, &quoted);
+        let args = self.values(ScalarType::String, vrs, &quoted);
         let f = self.name2("fmi2SetString", "fmi3Set*");
         self.traced(f, args, |b| b.set_string(vrs, values))
     }

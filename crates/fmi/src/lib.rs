@@ -27,7 +27,7 @@ pub use schema::{Causality, Initial, ScalarType, Variability};
 #[cfg(feature = "import")]
 pub use import::archive::{FmuCache, LoadedFmu};
 #[cfg(feature = "import")]
-pub use import::description::{Interface, ModelDescription};
+pub use import::description::{Interface, ModelDescription, VarKey};
 #[cfg(feature = "import")]
 pub use import::instance::{FmuState, Instance};
 #[cfg(feature = "import")]

@@ -130,6 +130,17 @@ impl ScalarType {
     pub const fn is_numeric(self) -> bool {
         !matches!(self, ScalarType::String)
     }
+
+    /// The space its value references are counted in. FMI 2.0 (section 2.2.7,
+    /// `valueReference`): a value reference "is unique for a particular base data type
+    /// (Real, Integer/Enumeration, Boolean, String)"; variables of two base types on one
+    /// value reference are two variables, and an Enumeration shares the Integers' space.
+    pub const fn value_space(self) -> ScalarType {
+        match self {
+            ScalarType::Enumeration => ScalarType::Integer,
+            t => t,
+        }
+    }
 }
 
 /// Shortest decimal text that parses back to the same f64 (Rust's `Debug` is round-trip

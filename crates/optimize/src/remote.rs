@@ -76,7 +76,10 @@ impl StepCost {
 }
 
 /// SHA-256 of each file a study reads, in a fixed order: the study, its measurement and
-/// every input of its system ([`tb_cosim::Plan::input_files`]).
+/// every input of its system ([`tb_cosim::Plan::input_files`]). An FMU's entry is its
+/// archive's SHA-256 and the digest of its unpacked folder's manifest (every file's path,
+/// size, mode and BLAKE3), after every unpacked file was verified against it: the content
+/// the worker's runs actually read (a resource file the FMU opens included).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct InputDigest {
     pub files: Vec<(PathBuf, String)>,
@@ -91,15 +94,13 @@ impl InputDigest {
             .into_iter()
             .map(|p| {
                 // An FMU's content hash is the unpack cache's (kept in its index: no
-                // second read and hash of the archive).
+                // second read and hash of the archive); its unpacked content is verified
+                // (a cache `verifying_all` did so when it loaded it, repairing what differed).
                 if plan.file.fmus.values().any(|f| *f == p) {
-                    let sha = plan
-                        .cache
-                        .load(&p)
-                        .map_err(tb_cosim::SystemError::from)?
-                        .sha256
-                        .clone();
-                    return Ok((p, sha));
+                    let fmu = plan.cache.load(&p).map_err(tb_cosim::SystemError::from)?;
+                    fmu.verify_all().map_err(tb_cosim::SystemError::from)?;
+                    let digest = format!("{} unpacked {}", fmu.sha256, fmu.manifest_digest());
+                    return Ok((p, digest));
                 }
                 let bytes = std::fs::read(&p).map_err(|e| OptimizeError::File {
                     path: p.clone(),
@@ -127,7 +128,7 @@ impl InputDigest {
             .find(|(a, b)| a.1 != b.1)
             .map(|(mine, _)| {
                 format!(
-                    "{} differs from the coordinator's copy (its SHA-256 here is {}): every worker needs the same files on a shared path",
+                    "{} differs from the coordinator's copy (its digest here is {}): every worker needs the same files on a shared path, and the same unpacked FMUs",
                     mine.0.display(),
                     mine.1
                 )
@@ -147,8 +148,17 @@ pub struct StudyEvaluator {
 
 impl StudyEvaluator {
     pub fn load(path: &Path) -> Result<StudyEvaluator, OptimizeError> {
+        let cache = FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?;
+        Self::load_with(path, cache)
+    }
+
+    /// [`StudyEvaluator::load`] with FMUs from `cache`, which verifies every unpacked file
+    /// of the study's FMUs before anything runs ([`FmuCache::verifying_all`]): a worker
+    /// whose unpacked copy of a resource was changed repairs it, and its input digest
+    /// says which content it runs on.
+    pub fn load_with(path: &Path, cache: FmuCache) -> Result<StudyEvaluator, OptimizeError> {
         let study = Study::load(path)?;
-        let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
+        let cache = Arc::new(cache.verifying_all());
         let workers = WorkerPool::new(&study, cache)?;
         let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
         let digest = InputDigest::of(&study, &workers)?;

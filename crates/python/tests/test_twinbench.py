@@ -241,7 +241,7 @@ def test_an_interrupted_distributed_study_resumes_to_the_same_table1(cli_study, 
         with pytest.raises(RuntimeError, match="the cluster went away"):
             study.optimize(executor=FailingExecutor(pool, 45), out=out)
         checkpoint = json.loads((out / "spielberg.checkpoint.json").read_text())
-        assert checkpoint["current"]["run"]["history"], "a generation was checkpointed"
+        assert checkpoint["checkpoint"]["current"]["run"]["history"], "a generation was checkpointed"
         assert not (out / "table1.json").exists()
         study.optimize(executor=pool, out=out, resume=True)
     assert table1(out) == table1(cli_study)

@@ -49,9 +49,10 @@ impl IsolatedBackend {
         logging: bool,
         run: RunAs,
     ) -> Result<IsolatedBackend, FmuError> {
-        let mut b = IsolatedBackend::spawn(name, options)?;
+        let library = library_target(fmu, options, run)?;
+        let mut b = IsolatedBackend::spawn(name, options, fmu.store())?;
         b.queue(&Request::Instantiate {
-            library: library_target(fmu, options, run),
+            library,
             name: name.to_string(),
             guid: fmu.description.guid.clone(),
             resources: fmu.resource_dir().to_string_lossy().into_owned(),
@@ -70,8 +71,9 @@ impl IsolatedBackend {
         options: &IsolationOptions,
     ) -> Result<LibraryReport, FmuError> {
         let name = fmu.model_identifier().to_string();
-        let mut b = IsolatedBackend::spawn(&name, options)?;
-        let probe = Request::Probe(library_target(fmu, options, RunAs::default_for(fmu)));
+        let library = library_target(fmu, options, RunAs::default_for(fmu))?;
+        let mut b = IsolatedBackend::spawn(&name, options, fmu.store())?;
+        let probe = Request::Probe(library);
         b.queue(&probe);
         let answer = b.call(Function::GetVersion.name(), std::slice::from_ref(&probe))?;
         match answer.as_slice() {
@@ -91,7 +93,13 @@ impl IsolatedBackend {
         }
     }
 
-    fn spawn(name: &str, options: &IsolationOptions) -> Result<IsolatedBackend, FmuError> {
+    /// A worker process; `store`, the store of unpacked FMUs it is to make read-only for
+    /// itself before it loads anything.
+    fn spawn(
+        name: &str,
+        options: &IsolationOptions,
+        store: Option<&std::path::Path>,
+    ) -> Result<IsolatedBackend, FmuError> {
         let fail = |cause: String| FmuError::Isolated {
             instance: name.to_string(),
             function: "starting the worker".into(),
@@ -106,6 +114,24 @@ impl IsolatedBackend {
         // study cleanly, not the worker; and killing the group ends the worker and its
         // guard together.
         std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
+        match (store, tb_fmi::import::sandbox::available()) {
+            (Some(store), Ok(())) => {
+                cmd.env(super::READ_ONLY_ENV, store);
+            }
+            (Some(store), Err(why)) => {
+                static ONCE: std::sync::Once = std::sync::Once::new();
+                ONCE.call_once(|| {
+                    log::warn!(
+                        "isolated workers cannot be kept from writing the store of unpacked FMUs {} ({why}); a library this process loads is verified against its FMU's archive instead",
+                        store.display()
+                    )
+                });
+                cmd.env_remove(super::READ_ONLY_ENV);
+            }
+            (None, _) => {
+                cmd.env_remove(super::READ_ONLY_ENV);
+            }
+        }
         cmd.arg("worker")
             .stdin(Stdio::from(OwnedFd::from(worker)))
             .stdout(Stdio::null())
@@ -504,15 +530,27 @@ fn read_stderr(mut err: impl Read, mut keep: impl FnMut(String), who: &str) {
     }
 }
 
-fn library_target(fmu: &LoadedFmu, options: &IsolationOptions, run: RunAs) -> LibraryTarget {
+/// What the worker loads, with the checks it makes first: the library of the interface the
+/// instance runs through, verified here (repaired when it differs from its manifest), and
+/// again by the worker; the description too where the worker reads it (FMI 3.0, Model
+/// Exchange).
+fn library_target(
+    fmu: &LoadedFmu,
+    options: &IsolationOptions,
+    run: RunAs,
+) -> Result<LibraryTarget, FmuError> {
     let me = run.interface == Interface::ModelExchange;
     let id = fmu
         .description
         .model_identifier(run.interface)
         .unwrap_or(fmu.model_identifier());
-    let entry = tb_fmi::import::archive::library_entry(&fmu.description.fmi_version, id);
-    LibraryTarget {
-        path: fmu.dir.join(entry).to_string_lossy().into_owned(),
+    let library = fmu.checked_library_of(run.interface)?;
+    let mut checks = vec![library.clone()];
+    if fmu.is_fmi3() || me {
+        checks.extend(fmu.unpacked_file("modelDescription.xml"));
+    }
+    Ok(LibraryTarget {
+        path: library.path().to_string_lossy().into_owned(),
         source: fmu.source.to_string_lossy().into_owned(),
         model_identifier: id.to_string(),
         preload: options
@@ -530,7 +568,8 @@ fn library_target(fmu: &LoadedFmu, options: &IsolationOptions, run: RunAs) -> Li
         } else {
             String::new()
         },
-    }
+        checks,
+    })
 }
 
 fn signal_name(sig: i32) -> &'static str {
@@ -574,11 +613,20 @@ impl Backend for IsolatedBackend {
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
         IsolatedBackend::set_debug_logging(self, on)
     }
-    fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
         self.time = start;
         self.control(
             "fmi2SetupExperiment",
-            Request::SetupExperiment { start, stop },
+            Request::SetupExperiment {
+                start,
+                stop,
+                tolerance,
+            },
         )
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {

@@ -55,6 +55,9 @@ pub fn watchdog(seconds: f64) -> Result<Duration, String> {
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(10);
 /// Environment variable naming the executable that serves `worker` (default: this one).
 pub const WORKER_EXE_ENV: &str = "TWINBENCH_WORKER_EXE";
+/// Environment variable through which the host names the store of unpacked FMUs that the
+/// worker makes read-only for itself (Landlock) before it loads anything.
+pub const READ_ONLY_ENV: &str = "TWINBENCH_WORKER_READ_ONLY";
 /// Lines of the worker's stderr kept for crash reports.
 const STDERR_LINES: usize = 20;
 

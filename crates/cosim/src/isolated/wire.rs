@@ -17,6 +17,7 @@
 
 use std::borrow::Cow;
 use tb_fmi::fmi2::fmi2Status;
+pub use tb_fmi::import::archive::FileCheck;
 use tb_fmi::{FmuError, Function};
 
 /// Operation codes.
@@ -103,6 +104,9 @@ pub struct LibraryTarget {
     pub model_exchange: bool,
     /// Model Exchange: the solver's relative tolerance from the system (NaN: none).
     pub tolerance: f64,
+    /// The unpacked files the worker verifies before it loads anything (the library, and
+    /// FMI 3.0's description): where, size, mode, BLAKE3.
+    pub checks: Vec<FileCheck>,
 }
 
 impl LibraryTarget {
@@ -115,6 +119,15 @@ impl LibraryTarget {
         e.str(&self.description);
         e.u8(self.model_exchange as u8);
         e.f64(self.tolerance);
+        e.u32(self.checks.len() as u32);
+        for c in &self.checks {
+            e.str(&c.base.to_string_lossy());
+            e.str(&c.rel);
+            // Sizes are within the unpack limit (2 GiB): exact as a double.
+            e.f64(c.size as f64);
+            e.u32(c.mode);
+            e.str(&c.hash);
+        }
     }
     pub fn decode(d: &mut Dec) -> Result<LibraryTarget, String> {
         let path = d.str()?;
@@ -125,6 +138,16 @@ impl LibraryTarget {
         let description = d.str()?;
         let model_exchange = d.u8()? != 0;
         let tolerance = d.f64()?;
+        let n = d.count(4 + 4 + 8 + 4 + 4)?;
+        let checks = d.each(n, |d| {
+            Ok(FileCheck {
+                base: d.str()?.into(),
+                rel: d.str()?,
+                size: d.f64()? as u64,
+                mode: d.u32()?,
+                hash: d.str()?,
+            })
+        })?;
         Ok(LibraryTarget {
             path,
             source,
@@ -133,6 +156,7 @@ impl LibraryTarget {
             description,
             model_exchange,
             tolerance,
+            checks,
         })
     }
 }
@@ -158,6 +182,7 @@ pub enum Request<'a> {
     SetupExperiment {
         start: f64,
         stop: Option<f64>,
+        tolerance: Option<f64>,
     },
     EnterInit,
     ExitInit,
@@ -267,10 +292,16 @@ impl Request<'_> {
             }
             Request::Probe(library) => library.encode(e),
             Request::SetDebugLogging(on) => e.u8(*on as u8),
-            Request::SetupExperiment { start, stop } => {
+            Request::SetupExperiment {
+                start,
+                stop,
+                tolerance,
+            } => {
                 e.f64(*start);
                 e.u8(stop.is_some() as u8);
                 e.f64(stop.unwrap_or(0.0));
+                e.u8(tolerance.is_some() as u8);
+                e.f64(tolerance.unwrap_or(0.0));
             }
             Request::SetReal { vrs, values } => {
                 e.vrs(vrs);
@@ -319,9 +350,12 @@ impl Request<'_> {
                 let start = d.f64()?;
                 let has_stop = d.u8()? != 0;
                 let stop = d.f64()?;
+                let has_tolerance = d.u8()? != 0;
+                let tolerance = d.f64()?;
                 Request::SetupExperiment {
                     start,
                     stop: has_stop.then_some(stop),
+                    tolerance: has_tolerance.then_some(tolerance),
                 }
             }
             op::ENTER_INIT => Request::EnterInit,
@@ -394,7 +428,15 @@ impl Request<'_> {
             Request::Probe(library) => Request::Probe(library),
             Request::Quit => Request::Quit,
             Request::SetDebugLogging(on) => Request::SetDebugLogging(on),
-            Request::SetupExperiment { start, stop } => Request::SetupExperiment { start, stop },
+            Request::SetupExperiment {
+                start,
+                stop,
+                tolerance,
+            } => Request::SetupExperiment {
+                start,
+                stop,
+                tolerance,
+            },
             Request::EnterInit => Request::EnterInit,
             Request::ExitInit => Request::ExitInit,
             Request::Terminate => Request::Terminate,
@@ -824,6 +866,13 @@ mod tests {
             description: "/c/modelDescription.xml".into(),
             model_exchange: true,
             tolerance: 1e-6,
+            checks: vec![FileCheck {
+                base: "/c".into(),
+                rel: "0123/x.so".into(),
+                size: 1 << 31,
+                mode: 0o700,
+                hash: "ab".repeat(32),
+            }],
         }
     }
 
@@ -893,10 +942,12 @@ mod tests {
             Request::SetupExperiment {
                 start: 0.5,
                 stop: Some(98.5),
+                tolerance: Some(1e-6),
             },
             Request::SetupExperiment {
                 start: -1.0,
                 stop: None,
+                tolerance: None,
             },
             Request::EnterInit,
             Request::ExitInit,

@@ -67,6 +67,17 @@ fn guard(host: libc::pid_t) {
 }
 
 pub fn serve_stdio() -> i32 {
+    // Before anything else, above all before any thread exists (Landlock restricts the
+    // calling thread and what it starts): the store of unpacked FMUs read-only for good.
+    if let Some(store) = std::env::var_os(super::READ_ONLY_ENV) {
+        let store = std::path::Path::new(&store);
+        if let Err(why) = tb_fmi::import::sandbox::read_only(store) {
+            eprintln!(
+                "twinbench worker: warning: the store of unpacked FMUs {} stays writable for this FMU ({why}); libraries are verified before they are loaded",
+                store.display()
+            );
+        }
+    }
     // Take the socket off fd 0, and point fd 0 at /dev/null and fd 1 at stderr, so that
     // an FMU that reads stdin or prints to stdout cannot touch the protocol.
     let fd = unsafe { libc::fcntl(0, libc::F_DUPFD_CLOEXEC, 3) };
@@ -134,12 +145,30 @@ fn serve(stream: UnixStream) -> i32 {
     }
 }
 
-/// The preloads, then the FMU's library; errors name the .fmu, not the unpacked copy.
+/// The preloads, then the FMU's library, which is loaded only after every check of the
+/// host passed (the unpacked copy verified here again: the host's check and this load are
+/// different moments); errors name the .fmu, not the unpacked copy.
 fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
+    let source = std::path::Path::new(&target.source);
+    for c in &target.checks {
+        c.verify().map_err(|why| FmuError::Load {
+            path: source.to_path_buf(),
+            message: format!("the unpacked copy is not the FMU's, not loaded: {why}"),
+        })?;
+    }
+    if !target
+        .checks
+        .iter()
+        .any(|c| c.path() == std::path::Path::new(&target.path))
+    {
+        return Err(FmuError::Load {
+            path: source.to_path_buf(),
+            message: "the host sent no check of the library; not loaded".into(),
+        });
+    }
     for p in &target.preload {
         tb_fmi::import::library::preload_global(std::path::Path::new(p))?;
     }
-    let source = std::path::Path::new(&target.source);
     if !target.description.is_empty() {
         let xml =
             std::fs::read_to_string(&target.description).map_err(|e| FmuError::Description {
@@ -311,7 +340,11 @@ fn probe(library: &Loaded) -> Values {
 fn call(i: &mut dyn Backend, op: Request<'_>) -> Result<Option<Values>, Failure> {
     match op {
         Request::SetDebugLogging(on) => i.set_debug_logging(on)?,
-        Request::SetupExperiment { start, stop } => i.setup_experiment(start, stop)?,
+        Request::SetupExperiment {
+            start,
+            stop,
+            tolerance,
+        } => i.setup_experiment(start, stop, tolerance)?,
         Request::EnterInit => i.enter_initialization_mode()?,
         Request::ExitInit => i.exit_initialization_mode()?,
         Request::Terminate => i.terminate()?,
@@ -451,6 +484,7 @@ mod tests {
             Request::SetupExperiment {
                 start: 0.0,
                 stop: Some(1.0),
+                tolerance: None,
             },
             Request::EnterInit,
             Request::SetReal {
@@ -494,6 +528,7 @@ mod tests {
             Request::SetupExperiment {
                 start: 0.0,
                 stop: None,
+                tolerance: Some(1e-6),
             },
             Request::EnterInit,
             Request::ExitInit,

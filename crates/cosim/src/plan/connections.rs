@@ -25,7 +25,7 @@ pub(super) fn connections(
         let c = connection(conn, units, signals, &ctx, &mut notes)?;
         if connections
             .iter()
-            .any(|d| d.to_unit == c.to_unit && d.to_vr == c.to_vr)
+            .any(|d| d.to_unit == c.to_unit && d.to_key() == c.to_key())
         {
             return Err(invalid(
                 &ctx,
@@ -92,6 +92,15 @@ fn connection(
                 Some(units.instances[*unit].description()),
             )
         }
+        // A column without a unit (an FMPy input file has none) takes the input's.
+        Endpoint::Replay { unit_name, .. } if unit_name.is_empty() => {
+            if let Some(u) = to_def.description().unit_of(to_sv) {
+                notes.push(format!(
+                    "connection \"{text}\": '{a}' has no unit; taken as '{b}''s unit {u}"
+                ));
+            }
+            (None, None)
+        }
         Endpoint::Replay { unit_name, .. } => (Some(unit_name.clone()), None),
     };
     check_types(&from, a, to_sv, b, ctx)?;
@@ -103,7 +112,21 @@ fn connection(
         (to_md, to_md.unit_of(to_sv)),
         to_sv.ty,
     )
-    .map_err(|m| invalid(ctx, m))?;
+    .map_err(|m| match &from {
+        // The fix for a replayed column is its unit, not a scale.
+        Endpoint::Replay { unit, column, .. } => {
+            let r = units.replay(*unit);
+            invalid(
+                ctx,
+                format!(
+                    "{m}; if the file's unit for '{a}' is wrong or missing, name it in its [[replay]]: units = {{ {} = \"{}\" }}",
+                    r.columns[*column],
+                    to_md.unit_of(to_sv).unwrap_or("1")
+                ),
+            )
+        }
+        _ => invalid(ctx, m),
+    })?;
     if let Some(note) = &conversion.note {
         notes.push(format!("connection \"{text}\": {note}"));
     }
@@ -176,7 +199,7 @@ pub(super) fn replayed_columns(
             .description()
             .variables
             .iter()
-            .find(|v| v.value_reference == c.to_vr && v.causality == Causality::Input)
+            .find(|v| v.has_key(c.to_key()) && v.causality == Causality::Input)
             .expect("resolved by the connections stage");
         let r = units.replay(unit);
         let discrete = sv.ty != ScalarType::Real
@@ -267,7 +290,7 @@ pub(super) fn unconnected_inputs(
         {
             let connected = connections
                 .iter()
-                .any(|c| c.to_unit == k && c.to_vr == v.value_reference);
+                .any(|c| c.to_unit == k && c.to_key() == v.key());
             let set = file
                 .parameters
                 .contains_key(&format!("{}.{}", inst.name, v.name))

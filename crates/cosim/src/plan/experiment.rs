@@ -57,16 +57,8 @@ pub(super) fn check(file: &SystemFile, ctx_file: &str) -> Result<(), SystemError
             ),
         ));
     }
-    if let Some(tol) = e.tolerance {
-        if !(tol.is_finite() && tol > 0.0 && tol < 1.0) {
-            return Err(invalid(
-                ctx_file,
-                format!(
-                    "experiment.tolerance (the Model Exchange solver's relative tolerance) must be in (0, 1), got {}",
-                    tb_files::number(tol)
-                ),
-            ));
-        }
+    if let Some(t) = e.tolerance {
+        super::instances::check_tolerance(t, &format!("{ctx_file}: experiment.tolerance"))?;
     }
     if file.record.decimation == 0 {
         return Err(invalid(ctx_file, "record.decimation must be at least 1"));

@@ -7,7 +7,7 @@ use crate::config::SystemFile;
 use crate::split_name;
 use std::collections::HashMap;
 use tb_fmi::import::description::ScalarVariable;
-use tb_fmi::Causality;
+use tb_fmi::{Causality, VarKey};
 
 /// Direct feed-through cycles: output -> input (connection) -> output of the same instance
 /// (declared dependency). Cycles made only of declared dependencies are errors; cycles
@@ -18,15 +18,15 @@ pub(crate) fn check_feedthrough_cycles(
     connections: &[ConnectionDef],
     warnings: &mut Vec<String>,
 ) -> Result<(), String> {
-    // Nodes: (instance, vr) of connected inputs and outputs.
-    type Node = (usize, u32);
+    // Nodes: (instance, value space, value reference) of connected inputs and outputs.
+    type Node = (usize, VarKey);
     let mut edges: HashMap<Node, Vec<(Node, bool)>> = HashMap::new();
     for c in connections {
-        if let Endpoint::Fmu { unit, vr, .. } = c.from {
+        if let Endpoint::Fmu { unit, vr, ty, .. } = c.from {
             edges
-                .entry((unit, vr))
+                .entry((unit, (ty.value_space(), vr)))
                 .or_default()
-                .push(((c.to_unit, c.to_vr), true));
+                .push(((c.to_unit, c.to_key()), true));
         }
     }
     for (k, inst) in instances.iter().enumerate() {
@@ -57,11 +57,12 @@ pub(crate) fn check_feedthrough_cycles(
                         false,
                     ),
                 };
-            for inp in deps {
+            // An output that is an alias of an input is that input, not a loop through it.
+            for inp in deps.into_iter().filter(|i| i.key() != out.key()) {
                 edges
-                    .entry((k, inp.value_reference))
+                    .entry((k, inp.key()))
                     .or_default()
-                    .push(((k, out.value_reference), declared));
+                    .push(((k, out.key()), declared));
             }
         }
     }
@@ -71,7 +72,7 @@ pub(crate) fn check_feedthrough_cycles(
             .description()
             .variables
             .iter()
-            .find(|v| v.value_reference == n.1)
+            .find(|v| v.has_key(n.1))
             .map(|v| v.name.as_str())
             .unwrap_or("?");
         format!("{}.{v}", inst.name)
@@ -80,13 +81,13 @@ pub(crate) fn check_feedthrough_cycles(
     let mut color: HashMap<Node, u8> = HashMap::new();
     let mut nodes: Vec<Node> = edges.keys().copied().collect();
     nodes.sort();
-    type Edges = HashMap<(usize, u32), Vec<((usize, u32), bool)>>;
+    type Edges = HashMap<Node, Vec<(Node, bool)>>;
     fn dfs(
-        n: (usize, u32),
+        n: Node,
         edges: &Edges,
-        color: &mut HashMap<(usize, u32), u8>,
-        path: &mut Vec<((usize, u32), bool)>,
-    ) -> Option<Vec<((usize, u32), bool)>> {
+        color: &mut HashMap<Node, u8>,
+        path: &mut Vec<(Node, bool)>,
+    ) -> Option<Vec<(Node, bool)>> {
         color.insert(n, 1);
         if let Some(next) = edges.get(&n) {
             for &(m, declared) in next {

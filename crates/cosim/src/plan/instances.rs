@@ -45,6 +45,20 @@ fn missing_fmu(ctx_file: &str, key: &str, path: &Path) -> SystemError {
     )
 }
 
+/// A relative tolerance: a number in (0, 1).
+pub(super) fn check_tolerance(t: f64, ctx: &str) -> Result<(), SystemError> {
+    if t > 0.0 && t < 1.0 {
+        return Ok(());
+    }
+    Err(invalid(
+        ctx,
+        format!(
+            "{} is not a relative tolerance: expected a number between 0 and 1 (e.g. 1e-6)",
+            tb_files::number(t)
+        ),
+    ))
+}
+
 /// The instances, each with the factory of its backend (in-process FMU, native model,
 /// isolated worker, traced); and a warning for every instance `--native` could not link.
 pub(super) fn instances(
@@ -108,12 +122,32 @@ pub(super) fn instances(
             options,
             &mut native_fallback,
         )?;
+        let ctx = format!("{ctx_file}: instance '{}'", inst.name);
+        let tolerance = inst
+            .tolerance
+            .or(file.experiment.tolerance)
+            .or_else(|| fmu.description.default_experiment.as_ref()?.tolerance);
+        if let Some(t) = inst.tolerance {
+            check_tolerance(t, &format!("{ctx}: tolerance"))?;
+        }
+        if let Some(t) =
+            tolerance.filter(|_| inst.tolerance.is_none() && file.experiment.tolerance.is_none())
+        {
+            check_tolerance(
+                t,
+                &format!(
+                    "{ctx}: the DefaultExperiment tolerance of {}",
+                    fmu.source.display()
+                ),
+            )?;
+        }
         let def = InstanceDef {
             name: inst.name.clone(),
             fmu: fmu.clone(),
             ports: inst.ports.clone(),
             logging: inst.logging,
             interface: run.interface,
+            tolerance,
             factory,
         };
         for theirs in inst.ports.values() {
@@ -159,7 +193,9 @@ fn run_as(
     Ok(RunAs {
         interface,
         me: MeSettings {
-            relative_tolerance: file.experiment.tolerance,
+            // The instance's, else the experiment's; else the FMU's DefaultExperiment
+            // tolerance, else FMPy's 1e-5 (`MeSettings::relative_tolerance_for`).
+            relative_tolerance: inst.tolerance.or(file.experiment.tolerance),
         },
     })
 }
@@ -360,11 +396,11 @@ impl<'a> Units<'a> {
     /// The FMU variable behind an FMU endpoint.
     pub fn variable(&self, e: &Endpoint) -> Option<&'a ScalarVariable> {
         match e {
-            Endpoint::Fmu { unit, vr, .. } => self.instances[*unit]
+            Endpoint::Fmu { unit, vr, ty, .. } => self.instances[*unit]
                 .description()
                 .variables
                 .iter()
-                .find(|v| v.value_reference == *vr),
+                .find(|v| v.has_key((ty.value_space(), *vr))),
             Endpoint::Replay { .. } => None,
         }
     }

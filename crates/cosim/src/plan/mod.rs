@@ -39,7 +39,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_fmi::import::description::{ModelDescription, ScalarVariable};
-use tb_fmi::{FmuCache, LoadedFmu, ScalarType};
+use tb_fmi::{FmuCache, LoadedFmu, ScalarType, VarKey};
 
 /// One FMU instance of the system, resolved.
 pub struct InstanceDef {
@@ -50,6 +50,9 @@ pub struct InstanceDef {
     pub logging: bool,
     /// The FMI interface it runs through (Model Exchange: integrated by twinbench).
     pub interface: tb_fmi::Interface,
+    /// The relative tolerance it is given (`toleranceDefined` when Some): the instance's,
+    /// else the experiment's, else the FMU's DefaultExperiment tolerance.
+    pub tolerance: Option<f64>,
     /// Creates the running unit (in-process FMU by default).
     pub factory: Arc<dyn BackendFactory>,
 }
@@ -67,6 +70,10 @@ pub struct LoadOptions {
     pub isolation: IsolationOptions,
     /// The FMI call trace (`--trace-fmi`): `None` wraps nothing, so it costs nothing.
     pub trace: Option<crate::trace::TraceOptions>,
+    /// Every FMU's relative tolerance (`run --tolerance`), over the system file's.
+    pub tolerance: Option<f64>,
+    /// The step size convention (`run --step-convention`), over the system file's.
+    pub step_convention: Option<crate::config::StepConvention>,
 }
 
 impl InstanceDef {
@@ -125,6 +132,13 @@ pub struct ConnectionDef {
     pub offset: f64,
 }
 
+impl ConnectionDef {
+    /// The input's [`VarKey`]: (value space, value reference).
+    pub fn to_key(&self) -> VarKey {
+        (self.to_ty.value_space(), self.to_vr)
+    }
+}
+
 /// The most macro steps a run may have (10¹²: days of a 1 µs step; more is a mistake).
 pub const MAX_STEPS: f64 = 1e12;
 
@@ -151,7 +165,8 @@ pub struct Signal {
 #[derive(Clone, Debug, Default)]
 pub struct SignalTable {
     pub signals: Vec<Signal>,
-    index: HashMap<(bool, usize, u64), usize>,
+    /// (replay?, unit, value space, value reference or column).
+    index: HashMap<(bool, usize, Option<ScalarType>, u64), usize>,
 }
 
 impl Signal {
@@ -171,8 +186,10 @@ impl SignalTable {
     /// The slot of a source (a new one the first time).
     pub fn slot(&mut self, e: &Endpoint, name: &str) -> usize {
         let key = match e {
-            Endpoint::Fmu { unit, vr, .. } => (false, *unit, *vr as u64),
-            Endpoint::Replay { unit, column, .. } => (true, *unit, *column as u64),
+            Endpoint::Fmu { unit, vr, ty, .. } => {
+                (false, *unit, Some(ty.value_space()), *vr as u64)
+            }
+            Endpoint::Replay { unit, column, .. } => (true, *unit, None, *column as u64),
         };
         if let Some(&k) = self.index.get(&key) {
             return k;
@@ -280,6 +297,14 @@ impl Plan {
     ) -> Result<Plan, SystemError> {
         // Named as the user named it, without `a/..` steps.
         let path = tb_files::normalize(path);
+        let mut file = file;
+        if let Some(t) = options.tolerance {
+            file.experiment.tolerance = Some(t);
+            file.instances.iter_mut().for_each(|i| i.tolerance = None);
+        }
+        if let Some(c) = options.step_convention {
+            file.experiment.step_convention = c;
+        }
         let ctx = path.display().to_string();
         experiment::check(&file, &ctx)?;
         let loaded = instances::load_fmus(&file, &ctx, &cache)?;
@@ -392,7 +417,7 @@ impl Plan {
     pub fn driving_connection(&self, slot: &ParamSlot) -> Option<&ConnectionDef> {
         self.connections
             .iter()
-            .find(|c| c.to_unit == slot.unit && c.to_vr == slot.vr)
+            .find(|c| c.to_unit == slot.unit && c.to_key() == slot.key())
     }
 
     /// A signal the system can read (`instance.variable` or `replay.column`).

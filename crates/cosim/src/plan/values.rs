@@ -3,7 +3,7 @@
 
 use crate::{invalid, SystemError};
 use std::fmt;
-use tb_fmi::ScalarType;
+use tb_fmi::{ScalarType, VarKey};
 
 /// A settable variable, resolved: which instance, which value reference, which type.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,6 +36,16 @@ pub enum ParamValue {
 }
 
 impl ParamValue {
+    /// The value space it is set in (the typed `fmi2Set*` call that takes it).
+    pub fn space(&self) -> ScalarType {
+        match self {
+            ParamValue::Real(_) => ScalarType::Real,
+            ParamValue::Integer(_) => ScalarType::Integer,
+            ParamValue::Boolean(_) => ScalarType::Boolean,
+            ParamValue::String(_) => ScalarType::String,
+        }
+    }
+
     /// The value as a number (booleans 0/1), None for strings.
     pub fn as_f64(&self) -> Option<f64> {
         match self {
@@ -59,6 +69,11 @@ impl fmt::Display for ParamValue {
 }
 
 impl ParamSlot {
+    /// The variable's [`VarKey`]: (value space, value reference).
+    pub fn key(&self) -> VarKey {
+        (self.ty.value_space(), self.vr)
+    }
+
     /// A value from a system or study file (or `--set`), checked for type and range.
     pub fn value_from_toml(
         &self,

@@ -5,17 +5,20 @@
 use super::description::{self, Interface, ModelDescription};
 use super::library::Library;
 use super::library3::Library3;
+use super::manifest::{self, Manifest, ManifestFile};
 use super::store::{self, CdEntry, IndexEntry};
 use crate::FmuError;
 use sha2::{Digest, Sha256};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fs::{File, Metadata};
 use std::io::{Read, Seek};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
-pub use super::store::default_store_dir;
+pub use super::store::{
+    default_store_dir, folders as store_folders, prune as prune_store, Pruned, StoreFolder,
+};
 
 /// Limits against zip bombs.
 pub const MAX_ENTRIES: usize = 10_000;
@@ -42,19 +45,240 @@ impl Default for Limits {
 
 /// An unpacked, checked FMU. Its library is loaded into this process only when an
 /// in-process instance first needs it ([`LoadedFmu::library`]): an FMU that runs isolated
-/// never executes code in the host, not even `fmi2GetVersion`.
+/// never executes code in the host, not even `fmi2GetVersion`. Before the library is
+/// loaded it is verified against the folder's manifest (and repaired when it differs).
 pub struct LoadedFmu {
     pub source: PathBuf,
     pub dir: PathBuf,
     pub sha256: String,
     pub description: ModelDescription,
+    /// The folder `dir` lies in: the store, or the cache's own folder.
+    base: PathBuf,
+    /// Whether `base` is a store that other processes share.
+    shared: bool,
+    /// What the unpacking wrote; `trusted` when this process unpacked it itself (the hashes
+    /// then come from the archive's bytes, not from the store).
+    manifest: Manifest,
+    trusted: bool,
+    limits: Limits,
+    /// The libraries' checks that passed (one per interface's library).
+    library_checked: Mutex<Vec<FileCheck>>,
+    /// `.complete`, held with a shared lock while the FMU is loaded: `cache prune` leaves
+    /// the folder alone.
+    _in_use: Option<File>,
     library: Mutex<Option<Arc<Library>>>,
     library3: Mutex<Option<Arc<Library3>>>,
     /// The FMI 2.0 library loaded for Model Exchange (its own `modelIdentifier`).
     library_me: Mutex<Option<Arc<Library>>>,
 }
 
+/// What an unpacked file must be: where (a path relative to [`FileCheck::base`]), its
+/// size, mode and BLAKE3 hash. What the host hands an isolated worker, which checks the
+/// library again before it loads it.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FileCheck {
+    /// The folder the permission check starts from (the store).
+    pub base: PathBuf,
+    /// The file, relative to `base`.
+    pub rel: String,
+    pub size: u64,
+    pub mode: u32,
+    pub hash: String,
+}
+
+impl FileCheck {
+    /// The file's full path.
+    pub fn path(&self) -> PathBuf {
+        self.base.join(&self.rel)
+    }
+
+    /// Checks the file: every folder from `base` down and the file owned by this user and
+    /// writable by no one else, no symbolic link, a regular file of the size, mode and
+    /// hash. The reason otherwise.
+    pub fn verify(&self) -> Result<(), String> {
+        let (dir, name) = self.rel.split_once('/').ok_or("no folder")?;
+        manifest::verify_file(
+            &self.base,
+            dir,
+            &ManifestFile {
+                path: name.to_string(),
+                size: self.size,
+                mode: self.mode,
+                crc32: 0,
+                hash: self.hash.clone(),
+            },
+        )
+    }
+}
+
 impl LoadedFmu {
+    /// The store the FMU was unpacked into, when it is one that other processes share (an
+    /// isolated worker makes it read-only for itself).
+    pub fn store(&self) -> Option<&Path> {
+        self.shared.then_some(self.base.as_path())
+    }
+
+    /// The BLAKE3 of the unpacked folder's manifest: every file's path, size, mode and hash.
+    pub fn manifest_digest(&self) -> String {
+        self.manifest.digest()
+    }
+
+    /// The folder's name in `base`.
+    fn dir_rel(&self) -> &str {
+        &self.sha256[..32]
+    }
+
+    /// The check of an unpacked file of the manifest (`entry`: its name in the archive).
+    pub fn unpacked_file(&self, entry: &str) -> Option<FileCheck> {
+        let f = self.manifest.file(entry)?;
+        Some(FileCheck {
+            base: self.base.clone(),
+            rel: format!("{}/{}", self.dir_rel(), f.path),
+            size: f.size,
+            mode: f.mode,
+            hash: f.hash.clone(),
+        })
+    }
+
+    /// The library of the default interface, verified against the manifest (unpacked
+    /// again when it differs): the only way to its path that code is loaded from, in this
+    /// process or in a worker.
+    pub fn checked_library(&self) -> Result<FileCheck, FmuError> {
+        self.checked_entry(&self.library_entry())
+    }
+
+    /// The library of `interface` (Model Exchange may have its own `modelIdentifier`),
+    /// verified as [`LoadedFmu::checked_library`].
+    pub fn checked_library_of(&self, interface: Interface) -> Result<FileCheck, FmuError> {
+        let entry = self
+            .library_entry_of(interface)
+            .ok_or_else(|| FmuError::Description {
+                path: self.source.clone(),
+                message: format!("the FMU has no <{}> element", interface.name()),
+            })?;
+        self.checked_entry(&entry)
+    }
+
+    fn checked_entry(&self, entry: &str) -> Result<FileCheck, FmuError> {
+        let mut checked = lock(&self.library_checked);
+        let Some(check) = self.unpacked_file(entry) else {
+            return Err(FmuError::Load {
+                path: self.source.clone(),
+                message: format!("{entry}: the FMU has no such file"),
+            });
+        };
+        if checked.contains(&check) {
+            return Ok(check);
+        }
+        self.trust_from_archive(&check, entry)?;
+        if let Err(reason) = check.verify() {
+            self.unpack_again(&reason)?;
+            check.verify().map_err(|again| {
+                arch(
+                    &self.source,
+                    format!("{entry}: unpacked again and still not the FMU's: {again}"),
+                )
+            })?;
+        }
+        checked.push(check.clone());
+        Ok(check)
+    }
+
+    /// Every file of the unpacked folder verified against the manifest (unpacked again when
+    /// one differs): what a remote worker runs on before it says which content it uses.
+    pub fn verify_all(&self) -> Result<(), FmuError> {
+        let bad = self
+            .manifest
+            .files
+            .iter()
+            .find_map(|f| manifest::verify_file(&self.base, self.dir_rel(), f).err());
+        if let Some(reason) = bad {
+            self.unpack_again(&reason)?;
+            for f in &self.manifest.files {
+                manifest::verify_file(&self.base, self.dir_rel(), f).map_err(|again| {
+                    arch(
+                        &self.source,
+                        format!("unpacked again and still not the FMU's: {again}"),
+                    )
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// A manifest read from a store is trusted when no FMU process could have written the
+    /// store (isolated workers are sandboxed here). Otherwise the library's hash is taken
+    /// from the archive itself before the manifest is believed.
+    fn trust_from_archive(&self, check: &FileCheck, entry: &str) -> Result<(), FmuError> {
+        if self.trusted || super::sandbox::available().is_ok() {
+            return Ok(());
+        }
+        // The archive as it is now: if it changed since it was loaded, its library differs
+        // and the repair below says so.
+        let (file, _) = open_regular(&self.source, &self.limits, "an FMU is a zip archive")?;
+        let bytes = read_regular(&self.source, &file, &self.limits)?;
+        let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&bytes[..]))
+            .map_err(|e| arch(&self.source, e.to_string()))?;
+        let mut f = zip
+            .by_name(entry)
+            .map_err(|e| arch(&self.source, format!("{entry}: {e}")))?;
+        let mut h = manifest::Hashing {
+            inner: std::io::sink(),
+            hasher: blake3::Hasher::new(),
+        };
+        std::io::copy(&mut f.by_ref().take(self.limits.max_total_bytes), &mut h)
+            .map_err(|e| arch(&self.source, format!("{entry}: {e}")))?;
+        if h.hasher.finalize().to_hex().as_str() != check.hash {
+            self.unpack_again(&format!(
+                "{}: its manifest does not name the FMU's {entry}",
+                self.dir.display()
+            ))?;
+        }
+        Ok(())
+    }
+
+    /// Reports a damaged folder once and unpacks the archive again into a fresh folder in
+    /// its place. Fails when the archive is no longer the one loaded, or the new unpacking
+    /// is not the same content.
+    fn unpack_again(&self, reason: &str) -> Result<(), FmuError> {
+        log::warn!(
+            "{}: the unpacked FMU {} differs from what was unpacked ({reason}); unpacking it again",
+            self.dir.display(),
+            self.source.display()
+        );
+        let (file, _) = open_regular(&self.source, &self.limits, "an FMU is a zip archive")?;
+        let bytes = read_regular(&self.source, &file, &self.limits)?;
+        if format!("{:x}", Sha256::digest(&bytes)) != self.sha256 {
+            return Err(changed_since(&self.source));
+        }
+        use std::os::unix::fs::MetadataExt;
+        let exec = library_entry(&self.description.fmi_version, self.model_identifier());
+        // Only this folder is replaced: one another process put in its place meanwhile is
+        // used if good.
+        let stale = std::fs::symlink_metadata(&self.dir).map_or(0, |m| m.ino());
+        let (fresh, _) = replace_folder(
+            &self.source,
+            &bytes,
+            &self.sha256,
+            &self.base,
+            self.dir_rel(),
+            &self.limits,
+            Some(&exec),
+            self.shared,
+            Some(stale),
+        )?;
+        if fresh != self.manifest {
+            return Err(arch(
+                &self.source,
+                format!(
+                    "{}: unpacked again, its manifest differs from the one loaded (the store was changed); run again",
+                    self.dir.display()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// The unpacked library of the default interface (`binaries/linux64/<modelIdentifier>.so`,
     /// FMI 3.0: `binaries/x86_64-linux/`).
     pub fn library_path(&self) -> PathBuf {
@@ -124,8 +348,8 @@ impl LoadedFmu {
         if let Some(l) = &*slot {
             return Ok(l.clone());
         }
-        let entry = library_entry(&self.description.fmi_version, id);
-        let library = Library::load_model_exchange(&self.dir.join(entry))
+        let check = self.checked_library_of(Interface::ModelExchange)?;
+        let library = Library::load_model_exchange(&check.path())
             .map(Arc::new)
             .map_err(|e| library_error(&self.source, &self.description.fmi_version, id, e))?;
         *slot = Some(library.clone());
@@ -165,7 +389,8 @@ impl LoadedFmu {
         if let Some(l) = &*slot {
             return Ok(l.clone());
         }
-        let library = load(&self.library_path()).map(Arc::new).map_err(|e| {
+        let check = self.checked_library()?;
+        let library = load(&check.path()).map(Arc::new).map_err(|e| {
             library_error(
                 &self.source,
                 &self.description.fmi_version,
@@ -210,6 +435,8 @@ pub struct FmuCache {
     /// Whether an FMU must carry a binary for this platform (see
     /// [`FmuCache::description_only`]).
     binary_required: bool,
+    /// Whether every unpacked file is verified on load (see [`FmuCache::verifying_all`]).
+    verify_all: bool,
     counters: Counters,
     /// A temporary cache's lock file (`<root>.lock`, flocked while the cache lives).
     _owner: Option<OwnerLock>,
@@ -283,8 +510,14 @@ fn arch(path: &Path, message: impl Into<String>) -> FmuError {
     }
 }
 
+/// Creates a cache's folder or a store: its parents as usual, itself private to the user
+/// (mode 700 whatever the umask).
 fn create_folder(dir: &Path) -> Result<(), FmuError> {
-    std::fs::create_dir_all(dir).map_err(|e| arch(dir, format!("cannot create cache folder: {e}")))
+    let cannot = |e: std::io::Error| arch(dir, format!("cannot create cache folder: {e}"));
+    if let Some(parent) = dir.parent() {
+        std::fs::create_dir_all(parent).map_err(cannot)?;
+    }
+    manifest::make_dir(dir).map_err(cannot)
 }
 
 /// The machine-wide store, created if needed; `None` (FMUs unpacked per process, as without
@@ -337,6 +570,7 @@ impl FmuCache {
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
             binary_required: true,
+            verify_all: false,
             counters: Counters::default(),
         })
     }
@@ -359,6 +593,7 @@ impl FmuCache {
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
             binary_required: true,
+            verify_all: false,
             counters: Counters::default(),
         })
     }
@@ -400,22 +635,41 @@ impl FmuCache {
         self
     }
 
+    /// A cache that verifies every unpacked file of an FMU when it loads it, resources
+    /// included (repairing a folder that differs), not only the description and, before
+    /// it is loaded, the library: for a remote worker, whose input digest says which
+    /// unpacked content it runs on.
+    pub fn verifying_all(mut self) -> Self {
+        self.verify_all = true;
+        self
+    }
+
     /// Check, unpack (once per content) and load an FMU.
     pub fn load(&self, fmu: &Path) -> Result<Arc<LoadedFmu>, FmuError> {
         let (file, meta) = open_regular(fmu, &self.limits, "an FMU is a zip archive")?;
-        if let Some(store) = &self.store {
-            if let Some(l) = self.load_indexed(fmu, &file, &meta, store) {
+        let indexed = match &self.store {
+            Some(store) => self.load_indexed(fmu, &file, &meta, store),
+            None => None,
+        };
+        let loaded = match indexed {
+            Some(l) => {
                 self.counters.index_hits.fetch_add(1, Ordering::Relaxed);
-                return Ok(l);
+                l
             }
+            None => self.load_full(fmu, &file, &meta)?,
+        };
+        if self.verify_all {
+            loaded.verify_all()?;
         }
-        self.load_full(fmu, &file, &meta)
+        Ok(loaded)
     }
 
     /// A load through the stat index: the file's `stat` finds its entry, the archive's
     /// central directory (read, nothing inflated) must match the entry's fingerprint and
-    /// pass the entry checks again, and the description is read from the unpacked folder and
-    /// checked again. `None` on any doubt: the caller takes the full path.
+    /// pass the entry checks again, the unpacked folder's manifest must name this archive
+    /// and every file of its central directory (size and CRC-32), and the description is
+    /// read from the unpacked folder, verified against the manifest and checked again.
+    /// `None` on any doubt: the caller takes the full path (which repairs the folder).
     fn load_indexed(
         &self,
         fmu: &Path,
@@ -426,10 +680,7 @@ impl FmuCache {
         let canonical = std::fs::canonicalize(fmu).ok()?;
         let key = store::index_key(&canonical, meta);
         let entry = store::read_entry(store, &key)?;
-        let dir = store.join(&entry.sha256[..32]);
-        if !dir.join(".complete").is_file() {
-            return None;
-        }
+        let rel = &entry.sha256[..32];
         let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file)).ok()?;
         let entries = check_entries_of(fmu, &mut zip, &self.limits).ok()?;
         if entries.len() != entry.entries || store::fingerprint(&entries) != entry.directory {
@@ -443,14 +694,23 @@ impl FmuCache {
         if let Some(l) = lock(&self.loaded).get(&entry.sha256) {
             return Some(l.clone());
         }
-        let xml = read_unpacked_description(fmu, &dir).ok()?;
+        let in_use = in_use(&store.join(rel))?;
+        let (manifest, xml) = check_folder(store, rel, &entry.sha256, &entries).ok()?;
+        let xml = String::from_utf8(xml).ok()?;
         let names: Vec<String> = entries.into_iter().map(|e| e.name).collect();
         let (md, _id) = check_description(fmu, &xml, &names, self.binary_required).ok()?;
         let loaded = Arc::new(LoadedFmu {
             source: fmu.to_path_buf(),
-            dir,
+            dir: store.join(rel),
             sha256: entry.sha256.clone(),
             description: md,
+            base: store.to_path_buf(),
+            shared: true,
+            manifest,
+            trusted: false,
+            limits: self.limits,
+            library_checked: Mutex::new(Vec::new()),
+            _in_use: Some(in_use),
             library: Mutex::new(None),
             library3: Mutex::new(None),
             library_me: Mutex::new(None),
@@ -460,7 +720,8 @@ impl FmuCache {
     }
 
     /// The full path: read and hash the archive, check it whole, unpack it unless its
-    /// content is unpacked already, and (re)write its index entry.
+    /// content is unpacked already and its folder passes [`check_folder`] (a folder that
+    /// does not is reported and unpacked again), and (re)write its index entry.
     fn load_full(
         &self,
         fmu: &Path,
@@ -479,16 +740,54 @@ impl FmuCache {
         if let Some(l) = lock(&self.loaded).get(&sha) {
             return Ok(l.clone());
         }
-        let (md, _id, entries) =
+        let (md, id, entries) =
             check_archive_entries(fmu, &bytes, &self.limits, self.binary_required)?;
-        let dir = self.fmu_folder().join(&sha[..32]);
-        if !dir.join(".complete").exists() {
-            if let Some(store) = &self.store {
-                store::sweep_temporaries(store);
+        let base = self.fmu_folder();
+        let rel = &sha[..32];
+        let dir = base.join(rel);
+        let mut held = in_use(&dir);
+        let found = held
+            .as_ref()
+            .map(|_| check_folder(base, rel, &sha, &entries));
+        let (manifest, trusted) = match found {
+            Some(Ok((m, _))) => (m, false),
+            found => {
+                if let Some(Err(reason)) = &found {
+                    if !dir.join(manifest::MANIFEST).exists() {
+                        // A folder without a manifest was unpacked by a twinbench before
+                        // manifests: unpacked again, nothing to report.
+                        log::info!("{}: no manifest; unpacking again", dir.display());
+                    } else {
+                        log::warn!(
+                        "{}: the unpacked FMU {} differs from what was unpacked ({reason}); unpacking it again",
+                        dir.display(),
+                        fmu.display()
+                    );
+                    }
+                }
+                drop(held);
+                if let Some(store) = &self.store {
+                    store::sweep_temporaries(store);
+                }
+                let exec = library_entry(&md.fmi_version, &id);
+                let (m, ours) = replace_folder(
+                    fmu,
+                    &bytes,
+                    &sha,
+                    base,
+                    rel,
+                    &self.limits,
+                    Some(&exec),
+                    self.store.is_some(),
+                    None,
+                )?;
+                if ours {
+                    self.counters.extractions.fetch_add(1, Ordering::Relaxed);
+                }
+                held = in_use(&dir);
+                (m, ours)
             }
-            extract(fmu, &bytes, &dir, &self.limits)?;
-            self.counters.extractions.fetch_add(1, Ordering::Relaxed);
-        }
+        };
         if let Some(store) = &self.store {
             self.remember(store, fmu, file, meta, &sha, &entries);
         }
@@ -497,6 +796,13 @@ impl FmuCache {
             dir,
             sha256: sha.clone(),
             description: md,
+            base: base.to_path_buf(),
+            shared: self.store.is_some(),
+            manifest,
+            trusted,
+            limits: self.limits,
+            library_checked: Mutex::new(Vec::new()),
+            _in_use: held,
             library: Mutex::new(None),
             library3: Mutex::new(None),
             library_me: Mutex::new(None),
@@ -602,30 +908,6 @@ fn read_regular(path: &Path, mut file: &File, limits: &Limits) -> Result<Vec<u8>
     Ok(bytes)
 }
 
-/// The modelDescription.xml of an unpacked FMU, read as from its archive (a regular file,
-/// bounded, UTF-8); errors name the `.fmu`.
-fn read_unpacked_description(fmu: &Path, dir: &Path) -> Result<String, FmuError> {
-    use std::os::unix::fs::OpenOptionsExt;
-    let path = dir.join("modelDescription.xml");
-    let f = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
-        .open(&path)
-        .map_err(|e| {
-            arch(
-                fmu,
-                format!("cannot read the unpacked modelDescription.xml: {e}"),
-            )
-        })?;
-    if !f.metadata().is_ok_and(|m| m.is_file()) {
-        return Err(arch(
-            fmu,
-            "the unpacked modelDescription.xml is not a regular file",
-        ));
-    }
-    read_description(fmu, f)
-}
-
 impl FmuCache {
     /// Check and unpack any zip package (an SSP) into this cache, once per content, with the
     /// FMU rules: a regular file within the size limit, [`check_entries`], the real
@@ -643,7 +925,7 @@ impl FmuCache {
         check_entries(package, &bytes, &self.limits)?;
         let dir = self.root.join(format!("pkg-{}", &sha[..32]));
         if !dir.join(".complete").exists() {
-            extract(package, &bytes, &dir, &self.limits)?;
+            extract(package, &bytes, &sha, &dir, &self.limits, None)?;
         }
         Ok(dir)
     }
@@ -945,26 +1227,42 @@ fn check_description(
     }
     let so = library_entry(&md.fmi_version, &id);
     if binary_required && !names.contains(&so) {
-        // Name the platforms the FMU has: a Windows- or macOS-only FMU is a common mistake.
+        // Name the platforms the FMU has binaries for (a Windows- or macOS-only FMU is a
+        // common mistake); a platform folder with no file in it has none.
         let mut platforms: Vec<&str> = names
             .iter()
             .filter_map(|n| n.strip_prefix("binaries/"))
-            .filter_map(|n| n.split_once('/').map(|(p, _)| p))
-            .filter(|p| !p.is_empty())
+            .filter_map(|n| n.split_once('/'))
+            .filter(|(p, rest)| !p.is_empty() && !rest.is_empty() && !rest.ends_with('/'))
+            .map(|(p, _)| p)
             .collect();
         platforms.sort();
         platforms.dedup();
-        return Err(arch(
-            fmu,
+        let has = if platforms.is_empty() {
+            "no binaries at all".to_string()
+        } else {
+            format!("binaries for {}", platforms.join(", "))
+        };
+        let dir = &so[..=so.rfind('/').expect("a folder")];
+        let mut here: Vec<&str> = names
+            .iter()
+            .filter_map(|n| n.strip_prefix(dir))
+            .filter(|n| !n.is_empty() && !n.ends_with('/'))
+            .collect();
+        here.sort();
+        let why = if !here.is_empty() {
+            let shown: Vec<&str> = here.iter().take(5).copied().collect();
             format!(
-                "no {so} (the FMU has no binary for this platform; it has {})",
-                if platforms.is_empty() {
-                    "no binaries at all".to_string()
-                } else {
-                    format!("binaries for {}", platforms.join(", "))
-                }
-            ),
-        ));
+                "{dir} holds {}{} but not the library its modelIdentifier \"{id}\" names",
+                shown.join(", "),
+                if here.len() > 5 { ", ..." } else { "" }
+            )
+        } else if names.iter().any(|n| n.starts_with(dir)) {
+            format!("the folder {dir} is empty (the FMU has {has})")
+        } else {
+            format!("the FMU has no binary for this platform; it has {has}")
+        };
+        return Err(arch(fmu, format!("no {so} ({why})")));
     }
     Ok((md, id))
 }
@@ -1013,10 +1311,182 @@ pub(crate) fn unique_sibling(path: &Path) -> PathBuf {
     path.with_file_name(unique_name(&format!(".{name}.tmp")))
 }
 
-fn extract(fmu: &Path, bytes: &[u8], dir: &Path, limits: &Limits) -> Result<(), FmuError> {
+/// The error of an archive that changed since it was loaded (a repair needs its bytes).
+fn changed_since(fmu: &Path) -> FmuError {
+    arch(
+        fmu,
+        "the file changed since it was loaded; its unpacked copy cannot be repaired from it: run again",
+    )
+}
+
+/// `.complete` of an unpacked folder, opened and held with a shared lock: the folder is in
+/// use (`cache prune` takes the lock exclusively before it removes a folder). `None` when
+/// the folder is not complete, or was removed while waiting for the lock. Its time is set
+/// to now: the folder's last use.
+fn in_use(dir: &Path) -> Option<File> {
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
+    let path = dir.join(".complete");
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_CLOEXEC)
+        .open(&path)
+        .ok()?;
+    // SAFETY: flock on a descriptor we own.
+    if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_SH) } != 0 {
+        return None;
+    }
+    let held = f.metadata().ok()?;
+    let now = std::fs::symlink_metadata(&path).ok()?;
+    if (held.dev(), held.ino()) != (now.dev(), now.ino()) {
+        return None;
+    }
+    let _ = f.set_modified(std::time::SystemTime::now());
+    Some(f)
+}
+
+/// An archive entry's name as the file it is unpacked to: its normal components joined by
+/// `/` (the entry checks refused absolute names and `..`).
+fn unpacked_name(name: &str) -> String {
+    Path::new(name)
+        .components()
+        .filter_map(|c| match c {
+            std::path::Component::Normal(n) => Some(n.to_string_lossy().into_owned()),
+            _ => None,
+        })
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
+/// The manifest to be of an archive's central directory: its files by unpacked name (the
+/// last of a repeated name wins, as when unpacking), without hashes.
+fn archive_files(entries: &[CdEntry]) -> BTreeMap<String, &CdEntry> {
+    entries
+        .iter()
+        .filter(|e| !e.name.ends_with('/'))
+        .map(|e| (unpacked_name(&e.name), e))
+        .collect()
+}
+
+/// Reads and checks an unpacked folder `base/rel` of the archive with content hash `sha`
+/// and central directory `entries`: its manifest, opened through folders that only this
+/// user can write, names this archive and exactly its files with their sizes and CRC-32s;
+/// its `modelDescription.xml` is the manifest's (size, mode, hash). Returns the manifest
+/// and the description's bytes, or why the folder cannot be used.
+fn check_folder(
+    base: &Path,
+    rel: &str,
+    sha: &str,
+    entries: &[CdEntry],
+) -> Result<(Manifest, Vec<u8>), String> {
+    let (f, _) = manifest::open_checked(base, &format!("{rel}/{}", manifest::MANIFEST))?;
+    let (text, _) = manifest::read_hashed(&f, manifest::MAX_MANIFEST_BYTES)
+        .map_err(|e| format!("its manifest: {e}"))?;
+    let m = std::str::from_utf8(&text)
+        .ok()
+        .and_then(Manifest::parse)
+        .ok_or("its manifest is damaged")?;
+    if m.archive != sha {
+        return Err("its manifest is of another archive".into());
+    }
+    let files = archive_files(entries);
+    let same = files.len() == m.files.len()
+        && files
+            .iter()
+            .zip(&m.files)
+            .all(|((name, e), f)| *name == f.path && e.size == f.size && e.crc32 == f.crc32);
+    if !same {
+        return Err("its manifest does not list the archive's files".into());
+    }
+    let md = m
+        .file("modelDescription.xml")
+        .ok_or("no modelDescription.xml")?;
+    let (f, meta) = manifest::open_checked(base, &format!("{rel}/modelDescription.xml"))?;
+    use std::os::unix::fs::MetadataExt;
+    if meta.len() != md.size || meta.mode() & 0o7777 != md.mode {
+        return Err(format!(
+            "{}: {} bytes, mode {:o}; unpacked: {} bytes, mode {:o}",
+            base.join(rel).join("modelDescription.xml").display(),
+            meta.len(),
+            meta.mode() & 0o7777,
+            md.size,
+            md.mode
+        ));
+    }
+    let (bytes, hash) = manifest::read_hashed(&f, MAX_DESCRIPTION_BYTES)
+        .map_err(|e| format!("modelDescription.xml: {e}"))?;
+    if hash != md.hash {
+        return Err(format!(
+            "{}: its content is not the unpacked one",
+            base.join(rel).join("modelDescription.xml").display()
+        ));
+    }
+    Ok((m, bytes))
+}
+
+/// Unpacks `bytes` (the archive `fmu`, checked) into `base/rel` afresh: a folder there is
+/// set aside and removed, unless another process has put a good one in its place meanwhile
+/// (`stale`: the inode of the folder found damaged; `None`: any folder that passes
+/// [`check_folder`] is good). In a shared store one process unpacks at a time (the store's
+/// unpack lock), so that processes starting together do not each unpack a copy. Returns
+/// the manifest of the folder in place and whether this process unpacked it.
+#[allow(clippy::too_many_arguments)]
+fn replace_folder(
+    fmu: &Path,
+    bytes: &[u8],
+    sha: &str,
+    base: &Path,
+    rel: &str,
+    limits: &Limits,
+    exec: Option<&str>,
+    shared: bool,
+    stale: Option<u64>,
+) -> Result<(Manifest, bool), FmuError> {
+    use std::os::unix::fs::MetadataExt;
+    let dir = base.join(rel);
+    let _unpacking = if shared {
+        store::unpack_lock(base)
+    } else {
+        None
+    };
+    let mut zip =
+        zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| arch(fmu, e.to_string()))?;
+    let entries = check_entries_of(fmu, &mut zip, limits)?;
+    let current = std::fs::symlink_metadata(&dir).ok().map(|m| m.ino());
+    let replaced_meanwhile = stale.is_none() || current != stale;
+    if current.is_some() && replaced_meanwhile && dir.join(".complete").is_file() {
+        if let Ok((m, _)) = check_folder(base, rel, sha, &entries) {
+            return Ok((m, false));
+        }
+    }
+    if current.is_some() {
+        let aside = unique_sibling(&dir);
+        if std::fs::rename(&dir, &aside).is_ok() {
+            let _ = std::fs::remove_dir_all(&aside);
+        }
+    }
+    match extract(fmu, bytes, sha, &dir, limits, exec)? {
+        Some(m) => Ok((m, true)),
+        None => check_folder(base, rel, sha, &entries)
+            .map(|(m, _)| (m, false))
+            .map_err(|why| arch(&dir, format!("cannot use the unpacked FMU: {why}"))),
+    }
+}
+
+/// Unpacks into a folder of its own renamed into place as `dir`. Returns the manifest of
+/// what was unpacked, `None` when another process renamed a complete unpacking into place
+/// first (theirs is used).
+fn extract(
+    fmu: &Path,
+    bytes: &[u8],
+    sha: &str,
+    dir: &Path,
+    limits: &Limits,
+    exec: Option<&str>,
+) -> Result<Option<Manifest>, FmuError> {
     let tmp = unique_sibling(dir);
     // Nothing half-extracted stays behind in the cache.
-    extract_into(fmu, bytes, &tmp, limits).inspect_err(|_| {
+    let manifest = extract_into(fmu, bytes, &tmp, limits, sha, exec).inspect_err(|_| {
         let _ = std::fs::remove_dir_all(&tmp);
     })?;
     let mut moved = std::fs::rename(&tmp, dir);
@@ -1030,11 +1500,11 @@ fn extract(fmu: &Path, bytes: &[u8], dir: &Path, limits: &Limits) -> Result<(), 
         moved = std::fs::rename(&tmp, dir);
     }
     match moved {
-        Ok(()) => Ok(()),
+        Ok(()) => Ok(Some(manifest)),
         // Another process unpacked the same content first: use theirs.
         Err(_) if dir.join(".complete").exists() => {
             let _ = std::fs::remove_dir_all(&tmp);
-            Ok(())
+            Ok(None)
         }
         Err(e) => {
             let _ = std::fs::remove_dir_all(&tmp);
@@ -1046,11 +1516,23 @@ fn extract(fmu: &Path, bytes: &[u8], dir: &Path, limits: &Limits) -> Result<(), 
     }
 }
 
-fn extract_into(fmu: &Path, bytes: &[u8], tmp: &Path, limits: &Limits) -> Result<(), FmuError> {
+/// Unpacks every entry into `tmp` with modes set whatever the umask (folders 0700, files
+/// 0600, the library `exec` 0700), hashing each file as it is written, then writes the
+/// manifest and, last, `.complete`.
+fn extract_into(
+    fmu: &Path,
+    bytes: &[u8],
+    tmp: &Path,
+    limits: &Limits,
+    sha: &str,
+    exec: Option<&str>,
+) -> Result<Manifest, FmuError> {
     let max = limits.max_total_bytes;
     let mut zip =
         zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| arch(fmu, e.to_string()))?;
+    manifest::make_dir(tmp).map_err(|e| arch(tmp, e.to_string()))?;
     let mut written: u64 = 0;
+    let mut files: BTreeMap<String, ManifestFile> = BTreeMap::new();
     for i in 0..zip.len() {
         let mut f = zip
             .by_index(i)
@@ -1060,13 +1542,27 @@ fn extract_into(fmu: &Path, bytes: &[u8], tmp: &Path, limits: &Limits) -> Result
             .ok_or_else(|| arch(fmu, format!("entry '{}' escapes the archive", f.name())))?;
         let out = tmp.join(&rel);
         if f.is_dir() {
-            std::fs::create_dir_all(&out).map_err(|e| arch(&out, e.to_string()))?;
+            manifest::make_dirs(tmp, &rel).map_err(|e| arch(&out, e.to_string()))?;
             continue;
         }
-        if let Some(p) = out.parent() {
-            std::fs::create_dir_all(p).map_err(|e| arch(p, e.to_string()))?;
+        if let Some(p) = rel.parent() {
+            manifest::make_dirs(tmp, p).map_err(|e| arch(&tmp.join(p), e.to_string()))?;
         }
-        let mut w = std::fs::File::create(&out).map_err(|e| arch(&out, e.to_string()))?;
+        let name = unpacked_name(f.name());
+        let mode = if exec == Some(name.as_str()) {
+            manifest::EXEC_MODE
+        } else {
+            manifest::FILE_MODE
+        };
+        if files.contains_key(&name) {
+            // A repeated name: the last entry wins, as it always did.
+            let _ = std::fs::remove_file(&out);
+        }
+        let w = manifest::create_file(&out, mode).map_err(|e| arch(&out, e.to_string()))?;
+        let mut w = manifest::Hashing {
+            inner: w,
+            hasher: blake3::Hasher::new(),
+        };
         // Bound the real decompressed size too: declared sizes can lie.
         let n = std::io::copy(&mut f.by_ref().take(max - written + 1), &mut w)
             .map_err(|e| arch(fmu, format!("cannot extract '{}': {e}", rel.display())))?;
@@ -1080,9 +1576,31 @@ fn extract_into(fmu: &Path, bytes: &[u8], tmp: &Path, limits: &Limits) -> Result
                 ),
             ));
         }
+        files.insert(
+            name.clone(),
+            ManifestFile {
+                path: name,
+                size: n,
+                mode,
+                crc32: f.crc32(),
+                hash: w.hasher.finalize().to_hex().to_string(),
+            },
+        );
     }
-    std::fs::write(tmp.join(".complete"), b"").map_err(|e| arch(tmp, e.to_string()))?;
-    Ok(())
+    let manifest = Manifest {
+        archive: sha.to_string(),
+        files: files.into_values().collect(),
+    };
+    let write = |name: &str, text: &[u8]| -> Result<(), FmuError> {
+        use std::io::Write;
+        let p = tmp.join(name);
+        manifest::create_file(&p, manifest::FILE_MODE)
+            .and_then(|mut f| f.write_all(text))
+            .map_err(|e| arch(&p, e.to_string()))
+    };
+    write(manifest::MANIFEST, manifest.to_text().as_bytes())?;
+    write(".complete", b"")?;
+    Ok(manifest)
 }
 
 #[cfg(test)]
@@ -1289,16 +1807,22 @@ mod tests {
         assert_eq!(c.stats(), stats(0, 1, 1));
         assert_eq!(l.dir, first.dir);
         assert!(l.dir.join("binaries/linux64/m.so").is_file());
-        // An unpacked description that is not the archive's: the full path (the content
-        // hash keeps the folder; only an index hit would read it).
+        // An unpacked description that is not the manifest's: the full path, which finds
+        // the folder damaged and unpacks it again.
         let c = s.cache();
         c.load(&fmu).unwrap();
         assert_eq!(c.stats(), stats(1, 0, 0));
-        std::fs::write(l.dir.join("modelDescription.xml"), b"<not xml").unwrap();
+        let md = l.dir.join("modelDescription.xml");
+        let good = std::fs::read(&md).unwrap();
+        std::fs::write(&md, b"<not xml").unwrap();
         let c = s.cache();
         let e = c.load(&fmu).err();
         assert!(e.is_none(), "{e:?}");
-        assert_eq!(c.stats(), stats(0, 1, 0));
+        assert_eq!(c.stats(), stats(0, 1, 1));
+        assert_eq!(std::fs::read(&md).unwrap(), good);
+        let c = s.cache();
+        c.load(&fmu).unwrap();
+        assert_eq!(c.stats(), stats(1, 0, 0));
         // No temporaries left in the store.
         let names: Vec<String> = std::fs::read_dir(s.store())
             .unwrap()
@@ -1306,6 +1830,104 @@ mod tests {
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .collect();
         assert!(names.iter().all(|n| !n.contains("tmp")), "{names:?}");
+    }
+
+    /// The library's store copy with one byte changed, its size kept.
+    fn flip_a_byte(path: &Path) {
+        use std::os::unix::fs::PermissionsExt;
+        let mut bytes = std::fs::read(path).unwrap();
+        bytes[3] ^= 0x20;
+        let mode = std::fs::metadata(path).unwrap().permissions().mode();
+        std::fs::write(path, &bytes).unwrap();
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap();
+    }
+
+    #[test]
+    fn n03_a_changed_byte_in_the_stores_library_is_found_before_loading_and_repaired() {
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        let first = s.cache().load(&fmu).unwrap();
+        let so = first.library_path();
+        let good = std::fs::read(&so).unwrap();
+        assert!(first.checked_library().is_ok());
+        flip_a_byte(&so);
+        // A later process: the index still hits (nothing of the archive changed), and the
+        // library is verified before anything could load it.
+        let c = s.cache();
+        let l = c.load(&fmu).unwrap();
+        assert_eq!(c.stats(), stats(1, 0, 0));
+        let checked = l.checked_library().unwrap();
+        assert_eq!(checked.path(), so);
+        assert_eq!(std::fs::read(&so).unwrap(), good);
+        checked.verify().unwrap();
+        // A resource changed: not read by the host (the FMU reads it), found by a full
+        // verification (a remote worker's) and repaired too.
+        let data = l.dir.join("resources/data.txt");
+        flip_a_byte(&data);
+        let l = s.cache().load(&fmu).unwrap();
+        l.verify_all().unwrap();
+        assert_eq!(std::fs::read_to_string(&data).unwrap(), "first");
+    }
+
+    #[test]
+    fn n19_a_complete_folder_without_its_library_is_unpacked_again() {
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        let first = s.cache().load(&fmu).unwrap();
+        std::fs::remove_file(first.library_path()).unwrap();
+        // After deleting the index and touching the FMU too: the full path finds the folder
+        // complete, and the library is missing when it is checked.
+        std::fs::remove_dir_all(s.store().join(store::INDEX_DIR)).unwrap();
+        set_mtime(&fmu, std::time::SystemTime::now());
+        let c = s.cache();
+        let l = c.load(&fmu).unwrap();
+        assert_eq!(c.stats(), stats(0, 1, 0));
+        l.checked_library().unwrap();
+        assert!(l.library_path().is_file());
+        // The manifest gone: the folder is not used as it is, but unpacked again.
+        std::fs::remove_file(l.dir.join(manifest::MANIFEST)).unwrap();
+        let c = s.cache();
+        c.load(&fmu).unwrap();
+        assert_eq!(c.stats(), stats(0, 1, 1));
+        assert!(l.dir.join(manifest::MANIFEST).is_file());
+    }
+
+    #[test]
+    fn n27_folders_and_files_anyone_else_can_write_are_not_used() {
+        use std::os::unix::fs::PermissionsExt;
+        let s = Scratch::new();
+        let fmu = s.fmu("first");
+        let first = s.cache().load(&fmu).unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o7777;
+        assert_eq!(mode(&first.dir), 0o700);
+        assert_eq!(mode(&first.dir.join("binaries/linux64")), 0o700);
+        assert_eq!(mode(&first.library_path()), 0o700);
+        assert_eq!(mode(&first.dir.join("modelDescription.xml")), 0o600);
+        assert_eq!(mode(&s.store().join(store::INDEX_DIR)), 0o700);
+        // A folder on the way to the library that others can write: repaired, not used.
+        let linux64 = first.dir.join("binaries/linux64");
+        std::fs::set_permissions(&linux64, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let l = s.cache().load(&fmu).unwrap();
+        l.checked_library().unwrap();
+        assert_eq!(mode(&linux64), 0o700);
+        // The library itself group-writable: the same.
+        let so = l.library_path();
+        std::fs::set_permissions(&so, std::fs::Permissions::from_mode(0o770)).unwrap();
+        let l = s.cache().load(&fmu).unwrap();
+        l.checked_library().unwrap();
+        assert_eq!(mode(&so), 0o700);
+        // The store's own folder: no repair can help, the library is refused with the path
+        // and the mode.
+        std::fs::set_permissions(s.store(), std::fs::Permissions::from_mode(0o775)).unwrap();
+        let l = s.cache().load(&fmu).unwrap();
+        let e = l.checked_library().unwrap_err().to_string();
+        assert!(
+            e.contains(&format!(
+                "{}: mode 775: group or others can write it",
+                s.store().display()
+            )),
+            "{e}"
+        );
     }
 
     #[test]

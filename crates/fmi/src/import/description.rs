@@ -27,7 +27,22 @@ pub struct ScalarVariable {
     pub fmi3: Option<super::description3::Fmi3Slot>,
 }
 
+/// What identifies a variable's value in the FMU's C interface: its value space (base type)
+/// and its value reference. Two variables with one key are aliases.
+pub type VarKey = (ScalarType, u32);
+
 impl ScalarVariable {
+    /// Its [`VarKey`]: (value space, value reference).
+    pub fn key(&self) -> VarKey {
+        (self.ty.value_space(), self.value_reference)
+    }
+
+    /// Whether this variable is the one behind `key` (a variable of another base type on
+    /// the same value reference is not).
+    pub fn has_key(&self, key: VarKey) -> bool {
+        self.value_reference == key.1 && self.ty.value_space() == key.0
+    }
+
     pub fn start_f64(&self) -> Option<f64> {
         let s = self.start.as_deref()?;
         match s {
@@ -410,6 +425,9 @@ impl Reader2 {
         self.shared.finish(&mut self.md)?;
         let md = self.md;
         check_names_and_aliases(&md)?;
+        for v in &md.variables {
+            check_combination(v)?;
+        }
         let n = md.variables.len();
         for u in md
             .outputs
@@ -475,12 +493,17 @@ fn scalar_variable(m: &Attrs) -> Result<ScalarVariable, String> {
     })
 }
 
-/// Variable names are unique; a value reference shared by several variables (an alias) is
-/// allowed among variables of one type, but never for an input or a parameter (a set would
-/// write the other variable too: the FMU's interface would not be what it says).
+/// Variable names are unique, and aliases are what FMI 2.0 allows (section 2.2.7,
+/// `valueReference`): variables of one base type (Integer and Enumeration count as one) that
+/// share a value reference are an alias set, one value under several names; variables of
+/// different base types on one value reference are unrelated. In an alias set at most one
+/// variable can be set (an input or a parameter: a set writes every name of the set), and the
+/// start values must not contradict each other (one value has one start). An input or a
+/// parameter whose aliases are locals or outputs (as OpenModelica exports them) is allowed.
+/// FMI 3.0 declares aliases explicitly (`<Alias>`), each the same variable by design.
 pub(crate) fn check_names_and_aliases(md: &ModelDescription) -> Result<(), String> {
     let mut by_name: HashMap<&str, u32> = HashMap::new();
-    let mut by_vr: HashMap<(u32, ScalarType), &ScalarVariable> = HashMap::new();
+    let mut sets: HashMap<VarKey, Vec<&ScalarVariable>> = HashMap::new();
     for v in &md.variables {
         if let Some(vr) = by_name.insert(&v.name, v.value_reference) {
             return Err(format!(
@@ -488,25 +511,97 @@ pub(crate) fn check_names_and_aliases(md: &ModelDescription) -> Result<(), Strin
                 v.name, v.value_reference
             ));
         }
-        if let Some(first) = by_vr.insert((v.value_reference, v.ty), v) {
-            let settable =
-                |x: &ScalarVariable| matches!(x.causality, Causality::Input | Causality::Parameter);
-            // FMI 3.0 declares aliases explicitly (`<Alias>`): the same variable by design.
-            let declared_alias = md.fmi_version.starts_with("3.");
-            if !declared_alias && (settable(first) || settable(v)) {
-                return Err(format!(
-                    "value reference {} of {} is shared by '{}' ({}) and '{}' ({}): an input or a parameter cannot be an alias",
-                    v.value_reference,
-                    v.ty,
-                    first.name,
-                    first.causality,
-                    v.name,
-                    v.causality
-                ));
-            }
+        sets.entry(v.key()).or_default().push(v);
+    }
+    if md.fmi_version.starts_with("3.") {
+        return Ok(());
+    }
+    let mut sets: Vec<(VarKey, Vec<&ScalarVariable>)> =
+        sets.into_iter().filter(|(_, s)| s.len() > 1).collect();
+    sets.sort_by_key(|(k, _)| (k.1, k.0));
+    for ((ty, vr), set) in sets {
+        let settable: Vec<&&ScalarVariable> = set
+            .iter()
+            .filter(|x| matches!(x.causality, Causality::Input | Causality::Parameter))
+            .collect();
+        if settable.len() > 1 {
+            return Err(format!(
+                "value reference {vr} of {ty} is shared by {} '{}' ({}) and '{}' ({}): an alias set can have at most one variable that is set (FMI 2.0, section 2.2.7)",
+                if settable.len() > 2 { "more than" } else { "both" },
+                settable[0].name,
+                settable[0].causality,
+                settable[1].name,
+                settable[1].causality
+            ));
+        }
+        let starts: Vec<&&ScalarVariable> = set.iter().filter(|x| x.start.is_some()).collect();
+        if let Some(b) = starts
+            .iter()
+            .skip(1)
+            .find(|b| !same_start(starts[0], b, ty))
+        {
+            let a = starts[0];
+            return Err(format!(
+                "value reference {vr} of {ty} is shared by '{}' (start {}) and '{}' (start {}): one value cannot have two start values (FMI 2.0, section 2.2.7)",
+                a.name,
+                a.start.as_deref().unwrap_or_default(),
+                b.name,
+                b.start.as_deref().unwrap_or_default()
+            ));
         }
     }
     Ok(())
+}
+
+/// The combinations of causality and variability FMI 2.0 allows (section 2.2.7, the table
+/// after the definition of `variability`): a parameter is fixed or tunable, an input or an
+/// output is not (a `constant` output is), only a local or an output is constant, and the
+/// independent variable is continuous. FMPy refuses the same combinations.
+fn check_combination(v: &ScalarVariable) -> Result<(), String> {
+    use Causality as C;
+    use Variability as V;
+    let allowed = match v.variability {
+        V::Constant => matches!(v.causality, C::Output | C::Local),
+        V::Fixed | V::Tunable => {
+            matches!(
+                v.causality,
+                C::Parameter | C::CalculatedParameter | C::Local
+            )
+        }
+        V::Discrete => matches!(v.causality, C::Input | C::Output | C::Local),
+        V::Continuous => matches!(
+            v.causality,
+            C::Input | C::Output | C::Local | C::Independent
+        ),
+    };
+    if allowed {
+        return Ok(());
+    }
+    Err(format!(
+        "variable '{}': causality=\"{}\" with variability=\"{}\" is not allowed (FMI 2.0, section 2.2.7: {})",
+        v.name,
+        v.causality,
+        v.variability,
+        match v.causality {
+            C::Parameter | C::CalculatedParameter => "a parameter is fixed or tunable",
+            C::Input => "an input is discrete or continuous",
+            C::Output => "an output is constant, discrete or continuous",
+            C::Independent => "the independent variable is continuous",
+            C::Local => "",
+        }
+    ))
+}
+
+/// Two start values of one alias set say the same (as numbers where they are numbers:
+/// "1" and "1.0", "true" and "1").
+fn same_start(a: &ScalarVariable, b: &ScalarVariable, ty: ScalarType) -> bool {
+    if ty == ScalarType::String {
+        return a.start == b.start;
+    }
+    match (a.start_f64(), b.start_f64()) {
+        (Some(x), Some(y)) => x == y,
+        _ => a.start == b.start,
+    }
 }
 
 #[cfg(test)]
@@ -629,21 +724,92 @@ mod tests {
     }
 
     #[test]
-    fn duplicate_names_and_aliased_inputs_are_refused() {
+    fn alias_sets_follow_the_standard() {
         let two = XML.replace("name=\"p\"", "name=\"n\"");
         assert!(parse(&two)
             .unwrap_err()
             .contains("variable name 'n' appears twice (value references 3 and 4)"));
-        let input = r#"<ScalarVariable name="u" valueReference="3" causality="input"><Real start="0"/></ScalarVariable>"#;
-        let aliased = XML.replace(
-            "<ScalarVariable name=\"p\"",
-            &format!("{input}\n    <ScalarVariable name=\"p\""),
-        );
-        let e = parse(&aliased).unwrap_err();
+        let with = |extra: &str| {
+            XML.replace(
+                "<ScalarVariable name=\"p\"",
+                &format!("{extra}\n    <ScalarVariable name=\"p\""),
+            )
+        };
+        // An input whose alias is an output, a parameter with a local alias (OpenModelica's
+        // `_D_outputAlias_*`): one value under two names, allowed.
+        let md = parse(&with(
+            r#"<ScalarVariable name="u" valueReference="3" causality="input"><Real start="0"/></ScalarVariable>
+    <ScalarVariable name="_D_p" valueReference="4" causality="local" variability="fixed"><Integer/></ScalarVariable>"#,
+        ))
+        .unwrap();
+        assert_eq!(md.variables.len(), 4);
+        // Two variables that can be set in one set: refused, naming both and the clause.
+        let e = parse(&with(
+            r#"<ScalarVariable name="q" valueReference="4" causality="parameter" variability="fixed"><Integer start="2"/></ScalarVariable>"#,
+        ))
+        .unwrap_err();
         assert!(
-            e.contains("value reference 3 of Real is shared by 'n' (output) and 'u' (input)"),
+            e.contains("value reference 4 of Integer is shared by both 'q' (parameter) and 'p' (parameter): an alias set can have at most one variable that is set (FMI 2.0, section 2.2.7)"),
             "{e}"
         );
+        // An Enumeration is in the Integers' space: an alias of an Integer.
+        let e = parse(&with(
+            r#"<ScalarVariable name="e" valueReference="4" causality="input"><Enumeration declaredType="E" start="2"/></ScalarVariable>"#,
+        ))
+        .unwrap_err();
+        assert!(e.contains("'e' (input) and 'p' (parameter)"), "{e}");
+        // Start values that contradict each other: refused; the same value twice: one start.
+        let e = parse(&with(
+            r#"<ScalarVariable name="p_copy" valueReference="4" causality="local" variability="fixed" initial="exact"><Integer start="3"/></ScalarVariable>"#,
+        ))
+        .unwrap_err();
+        assert!(
+            e.contains(
+                "'p_copy' (start 3) and 'p' (start 2): one value cannot have two start values"
+            ),
+            "{e}"
+        );
+        assert!(parse(&with(
+            r#"<ScalarVariable name="p_copy" valueReference="4" causality="local" variability="fixed" initial="exact"><Integer start="2"/></ScalarVariable>"#,
+        ))
+        .is_ok());
+        // Another base type on the same value reference: another variable, however set.
+        let md = parse(&with(
+            r#"<ScalarVariable name="on" valueReference="4" causality="input"><Boolean start="true"/></ScalarVariable>
+    <ScalarVariable name="k" valueReference="3" causality="input"><Integer start="7"/></ScalarVariable>"#,
+        ))
+        .unwrap();
+        let key = |n: &str| md.variables.iter().find(|v| v.name == n).unwrap().key();
+        assert_ne!(key("on"), key("p"));
+        assert_ne!(key("k"), key("n"));
+        assert_eq!(key("k"), (ScalarType::Integer, 3));
+    }
+
+    #[test]
+    fn combinations_of_causality_and_variability_the_standard_forbids_are_refused() {
+        let e = parse(&XML.replace(
+            "causality=\"parameter\" variability=\"fixed\"",
+            "causality=\"parameter\" variability=\"constant\"",
+        ))
+        .unwrap_err();
+        assert!(
+            e.contains("variable 'p': causality=\"parameter\" with variability=\"constant\" is not allowed (FMI 2.0, section 2.2.7: a parameter is fixed or tunable)"),
+            "{e}"
+        );
+        let e = parse(&XML.replace(
+            "causality=\"output\" myAttr",
+            "causality=\"output\" variability=\"tunable\" myAttr",
+        ))
+        .unwrap_err();
+        assert!(
+            e.contains("an output is constant, discrete or continuous"),
+            "{e}"
+        );
+        assert!(parse(&XML.replace(
+            "causality=\"output\" myAttr",
+            "causality=\"output\" variability=\"constant\" myAttr"
+        ))
+        .is_ok());
     }
 
     #[test]

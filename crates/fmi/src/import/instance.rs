@@ -187,13 +187,19 @@ impl Instance {
         self.check(Function::SetDebugLogging, s)
     }
 
-    pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+    /// `fmi2SetupExperiment`; `tolerance` Some: `toleranceDefined = fmi2True` with it.
+    pub fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
         self.time = start;
         let s = unsafe {
             (self.lib.api.fmi2SetupExperiment)(
                 self.comp,
-                fmi2False,
-                0.0,
+                tolerance.is_some() as fmi2Boolean,
+                tolerance.unwrap_or(0.0),
                 start,
                 stop.is_some() as fmi2Boolean,
                 stop.unwrap_or(0.0),

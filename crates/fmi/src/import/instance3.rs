@@ -83,6 +83,8 @@ pub struct Instance3 {
     terminate_requested: Option<f64>,
     start: f64,
     stop: Option<f64>,
+    /// The relative tolerance passed to `fmi3EnterInitializationMode`.
+    tolerance: Option<f64>,
     sink: Box<LogSink>,
 }
 
@@ -154,6 +156,7 @@ impl Instance3 {
             terminate_requested: None,
             start: 0.0,
             stop: None,
+            tolerance: None,
             sink,
         })
     }
@@ -211,7 +214,13 @@ impl Instance3 {
     }
 
     /// FMI 3.0 has no fmi2SetupExperiment: start and stop go with the initialization mode.
-    pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+    pub fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
+        self.tolerance = tolerance;
         self.start = start;
         self.time = start;
         self.stop = stop;
@@ -222,8 +231,8 @@ impl Instance3 {
         let s = unsafe {
             (self.lib.api.enter_initialization_mode)(
                 self.inst,
-                false,
-                0.0,
+                self.tolerance.is_some(),
+                self.tolerance.unwrap_or(0.0),
                 self.start,
                 self.stop.is_some(),
                 self.stop.unwrap_or(0.0),

@@ -2,7 +2,9 @@
 //! from archive to running instance.
 //!
 //! - [`archive`]: archive checks (untrusted input), the unpack cache and the machine-wide
-//!   store of unpacked FMUs with its stat index ([`store`]);
+//!   store of unpacked FMUs with its stat index ([`store`]) and the manifests that every
+//!   file is verified against before use ([`manifest`]); [`sandbox`]: the isolated worker's
+//!   read-only store;
 //! - [`description`]: what twinbench knows of an FMU, and the FMI 2.0 modelDescription.xml
 //!   reader; [`description3`]: the FMI 3.0 reader; [`reader`]: what both share;
 //! - [`library`] and [`library3`]: a loaded shared library with its functions resolved;
@@ -21,8 +23,10 @@ pub mod instance3;
 pub mod library;
 pub mod library3;
 pub mod log;
+mod manifest;
 pub mod model_exchange;
 pub(crate) mod reader;
+pub mod sandbox;
 mod store;
 
 pub use error::FmuError;

@@ -10,6 +10,11 @@
 //!   archive's content hash and a fingerprint of its central directory;
 //! - `.<name>.tmp-*`: unpackings and index entries being written (a killed process may leave
 //!   one; they are removed after a day).
+//!
+//! A process that unpacks into the store holds an exclusive `flock` on the store's folder.
+//! Every unpacked folder holds its manifest (`.manifest`, see [`super::manifest`]); a
+//! process that uses a folder holds a shared lock on its `.complete`, which `cache prune`
+//! ([`prune`]) must take exclusively to remove it.
 
 use sha2::{Digest, Sha256};
 use std::ffi::OsString;
@@ -208,15 +213,13 @@ pub(crate) fn read_entry(store: &Path, key: &str) -> Option<IndexEntry> {
 }
 
 /// Writes an index entry atomically: a reader sees the old entry or the new one, whole.
+/// The index folder is made private (0700) and the entry 0600, whatever the umask.
 pub(crate) fn write_entry(store: &Path, entry: &IndexEntry) -> std::io::Result<()> {
     let path = entry_path(store, &entry.key);
-    std::fs::create_dir_all(store.join(INDEX_DIR))?;
+    super::manifest::make_dir(&store.join(INDEX_DIR))?;
     let tmp = super::archive::unique_sibling(&path);
     let written = (|| {
-        let mut f = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)?;
+        let mut f = super::manifest::create_file(&tmp, super::manifest::FILE_MODE)?;
         f.write_all(entry.to_text().as_bytes())?;
         std::fs::rename(&tmp, &path)
     })();
@@ -230,6 +233,12 @@ pub(crate) fn write_entry(store: &Path, entry: &IndexEntry) -> std::io::Result<(
 /// being written (`.<name>.tmp-*`) more than a day ago. Only temporaries: an unpacked FMU
 /// may be in use by any process at any time.
 pub(crate) fn sweep_temporaries(store: &Path) {
+    sweep_older_than(store, STALE_AFTER);
+}
+
+/// [`sweep_temporaries`] with another age; the number removed.
+fn sweep_older_than(store: &Path, stale_after: std::time::Duration) -> usize {
+    let mut removed = 0;
     for dir in [store.to_path_buf(), store.join(INDEX_DIR)] {
         let Ok(entries) = std::fs::read_dir(&dir) else {
             continue;
@@ -245,13 +254,210 @@ pub(crate) fn sweep_temporaries(store: &Path) {
                 .and_then(|m| m.modified())
                 .ok()
                 .and_then(|t| t.elapsed().ok())
-                .is_some_and(|age| age > STALE_AFTER);
+                .is_some_and(|age| age > stale_after);
             if old {
                 let p = e.path();
-                let _ = std::fs::remove_dir_all(&p).or_else(|_| std::fs::remove_file(&p));
+                if std::fs::remove_dir_all(&p)
+                    .or_else(|_| std::fs::remove_file(&p))
+                    .is_ok()
+                {
+                    removed += 1;
+                }
             }
         }
     }
+    removed
+}
+
+/// The store's unpack lock (the store's folder itself, flocked exclusively while one
+/// process unpacks into it): processes that start together on a new FMU unpack it once, not
+/// each a copy. `None` when it cannot be had (the unpacking goes on without it; after ten
+/// minutes of waiting too: a stopped process must not stop every other).
+pub(crate) fn unpack_lock(store: &Path) -> Option<std::fs::File> {
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::OpenOptionsExt;
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_DIRECTORY | libc::O_CLOEXEC)
+        .open(store)
+        .ok()?;
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(600);
+    loop {
+        // SAFETY: flock on a descriptor we own.
+        if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+            return Some(f);
+        }
+        if std::time::Instant::now() > until {
+            return None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// The unpack lock if no process holds it now.
+fn try_unpack_lock(store: &Path) -> Option<std::fs::File> {
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::OpenOptionsExt;
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_DIRECTORY | libc::O_CLOEXEC)
+        .open(store)
+        .ok()?;
+    // SAFETY: flock on a descriptor we own.
+    (unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0).then_some(f)
+}
+
+/// Whether a store entry's name is an unpacked FMU's folder (32 hexadecimal digits).
+fn is_unpacked(name: &str) -> bool {
+    name.len() == 32 && name.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+}
+
+/// The bytes a folder's files take (their sizes; folders not counted).
+fn size_of(dir: &Path) -> u64 {
+    let mut total = 0;
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            match e.file_type() {
+                Ok(t) if t.is_dir() => todo.push(e.path()),
+                Ok(_) => total += e.metadata().map_or(0, |m| m.len()),
+                Err(_) => {}
+            }
+        }
+    }
+    total
+}
+
+/// One unpacked FMU of a store, as `cache info` and `cache prune` see it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StoreFolder {
+    pub path: PathBuf,
+    pub bytes: u64,
+    /// When a process last loaded it (the time of its `.complete`).
+    pub last_used: std::time::SystemTime,
+    /// A running process holds it (a shared lock on its `.complete`).
+    pub in_use: bool,
+    /// Without `.complete`: left by something else than an unpacking.
+    pub incomplete: bool,
+}
+
+/// The unpacked FMUs of a store, least recently used first.
+pub fn folders(store: &Path) -> std::io::Result<Vec<StoreFolder>> {
+    use std::os::fd::AsRawFd;
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(store)?.flatten() {
+        let name = e.file_name();
+        if !is_unpacked(&name.to_string_lossy()) || !e.file_type().is_ok_and(|t| t.is_dir()) {
+            continue;
+        }
+        let path = e.path();
+        let complete = path.join(".complete");
+        let (in_use, incomplete, last_used) = match std::fs::File::open(&complete) {
+            Ok(f) => {
+                // SAFETY: flock on a descriptor we own; released when `f` is closed.
+                let free = unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_SH | libc::LOCK_NB) }
+                    == 0
+                    && unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0;
+                let t = f.metadata().and_then(|m| m.modified());
+                (!free, false, t)
+            }
+            Err(_) => (false, true, e.metadata().and_then(|m| m.modified())),
+        };
+        out.push(StoreFolder {
+            bytes: size_of(&path),
+            path,
+            last_used: last_used.unwrap_or(std::time::UNIX_EPOCH),
+            in_use,
+            incomplete,
+        });
+    }
+    out.sort_by_key(|f| f.last_used);
+    Ok(out)
+}
+
+/// What `cache prune` did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Pruned {
+    pub removed: Vec<StoreFolder>,
+    /// Folders kept although the bound asked for their room: running processes use them.
+    pub kept_in_use: usize,
+    /// Index entries and temporaries removed.
+    pub index_entries: usize,
+    pub temporaries: usize,
+    /// What the store's folders take afterwards.
+    pub bytes_left: u64,
+}
+
+/// Removes from `store` the unpacked FMUs no running process uses that were last used more
+/// than `older_than` ago, then, least recently used first, unused ones until the folders
+/// take at most `max_bytes`; folders without `.complete`; temporaries of killed processes
+/// (when no process is unpacking, else those a day old); index entries whose folder is
+/// gone. A folder is removed
+/// only while holding its `.complete` lock exclusively (a process that loads it takes it
+/// shared, and after waiting for it finds the folder gone and unpacks again).
+pub fn prune(
+    store: &Path,
+    older_than: Option<std::time::Duration>,
+    max_bytes: Option<u64>,
+) -> std::io::Result<Pruned> {
+    use std::os::fd::AsRawFd;
+    let mut report = Pruned::default();
+    let all = folders(store)?;
+    let mut total: u64 = all.iter().map(|f| f.bytes).sum();
+    let now = std::time::SystemTime::now();
+    for f in all {
+        let old = older_than.is_some_and(|age| {
+            now.duration_since(f.last_used)
+                .is_ok_and(|since| since > age)
+        });
+        let over = max_bytes.is_some_and(|m| total > m);
+        if !(old || over || f.incomplete) {
+            continue;
+        }
+        let lock = std::fs::File::open(f.path.join(".complete")).ok();
+        let free = lock.as_ref().is_none_or(|l| {
+            // SAFETY: flock on a descriptor we own.
+            unsafe { libc::flock(l.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) == 0 }
+        });
+        if !free {
+            report.kept_in_use += 1;
+            continue;
+        }
+        let aside = super::archive::unique_sibling(&f.path);
+        if std::fs::rename(&f.path, &aside).is_ok() {
+            drop(lock);
+            let _ = std::fs::remove_dir_all(&aside);
+            total -= f.bytes;
+            report.removed.push(f);
+        }
+    }
+    // Temporaries: with the unpack lock no process is unpacking, and any unpacking left is
+    // a killed one's (an index entry is written in microseconds: a minute is plenty);
+    // without it (a process is unpacking) only those a day old.
+    let stale_after = match try_unpack_lock(store) {
+        Some(_lock) => std::time::Duration::from_secs(60),
+        None => STALE_AFTER,
+    };
+    report.temporaries = sweep_older_than(store, stale_after);
+    // Index entries whose folder is gone.
+    if let Ok(entries) = std::fs::read_dir(store.join(INDEX_DIR)) {
+        for e in entries.flatten() {
+            let keep = std::fs::read_to_string(e.path())
+                .ok()
+                .and_then(|t| IndexEntry::parse(&t))
+                .is_some_and(|entry| store.join(&entry.sha256[..32]).is_dir());
+            let name = e.file_name();
+            if !keep && !name.to_string_lossy().starts_with('.') {
+                let _ = std::fs::remove_file(e.path());
+                report.index_entries += 1;
+            }
+        }
+    }
+    report.bytes_left = total;
+    Ok(report)
 }
 
 /// A scratch folder in the temporary directory, removed when dropped (the crate's tests

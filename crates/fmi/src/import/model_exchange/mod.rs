@@ -297,11 +297,12 @@ impl MeInstance {
             .map_err(|e| self.wrap(e))
     }
 
+    /// The FMU is told the solver's relative tolerance (`toleranceDefined`), as FMPy does.
     pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
         self.start = start;
         self.stop = stop;
         self.inst
-            .setup_experiment(start, stop)
+            .setup_experiment(start, stop, Some(self.rtol))
             .map_err(|e| self.wrap(e))
     }
 

@@ -1,0 +1,187 @@
+/* An FMI 2.0 Co-Simulation FMU with an internal variable-step solver, as many exporting
+ * tools build them: the Van der Pol oscillator
+ *     x1' = x2,  x2' = mu (1 - x1^2) x2 - x1
+ * integrated inside fmi2DoStep by an embedded Runge-Kutta 2(3) pair (Bogacki-Shampine) with
+ * step size control. Its accuracy follows the tolerance the importer passes to
+ * fmi2SetupExperiment (toleranceDefined); without one it uses its own coarse default 1e-2.
+ * Built by the test suite with gcc.
+ *
+ *   value references (Real): 0 x1 (output), 1 x2 (output), 2 mu (parameter, 1.0),
+ *                            3 steps_taken (output: internal steps so far)
+ *
+ * Only the C types are used (no FMI headers). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum { OK = 0, ERROR = 3 };
+
+typedef struct {
+    double x1, x2, mu, t, rtol, dt, steps;
+} Model;
+
+static void reset(Model *m) {
+    memset(m, 0, sizeof(Model));
+    m->x1 = 2.0;
+    m->mu = 1.0;
+    m->rtol = 1e-2;
+}
+
+static void f(const Model *m, const double x[2], double dx[2]) {
+    dx[0] = x[1];
+    dx[1] = m->mu * (1.0 - x[0] * x[0]) * x[1] - x[0];
+}
+
+/* From t to t + h with error control; the last accepted internal step is remembered. */
+static void integrate(Model *m, double h) {
+    double x[2] = {m->x1, m->x2}, t = 0.0;
+    double dt = m->dt > 0.0 ? m->dt : h / 10.0;
+    const double atol = m->rtol * 1e-2;
+    double k1[2], k2[2], k3[2], k4[2], y[2], z[2], xs[2];
+    f(m, x, k1);
+    while (t < h) {
+        int last = 0;
+        if (t + dt >= h) {
+            dt = h - t;
+            last = 1;
+        }
+        for (int i = 0; i < 2; i++) xs[i] = x[i] + 0.5 * dt * k1[i];
+        f(m, xs, k2);
+        for (int i = 0; i < 2; i++) xs[i] = x[i] + 0.75 * dt * k2[i];
+        f(m, xs, k3);
+        for (int i = 0; i < 2; i++) y[i] = x[i] + dt * (2.0 / 9 * k1[i] + 1.0 / 3 * k2[i] + 4.0 / 9 * k3[i]);
+        f(m, y, k4);
+        double err = 0.0;
+        for (int i = 0; i < 2; i++) {
+            z[i] = x[i] + dt * (7.0 / 24 * k1[i] + 0.25 * k2[i] + 1.0 / 3 * k3[i] + 0.125 * k4[i]);
+            double sc = atol + m->rtol * fmax(fabs(x[i]), fabs(y[i]));
+            double e = (y[i] - z[i]) / sc;
+            err += e * e;
+        }
+        err = sqrt(err / 2.0);
+        if (err <= 1.0) {
+            t = last ? h : t + dt;
+            x[0] = y[0];
+            x[1] = y[1];
+            k1[0] = k4[0];
+            k1[1] = k4[1];
+            m->steps += 1.0;
+            if (!last)
+                m->dt = dt;
+        }
+        double factor = err > 0.0 ? 0.9 * pow(err, -1.0 / 3.0) : 5.0;
+        dt *= fmin(5.0, fmax(0.2, factor));
+        if (last && err > 1.0)
+            continue;
+        if (last && err <= 1.0)
+            break;
+    }
+    m->x1 = x[0];
+    m->x2 = x[1];
+}
+
+const char *fmi2GetTypesPlatform(void) { return "default"; }
+const char *fmi2GetVersion(void) { return "2.0"; }
+
+int fmi2SetDebugLogging(void *c, int on, size_t n, const char *const cats[]) {
+    (void)c; (void)on; (void)n; (void)cats;
+    return OK;
+}
+
+void *fmi2Instantiate(const char *name, int type, const char *guid, const char *resources,
+                      const void *callbacks, int visible, int logging) {
+    (void)name; (void)type; (void)guid; (void)resources; (void)callbacks; (void)visible;
+    (void)logging;
+    Model *m = calloc(1, sizeof(Model));
+    if (m)
+        reset(m);
+    return m;
+}
+
+void fmi2FreeInstance(void *c) { free(c); }
+
+int fmi2SetupExperiment(void *c, int tol_defined, double tol, double start, int stop_defined,
+                        double stop) {
+    Model *m = c;
+    (void)stop_defined; (void)stop;
+    m->t = start;
+    if (tol_defined) {
+        if (!(tol > 0.0 && tol < 1.0))
+            return ERROR;
+        m->rtol = tol;
+    }
+    return OK;
+}
+
+int fmi2EnterInitializationMode(void *c) { (void)c; return OK; }
+int fmi2ExitInitializationMode(void *c) { (void)c; return OK; }
+int fmi2Terminate(void *c) { (void)c; return OK; }
+int fmi2Reset(void *c) { reset(c); return OK; }
+
+int fmi2GetReal(void *c, const unsigned *vr, size_t n, double *value) {
+    Model *m = c;
+    for (size_t i = 0; i < n; i++) {
+        switch (vr[i]) {
+        case 0: value[i] = m->x1; break;
+        case 1: value[i] = m->x2; break;
+        case 2: value[i] = m->mu; break;
+        case 3: value[i] = m->steps; break;
+        default: return ERROR;
+        }
+    }
+    return OK;
+}
+
+int fmi2SetReal(void *c, const unsigned *vr, size_t n, const double *value) {
+    Model *m = c;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != 2)
+            return ERROR;
+        m->mu = value[i];
+    }
+    return OK;
+}
+
+int fmi2GetInteger(void *c, const unsigned *vr, size_t n, int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
+int fmi2SetInteger(void *c, const unsigned *vr, size_t n, const int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
+int fmi2GetBoolean(void *c, const unsigned *vr, size_t n, int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
+int fmi2SetBoolean(void *c, const unsigned *vr, size_t n, const int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
+int fmi2GetString(void *c, const unsigned *vr, size_t n, const char **v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
+int fmi2SetString(void *c, const unsigned *vr, size_t n, const char *const *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
+
+int fmi2DoStep(void *c, double t, double h, int no_prior) {
+    Model *m = c;
+    (void)no_prior;
+    if (!(h > 0.0))
+        return ERROR;
+    integrate(m, h);
+    m->t = t + h;
+    return OK;
+}
+
+/* The optional functions, present so that every importer finds its symbols. */
+int fmi2CancelStep(void *c) { (void)c; return ERROR; }
+int fmi2GetStatus(void *c, int s, int *v) { (void)c; (void)s; (void)v; return ERROR; }
+int fmi2GetRealStatus(void *c, int s, double *v) { (void)c; (void)s; (void)v; return ERROR; }
+int fmi2GetIntegerStatus(void *c, int s, int *v) { (void)c; (void)s; (void)v; return ERROR; }
+int fmi2GetBooleanStatus(void *c, int s, int *v) { (void)c; (void)s; (void)v; return ERROR; }
+int fmi2GetStringStatus(void *c, int s, const char **v) { (void)c; (void)s; (void)v; return ERROR; }
+int fmi2SetRealInputDerivatives(void *c, const unsigned *vr, size_t n, const int *o, const double *v) {
+    (void)c; (void)vr; (void)n; (void)o; (void)v;
+    return ERROR;
+}
+int fmi2GetRealOutputDerivatives(void *c, const unsigned *vr, size_t n, const int *o, double *v) {
+    (void)c; (void)vr; (void)n; (void)o; (void)v;
+    return ERROR;
+}
+int fmi2GetFMUstate(void *c, void **s) { (void)c; (void)s; return ERROR; }
+int fmi2SetFMUstate(void *c, void *s) { (void)c; (void)s; return ERROR; }
+int fmi2FreeFMUstate(void *c, void **s) { (void)c; (void)s; return ERROR; }
+int fmi2SerializedFMUstateSize(void *c, void *s, size_t *n) { (void)c; (void)s; (void)n; return ERROR; }
+int fmi2SerializeFMUstate(void *c, void *s, char *b, size_t n) { (void)c; (void)s; (void)b; (void)n; return ERROR; }
+int fmi2DeSerializeFMUstate(void *c, const char *b, size_t n, void **s) { (void)c; (void)b; (void)n; (void)s; return ERROR; }
+int fmi2GetDirectionalDerivative(void *c, const unsigned *u, size_t nu, const unsigned *z, size_t nz,
+                                 const double *dz, double *du) {
+    (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)dz; (void)du;
+    return ERROR;
+}

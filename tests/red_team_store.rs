@@ -1,0 +1,459 @@
+//! Red team findings on the store of unpacked FMUs (docs/robustness.md, "The store of
+//! unpacked FMUs"), each a real `twinbench` process on a store of the test's own:
+//!
+//! - N2: an isolated FMU cannot plant code that a later in-process run loads (the worker
+//!   cannot write the store; without the sandbox the planted library is found and never
+//!   loaded);
+//! - N3: a changed byte of a library in the store is found, reported and repaired, in
+//!   process and isolated, also after deleting the index and touching the FMU;
+//! - N19: a complete folder without its library is repaired;
+//! - N27: with umask 000 the store's folders and files are private, and a folder others can
+//!   write is not used;
+//! - the remote worker's input digest covers the unpacked content it runs on.
+
+mod common;
+
+use std::io::Write;
+use std::os::unix::fs::PermissionsExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use zip::write::SimpleFileOptions;
+
+const MODEL_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="hostile" guid="{8c4e810f-3df3-4a00-8276-176fa3c9f000}" generationTool="twinbench tests (gcc)">
+  <CoSimulation modelIdentifier="hostile" canHandleVariableCommunicationStepSize="true"/>
+  <ModelVariables>
+    <ScalarVariable name="u" valueReference="0" causality="input" variability="continuous"><Real start="1"/></ScalarVariable>
+    <ScalarVariable name="y" valueReference="1" causality="output" variability="continuous" initial="calculated"><Real/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs><Unknown index="2" dependencies=""/></Outputs>
+    <InitialUnknowns><Unknown index="2" dependencies="1"/></InitialUnknowns>
+  </ModelStructure>
+</fmiModelDescription>
+"#;
+
+/// `tests/hostile/hostile.c` built with `-DFAULT=<fault>`, and its FMU, in `dir`.
+fn hostile_fmu(dir: &Path, fault: &str) -> (PathBuf, Vec<u8>) {
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hostile/hostile.c");
+    let so = dir.join(format!("hostile-{fault}.so"));
+    let out = Command::new("gcc")
+        .args(["-shared", "-fPIC", "-O1", "-Wall", "-Werror"])
+        .arg(format!("-DFAULT={fault}"))
+        .arg("-o")
+        .arg(&so)
+        .arg(&source)
+        .output()
+        .expect("gcc runs");
+    assert!(
+        out.status.success(),
+        "gcc: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let library = std::fs::read(&so).unwrap();
+    let fmu = dir.join(format!("hostile-{fault}.fmu"));
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&fmu).unwrap());
+    let o = SimpleFileOptions::default();
+    zip.start_file("modelDescription.xml", o).unwrap();
+    zip.write_all(MODEL_DESCRIPTION.as_bytes()).unwrap();
+    zip.start_file("binaries/linux64/hostile.so", o).unwrap();
+    zip.write_all(&library).unwrap();
+    zip.finish().unwrap();
+    (fmu, library)
+}
+
+fn system(dir: &Path, fmu: &Path) -> PathBuf {
+    let sys = dir.join(format!(
+        "{}.toml",
+        fmu.file_stem().unwrap().to_string_lossy()
+    ));
+    std::fs::write(
+        &sys,
+        format!(
+            "[fmus]\nhostile = \"{}\"\n\n[[instance]]\nname = \"h\"\nfmu = \"hostile\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n\n[record]\nsignals = [\"h.y\"]\n",
+            fmu.display()
+        ),
+    )
+    .unwrap();
+    sys
+}
+
+/// `twinbench run SYSTEM` on the store `store` (and `--isolate`), with `env` set: its
+/// output, stderr, and the last recorded y.
+fn run(
+    store: &Path,
+    sys: &Path,
+    isolate: bool,
+    env: &[(&str, &str)],
+    shell: Option<&str>,
+) -> (Output, String, Option<f64>) {
+    let csv = sys.with_extension(format!("{isolate}.csv"));
+    let _ = std::fs::remove_file(&csv);
+    let exe = env!("CARGO_BIN_EXE_twinbench");
+    let mut args = vec![
+        "run".to_string(),
+        sys.display().to_string(),
+        "--out".into(),
+        csv.display().to_string(),
+    ];
+    if isolate {
+        args.push("--isolate".into());
+    }
+    let mut cmd = match shell {
+        // A shell line run before twinbench in the same process (`umask 000`).
+        Some(line) => {
+            let mut c = Command::new("sh");
+            c.arg("-c")
+                .arg(format!("{line}; exec \"$0\" \"$@\""))
+                .arg(exe)
+                .args(&args);
+            c
+        }
+        None => {
+            let mut c = Command::new(exe);
+            c.args(&args);
+            c
+        }
+    };
+    cmd.env("TWINBENCH_CACHE", store)
+        .env_remove("TWINBENCH_WORKER_SANDBOX")
+        .env_remove("HOSTILE_PLANT");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    let y = std::fs::read_to_string(&csv).ok().and_then(|t| {
+        t.lines()
+            .last()
+            .and_then(|l| l.rsplit(',').next())
+            .and_then(|v| v.parse().ok())
+    });
+    (out, err, y)
+}
+
+/// The store folder of an FMU (named by the first 32 digits of its SHA-256).
+fn folder_of(store: &Path, fmu: &Path) -> PathBuf {
+    use sha2::Digest;
+    let sha = format!("{:x}", sha2::Sha256::digest(std::fs::read(fmu).unwrap()));
+    store.join(&sha[..32])
+}
+
+/// A file's bytes replaced keeping its mode.
+fn rewrite(path: &Path, bytes: &[u8]) {
+    let mode = std::fs::metadata(path).unwrap().permissions().mode();
+    std::fs::write(path, bytes).unwrap();
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap();
+}
+
+/// Runs the victim FMU (`NONE`) in-process after the attacker (`PLANT`) ran isolated on the
+/// same store, with `attack_env` for the attacker's run. Returns the attacker's and the
+/// victim's stderr.
+fn attack(tag: &str, attack_env: &[(&str, &str)]) -> (String, String) {
+    let dir = tb_testkit::scratch(tag);
+    let store = dir.path().join("store");
+    let (victim, library) = hostile_fmu(dir.path(), "NONE");
+    let (attacker, _) = hostile_fmu(dir.path(), "PLANT");
+    let (victim_sys, attacker_sys) = (system(dir.path(), &victim), system(dir.path(), &attacker));
+    // The victim is in the store first.
+    let (out, err, y) = run(&store, &victim_sys, false, &[], None);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(y, Some(1.0));
+    let stored = folder_of(&store, &victim).join("binaries/linux64/hostile.so");
+    assert_eq!(std::fs::read(&stored).unwrap(), library);
+    // The attacker runs isolated: it runs (its y is u + 100) whatever became of its attack.
+    let mut env = vec![("HOSTILE_PLANT", "1")];
+    env.extend_from_slice(attack_env);
+    let (out, attack_err, y) = run(&store, &attacker_sys, true, &env, None);
+    assert!(out.status.success(), "{attack_err}");
+    assert_eq!(y, Some(101.0), "{attack_err}");
+    assert!(
+        attack_err.contains(&format!("{}", stored.display())),
+        "the attack did not reach the victim's library: {attack_err}"
+    );
+    // The victim in-process: its own values, none of the attacker's code.
+    let (out, victim_err, y) = run(&store, &victim_sys, false, &[], None);
+    assert!(out.status.success(), "{victim_err}");
+    assert_eq!(y, Some(1.0), "{victim_err}");
+    assert!(
+        !victim_err.contains("PLANT code runs"),
+        "planted code ran in the host: {victim_err}"
+    );
+    assert_eq!(std::fs::read(&stored).unwrap(), library);
+    (attack_err, victim_err)
+}
+
+#[test]
+fn n02_an_isolated_fmu_cannot_write_the_store_that_a_later_in_process_run_loads_from() {
+    if let Err(why) = tb_fmi::import::sandbox::available() {
+        eprintln!("skipped: workers cannot be sandboxed here ({why}); see the next test");
+        return;
+    }
+    let (attack, victim) = attack("n02-sandbox", &[]);
+    // Every write was refused: in place and by a rename.
+    assert!(
+        attack.contains("hostile: cannot write") && attack.contains("Permission denied"),
+        "{attack}"
+    );
+    assert!(!attack.contains("hostile: planted into"), "{attack}");
+    // Nothing to repair afterwards.
+    assert!(!victim.contains("unpacking it again"), "{victim}");
+}
+
+#[test]
+fn n02_without_the_sandbox_the_planted_library_is_found_and_never_loaded() {
+    let (attack, victim) = attack("n02-nosandbox", &[("TWINBENCH_WORKER_SANDBOX", "off")]);
+    assert!(attack.contains("hostile: planted into"), "{attack}");
+    assert!(
+        attack.contains("isolated workers cannot be kept from writing the store of unpacked FMUs"),
+        "{attack}"
+    );
+    // Found before loading, reported once naming the store folder, unpacked again.
+    assert_eq!(victim.matches("unpacking it again").count(), 1, "{victim}");
+    assert!(
+        victim.contains("differs from what was unpacked") && victim.contains("/store/"),
+        "{victim}"
+    );
+}
+
+#[test]
+fn n03_a_changed_byte_of_a_stored_library_is_found_and_repaired_in_process_and_isolated() {
+    let dir = tb_testkit::scratch("n03");
+    let store = dir.path().join("store");
+    let (fmu, library) = hostile_fmu(dir.path(), "NONE");
+    let sys = system(dir.path(), &fmu);
+    let (out, err, _) = run(&store, &sys, false, &[], None);
+    assert!(out.status.success(), "{err}");
+    let stored = folder_of(&store, &fmu).join("binaries/linux64/hostile.so");
+    // "2.0" returned by fmi2GetVersion becomes "2.1": a library that loads and runs, one
+    // byte changed, the size kept. Loaded, it would fail the version check.
+    let at = library.windows(8).position(|w| w == b"default\0").unwrap();
+    let at = at
+        + library[at..]
+            .windows(4)
+            .position(|w| w == b"2.0\0")
+            .unwrap();
+    let mut evil = library.clone();
+    evil[at + 2] = b'1';
+    for isolate in [false, true] {
+        rewrite(&stored, &evil);
+        // The index deleted and the FMU touched too: nothing of that matters.
+        let _ = std::fs::remove_dir_all(store.join("index"));
+        std::fs::File::options()
+            .write(true)
+            .open(&fmu)
+            .unwrap()
+            .set_modified(std::time::SystemTime::now())
+            .unwrap();
+        let (out, err, y) = run(&store, &sys, isolate, &[], None);
+        assert!(out.status.success(), "isolate {isolate}: {err}");
+        assert_eq!(y, Some(1.0), "{err}");
+        assert_eq!(err.matches("unpacking it again").count(), 1, "{err}");
+        assert!(
+            err.contains(&folder_of(&store, &fmu).display().to_string())
+                && err.contains("its content is not the unpacked one"),
+            "{err}"
+        );
+        assert_eq!(std::fs::read(&stored).unwrap(), library);
+        // The next run finds nothing to repair.
+        let (out, err, _) = run(&store, &sys, isolate, &[], None);
+        assert!(
+            out.status.success() && !err.contains("unpacking it again"),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn n19_a_complete_folder_without_its_library_is_repaired() {
+    let dir = tb_testkit::scratch("n19");
+    let store = dir.path().join("store");
+    let (fmu, library) = hostile_fmu(dir.path(), "NONE");
+    let sys = system(dir.path(), &fmu);
+    let (out, err, _) = run(&store, &sys, false, &[], None);
+    assert!(out.status.success(), "{err}");
+    let folder = folder_of(&store, &fmu);
+    assert!(folder.join(".complete").is_file());
+    std::fs::remove_file(folder.join("binaries/linux64/hostile.so")).unwrap();
+    std::fs::remove_dir_all(store.join("index")).unwrap();
+    let (out, err, y) = run(&store, &sys, false, &[], None);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(y, Some(1.0));
+    assert!(
+        err.contains("hostile.so: cannot open") && err.contains("unpacking it again"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(folder.join("binaries/linux64/hostile.so")).unwrap(),
+        library
+    );
+}
+
+/// Every folder and file under `store`, with its mode.
+fn modes(store: &Path) -> Vec<(PathBuf, u32)> {
+    let mut out = Vec::new();
+    let mut todo = vec![store.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let m = e.metadata().unwrap();
+            if m.is_dir() {
+                todo.push(e.path());
+            }
+            out.push((e.path(), m.permissions().mode() & 0o7777));
+        }
+    }
+    out
+}
+
+#[test]
+fn n27_with_umask_000_the_store_is_private_and_a_folder_others_can_write_is_not_used() {
+    let dir = tb_testkit::scratch("n27");
+    let store = dir.path().join("store");
+    let (fmu, _) = hostile_fmu(dir.path(), "NONE");
+    let sys = system(dir.path(), &fmu);
+    let (out, err, y) = run(&store, &sys, false, &[], Some("umask 000"));
+    assert!(out.status.success(), "{err}");
+    assert_eq!(y, Some(1.0));
+    let all = modes(&store);
+    assert!(all.len() > 6, "{all:?}");
+    for (p, mode) in &all {
+        assert_eq!(mode & 0o077, 0, "{} has mode {mode:o}", p.display());
+    }
+    let folder = folder_of(&store, &fmu);
+    let mode_of = |p: &Path| all.iter().find(|(q, _)| q == p).unwrap().1;
+    assert_eq!(mode_of(&folder), 0o700);
+    assert_eq!(mode_of(&folder.join("binaries/linux64/hostile.so")), 0o700);
+    assert_eq!(mode_of(&folder.join("modelDescription.xml")), 0o600);
+    assert_eq!(mode_of(&store.join("index")), 0o700);
+    // A folder on the way to the library that others can write: named with its mode and
+    // unpacked again, in process and isolated.
+    for isolate in [false, true] {
+        let linux64 = folder.join("binaries/linux64");
+        std::fs::set_permissions(&linux64, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let (out, err, y) = run(&store, &sys, isolate, &[], Some("umask 000"));
+        assert!(out.status.success(), "{err}");
+        assert_eq!(y, Some(1.0));
+        assert!(
+            err.contains(&format!(
+                "{}: mode 777: group or others can write it",
+                linux64.display()
+            )) && err.contains("unpacking it again"),
+            "{err}"
+        );
+        assert_eq!(mode_of(&linux64), 0o700);
+        let now = std::fs::metadata(&linux64).unwrap().permissions().mode() & 0o7777;
+        assert_eq!(now, 0o700);
+    }
+}
+
+/// The remote worker's digest: a worker whose store copy of the driver's
+/// `resources/target_speed.csv` was edited verifies it, repairs it and computes the
+/// coordinator's cost; a worker whose unpacked content differs is refused by the digest.
+#[test]
+fn a_remote_workers_digest_covers_the_unpacked_content_it_runs_on() {
+    use tb_optimize::{Candidate, StudyEvaluator};
+    common::fmu_dir();
+    let dir = tb_testkit::scratch("remote-digest");
+    let store = dir.path().join("store");
+    let path = twinbench::pack::workspace_root().join("studies/spielberg.toml");
+    let evaluator = || {
+        StudyEvaluator::load_with(
+            &path,
+            tb_fmi::FmuCache::temporary_with_store(&store).unwrap(),
+        )
+    };
+    let coordinator = evaluator().unwrap();
+    let x: Vec<f64> = coordinator
+        .workers()
+        .assignment()
+        .iter()
+        .map(|a| a.1)
+        .collect();
+    let candidate = Candidate { step: 0, values: x };
+    let cost = coordinator.cost(&candidate).unwrap();
+    let driver = coordinator
+        .digest()
+        .files
+        .iter()
+        .find(|(p, _)| p.ends_with("driver.fmu"))
+        .unwrap()
+        .clone();
+    assert!(driver.1.contains(" unpacked "), "{driver:?}");
+    // The worker's store copy of the target speed edited (the finding's case).
+    let folder = std::fs::read_dir(&store)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.join("resources/target_speed.csv").is_file())
+        .expect("the driver's unpacked folder");
+    let csv = folder.join("resources/target_speed.csv");
+    let good = std::fs::read_to_string(&csv).unwrap();
+    let mut lines: Vec<String> = good.lines().map(String::from).collect();
+    let row = lines.len() / 2;
+    lines[row] = lines[row].replacen('1', "2", 1);
+    rewrite(&csv, format!("{}\n", lines.join("\n")).as_bytes());
+    assert_ne!(std::fs::read_to_string(&csv).unwrap(), good);
+    let worker = evaluator().unwrap();
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), good, "repaired");
+    assert_eq!(worker.digest().mismatch(coordinator.digest()), None);
+    assert_eq!(worker.cost(&candidate).unwrap().to_bits(), cost.to_bits());
+    // A worker whose unpacked content differs (another manifest) is refused, naming the FMU.
+    let mut other = coordinator.digest().clone();
+    let i = other
+        .files
+        .iter()
+        .position(|(p, _)| p.ends_with("driver.fmu"))
+        .unwrap();
+    let (sha, _) = other.files[i].1.split_once(" unpacked ").unwrap();
+    other.files[i].1 = format!("{sha} unpacked {}", "0".repeat(64));
+    let why = worker.digest().mismatch(&other).unwrap();
+    assert!(why.contains("driver.fmu"), "{why}");
+}
+
+/// The store keeps every FMU ever run (the finding's 1.9 GB bomb stayed): `twinbench cache
+/// prune` removes the folders no running process uses, and keeps the one this test holds.
+#[test]
+fn cache_prune_removes_unused_folders_and_keeps_those_in_use() {
+    let dir = tb_testkit::scratch("prune");
+    let store = dir.path().join("store");
+    let (a, _) = hostile_fmu(dir.path(), "NONE");
+    let (b, _) = hostile_fmu(dir.path(), "STEP_EXIT");
+    let cache = tb_fmi::FmuCache::temporary_with_store(&store).unwrap();
+    let held = cache.load(&a).unwrap();
+    drop(
+        tb_fmi::FmuCache::temporary_with_store(&store)
+            .unwrap()
+            .load(&b)
+            .unwrap(),
+    );
+    let twinbench = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .args(args)
+            .env("TWINBENCH_CACHE", &store)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let info = twinbench(&["cache", "info"]);
+    assert!(
+        info.contains("folders  2 (") && info.contains("1 in use"),
+        "{info}"
+    );
+    let pruned = twinbench(&["cache", "prune", "--older-than", "0"]);
+    assert!(
+        pruned.contains("removed  1 folders") && pruned.contains("kept     1 folders in use"),
+        "{pruned}"
+    );
+    assert!(held.dir.join(".complete").is_file());
+    assert!(!folder_of(&store, &b).exists());
+    drop(held);
+    drop(cache);
+    let pruned = twinbench(&["cache", "prune", "--max-size", "0"]);
+    assert!(pruned.contains("removed  1 folders"), "{pruned}");
+    assert!(!folder_of(&store, &a).exists());
+    // The next run unpacks again.
+    let (out, err, y) = run(&store, &system(dir.path(), &a), false, &[], None);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(y, Some(1.0));
+}
