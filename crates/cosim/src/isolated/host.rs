@@ -356,10 +356,10 @@ impl IsolatedBackend {
                     self.sink.keep(l.clone());
                 }
                 FmuError::ModelExchange {
-                    fmu: fmu.into(),
+                    fmu: std::path::PathBuf::from(fmu).into_boxed_path(),
                     instance: self.name.clone(),
                     time,
-                    call,
+                    call: call.into(),
                     problem,
                     log,
                 }

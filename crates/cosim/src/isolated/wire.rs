@@ -548,7 +548,7 @@ impl From<FmuError> for Failure {
                 ..
             } => Failure::ModelExchange {
                 fmu: fmu.to_string_lossy().into_owned(),
-                call,
+                call: call.into_string(),
                 problem,
                 time,
                 log,

@@ -43,12 +43,12 @@ pub enum FmuError {
         format_log(log)
     )]
     ModelExchange {
-        /// The .fmu the user gave.
-        fmu: PathBuf,
+        /// The .fmu the user gave (boxed, as `call`: the error stays small).
+        fmu: Box<std::path::Path>,
         instance: String,
         time: f64,
         /// The FMI function (`fmi2GetDerivatives`) or the solver's (`CVode`).
-        call: String,
+        call: Box<str>,
         /// What went wrong: `returned fmi2Error`, `returned CV_CONV_FAILURE (-4): ...`.
         problem: String,
         log: Vec<String>,

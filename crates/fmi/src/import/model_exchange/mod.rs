@@ -253,10 +253,10 @@ impl MeInstance {
     #[cold]
     fn error(&self, call: &str, problem: String) -> FmuError {
         FmuError::ModelExchange {
-            fmu: self.fmu.clone(),
+            fmu: self.fmu.clone().into_boxed_path(),
             instance: self.inst.name.clone(),
             time: self.inst.time,
-            call: call.to_string(),
+            call: call.into(),
             problem,
             log: self.inst.last_log_lines(),
         }
@@ -272,10 +272,10 @@ impl MeInstance {
                 log,
                 ..
             } => FmuError::ModelExchange {
-                fmu: self.fmu.clone(),
+                fmu: self.fmu.clone().into_boxed_path(),
                 instance: self.inst.name.clone(),
                 time,
-                call: function.name().to_string(),
+                call: function.name().into(),
                 problem: format!("returned {status}"),
                 log,
             },
