@@ -371,6 +371,7 @@ fn an_isolated_fmi3_error_names_the_fmi3_call_and_status() {
     let cache = FmuCache::temporary(false).unwrap();
     let fmu = cache.load(&reference::fmu("Dahlquist", 3)).unwrap();
     let factory = tb_cosim::isolated::IsolatedFactory {
+        run: tb_cosim::backend::RunAs::default_for(&fmu),
         fmu,
         options: common::worker_options().isolation,
     };

@@ -371,8 +371,10 @@ fn forged_worker(dir: &Path, name: &str, frames: Frames) -> PathBuf {
 }
 
 fn factory(worker: PathBuf) -> IsolatedFactory {
+    let fmu = common::load("dyno");
     IsolatedFactory {
-        fmu: common::load("dyno"),
+        run: tb_cosim::backend::RunAs::default_for(&fmu),
+        fmu,
         options: IsolationOptions {
             timeout: Duration::from_secs(2),
             worker_exe: Some(worker),

@@ -407,18 +407,36 @@ fn fmi_1_is_refused_with_its_version_and_3_0_is_read_as_3_0() {
 }
 
 #[test]
-fn model_exchange_only_is_refused() {
+fn an_fmi2_model_exchange_only_fmu_loads_and_a_library_without_its_functions_is_named() {
+    // Model Exchange only: loaded (twinbench integrates it); a library that lacks the
+    // Model Exchange functions (this one is a Co-Simulation library) is named with the
+    // .fmu, its entry and the first missing function, when an instance needs it.
     let md = model_description().replace("CoSimulation", "ModelExchange");
-    let e = default_refused(
-        "me.fmu",
-        &build(
+    let s = Scratch::new();
+    let fmu = s.dir.path().join("me.fmu");
+    std::fs::write(
+        &fmu,
+        build(
             &with_entry("modelDescription.xml", Some(md.into_bytes())),
             |_| {},
         ),
-    );
+    )
+    .unwrap();
+    let cache = FmuCache::persistent(&s.cache_dir()).unwrap();
+    let l = cache.load(&fmu).unwrap();
+    assert_eq!(l.default_interface(), tb_fmi::Interface::ModelExchange);
+    assert_eq!(l.model_identifier(), "faulty");
+    let e = l.library_me().err().unwrap().to_string();
     assert!(
-        e.contains("the FMU supports Model Exchange only; twinbench needs Co-Simulation"),
+        e.contains("me.fmu: binaries/linux64/faulty.so does not export the required FMI 2.0 Model Exchange function fmi2EnterEventMode"),
         "{e}"
+    );
+    let e = l
+        .check_interface(tb_fmi::Interface::CoSimulation)
+        .unwrap_err();
+    assert_eq!(
+        e,
+        "the FMU has no <CoSimulation> element (it supports model-exchange only)"
     );
 }
 

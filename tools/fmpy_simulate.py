@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
-"""Simulate one FMU in FMPy's co-simulation master and write every output at every
-communication point, for comparison with twinbench.
+"""Simulate one FMU in FMPy's co-simulation master (or, with --model-exchange, FMPy's
+Model Exchange loop with its CVode solver) and write every output at every communication
+point, for comparison with twinbench.
 
 Usage: fmpy_simulate.py FMU OUT.csv --stop T --step H [--start T0] [--input IN.csv]
-                        [--set NAME=VALUE ...] [--tolerance RTOL]
+                        [--set NAME=VALUE ...] [--tolerance RTOL] [--model-exchange]
 
 OUT.csv: a header (time, then the outputs in model order), then one row per communication
 point; Real values as repr() (shortest round trip), Booleans as 0/1, Strings quoted."""
@@ -49,8 +50,12 @@ def main():
     p.add_argument("--start", type=float, default=0.0)
     p.add_argument("--input")
     p.add_argument("--set", action="append", default=[])
-    # Default: the DefaultExperiment's tolerance (FMPy's own default).
-    p.add_argument("--tolerance", type=float)
+    p.add_argument("--model-exchange", action="store_true",
+                   help="FMPy's Model Exchange loop with solver='CVode' (output interval = step)")
+    p.add_argument("--record-events", action="store_true",
+                   help="with --model-exchange: also the rows FMPy records before and after each event")
+    p.add_argument("--tolerance", type=float, default=None,
+                   help="the relative tolerance (default: the FMU's DefaultExperiment's, else FMPy's)")
     a = p.parse_args()
     md = read_model_description(a.fmu)
     # Binary and Clock values have no column in twinbench.
@@ -60,10 +65,12 @@ def main():
     for s in a.set:
         k, v = s.split("=", 1)
         start_values[k] = float(v) if v.replace(".", "", 1).replace("e", "", 1).lstrip("-").isdigit() else v
-    res = simulate_fmu(a.fmu, fmi_type="CoSimulation", start_time=a.start, stop_time=a.stop,
+    extra = {"solver": "CVode", "record_events": a.record_events} if a.model_exchange else {}
+    res = simulate_fmu(a.fmu, fmi_type="ModelExchange" if a.model_exchange else "CoSimulation",
+                       start_time=a.start, stop_time=a.stop,
                        output_interval=a.step, output=outputs, start_values=start_values,
                        relative_tolerance=a.tolerance,
-                       input=read_input(a.input, md) if a.input else None)
+                       input=read_input(a.input, md) if a.input else None, **extra)
     with open(a.out, "w", newline="") as f:
         w = csv.writer(f)
         # An FMI 3.0 array is one column per element, name[i] or name[i,j] (1-based).

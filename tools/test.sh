@@ -21,6 +21,8 @@ if [ ${#missing[@]} -gt 0 ]; then
     echo "error: the tests need $line: see README, 'What the tests need'" >&2
     exit 2
 fi
+# The Model Exchange solver's library (Debian's libsundials-dev), before anything is built.
+tools/sundials.sh
 if ! target/venv/bin/python -c "import fmpy, numpy, scipy, pythonfmu, libcosimpy, asammdf, distributed, pandas, pytest, maturin" 2>/dev/null; then
     echo "== creating target/venv (tools/requirements.txt)"
     python3 -m venv target/venv

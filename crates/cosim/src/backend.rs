@@ -4,7 +4,7 @@
 //! its unit.
 
 use std::sync::Arc;
-use tb_fmi::{FmuError, Instance, Instance3, LoadedFmu};
+use tb_fmi::{FmuError, Instance, Instance3, Interface, LoadedFmu, MeInstance, MeSettings};
 
 /// One running instance, in FMI 2.0 Co-Simulation terms.
 pub trait Backend: Send {
@@ -51,15 +51,72 @@ pub trait BackendFactory: Send + Sync {
     fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError>;
 }
 
+/// How an instance runs its FMU: through which interface and, for Model Exchange, with
+/// which solver settings. The isolated worker is given the same, so that it runs the same
+/// backend (the whole integration happens in the worker).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunAs {
+    pub interface: Interface,
+    pub me: MeSettings,
+}
+
+impl RunAs {
+    /// The FMU's default interface (Co-Simulation when it has it), default settings.
+    pub fn default_for(fmu: &LoadedFmu) -> RunAs {
+        RunAs {
+            interface: fmu.default_interface(),
+            me: MeSettings::default(),
+        }
+    }
+}
+
 /// The default: the FMU's shared library loaded in this process.
-pub struct FmuFactory(pub Arc<LoadedFmu>);
+pub struct FmuFactory {
+    pub fmu: Arc<LoadedFmu>,
+    pub run: RunAs,
+}
+
+impl FmuFactory {
+    /// Through the FMU's default interface.
+    pub fn new(fmu: Arc<LoadedFmu>) -> FmuFactory {
+        let run = RunAs::default_for(&fmu);
+        FmuFactory { fmu, run }
+    }
+}
+
+/// A Model Exchange instance of `fmu` in this process (its library loaded for Model
+/// Exchange), debug logging on when asked.
+pub fn model_exchange(
+    fmu: &LoadedFmu,
+    instance_name: &str,
+    logging: bool,
+    settings: MeSettings,
+) -> Result<MeInstance, FmuError> {
+    let mut inst = MeInstance::instantiate(
+        fmu.library_me()?,
+        &fmu.description,
+        &fmu.source,
+        instance_name,
+        Some(&fmu.resource_dir()),
+        logging,
+        settings,
+    )?;
+    if logging {
+        inst.set_debug_logging(true)?;
+    }
+    Ok(inst)
+}
 
 impl BackendFactory for FmuFactory {
     fn kind(&self) -> &'static str {
         "fmu"
     }
     fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError> {
-        let fmu = &self.0;
+        let fmu = &self.fmu;
+        if self.run.interface == Interface::ModelExchange {
+            let inst = model_exchange(fmu, instance_name, logging, self.run.me)?;
+            return Ok(Box::new(inst));
+        }
         if fmu.is_fmi3() {
             let mut inst = Instance3::instantiate(
                 fmu.library3()?,
@@ -223,5 +280,74 @@ impl Backend for Instance3 {
     }
     fn terminated_by_fmu(&mut self) -> Option<f64> {
         Instance3::terminated_by_fmu(self)
+    }
+}
+
+impl Backend for MeInstance {
+    fn name(&self) -> &str {
+        MeInstance::name(self)
+    }
+    fn time(&self) -> f64 {
+        MeInstance::time(self)
+    }
+    fn set_echo(&mut self, on: bool) {
+        MeInstance::set_echo(self, on)
+    }
+    fn last_log_lines(&self) -> Vec<String> {
+        MeInstance::last_log_lines(self)
+    }
+    fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
+        MeInstance::set_debug_logging(self, on)
+    }
+    /// The tolerance was resolved when the instance was made (it is CVODE's too).
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        _tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
+        MeInstance::setup_experiment(self, start, stop)
+    }
+    fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        MeInstance::enter_initialization_mode(self)
+    }
+    fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        MeInstance::exit_initialization_mode(self)
+    }
+    fn terminate(&mut self) -> Result<(), FmuError> {
+        MeInstance::terminate(self)
+    }
+    fn reset(&mut self) -> Result<(), FmuError> {
+        MeInstance::reset(self)
+    }
+    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        MeInstance::get_real(self, vrs, out)
+    }
+    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        MeInstance::set_real(self, vrs, values)
+    }
+    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        MeInstance::get_integer(self, vrs, out)
+    }
+    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        MeInstance::set_integer(self, vrs, values)
+    }
+    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        MeInstance::get_boolean(self, vrs, out)
+    }
+    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        MeInstance::set_boolean(self, vrs, values)
+    }
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        MeInstance::get_string(self, vrs, out)
+    }
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        MeInstance::set_string(self, vrs, values)
+    }
+    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        MeInstance::do_step(self, t, h)
+    }
+    fn terminated_by_fmu(&mut self) -> Option<f64> {
+        MeInstance::terminated_by_fmu(self)
     }
 }

@@ -160,6 +160,20 @@ pub struct InstanceConfig {
     /// else the FMU's DefaultExperiment tolerance).
     #[serde(default)]
     pub tolerance: Option<f64>,
+    /// The FMI interface: `"co-simulation"` or `"model-exchange"` (twinbench integrates
+    /// the FMU with CVODE). Default: Co-Simulation when the FMU has it, else Model
+    /// Exchange. Refused when the FMU lacks the interface.
+    #[serde(default, deserialize_with = "interface")]
+    pub interface: Option<tb_fmi::Interface>,
+}
+
+fn interface<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Option<tb_fmi::Interface>, D::Error> {
+    let name = String::deserialize(d)?;
+    tb_fmi::Interface::from_name(&name)
+        .map(Some)
+        .map_err(serde::de::Error::custom)
 }
 
 /// The master algorithm a system runs with. Its names are one list ([`Algorithm::ALL`],
@@ -278,8 +292,9 @@ pub struct ExperimentConfig {
     #[serde(default)]
     pub order: Vec<String>,
     /// The relative tolerance passed to every FMU (`fmi2SetupExperiment`,
-    /// `fmi3EnterInitializationMode`), for FMUs with an internal variable-step solver;
-    /// default: each FMU's DefaultExperiment tolerance (as FMPy), else none.
+    /// `fmi3EnterInitializationMode`), for FMUs with an internal variable-step solver,
+    /// and to CVODE for Model Exchange instances; default: each FMU's DefaultExperiment
+    /// tolerance (as FMPy), else none (Model Exchange: 1e-5, FMPy's).
     #[serde(default)]
     pub tolerance: Option<f64>,
     /// The step size each `fmi2DoStep` is given: `"h"` (default) or `"grid"` (as FMPy).

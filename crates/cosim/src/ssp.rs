@@ -420,8 +420,13 @@ impl<'a> Exporter<'a> {
         x.push_str("    <ssd:Elements>\n");
         let mut n_connectors = 0;
         for (k, inst) in self.system.instances.iter().enumerate() {
+            // A Model Exchange instance says so (SSP 1.0's `implementation`); else "any".
+            let implementation = match inst.interface {
+                tb_fmi::Interface::ModelExchange => " implementation=\"ModelExchange\"",
+                tb_fmi::Interface::CoSimulation => "",
+            };
             x.push_str(&format!(
-                "      <ssd:Component name=\"{}\" type=\"application/x-fmu-sharedlibrary\" source=\"{}\">\n",
+                "      <ssd:Component name=\"{}\" type=\"application/x-fmu-sharedlibrary\" source=\"{}\"{implementation}>\n",
                 esc(&inst.name),
                 esc(&source_of[k])
             ));

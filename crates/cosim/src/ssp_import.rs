@@ -278,6 +278,8 @@ struct Component {
     fmu_key: String,
     entry: String,
     md: ModelDescription,
+    /// `implementation="CoSimulation"` or `"ModelExchange"` (None: "any").
+    interface: Option<tb_fmi::Interface>,
     /// Connector name -> (declared unit, line).
     connectors: BTreeMap<String, (Option<String>, usize)>,
 }
@@ -508,6 +510,7 @@ fn imp_system(mut imp: Importer<'_>, root: &Node) -> Result<SystemFile, SspImpor
             logging: false,
             isolate: false,
             watchdog: None,
+            interface: c.interface,
             tolerance: tolerances.get(&c.name).copied(),
         })
         .collect();
@@ -683,6 +686,11 @@ fn read_components<'n>(
                 fmu_key: key,
                 entry,
                 md: loaded.description.clone(),
+                interface: match c.attr("implementation") {
+                    Some("ModelExchange") => Some(tb_fmi::Interface::ModelExchange),
+                    Some("CoSimulation") => Some(tb_fmi::Interface::CoSimulation),
+                    _ => None,
+                },
                 connectors: BTreeMap::new(),
             };
             let k = components.len();
@@ -743,12 +751,12 @@ fn component_fmu(imp: &Importer<'_>, c: &Node) -> Result<(String, PathBuf), SspI
         }
     }
     if let Some(i) = c.attr("implementation") {
-        if !matches!(i, "CoSimulation" | "any") {
+        if !matches!(i, "CoSimulation" | "ModelExchange" | "any") {
             return Err(imp.unsupported(
                 f,
                 c,
                 &format!(
-                    "component '{name}' asks for implementation=\"{i}\"; twinbench runs Co-Simulation FMUs (CoSimulation or any)"
+                    "component '{name}' asks for implementation=\"{i}\"; twinbench runs FMUs through Co-Simulation or Model Exchange (CoSimulation, ModelExchange or any)"
                 ),
             ));
         }

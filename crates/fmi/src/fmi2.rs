@@ -216,3 +216,35 @@ pub type fmi2GetBooleanStatusTYPE =
     unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2Boolean) -> fmi2Status;
 pub type fmi2GetStringStatusTYPE =
     unsafe extern "C" fn(fmi2Component, fmi2StatusKind, *mut fmi2String) -> fmi2Status;
+
+// Model Exchange (FMI 2.0 §3.2): the event information and the functions of the interface.
+
+/// `fmi2EventInfo`, filled by `fmi2NewDiscreteStates` (FMI 2.0 §3.2.2).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct fmi2EventInfo {
+    pub newDiscreteStatesNeeded: fmi2Boolean,
+    pub terminateSimulation: fmi2Boolean,
+    pub nominalsOfContinuousStatesChanged: fmi2Boolean,
+    pub valuesOfContinuousStatesChanged: fmi2Boolean,
+    pub nextEventTimeDefined: fmi2Boolean,
+    pub nextEventTime: fmi2Real,
+}
+
+pub type fmi2EnterEventModeTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
+pub type fmi2NewDiscreteStatesTYPE =
+    unsafe extern "C" fn(fmi2Component, *mut fmi2EventInfo) -> fmi2Status;
+pub type fmi2EnterContinuousTimeModeTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
+pub type fmi2CompletedIntegratorStepTYPE = unsafe extern "C" fn(
+    fmi2Component,
+    fmi2Boolean,
+    *mut fmi2Boolean,
+    *mut fmi2Boolean,
+) -> fmi2Status;
+pub type fmi2SetTimeTYPE = unsafe extern "C" fn(fmi2Component, fmi2Real) -> fmi2Status;
+pub type fmi2SetContinuousStatesTYPE =
+    unsafe extern "C" fn(fmi2Component, *const fmi2Real, usize) -> fmi2Status;
+/// `fmi2GetDerivatives`, `fmi2GetEventIndicators`, `fmi2GetContinuousStates` and
+/// `fmi2GetNominalsOfContinuousStates` share this type.
+pub type fmi2GetRealVectorTYPE =
+    unsafe extern "C" fn(fmi2Component, *mut fmi2Real, usize) -> fmi2Status;

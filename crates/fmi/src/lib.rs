@@ -27,7 +27,7 @@ pub use schema::{Causality, Initial, ScalarType, Variability};
 #[cfg(feature = "import")]
 pub use import::archive::{FmuCache, LoadedFmu};
 #[cfg(feature = "import")]
-pub use import::description::{ModelDescription, VarKey};
+pub use import::description::{Interface, ModelDescription, VarKey};
 #[cfg(feature = "import")]
 pub use import::instance::{FmuState, Instance};
 #[cfg(feature = "import")]
@@ -36,5 +36,7 @@ pub use import::instance3::Instance3;
 pub use import::library::Library;
 #[cfg(feature = "import")]
 pub use import::library3::Library3;
+#[cfg(feature = "import")]
+pub use import::model_exchange::{MeInstance, MeSettings};
 #[cfg(feature = "import")]
 pub use import::FmuError;

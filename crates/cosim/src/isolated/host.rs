@@ -6,7 +6,7 @@
 
 use super::wire::{Enc, Failure, LibraryTarget, Request, Response, Values, MAX_FRAME};
 use super::{IsolationOptions, LibraryReport, STDERR_LINES};
-use crate::backend::Backend;
+use crate::backend::{Backend, RunAs};
 use std::collections::VecDeque;
 use std::io::Read;
 use std::os::fd::{AsRawFd, OwnedFd};
@@ -15,7 +15,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tb_fmi::import::log::LogSink;
-use tb_fmi::{FmuError, Function, LoadedFmu};
+use tb_fmi::{FmuError, Function, Interface, LoadedFmu};
 
 /// One instance in a worker process.
 pub struct IsolatedBackend {
@@ -47,8 +47,9 @@ impl IsolatedBackend {
         fmu: &LoadedFmu,
         options: &IsolationOptions,
         logging: bool,
+        run: RunAs,
     ) -> Result<IsolatedBackend, FmuError> {
-        let library = library_target(fmu, options)?;
+        let library = library_target(fmu, options, run)?;
         let mut b = IsolatedBackend::spawn(name, options, fmu.store())?;
         b.queue(&Request::Instantiate {
             library,
@@ -70,7 +71,7 @@ impl IsolatedBackend {
         options: &IsolationOptions,
     ) -> Result<LibraryReport, FmuError> {
         let name = fmu.model_identifier().to_string();
-        let library = library_target(fmu, options)?;
+        let library = library_target(fmu, options, RunAs::default_for(fmu))?;
         let mut b = IsolatedBackend::spawn(&name, options, fmu.store())?;
         let probe = Request::Probe(library);
         b.queue(&probe);
@@ -343,6 +344,26 @@ impl IsolatedBackend {
                     log,
                 }
             }
+            Failure::ModelExchange {
+                fmu,
+                call,
+                problem,
+                time,
+                log,
+            } => {
+                self.sink.clear();
+                for l in &log {
+                    self.sink.keep(l.clone());
+                }
+                FmuError::ModelExchange {
+                    fmu: std::path::PathBuf::from(fmu).into_boxed_path(),
+                    instance: self.name.clone(),
+                    time,
+                    call: call.into(),
+                    problem,
+                    log,
+                }
+            }
             Failure::Instantiate(message) => FmuError::Instantiate {
                 instance: self.name.clone(),
                 message,
@@ -509,24 +530,37 @@ fn read_stderr(mut err: impl Read, mut keep: impl FnMut(String), who: &str) {
     }
 }
 
-/// What the worker loads, with the checks it makes first: the library verified here
-/// (repaired when it differs from its manifest), and again by the worker.
-fn library_target(fmu: &LoadedFmu, options: &IsolationOptions) -> Result<LibraryTarget, FmuError> {
-    let library = fmu.checked_library()?;
+/// What the worker loads, with the checks it makes first: the library of the interface the
+/// instance runs through, verified here (repaired when it differs from its manifest), and
+/// again by the worker; the description too where the worker reads it (FMI 3.0, Model
+/// Exchange).
+fn library_target(
+    fmu: &LoadedFmu,
+    options: &IsolationOptions,
+    run: RunAs,
+) -> Result<LibraryTarget, FmuError> {
+    let me = run.interface == Interface::ModelExchange;
+    let id = fmu
+        .description
+        .model_identifier(run.interface)
+        .unwrap_or(fmu.model_identifier());
+    let library = fmu.checked_library_of(run.interface)?;
     let mut checks = vec![library.clone()];
-    if fmu.is_fmi3() {
+    if fmu.is_fmi3() || me {
         checks.extend(fmu.unpacked_file("modelDescription.xml"));
     }
     Ok(LibraryTarget {
         path: library.path().to_string_lossy().into_owned(),
         source: fmu.source.to_string_lossy().into_owned(),
-        model_identifier: fmu.model_identifier().to_string(),
+        model_identifier: id.to_string(),
         preload: options
             .preload
             .iter()
             .map(|p| p.to_string_lossy().into_owned())
             .collect(),
-        description: if fmu.is_fmi3() {
+        model_exchange: me,
+        tolerance: run.me.relative_tolerance.unwrap_or(f64::NAN),
+        description: if fmu.is_fmi3() || me {
             fmu.dir
                 .join("modelDescription.xml")
                 .to_string_lossy()

@@ -26,7 +26,7 @@ pub mod worker;
 pub use host::IsolatedBackend;
 pub use worker::serve_stdio;
 
-use crate::backend::{Backend, BackendFactory};
+use crate::backend::{Backend, BackendFactory, RunAs};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
@@ -132,6 +132,8 @@ pub fn probe(fmu: &LoadedFmu, options: &IsolationOptions) -> Result<LibraryRepor
 pub struct IsolatedFactory {
     pub fmu: Arc<LoadedFmu>,
     pub options: IsolationOptions,
+    /// The interface (and Model Exchange solver settings): the worker runs that backend.
+    pub run: RunAs,
 }
 
 impl BackendFactory for IsolatedFactory {
@@ -139,7 +141,7 @@ impl BackendFactory for IsolatedFactory {
         "isolated"
     }
     fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError> {
-        let b = IsolatedBackend::start(instance_name, &self.fmu, &self.options, logging)?;
+        let b = IsolatedBackend::start(instance_name, &self.fmu, &self.options, logging, self.run)?;
         Ok(Box::new(b))
     }
 }

@@ -66,6 +66,9 @@ pub mod kind {
     /// An FMI 3.0 call returned a status that stops the caller: function name, status
     /// name, time, log.
     pub const CALL3: u8 = 4;
+    /// A Model Exchange instance's call or its solver failed: the .fmu, the call, what
+    /// went wrong, time, log.
+    pub const MODEL_EXCHANGE: u8 = 5;
 }
 
 /// The function an operation code stands for (for messages).
@@ -93,9 +96,14 @@ pub struct LibraryTarget {
     pub model_identifier: String,
     /// Libraries loaded with RTLD_GLOBAL first (the system file's `preload`).
     pub preload: Vec<String>,
-    /// FMI 3.0: the unpacked modelDescription.xml (the worker needs its variables' types);
-    /// empty for FMI 2.0.
+    /// FMI 3.0 and Model Exchange: the unpacked modelDescription.xml (the worker needs its
+    /// variables' types, its states and event indicators); empty otherwise.
     pub description: String,
+    /// Model Exchange: the worker runs the whole integration (the instance the master
+    /// steps is the same backend as in-process). False: Co-Simulation.
+    pub model_exchange: bool,
+    /// Model Exchange: the solver's relative tolerance from the system (NaN: none).
+    pub tolerance: f64,
     /// The unpacked files the worker verifies before it loads anything (the library, and
     /// FMI 3.0's description): where, size, mode, BLAKE3.
     pub checks: Vec<FileCheck>,
@@ -109,6 +117,8 @@ impl LibraryTarget {
         e.u32(self.preload.len() as u32);
         self.preload.iter().for_each(|p| e.str(p));
         e.str(&self.description);
+        e.u8(self.model_exchange as u8);
+        e.f64(self.tolerance);
         e.u32(self.checks.len() as u32);
         for c in &self.checks {
             e.str(&c.base.to_string_lossy());
@@ -126,6 +136,8 @@ impl LibraryTarget {
         let n = d.count(4)?;
         let preload = (0..n).map(|_| d.str()).collect::<Result<_, _>>()?;
         let description = d.str()?;
+        let model_exchange = d.u8()? != 0;
+        let tolerance = d.f64()?;
         let n = d.count(4 + 4 + 8 + 4 + 4)?;
         let checks = d.each(n, |d| {
             Ok(FileCheck {
@@ -142,6 +154,8 @@ impl LibraryTarget {
             model_identifier,
             preload,
             description,
+            model_exchange,
+            tolerance,
             checks,
         })
     }
@@ -482,6 +496,14 @@ pub enum Failure {
         time: f64,
         log: Vec<String>,
     },
+    /// A Model Exchange instance's FMI call or its solver (CVODE) failed.
+    ModelExchange {
+        fmu: String,
+        call: String,
+        problem: String,
+        time: f64,
+        log: Vec<String>,
+    },
     /// `fmi2Instantiate` failed.
     Instantiate(String),
     /// An optional function the FMU does not export (None: a code the host does not know).
@@ -514,6 +536,20 @@ impl From<FmuError> for Failure {
             } => Failure::Call3 {
                 function,
                 status,
+                time,
+                log,
+            },
+            FmuError::ModelExchange {
+                fmu,
+                call,
+                problem,
+                time,
+                log,
+                ..
+            } => Failure::ModelExchange {
+                fmu: fmu.to_string_lossy().into_owned(),
+                call: call.into_string(),
+                problem,
                 time,
                 log,
             },
@@ -550,6 +586,21 @@ impl Failure {
                 e.u8(kind::CALL3);
                 e.str(function);
                 e.str(status);
+                e.f64(*time);
+                e.u32(log.len() as u32);
+                log.iter().for_each(|l| e.str(l));
+            }
+            Failure::ModelExchange {
+                fmu,
+                call,
+                problem,
+                time,
+                log,
+            } => {
+                e.u8(kind::MODEL_EXCHANGE);
+                e.str(fmu);
+                e.str(call);
+                e.str(problem);
                 e.f64(*time);
                 e.u32(log.len() as u32);
                 log.iter().for_each(|l| e.str(l));
@@ -593,6 +644,18 @@ impl Failure {
                 Failure::Call3 {
                     function,
                     status,
+                    time,
+                    log: d.each(n, Dec::str)?,
+                }
+            }
+            kind::MODEL_EXCHANGE => {
+                let (fmu, call, problem) = (d.str()?, d.str()?, d.str()?);
+                let time = d.f64()?;
+                let n = d.count(4)?;
+                Failure::ModelExchange {
+                    fmu,
+                    call,
+                    problem,
                     time,
                     log: d.each(n, Dec::str)?,
                 }
@@ -801,6 +864,8 @@ mod tests {
             model_identifier: "x".into(),
             preload: vec!["libpython3.11.so".into(), "b".into()],
             description: "/c/modelDescription.xml".into(),
+            model_exchange: true,
+            tolerance: 1e-6,
             checks: vec![FileCheck {
                 base: "/c".into(),
                 rel: "0123/x.so".into(),
@@ -1052,6 +1117,13 @@ mod tests {
                 status: "fmi3Error".into(),
                 time: 0.25,
                 log: vec!["[Error] a step of an FMI 3.0 FMU".into()],
+            },
+            Failure::ModelExchange {
+                fmu: "m.fmu".into(),
+                call: "CVode".into(),
+                problem: "returned CV_CONV_FAILURE (-4): failed".into(),
+                time: 0.125,
+                log: vec!["[Error] no".into()],
             },
             Failure::Instantiate("GUID {a} differs".into()),
             Failure::Unsupported(Some(Function::GetBooleanStatus)),

@@ -8,13 +8,18 @@ use std::os::unix::net::UnixStream;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
-use tb_fmi::{FmuError, Instance, Instance3, Library, Library3, ModelDescription};
+use tb_fmi::{
+    FmuError, Instance, Instance3, Library, Library3, MeInstance, MeSettings, ModelDescription,
+};
 
-/// A library loaded in the worker: FMI 2.0, or FMI 3.0 with its description.
+/// A library loaded in the worker: FMI 2.0, or FMI 3.0 with its description, or FMI 2.0
+/// for Model Exchange with its description, the .fmu (for messages) and the solver's
+/// settings.
 #[derive(Clone)]
 enum Loaded {
     V2(Arc<Library>),
     V3(Arc<Library3>, Arc<ModelDescription>),
+    Me(Arc<Library>, Arc<ModelDescription>, PathBuf, MeSettings),
 }
 
 /// Serve the protocol on stdin until the host closes it or says quit. Returns the exit code.
@@ -175,6 +180,26 @@ fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
                 path: source.to_path_buf(),
                 message,
             })?;
+        if target.model_exchange {
+            let lib =
+                Library::load_model_exchange(std::path::Path::new(&target.path)).map_err(|e| {
+                    tb_fmi::import::archive::library_error(
+                        source,
+                        &md.fmi_version,
+                        &target.model_identifier,
+                        e,
+                    )
+                })?;
+            let settings = MeSettings {
+                relative_tolerance: (!target.tolerance.is_nan()).then_some(target.tolerance),
+            };
+            return Ok(Loaded::Me(
+                Arc::new(lib),
+                Arc::new(md),
+                source.to_path_buf(),
+                settings,
+            ));
+        }
         let lib = Library3::load(std::path::Path::new(&target.path)).map_err(|e| {
             tb_fmi::import::archive::library_error(
                 source,
@@ -286,6 +311,15 @@ impl Worker {
             Loaded::V3(l, md) => {
                 Box::new(Instance3::instantiate(l, &md, name, Some(&res), logging)?)
             }
+            Loaded::Me(l, md, source, settings) => Box::new(MeInstance::instantiate(
+                l,
+                &md,
+                &source,
+                name,
+                Some(&res),
+                logging,
+                settings,
+            )?),
         };
         i.set_echo(false);
         self.instance = Some(i);
@@ -298,6 +332,7 @@ fn probe(library: &Loaded) -> Values {
     Values::Text(match library {
         Loaded::V2(l) => vec![l.version.clone(), l.missing_optional.join(",")],
         Loaded::V3(l, _) => vec![l.version.clone(), String::new()],
+        Loaded::Me(l, ..) => vec![l.version.clone(), l.missing_optional.join(",")],
     })
 }
 

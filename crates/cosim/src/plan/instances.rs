@@ -3,7 +3,7 @@
 //! (`instance.variable`, `replay.column`) becomes a unit, a variable or a signal.
 
 use super::{Endpoint, InstanceDef, LoadOptions, ParamSlot};
-use crate::backend::{BackendFactory, FmuFactory};
+use crate::backend::{BackendFactory, FmuFactory, RunAs};
 use crate::config::{InstanceConfig, SystemFile};
 use crate::isolated::IsolatedFactory;
 use crate::native::NativeFactory;
@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 use tb_fmi::import::description::ScalarVariable;
-use tb_fmi::{Causality, FmuCache, LoadedFmu, ScalarType, Variability};
+use tb_fmi::{Causality, FmuCache, Interface, LoadedFmu, MeSettings, ScalarType, Variability};
 
 /// The FMUs of `[fmus]`, loaded once each (an FMU shared by instances is unpacked once).
 pub(super) fn load_fmus(
@@ -92,11 +92,18 @@ pub(super) fn instances(
                 ),
             ));
         }
-        let only_once = fmu
-            .description
-            .co_simulation
-            .as_ref()
-            .is_some_and(|c| c.can_be_instantiated_only_once_per_process);
+        let run = run_as(file, inst, fmu, ctx_file)?;
+        let md = &fmu.description;
+        let only_once = match run.interface {
+            Interface::CoSimulation => md
+                .co_simulation
+                .as_ref()
+                .is_some_and(|c| c.can_be_instantiated_only_once_per_process),
+            Interface::ModelExchange => md
+                .model_exchange
+                .as_ref()
+                .is_some_and(|m| m.can_be_instantiated_only_once_per_process),
+        };
         if only_once && file.instances.iter().filter(|i| i.fmu == inst.fmu).count() > 1 {
             return Err(invalid(
                 ctx_file,
@@ -106,7 +113,15 @@ pub(super) fn instances(
                 ),
             ));
         }
-        let factory = backend(file, inst, fmu, ctx_file, options, &mut native_fallback)?;
+        let factory = backend(
+            file,
+            inst,
+            fmu,
+            run,
+            ctx_file,
+            options,
+            &mut native_fallback,
+        )?;
         let ctx = format!("{ctx_file}: instance '{}'", inst.name);
         let tolerance = inst
             .tolerance
@@ -131,6 +146,7 @@ pub(super) fn instances(
             fmu: fmu.clone(),
             ports: inst.ports.clone(),
             logging: inst.logging,
+            interface: run.interface,
             tolerance,
             factory,
         };
@@ -156,26 +172,62 @@ pub(super) fn instances(
     Ok((instances, native_fallback))
 }
 
-/// What runs one instance: the native model (`--native`, when linked), else the FMU; in a
-/// worker process when isolated (of this instance, or of all: isolation wins); wrapped by
-/// the call trace when traced.
+/// The interface an instance runs through (its `interface`, else the FMU's default),
+/// checked against the FMU, with the Model Exchange solver's settings.
+fn run_as(
+    file: &SystemFile,
+    inst: &InstanceConfig,
+    fmu: &LoadedFmu,
+    ctx_file: &str,
+) -> Result<RunAs, SystemError> {
+    let interface = inst.interface.unwrap_or_else(|| fmu.default_interface());
+    fmu.check_interface(interface).map_err(|why| {
+        invalid(
+            format!("{ctx_file}: instance '{}'", inst.name),
+            format!(
+                "interface = \"{interface}\": {}: {why}",
+                fmu.source.display()
+            ),
+        )
+    })?;
+    Ok(RunAs {
+        interface,
+        me: MeSettings {
+            // The instance's, else the experiment's; else the FMU's DefaultExperiment
+            // tolerance, else FMPy's 1e-5 (`MeSettings::relative_tolerance_for`).
+            relative_tolerance: inst.tolerance.or(file.experiment.tolerance),
+        },
+    })
+}
+
+/// What runs one instance: the native model (`--native`, when linked, Co-Simulation only),
+/// else the FMU through its interface; in a worker process when isolated (of this
+/// instance, or of all: isolation wins); wrapped by the call trace when traced.
 fn backend(
     file: &SystemFile,
     inst: &InstanceConfig,
     fmu: &Arc<LoadedFmu>,
+    run: RunAs,
     ctx_file: &str,
     options: &LoadOptions,
     native_fallback: &mut Vec<String>,
 ) -> Result<Arc<dyn BackendFactory>, SystemError> {
-    let in_process: Arc<dyn BackendFactory> = match options.native {
+    let as_fmu = || -> Arc<dyn BackendFactory> {
+        Arc::new(FmuFactory {
+            fmu: fmu.clone(),
+            run,
+        })
+    };
+    let native = options.native && run.interface == Interface::CoSimulation;
+    let in_process: Arc<dyn BackendFactory> = match native {
         true => match NativeFactory::for_fmu(fmu, &options.native_models) {
             Ok(f) => Arc::new(f),
             Err(why) => {
                 native_fallback.push(format!("instance '{}' runs as an FMU: {why}", inst.name));
-                Arc::new(FmuFactory(fmu.clone()))
+                as_fmu()
             }
         },
-        false => Arc::new(FmuFactory(fmu.clone())),
+        false => as_fmu(),
     };
     let factory: Arc<dyn BackendFactory> = if inst.isolate || options.isolate {
         let mut iso = options.isolation.clone();
@@ -187,6 +239,7 @@ fn backend(
         Arc::new(IsolatedFactory {
             fmu: fmu.clone(),
             options: iso,
+            run,
         })
     } else {
         in_process

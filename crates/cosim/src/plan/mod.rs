@@ -48,6 +48,8 @@ pub struct InstanceDef {
     /// Name in the system file -> the FMU's variable name.
     pub ports: BTreeMap<String, String>,
     pub logging: bool,
+    /// The FMI interface it runs through (Model Exchange: integrated by twinbench).
+    pub interface: tb_fmi::Interface,
     /// The relative tolerance it is given (`toleranceDefined` when Some): the instance's,
     /// else the experiment's, else the FMU's DefaultExperiment tolerance.
     pub tolerance: Option<f64>,

@@ -2,7 +2,7 @@
 //! shared by every twinbench process, their shared library loaded once and shared by every
 //! instance.
 
-use super::description::{self, ModelDescription};
+use super::description::{self, Interface, ModelDescription};
 use super::library::Library;
 use super::library3::Library3;
 use super::manifest::{self, Manifest, ManifestFile};
@@ -61,13 +61,15 @@ pub struct LoadedFmu {
     manifest: Manifest,
     trusted: bool,
     limits: Limits,
-    /// The library's check, once it passed.
-    library_checked: Mutex<Option<FileCheck>>,
+    /// The libraries' checks that passed (one per interface's library).
+    library_checked: Mutex<Vec<FileCheck>>,
     /// `.complete`, held with a shared lock while the FMU is loaded: `cache prune` leaves
     /// the folder alone.
     _in_use: Option<File>,
     library: Mutex<Option<Arc<Library>>>,
     library3: Mutex<Option<Arc<Library3>>>,
+    /// The FMI 2.0 library loaded for Model Exchange (its own `modelIdentifier`).
+    library_me: Mutex<Option<Arc<Library>>>,
 }
 
 /// What an unpacked file must be: where (a path relative to [`FileCheck::base`]), its
@@ -138,21 +140,37 @@ impl LoadedFmu {
         })
     }
 
-    /// The library, verified against the manifest (unpacked again when it differs): the
-    /// only way to its path that code is loaded from, in this process or in a worker.
+    /// The library of the default interface, verified against the manifest (unpacked
+    /// again when it differs): the only way to its path that code is loaded from, in this
+    /// process or in a worker.
     pub fn checked_library(&self) -> Result<FileCheck, FmuError> {
+        self.checked_entry(&self.library_entry())
+    }
+
+    /// The library of `interface` (Model Exchange may have its own `modelIdentifier`),
+    /// verified as [`LoadedFmu::checked_library`].
+    pub fn checked_library_of(&self, interface: Interface) -> Result<FileCheck, FmuError> {
+        let entry = self
+            .library_entry_of(interface)
+            .ok_or_else(|| FmuError::Description {
+                path: self.source.clone(),
+                message: format!("the FMU has no <{}> element", interface.name()),
+            })?;
+        self.checked_entry(&entry)
+    }
+
+    fn checked_entry(&self, entry: &str) -> Result<FileCheck, FmuError> {
         let mut checked = lock(&self.library_checked);
-        if let Some(c) = &*checked {
-            return Ok(c.clone());
-        }
-        let entry = self.library_entry();
-        let Some(check) = self.unpacked_file(&entry) else {
+        let Some(check) = self.unpacked_file(entry) else {
             return Err(FmuError::Load {
                 path: self.source.clone(),
                 message: format!("{entry}: the FMU has no such file"),
             });
         };
-        self.trust_from_archive(&check, &entry)?;
+        if checked.contains(&check) {
+            return Ok(check);
+        }
+        self.trust_from_archive(&check, entry)?;
         if let Err(reason) = check.verify() {
             self.unpack_again(&reason)?;
             check.verify().map_err(|again| {
@@ -162,7 +180,7 @@ impl LoadedFmu {
                 )
             })?;
         }
-        *checked = Some(check.clone());
+        checked.push(check.clone());
         Ok(check)
     }
 
@@ -261,8 +279,8 @@ impl LoadedFmu {
         Ok(())
     }
 
-    /// The unpacked library (`binaries/linux64/<modelIdentifier>.so`, FMI 3.0:
-    /// `binaries/x86_64-linux/`).
+    /// The unpacked library of the default interface (`binaries/linux64/<modelIdentifier>.so`,
+    /// FMI 3.0: `binaries/x86_64-linux/`).
     pub fn library_path(&self) -> PathBuf {
         self.dir.join(self.library_entry())
     }
@@ -270,6 +288,72 @@ impl LoadedFmu {
     /// The library's entry in the archive, for messages.
     pub fn library_entry(&self) -> String {
         library_entry(&self.description.fmi_version, self.model_identifier())
+    }
+
+    /// The interface an instance uses unless its system file chooses one (Co-Simulation
+    /// when the FMU has it).
+    pub fn default_interface(&self) -> Interface {
+        self.description
+            .default_interface()
+            .expect("checked at load: Co-Simulation or Model Exchange")
+    }
+
+    /// The library entry of `interface` (None: the FMU does not declare it).
+    pub fn library_entry_of(&self, interface: Interface) -> Option<String> {
+        let id = self.description.model_identifier(interface)?;
+        Some(library_entry(&self.description.fmi_version, id))
+    }
+
+    /// Whether an instance can run through `interface`: the FMU declares it, and has its
+    /// library for this platform. Err: why not, in words for a message.
+    pub fn check_interface(&self, interface: Interface) -> Result<(), String> {
+        let Some(entry) = self.library_entry_of(interface) else {
+            let has: Vec<&str> = Interface::ALL
+                .into_iter()
+                .filter(|i| self.description.supports(*i))
+                .map(Interface::name)
+                .collect();
+            return Err(format!(
+                "the FMU has no <{}> element (it supports {} only)",
+                interface.element(),
+                has.join(" and ")
+            ));
+        };
+        if interface == Interface::ModelExchange && self.is_fmi3() {
+            return Err(
+                "twinbench runs FMI 3.0 FMUs through Co-Simulation only (FMI 2.0 Model Exchange FMUs are integrated with CVODE)"
+                    .into(),
+            );
+        }
+        if !self.dir.join(&entry).is_file() {
+            return Err(format!(
+                "no {entry}, the {} library (the FMU has no binary of it for this platform)",
+                interface.element()
+            ));
+        }
+        Ok(())
+    }
+
+    /// The FMI 2.0 library loaded for Model Exchange ([`Library::load_model_exchange`]),
+    /// on the first call; errors name the .fmu and the library's entry.
+    pub fn library_me(&self) -> Result<Arc<Library>, FmuError> {
+        let id = self
+            .description
+            .model_identifier(Interface::ModelExchange)
+            .ok_or_else(|| FmuError::Description {
+                path: self.source.clone(),
+                message: "the FMU has no <ModelExchange> element".into(),
+            })?;
+        let mut slot = lock(&self.library_me);
+        if let Some(l) = &*slot {
+            return Ok(l.clone());
+        }
+        let check = self.checked_library_of(Interface::ModelExchange)?;
+        let library = Library::load_model_exchange(&check.path())
+            .map(Arc::new)
+            .map_err(|e| library_error(&self.source, &self.description.fmi_version, id, e))?;
+        *slot = Some(library.clone());
+        Ok(library)
     }
 
     /// An FMI 3.0 FMU.
@@ -321,13 +405,11 @@ impl LoadedFmu {
     pub fn resource_dir(&self) -> PathBuf {
         self.dir.join("resources")
     }
+    /// The `modelIdentifier` of the default interface.
     pub fn model_identifier(&self) -> &str {
-        &self
-            .description
-            .co_simulation
-            .as_ref()
+        self.description
+            .model_identifier(self.default_interface())
             .expect("checked at load")
-            .model_identifier
     }
 }
 
@@ -627,10 +709,11 @@ impl FmuCache {
             manifest,
             trusted: false,
             limits: self.limits,
-            library_checked: Mutex::new(None),
+            library_checked: Mutex::new(Vec::new()),
             _in_use: Some(in_use),
             library: Mutex::new(None),
             library3: Mutex::new(None),
+            library_me: Mutex::new(None),
         });
         lock(&self.loaded).insert(entry.sha256, loaded.clone());
         Some(loaded)
@@ -718,10 +801,11 @@ impl FmuCache {
             manifest,
             trusted,
             limits: self.limits,
-            library_checked: Mutex::new(None),
+            library_checked: Mutex::new(Vec::new()),
             _in_use: held,
             library: Mutex::new(None),
             library3: Mutex::new(None),
+            library_me: Mutex::new(None),
         });
         lock(&self.loaded).insert(sha, loaded.clone());
         Ok(loaded)
@@ -870,7 +954,12 @@ pub fn library_error(fmu: &Path, fmi_version: &str, id: &str, e: FmuError) -> Fm
         FmuError::MissingSymbol { symbol, .. } => FmuError::Archive {
             path: fmu.to_path_buf(),
             message: format!(
-                "{entry} does not export the required FMI {version} function {symbol}"
+                "{entry} does not export the required FMI {version}{} function {symbol}",
+                if super::library::ME_FUNCTIONS.contains(&symbol) {
+                    " Model Exchange"
+                } else {
+                    ""
+                }
             ),
         },
         other => other,
@@ -1089,39 +1178,40 @@ fn check_description(
             ),
         });
     }
-    let Some(cs) = &md.co_simulation else {
-        let kinds: Vec<&str> = [
-            (md.has_model_exchange, "Model Exchange"),
-            (
-                md.unsupported.iter().any(|u| u.starts_with("Scheduled")),
-                "Scheduled Execution",
-            ),
-        ]
-        .iter()
-        .filter(|(has, _)| *has)
-        .map(|(_, k)| *k)
-        .collect();
-        return Err(FmuError::Description {
-            path: fmu.to_path_buf(),
-            message: if kinds.is_empty() {
-                "no <CoSimulation> element".into()
-            } else {
-                format!(
-                    "the FMU supports {} only; twinbench needs Co-Simulation",
-                    kinds.join(" and ")
-                )
-            },
-        });
+    // FMI 2.0: Co-Simulation, or Model Exchange (integrated by twinbench); FMI 3.0:
+    // Co-Simulation.
+    let interface = match (md.default_interface(), fmi3) {
+        (Some(Interface::CoSimulation), _) => Interface::CoSimulation,
+        (Some(Interface::ModelExchange), false) => Interface::ModelExchange,
+        _ => {
+            let kinds: Vec<&str> = [
+                (md.model_exchange.is_some(), "Model Exchange"),
+                (
+                    md.unsupported.iter().any(|u| u.starts_with("Scheduled")),
+                    "Scheduled Execution",
+                ),
+            ]
+            .iter()
+            .filter(|(has, _)| *has)
+            .map(|(_, k)| *k)
+            .collect();
+            return Err(FmuError::Description {
+                path: fmu.to_path_buf(),
+                message: match (kinds.is_empty(), fmi3) {
+                    (true, false) => "neither a <CoSimulation> nor a <ModelExchange> element".into(),
+                    (true, true) => "no <CoSimulation> element".into(),
+                    (false, _) => format!(
+                        "the FMU supports {} only; twinbench needs Co-Simulation for FMI 3.0 FMUs (FMI 2.0 Model Exchange FMUs are integrated with CVODE)",
+                        kinds.join(" and ")
+                    ),
+                },
+            });
+        }
     };
-    if let Some(what) = md.unsupported.first() {
-        return Err(FmuError::Description {
-            path: fmu.to_path_buf(),
-            message: format!(
-                "the FMU needs {what}; twinbench runs FMI 3.0 Co-Simulation without clocks"
-            ),
-        });
-    }
-    let id = cs.model_identifier.clone();
+    let id = md
+        .model_identifier(interface)
+        .expect("the interface is declared")
+        .to_string();
     // Used as a file name and a C symbol prefix: a path here would load a library from
     // outside the cache.
     if id.is_empty()

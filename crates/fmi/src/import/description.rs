@@ -65,6 +65,67 @@ pub struct CoSimulation {
     pub provides_directional_derivative: bool,
 }
 
+/// `<ModelExchange>`: the interface twinbench integrates itself (FMI 2.0 §3), with CVODE
+/// between communication points ([`crate::import::model_exchange`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelExchange {
+    pub model_identifier: String,
+    pub needs_execution_tool: bool,
+    /// `completedIntegratorStepNotNeeded` (FMI 2.0; default false: the FMU must be told of
+    /// every completed integrator step with `fmi2CompletedIntegratorStep`).
+    pub completed_integrator_step_not_needed: bool,
+    pub can_be_instantiated_only_once_per_process: bool,
+    pub can_get_and_set_fmu_state: bool,
+    pub provides_directional_derivative: bool,
+}
+
+/// The FMI interface an instance runs through: Co-Simulation (the FMU steps itself) or
+/// Model Exchange (twinbench integrates the FMU's equations). Names as in system files.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Interface {
+    CoSimulation,
+    ModelExchange,
+}
+
+impl Interface {
+    pub const ALL: [Interface; 2] = [Interface::CoSimulation, Interface::ModelExchange];
+
+    /// The name in system files (`interface = "model-exchange"`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Interface::CoSimulation => "co-simulation",
+            Interface::ModelExchange => "model-exchange",
+        }
+    }
+
+    /// The element of modelDescription.xml that declares it.
+    pub const fn element(self) -> &'static str {
+        match self {
+            Interface::CoSimulation => "CoSimulation",
+            Interface::ModelExchange => "ModelExchange",
+        }
+    }
+
+    /// The interface of a name; the error lists the names there are.
+    pub fn from_name(name: &str) -> Result<Interface, String> {
+        Interface::ALL
+            .into_iter()
+            .find(|i| i.name() == name)
+            .ok_or_else(|| {
+                format!(
+                    "unknown interface \"{name}\" ({})",
+                    Interface::ALL.map(Interface::name).join(", ")
+                )
+            })
+    }
+}
+
+impl std::fmt::Display for Interface {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Unknown {
     /// 1-based index into the ScalarVariable list.
@@ -89,7 +150,9 @@ pub struct ModelDescription {
     pub description: String,
     pub generation_tool: String,
     pub co_simulation: Option<CoSimulation>,
-    pub has_model_exchange: bool,
+    pub model_exchange: Option<ModelExchange>,
+    /// `numberOfEventIndicators` (FMI 2.0; 0 when absent).
+    pub number_of_event_indicators: usize,
     /// `<Unit>` name and its base-unit definition (the definition's own name is unused).
     pub units: Vec<(String, UnitDef)>,
     /// SimpleType name -> its unit.
@@ -100,6 +163,9 @@ pub struct ModelDescription {
     pub default_experiment: Option<DefaultExperiment>,
     pub variables: Vec<ScalarVariable>,
     pub outputs: Vec<Unknown>,
+    /// `ModelStructure/Derivatives` (FMI 2.0): one per continuous state, in the order of
+    /// the state vector (FMI 2.0 §2.2.8).
+    pub derivatives: Vec<Unknown>,
     pub initial_unknowns: Vec<Unknown>,
     /// FMI 3.0: what the description has that twinbench cannot run (clocks, Scheduled
     /// Execution), each named; the archive check refuses the FMU with them.
@@ -107,6 +173,34 @@ pub struct ModelDescription {
 }
 
 impl ModelDescription {
+    /// Whether the FMU declares `interface`.
+    pub fn supports(&self, interface: Interface) -> bool {
+        match interface {
+            Interface::CoSimulation => self.co_simulation.is_some(),
+            Interface::ModelExchange => self.model_exchange.is_some(),
+        }
+    }
+
+    /// The interface an instance uses unless its system file chooses: Co-Simulation when
+    /// the FMU has it, else Model Exchange (None: neither).
+    pub fn default_interface(&self) -> Option<Interface> {
+        Interface::ALL.into_iter().find(|i| self.supports(*i))
+    }
+
+    /// The `modelIdentifier` of `interface` (the library's name), if the FMU declares it.
+    pub fn model_identifier(&self, interface: Interface) -> Option<&str> {
+        match interface {
+            Interface::CoSimulation => self.co_simulation.as_ref().map(|c| &c.model_identifier),
+            Interface::ModelExchange => self.model_exchange.as_ref().map(|m| &m.model_identifier),
+        }
+        .map(String::as_str)
+    }
+
+    /// The number of continuous states (FMI 2.0: the `<Derivatives>` listed).
+    pub fn number_of_continuous_states(&self) -> usize {
+        self.derivatives.len()
+    }
+
     pub fn variable(&self, name: &str) -> Option<&ScalarVariable> {
         self.variables.iter().find(|v| v.name == name)
     }
@@ -309,6 +403,7 @@ impl Visit for Reader2 {
                 }
             }
             ("Outputs", "Unknown") => self.md.outputs.push(unknown(m)?),
+            ("Derivatives", "Unknown") => self.md.derivatives.push(unknown(m)?),
             ("InitialUnknowns", "Unknown") => self.md.initial_unknowns.push(unknown(m)?),
             _ => {}
         }
@@ -334,7 +429,12 @@ impl Reader2 {
             check_combination(v)?;
         }
         let n = md.variables.len();
-        for u in md.outputs.iter().chain(&md.initial_unknowns) {
+        for u in md
+            .outputs
+            .iter()
+            .chain(&md.derivatives)
+            .chain(&md.initial_unknowns)
+        {
             if u.index == 0 || u.index > n {
                 return Err(format!(
                     "ModelStructure refers to variable index {} of {n}",

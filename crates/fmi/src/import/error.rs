@@ -35,6 +35,24 @@ pub enum FmuError {
         time: f64,
         log: Vec<String>,
     },
+    /// A Model Exchange instance's error: an FMI call, or the integrator (CVODE) with its
+    /// return flag's name, e.g. `CVode returned CV_CONV_FAILURE (-4): ...`.
+    #[error(
+        "{}: instance '{instance}' (Model Exchange) at t = {time} s: {call} {problem}{}",
+        fmu.display(),
+        format_log(log)
+    )]
+    ModelExchange {
+        /// The .fmu the user gave (boxed, as `call`: the error stays small).
+        fmu: Box<std::path::Path>,
+        instance: String,
+        time: f64,
+        /// The FMI function (`fmi2GetDerivatives`) or the solver's (`CVode`).
+        call: Box<str>,
+        /// What went wrong: `returned fmi2Error`, `returned CV_CONV_FAILURE (-4): ...`.
+        problem: String,
+        log: Vec<String>,
+    },
     #[error("instance '{instance}': {what} is not provided by this FMU")]
     Unsupported {
         instance: String,

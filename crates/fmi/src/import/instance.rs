@@ -59,12 +59,33 @@ pub struct Instance {
 unsafe impl Send for Instance {}
 
 impl Instance {
+    /// A Co-Simulation instance.
     pub fn instantiate(
         lib: Arc<Library>,
         name: &str,
         guid: &str,
         resource_dir: Option<&Path>,
         logging_on: bool,
+    ) -> Result<Instance, FmuError> {
+        Self::instantiate_as(
+            lib,
+            name,
+            guid,
+            resource_dir,
+            logging_on,
+            fmi2Type::CO_SIMULATION,
+        )
+    }
+
+    /// An instance of `kind` (Model Exchange instances are driven by
+    /// [`crate::import::model_exchange::MeInstance`]).
+    pub fn instantiate_as(
+        lib: Arc<Library>,
+        name: &str,
+        guid: &str,
+        resource_dir: Option<&Path>,
+        logging_on: bool,
+        kind: fmi2Type,
     ) -> Result<Instance, FmuError> {
         let sink = Box::new(LogSink::new(name));
         let env = log_env(&sink);
@@ -84,7 +105,7 @@ impl Instance {
         let comp = unsafe {
             (lib.api.fmi2Instantiate)(
                 c_name.as_ptr(),
-                fmi2Type::CO_SIMULATION,
+                kind,
                 c_guid.as_ptr(),
                 c_res.as_ref().map_or(std::ptr::null(), |c| c.as_ptr()),
                 &*callbacks,

@@ -1,4 +1,5 @@
-//! The importer: FMI 2.0 and FMI 3.0 Co-Simulation FMUs from archive to running instance.
+//! The importer: FMI 2.0 and FMI 3.0 Co-Simulation FMUs, and FMI 2.0 Model Exchange FMUs,
+//! from archive to running instance.
 //!
 //! - [`archive`]: archive checks (untrusted input), the unpack cache and the machine-wide
 //!   store of unpacked FMUs with its stat index ([`store`]) and the manifests that every
@@ -9,6 +10,8 @@
 //! - [`library`] and [`library3`]: a loaded shared library with its functions resolved;
 //! - [`instance`] and [`instance3`]: a safe handle on one FMU instance (the same calls for
 //!   both versions);
+//! - [`model_exchange`]: an FMI 2.0 Model Exchange instance integrated with CVODE, with
+//!   the calls of a Co-Simulation one;
 //! - [`log`]: the log sink every backend's messages go to; [`FmuError`]: the errors.
 
 pub mod archive;
@@ -21,6 +24,7 @@ pub mod library;
 pub mod library3;
 pub mod log;
 mod manifest;
+pub mod model_exchange;
 pub(crate) mod reader;
 pub mod sandbox;
 mod store;

@@ -4,7 +4,7 @@
 //! definitions with display units, type definitions and their enumeration items, log
 //! categories). Each version's reader adds its variables and model structure.
 
-use super::description::{CoSimulation, DefaultExperiment, ModelDescription};
+use super::description::{CoSimulation, DefaultExperiment, ModelDescription, ModelExchange};
 use crate::units::UnitDef;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::Reader;
@@ -106,7 +106,9 @@ impl Shared {
             ("fmiModelDescription", "CoSimulation") => {
                 md.co_simulation = Some(co_simulation(m, version)?)
             }
-            ("fmiModelDescription", "ModelExchange") => md.has_model_exchange = true,
+            ("fmiModelDescription", "ModelExchange") => {
+                md.model_exchange = Some(model_exchange(m, version)?)
+            }
             ("fmiModelDescription", "DefaultExperiment") => {
                 md.default_experiment = Some(default_experiment(m)?)
             }
@@ -231,6 +233,39 @@ fn co_simulation(m: &Attrs, version: Version) -> Result<CoSimulation, String> {
     })
 }
 
+/// `<ModelExchange>`'s attributes (FMI 3.0 spells the directional derivatives in the
+/// plural, and has no `completedIntegratorStepNotNeeded`: its `needsCompletedIntegratorStep`
+/// says the opposite, default false).
+fn model_exchange(m: &Attrs, version: Version) -> Result<ModelExchange, String> {
+    let (derivatives, not_needed) = match version {
+        Version::V2 => (
+            "providesDirectionalDerivative",
+            flag(m, "completedIntegratorStepNotNeeded"),
+        ),
+        Version::V3 => (
+            "providesDirectionalDerivatives",
+            !flag(m, "needsCompletedIntegratorStep"),
+        ),
+    };
+    Ok(ModelExchange {
+        model_identifier: m
+            .get("modelIdentifier")
+            .cloned()
+            .ok_or("<ModelExchange> has no modelIdentifier")?,
+        needs_execution_tool: flag(m, "needsExecutionTool"),
+        completed_integrator_step_not_needed: not_needed,
+        can_be_instantiated_only_once_per_process: flag(m, "canBeInstantiatedOnlyOncePerProcess"),
+        can_get_and_set_fmu_state: flag(
+            m,
+            match version {
+                Version::V2 => "canGetAndSetFMUstate",
+                Version::V3 => "canGetAndSetFMUState",
+            },
+        ),
+        provides_directional_derivative: flag(m, derivatives),
+    })
+}
+
 pub(crate) fn attrs(e: &BytesStart) -> Result<Attrs, String> {
     let mut m = HashMap::new();
     for a in e.attributes() {
@@ -338,6 +373,10 @@ pub(crate) fn root_attributes(md: &mut ModelDescription, m: &HashMap<String, Str
     md.guid = get(token);
     md.description = get("description");
     md.generation_tool = get("generationTool");
+    md.number_of_event_indicators = m
+        .get("numberOfEventIndicators")
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(0);
 }
 
 pub(crate) fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {

@@ -1,0 +1,775 @@
+//! FMI 2.0 Model Exchange: an instance that twinbench integrates itself, with SUNDIALS
+//! CVODE ([`cvode`]) between communication points, so that to the master it is one more
+//! Co-Simulation unit: [`MeInstance::do_step`]`(t, h)` integrates from t to t + h and
+//! handles the events inside (FMI 2.0 §3.1, the calling sequence of §3.2.3):
+//!
+//! - **time events**: the integration stops at `nextEventTime` of the last
+//!   `fmi2NewDiscreteStates`;
+//! - **state events**: CVODE's root finding on the event indicators
+//!   (`fmi2GetEventIndicators`) stops it where one changes sign;
+//! - **step events**: `fmi2CompletedIntegratorStep` after each integration (unless the FMU
+//!   says `completedIntegratorStepNotNeeded`) may ask for event mode, or to terminate;
+//! - **event iteration**: `fmi2EnterEventMode`, then `fmi2NewDiscreteStates` until
+//!   `newDiscreteStatesNeeded` is false, then `fmi2EnterContinuousTimeMode`; CVODE then
+//!   starts again from the states after the event (after every event, as FMPy does, which
+//!   covers `valuesOfContinuousStatesChanged`), with new absolute tolerances when
+//!   `nominalsOfContinuousStatesChanged`;
+//! - **terminateSimulation** ends the run at the time reached (the master is told as by a
+//!   Co-Simulation FMU: the step reports `fmi2Discard`, [`MeInstance::terminated_by_fmu`]
+//!   gives the time);
+//! - **inputs**: a continuous Real input may be set in continuous-time mode (FMI 2.0
+//!   §3.2.3); a changed one restarts CVODE at the next step (the inputs are held over a
+//!   communication step: the trajectory has a kink there), after handling an event when an
+//!   event indicator changed sign with it. Any other variable (a discrete input, a
+//!   parameter) may be set in event mode only: the instance enters event mode for it, and
+//!   the event iteration runs before the next get or step.
+//!
+//! The solver is set up as FMPy 0.3.32's `simulate_fmu(..., fmi_type='ModelExchange',
+//! solver='CVode')`: BDF, Newton, the dense linear solver, relative tolerance = the
+//! system's, else the DefaultExperiment's, else 1e-5 (FMPy's `simulateME` default); the
+//! absolute tolerance of each state its nominal (`fmi2GetNominalsOfContinuousStates`)
+//! times the relative tolerance; the largest step (stop − start)/50; at most 500 internal
+//! steps per integration; an FMU without continuous states gets one dummy state (ẋ = 0), so
+//! that root finding still watches its event indicators.
+
+pub mod cvode;
+mod system;
+
+use super::description::ModelDescription;
+use super::instance::Instance;
+use super::library::{Library, MeApi};
+use crate::fmi2::*;
+use crate::functions::Function;
+use crate::{Causality, FmuError, Variability};
+use cvode::{Cvode, Reached, Settings};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use system::FmuSystem;
+
+/// FMPy's relative tolerance when neither the system nor the FMU gives one.
+pub const DEFAULT_RELATIVE_TOLERANCE: f64 = 1e-5;
+/// The most internal steps of one integration (FMPy's, CVODE's default).
+pub const MAX_NUM_STEPS: i64 = 500;
+/// The most event iterations (`fmi2NewDiscreteStates` calls) of one event, and the most
+/// events at one time: beyond, the FMU does not settle and the run stops with an error.
+pub const MAX_EVENT_ITERATIONS: usize = 10_000;
+/// The most event indicators and continuous states accepted (a description is untrusted:
+/// a huge count would allocate that much).
+pub const MAX_SIZE: usize = 1 << 20;
+
+/// What an instance's solver is given by the system.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MeSettings {
+    /// The solver's relative tolerance (None: the FMU's DefaultExperiment tolerance, else
+    /// [`DEFAULT_RELATIVE_TOLERANCE`]).
+    pub relative_tolerance: Option<f64>,
+}
+
+impl MeSettings {
+    /// The relative tolerance for an FMU: the system's, the FMU's DefaultExperiment's,
+    /// FMPy's default, in this order.
+    pub fn relative_tolerance_for(&self, md: &ModelDescription) -> f64 {
+        self.relative_tolerance
+            .or(md.default_experiment.and_then(|d| d.tolerance))
+            .unwrap_or(DEFAULT_RELATIVE_TOLERANCE)
+    }
+}
+
+/// FMPy's `isclose` (Python's `math.isclose` with its default relative tolerance 1e-9).
+pub fn isclose(a: f64, b: f64) -> bool {
+    a == b || (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
+}
+
+/// Where the instance is in the Model Exchange state machine (FMI 2.0 §3.2.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    Instantiated,
+    Initialization,
+    Event,
+    ContinuousTime,
+    Terminated,
+}
+
+/// One FMI 2.0 Model Exchange instance with its integrator. Its calls are those of a
+/// Co-Simulation [`Instance`] (the backend of a system instance); errors are
+/// [`FmuError::ModelExchange`], naming the .fmu, the instance, the time and the call.
+pub struct MeInstance {
+    /// Declared first: the integrator (which calls the FMU) goes before the instance.
+    solver: Option<Cvode<FmuSystem>>,
+    inst: Instance,
+    api: MeApi,
+    fmu: PathBuf,
+    nx: usize,
+    nz: usize,
+    rtol: f64,
+    completed_step_needed: bool,
+    /// The continuous Real inputs (settable in continuous-time mode).
+    continuous_inputs: HashMap<u32, ()>,
+    mode: Mode,
+    start: f64,
+    stop: Option<f64>,
+    next_event: Option<f64>,
+    /// The states (at least one: the dummy of an FMU without states), nominals and the
+    /// absolute tolerances.
+    x: Vec<f64>,
+    atol: Vec<f64>,
+    /// The event indicators at the end of the last step, roots found.
+    z: Vec<f64>,
+    roots: Vec<i32>,
+    /// The continuous inputs' values as last set (bits), and whether one changed since the
+    /// integrator last started.
+    inputs: HashMap<u32, u64>,
+    inputs_changed: bool,
+    /// Event mode entered for a set that needs it; the iteration runs before the next call.
+    event_pending: bool,
+    /// Set when the FMU asked to end the simulation: the time reached.
+    terminated_at: Option<f64>,
+    /// The times of the events handled since initialisation (the first [`MAX_EVENTS_KEPT`]).
+    events: Vec<f64>,
+}
+
+/// The most event times an instance keeps ([`MeInstance::events`]).
+pub const MAX_EVENTS_KEPT: usize = 100_000;
+
+// One instance is used by one thread at a time; FMI 2.0 allows moving it between threads,
+// and CVODE's memory belongs to this instance alone.
+unsafe impl Send for MeInstance {}
+
+impl MeInstance {
+    /// Instantiate an FMU for Model Exchange: `lib` loaded with
+    /// [`Library::load_model_exchange`], `md` its description, `fmu` the .fmu (for
+    /// messages).
+    pub fn instantiate(
+        lib: Arc<Library>,
+        md: &ModelDescription,
+        fmu: &Path,
+        name: &str,
+        resource_dir: Option<&Path>,
+        logging_on: bool,
+        settings: MeSettings,
+    ) -> Result<MeInstance, FmuError> {
+        let bad = |message: String| FmuError::Instantiate {
+            instance: name.into(),
+            message,
+        };
+        let api = lib
+            .me
+            .ok_or_else(|| bad("the library was not loaded for Model Exchange".into()))?;
+        let me = md
+            .model_exchange
+            .as_ref()
+            .ok_or_else(|| bad(format!("{}: no <ModelExchange> element", fmu.display())))?;
+        let (nx, nz) = (
+            md.number_of_continuous_states(),
+            md.number_of_event_indicators,
+        );
+        if nx > MAX_SIZE || nz > MAX_SIZE {
+            return Err(bad(format!(
+                "{}: {nx} continuous states and {nz} event indicators; twinbench integrates at most {MAX_SIZE} of each",
+                fmu.display()
+            )));
+        }
+        let rtol = settings.relative_tolerance_for(md);
+        if !(rtol.is_finite() && rtol > 0.0 && rtol < 1.0) {
+            return Err(bad(format!(
+                "the relative tolerance {rtol:e} of the Model Exchange solver is not in (0, 1)"
+            )));
+        }
+        let inst = Instance::instantiate_as(
+            lib,
+            name,
+            &md.guid,
+            resource_dir,
+            logging_on,
+            fmi2Type::MODEL_EXCHANGE,
+        )?;
+        let continuous_inputs = md
+            .variables
+            .iter()
+            .filter(|v| {
+                v.causality == Causality::Input
+                    && v.variability == Variability::Continuous
+                    && v.ty == crate::ScalarType::Real
+            })
+            .map(|v| (v.value_reference, ()))
+            .collect();
+        let n = nx.max(1);
+        Ok(MeInstance {
+            solver: None,
+            inst,
+            api,
+            fmu: fmu.to_path_buf(),
+            nx,
+            nz,
+            rtol,
+            completed_step_needed: !me.completed_integrator_step_not_needed,
+            continuous_inputs,
+            mode: Mode::Instantiated,
+            start: 0.0,
+            stop: None,
+            next_event: None,
+            x: vec![1.0; n],
+            atol: vec![rtol; n],
+            z: vec![0.0; nz],
+            roots: vec![0; nz],
+            inputs: HashMap::new(),
+            inputs_changed: false,
+            event_pending: false,
+            terminated_at: None,
+            events: Vec::new(),
+        })
+    }
+
+    /// The times of the events handled since initialisation (time, state, step and input
+    /// events, after the initial one; at most [`MAX_EVENTS_KEPT`]).
+    pub fn events(&self) -> &[f64] {
+        &self.events
+    }
+
+    pub fn name(&self) -> &str {
+        &self.inst.name
+    }
+
+    /// The FMU's time (for messages).
+    pub fn time(&self) -> f64 {
+        self.inst.time
+    }
+
+    /// The solver's relative tolerance.
+    pub fn relative_tolerance(&self) -> f64 {
+        self.rtol
+    }
+
+    pub fn last_log_lines(&self) -> Vec<String> {
+        self.inst.last_log_lines()
+    }
+
+    pub fn set_echo(&mut self, on: bool) {
+        self.inst.set_echo(on)
+    }
+
+    /// An error of this instance's `call`.
+    #[cold]
+    fn error(&self, call: &str, problem: String) -> FmuError {
+        FmuError::ModelExchange {
+            fmu: self.fmu.clone().into_boxed_path(),
+            instance: self.inst.name.clone(),
+            time: self.inst.time,
+            call: call.into(),
+            problem,
+            log: self.inst.last_log_lines(),
+        }
+    }
+
+    /// A common call's error (from [`Instance`]) as this instance's.
+    fn wrap(&self, e: FmuError) -> FmuError {
+        match e {
+            FmuError::Call {
+                function,
+                status,
+                time,
+                log,
+                ..
+            } => FmuError::ModelExchange {
+                fmu: self.fmu.clone().into_boxed_path(),
+                instance: self.inst.name.clone(),
+                time,
+                call: function.name().into(),
+                problem: format!("returned {status}"),
+                log,
+            },
+            other => other,
+        }
+    }
+
+    /// A Model Exchange call's status: OK and Warning go on.
+    fn check(&self, call: &str, status: fmi2Status) -> Result<(), FmuError> {
+        match status.ok() {
+            Ok(()) => Ok(()),
+            Err(s) => Err(self.error(call, format!("returned {s}"))),
+        }
+    }
+
+    pub fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
+        self.inst
+            .set_debug_logging(on, &[])
+            .map_err(|e| self.wrap(e))
+    }
+
+    /// The FMU is told the solver's relative tolerance (`toleranceDefined`), as FMPy does.
+    pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
+        self.start = start;
+        self.stop = stop;
+        self.inst
+            .setup_experiment(start, stop, Some(self.rtol))
+            .map_err(|e| self.wrap(e))
+    }
+
+    pub fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        self.inst
+            .enter_initialization_mode()
+            .map_err(|e| self.wrap(e))?;
+        self.mode = Mode::Initialization;
+        Ok(())
+    }
+
+    /// Leave initialization mode: the FMU is then in event mode (FMI 2.0 §3.2.3), so the
+    /// initial event iteration runs, then continuous-time mode is entered and the
+    /// integrator starts at the start time.
+    pub fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        self.inst
+            .exit_initialization_mode()
+            .map_err(|e| self.wrap(e))?;
+        self.mode = Mode::Event;
+        let info = self.iterate_discrete_states()?;
+        if info.terminateSimulation != fmi2False {
+            // As FMPy: an error ("Model requested termination during initial event update").
+            return Err(self.error(
+                "fmi2NewDiscreteStates",
+                "set terminateSimulation in the initial event iteration, before the first step"
+                    .into(),
+            ));
+        }
+        self.enter_continuous_time_mode()?;
+        self.start_solver()
+    }
+
+    pub fn terminate(&mut self) -> Result<(), FmuError> {
+        self.solver = None;
+        self.mode = Mode::Terminated;
+        self.inst.terminate().map_err(|e| self.wrap(e))
+    }
+
+    pub fn reset(&mut self) -> Result<(), FmuError> {
+        self.solver = None;
+        self.events.clear();
+        self.mode = Mode::Instantiated;
+        self.next_event = None;
+        self.terminated_at = None;
+        self.event_pending = false;
+        self.inputs.clear();
+        self.inputs_changed = false;
+        self.inst.reset().map_err(|e| self.wrap(e))
+    }
+
+    /// After a step reported `fmi2Discard`: the time at which the FMU asked to end the
+    /// simulation (`terminateSimulation`).
+    pub fn terminated_by_fmu(&mut self) -> Option<f64> {
+        self.terminated_at
+    }
+
+    pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        self.settle()?;
+        self.inst.get_real(vrs, out).map_err(|e| self.wrap(e))
+    }
+
+    pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        self.settle()?;
+        self.inst.get_integer(vrs, out).map_err(|e| self.wrap(e))
+    }
+
+    pub fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        self.settle()?;
+        self.inst.get_boolean(vrs, out).map_err(|e| self.wrap(e))
+    }
+
+    pub fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        self.settle()?;
+        self.inst.get_string(vrs, out).map_err(|e| self.wrap(e))
+    }
+
+    /// Set Reals: continuous inputs as they are (a change restarts the integrator), any
+    /// other in event mode.
+    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        let all_continuous = vrs.iter().all(|vr| self.continuous_inputs.contains_key(vr));
+        if !all_continuous {
+            self.event_mode_for_set()?;
+        }
+        self.inst.set_real(vrs, values).map_err(|e| self.wrap(e))?;
+        for (vr, v) in vrs.iter().zip(values) {
+            if self.continuous_inputs.contains_key(vr) {
+                let old = self.inputs.insert(*vr, v.to_bits());
+                self.inputs_changed |= old.is_some_and(|o| o != v.to_bits());
+            }
+        }
+        Ok(())
+    }
+
+    pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        self.event_mode_for_set()?;
+        self.inst.set_integer(vrs, values).map_err(|e| self.wrap(e))
+    }
+
+    pub fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        self.event_mode_for_set()?;
+        self.inst.set_boolean(vrs, values).map_err(|e| self.wrap(e))
+    }
+
+    pub fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        self.event_mode_for_set()?;
+        self.inst.set_string(vrs, values).map_err(|e| self.wrap(e))
+    }
+
+    /// Discrete inputs and tunable parameters may be set in event mode only (FMI 2.0
+    /// §3.2.3): in continuous-time mode, enter it; the event iteration follows before the
+    /// next get or step ([`MeInstance::settle`]).
+    fn event_mode_for_set(&mut self) -> Result<(), FmuError> {
+        if self.mode == Mode::ContinuousTime {
+            let s = unsafe { (self.api.fmi2EnterEventMode)(self.inst.raw()) };
+            self.check("fmi2EnterEventMode", s)?;
+            self.mode = Mode::Event;
+            self.event_pending = true;
+        }
+        Ok(())
+    }
+
+    /// After sets in event mode: the event iteration, back to continuous-time mode, and the
+    /// integrator started again.
+    fn settle(&mut self) -> Result<(), FmuError> {
+        if !self.event_pending {
+            return Ok(());
+        }
+        self.event_pending = false;
+        // Ended by the FMU: the master learns it at the step (terminated_at is set).
+        self.event_iteration(false)?;
+        Ok(())
+    }
+
+    /// `fmi2NewDiscreteStates` until the FMU needs no more (FMI 2.0 §3.2.2, the event
+    /// iteration), or asks to terminate; the next time event from the last call.
+    fn iterate_discrete_states(&mut self) -> Result<fmi2EventInfo, FmuError> {
+        let mut info = fmi2EventInfo {
+            newDiscreteStatesNeeded: fmi2True,
+            ..Default::default()
+        };
+        let mut nominals_changed = false;
+        let mut iterations = 0;
+        while info.newDiscreteStatesNeeded != fmi2False && info.terminateSimulation == fmi2False {
+            iterations += 1;
+            if iterations > MAX_EVENT_ITERATIONS {
+                return Err(self.error(
+                    "fmi2NewDiscreteStates",
+                    format!("still asks for new discrete states after {MAX_EVENT_ITERATIONS} iterations of one event (the event iteration does not converge)"),
+                ));
+            }
+            info = fmi2EventInfo::default();
+            let s = unsafe { (self.api.fmi2NewDiscreteStates)(self.inst.raw(), &mut info) };
+            self.check("fmi2NewDiscreteStates", s)?;
+            nominals_changed |= info.nominalsOfContinuousStatesChanged != fmi2False;
+        }
+        info.nominalsOfContinuousStatesChanged = nominals_changed as fmi2Boolean;
+        self.next_event = (info.nextEventTimeDefined != fmi2False).then_some(info.nextEventTime);
+        Ok(info)
+    }
+
+    fn enter_continuous_time_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.api.fmi2EnterContinuousTimeMode)(self.inst.raw()) };
+        self.check("fmi2EnterContinuousTimeMode", s)?;
+        self.mode = Mode::ContinuousTime;
+        Ok(())
+    }
+
+    /// One event at the current time: event mode (unless already entered), the iteration,
+    /// continuous-time mode, the integrator started again from the states after the event.
+    /// True when the FMU asked to end the simulation.
+    fn event_iteration(&mut self, enter: bool) -> Result<bool, FmuError> {
+        if self.events.len() < MAX_EVENTS_KEPT {
+            self.events.push(self.inst.time);
+        }
+        if enter {
+            let s = unsafe { (self.api.fmi2EnterEventMode)(self.inst.raw()) };
+            self.check("fmi2EnterEventMode", s)?;
+            self.mode = Mode::Event;
+        }
+        let info = self.iterate_discrete_states()?;
+        if info.terminateSimulation != fmi2False {
+            self.terminated_at = Some(self.inst.time);
+            return Ok(true);
+        }
+        self.enter_continuous_time_mode()?;
+        self.restart_solver(info.nominalsOfContinuousStatesChanged != fmi2False)?;
+        Ok(false)
+    }
+
+    /// A vector the FMU fills (`fmi2GetContinuousStates`, ...), into `out`.
+    fn get_vector(
+        &self,
+        call: &str,
+        f: fmi2GetRealVectorTYPE,
+        out: &mut [f64],
+    ) -> Result<(), FmuError> {
+        let s = unsafe { f(self.inst.raw(), out.as_mut_ptr(), out.len()) };
+        self.check(call, s)
+    }
+
+    /// The states into `self.x` and, when `nominals`, the absolute tolerances from the
+    /// nominals: rtol · nominal (FMPy; a nominal that is not a positive number counts as 1).
+    fn read_states(&mut self, nominals: bool) -> Result<(), FmuError> {
+        if self.nx == 0 {
+            return Ok(());
+        }
+        let mut x = std::mem::take(&mut self.x);
+        let r = self.get_vector(
+            "fmi2GetContinuousStates",
+            self.api.fmi2GetContinuousStates,
+            &mut x,
+        );
+        self.x = x;
+        r?;
+        if nominals {
+            let mut atol = std::mem::take(&mut self.atol);
+            let r = self.get_vector(
+                "fmi2GetNominalsOfContinuousStates",
+                self.api.fmi2GetNominalsOfContinuousStates,
+                &mut atol,
+            );
+            for a in atol.iter_mut() {
+                *a = self.rtol * if a.is_finite() && *a > 0.0 { *a } else { 1.0 };
+            }
+            self.atol = atol;
+            r?;
+        }
+        Ok(())
+    }
+
+    /// The event indicators into `self.z`.
+    fn read_indicators(&mut self) -> Result<(), FmuError> {
+        if self.nz == 0 {
+            return Ok(());
+        }
+        let mut z = std::mem::take(&mut self.z);
+        let r = self.get_vector(
+            "fmi2GetEventIndicators",
+            self.api.fmi2GetEventIndicators,
+            &mut z,
+        );
+        self.z = z;
+        r
+    }
+
+    /// A solver error as this instance's: the FMI call that failed inside CVODE's
+    /// callbacks when one did, else CVODE's flag and message.
+    fn solver_error(&mut self, e: cvode::SolverError) -> FmuError {
+        if let Some(f) = self.solver.as_mut().and_then(|s| s.system().failure.take()) {
+            self.inst.time = f.time;
+            return self.error(
+                f.call,
+                format!(
+                    "returned {} (called by CVODE, which then {})",
+                    f.status,
+                    e.problem().trim_start_matches("returned ")
+                ),
+            );
+        }
+        self.error(e.function, e.problem())
+    }
+
+    /// CVODE's warnings into the instance's log.
+    fn log_solver_warnings(&mut self) {
+        if let Some(s) = self.solver.as_mut() {
+            for w in s.take_warnings() {
+                self.inst
+                    .sink()
+                    .push(fmi2Status::WARNING, "CVODE", &format!("CVODE warning: {w}"));
+            }
+        }
+    }
+
+    /// The integrator, created at the current time from the FMU's states.
+    fn start_solver(&mut self) -> Result<(), FmuError> {
+        self.solver = None;
+        self.read_states(true)?;
+        self.read_indicators()?;
+        let max_step = match self.stop {
+            Some(stop) if stop > self.start => (stop - self.start) / 50.0,
+            _ => 0.0,
+        };
+        let settings = Settings {
+            relative_tolerance: self.rtol,
+            max_step,
+            max_num_steps: MAX_NUM_STEPS,
+        };
+        let system = FmuSystem::new(self.inst.raw(), self.api, self.nx);
+        let solver = Cvode::new(
+            system,
+            self.inst.time,
+            &self.x,
+            &self.atol,
+            self.nz,
+            settings,
+        )
+        .map_err(|e| self.error(e.function, e.problem()))?;
+        self.solver = Some(solver);
+        self.inputs_changed = false;
+        Ok(())
+    }
+
+    /// The integrator started again at the current time from the FMU's states (after an
+    /// event or a changed input).
+    fn restart_solver(&mut self, nominals_changed: bool) -> Result<(), FmuError> {
+        self.read_states(nominals_changed)?;
+        self.read_indicators()?;
+        self.inputs_changed = false;
+        let (t, rtol) = (self.inst.time, self.rtol);
+        let Some(solver) = self.solver.as_mut() else {
+            return self.start_solver();
+        };
+        let atol = nominals_changed.then_some((self.atol.as_slice(), rtol));
+        let r = solver.reinit(t, &self.x, atol);
+        r.map_err(|e| self.solver_error(e))
+    }
+
+    /// Integrate from the current time to `t + h` (FMPy's `simulateME` loop between two
+    /// output points), handling every event on the way. When the FMU asks to end the
+    /// simulation the step reports `fmi2Discard` and [`MeInstance::terminated_by_fmu`]
+    /// gives the time reached.
+    pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        if self.terminated_at.is_some() {
+            return Err(self.ended());
+        }
+        if self.mode != Mode::ContinuousTime && !self.event_pending {
+            return Err(self.error(
+                Function::DoStep.name(),
+                format!(
+                    "a step is not possible in {} (the instance is not initialised)",
+                    self.mode_name()
+                ),
+            ));
+        }
+        self.settle()?;
+        if self.terminated_at.is_some() {
+            return Err(self.ended());
+        }
+        if self.inputs_changed && self.input_event()? {
+            return Err(self.ended());
+        }
+        let target = t + h;
+        let mut events_here = 0;
+        while !(self.inst.time > target || isclose(self.inst.time, target)) {
+            let mut t_next = target;
+            if let Some(te) = self.next_event {
+                if t_next > te && !isclose(t_next, te) {
+                    t_next = te;
+                }
+            }
+            let time_event = self.next_event.is_some_and(|te| isclose(t_next, te));
+            let before = self.inst.time;
+            let state_event = if t_next <= before || isclose(t_next, before) {
+                // A time event now (or one the FMU set in the past): no integration.
+                false
+            } else {
+                self.integrate_to(t_next)?
+            };
+            let (step_event, terminate) = self.completed_integrator_step()?;
+            if terminate {
+                self.terminated_at = Some(self.inst.time);
+                return Err(self.ended());
+            }
+            let time_event = time_event && isclose(self.inst.time, t_next);
+            if time_event || state_event || step_event {
+                events_here = if self.inst.time == before {
+                    events_here + 1
+                } else {
+                    0
+                };
+                if events_here > MAX_EVENT_ITERATIONS {
+                    return Err(self.error(
+                        "fmi2NewDiscreteStates",
+                        format!("{MAX_EVENT_ITERATIONS} events at one time: the FMU sets its next event time to the current time again and again"),
+                    ));
+                }
+                if self.event_iteration(true)? {
+                    return Err(self.ended());
+                }
+            }
+        }
+        if !self.continuous_inputs.is_empty() {
+            // The indicators as the step left them: a changed input is compared to these.
+            self.read_indicators()?;
+        }
+        Ok(())
+    }
+
+    /// CVODE from the current time to `t_next`, stopping at a root; the FMU then holds the
+    /// time and states reached (`fmi2SetContinuousStates`, `fmi2SetTime`, as FMPy). True at
+    /// a state event.
+    fn integrate_to(&mut self, t_next: f64) -> Result<bool, FmuError> {
+        let solver = self.solver.as_mut().expect("started at initialisation");
+        let r = solver.advance(t_next, &mut self.x, &mut self.roots);
+        self.log_solver_warnings();
+        let reached = r.map_err(|e| self.solver_error(e))?;
+        let (t, state_event) = match reached {
+            Reached::Time(t) => (t, false),
+            Reached::Root(t) => (t, true),
+        };
+        if self.nx > 0 {
+            let s = unsafe {
+                (self.api.fmi2SetContinuousStates)(self.inst.raw(), self.x.as_ptr(), self.nx)
+            };
+            self.check("fmi2SetContinuousStates", s)?;
+        }
+        self.inst.time = t;
+        let s = unsafe { (self.api.fmi2SetTime)(self.inst.raw(), t) };
+        self.check("fmi2SetTime", s)?;
+        Ok(state_event)
+    }
+
+    /// `fmi2CompletedIntegratorStep` (unless the FMU does not need it): whether it asks
+    /// for event mode, and whether to end the simulation.
+    fn completed_integrator_step(&mut self) -> Result<(bool, bool), FmuError> {
+        if !self.completed_step_needed {
+            return Ok((false, false));
+        }
+        let (mut enter, mut terminate) = (fmi2False, fmi2False);
+        let s = unsafe {
+            (self.api.fmi2CompletedIntegratorStep)(
+                self.inst.raw(),
+                fmi2True,
+                &mut enter,
+                &mut terminate,
+            )
+        };
+        self.check("fmi2CompletedIntegratorStep", s)?;
+        Ok((enter != fmi2False, terminate != fmi2False))
+    }
+
+    /// A continuous input changed since the integrator started: an event when an event
+    /// indicator changed sign with it (compared with the end of the last step), then the
+    /// integrator starts again. True when the FMU asked to end the simulation.
+    fn input_event(&mut self) -> Result<bool, FmuError> {
+        let before = self.z.clone();
+        self.read_indicators()?;
+        let crossed = before
+            .iter()
+            .zip(&self.z)
+            .any(|(a, b)| (*a > 0.0) != (*b > 0.0));
+        if crossed {
+            return self.event_iteration(true);
+        }
+        self.restart_solver(false)?;
+        Ok(false)
+    }
+
+    /// The step's error when the FMU asked to end the simulation: `fmi2Discard` as a
+    /// Co-Simulation FMU would say it (the master then asks [`Self::terminated_by_fmu`]).
+    fn ended(&self) -> FmuError {
+        FmuError::call(
+            &self.inst.name,
+            Function::DoStep,
+            fmi2Status::DISCARD,
+            self.terminated_at.unwrap_or(self.inst.time),
+            Vec::new(),
+        )
+    }
+
+    fn mode_name(&self) -> &'static str {
+        match self.mode {
+            Mode::Instantiated => "the instantiated state",
+            Mode::Initialization => "initialization mode",
+            Mode::Event => "event mode",
+            Mode::ContinuousTime => "continuous-time mode",
+            Mode::Terminated => "the terminated state",
+        }
+    }
+}

@@ -1,0 +1,478 @@
+//! FMI 2.0 Model Exchange: every FMI 2.0 Reference FMU run through its Model Exchange
+//! interface (integrated by twinbench with CVODE) and compared with FMPy's Model Exchange
+//! loop with its CVode solver (`simulate_fmu(..., fmi_type='ModelExchange',
+//! solver='CVode')`, record_events off, output interval = the system's step): every output
+//! sample, and the event times (BouncingBall's bounces, Stair's steps). Each model runs
+//! twice in twinbench, both ways of choosing Model Exchange: the Reference FMU (which
+//! declares both interfaces) with `interface = "model-exchange"`, and an archive stripped of
+//! its `<CoSimulation>` element (Model Exchange only: the default). Then an isolated
+//! instance against the in-process one (bit for bit), Model Exchange and Co-Simulation
+//! instances connected in one system, and the refusals and errors.
+
+mod common;
+
+use common::reference;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tb_cosim::{Plan, Simulation, SystemFile, Table};
+use tb_fmi::FmuCache;
+
+/// The largest difference from FMPy's CVode result allowed, relative to the larger of 1
+/// and the column's largest magnitude. Both integrate with CVODE set up alike (BDF,
+/// Newton, dense, rtol 1e-5 and atol = rtol·nominal, maxStep (stop − start)/50, 500 steps
+/// per call, restart after every event), FMPy with SUNDIALS 7 and twinbench with Debian's
+/// 6.4.1; the measured differences are printed (`--nocapture`) and in docs/design.md.
+const TOLERANCE: f64 = 1e-11;
+
+/// The experiments: the models' default ones (Feedthrough and Resource have no step).
+fn experiment(model: &str) -> (f64, f64) {
+    match model {
+        "BouncingBall" => (3.0, 1e-2),
+        "Dahlquist" => (10.0, 0.1),
+        "Feedthrough" => (2.0, 0.1),
+        "Resource" => (1.0, 0.1),
+        "Stair" => (10.0, 0.2),
+        "VanDerPol" => (20.0, 1e-2),
+        m => panic!("no experiment for {m}"),
+    }
+}
+
+/// `<Model>.fmu` (both interfaces) and `<Model>_me.fmu` (Model Exchange only, in `dir`).
+fn fmus(model: &str, dir: &Path) -> (PathBuf, PathBuf) {
+    let both = reference::fmu(model, 2);
+    let me_only = reference::variant(
+        &both,
+        dir,
+        &format!("{model}_me"),
+        |xml| {
+            let a = xml.find("<CoSimulation").unwrap();
+            let b = xml.find("</CoSimulation>").unwrap() + "</CoSimulation>".len();
+            format!("{}{}", &xml[..a], &xml[b..])
+        },
+        |name| Some(name.to_string()),
+    );
+    (both, me_only)
+}
+
+/// FMPy's Model Exchange result: a row per output point (`record_events`: and the two rows
+/// FMPy records at each event, before and after it).
+fn fmpy(fmu: &Path, out: &Path, stop: f64, step: f64, record_events: bool) -> Table {
+    let script = twinbench::pack::workspace_root().join("tools/fmpy_simulate.py");
+    let mut cmd = std::process::Command::new(common::python::python());
+    cmd.arg(&script)
+        .arg(fmu)
+        .arg(out)
+        .args(["--stop", &stop.to_string(), "--step", &step.to_string()])
+        .arg("--model-exchange");
+    if record_events {
+        cmd.arg("--record-events");
+    }
+    let r = cmd.output().unwrap();
+    assert!(
+        r.status.success(),
+        "FMPy on {}: {}",
+        fmu.display(),
+        String::from_utf8_lossy(&r.stderr)
+    );
+    Table::read_any(out).unwrap()
+}
+
+/// A system file's text: the top-level keys `top`, `instances` as (name, fmu, extra
+/// keys), then the tables `rest`.
+fn system_text(top: &str, instances: &[(&str, &Path, &str)], rest: &str) -> String {
+    let mut text = format!("{top}\n[fmus]\n");
+    for (name, fmu, _) in instances {
+        text.push_str(&format!("{name} = \"{}\"\n", fmu.display()));
+    }
+    for (name, _, extra) in instances {
+        text.push_str(&format!(
+            "\n[[instance]]\nname = \"{name}\"\nfmu = \"{name}\"\n{extra}\n"
+        ));
+    }
+    text.push('\n');
+    text.push_str(rest);
+    text
+}
+
+/// Run a system file's text in `dir`: the recording, or the error.
+fn run(text: &str, dir: &Path, name: &str) -> Result<Table, String> {
+    let path = dir.join(format!("{name}.toml"));
+    let file = SystemFile::parse(text, &path).map_err(|e| e.to_string())?;
+    let plan = Plan::compile(
+        file,
+        &path,
+        Arc::new(FmuCache::temporary(false).unwrap()),
+        &common::worker_options(),
+    )
+    .map_err(|e| format!("{e}"))?;
+    let mut sim = Simulation::new(plan).map_err(|e| e.to_string())?;
+    sim.echo_fmu_log = false;
+    sim.run().map_err(|e| format!("{e}"))?;
+    Ok(sim.recording.clone())
+}
+
+/// One Model Exchange instance `m` of `fmu`, every output recorded.
+fn run_one(fmu: &Path, extra: &str, stop: f64, step: f64, dir: &Path) -> Table {
+    let text = system_text(
+        "",
+        &[("m", fmu, extra)],
+        &format!("[experiment]\nstep = {step}\nstop = {stop}\n"),
+    );
+    run(&text, dir, "m").unwrap_or_else(|e| panic!("{}: {e}", fmu.display()))
+}
+
+/// Per column FMPy recorded: the largest difference, relative to max(1, |largest value|).
+fn differences(model: &str, ours: &Table, theirs: &Table) -> Vec<(String, f64)> {
+    assert_eq!(
+        ours.len(),
+        theirs.len(),
+        "{model}: {} rows in twinbench, {} in FMPy",
+        ours.len(),
+        theirs.len()
+    );
+    let mut out = Vec::new();
+    for name in theirs.names() {
+        let ours_name = if name == "time" {
+            "time".to_string()
+        } else {
+            format!("m.{name}")
+        };
+        let a = ours
+            .require(&ours_name)
+            .unwrap_or_else(|e| panic!("{model}: {e}"));
+        let b = theirs.require(name).unwrap();
+        let scale = b.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+        let worst = a
+            .iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f64, f64::max);
+        out.push((name.clone(), worst / scale));
+    }
+    out
+}
+
+/// Whether two recordings are equal bit for bit.
+fn same_bits(a: &Table, b: &Table) -> bool {
+    a.names() == b.names()
+        && a.len() == b.len()
+        && (0..a.names().len()).all(|k| {
+            a.is_text(k) && b.is_text(k)
+                || a.column_at(k)
+                    .iter()
+                    .zip(b.column_at(k))
+                    .all(|(x, y)| x.to_bits() == y.to_bits())
+        })
+}
+
+fn check(model: &str) {
+    let dir = tb_testkit::scratch(&format!("me-{model}"));
+    let (stop, step) = experiment(model);
+    let (both, me_only) = fmus(model, dir.path());
+    let forced = run_one(
+        &both,
+        "interface = \"model-exchange\"",
+        stop,
+        step,
+        dir.path(),
+    );
+    let only = run_one(&me_only, "", stop, step, dir.path());
+    assert!(
+        same_bits(&forced, &only),
+        "{model}: the Model Exchange only archive gives another result"
+    );
+    let theirs = fmpy(&me_only, &dir.path().join("fmpy.csv"), stop, step, false);
+    let mut ours = forced.clone();
+    if model == "Stair" {
+        // Stair ends the simulation at t = 9 (terminateSimulation when its counter reaches
+        // 10). twinbench records that last time as after a Co-Simulation FMU's end (FMPy's
+        // Co-Simulation loop does too); FMPy's Model Exchange loop stops without it.
+        assert_eq!(forced.len(), theirs.len() + 1);
+        assert_eq!(forced.require("time").unwrap().last(), Some(&9.0));
+        assert_eq!(forced.require("m.counter").unwrap().last(), Some(&10.0));
+        ours.truncate(theirs.len());
+    }
+    let diffs = differences(model, &ours, &theirs);
+    eprintln!("{model} (Model Exchange) vs FMPy CVode: {diffs:?}");
+    for (name, d) in diffs {
+        assert!(
+            d <= TOLERANCE,
+            "{model}: {name} differs from FMPy's Model Exchange result by {d:e} (relative)"
+        );
+    }
+}
+
+#[test]
+fn bouncing_ball() {
+    check("BouncingBall");
+}
+
+#[test]
+fn dahlquist() {
+    check("Dahlquist");
+}
+
+#[test]
+fn feedthrough() {
+    check("Feedthrough");
+}
+
+#[test]
+fn resource() {
+    check("Resource");
+}
+
+#[test]
+fn stair() {
+    check("Stair");
+}
+
+#[test]
+fn van_der_pol() {
+    check("VanDerPol");
+}
+
+/// The event times of one in-process Model Exchange instance over `stop` in steps of
+/// `step` (the backend the master drives, without the master), and the time at which the
+/// FMU asked to end the simulation, if it did.
+fn our_events(fmu: &Path, stop: f64, step: f64) -> (Vec<f64>, Option<f64>) {
+    let cache = FmuCache::temporary(false).unwrap();
+    let loaded = cache.load(fmu).unwrap();
+    let mut m = tb_cosim::backend::model_exchange(&loaded, "m", false, Default::default()).unwrap();
+    m.setup_experiment(0.0, Some(stop)).unwrap();
+    m.enter_initialization_mode().unwrap();
+    m.exit_initialization_mode().unwrap();
+    let n = (stop / step).round() as usize;
+    for k in 0..n {
+        if let Err(e) = m.do_step(k as f64 * step, step) {
+            let end = m.terminated_by_fmu();
+            assert!(end.is_some(), "{e}");
+            return (m.events().to_vec(), end);
+        }
+    }
+    (m.events().to_vec(), None)
+}
+
+/// FMPy's event times (the times it recorded twice, before and after each event), and the
+/// last time it recorded.
+fn fmpy_events(fmu: &Path, dir: &Path, stop: f64, step: f64) -> (Vec<f64>, f64) {
+    let t = fmpy(fmu, &dir.join("events.csv"), stop, step, true);
+    let time = t.require("time").unwrap();
+    let events = time
+        .windows(2)
+        .filter(|w| w[0] == w[1])
+        .map(|w| w[0])
+        .collect();
+    (events, *time.last().unwrap())
+}
+
+#[test]
+fn events_land_where_fmpy_puts_them() {
+    // BouncingBall: state events (the bounces); Stair: time events (its steps), the last
+    // of which ends the simulation (terminateSimulation at counter 10). A step of
+    // twinbench's ends at t + h (the master's t and h), FMPy's output point at
+    // start + (n + 1)·interval: the two may be an ulp apart (3.0000000000000004 and 3.0),
+    // and a time event on the grid lands on that point.
+    for (model, tolerance) in [("BouncingBall", 1e-12), ("Stair", 1e-15)] {
+        let dir = tb_testkit::scratch("me-events");
+        let (stop, step) = experiment(model);
+        let (_, me_only) = fmus(model, dir.path());
+        let (mut ours, end) = our_events(&me_only, stop, step);
+        let (theirs, their_last) = fmpy_events(&me_only, dir.path(), stop, step);
+        eprintln!("{model}: events at {ours:?} (end {end:?}); FMPy: {theirs:?}");
+        if let Some(end) = end {
+            // FMPy stops at the terminating event: its last row, recorded once.
+            assert_eq!(ours.pop(), Some(end));
+            assert_eq!(end, their_last, "{model}: the end");
+        }
+        assert_eq!(ours.len(), theirs.len(), "{model}: {ours:?} vs {theirs:?}");
+        assert!(!ours.is_empty(), "{model}: no event");
+        let worst = ours
+            .iter()
+            .zip(&theirs)
+            .map(|(a, b)| (a - b).abs() / a.abs().max(1.0))
+            .fold(0.0f64, f64::max);
+        eprintln!("{model}: event times differ from FMPy's by at most {worst:e} (relative)");
+        assert!(worst <= tolerance, "{model}: {worst:e}");
+    }
+}
+
+#[test]
+fn an_isolated_instance_equals_the_in_process_one_bit_for_bit() {
+    let dir = tb_testkit::scratch("me-isolated");
+    for model in ["BouncingBall", "VanDerPol"] {
+        let (stop, step) = experiment(model);
+        let (both, _) = fmus(model, dir.path());
+        let inside = run_one(
+            &both,
+            "interface = \"model-exchange\"",
+            stop,
+            step,
+            dir.path(),
+        );
+        let isolated = run_one(
+            &both,
+            "interface = \"model-exchange\"\nisolate = true",
+            stop,
+            step,
+            dir.path(),
+        );
+        assert!(same_bits(&inside, &isolated), "{model}");
+    }
+}
+
+#[test]
+fn model_exchange_and_co_simulation_instances_connect() {
+    // VanDerPol through Model Exchange feeds a Co-Simulation Feedthrough (a continuous
+    // Real input) and a Model Exchange Feedthrough; Stair (Co-Simulation) drives the Model
+    // Exchange Feedthrough's Integer input, a discrete input set in event mode.
+    let dir = tb_testkit::scratch("me-mixed");
+    let vdp = reference::fmu("VanDerPol", 2);
+    let stair = reference::fmu("Stair", 2);
+    let ft = reference::fmu("Feedthrough", 2);
+    let me = "interface = \"model-exchange\"";
+    let text = system_text(
+        "connections = [\"vdp.x0 -> cs.Float64_continuous_input\", \"vdp.x0 -> me.Float64_continuous_input\", \"stair.counter -> me.Int32_input\"]",
+        &[
+            ("vdp", &vdp, me),
+            ("stair", &stair, ""),
+            ("cs", &ft, "interface = \"co-simulation\""),
+            ("me", &ft, me),
+        ],
+        "[experiment]\nstep = 0.05\nstop = 5\n[record]\nsignals = [\"vdp.x0\", \"cs.Float64_continuous_output\", \"me.Float64_continuous_output\", \"stair.counter\", \"me.Int32_output\"]\n",
+    );
+    let t = run(&text, dir.path(), "mixed").unwrap();
+    let col = |n: &str| t.require(n).unwrap().to_vec();
+    let x0 = col("vdp.x0");
+    // Gauss-Seidel in connection order: both Feedthroughs see vdp's output of this step.
+    assert_eq!(col("cs.Float64_continuous_output"), x0);
+    assert_eq!(col("me.Float64_continuous_output"), x0);
+    assert_eq!(col("me.Int32_output"), col("stair.counter"));
+    assert!(col("stair.counter").iter().any(|c| *c >= 4.0));
+    // The Model Exchange VanDerPol alone gives the same x0.
+    let alone = run_one(&vdp, me, 5.0, 0.05, dir.path());
+    assert_eq!(alone.require("m.x0").unwrap(), x0.as_slice());
+}
+
+#[test]
+fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
+    let dir = tb_testkit::scratch("me-refused");
+    let (both, me_only) = fmus("Dahlquist", dir.path());
+    let cs_only = reference::variant(
+        &both,
+        dir.path(),
+        "Dahlquist_cs",
+        |xml| {
+            let a = xml.find("<ModelExchange").unwrap();
+            let b = xml.find("</ModelExchange>").unwrap() + "</ModelExchange>".len();
+            format!("{}{}", &xml[..a], &xml[b..])
+        },
+        |name| Some(name.to_string()),
+    );
+    let exp = "[experiment]\nstep = 0.1\nstop = 1\n";
+    let e = run(
+        &system_text(
+            "",
+            &[("m", &cs_only, "interface = \"model-exchange\"")],
+            exp,
+        ),
+        dir.path(),
+        "a",
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("instance 'm'")
+            && e.contains("interface = \"model-exchange\"")
+            && e.contains("Dahlquist_cs.fmu: the FMU has no <ModelExchange> element (it supports co-simulation only)"),
+        "{e}"
+    );
+    let e = run(
+        &system_text("", &[("m", &me_only, "interface = \"co-simulation\"")], exp),
+        dir.path(),
+        "b",
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("Dahlquist_me.fmu: the FMU has no <CoSimulation> element (it supports model-exchange only)"),
+        "{e}"
+    );
+    let e = run(
+        &system_text("", &[("m", &both, "interface = \"me\"")], exp),
+        dir.path(),
+        "c",
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("unknown interface \"me\" (co-simulation, model-exchange)"),
+        "{e}"
+    );
+    // FMI 3.0 Model Exchange is not integrated: said so.
+    let v3 = reference::fmu("Dahlquist", 3);
+    let e = run(
+        &system_text("", &[("m", &v3, "interface = \"model-exchange\"")], exp),
+        dir.path(),
+        "d",
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("twinbench runs FMI 3.0 FMUs through Co-Simulation only"),
+        "{e}"
+    );
+    // A tolerance out of range.
+    let e = run(
+        &system_text(
+            "",
+            &[("m", &me_only, "")],
+            "[experiment]\nstep = 0.1\nstop = 1\ntolerance = 0\n",
+        ),
+        dir.path(),
+        "e",
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("experiment.tolerance: 0 is not a relative tolerance: expected a number between 0 and 1"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_solver_failure_names_the_fmu_instance_time_and_cvode_flag() {
+    // Far more accuracy than a double holds: CVODE gives up with CV_TOO_MUCH_ACC.
+    let dir = tb_testkit::scratch("me-solver");
+    let (_, me_only) = fmus("VanDerPol", dir.path());
+    let text = system_text(
+        "",
+        &[("vdp", &me_only, "")],
+        "[experiment]\nstep = 0.1\nstop = 2\ntolerance = 1e-300\n",
+    );
+    let e = run(&text, dir.path(), "acc").unwrap_err();
+    assert!(
+        e.contains("VanDerPol_me.fmu: instance 'vdp' (Model Exchange) at t = ")
+            && e.contains("s: CVode returned CV_TOO_MUCH_ACC (-2): "),
+        "{e}"
+    );
+}
+
+#[test]
+fn the_system_tolerance_reaches_the_solver() {
+    // A tighter tolerance changes the result, a little.
+    let dir = tb_testkit::scratch("me-tolerance");
+    let (_, me_only) = fmus("VanDerPol", dir.path());
+    let loose = run_one(&me_only, "", 20.0, 0.01, dir.path());
+    let text = system_text(
+        "",
+        &[("m", &me_only, "")],
+        "[experiment]\nstep = 0.01\nstop = 20\ntolerance = 1e-8\n",
+    );
+    let tight = run(&text, dir.path(), "tight").unwrap();
+    let (a, b) = (
+        loose.require("m.x0").unwrap(),
+        tight.require("m.x0").unwrap(),
+    );
+    let worst = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f64, f64::max);
+    assert!(worst > 1e-9 && worst < 1e-2, "{worst:e}");
+}
