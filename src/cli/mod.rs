@@ -19,6 +19,7 @@ pub mod optimize;
 pub mod pack;
 pub mod progress;
 pub mod run;
+pub mod run_fmu;
 pub mod worker;
 
 #[derive(Parser, Debug)]

@@ -8,7 +8,8 @@ use tb_fmi::FmuCache;
 
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
-    /// The system description (TOML), or an SSP 1.0 package (`.ssp`).
+    /// The system description (TOML), an SSP 1.0 package (`.ssp`), or one FMU (`.fmu`,
+    /// run on its own as `fmpy simulate` runs it: its default experiment, every output).
     pub system: PathBuf,
     /// Write the recorded signals here, written atomically: MDF 4 for `.mf4`/`.mdf` (with
     /// units, `time` the master channel), CSV otherwise.
@@ -53,6 +54,24 @@ pub struct RunArgs {
     /// (t[n+1] - t[n], as FMPy passes it).
     #[arg(long, value_name = "h|grid", value_parser = |s: &str| tb_cosim::StepConvention::from_name(s))]
     pub step_convention: Option<tb_cosim::StepConvention>,
+    /// One FMU: the start time [s] (default: its DefaultExperiment's, else 0).
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    pub start: Option<f64>,
+    /// One FMU: the stop time [s] (default: its DefaultExperiment's, else start + 1).
+    #[arg(long, value_name = "SECONDS")]
+    pub stop: Option<f64>,
+    /// One FMU: the communication step [s] (default: FMPy's, from the DefaultExperiment's
+    /// step, at most 1000 steps; else 500 to 1000 steps of a round size).
+    #[arg(long, value_name = "SECONDS")]
+    pub step: Option<f64>,
+    /// One FMU: record every OUTPUT_INTERVAL seconds (a whole number of steps; alone, it is
+    /// the step too, as in FMPy).
+    #[arg(long, value_name = "SECONDS")]
+    pub output_interval: Option<f64>,
+    /// One FMU: an input file (CSV or MDF 4, FMPy's format: `time`, then one column per
+    /// input, by the input's name; a column without a unit takes its input's).
+    #[arg(long, value_name = "FILE")]
+    pub input: Option<PathBuf>,
 }
 
 /// A run that failed: what it recorded up to the failure is kept, in a file named as
@@ -184,7 +203,23 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             );
         }
     }
-    let system = Arc::new(Plan::load_with(&args.system, cache, &options)?);
+    // One FMU on its own: a system of one instance, its recorded columns under the FMU's
+    // own names and `--set` naming the FMU's variables.
+    let alone = super::run_fmu::is_fmu(&args.system);
+    let (system, instance) = match alone {
+        true => {
+            let (file, instance) = super::run_fmu::system(&args, &cache)?;
+            let plan = Plan::compile(file, &args.system, cache, &options)?;
+            (Arc::new(plan), Some(instance))
+        }
+        false => {
+            super::run_fmu::refuse_fmu_options(&args)?;
+            (
+                Arc::new(Plan::load_with(&args.system, cache, &options)?),
+                None,
+            )
+        }
+    };
     if let Some(out) = &args.out {
         // Before the run: a result must not replace a device, a link, a folder or an input.
         let files = system.input_files();
@@ -212,8 +247,15 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .map(|&k| system.unit_name(k).to_string())
         .collect();
     let mut sim = Simulation::new(system.clone())?;
+    if let Some(instance) = &instance {
+        super::run_fmu::own_names(&mut sim.recording, instance)?;
+    }
     for s in &args.set {
         let (name, value) = parse_assignment(s)?;
+        let name = match &instance {
+            Some(i) => format!("{i}.{name}"),
+            None => name,
+        };
         set_parameter(&system, &mut sim, &name, &value).with_context(|| format!("--set {s}"))?;
     }
     // A run that completed keeps its results even when an instance then fails to end.

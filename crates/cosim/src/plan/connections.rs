@@ -20,9 +20,9 @@ pub(super) fn connections(
 ) -> Result<(Vec<ConnectionDef>, Vec<String>), SystemError> {
     let mut connections: Vec<ConnectionDef> = Vec::new();
     let mut notes = Vec::new();
-    for conn in &file.connections {
+    for conn in file.connections.iter().flat_map(|c| element_wise(c, units)) {
         let ctx = format!("{ctx_file}: connection \"{}\"", conn.text);
-        let c = connection(conn, units, signals, &ctx, &mut notes)?;
+        let c = connection(&conn, units, signals, &ctx, &mut notes)?;
         if connections
             .iter()
             .any(|d| d.to_unit == c.to_unit && d.to_key() == c.to_key())
@@ -35,6 +35,30 @@ pub(super) fn connections(
         connections.push(c);
     }
     Ok((connections, notes))
+}
+
+/// FMI 3.0: a connection between two arrays of one size is one per element, in order
+/// (`a.y -> b.u` gives `a.y[1] -> b.u[1]`, …); anything else is itself (and the check of
+/// its names says what is wrong).
+fn element_wise(conn: &ConnectionConfig, units: Units<'_>) -> Vec<ConnectionConfig> {
+    let one = || vec![conn.clone()];
+    let Some((a, b)) = conn.text.split_once("->") else {
+        return one();
+    };
+    let (from, to) = (
+        units.array_elements(a.trim()),
+        units.array_elements(b.trim()),
+    );
+    if from.is_empty() || from.len() != to.len() {
+        return one();
+    }
+    from.iter()
+        .zip(&to)
+        .map(|(f, t)| ConnectionConfig {
+            text: format!("{f} -> {t}"),
+            ..conn.clone()
+        })
+        .collect()
 }
 
 /// One connection, resolved and checked.

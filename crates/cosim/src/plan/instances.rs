@@ -393,6 +393,22 @@ impl<'a> Units<'a> {
         })
     }
 
+    /// FMI 3.0: `instance.array` → `instance.array[1]`, … (the elements' full names);
+    /// empty when `full` is not an instance's array.
+    pub fn array_elements(&self, full: &str) -> Vec<String> {
+        let Some((u, var)) = split_name(full) else {
+            return Vec::new();
+        };
+        match self.instances.iter().find(|i| i.name == u) {
+            Some(inst) => inst
+                .elements(var)
+                .into_iter()
+                .map(|e| format!("{u}.{e}"))
+                .collect(),
+            None => Vec::new(),
+        }
+    }
+
     /// The FMU variable behind an FMU endpoint.
     pub fn variable(&self, e: &Endpoint) -> Option<&'a ScalarVariable> {
         match e {

@@ -85,6 +85,20 @@ impl InstanceDef {
     pub fn variable(&self, name: &str, context: &str) -> Result<&ScalarVariable, SystemError> {
         let fmu_name = self.ports.get(name).map(String::as_str).unwrap_or(name);
         self.description().variable(fmu_name).ok_or_else(|| {
+            let elements = self.elements(name);
+            if let (Some(first), Some(last)) = (elements.first(), elements.last()) {
+                return invalid(
+                    context,
+                    format!(
+                        "'{}.{name}' is an array of {} elements (FMU {}): name one ('{}.{first}' … '{}.{last}'); [record] takes the whole array by its name, and a connection between two arrays of one size connects them element by element",
+                        self.name,
+                        elements.len(),
+                        self.fmu.source.display(),
+                        self.name,
+                        self.name,
+                    ),
+                );
+            }
             let mut close = self.description().closest_names(fmu_name, 3);
             close.retain(|c| !c.is_empty());
             invalid(
@@ -97,6 +111,25 @@ impl InstanceDef {
                 ),
             )
         })
+    }
+
+    /// FMI 3.0: the names of the elements of the array `name` (`name[1]`, `name[2,1]`, …,
+    /// row-major, as the description lists them); empty when `name` is a variable or no
+    /// array's name. (An array is taken by the FMU's name: the port map renames scalars.)
+    pub fn elements(&self, name: &str) -> Vec<String> {
+        if self.description().variable(name).is_some() || self.ports.contains_key(name) {
+            return Vec::new();
+        }
+        self.description()
+            .variables
+            .iter()
+            .filter(|v| {
+                v.name
+                    .strip_prefix(name)
+                    .is_some_and(|rest| rest.starts_with('[') && rest.ends_with(']'))
+            })
+            .map(|v| v.name.clone())
+            .collect()
     }
 }
 

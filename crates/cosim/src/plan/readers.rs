@@ -69,7 +69,16 @@ pub(super) fn record(
     ctx_file: &str,
 ) -> Result<(Vec<usize>, Vec<String>), SystemError> {
     let names = match file.record.signals.is_empty() {
-        false => file.record.signals.clone(),
+        // An FMI 3.0 array listed by its name records each of its elements.
+        false => file
+            .record
+            .signals
+            .iter()
+            .flat_map(|n| match units.array_elements(n) {
+                e if e.is_empty() => vec![n.clone()],
+                e => e,
+            })
+            .collect(),
         true => default_record(units),
     };
     let mut record = Vec::with_capacity(names.len());

@@ -70,6 +70,9 @@ pub struct LoadedFmu {
     library3: Mutex<Option<Arc<Library3>>>,
     /// The FMI 2.0 library loaded for Model Exchange (its own `modelIdentifier`).
     library_me: Mutex<Option<Arc<Library>>>,
+    /// Whether the cache it came from needs its binaries (not when it describes models
+    /// that run natively: [`FmuCache::description_only`]).
+    binary_required: bool,
 }
 
 /// What an unpacked file must be: where (a path relative to [`FileCheck::base`]), its
@@ -325,7 +328,7 @@ impl LoadedFmu {
                     .into(),
             );
         }
-        if !self.dir.join(&entry).is_file() {
+        if self.binary_required && !self.dir.join(&entry).is_file() {
             return Err(format!(
                 "no {entry}, the {} library (the FMU has no binary of it for this platform)",
                 interface.element()
@@ -714,6 +717,7 @@ impl FmuCache {
             library: Mutex::new(None),
             library3: Mutex::new(None),
             library_me: Mutex::new(None),
+            binary_required: self.binary_required,
         });
         lock(&self.loaded).insert(entry.sha256, loaded.clone());
         Some(loaded)
@@ -806,6 +810,7 @@ impl FmuCache {
             library: Mutex::new(None),
             library3: Mutex::new(None),
             library_me: Mutex::new(None),
+            binary_required: self.binary_required,
         });
         lock(&self.loaded).insert(sha, loaded.clone());
         Ok(loaded)

@@ -230,6 +230,14 @@ fn co_simulation(m: &Attrs, version: Version) -> Result<CoSimulation, String> {
         can_serialize_fmu_state: flag(m, serialize),
         can_interpolate_inputs: version == Version::V2 && flag(m, "canInterpolateInputs"),
         provides_directional_derivative: flag(m, derivatives),
+        // Only a positive number is a step; anything else is no hint at all.
+        fixed_internal_step_size: match version {
+            Version::V2 => None,
+            Version::V3 => m
+                .get("fixedInternalStepSize")
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .filter(|h| h.is_finite() && *h > 0.0),
+        },
     })
 }
 

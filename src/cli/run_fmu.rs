@@ -1,0 +1,317 @@
+//! `twinbench run model.fmu`: one FMU on its own, as `fmpy simulate` runs it. The run is a
+//! system of one instance (named after the model identifier) that twinbench writes for
+//! itself: the FMU's default experiment (or `--start`, `--stop`, `--step`,
+//! `--output-interval`, `--tolerance`), every output recorded under its own name in FMPy's
+//! column order, and an input file (`--input`) whose columns drive the inputs of the same
+//! names (a column without a unit takes its input's). Everything else (checks, messages,
+//! the summary, `--out`, `--set`, `--isolate`, `--trace-fmi`) is `run`'s.
+
+use super::run::RunArgs;
+use anyhow::{bail, Context};
+use std::path::Path;
+use tb_cosim::SystemFile;
+use tb_fmi::import::description::{ModelDescription, ScalarVariable};
+use tb_fmi::import::description3::Fmi3Type;
+use tb_fmi::{Causality, FmuCache, Interface, LoadedFmu, ScalarType};
+
+/// The name of the input file's replay in the system (never an instance's: those are C
+/// identifiers, this is not one).
+const INPUT: &str = "input-file";
+
+/// Whether `path` names an FMU (by its extension, as FMPy decides).
+pub fn is_fmu(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("fmu"))
+}
+
+/// The options that only a run of one FMU takes, refused with a system file.
+pub fn refuse_fmu_options(args: &RunArgs) -> anyhow::Result<()> {
+    let given = [
+        ("--start", args.start.is_some()),
+        ("--stop", args.stop.is_some()),
+        ("--step", args.step.is_some()),
+        ("--output-interval", args.output_interval.is_some()),
+        ("--input", args.input.is_some()),
+    ];
+    if let Some((name, _)) = given.iter().find(|(_, on)| *on) {
+        bail!(
+            "{name} is for running one FMU (`twinbench run model.fmu {name} ...`); {} is a system: its [experiment] and [[replay]] say this",
+            args.system.display()
+        );
+    }
+    Ok(())
+}
+
+/// The system of one FMU run alone, and its instance's name.
+pub fn system(args: &RunArgs, cache: &FmuCache) -> anyhow::Result<(SystemFile, String)> {
+    let fmu_path = tb_files::absolute(&args.system);
+    let fmu = cache.load(&fmu_path)?;
+    let md = &fmu.description;
+    let instance = fmu.model_identifier().to_string();
+    let mut connections = Vec::new();
+    let mut replay = String::new();
+    if let Some(input) = &args.input {
+        let file = tb_files::absolute(input);
+        for column in input_columns(&file)? {
+            let sv = input_variable(md, &column, &file)?;
+            connections.push(quoted(&format!(
+                "{INPUT}.{column} -> {instance}.{}",
+                sv.name
+            )));
+        }
+        replay = format!(
+            "[[replay]]\nname = {}\nfile = {}\nbasis = \"time\"\n\n",
+            quoted(INPUT),
+            quoted(&file.to_string_lossy())
+        );
+    }
+    let recorded: Vec<String> = outputs(md)
+        .iter()
+        .map(|v| quoted(&format!("{instance}.{}", v.name)))
+        .collect();
+    let text = format!(
+        "connections = [{}]\n\n[fmus]\n{} = {}\n\n[[instance]]\nname = {}\nfmu = {}\n\n{replay}{}[record]\nsignals = [{}]\ndecimation = {}\n",
+        connections.join(", "),
+        quoted(&instance),
+        quoted(&fmu_path.to_string_lossy()),
+        quoted(&instance),
+        quoted(&instance),
+        experiment(args, &fmu)?,
+        recorded.join(", "),
+        decimation(args)?,
+    );
+    let file = SystemFile::parse(&text, &fmu_path)?;
+    Ok((file, instance))
+}
+
+/// A TOML basic string.
+fn quoted(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}
+
+/// The columns FMPy's `simulate` writes: the outputs (but a variable named `time`), Strings
+/// and Binaries left out, grouped by type as FMPy's recorder groups them (FMI 2.0: Real,
+/// Integer and Enumeration, Boolean; FMI 3.0: Float32 … UInt64 with Enumerations among the
+/// Int64s, Boolean), each group in model order. An FMI 3.0 array is one column per element.
+pub fn outputs(md: &ModelDescription) -> Vec<&ScalarVariable> {
+    let mut outputs: Vec<(usize, bool, &ScalarVariable)> = md
+        .variables
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.causality == Causality::Output && v.name != "time")
+        .filter_map(|(k, v)| fmpy_group(v).map(|g| (g, is_fmi3_alias(md, k), v)))
+        .collect();
+    // Stable: model order within a group; FMPy lists an FMI 3.0 `<Alias>` after every
+    // declared variable.
+    outputs.sort_by_key(|(g, alias, _)| (*g, *alias));
+    outputs.into_iter().map(|(_, _, v)| v).collect()
+}
+
+/// Whether variable `k` is an FMI 3.0 `<Alias>`: it shares its value (type, value reference
+/// and element) with a variable declared before it.
+fn is_fmi3_alias(md: &ModelDescription, k: usize) -> bool {
+    let Some(slot) = &md.variables[k].fmi3 else {
+        return false;
+    };
+    md.variables[..k].iter().any(|v| {
+        v.fmi3
+            .as_ref()
+            .is_some_and(|s| s.ty == slot.ty && s.vr == slot.vr && s.index == slot.index)
+    })
+}
+
+/// FMPy's recorder group of a variable's type (None: not recorded).
+fn fmpy_group(v: &ScalarVariable) -> Option<usize> {
+    if let Some(slot) = &v.fmi3 {
+        use Fmi3Type::*;
+        return match slot.ty {
+            Float32 => Some(0),
+            Float64 => Some(1),
+            Int8 => Some(2),
+            UInt8 => Some(3),
+            Int16 => Some(4),
+            UInt16 => Some(5),
+            Int32 => Some(6),
+            UInt32 => Some(7),
+            Int64 | Enumeration => Some(8),
+            UInt64 => Some(9),
+            Boolean => Some(10),
+            String | Binary => None,
+        };
+    }
+    match v.ty {
+        ScalarType::Real => Some(0),
+        ScalarType::Integer | ScalarType::Enumeration => Some(1),
+        ScalarType::Boolean => Some(2),
+        ScalarType::String => None,
+    }
+}
+
+/// `[experiment]` from the options, else the FMU's default experiment, else FMPy's
+/// defaults (start 0, stop start + 1 s; the step: see [`default_step`]).
+fn experiment(args: &RunArgs, fmu: &LoadedFmu) -> anyhow::Result<String> {
+    let de = fmu.description.default_experiment.unwrap_or_default();
+    let start = args.start.or(de.start_time).unwrap_or(0.0);
+    let stop = args.stop.or(de.stop_time).unwrap_or(start + 1.0);
+    for (name, v) in [("--start", start), ("--stop", stop)] {
+        if !v.is_finite() {
+            bail!("{name} {v}: a time is a finite number of seconds");
+        }
+    }
+    if stop <= start {
+        bail!(
+            "the run would end at {} s, not after its start at {} s (--start, --stop, or the FMU's DefaultExperiment)",
+            tb_files::number(stop),
+            tb_files::number(start)
+        );
+    }
+    let step = match args.step.or(args.output_interval) {
+        Some(h) => h,
+        None => default_step(fmu, start, stop),
+    };
+    if !(step.is_finite() && step > 0.0) {
+        bail!(
+            "--step {}: a step is a positive number of seconds",
+            tb_files::number(step)
+        );
+    }
+    Ok(format!(
+        "[experiment]\nstart = {start:?}\nstop = {stop:?}\nstep = {step:?}\n\n"
+    ))
+}
+
+/// The step FMPy's `simulate` takes when none is given: Co-Simulation, the FMU's
+/// `fixedInternalStepSize` (FMI 3.0), else its DefaultExperiment step, doubled until the run has
+/// at most 1000 of them, else FMPy's automatic interval (500 to 1000 steps of a round
+/// number); Model Exchange, 10^(round(log10 T) - 3) doubled likewise.
+pub fn default_step(fmu: &LoadedFmu, start: f64, stop: f64) -> f64 {
+    let t = stop - start;
+    let at_most_1000 = |mut h: f64| {
+        while t / h > 1000.0 {
+            h *= 2.0;
+        }
+        h
+    };
+    let md = &fmu.description;
+    if fmu.default_interface() == Interface::ModelExchange {
+        return at_most_1000(10f64.powf(t.log10().round_ties_even() - 3.0));
+    }
+    let declared = md
+        .co_simulation
+        .as_ref()
+        .and_then(|c| c.fixed_internal_step_size)
+        .or(md.default_experiment.and_then(|d| d.step_size));
+    match declared {
+        Some(h) if h > 0.0 => at_most_1000(h),
+        _ => auto_interval(t),
+    }
+}
+
+/// FMPy's `auto_interval`: a round step that divides `t` into 500 to 1000 steps.
+fn auto_interval(t: f64) -> f64 {
+    let mut h = 10f64.powf(t.log10().round_ties_even() - 3.0);
+    let n = t / h;
+    if n >= 2500.0 {
+        h *= 5.0;
+    } else if n >= 2000.0 {
+        h *= 4.0;
+    } else if n >= 1000.0 {
+        h *= 2.0;
+    } else if n <= 200.0 {
+        h /= 5.0;
+    } else if n <= 250.0 {
+        h /= 4.0;
+    } else if n <= 500.0 {
+        h /= 2.0;
+    }
+    h
+}
+
+/// Rows recorded every `--output-interval / --step` steps (a whole number).
+fn decimation(args: &RunArgs) -> anyhow::Result<usize> {
+    let (Some(interval), Some(step)) = (args.output_interval, args.step) else {
+        return Ok(1);
+    };
+    let k = interval / step;
+    if !(k.is_finite() && k >= 1.0 && (k - k.round()).abs() < 1e-9 * k) {
+        bail!(
+            "--output-interval {} is not a whole number of steps of {} s",
+            tb_files::number(interval),
+            tb_files::number(step)
+        );
+    }
+    Ok(k.round() as usize)
+}
+
+/// The input file's columns other than its time (named `time`, else the first), as FMPy
+/// reads an input file.
+fn input_columns(file: &Path) -> anyhow::Result<Vec<String>> {
+    // Only the time is parsed here; the replay reads the columns.
+    let table = match tb_table::is_mdf(file) {
+        true => tb_table::Table::read_any(file),
+        false => tb_table::Table::read_path_keeping(file, &|k, _| k == 0),
+    }
+    .with_context(|| format!("--input {}", file.display()))?;
+    let header = table.names();
+    let time = header.iter().position(|n| n == "time").unwrap_or(0);
+    Ok(header
+        .iter()
+        .cloned()
+        .enumerate()
+        .filter(|(k, _)| *k != time)
+        .map(|(_, n)| n)
+        .collect())
+}
+
+/// The input a column of the input file drives: the FMU's input of that name.
+fn input_variable<'a>(
+    md: &'a ModelDescription,
+    column: &str,
+    file: &Path,
+) -> anyhow::Result<&'a ScalarVariable> {
+    let inputs: Vec<&str> = md
+        .variables
+        .iter()
+        .filter(|v| v.causality == Causality::Input)
+        .map(|v| v.name.as_str())
+        .collect();
+    match md.variable(column) {
+        Some(v) if v.causality == Causality::Input => Ok(v),
+        Some(v) => bail!(
+            "--input {}: column '{column}' is {} {}, not an input of the FMU (inputs: {})",
+            file.display(),
+            v.variability,
+            v.causality,
+            list(&inputs)
+        ),
+        None => bail!(
+            "--input {}: column '{column}' is no variable of the FMU; its inputs: {}",
+            file.display(),
+            list(&tb_fmi::import::description::closest(
+                column,
+                inputs.iter().copied(),
+                inputs.len()
+            ))
+        ),
+    }
+}
+
+fn list(names: &[&str]) -> String {
+    match names.is_empty() {
+        true => "none".into(),
+        false => names.join(", "),
+    }
+}
+
+/// The recorded columns under the FMU's own names (`h`, not `BouncingBall.h`), as FMPy
+/// writes them.
+pub fn own_names(recording: &mut tb_table::Table, instance: &str) -> anyhow::Result<()> {
+    let prefix = format!("{instance}.");
+    let names: Vec<String> = recording.names().to_vec();
+    for (k, n) in names.iter().enumerate() {
+        if let Some(own) = n.strip_prefix(&prefix) {
+            recording.rename(k, own)?;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,319 @@
+//! `twinbench run model.fmu`: one FMU on its own as `fmpy simulate` runs it (default
+//! experiment, every output in FMPy's column order, an input file by column names, start
+//! values), checked against `fmpy simulate` itself on the Reference FMUs; and FMI 3.0
+//! arrays recorded and connected by their names in a system.
+
+mod common;
+
+use common::reference;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn twinbench(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok(o: &Output, what: &str) {
+    assert!(
+        o.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// `fmpy simulate FMU --output-file OUT [extra]`.
+fn fmpy_simulate(dir: &Path, fmu: &Path, out: &str, extra: &[&str]) {
+    let o = Command::new(common::python::python())
+        .current_dir(dir)
+        .args(["-m", "fmpy.cli", "simulate"])
+        .arg(fmu)
+        .args(["--output-file", out])
+        .args(extra)
+        .output()
+        .unwrap();
+    ok(&o, "fmpy simulate");
+}
+
+/// FMPy's CSV: the header, then rows of numbers; True/False as 1/0; an array's values in
+/// one field separated by spaces, spread here into one number per element.
+fn read_fmpy(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|h| h.trim_matches('"').to_string())
+        .collect();
+    let rows: Vec<Vec<Vec<f64>>> = lines
+        .map(|l| {
+            l.split(',')
+                .map(|f| {
+                    f.split(' ')
+                        .map(|x| match x {
+                            "True" => 1.0,
+                            "False" => 0.0,
+                            x => x.parse().unwrap(),
+                        })
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    // An array column `y` of n values is y[1] … y[n] in twinbench.
+    let mut names = Vec::new();
+    for (k, h) in header.iter().enumerate() {
+        match rows[0][k].len() {
+            1 => names.push(h.clone()),
+            n => names.extend((1..=n).map(|i| format!("{h}[{i}]"))),
+        }
+    }
+    let rows = rows.into_iter().map(|r| r.concat()).collect();
+    (names, rows)
+}
+
+/// twinbench's result: the header and the numbers (the units row skipped).
+fn read_ours(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let t = tb_table::Table::read_path(path).unwrap();
+    let names = t.names().to_vec();
+    let rows = (0..t.len())
+        .map(|r| t.columns().iter().map(|c| c[r]).collect())
+        .collect();
+    (names, rows)
+}
+
+/// The same columns, rows and values (Float32 values to a float's precision: FMPy writes
+/// them as float32, twinbench as the double they widen to).
+fn assert_same(model: &str, ours: &Path, theirs: &Path) -> f64 {
+    let (n1, r1) = read_ours(ours);
+    let (n2, r2) = read_fmpy(theirs);
+    assert_eq!(n1, n2, "{model}: columns");
+    assert_eq!(r1.len(), r2.len(), "{model}: rows");
+    let mut worst: f64 = 0.0;
+    for (k, (a, b)) in r1.iter().zip(&r2).enumerate() {
+        for (c, (x, y)) in a.iter().zip(b).enumerate() {
+            let tol = if n1[c].starts_with("Float32") {
+                1e-7
+            } else {
+                1e-13
+            };
+            let d = (x - y).abs() / y.abs().max(1.0);
+            worst = worst.max(d);
+            assert!(
+                d <= tol,
+                "{model}: row {k}, {}: twinbench {x}, FMPy {y}",
+                n1[c]
+            );
+        }
+    }
+    worst
+}
+
+fn models(version: u8) -> Vec<&'static str> {
+    let mut m = reference::FMI2_MODELS.to_vec();
+    if version == 3 {
+        m.extend(["Roberts", "StateSpace"]);
+    }
+    m
+}
+
+#[test]
+fn each_reference_fmu_alone_gives_fmpy_simulates_columns_and_values() {
+    let dir = tb_testkit::scratch("run-fmu");
+    for version in [2u8, 3] {
+        for model in models(version) {
+            let fmu = reference::fmu(model, version);
+            let ours = format!("{model}{version}.csv");
+            let theirs = format!("{model}{version}.fmpy.csv");
+            // Roberts' default experiment runs to 1e8 s at an internal step of 1e-3 s (days,
+            // in any host): both stop at 1 s. Its variable-step solver sees the step sizes
+            // FMPy passes (t[n+1] - t[n]) with the grid convention (docs/cross_validation.md).
+            let (stop, fmpy_stop): (&[&str], &[&str]) = match model {
+                "Roberts" => (
+                    &["--stop", "1", "--step-convention", "grid"],
+                    &["--stop-time", "1"],
+                ),
+                _ => (&[], &[]),
+            };
+            let mut args = vec!["run", fmu.to_str().unwrap(), "--out", &ours];
+            args.extend(stop);
+            let o = twinbench(dir.path(), &args);
+            ok(&o, model);
+            // The same summary as a system's run.
+            let summary = String::from_utf8_lossy(&o.stdout);
+            assert!(summary.contains("stopped by      "), "{summary}");
+            fmpy_simulate(dir.path(), &fmu, &theirs, fmpy_stop);
+            let worst = assert_same(
+                &format!("{model} (FMI {version})"),
+                &dir.path().join(&ours),
+                &dir.path().join(&theirs),
+            );
+            println!("{model} (FMI {version}): largest relative difference from FMPy {worst:e}");
+        }
+    }
+}
+
+/// Feedthrough's inputs from a file in FMPy's format (a time column, one column per input,
+/// no units; a repeated time is a step) and a start value, with an output interval of
+/// their own (FMPy's communication step, as alone it is twinbench's).
+#[test]
+fn an_input_file_start_values_and_intervals_as_in_fmpy() {
+    let dir = tb_testkit::scratch("run-fmu-input");
+    std::fs::write(
+        dir.path().join("in.csv"),
+        "time,Float64_continuous_input,Int32_input,Boolean_input\n0,0,1,0\n0.5,1,1,0\n0.5,1,3,1\n1,-2,3,1\n",
+    )
+    .unwrap();
+    let fmu = reference::fmu("Feedthrough", 2);
+    let f = fmu.to_str().unwrap();
+    let o = twinbench(
+        dir.path(),
+        &[
+            "run",
+            f,
+            "--input",
+            "in.csv",
+            "--set",
+            "Float64_fixed_parameter=2.5",
+            "--stop",
+            "1",
+            "--output-interval",
+            "0.05",
+            "--out",
+            "ours.csv",
+        ],
+    );
+    ok(&o, "run with --input");
+    fmpy_simulate(
+        dir.path(),
+        &fmu,
+        "theirs.csv",
+        &[
+            "--input-file",
+            "in.csv",
+            "--start-values",
+            "Float64_fixed_parameter",
+            "2.5",
+            "--stop-time",
+            "1",
+            "--output-interval",
+            "0.05",
+        ],
+    );
+    let (n, rows) = read_ours(&dir.path().join("ours.csv"));
+    assert_eq!(rows.len(), 21, "every 0.05 s over 1 s");
+    assert_same(
+        "Feedthrough with inputs",
+        &dir.path().join("ours.csv"),
+        &dir.path().join("theirs.csv"),
+    );
+    // The inputs reached the outputs: the Int32 steps from 1 to 3 at 0.5 s.
+    let k = n.iter().position(|c| c == "Int32_output").unwrap();
+    assert_eq!((rows[9][k], rows[11][k]), (1.0, 3.0));
+}
+
+#[test]
+fn what_does_not_fit_is_refused_with_the_reason() {
+    let dir = tb_testkit::scratch("run-fmu-refused");
+    let fmu = reference::fmu("Feedthrough", 2);
+    let f = fmu.to_str().unwrap();
+    let refused = |args: &[&str]| {
+        let o = twinbench(dir.path(), args);
+        assert!(!o.status.success(), "{args:?} accepted");
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    // A column that is no input: the closest inputs named.
+    std::fs::write(
+        dir.path().join("bad.csv"),
+        "time,Float64_continous_input\n0,1\n1,1\n",
+    )
+    .unwrap();
+    let e = refused(&["run", f, "--input", "bad.csv"]);
+    assert!(
+        e.contains("column 'Float64_continous_input' is no variable of the FMU; its inputs: Float64_continuous_input"),
+        "{e}"
+    );
+    std::fs::write(
+        dir.path().join("out.csv"),
+        "time,Float64_continuous_output\n0,1\n1,1\n",
+    )
+    .unwrap();
+    let e = refused(&["run", f, "--input", "out.csv"]);
+    assert!(
+        e.contains("column 'Float64_continuous_output' is continuous output, not an input"),
+        "{e}"
+    );
+    // A stop before the start; an output interval that is not whole steps.
+    let e = refused(&["run", f, "--start", "2", "--stop", "1"]);
+    assert!(
+        e.contains("would end at 1 s, not after its start at 2 s"),
+        "{e}"
+    );
+    let e = refused(&["run", f, "--step", "0.3", "--output-interval", "0.5"]);
+    assert!(
+        e.contains("--output-interval 0.5 is not a whole number of steps of 0.3 s"),
+        "{e}"
+    );
+    // FMU options with a system file.
+    let sys = dir.path().join("s.toml");
+    std::fs::write(&sys, "").unwrap();
+    let e = refused(&["run", sys.to_str().unwrap(), "--stop", "1"]);
+    assert!(e.contains("--stop is for running one FMU"), "{e}");
+}
+
+/// FMI 3.0 arrays in a system: StateSpace's output vector y into another StateSpace's
+/// input vector u by their names, recorded by name; an element where an array is meant
+/// gets a message naming the elements.
+#[test]
+fn arrays_are_recorded_and_connected_by_their_names() {
+    let dir = tb_testkit::scratch("arrays");
+    let fmu = reference::fmu("StateSpace", 3);
+    let system = |connection: &str| {
+        let p: PathBuf = dir.path().join("ss.toml");
+        std::fs::write(
+            &p,
+            format!(
+                "connections = [{connection:?}]\n\n[fmus]\nss = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"ss\"\n\n[[instance]]\nname = \"b\"\nfmu = \"ss\"\n\n[experiment]\nstep = 0.1\nstop = 1\n\n[record]\nsignals = [\"a.y\", \"b.y\"]\n",
+                fmu.display().to_string()
+            ),
+        )
+        .unwrap();
+        p
+    };
+    let sys = system("a.y -> b.u");
+    let o = twinbench(
+        dir.path(),
+        &["run", sys.to_str().unwrap(), "--out", "arrays.csv"],
+    );
+    ok(&o, "arrays");
+    let (names, rows) = read_ours(&dir.path().join("arrays.csv"));
+    assert_eq!(
+        names,
+        ["time", "a.y[1]", "a.y[2]", "a.y[3]", "b.y[1]", "b.y[2]", "b.y[3]"]
+    );
+    // y = C x + D u with C = D = I and x(0) = 0: a's y starts at its u = (1, 2, 3), and b,
+    // driven by a's y, starts at the same.
+    assert_eq!(&rows[0][1..], &[1.0, 2.0, 3.0, 1.0, 2.0, 3.0]);
+    // b's input follows a's output, so b grows faster than a (its u grows too).
+    let last = rows.last().unwrap();
+    for i in 1..=3 {
+        assert!(
+            last[3 + i] > last[i],
+            "b.y[{i}] {} vs a.y[{i}] {}",
+            last[3 + i],
+            last[i]
+        );
+    }
+    let sys = system("a.y[1] -> b.u");
+    let o = twinbench(dir.path(), &["run", sys.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("'b.u' is an array of 3 elements") && e.contains("'b.u[1]' … 'b.u[3]'"),
+        "{e}"
+    );
+}
