@@ -218,13 +218,28 @@ fn pack_writes_the_shipped_fmus_to_one_documented_place_and_the_test_fmu_only_wh
 }
 
 #[test]
-fn run_on_an_fmu_says_what_run_takes() {
-    let e = failure(&root(), &["run", common::fmu("vehicle").to_str().unwrap()]);
+fn run_on_an_fmu_runs_it_and_on_another_zip_says_what_run_takes() {
+    let dir = tb_testkit::scratch("first-hour-zip");
+    let d = dir.path();
+    // An FMU runs on its own (as `fmpy simulate` runs it).
+    let out = success(
+        d,
+        &[
+            "run",
+            common::fmu("faulty").to_str().unwrap(),
+            "--stop",
+            "0.1",
+        ],
+    );
+    assert!(out.contains("stopped by      stop time 0.1 s"), "{out}");
+    // A ZIP archive under another name: what `run` takes.
+    std::fs::copy(common::fmu("vehicle"), d.join("vehicle.zip")).unwrap();
+    let e = failure(d, &["run", "vehicle.zip"]);
     assert!(
         e.contains("is a ZIP archive (an FMU?), not a system file"),
         "{e}"
     );
-    assert!(e.contains("SSP"), "{e}");
+    assert!(e.contains("SSP") && e.contains(".fmu"), "{e}");
     assert!(!e.contains("UTF-8"), "{e}");
 }
 

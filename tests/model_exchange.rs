@@ -476,3 +476,72 @@ fn the_system_tolerance_reaches_the_solver() {
         .fold(0.0f64, f64::max);
     assert!(worst > 1e-9 && worst < 1e-2, "{worst:e}");
 }
+
+/// An ME instance through the paths a Co-Simulation one takes: exported to SSP and run from
+/// the package (`implementation="ModelExchange"` keeps the interface), traced, and run a
+/// second time after a reset, each bit for bit the same as the plain run.
+#[test]
+fn ssp_trace_and_reset_keep_a_model_exchange_instance() {
+    let dir = tb_testkit::scratch("me-paths");
+    let bb = reference::fmu("BouncingBall", 2);
+    let text = system_text(
+        "",
+        &[("m", &bb, "interface = \"model-exchange\"")],
+        "[experiment]\nstep = 0.01\nstop = 3\n[record]\nsignals = [\"m.h\", \"m.v\"]\n",
+    );
+    let sys = dir.path().join("bb.toml");
+    std::fs::write(&sys, &text).unwrap();
+    let plain = run(&text, dir.path(), "plain").unwrap();
+    let exe = env!("CARGO_BIN_EXE_twinbench");
+    let cli = |args: &[&str]| {
+        let o = std::process::Command::new(exe)
+            .current_dir(dir.path())
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    };
+    cli(&["export-ssp", "bb.toml", "--out", "bb.ssp"]);
+    cli(&[
+        "run",
+        "bb.ssp",
+        "--out",
+        "from_ssp.csv",
+        "--trace-fmi",
+        "trace.txt",
+    ]);
+    let from_ssp = Table::read_path(dir.path().join("from_ssp.csv")).unwrap();
+    for c in ["m.h", "m.v"] {
+        assert_eq!(
+            from_ssp.require(c).unwrap(),
+            plain.require(c).unwrap(),
+            "{c} from the SSP"
+        );
+    }
+    let trace = std::fs::read_to_string(dir.path().join("trace.txt")).unwrap();
+    assert!(
+        trace.contains("m") && trace.matches("DoStep").count() >= 300,
+        "{}",
+        &trace[..trace.len().min(2000)]
+    );
+    // A second run of the same Simulation (the instance reset, as an optimisation's
+    // candidates reuse it).
+    let path = dir.path().join("again.toml");
+    let file = SystemFile::parse(&text, &path).unwrap();
+    let plan = Plan::compile(
+        file,
+        &path,
+        Arc::new(FmuCache::temporary(false).unwrap()),
+        &common::worker_options(),
+    )
+    .unwrap();
+    let mut sim = Simulation::new(plan).unwrap();
+    sim.echo_fmu_log = false;
+    sim.run().unwrap();
+    sim.run().unwrap();
+    assert!(same_bits(&sim.recording, &plain), "the second run");
+}

@@ -387,7 +387,7 @@ impl SystemFile {
         let text = String::from_utf8(bytes).map_err(|e| super::SystemError::File {
             path: path.to_path_buf(),
             message: match e.as_bytes().starts_with(b"PK\x03\x04") {
-                true => "is a ZIP archive (an FMU?), not a system file: `run` takes a system file (TOML) or an SSP 1.0 package (.ssp); a system with one instance runs one FMU".into(),
+                true => "is a ZIP archive (an FMU?), not a system file: `run` takes a system file (TOML), an SSP 1.0 package (.ssp) or an FMU named .fmu (run on its own)".into(),
                 false => format!(
                     "is not a text file (byte {} is not UTF-8): a system file is TOML",
                     e.utf8_error().valid_up_to()

@@ -328,7 +328,9 @@ impl LoadedFmu {
                     .into(),
             );
         }
-        if self.binary_required && !self.dir.join(&entry).is_file() {
+        // In the archive (the manifest of what was unpacked): a missing or changed file on
+        // disk is repaired when the library is loaded (`checked_library_of`).
+        if self.binary_required && self.unpacked_file(&entry).is_none() {
             return Err(format!(
                 "no {entry}, the {} library (the FMU has no binary of it for this platform)",
                 interface.element()
@@ -1213,6 +1215,14 @@ fn check_description(
             });
         }
     };
+    if let Some(what) = md.unsupported.first() {
+        return Err(FmuError::Description {
+            path: fmu.to_path_buf(),
+            message: format!(
+                "the FMU needs {what}; twinbench runs FMI 3.0 Co-Simulation without clocks"
+            ),
+        });
+    }
     let id = md
         .model_identifier(interface)
         .expect("the interface is declared")
