@@ -300,6 +300,10 @@ fn experiment_values_that_cannot_be_run_are_refused() {
             "s over 1 s is 1.000e300 macro steps, more than 1e12: a larger step",
         ),
         (
+            "step = 1e308\nstop = 1.0",
+            "experiment.step = 1e308 s is longer than the whole run (1 s): not one step would be taken",
+        ),
+        (
             "step = 1e-9\nstop = \"int.x >= 1\"\nmax_time = 1e4",
             "is 1.000e13 macro steps, more than 1e12",
         ),
@@ -344,7 +348,7 @@ fn a_file_that_is_not_a_system_file_says_what_it_is() {
         .to_string();
     assert_contains(
         &e,
-        &["gain.fmu: is a ZIP archive (an FMU?), not a system file: `run` takes a system file (TOML) or an SSP 1.0 package (.ssp)"],
+        &["gain.fmu: is a ZIP archive (an FMU?), not a system file: `run` takes a system file (TOML), an SSP 1.0 package (.ssp) or an FMU named .fmu"],
     );
     let bin = b.path("bin.toml");
     std::fs::write(&bin, [b'a', 0xff, b'b']).unwrap();

@@ -5,7 +5,8 @@
 //! wait for a FIFO's writer, and a device cannot feed the reader until memory runs out.
 //!
 //! The limits (`docs/robustness.md`, "Input files"):
-//! - [`Limit::CONFIG`], 16 MiB: system, study and channel-map files, SSP descriptions;
+//! - [`Limit::CONFIG`], 16 MiB: system, study and channel-map files (an SSP package's
+//!   descriptions, unpacked from the package, have the limit of an FMU's description);
 //! - [`Limit::DATA`], 2 GiB: measurements (CSV, MDF 4), replays, tracks, target speeds,
 //!   simulation results.
 

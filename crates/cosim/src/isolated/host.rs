@@ -491,7 +491,8 @@ fn read_stderr(mut err: impl Read, mut keep: impl FnMut(String), who: &str) {
     let mut cut = false;
     let mut echoed = 0usize;
     let mut emit = |line: &mut Vec<u8>, cut: &mut bool| {
-        let mut text = String::from_utf8_lossy(line).into_owned();
+        // Control characters escaped: a worker must not drive the user's terminal.
+        let mut text = tb_files::shown(&String::from_utf8_lossy(line), STDERR_LINE_BYTES, false);
         if *cut {
             text.push_str(" [line cut]");
         }
@@ -789,6 +790,18 @@ impl Drop for IsolatedBackend {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_workers_stderr_reaches_the_log_escaped_and_cut() {
+        let mut kept = Vec::new();
+        let mut bytes = b"plain\n\x1b[2J\x1b]0;owned\x07 cleared\r\n".to_vec();
+        bytes.extend(std::iter::repeat_n(b'x', STDERR_LINE_BYTES + 10));
+        read_stderr(&bytes[..], |l| kept.push(l), "w");
+        assert_eq!(kept[0], "plain");
+        assert_eq!(kept[1], "\\u{1b}[2J\\u{1b}]0;owned\\u{7} cleared\\u{d}");
+        assert!(kept[2].ends_with(" [line cut]") && kept[2].len() < STDERR_LINE_BYTES + 64);
+        assert!(kept.iter().all(|l| !l.chars().any(char::is_control)));
+    }
 
     #[test]
     fn stderr_without_newlines_is_kept_in_bounded_lines() {

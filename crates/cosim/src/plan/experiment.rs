@@ -47,6 +47,18 @@ pub(super) fn check(file: &SystemFile, ctx_file: &str) -> Result<(), SystemError
         StopConfig::Word(_) => e.max_time,
     };
     let steps = span / e.step;
+    // The master drops a last step shorter than 1e-9 of a step (rounding): a step that
+    // much longer than the whole run would run nothing and report success.
+    if matches!(e.stop, StopConfig::Time(_)) && span > 0.0 && span <= e.step * 1e-9 {
+        return Err(invalid(
+            ctx_file,
+            format!(
+                "experiment.step = {} s is longer than the whole run ({} s): not one step would be taken",
+                tb_files::number(e.step),
+                tb_files::number(span)
+            ),
+        ));
+    }
     if span.is_finite() && (steps.is_nan() || steps > MAX_STEPS) {
         return Err(invalid(
             ctx_file,
