@@ -586,3 +586,31 @@ fn n28_a_byte_order_mark_is_read_and_huge_numbers_print_short() {
     assert!(e.contains("1e308 is outside the declared range"), "{e}");
     assert!(!e.contains("0000000000"), "{e}");
 }
+
+/// N12: a String value of 2 MiB read from an FMU (the test FMU's `tag_out` echoes its
+/// `tag`) is refused with its size, in process and isolated, instead of being copied into
+/// every recorded row until memory runs out.
+#[test]
+fn n12_a_huge_string_from_an_fmu_is_refused_with_its_size() {
+    let dir = tb_testkit::scratch("n12");
+    let fmu = common::fmu("faulty");
+    let text = format!(
+        "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.tag\" = \"{}\"\n\n[experiment]\nstep = 0.1\nstop = 0.5\n\n[record]\nsignals = [\"a.y\", \"a.tag_out\"]\n",
+        fmu.display().to_string(),
+        "x".repeat(2 << 20)
+    );
+    std::fs::write(dir.path().join("big.toml"), text).unwrap();
+    for isolate in [false, true] {
+        let mut args = vec!["run", "big.toml"];
+        if isolate {
+            args.push("--isolate");
+        }
+        let e = failure_in(dir.path(), &args);
+        assert!(
+            e.contains("fmi2GetString: value reference 9 holds")
+                && e.contains("more than the 1 MiB twinbench exchanges and records"),
+            "isolate {isolate}: {}",
+            &e[..e.len().min(2000)]
+        );
+    }
+}
