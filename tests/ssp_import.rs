@@ -690,3 +690,56 @@ stop = 0.1
         2.0
     );
 }
+
+/// N29: what a package says that defines nothing or contradicts itself is refused, not
+/// taken: a unit with factor 0 (it zeroed a start value), one parameter set twice in one
+/// parameter set (the last one won); and a value in a unit given for a variable without one
+/// is converted, not taken as a number in the variable's unit.
+#[test]
+fn n29_degenerate_units_and_parameter_sets_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let zero = hand_ssd("", "").replace("factor=\"0.2777777777777778\"", "factor=\"0\"");
+    let e = load_err(&hand_package(dir.path(), "zero.ssp", &zero, ROTOR_SSV, ""));
+    assert!(
+        e.contains("unit 'km/h': factor 0.0 and offset 0.0 do not define a unit (a finite, non-zero factor)"),
+        "{e}"
+    );
+    let twice = format!(
+        "{ROTOR_SSV}\n    <ssv:Parameter name=\"inertia\"><ssv:Real value=\"3.0\" unit=\"kg.m2\"/></ssv:Parameter>"
+    );
+    let e = load_err(&hand_package(
+        dir.path(),
+        "twice.ssp",
+        &hand_ssd("", ""),
+        &twice,
+        "",
+    ));
+    assert!(
+        e.contains("is set twice in this parameter set (first at line"),
+        "{e}"
+    );
+    // The Feedthrough's unitless parameter given in percent: converted (150 % = 1.5).
+    let percent = hand_ssd("", "").replace(
+        "<ssv:Real value=\"1.5\"/>",
+        "<ssv:Real value=\"150\" unit=\"%\"/>",
+    );
+    let ssp = hand_package(dir.path(), "percent.ssp", &percent, ROTOR_SSV, "");
+    let cache = Arc::new(FmuCache::temporary(false).unwrap());
+    let file = Plan::read_system(&ssp, &cache).unwrap();
+    let x = file
+        .parameters
+        .get("conv.Float64_fixed_parameter")
+        .and_then(|v| v.as_float())
+        .unwrap();
+    assert!((x - 1.5).abs() < 1e-15, "150 % = {x}");
+    // A time for it: refused (500 ms used to be taken as 500).
+    let ms = hand_ssd("", "").replace(
+        "<ssv:Real value=\"1.5\"/>",
+        "<ssv:Real value=\"500\" unit=\"ms\"/>",
+    );
+    let e = load_err(&hand_package(dir.path(), "ms.ssp", &ms, ROTOR_SSV, ""));
+    assert!(
+        e.contains("parameter 'conv.Float64_fixed_parameter': incompatible units 'ms' and '1'"),
+        "{e}"
+    );
+}
