@@ -94,30 +94,25 @@ fn quoted(s: &str) -> String {
 /// Integer and Enumeration, Boolean; FMI 3.0: Float32 … UInt64 with Enumerations among the
 /// Int64s, Boolean), each group in model order. An FMI 3.0 array is one column per element.
 pub fn outputs(md: &ModelDescription) -> Vec<&ScalarVariable> {
-    let mut outputs: Vec<(usize, bool, &ScalarVariable)> = md
-        .variables
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| v.causality == Causality::Output && v.name != "time")
-        .filter_map(|(k, v)| fmpy_group(v).map(|g| (g, is_fmi3_alias(md, k), v)))
-        .collect();
-    // Stable: model order within a group; FMPy lists an FMI 3.0 `<Alias>` after every
-    // declared variable.
+    // An FMI 3.0 `<Alias>` shares its value (type, value reference, element) with a
+    // variable declared before it; FMPy lists aliases after every declared variable.
+    let mut declared = std::collections::HashSet::new();
+    let mut outputs: Vec<(usize, bool, &ScalarVariable)> = Vec::new();
+    for v in &md.variables {
+        let alias = v
+            .fmi3
+            .as_ref()
+            .is_some_and(|s| !declared.insert((s.ty, s.vr, s.index)));
+        if v.causality != Causality::Output || v.name == "time" {
+            continue;
+        }
+        if let Some(g) = fmpy_group(v) {
+            outputs.push((g, alias, v));
+        }
+    }
+    // Stable: model order within a group, aliases last.
     outputs.sort_by_key(|(g, alias, _)| (*g, *alias));
     outputs.into_iter().map(|(_, _, v)| v).collect()
-}
-
-/// Whether variable `k` is an FMI 3.0 `<Alias>`: it shares its value (type, value reference
-/// and element) with a variable declared before it.
-fn is_fmi3_alias(md: &ModelDescription, k: usize) -> bool {
-    let Some(slot) = &md.variables[k].fmi3 else {
-        return false;
-    };
-    md.variables[..k].iter().any(|v| {
-        v.fmi3
-            .as_ref()
-            .is_some_and(|s| s.ty == slot.ty && s.vr == slot.vr && s.index == slot.index)
-    })
 }
 
 /// FMPy's recorder group of a variable's type (None: not recorded).

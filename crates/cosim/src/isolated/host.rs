@@ -311,6 +311,14 @@ impl IsolatedBackend {
         self.isolated_error(function, cause, self.stderr_lines())
     }
 
+    /// The FMU's log lines of a failed call, kept for reports in place of earlier ones.
+    fn keep_log(&mut self, log: &[String]) {
+        self.sink.clear();
+        for l in log {
+            self.sink.keep(l.clone());
+        }
+    }
+
     /// The error a request stopped with, as the FMU's (its log kept for reports).
     fn failure(&mut self, function: &str, f: Failure) -> FmuError {
         match f {
@@ -320,10 +328,7 @@ impl IsolatedBackend {
                 time,
                 log,
             } => {
-                self.sink.clear();
-                for l in &log {
-                    self.sink.keep(l.clone());
-                }
+                self.keep_log(&log);
                 FmuError::call(&self.name, function, status, time, log)
             }
             Failure::Call3 {
@@ -332,10 +337,7 @@ impl IsolatedBackend {
                 time,
                 log,
             } => {
-                self.sink.clear();
-                for l in &log {
-                    self.sink.keep(l.clone());
-                }
+                self.keep_log(&log);
                 FmuError::Call3 {
                     instance: self.name.clone(),
                     function,
@@ -351,10 +353,7 @@ impl IsolatedBackend {
                 time,
                 log,
             } => {
-                self.sink.clear();
-                for l in &log {
-                    self.sink.keep(l.clone());
-                }
+                self.keep_log(&log);
                 FmuError::ModelExchange {
                     fmu: std::path::PathBuf::from(fmu).into_boxed_path(),
                     instance: self.name.clone(),
