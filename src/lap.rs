@@ -86,7 +86,7 @@ pub fn lap_length(m: &Measurement) -> Result<f64, LapError> {
     }
     if let Some(k) = v.iter().position(|x| x.abs() > MAX_SPEED_M_S) {
         return Err(LapError::Invalid(format!(
-            "{}: sample {} (t = {} s) has v = {:?} m/s, more than the {MAX_SPEED_M_S} m/s a car's lap may have: a logger's error value?",
+            "{}: sample {} (t = {} s) has v = {:?} m/s, more than the {MAX_SPEED_M_S} m/s a car's lap may have: a logger's error value, or a speed in km/h or mph without its unit declared?",
             m.table().source(),
             k + 1,
             t[k],
@@ -102,6 +102,63 @@ pub fn lap_length(m: &Measurement) -> Result<f64, LapError> {
         )));
     }
     Ok(length)
+}
+
+/// How a speed logged in km/h or mph without a declared unit shows against the other
+/// signals: the ratio of the speed read as m/s to the speed the distance or a_x implies.
+const SPEED_UNITS: [(&str, f64); 2] = [("km/h", 3.6), ("mph", 3600.0 / 1609.344)];
+
+/// A speed whose unit the file does not declare (no units row, an empty unit) is taken as
+/// m/s; one logged in km/h or mph would then be a target 3.6 or 2.24 times too fast. The
+/// file's distance column (∫v dt against it) or a_x (dv/dt against it, least squares) shows
+/// the factor: within 10 % of km/h's or mph's, the lap is refused with its unit named.
+pub fn check_speed_unit(m: &Measurement) -> Result<(), LapError> {
+    let table = m.table();
+    let Some(iv) = table.names().iter().position(|n| n == "v") else {
+        return Ok(());
+    };
+    let declared = table
+        .units()
+        .is_some_and(|u| u.get(iv).is_some_and(|u| !u.trim().is_empty()));
+    if declared {
+        return Ok(());
+    }
+    let (t, v) = (m.time(), table.column_at(iv));
+    let ratio = match (m.distance_source(), m.signal("a_x")?) {
+        (tb_compare::DistanceSource::Column, _) => {
+            let d = m.distance();
+            let integrated = tb_compare::measurement::cumulative_trapezoid(t, v);
+            let driven = d[d.len() - 1] - d[0];
+            (driven > 0.0).then(|| integrated[integrated.len() - 1] / driven)
+        }
+        (_, Some(ax)) if t.len() > 2 => {
+            let (mut num, mut den) = (0.0, 0.0);
+            for k in 1..t.len() - 1 {
+                let dv = (v[k + 1] - v[k - 1]) / (t[k + 1] - t[k - 1]);
+                num += dv * ax[k];
+                den += ax[k] * ax[k];
+            }
+            (den > 0.0).then(|| num / den)
+        }
+        _ => None,
+    };
+    let Some(ratio) = ratio.filter(|r| r.is_finite()) else {
+        return Ok(());
+    };
+    match SPEED_UNITS
+        .iter()
+        .find(|(_, f)| (ratio / f - 1.0).abs() < 0.1)
+    {
+        Some((unit, f)) => Err(LapError::Invalid(format!(
+            "{}: v has no unit and looks like {unit}, not m/s: read as m/s it is {ratio:.2} times the speed {} implies ({unit}: {f:.2}); declare its unit (a units row under the CSV header with `{unit}` under v, or the MDF channel's unit)",
+            table.source(),
+            match m.distance_source() {
+                tb_compare::DistanceSource::Column => "the distance column",
+                tb_compare::DistanceSource::IntegratedFromSpeed => "a_x",
+            }
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// `v` resampled onto `grid` by distance (linear, held at the ends).
@@ -402,9 +459,26 @@ fn wheel_radius() -> f64 {
     vehicle::VehicleVars::default().wheel_radius
 }
 
-/// Writes the lap's files into `o.out` (created if needed).
+/// Writes the lap's files into `o.out` (created if needed). A lap refused leaves no
+/// folder behind that this call created.
 pub fn prepare(o: &LapOptions) -> Result<LapFiles, LapError> {
+    let created = !o.out.exists();
+    let r = prepare_in(o);
+    if r.is_err() && created && o.out.is_dir() {
+        let _ = std::fs::remove_dir_all(&o.out);
+    }
+    r
+}
+
+fn prepare_in(o: &LapOptions) -> Result<LapFiles, LapError> {
     let m = Measurement::load(&o.measurement, &o.channels)?;
+    check_speed_unit(&m)?;
+    // Everything that can refuse the lap before its folder is made.
+    let lap = lap_length(&m)?;
+    let track_text = match &o.track {
+        Some(p) => Some(given_track(p, lap)?),
+        None => None,
+    };
     let mut warnings = Vec::new();
     std::fs::create_dir_all(&o.out).map_err(|e| {
         LapError::Invalid(format!(
@@ -435,11 +509,6 @@ pub fn prepare(o: &LapOptions) -> Result<LapFiles, LapError> {
             source,
         })?;
     }
-    let lap = lap_length(&m)?;
-    let track_text = match &o.track {
-        Some(p) => Some(given_track(p, lap)?),
-        None => None,
-    };
     let t = m.time();
     let lap_time = t[t.len() - 1] - t[0];
     let target_speed = o.out.join("target_speed.csv");

@@ -1,5 +1,5 @@
-//! Benchmark (ignored by default; `cargo test --release --test optimize_speedup -- --ignored
-//! --nocapture`): the same 16 full-lap candidates evaluated through the study's parallel
+//! The slow tier (`--features slow-tests`; `cargo test --release --features slow-tests --test
+//! optimize_speedup -- --nocapture` prints the figures): the same 16 full-lap candidates evaluated through the study's parallel
 //! path with 1 and with 2 threads; prints laps per second and the speedup, and checks that
 //! the costs are bitwise the same.
 
@@ -47,7 +47,6 @@ impl Problem for Lift<'_> {
 }
 
 #[test]
-#[ignore]
 fn speedup_from_1_to_2_threads() {
     common::fmu_dir();
     let root = twinbench::pack::workspace_root();

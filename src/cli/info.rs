@@ -124,10 +124,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
         cs.can_handle_variable_communication_step_size
     );
     if let Some(d) = md.default_experiment {
-        println!(
-            "default experiment: start {:?} stop {:?} step {:?}",
-            d.start_time, d.stop_time, d.step_size
-        );
+        println!("default experiment: {}", default_experiment(&d));
     }
     match &check {
         LibraryCheck::NotLoaded => println!(
@@ -177,4 +174,38 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// `start 0 s, stop 100 s, step 0.001 s, tolerance 1e-6`: the attributes the FMU gives.
+pub fn default_experiment(d: &tb_fmi::import::description::DefaultExperiment) -> String {
+    let parts: Vec<String> = [
+        ("start", d.start_time, " s"),
+        ("stop", d.stop_time, " s"),
+        ("step", d.step_size, " s"),
+        ("tolerance", d.tolerance, ""),
+    ]
+    .iter()
+    .filter_map(|(name, v, unit)| v.map(|v| format!("{name} {}{unit}", tb_files::number(v))))
+    .collect();
+    match parts.is_empty() {
+        true => "none of start, stop, step and tolerance given".into(),
+        false => parts.join(", "),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_default_experiment_is_said_in_seconds_without_option_wrappers() {
+        let d = tb_fmi::import::description::DefaultExperiment {
+            start_time: Some(0.0),
+            stop_time: Some(100.0),
+            step_size: Some(0.001),
+            tolerance: None,
+        };
+        assert_eq!(
+            super::default_experiment(&d),
+            "start 0 s, stop 100 s, step 0.001 s"
+        );
+    }
 }

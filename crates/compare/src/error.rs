@@ -79,8 +79,20 @@ pub enum Error {
     #[error("signal `{signal}`: {reason}")]
     Degenerate { signal: String, reason: String },
 
-    #[error("invalid settings: {0}")]
+    /// A setting or file that cannot be used; the message names the file and what was
+    /// expected.
+    #[error("{0}")]
     Settings(String),
+
+    /// A measurement without one of the signals every measurement needs: the channel map
+    /// entry that would supply it is suggested.
+    #[error("{file}: missing required column `{signal}` (columns present: {available}); {hint}")]
+    MissingSignal {
+        file: String,
+        signal: String,
+        available: String,
+        hint: String,
+    },
 }
 
 #[cfg(test)]

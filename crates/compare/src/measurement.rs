@@ -16,6 +16,26 @@ use tb_table::{Table, TableError};
 /// Columns that must be present in a measurement.
 pub const REQUIRED_COLUMNS: [&str; 6] = ["time", "v", "Fz_fl", "Fz_fr", "Fz_rl", "Fz_rr"];
 
+/// Every signal a channel map can name: the required ones, the distance, the accelerations,
+/// the pedals and the wheel speeds (`data/README.md`).
+pub const SIGNALS: [&str; 15] = [
+    "time",
+    "distance",
+    "v",
+    "a_x",
+    "a_y",
+    "Fz_fl",
+    "Fz_fr",
+    "Fz_rl",
+    "Fz_rr",
+    "accel_pedal",
+    "brake_pedal",
+    "omega_fl",
+    "omega_fr",
+    "omega_rl",
+    "omega_rr",
+];
+
 /// Where the distance came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DistanceSource {
@@ -44,7 +64,9 @@ impl Measurement {
     /// Validates a table as a measurement.
     pub fn from_table(mut table: Table) -> Result<Self> {
         for c in REQUIRED_COLUMNS {
-            table.require(c)?;
+            if table.find(c)?.is_none() {
+                return Err(missing_signal(&table, c));
+            }
         }
         // Every number finite (text columns aside: labels a logger writes); report the
         // earliest row (then the leftmost column).
@@ -108,6 +130,33 @@ impl Measurement {
     /// A column by name, or a missing-column error (for callers that need e.g. the pedals).
     pub fn require(&self, name: &str) -> Result<&[f64]> {
         Ok(self.table.require(name)?)
+    }
+}
+
+/// A required signal the table lacks, with the channel map entry that would supply it: the
+/// column that differs only in case (`time = "Time"`), else the closest names.
+fn missing_signal(table: &Table, signal: &str) -> Error {
+    let names = table.names();
+    let same_but_case = names.iter().find(|n| n.eq_ignore_ascii_case(signal));
+    let hint = match same_but_case {
+        Some(n) => format!(
+            "the column `{n}` differs only in case: map it with `{signal} = \"{n}\"` in the channel map ([channels] of `lap --channels`, [measurement.channels] in a study)"
+        ),
+        None => format!(
+            "map the file's channel to it with `{signal} = \"<channel>\"` in the channel map ([channels] of `lap --channels`, [measurement.channels] in a study); closest columns: {}",
+            tb_fmi::import::description::closest(
+                signal,
+                names.iter().map(String::as_str),
+                3
+            )
+            .join(", ")
+        ),
+    };
+    Error::MissingSignal {
+        file: table.source().into(),
+        signal: signal.into(),
+        available: names.join(", "),
+        hint,
     }
 }
 
@@ -214,7 +263,31 @@ impl ChannelMap {
             })?;
         let f: File = toml::from_str(&text)
             .map_err(|e| Error::Settings(format!("{}: {e}", path.display())))?;
+        f.channels.check(&path.display().to_string())?;
         Ok(f.channels)
+    }
+
+    /// Every key is a signal twinbench knows ([`SIGNALS`]): `speed = "GPS_Speed"` is refused
+    /// with the keys a map can have, not ignored until `v` is found missing. `source` names
+    /// the map (its file, or the study) in the message.
+    pub fn check(&self, source: &str) -> Result<()> {
+        for key in self.0.keys() {
+            if !SIGNALS.contains(&key.as_str()) {
+                use tb_fmi::import::description::{closest, edit_distance};
+                let near = closest(key, SIGNALS, 1)
+                    .into_iter()
+                    .find(|c| edit_distance(key, c) <= 2.max(key.len() / 3));
+                return Err(Error::Settings(format!(
+                    "{source}: channel map: unknown signal `{key}`{} (the signals a map names: {})",
+                    match near {
+                        Some(c) => format!(" (did you mean `{c}`?)"),
+                        None => String::new(),
+                    },
+                    SIGNALS.join(", ")
+                )));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -224,8 +297,9 @@ impl Measurement {
     /// channel units, a CSV units row) to SI; then validated as [`Measurement::from_table`]
     /// does. A missing channel, an unknown or incompatible unit name the file and channel.
     pub fn load(path: &Path, map: &ChannelMap) -> Result<Self> {
-        let mut table = Table::read_any(path)?;
         let file = path.display().to_string();
+        map.check(&format!("channel map for {file}"))?;
+        let mut table = Table::read_any(path)?;
         for (signal, channel) in &map.0 {
             let i = table
                 .names()

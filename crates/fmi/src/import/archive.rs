@@ -949,14 +949,9 @@ pub fn library_error(fmu: &Path, fmi_version: &str, id: &str, e: FmuError) -> Fm
         "2.0"
     };
     match e {
-        FmuError::Load { message, .. } => FmuError::Load {
+        FmuError::Load { path, message } => FmuError::Load {
             path: fmu.to_path_buf(),
-            message: format!(
-                "{entry}: {}",
-                message
-                    .rsplit_once(".so: ")
-                    .map_or(message.as_str(), |(_, m)| m)
-            ),
+            message: load_problem(&entry, &path, &message),
         },
         FmuError::MissingSymbol { symbol, .. } => FmuError::Archive {
             path: fmu.to_path_buf(),
@@ -971,6 +966,28 @@ pub fn library_error(fmu: &Path, fmi_version: &str, id: &str, e: FmuError) -> Fm
         },
         other => other,
     }
+}
+
+/// The loader's message for the library `entry` (loaded from `path`) in the archive's terms:
+/// dlopen's text starts with the path it was given (a store folder, meaningless to the
+/// user), then names the file that failed, which is a dependency of the library when the
+/// library itself is present (`libSimulationRuntimeC.so: cannot open shared object file`).
+fn load_problem(entry: &str, path: &Path, message: &str) -> String {
+    let rest = message
+        .strip_prefix(&format!("{}: ", path.display()))
+        .unwrap_or(message);
+    let own = Path::new(entry).file_name().and_then(|n| n.to_str());
+    match rest.split_once(": ") {
+        Some((dep, why)) if is_library_name(dep) && Some(dep) != own => {
+            format!("{entry} needs the library {dep}, which cannot be loaded: {why} (the FMU does not bring it: install it or put its folder on LD_LIBRARY_PATH)")
+        }
+        _ => format!("{entry}: {rest}"),
+    }
+}
+
+/// `libfoo.so`, `libfoo.so.3`, `/usr/lib/libfoo.so.1.2`: a shared library's name.
+fn is_library_name(s: &str) -> bool {
+    !s.contains(' ') && (s.ends_with(".so") || s.contains(".so."))
 }
 
 /// A poisoned lock only means another thread panicked while holding it; the maps stay
@@ -1616,6 +1633,44 @@ fn extract_into(
     write(manifest::MANIFEST, manifest.to_text().as_bytes())?;
     write(".complete", b"")?;
     Ok(manifest)
+}
+
+#[cfg(test)]
+mod load_messages {
+    use super::*;
+
+    #[test]
+    fn a_missing_dependency_is_named_not_the_fmus_own_library() {
+        let path = Path::new("/store/ab12/binaries/linux64/Model.so");
+        let m = load_problem(
+            "binaries/linux64/Model.so",
+            path,
+            "/store/ab12/binaries/linux64/Model.so: libSimulationRuntimeC.so: cannot open shared object file: No such file or directory",
+        );
+        assert!(
+            m.starts_with("binaries/linux64/Model.so needs the library libSimulationRuntimeC.so, which cannot be loaded: cannot open shared object file"),
+            "{m}"
+        );
+        // The library itself missing or broken: its own name and the reason.
+        let m = load_problem(
+            "binaries/linux64/Model.so",
+            path,
+            "/store/ab12/binaries/linux64/Model.so: cannot open shared object file: No such file or directory",
+        );
+        assert_eq!(m, "binaries/linux64/Model.so: cannot open shared object file: No such file or directory");
+        let m = load_problem(
+            "binaries/linux64/Model.so",
+            path,
+            "/store/ab12/binaries/linux64/Model.so: undefined symbol: foo",
+        );
+        assert_eq!(m, "binaries/linux64/Model.so: undefined symbol: foo");
+        let m = load_problem(
+            "binaries/linux64/Model.so",
+            path,
+            "/store/ab12/binaries/linux64/Model.so: libgfortran.so.3: cannot open shared object file: No such file or directory",
+        );
+        assert!(m.contains("needs the library libgfortran.so.3,"), "{m}");
+    }
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@
 
 use std::cell::RefCell;
 use std::ffi::{c_char, c_int, c_long, c_void, CStr};
+use std::ptr::NonNull;
 
 type SunContext = *mut c_void;
 type NVector = *mut c_void;
@@ -28,32 +29,129 @@ const CV_NORMAL: c_int = 1;
 const CV_SUCCESS: c_int = 0;
 const CV_ROOT_RETURN: c_int = 2;
 const CV_WARNING: c_int = 99;
+const CV_MEM_FAIL: c_int = -20;
+#[cfg_attr(tb_cvode, allow(dead_code))]
+const CV_MEM_NULL: c_int = -21;
+const CV_ILL_INPUT: c_int = -22;
 
-extern "C" {
-    fn SUNContext_Create(comm: *mut c_void, ctx: *mut SunContext) -> c_int;
-    fn SUNContext_Free(ctx: *mut SunContext) -> c_int;
-    fn N_VNew_Serial(length: SunIndex, ctx: SunContext) -> NVector;
-    fn N_VDestroy(v: NVector);
-    fn N_VGetArrayPointer(v: NVector) -> *mut f64;
-    fn SUNDenseMatrix(m: SunIndex, n: SunIndex, ctx: SunContext) -> SunMatrix;
-    fn SUNMatDestroy(a: SunMatrix);
-    fn SUNLinSol_Dense(y: NVector, a: SunMatrix, ctx: SunContext) -> SunLinearSolver;
-    fn SUNLinSolFree(s: SunLinearSolver) -> c_int;
-    fn CVodeCreate(lmm: c_int, ctx: SunContext) -> *mut c_void;
-    fn CVodeInit(mem: *mut c_void, f: RhsFn, t0: f64, y0: NVector) -> c_int;
-    fn CVodeReInit(mem: *mut c_void, t0: f64, y0: NVector) -> c_int;
-    fn CVodeSVtolerances(mem: *mut c_void, reltol: f64, abstol: NVector) -> c_int;
-    fn CVodeRootInit(mem: *mut c_void, nrtfn: c_int, g: Option<RootFn>) -> c_int;
-    fn CVodeSetLinearSolver(mem: *mut c_void, ls: SunLinearSolver, a: SunMatrix) -> c_int;
-    fn CVodeSetMaxStep(mem: *mut c_void, hmax: f64) -> c_int;
-    fn CVodeSetMaxNumSteps(mem: *mut c_void, mxsteps: c_long) -> c_int;
-    fn CVodeSetNoInactiveRootWarn(mem: *mut c_void) -> c_int;
-    fn CVodeSetErrHandlerFn(mem: *mut c_void, f: ErrHandlerFn, data: *mut c_void) -> c_int;
-    fn CVodeSetUserData(mem: *mut c_void, data: *mut c_void) -> c_int;
-    fn CVode(mem: *mut c_void, tout: f64, yout: NVector, tret: *mut f64, itask: c_int) -> c_int;
-    fn CVodeGetRootInfo(mem: *mut c_void, rootsfound: *mut c_int) -> c_int;
-    fn CVodeFree(mem: *mut *mut c_void);
+/// SUNDIALS' functions, linked statically when the build found CVODE (`cfg(tb_cvode)`,
+/// `build.rs`).
+#[cfg(tb_cvode)]
+mod ffi {
+    use super::*;
+    extern "C" {
+        pub fn SUNContext_Create(comm: *mut c_void, ctx: *mut SunContext) -> c_int;
+        pub fn SUNContext_Free(ctx: *mut SunContext) -> c_int;
+        pub fn N_VNew_Serial(length: SunIndex, ctx: SunContext) -> NVector;
+        pub fn N_VDestroy(v: NVector);
+        pub fn N_VGetArrayPointer(v: NVector) -> *mut f64;
+        pub fn SUNDenseMatrix(m: SunIndex, n: SunIndex, ctx: SunContext) -> SunMatrix;
+        pub fn SUNMatDestroy(a: SunMatrix);
+        pub fn SUNLinSol_Dense(y: NVector, a: SunMatrix, ctx: SunContext) -> SunLinearSolver;
+        pub fn SUNLinSolFree(s: SunLinearSolver) -> c_int;
+        pub fn CVodeCreate(lmm: c_int, ctx: SunContext) -> *mut c_void;
+        pub fn CVodeInit(mem: *mut c_void, f: RhsFn, t0: f64, y0: NVector) -> c_int;
+        pub fn CVodeReInit(mem: *mut c_void, t0: f64, y0: NVector) -> c_int;
+        pub fn CVodeSVtolerances(mem: *mut c_void, reltol: f64, abstol: NVector) -> c_int;
+        pub fn CVodeRootInit(mem: *mut c_void, nrtfn: c_int, g: Option<RootFn>) -> c_int;
+        pub fn CVodeSetLinearSolver(mem: *mut c_void, ls: SunLinearSolver, a: SunMatrix) -> c_int;
+        pub fn CVodeSetMaxStep(mem: *mut c_void, hmax: f64) -> c_int;
+        pub fn CVodeSetMaxNumSteps(mem: *mut c_void, mxsteps: c_long) -> c_int;
+        pub fn CVodeSetNoInactiveRootWarn(mem: *mut c_void) -> c_int;
+        pub fn CVodeSetErrHandlerFn(mem: *mut c_void, f: ErrHandlerFn, data: *mut c_void) -> c_int;
+        pub fn CVodeSetUserData(mem: *mut c_void, data: *mut c_void) -> c_int;
+        pub fn CVode(
+            mem: *mut c_void,
+            tout: f64,
+            yout: NVector,
+            tret: *mut f64,
+            itask: c_int,
+        ) -> c_int;
+        pub fn CVodeGetRootInfo(mem: *mut c_void, rootsfound: *mut c_int) -> c_int;
+        pub fn CVodeFree(mem: *mut *mut c_void);
+    }
 }
+
+/// Without CVODE at build time: the same functions, each failing as CVODE does when it
+/// cannot allocate (a null pointer, a negative flag). [`super::MeInstance::instantiate`]
+/// refuses a Model Exchange FMU before any of them is reached ([`AVAILABLE`]).
+#[cfg(not(tb_cvode))]
+#[allow(clippy::missing_safety_doc, non_snake_case)]
+mod ffi {
+    use super::*;
+    const NULL: *mut c_void = std::ptr::null_mut();
+    pub unsafe fn SUNContext_Create(_: *mut c_void, _: *mut SunContext) -> c_int {
+        -1
+    }
+    pub unsafe fn SUNContext_Free(_: *mut SunContext) -> c_int {
+        0
+    }
+    pub unsafe fn N_VNew_Serial(_: SunIndex, _: SunContext) -> NVector {
+        NULL
+    }
+    pub unsafe fn N_VDestroy(_: NVector) {}
+    pub unsafe fn N_VGetArrayPointer(_: NVector) -> *mut f64 {
+        std::ptr::null_mut()
+    }
+    pub unsafe fn SUNDenseMatrix(_: SunIndex, _: SunIndex, _: SunContext) -> SunMatrix {
+        NULL
+    }
+    pub unsafe fn SUNMatDestroy(_: SunMatrix) {}
+    pub unsafe fn SUNLinSol_Dense(_: NVector, _: SunMatrix, _: SunContext) -> SunLinearSolver {
+        NULL
+    }
+    pub unsafe fn SUNLinSolFree(_: SunLinearSolver) -> c_int {
+        0
+    }
+    pub unsafe fn CVodeCreate(_: c_int, _: SunContext) -> *mut c_void {
+        NULL
+    }
+    pub unsafe fn CVodeInit(_: *mut c_void, _: RhsFn, _: f64, _: NVector) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeReInit(_: *mut c_void, _: f64, _: NVector) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeSVtolerances(_: *mut c_void, _: f64, _: NVector) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeRootInit(_: *mut c_void, _: c_int, _: Option<RootFn>) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeSetLinearSolver(_: *mut c_void, _: SunLinearSolver, _: SunMatrix) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeSetMaxStep(_: *mut c_void, _: f64) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeSetMaxNumSteps(_: *mut c_void, _: c_long) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeSetNoInactiveRootWarn(_: *mut c_void) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeSetErrHandlerFn(_: *mut c_void, _: ErrHandlerFn, _: *mut c_void) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeSetUserData(_: *mut c_void, _: *mut c_void) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVode(_: *mut c_void, _: f64, _: NVector, _: *mut f64, _: c_int) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeGetRootInfo(_: *mut c_void, _: *mut c_int) -> c_int {
+        CV_MEM_NULL
+    }
+    pub unsafe fn CVodeFree(_: *mut *mut c_void) {}
+}
+use ffi::*;
+
+/// Whether this build integrates Model Exchange FMUs (SUNDIALS CVODE was found at build
+/// time).
+pub const AVAILABLE: bool = cfg!(tb_cvode);
+
+/// What to do for Model Exchange in a build without CVODE.
+pub const MISSING: &str = "this twinbench was built without SUNDIALS CVODE, the Model Exchange solver: install it (Debian/Ubuntu: apt-get install libsundials-dev; elsewhere SUNDIALS 6.x, double precision, 64-bit index, with TWINBENCH_SUNDIALS_LIB naming the folder of libsundials_cvode.a) and rebuild twinbench (cargo build --release, or cargo install --locked --path . again)";
 
 /// The name of a CVODE return flag (cvode.h, SUNDIALS 6.4.1).
 pub fn flag_name(flag: i32) -> &'static str {
@@ -218,6 +316,12 @@ pub enum Reached {
 
 /// One CVODE integrator with its vectors, matrix and linear solver. Not `Send` by itself:
 /// its owner moves it between threads as a whole ([`super::MeInstance`]).
+///
+/// CVODE keeps two raw pointers of ours, its user data (the [`Callbacks`]) and the error
+/// handler's data (the [`Messages`]): both are allocations made with `Box::into_raw`, owned
+/// here through `NonNull`, reached only through those pointers (never through a `Box` that
+/// moves or is reborrowed while CVODE holds them) and freed once, in `Drop`, after CVODE's
+/// memory.
 pub struct Cvode<S: System> {
     mem: *mut c_void,
     y: NVector,
@@ -227,8 +331,8 @@ pub struct Cvode<S: System> {
     ctx: SunContext,
     n: usize,
     nz: usize,
-    callbacks: Box<Callbacks<S>>,
-    messages: Box<RefCell<Messages>>,
+    callbacks: NonNull<Callbacks<S>>,
+    messages: NonNull<RefCell<Messages>>,
 }
 
 impl<S: System> Cvode<S> {
@@ -243,18 +347,30 @@ impl<S: System> Cvode<S> {
         settings: Settings,
     ) -> Result<Cvode<S>, SolverError> {
         let n = x0.len();
-        assert!(n > 0 && abstol.len() == n, "CVODE needs at least one state");
-        let fail = |function, flag| SolverError {
+        let fail = |function, flag, message: Option<String>| SolverError {
             function,
             flag,
-            message: None,
+            message,
         };
+        if n == 0 || abstol.len() != n || i32::try_from(nz).is_err() {
+            return Err(fail(
+                "CVodeInit",
+                CV_ILL_INPUT,
+                Some(format!(
+                    "{n} states with {} absolute tolerances and {nz} root functions (at least one state, one tolerance per state)",
+                    abstol.len()
+                )),
+            ));
+        }
+        if !AVAILABLE {
+            return Err(fail("CVodeCreate", CV_MEM_FAIL, Some(MISSING.into())));
+        }
         let mut ctx: SunContext = std::ptr::null_mut();
         // SAFETY: every pointer CVODE returns is checked before use; the integrator owns
         // them and frees them in Drop (in the reverse order).
         let r = unsafe { SUNContext_Create(std::ptr::null_mut(), &mut ctx) };
         if r != 0 || ctx.is_null() {
-            return Err(fail("SUNContext_Create", r));
+            return Err(fail("SUNContext_Create", r, None));
         }
         let mut c = Cvode {
             mem: std::ptr::null_mut(),
@@ -265,30 +381,30 @@ impl<S: System> Cvode<S> {
             ctx,
             n,
             nz,
-            callbacks: Box::new(Callbacks { system, n, nz }),
-            messages: Box::new(RefCell::new(Messages::default())),
+            callbacks: NonNull::from(Box::leak(Box::new(Callbacks { system, n, nz }))),
+            messages: NonNull::from(Box::leak(Box::new(RefCell::new(Messages::default())))),
         };
         unsafe {
             c.y = N_VNew_Serial(n as SunIndex, ctx);
             c.abstol = N_VNew_Serial(n as SunIndex, ctx);
             c.a = SUNDenseMatrix(n as SunIndex, n as SunIndex, ctx);
             if c.y.is_null() || c.abstol.is_null() || c.a.is_null() {
-                return Err(fail("N_VNew_Serial", -20));
+                return Err(fail("N_VNew_Serial", CV_MEM_FAIL, None));
             }
             c.ls = SUNLinSol_Dense(c.y, c.a, ctx);
             c.mem = CVodeCreate(CV_BDF, ctx);
             if c.ls.is_null() || c.mem.is_null() {
-                return Err(fail("CVodeCreate", -20));
+                return Err(fail("CVodeCreate", CV_MEM_FAIL, None));
             }
             values(c.y, n).copy_from_slice(x0);
             values(c.abstol, n).copy_from_slice(abstol);
-            let data = &mut *c.messages as *mut RefCell<Messages> as *mut c_void;
+            let data = c.messages.as_ptr() as *mut c_void;
             c.check(
                 "CVodeSetErrHandlerFn",
                 CVodeSetErrHandlerFn(c.mem, error_handler, data),
             )?;
             c.check("CVodeInit", CVodeInit(c.mem, rhs::<S>, t0, c.y))?;
-            let user = &mut *c.callbacks as *mut Callbacks<S> as *mut c_void;
+            let user = c.callbacks.as_ptr() as *mut c_void;
             c.check("CVodeSetUserData", CVodeSetUserData(c.mem, user))?;
             c.check(
                 "CVodeSVtolerances",
@@ -313,6 +429,12 @@ impl<S: System> Cvode<S> {
         Ok(c)
     }
 
+    fn messages(&self) -> std::cell::RefMut<'_, Messages> {
+        // SAFETY: the allocation lives until Drop; CVODE writes to it only inside a call
+        // made through `&mut self` methods, never while this borrow is held.
+        unsafe { self.messages.as_ref() }.borrow_mut()
+    }
+
     fn check(&self, function: &'static str, flag: c_int) -> Result<(), SolverError> {
         if flag >= CV_SUCCESS {
             return Ok(());
@@ -320,30 +442,45 @@ impl<S: System> Cvode<S> {
         Err(SolverError {
             function,
             flag,
-            message: self.messages.borrow_mut().last_error.take(),
+            message: self.messages().last_error.take(),
         })
     }
 
     /// The system CVODE calls (to read what a failed callback left there).
     pub fn system(&mut self) -> &mut S {
-        &mut self.callbacks.system
+        // SAFETY: CVODE uses the pointer only inside calls made through `&mut self`, so
+        // this is the only reference while it lives.
+        unsafe { &mut self.callbacks.as_mut().system }
     }
 
     /// CVODE's warnings since the last call, oldest first.
     pub fn take_warnings(&mut self) -> Vec<String> {
-        std::mem::take(&mut self.messages.borrow_mut().warnings)
+        std::mem::take(&mut self.messages().warnings)
     }
 
     /// Integrate to `tout` (CVODE's `CV_NORMAL` task: it may step past `tout` and
     /// interpolate back), stopping early at a root. The states at the time reached are in
-    /// `x` (its length is the integrator's), the roots found (±1 by direction, else 0) in
-    /// `found` (one per root function).
+    /// `x` (exactly one per state), the roots found (±1 by direction, else 0) in `found`
+    /// (exactly one per root function); other lengths are refused before CVODE runs.
     pub fn advance(
         &mut self,
         tout: f64,
         x: &mut [f64],
         found: &mut [i32],
     ) -> Result<Reached, SolverError> {
+        if x.len() != self.n || found.len() != self.nz {
+            return Err(SolverError {
+                function: "CVode",
+                flag: CV_ILL_INPUT,
+                message: Some(format!(
+                    "{} states and {} roots asked for, the integrator has {} and {}",
+                    x.len(),
+                    found.len(),
+                    self.n,
+                    self.nz
+                )),
+            });
+        }
         let mut tret = 0.0;
         // SAFETY: the integrator is set up (new) and its vectors have n values.
         let flag = unsafe { CVode(self.mem, tout, self.y, &mut tret, CV_NORMAL) };
@@ -351,7 +488,7 @@ impl<S: System> Cvode<S> {
         x.copy_from_slice(unsafe { values(self.y, self.n) });
         found.iter_mut().for_each(|r| *r = 0);
         if flag == CV_ROOT_RETURN {
-            debug_assert_eq!(found.len(), self.nz);
+            // SAFETY: `found` has nz values (checked above), as many as CVODE writes.
             let r = unsafe { CVodeGetRootInfo(self.mem, found.as_mut_ptr()) };
             self.check("CVodeGetRootInfo", r)?;
             return Ok(Reached::Root(tret));
@@ -360,13 +497,23 @@ impl<S: System> Cvode<S> {
     }
 
     /// Start again from `t0` and `x0` (after an event: CVODE forgets its history), with new
-    /// absolute tolerances when given.
+    /// absolute tolerances when given. `x0` and the tolerances have one value per state.
     pub fn reinit(
         &mut self,
         t0: f64,
         x0: &[f64],
         abstol: Option<(&[f64], f64)>,
     ) -> Result<(), SolverError> {
+        if x0.len() != self.n || abstol.is_some_and(|(a, _)| a.len() != self.n) {
+            return Err(SolverError {
+                function: "CVodeReInit",
+                flag: CV_ILL_INPUT,
+                message: Some(format!(
+                    "states or tolerances of another length than the integrator's {}",
+                    self.n
+                )),
+            });
+        }
         unsafe {
             values(self.y, self.n).copy_from_slice(x0);
             self.check("CVodeReInit", CVodeReInit(self.mem, t0, self.y))?;
@@ -384,7 +531,9 @@ impl<S: System> Cvode<S> {
 
 impl<S: System> Drop for Cvode<S> {
     fn drop(&mut self) {
-        // SAFETY: each pointer is null or owned here; CVODE's memory first, then what it used.
+        // SAFETY: each pointer is null or owned here; CVODE's memory first, then what it
+        // used, then the two allocations it pointed to (made by Box::leak in `new`, freed
+        // here once).
         unsafe {
             if !self.mem.is_null() {
                 CVodeFree(&mut self.mem);
@@ -400,12 +549,47 @@ impl<S: System> Drop for Cvode<S> {
                     N_VDestroy(v);
                 }
             }
-            SUNContext_Free(&mut self.ctx);
+            if !self.ctx.is_null() {
+                SUNContext_Free(&mut self.ctx);
+            }
+            drop(Box::from_raw(self.callbacks.as_ptr()));
+            drop(Box::from_raw(self.messages.as_ptr()));
         }
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, not(tb_cvode)))]
+mod without_cvode {
+    use super::*;
+
+    struct Zero;
+    impl System for Zero {
+        fn rhs(&mut self, _t: f64, _x: &[f64], dx: &mut [f64]) -> i32 {
+            dx.fill(0.0);
+            0
+        }
+        fn roots(&mut self, _t: f64, _x: &[f64], _g: &mut [f64]) -> i32 {
+            0
+        }
+    }
+
+    #[test]
+    fn a_build_without_cvode_says_what_to_install_instead_of_integrating() {
+        let s = Settings {
+            relative_tolerance: 1e-6,
+            max_step: 0.0,
+            max_num_steps: 500,
+        };
+        let e = Cvode::new(Zero, 0.0, &[1.0], &[1e-6], 0, s).err().unwrap();
+        assert!(!AVAILABLE);
+        assert!(
+            e.problem().contains("apt-get install libsundials-dev"),
+            "{e:?}"
+        );
+    }
+}
+
+#[cfg(all(test, tb_cvode))]
 mod tests {
     use super::*;
 
@@ -506,5 +690,46 @@ mod tests {
         let mut c = Cvode::new(Decay { k: 1.0, calls: 0 }, 0.0, &[1.0], &[1e-12], 0, s).unwrap();
         let e = c.advance(100.0, &mut [0.0], &mut []).unwrap_err();
         assert_eq!(flag_name(e.flag), "CV_TOO_MUCH_WORK");
+    }
+
+    /// Slices of another length than the integrator's are refused before CVODE runs (in a
+    /// release build too: CVodeGetRootInfo writes one value per root function).
+    #[test]
+    fn slices_of_the_wrong_length_are_refused_not_written_past() {
+        let mut c = Cvode::new(
+            Decay { k: 1.0, calls: 0 },
+            0.0,
+            &[1.0],
+            &[1e-10],
+            1,
+            settings(),
+        )
+        .unwrap();
+        let calls = c.system().calls;
+        let e = c.advance(1.0, &mut [0.0], &mut []).unwrap_err();
+        assert_eq!((e.function, flag_name(e.flag)), ("CVode", "CV_ILL_INPUT"));
+        let e = c.advance(1.0, &mut [0.0, 0.0], &mut [0]).unwrap_err();
+        assert_eq!(flag_name(e.flag), "CV_ILL_INPUT");
+        assert_eq!(c.system().calls, calls, "CVODE ran");
+        let e = c.reinit(0.0, &[1.0, 2.0], None).unwrap_err();
+        assert_eq!(flag_name(e.flag), "CV_ILL_INPUT");
+        let e = c.reinit(0.0, &[1.0], Some((&[], 1e-6))).unwrap_err();
+        assert_eq!(flag_name(e.flag), "CV_ILL_INPUT");
+        // Still usable: the root x = 0.5 at t = ln 2.
+        let mut found = [0];
+        let r = c.advance(1.0, &mut [0.0], &mut found).unwrap();
+        assert!(
+            matches!(r, Reached::Root(t) if (t - 2f64.ln()).abs() < 1e-6),
+            "{r:?}"
+        );
+        // No states, or tolerances of another length: refused at creation.
+        let e = Cvode::new(Decay { k: 1.0, calls: 0 }, 0.0, &[], &[], 0, settings())
+            .err()
+            .unwrap();
+        assert_eq!(flag_name(e.flag), "CV_ILL_INPUT");
+        let e = Cvode::new(Decay { k: 1.0, calls: 0 }, 0.0, &[1.0], &[], 0, settings())
+            .err()
+            .unwrap();
+        assert_eq!(flag_name(e.flag), "CV_ILL_INPUT");
     }
 }

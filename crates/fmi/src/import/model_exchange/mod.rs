@@ -32,7 +32,7 @@
 //! steps per integration; an FMU without continuous states gets one dummy state (ẋ = 0), so
 //! that root finding still watches its event indicators.
 
-pub mod cvode;
+pub(crate) mod cvode;
 mod system;
 
 use super::description::ModelDescription;
@@ -46,6 +46,10 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use system::FmuSystem;
+
+/// Whether this build integrates Model Exchange FMUs: SUNDIALS CVODE was found when it was
+/// built (else an instance is refused at instantiation with what to install).
+pub const SOLVER_AVAILABLE: bool = cvode::AVAILABLE;
 
 /// FMPy's relative tolerance when neither the system nor the FMU gives one.
 pub const DEFAULT_RELATIVE_TOLERANCE: f64 = 1e-5;
@@ -103,6 +107,8 @@ pub struct MeInstance {
     nx: usize,
     nz: usize,
     rtol: f64,
+    /// The tolerance the FMU is told in `fmi2SetupExperiment`: the system's, when it gave one.
+    told_tolerance: Option<f64>,
     completed_step_needed: bool,
     /// The continuous Real inputs (settable in continuous-time mode).
     continuous_inputs: HashMap<u32, ()>,
@@ -153,6 +159,13 @@ impl MeInstance {
             instance: name.into(),
             message,
         };
+        if !SOLVER_AVAILABLE {
+            return Err(bad(format!(
+                "{}: a Model Exchange FMU, but {}",
+                fmu.display(),
+                cvode::MISSING
+            )));
+        }
         let api = lib
             .me
             .ok_or_else(|| bad("the library was not loaded for Model Exchange".into()))?;
@@ -203,6 +216,7 @@ impl MeInstance {
             nx,
             nz,
             rtol,
+            told_tolerance: settings.relative_tolerance,
             completed_step_needed: !me.completed_integrator_step_not_needed,
             continuous_inputs,
             mode: Mode::Instantiated,
@@ -297,12 +311,14 @@ impl MeInstance {
             .map_err(|e| self.wrap(e))
     }
 
-    /// The FMU is told the solver's relative tolerance (`toleranceDefined`), as FMPy does.
+    /// As FMPy 0.3.32's Model Exchange loop, `toleranceDefined = false` unless the system
+    /// gives a tolerance (the instance's, the experiment's, `run --tolerance`): then the FMU
+    /// is told it. Either way the solver integrates with [`MeInstance::relative_tolerance`].
     pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
         self.start = start;
         self.stop = stop;
         self.inst
-            .setup_experiment(start, stop, Some(self.rtol))
+            .setup_experiment(start, stop, self.told_tolerance)
             .map_err(|e| self.wrap(e))
     }
 
