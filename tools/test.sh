@@ -50,7 +50,8 @@ cargo test --release --workspace "$@"
 # master over a lap, the SSP in FMPy, libcosim and OMSimulator.
 cargo test --release -p twinbench --features slow-tests \
     --test optimize_spielberg --test optimize_study --test robustness_optimize \
-    --test ssp_export --test cross_validation --test own_lap --test omsimulator "$@"
+    --test ssp_export --test cross_validation --test own_lap --test omsimulator \
+    --test optimize_speedup "$@"
 # The Python package: its wheel (abi3) built from the workspace into the venv, then its
 # tests against the command line the slow tier built (studies on a Dask LocalCluster).
 rm -rf target/wheels

@@ -72,6 +72,10 @@ pub struct RunArgs {
     /// input, by the input's name; a column without a unit takes its input's).
     #[arg(long, value_name = "FILE")]
     pub input: Option<PathBuf>,
+    /// One FMU: the interface to run it through, model-exchange or co-simulation (FMPy's
+    /// `--fmi-type`; default: Co-Simulation when the FMU has it).
+    #[arg(long, value_name = "model-exchange|co-simulation", value_parser = |s: &str| tb_fmi::Interface::from_name(s))]
+    pub interface: Option<tb_fmi::Interface>,
 }
 
 /// A run that failed: what it recorded up to the failure is kept, in a file named as

@@ -32,6 +32,7 @@ pub fn refuse_fmu_options(args: &RunArgs) -> anyhow::Result<()> {
         ("--step", args.step.is_some()),
         ("--output-interval", args.output_interval.is_some()),
         ("--input", args.input.is_some()),
+        ("--interface", args.interface.is_some()),
     ];
     if let Some((name, _)) = given.iter().find(|(_, on)| *on) {
         bail!(
@@ -47,7 +48,13 @@ pub fn system(args: &RunArgs, cache: &FmuCache) -> anyhow::Result<(SystemFile, S
     let fmu_path = tb_files::absolute(&args.system);
     let fmu = cache.load(&fmu_path)?;
     let md = &fmu.description;
-    let instance = fmu.model_identifier().to_string();
+    let interface = args.interface.unwrap_or_else(|| fmu.default_interface());
+    fmu.check_interface(interface)
+        .map_err(|why| anyhow::anyhow!("--interface {interface}: {}: {why}", fmu_path.display()))?;
+    let instance = md
+        .model_identifier(interface)
+        .unwrap_or(fmu.model_identifier())
+        .to_string();
     let mut connections = Vec::new();
     let mut replay = String::new();
     if let Some(input) = &args.input {
@@ -70,13 +77,14 @@ pub fn system(args: &RunArgs, cache: &FmuCache) -> anyhow::Result<(SystemFile, S
         .map(|v| quoted(&format!("{instance}.{}", v.name)))
         .collect();
     let text = format!(
-        "connections = [{}]\n\n[fmus]\n{} = {}\n\n[[instance]]\nname = {}\nfmu = {}\n\n{replay}{}[record]\nsignals = [{}]\ndecimation = {}\n",
+        "connections = [{}]\n\n[fmus]\n{} = {}\n\n[[instance]]\nname = {}\nfmu = {}\ninterface = {}\n\n{replay}{}[record]\nsignals = [{}]\ndecimation = {}\n",
         connections.join(", "),
         quoted(&instance),
         quoted(&fmu_path.to_string_lossy()),
         quoted(&instance),
         quoted(&instance),
-        experiment(args, &fmu)?,
+        quoted(interface.name()),
+        experiment(args, &fmu, interface)?,
         recorded.join(", "),
         decimation(args)?,
     );
@@ -144,7 +152,7 @@ fn fmpy_group(v: &ScalarVariable) -> Option<usize> {
 
 /// `[experiment]` from the options, else the FMU's default experiment, else FMPy's
 /// defaults (start 0, stop start + 1 s; the step: see [`default_step`]).
-fn experiment(args: &RunArgs, fmu: &LoadedFmu) -> anyhow::Result<String> {
+fn experiment(args: &RunArgs, fmu: &LoadedFmu, interface: Interface) -> anyhow::Result<String> {
     let de = fmu.description.default_experiment.unwrap_or_default();
     let start = args.start.or(de.start_time).unwrap_or(0.0);
     let stop = args.stop.or(de.stop_time).unwrap_or(start + 1.0);
@@ -162,7 +170,7 @@ fn experiment(args: &RunArgs, fmu: &LoadedFmu) -> anyhow::Result<String> {
     }
     let step = match args.step.or(args.output_interval) {
         Some(h) => h,
-        None => default_step(fmu, start, stop),
+        None => default_step(fmu, interface, start, stop),
     };
     if !(step.is_finite() && step > 0.0) {
         bail!(
@@ -179,7 +187,7 @@ fn experiment(args: &RunArgs, fmu: &LoadedFmu) -> anyhow::Result<String> {
 /// `fixedInternalStepSize` (FMI 3.0), else its DefaultExperiment step, doubled until the run has
 /// at most 1000 of them, else FMPy's automatic interval (500 to 1000 steps of a round
 /// number); Model Exchange, 10^(round(log10 T) - 3) doubled likewise.
-pub fn default_step(fmu: &LoadedFmu, start: f64, stop: f64) -> f64 {
+pub fn default_step(fmu: &LoadedFmu, interface: Interface, start: f64, stop: f64) -> f64 {
     let t = stop - start;
     let at_most_1000 = |mut h: f64| {
         while t / h > 1000.0 {
@@ -188,7 +196,7 @@ pub fn default_step(fmu: &LoadedFmu, start: f64, stop: f64) -> f64 {
         h
     };
     let md = &fmu.description;
-    if fmu.default_interface() == Interface::ModelExchange {
+    if interface == Interface::ModelExchange {
         return at_most_1000(10f64.powf(t.log10().round_ties_even() - 3.0));
     }
     let declared = md

@@ -36,7 +36,9 @@ pub use compare::{
 };
 pub use error::{Error, Result};
 pub use filter::Butterworth;
-pub use measurement::{si_unit, ChannelMap, DistanceSource, Measurement, REQUIRED_COLUMNS, SIGNALS};
+pub use measurement::{
+    si_unit, ChannelMap, DistanceSource, Measurement, REQUIRED_COLUMNS, SIGNALS,
+};
 pub use metrics::{error_measure, metrics, Metrics};
 pub use resample::DistanceGrid;
 pub use tb_table::Table;

@@ -144,7 +144,7 @@ fn missing_signal(table: &Table, signal: &str) -> Error {
         ),
         None => format!(
             "map the file's channel to it with `{signal} = \"<channel>\"` in the channel map ([channels] of `lap --channels`, [measurement.channels] in a study); closest columns: {}",
-            tb_fmi::import::description::closest(
+            tb_files::names::closest(
                 signal,
                 names.iter().map(String::as_str),
                 3
@@ -273,7 +273,7 @@ impl ChannelMap {
     pub fn check(&self, source: &str) -> Result<()> {
         for key in self.0.keys() {
             if !SIGNALS.contains(&key.as_str()) {
-                use tb_fmi::import::description::{closest, edit_distance};
+                use tb_files::names::{closest, edit_distance};
                 let near = closest(key, SIGNALS, 1)
                     .into_iter()
                     .find(|c| edit_distance(key, c) <= 2.max(key.len() / 3));
@@ -309,7 +309,7 @@ impl Measurement {
                     file: file.clone(),
                     signal: signal.clone(),
                     channel: channel.clone(),
-                    closest: tb_fmi::import::description::closest(
+                    closest: tb_files::names::closest(
                         channel,
                         table.names().iter().map(String::as_str),
                         3,

@@ -7,10 +7,13 @@
 //! [`input`]: an input file is read only when it is a regular file within the limit of
 //! its kind (never a FIFO, a device or a file that grows without end).
 //!
+//! [`names`]: the names closest to a wrong one, for messages.
+//!
 //! [`shown`]: what a message may show of text twinbench did not write (cut, control
 //! characters escaped).
 
 pub mod input;
+pub mod names;
 pub mod paths;
 pub mod shown;
 

@@ -1657,7 +1657,10 @@ mod load_messages {
             path,
             "/store/ab12/binaries/linux64/Model.so: cannot open shared object file: No such file or directory",
         );
-        assert_eq!(m, "binaries/linux64/Model.so: cannot open shared object file: No such file or directory");
+        assert_eq!(
+            m,
+            "binaries/linux64/Model.so: cannot open shared object file: No such file or directory"
+        );
         let m = load_problem(
             "binaries/linux64/Model.so",
             path,

@@ -1,0 +1,247 @@
+//! The newcomer's fourth hour (`lap` and `info` messages): a logger's `Time` column, a
+//! wrong key in a channel map, a speed in km/h without its unit, a refused lap's folder, the
+//! default experiment as `info` prints it, and messages without an `invalid settings:`
+//! prefix. Each message names the file and says what to write instead.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn twinbench(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn failure(args: &[&str]) -> String {
+    let o = twinbench(args);
+    assert!(!o.status.success(), "twinbench {args:?} succeeded");
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The bundled lap's rows, the header replaced by `header` (same columns), the columns
+/// mapped by `row`.
+fn lap_with(dir: &Path, name: &str, header: &str, row: impl Fn(&mut Vec<String>)) -> PathBuf {
+    let text =
+        std::fs::read_to_string(twinbench::pack::workspace_root().join("data/spielberg_lap.csv"))
+            .unwrap();
+    let mut out = String::from(header);
+    out.push('\n');
+    for line in text.lines().skip(1) {
+        let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+        row(&mut cells);
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    let p = dir.join(name);
+    std::fs::write(&p, out).unwrap();
+    p
+}
+
+const HEADER: &str =
+    "time,distance,v,a_x,a_y,Fz_fl,Fz_fr,Fz_rl,Fz_rr,accel_pedal,brake_pedal,omega_rl,omega_rr";
+
+fn lap_args<'a>(measurement: &'a str, out: &'a str, fmus: &'a str) -> Vec<&'a str> {
+    vec!["lap", measurement, "--out", out, "--fmus", fmus]
+}
+
+#[test]
+fn a_loggers_time_column_is_named_with_the_map_entry_that_takes_it() {
+    let dir = tb_testkit::scratch("first-hour-4-time");
+    let m = lap_with(
+        dir.path(),
+        "logger.csv",
+        &HEADER.replacen("time", "Time", 1),
+        |_| {},
+    );
+    let out = dir.path().join("lap");
+    let fmus = common::fmu_dir();
+    let args = lap_args(
+        m.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fmus.to_str().unwrap(),
+    );
+    let e = failure(&args);
+    assert!(e.contains("missing required column `time`"), "{e}");
+    assert!(
+        e.contains("the column `Time` differs only in case: map it with `time = \"Time\"`"),
+        "{e}"
+    );
+    assert!(!out.exists(), "a refused lap left {}", out.display());
+    // The map entry the message suggests works.
+    let map = dir.path().join("map.toml");
+    std::fs::write(&map, "[channels]\ntime = \"Time\"\n").unwrap();
+    let mut args = args.clone();
+    args.extend(["--channels", map.to_str().unwrap()]);
+    let o = twinbench(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("study.toml").is_file());
+}
+
+#[test]
+fn an_unknown_key_in_a_channel_map_is_refused_with_the_keys_a_map_has() {
+    let dir = tb_testkit::scratch("first-hour-4-map");
+    let m = lap_with(
+        dir.path(),
+        "logger.csv",
+        &HEADER.replacen(",v,", ",GPS_Speed,", 1),
+        |_| {},
+    );
+    let map = dir.path().join("map.toml");
+    std::fs::write(&map, "[channels]\nspeed = \"GPS_Speed\"\n").unwrap();
+    let out = dir.path().join("lap");
+    let fmus = common::fmu_dir();
+    let mut args = lap_args(
+        m.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fmus.to_str().unwrap(),
+    );
+    args.extend(["--channels", map.to_str().unwrap()]);
+    let e = failure(&args);
+    assert!(
+        e.contains(&format!(
+            "{}: channel map: unknown signal `speed`",
+            map.display()
+        )),
+        "{e}"
+    );
+    assert!(
+        e.contains("(the signals a map names: time, distance, v, a_x"),
+        "{e}"
+    );
+    assert!(!e.contains("invalid settings"), "{e}");
+    assert!(!out.exists(), "a refused lap left {}", out.display());
+    // A near miss is named.
+    std::fs::write(&map, "[channels]\nFz_lf = \"LoadFL\"\n").unwrap();
+    let e = failure(&args);
+    assert!(
+        e.contains("unknown signal `Fz_lf` (did you mean `Fz_fl`?)"),
+        "{e}"
+    );
+}
+
+/// The speed column times 3.6 (km/h) or 2.237 (mph), without a units row.
+fn scaled_speed(dir: &Path, name: &str, factor: f64, header: &str) -> PathBuf {
+    lap_with(dir, name, header, |cells| {
+        let v: f64 = cells[2].parse().unwrap();
+        cells[2] = format!("{}", v * factor);
+    })
+}
+
+#[test]
+fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
+    let dir = tb_testkit::scratch("first-hour-4-kmh");
+    let fmus = common::fmu_dir();
+    let out = dir.path().join("lap");
+    // With the distance column: ∫v dt is 3.6 times the distance.
+    let m = scaled_speed(dir.path(), "kmh.csv", 3.6, HEADER);
+    let e = failure(&lap_args(
+        m.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fmus.to_str().unwrap(),
+    ));
+    assert!(
+        e.contains(&format!(
+            "{}: v has no unit and looks like km/h, not m/s",
+            m.display()
+        )),
+        "{e}"
+    );
+    assert!(e.contains("the distance column"), "{e}");
+    assert!(!out.exists());
+    // Without it, from a_x: dv/dt is 2.24 times a_x. The distance column's name is
+    // changed so that the measurement has none.
+    let m = scaled_speed(
+        dir.path(),
+        "mph.csv",
+        3600.0 / 1609.344,
+        &HEADER.replacen("distance", "odometer", 1),
+    );
+    let e = failure(&lap_args(
+        m.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fmus.to_str().unwrap(),
+    ));
+    assert!(
+        e.contains("v has no unit and looks like mph, not m/s"),
+        "{e}"
+    );
+    assert!(e.contains("implies (mph: 2.24)"), "{e}");
+    assert!(!out.exists());
+    // The same speed in m/s is a lap (no false alarm from a_x's noise).
+    let m = scaled_speed(
+        dir.path(),
+        "ms.csv",
+        1.0,
+        &HEADER.replacen("distance", "odometer", 1),
+    );
+    let o = twinbench(&lap_args(
+        m.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fmus.to_str().unwrap(),
+    ));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn a_refused_lap_keeps_a_folder_the_user_made_and_what_is_in_it() {
+    let dir = tb_testkit::scratch("first-hour-4-keep");
+    let fmus = common::fmu_dir();
+    let out = dir.path().join("mine");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let m = scaled_speed(dir.path(), "kmh.csv", 3.6, HEADER);
+    failure(&lap_args(
+        m.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fmus.to_str().unwrap(),
+    ));
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+}
+
+#[test]
+fn an_unknown_unit_is_said_without_a_settings_prefix() {
+    let dir = tb_testkit::scratch("first-hour-4-unit");
+    let text =
+        std::fs::read_to_string(twinbench::pack::workspace_root().join("data/spielberg_lap.csv"))
+            .unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let units = "s,m,kph,m/s2,m/s2,N,N,N,N,1,1,rad/s,rad/s";
+    let m = dir.path().join("bad_unit.csv");
+    let body: Vec<&str> = lines.collect();
+    std::fs::write(&m, format!("{header}\n{units}\n{}\n", body.join("\n"))).unwrap();
+    let out = dir.path().join("lap");
+    let fmus = common::fmu_dir();
+    let e = failure(&lap_args(
+        m.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fmus.to_str().unwrap(),
+    ));
+    assert!(
+        e.contains(&format!("{}: channel `v`: unknown unit 'kph'", m.display())),
+        "{e}"
+    );
+    assert!(!e.contains("invalid settings"), "{e}");
+}
+
+#[test]
+fn info_says_the_default_experiment_in_seconds() {
+    let o = twinbench(&["info", common::fmu("vehicle").to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("default experiment: "))
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!(
+        line.starts_with("default experiment: start 0 s, stop "),
+        "{line}"
+    );
+    assert!(!text.contains("Some("), "{text}");
+}
