@@ -46,6 +46,8 @@ mkdir -p "$TMPDIR"
 export TWINBENCH_CACHE="$PWD/target/unpack-cache"
 # The fast tier: every crate's tests, the FMUs through their C symbols, the orchestrator.
 cargo test --release --workspace "$@"
+# The CVODE binding under valgrind's memcheck.
+tools/memcheck.sh
 # The slow tier: whole optimisations (Spielberg, and a lap the suite makes itself), FMPy's
 # master over a lap, the SSP in FMPy, libcosim and OMSimulator.
 cargo test --release -p twinbench --features slow-tests \

@@ -19,8 +19,10 @@ use tb_optimize::{
     StudyEvaluator,
 };
 
+// Declared in the module `twinbench`, where the package exports it: Python shows it as
+// `twinbench.TwinbenchError`.
 create_exception!(
-    _native,
+    twinbench,
     TwinbenchError,
     PyException,
     "An error of twinbench: a bad file, a wrong name, a failed run (the message is the command line's)."
@@ -657,12 +659,28 @@ fn load_study(path: PathBuf) -> PyResult<(String, String, String, String, f64, u
     ))
 }
 
+/// Packs twinbench's FMUs (`vehicle`, `driver`, `dyno`, `edu`, or those named) into `out`
+/// (default: the folder `twinbench pack` writes to); returns their paths.
+#[pyfunction]
+#[pyo3(signature = (out=None, models=None))]
+fn pack(
+    py: Python<'_>,
+    out: Option<PathBuf>,
+    models: Option<Vec<String>>,
+) -> PyResult<Vec<PathBuf>> {
+    let out = out.unwrap_or_else(twinbench::pack::default_fmu_dir);
+    let models = models.unwrap_or_default();
+    py.detach(|| twinbench::pack::pack(&models, &out))
+        .map_err(error)
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("TwinbenchError", m.py().get_type::<TwinbenchError>())?;
     // The package's version is the workspace's (the wheel's metadata says the same).
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(pack, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
     m.add_function(wrap_pyfunction!(load_study, m)?)?;

@@ -461,3 +461,28 @@ def test_a_malformed_digest_says_what_it_is():
     worker = _native.StudyEvaluatorPy(str(STUDY))
     with pytest.raises(twinbench.TwinbenchError, match="not a twinbench digest"):
         worker.mismatch("{not json")
+
+
+def test_pack_writes_the_four_fmus_as_the_command_line_does(tmp_path):
+    written = twinbench.pack(tmp_path / "fmu")
+    assert sorted(p.name for p in written) == ["driver.fmu", "dyno.fmu", "edu.fmu", "vehicle.fmu"]
+    assert all(p.is_file() and p.stat().st_size > 0 for p in written)
+    # The same from `python -m twinbench pack`, one model by name.
+    import sys
+
+    p = subprocess.run(
+        [sys.executable, "-m", "twinbench", "pack", "vehicle", "-o", str(tmp_path / "one")],
+        capture_output=True,
+        text=True,
+    )
+    assert p.returncode == 0, p.stderr
+    assert (tmp_path / "one/vehicle.fmu").is_file()
+    assert p.stdout.strip() == str(tmp_path / "one/vehicle.fmu")
+    with pytest.raises(twinbench.TwinbenchError, match="vehicel"):
+        twinbench.pack(tmp_path / "bad", ["vehicel"])
+
+
+def test_the_exception_is_twinbenchs_not_the_native_modules():
+    assert twinbench.TwinbenchError.__module__ == "twinbench"
+    assert repr(twinbench.TwinbenchError("x")) == "TwinbenchError('x')"
+    assert f"{twinbench.TwinbenchError.__module__}.{twinbench.TwinbenchError.__qualname__}" == "twinbench.TwinbenchError"

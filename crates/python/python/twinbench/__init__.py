@@ -31,6 +31,7 @@ from ._native import TwinbenchError, __version__
 __all__ = [
     "__version__",
     "run",
+    "pack",
     "compare",
     "Result",
     "Comparison",
@@ -89,6 +90,24 @@ class Result:
             f"Result({len(self.signals)} signals, {len(next(iter(self.signals.values()), []))} rows, "
             f"simulated {s.get('simulated_time', 0):.3f} s, stopped by {s.get('stopped_by')!r})"
         )
+
+
+def pack(out: Optional[PathLike] = None, models: Optional[Sequence[str]] = None) -> List[Path]:
+    """Pack twinbench's FMUs, as ``twinbench pack`` does.
+
+    Args:
+        out: the folder to write them into (default: ``$XDG_DATA_HOME/twinbench/fmu``,
+            that is ``~/.local/share/twinbench/fmu``, the command line's).
+        models: the models to pack (default: ``vehicle``, ``driver``, ``dyno``, ``edu``).
+
+    Returns:
+        The paths of the FMUs written.
+
+    Raises:
+        TwinbenchError: an unknown model, a folder that cannot be written.
+    """
+    written = _native.pack(None if out is None else os.fspath(out), None if models is None else list(models))
+    return [Path(p) for p in written]
 
 
 def run(

@@ -1,4 +1,4 @@
-"""``python -m twinbench optimize STUDY`` on a Dask cluster.
+"""``python -m twinbench optimize STUDY`` on a Dask cluster; ``python -m twinbench pack``.
 
     python -m twinbench optimize studies/spielberg.toml --local 2
     python -m twinbench optimize studies/spielberg.toml --scheduler tcp://head:8786
@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import Study, TwinbenchError
+from . import Study, TwinbenchError, pack
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -39,7 +39,16 @@ def _parser() -> argparse.ArgumentParser:
     o.add_argument("--force", action="store_true", help="optimise even when measurement and twin do not belong together")
     o.add_argument("--no-report", action="store_true", help="skip Tab. 1 and the plots")
     o.add_argument("--json", action="store_true", help="print the result as JSON")
+    k = sub.add_parser("pack", help="pack twinbench's FMUs (vehicle, driver, dyno, edu) as `twinbench pack` does")
+    k.add_argument("models", nargs="*", help="the models to pack (default: all four)")
+    k.add_argument("--out", "-o", type=Path, help="output folder (default: ~/.local/share/twinbench/fmu)")
     return p
+
+
+def _pack(args: argparse.Namespace) -> int:
+    for path in pack(args.out, args.models or None):
+        print(path)
+    return 0
 
 
 def _optimize(args: argparse.Namespace) -> int:
@@ -100,6 +109,8 @@ def main(argv=None) -> int:
     try:
         if args.command == "optimize":
             return _optimize(args)
+        if args.command == "pack":
+            return _pack(args)
     except TwinbenchError as e:
         print(f"error: {e}", file=sys.stderr)
         return 1

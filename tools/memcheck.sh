@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# The CVODE binding's tests (crates/fmi/src/import/model_exchange/cvode.rs) under valgrind's
+# memcheck: every read and write through the FFI, CVODE's own included, checked; an invalid
+# access or a definitely lost block fails. (Miri cannot run them: CVODE is C.)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+command -v valgrind >/dev/null || {
+    SUDO=$([ "$(id -u)" = 0 ] || echo sudo)
+    $SUDO apt-get install -y -qq valgrind >/dev/null \
+        || { $SUDO apt-get update -qq >/dev/null && $SUDO apt-get install -y -qq valgrind >/dev/null; }
+}
+bin=$(cargo test --release -p tb-fmi --lib --no-run --message-format=json 2>/dev/null \
+    | python3 -c 'import json,sys
+for l in sys.stdin:
+    m = json.loads(l)
+    if m.get("reason") == "compiler-artifact" and m["target"]["name"] == "tb_fmi" and m.get("executable"):
+        print(m["executable"])')
+valgrind --tool=memcheck --error-exitcode=9 --leak-check=full --errors-for-leak-kinds=definite --show-leak-kinds=definite \
+    --quiet "$bin" --test-threads=1 model_exchange::cvode
