@@ -157,6 +157,79 @@ fn each_reference_fmu_alone_gives_fmpy_simulates_columns_and_values() {
     }
 }
 
+/// Through Model Exchange with event rows (`--interface model-exchange --record-events`),
+/// each FMI 2.0 Reference FMU gives `fmpy simulate --interface-type ModelExchange`'s rows: the
+/// output points and, at each event, a row before and after it (FMPy's `record_events`,
+/// its default), with the values of FMPy's CVode to round-off (1e-11 relative).
+#[test]
+fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_rows() {
+    let dir = tb_testkit::scratch("run-fmu-me");
+    let mut rows_with_events = 0;
+    for model in reference::FMI2_MODELS {
+        let fmu = reference::fmu(model, 2);
+        let ours = format!("{model}.me.csv");
+        let theirs = format!("{model}.me.fmpy.csv");
+        let args = [
+            "run",
+            fmu.to_str().unwrap(),
+            "--interface",
+            "model-exchange",
+            "--record-events",
+            "--out",
+            &ours,
+        ];
+        ok(&twinbench(dir.path(), &args), model);
+        fmpy_simulate(
+            dir.path(),
+            &fmu,
+            &theirs,
+            &["--interface-type", "ModelExchange"],
+        );
+        let (n1, r1) = read_ours(&dir.path().join(&ours));
+        let (n2, r2) = read_fmpy(&dir.path().join(&theirs));
+        assert_eq!(n1, n2, "{model}: columns");
+        assert_eq!(r1.len(), r2.len(), "{model}: rows");
+        let mut worst: f64 = 0.0;
+        for (k, (a, b)) in r1.iter().zip(&r2).enumerate() {
+            for (c, (x, y)) in a.iter().zip(b).enumerate() {
+                let d = (x - y).abs() / y.abs().max(1.0);
+                worst = worst.max(d);
+                assert!(
+                    d <= 1e-11,
+                    "{model}: row {k}, {}: twinbench {x}, FMPy {y}",
+                    n1[c]
+                );
+            }
+        }
+        // Rows at one time twice: an event's left and right limits.
+        let times: Vec<f64> = r1.iter().map(|r| r[0]).collect();
+        let events = times.windows(2).filter(|w| w[0] == w[1]).count();
+        rows_with_events += events;
+        println!("{model} (Model Exchange, event rows): {} rows, {events} at events, largest relative difference from FMPy {worst:e}", r1.len());
+        // Without --record-events: the output points only.
+        let plain = format!("{model}.me.plain.csv");
+        let args = [
+            "run",
+            fmu.to_str().unwrap(),
+            "--interface",
+            "model-exchange",
+            "--out",
+            &plain,
+        ];
+        ok(&twinbench(dir.path(), &args), model);
+        let (_, r3) = read_ours(&dir.path().join(&plain));
+        assert!(
+            r3.windows(2).all(|w| w[1][0] > w[0][0]),
+            "{model}: a time twice without event rows"
+        );
+    }
+    // BouncingBall's bounces and Stair's steps are there.
+    assert!(
+        rows_with_events >= 10,
+        "{rows_with_events} event rows in all"
+    );
+}
+
 /// Feedthrough's inputs from a file in FMPy's format (a time column, one column per input,
 /// no units; a repeated time is a step) and a start value, with an output interval of
 /// their own (FMPy's communication step, as alone it is twinbench's).

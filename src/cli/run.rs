@@ -76,6 +76,10 @@ pub struct RunArgs {
     /// `--fmi-type`; default: Co-Simulation when the FMU has it).
     #[arg(long, value_name = "model-exchange|co-simulation", value_parser = |s: &str| tb_fmi::Interface::from_name(s))]
     pub interface: Option<tb_fmi::Interface>,
+    /// One Model Exchange FMU: a row just before and just after each event too, both at the
+    /// event's time (FMPy's `record_events`), besides the output points.
+    #[arg(long)]
+    pub record_events: bool,
 }
 
 /// A run that failed: what it recorded up to the failure is kept, in a file named as
@@ -254,6 +258,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if let Some(instance) = &instance {
         super::run_fmu::own_names(&mut sim.recording, instance)?;
     }
+    sim.record_events(args.record_events)?;
     for s in &args.set {
         let (name, value) = parse_assignment(s)?;
         let name = match &instance {

@@ -33,6 +33,7 @@ pub fn refuse_fmu_options(args: &RunArgs) -> anyhow::Result<()> {
         ("--output-interval", args.output_interval.is_some()),
         ("--input", args.input.is_some()),
         ("--interface", args.interface.is_some()),
+        ("--record-events", args.record_events),
     ];
     if let Some((name, _)) = given.iter().find(|(_, on)| *on) {
         bail!(
@@ -51,6 +52,11 @@ pub fn system(args: &RunArgs, cache: &FmuCache) -> anyhow::Result<(SystemFile, S
     let interface = args.interface.unwrap_or_else(|| fmu.default_interface());
     fmu.check_interface(interface)
         .map_err(|why| anyhow::anyhow!("--interface {interface}: {}: {why}", fmu_path.display()))?;
+    if args.record_events && args.isolate && interface == Interface::ModelExchange {
+        bail!(
+            "--record-events with --isolate: an isolated Model Exchange instance integrates in its worker and records no event rows yet; run without --isolate for event rows"
+        );
+    }
     let instance = md
         .model_identifier(interface)
         .unwrap_or(fmu.model_identifier())

@@ -4,7 +4,7 @@
 //! its unit.
 
 use std::sync::Arc;
-use tb_fmi::{FmuError, Instance, Instance3, Interface, LoadedFmu, MeInstance, MeSettings};
+use tb_fmi::{FmuError, Instance, Instance3, Interface, LoadedFmu, MeInstance, MeSettings, MeStop};
 
 /// One running instance, in FMI 2.0 Co-Simulation terms.
 pub trait Backend: Send {
@@ -37,6 +37,17 @@ pub trait Backend: Send {
     fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError>;
     fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError>;
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError>;
+    /// Whether [`Backend::step_to_event`] stops at events (an in-process Model Exchange
+    /// instance); the master records event rows only from such a unit.
+    fn stops_at_events(&self) -> bool {
+        false
+    }
+    /// The step from `t` by `h`, stopping before and after each event inside it (FMPy's
+    /// `record_events`); called again with the same `t` and `h` until it returns
+    /// [`MeStop::Reached`]. A unit that does not stop at events makes the whole step.
+    fn step_to_event(&mut self, t: f64, h: f64) -> Result<MeStop, FmuError> {
+        self.do_step(t, h).map(|()| MeStop::Reached)
+    }
     /// After a step returned `fmi2Discard`: `Some(last successful time)` when the FMU asks
     /// to end the simulation (`fmi2Terminated`), as FMPy's master asks it.
     fn terminated_by_fmu(&mut self) -> Option<f64> {
@@ -346,6 +357,12 @@ impl Backend for MeInstance {
     }
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
         MeInstance::do_step(self, t, h)
+    }
+    fn stops_at_events(&self) -> bool {
+        true
+    }
+    fn step_to_event(&mut self, t: f64, h: f64) -> Result<MeStop, FmuError> {
+        MeInstance::step_to_event(self, t, h)
     }
     fn terminated_by_fmu(&mut self) -> Option<f64> {
         MeInstance::terminated_by_fmu(self)

@@ -12,7 +12,7 @@ use crate::{backend::Backend, invalid, SystemError};
 use std::sync::Arc;
 use std::time::Instant;
 use tb_fmi::fmi2::fmi2Status;
-use tb_fmi::{FmuError, Function, ScalarType};
+use tb_fmi::{FmuError, Function, MeStop, ScalarType};
 use tb_table::Table;
 
 #[derive(Default)]
@@ -164,6 +164,25 @@ impl FmuUnit {
 /// Reads a batch of Real outputs into the exchange buffer; a value that is not finite is
 /// an error naming the instance, the signal and the time.
 #[inline]
+/// A step's error: a discarded step may be the FMU's way to end the simulation (FMI 2.0,
+/// 4.2.3), and the run then ends there, normally.
+fn step_error(f: &mut FmuUnit, e: FmuError) -> SystemError {
+    match e {
+        e @ FmuError::Call {
+            function: Function::DoStep,
+            status: fmi2Status::DISCARD,
+            ..
+        } => match f.backend().terminated_by_fmu() {
+            Some(time) => SystemError::EndedByFmu {
+                instance: f.name.clone(),
+                time,
+            },
+            None => e.into(),
+        },
+        e => e.into(),
+    }
+}
+
 fn read_reals(
     i: &mut dyn Backend,
     batch: &mut Batch<f64>,
@@ -245,29 +264,24 @@ impl Exchange {
     #[inline]
     pub fn do_step(&mut self, u: usize, t: f64, h: f64) -> Result<(), SystemError> {
         if let Unit::Fmu(f) = &mut self.units[u] {
-            match f.backend().do_step(t, h) {
-                Ok(()) => {}
-                // A discarded step may be the FMU's way to end the simulation (FMI 2.0,
-                // 4.2.3): then the run ends there, normally.
-                Err(
-                    e @ FmuError::Call {
-                        function: Function::DoStep,
-                        status: fmi2Status::DISCARD,
-                        ..
-                    },
-                ) => {
-                    return Err(match f.backend().terminated_by_fmu() {
-                        Some(time) => SystemError::EndedByFmu {
-                            instance: f.name.clone(),
-                            time,
-                        },
-                        None => e.into(),
-                    })
-                }
-                Err(e) => return Err(e.into()),
+            if let Err(e) = f.backend().do_step(t, h) {
+                return Err(step_error(f, e));
             }
         }
         Ok(())
+    }
+
+    /// Step unit `u` from `t` by `h`, stopping before and after each event inside the step
+    /// ([`Backend::step_to_event`]; a replay, or a unit that does not stop at events, makes
+    /// the whole step).
+    pub fn step_to_event(&mut self, u: usize, t: f64, h: f64) -> Result<MeStop, SystemError> {
+        match &mut self.units[u] {
+            Unit::Fmu(f) => f
+                .backend()
+                .step_to_event(t, h)
+                .map_err(|e| step_error(f, e)),
+            Unit::Replay(_) => Ok(MeStop::Reached),
+        }
     }
 
     /// Read unit `u`'s outputs into the exchange buffer. A replay by distance takes its
@@ -442,6 +456,9 @@ pub struct Simulation {
     pub echo_fmu_log: bool,
     /// The recording has text columns (String signals).
     has_text: bool,
+    /// A row before and after each event of a Model Exchange instance, as FMPy's
+    /// `record_events` ([`Simulation::record_events`]).
+    record_events: bool,
 }
 
 impl Simulation {
@@ -548,7 +565,53 @@ impl Simulation {
             plan,
             recording,
             echo_fmu_log: true,
+            record_events: false,
         })
+    }
+
+    /// Record a row before and after each event inside a step, as FMPy's `record_events`
+    /// (`twinbench run model.fmu --record-events`): the values just before the event (its
+    /// left limits) and just after it, both at the event's time; an event at a step's end
+    /// adds the row before it. Only a unit that stops at events ([`Backend::stops_at_events`]:
+    /// an in-process Model Exchange instance) has event rows; a system of more than one
+    /// instance is refused (the others' values between their steps are not defined).
+    pub fn record_events(&mut self, on: bool) -> Result<(), SystemError> {
+        if on && self.plan.instances.len() != 1 {
+            return Err(invalid(
+                self.plan.path.display().to_string(),
+                format!(
+                    "event rows (record_events) are for a system of one instance; this one has {}",
+                    self.plan.instances.len()
+                ),
+            ));
+        }
+        self.record_events = on;
+        Ok(())
+    }
+
+    /// One step of the units in `order` (Gauss-Seidel), with a recorded row before and after
+    /// each event inside it.
+    fn step_recording_events(
+        &mut self,
+        order: &[usize],
+        t: f64,
+        h: f64,
+    ) -> Result<(), SystemError> {
+        for &u in order {
+            self.ex.set_inputs(u)?;
+            loop {
+                match self.ex.step_to_event(u, t, h)? {
+                    MeStop::Reached => break,
+                    MeStop::BeforeEvent(te) | MeStop::AfterEvent(te) => {
+                        self.ex.time_replays_at(te);
+                        self.ex.publish(u, te)?;
+                        self.record(te)?;
+                    }
+                }
+            }
+            self.ex.publish(u, t + h)?;
+        }
+        Ok(())
     }
 
     /// The plan this simulation runs.
@@ -843,7 +906,11 @@ impl Simulation {
                 (true, true) => (start + span) - t,
             };
             self.ex.time_replays_at(t);
-            if let Err(e) = self.algorithm.step(&mut self.ex, order, t, step) {
+            let stepped = match self.record_events {
+                true => self.step_recording_events(order, t, step),
+                false => self.algorithm.step(&mut self.ex, order, t, step),
+            };
+            if let Err(e) = stepped {
                 let SystemError::EndedByFmu { instance, time } = e else {
                     return Err(e);
                 };
@@ -851,7 +918,13 @@ impl Simulation {
                 self.ex.publish_all(time)?;
                 k += 1;
                 t_end = time;
-                self.record(t_end)?;
+                // With event rows the FMU's end in an event follows the row before that
+                // event, at the same time: as FMPy's `record_events`, that row is the last.
+                let recorded =
+                    self.record_events && self.recording.column_at(0).last() == Some(&time);
+                if !recorded {
+                    self.record(t_end)?;
+                }
                 stopped_by = format!(
                     "instance '{instance}' asked to end the simulation at t = {time} s (fmi2Discard with fmi2Terminated, or fmi3DoStep's terminateSimulation)"
                 );

@@ -383,6 +383,17 @@ impl Backend for Traced {
             |b| b.do_step(t, h),
         )
     }
+    fn stops_at_events(&self) -> bool {
+        self.inner.stops_at_events()
+    }
+    fn step_to_event(&mut self, t: f64, h: f64) -> Result<tb_fmi::MeStop, FmuError> {
+        let f = self.name2("fmi2DoStep", "fmi3DoStep");
+        self.traced(
+            f,
+            format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}"),
+            |b| b.step_to_event(t, h),
+        )
+    }
     fn terminated_by_fmu(&mut self) -> Option<f64> {
         let t = self.inner.time();
         let r = self.inner.terminated_by_fmu();

@@ -131,8 +131,26 @@ pub struct MeInstance {
     event_pending: bool,
     /// Set when the FMU asked to end the simulation: the time reached.
     terminated_at: Option<f64>,
+    /// The end of the step under way ([`MeInstance::step_to_event`] stopped at an event
+    /// before it), the events at one time so far, and an event found but not yet handled
+    /// (with the time its integration started from).
+    step_target: Option<f64>,
+    events_here: usize,
+    event_detected: bool,
+    event_start: f64,
     /// The times of the events handled since initialisation (the first [`MAX_EVENTS_KEPT`]).
     events: Vec<f64>,
+}
+
+/// Where [`MeInstance::step_to_event`] stopped.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MeStop {
+    /// The end of the step.
+    Reached,
+    /// An event at this time, not yet handled: the values are its left limits.
+    BeforeEvent(f64),
+    /// The event at this time handled, before the end of the step.
+    AfterEvent(f64),
 }
 
 /// The most event times an instance keeps ([`MeInstance::events`]).
@@ -231,6 +249,10 @@ impl MeInstance {
             inputs_changed: false,
             event_pending: false,
             terminated_at: None,
+            step_target: None,
+            events_here: 0,
+            event_detected: false,
+            event_start: 0.0,
             events: Vec::new(),
         })
     }
@@ -363,6 +385,8 @@ impl MeInstance {
         self.mode = Mode::Instantiated;
         self.next_event = None;
         self.terminated_at = None;
+        self.step_target = None;
+        self.event_detected = false;
         self.event_pending = false;
         self.inputs.clear();
         self.inputs_changed = false;
@@ -641,6 +665,40 @@ impl MeInstance {
     /// simulation the step reports `fmi2Discard` and [`MeInstance::terminated_by_fmu`]
     /// gives the time reached.
     pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        while self.advance(t, h, false)? != MeStop::Reached {}
+        Ok(())
+    }
+
+    /// As [`MeInstance::do_step`], but stopping at each event twice, as FMPy's
+    /// `record_events` samples it: before it is handled ([`MeStop::BeforeEvent`], the
+    /// left limit) and after ([`MeStop::AfterEvent`], unless the event is at `t + h`, whose
+    /// values the step's end gives). Called again with the same `t` and `h` until it
+    /// returns [`MeStop::Reached`].
+    pub fn step_to_event(&mut self, t: f64, h: f64) -> Result<MeStop, FmuError> {
+        self.advance(t, h, true)
+    }
+
+    fn advance(&mut self, t: f64, h: f64, stop_at_events: bool) -> Result<MeStop, FmuError> {
+        let target = t + h;
+        if self.step_target != Some(target) {
+            self.begin_step()?;
+            self.step_target = Some(target);
+            self.events_here = 0;
+        }
+        let r = self.advance_to(target, stop_at_events);
+        if !matches!(r, Ok(MeStop::BeforeEvent(_) | MeStop::AfterEvent(_))) {
+            self.step_target = None;
+            self.event_detected = false;
+        }
+        if r.as_ref().is_ok_and(|s| *s == MeStop::Reached) && !self.continuous_inputs.is_empty() {
+            // The indicators as the step left them: a changed input is compared to these.
+            self.read_indicators()?;
+        }
+        r
+    }
+
+    /// The checks and pending work before a step's integration.
+    fn begin_step(&mut self) -> Result<(), FmuError> {
         if self.terminated_at.is_some() {
             return Err(self.ended());
         }
@@ -660,8 +718,39 @@ impl MeInstance {
         if self.inputs_changed && self.input_event()? {
             return Err(self.ended());
         }
-        let target = t + h;
-        let mut events_here = 0;
+        Ok(())
+    }
+
+    /// The event detected at the current time, handled (event iteration).
+    fn handle_event(&mut self, before: f64) -> Result<(), FmuError> {
+        self.events_here = if self.inst.time == before {
+            self.events_here + 1
+        } else {
+            0
+        };
+        if self.events_here > MAX_EVENT_ITERATIONS {
+            return Err(self.error(
+                "fmi2NewDiscreteStates",
+                format!("{MAX_EVENT_ITERATIONS} events at one time: the FMU sets its next event time to the current time again and again"),
+            ));
+        }
+        if self.event_iteration(true)? {
+            return Err(self.ended());
+        }
+        Ok(())
+    }
+
+    fn advance_to(&mut self, target: f64, stop_at_events: bool) -> Result<MeStop, FmuError> {
+        if self.event_detected {
+            // Stopped before this event (BeforeEvent): handle it now.
+            self.event_detected = false;
+            let before = self.event_start;
+            self.handle_event(before)?;
+            let te = self.inst.time;
+            if !(te > target || isclose(te, target)) {
+                return Ok(MeStop::AfterEvent(te));
+            }
+        }
         while !(self.inst.time > target || isclose(self.inst.time, target)) {
             let mut t_next = target;
             if let Some(te) = self.next_event {
@@ -684,27 +773,15 @@ impl MeInstance {
             }
             let time_event = time_event && isclose(self.inst.time, t_next);
             if time_event || state_event || step_event {
-                events_here = if self.inst.time == before {
-                    events_here + 1
-                } else {
-                    0
-                };
-                if events_here > MAX_EVENT_ITERATIONS {
-                    return Err(self.error(
-                        "fmi2NewDiscreteStates",
-                        format!("{MAX_EVENT_ITERATIONS} events at one time: the FMU sets its next event time to the current time again and again"),
-                    ));
+                if stop_at_events {
+                    self.event_detected = true;
+                    self.event_start = before;
+                    return Ok(MeStop::BeforeEvent(self.inst.time));
                 }
-                if self.event_iteration(true)? {
-                    return Err(self.ended());
-                }
+                self.handle_event(before)?;
             }
         }
-        if !self.continuous_inputs.is_empty() {
-            // The indicators as the step left them: a changed input is compared to these.
-            self.read_indicators()?;
-        }
-        Ok(())
+        Ok(MeStop::Reached)
     }
 
     /// CVODE from the current time to `t_next`, stopping at a root; the FMU then holds the
