@@ -139,3 +139,79 @@ fn a_trace_path_that_is_an_input_is_refused_and_the_input_kept() {
     assert!(!r.status.success() && err.contains("--trace-fmi"), "{err}");
     assert_eq!(std::fs::read(&s).unwrap(), before);
 }
+
+/// A Model Exchange instance's trace has the calls the FMU receives while twinbench
+/// integrates it (time, states, derivatives, event indicators, event mode and the event
+/// iteration, CVODE's callbacks among them), not an `fmi2DoStep` it never gets; and the
+/// trace changes nothing in the result.
+#[test]
+fn a_model_exchange_trace_has_the_calls_the_fmu_receives() {
+    let dir = tb_testkit::scratch("trace-me");
+    let fmu = reference::fmu("BouncingBall", 2);
+    let trace = dir.path().join("trace.txt");
+    let (traced, plain) = (dir.path().join("traced.csv"), dir.path().join("plain.csv"));
+    let r = twinbench(&[
+        "run".as_ref(),
+        fmu.as_os_str(),
+        "--interface".as_ref(),
+        "model-exchange".as_ref(),
+        "--trace-fmi".as_ref(),
+        trace.as_os_str(),
+        "-o".as_ref(),
+        traced.as_os_str(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = twinbench(&[
+        "run".as_ref(),
+        fmu.as_os_str(),
+        "--interface".as_ref(),
+        "model-exchange".as_ref(),
+        "-o".as_ref(),
+        plain.as_os_str(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(
+        std::fs::read(&traced).unwrap(),
+        std::fs::read(&plain).unwrap()
+    );
+    let text = std::fs::read_to_string(&trace).unwrap();
+    for call in [
+        "fmi2Instantiate(",
+        "fmi2SetupExperiment(",
+        "fmi2ExitInitializationMode(",
+        "fmi2SetTime(time=",
+        "fmi2SetContinuousStates([",
+        "fmi2GetDerivatives([",
+        "fmi2GetEventIndicators([",
+        "fmi2GetContinuousStates([",
+        "fmi2GetNominalsOfContinuousStates([",
+        "fmi2CompletedIntegratorStep(noSetFMUStatePriorToCurrentPoint=true",
+        "fmi2EnterEventMode()",
+        "fmi2NewDiscreteStates(newDiscreteStatesNeeded=false",
+        "fmi2EnterContinuousTimeMode()",
+        "fmi2GetReal(",
+    ] {
+        assert!(
+            text.contains(call),
+            "no {call} in the trace:\n{}",
+            &text[..text.len().min(3000)]
+        );
+    }
+    assert!(
+        !text.contains("fmi2DoStep"),
+        "an fmi2DoStep in a Model Exchange trace"
+    );
+    // BouncingBall's eleven bounces (and none more): event mode entered once for each.
+    let bounces = text.matches("fmi2EnterEventMode()").count();
+    assert!((11..=12).contains(&bounces), "{bounces} events");
+    // A line: the instance's time, its name, the call, its status.
+    let line = text
+        .lines()
+        .find(|l| l.contains("fmi2GetDerivatives("))
+        .unwrap();
+    assert!(
+        line.starts_with("t=") && line.contains(" BouncingBall: "),
+        "{line}"
+    );
+    assert!(line.ends_with(") -> fmi2OK"), "{line}");
+}

@@ -37,6 +37,12 @@ pub trait Backend: Send {
     fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError>;
     fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError>;
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError>;
+    /// Give the unit a trace for the FMI calls it makes on its own inside a step (a Model
+    /// Exchange instance's integration: time, states, derivatives, event indicators, event
+    /// mode); false when it makes none (a Co-Simulation FMU's step is the one call).
+    fn set_call_trace(&mut self, _trace: tb_fmi::CallTrace) -> bool {
+        false
+    }
     /// Whether [`Backend::step_to_event`] stops at events (an in-process Model Exchange
     /// instance); the master records event rows only from such a unit.
     fn stops_at_events(&self) -> bool {
@@ -359,6 +365,10 @@ impl Backend for MeInstance {
         MeInstance::do_step(self, t, h)
     }
     fn stops_at_events(&self) -> bool {
+        true
+    }
+    fn set_call_trace(&mut self, trace: tb_fmi::CallTrace) -> bool {
+        MeInstance::set_call_trace(self, Some(trace));
         true
     }
     fn step_to_event(&mut self, t: f64, h: f64) -> Result<MeStop, FmuError> {

@@ -141,11 +141,21 @@ impl BackendFactory for TracedFactory {
                 ),
             })
             .collect();
+        let mut inner = r?;
+        // A Model Exchange instance's own calls inside a step, in the same form; its step is
+        // then no fmi2DoStep (the FMU never receives one).
+        let line_sink = sink.clone();
+        let name = instance_name.to_string();
+        let steps_traced_inside =
+            inner.set_call_trace(Arc::new(move |t, function, args, status| {
+                line_sink.line(&format!("t={t} {name}: {function}({args}) -> {status}"));
+            }));
         Ok(Box::new(Traced {
-            inner: r?,
+            inner,
             sink,
             names,
             fmi3,
+            steps_traced_inside,
         }))
     }
 }
@@ -157,6 +167,8 @@ pub struct Traced {
     /// Variable names by (value space, value reference); FMI 3.0: by value reference.
     names: HashMap<(Option<ScalarType>, u32), String>,
     fmi3: bool,
+    /// The unit traces the calls of its steps itself (Model Exchange).
+    steps_traced_inside: bool,
 }
 
 impl Traced {
@@ -376,6 +388,9 @@ impl Backend for Traced {
         self.traced(f, args, |b| b.set_string(vrs, values))
     }
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        if self.steps_traced_inside {
+            return self.inner.do_step(t, h);
+        }
         let f = self.name2("fmi2DoStep", "fmi3DoStep");
         self.traced(
             f,
@@ -387,6 +402,9 @@ impl Backend for Traced {
         self.inner.stops_at_events()
     }
     fn step_to_event(&mut self, t: f64, h: f64) -> Result<tb_fmi::MeStop, FmuError> {
+        if self.steps_traced_inside {
+            return self.inner.step_to_event(t, h);
+        }
         let f = self.name2("fmi2DoStep", "fmi3DoStep");
         self.traced(
             f,

@@ -135,11 +135,25 @@ pub struct MeInstance {
     /// before it), the events at one time so far, and an event found but not yet handled
     /// (with the time its integration started from).
     step_target: Option<f64>,
+    /// The call trace ([`MeInstance::set_call_trace`]).
+    trace: Option<CallTrace>,
     events_here: usize,
     event_detected: bool,
     event_start: f64,
     /// The times of the events handled since initialisation (the first [`MAX_EVENTS_KEPT`]).
     events: Vec<f64>,
+}
+
+/// Where an instance reports each FMI call it makes on its own between the master's calls
+/// (`--trace-fmi`): the instance's time, the function, its arguments and the status. The
+/// calls the master makes through the instance (get, set, initialisation) are the master's
+/// to trace.
+pub type CallTrace = Arc<dyn Fn(f64, &str, &str, fmi2Status) + Send + Sync>;
+
+/// `[1.0, 2.5]`: values as their shortest round-trip text.
+pub(crate) fn shown_values(x: &[f64]) -> String {
+    let items: Vec<String> = x.iter().map(|v| format!("{v:?}")).collect();
+    format!("[{}]", items.join(", "))
 }
 
 /// Where [`MeInstance::step_to_event`] stopped.
@@ -250,6 +264,7 @@ impl MeInstance {
             event_pending: false,
             terminated_at: None,
             step_target: None,
+            trace: None,
             events_here: 0,
             event_detected: false,
             event_start: 0.0,
@@ -319,8 +334,28 @@ impl MeInstance {
         }
     }
 
+    /// Report each FMI call the instance makes on its own (event mode, the event
+    /// iteration, time, states, derivatives and event indicators, CVODE's callbacks
+    /// included) to `trace`.
+    pub fn set_call_trace(&mut self, trace: Option<CallTrace>) {
+        self.trace = trace;
+    }
+
     /// A Model Exchange call's status: OK and Warning go on.
     fn check(&self, call: &str, status: fmi2Status) -> Result<(), FmuError> {
+        self.check_with(call, String::new, status)
+    }
+
+    /// As [`Self::check`], with the call's arguments for the trace.
+    fn check_with(
+        &self,
+        call: &str,
+        args: impl FnOnce() -> String,
+        status: fmi2Status,
+    ) -> Result<(), FmuError> {
+        if let Some(trace) = &self.trace {
+            trace(self.inst.time, call, &args(), status);
+        }
         match status.ok() {
             Ok(()) => Ok(()),
             Err(s) => Err(self.error(call, format!("returned {s}"))),
@@ -495,7 +530,18 @@ impl MeInstance {
             }
             info = fmi2EventInfo::default();
             let s = unsafe { (self.api.fmi2NewDiscreteStates)(self.inst.raw(), &mut info) };
-            self.check("fmi2NewDiscreteStates", s)?;
+            let shown = || {
+                format!(
+                    "newDiscreteStatesNeeded={}, terminateSimulation={}, nominalsOfContinuousStatesChanged={}, valuesOfContinuousStatesChanged={}, nextEventTimeDefined={}, nextEventTime={:?}",
+                    info.newDiscreteStatesNeeded != fmi2False,
+                    info.terminateSimulation != fmi2False,
+                    info.nominalsOfContinuousStatesChanged != fmi2False,
+                    info.valuesOfContinuousStatesChanged != fmi2False,
+                    info.nextEventTimeDefined != fmi2False,
+                    info.nextEventTime
+                )
+            };
+            self.check_with("fmi2NewDiscreteStates", shown, s)?;
             nominals_changed |= info.nominalsOfContinuousStatesChanged != fmi2False;
         }
         info.nominalsOfContinuousStatesChanged = nominals_changed as fmi2Boolean;
@@ -540,7 +586,7 @@ impl MeInstance {
         out: &mut [f64],
     ) -> Result<(), FmuError> {
         let s = unsafe { f(self.inst.raw(), out.as_mut_ptr(), out.len()) };
-        self.check(call, s)
+        self.check_with(call, || shown_values(out), s)
     }
 
     /// The states into `self.x` and, when `nominals`, the absolute tolerances from the
@@ -630,7 +676,7 @@ impl MeInstance {
             max_step,
             max_num_steps: MAX_NUM_STEPS,
         };
-        let system = FmuSystem::new(self.inst.raw(), self.api, self.nx);
+        let system = FmuSystem::new(self.inst.raw(), self.api, self.nx, self.trace.clone());
         let solver = Cvode::new(
             system,
             self.inst.time,
@@ -800,11 +846,15 @@ impl MeInstance {
             let s = unsafe {
                 (self.api.fmi2SetContinuousStates)(self.inst.raw(), self.x.as_ptr(), self.nx)
             };
-            self.check("fmi2SetContinuousStates", s)?;
+            self.check_with(
+                "fmi2SetContinuousStates",
+                || shown_values(&self.x[..self.nx]),
+                s,
+            )?;
         }
         self.inst.time = t;
         let s = unsafe { (self.api.fmi2SetTime)(self.inst.raw(), t) };
-        self.check("fmi2SetTime", s)?;
+        self.check_with("fmi2SetTime", || format!("time={t:?}"), s)?;
         Ok(state_event)
     }
 
@@ -823,7 +873,17 @@ impl MeInstance {
                 &mut terminate,
             )
         };
-        self.check("fmi2CompletedIntegratorStep", s)?;
+        self.check_with(
+            "fmi2CompletedIntegratorStep",
+            || {
+                format!(
+                    "noSetFMUStatePriorToCurrentPoint=true, enterEventMode={}, terminateSimulation={}",
+                    enter != fmi2False,
+                    terminate != fmi2False
+                )
+            },
+            s,
+        )?;
         Ok((enter != fmi2False, terminate != fmi2False))
     }
 

@@ -4,6 +4,7 @@
 //! one dummy state with ẋ = 0 (FMPy's `discrete` case), never set into the FMU.
 
 use super::cvode::System;
+use super::{shown_values, CallTrace};
 use crate::fmi2::*;
 use crate::import::library::MeApi;
 
@@ -20,15 +21,24 @@ pub struct FmuSystem {
     api: MeApi,
     nx: usize,
     pub failure: Option<Failure>,
+    trace: Option<CallTrace>,
 }
 
 impl FmuSystem {
-    pub fn new(comp: fmi2Component, api: MeApi, nx: usize) -> FmuSystem {
+    pub fn new(comp: fmi2Component, api: MeApi, nx: usize, trace: Option<CallTrace>) -> FmuSystem {
         FmuSystem {
             comp,
             api,
             nx,
             failure: None,
+            trace,
+        }
+    }
+
+    /// The call to the trace, when there is one.
+    fn traced(&self, t: f64, call: &str, args: impl FnOnce() -> String, status: fmi2Status) {
+        if let Some(trace) = &self.trace {
+            trace(t, call, &args(), status);
         }
     }
 
@@ -54,11 +64,18 @@ impl FmuSystem {
         // SAFETY: the component is alive while the integrator is (the instance owns both
         // and drops the integrator first); x has nx values.
         let s = unsafe { (self.api.fmi2SetTime)(self.comp, t) };
+        self.traced(t, "fmi2SetTime", || format!("time={t:?}"), s);
         let r = self.status("fmi2SetTime", s, t);
         if r != 0 || self.nx == 0 {
             return r;
         }
         let s = unsafe { (self.api.fmi2SetContinuousStates)(self.comp, x.as_ptr(), self.nx) };
+        self.traced(
+            t,
+            "fmi2SetContinuousStates",
+            || shown_values(&x[..self.nx]),
+            s,
+        );
         self.status("fmi2SetContinuousStates", s, t)
     }
 }
@@ -68,6 +85,7 @@ impl System for FmuSystem {
         if self.nx == 0 {
             dx.iter_mut().for_each(|d| *d = 0.0);
             let s = unsafe { (self.api.fmi2SetTime)(self.comp, t) };
+            self.traced(t, "fmi2SetTime", || format!("time={t:?}"), s);
             return self.status("fmi2SetTime", s, t);
         }
         let r = self.set(t, x);
@@ -75,6 +93,7 @@ impl System for FmuSystem {
             return r;
         }
         let s = unsafe { (self.api.fmi2GetDerivatives)(self.comp, dx.as_mut_ptr(), self.nx) };
+        self.traced(t, "fmi2GetDerivatives", || shown_values(dx), s);
         self.status("fmi2GetDerivatives", s, t)
     }
 
@@ -84,6 +103,7 @@ impl System for FmuSystem {
             return r;
         }
         let s = unsafe { (self.api.fmi2GetEventIndicators)(self.comp, g.as_mut_ptr(), g.len()) };
+        self.traced(t, "fmi2GetEventIndicators", || shown_values(g), s);
         self.status("fmi2GetEventIndicators", s, t)
     }
 }
