@@ -523,8 +523,9 @@ fn ssp_trace_and_reset_keep_a_model_exchange_instance() {
         );
     }
     let trace = std::fs::read_to_string(dir.path().join("trace.txt")).unwrap();
+    // The calls the FMU receives while twinbench integrates it, not an fmi2DoStep.
     assert!(
-        trace.contains("m") && trace.matches("DoStep").count() >= 300,
+        trace.matches(" m: fmi2GetDerivatives(").count() >= 300 && !trace.contains("DoStep"),
         "{}",
         &trace[..trace.len().min(2000)]
     );
