@@ -245,3 +245,46 @@ fn info_says_the_default_experiment_in_seconds() {
     );
     assert!(!text.contains("Some("), "{text}");
 }
+
+/// Ctrl-C during `demo` keeps the checkpoint and says how to go on, as `optimize` does; the
+/// command it prints finishes the demo.
+#[test]
+fn an_interrupted_demo_says_how_to_go_on() {
+    let dir = tb_testkit::scratch("first-hour-4-demo");
+    let d = dir.path();
+    let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(["demo", "--out", "dem"])
+        .current_dir(d)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let checkpoint = d.join("dem/spielberg.checkpoint.json");
+    let started = std::time::Instant::now();
+    while !checkpoint.exists() {
+        assert!(
+            started.elapsed().as_secs() < 120,
+            "no checkpoint after 2 minutes"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let o = child.wait_with_output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{e}");
+    assert!(
+        e.contains(
+            "interrupted: checkpoint kept (dem/spielberg.checkpoint.json); resume with `twinbench demo --resume --out dem`"
+        ),
+        "{e}"
+    );
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(["demo", "--resume", "--out", "dem"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.contains("| Fz_rl |"), "{text}");
+    assert!(d.join("dem/table1.md").is_file());
+}

@@ -23,6 +23,24 @@ pub struct DemoArgs {
     /// The study to run (default: studies/spielberg.toml).
     #[arg(long)]
     pub study: Option<PathBuf>,
+    /// Continue an interrupted demo from its checkpoint (to the same Tab. 1).
+    #[arg(long)]
+    pub resume: bool,
+}
+
+impl DemoArgs {
+    /// The command line that continues this demo from its checkpoint.
+    fn resume_command(&self) -> String {
+        let quote = super::interrupt::shell_word;
+        let mut c = String::from("twinbench demo --resume");
+        if self.out != std::path::Path::new("target/demo") {
+            c.push_str(&format!(" --out {}", quote(&self.out)));
+        }
+        if let Some(study) = &self.study {
+            c.push_str(&format!(" --study {}", quote(study)));
+        }
+        c
+    }
 }
 
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
@@ -32,6 +50,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     prepare_bundle(&bundle, args.repack)?;
     let study_path = args
         .study
+        .clone()
         .unwrap_or_else(|| bundle.join("studies/spielberg.toml"));
     let study = Study::load(&study_path)?;
     std::fs::create_dir_all(&args.out)
@@ -44,17 +63,30 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     println!("  system       {}", study.system_path.display());
     println!("  measurement  {}", study.measurement_path.display());
     let optimise_start = Instant::now();
+    let checkpoint = args.out.join(format!("{}.checkpoint.json", study.name()));
+    if args.resume && !checkpoint.exists() {
+        eprintln!(
+            "no checkpoint at {}: starting from the beginning",
+            checkpoint.display()
+        );
+    }
     let options = RunOptions {
         threads: args.threads,
         progress: Some(super::progress::Bars::shared()),
-        checkpoint: Some(args.out.join(format!("{}.checkpoint.json", study.name()))),
-        resume: false,
+        checkpoint: Some(checkpoint.clone()),
+        resume: args.resume,
+        interrupt: Some(super::interrupt::flag()?),
         verbose: true,
         ..RunOptions::default()
     };
     let result = match run_study(&study, &options)? {
         StudyOutcome::Finished(r) => r,
-        StudyOutcome::Interrupted { .. } => anyhow::bail!("interrupted"),
+        // As `optimize`: the checkpoint of every finished generation, and how to go on.
+        StudyOutcome::Interrupted { .. } => {
+            return Err(
+                super::interrupt::Interrupted::new(&checkpoint, args.resume_command()).into(),
+            )
+        }
     };
     let optimise_seconds = optimise_start.elapsed().as_secs_f64();
     let report = crate::report::write_report(&study, &result, &args.out)?;

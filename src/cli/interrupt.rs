@@ -18,6 +18,18 @@ pub struct Interrupted {
     pub resume: String,
 }
 
+/// A path as one word of a shell command line (quoted only when it needs to be).
+pub fn shell_word(p: &Path) -> String {
+    let s = p.display().to_string();
+    match s
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || "/._-+".contains(c))
+    {
+        true => s,
+        false => format!("'{}'", s.replace('\'', "'\\''")),
+    }
+}
+
 impl Interrupted {
     pub fn new(checkpoint: &Path, resume: String) -> Self {
         Interrupted {

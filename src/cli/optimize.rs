@@ -43,16 +43,7 @@ pub struct OptimizeArgs {
 impl OptimizeArgs {
     /// The command line that continues this study from its checkpoint.
     pub fn resume_command(&self) -> String {
-        let quote = |p: &std::path::Path| {
-            let s = p.display().to_string();
-            match s
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || "/._-+".contains(c))
-            {
-                true => s,
-                false => format!("'{}'", s.replace('\'', "'\\''")),
-            }
-        };
+        let quote = super::interrupt::shell_word;
         let mut c = format!("twinbench optimize {} --resume", quote(&self.study));
         if self.out != std::path::Path::new(DEFAULT_OUT) {
             c.push_str(&format!(" --out {}", quote(&self.out)));
