@@ -48,6 +48,9 @@ pub struct TableRow {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TableParameter {
     pub name: String,
+    /// The variable's unit (None: dimensionless, or not declared).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     pub initial: f64,
     pub optimized: f64,
     pub change_percent: f64,
@@ -66,7 +69,23 @@ pub struct TableStep {
 pub struct Table1 {
     pub study: String,
     pub steps: Vec<TableStep>,
+    /// The twin's lap time minus the vehicle's [s], with the initial and with the optimised
+    /// parameters (over the distance both cover; what `time_over_distance` shows).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lap_time_difference: Option<LapTimeDifference>,
 }
+
+/// The twin's lap time minus the measured one [s].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LapTimeDifference {
+    pub initial_s: f64,
+    pub optimized_s: f64,
+    /// The measured lap time [s] over the same distance.
+    pub measured_s: f64,
+}
+
+/// What Tab. 1's columns mean, printed under it.
+pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit).";
 
 /// What was written.
 #[derive(Clone, Debug)]
@@ -80,9 +99,10 @@ fn short(name: &str) -> &str {
     name.split_once('.').map_or(name, |(_, v)| v)
 }
 
-pub fn table1(result: &StudyResult) -> Table1 {
+pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifference>) -> Table1 {
     Table1 {
         study: result.study.clone(),
+        lap_time_difference,
         steps: result
             .steps
             .iter()
@@ -94,6 +114,7 @@ pub fn table1(result: &StudyResult) -> Table1 {
                     .iter()
                     .map(|p| TableParameter {
                         name: p.name.clone(),
+                        unit: p.unit.clone().filter(|u| !u.is_empty() && u != "1"),
                         initial: p.before,
                         optimized: p.after,
                         change_percent: p.change_percent,
@@ -134,8 +155,13 @@ pub fn table1_markdown(t: &Table1) -> String {
             .parameters
             .iter()
             .map(|p| {
+                let unit = p
+                    .unit
+                    .as_deref()
+                    .map(|u| format!(" {u}"))
+                    .unwrap_or_default();
                 format!(
-                    "{}: {:+.1} % ({:.4} → {:.4})",
+                    "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit})",
                     short(&p.name),
                     p.change_percent,
                     p.initial,
@@ -163,6 +189,13 @@ pub fn table1_markdown(t: &Table1) -> String {
             ));
         }
     }
+    if let Some(d) = t.lap_time_difference {
+        s.push_str(&format!(
+            "\nLap time, twin − vehicle: {:+.3} s initial, {:+.3} s optimised (measured {:.3} s).\n",
+            d.initial_s, d.optimized_s, d.measured_s
+        ));
+    }
+    s.push_str(&format!("\n{TABLE1_LEGEND}\n"));
     s
 }
 
@@ -195,14 +228,6 @@ pub fn write_report(
         source,
     })?;
     let mut files = Vec::new();
-    let t = table1(result);
-    let md = table1_markdown(&t);
-    write(&folder.join("table1.md"), md.as_bytes(), &mut files)?;
-    write(
-        &folder.join("table1.json"),
-        &serde_json::to_vec_pretty(&t).expect("serialises"),
-        &mut files,
-    )?;
     write(
         &folder.join("result.json"),
         &serde_json::to_vec_pretty(result).expect("serialises"),
@@ -249,6 +274,32 @@ pub fn write_report(
     let grid = prepared.grid();
     let mut ws = Workspace::new();
     let meas: &Table = measurement.table();
+
+    // Tab. 1, with the lap times' difference the time plot below shows.
+    let (rm, m) = prepared.on_grid(meas, "time", false, &mut ws)?;
+    let mut lap_gap = |lap: &Table| -> Result<(f64, f64), ReportError> {
+        let (ro, o) = prepared.on_grid(lap, "time", false, &mut ws)?;
+        let end = rm.end.min(ro.end);
+        let (measured, twin) = (m[end - 1 - rm.start] - m[0], o[end - 1 - ro.start] - o[0]);
+        Ok((twin - measured, measured))
+    };
+    let (initial_gap, _) = lap_gap(initial)?;
+    let (optimized_gap, measured_s) = lap_gap(optimised)?;
+    let t = table1(
+        result,
+        Some(LapTimeDifference {
+            initial_s: initial_gap,
+            optimized_s: optimized_gap,
+            measured_s,
+        }),
+    );
+    let md = table1_markdown(&t);
+    write(&folder.join("table1.md"), md.as_bytes(), &mut files)?;
+    write(
+        &folder.join("table1.json"),
+        &serde_json::to_vec_pretty(&t).expect("serialises"),
+        &mut files,
+    )?;
 
     // The sum of the wheel loads (the lift coefficients' signal): the whole lap filtered, as
     // the comparison sees it; unfiltered over the first stretch, where the road's

@@ -85,6 +85,9 @@ impl std::fmt::Debug for RunOptions {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ParameterChange {
     pub name: String,
+    /// The variable's unit (absent in results written before units were kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     pub min: f64,
     pub max: f64,
     pub before: f64,
@@ -803,6 +806,7 @@ fn finish_step(
         .enumerate()
         .map(|(j, p)| ParameterChange {
             name: p.name.clone(),
+            unit: problem.workers.parameter_unit(&p.name).map(str::to_string),
             min: p.min,
             max: p.max,
             before: start.x0[j],

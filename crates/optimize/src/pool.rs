@@ -175,6 +175,12 @@ impl WorkerPool {
             .collect()
     }
 
+    /// The unit of a parameter the study touches (None: it has none, or is not one).
+    pub fn parameter_unit(&self, name: &str) -> Option<&str> {
+        let slot = self.slots.iter().find(|s| s.name == name)?;
+        slot.variable_unit.as_deref()
+    }
+
     /// Position of a parameter in [`WorkerPool::assignment`].
     pub fn index_of(&self, name: &str) -> Option<usize> {
         self.slots.iter().position(|s| s.name == name)

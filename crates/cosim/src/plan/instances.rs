@@ -465,6 +465,7 @@ pub(crate) fn parameter_slot(
         max: sv.max,
         start: sv.start_f64(),
         is_path: sv.ty == ScalarType::String && sv.name.ends_with("_file"),
+        variable_unit: instances[k].description().unit_of(sv).map(str::to_string),
         items: instances[k]
             .description()
             .enumeration_items(sv)

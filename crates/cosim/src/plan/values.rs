@@ -23,6 +23,8 @@ pub struct ParamSlot {
     pub is_path: bool,
     /// An Enumeration's items (name, value): a value must be one of them.
     pub items: Option<Vec<(String, i64)>>,
+    /// The variable's unit (its own or its declared type's), for reports.
+    pub variable_unit: Option<String>,
 }
 
 /// A typed parameter value.
