@@ -186,7 +186,24 @@ fn resolve(table: &Table, name: &str) -> Result<Source> {
             table.require(p)?;
         }
     }
-    Ok(Source::Column(table.require_index(name)?))
+    match table.find(name)? {
+        Some(i) => Ok(Source::Column(i)),
+        // Unknown: the closest of the table's columns and the derived signals.
+        None => {
+            let names = table
+                .names()
+                .iter()
+                .map(String::as_str)
+                .chain(DERIVED_SIGNALS.iter().map(|(n, _)| *n));
+            let closest = tb_files::names::closest(name, names, 3);
+            Err(Error::UnknownSignal {
+                file: table.source().into(),
+                signal: name.into(),
+                closest: closest.join(", "),
+                available: table.names().join(", "),
+            })
+        }
+    }
 }
 
 /// The signal's values: a column slice, or the sum written into `buf`. Non-finite values are

@@ -84,6 +84,15 @@ pub enum Error {
     #[error("{0}")]
     Settings(String),
 
+    /// A signal to compare that is neither a column nor a derived signal.
+    #[error("{file}: no signal `{signal}`; closest: {closest} (columns: {available}; derived: Fz_sum, Fz_front, Fz_rear)")]
+    UnknownSignal {
+        file: String,
+        signal: String,
+        closest: String,
+        available: String,
+    },
+
     /// A measurement without one of the signals every measurement needs: the channel map
     /// entry that would supply it is suggested.
     #[error("{file}: missing required column `{signal}` (columns present: {available}); {hint}")]

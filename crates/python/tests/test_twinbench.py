@@ -151,6 +151,9 @@ def test_compare_gives_the_command_lines_metrics(tmp_path):
         assert c[name].bias == expected[name]["bias"]
     with pytest.raises(twinbench.TwinbenchError, match="Fz_nope"):
         twinbench.compare(twinbench.run(SYSTEM, stop=5.0), ROOT / "data/spielberg_lap.csv", signals="Fz_nope", min_coverage=0.0)
+    # A misspelt signal is named with the closest ones (the derived Fz_sum among them).
+    with pytest.raises(twinbench.TwinbenchError, match="no signal `Fz_summ`; closest: Fz_sum"):
+        twinbench.compare(twinbench.run(SYSTEM, stop=5.0), ROOT / "data/spielberg_lap.csv", signals=["Fz_summ"], min_coverage=0.0)
 
 
 def test_help_reads_well():
