@@ -3,12 +3,11 @@
 //! distance basis (paper §4.2) and prints m, intercept, R², e (Eq. 16), bias and RMS per
 //! signal.
 
+pub use crate::bench::compare_table;
 use anyhow::Context;
 use std::io::Write;
 use std::path::PathBuf;
-use tb_compare::{
-    ChannelMap, CompareSettings, Comparison, Measurement, PreparedMeasurement, Table, Workspace,
-};
+use tb_compare::{CompareSettings, Comparison, Table};
 
 #[derive(clap::Args, Debug)]
 pub struct CompareArgs {
@@ -63,33 +62,6 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         r => Ok(r?),
     }
-}
-
-/// A simulation (as a table) against a measurement file: what `compare` prints, and what
-/// the Python package's `compare` returns.
-pub fn compare_table(
-    sim: &Table,
-    measurement: &std::path::Path,
-    channels: Option<&std::path::Path>,
-    signals: &[String],
-    settings: &CompareSettings,
-) -> anyhow::Result<Comparison> {
-    let signals: Vec<&str> = signals
-        .iter()
-        .map(|s| s.trim())
-        .filter(|s| !s.is_empty())
-        .collect();
-    anyhow::ensure!(!signals.is_empty(), "--signals names no signal");
-    let map = match channels {
-        Some(p) => ChannelMap::read_path(p)?,
-        None => ChannelMap::default(),
-    };
-    let meas = Measurement::load(measurement, &map)?;
-    let prepared =
-        PreparedMeasurement::new(&meas, &signals, settings).context("preparing the measurement")?;
-    prepared
-        .compare(sim, &mut Workspace::new())
-        .context("comparing")
 }
 
 fn print(args: &CompareArgs, settings: &CompareSettings, cmp: &Comparison) -> std::io::Result<()> {

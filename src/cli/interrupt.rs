@@ -3,41 +3,13 @@
 //! checkpointed, so that `--resume` continues it; a second ends the process at once (the
 //! checkpoint of the last finished generation is still there).
 
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// The exit code of an interrupted command (128 + SIGINT, as a shell reports it).
 pub const EXIT_INTERRUPTED: u8 = 130;
 
-/// A study stopped on request; its checkpoint holds every finished generation.
-#[derive(Debug, thiserror::Error)]
-#[error("interrupted: checkpoint kept ({checkpoint}); resume with `{resume}`")]
-pub struct Interrupted {
-    pub checkpoint: String,
-    pub resume: String,
-}
-
-/// A path as one word of a shell command line (quoted only when it needs to be).
-pub fn shell_word(p: &Path) -> String {
-    let s = p.display().to_string();
-    match s
-        .chars()
-        .all(|c| c.is_ascii_alphanumeric() || "/._-+".contains(c))
-    {
-        true => s,
-        false => format!("'{}'", s.replace('\'', "'\\''")),
-    }
-}
-
-impl Interrupted {
-    pub fn new(checkpoint: &Path, resume: String) -> Self {
-        Interrupted {
-            checkpoint: checkpoint.display().to_string(),
-            resume,
-        }
-    }
-}
+pub use crate::study::{shell_word, Interrupted};
 
 /// The handlers of every command but a study's: a SIGINT or SIGTERM ends the process at
 /// once, with the result files being written removed (nothing half-written stays behind).

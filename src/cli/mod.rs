@@ -85,21 +85,6 @@ impl Command {
     }
 }
 
-/// The bench's lap time of a run: a reported `*.lap_time` signal (the vehicle interpolates
-/// the line crossing inside its step), else the simulated time when the run stopped on a
-/// condition, else none.
-pub fn lap_time(summary: &tb_cosim::RunSummary, plan: &tb_cosim::Plan) -> Option<f64> {
-    summary
-        .reported
-        .iter()
-        .find(|(n, _)| n.ends_with(".lap_time"))
-        .map(|r| r.1)
-        .or(match plan.stop {
-            tb_cosim::Stop::When { .. } => Some(summary.simulated_time),
-            tb_cosim::Stop::Time(_) => None,
-        })
-}
-
 /// Set while a command runs. An FMU loaded in this process that calls `exit()` (some
 /// exporters do on a fatal error) would end twinbench with the FMU's exit code, often 0, and
 /// no word: the handler below turns that into a message and a failure.
@@ -196,19 +181,4 @@ pub fn main() -> ExitCode {
     }
 }
 
-/// An error and its causes in one line, each part said once. Errors print as
-/// `path: what: why` and many also carry their cause, which prints again (`path: No such
-/// file` under `path: cannot read: No such file`): the line is built from the `": "`-separated
-/// parts of the error and of every cause, leaving out a part already said.
-pub fn message(e: &anyhow::Error) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    for cause in e.chain() {
-        for part in cause.to_string().split(": ") {
-            let part = part.trim();
-            if !part.is_empty() && !parts.iter().any(|p| p == part) {
-                parts.push(part.to_string());
-            }
-        }
-    }
-    parts.join(": ")
-}
+pub use crate::bench::{lap_time, message};

@@ -1,5 +1,6 @@
 //! `twinbench run`: run a system file.
 
+pub use crate::bench::set_parameter;
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -157,23 +158,6 @@ pub fn parse_assignment(s: &str) -> anyhow::Result<(String, toml::Value)> {
         toml::Value::String(text.to_string())
     };
     Ok((name.trim().to_string(), v))
-}
-
-/// Sets a parameter of a run by its system name, checked against its variable (type,
-/// range); a relative path is relative to the working directory.
-pub fn set_parameter(
-    system: &Plan,
-    sim: &mut Simulation,
-    name: &str,
-    value: &toml::Value,
-) -> anyhow::Result<()> {
-    let slot = system.parameter(name)?;
-    let v = slot.value_from_toml(value, &format!("parameter \"{name}\""))?;
-    sim.set(
-        &slot,
-        slot.resolve_path(v, &tb_files::absolute(Path::new("."))),
-    );
-    Ok(())
 }
 
 pub fn run(args: RunArgs) -> anyhow::Result<()> {

@@ -30,7 +30,7 @@ create_exception!(
 
 /// An error as the command line prints it (the whole chain, `error: ` left off).
 fn error(e: impl Into<anyhow::Error>) -> PyErr {
-    TwinbenchError::new_err(twinbench::cli::message(&e.into()))
+    TwinbenchError::new_err(twinbench::bench::message(&e.into()))
 }
 
 /// A Python value as the TOML value `--set` would give the same text.
@@ -98,11 +98,11 @@ fn run(
         let mut sim = Simulation::new(plan.clone())?;
         sim.echo_fmu_log = false;
         for (name, value) in &parameters {
-            twinbench::cli::run::set_parameter(&plan, &mut sim, name, value)
+            twinbench::bench::set_parameter(&plan, &mut sim, name, value)
                 .map_err(|e| e.context(format!("parameters[\"{name}\"]")))?;
         }
         let summary = sim.run()?;
-        let lap_time = twinbench::cli::lap_time(&summary, &plan);
+        let lap_time = twinbench::bench::lap_time(&summary, &plan);
         let order: Vec<String> = plan
             .order
             .iter()
@@ -182,7 +182,7 @@ fn compare(
             min_coverage,
             ..tb_compare::CompareSettings::default()
         };
-        let cmp = twinbench::cli::compare::compare_table(
+        let cmp = twinbench::bench::compare_table(
             &sim,
             &measurement,
             channels.as_deref(),
@@ -343,10 +343,10 @@ fn optimize(
         })),
         _ => None,
     };
-    let args = twinbench::cli::optimize::OptimizeArgs {
+    let args = twinbench::study::StudyRun {
         study,
         resume,
-        json: true,
+        verbose: false,
         threads,
         out,
         optimizer,
@@ -371,7 +371,7 @@ fn optimize(
     let result = std::thread::scope(|scope| {
         let flag = interrupt.clone();
         let study = scope.spawn(move || {
-            twinbench::cli::optimize::optimize(&args, dyn_evaluator, progress, Some(flag))
+            twinbench::study::optimize(&args, dyn_evaluator, progress, Some(flag))
                 .and_then(|o| Ok(serde_json::to_string(&o.result)?))
         });
         while !study.is_finished() {
@@ -397,7 +397,7 @@ fn optimize(
         return Err(e);
     }
     match result {
-        Err(e) => match e.downcast_ref::<twinbench::cli::interrupt::Interrupted>() {
+        Err(e) => match e.downcast_ref::<twinbench::study::Interrupted>() {
             Some(i) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(format!(
                 "interrupted: checkpoint kept ({}); resume with study.optimize(..., resume=True) or `{}`",
                 i.checkpoint, i.resume
