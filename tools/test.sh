@@ -14,7 +14,7 @@ missing=()
 [ -f "$TWINBENCH_REFERENCE_FMUS/src/fmi2Functions.c" ] \
     || missing+=("the Modelica Reference FMUs' sources ($REFERENCE_FMUS_REPOSITORY at commit $REFERENCE_FMUS_COMMIT) at $TWINBENCH_REFERENCE_FMUS (or set TWINBENCH_REFERENCE_FMUS)")
 tools/omsimulator.sh --check \
-    || missing+=("OMSimulator's source archive $OMSIMULATOR_ARCHIVE (SHA-256 $OMSIMULATOR_SHA256; $OMSIMULATOR_REPOSITORY at $OMSIMULATOR_COMMIT) in ../shared/omsimulator (or set TWINBENCH_OMSIMULATOR_SOURCES)")
+    || missing+=("OMSimulator's source archive $OMSIMULATOR_ARCHIVE (SHA-256 $OMSIMULATOR_SHA256; $OMSIMULATOR_REPOSITORY at $OMSIMULATOR_COMMIT) in ${TWINBENCH_OMSIMULATOR_SOURCES:-$(cd .. && pwd)/shared/omsimulator} (or set TWINBENCH_OMSIMULATOR_SOURCES)")
 if [ ${#missing[@]} -gt 0 ]; then
     line="${missing[0]}"
     [ ${#missing[@]} -eq 1 ] || line="$line, and ${missing[1]}"

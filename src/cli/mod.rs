@@ -44,7 +44,7 @@ pub enum Command {
     Demo(demo::DemoArgs),
     /// Time one lap of the bench (wall time, real-time factor, ns per macro step).
     Benchmark(benchmark::BenchmarkArgs),
-    /// Run a system file (co-simulation of FMUs).
+    /// Run a system file, an SSP 1.0 package, or one FMU on its own (as fmpy simulate).
     Run(run::RunArgs),
     /// Show an FMU's capabilities and variables.
     Info(info::InfoArgs),
