@@ -177,7 +177,8 @@ fn a_model_exchange_trace_has_the_calls_the_fmu_receives() {
     let text = std::fs::read_to_string(&trace).unwrap();
     for call in [
         "fmi2Instantiate(",
-        "fmi2SetupExperiment(",
+        // As FMPy's Model Exchange loop: no tolerance unless the run gives one.
+        "fmi2SetupExperiment(toleranceDefined=false, startTime=0.0",
         "fmi2ExitInitializationMode(",
         "fmi2SetTime(time=",
         "fmi2SetContinuousStates([",
@@ -214,4 +215,22 @@ fn a_model_exchange_trace_has_the_calls_the_fmu_receives() {
         "{line}"
     );
     assert!(line.ends_with(") -> fmi2OK"), "{line}");
+    // With a tolerance the FMU is told it.
+    let r = twinbench(&[
+        "run".as_ref(),
+        fmu.as_os_str(),
+        "--interface".as_ref(),
+        "model-exchange".as_ref(),
+        "--tolerance".as_ref(),
+        "1e-7".as_ref(),
+        "--trace-fmi".as_ref(),
+        trace.as_os_str(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let text = std::fs::read_to_string(&trace).unwrap();
+    assert!(
+        text.contains("fmi2SetupExperiment(toleranceDefined=true, tolerance=1e-7, startTime=0.0"),
+        "{}",
+        &text[..text.len().min(2000)]
+    );
 }

@@ -290,8 +290,9 @@ impl Backend for Traced {
         tolerance: Option<f64>,
     ) -> Result<(), FmuError> {
         let stop_text = stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
-        if self.fmi3 {
-            // FMI 3.0 passes these to fmi3EnterInitializationMode.
+        if self.fmi3 || self.steps_traced_inside {
+            // FMI 3.0 passes these to fmi3EnterInitializationMode; a Model Exchange instance
+            // traces the call with the tolerance it tells the FMU (its own, not the master's).
             return self.inner.setup_experiment(start, stop, tolerance);
         }
         self.traced(

@@ -374,9 +374,21 @@ impl MeInstance {
     pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
         self.start = start;
         self.stop = stop;
-        self.inst
-            .setup_experiment(start, stop, self.told_tolerance)
-            .map_err(|e| self.wrap(e))
+        let r = self.inst.setup_experiment(start, stop, self.told_tolerance);
+        if let Some(trace) = &self.trace {
+            let stop = stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
+            let args = match self.told_tolerance {
+                Some(tol) => format!("toleranceDefined=true, tolerance={tol:?}, startTime={start:?}, stopTime={stop}"),
+                None => format!("toleranceDefined=false, startTime={start:?}, stopTime={stop}"),
+            };
+            let status = match &r {
+                Ok(()) => fmi2Status::OK,
+                Err(FmuError::Call { status, .. }) => *status,
+                Err(_) => fmi2Status::ERROR,
+            };
+            trace(self.inst.time, "fmi2SetupExperiment", &args, status);
+        }
+        r.map_err(|e| self.wrap(e))
     }
 
     pub fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
