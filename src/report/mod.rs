@@ -51,6 +51,12 @@ pub struct TableParameter {
     /// The variable's unit (None: dimensionless, or not declared).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unit: Option<String>,
+    /// The optimised value's 95 % confidence interval, an open end `None`; absent when
+    /// there is none (`interval_statement` says why).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval: Option<(Option<f64>, Option<f64>)>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval_statement: Option<String>,
     pub initial: f64,
     pub optimized: f64,
     pub change_percent: f64,
@@ -85,7 +91,7 @@ pub struct LapTimeDifference {
 }
 
 /// What Tab. 1's columns mean, printed under it.
-pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit).";
+pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit; [lo, hi] the optimised value's 95 % confidence interval from the sensitivities at the optimum with the residuals' autocorrelation accounted for, docs/optimize.md; \"open\": that end lies beyond the parameter's range).";
 
 /// What was written.
 #[derive(Clone, Debug)]
@@ -115,6 +121,8 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
                     .map(|p| TableParameter {
                         name: p.name.clone(),
                         unit: p.unit.clone().filter(|u| !u.is_empty() && u != "1"),
+                        interval: p.interval,
+                        interval_statement: p.interval_statement.clone(),
                         initial: p.before,
                         optimized: p.after,
                         change_percent: p.change_percent,
@@ -160,8 +168,14 @@ pub fn table1_markdown(t: &Table1) -> String {
                     .as_deref()
                     .map(|u| format!(" {u}"))
                     .unwrap_or_default();
+                let end = |e: Option<f64>| e.map_or("open".to_string(), |x| format!("{x:.4}"));
+                let interval = match p.interval {
+                    Some((lo, hi)) => format!(" [{}, {}]", end(lo), end(hi)),
+                    None if p.interval_statement.is_some() => " [no interval]".into(),
+                    None => String::new(),
+                };
                 format!(
-                    "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit})",
+                    "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit}{interval})",
                     short(&p.name),
                     p.change_percent,
                     p.initial,
@@ -188,6 +202,20 @@ pub fn table1_markdown(t: &Table1) -> String {
                 r.bias_percent_optimized
             ));
         }
+    }
+    let statements: Vec<String> = t
+        .steps
+        .iter()
+        .flat_map(|st| &st.parameters)
+        .filter_map(|p| {
+            let why = p.interval_statement.as_ref()?;
+            Some(format!("- {}: {why}", short(&p.name)))
+        })
+        .collect();
+    if !statements.is_empty() {
+        s.push_str("\nIntervals open or missing:\n");
+        s.push_str(&statements.join("\n"));
+        s.push('\n');
     }
     if let Some(d) = t.lap_time_difference {
         s.push_str(&format!(

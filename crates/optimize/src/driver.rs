@@ -93,6 +93,16 @@ pub struct ParameterChange {
     pub before: f64,
     pub after: f64,
     pub change_percent: f64,
+    /// The 95 % confidence interval of `after`: [lo, hi], an end `None` (JSON null) where
+    /// it is open; absent when there is none (the statement says why).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval: Option<(Option<f64>, Option<f64>)>,
+    /// How the interval was computed ([`crate::interval::METHOD`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval_method: Option<String>,
+    /// Why the interval is open or missing, in words.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval_statement: Option<String>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -120,6 +130,10 @@ pub struct StepResult {
     pub evaluations: usize,
     pub failures: usize,
     pub failure_reasons: Vec<String>,
+    /// Each parameter's 95 % confidence interval at the step's optimum (absent in results
+    /// written before intervals were computed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intervals: Option<crate::interval::Intervals>,
     /// The parameter values after the step, bit-exact (the next step starts from them).
     #[serde(with = "exact::vec")]
     pub after_exact: Vec<f64>,
@@ -547,7 +561,34 @@ fn run_step(
     let Some((best, best_cost)) = run_generations(session, state, &step, &mut begun)? else {
         return Ok(ControlFlow::Break(()));
     };
-    let (result, after) = finish_step(&step, begun, best, best_cost)?;
+    let (result, after) = finish_step(&step, begun, best, best_cost, &session.pool)?;
+    if session.options.verbose {
+        if let Some(iv) = &result.intervals {
+            eprintln!(
+                "step {} '{}': 95 % intervals ({} laps, {} grid points, correlation bandwidth {})",
+                k + 1,
+                config.name,
+                iv.laps,
+                iv.grid_points,
+                iv.bandwidth
+            );
+            for p in &iv.parameters {
+                let unit = step
+                    .problem
+                    .workers
+                    .parameter_unit(&p.name)
+                    .filter(|u| !u.is_empty() && *u != "1");
+                let short = p.name.split_once('.').map_or(p.name.as_str(), |(_, v)| v);
+                match &p.statement {
+                    Some(why) => eprintln!("  {short}: {} ({why})", p.shown(unit)),
+                    None => eprintln!("  {short}: {}", p.shown(unit)),
+                }
+            }
+            for n in &iv.notes {
+                eprintln!("  note: {n}");
+            }
+        }
+    }
     if k + 1 == session.study.file.steps.len() {
         state.laps.optimized = Some(after);
     }
@@ -761,6 +802,7 @@ fn finish_step(
     begun: StepBegun,
     best: Vec<f64>,
     best_cost: f64,
+    pool: &rayon::ThreadPool,
 ) -> Result<(StepResult, Table), OptimizeError> {
     let (config, problem) = (step.config, &step.problem);
     // A step whose every candidate failed found nothing: its "best" is a failure's penalty.
@@ -795,6 +837,18 @@ fn finish_step(
             config.name
         );
     }
+    // How sure the optimum is: 2 laps per parameter around it (crate::interval).
+    let intervals = crate::interval::at_optimum(
+        &config.parameter_names(),
+        &config.signals,
+        &weights,
+        &best,
+        &problem.bounds,
+        problem.prepared,
+        &after.table,
+        pool,
+        |x| problem.outcome(x).map(|o| o.table),
+    );
     let StepBegun {
         start,
         optimizer,
@@ -816,6 +870,12 @@ fn finish_step(
             } else {
                 f64::NAN
             },
+            interval: intervals
+                .get(&p.name)
+                .filter(|i| i.std_error.is_some())
+                .map(|i| (i.lo, i.hi)),
+            interval_method: Some(intervals.method.clone()),
+            interval_statement: intervals.get(&p.name).and_then(|i| i.statement.clone()),
         })
         .collect();
     let e = config
@@ -830,6 +890,7 @@ fn finish_step(
         })
         .collect();
     let result = StepResult {
+        intervals: Some(intervals),
         step: problem.step + 1,
         name: config.name.clone(),
         signals: config.signals.clone(),

@@ -129,6 +129,18 @@ fn residuals(
     pool: &rayon::ThreadPool,
     run: impl Fn(&[f64]) -> Result<Table, String> + Sync,
 ) -> Vec<Residuals> {
+    signals_on_grid(points, &step.signals, prepared, pool, run)
+}
+
+/// Each point's run: `signals` filtered on the distance grid, with the grid range each
+/// covers (one run per thread at a time, results in the points' order).
+pub(crate) fn signals_on_grid(
+    points: &[Vec<f64>],
+    signals: &[String],
+    prepared: &PreparedMeasurement,
+    pool: &rayon::ThreadPool,
+    run: impl Fn(&[f64]) -> Result<Table, String> + Sync,
+) -> Vec<Residuals> {
     pool.install(|| {
         points
             .par_iter()
@@ -136,7 +148,7 @@ fn residuals(
             .map(|x| {
                 let table = run(x)?;
                 let mut ws = Workspace::new();
-                step.signals
+                signals
                     .iter()
                     .map(|s| {
                         prepared

@@ -14,6 +14,8 @@
 //!   floats in checkpoints.
 //! - [`identifiability`]: the identifiability check (finite-difference Jacobian,
 //!   near-null directions).
+//! - [`interval`]: each fitted parameter's confidence interval at a step's optimum
+//!   (Gauss–Newton sandwich with a long-run covariance of the scores).
 //! - [`driver`]: the study driver: steps in order, each starting from the earlier results,
 //!   identifiability check, e before/after, a checkpoint after every generation, resume.
 //! - [`checkpoint`]: the checkpoint file the driver writes after every generation and
@@ -30,6 +32,7 @@ pub mod driver;
 pub mod exact;
 pub mod ga;
 pub mod identifiability;
+pub mod interval;
 pub mod optimizer;
 pub mod pool;
 pub mod remote;
@@ -40,6 +43,7 @@ pub use cmaes::{Cmaes, CmaesSettings};
 pub use driver::{run_study, Progress, RunOptions, StepResult, StudyOutcome, StudyResult};
 pub use ga::{Ga, GaSettings};
 pub use identifiability::Identifiability;
+pub use interval::{Intervals, ParameterInterval};
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
 pub use pool::WorkerPool;
 pub use remote::{Candidate, Evaluator, InputDigest, StepCost, StudyEvaluator};
