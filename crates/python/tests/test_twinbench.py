@@ -197,6 +197,20 @@ def test_a_dask_study_gives_the_command_lines_table1(cli_study, tmp_path):
     expected = json.loads((cli_study / "result.json").read_text())
     for a, b in zip(result["steps"], expected["steps"], strict=True):
         assert a["after_exact"] == b["after_exact"] and a["history"] == b["history"]
+        # The same intervals wherever the candidates ran.
+        assert a["intervals"] == b["intervals"]
+    # Each fitted parameter with its interval, as the command line's JSON has it.
+    params = result["parameters"]
+    assert set(params) == {p["name"] for s in expected["steps"] for p in s["parameters"]}
+    for s in expected["steps"]:
+        for p in s["parameters"]:
+            mine = params[p["name"]]
+            assert mine["value"] == p["after"] and mine["interval"] == p["interval"]
+            assert mine["interval_method"] == "gauss-newton-hac"
+            lo, hi = mine["interval"]
+            assert lo is None or lo < mine["value"]
+            assert hi is None or mine["value"] < hi
+    assert params["vehicle.l"]["unit"] == "m"
 
 
 def test_a_worker_killed_mid_study_changes_nothing(cli_study, tmp_path):

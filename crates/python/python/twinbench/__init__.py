@@ -390,7 +390,11 @@ class Study:
 
         Returns:
             The result as a dict (per step: parameters before/after, e before/after,
-            history, identifiability).
+            history, identifiability, the intervals), and ``"parameters"``: each fitted
+            parameter by name with its ``value`` (after its step), ``unit``, ``interval``
+            (``[lo, hi]``, ``None`` for an open end; ``None`` when there is none),
+            ``interval_method`` and ``interval_statement`` (why an interval is open or
+            missing).
 
         Raises:
             TwinbenchError: a bad study, system or measurement; a checkpoint of other
@@ -418,7 +422,19 @@ class Study:
             digest,
             progress,
         )
-        return json.loads(text)
+        result = json.loads(text)
+        result["parameters"] = {
+            p["name"]: {
+                "value": p["after"],
+                "unit": p.get("unit"),
+                "interval": p.get("interval"),
+                "interval_method": p.get("interval_method"),
+                "interval_statement": p.get("interval_statement"),
+            }
+            for step in result["steps"]
+            for p in step["parameters"]
+        }
+        return result
 
     def evaluate(
         self,
