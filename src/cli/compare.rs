@@ -162,7 +162,7 @@ mod tests {
             json: false,
         };
         let e = format!("{:#}", run(args).unwrap_err());
-        assert!(e.contains("missing required column `Fz_nope`"), "{e}");
+        assert!(e.contains("no signal `Fz_nope`; closest: "), "{e}");
     }
 
     #[test]
