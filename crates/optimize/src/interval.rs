@@ -509,6 +509,7 @@ mod tests {
         }
         let share = covered as f64 / cases as f64;
         let naive = naive_covered as f64 / cases as f64;
+        eprintln!("AR(1) ρ = {rho}: coverage {share} (every point independent: {naive})");
         assert!(share >= 0.85, "coverage {share}");
         assert!(naive < 0.6, "the naive interval covered {naive}");
     }
