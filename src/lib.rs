@@ -6,6 +6,7 @@
 //! - [`report`]: Tab. 1 and plots of an optimisation study, from its stored results;
 //! - [`bench`]: setting a parameter, a run's lap time, a comparison, an error's message;
 //! - [`study`]: an optimisation study run to its files (result, report, checkpoint);
+//! - [`validate`]: the fitted twin on a lap it was not fitted on;
 //! - [`cli`]: one module per subcommand, over the modules above (the Python package uses
 //!   them directly, never `cli`).
 //!
@@ -21,3 +22,4 @@ pub mod pack;
 pub mod registry;
 pub mod report;
 pub mod study;
+pub mod validate;

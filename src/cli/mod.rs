@@ -20,6 +20,7 @@ pub mod pack;
 pub mod progress;
 pub mod run;
 pub mod run_fmu;
+pub mod validate;
 pub mod worker;
 
 #[derive(Parser, Debug)]
@@ -56,6 +57,8 @@ pub enum Command {
     Compare(compare::CompareArgs),
     /// Optimise the twin's parameters against a vehicle measurement (a study file).
     Optimize(optimize::OptimizeArgs),
+    /// Run the fitted twin on a lap it was not fitted on: e, m, R², bias per signal.
+    Validate(validate::ValidateArgs),
     /// Modal analysis of a torsional drivetrain chain.
     Modal(modal::ModalArgs),
     /// Identify the dyno loop from a step response or a frequency sweep.
@@ -78,6 +81,7 @@ impl Command {
             Command::ExportSsp(a) => a.json,
             Command::Compare(a) => a.json,
             Command::Optimize(a) => a.json,
+            Command::Validate(a) => a.json,
             Command::Modal(a) => a.json,
             Command::Identify(a) => a.json(),
             Command::Pack(_) | Command::Demo(_) | Command::Cache(_) | Command::Worker(_) => false,
@@ -162,6 +166,7 @@ pub fn main() -> ExitCode {
         Command::ExportSsp(a) => export_ssp::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Optimize(a) => optimize::run(a),
+        Command::Validate(a) => validate::run(a),
         Command::Modal(a) => modal::run(a),
         Command::Identify(a) => identify::run(a),
         Command::Cache(a) => cache::run(a),

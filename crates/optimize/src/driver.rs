@@ -146,6 +146,10 @@ pub struct StudyResult {
     pub measurement: PathBuf,
     pub seed: u64,
     pub threads: usize,
+    /// The comparison's settings (filter, grid): `twinbench validate` compares another lap
+    /// the same way (absent in results written before they were kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compare: Option<tb_compare::CompareSettings>,
     pub steps: Vec<StepResult>,
     /// Every parameter the study touches: initial and final values.
     pub parameters_initial: Vec<(String, f64)>,
@@ -952,6 +956,7 @@ fn finish_study(
         measurement: study.measurement_path.clone(),
         seed: study.file.seed,
         threads: session.pool.current_num_threads(),
+        compare: Some(study.file.compare.clone()),
         steps: state.checkpoint.completed,
         parameters_initial: state.initial,
         parameters_final: state.assignment,

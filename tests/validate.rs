@@ -1,0 +1,104 @@
+//! `twinbench validate RESULT.json MEASUREMENT`: the fitted twin on a lap it was not fitted
+//! on. On the fitted lap itself (prepared anew by `lap` from the measurement and its track)
+//! it must give the e the same twin reaches on the study's own bench; a file that is not a
+//! study result is refused by name.
+
+mod common;
+
+use std::process::Command;
+
+fn twinbench(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
+    common::fmu_dir();
+    let root = twinbench::pack::workspace_root();
+    let dir = tb_testkit::scratch("validate");
+    let d = dir.path();
+    let study = root.join("studies/spielberg.toml");
+    // A short study (one generation per step) for a result to validate.
+    let o = twinbench(
+        d,
+        &[
+            "optimize",
+            study.to_str().unwrap(),
+            "--generations",
+            "1",
+            "--json",
+            "--out",
+            "opt",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("opt/result.json")).unwrap()).unwrap();
+    // Every parameter carries an interval (or a statement why not) and its method.
+    for s in result["steps"].as_array().unwrap() {
+        for p in s["parameters"].as_array().unwrap() {
+            assert_eq!(p["interval_method"], "gauss-newton-hac", "{p}");
+            assert!(
+                p["interval"].is_array() || p["interval_statement"].is_string(),
+                "{p}"
+            );
+        }
+    }
+    let meas = root.join("data/spielberg_lap.csv");
+    let track = root.join("data/spielberg_lap_track.csv");
+    let o = twinbench(
+        d,
+        &[
+            "validate",
+            "opt/result.json",
+            meas.to_str().unwrap(),
+            "--track",
+            track.to_str().unwrap(),
+            "--out",
+            "val",
+            "--json",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 7, "{v}");
+    for r in rows {
+        let (a, b) = (r["e_fitted"].as_f64().unwrap(), r["e"].as_f64().unwrap());
+        // The lap `lap` prepares is the bundled bench's lap: the same e to 1e-3.
+        assert!((a - b).abs() < 1e-3, "{r}");
+    }
+    assert!(v["notes"].as_array().unwrap().is_empty(), "{v}");
+    for f in [
+        "validation.md",
+        "validation.json",
+        "validation_fz_sum.svg",
+        "validation_fz_sum.png",
+    ] {
+        assert!(d.join("val").join(f).is_file(), "{f}");
+    }
+    let md = std::fs::read_to_string(d.join("val/validation.md")).unwrap();
+    assert!(md.contains("| 2 | Fz_rl |"), "{md}");
+    // Not a result: named, and what was expected.
+    std::fs::write(d.join("bad.json"), "{\"study\": 1}").unwrap();
+    let o = twinbench(
+        d,
+        &[
+            "validate",
+            "bad.json",
+            meas.to_str().unwrap(),
+            "--out",
+            "val2",
+        ],
+    );
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("bad.json: not a study result (the result.json `twinbench optimize` writes)"),
+        "{e}"
+    );
+}
