@@ -321,7 +321,7 @@ pub(crate) fn sandwich(
     let mut unseen = vec![0.0f64; p];
     let mut inv = vec![vec![0.0; p]; p];
     for (k, &l) in vals.iter().enumerate() {
-        if !(top > 0.0) || l <= NULL_RATIO * top {
+        if top <= 0.0 || top.is_nan() || l <= NULL_RATIO * top {
             for (i, u) in unseen.iter_mut().enumerate() {
                 *u = u.max(vecs[i][k].abs());
             }
@@ -414,7 +414,7 @@ fn bandwidth(scores: &[Vec<f64>]) -> (usize, bool) {
             .sum()
     };
     let c0 = dot(0);
-    if !(c0 > 0.0) {
+    if c0 <= 0.0 || c0.is_nan() {
         return (MIN_BANDWIDTH, false);
     }
     let mut k = 1;
