@@ -84,6 +84,16 @@ impl Interrupted {
     }
 }
 
+/// A resume without a checkpoint starts from the beginning, and says so.
+pub fn say_when_no_checkpoint(resume: bool, checkpoint: &Path) {
+    if resume && !checkpoint.exists() {
+        eprintln!(
+            "no checkpoint at {}: starting from the beginning",
+            checkpoint.display()
+        );
+    }
+}
+
 /// What an optimisation made: the result, its report (unless `--no-report`), its checkpoint.
 pub struct Optimized {
     pub result: Box<StudyResult>,
@@ -121,12 +131,7 @@ pub fn optimize(
     ] {
         tb_table::check_output(&name, &inputs)?;
     }
-    if args.resume && !checkpoint.exists() {
-        eprintln!(
-            "no checkpoint at {}: starting from the beginning",
-            checkpoint.display()
-        );
-    }
+    say_when_no_checkpoint(args.resume, &checkpoint);
     let options = RunOptions {
         threads: args.threads,
         progress,

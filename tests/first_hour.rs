@@ -371,14 +371,7 @@ fn ctrl_c_keeps_the_checkpoint_and_says_how_to_resume() {
         .unwrap();
     // Interrupt once the first generation is checkpointed.
     let checkpoint = d.join("opt/mylap.checkpoint.json");
-    let started = std::time::Instant::now();
-    while !checkpoint.exists() {
-        assert!(
-            started.elapsed().as_secs() < 120,
-            "no checkpoint after 2 minutes"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
+    tb_testkit::wait_for_file(&checkpoint, 120);
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     let o = child.wait_with_output().unwrap();
     let e = String::from_utf8_lossy(&o.stderr);

@@ -6,7 +6,8 @@
 
 mod common;
 
-use std::fmt::Write as _;
+use common::synthetic;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -19,63 +20,6 @@ const TRUTH: [(&str, f64); 5] = [
     ("vehicle.b_front", 1.45),
     ("vehicle.b_rear", 1.40),
 ];
-const WHEEL_RADIUS: f64 = 0.345;
-
-/// A closed circuit of straights and constant-radius corners (curvature per 1 m row) and a
-/// feasible target speed over it.
-fn circuit() -> (String, String, f64) {
-    let segments: [(usize, f64); 12] = [
-        (420, 0.0),
-        (140, 1.0 / 55.0),
-        (260, 0.0),
-        (190, -1.0 / 95.0),
-        (380, 0.0),
-        (110, 1.0 / 40.0),
-        (230, 0.0),
-        (170, -1.0 / 70.0),
-        (150, 0.0),
-        (200, 1.0 / 120.0),
-        (300, 0.0),
-        (90, -1.0 / 35.0),
-    ];
-    let kappa: Vec<f64> = segments
-        .iter()
-        .flat_map(|&(n, k)| std::iter::repeat_n(k, n))
-        .collect();
-    let n = kappa.len();
-    // Corner speed from a lateral acceleration of 11 m/s², at most 62 m/s; then braking at
-    // 11 m/s² and accelerating at 5 m/s², twice round the lap (it is periodic).
-    let mut v: Vec<f64> = kappa
-        .iter()
-        .map(|k| {
-            if *k == 0.0 {
-                62.0
-            } else {
-                (11.0 / k.abs()).sqrt().min(62.0)
-            }
-        })
-        .collect();
-    for _ in 0..2 {
-        for i in (0..2 * n).rev() {
-            let (a, b) = (i % n, (i + 1) % n);
-            v[a] = v[a].min((v[b] * v[b] + 2.0 * 11.0).sqrt());
-        }
-        for i in 1..2 * n {
-            let (a, b) = (i % n, (i - 1) % n);
-            v[a] = v[a].min((v[b] * v[b] + 2.0 * 5.0).sqrt());
-        }
-    }
-    let mut track = String::from("s,curvature,grade,z_road_left,z_road_right\n");
-    for (i, k) in kappa.iter().enumerate() {
-        let _ = writeln!(track, "{i},{k},0,0,0");
-    }
-    let mut target = String::from("s,v\n");
-    for (i, x) in v.iter().enumerate() {
-        let _ = writeln!(target, "{i},{x}");
-    }
-    let _ = writeln!(target, "{n},{}", v[0]);
-    (track, target, v[0])
-}
 
 fn bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_twinbench"))
@@ -93,62 +37,10 @@ fn twinbench(args: &[&str]) -> String {
 
 /// The twin's lap with the true values, as a measurement file (CSV, SI, a units row).
 fn measurement(dir: &Path) -> (PathBuf, PathBuf) {
-    let fmu_dir = common::fmu_dir();
-    let (track, target, v0) = circuit();
-    let track_p = dir.join("circuit_track.csv");
-    let target_p = dir.join("truth_target.csv");
-    std::fs::write(&track_p, track).unwrap();
-    std::fs::write(&target_p, target).unwrap();
-    let mut params = format!(
-        "\"vehicle.track_file\" = {:?}\n\"driver.target_speed_file\" = {:?}\n\"vehicle.v_start\" = {v0:?}\n\"dyno_rl.omega_start\" = {w:?}\n\"dyno_rr.omega_start\" = {w:?}\n\"edu.omega_wheel_start\" = {w:?}\n",
-        track_p.display().to_string(),
-        target_p.display().to_string(),
-        w = v0 / WHEEL_RADIUS,
-    );
-    for (n, x) in TRUTH {
-        let _ = writeln!(params, "\"{n}\" = {x:?}");
-    }
-    let bundled =
-        std::fs::read_to_string(twinbench::pack::workspace_root().join("systems/rls_v.toml"))
-            .unwrap();
-    let start = bundled.find("[parameters]").unwrap();
-    let end = bundled.find("# The vehicle's track and").unwrap();
-    let text = format!(
-        "{}[parameters]\n{params}\n{}",
-        &bundled[..start],
-        &bundled[end..]
-    )
-    .replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()));
-    let sys = dir.join("truth.toml");
-    std::fs::write(&sys, text).unwrap();
-    let raw = dir.join("truth_run.csv");
-    twinbench(&["run", sys.to_str().unwrap(), "--out", raw.to_str().unwrap()]);
-    // The logger's view: plain names, SI units.
-    let t = tb_table::Table::read_path(&raw).unwrap();
-    let cols = [
-        ("time", "time", "s"),
-        ("distance", "vehicle.distance", "m"),
-        ("v", "vehicle.v", "m/s"),
-        ("a_x", "vehicle.a_x", "m/s2"),
-        ("a_y", "vehicle.a_y", "m/s2"),
-        ("Fz_fl", "vehicle.Fz_fl", "N"),
-        ("Fz_fr", "vehicle.Fz_fr", "N"),
-        ("Fz_rl", "vehicle.Fz_rl", "N"),
-        ("Fz_rr", "vehicle.Fz_rr", "N"),
-    ];
-    let meas = tb_table::Table::from_columns(
-        "measurement",
-        cols.iter().map(|c| c.0.to_string()).collect(),
-        cols.iter()
-            .map(|c| t.require(c.1).unwrap().to_vec())
-            .collect(),
-    )
-    .unwrap()
-    .with_units(cols.iter().map(|c| c.2.to_string()).collect())
-    .unwrap();
-    let p = dir.join("measurement.csv");
-    meas.write_csv(&p).unwrap();
-    (p, track_p)
+    let circuit = synthetic::own_circuit(dir);
+    let lap = synthetic::truth_lap(dir, &circuit, &TRUTH);
+    let p = synthetic::measurement(&lap, &dir.join("measurement.csv"), None);
+    (p, circuit.track.unwrap())
 }
 
 fn optimise(study: &Path) -> serde_json::Value {

@@ -64,12 +64,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     println!("  measurement  {}", study.measurement_path.display());
     let optimise_start = Instant::now();
     let checkpoint = args.out.join(format!("{}.checkpoint.json", study.name()));
-    if args.resume && !checkpoint.exists() {
-        eprintln!(
-            "no checkpoint at {}: starting from the beginning",
-            checkpoint.display()
-        );
-    }
+    crate::study::say_when_no_checkpoint(args.resume, &checkpoint);
     let options = RunOptions {
         threads: args.threads,
         progress: Some(super::progress::Bars::shared()),

@@ -1,6 +1,8 @@
 //! Shared helpers of the integration tests: the packed FMUs and a cache to load them.
 #![allow(dead_code)]
 
+pub mod synthetic;
+
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 use tb_fmi::{FmuCache, LoadedFmu};

@@ -94,6 +94,19 @@ pub fn scratch(tag: &str) -> tempfile::TempDir {
         .expect("a scratch folder in the temporary directory")
 }
 
+/// Waits until `path` exists (a checkpoint a child process writes), at most `seconds`.
+pub fn wait_for_file(path: &std::path::Path, seconds: u64) {
+    let started = std::time::Instant::now();
+    while !path.exists() {
+        assert!(
+            started.elapsed().as_secs() < seconds,
+            "no {} after {seconds} s",
+            path.display()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
