@@ -77,16 +77,17 @@ fn spielberg_two_step_study_recovers_the_truth() {
     assert!(rel(v("vehicle.b_rear"), t("b_rear_effective")) < 0.05);
     assert!((2.0..4.5).contains(&v("vehicle.l")));
 
-    // The intervals (docs/optimize.md, "How sure the parameters are"): each parameter has
-    // one around its value; the lift coefficients' are narrow (within ±3 %), the wheelbase's
-    // is the widest of step 2 relative to its value, and c_lift_front's and b_front's
-    // contain the truth (c_lift_rear and b_rear miss it by a systematic error of the twin's
+    // The joint intervals (docs/optimize.md, "How sure the parameters are"): each
+    // parameter has one around its value; the lift coefficients' are narrow (within ±3 %),
+    // the wheelbase's is the widest relative to its value, and c_lift_front's, b_front's and
+    // b_rear's contain the truth (c_lift_rear misses it by a systematic error of the twin's
     // driving that no interval from the data's scatter shows: the docs say so).
+    assert!(r.steps.iter().all(|s| s.intervals.is_some()));
     let interval = |name: &str| {
-        r.steps
-            .iter()
-            .flat_map(|s| s.intervals.as_ref().unwrap().parameters.iter())
-            .find(|p| p.name == name)
+        r.joint_intervals
+            .as_ref()
+            .unwrap()
+            .get(name)
             .unwrap()
             .clone()
     };
@@ -106,6 +107,7 @@ fn spielberg_two_step_study_recovers_the_truth() {
     for (n, k) in [
         ("vehicle.c_lift_front", "c_lift_front"),
         ("vehicle.b_front", "b_front_effective"),
+        ("vehicle.b_rear", "b_rear_effective"),
     ] {
         let p = interval(n);
         assert!(

@@ -91,7 +91,7 @@ pub struct LapTimeDifference {
 }
 
 /// What Tab. 1's columns mean, printed under it.
-pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit; [lo, hi] the optimised value's 95 % confidence interval from the sensitivities at the optimum with the residuals' autocorrelation accounted for, docs/optimize.md; \"open\": that end lies beyond the parameter's range).";
+pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit; [lo, hi] the optimised value's 95 % confidence interval from the sensitivities at the study's final point, all its parameters together, with the residuals' autocorrelation accounted for, docs/optimize.md; \"open\": that end lies beyond the parameter's range).";
 
 /// What was written.
 #[derive(Clone, Debug)]
@@ -106,6 +106,8 @@ fn short(name: &str) -> &str {
 }
 
 pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifference>) -> Table1 {
+    // The study's joint intervals where it has them (several steps), else each step's own.
+    let joint = |name: &str| result.joint_intervals.as_ref().and_then(|j| j.get(name));
     Table1 {
         study: result.study.clone(),
         lap_time_difference,
@@ -121,8 +123,10 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
                     .map(|p| TableParameter {
                         name: p.name.clone(),
                         unit: p.unit.clone().filter(|u| !u.is_empty() && u != "1"),
-                        interval: p.interval,
-                        interval_statement: p.interval_statement.clone(),
+                        interval: joint(&p.name)
+                            .map_or(p.interval, |j| j.std_error.map(|_| (j.lo, j.hi))),
+                        interval_statement: joint(&p.name)
+                            .map_or(p.interval_statement.clone(), |j| j.statement.clone()),
                         initial: p.before,
                         optimized: p.after,
                         change_percent: p.change_percent,

@@ -151,6 +151,10 @@ pub struct StudyResult {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compare: Option<tb_compare::CompareSettings>,
     pub steps: Vec<StepResult>,
+    /// A study of several steps: the 95 % intervals of all its fitted parameters together
+    /// at the final point (each step's own are conditional on the other steps' values).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_intervals: Option<crate::interval::Intervals>,
     /// Every parameter the study touches: initial and final values.
     pub parameters_initial: Vec<(String, f64)>,
     pub parameters_final: Vec<(String, f64)>,
@@ -915,6 +919,65 @@ fn finish_step(
     Ok((result, after.table))
 }
 
+/// The intervals of every fitted parameter together, at the study's final point, from every
+/// step's signals: a later step's parameters were fitted with an earlier step's held where
+/// they were, so each step's own intervals are conditional on the others' values; these
+/// carry the correlations between the steps' parameters (2 laps per parameter).
+fn joint_intervals(
+    session: &Session,
+    state: &StudyState,
+) -> Result<crate::interval::Intervals, OptimizeError> {
+    let (study, workers) = (session.study, &session.workers);
+    let mut names: Vec<String> = Vec::new();
+    let mut bounds = Vec::new();
+    let mut signals: Vec<String> = Vec::new();
+    let mut weights = Vec::new();
+    for step in &study.file.steps {
+        for p in &step.parameters {
+            if !names.contains(&p.name) {
+                names.push(p.name.clone());
+                bounds.push((p.min, p.max));
+            }
+        }
+        for (s, w) in step.signals.iter().zip(step.weights()) {
+            if !signals.contains(s) {
+                signals.push(s.clone());
+                weights.push(w);
+            }
+        }
+    }
+    let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
+    let index: Vec<usize> = names
+        .iter()
+        .map(|n| workers.index_of(n).expect("a study parameter has a slot"))
+        .collect();
+    let x: Vec<f64> = index.iter().map(|&i| all[i]).collect();
+    let names_ref: Vec<&str> = signals.iter().map(String::as_str).collect();
+    let prepared = PreparedMeasurement::new(&session.measurement, &names_ref, &study.file.compare)?;
+    let best = state
+        .laps
+        .optimized
+        .as_ref()
+        .expect("the final lap is run before the intervals");
+    Ok(crate::interval::at_optimum(
+        &names,
+        &signals,
+        &weights,
+        &x,
+        &bounds,
+        &prepared,
+        best,
+        &session.pool,
+        |y| {
+            let mut values = all.clone();
+            for (k, &i) in index.iter().enumerate() {
+                values[i] = y[k];
+            }
+            workers.run(&values, &prepared).map(|o| o.table)
+        },
+    ))
+}
+
 /// The study's result, with the laps a resumed session did not run itself made once each
 /// (before the runs are counted).
 fn finish_study(
@@ -949,8 +1012,13 @@ fn finish_study(
             state.laps.initial = Some(lap(&values)?);
         }
     }
+    let joint_intervals = match study.file.steps.len() {
+        1 => None,
+        _ => Some(joint_intervals(session, &state)?),
+    };
     let (simulations, simulation_seconds) = workers.runs();
     Ok(StudyResult {
+        joint_intervals,
         study: study.name(),
         system: study.system_path.clone(),
         measurement: study.measurement_path.clone(),

@@ -202,10 +202,13 @@ def test_a_dask_study_gives_the_command_lines_table1(cli_study, tmp_path):
     # Each fitted parameter with its interval, as the command line's JSON has it.
     params = result["parameters"]
     assert set(params) == {p["name"] for s in expected["steps"] for p in s["parameters"]}
+    assert result["joint_intervals"] == expected["joint_intervals"]
+    joint = {p["name"]: p for p in expected["joint_intervals"]["parameters"]}
     for s in expected["steps"]:
         for p in s["parameters"]:
             mine = params[p["name"]]
-            assert mine["value"] == p["after"] and mine["interval"] == p["interval"]
+            j = joint[p["name"]]
+            assert mine["value"] == p["after"] and mine["interval"] == [j["lo"], j["hi"]]
             assert mine["interval_method"] == "gauss-newton-hac"
             lo, hi = mine["interval"]
             assert lo is None or lo < mine["value"]

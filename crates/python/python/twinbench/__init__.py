@@ -390,8 +390,9 @@ class Study:
 
         Returns:
             The result as a dict (per step: parameters before/after, e before/after,
-            history, identifiability, the intervals), and ``"parameters"``: each fitted
-            parameter by name with its ``value`` (after its step), ``unit``, ``interval``
+            history, identifiability, the intervals; ``joint_intervals`` for a study of
+            several steps), and ``"parameters"``: each fitted parameter by name with its
+            ``value`` (after its step), ``unit``, ``interval`` (the joint one where there is)
             (``[lo, hi]``, ``None`` for an open end; ``None`` when there is none),
             ``interval_method`` and ``interval_statement`` (why an interval is open or
             missing).
@@ -423,17 +424,27 @@ class Study:
             progress,
         )
         result = json.loads(text)
-        result["parameters"] = {
-            p["name"]: {
-                "value": p["after"],
-                "unit": p.get("unit"),
-                "interval": p.get("interval"),
-                "interval_method": p.get("interval_method"),
-                "interval_statement": p.get("interval_statement"),
-            }
-            for step in result["steps"]
-            for p in step["parameters"]
-        }
+        # A study of several steps: the joint intervals (all its parameters together at the
+        # final point), as Tab. 1 shows them; else each step's own.
+        joint = {p["name"]: p for p in (result.get("joint_intervals") or {}).get("parameters", [])}
+
+        def interval(p):
+            j = joint.get(p["name"])
+            if j is None:
+                return p.get("interval"), p.get("interval_statement")
+            return ([j["lo"], j["hi"]] if j["std_error"] is not None else None), j["statement"]
+
+        result["parameters"] = {}
+        for step in result["steps"]:
+            for p in step["parameters"]:
+                iv, statement = interval(p)
+                result["parameters"][p["name"]] = {
+                    "value": p["after"],
+                    "unit": p.get("unit"),
+                    "interval": iv,
+                    "interval_method": p.get("interval_method"),
+                    "interval_statement": statement,
+                }
         return result
 
     def evaluate(
