@@ -354,6 +354,11 @@ fn optimize(
         no_report,
         force,
     };
+    let (args_study, args_out, resume) = (
+        args.study.clone(),
+        args.out.clone(),
+        args.resume_command(),
+    );
     let dyn_evaluator = evaluator.clone().map(|e| e as Arc<dyn Evaluator>);
     // The study runs on a thread of its own while this one, Python's main thread, looks
     // for Ctrl-C: Python sees a signal only where it holds the GIL, never inside the
@@ -404,8 +409,24 @@ fn optimize(
             ))),
             None => Err(error(e)),
         },
+        // Ctrl-C came after the last generation's check, while the study finished: its
+        // result is complete and written, but a Ctrl-C is never swallowed (Python raises
+        // KeyboardInterrupt for it), so it is raised now, saying where the result is.
+        Ok(_) if interrupt.load(Ordering::SeqCst) => {
+            let checkpoint = checkpoint_of(&args_study, &args_out);
+            Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(format!(
+                "interrupted: checkpoint kept ({checkpoint}); the study had already finished its last generation, and its result is complete in {} (study.optimize(..., resume=True) or `{resume}` returns it)",
+                args_out.display()
+            )))
+        }
         Ok(r) => Ok(r),
     }
+}
+
+/// The checkpoint a study writes into `out` (`<name>.checkpoint.json`), as shown in messages.
+fn checkpoint_of(study: &std::path::Path, out: &std::path::Path) -> String {
+    let name = Study::load(study).map(|s| s.name()).unwrap_or_default();
+    out.join(format!("{name}.checkpoint.json")).display().to_string()
 }
 
 /// A step as Python sees it: name, parameter names, bounds, start values.
