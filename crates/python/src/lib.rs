@@ -354,11 +354,8 @@ fn optimize(
         no_report,
         force,
     };
-    let (args_study, args_out, resume) = (
-        args.study.clone(),
-        args.out.clone(),
-        args.resume_command(),
-    );
+    let (args_study, args_out, resume) =
+        (args.study.clone(), args.out.clone(), args.resume_command());
     let dyn_evaluator = evaluator.clone().map(|e| e as Arc<dyn Evaluator>);
     // The study runs on a thread of its own while this one, Python's main thread, looks
     // for Ctrl-C: Python sees a signal only where it holds the GIL, never inside the
@@ -426,7 +423,9 @@ fn optimize(
 /// The checkpoint a study writes into `out` (`<name>.checkpoint.json`), as shown in messages.
 fn checkpoint_of(study: &std::path::Path, out: &std::path::Path) -> String {
     let name = Study::load(study).map(|s| s.name()).unwrap_or_default();
-    out.join(format!("{name}.checkpoint.json")).display().to_string()
+    out.join(format!("{name}.checkpoint.json"))
+        .display()
+        .to_string()
 }
 
 /// A step as Python sees it: name, parameter names, bounds, start values.
