@@ -340,9 +340,13 @@ print("finished")
 
 def test_ctrl_c_stops_a_study_after_its_generation_and_says_how_to_resume(tmp_path):
     out = tmp_path / "opt"
+    # The child starts with SIGINT at its default, as under a terminal: a suite launched in
+    # the background by a shell without job control inherits SIGINT ignored, and a Python
+    # started so never installs its KeyboardInterrupt handler (the signal would be lost).
     child = subprocess.Popen(
         [sys_executable(), "-c", CTRL_C, str(STUDY), str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     checkpoint = out / "spielberg.checkpoint.json"
     import time
