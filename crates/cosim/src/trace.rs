@@ -36,6 +36,11 @@ impl TraceSink {
         }
     }
 
+    /// One call's line: `t=0.1 edu: fmi2SetReal(vr=[...]) -> fmi2OK`.
+    fn call(&self, t: f64, instance: &str, function: &str, args: &str, status: &str) {
+        self.line(&format!("t={t} {instance}: {function}({args}) -> {status}"));
+    }
+
     /// Flush; the first write error of the run, if any (a trace is never cut silently).
     pub fn finish(&self) -> std::io::Result<()> {
         let mut g = self.out.lock().unwrap_or_else(|e| e.into_inner());
@@ -148,7 +153,7 @@ impl BackendFactory for TracedFactory {
         let name = instance_name.to_string();
         let steps_traced_inside =
             inner.set_call_trace(Arc::new(move |t, function, args, status| {
-                line_sink.line(&format!("t={t} {name}: {function}({args}) -> {status}"));
+                line_sink.call(t, &name, function, args, &status.to_string());
             }));
         Ok(Box::new(Traced {
             inner,
@@ -192,10 +197,7 @@ impl Traced {
 
     /// One line; `t` is the instance's time before the call.
     fn emit(&self, t: f64, function: &str, args: &str, status: &str) {
-        self.sink.line(&format!(
-            "t={t} {}: {function}({args}) -> {status}",
-            self.inner.name()
-        ));
+        self.sink.call(t, self.inner.name(), function, args, status);
     }
 
     /// `vr=[...]` with each value reference's name in the value space of the call.
