@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use tb_compare::{Measurement, PreparedMeasurement, Table, Workspace};
+use tb_optimize::driver::{ParameterChange, SignalChange};
 use tb_optimize::{OptimizeError, Study, StudyResult};
 use tb_plot::{Figure, LinePlot, Style};
 
@@ -75,6 +76,10 @@ pub struct TableStep {
 pub struct Table1 {
     pub study: String,
     pub steps: Vec<TableStep>,
+    /// The study's answer: every parameter from its step's start to the joint refinement,
+    /// with its interval, and every signal at the study's start and at the answer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<TableStep>,
     /// The twin's lap time minus the vehicle's [s], with the initial and with the optimised
     /// parameters (over the distance both cover; what `time_over_distance` shows).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -91,7 +96,7 @@ pub struct LapTimeDifference {
 }
 
 /// What Tab. 1's columns mean, printed under it.
-pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit; [lo, hi] the optimised value's 95 % confidence interval from the sensitivities at the study's final point, all its parameters together, with the residuals' autocorrelation accounted for, docs/optimize.md; \"open\": that end lies beyond the parameter's range).";
+pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit). Row \"all\": the study's answer, every parameter moved together to the least-squares point of every signal (the joint refinement after the steps, docs/optimize.md), from the value its step started from, with [lo, hi] its 95 % confidence interval from the sensitivities there, the residuals' autocorrelation accounted for; \"open\": that end lies beyond the parameter's range; e, m, bias of the row: every signal at the study's start and at the answer.";
 
 /// What was written.
 #[derive(Clone, Debug)]
@@ -106,8 +111,29 @@ fn short(name: &str) -> &str {
 }
 
 pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifference>) -> Table1 {
-    // The study's joint intervals where it has them (several steps), else each step's own.
-    let joint = |name: &str| result.joint_intervals.as_ref().and_then(|j| j.get(name));
+    let parameter = |p: &ParameterChange, with_interval: bool| TableParameter {
+        name: p.name.clone(),
+        unit: p.unit.clone().filter(|u| !u.is_empty() && u != "1"),
+        interval: p.interval.filter(|_| with_interval),
+        interval_statement: p.interval_statement.clone().filter(|_| with_interval),
+        initial: p.before,
+        optimized: p.after,
+        change_percent: p.change_percent,
+    };
+    let row = |e: &SignalChange| TableRow {
+        signal: e.signal.clone(),
+        e_initial: e.before.e,
+        e_optimized: e.after.e,
+        slope_initial: e.before.slope,
+        slope_optimized: e.after.slope,
+        r_squared_initial: e.before.r_squared,
+        r_squared_optimized: e.after.r_squared,
+        bias_percent_initial: 100.0 * e.before.bias,
+        bias_percent_optimized: 100.0 * e.after.bias,
+    };
+    // With a joint answer, the intervals are its (a step's own are conditional on the other
+    // steps' values at the time): the steps' rows show their values only.
+    let joint = result.joint.as_ref();
     Table1 {
         study: result.study.clone(),
         lap_time_difference,
@@ -120,35 +146,23 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
                 parameters: s
                     .parameters
                     .iter()
-                    .map(|p| TableParameter {
-                        name: p.name.clone(),
-                        unit: p.unit.clone().filter(|u| !u.is_empty() && u != "1"),
-                        interval: joint(&p.name)
-                            .map_or(p.interval, |j| j.std_error.map(|_| (j.lo, j.hi))),
-                        interval_statement: joint(&p.name)
-                            .map_or(p.interval_statement.clone(), |j| j.statement.clone()),
-                        initial: p.before,
-                        optimized: p.after,
-                        change_percent: p.change_percent,
-                    })
+                    .map(|p| parameter(p, joint.is_none()))
                     .collect(),
-                signals: s
-                    .e
-                    .iter()
-                    .map(|e| TableRow {
-                        signal: e.signal.clone(),
-                        e_initial: e.before.e,
-                        e_optimized: e.after.e,
-                        slope_initial: e.before.slope,
-                        slope_optimized: e.after.slope,
-                        r_squared_initial: e.before.r_squared,
-                        r_squared_optimized: e.after.r_squared,
-                        bias_percent_initial: 100.0 * e.before.bias,
-                        bias_percent_optimized: 100.0 * e.after.bias,
-                    })
-                    .collect(),
+                signals: s.e.iter().map(row).collect(),
             })
             .collect(),
+        joint: joint.map(|j| TableStep {
+            step: result.steps.len() + 1,
+            name: match &j.refinement {
+                Some(r) => format!(
+                    "all parameters together ({}, {} iterations)",
+                    r.method, r.iterations
+                ),
+                None => "all parameters together (the steps' answer)".into(),
+            },
+            parameters: j.parameters.iter().map(|p| parameter(p, true)).collect(),
+            signals: j.e.iter().map(row).collect(),
+        }),
     }
 }
 
@@ -162,7 +176,12 @@ pub fn table1_markdown(t: &Table1) -> String {
     ));
     s.push_str("| step | validation signal | optimised parameters | e initial | e optimised | m initial | m optimised | bias initial | bias optimised |\n");
     s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|\n");
-    for st in &t.steps {
+    for (label, st) in t
+        .steps
+        .iter()
+        .map(|st| (st.step.to_string(), st))
+        .chain(t.joint.iter().map(|st| ("all".to_string(), st)))
+    {
         let params = st
             .parameters
             .iter()
@@ -191,11 +210,7 @@ pub fn table1_markdown(t: &Table1) -> String {
         for (k, r) in st.signals.iter().enumerate() {
             s.push_str(&format!(
                 "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:+.2} % | {:+.2} % |\n",
-                if k == 0 {
-                    st.step.to_string()
-                } else {
-                    String::new()
-                },
+                if k == 0 { label.as_str() } else { "" },
                 r.signal,
                 if k == 0 { params.as_str() } else { "" },
                 r.e_initial,
@@ -210,6 +225,7 @@ pub fn table1_markdown(t: &Table1) -> String {
     let statements: Vec<String> = t
         .steps
         .iter()
+        .chain(&t.joint)
         .flat_map(|st| &st.parameters)
         .filter_map(|p| {
             let why = p.interval_statement.as_ref()?;

@@ -5,6 +5,7 @@
 use super::checkpoint::{initial_lap_path, Checkpoint, Current, StepStart};
 use super::cmaes::Cmaes;
 use super::exact;
+use super::fit::{Frame, Refinement, Series};
 use super::ga::Ga;
 use super::identifiability::{self, Identifiability};
 use super::optimizer::{
@@ -151,10 +152,15 @@ pub struct StudyResult {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compare: Option<tb_compare::CompareSettings>,
     pub steps: Vec<StepResult>,
-    /// A study of several steps: the 95 % intervals of all its fitted parameters together
-    /// at the final point (each step's own are conditional on the other steps' values).
+    /// The 95 % intervals of all the study's fitted parameters together at its answer
+    /// (each step's own are conditional on the other steps' values).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_intervals: Option<crate::interval::Intervals>,
+    /// The study's answer for all its parameters together: the refinement, each parameter
+    /// from before its step to the answer, each signal at the start and at the answer
+    /// (absent in results written before it was made).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<JointResult>,
     /// Every parameter the study touches: initial and final values.
     pub parameters_initial: Vec<(String, f64)>,
     pub parameters_final: Vec<(String, f64)>,
@@ -169,6 +175,19 @@ pub struct StudyResult {
     /// The recorded laps a report draws (not serialised: tables of samples).
     #[serde(skip)]
     pub laps: StudyLaps,
+}
+
+/// All the study's parameters and signals together at its answer (Tab. 1's joint row).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointResult {
+    /// Before: the value the parameter's (first) step started from; after: the answer,
+    /// with the joint interval.
+    pub parameters: Vec<ParameterChange>,
+    /// Each signal of every step at the study's start and at its answer.
+    pub e: Vec<SignalChange>,
+    /// The joint refinement (absent with `refine = false`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refinement: Option<Refinement>,
 }
 
 /// The twin's laps of a study, on the comparison's uniform time grid: at the first step's
@@ -569,7 +588,14 @@ fn run_step(
     let Some((best, best_cost)) = run_generations(session, state, &step, &mut begun)? else {
         return Ok(ControlFlow::Break(()));
     };
-    let (result, after) = finish_step(&step, begun, best, best_cost, &session.pool)?;
+    let (result, after) = finish_step(
+        &step,
+        begun,
+        best,
+        best_cost,
+        &session.pool,
+        session.study.file.refine,
+    )?;
     if session.options.verbose {
         if let Some(iv) = &result.intervals {
             eprintln!(
@@ -811,6 +837,7 @@ fn finish_step(
     best: Vec<f64>,
     best_cost: f64,
     pool: &rayon::ThreadPool,
+    refine: bool,
 ) -> Result<(StepResult, Table), OptimizeError> {
     let (config, problem) = (step.config, &step.problem);
     // A step whose every candidate failed found nothing: its "best" is a failure's penalty.
@@ -845,8 +872,10 @@ fn finish_step(
             config.name
         );
     }
-    // How sure the optimum is: 2 laps per parameter around it (crate::interval).
-    let intervals = crate::interval::at_optimum(
+    // How sure the optimum is: 2 laps per parameter around it (crate::interval); with the
+    // joint refinement after the steps, its intervals are the answer's and the step's own
+    // (conditional on the other steps' values) are not made.
+    let intervals = (!refine).then(|| crate::interval::at_optimum(
         &config.parameter_names(),
         &config.signals,
         &weights,
@@ -856,7 +885,7 @@ fn finish_step(
         &after.table,
         pool,
         |x| problem.outcome(x).map(|o| o.table),
-    );
+    ));
     let StepBegun {
         start,
         optimizer,
@@ -879,11 +908,15 @@ fn finish_step(
                 f64::NAN
             },
             interval: intervals
-                .get(&p.name)
+                .as_ref()
+                .and_then(|iv| iv.get(&p.name))
                 .filter(|i| i.std_error.is_some())
                 .map(|i| (i.lo, i.hi)),
-            interval_method: Some(intervals.method.clone()),
-            interval_statement: intervals.get(&p.name).and_then(|i| i.statement.clone()),
+            interval_method: intervals.as_ref().map(|iv| iv.method.clone()),
+            interval_statement: intervals
+                .as_ref()
+                .and_then(|iv| iv.get(&p.name))
+                .and_then(|i| i.statement.clone()),
         })
         .collect();
     let e = config
@@ -898,7 +931,7 @@ fn finish_step(
         })
         .collect();
     let result = StepResult {
-        intervals: Some(intervals),
+        intervals,
         step: problem.step + 1,
         name: config.name.clone(),
         signals: config.signals.clone(),
@@ -919,63 +952,147 @@ fn finish_step(
     Ok((result, after.table))
 }
 
-/// The intervals of every fitted parameter together, at the study's final point, from every
-/// step's signals: a later step's parameters were fitted with an earlier step's held where
-/// they were, so each step's own intervals are conditional on the others' values; these
-/// carry the correlations between the steps' parameters (2 laps per parameter).
-fn joint_intervals(
-    session: &Session,
-    state: &StudyState,
-) -> Result<crate::interval::Intervals, OptimizeError> {
-    let (study, workers) = (session.study, &session.workers);
-    let mut names: Vec<String> = Vec::new();
-    let mut bounds = Vec::new();
-    let mut signals: Vec<String> = Vec::new();
-    let mut weights = Vec::new();
-    for step in &study.file.steps {
-        for p in &step.parameters {
-            if !names.contains(&p.name) {
-                names.push(p.name.clone());
-                bounds.push((p.min, p.max));
+/// Every parameter the steps fit (first appearance: its bounds and its value before its
+/// step) and every signal they compare (its weight where it first appears).
+struct JointProblem {
+    names: Vec<String>,
+    bounds: Vec<(f64, f64)>,
+    before: Vec<f64>,
+    signals: Vec<String>,
+    weights: Vec<f64>,
+}
+
+impl JointProblem {
+    fn of(study: &Study, steps: &[StepResult]) -> JointProblem {
+        let mut j = JointProblem {
+            names: Vec::new(),
+            bounds: Vec::new(),
+            before: Vec::new(),
+            signals: Vec::new(),
+            weights: Vec::new(),
+        };
+        for (step, done) in study.file.steps.iter().zip(steps) {
+            for (p, change) in step.parameters.iter().zip(&done.parameters) {
+                if !j.names.contains(&p.name) {
+                    j.names.push(p.name.clone());
+                    j.bounds.push((p.min, p.max));
+                    j.before.push(change.before);
+                }
+            }
+            for (s, w) in step.signals.iter().zip(step.weights()) {
+                if !j.signals.contains(s) {
+                    j.signals.push(s.clone());
+                    j.weights.push(w);
+                }
             }
         }
-        for (s, w) in step.signals.iter().zip(step.weights()) {
-            if !signals.contains(s) {
-                signals.push(s.clone());
-                weights.push(w);
-            }
-        }
+        j
     }
+}
+
+/// The study's joint answer: the refinement of all its parameters together on all its
+/// signals ([`crate::fit`], unless the study says `refine = false`) and the 95 % intervals
+/// there, from the sensitivities at that point (each step's own intervals are conditional
+/// on the other steps' values). Puts the refined values in the state's assignment.
+fn joint_answer(
+    session: &Session,
+    state: &mut StudyState,
+    prepared: &PreparedMeasurement,
+) -> Result<(Option<Refinement>, crate::interval::Intervals), OptimizeError> {
+    let (study, workers) = (session.study, &session.workers);
+    let j = JointProblem::of(study, &state.checkpoint.completed);
     let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
-    let index: Vec<usize> = names
+    let index: Vec<usize> = j
+        .names
         .iter()
         .map(|n| workers.index_of(n).expect("a study parameter has a slot"))
         .collect();
     let x: Vec<f64> = index.iter().map(|&i| all[i]).collect();
-    let names_ref: Vec<&str> = signals.iter().map(String::as_str).collect();
-    let prepared = PreparedMeasurement::new(&session.measurement, &names_ref, &study.file.compare)?;
-    let best = state
-        .laps
-        .optimized
-        .as_ref()
-        .expect("the final lap is run before the intervals");
-    Ok(crate::interval::at_optimum(
-        &names,
-        &signals,
-        &weights,
-        &x,
-        &bounds,
-        &prepared,
-        best,
-        &session.pool,
-        |y| {
-            let mut values = all.clone();
-            for (k, &i) in index.iter().enumerate() {
-                values[i] = y[k];
+    let values = |y: &[f64]| {
+        let mut values = all.clone();
+        for (k, &i) in index.iter().enumerate() {
+            values[i] = y[k];
+        }
+        values
+    };
+    let run = |y: &[f64]| workers.run(&values(y), prepared).map(|o| o.table);
+    if !study.file.refine {
+        let best = state
+            .laps
+            .optimized
+            .as_ref()
+            .expect("the final lap is run before the intervals");
+        let iv = crate::interval::at_optimum(
+            &j.names,
+            &j.signals,
+            &j.weights,
+            &x,
+            &j.bounds,
+            prepared,
+            best,
+            &session.pool,
+            run,
+        );
+        return Ok((None, iv));
+    }
+    let series: Vec<Series> = j
+        .signals
+        .iter()
+        .zip(&j.weights)
+        .map(|(s, &w)| Series {
+            name: s.clone(),
+            weight: w,
+            measured: prepared.measured(s).unwrap_or(&[]),
+            offset: 0,
+        })
+        .collect();
+    let simulate = |y: &[f64]| -> crate::fit::Simulated {
+        let table = run(y)?;
+        let mut ws = Workspace::new();
+        j.signals
+            .iter()
+            .map(|s| {
+                prepared
+                    .on_grid(&table, s, true, &mut ws)
+                    .map_err(|e| e.to_string())
+            })
+            .collect()
+    };
+    let (frame, raw, sens) =
+        match Frame::new(series, j.bounds.clone(), &x, &session.pool, simulate) {
+            Ok(f) => f,
+            Err(why) => {
+                let why = format!("no joint refinement and no interval: {why}");
+                let iv = crate::interval::Intervals::none(&j.names, &x, why, 2 * x.len() + 1);
+                return Ok((None, iv));
             }
-            workers.run(&values, &prepared).map(|o| o.table)
-        },
-    ))
+        };
+    let objective_before = frame.per_point(frame.objective(&raw));
+    let solution = frame.minimise(&x, raw, sens, &vec![true; x.len()]);
+    let laps = frame.laps();
+    let iv = crate::interval::sandwich(
+        &j.names,
+        &solution.x,
+        &j.bounds,
+        &frame.blocks(&solution),
+        laps,
+    );
+    let refinement = Refinement {
+        method: crate::fit::METHOD.into(),
+        parameters: j.names.clone(),
+        signals: j.signals.clone(),
+        weights: j.weights.clone(),
+        before: x,
+        after: solution.x.clone(),
+        objective_before,
+        objective_after: frame.per_point(solution.objective),
+        iterations: solution.iterations,
+        laps,
+        converged: solution.converged,
+        statement: solution.statement.clone(),
+    };
+    state.set(&index, &solution.x);
+    Ok((Some(refinement), iv))
 }
 
 /// The study's result, with the laps a resumed session did not run itself made once each
@@ -1012,12 +1129,75 @@ fn finish_study(
             state.laps.initial = Some(lap(&values)?);
         }
     }
-    let joint_intervals = match study.file.steps.len() {
-        1 => None,
-        _ => Some(joint_intervals(session, &state)?),
+    let j = JointProblem::of(study, &state.checkpoint.completed);
+    let names_ref: Vec<&str> = j.signals.iter().map(String::as_str).collect();
+    let prepared = PreparedMeasurement::new(&session.measurement, &names_ref, &study.file.compare)?;
+    let sequential: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
+    let (refinement, intervals) = joint_answer(session, &mut state, &prepared)?;
+    // The joint row of Tab. 1: every signal at the study's start and at its answer.
+    let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
+    let failed = |reason| OptimizeError::Start {
+        step: "report".into(),
+        reason,
     };
+    let mut ws = Workspace::new();
+    let initial_table = state.laps.initial.as_ref().expect("made above");
+    let before = prepared
+        .compare(initial_table, &mut ws)
+        .map_err(|e| failed(format!("comparison: {e}")))?;
+    let after = if all == sequential {
+        let table = state.laps.optimized.as_ref().expect("made above");
+        prepared
+            .compare(table, &mut ws)
+            .map_err(|e| failed(format!("comparison: {e}")))?
+    } else {
+        let o = workers.run(&all, &prepared).map_err(failed)?;
+        state.laps.optimized = Some(o.table);
+        o.comparison
+    };
+    let joint = JointResult {
+        parameters: j
+            .names
+            .iter()
+            .enumerate()
+            .map(|(k, name)| {
+                let value = state.assignment[workers.index_of(name).expect("a slot")].1;
+                let iv = intervals.get(name);
+                ParameterChange {
+                    name: name.clone(),
+                    unit: workers.parameter_unit(name).map(str::to_string),
+                    min: j.bounds[k].0,
+                    max: j.bounds[k].1,
+                    before: j.before[k],
+                    after: value,
+                    change_percent: if j.before[k] != 0.0 {
+                        (value / j.before[k] - 1.0) * 100.0
+                    } else {
+                        f64::NAN
+                    },
+                    interval: iv.filter(|i| i.std_error.is_some()).map(|i| (i.lo, i.hi)),
+                    interval_method: Some(intervals.method.clone()),
+                    interval_statement: iv.and_then(|i| i.statement.clone()),
+                }
+            })
+            .collect(),
+        e: j
+            .signals
+            .iter()
+            .zip(&j.weights)
+            .map(|(s, &w)| SignalChange {
+                signal: s.clone(),
+                weight: w,
+                before: before.get(s).cloned().expect("compared"),
+                after: after.get(s).cloned().expect("compared"),
+            })
+            .collect(),
+        refinement,
+    };
+    let joint_intervals = Some(intervals);
     let (simulations, simulation_seconds) = workers.runs();
     Ok(StudyResult {
+        joint: Some(joint),
         joint_intervals,
         study: study.name(),
         system: study.system_path.clone(),

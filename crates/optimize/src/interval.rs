@@ -41,7 +41,7 @@ pub const METHOD: &str = "gauss-newton-hac";
 /// Two-sided 95 % quantile of the normal distribution.
 pub const Z95: f64 = 1.959_963_984_540_054;
 /// Each parameter's step for the sensitivities, relative to its value (or its range).
-const REL_STEP: f64 = 0.02;
+pub(crate) const REL_STEP: f64 = 0.02;
 /// An information eigenvalue below this fraction of the largest: a direction not seen.
 const NULL_RATIO: f64 = 1e-9;
 /// A parameter closer to a bound than this fraction of its range is on the bound.
@@ -110,7 +110,7 @@ impl Intervals {
     }
 
     /// Intervals that could not be computed at all: every parameter without one, with why.
-    fn none(names: &[String], x: &[f64], why: String, laps: usize) -> Intervals {
+    pub(crate) fn none(names: &[String], x: &[f64], why: String, laps: usize) -> Intervals {
         Intervals {
             method: METHOD.into(),
             level: 0.95,

@@ -16,6 +16,8 @@
 //!   near-null directions).
 //! - [`interval`]: each fitted parameter's confidence interval at a step's optimum
 //!   (Gauss–Newton sandwich with a long-run covariance of the scores).
+//! - [`fit`]: the joint least-squares refinement of all of a study's parameters on all its
+//!   signals (Levenberg–Marquardt), where the intervals are centred.
 //! - [`driver`]: the study driver: steps in order, each starting from the earlier results,
 //!   identifiability check, e before/after, a checkpoint after every generation, resume.
 //! - [`checkpoint`]: the checkpoint file the driver writes after every generation and
@@ -30,6 +32,7 @@ pub mod checkpoint;
 pub mod cmaes;
 pub mod driver;
 pub mod exact;
+pub mod fit;
 pub mod ga;
 pub mod identifiability;
 pub mod interval;

@@ -49,6 +49,15 @@ pub struct StudyFile {
     /// Checks on the first run that measurement and twin belong together.
     #[serde(default)]
     pub plausibility: Plausibility,
+    /// After the steps, move all their parameters together to the least-squares point of
+    /// all their signals (Levenberg–Marquardt, `tb_optimize::fit`), where the intervals are
+    /// centred. `false`: the steps' answer stands, and its intervals are centred on it.
+    #[serde(default = "yes")]
+    pub refine: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// Before optimising, the first run of the twin is checked against the measurement: a

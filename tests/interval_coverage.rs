@@ -1,0 +1,138 @@
+//! Calibration of the intervals (slow tier): synthetic laps the suite makes with the twin
+//! itself, with known parameters and wheel-load noise of a realistic autocorrelation, on
+//! two circuits (the suite's own and Spielberg); each lap prepared by `twinbench lap` and
+//! fitted by its two-step study and the joint refinement; the 95 % intervals of the answer
+//! must contain the truth in at least 85 % of the laps for each parameter. Prints the
+//! coverage table (docs/optimize.md has it).
+//!
+//! The steps run 12 generations instead of the study's 40: the answer is the joint
+//! refinement's, which starts wherever the steps end (`--generations`, as a user in a
+//! hurry would; the intervals are the default ones). `TWINBENCH_COVERAGE_LAPS` sets the
+//! laps per circuit (default 10).
+
+mod common;
+
+use common::synthetic::{self, Noise};
+use std::process::Command;
+
+const TRUTH: [(&str, f64); 5] = [
+    ("vehicle.c_lift_front", 0.95),
+    ("vehicle.c_lift_rear", 1.25),
+    ("vehicle.l", 2.85),
+    ("vehicle.b_front", 1.45),
+    ("vehicle.b_rear", 1.40),
+];
+/// Laps per circuit (20 in all).
+const LAPS: u64 = 10;
+/// Generations per step.
+const GENERATIONS: &str = "12";
+/// Wheel-load noise: 150 N, AR(1) with ρ = 0.995 per 5 ms sample (correlation time 1 s,
+/// about 50 m at speed: a load cell's drift and the road, not white noise).
+const SIGMA: f64 = 150.0;
+const RHO: f64 = 0.995;
+
+fn twinbench(args: &[&str]) -> Vec<u8> {
+    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "twinbench {args:?}:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
+#[test]
+fn the_95_percent_intervals_contain_the_truth_in_at_least_85_percent_of_synthetic_laps() {
+    let fmus = common::fmu_dir();
+    let dir = tb_testkit::scratch("interval-coverage");
+    let per_circuit = std::env::var("TWINBENCH_COVERAGE_LAPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(LAPS);
+    let mut inside = [0usize; 5];
+    let mut widths = [0.0f64; 5];
+    let mut laps = 0usize;
+    for (c, name) in ["own", "spielberg"].iter().enumerate() {
+        let cdir = dir.path().join(name);
+        std::fs::create_dir_all(&cdir).unwrap();
+        let circuit = match c {
+            0 => synthetic::own_circuit(&cdir),
+            _ => synthetic::spielberg(),
+        };
+        let track = circuit.track.clone().unwrap_or_else(|| {
+            twinbench::pack::workspace_root().join("data/spielberg_lap_track.csv")
+        });
+        let lap = synthetic::truth_lap(&cdir, &circuit, &TRUTH);
+        for seed in 0..per_circuit {
+            let ldir = cdir.join(format!("lap{seed}"));
+            std::fs::create_dir_all(&ldir).unwrap();
+            let noise = Noise {
+                sigma: SIGMA,
+                rho: RHO,
+                seed: 1000 * c as u64 + seed,
+            };
+            let meas = synthetic::measurement(&lap, &ldir.join("measurement.csv"), Some(noise));
+            let out = ldir.join("lap");
+            twinbench(&[
+                "lap",
+                meas.to_str().unwrap(),
+                "--track",
+                track.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--fmus",
+                fmus.to_str().unwrap(),
+            ]);
+            let text = twinbench(&[
+                "optimize",
+                out.join("study.toml").to_str().unwrap(),
+                "--json",
+                "--no-report",
+                "--generations",
+                GENERATIONS,
+                "--out",
+                ldir.join("opt").to_str().unwrap(),
+            ]);
+            let r: serde_json::Value = serde_json::from_slice(&text).unwrap();
+            laps += 1;
+            for p in r["joint"]["parameters"].as_array().unwrap() {
+                let k = TRUTH.iter().position(|t| t.0 == p["name"]).unwrap();
+                let truth = TRUTH[k].1;
+                let end = |i: usize, open: f64| p["interval"][i].as_f64().unwrap_or(open);
+                let (lo, hi) = match p["interval"].is_array() {
+                    true => (end(0, f64::NEG_INFINITY), end(1, f64::INFINITY)),
+                    false => (f64::NAN, f64::NAN),
+                };
+                let hit = lo <= truth && truth <= hi;
+                inside[k] += usize::from(hit);
+                widths[k] += (hi - lo) / truth;
+                eprintln!(
+                    "{name} lap {seed}: {} = {:.4} [{lo:.4}, {hi:.4}] truth {truth} {}",
+                    p["name"],
+                    p["after"].as_f64().unwrap(),
+                    if hit { "inside" } else { "OUTSIDE" }
+                );
+            }
+        }
+    }
+    eprintln!("\n| parameter | truth | inside its 95 % interval | mean width (relative) |");
+    eprintln!("|---|---:|---:|---:|");
+    for (k, (n, t)) in TRUTH.iter().enumerate() {
+        eprintln!(
+            "| {n} | {t} | {}/{laps} ({:.0} %) | {:.1} % |",
+            inside[k],
+            100.0 * inside[k] as f64 / laps as f64,
+            100.0 * widths[k] / laps as f64
+        );
+    }
+    for (k, (n, _)) in TRUTH.iter().enumerate() {
+        assert!(
+            inside[k] as f64 >= 0.85 * laps as f64,
+            "{n}: the truth inside {} of {laps} intervals",
+            inside[k]
+        );
+    }
+}
