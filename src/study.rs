@@ -32,6 +32,8 @@ pub struct StudyRun {
     pub force: bool,
     /// Print each step's progress and identifiability on stderr.
     pub verbose: bool,
+    /// Profile likelihood of every parameter after the refinement.
+    pub profiles: bool,
 }
 
 impl StudyRun {
@@ -47,6 +49,9 @@ impl StudyRun {
         }
         if let Some(g) = self.generations {
             c.push_str(&format!(" --generations {g}"));
+        }
+        if self.profiles {
+            c.push_str(" --profiles");
         }
         c
     }
@@ -144,6 +149,7 @@ pub fn optimize(
         verbose: args.verbose,
         force: args.force,
         evaluator,
+        profiles: args.profiles,
     };
     let result = match run_study(&study, &options)? {
         StudyOutcome::Finished(r) => r,

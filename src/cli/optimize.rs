@@ -34,6 +34,10 @@ pub struct OptimizeArgs {
     /// together (lap length, lap time, speed over distance; the study's [plausibility]).
     #[arg(long)]
     pub force: bool,
+    /// Profile likelihood of every fitted parameter after the joint refinement: each held
+    /// on a grid, the others re-optimised; intervals and plots from it (docs/optimize.md)
+    #[arg(long)]
+    pub profiles: bool,
 }
 
 impl OptimizeArgs {
@@ -49,6 +53,7 @@ impl OptimizeArgs {
             no_report: self.no_report,
             force: self.force,
             verbose: !self.json,
+            profiles: self.profiles,
         }
     }
 }

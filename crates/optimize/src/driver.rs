@@ -63,6 +63,9 @@ pub struct RunOptions {
     /// Evaluate the generations' candidates here instead of on `threads` threads (the
     /// start, identifiability and result runs stay local).
     pub evaluator: Option<Arc<dyn Evaluator>>,
+    /// Profile likelihood of every parameter after the joint refinement (as the study's
+    /// `profiles = true`).
+    pub profiles: bool,
 }
 
 impl std::fmt::Debug for RunOptions {
@@ -79,6 +82,7 @@ impl std::fmt::Debug for RunOptions {
             .field("verbose", &self.verbose)
             .field("force", &self.force)
             .field("evaluator", &self.evaluator.is_some())
+            .field("profiles", &self.profiles)
             .finish()
     }
 }
@@ -161,6 +165,10 @@ pub struct StudyResult {
     /// (absent in results written before it was made).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint: Option<JointResult>,
+    /// Profile likelihood of every parameter (asked for with `--profiles` or
+    /// `profiles = true`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profiles: Option<crate::profile::Profiles>,
     /// Every parameter the study touches: initial and final values.
     pub parameters_initial: Vec<(String, f64)>,
     pub parameters_final: Vec<(String, f64)>,
@@ -998,7 +1006,7 @@ fn joint_answer(
     session: &Session,
     state: &mut StudyState,
     prepared: &PreparedMeasurement,
-) -> Result<(Option<Refinement>, crate::interval::Intervals), OptimizeError> {
+) -> Result<JointAnswer, OptimizeError> {
     let (study, workers) = (session.study, &session.workers);
     let j = JointProblem::of(study, &state.checkpoint.completed);
     let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
@@ -1033,7 +1041,7 @@ fn joint_answer(
             &session.pool,
             run,
         );
-        return Ok((None, iv));
+        return Ok((None, iv, None));
     }
     let series: Vec<Series> = j
         .signals
@@ -1064,7 +1072,7 @@ fn joint_answer(
             Err(why) => {
                 let why = format!("no joint refinement and no interval: {why}");
                 let iv = crate::interval::Intervals::none(&j.names, &x, why, 2 * x.len() + 1);
-                return Ok((None, iv));
+                return Ok((None, iv, None));
             }
         };
     let objective_before = frame.per_point(frame.objective(&raw));
@@ -1091,9 +1099,31 @@ fn joint_answer(
         converged: solution.converged,
         statement: solution.statement.clone(),
     };
+    let profiles = (study.file.profiles || session.options.profiles).then(|| {
+        let units: Vec<Option<String>> = j
+            .names
+            .iter()
+            .map(|n| workers.parameter_unit(n).map(str::to_string))
+            .collect();
+        crate::profile::profiles(
+            &frame,
+            &j.names,
+            &units,
+            &solution,
+            iv.critical_value,
+            &session.pool,
+        )
+    });
     state.set(&index, &solution.x);
-    Ok((Some(refinement), iv))
+    Ok((Some(refinement), iv, profiles))
 }
+
+/// The refinement, the intervals at the answer, the profiles when asked for.
+type JointAnswer = (
+    Option<Refinement>,
+    crate::interval::Intervals,
+    Option<crate::profile::Profiles>,
+);
 
 /// The study's result, with the laps a resumed session did not run itself made once each
 /// (before the runs are counted).
@@ -1133,7 +1163,7 @@ fn finish_study(
     let names_ref: Vec<&str> = j.signals.iter().map(String::as_str).collect();
     let prepared = PreparedMeasurement::new(&session.measurement, &names_ref, &study.file.compare)?;
     let sequential: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
-    let (refinement, intervals) = joint_answer(session, &mut state, &prepared)?;
+    let (refinement, intervals, profiles) = joint_answer(session, &mut state, &prepared)?;
     // The joint row of Tab. 1: every signal at the study's start and at its answer.
     let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
     let failed = |reason| OptimizeError::Start {
@@ -1163,6 +1193,7 @@ fn finish_study(
             .map(|(k, name)| {
                 let value = state.assignment[workers.index_of(name).expect("a slot")].1;
                 let iv = intervals.get(name);
+                let profile = profiles.as_ref().and_then(|p| p.get(name));
                 ParameterChange {
                     name: name.clone(),
                     unit: workers.parameter_unit(name).map(str::to_string),
@@ -1175,9 +1206,18 @@ fn finish_study(
                     } else {
                         f64::NAN
                     },
-                    interval: iv.filter(|i| i.std_error.is_some()).map(|i| (i.lo, i.hi)),
-                    interval_method: Some(intervals.method.clone()),
-                    interval_statement: iv.and_then(|i| i.statement.clone()),
+                    interval: match profile {
+                        Some(p) => (p.lo.is_some() || p.hi.is_some()).then_some((p.lo, p.hi)),
+                        None => iv.filter(|i| i.std_error.is_some()).map(|i| (i.lo, i.hi)),
+                    },
+                    interval_method: Some(match profile {
+                        Some(_) => crate::profile::METHOD.to_string(),
+                        None => intervals.method.clone(),
+                    }),
+                    interval_statement: match profile {
+                        Some(p) => p.statement.clone(),
+                        None => iv.and_then(|i| i.statement.clone()),
+                    },
                 }
             })
             .collect(),
@@ -1197,6 +1237,7 @@ fn finish_study(
     let joint_intervals = Some(intervals);
     let (simulations, simulation_seconds) = workers.runs();
     Ok(StudyResult {
+        profiles,
         joint: Some(joint),
         joint_intervals,
         study: study.name(),

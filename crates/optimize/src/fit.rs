@@ -431,6 +431,41 @@ where
         out
     }
 
+    /// The residuals and the sensitivities of the `free` parameters at `x`: 1 + 2 per free
+    /// parameter laps, in one batch.
+    pub fn start(&self, x: &[f64], free: &[bool]) -> Result<(Raw, Vec<Option<Raw>>), String> {
+        let mut points = vec![x.to_vec()];
+        points.extend(around(x, &self.bounds, free).into_iter().map(|(_, y)| y));
+        let mut raws: Vec<Raw> = self.run(&points).into_iter().collect::<Result<_, _>>()?;
+        let rest = raws.split_off(1);
+        let sens = self.sensitivities(x, &rest, free);
+        Ok((raws.pop().expect("the lap at x"), sens))
+    }
+
+    /// At a solution (every parameter free): the naive covariance (JᵀWJ)⁻¹, as if every
+    /// grid point were independent, and the sandwich variance of each parameter, both in
+    /// the parameters' own units (0 where not determined).
+    pub fn covariances(&self, solution: &Solution) -> (Vec<Vec<f64>>, Vec<f64>) {
+        let p = solution.x.len();
+        let span: Vec<f64> = self.bounds.iter().map(|(lo, hi)| hi - lo).collect();
+        let (a, _) = self.normal_equations(&solution.raw, &solution.sensitivities, &span);
+        let (vals, vecs) = symmetric_eigen(&a);
+        let top = vals.iter().cloned().fold(0.0f64, f64::max);
+        let mut naive = vec![vec![0.0; p]; p];
+        for (k, &l) in vals.iter().enumerate() {
+            if !(top > 0.0) || l <= NULL_RATIO * top {
+                continue;
+            }
+            for i in 0..p {
+                for j in 0..p {
+                    naive[i][j] += vecs[i][k] * vecs[j][k] / l * span[i] * span[j];
+                }
+            }
+        }
+        let se = self.std_errors(&solution.x, &solution.raw, &solution.sensitivities);
+        (naive, se.iter().map(|s| s.map_or(0.0, |s| s * s)).collect())
+    }
+
     /// The objective per compared grid point (1 where every residual is at its σ).
     pub fn per_point(&self, objective: f64) -> f64 {
         objective / self.points() as f64
@@ -454,6 +489,7 @@ where
                     .map(|n| free.iter().map(|j| j[b][n]).collect())
                     .collect(),
                 weight: s.weight,
+                factor: Some(self.scale[b] * self.scale[b]),
             })
             .collect()
     }

@@ -18,6 +18,8 @@
 //!   (Gauss–Newton sandwich with a long-run covariance of the scores).
 //! - [`fit`]: the joint least-squares refinement of all of a study's parameters on all its
 //!   signals (Levenberg–Marquardt), where the intervals are centred.
+//! - [`profile`]: profile likelihood, each parameter held on a grid and the others
+//!   re-optimised by [`fit`]'s iteration (on request).
 //! - [`driver`]: the study driver: steps in order, each starting from the earlier results,
 //!   identifiability check, e before/after, a checkpoint after every generation, resume.
 //! - [`checkpoint`]: the checkpoint file the driver writes after every generation and
@@ -38,6 +40,7 @@ pub mod identifiability;
 pub mod interval;
 pub mod optimizer;
 pub mod pool;
+pub mod profile;
 pub mod remote;
 pub mod rng;
 pub mod study;

@@ -54,6 +54,10 @@ pub struct StudyFile {
     /// centred. `false`: the steps' answer stands, and its intervals are centred on it.
     #[serde(default = "yes")]
     pub refine: bool,
+    /// Profile likelihood of every parameter after the refinement (`tb_optimize::profile`;
+    /// `twinbench optimize --profiles` asks for it too).
+    #[serde(default)]
+    pub profiles: bool,
 }
 
 fn yes() -> bool {
@@ -283,6 +287,11 @@ impl Study {
         let f = &self.file;
         if f.steps.is_empty() {
             return Err(bad("no [[step]]".into()));
+        }
+        if f.profiles && !f.refine {
+            return Err(bad(
+                "profiles = true needs refine = true: a profile is measured from the joint least-squares point the refinement finds".into(),
+            ));
         }
         f.compare
             .validate()

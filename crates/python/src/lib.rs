@@ -307,7 +307,7 @@ impl Progress for PyProgress {
 /// Runs a study as `twinbench optimize --json` does (same files in `out`); returns the
 /// result as JSON. `executor` and `function`: evaluate the generations there.
 #[pyfunction]
-#[pyo3(signature = (study, out, threads, resume, generations, optimizer, force, no_report, executor=None, function=None, digest=None, progress=None))]
+#[pyo3(signature = (study, out, threads, resume, generations, optimizer, force, no_report, executor=None, function=None, digest=None, progress=None, profiles=false))]
 #[allow(clippy::too_many_arguments)]
 fn optimize(
     py: Python<'_>,
@@ -323,6 +323,7 @@ fn optimize(
     function: Option<Py<PyAny>>,
     digest: Option<String>,
     progress: Option<Py<PyAny>>,
+    profiles: bool,
 ) -> PyResult<String> {
     let optimizer = optimizer
         .map(|o| match o.as_str() {
@@ -353,6 +354,7 @@ fn optimize(
         generations,
         no_report,
         force,
+        profiles,
     };
     let (args_study, args_out, resume) =
         (args.study.clone(), args.out.clone(), args.resume_command());

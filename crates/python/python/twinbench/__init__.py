@@ -363,6 +363,7 @@ class Study:
         force: bool = False,
         report: bool = True,
         progress: Optional[Callable[[Dict[str, Any]], None]] = None,
+        profiles: bool = False,
     ) -> Dict[str, Any]:
         """Run the study, as ``twinbench optimize --json``, and return its result.
 
@@ -387,15 +388,17 @@ class Study:
             report: write Tab. 1 and the plots.
             progress: called after every generation with a dict (generation,
                 evaluations, best_cost, best_x, failures).
+            profiles: profile likelihood of every parameter after the joint refinement
+                (as ``--profiles``); the intervals are then the profiles'.
 
         Returns:
             The result as a dict (per step: parameters before/after, e before/after,
-            history, identifiability, the intervals; ``joint_intervals`` for a study of
-            several steps), and ``"parameters"``: each fitted parameter by name with its
-            ``value`` (after its step), ``unit``, ``interval`` (the joint one where there is)
-            (``[lo, hi]``, ``None`` for an open end; ``None`` when there is none),
-            ``interval_method`` and ``interval_statement`` (why an interval is open or
-            missing).
+            history, identifiability; ``joint``: the study's answer, all parameters
+            refined together, with the intervals; ``joint_intervals``; ``profiles`` when
+            asked for), and ``"parameters"``: each fitted parameter by name with its
+            ``value`` (the study's answer), ``unit``, ``interval`` (``[lo, hi]``, ``None``
+            for an open end; ``None`` when there is none), ``interval_method`` and
+            ``interval_statement`` (why an interval is open or missing).
 
         Raises:
             TwinbenchError: a bad study, system or measurement; a checkpoint of other
@@ -422,29 +425,23 @@ class Study:
             function,
             digest,
             progress,
+            bool(profiles),
         )
         result = json.loads(text)
-        # A study of several steps: the joint intervals (all its parameters together at the
-        # final point), as Tab. 1 shows them; else each step's own.
-        joint = {p["name"]: p for p in (result.get("joint_intervals") or {}).get("parameters", [])}
-
-        def interval(p):
-            j = joint.get(p["name"])
-            if j is None:
-                return p.get("interval"), p.get("interval_statement")
-            return ([j["lo"], j["hi"]] if j["std_error"] is not None else None), j["statement"]
-
-        result["parameters"] = {}
-        for step in result["steps"]:
-            for p in step["parameters"]:
-                iv, statement = interval(p)
-                result["parameters"][p["name"]] = {
-                    "value": p["after"],
-                    "unit": p.get("unit"),
-                    "interval": iv,
-                    "interval_method": p.get("interval_method"),
-                    "interval_statement": statement,
-                }
+        # The study's answer (Tab. 1's row "all"): every parameter with its interval; a
+        # result without one (written before it was made) gives each step's own.
+        joint = result.get("joint")
+        rows = joint["parameters"] if joint else [p for s in result["steps"] for p in s["parameters"]]
+        result["parameters"] = {
+            p["name"]: {
+                "value": p["after"],
+                "unit": p.get("unit"),
+                "interval": list(p["interval"]) if p.get("interval") is not None else None,
+                "interval_method": p.get("interval_method"),
+                "interval_statement": p.get("interval_statement"),
+            }
+            for p in rows
+        }
         return result
 
     def evaluate(

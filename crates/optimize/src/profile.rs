@@ -1,0 +1,316 @@
+//! Profile likelihood: each parameter held on a grid of values and the others re-optimised,
+//! for intervals that follow the objective where it is not a parabola (a parameter the
+//! signals see only on one side, or not at all).
+//!
+//! **The statistic.** With S the weighted sum of squares of [`crate::fit`] and Ŝ its
+//! minimum, the profile of parameter i is S_i(t) = min over the others of S with θ_i = t.
+//! For independent residuals ΔS = S_i(t) − Ŝ would be χ²₁ at the truth; filtered signals on
+//! a 1 m grid are far from independent, and ΔS is larger by the factor by which the
+//! sandwich variance exceeds the naive one,
+//!
+//!   κ_i = C_ii / (JᵀWJ)⁻¹_ii  (C the sandwich of [`crate::interval`], W = diag(w_s/σ_s²)),
+//!
+//! so the profile statistic is D_i(t) = ΔS/κ_i and the 95 % interval is where D_i ≤ c², c
+//! the sandwich intervals' critical value ([`crate::interval::critical_value`]: 1.96, χ²₁'s
+//! 3.84, for independent residuals; more where the long-run variance is itself uncertain).
+//! Where S is a parabola in θ this is exactly the sandwich interval; where it is not, the
+//! profile says where the data stop agreeing.
+//!
+//! **The grid.** From the answer outwards on each side, in steps of 0.75 standard errors
+//! (a tenth of the range when there is none), until D passes c² (the interval's end is
+//! interpolated linearly between the last two points), the bound is reached (an open end),
+//! or [`MAX_POINTS`] points. Each point is re-optimised by [`crate::fit`]'s
+//! Levenberg–Marquardt with θ_i held, warm-started from the neighbouring point moved along
+//! the information's regression of the others on θ_i (usually one iteration). The sides of
+//! all parameters run in parallel on the study's threads.
+
+use super::fit::{Frame, Simulated, Solution};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The method's name in results.
+pub const METHOD: &str = "profile-likelihood";
+/// Grid step in standard errors.
+const STEP_SE: f64 = 0.75;
+/// Points per side at most.
+pub const MAX_POINTS: usize = 8;
+
+/// One point of a profile.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProfilePoint {
+    /// The held parameter's value.
+    pub value: f64,
+    /// D (module doc) there.
+    pub statistic: f64,
+    /// The other parameters re-optimised (in the study's order, the held one included).
+    pub parameters: Vec<f64>,
+    /// Laps this point took.
+    pub laps: usize,
+}
+
+/// One parameter's profile and the interval from it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Profile {
+    pub name: String,
+    pub value: f64,
+    /// κ (module doc).
+    pub kappa: f64,
+    /// The points from the lowest value to the highest, the answer (D = 0) included.
+    pub points: Vec<ProfilePoint>,
+    /// The interval's ends (`None`: open, the statement says why).
+    pub lo: Option<f64>,
+    pub hi: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub statement: Option<String>,
+}
+
+/// Every parameter's profile.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Profiles {
+    /// [`METHOD`].
+    pub method: String,
+    pub level: f64,
+    pub threshold: f64,
+    pub parameters: Vec<Profile>,
+    /// Laps for all profiles, and the profile points re-optimised.
+    pub laps: usize,
+    pub points: usize,
+    /// Wall time of the profiles [s].
+    pub seconds: f64,
+}
+
+impl Profiles {
+    pub fn get(&self, name: &str) -> Option<&Profile> {
+        self.parameters.iter().find(|p| p.name == name)
+    }
+}
+
+/// The profiles of every parameter around `answer` (the joint fit's solution in `frame`).
+pub(crate) fn profiles<F>(
+    frame: &Frame<'_, F>,
+    names: &[String],
+    units: &[Option<String>],
+    answer: &Solution,
+    critical_value: f64,
+    pool: &rayon::ThreadPool,
+) -> Profiles
+where
+    F: Fn(&[f64]) -> Simulated + Sync,
+{
+    let started = std::time::Instant::now();
+    let threshold = critical_value * critical_value;
+    let laps_before = frame.laps();
+    let p = answer.x.len();
+    let (naive, sandwich) = frame.covariances(answer);
+    let sides: Vec<(usize, f64)> = (0..p).flat_map(|i| [(i, -1.0), (i, 1.0)]).collect();
+    let walked: Vec<Side> = pool.install(|| {
+        sides
+            .par_iter()
+            .with_max_len(1)
+            .map(|&(i, sign)| {
+                let at = Around {
+                    name: &names[i],
+                    answer,
+                    naive: &naive,
+                    sandwich: &sandwich,
+                    threshold,
+                };
+                walk(frame, &at, i, sign)
+            })
+            .collect()
+    });
+    let mut parameters = Vec::new();
+    let mut points = 0;
+    for i in 0..p {
+        let (below, above) = (&walked[2 * i], &walked[2 * i + 1]);
+        points += below.points.len() + above.points.len();
+        let mut all: Vec<ProfilePoint> = below.points.iter().rev().cloned().collect();
+        all.push(ProfilePoint {
+            value: answer.x[i],
+            statistic: 0.0,
+            parameters: answer.x.clone(),
+            laps: 0,
+        });
+        all.extend(above.points.iter().cloned());
+        let (lo_b, hi_b) = frame.bounds[i];
+        let unit = units[i]
+            .as_deref()
+            .filter(|u| !u.is_empty() && *u != "1")
+            .map(|u| format!(" {u}"))
+            .unwrap_or_default();
+        let short = names[i].split_once('.').map_or(names[i].as_str(), |(_, v)| v);
+        let range = format!(
+            "[{}, {}]{unit}",
+            tb_files::number(lo_b),
+            tb_files::number(hi_b)
+        );
+        let statement = match (below.end, above.end, &below.stop, &above.stop) {
+            (_, _, Some(why), _) | (_, _, _, Some(why)) => Some(why.clone()),
+            (None, None, _, _) => Some(format!(
+                "{short}: not determined by these signals within {range}"
+            )),
+            (None, Some(_), _, _) => Some(format!(
+                "{short}: open below, any value down to {}{unit} fits",
+                tb_files::number(lo_b)
+            )),
+            (Some(_), None, _, _) => Some(format!(
+                "{short}: open above, any value up to {}{unit} fits",
+                tb_files::number(hi_b)
+            )),
+            _ => None,
+        };
+        parameters.push(Profile {
+            name: names[i].clone(),
+            value: answer.x[i],
+            kappa: kappa(&naive, &sandwich, i),
+            points: all,
+            lo: below.end,
+            hi: above.end,
+            statement,
+        });
+    }
+    Profiles {
+        method: METHOD.into(),
+        level: 0.95,
+        threshold,
+        parameters,
+        laps: frame.laps() - laps_before,
+        points,
+        seconds: started.elapsed().as_secs_f64(),
+    }
+}
+
+fn kappa(naive: &[Vec<f64>], sandwich: &[f64], i: usize) -> f64 {
+    if naive[i][i] > 0.0 && sandwich[i] > 0.0 {
+        sandwich[i] / naive[i][i]
+    } else {
+        1.0
+    }
+}
+
+/// One side of a profile.
+struct Side {
+    points: Vec<ProfilePoint>,
+    /// Where D crosses the threshold (`None`: it does not, inside the range and the grid).
+    end: Option<f64>,
+    /// Why the side stopped early (a point that could not be re-optimised).
+    stop: Option<String>,
+    /// The side reached the parameter's bound without crossing.
+    bounded: bool,
+}
+
+/// Parameter i from the answer towards `sign`, point by point.
+/// What every side starts from.
+struct Around<'a> {
+    name: &'a str,
+    answer: &'a Solution,
+    naive: &'a [Vec<f64>],
+    sandwich: &'a [f64],
+    threshold: f64,
+}
+
+fn walk<F>(frame: &Frame<'_, F>, at: &Around, i: usize, sign: f64) -> Side
+where
+    F: Fn(&[f64]) -> Simulated + Sync,
+{
+    let Around {
+        name,
+        answer,
+        naive,
+        sandwich,
+        threshold,
+    } = *at;
+    let p = answer.x.len();
+    let (lo_b, hi_b) = frame.bounds[i];
+    let se = sandwich[i].max(0.0).sqrt();
+    let step = if se > 0.0 && se.is_finite() {
+        (STEP_SE * se).min(0.25 * (hi_b - lo_b))
+    } else {
+        0.1 * (hi_b - lo_b)
+    };
+    let k = kappa(naive, sandwich, i);
+    // The others' change per unit of θ_i along the information's regression (naive
+    // covariance: Cov(θ_j, θ_i)/Var(θ_i)).
+    let slope: Vec<f64> = (0..p)
+        .map(|j| {
+            if naive[i][i] > 0.0 {
+                naive[j][i] / naive[i][i]
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let free: Vec<bool> = (0..p).map(|j| j != i).collect();
+    let mut side = Side {
+        points: Vec::new(),
+        end: None,
+        stop: None,
+        bounded: false,
+    };
+    let (mut prev_value, mut prev_stat, mut prev_x) = (answer.x[i], 0.0, answer.x.clone());
+    for _ in 0..MAX_POINTS {
+        let at_bound = if sign < 0.0 {
+            prev_value <= lo_b
+        } else {
+            prev_value >= hi_b
+        };
+        if at_bound {
+            side.bounded = true;
+            break;
+        }
+        let value = (prev_value + sign * step).clamp(lo_b, hi_b);
+        let mut x0 = prev_x.clone();
+        for j in 0..p {
+            let (lo, hi) = frame.bounds[j];
+            x0[j] = if j == i {
+                value
+            } else {
+                (prev_x[j] + slope[j] * (value - prev_value)).clamp(lo, hi)
+            };
+        }
+        let laps0 = frame.laps();
+        let solution = frame
+            .start(&x0, &free)
+            .map(|(raw, sens)| frame.minimise(&x0, raw, sens, &free));
+        let solution = match solution {
+            Ok(s) => s,
+            Err(why) => {
+                side.stop = Some(format!(
+                    "the profile of {} cannot be re-optimised at {}: {why}",
+                    name,
+                    tb_files::number(value)
+                ));
+                break;
+            }
+        };
+        let statistic = (solution.objective - answer.objective).max(0.0) / k;
+        side.points.push(ProfilePoint {
+            value,
+            statistic,
+            parameters: solution.x.clone(),
+            laps: frame.laps() - laps0,
+        });
+        if statistic >= threshold {
+            let f = (threshold - prev_stat) / (statistic - prev_stat);
+            side.end = Some(prev_value + f * (value - prev_value));
+            break;
+        }
+        (prev_value, prev_stat, prev_x) = (value, statistic, solution.x);
+    }
+    if side.end.is_none() && side.stop.is_none() && !side.bounded {
+        side.bounded = if sign < 0.0 {
+            prev_value <= lo_b
+        } else {
+            prev_value >= hi_b
+        };
+        if !side.bounded {
+            side.stop = Some(format!(
+                "the profile of {name} stays below the threshold over {MAX_POINTS} points ({} to {}): open on that side",
+                tb_files::number(answer.x[i]),
+                tb_files::number(prev_value)
+            ));
+        }
+    }
+    side
+}
+
