@@ -320,31 +320,42 @@ fn one_line(s: &str) -> String {
     s.replace(['\n', '\r'], " ")
 }
 
+/// A channel map as the lines of a TOML table.
+fn channel_lines(channels: &ChannelMap) -> String {
+    let mut out = String::new();
+    for (signal, channel) in &channels.0 {
+        let _ = writeln!(out, "{} = {}", toml_string(signal), toml_string(channel));
+    }
+    out
+}
+
 /// The paper's two-step study against the measurement.
 fn study_toml(o: &LapOptions, name: &str) -> String {
-    let mut channels = String::new();
-    for (signal, channel) in &o.channels.0 {
-        let _ = writeln!(
-            channels,
-            "{} = {}",
-            toml_string(signal),
-            toml_string(channel)
-        );
-    }
+    let measurement = format!(
+        "[measurement]\nfile = {}\n\n[measurement.channels]\n{}",
+        toml_string(
+            &as_written_from(&o.out, &o.measurement)
+                .display()
+                .to_string()
+        ),
+        channel_lines(&o.channels)
+    );
+    study_text(&o.out.join("study.toml"), name, "system.toml", &measurement)
+}
+
+/// The study file's text: its measurement part given (one `[measurement]` or several
+/// `[[measurement]]`), the rest the paper's two steps.
+fn study_text(study_path: &Path, name: &str, system: &str, measurement: &str) -> String {
     format!(
         r#"# The paper's two-step optimisation on this lap: prepared by `twinbench lap`. Run it with
 #   twinbench optimize {study_path}
 name = {name}
-system = "system.toml"
+system = {system}
 seed = 2024
 penalty = 10.0
 bias_weight = 1.0
 
-[measurement]
-file = {file}
-
-[measurement.channels]
-{channels}
+{measurement}
 [compare]
 cutoff_hz = 2.0
 filter_order = 2
@@ -395,14 +406,100 @@ name = "vehicle.b_rear"
 min = 0.9
 max = 2.0
 "#,
-        study_path = o.out.join("study.toml").display(),
+        study_path = study_path.display(),
         name = toml_string(name),
-        file = toml_string(
-            &as_written_from(&o.out, &o.measurement)
-                .display()
-                .to_string()
-        ),
+        system = toml_string(system),
     )
+}
+
+/// What `lap` wrote for several measurements: each lap in a folder of its own (named after
+/// its file), and one study over all of them.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SeveralLaps {
+    pub laps: Vec<LapFiles>,
+    pub study: PathBuf,
+}
+
+/// Several measurements into one study: each prepared as [`prepare`] does into
+/// `<out>/<its file's stem>/` (the FMUs packed once into `<out>/fmu`, or `fmu_dir`), and
+/// `<out>/study.toml` with a `[[measurement]]` entry per lap (its file, system and
+/// channels), fitting the study's parameters on all of them. `tracks`: one for every
+/// lap, or one per measurement, or none (each derived from its measurement).
+pub fn prepare_several(
+    measurements: &[(PathBuf, ChannelMap)],
+    tracks: &[PathBuf],
+    out: &Path,
+    fmu_dir: Option<&Path>,
+) -> Result<SeveralLaps, LapError> {
+    if tracks.len() > 1 && tracks.len() != measurements.len() {
+        return Err(LapError::Invalid(format!(
+            "{} tracks for {} measurements: give one track for all, or one per measurement in the same order",
+            tracks.len(),
+            measurements.len()
+        )));
+    }
+    let mut names: Vec<String> = Vec::new();
+    for (m, _) in measurements {
+        let stem = m
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "lap".into());
+        if names.contains(&stem) {
+            return Err(LapError::Invalid(format!(
+                "{}: another measurement has the same file name '{stem}' (each lap gets a folder of that name): rename one",
+                m.display()
+            )));
+        }
+        names.push(stem);
+    }
+    let created = !out.exists();
+    let r = (|| {
+        let fmus = match fmu_dir {
+            Some(d) => tb_files::absolute(d),
+            None => {
+                let d = out.join("fmu");
+                crate::pack::pack(&[], &d).map_err(|e| LapError::Invalid(e.to_string()))?;
+                tb_files::absolute(&d)
+            }
+        };
+        let mut laps = Vec::new();
+        let mut entries = String::new();
+        for (k, ((m, channels), name)) in measurements.iter().zip(&names).enumerate() {
+            let o = LapOptions {
+                measurement: tb_files::absolute(m),
+                channels: channels.clone(),
+                track: match tracks.len() {
+                    0 => None,
+                    1 => Some(tracks[0].clone()),
+                    _ => Some(tracks[k].clone()),
+                },
+                out: out.join(name),
+                fmu_dir: Some(fmus.clone()),
+            };
+            let files = prepare(&o)?;
+            let _ = write!(
+                entries,
+                "[[measurement]]\nname = {}\nfile = {}\nsystem = {}\n\n[measurement.channels]\n{}\n",
+                toml_string(name),
+                toml_string(&as_written_from(out, &o.measurement).display().to_string()),
+                toml_string(&format!("{name}/system.toml")),
+                channel_lines(channels)
+            );
+            laps.push(files);
+        }
+        let study = out.join("study.toml");
+        let name = out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "laps".into());
+        let first_system = format!("{}/system.toml", names[0]);
+        write(&study, &study_text(&study, &name, &first_system, &entries))?;
+        Ok(SeveralLaps { laps, study })
+    })();
+    if r.is_err() && created && out.is_dir() {
+        let _ = std::fs::remove_dir_all(out);
+    }
+    r
 }
 
 /// `path` (as given on the command line) as a file in folder `out` must name it: an

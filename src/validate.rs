@@ -51,8 +51,13 @@ pub struct ValidateOptions {
 pub struct ValidationRow {
     pub step: usize,
     pub signal: String,
-    /// e of the same twin (the study's final parameters) on the lap it was fitted on.
+    /// e of the same twin (the study's final parameters) on the lap it was fitted on (the
+    /// first, in a study of several).
     pub e_fitted: f64,
+    /// A study of several laps: the lowest and highest e its answer reached over the fitted
+    /// laps (from the result).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub e_fitted_range: Option<(f64, f64)>,
     pub e: f64,
     pub slope: f64,
     pub r_squared: f64,
@@ -182,10 +187,24 @@ pub fn validate(o: &ValidateOptions) -> Result<Validation, ValidateError> {
                 .ok()
                 .and_then(|c| c.get(name))
                 .map_or(*e_step, |m| m.e);
+            let laps: Vec<f64> = result
+                .joint
+                .iter()
+                .flat_map(|j| &j.e)
+                .filter(|e| e.lap.is_some() && e.signal == *name)
+                .map(|e| e.after.e)
+                .collect();
+            let e_fitted_range = (!laps.is_empty()).then(|| {
+                laps.iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &e| {
+                        (a.min(e), b.max(e))
+                    })
+            });
             ValidationRow {
                 step: *step,
                 signal: name.clone(),
                 e_fitted,
+                e_fitted_range,
                 e: m.e,
                 slope: m.slope,
                 r_squared: m.r_squared,
@@ -253,9 +272,13 @@ pub fn markdown(v: &Validation) -> String {
         v.measurement.display()
     );
     for r in &v.rows {
+        let fitted = match r.e_fitted_range {
+            Some((lo, hi)) => format!("{lo:.4} … {hi:.4}"),
+            None => format!("{:.4}", r.e_fitted),
+        };
         s.push_str(&format!(
-            "| {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:+.2} % |\n",
-            r.step, r.signal, r.e_fitted, r.e, r.slope, r.r_squared, r.bias_percent
+            "| {} | {} | {fitted} | {:.4} | {:.4} | {:.4} | {:+.2} % |\n",
+            r.step, r.signal, r.e, r.slope, r.r_squared, r.bias_percent
         ));
     }
     s.push_str(&format!(

@@ -112,6 +112,18 @@ fn the_95_percent_intervals_contain_the_truth_in_at_least_85_percent_of_syntheti
             ]);
             let r: serde_json::Value = serde_json::from_slice(&text).unwrap();
             laps += 1;
+            let f = &r["joint"]["refinement"];
+            let iv = &r["joint_intervals"];
+            eprintln!(
+                "{name} lap {seed}: refinement {} iterations, {} laps, converged {} {}; critical value {:.3} (bandwidth {} of {} grid points)",
+                f["iterations"],
+                f["laps"],
+                f["converged"],
+                f["statement"].as_str().unwrap_or(""),
+                iv["critical_value"].as_f64().unwrap_or(f64::NAN),
+                iv["bandwidth"],
+                iv["grid_points"]
+            );
             for p in r["joint"]["parameters"].as_array().unwrap() {
                 let k = TRUTH.iter().position(|t| t.0 == p["name"]).unwrap();
                 let truth = TRUTH[k].1;

@@ -1,17 +1,21 @@
-//! `twinbench lap MEASUREMENT [--track TRACK.csv] [--channels MAP.toml] --out DIR`: prepares
-//! a lap of any circuit for the packed FMUs (docs/lap.md).
+//! `twinbench lap MEASUREMENT... [--track TRACK.csv]... [--channels MAP.toml] --out DIR`:
+//! prepares a lap of any circuit for the packed FMUs, or several laps into one study
+//! (docs/lap.md).
 
 use std::path::PathBuf;
 use tb_compare::ChannelMap;
 
 #[derive(clap::Args, Debug)]
 pub struct LapArgs {
-    /// The vehicle measurement of the lap: MDF 4 (.mf4) or CSV.
-    pub measurement: PathBuf,
+    /// The vehicle measurement of the lap: MDF 4 (.mf4) or CSV. Several: each lap is
+    /// prepared into a folder of its own and one study fits them all together.
+    #[arg(required = true)]
+    pub measurements: Vec<PathBuf>,
     /// The circuit's track (CSV: s, curvature, grade, z_road_left, z_road_right); without
-    /// it, one is derived from the measurement's a_y/v² (no grade, no road profile).
+    /// it, one is derived from the measurement's a_y/v² (no grade, no road profile). With
+    /// several measurements: one track for all, or `--track` once per measurement.
     #[arg(long)]
-    pub track: Option<PathBuf>,
+    pub track: Vec<PathBuf>,
     /// The channel of each signal in the measurement (a TOML file with a `[channels]`
     /// table: v = "GPS_Speed", Fz_rl = "LoadRL", ...).
     #[arg(long, value_name = "MAP.toml")]
@@ -34,10 +38,48 @@ pub fn run(args: LapArgs) -> anyhow::Result<()> {
         Some(p) => ChannelMap::read_path(p)?,
         None => ChannelMap::default(),
     };
+    if args.measurements.len() > 1 {
+        let measurements: Vec<(PathBuf, ChannelMap)> = args
+            .measurements
+            .iter()
+            .map(|m| (m.clone(), channels.clone()))
+            .collect();
+        let several = crate::lap::prepare_several(
+            &measurements,
+            &args.track,
+            &args.out,
+            args.fmus.as_deref(),
+        )?;
+        for w in several.laps.iter().flat_map(|l| &l.warnings) {
+            eprintln!("warning: {w}");
+        }
+        if args.json {
+            super::json::print(&serde_json::to_string_pretty(&several)?)?;
+        } else {
+            for (m, files) in args.measurements.iter().zip(&several.laps) {
+                println!(
+                    "lap of {}: {:.1} m in {:.3} s, system {}",
+                    m.display(),
+                    files.lap_length,
+                    files.lap_time,
+                    files.system.display()
+                );
+            }
+            println!("  study         {}", several.study.display());
+            println!("next: twinbench optimize {}", several.study.display());
+        }
+        return Ok(());
+    }
+    if args.track.len() > 1 {
+        anyhow::bail!(
+            "{} tracks for one measurement: give --track once",
+            args.track.len()
+        );
+    }
     let options = crate::lap::LapOptions {
-        measurement: args.measurement.clone(),
+        measurement: args.measurements[0].clone(),
         channels,
-        track: args.track.clone(),
+        track: args.track.first().cloned(),
         out: args.out.clone(),
         fmu_dir: args.fmus.clone(),
     };
@@ -48,7 +90,7 @@ pub fn run(args: LapArgs) -> anyhow::Result<()> {
     if args.json {
         super::json::print(&serde_json::to_string_pretty(&files)?)?;
     } else {
-        println!("lap of {}", args.measurement.display());
+        println!("lap of {}", args.measurements[0].display());
         println!(
             "  measured      {:.1} m in {:.3} s, starting at {:.3} m/s ({:.3} rad/s at the wheels)",
             files.lap_length, files.lap_time, files.v_start, files.omega_start

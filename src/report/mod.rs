@@ -35,6 +35,9 @@ pub enum ReportError {
 /// One row of Tab. 1: a validation signal of a step.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TableRow {
+    /// The lap, in a study of several.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lap: Option<String>,
     pub signal: String,
     pub e_initial: f64,
     pub e_optimized: f64,
@@ -80,6 +83,9 @@ pub struct Table1 {
     /// with its interval, and every signal at the study's start and at the answer.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint: Option<TableStep>,
+    /// The held-out laps: every signal at the study's start and with its answer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hold_out: Option<TableStep>,
     /// The twin's lap time minus the vehicle's [s], with the initial and with the optimised
     /// parameters (over the distance both cover; what `time_over_distance` shows).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -121,6 +127,7 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
         change_percent: p.change_percent,
     };
     let row = |e: &SignalChange| TableRow {
+        lap: e.lap.clone(),
         signal: e.signal.clone(),
         e_initial: e.before.e,
         e_optimized: e.after.e,
@@ -163,6 +170,12 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
             parameters: j.parameters.iter().map(|p| parameter(p, true)).collect(),
             signals: j.e.iter().map(row).collect(),
         }),
+        hold_out: (!result.hold_out.is_empty()).then(|| TableStep {
+            step: result.steps.len() + 2,
+            name: "held out: run with the answer, not fitted".into(),
+            parameters: Vec::new(),
+            signals: result.hold_out.iter().map(row).collect(),
+        }),
     }
 }
 
@@ -181,6 +194,7 @@ pub fn table1_markdown(t: &Table1) -> String {
         .iter()
         .map(|st| (st.step.to_string(), st))
         .chain(t.joint.iter().map(|st| ("all".to_string(), st)))
+        .chain(t.hold_out.iter().map(|st| ("held out".to_string(), st)))
     {
         let params = st
             .parameters
@@ -211,7 +225,10 @@ pub fn table1_markdown(t: &Table1) -> String {
             s.push_str(&format!(
                 "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:+.2} % | {:+.2} % |\n",
                 if k == 0 { label.as_str() } else { "" },
-                r.signal,
+                match &r.lap {
+                    Some(lap) => format!("{} ({lap})", r.signal),
+                    None => r.signal.clone(),
+                },
                 if k == 0 { params.as_str() } else { "" },
                 r.e_initial,
                 r.e_optimized,

@@ -30,7 +30,10 @@ pub fn initial_lap_path(checkpoint: &Path) -> PathBuf {
 pub(crate) struct StepStart {
     #[serde(with = "exact::vec")]
     pub(crate) x0: Vec<f64>,
+    /// The first lap's comparison, and the other laps' in a study of several.
     pub(crate) before: Comparison,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub(crate) before_other_laps: Vec<Comparison>,
     pub(crate) cost_before: f64,
     pub(crate) identifiability: Identifiability,
 }

@@ -4,6 +4,7 @@
 
 use super::checkpoint::{initial_lap_path, Checkpoint, Current, StepStart};
 use super::cmaes::Cmaes;
+use super::bench::{Bench, LapBench};
 use super::exact;
 use super::fit::{Frame, Refinement, Series};
 use super::ga::Ga;
@@ -12,7 +13,7 @@ use super::optimizer::{
     evaluate_all, finite, minimize, thread_pool, to_unit, GenerationRecord, Optimizer, Problem,
     RunSettings, RunState,
 };
-use super::pool::{Outcome, WorkerPool};
+use super::pool::Outcome;
 use super::remote::{Candidate, Evaluator, StepCost};
 use super::study::{OptimizerKind, StepConfig, Study};
 use super::OptimizeError;
@@ -21,7 +22,7 @@ use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
-use tb_compare::{Comparison, Measurement, Metrics, PreparedMeasurement, Table, Workspace};
+use tb_compare::{Comparison, Metrics, PreparedMeasurement, Table, Workspace};
 use tb_fmi::FmuCache;
 use tb_table::write_atomic;
 
@@ -112,6 +113,9 @@ pub struct ParameterChange {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SignalChange {
+    /// The lap, in a study of several (absent for one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lap: Option<String>,
     pub signal: String,
     pub weight: f64,
     pub before: Metrics,
@@ -165,6 +169,10 @@ pub struct StudyResult {
     /// (absent in results written before it was made).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint: Option<JointResult>,
+    /// The held-out laps (`hold_out = true`): each signal at the study's start and with its
+    /// answer, never fitted.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hold_out: Vec<SignalChange>,
     /// Profile likelihood of every parameter (asked for with `--profiles` or
     /// `profiles = true`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -261,8 +269,9 @@ pub fn cost_of(cmp: &Comparison, signals: &[String], weights: &[f64], bias_weigh
 
 /// One step's cost over the bench.
 struct StepProblem<'a> {
-    workers: &'a WorkerPool,
-    prepared: &'a PreparedMeasurement,
+    bench: &'a Bench,
+    /// Each lap's measurement prepared for the step's signals.
+    prepared: &'a [PreparedMeasurement],
     /// The step (0-based) and its cost.
     step: usize,
     cost: StepCost,
@@ -292,8 +301,25 @@ impl StepProblem<'_> {
         }
     }
 
+    /// The first lap's run (what the identifiability check and a step's own intervals
+    /// look at).
     fn outcome(&self, x: &[f64]) -> Result<Outcome, String> {
-        self.workers.run(&self.params(x), self.prepared)
+        self.bench.workers().run(&self.params(x), &self.prepared[0])
+    }
+
+    /// Every lap's run.
+    fn outcomes(&self, x: &[f64]) -> Result<Vec<Outcome>, String> {
+        self.bench.outcomes(&self.params(x), self.prepared)
+    }
+
+    /// The step's cost of every lap's comparison, weighted.
+    fn cost_of_laps(&self, config: &StepConfig, comparisons: &[&Comparison]) -> f64 {
+        let weights = config.weights();
+        let costs: Vec<f64> = comparisons
+            .iter()
+            .map(|c| cost_of(c, &config.signals, &weights, self.cost.bias_weight))
+            .collect();
+        self.bench.weighted(&costs)
     }
 }
 
@@ -303,7 +329,7 @@ impl Problem for StepProblem<'_> {
     }
 
     fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
-        self.cost.of(self.workers, &self.params(x), self.prepared)
+        self.bench.cost(&self.cost, &self.params(x), self.prepared)
     }
 
     fn evaluate_many(
@@ -355,11 +381,8 @@ fn make_optimizer(
 
 /// Do the measurement and the twin's first run belong together? Lap length, lap time and
 /// the speed over distance, each against the study's `[plausibility]` bounds.
-fn check_plausible(
-    study: &Study,
-    measurement: &Measurement,
-    lap: &Table,
-) -> Result<(), OptimizeError> {
+fn check_plausible(study: &Study, bench: &LapBench, lap: &Table) -> Result<(), OptimizeError> {
+    let measurement = &bench.measurement;
     let p = &study.file.plausibility;
     let mut problems = Vec::new();
     let rel = |a: f64, b: f64| (a - b).abs() / b.abs().max(1e-12);
@@ -402,8 +425,8 @@ fn check_plausible(
     }
     Err(OptimizeError::Implausible(format!(
         "{} and the twin of {} do not belong together: {}. Is the measurement of this circuit, and are the track and the target speed its own (twinbench lap)? `--force` optimises anyway",
-        study.measurement_path.display(),
-        study.system_path.display(),
+        bench.lap.measurement_path.display(),
+        bench.lap.system_path.display(),
         problems.join("; ")
     )))
 }
@@ -430,8 +453,10 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
 struct Session<'a> {
     study: &'a Study,
     options: &'a RunOptions,
-    workers: WorkerPool,
-    measurement: Measurement,
+    /// The fitted laps.
+    bench: Bench,
+    /// The unpacked FMUs (the held-out laps' workers load theirs from it too).
+    cache: Arc<FmuCache>,
     /// The identifiability check's threads (the generations' are `minimize`'s own).
     pool: rayon::ThreadPool,
     kind: OptimizerKind,
@@ -441,14 +466,13 @@ impl<'a> Session<'a> {
     /// Compiles the system, loads the measurement, builds the threads.
     fn open(study: &'a Study, options: &'a RunOptions) -> Result<Session<'a>, OptimizeError> {
         let cache = Arc::new(FmuCache::temporary(false).map_err(tb_cosim::SystemError::from)?);
-        let workers = WorkerPool::new(study, cache)?;
-        let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
+        let bench = Bench::new(study, cache.clone(), false)?;
         let pool = thread_pool(options.threads)?;
         Ok(Session {
             study,
             options,
-            workers,
-            measurement,
+            bench,
+            cache,
             pool,
             kind: options.optimizer.unwrap_or(study.file.optimizer.kind),
         })
@@ -474,7 +498,7 @@ struct StudyState {
 impl StudyState {
     /// The study's state from its checkpoint (resume), else before its first step.
     fn begin(session: &Session) -> Result<StudyState, OptimizeError> {
-        let assignment = session.workers.assignment();
+        let assignment = session.bench.workers().assignment();
         let (checkpoint, resumed) = Checkpoint::resume_or_new(session.study, session.options)?;
         let mut laps = StudyLaps::default();
         if resumed {
@@ -522,7 +546,7 @@ impl<'a> Step<'a> {
         session: &'a Session,
         k: usize,
         index: Vec<usize>,
-        prepared: &'a PreparedMeasurement,
+        prepared: &'a [PreparedMeasurement],
         assignment: Vec<(String, f64)>,
     ) -> Step<'a> {
         let (study, options) = (session.study, session.options);
@@ -535,7 +559,7 @@ impl<'a> Step<'a> {
                 .or(config.generations)
                 .unwrap_or(study.file.optimizer.generations),
             problem: StepProblem {
-                workers: &session.workers,
+                bench: &session.bench,
                 prepared,
                 step: k,
                 cost: StepCost::of_step(study, k).expect("a step of the study"),
@@ -573,11 +597,9 @@ fn run_step(
         state.set(&index, &after);
         return Ok(ControlFlow::Continue(()));
     }
-    let prepared = PreparedMeasurement::new(
-        &session.measurement,
-        &config.signals,
-        &session.study.file.compare,
-    )?;
+    let prepared = session
+        .bench
+        .prepare(&config.signals, &session.study.file.compare)?;
     let mut step = Step::new(session, k, index, &prepared, state.assignment.clone());
     let mut begun = match state.checkpoint.current.take().filter(|c| c.step == k) {
         Some(current) => resume_step(session, &step, current)?,
@@ -617,7 +639,8 @@ fn run_step(
             for p in &iv.parameters {
                 let unit = step
                     .problem
-                    .workers
+                    .bench
+                    .workers()
                     .parameter_unit(&p.name)
                     .filter(|u| !u.is_empty() && *u != "1");
                 let short = p.name.split_once('.').map_or(p.name.as_str(), |(_, v)| v);
@@ -649,7 +672,7 @@ fn parameter_index(session: &Session, config: &StepConfig) -> Result<Vec<usize>,
         .parameter_names()
         .iter()
         .map(|n| {
-            session.workers.index_of(n).ok_or_else(|| {
+            session.bench.workers().index_of(n).ok_or_else(|| {
                 OptimizeError::Invalid(format!("step '{}': unknown parameter '{n}'", config.name))
             })
         })
@@ -716,25 +739,28 @@ fn start_step(
     };
     if k == 0 && !options.force {
         // Before any optimising: do the measurement and the twin belong together?
-        let lap = session.workers.lap(&problem.params(&x0)).map_err(failed)?;
-        check_plausible(study, &session.measurement, &lap)?;
+        for l in &session.bench.laps {
+            let lap = l.workers.lap(&problem.params(&x0)).map_err(failed)?;
+            check_plausible(study, l, &lap)?;
+        }
     }
     let identifiability = identifiability::check(
         config,
         study.file.null_ratio,
         &x0,
         &problem.bounds,
-        problem.prepared,
+        &problem.prepared[0],
         &session.pool,
         |x| problem.outcome(x).map(|o| o.table),
     );
-    let before = problem.outcome(&x0).map_err(failed)?;
-    let cost_before = cost_of(
-        &before.comparison,
-        &config.signals,
-        &config.weights(),
-        problem.cost.bias_weight,
+    let mut before = problem.outcomes(&x0).map_err(failed)?;
+    let cost_before = problem.cost_of_laps(
+        config,
+        &before.iter().map(|o| &o.comparison).collect::<Vec<_>>(),
     );
+    let before_other_laps: Vec<Comparison> =
+        before.drain(1..).map(|o| o.comparison).collect();
+    let before = before.pop().expect("the first lap");
     if k == 0 {
         if let Some(c) = &options.checkpoint {
             let path = initial_lap_path(c);
@@ -750,6 +776,7 @@ fn start_step(
         start: StepStart {
             x0,
             before: before.comparison,
+            before_other_laps,
             cost_before,
             identifiability,
         },
@@ -865,15 +892,18 @@ fn finish_step(
             ),
         });
     }
-    let after = problem
-        .outcome(&best)
+    let mut after = problem
+        .outcomes(&best)
         .map_err(|reason| OptimizeError::Start {
             step: config.name.clone(),
             reason: format!("the best point cannot be re-evaluated: {reason}"),
         })?;
     let weights = config.weights();
     let bias_weight = problem.cost.bias_weight;
-    let cost_after = cost_of(&after.comparison, &config.signals, &weights, bias_weight);
+    let cost_after = problem.cost_of_laps(
+        config,
+        &after.iter().map(|o| &o.comparison).collect::<Vec<_>>(),
+    );
     if cost_after.to_bits() != best_cost.to_bits() {
         log::warn!(
             "step '{}': the best point re-evaluated to {cost_after} (optimiser saw {best_cost})",
@@ -889,8 +919,8 @@ fn finish_step(
         &weights,
         &best,
         &problem.bounds,
-        problem.prepared,
-        &after.table,
+        &problem.prepared[0],
+        &after[0].table,
         pool,
         |x| problem.outcome(x).map(|o| o.table),
     ));
@@ -905,7 +935,11 @@ fn finish_step(
         .enumerate()
         .map(|(j, p)| ParameterChange {
             name: p.name.clone(),
-            unit: problem.workers.parameter_unit(&p.name).map(str::to_string),
+            unit: problem
+                .bench
+                .workers()
+                .parameter_unit(&p.name)
+                .map(str::to_string),
             min: p.min,
             max: p.max,
             before: start.x0[j],
@@ -927,15 +961,25 @@ fn finish_step(
                 .and_then(|i| i.statement.clone()),
         })
         .collect();
-    let e = config
-        .signals
+    let before: Vec<&Comparison> = std::iter::once(&start.before)
+        .chain(&start.before_other_laps)
+        .collect();
+    let e = after
         .iter()
-        .zip(&weights)
-        .map(|(s, &w)| SignalChange {
-            signal: s.clone(),
-            weight: w,
-            before: start.before.get(s).cloned().expect("compared"),
-            after: after.comparison.get(s).cloned().expect("compared"),
+        .enumerate()
+        .flat_map(|(k, a)| {
+            let (before, lap) = (before[k], problem.bench.label(k));
+            config
+                .signals
+                .iter()
+                .zip(&weights)
+                .map(move |(s, &w)| SignalChange {
+                    lap: lap.clone(),
+                    signal: s.clone(),
+                    weight: w,
+                    before: before.get(s).cloned().expect("compared"),
+                    after: a.comparison.get(s).cloned().expect("compared"),
+                })
         })
         .collect();
     let result = StepResult {
@@ -957,7 +1001,7 @@ fn finish_step(
         failure_reasons: run.failure_reasons,
         after_exact: best,
     };
-    Ok((result, after.table))
+    Ok((result, after.swap_remove(0).table))
 }
 
 /// Every parameter the steps fit (first appearance: its bounds and its value before its
@@ -1005,9 +1049,10 @@ impl JointProblem {
 fn joint_answer(
     session: &Session,
     state: &mut StudyState,
-    prepared: &PreparedMeasurement,
+    prepared: &[PreparedMeasurement],
 ) -> Result<JointAnswer, OptimizeError> {
-    let (study, workers) = (session.study, &session.workers);
+    let (study, bench) = (session.study, &session.bench);
+    let workers = bench.workers();
     let j = JointProblem::of(study, &state.checkpoint.completed);
     let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
     let index: Vec<usize> = j
@@ -1023,8 +1068,9 @@ fn joint_answer(
         }
         values
     };
-    let run = |y: &[f64]| workers.run(&values(y), prepared).map(|o| o.table);
     if !study.file.refine {
+        // One fitted lap (the study's check): the intervals at the steps' answer.
+        let run = |y: &[f64]| workers.run(&values(y), &prepared[0]).map(|o| o.table);
         let best = state
             .laps
             .optimized
@@ -1036,35 +1082,44 @@ fn joint_answer(
             &j.weights,
             &x,
             &j.bounds,
-            prepared,
+            &prepared[0],
             best,
             &session.pool,
             run,
         );
         return Ok((None, iv, None));
     }
-    let series: Vec<Series> = j
-        .signals
+    // One series per lap and signal; each lap a segment of its own for the long-run
+    // covariance (laps are independent of each other).
+    let series: Vec<Series> = prepared
         .iter()
-        .zip(&j.weights)
-        .map(|(s, &w)| Series {
-            name: s.clone(),
-            weight: w,
-            measured: prepared.measured(s).unwrap_or(&[]),
-            offset: 0,
+        .enumerate()
+        .flat_map(|(k, p)| {
+            let label = bench.label(k);
+            j.signals.iter().zip(&j.weights).map(move |(s, &w)| Series {
+                name: match &label {
+                    Some(l) => format!("{s} of lap '{l}'"),
+                    None => s.clone(),
+                },
+                weight: w,
+                measured: p.measured(s).unwrap_or(&[]),
+                segment: k,
+            })
         })
         .collect();
     let simulate = |y: &[f64]| -> crate::fit::Simulated {
-        let table = run(y)?;
+        let tables = bench
+            .outcomes(&values(y), prepared)?
+            .into_iter()
+            .map(|o| o.table);
         let mut ws = Workspace::new();
-        j.signals
-            .iter()
-            .map(|s| {
-                prepared
-                    .on_grid(&table, s, true, &mut ws)
-                    .map_err(|e| e.to_string())
-            })
-            .collect()
+        let mut out = Vec::new();
+        for (table, p) in tables.zip(prepared) {
+            for s in &j.signals {
+                out.push(p.on_grid(&table, s, true, &mut ws).map_err(|e| e.to_string())?);
+            }
+        }
+        Ok(out)
     };
     let (frame, raw, sens) =
         match Frame::new(series, j.bounds.clone(), &x, &session.pool, simulate) {
@@ -1125,6 +1180,20 @@ type JointAnswer = (
     Option<crate::profile::Profiles>,
 );
 
+/// Every parameter's value at the study's start: the first step's start point, the others
+/// as the system has them (Tab. 1's "initial").
+fn initial_values(session: &Session, state: &StudyState) -> Vec<f64> {
+    let mut values: Vec<f64> = state.initial.iter().map(|p| p.1).collect();
+    if let Some(x0) = &state.first_x0 {
+        for (j, p) in session.study.file.steps[0].parameters.iter().enumerate() {
+            if let Some(i) = session.bench.workers().index_of(&p.name) {
+                values[i] = x0[j];
+            }
+        }
+    }
+    values
+}
+
 /// The study's result, with the laps a resumed session did not run itself made once each
 /// (before the runs are counted).
 fn finish_study(
@@ -1132,10 +1201,13 @@ fn finish_study(
     mut state: StudyState,
     wall: Instant,
 ) -> Result<StudyResult, OptimizeError> {
-    let (study, workers) = (session.study, &session.workers);
+    let (study, workers) = (session.study, session.bench.workers());
     let lap = |values: &[f64]| -> Result<Table, OptimizeError> {
-        let prepared =
-            PreparedMeasurement::new(&session.measurement, &["Fz_sum"], &study.file.compare)?;
+        let prepared = PreparedMeasurement::new(
+            &session.bench.laps[0].measurement,
+            &["Fz_sum"],
+            &study.file.compare,
+        )?;
         workers
             .run(values, &prepared)
             .map(|o| o.table)
@@ -1148,42 +1220,84 @@ fn finish_study(
         let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
         state.laps.optimized = Some(lap(&all)?);
     }
-    if state.laps.initial.is_none() {
-        if let Some(x0) = &state.first_x0 {
-            let mut values: Vec<f64> = state.initial.iter().map(|p| p.1).collect();
-            for (j, p) in study.file.steps[0].parameters.iter().enumerate() {
-                if let Some(i) = workers.index_of(&p.name) {
-                    values[i] = x0[j];
-                }
-            }
-            state.laps.initial = Some(lap(&values)?);
-        }
+    if state.laps.initial.is_none() && state.first_x0.is_some() {
+        state.laps.initial = Some(lap(&initial_values(session, &state))?);
     }
     let j = JointProblem::of(study, &state.checkpoint.completed);
-    let names_ref: Vec<&str> = j.signals.iter().map(String::as_str).collect();
-    let prepared = PreparedMeasurement::new(&session.measurement, &names_ref, &study.file.compare)?;
+    let prepared = session.bench.prepare(&j.signals, &study.file.compare)?;
     let sequential: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
     let (refinement, intervals, profiles) = joint_answer(session, &mut state, &prepared)?;
-    // The joint row of Tab. 1: every signal at the study's start and at its answer.
+    // The joint row of Tab. 1: every signal of every lap at the study's start and at its
+    // answer (a study of one lap has both laps already).
     let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
     let failed = |reason| OptimizeError::Start {
         step: "report".into(),
         reason,
     };
-    let mut ws = Workspace::new();
-    let initial_table = state.laps.initial.as_ref().expect("made above");
-    let before = prepared
-        .compare(initial_table, &mut ws)
-        .map_err(|e| failed(format!("comparison: {e}")))?;
-    let after = if all == sequential {
-        let table = state.laps.optimized.as_ref().expect("made above");
-        prepared
-            .compare(table, &mut ws)
-            .map_err(|e| failed(format!("comparison: {e}")))?
+    let compare = |table: &Table| {
+        prepared[0]
+            .compare(table, &mut Workspace::new())
+            .map_err(|e| failed(format!("comparison: {e}")))
+    };
+    let initial_values = initial_values(session, &state);
+    let (before, after): (Vec<Comparison>, Vec<Comparison>) = if session.bench.laps.len() == 1 {
+        let before = compare(state.laps.initial.as_ref().expect("made above"))?;
+        let after = if all == sequential {
+            compare(state.laps.optimized.as_ref().expect("made above"))?
+        } else {
+            let o = workers.run(&all, &prepared[0]).map_err(failed)?;
+            state.laps.optimized = Some(o.table);
+            o.comparison
+        };
+        (vec![before], vec![after])
     } else {
-        let o = workers.run(&all, &prepared).map_err(failed)?;
-        state.laps.optimized = Some(o.table);
-        o.comparison
+        let before = session
+            .bench
+            .outcomes(&initial_values, &prepared)
+            .map_err(failed)?;
+        let mut after = session.bench.outcomes(&all, &prepared).map_err(failed)?;
+        state.laps.optimized = Some(after[0].table.clone());
+        (
+            before.into_iter().map(|o| o.comparison).collect(),
+            after.drain(..).map(|o| o.comparison).collect(),
+        )
+    };
+    let rows = |labels: &dyn Fn(usize) -> Option<String>,
+                before: &[Comparison],
+                after: &[Comparison]| {
+        before
+            .iter()
+            .zip(after)
+            .enumerate()
+            .flat_map(|(k, (b, a))| {
+                let lap = labels(k);
+                j.signals
+                    .iter()
+                    .zip(&j.weights)
+                    .map(move |(s, &w)| SignalChange {
+                        lap: lap.clone(),
+                        signal: s.clone(),
+                        weight: w,
+                        before: b.get(s).cloned().expect("compared"),
+                        after: a.get(s).cloned().expect("compared"),
+                    })
+            })
+            .collect::<Vec<_>>()
+    };
+    // Held-out laps: run at the start and with the answer, compared, never fitted.
+    let hold_out = if study.laps.iter().any(|l| l.hold_out) {
+        let held = Bench::new(study, session.cache.clone(), true)?;
+        let prepared = held.prepare(&j.signals, &study.file.compare)?;
+        let before = held.outcomes(&initial_values, &prepared).map_err(failed)?;
+        let after = held.outcomes(&all, &prepared).map_err(failed)?;
+        let names = |k: usize| Some(held.laps[k].lap.name.clone());
+        rows(
+            &names,
+            &before.into_iter().map(|o| o.comparison).collect::<Vec<_>>(),
+            &after.into_iter().map(|o| o.comparison).collect::<Vec<_>>(),
+        )
+    } else {
+        Vec::new()
     };
     let joint = JointResult {
         parameters: j
@@ -1221,22 +1335,13 @@ fn finish_study(
                 }
             })
             .collect(),
-        e: j
-            .signals
-            .iter()
-            .zip(&j.weights)
-            .map(|(s, &w)| SignalChange {
-                signal: s.clone(),
-                weight: w,
-                before: before.get(s).cloned().expect("compared"),
-                after: after.get(s).cloned().expect("compared"),
-            })
-            .collect(),
+        e: rows(&|k| session.bench.label(k), &before, &after),
         refinement,
     };
     let joint_intervals = Some(intervals);
-    let (simulations, simulation_seconds) = workers.runs();
+    let (simulations, simulation_seconds) = session.bench.runs();
     Ok(StudyResult {
+        hold_out,
         profiles,
         joint: Some(joint),
         joint_intervals,
@@ -1252,7 +1357,7 @@ fn finish_study(
         simulations,
         simulation_seconds,
         wall_seconds: wall.elapsed().as_secs_f64(),
-        workers_created: workers.workers_created(),
+        workers_created: session.bench.workers_created(),
         resumed: state.resumed,
         laps: state.laps,
     })

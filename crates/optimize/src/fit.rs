@@ -55,9 +55,9 @@ pub(crate) struct Series<'a> {
     pub weight: f64,
     /// The measured signal on the grid.
     pub measured: &'a [f64],
-    /// Where the block's grid points sit in the long-run covariance's sequence: blocks of
-    /// one lap share their grid indices, another lap's are offset past them.
-    pub offset: usize,
+    /// The lap: blocks of one lap share their grid indices in the long-run covariance;
+    /// another lap's are independent of them.
+    pub segment: usize,
 }
 
 /// A lap's signals on the grid, one (covered range, values) per [`Series`].
@@ -483,7 +483,8 @@ where
             .iter()
             .enumerate()
             .map(|(b, s)| Block {
-                start: s.offset + self.ranges[b].start,
+                start: self.ranges[b].start,
+                segment: s.segment,
                 residual: raw[b].clone(),
                 rows: (0..raw[b].len())
                     .map(|n| free.iter().map(|j| j[b][n]).collect())
@@ -591,7 +592,7 @@ mod tests {
                 name: "y".into(),
                 weight: 1.0,
                 measured: &measured,
-                offset: 0,
+                segment: 0,
             }];
             let bounds = vec![(0.1, 10.0), (0.01, 5.0)];
             let (frame, raw, sens) = Frame::new(series, bounds, &x0, &pool, simulate).unwrap();
@@ -627,7 +628,7 @@ mod tests {
             name: "y".into(),
             weight: 1.0,
             measured: &measured,
-            offset: 0,
+            segment: 0,
         }];
         let (frame, raw, sens) =
             Frame::new(series, vec![(0.5, 2.0)], &[1.0], &pool, simulate).unwrap();

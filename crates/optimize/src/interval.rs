@@ -59,6 +59,13 @@ const NULL_RATIO: f64 = 1e-9;
 const ON_BOUND: f64 = 1e-6;
 /// At least this many correlation lengths of grid for the long-run covariance.
 const MIN_LENGTHS: usize = 8;
+/// The Bartlett bandwidth in lags at which the scores' autocorrelation falls below 0.05:
+/// wide, so that the kernel's downweighting of the correlation it does see costs little (its
+/// bias is about the correlation length over the bandwidth); the fixed-b critical value
+/// pays for the noisier estimate.
+const LAGS: usize = 4;
+/// The bandwidth at most this fraction of the grid.
+const MAX_SHARE: usize = 4;
 /// The shortest Bartlett bandwidth [grid points].
 const MIN_BANDWIDTH: usize = 10;
 
@@ -243,6 +250,7 @@ pub(crate) fn at_optimum(
             rows,
             weight: weights[s],
             factor: None,
+            segment: 0,
         });
     }
     sandwich(names, x, bounds, &blocks, laps)
@@ -255,6 +263,8 @@ pub(crate) struct Block {
     /// ∂(simulated)/∂θ_i at each grid point, in the parameters' own units.
     pub rows: Vec<Vec<f64>>,
     pub weight: f64,
+    /// The lap the block belongs to: the long-run covariance sums within a lap only.
+    pub segment: usize,
     /// The factor w_s/σ_s² when the fit held it fixed ([`crate::fit`]: the sandwich must
     /// weigh the residuals as the objective did); `None`: w_s over the block's own mean
     /// squared residual.
@@ -275,16 +285,30 @@ pub(crate) fn sandwich(
         .iter()
         .map(|(lo, hi)| (hi - lo).max(1e-300))
         .collect();
-    let start = blocks.iter().map(|b| b.start).min().unwrap_or(0);
-    let end = blocks
-        .iter()
-        .map(|b| b.start + b.residual.len())
-        .max()
-        .unwrap_or(0);
-    let n = end - start;
+    // The scores per segment (a lap): its blocks' grid points, summed where signals share
+    // one. Segments are independent: the long-run covariance sums within each.
+    let mut segments: Vec<usize> = blocks.iter().map(|b| b.segment).collect();
+    segments.sort_unstable();
+    segments.dedup();
+    let extent = |seg: usize| {
+        let of = blocks.iter().filter(|b| b.segment == seg);
+        let start = of.clone().map(|b| b.start).min().unwrap_or(0);
+        let end = of.map(|b| b.start + b.residual.len()).max().unwrap_or(0);
+        (start, end)
+    };
+    let extents: Vec<(usize, usize)> = segments.iter().map(|&g| extent(g)).collect();
     let mut bread = vec![vec![0.0; p]; p];
-    let mut scores = vec![vec![0.0; p]; n];
+    let mut scores: Vec<Vec<Vec<f64>>> = extents
+        .iter()
+        .map(|(a, b)| vec![vec![0.0; p]; b - a])
+        .collect();
+    // The shortest segment decides whether the autocorrelation can be estimated at all;
+    // the mean one is the fixed-b ratio's n.
+    let n = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
+    let n_mean = extents.iter().map(|(a, b)| b - a).sum::<usize>() / extents.len().max(1);
     for b in blocks {
+        let g = segments.binary_search(&b.segment).expect("listed");
+        let (start, _) = extents[g];
         let m = b.residual.len() as f64;
         let var = b.residual.iter().map(|e| e * e).sum::<f64>() / m;
         if !(var.is_finite() && var > 0.0) {
@@ -300,7 +324,7 @@ pub(crate) fn sandwich(
         for (k, (row, e)) in b.rows.iter().zip(&b.residual).enumerate() {
             let row: Vec<f64> = row.iter().zip(&span).map(|(j, s)| j * s).collect();
             for i in 0..p {
-                scores[b.start - start + k][i] += c * row[i] * e;
+                scores[g][b.start - start + k][i] += c * row[i] * e;
                 for j in 0..p {
                     bread[i][j] += c * row[i] * row[j];
                 }
@@ -314,26 +338,29 @@ pub(crate) fn sandwich(
         );
         return Intervals::none(names, x, why, laps);
     }
-    let (bandwidth, capped) = bandwidth(&scores);
+    let (bandwidth, capped) = bandwidth(&scores, n);
     if capped {
         notes.push(format!(
-            "the residuals stay correlated beyond {bandwidth} grid points (an eighth of the compared stretch): the long-run covariance is cut there, and the intervals may be narrower than the data warrant"
+            "the residuals stay correlated beyond {bandwidth} grid points (a quarter of the compared stretch): the long-run covariance is cut there, and the intervals may be narrower than the data warrant"
         ));
     }
     let mut meat = vec![vec![0.0; p]; p];
-    for k in 0..=bandwidth.min(n - 1) {
-        let w = if k == 0 {
-            1.0
-        } else {
-            1.0 - k as f64 / (bandwidth + 1) as f64
-        };
-        for g in 0..n - k {
-            for i in 0..p {
-                for j in 0..p {
-                    let v = scores[g][i] * scores[g + k][j];
-                    meat[i][j] += w * v;
-                    if k > 0 {
-                        meat[j][i] += w * v;
+    for seg in &scores {
+        let len = seg.len();
+        for k in 0..=bandwidth.min(len.saturating_sub(1)) {
+            let w = if k == 0 {
+                1.0
+            } else {
+                1.0 - k as f64 / (bandwidth + 1) as f64
+            };
+            for g in 0..len - k {
+                for i in 0..p {
+                    for j in 0..p {
+                        let v = seg[g][i] * seg[g + k][j];
+                        meat[i][j] += w * v;
+                        if k > 0 {
+                            meat[j][i] += w * v;
+                        }
                     }
                 }
             }
@@ -362,7 +389,7 @@ pub(crate) fn sandwich(
         notes.push("the signals do not see any of the step's parameters".into());
     }
     let cov = mul(&mul(&inv, &meat), &inv);
-    let cv = critical_value((bandwidth + 1) as f64 / n as f64);
+    let cv = critical_value((bandwidth + 1) as f64 / n_mean as f64);
     let parameters = (0..p)
         .map(|i| {
             let (lo_b, hi_b) = bounds[i];
@@ -415,7 +442,7 @@ pub(crate) fn sandwich(
         method: METHOD.into(),
         level: 0.95,
         parameters,
-        grid_points: n,
+        grid_points: extents.iter().map(|(a, b)| b - a).sum(),
         bandwidth,
         laps,
         critical_value: cv,
@@ -424,18 +451,16 @@ pub(crate) fn sandwich(
 }
 
 /// The Bartlett bandwidth: twice the lag at which the scores' autocorrelation (summed over
-/// the parameters) first falls below 0.05; at least [`MIN_BANDWIDTH`], at most an eighth
-/// of the grid (true when that cut it).
-fn bandwidth(scores: &[Vec<f64>]) -> (usize, bool) {
-    let n = scores.len();
-    let cap = (n / MIN_LENGTHS).max(MIN_BANDWIDTH);
+/// the parameters and the segments) first falls below 0.05; at least [`MIN_BANDWIDTH`], at
+/// most a quarter of the shortest segment's `n` grid points (true when that cut it).
+fn bandwidth(scores: &[Vec<Vec<f64>>], n: usize) -> (usize, bool) {
+    let cap = (n / MAX_SHARE).max(MIN_BANDWIDTH);
     let dot = |k: usize| -> f64 {
-        (0..n - k)
-            .map(|g| {
-                scores[g]
-                    .iter()
-                    .zip(&scores[g + k])
-                    .map(|(a, b)| a * b)
+        scores
+            .iter()
+            .map(|seg| {
+                (0..seg.len().saturating_sub(k))
+                    .map(|g| seg[g].iter().zip(&seg[g + k]).map(|(a, b)| a * b).sum::<f64>())
                     .sum::<f64>()
             })
             .sum()
@@ -445,11 +470,11 @@ fn bandwidth(scores: &[Vec<f64>]) -> (usize, bool) {
         return (MIN_BANDWIDTH, false);
     }
     let mut k = 1;
-    while 2 * k < cap && dot(k) / c0 >= 0.05 {
+    while LAGS * k < cap && dot(k) / c0 >= 0.05 {
         k += 1;
     }
-    let capped = 2 * k >= cap && dot(k) / c0 >= 0.05;
-    ((2 * k).clamp(MIN_BANDWIDTH, cap), capped)
+    let capped = LAGS * k >= cap && dot(k) / c0 >= 0.05;
+    ((LAGS * k).clamp(MIN_BANDWIDTH, cap), capped)
 }
 
 fn mul(a: &[Vec<f64>], b: &[Vec<f64>]) -> Vec<Vec<f64>> {
@@ -509,6 +534,7 @@ mod tests {
                 rows: t.iter().map(|&t| vec![1.0, t]).collect(),
                 weight: 1.0,
                 factor: None,
+                segment: 0,
             };
             let names = vec!["a".to_string(), "b".to_string()];
             let iv = sandwich(
@@ -595,6 +621,7 @@ mod tests {
             rows: t.iter().map(|&t| vec![t, 0.0]).collect(),
             weight: 1.0,
             factor: None,
+            segment: 0,
         };
         let names = vec!["a".to_string(), "vehicle.l".to_string()];
         let iv = sandwich(&names, &[1.0, 3.0], &[(0.0, 2.0), (2.0, 4.5)], &[block], 4);
@@ -615,6 +642,7 @@ mod tests {
             rows: t.iter().map(|&t| vec![t, 1.0]).collect(),
             weight: 1.0,
             factor: None,
+            segment: 0,
         };
         let iv = sandwich(&names, &[1.0, 2.0], &[(0.0, 2.0), (2.0, 4.5)], &[block], 4);
         let l = &iv.parameters[1];
@@ -638,6 +666,7 @@ mod tests {
             rows: rows.clone(),
             weight: 1.0,
             factor: None,
+            segment: 0,
         };
         let iv = sandwich(&names, &[1.0], &[(0.0, 2.0)], &[short], 2);
         assert!(
@@ -650,6 +679,7 @@ mod tests {
             rows,
             weight: 1.0,
             factor: None,
+            segment: 0,
         };
         let iv = sandwich(&names, &[1.0], &[(0.0, 2.0)], &[exact], 2);
         assert!(

@@ -8,6 +8,8 @@
 //! - [`pool`]: the worker pool, candidates on the co-simulated bench: the system compiled
 //!   once into a plan, one reused `Simulation` of it per worker, every study parameter
 //!   resolved to a slot.
+//! - [`bench`]: the laps of a study (one or several `[[measurement]]`s), each with its worker
+//!   pool and measurement; a candidate's cost over all of them.
 //! - [`remote`]: candidates evaluated in other processes or on other machines (the
 //!   [`Evaluator`] a distributed study uses, the [`StudyEvaluator`] a worker holds).
 //! - [`rng`]: the seeded generator every random draw comes from; [`exact`]: bit-exact
@@ -30,6 +32,7 @@
 //! the same seed gives the same result with any number of threads, and a resumed study
 //! (bit-exact optimiser state in the checkpoint) the same result as an uninterrupted one.
 
+pub mod bench;
 pub mod checkpoint;
 pub mod cmaes;
 pub mod driver;

@@ -8,7 +8,7 @@
 //! value for each of them (all of them, on every run: a worker keeps nothing of the
 //! candidate it ran before).
 
-use super::study::Study;
+use super::study::{Lap, Study};
 use super::OptimizeError;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -56,14 +56,25 @@ impl WorkerPool {
     /// Compiles the study's system (with its record override) and resolves every parameter
     /// the study touches: a bad system or study parameter is an error here, up front.
     pub fn new(study: &Study, cache: Arc<FmuCache>) -> Result<WorkerPool, OptimizeError> {
-        let mut file = SystemFile::load(&study.system_path)?;
+        Self::for_lap(study, &study.laps[0], cache)
+    }
+
+    /// The worker pool of one lap of the study: its system, the study's parameters and the
+    /// lap's own values (set on every worker, never part of the assignment: every lap's
+    /// pool has the same assignment, in the same order).
+    pub fn for_lap(
+        study: &Study,
+        lap: &Lap,
+        cache: Arc<FmuCache>,
+    ) -> Result<WorkerPool, OptimizeError> {
+        let mut file = SystemFile::load(&lap.system_path)?;
         if let Some(r) = &study.file.record {
             file.record.signals = r.signals.clone();
             file.record.decimation = r.decimation;
         }
         let plan = Arc::new(Plan::compile(
             file,
-            &study.system_path,
+            &lap.system_path,
             cache,
             &LoadOptions::default(),
         )?);
@@ -92,13 +103,28 @@ impl WorkerPool {
             let slot = plan.parameter(name)?;
             not_connected(&slot)?;
             let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, &study_dir);
+            // A value some lap sets for itself is fixed on every lap's workers, never part
+            // of the assignment (which is the same on every lap).
+            let per_lap = study.laps.iter().any(|l| l.parameters.contains_key(name));
             match v {
-                ParamValue::Real(x) => {
+                ParamValue::Real(x) if !per_lap => {
                     slots.push(slot);
                     initial.push(x);
                 }
                 other => fixed.push((slot, other)),
             }
+        }
+        for (name, value) in &lap.parameters {
+            let ctx = format!(
+                "{}: lap '{}': parameter \"{name}\"",
+                study.path.display(),
+                lap.name
+            );
+            let slot = plan.parameter(name)?;
+            not_connected(&slot)?;
+            let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, &study_dir);
+            fixed.retain(|(s, _)| s.name != slot.name);
+            fixed.push((slot, v));
         }
         for (slot, v) in &fixed {
             sim.set(slot, v.clone());

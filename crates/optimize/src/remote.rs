@@ -12,6 +12,7 @@
 //! [`InputDigest`] of the study's files and a worker that sees other contents refuses,
 //! naming the file.
 
+use super::bench::Bench;
 use super::driver::cost_of;
 use super::pool::WorkerPool;
 use super::study::Study;
@@ -21,7 +22,7 @@ use sha2::Digest;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use tb_compare::{Measurement, PreparedMeasurement};
+use tb_compare::PreparedMeasurement;
 use tb_fmi::FmuCache;
 
 /// One candidate of a study step: the step (0-based) and the value of every parameter of
@@ -86,17 +87,24 @@ pub struct InputDigest {
 }
 
 impl InputDigest {
-    pub fn of(study: &Study, workers: &WorkerPool) -> Result<InputDigest, OptimizeError> {
-        let plan = workers.plan();
-        let mut paths = vec![study.path.clone(), study.measurement_path.clone()];
-        paths.extend(plan.input_files());
+    pub fn of(study: &Study, bench: &Bench) -> Result<InputDigest, OptimizeError> {
+        let mut paths = vec![study.path.clone()];
+        for l in &bench.laps {
+            paths.push(l.lap.measurement_path.clone());
+            paths.extend(l.workers.plan().input_files());
+        }
         let files = paths
             .into_iter()
             .map(|p| {
+                let plan = bench
+                    .laps
+                    .iter()
+                    .map(|l| l.workers.plan())
+                    .find(|plan| plan.file.fmus.values().any(|f| *f == p));
                 // An FMU's content hash is the unpack cache's (kept in its index: no
                 // second read and hash of the archive); its unpacked content is verified
                 // (a cache `verifying_all` did so when it loaded it, repairing what differed).
-                if plan.file.fmus.values().any(|f| *f == p) {
+                if let Some(plan) = plan {
                     let fmu = plan.cache.load(&p).map_err(tb_cosim::SystemError::from)?;
                     fmu.verify_all().map_err(tb_cosim::SystemError::from)?;
                     let digest = format!("{} unpacked {}", fmu.sha256, fmu.manifest_digest());
@@ -140,10 +148,9 @@ impl InputDigest {
 /// simulations kept between candidates), the measurement prepared once per step.
 pub struct StudyEvaluator {
     study: Study,
-    workers: WorkerPool,
-    measurement: Measurement,
+    bench: Bench,
     digest: InputDigest,
-    prepared: Mutex<HashMap<usize, Arc<PreparedMeasurement>>>,
+    prepared: Mutex<HashMap<usize, Arc<Vec<PreparedMeasurement>>>>,
 }
 
 impl StudyEvaluator {
@@ -159,13 +166,11 @@ impl StudyEvaluator {
     pub fn load_with(path: &Path, cache: FmuCache) -> Result<StudyEvaluator, OptimizeError> {
         let study = Study::load(path)?;
         let cache = Arc::new(cache.verifying_all());
-        let workers = WorkerPool::new(&study, cache)?;
-        let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
-        let digest = InputDigest::of(&study, &workers)?;
+        let bench = Bench::new(&study, cache, false)?;
+        let digest = InputDigest::of(&study, &bench)?;
         Ok(StudyEvaluator {
             study,
-            workers,
-            measurement,
+            bench,
             digest,
             prepared: Mutex::new(HashMap::new()),
         })
@@ -175,8 +180,14 @@ impl StudyEvaluator {
         &self.study
     }
 
+    /// The first lap's workers (the assignment every lap shares).
     pub fn workers(&self) -> &WorkerPool {
-        &self.workers
+        self.bench.workers()
+    }
+
+    /// Every fitted lap.
+    pub fn bench(&self) -> &Bench {
+        &self.bench
     }
 
     pub fn digest(&self) -> &InputDigest {
@@ -196,20 +207,21 @@ impl StudyEvaluator {
             )
         })?;
         let prepared = self.prepared(c.step, &cost.signals)?;
-        cost.of(&self.workers, &c.values, &prepared)
+        self.bench.cost(&cost, &c.values, &prepared)
     }
 
     fn prepared(
         &self,
         step: usize,
         signals: &[String],
-    ) -> Result<Arc<PreparedMeasurement>, String> {
+    ) -> Result<Arc<Vec<PreparedMeasurement>>, String> {
         let mut map = self.prepared.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(p) = map.get(&step) {
             return Ok(p.clone());
         }
         let p = Arc::new(
-            PreparedMeasurement::new(&self.measurement, signals, &self.study.file.compare)
+            self.bench
+                .prepare(signals, &self.study.file.compare)
                 .map_err(|e| e.to_string())?,
         );
         map.insert(step, p.clone());

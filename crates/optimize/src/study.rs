@@ -18,8 +18,10 @@ pub struct StudyFile {
     /// The system file (TOML) run for every candidate.
     pub system: PathBuf,
     /// The vehicle measurement: a path (MDF 4 or CSV), or `{ file = "...", channels = {
-    /// v = "GPS_Speed", ... } }` with the channel of each twinbench signal.
-    pub measurement: MeasurementConfig,
+    /// v = "GPS_Speed", ... } }` with the channel of each twinbench signal; or several laps,
+    /// `[[measurement]]` entries, each with its file and its own system, parameters (track,
+    /// target, start values) and weight, sharing the study's parameters.
+    pub measurement: Measurements,
     /// Seed of every random draw of the study.
     #[serde(default = "default_seed")]
     pub seed: u64,
@@ -99,6 +101,46 @@ fn five_percent() -> f64 {
 }
 fn r_squared_v() -> f64 {
     0.9
+}
+
+/// One lap (`measurement = ...`, `[measurement]`) or several (`[[measurement]]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Measurements {
+    One(MeasurementConfig),
+    Laps(Vec<LapConfig>),
+}
+
+/// A `[[measurement]]` entry: a lap of its own, fitted with the others (its cost summed
+/// with its weight) or held out (run with the answer and compared, never fitted).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LapConfig {
+    /// A name for Tab. 1 (default: the file's stem).
+    #[serde(default)]
+    pub name: Option<String>,
+    pub file: PathBuf,
+    #[serde(default)]
+    pub channels: ChannelMap,
+    /// The lap's system file (default: the study's `system`).
+    #[serde(default)]
+    pub system: Option<PathBuf>,
+    /// Values for this lap only (its track and target files, its start values), over the
+    /// study's `[parameters]`; never a parameter the study fits.
+    #[serde(default)]
+    pub parameters: std::collections::BTreeMap<String, toml::Value>,
+    /// The lap's weight in the cost (its cost times weight, summed, over the summed
+    /// weights of the fitted laps).
+    #[serde(default = "unit_weight")]
+    pub weight: f64,
+    /// Not fitted: run with the study's answer and compared (prediction on a lap not
+    /// fitted).
+    #[serde(default)]
+    pub hold_out: bool,
+}
+
+fn unit_weight() -> f64 {
+    1.0
 }
 
 /// `measurement = "lap.mf4"` or `[measurement] file = "lap.mf4"` with `[measurement.channels]`.
@@ -210,15 +252,32 @@ fn one() -> usize {
     1
 }
 
+/// A lap of a study with its paths resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lap {
+    pub name: String,
+    pub system_path: PathBuf,
+    pub measurement_path: PathBuf,
+    pub channels: ChannelMap,
+    /// The lap's own parameter values (over the study's).
+    pub parameters: std::collections::BTreeMap<String, toml::Value>,
+    pub weight: f64,
+    pub hold_out: bool,
+}
+
 /// A study file read and checked, with its paths resolved.
 #[derive(Clone, Debug)]
 pub struct Study {
     pub file: StudyFile,
     pub path: PathBuf,
+    /// The first fitted lap's system, measurement and channels (the only ones of a study
+    /// of one lap).
     pub system_path: PathBuf,
     pub measurement_path: PathBuf,
     /// The channel of each twinbench signal in the measurement file.
     pub channels: ChannelMap,
+    /// Every lap: the fitted ones first, in the file's order, then the held-out ones.
+    pub laps: Vec<Lap>,
     /// Hash of the study text: a checkpoint of another study is refused.
     pub fingerprint: String,
 }
@@ -253,17 +312,49 @@ impl Study {
         })?;
         // Names in the study are relative to its folder, whatever the working directory.
         let dir = tb_files::folder_of(path);
-        let system_path = tb_files::resolve(&dir, &file.system);
-        let measurement_path = tb_files::resolve(&dir, file.measurement.file());
-        let channels = file.measurement.channels();
+        let system = tb_files::resolve(&dir, &file.system);
+        let stem = |p: &Path| {
+            p.file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "lap".into())
+        };
+        let mut laps: Vec<Lap> = match &file.measurement {
+            Measurements::One(m) => vec![Lap {
+                name: stem(m.file()),
+                system_path: system.clone(),
+                measurement_path: tb_files::resolve(&dir, m.file()),
+                channels: m.channels(),
+                parameters: Default::default(),
+                weight: 1.0,
+                hold_out: false,
+            }],
+            Measurements::Laps(laps) => laps
+                .iter()
+                .map(|l| Lap {
+                    name: l.name.clone().unwrap_or_else(|| stem(&l.file)),
+                    system_path: l
+                        .system
+                        .as_ref()
+                        .map_or(system.clone(), |s| tb_files::resolve(&dir, s)),
+                    measurement_path: tb_files::resolve(&dir, &l.file),
+                    channels: l.channels.clone(),
+                    parameters: l.parameters.clone(),
+                    weight: l.weight,
+                    hold_out: l.hold_out,
+                })
+                .collect(),
+        };
+        laps.sort_by_key(|l| l.hold_out);
+        let first = laps.iter().find(|l| !l.hold_out).unwrap_or(&laps[0]).clone();
         use sha2::Digest;
         let fingerprint = format!("{:x}", sha2::Sha256::digest(text.as_bytes()));
         let study = Study {
             file,
             path: tb_files::normalize(path),
-            system_path,
-            measurement_path,
-            channels,
+            system_path: first.system_path,
+            measurement_path: first.measurement_path,
+            channels: first.channels,
+            laps,
             fingerprint,
         };
         study.validate()?;
@@ -287,6 +378,47 @@ impl Study {
         let f = &self.file;
         if f.steps.is_empty() {
             return Err(bad("no [[step]]".into()));
+        }
+        if let Measurements::Laps(laps) = &f.measurement {
+            if laps.iter().all(|l| l.hold_out) {
+                return Err(bad(
+                    "every [[measurement]] is held out: at least one lap must be fitted".into(),
+                ));
+            }
+            if laps.iter().filter(|l| !l.hold_out).count() > 1 && !f.refine {
+                return Err(bad(
+                    "several fitted laps need refine = true: their intervals come from the joint fit over all laps".into(),
+                ));
+            }
+            let fitted: Vec<String> = f.steps.iter().flat_map(|s| s.parameter_names()).collect();
+            let mut names = Vec::new();
+            for (k, l) in laps.iter().enumerate() {
+                let name = l.name.clone().unwrap_or_else(|| {
+                    l.file
+                        .file_stem()
+                        .map_or("lap".into(), |s| s.to_string_lossy().into_owned())
+                });
+                if !(l.weight.is_finite() && l.weight > 0.0) {
+                    return Err(bad(format!(
+                        "[[measurement]] {} ({name}): weight = {}: a lap's weight must be a finite number > 0 (hold it out with hold_out = true)",
+                        k + 1,
+                        l.weight
+                    )));
+                }
+                if let Some(p) = l.parameters.keys().find(|p| fitted.contains(p)) {
+                    return Err(bad(format!(
+                        "[[measurement]] {} ({name}): '{p}' is a parameter the study fits: a lap can set only values of its own (track, target, start values)",
+                        k + 1
+                    )));
+                }
+                if names.contains(&name) {
+                    return Err(bad(format!(
+                        "[[measurement]] {}: the name '{name}' is taken by another lap (give each a name = \"...\")",
+                        k + 1
+                    )));
+                }
+                names.push(name);
+            }
         }
         if f.profiles && !f.refine {
             return Err(bad(

@@ -1,0 +1,221 @@
+//! A study over several laps (slow tier): two synthetic laps the twin makes with known
+//! parameters (the suite's own circuit and Spielberg, each with autocorrelated wheel-load
+//! noise), prepared together by `twinbench lap A B --track a --track b` into one study with
+//! a `[[measurement]]` per lap, and a third lap held out. The joint answer recovers the
+//! parameters with intervals narrower than either lap alone gives; the held-out lap and
+//! `twinbench validate` on it report e within the range the fitted laps reached.
+
+mod common;
+
+use common::synthetic::{self, Noise};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const TRUTH: [(&str, f64); 5] = [
+    ("vehicle.c_lift_front", 0.95),
+    ("vehicle.c_lift_rear", 1.25),
+    ("vehicle.l", 2.85),
+    ("vehicle.b_front", 1.45),
+    ("vehicle.b_rear", 1.40),
+];
+
+fn twinbench(args: &[&str]) -> Vec<u8> {
+    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "twinbench {args:?}:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
+/// The driver of a lap's system follows the truth lap's own target (as in
+/// `tests/interval_coverage.rs`: the twin is then the model that made the lap).
+fn own_target(system: &Path, target: Option<&Path>) {
+    let text = std::fs::read_to_string(system).unwrap();
+    let line = "\"driver.target_speed_file\" = \"target_speed.csv\"";
+    assert!(text.contains(line), "{text}");
+    let with = match target {
+        Some(t) => format!("\"driver.target_speed_file\" = {:?}", t.display().to_string()),
+        None => String::new(),
+    };
+    std::fs::write(system, text.replace(line, &with)).unwrap();
+}
+
+/// (value, [lo, hi]) of every parameter of the answer.
+fn answer(r: &serde_json::Value) -> Vec<(String, f64, f64, f64)> {
+    r["joint"]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let iv = p["interval"].as_array().expect("a closed interval");
+            (
+                p["name"].as_str().unwrap().to_string(),
+                p["after"].as_f64().unwrap(),
+                iv[0].as_f64().unwrap(),
+                iv[1].as_f64().unwrap(),
+            )
+        })
+        .collect()
+}
+
+fn optimise(study: &Path, out: &Path) -> serde_json::Value {
+    let text = twinbench(&[
+        "optimize",
+        study.to_str().unwrap(),
+        "--json",
+        "--no-report",
+        "--generations",
+        "12",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    serde_json::from_slice(&text).unwrap()
+}
+
+#[test]
+fn two_laps_narrow_the_intervals_and_a_held_out_lap_is_predicted() {
+    let fmus = common::fmu_dir();
+    let dir = tb_testkit::scratch("multi-lap");
+    let d = dir.path();
+    let own_dir = d.join("own");
+    std::fs::create_dir_all(&own_dir).unwrap();
+    let own = synthetic::own_circuit(&own_dir);
+    let spielberg = synthetic::spielberg();
+    let spielberg_track = twinbench::pack::workspace_root().join("data/spielberg_lap_track.csv");
+    let own_lap = synthetic::truth_lap(&own_dir, &own, &TRUTH);
+    let spielberg_dir = d.join("spielberg");
+    std::fs::create_dir_all(&spielberg_dir).unwrap();
+    let spielberg_lap = synthetic::truth_lap(&spielberg_dir, &spielberg, &TRUTH);
+    let noise = |seed| {
+        Some(Noise {
+            sigma: 150.0,
+            rho: 0.995,
+            seed,
+        })
+    };
+    let a = synthetic::measurement(&own_lap, &d.join("own_a.csv"), noise(21));
+    let b = synthetic::measurement(&spielberg_lap, &d.join("spielberg_b.csv"), noise(22));
+    let c = synthetic::measurement(&own_lap, &d.join("own_c.csv"), noise(23));
+    let own_track = own.track.clone().unwrap();
+    let s = |p: &PathBuf| p.to_str().unwrap().to_string();
+    let both = d.join("both");
+    twinbench(&[
+        "lap",
+        &s(&a),
+        &s(&b),
+        "--track",
+        &s(&own_track),
+        "--track",
+        &s(&spielberg_track),
+        "--out",
+        &s(&both),
+        "--fmus",
+        &s(&fmus),
+    ]);
+    own_target(&both.join("own_a/system.toml"), own.target.as_deref());
+    own_target(&both.join("spielberg_b/system.toml"), None);
+    // The third lap, held out: its own files from `lap`, an entry in the study.
+    let held = d.join("held");
+    twinbench(&[
+        "lap",
+        &s(&c),
+        "--track",
+        &s(&own_track),
+        "--out",
+        &s(&held),
+        "--fmus",
+        &s(&fmus),
+    ]);
+    own_target(&held.join("system.toml"), own.target.as_deref());
+    let study = both.join("study.toml");
+    let mut text = std::fs::read_to_string(&study).unwrap();
+    assert_eq!(text.matches("[[measurement]]").count(), 2, "{text}");
+    text = text.replace(
+        "[compare]",
+        &format!(
+            "[[measurement]]\nname = \"own_c\"\nfile = {:?}\nsystem = {:?}\nhold_out = true\n\n[compare]",
+            s(&c),
+            s(&held.join("system.toml"))
+        ),
+    );
+    std::fs::write(&study, text).unwrap();
+
+    let alone_a = optimise(&both.join("own_a/study.toml"), &d.join("opt_a"));
+    let alone_b = optimise(&both.join("spielberg_b/study.toml"), &d.join("opt_b"));
+    let joint = optimise(&study, &d.join("opt_both"));
+    let (ra, rb, rj) = (answer(&alone_a), answer(&alone_b), answer(&joint));
+    eprintln!("| parameter | truth | lap A alone | lap B alone | both laps |");
+    eprintln!("|---|---:|---|---|---|");
+    for (k, (name, truth)) in TRUTH.iter().enumerate() {
+        let cell = |r: &(String, f64, f64, f64)| format!("{:.4} [{:.4}, {:.4}]", r.1, r.2, r.3);
+        eprintln!(
+            "| {name} | {truth} | {} | {} | {} |",
+            cell(&ra[k]),
+            cell(&rb[k]),
+            cell(&rj[k])
+        );
+        assert_eq!(rj[k].0, *name);
+        let width = |r: &(String, f64, f64, f64)| r.3 - r.2;
+        assert!(
+            width(&rj[k]) < width(&ra[k]) && width(&rj[k]) < width(&rb[k]),
+            "{name}: two laps give [{}, {}], no narrower than one alone",
+            rj[k].2,
+            rj[k].3
+        );
+        // Recovered: the truth within three of the joint interval's standard errors.
+        let se = width(&rj[k]) / (2.0 * joint["joint_intervals"]["critical_value"].as_f64().unwrap());
+        assert!(
+            (rj[k].1 - truth).abs() < 3.0 * se,
+            "{name} = {} against {truth} (standard error {se})",
+            rj[k].1
+        );
+    }
+    // Tab. 1 has a row per lap and signal, and the held-out lap's.
+    let e = joint["joint"]["e"].as_array().unwrap();
+    assert_eq!(e.len(), 14, "7 signals on each of 2 laps");
+    let held_rows = joint["hold_out"].as_array().unwrap();
+    assert_eq!(held_rows.len(), 7);
+    let fitted_range = |signal: &str| {
+        e.iter()
+            .filter(|r| r["signal"] == signal)
+            .map(|r| r["after"]["e"].as_f64().unwrap())
+            .fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)))
+    };
+    for r in held_rows {
+        assert_eq!(r["lap"], "own_c");
+        let (lo, hi) = fitted_range(r["signal"].as_str().unwrap());
+        let got = r["after"]["e"].as_f64().unwrap();
+        eprintln!(
+            "held out {}: e {got:.4} (fitted laps {lo:.4} … {hi:.4})",
+            r["signal"]
+        );
+        // Predicted: no worse than the worse fitted lap, with a quarter for the noise of
+        // one lap's e.
+        assert!(got <= 1.25 * hi, "{r}");
+    }
+    // `validate` on the held-out lap's measurement reports the same kind of e and the
+    // fitted laps' range.
+    let v = twinbench(&[
+        "validate",
+        &s(&d.join("opt_both/result.json")),
+        &s(&c),
+        "--track",
+        &s(&own_track),
+        "--out",
+        &s(&d.join("val")),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_slice(&v).unwrap();
+    for row in v["rows"].as_array().unwrap() {
+        let range = row["e_fitted_range"].as_array().expect("a range of the fitted laps");
+        let hi = range[1].as_f64().unwrap();
+        let got = row["e"].as_f64().unwrap();
+        eprintln!("validate {}: e {got:.4} (fitted laps up to {hi:.4})", row["signal"]);
+        assert!(got <= 1.5 * hi, "{row}");
+    }
+}
