@@ -38,15 +38,16 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let result: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("opt/result.json")).unwrap()).unwrap();
-    // Every parameter carries an interval (or a statement why not) and its method.
-    for s in result["steps"].as_array().unwrap() {
-        for p in s["parameters"].as_array().unwrap() {
-            assert_eq!(p["interval_method"], "gauss-newton-hac", "{p}");
-            assert!(
-                p["interval"].is_array() || p["interval_statement"].is_string(),
-                "{p}"
-            );
-        }
+    // Every parameter of the study's answer carries an interval (or a statement why not)
+    // and its method.
+    let answer = result["joint"]["parameters"].as_array().unwrap();
+    assert_eq!(answer.len(), 5);
+    for p in answer {
+        assert_eq!(p["interval_method"], "gauss-newton-hac", "{p}");
+        assert!(
+            p["interval"].is_array() || p["interval_statement"].is_string(),
+            "{p}"
+        );
     }
     let meas = root.join("data/spielberg_lap.csv");
     let track = root.join("data/spielberg_lap_track.csv");

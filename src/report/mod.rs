@@ -250,7 +250,7 @@ pub fn table1_markdown(t: &Table1) -> String {
         })
         .collect();
     if !statements.is_empty() {
-        s.push_str("\nIntervals open or missing:\n");
+        s.push_str("\nAbout the intervals:\n");
         s.push_str(&statements.join("\n"));
         s.push('\n');
     }

@@ -1131,7 +1131,7 @@ fn joint_answer(
             }
         };
     let objective_before = frame.per_point(frame.objective(&raw));
-    let solution = frame.minimise(&x, raw, sens, &vec![true; x.len()]);
+    let solution = frame.minimise(&x, raw, sens, &vec![true; x.len()], crate::fit::ANSWER);
     let laps = frame.laps();
     let iv = crate::interval::sandwich(
         &j.names,
@@ -1305,9 +1305,42 @@ fn finish_study(
             .iter()
             .enumerate()
             .map(|(k, name)| {
-                let value = state.assignment[workers.index_of(name).expect("a slot")].1;
+                let slot = workers.index_of(name).expect("a slot");
+                let value = state.assignment[slot].1;
                 let iv = intervals.get(name);
                 let profile = profiles.as_ref().and_then(|p| p.get(name));
+                let interval = match profile {
+                    Some(p) => (p.lo.is_some() || p.hi.is_some()).then_some((p.lo, p.hi)),
+                    None => iv.filter(|i| i.std_error.is_some()).map(|i| (i.lo, i.hi)),
+                };
+                let statement = match profile {
+                    Some(p) => p.statement.clone(),
+                    None => iv.and_then(|i| i.statement.clone()),
+                };
+                // The steps' own answer outside the joint interval: the steps' cost and the
+                // least-squares fit disagree by more than the data's scatter.
+                let steps_value = sequential[slot];
+                let outside = refinement.is_some()
+                    && interval.is_some_and(|(lo, hi)| {
+                        lo.is_some_and(|lo| steps_value < lo) || hi.is_some_and(|hi| steps_value > hi)
+                    });
+                let statement = match (statement, outside) {
+                    (s, false) => s,
+                    (s, true) => {
+                        let unit = workers
+                            .parameter_unit(name)
+                            .filter(|u| !u.is_empty() && *u != "1")
+                            .map(|u| format!(" {u}"))
+                            .unwrap_or_default();
+                        let said = format!(
+                            "the steps' own answer, {steps_value:.4}{unit}, lies outside this interval: the steps' cost (e + β·|bias|) and the least-squares fit disagree on it by more than the data's scatter, a sign of a difference between the twin and the car in what this parameter does (or of steps that did not converge); the interval shows the scatter only"
+                        );
+                        Some(match s {
+                            Some(s) => format!("{s}; {said}"),
+                            None => said,
+                        })
+                    }
+                };
                 ParameterChange {
                     name: name.clone(),
                     unit: workers.parameter_unit(name).map(str::to_string),
@@ -1320,18 +1353,12 @@ fn finish_study(
                     } else {
                         f64::NAN
                     },
-                    interval: match profile {
-                        Some(p) => (p.lo.is_some() || p.hi.is_some()).then_some((p.lo, p.hi)),
-                        None => iv.filter(|i| i.std_error.is_some()).map(|i| (i.lo, i.hi)),
-                    },
+                    interval,
                     interval_method: Some(match profile {
                         Some(_) => crate::profile::METHOD.to_string(),
                         None => intervals.method.clone(),
                     }),
-                    interval_statement: match profile {
-                        Some(p) => p.statement.clone(),
-                        None => iv.and_then(|i| i.statement.clone()),
-                    },
+                    interval_statement: statement,
                 }
             })
             .collect(),

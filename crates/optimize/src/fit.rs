@@ -19,13 +19,14 @@
 //! **How.** Each iteration runs 2 laps per parameter (central differences, ±2 % of the
 //! value) for J, solves (JᵀJ + λ·diag JᵀJ) δ = −Jᵀr on the directions the signals see (a
 //! direction with an eigenvalue below 1e-9 of the largest gets no step), clamps to the
-//! bounds (a parameter on a bound that the gradient pushes out is held there), and runs one
-//! lap at the trial point: accepted when S falls (λ/3), else λ·10 and another trial. It
-//! stops before any lap when the Gauss–Newton step (λ = 0) would move no parameter by more
-//! than a tenth of its standard error (the sandwich at the current point: what is left is
-//! far inside the interval), when an accepted step lowers S by less than 1e-7 of itself,
-//! when λ exceeds 1e8 (no step lowers S: a minimum), or after [`MAX_ITERATIONS`]. The
-//! sensitivities at the last point are the intervals' (no further laps).
+//! bounds (a parameter on a bound that the gradient pushes out is held there), and runs
+//! two trial laps in one batch, with λ and 10λ: the first that lowers S is taken (λ/3),
+//! else λ·100 and two more trials. It stops before any lap when the Gauss–Newton step
+//! (λ = 0) would move no parameter by more than 0.3 of its standard error (the sandwich at
+//! the current point: what is left is well inside the interval; [`ANSWER`] says why not
+//! less), when an accepted step lowers S by less than 1e-7 of itself, when λ exceeds 1e8
+//! (no step lowers S: a minimum), or after [`MAX_ITERATIONS`]. The sensitivities at the
+//! last point are the intervals' (no further laps).
 //!
 //! The same iteration with one parameter held re-optimises the others at a profile point
 //! ([`crate::profile`]).
@@ -42,9 +43,24 @@ pub const METHOD: &str = "levenberg-marquardt";
 pub const MAX_ITERATIONS: usize = 15;
 const NULL_RATIO: f64 = 1e-9;
 const RELATIVE_DECREASE: f64 = 1e-7;
-const LAMBDA_START: f64 = 1e-3;
-/// Converged when the Gauss–Newton step is below this fraction of every standard error.
-const CLOSE: f64 = 0.1;
+const LAMBDA_START: f64 = 1e-5;
+/// How far a fit goes: at most `max_iterations`, and converged when the Gauss–Newton step
+/// is below `close` of every standard error.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Limits {
+    pub max_iterations: usize,
+    pub close: f64,
+}
+
+/// The study's answer: within 0.3 standard errors of the least-squares point. The twin's S
+/// is rough at the level of a few units (a fixed-step simulation, the lap's end), and its
+/// sensitivities by ±2 % differences see that: near the minimum the Gauss–Newton step
+/// stays at 0.2–0.3 standard errors while the trials it proposes no longer lower S (the
+/// demo's lap). A 0.3 σ offset changes a 95 % interval's coverage by less than a point.
+pub(crate) const ANSWER: Limits = Limits {
+    max_iterations: MAX_ITERATIONS,
+    close: 0.3,
+};
 const LAMBDA_MAX: f64 = 1e8;
 
 /// One residual block: a signal (of a lap) compared on the distance grid.
@@ -276,6 +292,7 @@ where
         raw0: Raw,
         sens0: Vec<Option<Raw>>,
         free: &[bool],
+        limits: Limits,
     ) -> Solution {
         let p = x0.len();
         let span: Vec<f64> = self.bounds.iter().map(|(lo, hi)| hi - lo).collect();
@@ -285,7 +302,7 @@ where
         let mut statement = None;
         let mut converged = false;
         let mut iterations = 0;
-        'outer: while iterations < MAX_ITERATIONS {
+        'outer: while iterations < limits.max_iterations {
             iterations += 1;
             // Normal equations in range-scaled parameters.
             let (a, g) = self.normal_equations(&raw, &sens, &span);
@@ -310,29 +327,43 @@ where
                 if active
                     .iter()
                     .zip(&gn)
-                    .all(|(&i, d)| se[i].is_some_and(|se| (d * span[i]).abs() <= CLOSE * se))
+                    .all(|(&i, d)| se[i].is_some_and(|se| (d * span[i]).abs() <= limits.close * se))
                 {
                     converged = true;
                     break;
                 }
             }
             loop {
-                let Some(delta) = solve(&a, &g, &active, lambda) else {
+                // Two trials in one batch (both cores busy): λ and 10λ, the first that
+                // lowers S taken.
+                let mut trials = Vec::new();
+                for l in [lambda, 10.0 * lambda] {
+                    let Some(delta) = solve(&a, &g, &active, l) else {
+                        continue;
+                    };
+                    let mut trial = x.clone();
+                    for (k, &i) in active.iter().enumerate() {
+                        let (lo, hi) = self.bounds[i];
+                        trial[i] = (x[i] + delta[k] * span[i]).clamp(lo, hi);
+                    }
+                    if trial != x {
+                        trials.push((l, trial));
+                    }
+                }
+                if trials.is_empty() {
                     converged = true;
                     break 'outer;
-                };
-                let mut trial = x.clone();
-                for (k, &i) in active.iter().enumerate() {
-                    let (lo, hi) = self.bounds[i];
-                    trial[i] = (x[i] + delta[k] * span[i]).clamp(lo, hi);
                 }
-                if trial == x {
-                    converged = true;
-                    break 'outer;
-                }
-                let tried = self.run(std::slice::from_ref(&trial)).pop();
-                match tried {
-                    Some(Ok(r)) if self.objective(&r) < s => {
+                let points: Vec<Vec<f64>> = trials.iter().map(|t| t.1.clone()).collect();
+                let accepted = trials
+                    .into_iter()
+                    .zip(self.run(&points))
+                    .find_map(|((l, trial), r)| match r {
+                        Ok(r) if self.objective(&r) < s => Some((l, trial, r)),
+                        _ => None,
+                    });
+                match accepted {
+                    Some((l, trial, r)) => {
                         let s_new = self.objective(&r);
                         let small = s - s_new <= RELATIVE_DECREASE * s;
                         match self.sensitivities_at(&trial, free) {
@@ -346,17 +377,17 @@ where
                                 break 'outer;
                             }
                         }
-                        lambda = (lambda / 3.0).max(1e-12);
+                        lambda = (l / 3.0).max(1e-12);
                         if small {
                             converged = true;
                             break 'outer;
                         }
                         continue 'outer;
                     }
-                    // Worse, or a lap that failed or fell short of the stretch: a shorter
-                    // step.
-                    _ => {
-                        lambda *= 10.0;
+                    // Both worse, or laps that failed or fell short of the stretch: shorter
+                    // steps.
+                    None => {
+                        lambda *= 100.0;
                         if lambda > LAMBDA_MAX {
                             converged = true;
                             break 'outer;
@@ -367,7 +398,8 @@ where
         }
         if !converged && statement.is_none() {
             statement = Some(format!(
-                "not converged after {MAX_ITERATIONS} iterations (S still falling)"
+                "not converged after {} iterations (S still falling)",
+                limits.max_iterations
             ));
         }
         Solution {
@@ -431,15 +463,17 @@ where
         out
     }
 
-    /// The residuals and the sensitivities of the `free` parameters at `x`: 1 + 2 per free
-    /// parameter laps, in one batch.
+    /// The residuals and the forward-difference sensitivities of the `free` parameters at
+    /// `x`: 1 + 1 per free parameter laps, in one batch.
     pub fn start(&self, x: &[f64], free: &[bool]) -> Result<(Raw, Vec<Option<Raw>>), String> {
+        let forward = forward_points(x, &self.bounds, free);
         let mut points = vec![x.to_vec()];
-        points.extend(around(x, &self.bounds, free).into_iter().map(|(_, y)| y));
+        points.extend(forward.iter().map(|(_, y)| y.clone()));
         let mut raws: Vec<Raw> = self.run(&points).into_iter().collect::<Result<_, _>>()?;
         let rest = raws.split_off(1);
-        let sens = self.sensitivities(x, &rest, free);
-        Ok((raws.pop().expect("the lap at x"), sens))
+        let raw = raws.pop().expect("the lap at x");
+        let sens = forward_sensitivities(x, &raw, &forward, &rest);
+        Ok((raw, sens))
     }
 
     /// At a solution (every parameter free): the naive covariance (JᵀWJ)⁻¹, as if every
@@ -515,6 +549,41 @@ fn around(x: &[f64], bounds: &[(f64, f64)], free: &[bool]) -> Vec<(usize, Vec<f6
     out
 }
 
+/// One point per free parameter, +[`REL_STEP`] of its value (− on its upper bound).
+fn forward_points(x: &[f64], bounds: &[(f64, f64)], free: &[bool]) -> Vec<(usize, Vec<f64>)> {
+    (0..x.len())
+        .filter(|&i| free[i])
+        .map(|i| {
+            let (lo, hi) = bounds[i];
+            let h = REL_STEP * if x[i].abs() > 1e-12 { x[i].abs() } else { hi - lo };
+            let mut y = x.to_vec();
+            y[i] = if x[i] + h <= hi { x[i] + h } else { x[i] - h };
+            (i, y)
+        })
+        .collect()
+}
+
+/// Forward-difference sensitivities at `x` (its residuals `raw`) from the laps at
+/// [`forward_points`].
+fn forward_sensitivities(
+    x: &[f64],
+    raw: &Raw,
+    points: &[(usize, Vec<f64>)],
+    raws: &[Raw],
+) -> Vec<Option<Raw>> {
+    let mut out = vec![None; x.len()];
+    for ((i, y), r) in points.iter().zip(raws) {
+        let h = y[*i] - x[*i];
+        out[*i] = Some(
+            r.iter()
+                .zip(raw)
+                .map(|(a, b)| a.iter().zip(b).map(|(a, b)| (a - b) / h).collect())
+                .collect(),
+        );
+    }
+    out
+}
+
 /// (JᵀJ + λ·diag) δ = −g on the `active` parameters, by eigen-decomposition; directions
 /// with an eigenvalue below [`NULL_RATIO`] of the largest get no step. `None`: no direction
 /// left (nothing to move).
@@ -566,7 +635,8 @@ mod tests {
     use super::*;
 
     /// A two-parameter curve y = a·exp(−b·t) fitted from a wrong start: the fit finds the
-    /// least-squares point (to 1e-6), which a second start reaches as well.
+    /// least-squares point, which a second start reaches as well (both within 0.3 standard
+    /// errors of it).
     #[test]
     fn levenberg_marquardt_finds_the_least_squares_point_of_a_curve() {
         let n = 400;
@@ -596,15 +666,17 @@ mod tests {
             }];
             let bounds = vec![(0.1, 10.0), (0.01, 5.0)];
             let (frame, raw, sens) = Frame::new(series, bounds, &x0, &pool, simulate).unwrap();
-            let sol = frame.minimise(&x0, raw, sens, &[true, true]);
+            let sol = frame.minimise(&x0, raw, sens, &[true, true], ANSWER);
             assert!(sol.converged, "{sol:?}");
-            sol.x
+            let (_, var) = frame.covariances(&sol);
+            (sol.x, [var[0].sqrt(), var[1].sqrt()])
         };
-        let a = fit([1.0, 0.3]);
-        let b = fit([3.5, 1.5]);
+        let (a, se) = fit([1.0, 0.3]);
+        let (b, _) = fit([3.5, 1.5]);
         assert!((a[0] - 2.0).abs() < 0.02 && (a[1] - 0.7).abs() < 0.02, "{a:?}");
+        // Each start ends within 0.3 standard errors of the least-squares point.
         for k in 0..2 {
-            assert!((a[k] - b[k]).abs() < 1e-6 * a[k], "{a:?} vs {b:?}");
+            assert!((a[k] - b[k]).abs() < 0.6 * se[k], "{a:?} vs {b:?} (σ {se:?})");
         }
     }
 
@@ -632,7 +704,7 @@ mod tests {
         }];
         let (frame, raw, sens) =
             Frame::new(series, vec![(0.5, 2.0)], &[1.0], &pool, simulate).unwrap();
-        let sol = frame.minimise(&[1.0], raw, sens, &[true]);
+        let sol = frame.minimise(&[1.0], raw, sens, &[true], ANSWER);
         assert_eq!(sol.x, vec![2.0]);
         assert!(sol.converged);
     }
