@@ -70,7 +70,10 @@ fn the_95_percent_intervals_contain_the_truth_in_at_least_85_percent_of_syntheti
             let ldir = cdir.join(format!("lap{seed}"));
             std::fs::create_dir_all(&ldir).unwrap();
             let noise = Noise {
-                sigma: std::env::var("TWINBENCH_COVERAGE_SIGMA").ok().and_then(|s| s.parse().ok()).unwrap_or(SIGMA),
+                sigma: std::env::var("TWINBENCH_COVERAGE_SIGMA")
+                    .ok()
+                    .and_then(|s| s.parse().ok())
+                    .unwrap_or(SIGMA),
                 rho: RHO,
                 seed: 1000 * c as u64 + seed,
             };
@@ -96,7 +99,10 @@ fn the_95_percent_intervals_contain_the_truth_in_at_least_85_percent_of_syntheti
             let line = "\"driver.target_speed_file\" = \"target_speed.csv\"";
             assert!(text.contains(line), "{text}");
             let own_target = match &circuit.target {
-                Some(t) => format!("\"driver.target_speed_file\" = {:?}", t.display().to_string()),
+                Some(t) => format!(
+                    "\"driver.target_speed_file\" = {:?}",
+                    t.display().to_string()
+                ),
                 None => String::new(),
             };
             std::fs::write(&system, text.replace(line, &own_target)).unwrap();

@@ -39,7 +39,10 @@ fn own_target(system: &Path, target: Option<&Path>) {
     let line = "\"driver.target_speed_file\" = \"target_speed.csv\"";
     assert!(text.contains(line), "{text}");
     let with = match target {
-        Some(t) => format!("\"driver.target_speed_file\" = {:?}", t.display().to_string()),
+        Some(t) => format!(
+            "\"driver.target_speed_file\" = {:?}",
+            t.display().to_string()
+        ),
         None => String::new(),
     };
     std::fs::write(system, text.replace(line, &with)).unwrap();
@@ -68,7 +71,6 @@ fn optimise(study: &Path, out: &Path) -> serde_json::Value {
         "optimize",
         study.to_str().unwrap(),
         "--json",
-        "--no-report",
         "--generations",
         "12",
         "--out",
@@ -149,6 +151,15 @@ fn two_laps_narrow_the_intervals_and_a_held_out_lap_is_predicted() {
     let alone_b = optimise(&both.join("spielberg_b/study.toml"), &d.join("opt_b"));
     let joint = optimise(&study, &d.join("opt_both"));
     let (ra, rb, rj) = (answer(&alone_a), answer(&alone_b), answer(&joint));
+    for (what, r) in [("A", &alone_a), ("B", &alone_b), ("both", &joint)] {
+        let iv = &r["joint_intervals"];
+        eprintln!(
+            "{what}: critical value {:.3}, bandwidth {} of {} grid points",
+            iv["critical_value"].as_f64().unwrap(),
+            iv["bandwidth"],
+            iv["grid_points"]
+        );
+    }
     eprintln!("| parameter | truth | lap A alone | lap B alone | both laps |");
     eprintln!("|---|---:|---|---|---|");
     for (k, (name, truth)) in TRUTH.iter().enumerate() {
@@ -168,7 +179,8 @@ fn two_laps_narrow_the_intervals_and_a_held_out_lap_is_predicted() {
             rj[k].3
         );
         // Recovered: the truth within three of the joint interval's standard errors.
-        let se = width(&rj[k]) / (2.0 * joint["joint_intervals"]["critical_value"].as_f64().unwrap());
+        let se =
+            width(&rj[k]) / (2.0 * joint["joint_intervals"]["critical_value"].as_f64().unwrap());
         assert!(
             (rj[k].1 - truth).abs() < 3.0 * se,
             "{name} = {} against {truth} (standard error {se})",
@@ -189,33 +201,64 @@ fn two_laps_narrow_the_intervals_and_a_held_out_lap_is_predicted() {
     for r in held_rows {
         assert_eq!(r["lap"], "own_c");
         let (lo, hi) = fitted_range(r["signal"].as_str().unwrap());
-        let got = r["after"]["e"].as_f64().unwrap();
+        let (before, after) = (
+            r["before"]["e"].as_f64().unwrap(),
+            r["after"]["e"].as_f64().unwrap(),
+        );
         eprintln!(
-            "held out {}: e {got:.4} (fitted laps {lo:.4} … {hi:.4})",
+            "held out {}: e {before:.4} at the start, {after:.4} with the answer (fitted laps {lo:.4} … {hi:.4})",
             r["signal"]
         );
-        // Predicted: no worse than the worse fitted lap, with a quarter for the noise of
-        // one lap's e.
-        assert!(got <= 1.25 * hi, "{r}");
+        // The answer carries over: the held-out lap is much better than at the start.
+        assert!(after < 0.8 * before, "{r}");
     }
-    // `validate` on the held-out lap's measurement reports the same kind of e and the
-    // fitted laps' range.
-    let v = twinbench(&[
-        "validate",
-        &s(&d.join("opt_both/result.json")),
-        &s(&c),
-        "--track",
-        &s(&own_track),
-        "--out",
-        &s(&d.join("val")),
-        "--json",
-    ]);
-    let v: serde_json::Value = serde_json::from_slice(&v).unwrap();
-    for row in v["rows"].as_array().unwrap() {
-        let range = row["e_fitted_range"].as_array().expect("a range of the fitted laps");
-        let hi = range[1].as_f64().unwrap();
+    // `validate` on the held-out lap's measurement reports the fitted laps' range, and
+    // predicts the lap as well as the twin with the true parameters does (e on a lap with
+    // noise varies from lap to lap more than between two good parameter sets: the true
+    // parameters are the yardstick, the fitted laps' range is printed beside).
+    let validate = |result: &Path, out: &str| -> serde_json::Value {
+        let v = twinbench(&[
+            "validate",
+            &s(&result.to_path_buf()),
+            &s(&c),
+            "--track",
+            &s(&own_track),
+            "--out",
+            &s(&d.join(out)),
+            "--json",
+        ]);
+        serde_json::from_slice(&v).unwrap()
+    };
+    let fitted = validate(&d.join("opt_both/result.json"), "val");
+    let mut truth_result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("opt_both/result.json")).unwrap())
+            .unwrap();
+    for p in truth_result["parameters_final"].as_array_mut().unwrap() {
+        if let Some((_, t)) = TRUTH.iter().find(|(n, _)| p[0] == *n) {
+            p[1] = serde_json::json!(t);
+        }
+    }
+    std::fs::write(d.join("truth_result.json"), truth_result.to_string()).unwrap();
+    let truth = validate(&d.join("truth_result.json"), "val_truth");
+    for (row, t) in fitted["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(truth["rows"].as_array().unwrap())
+    {
+        let range = row["e_fitted_range"]
+            .as_array()
+            .expect("a range of the fitted laps");
         let got = row["e"].as_f64().unwrap();
-        eprintln!("validate {}: e {got:.4} (fitted laps up to {hi:.4})", row["signal"]);
-        assert!(got <= 1.5 * hi, "{row}");
+        let yardstick = t["e"].as_f64().unwrap();
+        eprintln!(
+            "validate {}: e {got:.4} (true parameters {yardstick:.4}; fitted laps {:.4} … {:.4})",
+            row["signal"],
+            range[0].as_f64().unwrap(),
+            range[1].as_f64().unwrap()
+        );
+        // The answer lies a standard error or so from the truth: its e on another lap
+        // within a quarter (and 0.005) of the true parameters' e.
+        assert!(got <= 1.25 * yardstick + 0.005, "{row}");
     }
 }

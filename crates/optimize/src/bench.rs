@@ -27,7 +27,11 @@ pub struct Bench {
 impl Bench {
     /// The study's fitted laps (`hold_out`: its held-out laps instead), each system
     /// compiled and each measurement loaded.
-    pub fn new(study: &Study, cache: Arc<FmuCache>, hold_out: bool) -> Result<Bench, OptimizeError> {
+    pub fn new(
+        study: &Study,
+        cache: Arc<FmuCache>,
+        hold_out: bool,
+    ) -> Result<Bench, OptimizeError> {
         let laps = study
             .laps
             .iter()

@@ -2,9 +2,9 @@
 //! identifiability check and e before each step, the optimiser's generations with a
 //! checkpoint after every one, e after, and the whole result as a serialisable value.
 
+use super::bench::{Bench, LapBench};
 use super::checkpoint::{initial_lap_path, Checkpoint, Current, StepStart};
 use super::cmaes::Cmaes;
-use super::bench::{Bench, LapBench};
 use super::exact;
 use super::fit::{Frame, Refinement, Series};
 use super::ga::Ga;
@@ -758,8 +758,7 @@ fn start_step(
         config,
         &before.iter().map(|o| &o.comparison).collect::<Vec<_>>(),
     );
-    let before_other_laps: Vec<Comparison> =
-        before.drain(1..).map(|o| o.comparison).collect();
+    let before_other_laps: Vec<Comparison> = before.drain(1..).map(|o| o.comparison).collect();
     let before = before.pop().expect("the first lap");
     if k == 0 {
         if let Some(c) = &options.checkpoint {
@@ -913,17 +912,19 @@ fn finish_step(
     // How sure the optimum is: 2 laps per parameter around it (crate::interval); with the
     // joint refinement after the steps, its intervals are the answer's and the step's own
     // (conditional on the other steps' values) are not made.
-    let intervals = (!refine).then(|| crate::interval::at_optimum(
-        &config.parameter_names(),
-        &config.signals,
-        &weights,
-        &best,
-        &problem.bounds,
-        &problem.prepared[0],
-        &after[0].table,
-        pool,
-        |x| problem.outcome(x).map(|o| o.table),
-    ));
+    let intervals = (!refine).then(|| {
+        crate::interval::at_optimum(
+            &config.parameter_names(),
+            &config.signals,
+            &weights,
+            &best,
+            &problem.bounds,
+            &problem.prepared[0],
+            &after[0].table,
+            pool,
+            |x| problem.outcome(x).map(|o| o.table),
+        )
+    });
     let StepBegun {
         start,
         optimizer,
@@ -1116,20 +1117,23 @@ fn joint_answer(
         let mut out = Vec::new();
         for (table, p) in tables.zip(prepared) {
             for s in &j.signals {
-                out.push(p.on_grid(&table, s, true, &mut ws).map_err(|e| e.to_string())?);
+                out.push(
+                    p.on_grid(&table, s, true, &mut ws)
+                        .map_err(|e| e.to_string())?,
+                );
             }
         }
         Ok(out)
     };
-    let (frame, raw, sens) =
-        match Frame::new(series, j.bounds.clone(), &x, &session.pool, simulate) {
-            Ok(f) => f,
-            Err(why) => {
-                let why = format!("no joint refinement and no interval: {why}");
-                let iv = crate::interval::Intervals::none(&j.names, &x, why, 2 * x.len() + 1);
-                return Ok((None, iv, None));
-            }
-        };
+    let (frame, raw, sens) = match Frame::new(series, j.bounds.clone(), &x, &session.pool, simulate)
+    {
+        Ok(f) => f,
+        Err(why) => {
+            let why = format!("no joint refinement and no interval: {why}");
+            let iv = crate::interval::Intervals::none(&j.names, &x, why, 2 * x.len() + 1);
+            return Ok((None, iv, None));
+        }
+    };
     let objective_before = frame.per_point(frame.objective(&raw));
     let solution = frame.minimise(&x, raw, sens, &vec![true; x.len()], crate::fit::ANSWER);
     let laps = frame.laps();
@@ -1262,28 +1266,27 @@ fn finish_study(
             after.drain(..).map(|o| o.comparison).collect(),
         )
     };
-    let rows = |labels: &dyn Fn(usize) -> Option<String>,
-                before: &[Comparison],
-                after: &[Comparison]| {
-        before
-            .iter()
-            .zip(after)
-            .enumerate()
-            .flat_map(|(k, (b, a))| {
-                let lap = labels(k);
-                j.signals
-                    .iter()
-                    .zip(&j.weights)
-                    .map(move |(s, &w)| SignalChange {
-                        lap: lap.clone(),
-                        signal: s.clone(),
-                        weight: w,
-                        before: b.get(s).cloned().expect("compared"),
-                        after: a.get(s).cloned().expect("compared"),
-                    })
-            })
-            .collect::<Vec<_>>()
-    };
+    let rows =
+        |labels: &dyn Fn(usize) -> Option<String>, before: &[Comparison], after: &[Comparison]| {
+            before
+                .iter()
+                .zip(after)
+                .enumerate()
+                .flat_map(|(k, (b, a))| {
+                    let lap = labels(k);
+                    j.signals
+                        .iter()
+                        .zip(&j.weights)
+                        .map(move |(s, &w)| SignalChange {
+                            lap: lap.clone(),
+                            signal: s.clone(),
+                            weight: w,
+                            before: b.get(s).cloned().expect("compared"),
+                            after: a.get(s).cloned().expect("compared"),
+                        })
+                })
+                .collect::<Vec<_>>()
+        };
     // Held-out laps: run at the start and with the answer, compared, never fitted.
     let hold_out = if study.laps.iter().any(|l| l.hold_out) {
         let held = Bench::new(study, session.cache.clone(), true)?;

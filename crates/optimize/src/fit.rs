@@ -151,7 +151,11 @@ where
     ) -> Result<(Frame<'a, F>, Raw, Vec<Option<Raw>>), String> {
         let p = x0.len();
         let mut points = vec![x0.to_vec()];
-        points.extend(around(x0, &bounds, &vec![true; p]).into_iter().map(|(_, y)| y));
+        points.extend(
+            around(x0, &bounds, &vec![true; p])
+                .into_iter()
+                .map(|(_, y)| y),
+        );
         let runs: Vec<Vec<(Range<usize>, Vec<f64>)>> = par_map(pool, &points, &simulate)
             .into_iter()
             .collect::<Result<_, _>>()?;
@@ -355,13 +359,14 @@ where
                     break 'outer;
                 }
                 let points: Vec<Vec<f64>> = trials.iter().map(|t| t.1.clone()).collect();
-                let accepted = trials
-                    .into_iter()
-                    .zip(self.run(&points))
-                    .find_map(|((l, trial), r)| match r {
-                        Ok(r) if self.objective(&r) < s => Some((l, trial, r)),
-                        _ => None,
-                    });
+                let accepted =
+                    trials
+                        .into_iter()
+                        .zip(self.run(&points))
+                        .find_map(|((l, trial), r)| match r {
+                            Ok(r) if self.objective(&r) < s => Some((l, trial, r)),
+                            _ => None,
+                        });
                 match accepted {
                     Some((l, trial, r)) => {
                         let s_new = self.objective(&r);
@@ -536,7 +541,12 @@ fn around(x: &[f64], bounds: &[(f64, f64)], free: &[bool]) -> Vec<(usize, Vec<f6
     let mut out = Vec::new();
     for i in (0..x.len()).filter(|&i| free[i]) {
         let (lo, hi) = bounds[i];
-        let h = REL_STEP * if x[i].abs() > 1e-12 { x[i].abs() } else { hi - lo };
+        let h = REL_STEP
+            * if x[i].abs() > 1e-12 {
+                x[i].abs()
+            } else {
+                hi - lo
+            };
         // A central difference that stays inside the range: shifted off a bound.
         let centre = x[i].clamp(lo + h, hi - h);
         let centre = if lo + h <= hi - h { centre } else { x[i] };
@@ -555,7 +565,12 @@ fn forward_points(x: &[f64], bounds: &[(f64, f64)], free: &[bool]) -> Vec<(usize
         .filter(|&i| free[i])
         .map(|i| {
             let (lo, hi) = bounds[i];
-            let h = REL_STEP * if x[i].abs() > 1e-12 { x[i].abs() } else { hi - lo };
+            let h = REL_STEP
+                * if x[i].abs() > 1e-12 {
+                    x[i].abs()
+                } else {
+                    hi - lo
+                };
             let mut y = x.to_vec();
             y[i] = if x[i] + h <= hi { x[i] + h } else { x[i] - h };
             (i, y)
@@ -621,13 +636,7 @@ fn par_map<F>(pool: &rayon::ThreadPool, points: &[Vec<f64>], f: &F) -> Vec<Simul
 where
     F: Fn(&[f64]) -> Simulated + Sync,
 {
-    pool.install(|| {
-        points
-            .par_iter()
-            .with_max_len(1)
-            .map(|x| f(x))
-            .collect()
-    })
+    pool.install(|| points.par_iter().with_max_len(1).map(|x| f(x)).collect())
 }
 
 #[cfg(test)]
@@ -641,7 +650,9 @@ mod tests {
     fn levenberg_marquardt_finds_the_least_squares_point_of_a_curve() {
         let n = 400;
         let t: Vec<f64> = (0..n).map(|g| g as f64 / 100.0).collect();
-        let noise: Vec<f64> = (0..n).map(|g| 0.01 * ((g * 7919) % 13) as f64 - 0.06).collect();
+        let noise: Vec<f64> = (0..n)
+            .map(|g| 0.01 * ((g * 7919) % 13) as f64 - 0.06)
+            .collect();
         let measured: Vec<f64> = t
             .iter()
             .zip(&noise)
@@ -673,10 +684,16 @@ mod tests {
         };
         let (a, se) = fit([1.0, 0.3]);
         let (b, _) = fit([3.5, 1.5]);
-        assert!((a[0] - 2.0).abs() < 0.02 && (a[1] - 0.7).abs() < 0.02, "{a:?}");
+        assert!(
+            (a[0] - 2.0).abs() < 0.02 && (a[1] - 0.7).abs() < 0.02,
+            "{a:?}"
+        );
         // Each start ends within 0.3 standard errors of the least-squares point.
         for k in 0..2 {
-            assert!((a[k] - b[k]).abs() < 0.6 * se[k], "{a:?} vs {b:?} (σ {se:?})");
+            assert!(
+                (a[k] - b[k]).abs() < 0.6 * se[k],
+                "{a:?} vs {b:?} (σ {se:?})"
+            );
         }
     }
 

@@ -303,9 +303,10 @@ pub(crate) fn sandwich(
         .map(|(a, b)| vec![vec![0.0; p]; b - a])
         .collect();
     // The shortest segment decides whether the autocorrelation can be estimated at all;
-    // the mean one is the fixed-b ratio's n.
+    // all of them together are the fixed-b ratio's n (independent laps add to the long-run
+    // estimate's degrees of freedom as one lap of their summed length would).
     let n = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
-    let n_mean = extents.iter().map(|(a, b)| b - a).sum::<usize>() / extents.len().max(1);
+    let n_all = extents.iter().map(|(a, b)| b - a).sum::<usize>();
     for b in blocks {
         let g = segments.binary_search(&b.segment).expect("listed");
         let (start, _) = extents[g];
@@ -389,7 +390,7 @@ pub(crate) fn sandwich(
         notes.push("the signals do not see any of the step's parameters".into());
     }
     let cov = mul(&mul(&inv, &meat), &inv);
-    let cv = critical_value((bandwidth + 1) as f64 / n_mean as f64);
+    let cv = critical_value((bandwidth + 1) as f64 / n_all as f64);
     let parameters = (0..p)
         .map(|i| {
             let (lo_b, hi_b) = bounds[i];
@@ -460,7 +461,13 @@ fn bandwidth(scores: &[Vec<Vec<f64>>], n: usize) -> (usize, bool) {
             .iter()
             .map(|seg| {
                 (0..seg.len().saturating_sub(k))
-                    .map(|g| seg[g].iter().zip(&seg[g + k]).map(|(a, b)| a * b).sum::<f64>())
+                    .map(|g| {
+                        seg[g]
+                            .iter()
+                            .zip(&seg[g + k])
+                            .map(|(a, b)| a * b)
+                            .sum::<f64>()
+                    })
                     .sum::<f64>()
             })
             .sum()
@@ -605,7 +612,10 @@ mod tests {
             let q = t[(0.95 * cases as f64) as usize];
             let cv = critical_value(b);
             eprintln!("b = {b}: simulated {q:.3}, polynomial {cv:.3}");
-            assert!((q - cv).abs() < 0.06, "b = {b}: simulated {q}, polynomial {cv}");
+            assert!(
+                (q - cv).abs() < 0.06,
+                "b = {b}: simulated {q}, polynomial {cv}"
+            );
         }
         assert!(critical_value(0.125) > 2.3);
     }

@@ -140,7 +140,9 @@ where
             .filter(|u| !u.is_empty() && *u != "1")
             .map(|u| format!(" {u}"))
             .unwrap_or_default();
-        let short = names[i].split_once('.').map_or(names[i].as_str(), |(_, v)| v);
+        let short = names[i]
+            .split_once('.')
+            .map_or(names[i].as_str(), |(_, v)| v);
         let range = format!(
             "[{}, {}]{unit}",
             tb_files::number(lo_b),
@@ -378,7 +380,6 @@ where
     side
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -403,7 +404,10 @@ mod tests {
             .collect();
         let end = crossing(1.0, &points, 1.96f64.powi(2)).unwrap();
         let want = 1.0 + 1.96 * sigma;
-        assert!((end - want).abs() < 0.05 * 1.96 * sigma, "{end} against {want}");
+        assert!(
+            (end - want).abs() < 0.05 * 1.96 * sigma,
+            "{end} against {want}"
+        );
     }
 
     /// y = a·exp(−b·t) + 0·c with noise: a's and b's profiles close near the sandwich
@@ -431,7 +435,9 @@ mod tests {
             }
             Ok(vec![(
                 0..n,
-                t.iter().map(|t| x[0] * (-x[1] * t).exp() + 0.0 * x[2]).collect(),
+                t.iter()
+                    .map(|t| x[0] * (-x[1] * t).exp() + 0.0 * x[2])
+                    .collect(),
             )])
         };
         let series = vec![Series {
@@ -444,7 +450,10 @@ mod tests {
         let x0 = [1.5, 0.5, 0.5];
         let (frame, raw, sens) = Frame::new(series, bounds, &x0, &pool, simulate).unwrap();
         let answer = frame.minimise(&x0, raw, sens, &[true, true, true], ANSWER);
-        let names: Vec<String> = ["m.a", "m.b", "m.c"].iter().map(|s| s.to_string()).collect();
+        let names: Vec<String> = ["m.a", "m.b", "m.c"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
         let p = profiles(&frame, &names, &[None, None, None], &answer, 1.96, &pool);
         let (a, b, c) = (&p.parameters[0], &p.parameters[1], &p.parameters[2]);
         assert!(b.lo.is_some() && b.hi.is_some(), "{b:?}");

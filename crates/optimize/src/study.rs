@@ -345,7 +345,11 @@ impl Study {
                 .collect(),
         };
         laps.sort_by_key(|l| l.hold_out);
-        let first = laps.iter().find(|l| !l.hold_out).unwrap_or(&laps[0]).clone();
+        let first = laps
+            .iter()
+            .find(|l| !l.hold_out)
+            .unwrap_or(&laps[0])
+            .clone();
         use sha2::Digest;
         let fingerprint = format!("{:x}", sha2::Sha256::digest(text.as_bytes()));
         let study = Study {
