@@ -94,6 +94,9 @@ pub(crate) struct Frame<'a, F> {
 /// The residuals (simulated − measured) of every series on its range at one point.
 type Raw = Vec<Vec<f64>>;
 
+/// A new frame with the residuals and the sensitivities at its start point.
+type Started<'a, F> = (Frame<'a, F>, Raw, Vec<Option<Raw>>);
+
 /// Where a fit ended.
 #[derive(Clone, Debug)]
 pub(crate) struct Solution {
@@ -148,7 +151,7 @@ where
         x0: &[f64],
         pool: &'a rayon::ThreadPool,
         simulate: F,
-    ) -> Result<(Frame<'a, F>, Raw, Vec<Option<Raw>>), String> {
+    ) -> Result<Started<'a, F>, String> {
         let p = x0.len();
         let mut points = vec![x0.to_vec()];
         points.extend(
@@ -444,9 +447,11 @@ where
                 }
             }
         }
-        for i in 0..p {
-            for j in 0..i {
-                a[j][i] = a[i][j];
+        // The upper triangle from the lower.
+        let lower = a.clone();
+        for (j, row) in a.iter_mut().enumerate() {
+            for (i, x) in row.iter_mut().enumerate().skip(j + 1) {
+                *x = lower[i][j];
             }
         }
         (a, g)
@@ -492,7 +497,7 @@ where
         let top = vals.iter().cloned().fold(0.0f64, f64::max);
         let mut naive = vec![vec![0.0; p]; p];
         for (k, &l) in vals.iter().enumerate() {
-            if !(top > 0.0) || l <= NULL_RATIO * top {
+            if top.is_nan() || top <= 0.0 || l <= NULL_RATIO * top {
                 continue;
             }
             for i in 0..p {

@@ -104,11 +104,28 @@ fn r_squared_v() -> f64 {
 }
 
 /// One lap (`measurement = ...`, `[measurement]`) or several (`[[measurement]]`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Measurements {
     One(MeasurementConfig),
     Laps(Vec<LapConfig>),
+}
+
+// By the value's shape, so that a mistake inside a `[[measurement]]` entry (an unknown key,
+// a weight that is not a number) is named, not "did not match any variant".
+impl<'de> Deserialize<'de> for Measurements {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let value = toml::Value::deserialize(d)?;
+        match value {
+            toml::Value::Array(_) => Vec::<LapConfig>::deserialize(value)
+                .map(Measurements::Laps)
+                .map_err(|e| D::Error::custom(format!("[[measurement]]: {e}"))),
+            other => MeasurementConfig::deserialize(other)
+                .map(Measurements::One)
+                .map_err(|e| D::Error::custom(format!("measurement: {e}"))),
+        }
+    }
 }
 
 /// A `[[measurement]]` entry: a lap of its own, fitted with the others (its cost summed
