@@ -12,8 +12,7 @@
 
 mod common;
 
-use common::synthetic::{self, Noise};
-use std::process::Command;
+use common::synthetic::{self, drive_truth_target, twinbench, Noise};
 
 const TRUTH: [(&str, f64); 5] = [
     ("vehicle.c_lift_front", 0.95),
@@ -30,19 +29,6 @@ const GENERATIONS: &str = "12";
 /// about 50 m at speed: a load cell's drift and the road, not white noise).
 const SIGMA: f64 = 150.0;
 const RHO: f64 = 0.995;
-
-fn twinbench(args: &[&str]) -> Vec<u8> {
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "twinbench {args:?}:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out.stdout
-}
 
 #[test]
 fn the_95_percent_intervals_contain_the_truth_in_at_least_85_percent_of_synthetic_laps() {
@@ -94,18 +80,7 @@ fn the_95_percent_intervals_contain_the_truth_in_at_least_85_percent_of_syntheti
             // the twin is then exactly the model that made the lap, and the coverage
             // measures the intervals alone (docs/optimize.md gives the derived target's
             // bias on noise-free laps).
-            let system = out.join("system.toml");
-            let text = std::fs::read_to_string(&system).unwrap();
-            let line = "\"driver.target_speed_file\" = \"target_speed.csv\"";
-            assert!(text.contains(line), "{text}");
-            let own_target = match &circuit.target {
-                Some(t) => format!(
-                    "\"driver.target_speed_file\" = {:?}",
-                    t.display().to_string()
-                ),
-                None => String::new(),
-            };
-            std::fs::write(&system, text.replace(line, &own_target)).unwrap();
+            drive_truth_target(&out.join("system.toml"), circuit.target.as_deref());
             let text = twinbench(&[
                 "optimize",
                 out.join("study.toml").to_str().unwrap(),

@@ -7,9 +7,8 @@
 
 mod common;
 
-use common::synthetic::{self, Noise};
+use common::synthetic::{self, drive_truth_target as own_target, twinbench, Noise};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const TRUTH: [(&str, f64); 5] = [
     ("vehicle.c_lift_front", 0.95),
@@ -18,35 +17,6 @@ const TRUTH: [(&str, f64); 5] = [
     ("vehicle.b_front", 1.45),
     ("vehicle.b_rear", 1.40),
 ];
-
-fn twinbench(args: &[&str]) -> Vec<u8> {
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "twinbench {args:?}:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out.stdout
-}
-
-/// The driver of a lap's system follows the truth lap's own target (as in
-/// `tests/interval_coverage.rs`: the twin is then the model that made the lap).
-fn own_target(system: &Path, target: Option<&Path>) {
-    let text = std::fs::read_to_string(system).unwrap();
-    let line = "\"driver.target_speed_file\" = \"target_speed.csv\"";
-    assert!(text.contains(line), "{text}");
-    let with = match target {
-        Some(t) => format!(
-            "\"driver.target_speed_file\" = {:?}",
-            t.display().to_string()
-        ),
-        None => String::new(),
-    };
-    std::fs::write(system, text.replace(line, &with)).unwrap();
-}
 
 /// (value, [lo, hi]) of every parameter of the answer.
 fn answer(r: &serde_json::Value) -> Vec<(String, f64, f64, f64)> {

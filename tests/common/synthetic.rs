@@ -190,3 +190,35 @@ pub fn measurement(lap: &tb_table::Table, path: &Path, noise: Option<Noise>) -> 
     meas.write_csv(path).unwrap();
     path.to_path_buf()
 }
+
+/// `twinbench ARGS...` must succeed: its standard output (else the test fails with its
+/// standard error).
+pub fn twinbench(args: &[&str]) -> Vec<u8> {
+    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "twinbench {args:?}:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
+/// The driver of a system `twinbench lap` wrote follows the truth lap's own target (its
+/// circuit's file; `None`: the bundled Spielberg target) instead of the one derived from
+/// the measured speed: the twin is then exactly the model that made the lap.
+pub fn drive_truth_target(system: &Path, target: Option<&Path>) {
+    let text = std::fs::read_to_string(system).unwrap();
+    let line = "\"driver.target_speed_file\" = \"target_speed.csv\"";
+    assert!(text.contains(line), "{text}");
+    let with = match target {
+        Some(t) => format!(
+            "\"driver.target_speed_file\" = {:?}",
+            t.display().to_string()
+        ),
+        None => String::new(),
+    };
+    std::fs::write(system, text.replace(line, &with)).unwrap();
+}

@@ -499,6 +499,18 @@ fn mul(a: &[Vec<f64>], b: &[Vec<f64>]) -> Vec<Vec<f64>> {
 mod tests {
     use super::*;
 
+    /// A standard normal number: Box–Muller from a small LCG (deterministic).
+    fn gauss(seed: &mut u64) -> f64 {
+        let mut u = || {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((*seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let (a, b) = (u(), u());
+        (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
+    }
+
     /// y = a + b·t on a grid with AR(1) noise of correlation ρ: the interval of b covers
     /// its truth about 95 % of the time, where the interval that counts every point as
     /// independent covers far less.
@@ -506,17 +518,7 @@ mod tests {
     fn ar1_noise_on_a_line_is_covered_at_the_level() {
         let (n, rho, truth) = (2000usize, 0.95f64, [1.0, 0.5]);
         let mut seed = 12345u64;
-        let mut gauss = || {
-            // Box–Muller from a small LCG (deterministic).
-            let mut u = || {
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            let (a, b) = (u(), u());
-            (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
-        };
+        let mut gauss = || gauss(&mut seed);
         let t: Vec<f64> = (0..n).map(|g| g as f64 / n as f64).collect();
         let (mut covered, mut naive_covered, cases) = (0, 0, 200);
         for _ in 0..cases {
@@ -583,16 +585,7 @@ mod tests {
     fn the_fixed_b_critical_value_matches_a_simulation() {
         let (n, cases) = (400usize, 20000usize);
         let mut seed = 99u64;
-        let mut gauss = || {
-            let mut u = || {
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-            };
-            let (a, b) = (u(), u());
-            (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
-        };
+        let mut gauss = || gauss(&mut seed);
         for b in [0.05, 0.125, 0.2] {
             let l = (b * n as f64).round() as usize - 1;
             let mut t: Vec<f64> = (0..cases)
