@@ -215,6 +215,52 @@ def test_a_dask_study_gives_the_command_lines_table1(cli_study, tmp_path):
     assert params["vehicle.l"]["unit"] == "m"
 
 
+def two_lap_study(folder: Path) -> Path:
+    """The bundled study over two laps: the bundled lap twice, the second with weight 2 and
+    its own start speed, a third held out."""
+    text = STUDY.read_text()
+    lap = (ROOT / "data/spielberg_lap.csv").as_posix()
+    system = (ROOT / "systems/rls_v.toml").as_posix()
+    entries = "".join(
+        f'[[measurement]]\nname = "{name}"\nfile = "{lap}"\nweight = {w}\n{extra}\n'
+        for name, w, extra in [
+            ("one", 1.0, ""),
+            ("two", 2.0, '[measurement.parameters]\n"vehicle.v_start" = 52.5\n'),
+            ("held", 1.0, "hold_out = true\n"),
+        ]
+    )
+    lines = [
+        line
+        for line in text.splitlines()
+        if not line.startswith("measurement =") and not line.startswith("system =")
+    ]
+    study = folder / "two_laps.toml"
+    study.write_text(f'system = "{system}"\n' + "\n".join(lines) + "\n\n" + entries)
+    return study
+
+
+def test_a_study_of_two_laps_on_dask_equals_the_command_line(tmp_path):
+    study = two_lap_study(tmp_path)
+    cli("optimize", study, "--out", tmp_path / "cli", "--json", "--generations", "2")
+    cluster, client = local_cluster(tmp_path)
+    try:
+        result = twinbench.Study(study).optimize(
+            executor=client.get_executor(), out=tmp_path / "dask", generations=2
+        )
+    finally:
+        client.close()
+        cluster.close()
+    assert table1(tmp_path / "dask") == table1(tmp_path / "cli")
+    expected = json.loads((tmp_path / "cli" / "result.json").read_text())
+    assert result["joint"] == expected["joint"]
+    # A row per lap and signal, and the held-out lap's.
+    laps = {e["lap"] for e in result["joint"]["e"]}
+    assert laps == {"one", "two"}
+    assert {e["lap"] for e in result["hold_out"]} == {"held"}
+    md = (tmp_path / "dask" / "table1.md").read_text()
+    assert "| Fz_sum (two) |" in md and "| held out |" in md
+
+
 def test_a_worker_killed_mid_study_changes_nothing(cli_study, tmp_path):
     cluster, client = local_cluster(tmp_path)
     killed = []
