@@ -3,6 +3,7 @@
 //! weighted and summed, the laps run in parallel; a study of one lap is exactly the
 //! single-lap cost.
 
+use super::driver::cost_of;
 use super::pool::{Outcome, WorkerPool};
 use super::remote::StepCost;
 use super::study::{Lap, Study};
@@ -88,17 +89,18 @@ impl Bench {
         if self.laps.len() == 1 {
             return cost.of(&self.laps[0].workers, values, &prepared[0]);
         }
-        let costs: Vec<Result<f64, String>> = self
-            .laps
-            .par_iter()
-            .zip(prepared)
-            .with_max_len(1)
-            .map(|(l, p)| {
-                cost.of(&l.workers, values, p)
-                    .map_err(|e| format!("lap '{}': {e}", l.lap.name))
+        let costs: Vec<f64> = self
+            .outcomes(values, prepared)?
+            .iter()
+            .map(|o| {
+                cost_of(
+                    &o.comparison,
+                    &cost.signals,
+                    &cost.weights,
+                    cost.bias_weight,
+                )
             })
             .collect();
-        let costs = costs.into_iter().collect::<Result<Vec<f64>, String>>()?;
         Ok(self.weighted(&costs))
     }
 

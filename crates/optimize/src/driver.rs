@@ -1050,11 +1050,11 @@ impl JointProblem {
 fn joint_answer(
     session: &Session,
     state: &mut StudyState,
+    j: &JointProblem,
     prepared: &[PreparedMeasurement],
 ) -> Result<JointAnswer, OptimizeError> {
     let (study, bench) = (session.study, &session.bench);
     let workers = bench.workers();
-    let j = JointProblem::of(study, &state.checkpoint.completed);
     let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
     let index: Vec<usize> = j
         .names
@@ -1230,7 +1230,7 @@ fn finish_study(
     let j = JointProblem::of(study, &state.checkpoint.completed);
     let prepared = session.bench.prepare(&j.signals, &study.file.compare)?;
     let sequential: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
-    let (refinement, intervals, profiles) = joint_answer(session, &mut state, &prepared)?;
+    let (refinement, intervals, profiles) = joint_answer(session, &mut state, &j, &prepared)?;
     // The joint row of Tab. 1: every signal of every lap at the study's start and at its
     // answer (a study of one lap has both laps already).
     let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
