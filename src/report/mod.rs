@@ -358,10 +358,12 @@ pub fn write_report(
                 "profile statistic ΔS/κ",
             )
             .series("profile", &pts)
+            // The threshold is what the profile is judged against (black); the parabola is
+            // context (grey), so the two never share a style.
             .styled(
-                "95 % threshold (χ²₁)",
+                "95 % threshold (c², c the fixed-b critical value)",
                 &[(lo, profiles.threshold), (hi, profiles.threshold)],
-                Style::Faint,
+                Style::Reference,
             );
             if let Some(se) = wald(&p.name) {
                 let parabola: Vec<(f64, f64)> = (0..=40)

@@ -9,9 +9,13 @@ use super::remote::StepCost;
 use super::study::{Lap, Study};
 use super::OptimizeError;
 use rayon::prelude::*;
+use std::ops::Range;
 use std::sync::Arc;
-use tb_compare::{CompareSettings, Measurement, PreparedMeasurement};
+use tb_compare::{CompareSettings, Measurement, PreparedMeasurement, Workspace};
 use tb_fmi::FmuCache;
+
+/// Filtered signals on the distance grid: per signal the grid range covered and the values.
+pub type GridSignals = Vec<(Range<usize>, Vec<f64>)>;
 
 /// One lap: what it is, its workers, its measurement.
 pub struct LapBench {
@@ -123,6 +127,28 @@ impl Bench {
             })
             .collect();
         runs.into_iter().collect()
+    }
+
+    /// Every lap run with `values`, and its `signals` filtered on the grid: per lap and
+    /// signal (laps outer) the grid range the lap covers and the values there. The joint
+    /// fit's residuals, local or on an evaluator's worker.
+    pub fn signals<S: AsRef<str>>(
+        &self,
+        values: &[f64],
+        prepared: &[PreparedMeasurement],
+        signals: &[S],
+    ) -> Result<GridSignals, String> {
+        let mut ws = Workspace::new();
+        let mut out = Vec::with_capacity(prepared.len() * signals.len());
+        for (o, p) in self.outcomes(values, prepared)?.iter().zip(prepared) {
+            for s in signals {
+                out.push(
+                    p.on_grid(&o.table, s.as_ref(), true, &mut ws)
+                        .map_err(|e| e.to_string())?,
+                );
+            }
+        }
+        Ok(out)
     }
 
     /// Lap name for rows of several laps (`None` for a study of one lap).

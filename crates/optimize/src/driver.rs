@@ -1017,12 +1017,13 @@ struct JointProblem {
 
 impl JointProblem {
     fn of(study: &Study, steps: &[StepResult]) -> JointProblem {
+        let (signals, weights) = study.joint_signals();
         let mut j = JointProblem {
             names: Vec::new(),
             bounds: Vec::new(),
             before: Vec::new(),
-            signals: Vec::new(),
-            weights: Vec::new(),
+            signals,
+            weights,
         };
         for (step, done) in study.file.steps.iter().zip(steps) {
             for (p, change) in step.parameters.iter().zip(&done.parameters) {
@@ -1030,12 +1031,6 @@ impl JointProblem {
                     j.names.push(p.name.clone());
                     j.bounds.push((p.min, p.max));
                     j.before.push(change.before);
-                }
-            }
-            for (s, w) in step.signals.iter().zip(step.weights()) {
-                if !j.signals.contains(s) {
-                    j.signals.push(s.clone());
-                    j.weights.push(w);
                 }
             }
         }
@@ -1108,25 +1103,34 @@ fn joint_answer(
             })
         })
         .collect();
-    let simulate = |y: &[f64]| -> crate::fit::Simulated {
-        let tables = bench
-            .outcomes(&values(y), prepared)?
-            .into_iter()
-            .map(|o| o.table);
-        let mut ws = Workspace::new();
-        let mut out = Vec::new();
-        for (table, p) in tables.zip(prepared) {
-            for s in &j.signals {
-                out.push(
-                    p.on_grid(&table, s, true, &mut ws)
-                        .map_err(|e| e.to_string())?,
-                );
-            }
+    // The laps of a batch of points: on the evaluator's workers when the study has one
+    // (each point one task, which runs its laps and returns the filtered signals), else
+    // on this process's threads; the same signals to the bit either way.
+    let remote = session.options.evaluator.as_deref();
+    let local = crate::fit::on_pool(&session.pool, |y: &[f64]| {
+        bench.signals(&values(y), prepared, &j.signals)
+    });
+    let simulate = |points: &[Vec<f64>]| -> Vec<crate::fit::Simulated> {
+        let Some(remote) = remote else {
+            return local(points);
+        };
+        let all: Vec<Vec<f64>> = points.iter().map(|y| values(y)).collect();
+        match remote.signals(&all) {
+            Ok(runs) => runs
+                .into_iter()
+                .map(|r| {
+                    r.map(|series| {
+                        series
+                            .into_iter()
+                            .map(|(start, v)| (start..start + v.len(), v))
+                            .collect()
+                    })
+                })
+                .collect(),
+            Err(why) => vec![Err(format!("the evaluator failed: {why}")); points.len()],
         }
-        Ok(out)
     };
-    let (frame, raw, sens) = match Frame::new(series, j.bounds.clone(), &x, &session.pool, simulate)
-    {
+    let (frame, raw, sens) = match Frame::new(series, j.bounds.clone(), &x, simulate) {
         Ok(f) => f,
         Err(why) => {
             let why = format!("no joint refinement and no interval: {why}");
@@ -1164,13 +1168,16 @@ fn joint_answer(
             .iter()
             .map(|n| workers.parameter_unit(n).map(str::to_string))
             .collect();
+        // On an evaluator every walk (two per parameter) waits on its own tasks, so all of
+        // them run at once and the cluster gets every walk's laps together.
+        let walks = remote.and_then(|_| thread_pool(2 * j.names.len()).ok());
         crate::profile::profiles(
             &frame,
             &j.names,
             &units,
             &solution,
             iv.critical_value,
-            &session.pool,
+            walks.as_ref().unwrap_or(&session.pool),
         )
     });
     state.set(&index, &solution.x);

@@ -77,7 +77,22 @@ pub(crate) struct Series<'a> {
 }
 
 /// A lap's signals on the grid, one (covered range, values) per [`Series`].
-pub(crate) type Simulated = Result<Vec<(Range<usize>, Vec<f64>)>, String>;
+pub(crate) type Simulated = Result<crate::bench::GridSignals, String>;
+
+/// Runs the laps at a batch of points, the results in the points' order: on this
+/// process's threads ([`on_pool`]) or on an [`crate::Evaluator`]'s workers.
+pub(crate) trait Laps: Fn(&[Vec<f64>]) -> Vec<Simulated> + Sync {}
+impl<T: Fn(&[Vec<f64>]) -> Vec<Simulated> + Sync> Laps for T {}
+
+/// The batch of laps on `pool`'s threads, one lap per thread at a time.
+pub(crate) fn on_pool<'p, G>(pool: &'p rayon::ThreadPool, lap: G) -> impl Laps + 'p
+where
+    G: Fn(&[f64]) -> Simulated + Sync + 'p,
+{
+    move |points: &[Vec<f64>]| {
+        pool.install(|| points.par_iter().with_max_len(1).map(|x| lap(x)).collect())
+    }
+}
 
 /// The fixed frame of a fit: the series, the grid points each is compared on, and each
 /// series' scale √w/σ.
@@ -87,7 +102,6 @@ pub(crate) struct Frame<'a, F> {
     scale: Vec<f64>,
     pub bounds: Vec<(f64, f64)>,
     simulate: F,
-    pool: &'a rayon::ThreadPool,
     laps: std::sync::atomic::AtomicUsize,
 }
 
@@ -104,6 +118,8 @@ pub(crate) struct Solution {
     /// S at `x`.
     pub objective: f64,
     pub iterations: usize,
+    /// Laps this fit ran (its trials and sensitivities; not those of its start).
+    pub laps: usize,
     pub converged: bool,
     /// Why it stopped when not converged, in words.
     pub statement: Option<String>,
@@ -137,10 +153,7 @@ pub struct Refinement {
     pub statement: Option<String>,
 }
 
-impl<'a, F> Frame<'a, F>
-where
-    F: Fn(&[f64]) -> Simulated + Sync,
-{
+impl<'a, F: Laps> Frame<'a, F> {
     /// The frame around `x0`: one lap at `x0` and 2 per parameter for the grid points every
     /// one of them covers (less a margin of 2 % of the stretch at each end, so that laps
     /// further away still cover them), and σ_s from the residuals at `x0`. Returns the
@@ -149,7 +162,6 @@ where
         series: Vec<Series<'a>>,
         bounds: Vec<(f64, f64)>,
         x0: &[f64],
-        pool: &'a rayon::ThreadPool,
         simulate: F,
     ) -> Result<Started<'a, F>, String> {
         let p = x0.len();
@@ -159,9 +171,8 @@ where
                 .into_iter()
                 .map(|(_, y)| y),
         );
-        let runs: Vec<Vec<(Range<usize>, Vec<f64>)>> = par_map(pool, &points, &simulate)
-            .into_iter()
-            .collect::<Result<_, _>>()?;
+        let runs: Vec<Vec<(Range<usize>, Vec<f64>)>> =
+            simulate(&points).into_iter().collect::<Result<_, _>>()?;
         let mut ranges = Vec::new();
         for (b, s) in series.iter().enumerate() {
             let lo = runs.iter().map(|r| r[b].0.start).max().unwrap_or(0);
@@ -187,7 +198,6 @@ where
             scale: Vec::new(),
             bounds,
             simulate,
-            pool,
             laps: std::sync::atomic::AtomicUsize::new(points.len()),
         };
         let raws: Vec<Raw> = runs
@@ -256,7 +266,7 @@ where
     fn run(&self, points: &[Vec<f64>]) -> Vec<Result<Raw, String>> {
         self.laps
             .fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
-        par_map(self.pool, points, &self.simulate)
+        (self.simulate)(points)
             .into_iter()
             .map(|r| r.and_then(|r| self.raw(&r)))
             .collect()
@@ -309,6 +319,7 @@ where
         let mut statement = None;
         let mut converged = false;
         let mut iterations = 0;
+        let mut laps = 0;
         'outer: while iterations < limits.max_iterations {
             iterations += 1;
             // Normal equations in range-scaled parameters.
@@ -362,6 +373,7 @@ where
                     break 'outer;
                 }
                 let points: Vec<Vec<f64>> = trials.iter().map(|t| t.1.clone()).collect();
+                laps += points.len();
                 let accepted =
                     trials
                         .into_iter()
@@ -374,6 +386,7 @@ where
                     Some((l, trial, r)) => {
                         let s_new = self.objective(&r);
                         let small = s - s_new <= RELATIVE_DECREASE * s;
+                        laps += 2 * free.iter().filter(|&&f| f).count();
                         match self.sensitivities_at(&trial, free) {
                             Ok(j) => {
                                 (x, raw, sens, s) = (trial, r, j, s_new);
@@ -414,6 +427,7 @@ where
             x,
             objective: s,
             iterations,
+            laps,
             converged,
             statement,
             raw,
@@ -636,14 +650,6 @@ fn solve(a: &[Vec<f64>], g: &[f64], active: &[usize], lambda: f64) -> Option<Vec
     Some(delta)
 }
 
-/// `f` at every point, in parallel on `pool` (one lap per thread at a time), in order.
-fn par_map<F>(pool: &rayon::ThreadPool, points: &[Vec<f64>], f: &F) -> Vec<Simulated>
-where
-    F: Fn(&[f64]) -> Simulated + Sync,
-{
-    pool.install(|| points.par_iter().with_max_len(1).map(|x| f(x)).collect())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -681,7 +687,8 @@ mod tests {
                 segment: 0,
             }];
             let bounds = vec![(0.1, 10.0), (0.01, 5.0)];
-            let (frame, raw, sens) = Frame::new(series, bounds, &x0, &pool, simulate).unwrap();
+            let (frame, raw, sens) =
+                Frame::new(series, bounds, &x0, on_pool(&pool, simulate)).unwrap();
             let sol = frame.minimise(&x0, raw, sens, &[true, true], ANSWER);
             assert!(sol.converged, "{sol:?}");
             let (_, var) = frame.covariances(&sol);
@@ -725,7 +732,7 @@ mod tests {
             segment: 0,
         }];
         let (frame, raw, sens) =
-            Frame::new(series, vec![(0.5, 2.0)], &[1.0], &pool, simulate).unwrap();
+            Frame::new(series, vec![(0.5, 2.0)], &[1.0], on_pool(&pool, simulate)).unwrap();
         let sol = frame.minimise(&[1.0], raw, sens, &[true], ANSWER);
         assert_eq!(sol.x, vec![2.0]);
         assert!(sol.converged);

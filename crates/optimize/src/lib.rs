@@ -55,7 +55,7 @@ pub use identifiability::Identifiability;
 pub use interval::{Intervals, ParameterInterval};
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
 pub use pool::WorkerPool;
-pub use remote::{Candidate, Evaluator, InputDigest, StepCost, StudyEvaluator};
+pub use remote::{Candidate, Evaluator, InputDigest, LapSignals, StepCost, StudyEvaluator};
 pub use rng::Rng;
 pub use study::{OptimizerKind, Study, StudyFile};
 

@@ -26,7 +26,7 @@
 //! the information's regression of the others on θ_i (usually one iteration). The sides of
 //! all parameters run in parallel on the study's threads.
 
-use super::fit::{Frame, Simulated, Solution};
+use super::fit::{Frame, Laps, Solution};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -97,7 +97,7 @@ pub(crate) fn profiles<F>(
     pool: &rayon::ThreadPool,
 ) -> Profiles
 where
-    F: Fn(&[f64]) -> Simulated + Sync,
+    F: Laps,
 {
     let started = std::time::Instant::now();
     let threshold = critical_value * critical_value;
@@ -274,7 +274,7 @@ struct Around<'a> {
 
 fn walk<F>(frame: &Frame<'_, F>, at: &Around, i: usize, sign: f64) -> Side
 where
-    F: Fn(&[f64]) -> Simulated + Sync,
+    F: Laps,
 {
     let Around {
         name,
@@ -332,7 +332,10 @@ where
                 (prev_x[j] + slope[j] * (value - prev_value)).clamp(lo, hi)
             };
         }
-        let laps0 = frame.laps();
+        // This point's own laps (the frame's count is shared with the walks running at
+        // the same time): its start's (the lap there and one forward difference per free
+        // parameter) and the fit's.
+        let start_laps = 1 + free.iter().filter(|&&f| f).count();
         let solution = frame
             .start(&x0, &free)
             .map(|(raw, sens)| frame.minimise(&x0, raw, sens, &free, POINT));
@@ -352,7 +355,7 @@ where
             value,
             statistic,
             parameters: solution.x.clone(),
-            laps: frame.laps() - laps0,
+            laps: start_laps + solution.laps,
         });
         if statistic >= threshold {
             above += 1;
@@ -383,7 +386,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::{Series, ANSWER};
+    use crate::fit::{on_pool, Series, ANSWER};
 
     /// A profile rough at the level of ±0.4 around (u/σ)²: the crossing of 1.96² from the
     /// smoothed points within 5 % of 1.96·σ.
@@ -448,7 +451,7 @@ mod tests {
         }];
         let bounds = vec![(0.5, 5.0), (0.1, 3.0), (0.0, 1.0)];
         let x0 = [1.5, 0.5, 0.5];
-        let (frame, raw, sens) = Frame::new(series, bounds, &x0, &pool, simulate).unwrap();
+        let (frame, raw, sens) = Frame::new(series, bounds, &x0, on_pool(&pool, simulate)).unwrap();
         let answer = frame.minimise(&x0, raw, sens, &[true, true, true], ANSWER);
         let names: Vec<String> = ["m.a", "m.b", "m.c"]
             .iter()
@@ -475,5 +478,17 @@ mod tests {
             );
         }
         assert!(p.laps > 0 && p.points > 0);
+        // Each point counts its own laps (its start's 1 + 2 free, and its fit's), whatever
+        // the walks running beside it ran; a point that failed counts none.
+        let counted: usize = p
+            .parameters
+            .iter()
+            .flat_map(|q| &q.points)
+            .map(|q| q.laps)
+            .sum();
+        assert!(counted <= p.laps, "{counted} > {}", p.laps);
+        for q in p.parameters.iter().flat_map(|q| &q.points) {
+            assert!(q.statistic == 0.0 || q.laps >= 3, "{q:?}");
+        }
     }
 }

@@ -39,7 +39,20 @@ pub struct Candidate {
 /// interruption), which ends the study with the checkpoint of the last whole generation.
 pub trait Evaluator: Send + Sync {
     fn evaluate(&self, candidates: &[Candidate]) -> Result<Vec<Result<f64, String>>, String>;
+
+    /// The joint fit's laps (the refinement, the profiles) at `points` (every parameter's
+    /// value, [`WorkerPool::assignment`]'s order): per point the filtered signals of
+    /// [`Study::joint_signals`] on the grid, per lap and signal (laps outer) the first grid
+    /// index and the values ([`StudyEvaluator::signals`]), or why its run failed. An
+    /// evaluator that cannot says so (`Err`) and the fit is not made.
+    fn signals(&self, points: &[Vec<f64>]) -> Result<Vec<Result<LapSignals, String>>, String> {
+        let _ = points;
+        Err("this evaluator runs candidates' costs only, not the joint fit's laps".into())
+    }
 }
+
+/// A point's filtered signals on the grid, per lap and signal: (first grid index, values).
+pub type LapSignals = Vec<(usize, Vec<f64>)>;
 
 /// The cost of a step's comparison: its signals, their weights and the bias weight.
 #[derive(Clone, Debug)]
@@ -151,6 +164,8 @@ pub struct StudyEvaluator {
     bench: Bench,
     digest: InputDigest,
     prepared: Mutex<HashMap<usize, Arc<Vec<PreparedMeasurement>>>>,
+    /// The measurement prepared for the joint fit's signals, on its first use.
+    joint: std::sync::OnceLock<Result<Vec<PreparedMeasurement>, String>>,
 }
 
 impl StudyEvaluator {
@@ -173,6 +188,7 @@ impl StudyEvaluator {
             bench,
             digest,
             prepared: Mutex::new(HashMap::new()),
+            joint: std::sync::OnceLock::new(),
         })
     }
 
@@ -208,6 +224,24 @@ impl StudyEvaluator {
         })?;
         let prepared = self.prepared(c.step, &cost.signals)?;
         self.bench.cost(&cost, &c.values, &prepared)
+    }
+
+    /// The joint fit's signals at `values` (every parameter's value), as
+    /// [`Evaluator::signals`] returns them for one point: the same numbers to the bit as the
+    /// coordinator's own laps ([`Bench::signals`] for both).
+    pub fn signals(&self, values: &[f64]) -> Result<LapSignals, String> {
+        let (signals, _) = self.study.joint_signals();
+        let prepared = self
+            .joint
+            .get_or_init(|| {
+                self.bench
+                    .prepare(&signals, &self.study.file.compare)
+                    .map_err(|e| e.to_string())
+            })
+            .as_ref()
+            .map_err(Clone::clone)?;
+        let series = self.bench.signals(values, prepared, &signals)?;
+        Ok(series.into_iter().map(|(r, v)| (r.start, v)).collect())
     }
 
     fn prepared(

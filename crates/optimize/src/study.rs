@@ -161,7 +161,7 @@ fn unit_weight() -> f64 {
 }
 
 /// `measurement = "lap.mf4"` or `[measurement] file = "lap.mf4"` with `[measurement.channels]`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum MeasurementConfig {
     Path(PathBuf),
@@ -170,6 +170,37 @@ pub enum MeasurementConfig {
         #[serde(default)]
         channels: ChannelMap,
     },
+}
+
+/// `[measurement]` as a table: its keys checked (a misspelt `file` or a `weight`, which
+/// belongs to `[[measurement]]` entries, is named rather than ignored).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MappedMeasurement {
+    file: PathBuf,
+    #[serde(default)]
+    channels: ChannelMap,
+}
+
+// By the value's shape, so that a mistake in the table is named, not "did not match any
+// variant".
+impl<'de> Deserialize<'de> for MeasurementConfig {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        match toml::Value::deserialize(d)? {
+            toml::Value::String(s) => Ok(MeasurementConfig::Path(PathBuf::from(s))),
+            t @ toml::Value::Table(_) => MappedMeasurement::deserialize(t)
+                .map(|m| MeasurementConfig::Mapped {
+                    file: m.file,
+                    channels: m.channels,
+                })
+                .map_err(|e| D::Error::custom(e.to_string().trim_end().to_string())),
+            other => Err(D::Error::custom(format!(
+                "expected a file name (measurement = \"lap.mf4\") or a table with `file` and `channels` ([measurement]), found {}",
+                other.type_str()
+            ))),
+        }
+    }
 }
 
 impl MeasurementConfig {
@@ -312,6 +343,21 @@ impl StepConfig {
 }
 
 impl Study {
+    /// The signals of the joint fit with their weights: every step's, each once (its
+    /// first step's weight), in the steps' order.
+    pub fn joint_signals(&self) -> (Vec<String>, Vec<f64>) {
+        let (mut signals, mut weights) = (Vec::new(), Vec::new());
+        for step in &self.file.steps {
+            for (s, w) in step.signals.iter().zip(step.weights()) {
+                if !signals.contains(s) {
+                    signals.push(s.clone());
+                    weights.push(w);
+                }
+            }
+        }
+        (signals, weights)
+    }
+
     pub fn load(path: &Path) -> Result<Study, OptimizeError> {
         let text = tb_files::input::read_to_string(path, tb_files::Limit::CONFIG).map_err(|e| {
             OptimizeError::File {

@@ -15,7 +15,7 @@ use tb_cosim::{LoadOptions, Plan, Simulation};
 use tb_fmi::FmuCache;
 use tb_optimize::optimizer::{to_bounds, to_unit};
 use tb_optimize::{
-    Candidate, Cmaes, Evaluator, Ga, GenerationRecord, OptimizerKind, Progress, Study,
+    Candidate, Cmaes, Evaluator, Ga, GenerationRecord, LapSignals, OptimizerKind, Progress, Study,
     StudyEvaluator,
 };
 
@@ -196,31 +196,42 @@ fn compare(
 
 /// Hands a study's generations to a `concurrent.futures.Executor`: one task per candidate,
 /// `function(study_path, digest_json, step, values)` returning the cost or the reason it
-/// failed. A Python exception (a lost cluster, Ctrl-C) stops the study; it is kept and
-/// raised as itself once the study has returned.
+/// failed; and the joint fit's laps, one task per point, `signals(study_path, digest_json,
+/// values)` returning the filtered signals or the reason the run failed. A Python
+/// exception (a lost cluster, Ctrl-C) stops the study; it is kept and raised as itself
+/// once the study has returned.
 struct ExecutorEvaluator {
     executor: Py<PyAny>,
     function: Py<PyAny>,
+    signals: Option<Py<PyAny>>,
     study: String,
     digest: String,
     raised: Mutex<Option<PyErr>>,
 }
 
-impl Evaluator for ExecutorEvaluator {
-    fn evaluate(&self, candidates: &[Candidate]) -> Result<Vec<Result<f64, String>>, String> {
+impl ExecutorEvaluator {
+    /// `function(study, digest, *args)` for each task's `args`, submitted together; the
+    /// results in order, each checked by `take` (an `Err` is the executor's own failure:
+    /// the remaining futures are cancelled and the error kept to be raised).
+    fn tasks<T>(
+        &self,
+        function: &Py<PyAny>,
+        args: Vec<Vec<Py<PyAny>>>,
+        take: impl Fn(usize, &Bound<'_, PyAny>) -> PyResult<T>,
+    ) -> Result<Vec<T>, String> {
         Python::attach(|py| {
-            let run = || -> PyResult<Vec<Result<f64, String>>> {
+            let run = || -> PyResult<Vec<T>> {
                 let submit = self.executor.bind(py).getattr("submit")?;
-                let mut futures = Vec::with_capacity(candidates.len());
-                for c in candidates {
-                    let f = submit.call1((
-                        self.function.bind(py),
-                        &self.study,
-                        &self.digest,
-                        c.step,
-                        c.values.clone(),
-                    ));
-                    match f {
+                let mut futures = Vec::with_capacity(args.len());
+                for a in args {
+                    let mut all: Vec<Py<PyAny>> = vec![
+                        function.clone_ref(py),
+                        self.study.clone().into_pyobject(py)?.into_any().unbind(),
+                        self.digest.clone().into_pyobject(py)?.into_any().unbind(),
+                    ];
+                    all.extend(a);
+                    let all = pyo3::types::PyTuple::new(py, all)?;
+                    match submit.call1(all) {
                         Ok(f) => futures.push(f),
                         Err(e) => {
                             cancel(&futures);
@@ -230,34 +241,13 @@ impl Evaluator for ExecutorEvaluator {
                 }
                 let mut out = Vec::with_capacity(futures.len());
                 for (k, f) in futures.iter().enumerate() {
-                    let r = match f.call_method0("result") {
-                        Ok(r) => r,
+                    match f.call_method0("result").and_then(|r| take(k, &r)) {
+                        Ok(t) => out.push(t),
                         Err(e) => {
                             cancel(&futures[k..]);
                             return Err(e);
                         }
-                    };
-                    out.push(match r.extract::<f64>() {
-                        // A cost is e plus a bias term: finite and not negative. Anything
-                        // else is a broken task or cluster, not a candidate's result.
-                        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
-                        Ok(x) => {
-                            return Err(TwinbenchError::new_err(format!(
-                                "the executor returned {x:?} as the cost of candidate {k} of step {}: a cost is a finite number ≥ 0 (is the task or the cluster broken?)",
-                                candidates[k].step + 1
-                            )))
-                        }
-                        Err(_) if r.is_instance_of::<pyo3::types::PyString>() => {
-                            Err(r.str()?.to_string())
-                        }
-                        Err(_) => {
-                            return Err(TwinbenchError::new_err(format!(
-                                "the executor returned {} for candidate {k} of step {}: a task returns a cost (a float) or why the run failed (a str)",
-                                r.repr()?,
-                                candidates[k].step + 1
-                            )))
-                        }
-                    });
+                    }
                 }
                 py.check_signals()?;
                 Ok(out)
@@ -267,6 +257,80 @@ impl Evaluator for ExecutorEvaluator {
                 *self.raised.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
                 text
             })
+        })
+    }
+}
+
+impl Evaluator for ExecutorEvaluator {
+    fn evaluate(&self, candidates: &[Candidate]) -> Result<Vec<Result<f64, String>>, String> {
+        // The task's arguments after study and digest: the step and the values.
+        let args = Python::attach(|py| -> PyResult<Vec<Vec<Py<PyAny>>>> {
+            candidates
+                .iter()
+                .map(|c| {
+                    Ok(vec![
+                        c.step.into_pyobject(py)?.into_any().unbind(),
+                        c.values.clone().into_pyobject(py)?.into_any().unbind(),
+                    ])
+                })
+                .collect()
+        })
+        .map_err(|e| e.to_string())?;
+        self.tasks(&self.function, args, |k, r| match r.extract::<f64>() {
+            // A cost is e plus a bias term: finite and not negative. Anything else is a
+            // broken task or cluster, not a candidate's result.
+            Ok(x) if x.is_finite() && x >= 0.0 => Ok(Ok(x)),
+            Ok(x) => Err(TwinbenchError::new_err(format!(
+                "the executor returned {x:?} as the cost of candidate {k} of step {}: a cost is a finite number ≥ 0 (is the task or the cluster broken?)",
+                candidates[k].step + 1
+            ))),
+            Err(_) if r.is_instance_of::<pyo3::types::PyString>() => Ok(Err(r.str()?.to_string())),
+            Err(_) => Err(TwinbenchError::new_err(format!(
+                "the executor returned {} for candidate {k} of step {}: a task returns a cost (a float) or why the run failed (a str)",
+                r.repr()?,
+                candidates[k].step + 1
+            ))),
+        })
+    }
+
+    fn signals(&self, points: &[Vec<f64>]) -> Result<Vec<Result<LapSignals, String>>, String> {
+        let Some(function) = &self.signals else {
+            return Err("no signals task was given with the executor".into());
+        };
+        let args = Python::attach(|py| -> PyResult<Vec<Vec<Py<PyAny>>>> {
+            points
+                .iter()
+                .map(|x| Ok(vec![x.clone().into_pyobject(py)?.into_any().unbind()]))
+                .collect()
+        })
+        .map_err(|e| e.to_string())?;
+        self.tasks(function, args, |k, r| {
+            if r.is_instance_of::<pyo3::types::PyString>() {
+                return Ok(Err(r.str()?.to_string()));
+            }
+            let series: Vec<(usize, Vec<u8>)> = r.extract().map_err(|_| {
+                TwinbenchError::new_err(format!(
+                    "the executor returned {} for point {k} of the joint fit: a task returns [(first grid index, float64 bytes)] per lap and signal, or why the run failed (a str)",
+                    r.repr().map(|s| s.to_string()).unwrap_or_default()
+                ))
+            })?;
+            series
+                .into_iter()
+                .map(|(start, bytes)| {
+                    if bytes.len() % 8 != 0 {
+                        return Err(TwinbenchError::new_err(format!(
+                            "the executor returned {} bytes for a signal of point {k}: not whole float64 values",
+                            bytes.len()
+                        )));
+                    }
+                    let v = bytes
+                        .chunks_exact(8)
+                        .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+                        .collect();
+                    Ok((start, v))
+                })
+                .collect::<PyResult<LapSignals>>()
+                .map(Ok)
         })
     }
 }
@@ -307,7 +371,7 @@ impl Progress for PyProgress {
 /// Runs a study as `twinbench optimize --json` does (same files in `out`); returns the
 /// result as JSON. `executor` and `function`: evaluate the generations there.
 #[pyfunction]
-#[pyo3(signature = (study, out, threads, resume, generations, optimizer, force, no_report, executor=None, function=None, digest=None, progress=None, profiles=false))]
+#[pyo3(signature = (study, out, threads, resume, generations, optimizer, force, no_report, executor=None, function=None, digest=None, progress=None, profiles=false, signals=None))]
 #[allow(clippy::too_many_arguments)]
 fn optimize(
     py: Python<'_>,
@@ -324,6 +388,7 @@ fn optimize(
     digest: Option<String>,
     progress: Option<Py<PyAny>>,
     profiles: bool,
+    signals: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let optimizer = optimizer
         .map(|o| match o.as_str() {
@@ -338,6 +403,7 @@ fn optimize(
         (Some(executor), Some(function)) => Some(Arc::new(ExecutorEvaluator {
             executor,
             function,
+            signals,
             study: study.display().to_string(),
             digest: digest.unwrap_or_default(),
             raised: Mutex::new(None),
@@ -503,6 +569,27 @@ impl StudyEvaluatorPy {
             tb_optimize::optimizer::finite(inner.cost(&Candidate { step, values }))
         });
         outcome_object(py, result)
+    }
+
+    /// The joint fit's filtered signals at `values` (every parameter's value): per lap and
+    /// signal, the first grid index and the values as little-endian float64 bytes; or the
+    /// reason the run failed (a str).
+    fn signals(&self, py: Python<'_>, values: Vec<f64>) -> PyResult<Py<PyAny>> {
+        let inner = self.inner.clone();
+        let result = py.detach(move || inner.signals(&values));
+        Ok(match result {
+            Ok(series) => {
+                let list: Vec<(usize, Py<PyBytes>)> = series
+                    .into_iter()
+                    .map(|(start, v)| {
+                        let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+                        (start, PyBytes::new(py, &bytes).unbind())
+                    })
+                    .collect();
+                list.into_pyobject(py)?.into_any().unbind()
+            }
+            Err(why) => why.into_pyobject(py)?.into_any().unbind(),
+        })
     }
 
     /// Many candidates' costs on `threads` threads (0: all cores): each a float, or the

@@ -261,6 +261,36 @@ def test_a_study_of_two_laps_on_dask_equals_the_command_line(tmp_path):
     assert "| Fz_sum (two) |" in md and "| held out |" in md
 
 
+def test_the_joint_fit_and_its_profiles_run_on_dask_as_on_the_command_line(tmp_path):
+    # The lift step alone, with profiles: the refinement's and the profiles' laps are
+    # tasks on the workers, and the answer, the intervals and every profile point are the
+    # command line's to the bit.
+    text = STUDY.read_text()
+    text = text[: text.index("# Step 2")].replace("\n[compare]", "\nprofiles = true\n\n[compare]", 1)
+    text = text.replace('"../', f'"{ROOT.as_posix()}/')
+    study = tmp_path / "lift.toml"
+    study.write_text(text)
+    cli("optimize", study, "--out", tmp_path / "cli", "--json", "--generations", "3")
+    cluster, client = local_cluster(tmp_path)
+    try:
+        result = twinbench.Study(study).optimize(
+            executor=client.get_executor(), out=tmp_path / "dask", generations=3
+        )
+        served = client.run(lambda: __import__("twinbench._worker")._worker.points())
+    finally:
+        client.close()
+        cluster.close()
+    expected = json.loads((tmp_path / "cli" / "result.json").read_text())
+    profiles = result["profiles"]
+    # Every lap of the refinement and the profiles ran on a worker (none here), on both.
+    assert sum(served.values()) == expected["joint"]["refinement"]["laps"] + profiles["laps"]
+    assert all(n > 0 for n in served.values()), served
+    assert result["joint"] == expected["joint"]
+    for mine, theirs in zip(profiles["parameters"], expected["profiles"]["parameters"], strict=True):
+        assert mine == theirs
+    assert table1(tmp_path / "dask") == table1(tmp_path / "cli")
+
+
 def test_a_worker_killed_mid_study_changes_nothing(cli_study, tmp_path):
     cluster, client = local_cluster(tmp_path)
     killed = []

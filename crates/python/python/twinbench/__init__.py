@@ -372,12 +372,14 @@ class Study:
 
         Args:
             executor: a ``concurrent.futures.Executor`` for the generations' candidates,
-                one task per candidate (Dask: ``Client.get_executor()``). Every worker
-                process needs twinbench installed and the study's files at the same
-                paths; it loads the study once and keeps it. None: this process's
-                threads.
+                one task per candidate (Dask: ``Client.get_executor()``), and for the
+                joint fit after the steps (refinement, profiles) one task per point.
+                Every worker process needs twinbench installed and the study's files at
+                the same paths; it loads the study once and keeps it. None: this
+                process's threads.
             threads: threads for the local runs (all of them without an executor: the
-                generations; with one: the start, identifiability and result runs).
+                generations and the joint fit; with one: the start, identifiability and
+                result runs).
                 None: all cores.
             resume: continue from the checkpoint in ``out`` (same result as an
                 uninterrupted run, wherever the candidates ran).
@@ -406,11 +408,11 @@ class Study:
         """
         import json
 
-        function = digest = None
+        function = signals = digest = None
         if executor is not None:
             from . import _worker
 
-            function = _worker.cost
+            function, signals = _worker.cost, _worker.signals
             digest = self._loaded().digest
         text = _native.optimize(
             os.fspath(self.path),
@@ -426,6 +428,7 @@ class Study:
             digest,
             progress,
             bool(profiles),
+            signals,
         )
         result = json.loads(text)
         # The study's answer (Tab. 1's row "all"): every parameter with its interval; a

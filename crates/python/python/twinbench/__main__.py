@@ -38,6 +38,7 @@ def _parser() -> argparse.ArgumentParser:
     o.add_argument("--optimizer", choices=["ga", "cmaes"], help="override the study's optimiser")
     o.add_argument("--force", action="store_true", help="optimise even when measurement and twin do not belong together")
     o.add_argument("--no-report", action="store_true", help="skip Tab. 1 and the plots")
+    o.add_argument("--profiles", action="store_true", help="profile likelihood of every parameter (its laps on the cluster too)")
     o.add_argument("--json", action="store_true", help="print the result as JSON")
     k = sub.add_parser("pack", help="pack twinbench's FMUs (vehicle, driver, dyno, edu) as `twinbench pack` does")
     k.add_argument("models", nargs="*", help="the models to pack (default: all four)")
@@ -85,6 +86,7 @@ def _optimize(args: argparse.Namespace) -> int:
             out=args.out,
             force=args.force,
             report=not args.no_report,
+            profiles=args.profiles,
         )
         wall = time.perf_counter() - started
     finally:

@@ -1,6 +1,8 @@
 """What runs on a worker process of a distributed study (a Dask worker, a process pool).
 
-Each task is one candidate: ``cost(study_path, digest, step, values)``. The first task
+Each task is one candidate, ``cost(study_path, digest, step, values)``, or one point of the
+joint fit (the refinement and the profiles after the steps), ``signals(study_path, digest,
+values)``. The first task
 of a study loads it (FMUs unpacked, measurement read) and the process keeps it for every
 later task, so a worker pays the start-up once. The coordinator's ``digest`` (SHA-256 of
 every file the study reads) must match this worker's files: a worker that sees other
@@ -10,13 +12,14 @@ files refuses, naming the file, rather than computing a cost of another study.
 from __future__ import annotations
 
 import threading
-from typing import Dict, List, Union
+from typing import Dict, List, Tuple, Union
 
 from . import _native
 from ._native import TwinbenchError
 
 _lock = threading.Lock()
 _loaded: Dict[str, "_native.StudyEvaluatorPy"] = {}
+_points = 0
 
 
 def _evaluator(study: str, digest: str):
@@ -39,7 +42,25 @@ def cost(study: str, digest: str, step: int, values: List[float]) -> Union[float
     return _evaluator(study, digest).cost(step, values)
 
 
+def signals(study: str, digest: str, values: List[float]) -> Union[List[Tuple[int, bytes]], str]:
+    """One point of the study's joint fit (its refinement, a profile): every fitted lap
+    run with ``values`` (every parameter), and per lap and signal the first grid index and
+    the filtered signal on the grid as little-endian float64 bytes; or the reason the run
+    failed (a str). Raises when the worker cannot evaluate at all."""
+    global _points
+    ev = _evaluator(study, digest)
+    with _lock:
+        _points += 1
+    return ev.signals(values)
+
+
 def loaded() -> int:
     """Studies this process holds (for tests and diagnostics)."""
     with _lock:
         return len(_loaded)
+
+
+def points() -> int:
+    """Points of joint fits this process has run (for tests and diagnostics)."""
+    with _lock:
+        return _points
