@@ -63,6 +63,15 @@ fn n01_the_folder_lock_follows_no_link_and_takes_no_other_users_folder() {
         .expect("a FIFO lock is refused")
         .to_string();
     assert!(e.contains("is not a regular file"), "{e}");
+    // A hard link to a file of the user's (M18): refused, nothing written through it.
+    std::fs::create_dir(d.join("out3")).unwrap();
+    std::fs::hard_link(&victim, d.join("out3/.twinbench.lock")).unwrap();
+    let e = tb_table::FolderLock::acquire(&d.join("out3"))
+        .err()
+        .expect("a hard-linked lock is refused")
+        .to_string();
+    assert!(e.contains("has 2 hard links"), "{e}");
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
     // Another user's folder (only root can make one here).
     if unsafe { libc::geteuid() } == 0 {
         let other = d.join("theirs");

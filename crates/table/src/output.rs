@@ -370,10 +370,22 @@ impl FolderLock {
                 ),
                 _ => refuse(&path, e),
             })?;
-        if !file.metadata().map_err(|e| refuse(&path, e))?.is_file() {
+        let lock_meta = file.metadata().map_err(|e| refuse(&path, e))?;
+        if !lock_meta.is_file() {
             return Err(refuse(
                 &path,
                 "is not a regular file: refusing to use it as the folder's lock (remove it)",
+            ));
+        }
+        // A hard link to another file (M18): writing our process id would change that
+        // file. Checked before anything is written.
+        if lock_meta.nlink() != 1 {
+            return Err(refuse(
+                &path,
+                format!(
+                    "has {} hard links (another file shares it): refusing to write into it (remove it; twinbench makes its own lock file)",
+                    lock_meta.nlink()
+                ),
             ));
         }
         // SAFETY: flock on an open descriptor of ours.
