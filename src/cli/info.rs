@@ -14,9 +14,10 @@ pub struct InfoArgs {
     /// functions). Without this or --isolate, none of the FMU's code runs.
     #[arg(long)]
     pub check: bool,
-    /// Check the library in a worker process: a crash or hang there cannot harm this one.
-    #[arg(long, conflicts_with = "check")]
-    pub isolate: bool,
+    /// Check the library in a worker process: a crash or hang there cannot harm this one
+    /// (confined, or `--isolate=crash-only`).
+    #[arg(long, conflicts_with = "check", num_args = 0..=1, require_equals = true, default_missing_value = "confined", value_name = "MODE")]
+    pub isolate: Option<super::IsolateMode>,
     /// Watchdog of the --isolate check [s].
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
     pub worker_timeout: f64,
@@ -36,8 +37,9 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
     let cache = FmuCache::temporary(false)?;
     // Reading the archive and its model description runs none of the FMU's code.
     let fmu = cache.load(&args.fmu)?;
-    let check = if args.isolate {
+    let check = if let Some(mode) = args.isolate {
         let options = tb_cosim::isolated::IsolationOptions {
+            mode: mode.mode(),
             timeout: tb_cosim::isolated::watchdog(args.worker_timeout)
                 .map_err(|m| anyhow::anyhow!("--worker-timeout: {m}"))?,
             preload: args.preload.clone(),

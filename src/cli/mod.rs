@@ -187,3 +187,21 @@ pub fn main() -> ExitCode {
 }
 
 pub use crate::bench::{lap_time, message};
+
+/// `--isolate[=MODE]`: confined (the default) or crash isolation only.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum IsolateMode {
+    /// Confined: the FMU writes only its scratch folder, no network, nothing outlives the run.
+    Confined,
+    /// Crash and hang isolation only: the worker runs unconfined, as the user.
+    CrashOnly,
+}
+
+impl IsolateMode {
+    pub fn mode(self) -> tb_cosim::isolated::confine::Mode {
+        match self {
+            IsolateMode::Confined => tb_cosim::isolated::confine::Mode::Confined,
+            IsolateMode::CrashOnly => tb_cosim::isolated::confine::Mode::CrashOnly,
+        }
+    }
+}

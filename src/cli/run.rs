@@ -29,9 +29,11 @@ pub struct RunArgs {
     #[arg(long)]
     pub native: bool,
     /// Run every FMU instance in a worker process: a crash or hang of an FMU ends the run
-    /// with an error naming the instance, time and cause (`isolate = true` does it per instance).
-    #[arg(long)]
-    pub isolate: bool,
+    /// with an error naming the instance, time and cause (`isolate = true` does it per
+    /// instance). Confined by default (the FMU writes only a scratch folder, has no network,
+    /// leaves no process behind); `--isolate=crash-only` isolates for crashes and hangs only.
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "confined", value_name = "MODE")]
+    pub isolate: Option<super::IsolateMode>,
     /// Watchdog of isolated instances: the longest wait for one call [s].
     #[arg(long, value_name = "SECONDS", default_value_t = 10.0)]
     pub worker_timeout: f64,
@@ -170,9 +172,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let options = LoadOptions {
         native: args.native,
         native_models: crate::registry::native_models(),
-        isolate: args.isolate,
+        isolate: args.isolate.is_some(),
         isolation: tb_cosim::isolated::IsolationOptions {
             timeout,
+            mode: args.isolate.map(|m| m.mode()).unwrap_or_default(),
             ..Default::default()
         },
         trace: args

@@ -52,7 +52,7 @@ pub fn system(args: &RunArgs, cache: &FmuCache) -> anyhow::Result<(SystemFile, S
     let interface = args.interface.unwrap_or_else(|| fmu.default_interface());
     fmu.check_interface(interface)
         .map_err(|why| anyhow::anyhow!("--interface {interface}: {}: {why}", fmu_path.display()))?;
-    if args.record_events && args.isolate && interface == Interface::ModelExchange {
+    if args.record_events && args.isolate.is_some() && interface == Interface::ModelExchange {
         bail!(
             "--record-events with --isolate: an isolated Model Exchange instance integrates in its worker and records no event rows yet; run without --isolate for event rows"
         );

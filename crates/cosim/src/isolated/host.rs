@@ -11,6 +11,7 @@ use std::collections::VecDeque;
 use std::io::Read;
 use std::os::fd::{AsRawFd, OwnedFd};
 use std::os::unix::net::UnixStream;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -38,6 +39,8 @@ pub struct IsolatedBackend {
     dead: Option<String>,
     /// The FMU's last messages, as the worker reported them with an error.
     sink: LogSink,
+    /// A confined worker's scratch folder, removed after the worker (dropped last).
+    _scratch: Option<super::confine::Scratch>,
 }
 
 impl IsolatedBackend {
@@ -50,7 +53,7 @@ impl IsolatedBackend {
         run: RunAs,
     ) -> Result<IsolatedBackend, FmuError> {
         let library = library_target(fmu, options, run)?;
-        let mut b = IsolatedBackend::spawn(name, options, fmu.store())?;
+        let mut b = IsolatedBackend::spawn(name, options, fmu.store(), Some(fmu.dir.clone()))?;
         b.queue(&Request::Instantiate {
             library,
             name: name.to_string(),
@@ -72,7 +75,7 @@ impl IsolatedBackend {
     ) -> Result<LibraryReport, FmuError> {
         let name = fmu.model_identifier().to_string();
         let library = library_target(fmu, options, RunAs::default_for(fmu))?;
-        let mut b = IsolatedBackend::spawn(&name, options, fmu.store())?;
+        let mut b = IsolatedBackend::spawn(&name, options, fmu.store(), Some(fmu.dir.clone()))?;
         let probe = Request::Probe(library);
         b.queue(&probe);
         let answer = b.call(Function::GetVersion.name(), std::slice::from_ref(&probe))?;
@@ -99,6 +102,7 @@ impl IsolatedBackend {
         name: &str,
         options: &IsolationOptions,
         store: Option<&std::path::Path>,
+        fmu_dir: Option<PathBuf>,
     ) -> Result<IsolatedBackend, FmuError> {
         let fail = |cause: String| FmuError::Isolated {
             instance: name.to_string(),
@@ -114,24 +118,60 @@ impl IsolatedBackend {
         // study cleanly, not the worker; and killing the group ends the worker and its
         // guard together.
         std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
-        match (store, tb_fmi::import::sandbox::available()) {
-            (Some(store), Ok(())) => {
-                cmd.env(super::READ_ONLY_ENV, store);
-            }
-            (Some(store), Err(why)) => {
+        // Confined unless the user asked for crash isolation only: a scratch folder of its
+        // own, and what it may read (its FMU's folder, the preloads, the files of `*_file`
+        // parameters).
+        let _ = store;
+        let scratch = match options.mode.effective() {
+            super::confine::Mode::CrashOnly => {
                 static ONCE: std::sync::Once = std::sync::Once::new();
                 ONCE.call_once(|| {
                     log::warn!(
-                        "isolated workers cannot be kept from writing the store of unpacked FMUs {} ({why}); a library this process loads is verified against its FMU's archive instead",
-                        store.display()
+                        "isolated workers are not confined (crash-only isolation): an FMU run so can read and write whatever this user can, the store of unpacked FMUs included"
                     )
                 });
-                cmd.env_remove(super::READ_ONLY_ENV);
+                cmd.env_remove(super::confine::SPEC_ENV);
+                None
             }
-            (None, _) => {
-                cmd.env_remove(super::READ_ONLY_ENV);
+            super::confine::Mode::Confined => {
+                let scratch = super::confine::Scratch::new()
+                    .map_err(|e| fail(format!("cannot make the worker's scratch folder: {e}")))?;
+                let mut read: Vec<PathBuf> = fmu_dir.into_iter().collect();
+                for p in &options.preload {
+                    // A preloaded interpreter reads its installation (libpython: its
+                    // standard library beside `lib/`), found where the library really is.
+                    let real = std::fs::canonicalize(p).unwrap_or_else(|_| p.clone());
+                    for lib in [p.clone(), real] {
+                        if let Some(prefix) = lib.parent().and_then(Path::parent) {
+                            read.push(prefix.to_path_buf());
+                        }
+                        read.push(lib);
+                    }
+                }
+                // An embedded Python's own search path, when the user set one.
+                for var in ["PYTHONHOME", "PYTHONPATH"] {
+                    if let Some(v) = std::env::var_os(var) {
+                        read.extend(std::env::split_paths(&v));
+                    }
+                }
+                read.extend(
+                    options
+                        .readable
+                        .read()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .iter()
+                        .cloned(),
+                );
+                let spec = super::confine::Spec {
+                    scratch: scratch.path.clone(),
+                    read: super::confine::existing(read),
+                };
+                let json = serde_json::to_string(&spec)
+                    .map_err(|e| fail(format!("cannot describe the confinement: {e}")))?;
+                cmd.env(super::confine::SPEC_ENV, json);
+                Some(scratch)
             }
-        }
+        };
         cmd.arg("worker")
             .stdin(Stdio::from(OwnedFd::from(worker)))
             .stdout(Stdio::null())
@@ -177,6 +217,7 @@ impl IsolatedBackend {
             prefetched: VecDeque::new(),
             dead: None,
             sink: LogSink::new(name),
+            _scratch: scratch,
         };
         b.request.start_frame();
         Ok(b)
@@ -231,6 +272,20 @@ impl IsolatedBackend {
         }
         use std::os::unix::process::ExitStatusExt;
         match (status.code(), status.signal()) {
+            (Some(super::confine::CANNOT_CONFINE), _) => {
+                let why = self
+                    .stderr_lines()
+                    .into_iter()
+                    .find_map(|l| {
+                        l.split_once("cannot confine the FMU: ")
+                            .map(|(_, w)| w.to_string())
+                    })
+                    .unwrap_or_else(|| "(no reason given)".into());
+                format!(
+                    "the FMU was not loaded: its worker cannot be confined here ({why}); run it with --isolate=crash-only (or {}=crash-only) to isolate it for crashes and hangs only, without confinement",
+                    super::confine::MODE_ENV
+                )
+            }
             (Some(c), _) => format!("the worker process exited with code {c}"),
             (None, Some(sig)) => format!(
                 "the worker process was killed by signal {sig} ({})",
@@ -545,7 +600,10 @@ fn library_target(
         .model_identifier(run.interface)
         .unwrap_or(fmu.model_identifier());
     let library = fmu.checked_library_of(run.interface)?;
+    // The library first, then the files beside it (its dependencies, M3): the worker
+    // verifies each again before it loads anything.
     let mut checks = vec![library.clone()];
+    checks.extend(fmu.beside(&library).into_iter().filter(|c| *c != library));
     if fmu.is_fmi3() || me {
         checks.extend(fmu.unpacked_file("modelDescription.xml"));
     }

@@ -19,6 +19,7 @@
 //! - [`host`]: the backend that talks to a worker;
 //! - [`worker`]: the server that runs in the worker process.
 
+pub mod confine;
 mod host;
 pub mod wire;
 pub mod worker;
@@ -55,9 +56,6 @@ pub fn watchdog(seconds: f64) -> Result<Duration, String> {
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(10);
 /// Environment variable naming the executable that serves `worker` (default: this one).
 pub const WORKER_EXE_ENV: &str = "TWINBENCH_WORKER_EXE";
-/// Environment variable through which the host names the store of unpacked FMUs that the
-/// worker makes read-only for itself (Landlock) before it loads anything.
-pub const READ_ONLY_ENV: &str = "TWINBENCH_WORKER_READ_ONLY";
 /// Lines of the worker's stderr kept for crash reports.
 const STDERR_LINES: usize = 20;
 
@@ -72,6 +70,12 @@ pub struct IsolationOptions {
     /// Libraries the worker loads with RTLD_GLOBAL before the FMU's (the system file's
     /// `preload`, e.g. libpython for a pythonfmu FMU).
     pub preload: Vec<PathBuf>,
+    /// Confined (the default) or crash isolation only ([`confine`]).
+    pub mode: confine::Mode,
+    /// Files and folders a confined worker may read besides the system's and its FMU's
+    /// folder: the files of the system's `*_file` parameters (set when the plan is compiled;
+    /// shared by the plan's instances).
+    pub readable: Arc<std::sync::RwLock<Vec<PathBuf>>>,
 }
 
 impl Default for IsolationOptions {
@@ -80,6 +84,8 @@ impl Default for IsolationOptions {
             timeout: DEFAULT_TIMEOUT,
             worker_exe: None,
             preload: Vec::new(),
+            mode: confine::Mode::default(),
+            readable: Arc::default(),
         }
     }
 }

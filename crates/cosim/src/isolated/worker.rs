@@ -22,34 +22,34 @@ enum Loaded {
     Me(Arc<Library>, Arc<ModelDescription>, PathBuf, MeSettings),
 }
 
-/// Serve the protocol on stdin until the host closes it or says quit. Returns the exit code.
-/// Splits the worker in two: this process becomes a guard that only waits, and the worker
-/// goes on in a child. An FMU that kills its parent (`kill(getppid(), SIGKILL)`) then ends
-/// the guard, not the host. The guard ends as the worker does (the same exit code, the same
-/// signal), and kills the worker's process group when the host is gone. Called before any
-/// thread is started (fork).
-fn guard(host: libc::pid_t) {
-    // SAFETY: no other thread runs yet; the child continues as the worker.
-    let worker = unsafe { libc::fork() };
-    if worker <= 0 {
-        // The worker (or, when fork fails, the worker unguarded).
-        return;
-    }
+/// Waits for `child`, ending this process as it ended (the same exit code, the same signal;
+/// `status` from the pipe when the child passed on its own child's). While waiting, watches
+/// that `host` is still this process's parent, and kills the child's group when it is gone.
+fn mirror(child: libc::pid_t, host: Option<libc::pid_t>, status_pipe: Option<i32>) -> ! {
     let mut status = 0;
     loop {
         // SAFETY: waitpid on our child.
-        let r = unsafe { libc::waitpid(worker, &mut status, libc::WNOHANG) };
-        if r == worker {
+        let r = unsafe { libc::waitpid(child, &mut status, libc::WNOHANG) };
+        if r == child {
             break;
         }
-        if unsafe { libc::getppid() } != host || r < 0 {
-            // The host is gone: end the worker with it (the group is the guard's own).
+        if host.is_some_and(|h| unsafe { libc::getppid() } != h) || r < 0 {
+            // The host is gone: end the worker with it (the group is this process's own;
+            // in a PID namespace the init's death ends everything in it).
             unsafe {
+                libc::kill(child, libc::SIGKILL);
                 libc::kill(-libc::getpid(), libc::SIGKILL);
                 libc::_exit(4);
             }
         }
         std::thread::sleep(Duration::from_millis(50));
+    }
+    if let Some(fd) = status_pipe {
+        let mut passed = [0u8; 4];
+        // SAFETY: a read into a local buffer from our pipe.
+        if unsafe { libc::read(fd, passed.as_mut_ptr().cast(), 4) } == 4 {
+            status = i32::from_ne_bytes(passed);
+        }
     }
     // SAFETY: ending as the worker ended; a signal is re-raised with its default action.
     unsafe {
@@ -66,18 +66,88 @@ fn guard(host: libc::pid_t) {
     }
 }
 
-pub fn serve_stdio() -> i32 {
-    // Before anything else, above all before any thread exists (Landlock restricts the
-    // calling thread and what it starts): the store of unpacked FMUs read-only for good.
-    if let Some(store) = std::env::var_os(super::READ_ONLY_ENV) {
-        let store = std::path::Path::new(&store);
-        if let Err(why) = tb_fmi::import::sandbox::read_only(store) {
-            eprintln!(
-                "twinbench worker: warning: the store of unpacked FMUs {} stays writable for this FMU ({why}); libraries are verified before they are loaded",
-                store.display()
-            );
+/// Splits the worker in two: this process becomes a guard that only waits, and the worker
+/// goes on in a child. An FMU that kills its parent (`kill(getppid(), SIGKILL)`) then ends
+/// the guard, not the host. The guard ends as the worker does, and kills the worker's
+/// process group when the host is gone. Called before any thread is started (fork).
+fn guard(host: libc::pid_t) {
+    // SAFETY: no other thread runs yet; the child continues as the worker.
+    let worker = unsafe { libc::fork() };
+    if worker <= 0 {
+        // The worker (or, when fork fails, the worker unguarded).
+        return;
+    }
+    mirror(worker, Some(host), None)
+}
+
+/// The confined worker's processes: this one (the guard, outside) makes a PID namespace and
+/// starts its init, which starts the worker and ends with it (the kernel then kills whatever
+/// else runs in the namespace). An FMU sees its parent as the namespace's init, which
+/// ignores the signals it could send; the guard and the host are not in its namespace.
+/// Returns in the worker; `Err` before any process was started.
+fn guard_confined(host: libc::pid_t) -> Result<(), String> {
+    super::confine::new_pid_namespace()?;
+    let mut fds = [0i32; 2];
+    // SAFETY: a pipe for the worker's status, from the init to the guard.
+    if unsafe { libc::pipe(fds.as_mut_ptr()) } != 0 {
+        return Err(format!("pipe: {}", std::io::Error::last_os_error()));
+    }
+    let (read_end, write_end) = (fds[0], fds[1]);
+    // SAFETY: single-threaded; the child becomes the namespace's init.
+    let init = unsafe { libc::fork() };
+    if init < 0 {
+        return Err(format!(
+            "cannot start the worker's init: {}",
+            std::io::Error::last_os_error()
+        ));
+    }
+    if init > 0 {
+        unsafe { libc::close(write_end) };
+        mirror(init, Some(host), Some(read_end));
+    }
+    // The init (PID 1 of the namespace): dies with the guard, starts the worker, passes on
+    // how it ended.
+    unsafe {
+        libc::close(read_end);
+        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL, 0, 0, 0);
+    }
+    // SAFETY: single-threaded; the child is the worker.
+    let worker = unsafe { libc::fork() };
+    if worker == 0 {
+        unsafe {
+            libc::close(write_end);
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL, 0, 0, 0);
+            libc::setsid();
+        }
+        return Ok(());
+    }
+    if worker < 0 {
+        eprintln!(
+            "twinbench worker: cannot start the worker in its namespace: {}",
+            std::io::Error::last_os_error()
+        );
+        unsafe { libc::_exit(super::confine::CANNOT_CONFINE) };
+    }
+    // Reap every process of the namespace until the worker ends.
+    let mut status = 0;
+    loop {
+        // SAFETY: waitpid on any child of ours (orphans of the namespace are ours).
+        let r = unsafe { libc::waitpid(-1, &mut status, 0) };
+        if r == worker
+            || (r < 0 && std::io::Error::last_os_error().raw_os_error() != Some(libc::EINTR))
+        {
+            break;
         }
     }
+    let bytes = status.to_ne_bytes();
+    // SAFETY: a write of a local buffer to our pipe, then the end (the namespace with it).
+    unsafe {
+        libc::write(write_end, bytes.as_ptr().cast(), 4);
+        libc::_exit(0);
+    }
+}
+
+pub fn serve_stdio() -> i32 {
     // Take the socket off fd 0, and point fd 0 at /dev/null and fd 1 at stderr, so that
     // an FMU that reads stdin or prints to stdout cannot touch the protocol.
     let fd = unsafe { libc::fcntl(0, libc::F_DUPFD_CLOEXEC, 3) };
@@ -94,11 +164,41 @@ pub fn serve_stdio() -> i32 {
         libc::dup2(2, 1);
     }
     let host = unsafe { libc::getppid() };
-    guard(host);
-    // Die with the host even when stuck inside the FMU (a closed socket is noticed only
-    // between calls). Not PR_SET_PDEATHSIG: that fires when the host *thread* that started
-    // the worker ends, and hosts move simulations between threads. The host is watched by
-    // its pid, not as the parent: the parent is the guard, which the FMU may kill.
+    // Before anything is loaded, above all before any thread exists (Landlock and seccomp
+    // hold for the calling thread and what it starts): confined, unless the host asked for
+    // crash isolation only.
+    let spec = std::env::var(super::confine::SPEC_ENV).ok();
+    let Some(spec) = spec else {
+        guard(host);
+        watch_host(host);
+        let stream = unsafe { <UnixStream as std::os::fd::FromRawFd>::from_raw_fd(fd) };
+        return serve(stream);
+    };
+    let cannot = |why: String| -> i32 {
+        eprintln!("twinbench worker: cannot confine the FMU: {why}");
+        super::confine::CANNOT_CONFINE
+    };
+    let spec: super::confine::Spec = match serde_json::from_str(&spec) {
+        Ok(s) => s,
+        Err(e) => return cannot(format!("the host's confinement is not readable: {e}")),
+    };
+    if let Err(why) = guard_confined(host) {
+        return cannot(why);
+    }
+    std::env::remove_var(super::confine::SPEC_ENV);
+    if let Err(why) = super::confine::confine(&spec) {
+        return cannot(why);
+    }
+    let stream = unsafe { <UnixStream as std::os::fd::FromRawFd>::from_raw_fd(fd) };
+    serve(stream)
+}
+
+/// Die with the host even when stuck inside the FMU (a closed socket is noticed only
+/// between calls). Not PR_SET_PDEATHSIG: that fires when the host *thread* that started
+/// the worker ends, and hosts move simulations between threads. The host is watched by its
+/// pid, not as the parent: the parent is the guard, which the FMU may kill. (A confined
+/// worker needs no watch: it dies with its namespace's init, which dies with the guard.)
+fn watch_host(host: libc::pid_t) {
     let _ = std::thread::Builder::new()
         .name("host-watch".into())
         .spawn(move || loop {
@@ -108,8 +208,6 @@ pub fn serve_stdio() -> i32 {
                 unsafe { libc::_exit(4) };
             }
         });
-    let stream = unsafe { <UnixStream as std::os::fd::FromRawFd>::from_raw_fd(fd) };
-    serve(stream)
 }
 
 fn serve(stream: UnixStream) -> i32 {

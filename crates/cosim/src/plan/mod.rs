@@ -341,6 +341,10 @@ impl Plan {
         let ctx = path.display().to_string();
         experiment::check(&file, &ctx)?;
         let loaded = instances::load_fmus(&file, &ctx, &cache)?;
+        // This plan's isolated instances share one list of the files they may read.
+        let mut options = options.clone();
+        options.isolation.readable = Arc::default();
+        let options = &options;
         let (instances, native_fallback) = instances::instances(&file, &loaded, &ctx, options)?;
         instances::preload(&file, &instances)?;
         let mut replays = instances::replays(&file, &instances, &ctx)?;
@@ -353,6 +357,11 @@ impl Plan {
         let (connections, notes) = connections::connections(&file, units, &mut signals, &ctx)?;
         let to_hold = connections::replayed_columns(&connections, units, &ctx)?;
         let parameters = values::parameters(&file, &instances, &path, &ctx)?;
+        *options
+            .isolation
+            .readable
+            .write()
+            .unwrap_or_else(|e| e.into_inner()) = path_parameters(&parameters);
         let (record, record_names) = readers::record(&file, units, &mut signals, &ctx)?;
         let stop = stop::stop(&file.experiment, units, &mut signals, &ctx)?;
         let report = readers::report(&file, units, &ctx)?;
@@ -429,13 +438,7 @@ impl Plan {
         files.extend(self.file.fmus.values().cloned());
         files.extend(self.file.replay.iter().map(|r| r.file.clone()));
         files.extend(self.file.preload.iter().cloned());
-        for (slot, value) in &self.parameters {
-            if let ParamValue::String(v) = value {
-                if slot.is_path && !v.is_empty() && !v.starts_with("file:") {
-                    files.push(PathBuf::from(v));
-                }
-            }
-        }
+        files.extend(path_parameters(&self.parameters));
         files
     }
 
@@ -489,4 +492,17 @@ fn structure_gaps(loaded: &HashMap<String, Arc<LoadedFmu>>) -> Vec<String> {
         }
     }
     warnings
+}
+
+/// The files named by `*_file` parameters.
+fn path_parameters(parameters: &[(ParamSlot, ParamValue)]) -> Vec<PathBuf> {
+    parameters
+        .iter()
+        .filter_map(|(slot, value)| match value {
+            ParamValue::String(v) if slot.is_path && !v.is_empty() && !v.starts_with("file:") => {
+                Some(PathBuf::from(v))
+            }
+            _ => None,
+        })
+        .collect()
 }

@@ -143,6 +143,19 @@ impl LoadedFmu {
         })
     }
 
+    /// Every unpacked file in the folder of `library` (itself and the dependencies it may
+    /// load), as checks a worker verifies again before loading.
+    pub fn beside(&self, library: &FileCheck) -> Vec<FileCheck> {
+        let entry = library.rel.split_once('/').map_or("", |(_, e)| e);
+        let folder = entry.rsplit_once('/').map_or("", |(d, _)| d);
+        self.manifest
+            .files
+            .iter()
+            .filter(|f| f.path.rsplit_once('/').map_or("", |(d, _)| d) == folder)
+            .filter_map(|f| self.unpacked_file(&f.path))
+            .collect()
+    }
+
     /// The library of the default interface, verified against the manifest (unpacked
     /// again when it differs): the only way to its path that code is loaded from, in this
     /// process or in a worker.
@@ -162,6 +175,9 @@ impl LoadedFmu {
         self.checked_entry(&entry)
     }
 
+    /// `entry` (a library) and every file beside it in its folder (the dependencies it may
+    /// load through `$ORIGIN`, M3), each checked against the FMU's archive and verified on
+    /// disk (the folder unpacked again when one differs), before anything is loaded.
     fn checked_entry(&self, entry: &str) -> Result<FileCheck, FmuError> {
         let mut checked = lock(&self.library_checked);
         let Some(check) = self.unpacked_file(entry) else {
@@ -173,15 +189,25 @@ impl LoadedFmu {
         if checked.contains(&check) {
             return Ok(check);
         }
-        self.trust_from_archive(&check, entry)?;
-        if let Err(reason) = check.verify() {
-            self.unpack_again(&reason)?;
-            check.verify().map_err(|again| {
-                arch(
-                    &self.source,
-                    format!("{entry}: unpacked again and still not the FMU's: {again}"),
-                )
-            })?;
+        let folder = entry.rsplit_once('/').map_or("", |(d, _)| d);
+        let beside: Vec<(FileCheck, String)> = self
+            .manifest
+            .files
+            .iter()
+            .filter(|f| f.path.rsplit_once('/').map_or("", |(d, _)| d) == folder)
+            .filter_map(|f| Some((self.unpacked_file(&f.path)?, f.path.clone())))
+            .collect();
+        self.trust_from_archive(&beside)?;
+        for (c, name) in &beside {
+            if let Err(reason) = c.verify() {
+                self.unpack_again(&reason)?;
+                c.verify().map_err(|again| {
+                    arch(
+                        &self.source,
+                        format!("{name}: unpacked again and still not the FMU's: {again}"),
+                    )
+                })?;
+            }
         }
         checked.push(check.clone());
         Ok(check)
@@ -209,11 +235,13 @@ impl LoadedFmu {
         Ok(())
     }
 
-    /// A manifest read from a store is trusted when no FMU process could have written the
-    /// store (isolated workers are sandboxed here). Otherwise the library's hash is taken
-    /// from the archive itself before the manifest is believed.
-    fn trust_from_archive(&self, check: &FileCheck, entry: &str) -> Result<(), FmuError> {
-        if self.trusted || super::sandbox::available().is_ok() {
+    /// A manifest read from a store is believed when this process unpacked the folder
+    /// itself, or when no isolated FMU can have written the store (workers are confined
+    /// here). Otherwise (no confinement, or `TWINBENCH_ISOLATE=crash-only`) the hashes of
+    /// `entries` are taken from the archive before the manifest is: an unconfined FMU may
+    /// have rewritten a library and its manifest together (M1).
+    fn trust_from_archive(&self, entries: &[(FileCheck, String)]) -> Result<(), FmuError> {
+        if self.trusted || entries.is_empty() || super::sandbox::available().is_ok() {
             return Ok(());
         }
         // The archive as it is now: if it changed since it was loaded, its library differs
@@ -222,20 +250,23 @@ impl LoadedFmu {
         let bytes = read_regular(&self.source, &file, &self.limits)?;
         let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&bytes[..]))
             .map_err(|e| arch(&self.source, e.to_string()))?;
-        let mut f = zip
-            .by_name(entry)
-            .map_err(|e| arch(&self.source, format!("{entry}: {e}")))?;
-        let mut h = manifest::Hashing {
-            inner: std::io::sink(),
-            hasher: blake3::Hasher::new(),
-        };
-        std::io::copy(&mut f.by_ref().take(self.limits.max_total_bytes), &mut h)
-            .map_err(|e| arch(&self.source, format!("{entry}: {e}")))?;
-        if h.hasher.finalize().to_hex().as_str() != check.hash {
-            self.unpack_again(&format!(
-                "{}: its manifest does not name the FMU's {entry}",
-                self.dir.display()
-            ))?;
+        for (check, entry) in entries {
+            let mut f = zip
+                .by_name(entry)
+                .map_err(|e| arch(&self.source, format!("{entry}: {e}")))?;
+            let mut h = manifest::Hashing {
+                inner: std::io::sink(),
+                hasher: blake3::Hasher::new(),
+            };
+            std::io::copy(&mut f.by_ref().take(self.limits.max_total_bytes), &mut h)
+                .map_err(|e| arch(&self.source, format!("{entry}: {e}")))?;
+            if h.hasher.finalize().to_hex().as_str() != check.hash {
+                drop(f);
+                return self.unpack_again(&format!(
+                    "{}: its manifest does not name the FMU's {entry}",
+                    self.dir.display()
+                ));
+            }
         }
         Ok(())
     }

@@ -213,7 +213,9 @@ pub(crate) fn open_checked(root: &Path, rel: &str) -> Result<(File, std::fs::Met
     let fd = unsafe {
         libc::open(
             c.as_ptr(),
-            libc::O_RDONLY | libc::O_DIRECTORY | libc::O_CLOEXEC,
+            // O_PATH: the folders are only walked (fstat, openat), never read; a confined
+            // worker may walk the store to its FMU's folder but read no other's.
+            libc::O_PATH | libc::O_DIRECTORY | libc::O_CLOEXEC,
         )
     };
     if fd < 0 {
@@ -243,10 +245,14 @@ pub(crate) fn open_checked(root: &Path, rel: &str) -> Result<(File, std::fs::Met
         let flags = if last {
             libc::O_RDONLY | libc::O_NONBLOCK
         } else {
-            libc::O_RDONLY | libc::O_DIRECTORY
+            libc::O_PATH | libc::O_DIRECTORY
         };
         let f = openat(&dir, part.as_bytes(), flags).map_err(|e| {
-            if e.raw_os_error() == Some(libc::ELOOP) {
+            // A link where a folder is expected fails as "not a folder" with O_PATH.
+            let link = e.raw_os_error() == Some(libc::ELOOP)
+                || (e.raw_os_error() == Some(libc::ENOTDIR)
+                    && std::fs::symlink_metadata(&at).is_ok_and(|m| m.file_type().is_symlink()));
+            if link {
                 format!("{}: is a symbolic link", at.display())
             } else {
                 format!("{}: cannot open: {e}", at.display())

@@ -82,6 +82,9 @@ pub fn available() -> Result<(), String> {
     static ANSWER: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
     ANSWER
         .get_or_init(|| {
+            if std::env::var_os("TWINBENCH_ISOLATE").is_some_and(|v| v == "crash-only") {
+                return Err("TWINBENCH_ISOLATE=crash-only".into());
+            }
             match std::env::var_os(SANDBOX_ENV) {
                 Some(v) if v == "off" => return Err(format!("{SANDBOX_ENV}=off")),
                 Some(v) if v == "assume" => return Ok(()),

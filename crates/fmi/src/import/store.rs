@@ -61,7 +61,7 @@ pub(crate) fn store_dir_from(var: impl Fn(&str) -> Option<OsString>) -> Option<P
 /// that it can be trusted with libraries that twinbench loads: a folder of this user that
 /// no other user can write into, and that this user can write into. The reason otherwise.
 pub(crate) fn prepare(dir: &Path) -> Result<(), String> {
-    use std::os::unix::fs::DirBuilderExt;
+    use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
     if let Some(parent) = dir.parent() {
         std::fs::create_dir_all(parent).map_err(|e| format!("cannot create it: {e}"))?;
     }
@@ -83,10 +83,22 @@ pub(crate) fn prepare(dir: &Path) -> Result<(), String> {
         ));
     }
     if meta.mode() & 0o022 != 0 {
-        return Err(format!(
-            "other users can write into it (mode {:o}; expected no group or other write permission)",
+        // Ours, made writable for others (a chmod by a process of this user, M1): repaired,
+        // never replaced by another store. What others could have written meanwhile is
+        // caught where it matters: every library is checked against its FMU's archive
+        // before it is loaded.
+        let repaired = meta.mode() & 0o7777 & !0o022;
+        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(repaired)).map_err(|e| {
+            format!(
+                "other users can write into it (mode {:o}) and it cannot be repaired: {e}",
+                meta.mode() & 0o7777
+            )
+        })?;
+        log::warn!(
+            "{}: the store of unpacked FMUs was writable by other users (mode {:o}); repaired to mode {repaired:o}",
+            dir.display(),
             meta.mode() & 0o7777
-        ));
+        );
     }
     let c = std::ffi::CString::new(dir.as_os_str().as_bytes())
         .map_err(|_| "its path holds a NUL byte".to_string())?;
