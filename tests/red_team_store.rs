@@ -285,6 +285,46 @@ fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() 
     assert_eq!(y, Some(1.0));
 }
 
+/// M3: a library beside the FMU's own (a dependency it would load through `$ORIGIN`) is
+/// verified before the FMU's library is loaded, in-process and isolated: one changed byte
+/// is found, reported and repaired.
+#[test]
+fn m03_a_changed_dependency_beside_the_library_is_found_and_repaired() {
+    let dir = tb_testkit::scratch("m03");
+    let store = dir.path().join("store");
+    let (plain, library) = hostile_fmu(dir.path(), "NONE");
+    // The same FMU with a dependency beside its library.
+    let fmu = dir.path().join("with-dep.fmu");
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&fmu).unwrap());
+    let o = SimpleFileOptions::default();
+    zip.start_file("modelDescription.xml", o).unwrap();
+    zip.write_all(MODEL_DESCRIPTION.as_bytes()).unwrap();
+    zip.start_file("binaries/linux64/hostile.so", o).unwrap();
+    zip.write_all(&library).unwrap();
+    zip.start_file("binaries/linux64/libdep.so", o).unwrap();
+    zip.write_all(b"the dependency's bytes").unwrap();
+    zip.finish().unwrap();
+    drop(plain);
+    let sys = system(dir.path(), &fmu);
+    let (out, err, y) = run(&store, &sys, false, &[], None);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(y, Some(1.0));
+    let dep = folder_of(&store, &fmu).join("binaries/linux64/libdep.so");
+    for isolate in [false, true] {
+        let mut bytes = std::fs::read(&dep).unwrap();
+        bytes[0] ^= 1;
+        rewrite(&dep, &bytes);
+        let (out, err, y) = run(&store, &sys, isolate, &[], None);
+        assert!(out.status.success(), "isolate {isolate}: {err}");
+        assert_eq!(y, Some(1.0));
+        assert!(
+            err.contains("libdep.so") && err.contains("unpacking it again"),
+            "isolate {isolate}: the changed dependency went unnoticed: {err}"
+        );
+        assert_eq!(std::fs::read(&dep).unwrap(), b"the dependency's bytes");
+    }
+}
+
 #[test]
 fn n02_without_the_sandbox_the_planted_library_is_found_and_never_loaded() {
     let (attack, victim) = attack("n02-nosandbox", &[("TWINBENCH_WORKER_SANDBOX", "off")]);

@@ -221,6 +221,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
         inputs.extend(files.iter().map(|p| p.as_path()));
         tb_table::check_output(out, &inputs)?;
+        // Where a failed run keeps its rows (M9): never an input of the run (the system,
+        // an --input file, an FMU), a folder or a link either.
+        let partial = incomplete_path(out);
+        inputs.push(out);
+        tb_table::check_output(&partial, &inputs).with_context(|| {
+            format!(
+                "{}: where a failed run would keep its rows (choose another --out)",
+                partial.display()
+            )
+        })?;
     }
     // The trace file is created on its first line, after this check.
     if let Some(trace) = &args.trace_fmi {

@@ -125,7 +125,29 @@ impl ReplaySource {
                 t.names()[time_index]
             ));
         }
-        let time = t.column_at(time_index).to_vec();
+        let mut time = t.column_at(time_index).to_vec();
+        // The time column's own unit (M8): seconds, or converted from another time unit;
+        // anything else is refused rather than read as seconds.
+        let time_unit = t
+            .units()
+            .and_then(|u| u.get(time_index))
+            .map(|u| u.trim())
+            .filter(|u| !u.is_empty());
+        if let Some(u) = time_unit {
+            let def = tb_fmi::units::lookup(u).filter(|d| {
+                (d.kg, d.m, d.s, d.a, d.k, d.mol, d.cd, d.rad) == (0, 0, 1, 0, 0, 0, 0, 0)
+                    && d.offset == 0.0
+            });
+            let Some(def) = def else {
+                return Err(format!(
+                    "the time column '{}' is in '{u}', not a unit of time (s, ms, min, h)",
+                    t.names()[time_index]
+                ));
+            };
+            if def.factor != 1.0 {
+                time.iter_mut().for_each(|x| *x *= def.factor);
+            }
+        }
         let row = |k: usize| format!("line {}", t.line_of(k));
         for k in 0..time.len() {
             if !time[k].is_finite() {

@@ -82,7 +82,21 @@ impl MeSettings {
 
 /// FMPy's `isclose` (Python's `math.isclose` with its default relative tolerance 1e-9).
 pub fn isclose(a: f64, b: f64) -> bool {
-    a == b || (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
+    isclose_in(a, b, f64::INFINITY)
+}
+
+/// Two times are one: FMPy's `isclose` (relative 1e-9) where the times are within `span`
+/// of 0 (every run that starts at 0: the same decisions as FMPy), and never coarser than
+/// 1e-9 of `span` (the run's length): at a start time of 1.7e9 s (a Unix time) a relative
+/// 1e-9 would be 1.7 s wide (M7). An infinite time is close only to itself (M6).
+pub fn isclose_in(a: f64, b: f64, span: f64) -> bool {
+    if a == b {
+        return true;
+    }
+    if !(a.is_finite() && b.is_finite()) {
+        return false;
+    }
+    (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).min(span)
 }
 
 /// Where the instance is in the Model Exchange state machine (FMI 2.0 §3.2.3).
@@ -371,6 +385,13 @@ impl MeInstance {
     /// As FMPy 0.3.32's Model Exchange loop, `toleranceDefined = false` unless the system
     /// gives a tolerance (the instance's, the experiment's, `run --tolerance`): then the FMU
     /// is told it. Either way the solver integrates with [`MeInstance::relative_tolerance`].
+    /// The run's length, the scale of its time comparisons ([`isclose_in`]): unbounded
+    /// without a stop time.
+    fn span(&self) -> f64 {
+        self.stop
+            .map_or(f64::INFINITY, |stop| (stop - self.start).abs().max(1.0))
+    }
+
     pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
         self.start = start;
         self.stop = stop;
@@ -557,7 +578,30 @@ impl MeInstance {
             nominals_changed |= info.nominalsOfContinuousStatesChanged != fmi2False;
         }
         info.nominalsOfContinuousStatesChanged = nominals_changed as fmi2Boolean;
-        self.next_event = (info.nextEventTimeDefined != fmi2False).then_some(info.nextEventTime);
+        self.next_event = None;
+        if info.nextEventTimeDefined != fmi2False {
+            let te = info.nextEventTime;
+            let now = self.inst.time;
+            // +inf: no time event (M6). A time event that is not a time, or one before now,
+            // would have the integration loop wait for it for ever (M5).
+            if te.is_nan() || te == f64::NEG_INFINITY {
+                return Err(self.error(
+                    "fmi2NewDiscreteStates",
+                    format!("nextEventTime = {te:?} is not a time (at t = {now:?} s)"),
+                ));
+            }
+            if te < now && !isclose_in(te, now, self.span()) {
+                return Err(self.error(
+                    "fmi2NewDiscreteStates",
+                    format!(
+                        "nextEventTime = {te:?} s lies before the current time {now:?} s: a time event must not be in the past"
+                    ),
+                ));
+            }
+            if te.is_finite() {
+                self.next_event = Some(te);
+            }
+        }
         Ok(info)
     }
 
@@ -799,6 +843,8 @@ impl MeInstance {
     }
 
     fn advance_to(&mut self, target: f64, stop_at_events: bool) -> Result<MeStop, FmuError> {
+        let span = self.span();
+        let isclose = |a: f64, b: f64| isclose_in(a, b, span);
         if self.event_detected {
             // Stopped before this event (BeforeEvent): handle it now.
             self.event_detected = false;
@@ -936,5 +982,32 @@ impl MeInstance {
             Mode::ContinuousTime => "continuous-time mode",
             Mode::Terminated => "the terminated state",
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Times within a run that starts at 0 are compared as FMPy does; at a Unix-time start
+    /// the comparison stays 1e-9 of the run's length wide, not 1.7 s (M7); an infinite time
+    /// is close only to itself (M6).
+    #[test]
+    fn times_are_compared_at_the_runs_resolution() {
+        // As FMPy within a run from 0 to 10 s.
+        for (a, b) in [(5.0, 5.0 + 4e-9), (9.9, 9.9 + 9e-9), (1e-3, 1e-3 + 1e-13)] {
+            assert_eq!(isclose_in(a, b, 10.0), isclose(a, b), "{a} {b}");
+        }
+        assert!(isclose_in(5.0, 5.0 + 4e-9, 10.0));
+        // 1.7e9 s and 1.7e9 + 1 s are relatively within 1e-9, but 1 s apart in a 2 s run.
+        assert!(isclose(1.7e9, 1.7e9 + 1.0));
+        assert!(!isclose_in(1.7e9, 1.7e9 + 1.0, 2.0));
+        assert!(isclose_in(1.7e9, 1.7e9 + 1e-9, 2.0));
+        for t in [0.0, 1.0, 1e300] {
+            assert!(!isclose_in(f64::INFINITY, t, f64::INFINITY));
+            assert!(!isclose_in(t, f64::NEG_INFINITY, 10.0));
+        }
+        assert!(isclose_in(f64::INFINITY, f64::INFINITY, 10.0));
+        assert!(!isclose_in(f64::NAN, f64::NAN, 10.0));
     }
 }

@@ -1,0 +1,190 @@
+//! Red team, fourth pass (`docs/robustness.md`, "Red team findings"): the Model Exchange
+//! integrator's time handling (M5–M7), each with an FMU of the suite's own
+//! (`tests/cfmus/me_time.c`: x' = −x, x(0) = 1, and a time event chosen by `mode`).
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// `twinbench run me_time.fmu --set mode=<mode> --start <start> --stop <stop>`: its output
+/// and the last row (time, y, events) of the CSV when it wrote one.
+fn run(dir: &Path, mode: i32, start: f64, stop: f64) -> (Output, Option<Vec<f64>>) {
+    let csv = dir.join(format!("me_time_{mode}_{start}.csv"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .arg("run")
+        .arg(common::cfmu::fmu("me_time"))
+        .args(["--set", &format!("mode={mode}")])
+        .args(["--start", &start.to_string(), "--stop", &stop.to_string()])
+        .arg("--out")
+        .arg(&csv)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // A run of 2 s of a one-state model takes milliseconds: one still going after 60 s
+    // spins (M5), and is a failure, not a hung suite.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("twinbench run of me_time mode {mode} from {start} s still runs after 60 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    let last = std::fs::read_to_string(&csv).ok().and_then(|t| {
+        let header: Vec<String> = t.lines().next()?.split(',').map(String::from).collect();
+        let row: Vec<f64> = t
+            .lines()
+            .last()?
+            .split(',')
+            .map(|v| v.parse().unwrap_or(f64::NAN))
+            .collect();
+        let at = |n: &str| header.iter().position(|h| h == n).map(|i| row[i]);
+        Some(vec![at("time")?, at("y")?, at("events")?])
+    });
+    (out, last)
+}
+
+/// M5: a time event in the past (here at 0 s in a run from 1 s) is an error naming the
+/// time, not a loop at 100 % CPU.
+#[test]
+fn m05_a_time_event_in_the_past_is_an_error_not_a_spin() {
+    let dir = tb_testkit::scratch("m05");
+    let (out, _) = run(dir.path(), 1, 1.0, 2.0);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("nextEventTime = 0.0 s lies before the current time 1.0 s"),
+        "{err}"
+    );
+}
+
+/// M6: nextEventTime = +inf is no event (the run equals the one without, one event at
+/// initialisation); −inf is an error.
+#[test]
+fn m06_an_infinite_next_event_time_is_no_event_and_minus_infinity_an_error() {
+    let dir = tb_testkit::scratch("m06");
+    let (out, none) = run(dir.path(), 0, 0.0, 2.0);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (out, inf) = run(dir.path(), 2, 0.0, 2.0);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (none, inf) = (none.unwrap(), inf.unwrap());
+    assert_eq!(inf, none, "+inf changed the run");
+    assert_eq!(inf[2], 1.0, "events: {inf:?}");
+    let (out, _) = run(dir.path(), 3, 0.0, 2.0);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("nextEventTime = -inf is not a time"), "{err}");
+}
+
+/// M7: at a Unix-time start the integration is that of a start at 0: y(t0 + 2) = e^−2
+/// within the solver's tolerance (a relative 1e-9 time comparison was 1.7 s wide there and
+/// gave 0.49999; at 1e10 y stayed 1).
+#[test]
+fn m07_a_large_start_time_integrates_as_a_start_at_zero() {
+    let dir = tb_testkit::scratch("m07");
+    let exact = (-2.0f64).exp();
+    for start in [0.0, 1.7e9, 1e10] {
+        let (out, last) = run(dir.path(), 0, start, start + 2.0);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let last = last.unwrap();
+        assert_eq!(last[0], start + 2.0);
+        // The default relative tolerance 1e-4 of the solver, and the time's own resolution
+        // at 1e10 s (2e-6 s): within 1e-3 of e^−2.
+        assert!(
+            (last[1] - exact).abs() < 1e-3 * exact,
+            "start {start}: y = {} (e^-2 = {exact})",
+            last[1]
+        );
+    }
+}
+
+/// M8: the time column's unit of an input file is converted (ms here) or, when it is not a
+/// time, refused naming it; never read as seconds.
+#[test]
+fn m08_the_time_columns_unit_is_converted_or_refused() {
+    let dir = tb_testkit::scratch("m08");
+    let fmu = common::cfmu::fmu("typed_vr");
+    let run = |input: &str, out: &str| {
+        let file = dir.path().join(format!("{out}.in.csv"));
+        std::fs::write(&file, input).unwrap();
+        let csv = dir.path().join(format!("{out}.csv"));
+        let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .arg("run")
+            .arg(&fmu)
+            .arg("--input")
+            .arg(&file)
+            .args(["--stop", "1", "--step", "0.25", "--out"])
+            .arg(&csv)
+            .output()
+            .unwrap();
+        (o, std::fs::read_to_string(&csv).unwrap_or_default())
+    };
+    // u rises from 0 to 1 over 1000 ms; u_echo shows the input of the step before.
+    let (o, ms) = run("time,u\nms,\n0,0\n1000,1\n", "ms");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (o, s) = run("time,u\ns,\n0,0\n1,1\n", "s");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(ms, s, "the same input in ms and in s");
+    assert!(s.lines().any(|l| l == "0.75,1.75,0.5,3,1"), "{s}");
+    let (o, _) = run("time,u\nfurlong,\n0,0\n1000,1\n", "furlong");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("the time column 'time' is in 'furlong', not a unit of time"),
+        "{err}"
+    );
+}
+
+/// M9: where a failed run would keep its rows (`<out>.incomplete.<ext>`) is checked before
+/// the run like `--out`: an input of the run (here the --input file) or a folder there is
+/// refused, and the input is left as it was.
+#[test]
+fn m09_the_incomplete_file_never_replaces_an_input() {
+    let dir = tb_testkit::scratch("m09");
+    let input = dir.path().join("r.incomplete.csv");
+    let text = "time,u\n0,1\n1,2\n";
+    std::fs::write(&input, text).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .arg("run")
+        .arg(common::cfmu::fmu("typed_vr"))
+        .arg("--input")
+        .arg(&input)
+        .arg("--out")
+        .arg(dir.path().join("r.csv"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("where a failed run would keep its rows"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&input).unwrap(), text);
+    assert!(!dir.path().join("r.csv").exists());
+    // A folder in that place: refused before the run, not a recording silently dropped.
+    std::fs::create_dir(dir.path().join("d.incomplete.csv")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .arg("run")
+        .arg(common::cfmu::fmu("typed_vr"))
+        .arg("--out")
+        .arg(dir.path().join("d.csv"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("d.incomplete.csv"));
+}
