@@ -157,6 +157,33 @@ fn same_seed_same_result_any_threads_and_after_resume() {
         saved["checkpoint"]["completed"].as_array().unwrap().len(),
         1
     );
+    // M14: a copy of this checkpoint with step 1's cost after edited and the digest
+    // recomputed is refused on resume, naming the step; the untouched one resumes.
+    {
+        use sha2::Digest;
+        let text = std::fs::read_to_string(&cp).unwrap();
+        let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        v["checkpoint"]["completed"][0]["cost_after"] = serde_json::json!(0.0);
+        let body = serde_json::to_string(&v["checkpoint"]).unwrap();
+        let digest = format!("{:x}", sha2::Sha256::digest(body.as_bytes()));
+        let edited = dir.path().join("edited.json");
+        std::fs::write(
+            &edited,
+            format!("{{\"sha256\":\"{digest}\",\"checkpoint\":{body}}}\n"),
+        )
+        .unwrap();
+        let mut e = o.clone();
+        e.checkpoint = Some(edited);
+        e.stop_after = None;
+        let err = run_study(&study, &e)
+            .err()
+            .expect("an edited checkpoint is refused");
+        assert!(
+            err.to_string()
+                .contains("step 1 'lift' of the checkpoint says its cost after was 0.0"),
+            "{err}"
+        );
+    }
     o.stop_after = None;
     o.threads = 2;
     let resumed = finished(run_study(&study, &o).unwrap());

@@ -20,11 +20,6 @@ use std::path::{Path, PathBuf};
 use tb_compare::Comparison;
 use tb_table::write_atomic;
 
-/// Where a study with a checkpoint keeps its initial lap (written once, read on resume).
-pub fn initial_lap_path(checkpoint: &Path) -> PathBuf {
-    checkpoint.with_extension("initial-lap.csv")
-}
-
 /// What a step knows before its first generation (checkpointed, so a resume does not redo it).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) struct StepStart {

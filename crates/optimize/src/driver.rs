@@ -3,7 +3,7 @@
 //! checkpoint after every one, e after, and the whole result as a serialisable value.
 
 use super::bench::{Bench, LapBench};
-use super::checkpoint::{initial_lap_path, Checkpoint, Current, StepStart};
+use super::checkpoint::{Checkpoint, Current, StepStart};
 use super::cmaes::Cmaes;
 use super::exact;
 use super::fit::{Frame, Refinement, Series};
@@ -24,7 +24,6 @@ use std::sync::Arc;
 use std::time::Instant;
 use tb_compare::{Comparison, Metrics, PreparedMeasurement, Table, Workspace};
 use tb_fmi::FmuCache;
-use tb_table::write_atomic;
 
 /// What a study reports while it runs: the library draws nothing, a front end (the CLI's
 /// progress bars, a notebook) implements what it wants.
@@ -500,17 +499,9 @@ impl StudyState {
     fn begin(session: &Session) -> Result<StudyState, OptimizeError> {
         let assignment = session.bench.workers().assignment();
         let (checkpoint, resumed) = Checkpoint::resume_or_new(session.study, session.options)?;
-        let mut laps = StudyLaps::default();
-        if resumed {
-            if let Some(path) = session
-                .options
-                .checkpoint
-                .as_ref()
-                .map(|c| initial_lap_path(c))
-            {
-                laps.initial = Table::read_path(&path).ok();
-            }
-        }
+        // A resumed study simulates its initial lap again (one lap) at the end rather than
+        // read one beside the checkpoint, which nothing vouches for (M14).
+        let laps = StudyLaps::default();
         Ok(StudyState {
             checkpoint,
             resumed,
@@ -580,6 +571,48 @@ struct StepBegun {
     run: RunState,
 }
 
+/// A completed step of a resumed checkpoint, checked before it is used (M14: a checkpoint
+/// edited and its digest recomputed is a file like any other): its cost before and after
+/// are computed again (two laps) at its `before` values and its answer, and must be what
+/// the checkpoint says.
+fn verify_completed(
+    session: &Session,
+    state: &StudyState,
+    k: usize,
+    index: &[usize],
+    done: &StepResult,
+) -> Result<(), OptimizeError> {
+    let config = &session.study.file.steps[k];
+    let prepared = session
+        .bench
+        .prepare(&config.signals, &session.study.file.compare)?;
+    let step = Step::new(
+        session,
+        k,
+        index.to_vec(),
+        &prepared,
+        state.assignment.clone(),
+    );
+    let before: Vec<f64> = done.parameters.iter().map(|p| p.before).collect();
+    for (what, x, recorded) in [
+        ("before", &before, done.cost_before),
+        ("after", &done.after_exact, done.cost_after),
+    ] {
+        let again = step
+            .problem
+            .evaluate(x)
+            .unwrap_or(session.study.file.penalty);
+        if (again - recorded).abs() > 1e-9 * recorded.abs().max(1.0) || x.len() != index.len() {
+            return Err(OptimizeError::Checkpoint(format!(
+                "step {} '{}' of the checkpoint says its cost {what} was {recorded:?}, and the study computes {again:?} there: the checkpoint was changed, or its study's files were; run without --resume (or remove the checkpoint) to start afresh",
+                k + 1,
+                config.name
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Runs step `k`, or passes over it when the checkpoint has it completed. `Break` when the
 /// session stops before the step is done (its checkpoint kept).
 fn run_step(
@@ -590,11 +623,12 @@ fn run_step(
     let config = &session.study.file.steps[k];
     let index = parameter_index(session, config)?;
     if let Some(done) = state.checkpoint.completed.get(k) {
+        let done = done.clone();
+        verify_completed(session, state, k, &index, &done)?;
         if k == 0 {
             state.first_x0 = Some(done.parameters.iter().map(|p| p.before).collect());
         }
-        let after = done.after_exact.clone();
-        state.set(&index, &after);
+        state.set(&index, &done.after_exact);
         return Ok(ControlFlow::Continue(()));
     }
     let prepared = session
@@ -761,12 +795,6 @@ fn start_step(
     let before_other_laps: Vec<Comparison> = before.drain(1..).map(|o| o.comparison).collect();
     let before = before.pop().expect("the first lap");
     if k == 0 {
-        if let Some(c) = &options.checkpoint {
-            let path = initial_lap_path(c);
-            write_atomic(&path, &before.table.to_csv()).map_err(|e| {
-                OptimizeError::Checkpoint(format!("writing {}: {e}", path.display()))
-            })?;
-        }
         laps.initial = Some(before.table);
     }
     let start = to_unit(&x0, &problem.bounds);

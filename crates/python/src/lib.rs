@@ -654,9 +654,10 @@ impl OptimizerPy {
         start: Option<Vec<f64>>,
     ) -> PyResult<Self> {
         for (k, &(lo, hi)) in bounds.iter().enumerate() {
-            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            // The width too (M15): (-1e308, 1e308) is finite at both ends, but not across.
+            if !(lo.is_finite() && hi.is_finite() && lo < hi && (hi - lo).is_finite()) {
                 return Err(TwinbenchError::new_err(format!(
-                    "bounds[{k}] = ({lo}, {hi}): expected finite lower < upper"
+                    "bounds[{k}] = ({lo:e}, {hi:e}): expected finite lower < upper, and a finite width"
                 )));
             }
         }
@@ -667,6 +668,13 @@ impl OptimizerPy {
                     s.len(),
                     bounds.len()
                 )));
+            }
+            for (k, (&x, &(lo, hi))) in s.iter().zip(&bounds).enumerate() {
+                if !(x.is_finite() && lo <= x && x <= hi) {
+                    return Err(TwinbenchError::new_err(format!(
+                        "start[{k}] = {x:?}: expected a number within its bounds [{lo}, {hi}]"
+                    )));
+                }
             }
         }
         let dim = bounds.len();
@@ -783,8 +791,50 @@ fn pack(
         .map_err(error)
 }
 
+/// Every warning of the Rust code (`log::warn!`), kept until the call returns to Python,
+/// whose package turns each into a `warnings.warn` (`TwinbenchWarning`): none is dropped
+/// (M13), and no Python is called from the simulation's threads.
+struct KeptWarnings;
+
+static KEPT: Mutex<Vec<String>> = Mutex::new(Vec::new());
+/// At most this many kept between two returns to Python (a flood is said, not kept).
+const KEPT_MAX: usize = 1000;
+
+impl log::Log for KeptWarnings {
+    fn enabled(&self, m: &log::Metadata) -> bool {
+        m.level() <= log::Level::Warn
+    }
+    fn log(&self, r: &log::Record) {
+        if !self.enabled(r.metadata()) {
+            return;
+        }
+        let mut kept = KEPT.lock().unwrap_or_else(|p| p.into_inner());
+        match kept.len() {
+            n if n < KEPT_MAX => kept.push(r.args().to_string()),
+            KEPT_MAX => kept.push(format!(
+                "more than {KEPT_MAX} warnings; the rest is not shown"
+            )),
+            _ => {}
+        }
+    }
+    fn flush(&self) {}
+}
+
+static KEPT_WARNINGS: KeptWarnings = KeptWarnings;
+
+/// The warnings kept since the last call (and forgets them).
+#[pyfunction]
+fn take_warnings() -> Vec<String> {
+    std::mem::take(&mut *KEPT.lock().unwrap_or_else(|p| p.into_inner()))
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // A host that installed its own logger keeps it.
+    if log::set_logger(&KEPT_WARNINGS).is_ok() {
+        log::set_max_level(log::LevelFilter::Warn);
+    }
+    m.add_function(wrap_pyfunction!(take_warnings, m)?)?;
     m.add("TwinbenchError", m.py().get_type::<TwinbenchError>())?;
     // The package's version is the workspace's (the wheel's metadata says the same).
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

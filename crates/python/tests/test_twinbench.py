@@ -585,3 +585,33 @@ def test_the_exception_is_twinbenchs_not_the_native_modules():
     assert twinbench.TwinbenchError.__module__ == "twinbench"
     assert repr(twinbench.TwinbenchError("x")) == "TwinbenchError('x')"
     assert f"{twinbench.TwinbenchError.__module__}.{twinbench.TwinbenchError.__qualname__}" == "twinbench.TwinbenchError"
+
+
+# ---- the fourth red team ----
+
+
+def test_a_rust_warning_reaches_python_as_a_twinbench_warning(tmp_path, monkeypatch):
+    # M13: a warning of the Rust code (here: the store of unpacked FMUs, made writable for
+    # everyone, repaired) is a Python warning, not dropped.
+    store = tmp_path / "store"
+    monkeypatch.setenv("TWINBENCH_CACHE", str(store))
+    twinbench.run(SYSTEM, stop=0.01)
+    os.chmod(store, 0o777)
+    with pytest.warns(twinbench.TwinbenchWarning, match="repaired to mode 755"):
+        twinbench.run(SYSTEM, stop=0.01)
+    assert os.stat(store).st_mode & 0o777 == 0o755
+
+
+def test_optimizer_and_evaluate_inputs_are_checked():
+    # M15: bounds whose width overflows, a start that is not a number, a penalty that is
+    # not a cost: refused, never inf or NaN candidates and costs.
+    with pytest.raises(twinbench.TwinbenchError, match="finite width"):
+        twinbench.Optimizer("cmaes", [(-1e308, 1e308)])
+    with pytest.raises(twinbench.TwinbenchError, match=r"start\[0\] = NaN"):
+        twinbench.Optimizer("cmaes", [(0.5, 1.5)] * 2, start=[float("nan"), 1.0])
+    with pytest.raises(twinbench.TwinbenchError, match=r"start\[1\] = 2.0"):
+        twinbench.Optimizer("ga", [(0.5, 1.5)] * 2, start=[1.0, 2.0])
+    study = twinbench.Study(STUDY)
+    for penalty in [float("nan"), -1.0, float("inf")]:
+        with pytest.raises(twinbench.TwinbenchError, match="a finite number >= 0"):
+            study.evaluate(0, [[-5.0, 1.0]], penalty=penalty)

@@ -28,6 +28,26 @@ import numpy as np
 from . import _native
 from ._native import TwinbenchError, __version__
 
+
+class TwinbenchWarning(UserWarning):
+    """A warning of twinbench's own code (a repaired store folder, a candidate's failed
+    run, a best point whose re-evaluation differs): every one the command line prints."""
+
+
+def _forward_warnings(fn):
+    """After the call, every warning the Rust code gave during it as a ``TwinbenchWarning``."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            for message in _native.take_warnings():
+                warnings.warn(message, TwinbenchWarning, stacklevel=3)
+
+    return wrapper
+
 __all__ = [
     "__version__",
     "run",
@@ -40,6 +60,7 @@ __all__ = [
     "StudyStep",
     "Optimizer",
     "TwinbenchError",
+    "TwinbenchWarning",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -92,6 +113,7 @@ class Result:
         )
 
 
+@_forward_warnings
 def pack(out: Optional[PathLike] = None, models: Optional[Sequence[str]] = None) -> List[Path]:
     """Pack twinbench's FMUs, as ``twinbench pack`` does.
 
@@ -110,6 +132,7 @@ def pack(out: Optional[PathLike] = None, models: Optional[Sequence[str]] = None)
     return [Path(p) for p in written]
 
 
+@_forward_warnings
 def run(
     system: PathLike,
     parameters: Optional[Mapping[str, Union[float, int, bool, str]]] = None,
@@ -177,6 +200,7 @@ class Comparison:
         return self.signals[signal]
 
 
+@_forward_warnings
 def compare(
     result: Union[Result, Mapping[str, Sequence[float]]],
     measurement: PathLike,
@@ -319,6 +343,7 @@ class Study:
     step (on threads or an executor), and :class:`Optimizer` twinbench's own ask/tell.
     """
 
+    @_forward_warnings
     def __init__(self, path: PathLike):
         self.path = Path(path).absolute()
         (
@@ -352,6 +377,7 @@ class Study:
         """Every parameter the study touches, with its value before the study."""
         return dict(self._loaded().assignment())
 
+    @_forward_warnings
     def optimize(
         self,
         executor: Any = None,
@@ -447,6 +473,7 @@ class Study:
         }
         return result
 
+    @_forward_warnings
     def evaluate(
         self,
         step: int,
@@ -507,6 +534,8 @@ class Study:
             ]
             results = [f.result() for f in futures]
         penalty = self.penalty if penalty is None else float(penalty)
+        if not (math.isfinite(penalty) and penalty >= 0.0):
+            raise TwinbenchError(f"penalty = {penalty!r}: a cost, a finite number >= 0")
         costs = []
         for k, r in enumerate(results):
             if isinstance(r, str):
