@@ -16,7 +16,7 @@ use super::optimizer::RunState;
 use super::study::{OptimizerKind, Study};
 use super::OptimizeError;
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use tb_compare::Comparison;
 use tb_table::write_atomic;
 
