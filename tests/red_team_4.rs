@@ -188,3 +188,127 @@ fn m09_the_incomplete_file_never_replaces_an_input() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("d.incomplete.csv"));
 }
+
+/// M12: a Model Exchange FMU with more continuous states than the dense solver takes is
+/// refused before anything is integrated, saying why (15,000 states took 3.5 GB and 50 s
+/// for 0.01 s).
+#[test]
+fn m12_too_many_states_for_the_dense_solver_are_refused_with_the_reason() {
+    use std::io::Write;
+    let dir = tb_testkit::scratch("m12");
+    let n = 5000;
+    let mut vars = String::new();
+    for i in 0..n {
+        vars.push_str(&format!(
+            "<ScalarVariable name=\"x{i}\" valueReference=\"{i}\" causality=\"local\" variability=\"continuous\" initial=\"exact\"><Real start=\"1\"/></ScalarVariable>\n"
+        ));
+    }
+    let mut ders = String::new();
+    for i in 0..n {
+        vars.push_str(&format!(
+            "<ScalarVariable name=\"der(x{i})\" valueReference=\"{}\" causality=\"local\" variability=\"continuous\"><Real derivative=\"{}\"/></ScalarVariable>\n",
+            n + i,
+            i + 1
+        ));
+        ders.push_str(&format!("<Unknown index=\"{}\"/>", n + i + 1));
+    }
+    let xml = format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<fmiModelDescription fmiVersion=\"2.0\" modelName=\"me_time\" guid=\"{{5a1e5e7c-0d7c-4c4e-9a61-7b3f0c1d2e07}}\" numberOfEventIndicators=\"0\">\n<ModelExchange modelIdentifier=\"me_time\"/>\n<ModelVariables>\n{vars}</ModelVariables>\n<ModelStructure><Derivatives>{ders}</Derivatives></ModelStructure>\n</fmiModelDescription>\n"
+    );
+    // The library of the suite's own ME FMU, taken from its archive.
+    let mut library = Vec::new();
+    {
+        use std::io::Read;
+        let f = std::fs::File::open(common::cfmu::fmu("me_time")).unwrap();
+        let mut z = zip::ZipArchive::new(f).unwrap();
+        z.by_name("binaries/linux64/me_time.so")
+            .unwrap()
+            .read_to_end(&mut library)
+            .unwrap();
+    }
+    let fmu = dir.path().join("big.fmu");
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(&fmu).unwrap());
+    let o = zip::write::SimpleFileOptions::default();
+    zip.start_file("modelDescription.xml", o).unwrap();
+    zip.write_all(xml.as_bytes()).unwrap();
+    zip.start_file("binaries/linux64/me_time.so", o).unwrap();
+    zip.write_all(&library).unwrap();
+    zip.finish().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .arg("run")
+        .arg(&fmu)
+        .args(["--stop", "0.01", "--out"])
+        .arg(dir.path().join("big.csv"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("5000 continuous states") && err.contains("at most 4000 states"),
+        "{err}"
+    );
+}
+
+/// M11: an FMI 3.0 variable with 100,000 `<Alias>`es (VanDerPol's x0 here): `info` and a
+/// run that records every name take linear time (they took 4.5 s and 49 s: a scan of the
+/// variables per name). The deadline is a hang's, not a benchmark's.
+#[test]
+fn m11_a_hundred_thousand_fmi3_aliases_are_read_and_run_in_linear_time() {
+    let dir = tb_testkit::scratch("m11");
+    let vdp = common::reference::fmu("VanDerPol", 3);
+    let aliases: String = (0..100_000)
+        .map(|i| format!("<Alias name=\"x0_{i}\"/>"))
+        .collect();
+    let fmu = common::reference::variant(
+        &vdp,
+        dir.path(),
+        "vdp_aliases",
+        |xml| {
+            xml.replacen(
+                "initial=\"exact\" start=\"2\"/>",
+                &format!("initial=\"exact\" start=\"2\">{aliases}</Float64>"),
+                1,
+            )
+        },
+        |n| Some(n.to_string()),
+    );
+    let deadline = |args: &[&str]| {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .args(args)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        while child.try_wait().unwrap().is_none() {
+            if std::time::Instant::now() > until {
+                let _ = child.kill();
+                panic!("twinbench {args:?} still runs after 60 s");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        child.wait_with_output().unwrap()
+    };
+    let f = fmu.to_str().unwrap();
+    let out = deadline(&["info", f]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = dir.path().join("a.csv");
+    let out = deadline(&["run", f, "--stop", "0.1", "--out", csv.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let header = std::fs::read_to_string(&csv).unwrap();
+    let header = header.lines().next().unwrap();
+    // Every alias is a column, with the value of x0.
+    assert!(
+        header.contains(",x0_99999"),
+        "{}",
+        &header[..200.min(header.len())]
+    );
+}

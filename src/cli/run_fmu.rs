@@ -316,11 +316,12 @@ fn list(names: &[&str]) -> String {
 /// writes them.
 pub fn own_names(recording: &mut tb_table::Table, instance: &str) -> anyhow::Result<()> {
     let prefix = format!("{instance}.");
-    let names: Vec<String> = recording.names().to_vec();
-    for (k, n) in names.iter().enumerate() {
-        if let Some(own) = n.strip_prefix(&prefix) {
-            recording.rename(k, own)?;
-        }
-    }
+    let renames: Vec<(usize, String)> = recording
+        .names()
+        .iter()
+        .enumerate()
+        .filter_map(|(k, n)| n.strip_prefix(&prefix).map(|own| (k, own.to_string())))
+        .collect();
+    recording.rename_many(&renames)?;
     Ok(())
 }

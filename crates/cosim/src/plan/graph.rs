@@ -32,13 +32,19 @@ pub(crate) fn check_feedthrough_cycles(
     for (k, inst) in instances.iter().enumerate() {
         let md = inst.description();
         // Every output: the ModelStructure's entry, or none (an output missing from it may
-        // depend on every input, as one without a `dependencies` attribute).
+        // depend on every input, as one without a `dependencies` attribute). The entries by
+        // index, once (a scan per output was quadratic, M11).
+        let mut listed: HashMap<usize, &tb_fmi::import::description::Unknown> =
+            HashMap::with_capacity(md.outputs.len());
+        for o in &md.outputs {
+            listed.entry(o.index).or_insert(o);
+        }
         let outputs = md
             .variables
             .iter()
             .enumerate()
             .filter(|(_, v)| v.causality == Causality::Output)
-            .map(|(i, v)| (v, md.outputs.iter().find(|o| o.index == i + 1)));
+            .map(|(i, v)| (v, listed.get(&(i + 1)).copied()));
         for (out, o) in outputs {
             let (deps, declared): (Vec<&ScalarVariable>, bool) =
                 match o.and_then(|o| o.dependencies.as_ref()) {

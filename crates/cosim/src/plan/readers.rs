@@ -82,8 +82,10 @@ pub(super) fn record(
         true => default_record(units),
     };
     let mut record = Vec::with_capacity(names.len());
-    for (k, n) in names.iter().enumerate() {
-        if names[..k].contains(n) || n == "time" {
+    // A set of the names so far (a scan per name was quadratic for 100k aliases, M11).
+    let mut seen = std::collections::HashSet::with_capacity(names.len());
+    for n in names.iter() {
+        if !seen.insert(n.as_str()) || n == "time" {
             return Err(invalid(
                 ctx_file,
                 format!("record: '{n}' is listed twice (a result file has one column per name)"),
