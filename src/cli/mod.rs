@@ -94,6 +94,9 @@ impl Command {
 /// no word: the handler below turns that into a message and a failure.
 static COMMAND_RUNNING: AtomicBool = AtomicBool::new(false);
 
+/// Set in a `twinbench worker` process (an isolated FMU's).
+static IN_WORKER: AtomicBool = AtomicBool::new(false);
+
 /// The exit code when something called `exit()` in the middle of a command.
 pub const EXIT_BY_FMU: i32 = 3;
 
@@ -111,7 +114,12 @@ extern "C" fn exit_guard() {
         }
     }
     if COMMAND_RUNNING.load(Ordering::SeqCst) {
-        let message = b"error: the process was ended by a call to exit() before the command finished, from inside an FMU's code (twinbench never calls it); nothing more was written. Run the FMU with --isolate (or isolate = true) to keep twinbench alive and see where.\n";
+        // In an isolated worker the FMU is isolated already (M17: it was told to isolate it).
+        let message: &[u8] = if IN_WORKER.load(Ordering::SeqCst) {
+            b"error: the FMU called exit() in its isolated worker (twinbench never calls it); the worker ends, twinbench goes on.\n"
+        } else {
+            b"error: the process was ended by a call to exit() before the command finished, from inside an FMU's code (twinbench never calls it); nothing more was written. Run the FMU with --isolate (or isolate = true) to keep twinbench alive and see where.\n"
+        };
         // Only async-signal-safe calls here: the process is already ending.
         unsafe {
             libc::write(2, message.as_ptr().cast(), message.len());
@@ -151,6 +159,7 @@ pub fn main() -> ExitCode {
     if cli.command.json() {
         json::protect();
     }
+    IN_WORKER.store(matches!(cli.command, Command::Worker(_)), Ordering::SeqCst);
     COMMAND_RUNNING.store(true, Ordering::SeqCst);
     // The test suite's way to a panic of twinbench's own (tests/robustness_faults.rs).
     if std::env::var_os("TWINBENCH_TEST_PANIC").is_some() {

@@ -717,6 +717,14 @@ mod tests {
             .unwrap_err()
             .contains("max=\"lots\" is not a number"));
         assert!(parse("<fmiModelDescription><broken").is_err());
+        // M17: a count that is not one is refused, naming it (it was taken as 0).
+        let bad = XML.replace(
+            "numberOfEventIndicators=\"0\"",
+            "numberOfEventIndicators=\"-5\"",
+        );
+        assert!(parse(&bad)
+            .unwrap_err()
+            .contains("numberOfEventIndicators=\"-5\">: expected a whole number >= 0"));
     }
 
     #[test]

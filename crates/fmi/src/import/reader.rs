@@ -96,7 +96,7 @@ impl Shared {
                     Version::V2 => "guid",
                     Version::V3 => "instantiationToken",
                 };
-                root_attributes(md, m, token);
+                root_attributes(md, m, token)?;
             }
             ("", other) => {
                 return Err(format!(
@@ -374,17 +374,28 @@ pub(crate) fn display_unit(
 
 /// The `<fmiModelDescription>` attributes both versions share; `token` names the GUID's
 /// attribute (`guid` in 2.0, `instantiationToken` in 3.0).
-pub(crate) fn root_attributes(md: &mut ModelDescription, m: &HashMap<String, String>, token: &str) {
+pub(crate) fn root_attributes(
+    md: &mut ModelDescription,
+    m: &HashMap<String, String>,
+    token: &str,
+) -> Result<(), String> {
     let get = |key: &str| m.get(key).cloned().unwrap_or_default();
     md.fmi_version = get("fmiVersion");
     md.model_name = get("modelName");
     md.guid = get(token);
     md.description = get("description");
     md.generation_tool = get("generationTool");
-    md.number_of_event_indicators = m
-        .get("numberOfEventIndicators")
-        .and_then(|s| s.trim().parse().ok())
-        .unwrap_or(0);
+    // A count that is not one (M17: "-5" was taken as 0) is refused, naming it.
+    md.number_of_event_indicators = match m.get("numberOfEventIndicators") {
+        None => 0,
+        Some(s) => s.trim().parse().map_err(|_| {
+            format!(
+                "<fmiModelDescription numberOfEventIndicators=\"{}\">: expected a whole number >= 0",
+                tb_files::shown(s, 40, true)
+            )
+        })?,
+    };
+    Ok(())
 }
 
 pub(crate) fn int_attr(m: &HashMap<String, String>, key: &str) -> i32 {
