@@ -11,28 +11,17 @@ use std::process::{Command, Output};
 /// and the last row (time, y, events) of the CSV when it wrote one.
 fn run(dir: &Path, mode: i32, start: f64, stop: f64) -> (Output, Option<Vec<f64>>) {
     let csv = dir.join(format!("me_time_{mode}_{start}.csv"));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
-        .arg(common::cfmu::fmu("me_time"))
-        .args(["--set", &format!("mode={mode}")])
-        .args(["--start", &start.to_string(), "--stop", &stop.to_string()])
-        .arg("--out")
-        .arg(&csv)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
     // A run of 2 s of a one-state model takes milliseconds: one still going after 60 s
     // spins (M5), and is a failure, not a hung suite.
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
-    while child.try_wait().unwrap().is_none() {
-        if std::time::Instant::now() > deadline {
-            let _ = child.kill();
-            panic!("twinbench run of me_time mode {mode} from {start} s still runs after 60 s");
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    let out = child.wait_with_output().unwrap();
+    let out = within_a_minute(
+        Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .arg("run")
+            .arg(common::cfmu::fmu("me_time"))
+            .args(["--set", &format!("mode={mode}")])
+            .args(["--start", &start.to_string(), "--stop", &stop.to_string()])
+            .arg("--out")
+            .arg(&csv),
+    );
     let last = std::fs::read_to_string(&csv).ok().and_then(|t| {
         let header: Vec<String> = t.lines().next()?.split(',').map(String::from).collect();
         let row: Vec<f64> = t
@@ -45,6 +34,44 @@ fn run(dir: &Path, mode: i32, start: f64, stop: f64) -> (Output, Option<Vec<f64>
         Some(vec![at("time")?, at("y")?, at("events")?])
     });
     (out, last)
+}
+
+/// `cmd`'s output; a failure when it still runs after 60 s (a hang, not a benchmark: what
+/// it runs takes well under a second).
+fn within_a_minute(cmd: &mut Command) -> Output {
+    let mut child = cmd
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Both pipes drained while it runs (a long `info` fills a pipe and would wait on it).
+    let drain = |r: Option<Box<dyn std::io::Read + Send>>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            if let Some(mut r) = r {
+                let _ = r.read_to_end(&mut bytes);
+            }
+            bytes
+        })
+    };
+    let out = drain(child.stdout.take().map(|r| Box::new(r) as _));
+    let err = drain(child.stderr.take().map(|r| Box::new(r) as _));
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if std::time::Instant::now() > until {
+            let _ = child.kill();
+            panic!("{cmd:?} still runs after 60 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    Output {
+        status,
+        stdout: out.join().unwrap(),
+        stderr: err.join().unwrap(),
+    }
 }
 
 /// M5: a time event in the past (here at 0 s in a run from 1 s) is an error naming the
@@ -272,23 +299,8 @@ fn m11_a_hundred_thousand_fmi3_aliases_are_read_and_run_in_linear_time() {
         },
         |n| Some(n.to_string()),
     );
-    let deadline = |args: &[&str]| {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-            .args(args)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let until = std::time::Instant::now() + std::time::Duration::from_secs(60);
-        while child.try_wait().unwrap().is_none() {
-            if std::time::Instant::now() > until {
-                let _ = child.kill();
-                panic!("twinbench {args:?} still runs after 60 s");
-            }
-            std::thread::sleep(std::time::Duration::from_millis(20));
-        }
-        child.wait_with_output().unwrap()
-    };
+    let deadline =
+        |args: &[&str]| within_a_minute(Command::new(env!("CARGO_BIN_EXE_twinbench")).args(args));
     let f = fmu.to_str().unwrap();
     let out = deadline(&["info", f]);
     assert!(

@@ -185,15 +185,26 @@ fn attack(tag: &str, attack_env: &[(&str, &str)]) -> (String, String) {
     (attack_err, victim_err)
 }
 
+/// Whether isolated workers can be confined on this machine; where not, the test is skipped
+/// with a line saying so, except under CI, where a missing confinement is a failure, not a
+/// pass that tested nothing.
+fn confinement_here() -> bool {
+    match tb_fmi::import::sandbox::available() {
+        Ok(()) => true,
+        Err(why) => {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI is set, and workers cannot be confined here: {why}"
+            );
+            eprintln!("skipped: workers cannot be confined here ({why})");
+            false
+        }
+    }
+}
+
 #[test]
 fn n02_an_isolated_fmu_cannot_write_the_store_that_a_later_in_process_run_loads_from() {
-    if let Err(why) = tb_fmi::import::sandbox::available() {
-        // Under CI a missing confinement is a failure, not a pass that tested nothing.
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI is set, and workers cannot be sandboxed here: {why}"
-        );
-        eprintln!("skipped: workers cannot be sandboxed here ({why}); see the next test");
+    if !confinement_here() {
         return;
     }
     let (attack, victim) = attack("n02-sandbox", &[]);
@@ -214,12 +225,7 @@ fn n02_an_isolated_fmu_cannot_write_the_store_that_a_later_in_process_run_loads_
 /// does not hang.
 #[test]
 fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() {
-    if let Err(why) = tb_fmi::import::sandbox::available() {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI is set, and workers cannot be confined here: {why}"
-        );
-        eprintln!("skipped: workers cannot be confined here ({why})");
+    if !confinement_here() {
         return;
     }
     let dir = tb_testkit::scratch("confined-escape");
