@@ -134,10 +134,8 @@ impl ReplaySource {
             .map(|u| u.trim())
             .filter(|u| !u.is_empty());
         if let Some(u) = time_unit {
-            let def = tb_fmi::units::lookup(u).filter(|d| {
-                (d.kg, d.m, d.s, d.a, d.k, d.mol, d.cd, d.rad) == (0, 0, 1, 0, 0, 0, 0, 0)
-                    && d.offset == 0.0
-            });
+            let second = tb_fmi::units::lookup("s").expect("the second is a known unit");
+            let def = tb_fmi::units::lookup(u).filter(|d| d.compatible(second) && d.offset == 0.0);
             let Some(def) = def else {
                 return Err(format!(
                     "the time column '{}' is in '{u}', not a unit of time (s, ms, min, h)",

@@ -157,6 +157,9 @@ impl InputDigest {
     }
 }
 
+/// The joint fit's signals and each fitted lap's measurement prepared for them.
+type JointSignals = (Vec<String>, Vec<PreparedMeasurement>);
+
 /// A study ready to evaluate candidates in a worker process: the worker pool (its
 /// simulations kept between candidates), the measurement prepared once per step.
 pub struct StudyEvaluator {
@@ -164,8 +167,8 @@ pub struct StudyEvaluator {
     bench: Bench,
     digest: InputDigest,
     prepared: Mutex<HashMap<usize, Arc<Vec<PreparedMeasurement>>>>,
-    /// The measurement prepared for the joint fit's signals, on its first use.
-    joint: std::sync::OnceLock<Result<Vec<PreparedMeasurement>, String>>,
+    /// The joint fit's signals and the measurement prepared for them, on their first use.
+    joint: std::sync::OnceLock<Result<JointSignals, String>>,
 }
 
 impl StudyEvaluator {
@@ -230,17 +233,19 @@ impl StudyEvaluator {
     /// [`Evaluator::signals`] returns them for one point: the same numbers to the bit as the
     /// coordinator's own laps ([`Bench::signals`] for both).
     pub fn signals(&self, values: &[f64]) -> Result<LapSignals, String> {
-        let (signals, _) = self.study.joint_signals();
-        let prepared = self
+        let (signals, prepared) = self
             .joint
             .get_or_init(|| {
-                self.bench
+                let (signals, _) = self.study.joint_signals();
+                let prepared = self
+                    .bench
                     .prepare(&signals, &self.study.file.compare)
-                    .map_err(|e| e.to_string())
+                    .map_err(|e| e.to_string())?;
+                Ok((signals, prepared))
             })
             .as_ref()
             .map_err(Clone::clone)?;
-        let series = self.bench.signals(values, prepared, &signals)?;
+        let series = self.bench.signals(values, prepared, signals)?;
         Ok(series.into_iter().map(|(r, v)| (r.start, v)).collect())
     }
 

@@ -42,9 +42,7 @@ use std::path::{Path, PathBuf};
 /// The worker's exit code when it cannot confine itself (before anything was loaded).
 pub const CANNOT_CONFINE: i32 = 5;
 
-/// `crash-only`: isolated workers are not confined (crash and hang isolation only), as if
-/// every `--isolate` were `--isolate=crash-only`.
-pub const MODE_ENV: &str = "TWINBENCH_ISOLATE";
+pub use tb_fmi::import::sandbox::MODE_ENV;
 
 /// The environment variable through which the host hands the worker its [`Spec`] (JSON).
 pub(crate) const SPEC_ENV: &str = "TWINBENCH_WORKER_CONFINE";
@@ -69,27 +67,12 @@ pub enum Mode {
 }
 
 impl Mode {
-    /// `confined` or `crash-only`.
-    pub fn parse(s: &str) -> Result<Mode, String> {
-        match s {
-            "confined" | "" => Ok(Mode::Confined),
-            "crash-only" => Ok(Mode::CrashOnly),
-            other => Err(format!(
-                "unknown isolation '{other}' (confined, crash-only)"
-            )),
-        }
-    }
-
-    /// This mode, unless [`MODE_ENV`] (or the older `TWINBENCH_WORKER_SANDBOX=off`) says
-    /// crash-only.
+    /// This mode, unless the environment says crash-only
+    /// ([`tb_fmi::import::sandbox::crash_only_by_environment`]).
     pub fn effective(self) -> Mode {
-        let env = std::env::var(MODE_ENV).unwrap_or_default();
-        let off =
-            std::env::var_os(tb_fmi::import::sandbox::SANDBOX_ENV).is_some_and(|v| v == "off");
-        if env == "crash-only" || off {
-            Mode::CrashOnly
-        } else {
-            self
+        match tb_fmi::import::sandbox::crash_only_by_environment() {
+            Some(_) => Mode::CrashOnly,
+            None => self,
         }
     }
 }
@@ -322,19 +305,9 @@ fn filters() -> Result<Vec<BpfProgram>, String> {
         .collect()
 }
 
-/// What the confinement achieved, for the worker's log.
-#[derive(Clone, Debug)]
-pub struct Confined {
-    /// The Landlock ABI in force.
-    pub landlock_abi: i32,
-    /// TCP refused by Landlock too (ABI 4); signals and abstract sockets scoped (ABI 6).
-    pub net_rules: bool,
-    pub scoped: bool,
-}
-
 /// Confines this process (single-threaded: Landlock and seccomp hold for the calling thread
 /// and whatever it starts afterwards). Called in the worker, inside its PID namespace.
-pub fn confine(spec: &Spec) -> Result<Confined, String> {
+pub fn confine(spec: &Spec) -> Result<(), String> {
     drop_capabilities()?;
     std::env::set_current_dir(&spec.scratch).map_err(|e| {
         format!(
@@ -390,11 +363,7 @@ pub fn confine(spec: &Spec) -> Result<Confined, String> {
     for f in filters()? {
         seccompiler::apply_filter(&f).map_err(|e| format!("seccomp: {e}"))?;
     }
-    Ok(Confined {
-        landlock_abi: abi,
-        net_rules: abi >= 4,
-        scoped: abi >= 6,
-    })
+    Ok(())
 }
 
 /// The PID namespace the worker runs in: root makes one; another user makes it with a user

@@ -53,7 +53,7 @@ impl IsolatedBackend {
         run: RunAs,
     ) -> Result<IsolatedBackend, FmuError> {
         let library = library_target(fmu, options, run)?;
-        let mut b = IsolatedBackend::spawn(name, options, fmu.store(), Some(fmu.dir.clone()))?;
+        let mut b = IsolatedBackend::spawn(name, options, &fmu.dir)?;
         b.queue(&Request::Instantiate {
             library,
             name: name.to_string(),
@@ -75,7 +75,7 @@ impl IsolatedBackend {
     ) -> Result<LibraryReport, FmuError> {
         let name = fmu.model_identifier().to_string();
         let library = library_target(fmu, options, RunAs::default_for(fmu))?;
-        let mut b = IsolatedBackend::spawn(&name, options, fmu.store(), Some(fmu.dir.clone()))?;
+        let mut b = IsolatedBackend::spawn(&name, options, &fmu.dir)?;
         let probe = Request::Probe(library);
         b.queue(&probe);
         let answer = b.call(Function::GetVersion.name(), std::slice::from_ref(&probe))?;
@@ -101,8 +101,7 @@ impl IsolatedBackend {
     fn spawn(
         name: &str,
         options: &IsolationOptions,
-        store: Option<&std::path::Path>,
-        fmu_dir: Option<PathBuf>,
+        fmu_dir: &Path,
     ) -> Result<IsolatedBackend, FmuError> {
         let fail = |cause: String| FmuError::Isolated {
             instance: name.to_string(),
@@ -121,7 +120,6 @@ impl IsolatedBackend {
         // Confined unless the user asked for crash isolation only: a scratch folder of its
         // own, and what it may read (its FMU's folder, the preloads, the files of `*_file`
         // parameters).
-        let _ = store;
         let scratch = match options.mode.effective() {
             super::confine::Mode::CrashOnly => {
                 static ONCE: std::sync::Once = std::sync::Once::new();
@@ -136,7 +134,7 @@ impl IsolatedBackend {
             super::confine::Mode::Confined => {
                 let scratch = super::confine::Scratch::new()
                     .map_err(|e| fail(format!("cannot make the worker's scratch folder: {e}")))?;
-                let mut read: Vec<PathBuf> = fmu_dir.into_iter().collect();
+                let mut read: Vec<PathBuf> = vec![fmu_dir.to_path_buf()];
                 for p in &options.preload {
                     // A preloaded interpreter reads its installation (libpython: its
                     // standard library beside `lib/`), found where the library really is.

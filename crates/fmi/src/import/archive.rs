@@ -115,12 +115,6 @@ impl FileCheck {
 }
 
 impl LoadedFmu {
-    /// The store the FMU was unpacked into, when it is one that other processes share (an
-    /// isolated worker makes it read-only for itself).
-    pub fn store(&self) -> Option<&Path> {
-        self.shared.then_some(self.base.as_path())
-    }
-
     /// The BLAKE3 of the unpacked folder's manifest: every file's path, size, mode and hash.
     pub fn manifest_digest(&self) -> String {
         self.manifest.digest()
@@ -147,12 +141,21 @@ impl LoadedFmu {
     /// load), as checks a worker verifies again before loading.
     pub fn beside(&self, library: &FileCheck) -> Vec<FileCheck> {
         let entry = library.rel.split_once('/').map_or("", |(_, e)| e);
-        let folder = entry.rsplit_once('/').map_or("", |(d, _)| d);
+        self.files_beside(entry)
+            .into_iter()
+            .map(|(c, _)| c)
+            .collect()
+    }
+
+    /// Every file of the manifest in the folder of `entry`, with its check and its entry.
+    fn files_beside(&self, entry: &str) -> Vec<(FileCheck, String)> {
+        let folder_of = |path: &str| path.rsplit_once('/').map_or("", |(d, _)| d).to_string();
+        let folder = folder_of(entry);
         self.manifest
             .files
             .iter()
-            .filter(|f| f.path.rsplit_once('/').map_or("", |(d, _)| d) == folder)
-            .filter_map(|f| self.unpacked_file(&f.path))
+            .filter(|f| folder_of(&f.path) == folder)
+            .filter_map(|f| Some((self.unpacked_file(&f.path)?, f.path.clone())))
             .collect()
     }
 
@@ -189,14 +192,7 @@ impl LoadedFmu {
         if checked.contains(&check) {
             return Ok(check);
         }
-        let folder = entry.rsplit_once('/').map_or("", |(d, _)| d);
-        let beside: Vec<(FileCheck, String)> = self
-            .manifest
-            .files
-            .iter()
-            .filter(|f| f.path.rsplit_once('/').map_or("", |(d, _)| d) == folder)
-            .filter_map(|f| Some((self.unpacked_file(&f.path)?, f.path.clone())))
-            .collect();
+        let beside = self.files_beside(entry);
         self.trust_from_archive(&beside)?;
         for (c, name) in &beside {
             if let Err(reason) = c.verify() {

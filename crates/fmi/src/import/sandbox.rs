@@ -11,6 +11,21 @@
 /// system calls).
 pub const SANDBOX_ENV: &str = "TWINBENCH_WORKER_SANDBOX";
 
+/// `crash-only`: isolated workers are not confined (crash and hang isolation only), as if
+/// every `--isolate` were `--isolate=crash-only`.
+pub const MODE_ENV: &str = "TWINBENCH_ISOLATE";
+
+/// Why the environment makes isolated workers unconfined ([`MODE_ENV`]`=crash-only`, or
+/// [`SANDBOX_ENV`]`=off`); `None` when it does not.
+pub fn crash_only_by_environment() -> Option<String> {
+    if std::env::var_os(MODE_ENV).is_some_and(|v| v == "crash-only") {
+        return Some(format!("{MODE_ENV}=crash-only"));
+    }
+    std::env::var_os(SANDBOX_ENV)
+        .is_some_and(|v| v == "off")
+        .then(|| format!("{SANDBOX_ENV}=off"))
+}
+
 const CREATE_RULESET_VERSION: u32 = 1;
 
 /// Landlock's ABI version, or why there is none.
@@ -41,13 +56,11 @@ pub fn available() -> Result<(), String> {
     static ANSWER: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
     ANSWER
         .get_or_init(|| {
-            if std::env::var_os("TWINBENCH_ISOLATE").is_some_and(|v| v == "crash-only") {
-                return Err("TWINBENCH_ISOLATE=crash-only".into());
+            if let Some(why) = crash_only_by_environment() {
+                return Err(why);
             }
-            match std::env::var_os(SANDBOX_ENV) {
-                Some(v) if v == "off" => return Err(format!("{SANDBOX_ENV}=off")),
-                Some(v) if v == "assume" => return Ok(()),
-                _ => {}
+            if std::env::var_os(SANDBOX_ENV).is_some_and(|v| v == "assume") {
+                return Ok(());
             }
             // ABI 3 (Linux 6.2): what a confined worker requires.
             abi().and_then(|v| match v {
