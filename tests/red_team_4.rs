@@ -177,6 +177,36 @@ fn m08_the_time_columns_unit_is_converted_or_refused() {
     );
 }
 
+/// M17: input rows of ±1e308 (legal numbers) interpolate to finite values: their difference
+/// overflowed to infinity and the NaN that followed was blamed on the FMU.
+#[test]
+fn m17_inputs_near_the_largest_number_interpolate_without_overflow() {
+    let dir = tb_testkit::scratch("m17-huge");
+    let file = dir.path().join("huge.in.csv");
+    std::fs::write(&file, "time,u\n0,1e308\n1,-1e308\n").unwrap();
+    let csv = dir.path().join("huge.csv");
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .arg("run")
+        .arg(common::cfmu::fmu("typed_vr"))
+        .arg("--input")
+        .arg(&file)
+        .args(["--stop", "1", "--step", "0.25", "--set", "gain=0", "--out"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == "u_echo").unwrap();
+    // u_echo is the input of the step before: 1e308 at 0.25 s, then 5e307, 0, -5e307.
+    let echoed: Vec<f64> = text
+        .lines()
+        .skip(2)
+        .map(|l| l.split(',').nth(col).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(echoed[1..], [1e308, 5e307, 0.0, -5e307], "{text}");
+}
+
 /// M9: where a failed run would keep its rows (`<out>.incomplete.<ext>`) is checked before
 /// the run like `--out`: an input of the run (here the --input file) or a folder there is
 /// refused, and the input is left as it was.
@@ -323,4 +353,79 @@ fn m11_a_hundred_thousand_fmi3_aliases_are_read_and_run_in_linear_time() {
         "{}",
         &header[..200.min(header.len())]
     );
+}
+
+/// M17: a NaN derivative is named as the FMU's (it only showed as CVODE's "t + h = t" or
+/// CV_TOO_MUCH_WORK), and a NaN event indicator is an error, not an event silently missed.
+#[test]
+fn m17_a_nan_derivative_or_event_indicator_is_named_as_the_fmus() {
+    let dir = tb_testkit::scratch("m17-nan");
+    let (out, _) = run(dir.path(), 4, 0.0, 2.0);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("since fmi2GetDerivatives returned NaN for der(x) at t = 0.5"),
+        "{err}"
+    );
+    let (out, _) = run(dir.path(), 5, 0.0, 2.0);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("fmi2GetEventIndicators returned NaN for event indicator 1 of 1"),
+        "{err}"
+    );
+}
+
+/// M17: a single FMU's `--set Instance.variable` (as in a system) names the variable, not
+/// `Instance.Instance.variable`; `cache prune` with a size that is none is refused even
+/// when there is no store yet.
+#[test]
+fn m17_a_single_fmus_instance_prefix_and_a_bad_prune_size() {
+    let dir = tb_testkit::scratch("m17-set");
+    let csv = dir.path().join("y.csv");
+    let twinbench = || Command::new(env!("CARGO_BIN_EXE_twinbench"));
+    let run = |set: &str| {
+        twinbench()
+            .arg("run")
+            .arg(common::cfmu::fmu("typed_vr"))
+            .args(["--stop", "0.5", "--step", "0.25", "--set", set, "--out"])
+            .arg(&csv)
+            .output()
+            .unwrap()
+    };
+    let last_y = || {
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+        let col = header.iter().position(|h| *h == "y").unwrap();
+        let y: f64 = text
+            .lines()
+            .last()
+            .unwrap()
+            .split(',')
+            .nth(col)
+            .unwrap()
+            .parse()
+            .unwrap();
+        y
+    };
+    // y = gain · u + t with gain 2: u = 2 makes y 4 more than u's start 0 does.
+    let o = run("u=2");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let plain = last_y();
+    assert!(plain >= 4.0, "{plain}");
+    let o = run("typed_vr.u=2");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(last_y(), plain);
+    let o = run("typed_vr.nothing=3");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("unknown variable"), "{err}");
+    let o = twinbench()
+        .args(["cache", "prune", "--max-size", "5X"])
+        .env("TWINBENCH_CACHE", dir.path().join("no-store"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("--max-size 5X: unknown unit"), "{err}");
 }

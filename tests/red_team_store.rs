@@ -219,8 +219,9 @@ fn n02_an_isolated_fmu_cannot_write_the_store_that_a_later_in_process_run_loads_
 }
 
 /// Red team M1–M4 and issue #33's list: a hostile FMU run with `--isolate` tries to write
-/// the user's home and the project, open a TCP connection, chmod the store, read another
-/// FMU's unpacked library and fork a daemon that outlives the run. Each fails; its own
+/// the user's home and the project, open a TCP connection, reach an abstract Unix socket
+/// and a System V shared memory segment of the user's, chmod the store, read another FMU's
+/// unpacked library and fork a daemon that outlives the run. Each fails; its own
 /// scratch folder works; the lap runs; nothing of it is left afterwards, and the next run
 /// does not hang.
 #[test]
@@ -244,17 +245,36 @@ fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() 
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     listener.set_nonblocking(true).unwrap();
     let port = listener.local_addr().unwrap().port().to_string();
+    // An abstract Unix socket and a System V shared memory segment of the user's.
+    use std::os::linux::net::SocketAddrExt;
+    let abstract_name = format!("twinbench-hostile-{port}");
+    let unix = std::os::unix::net::UnixListener::bind_addr(
+        &std::os::unix::net::SocketAddr::from_abstract_name(abstract_name.as_bytes()).unwrap(),
+    )
+    .unwrap();
+    unix.set_nonblocking(true).unwrap();
+    let shm = SharedMemory::new(std::process::id() as i32);
+    let shm_key = shm.key.to_string();
     let mode_before = std::fs::metadata(&store).unwrap().permissions().mode() & 0o7777;
     let env = [
         ("HOSTILE_HOME", home.to_str().unwrap()),
         ("HOSTILE_PROJECT", project.to_str().unwrap()),
         ("HOSTILE_PORT", port.as_str()),
         ("HOSTILE_OTHER", other.to_str().unwrap()),
+        ("HOSTILE_SHM", shm_key.as_str()),
     ];
     let (out, err, y) = run(&store, &attacker_sys, true, &env, None);
     assert!(out.status.success(), "{err}");
     assert_eq!(y, Some(1.0), "{err}");
-    for what in ["home", "project", "tcp", "chmod-store", "other-fmu"] {
+    for what in [
+        "home",
+        "project",
+        "tcp",
+        "abstract-socket",
+        "shm",
+        "chmod-store",
+        "other-fmu",
+    ] {
         let line = err
             .lines()
             .find(|l| l.contains(&format!("hostile: escape {what}:")))
@@ -269,6 +289,10 @@ fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() 
     );
     assert!(!project.join("planted.txt").exists());
     assert!(listener.accept().is_err(), "the FMU reached the listener");
+    assert!(
+        unix.accept().is_err(),
+        "the FMU reached the abstract socket"
+    );
     let mode_after = std::fs::metadata(&store).unwrap().permissions().mode() & 0o7777;
     assert_eq!(mode_before, mode_after);
     // The daemon ended with the run (its namespace ended with the worker).
@@ -289,6 +313,28 @@ fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() 
     let (out, err, y) = run(&store, &victim_sys, true, &[], None);
     assert!(out.status.success(), "{err}");
     assert_eq!(y, Some(1.0));
+}
+
+/// A System V shared memory segment (mode 600) of the test's, removed with it.
+struct SharedMemory {
+    key: i32,
+    id: i32,
+}
+
+impl SharedMemory {
+    fn new(key: i32) -> SharedMemory {
+        // SAFETY: shmget with documented arguments; no memory is handed over.
+        let id = unsafe { libc::shmget(key, 4096, libc::IPC_CREAT | libc::IPC_EXCL | 0o600) };
+        assert!(id >= 0, "shmget: {}", std::io::Error::last_os_error());
+        SharedMemory { key, id }
+    }
+}
+
+impl Drop for SharedMemory {
+    fn drop(&mut self) {
+        // SAFETY: IPC_RMID on the segment this test made.
+        unsafe { libc::shmctl(self.id, libc::IPC_RMID, std::ptr::null_mut()) };
+    }
 }
 
 /// M3: a library beside the FMU's own (a dependency it would load through `$ORIGIN`) is

@@ -85,7 +85,24 @@ fn days_ago(t: SystemTime) -> String {
     format!("{d:.1} days ago")
 }
 
+/// `prune`'s limits, checked before anything else (red team M17: a bad size passed when
+/// there was no store yet).
+fn prune_limits(p: &PruneArgs) -> anyhow::Result<(Option<Duration>, Option<u64>)> {
+    let older_than = match p.older_than {
+        Some(d) if !(d.is_finite() && (0.0..=36500.0).contains(&d)) => {
+            bail!("--older-than {d}: a number of days in [0, 36500]")
+        }
+        Some(d) => Some(Duration::from_secs_f64(d * 86400.0)),
+        None => None,
+    };
+    let max = p.max_size.as_deref().map(parse_size).transpose()?;
+    Ok((older_than, max))
+}
+
 pub fn run(args: CacheArgs) -> anyhow::Result<()> {
+    if let CacheCommand::Prune(p) = &args.command {
+        prune_limits(p)?;
+    }
     let store = store()?;
     if !store.is_dir() {
         println!("store    {} (not made yet)", store.display());
@@ -120,14 +137,7 @@ pub fn run(args: CacheArgs) -> anyhow::Result<()> {
             }
         }
         CacheCommand::Prune(p) => {
-            let older_than = match p.older_than {
-                Some(d) if !(d.is_finite() && (0.0..=36500.0).contains(&d)) => {
-                    bail!("--older-than {d}: a number of days in [0, 36500]")
-                }
-                Some(d) => Some(Duration::from_secs_f64(d * 86400.0)),
-                None => None,
-            };
-            let max = p.max_size.as_deref().map(parse_size).transpose()?;
+            let (older_than, max) = prune_limits(&p)?;
             let r = prune_store(&store, older_than, max)
                 .with_context(|| format!("{}: cannot prune", store.display()))?;
             let freed: u64 = r.removed.iter().map(|f| f.bytes).sum();

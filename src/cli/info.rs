@@ -75,7 +75,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             .iter()
             .map(|v| {
                 serde_json::json!({
-                    "name": v.name, "value_reference": v.value_reference, "type": v.ty.name(),
+                    "name": v.name, "value_reference": v.declared_value_reference(), "array_element": v.array_element(), "type": v.ty.name(),
                     "fmi3_type": v.fmi3.map(|s| s.ty.name()),
                     "causality": v.causality.xml_name(), "variability": v.variability.xml_name(), "unit": md.unit_of(v),
                     "start": v.start, "min": v.min, "max": v.max, "description": v.description,
@@ -164,8 +164,16 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
         eprintln!("warning: {}: {g}", args.fmu.display());
     }
     println!();
+    // An FMI 3.0 value reference may take ten digits.
+    let vr_width = md
+        .variables
+        .iter()
+        .map(|v| v.declared_value_reference().to_string().len())
+        .max()
+        .unwrap_or(0)
+        .max(4);
     println!(
-        "{:<28} {:>4} {:<8} {:<11} {:<10} {:<10} {:>12} {:>22}  description",
+        "{:<28} {:>vr_width$} {:<8} {:<11} {:<10} {:<10} {:>12} {:>22}  description",
         "name", "vr", "type", "causality", "variab.", "unit", "start", "range"
     );
     for v in &md.variables {
@@ -178,9 +186,9 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             ),
         };
         println!(
-            "{:<28} {:>4} {:<8} {:<11} {:<10} {:<10} {:>12} {:>22}  {}",
+            "{:<28} {:>vr_width$} {:<8} {:<11} {:<10} {:<10} {:>12} {:>22}  {}",
             v.name,
-            v.value_reference,
+            v.declared_value_reference(),
             v.fmi3.map_or(v.ty.name(), |s| s.ty.name()),
             v.causality.xml_name(),
             v.variability.xml_name(),

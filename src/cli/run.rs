@@ -259,7 +259,19 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     for s in &args.set {
         let (name, value) = parse_assignment(s)?;
         let name = match &instance {
-            Some(i) => format!("{i}.{name}"),
+            // The FMU's own variable name; `instance.variable` as in a system is taken too
+            // when the FMU has no variable of that whole name (red team M17).
+            Some(i) => {
+                let own = format!("{i}.{name}");
+                match name.strip_prefix(&format!("{i}.")) {
+                    Some(_)
+                        if system.parameter(&own).is_err() && system.parameter(&name).is_ok() =>
+                    {
+                        name
+                    }
+                    _ => own,
+                }
+            }
             None => name,
         };
         set_parameter(&system, &mut sim, &name, &value).with_context(|| format!("--set {s}"))?;

@@ -6,6 +6,10 @@
  *   1  nextEventTime = 0 s, whatever the time (in the past for a run that starts later: M5)
  *   2  nextEventTime = +inf (no event: M6)
  *   3  nextEventTime = -inf (not a time)
+ *   4  der(x) is NaN after 0.5 s (M17: named, not only CVODE's "t + h = t")
+ *   5  the event indicator is NaN after 0.5 s (M17: an error, not a missed event)
+ *
+ *   one event indicator, x + 1, which never crosses zero (x decays from 1)
  *
  *   value references: Real 0 x (state), 1 der(x), 2 y (output); Integer 3 mode (parameter);
  *                     Real 4 events (output: events handled)
@@ -55,7 +59,7 @@ int fmi2GetReal(void *c, const unsigned *vr, size_t n, double *v) {
     for (size_t k = 0; k < n; k++) {
         switch (vr[k]) {
         case 0: case 2: v[k] = m->x; break;
-        case 1: v[k] = -m->x; break;
+        case 1: v[k] = m->mode == 4 && m->t > 0.5 ? NAN : -m->x; break;
         case 4: v[k] = m->events; break;
         default: return ERROR;
         }
@@ -113,7 +117,15 @@ int fmi2CompletedIntegratorStep(void *c, int noSet, int *enter, int *term) {
 }
 int fmi2SetTime(void *c, double t) { Model *m = c; m->t = t; return OK; }
 int fmi2SetContinuousStates(void *c, const double *x, size_t n) { Model *m = c; if (n != 1) return ERROR; m->x = x[0]; return OK; }
-int fmi2GetDerivatives(void *c, double *dx, size_t n) { Model *m = c; if (n != 1) return ERROR; dx[0] = -m->x; return OK; }
-int fmi2GetEventIndicators(void *c, double *z, size_t n) { (void)c; (void)z; return n ? ERROR : OK; }
+int fmi2GetDerivatives(void *c, double *dx, size_t n) {
+    Model *m = c; if (n != 1) return ERROR;
+    dx[0] = m->mode == 4 && m->t > 0.5 ? NAN : -m->x;
+    return OK;
+}
+int fmi2GetEventIndicators(void *c, double *z, size_t n) {
+    Model *m = c; if (n != 1) return ERROR;
+    z[0] = m->mode == 5 && m->t > 0.5 ? NAN : m->x + 1.0;
+    return OK;
+}
 int fmi2GetContinuousStates(void *c, double *x, size_t n) { Model *m = c; if (n != 1) return ERROR; x[0] = m->x; return OK; }
 int fmi2GetNominalsOfContinuousStates(void *c, double *x, size_t n) { (void)c; for (size_t i = 0; i < n; i++) x[i] = 1.0; return OK; }

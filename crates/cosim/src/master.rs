@@ -356,7 +356,14 @@ impl Exchange {
                         col[i]
                     }
                 } else {
-                    col[i] + w * (col[i + 1] - col[i])
+                    let rise = col[i + 1] - col[i];
+                    if rise.is_finite() {
+                        col[i] + w * rise
+                    } else {
+                        // Rows near ±f64::MAX of opposite signs (red team M17): their
+                        // difference overflows; weighted separately they do not.
+                        col[i] * (1.0 - w) + col[i + 1] * w
+                    }
                 };
             }
         }

@@ -748,7 +748,11 @@ impl OptimizerPy {
 
     /// Continue from `save()`'s JSON.
     fn restore(&mut self, state: &str) -> PyResult<()> {
-        let v: serde_json::Value = serde_json::from_str(state).map_err(error)?;
+        let v: serde_json::Value = serde_json::from_str(state).map_err(|e| {
+            TwinbenchError::new_err(format!(
+                "Optimizer.restore: the state is not the JSON text Optimizer.save() gives ({e})"
+            ))
+        })?;
         self.lock().restore(&v).map_err(error)?;
         self.asked = 0;
         Ok(())

@@ -615,3 +615,9 @@ def test_optimizer_and_evaluate_inputs_are_checked():
     for penalty in [float("nan"), -1.0, float("inf")]:
         with pytest.raises(twinbench.TwinbenchError, match="a finite number >= 0"):
             study.evaluate(0, [[-5.0, 1.0]], penalty=penalty)
+    # M17: a negative thread count and a state that is not JSON are named.
+    with pytest.raises(twinbench.TwinbenchError, match=r"threads=-1: a number of threads, 0 or more"):
+        study.evaluate(0, [[-5.0, 1.0]], threads=-1)
+    opt = twinbench.Optimizer("cmaes", [(0.5, 1.5)] * 2)
+    with pytest.raises(twinbench.TwinbenchError, match=r"Optimizer.restore: the state is not the JSON text Optimizer.save\(\) gives"):
+        opt.restore("garbage")

@@ -6,7 +6,8 @@
 //!   own (root: `unshare(CLONE_NEWPID)`; another user: with a user namespace), under an init
 //!   that ends with the worker; the kernel then kills every process left in the namespace
 //!   (a daemon the FMU forked included), and a process in it cannot name, signal or trace
-//!   one outside;
+//!   one outside; an IPC and a network namespace of its own too (no System V IPC object,
+//!   abstract Unix socket or network interface of the host's);
 //! - **no privileges**: every capability dropped (bounding, ambient, effective, permitted,
 //!   inheritable) with the securebits locked, so that a root worker is root without any
 //!   capability; `no_new_privs`, so no exec gains any;
@@ -366,20 +367,25 @@ pub fn confine(spec: &Spec) -> Result<(), String> {
     Ok(())
 }
 
-/// The PID namespace the worker runs in: root makes one; another user makes it with a user
-/// namespace of its own. Called in the guard before it starts the worker's init.
+/// The PID, IPC and network namespaces the worker runs in: root makes them; another user
+/// makes them with a user namespace of its own. Called in the guard before it starts the worker's init.
 pub fn new_pid_namespace() -> Result<(), String> {
     // SAFETY: unshare with documented flags, in a single-threaded process.
     let r = unsafe {
+        // With the PID namespace an IPC and a network namespace of its own: the user's System
+        // V shared memory, semaphores and message queues, its abstract Unix sockets and
+        // every network interface (loopback included) are out of reach, whatever the
+        // worker's user id and the kernel's Landlock.
+        let flags = libc::CLONE_NEWPID | libc::CLONE_NEWIPC | libc::CLONE_NEWNET;
         if libc::geteuid() == 0 {
-            libc::unshare(libc::CLONE_NEWPID)
+            libc::unshare(flags)
         } else {
-            libc::unshare(libc::CLONE_NEWUSER | libc::CLONE_NEWPID)
+            libc::unshare(libc::CLONE_NEWUSER | flags)
         }
     };
     if r != 0 {
         return Err(format!(
-            "cannot make a PID namespace (so that nothing the FMU starts outlives the run): {}",
+            "cannot make a PID, IPC and network namespace (so that nothing the FMU starts outlives the run, and it reaches no other process's shared memory or sockets): {}",
             std::io::Error::last_os_error()
         ));
     }

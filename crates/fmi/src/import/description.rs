@@ -43,6 +43,17 @@ impl ScalarVariable {
         self.value_reference == key.1 && self.ty.value_space() == key.0
     }
 
+    /// The value reference the FMU declares: an FMI 3.0 array element's is its array's
+    /// (`value_reference` is then an internal one, unique per element).
+    pub fn declared_value_reference(&self) -> u32 {
+        self.fmi3.map_or(self.value_reference, |s| s.vr)
+    }
+
+    /// An FMI 3.0 array element's 1-based position in its array (row-major).
+    pub fn array_element(&self) -> Option<u32> {
+        self.fmi3.filter(|s| s.element).map(|s| s.index + 1)
+    }
+
     pub fn start_f64(&self) -> Option<f64> {
         let s = self.start.as_deref()?;
         match s {

@@ -6,9 +6,11 @@
 //!   and UInt64 travel as Real (f64), and a value an f64 cannot carry exactly is an error; Boolean, String and Enumeration keep their
 //!   kind; each variable keeps its exact type in [`Fmi3Slot`] for the C calls.
 //! - An array becomes one variable per element, `name[i]` or `name[i,j]` (1-based, row-major
-//!   as FMI 3.0 stores them), with its own value reference (the declared one for a scalar,
-//!   fresh ones past the largest declared for elements). Dimensions come from `start` or
-//!   from the structural parameter's start value.
+//!   as FMI 3.0 stores them). A scalar keeps its declared value reference; an element gets
+//!   an internal one among the values no variable declares (the whole `u32` range is the
+//!   FMU's, up to 4294967295), and keeps the array's own in [`Fmi3Slot`], which is what the
+//!   C calls and `info` use. A zero-size array has no element and no column. Dimensions come
+//!   from `start` or from the structural parameter's start value.
 //! - `instantiationToken` is kept as the GUID; `ModelStructure` outputs and initial unknowns
 //!   become 1-based indices as in FMI 2.0.
 //! - Binary is exchanged as text: its bytes in hexadecimal (as FMI 3.0 writes Binary start
@@ -105,6 +107,8 @@ pub struct Fmi3Slot {
     pub vr: u32,
     pub index: u32,
     pub len: u32,
+    /// An array's element (a one-element array's too), not a scalar.
+    pub element: bool,
     /// A structural parameter: it sizes arrays, so twinbench never changes it.
     pub structural: bool,
 }
@@ -277,11 +281,16 @@ impl Reader3 {
     fn finish(mut self) -> Result<ModelDescription, String> {
         self.shared.finish(&mut self.md)?;
         let mut md = self.md;
+        // Every declared value reference, a zero-size array's too (it has no element).
+        let mut indices: HashMap<u32, Vec<usize>> = self
+            .declared
+            .iter()
+            .map(|d| (d.var.value_reference, Vec::new()))
+            .collect();
         expand(&mut md, self.declared)?;
         // Value references become 1-based indices (every element of an array).
-        let mut indices: HashMap<u32, Vec<usize>> = HashMap::new();
         for (i, v) in md.variables.iter().enumerate() {
-            let vr = v.fmi3.map_or(v.value_reference, |s| s.vr);
+            let vr = v.declared_value_reference();
             indices.entry(vr).or_default().push(i + 1);
         }
         let skipped = &self.skipped_vrs;
@@ -347,6 +356,11 @@ fn declared(vname: String, vr: u32, ty: Fmi3Type, m: &Attrs) -> Result<Declared,
 
 /// A `<Dimension>`: a fixed size, or a structural parameter's value reference.
 fn dimension(m: &Attrs, variable: &str) -> Result<Dim, String> {
+    if m.contains_key("start") && m.contains_key("valueReference") {
+        return Err(format!(
+            "variable '{variable}': a <Dimension> has start or valueReference, not both"
+        ));
+    }
     if let Some(s) = m.get("start") {
         return Ok(Dim::Fixed(s.trim().parse().map_err(|_| {
             format!("variable '{variable}': Dimension start=\"{s}\" is not a size")
@@ -437,11 +451,7 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
             )
         })
         .collect();
-    let mut next_vr = declared
-        .iter()
-        .map(|d| d.var.value_reference)
-        .max()
-        .map_or(0u64, |v| v as u64 + 1);
+    let mut free = FreeValueReferences::new(declared.iter().map(|d| d.var.value_reference));
     // The total first, before a single element is made.
     let mut expanded = 0u64;
     for d in &declared {
@@ -466,6 +476,7 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
                 vr: d.var.value_reference,
                 index: 0,
                 len: 1,
+                element: false,
                 structural: d.structural,
             });
             let aliases: Vec<ScalarVariable> = d
@@ -497,10 +508,15 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
                 starts.len()
             ));
         }
-        let first_vr = u32::try_from(next_vr).unwrap_or(u32::MAX);
-        for (base, alias) in
-            std::iter::once((&name, false)).chain(d.aliases.iter().map(|a| (a, true)))
-        {
+        // The elements' internal value references, shared by the aliases' elements.
+        let element_vrs = (0..total)
+            .map(|_| free.next())
+            .collect::<Option<Vec<u32>>>()
+            .ok_or_else(|| {
+                format!("variable '{name}': no value reference left for its elements")
+            })?;
+        // An alias's elements share the original's value references.
+        for base in std::iter::once(&name).chain(d.aliases.iter()) {
             for k in 0..total {
                 // Row-major position → 1-based subscripts.
                 let mut rest = k;
@@ -517,28 +533,56 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
                     1 => Some(starts[0].clone()),
                     _ => Some(starts[k as usize].clone()),
                 };
-                // An alias's element shares its original's value reference.
-                let vr = if alias {
-                    first_vr + k as u32
-                } else {
-                    u32::try_from(next_vr + k).map_err(|_| {
-                        format!("variable '{name}': no value reference left for its elements")
-                    })?
-                };
-                v.value_reference = vr;
+                v.value_reference = element_vrs[k as usize];
                 v.fmi3 = Some(Fmi3Slot {
                     ty: d.ty,
                     vr: d.var.value_reference,
                     index: k as u32,
                     len: total as u32,
+                    element: true,
                     structural: d.structural,
                 });
                 md.variables.push(v);
             }
         }
-        next_vr += total;
     }
     Ok(())
+}
+
+/// The value references no declared variable uses, smallest first: the internal ones of
+/// array elements. The declared ones may lie anywhere in `0..=u32::MAX`, and at most a
+/// million values are expanded, so the range never runs dry in practice.
+struct FreeValueReferences {
+    /// The declared value references, sorted, and the first of them not yet passed.
+    used: Vec<u32>,
+    passed: usize,
+    candidate: Option<u32>,
+}
+
+impl FreeValueReferences {
+    fn new(used: impl Iterator<Item = u32>) -> Self {
+        let mut used: Vec<u32> = used.collect();
+        used.sort_unstable();
+        used.dedup();
+        FreeValueReferences {
+            used,
+            passed: 0,
+            candidate: Some(0),
+        }
+    }
+
+    fn next(&mut self) -> Option<u32> {
+        loop {
+            let c = self.candidate?;
+            while self.passed < self.used.len() && self.used[self.passed] < c {
+                self.passed += 1;
+            }
+            self.candidate = c.checked_add(1);
+            if self.used.get(self.passed) != Some(&c) {
+                return Some(c);
+            }
+        }
+    }
 }
 
 /// The sizes of a declared array's dimensions (a structural parameter's by its start).
@@ -697,6 +741,49 @@ mod tests {
         let e = parse(&xml).unwrap_err();
         assert!(
             e.contains("'a10': the arrays so far hold more than 1000000 values in all"),
+            "{e}"
+        );
+    }
+
+    /// Red team M16: the largest legal value reference made the FMU unloadable (elements
+    /// were numbered past the largest declared one); elements showed made-up value
+    /// references; a zero-size array was refused; a Dimension with both a size and a
+    /// structural parameter was accepted.
+    #[test]
+    fn value_references_up_to_the_largest_zero_size_arrays_and_dimensions_of_one_kind() {
+        let xml = XML.replace(
+            "<Binary name=\"b\" valueReference=\"10\" causality=\"output\"/>",
+            "<Binary name=\"b\" valueReference=\"10\" causality=\"output\"/>\n<Float64 name=\"h\" valueReference=\"4294967295\" causality=\"local\"/>\n<Float64 name=\"z\" valueReference=\"11\" causality=\"output\"><Dimension start=\"0\"/></Float64>",
+        ).replace("<InitialUnknown valueReference=\"5\"/>", "<InitialUnknown valueReference=\"5\"/><Output valueReference=\"11\"/>");
+        let md = parse(&xml).unwrap();
+        assert_eq!(md.variable("h").unwrap().value_reference, u32::MAX);
+        assert_eq!(
+            md.variable("h").unwrap().declared_value_reference(),
+            u32::MAX
+        );
+        assert_eq!(md.variable("h").unwrap().array_element(), None);
+        // The elements' internal references are free values, distinct from every declared
+        // one; what the FMU declares is the array's.
+        let declared = [0u32, 1, 5, 6, 7, 8, 9, 10, u32::MAX];
+        let mut internal = std::collections::HashSet::new();
+        for k in 1..=6 {
+            let (i, j) = ((k - 1) / 3 + 1, (k - 1) % 3 + 1);
+            let v = md.variable(&format!("y[{i},{j}]")).unwrap();
+            assert_eq!(v.declared_value_reference(), 5);
+            assert_eq!(v.array_element(), Some(k));
+            assert!(!declared.contains(&v.value_reference));
+            assert!(internal.insert(v.value_reference));
+        }
+        // z has no element, no column and no output entry.
+        assert!(md.variables.iter().all(|v| !v.name.starts_with('z')));
+        assert_eq!(md.outputs.len(), 7);
+        let xml = XML.replace(
+            "<Dimension start=\"3\"/>",
+            "<Dimension start=\"3\" valueReference=\"1\"/>",
+        );
+        let e = parse(&xml).unwrap_err();
+        assert!(
+            e.contains("'y': a <Dimension> has start or valueReference, not both"),
             "{e}"
         );
     }

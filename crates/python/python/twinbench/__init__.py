@@ -48,6 +48,16 @@ def _forward_warnings(fn):
 
     return wrapper
 
+
+def _threads(threads) -> int:
+    """``threads`` as the native calls take it (0: all cores), or a TwinbenchError naming it
+    (a negative count was a bare OverflowError from the conversion)."""
+    if threads is None:
+        return 0
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 0:
+        raise TwinbenchError(f"threads={threads!r}: a number of threads, 0 or more (0 or None: all cores)")
+    return threads
+
 __all__ = [
     "__version__",
     "run",
@@ -443,7 +453,7 @@ class Study:
         text = _native.optimize(
             os.fspath(self.path),
             os.fspath(out if out is not None else "target/optimize"),
-            int(threads or 0),
+            _threads(threads),
             bool(resume),
             generations,
             optimizer,
@@ -524,7 +534,7 @@ class Study:
             v.update(zip(params, x))
             full.append([v[n] for n in names])
         if executor is None:
-            results = loaded.costs(step, full, int(threads or 0))
+            results = loaded.costs(step, full, _threads(threads))
         else:
             from . import _worker
 

@@ -130,6 +130,8 @@ pub struct MeInstance {
     completed_step_needed: bool,
     /// The continuous Real inputs (settable in continuous-time mode).
     continuous_inputs: HashMap<u32, ()>,
+    /// The derivatives' names in state order (`der(x)`), for messages.
+    derivative_names: Vec<String>,
     mode: Mode,
     start: f64,
     stop: Option<f64>,
@@ -264,6 +266,17 @@ impl MeInstance {
             })
             .map(|v| (v.value_reference, ()))
             .collect();
+        let derivative_names = (0..nx)
+            .map(|k| {
+                md.derivatives
+                    .get(k)
+                    .and_then(|u| md.variables.get(u.index.wrapping_sub(1)))
+                    .map_or_else(
+                        || format!("derivative {} of {nx}", k + 1),
+                        |v| v.name.clone(),
+                    )
+            })
+            .collect();
         let n = nx.max(1);
         Ok(MeInstance {
             solver: None,
@@ -276,6 +289,7 @@ impl MeInstance {
             told_tolerance: settings.relative_tolerance,
             completed_step_needed: !me.completed_integrator_step_not_needed,
             continuous_inputs,
+            derivative_names,
             mode: Mode::Instantiated,
             start: 0.0,
             stop: None,
@@ -698,7 +712,19 @@ impl MeInstance {
             &mut z,
         );
         self.z = z;
-        r
+        r?;
+        // A NaN indicator has no sign: its event could never be found.
+        match self.z.iter().position(|v| v.is_nan()) {
+            Some(k) => Err(self.error(
+                "fmi2GetEventIndicators",
+                format!(
+                    "returned NaN for event indicator {} of {}, which has no sign to watch for a crossing",
+                    k + 1,
+                    self.nz
+                ),
+            )),
+            None => Ok(()),
+        }
     }
 
     /// A solver error as this instance's: the FMI call that failed inside CVODE's
@@ -709,9 +735,24 @@ impl MeInstance {
             return self.error(
                 f.call,
                 format!(
-                    "returned {} (called by CVODE, which then {})",
-                    f.status,
+                    "{} (called by CVODE, which then {})",
+                    f.problem,
                     e.problem().trim_start_matches("returned ")
+                ),
+            );
+        }
+        // CVODE gave up on its own after retrying a failed call: that call is the likely
+        // cause (a derivative that is NaN beyond some time makes it shrink its step to
+        // nothing).
+        if let Some(f) = self.solver.as_mut().and_then(|s| s.system().retried.take()) {
+            return self.error(
+                e.function,
+                format!(
+                    "{}; it had retried with ever smaller steps since {} {} at t = {} s",
+                    e.problem(),
+                    f.call,
+                    f.problem,
+                    f.time
                 ),
             );
         }
@@ -743,7 +784,12 @@ impl MeInstance {
             max_step,
             max_num_steps: MAX_NUM_STEPS,
         };
-        let system = FmuSystem::new(self.inst.raw(), self.api, self.nx, self.trace.clone());
+        let system = FmuSystem::new(
+            self.inst.raw(),
+            self.api,
+            self.derivative_names.clone(),
+            self.trace.clone(),
+        );
         let solver = Cvode::new(
             system,
             self.inst.time,

@@ -8,11 +8,12 @@ use super::{shown_values, CallTrace};
 use crate::fmi2::*;
 use crate::import::library::MeApi;
 
-/// The first FMI call that failed inside a callback, for the error message.
+/// The FMI call that failed in the last callback, for the error message: `problem` is what
+/// it did (`returned fmi2Error`, `returned NaN for der(x)`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Failure {
     pub call: &'static str,
-    pub status: fmi2Status,
+    pub problem: String,
     pub time: f64,
 }
 
@@ -20,17 +21,29 @@ pub struct FmuSystem {
     comp: fmi2Component,
     api: MeApi,
     nx: usize,
+    /// The derivatives' names (`der(x)`), for a message about one of them.
+    derivative_names: Vec<String>,
     pub failure: Option<Failure>,
+    /// The last failure CVODE retried with a smaller step (fmi2Discard, a NaN derivative):
+    /// the likely cause when it later gives up for another reason.
+    pub retried: Option<Failure>,
     trace: Option<CallTrace>,
 }
 
 impl FmuSystem {
-    pub fn new(comp: fmi2Component, api: MeApi, nx: usize, trace: Option<CallTrace>) -> FmuSystem {
+    pub fn new(
+        comp: fmi2Component,
+        api: MeApi,
+        derivative_names: Vec<String>,
+        trace: Option<CallTrace>,
+    ) -> FmuSystem {
         FmuSystem {
             comp,
             api,
-            nx,
+            nx: derivative_names.len(),
+            derivative_names,
             failure: None,
+            retried: None,
             trace,
         }
     }
@@ -43,20 +56,34 @@ impl FmuSystem {
     }
 
     /// A status as a callback's result: 0 for OK and Warning; fmi2Discard is an error CVODE
-    /// may recover from with a smaller step (1), anything else stops it (−1). The first
-    /// failure is kept.
+    /// may recover from with a smaller step (1), anything else stops it (−1). The failure of
+    /// the last callback is kept: when CVODE gives up, it is the one that made it.
     fn status(&mut self, call: &'static str, status: fmi2Status, time: f64) -> i32 {
         if status.is_ok() {
+            self.failure = None;
             return 0;
         }
-        if self.failure.is_none() {
-            self.failure = Some(Failure { call, status, time });
-        }
+        self.failure = Some(Failure {
+            call,
+            problem: format!("returned {status}"),
+            time,
+        });
         if status == fmi2Status::DISCARD {
+            self.retried = self.failure.clone();
             1
         } else {
             -1
         }
+    }
+
+    /// A value that is not a number (red team M17: a NaN derivative only showed as CVODE's
+    /// "t + h = t", a NaN event indicator silently missed its event).
+    fn not_a_number(&mut self, call: &'static str, what: String, v: f64, time: f64) {
+        self.failure = Some(Failure {
+            call,
+            problem: format!("returned {v} for {what}"),
+            time,
+        });
     }
 
     /// `fmi2SetTime` and, with states, `fmi2SetContinuousStates`.
@@ -94,7 +121,19 @@ impl System for FmuSystem {
         }
         let s = unsafe { (self.api.fmi2GetDerivatives)(self.comp, dx.as_mut_ptr(), self.nx) };
         self.traced(t, "fmi2GetDerivatives", || shown_values(dx), s);
-        self.status("fmi2GetDerivatives", s, t)
+        let r = self.status("fmi2GetDerivatives", s, t);
+        if r != 0 {
+            return r;
+        }
+        // An infinite or NaN derivative: CVODE may retry with a smaller step (a trial
+        // point outside the model's domain), and stops when it keeps coming back.
+        if let Some(k) = dx.iter().position(|d| !d.is_finite()) {
+            let what = self.derivative_names[k].clone();
+            self.not_a_number("fmi2GetDerivatives", what, dx[k], t);
+            self.retried = self.failure.clone();
+            return 1;
+        }
+        0
     }
 
     fn roots(&mut self, t: f64, x: &[f64], g: &mut [f64]) -> i32 {
@@ -104,6 +143,16 @@ impl System for FmuSystem {
         }
         let s = unsafe { (self.api.fmi2GetEventIndicators)(self.comp, g.as_mut_ptr(), g.len()) };
         self.traced(t, "fmi2GetEventIndicators", || shown_values(g), s);
-        self.status("fmi2GetEventIndicators", s, t)
+        let r = self.status("fmi2GetEventIndicators", s, t);
+        if r != 0 {
+            return r;
+        }
+        // A NaN indicator has no sign: its crossing could never be found.
+        if let Some(k) = g.iter().position(|z| z.is_nan()) {
+            let what = format!("event indicator {} of {}", k + 1, g.len());
+            self.not_a_number("fmi2GetEventIndicators", what, g[k], t);
+            return -1;
+        }
+        0
     }
 }
