@@ -315,6 +315,82 @@ fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() 
     assert_eq!(y, Some(1.0));
 }
 
+/// M2: Landlock's rules were for the store's path, and a bind mount of the store beside it
+/// let a worker write another FMU's library and its manifest. Now the worker writes only its
+/// scratch folder, through any path: the library opened for writing through the alias is
+/// refused, and the victim still runs its own code. (Run as root, where a test can mount;
+/// skipped elsewhere, as the confinement is where it cannot be set up.)
+#[test]
+fn m02_a_bind_mount_of_the_store_reaches_nothing() {
+    if !confinement_here() {
+        return;
+    }
+    let dir = tb_testkit::scratch("m02-bind");
+    let store = dir.path().join("store");
+    let (victim, _) = hostile_fmu(dir.path(), "NONE");
+    let (attacker, _) = hostile_fmu(dir.path(), "ESCAPE");
+    let (victim_sys, attacker_sys) = (system(dir.path(), &victim), system(dir.path(), &attacker));
+    let (out, err, _) = run(&store, &victim_sys, false, &[], None);
+    assert!(out.status.success(), "{err}");
+    let alias = dir.path().join("alias");
+    std::fs::create_dir(&alias).unwrap();
+    let Some(_mount) = BindMount::new(&store, &alias) else {
+        eprintln!("skipped: cannot bind-mount here");
+        return;
+    };
+    let library = folder_of(&store, &victim).join("binaries/linux64/hostile.so");
+    let before = std::fs::read(&library).unwrap();
+    let through_alias = folder_of(&alias, &victim).join("binaries/linux64/hostile.so");
+    let env = [("HOSTILE_ALIAS", through_alias.to_str().unwrap())];
+    let (out, err, _) = run(&store, &attacker_sys, true, &env, None);
+    assert!(out.status.success(), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("hostile: escape alias:"))
+        .unwrap_or_else(|| panic!("no attempt through the alias: {err}"));
+    assert!(
+        !line.ends_with(": ok"),
+        "the write through the bind mount succeeded: {err}"
+    );
+    assert_eq!(std::fs::read(&library).unwrap(), before);
+    let (out, err, y) = run(&store, &victim_sys, false, &[], None);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(y, Some(1.0), "{err}");
+}
+
+/// A bind mount made by the test (as root), unmounted with it.
+struct BindMount {
+    target: PathBuf,
+}
+
+impl BindMount {
+    fn new(source: &Path, target: &Path) -> Option<BindMount> {
+        let c = |p: &Path| std::ffi::CString::new(p.as_os_str().as_encoded_bytes()).unwrap();
+        let (s, t) = (c(source), c(target));
+        // SAFETY: mount with two NUL-terminated paths and no data.
+        let r = unsafe {
+            libc::mount(
+                s.as_ptr(),
+                t.as_ptr(),
+                std::ptr::null(),
+                libc::MS_BIND,
+                std::ptr::null(),
+            )
+        };
+        (r == 0).then(|| BindMount {
+            target: target.to_path_buf(),
+        })
+    }
+}
+
+impl Drop for BindMount {
+    fn drop(&mut self) {
+        let t = std::ffi::CString::new(self.target.as_os_str().as_encoded_bytes()).unwrap();
+        // SAFETY: umount of the path this test mounted.
+        unsafe { libc::umount2(t.as_ptr(), libc::MNT_DETACH) };
+    }
+}
+
 /// A System V shared memory segment (mode 600) of the test's, removed with it.
 struct SharedMemory {
     key: i32,
