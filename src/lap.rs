@@ -51,6 +51,40 @@ pub struct LapOptions {
     /// Where the packed FMUs are; None: pack them into `<out>/fmu`, so that the lap's folder
     /// needs nothing else (it survives the removal of the checkout twinbench was built in).
     pub fmu_dir: Option<PathBuf>,
+    /// The vehicle's chassis in the system, and whether the study fits its modes.
+    pub chassis: Chassis,
+}
+
+/// The vehicle model's chassis (`vehicle.chassis_model`) for a prepared lap.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+pub enum Chassis {
+    /// The first-order low-pass (the model's default); the study fits lift and geometry.
+    #[default]
+    FirstOrder,
+    /// Sprung pitch and roll modes; the study gets a third step fitting their frequencies
+    /// and dampings.
+    SecondOrder,
+}
+
+impl Chassis {
+    /// The four parameters of the second-order chassis (the chassis step's).
+    pub const MODE_PARAMETERS: [&'static str; 4] = [
+        "vehicle.pitch_frequency",
+        "vehicle.pitch_damping",
+        "vehicle.roll_frequency",
+        "vehicle.roll_damping",
+    ];
+
+    /// The chassis a fitted parameter set needs: second order when it has a mode parameter.
+    pub fn of_parameters<'a>(names: impl IntoIterator<Item = &'a str>) -> Chassis {
+        match names
+            .into_iter()
+            .any(|n| Chassis::MODE_PARAMETERS.contains(&n))
+        {
+            true => Chassis::SecondOrder,
+            false => Chassis::FirstOrder,
+        }
+    }
 }
 
 /// What `lap` wrote.
@@ -304,6 +338,9 @@ fn system_toml(
     parameters["vehicle.track_file"] = value("track.csv");
     parameters["driver.target_speed_file"] = value("target_speed.csv");
     parameters["vehicle.v_start"] = value(v0);
+    if o.chassis == Chassis::SecondOrder {
+        parameters["vehicle.chassis_model"] = value("second_order");
+    }
     for p in [
         "dyno_rl.omega_start",
         "dyno_rr.omega_start",
@@ -340,13 +377,26 @@ fn study_toml(o: &LapOptions, name: &str) -> String {
         ),
         channel_lines(&o.channels)
     );
-    study_text(&o.out.join("study.toml"), name, "system.toml", &measurement)
+    study_text(
+        &o.out.join("study.toml"),
+        name,
+        "system.toml",
+        &measurement,
+        o.chassis,
+    )
 }
 
 /// The study file's text: its measurement part given (one `[measurement]` or several
-/// `[[measurement]]`), the rest the paper's two steps.
-fn study_text(study_path: &Path, name: &str, system: &str, measurement: &str) -> String {
-    format!(
+/// `[[measurement]]`), the rest the paper's two steps, and with the second-order chassis a
+/// third that fits its modes.
+fn study_text(
+    study_path: &Path,
+    name: &str,
+    system: &str,
+    measurement: &str,
+    chassis: Chassis,
+) -> String {
+    let mut text = format!(
         r#"# The paper's two-step optimisation on this lap: prepared by `twinbench lap`. Run it with
 #   twinbench optimize {study_path}
 name = {name}
@@ -409,7 +459,36 @@ max = 2.0
         study_path = study_path.display(),
         name = toml_string(name),
         system = toml_string(system),
-    )
+    );
+    if chassis == Chassis::SecondOrder {
+        text.push_str(
+            r#"
+# Step 3: the second-order chassis' pitch and roll modes (system.toml sets
+# vehicle.chassis_model = "second_order"), validated on the four wheel loads and the
+# accelerations the loads follow.
+[[step]]
+name = "chassis"
+signals = ["Fz_rl", "Fz_rr", "Fz_fl", "Fz_fr"]
+[[step.parameter]]
+name = "vehicle.pitch_frequency"
+min = 0.5
+max = 8.0
+[[step.parameter]]
+name = "vehicle.pitch_damping"
+min = 0.1
+max = 1.5
+[[step.parameter]]
+name = "vehicle.roll_frequency"
+min = 0.5
+max = 8.0
+[[step.parameter]]
+name = "vehicle.roll_damping"
+min = 0.1
+max = 1.5
+"#,
+        );
+    }
+    text
 }
 
 /// What `lap` wrote for several measurements: each lap in a folder of its own (named after
@@ -430,6 +509,7 @@ pub fn prepare_several(
     tracks: &[PathBuf],
     out: &Path,
     fmu_dir: Option<&Path>,
+    chassis: Chassis,
 ) -> Result<SeveralLaps, LapError> {
     if tracks.len() > 1 && tracks.len() != measurements.len() {
         return Err(LapError::Invalid(format!(
@@ -475,6 +555,7 @@ pub fn prepare_several(
                 },
                 out: out.join(name),
                 fmu_dir: Some(fmus.clone()),
+                chassis,
             };
             let files = prepare(&o)?;
             let _ = write!(
@@ -493,7 +574,10 @@ pub fn prepare_several(
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "laps".into());
         let first_system = format!("{}/system.toml", names[0]);
-        write(&study, &study_text(&study, &name, &first_system, &entries))?;
+        write(
+            &study,
+            &study_text(&study, &name, &first_system, &entries, chassis),
+        )?;
         Ok(SeveralLaps { laps, study })
     })();
     if r.is_err() && created && out.is_dir() {

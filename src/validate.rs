@@ -139,6 +139,10 @@ pub fn validate(o: &ValidateOptions) -> Result<Validation, ValidateError> {
         track: o.track.clone(),
         out: o.out.join("lap"),
         fmu_dir: None,
+        // The chassis the fitted parameters belong to.
+        chassis: crate::lap::Chassis::of_parameters(
+            result.parameters_final.iter().map(|(n, _)| n.as_str()),
+        ),
     })?;
     let table = run_twin(&lap.system, &result.parameters_final, &o.result)?;
     let measurement = Measurement::load(&o.measurement, &o.channels)?;

@@ -146,3 +146,36 @@ fn fmpy_master_explicit_order_and_fractional_stop_match() {
     let j = fmpy_run(&system, &["--stop", "3.0005"], &csv);
     check(&j, &order, steps, "explicit order, stop 3.0005 s");
 }
+
+/// The second-order chassis (named by its item in the system file, as FMPy's master is told
+/// it too): 8 s of the lap with sprung pitch and roll agree as the first-order lap does.
+#[test]
+fn fmpy_master_second_order_chassis_matches() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = root().join("systems/rls_v.toml");
+    let text = std::fs::read_to_string(&src).unwrap().replace(
+        "\"vehicle.v_start\" = 52.43",
+        "\"vehicle.v_start\" = 52.43\n\"vehicle.chassis_model\" = \"second_order\"\n\"vehicle.pitch_damping\" = 0.3",
+    );
+    let fmu_dir = common::fmu_dir();
+    let text = text.replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()));
+    let system = dir.path().join("second_order.toml");
+    std::fs::write(&system, text).unwrap();
+    let csv = dir.path().join("twinbench.csv");
+    let (order, steps) = twinbench_run(&system, Some(8.0), None, &csv);
+    let j = fmpy_run(&system, &["--stop", "8.0"], &csv);
+    check(&j, &order, steps, "second-order chassis, 8 s");
+    // The chassis was in force: a_x differs from the first-order lap's.
+    let first = dir.path().join("first.csv");
+    twinbench_run(&src, Some(8.0), None, &first);
+    let column = |path: &Path| -> Vec<String> {
+        let text = std::fs::read_to_string(path).unwrap();
+        let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+        let k = header.iter().position(|h| *h == "vehicle.a_x").unwrap();
+        text.lines()
+            .skip(2)
+            .map(|l| l.split(',').nth(k).unwrap().to_string())
+            .collect()
+    };
+    assert_ne!(column(&csv), column(&first));
+}

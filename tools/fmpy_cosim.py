@@ -278,11 +278,20 @@ class System:
         params = dict(sysf.get("parameters", {}))
         for o in overrides or []:
             name, _, value = o.partition("=")
-            params[name.strip()] = float(value) if any(c in value for c in ".eE") else int(value)
+            try:
+                params[name.strip()] = float(value) if any(c in value for c in ".eE") else int(value)
+            except ValueError:
+                params[name.strip()] = value.strip()
         for name, value in params.items():
             u, var = split_name(name)
             unit = self.units[self.index[u]]
             v = unit.variable(var)
+            if v.type == "Enumeration" and isinstance(value, str):
+                # An Enumeration by an item's name, as twinbench takes it.
+                items = {i.name: int(i.value) for i in v.declaredType.items}
+                if value not in items:
+                    sys.exit(f"{name}: '{value}' is not an item of {v.declaredType.name} ({', '.join(items)})")
+                value = items[value]
             unit.params.append((v.valueReference, vtype(v), value))
         for u in self.units:
             u.finish_tables()

@@ -14,8 +14,10 @@ Landlock and take the last path every time. The first measures set
 TWINBENCH_WORKER_SANDBOX=assume (the host takes workers as sandboxed without asking the
 kernel, as it finds them natively on this machine); the last sets it to `off`.
 
-Usage: tools/instructions.py [--json]   (needs valgrind; run tools/benchmark.sh first, or
-  `cargo build --release` and `target/release/twinbench pack`)
+Usage: tools/instructions.py [--json] [--set instance.variable=value ...]   (needs valgrind;
+  run tools/benchmark.sh first, or `cargo build --release` and `target/release/twinbench
+  pack`). `--set` changes a parameter in every measured run, e.g.
+  `--set vehicle.chassis_model=second_order` for the second-order chassis' cost.
 """
 import argparse
 import json
@@ -31,10 +33,11 @@ sys.path.insert(0, os.path.join(ROOT, "tools"))
 from benchmark import system_variant  # noqa: E402
 
 
-def callgrind(system, tmp, env):
+def callgrind(system, tmp, env, sets=()):
     out = os.path.join(tmp, "callgrind.out")
+    args = [a for s in sets for a in ("--set", s)]
     p = subprocess.run(
-        ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", TB, "run", system, "--json"],
+        ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", TB, "run", system, "--json", *args],
         capture_output=True, text=True, env=env,
     )
     if p.returncode != 0:
@@ -48,6 +51,8 @@ def callgrind(system, tmp, env):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="a parameter for every measured run (as twinbench run --set)")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ)
@@ -55,11 +60,11 @@ def main():
         env["TWINBENCH_CACHE"] = os.path.join(tmp, "unpacked")
         env["TWINBENCH_WORKER_SANDBOX"] = "assume"
         short = system_variant(tmp, stop=0.001)
-        first, _ = callgrind(short, tmp, env)
-        second, one = callgrind(short, tmp, env)
-        lap, steps = callgrind(system_variant(tmp), tmp, env)
+        first, _ = callgrind(short, tmp, env, a.set)
+        second, one = callgrind(short, tmp, env, a.set)
+        lap, steps = callgrind(system_variant(tmp), tmp, env, a.set)
         env["TWINBENCH_WORKER_SANDBOX"] = "off"
-        no_landlock, _ = callgrind(short, tmp, env)
+        no_landlock, _ = callgrind(short, tmp, env, a.set)
     per_step = (lap - second) / (steps - one)
     result = {
         "startup_first_run": first,

@@ -28,6 +28,11 @@ pub struct LapArgs {
     /// relative to the output folder, so that it resolves from there.
     #[arg(long)]
     pub fmus: Option<PathBuf>,
+    /// The vehicle's chassis: `first-order` (the low-pass; the study fits lift and
+    /// geometry) or `second-order` (sprung pitch and roll modes; the study gets a third
+    /// step fitting their frequencies and dampings).
+    #[arg(long, value_enum, default_value_t = crate::lap::Chassis::FirstOrder)]
+    pub chassis: crate::lap::Chassis,
     /// Print a JSON summary.
     #[arg(long)]
     pub json: bool,
@@ -49,6 +54,7 @@ pub fn run(args: LapArgs) -> anyhow::Result<()> {
             &args.track,
             &args.out,
             args.fmus.as_deref(),
+            args.chassis,
         )?;
         for w in several.laps.iter().flat_map(|l| &l.warnings) {
             eprintln!("warning: {w}");
@@ -82,6 +88,7 @@ pub fn run(args: LapArgs) -> anyhow::Result<()> {
         track: args.track.first().cloned(),
         out: args.out.clone(),
         fmu_dir: args.fmus.clone(),
+        chassis: args.chassis,
     };
     let files = crate::lap::prepare(&options)?;
     for w in &files.warnings {

@@ -9,10 +9,7 @@
 mod target;
 
 use fmu_export::variables::*;
-use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource, StateReader,
-    StateWriter,
-};
+use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource};
 use std::cell::Cell;
 use std::sync::Arc;
 pub use target::TargetSpeed;
@@ -77,11 +74,19 @@ fmu_export::variables! {
     }
 }
 
+fmu_export::states! {
+    /// The driver's dynamic state.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    pub struct DriverState {
+        /// ∫ speed error dt [m], the PI's integral state.
+        error_integral: f64,
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Driver {
     target: Arc<TargetSpeed>,
-    /// ∫ speed error dt [m], the PI's integral state.
-    error_integral: f64,
+    st: DriverState,
     /// Segments of the last target lookups at the car and at the preview point (search
     /// hints only: results do not depend on them).
     hint_here: Cell<usize>,
@@ -96,7 +101,7 @@ impl Driver {
     }
 
     fn integral_part(&self, vars: &DriverVars) -> f64 {
-        Self::kp(vars) * self.error_integral / vars.integral_time
+        Self::kp(vars) * self.st.error_integral / vars.integral_time
     }
 
     /// Target at the preview point: (v_preview, a_target).
@@ -181,7 +186,9 @@ impl Model for Driver {
         vars.lap_length = target.lap_length();
         let driver = Driver {
             target,
-            error_integral: 0.0,
+            st: DriverState {
+                error_integral: 0.0,
+            },
             hint_here: Cell::new(0),
             hint_preview: Cell::new(0),
         };
@@ -201,9 +208,9 @@ impl Model for Driver {
         let error = vars.v_target - vars.v;
         let winds_up = (saturation > 0 && error > 0.0) || (saturation < 0 && error < 0.0);
         if !winds_up {
-            self.error_integral += error * step;
+            self.st.error_integral += error * step;
             let bound = vars.integral_limit * vars.integral_time / Self::kp(vars);
-            self.error_integral = self.error_integral.clamp(-bound, bound);
+            self.st.error_integral = self.st.error_integral.clamp(-bound, bound);
         }
         Ok(())
     }
@@ -214,13 +221,12 @@ impl Model for Driver {
 }
 
 impl ModelState for Driver {
-    fn save_state(&self, w: &mut StateWriter) {
-        w.f64(self.error_integral);
+    type State = DriverState;
+    fn state(&self) -> &DriverState {
+        &self.st
     }
-
-    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
-        self.error_integral = r.f64()?;
-        Ok(())
+    fn state_mut(&mut self) -> &mut DriverState {
+        &mut self.st
     }
 }
 

@@ -10,9 +10,7 @@
 mod lag;
 
 use fmu_export::variables::*;
-use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, StateReader, StateWriter,
-};
+use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState};
 use lag::LagStep;
 
 fmu_export::variables! {
@@ -77,7 +75,6 @@ const TICK_EPS: f64 = 1e-9;
 #[derive(Clone, Debug)]
 pub struct Dyno {
     // Fixed from parameters at initialisation.
-    start_time: f64,
     cycle: f64,
     inertia: f64,
     rotor_share: f64,
@@ -86,22 +83,31 @@ pub struct Dyno {
     jitter_cycles: f64,
     window_cycles: usize,
     lag_cycle: LagStep,
-    // Dynamic state.
-    tick: u64,
-    omega: f64,
-    omega_prev_tick: f64,
-    lag_x: f64,
-    lag_dx: f64,
-    lag_input: f64,
-    integral: f64,
-    last_mode: i32,
-    rng: u64,
-    /// Demands of past ticks (after compensation and limit); `hist_head` is the newest.
-    hist: Vec<f64>,
-    hist_head: usize,
-    /// Raw demands for the dead-time compensation's slope.
-    raw: Vec<f64>,
-    raw_head: usize,
+    st: DynoState,
+}
+
+fmu_export::states! {
+    /// The dyno's dynamic state. The tick clock's origin is in it: a deserializing host
+    /// re-initialises at another time.
+    #[derive(Clone, Debug, PartialEq)]
+    pub struct DynoState {
+        start_time: f64,
+        tick: u64,
+        omega: f64,
+        omega_prev_tick: f64,
+        lag_x: f64,
+        lag_dx: f64,
+        lag_input: f64,
+        integral: f64,
+        last_mode: i32,
+        rng: u64,
+        /// Demands of past ticks (after compensation and limit); `hist_head` is the newest.
+        hist: Vec<f64>,
+        hist_head: usize,
+        /// Raw demands for the dead-time compensation's slope.
+        raw: Vec<f64>,
+        raw_head: usize,
+    }
 }
 
 /// SplitMix64: tiny, seedable, good enough for a bounded timing jitter.
@@ -125,7 +131,7 @@ fn snap(x: f64) -> f64 {
 impl Dyno {
     fn tick_time(&self) -> f64 {
         // Through i64: one conversion instruction (tick < 2^63, the same value as u64's).
-        self.start_time + self.tick as i64 as f64 * self.cycle
+        self.st.start_time + self.st.tick as i64 as f64 * self.cycle
     }
 
     fn clip(x: f64, limit: f64) -> f64 {
@@ -134,30 +140,30 @@ impl Dyno {
 
     /// Speed PI: positive error (too slow) needs less load torque.
     fn speed_demand(&self, vars: &DynoVars) -> f64 {
-        -vars.speed_kp * (vars.speed_setpoint - self.omega) + self.integral
+        -vars.speed_kp * (vars.speed_setpoint - self.st.omega) + self.st.integral
     }
 
     /// One controller cycle at the current tick time: form the demand, push it into the
     /// dead-time line and read the delayed value as the lag's new input.
     fn controller_tick(&mut self, vars: &mut DynoVars) {
-        let alpha = (self.omega - self.omega_prev_tick) / self.cycle;
-        self.omega_prev_tick = self.omega;
+        let alpha = (self.st.omega - self.st.omega_prev_tick) / self.cycle;
+        self.st.omega_prev_tick = self.st.omega;
         let limit = vars.torque_max;
 
         let raw = if vars.control_mode == 1 {
-            if self.last_mode != 1 {
+            if self.st.last_mode != 1 {
                 // Bumpless switch: the integrator takes over the demand in force.
-                self.integral =
-                    self.hist[self.hist_head] + vars.speed_kp * (vars.speed_setpoint - self.omega);
+                self.st.integral = self.st.hist[self.st.hist_head]
+                    + vars.speed_kp * (vars.speed_setpoint - self.st.omega);
             }
             let demand = self.speed_demand(vars);
-            let error = vars.speed_setpoint - self.omega;
+            let error = vars.speed_setpoint - self.st.omega;
             // Anti-windup: integrate only while the demand is inside the limit or the
             // error pulls it back in.
             let pushes_out = (demand >= limit && error < 0.0) || (demand <= -limit && error > 0.0);
             if !pushes_out {
-                self.integral =
-                    Self::clip(self.integral - vars.speed_ki * error * self.cycle, limit);
+                self.st.integral =
+                    Self::clip(self.st.integral - vars.speed_ki * error * self.cycle, limit);
             }
             demand
         } else {
@@ -167,27 +173,27 @@ impl Dyno {
             }
             demand
         };
-        self.last_mode = vars.control_mode;
+        self.st.last_mode = vars.control_mode;
 
         let mut demand = raw;
         if vars.dead_time_compensation {
-            let n = self.raw.len();
-            self.raw_head = wrap_next(self.raw_head, n);
-            self.raw[self.raw_head] = raw;
-            let oldest = self.raw[wrap_next(self.raw_head, n)];
+            let n = self.st.raw.len();
+            self.st.raw_head = wrap_next(self.st.raw_head, n);
+            self.st.raw[self.st.raw_head] = raw;
+            let oldest = self.st.raw[wrap_next(self.st.raw_head, n)];
             let slope = (raw - oldest) / (self.window_cycles as f64 * self.cycle);
             demand += slope * self.dead_cycles * self.cycle;
         }
         let demand = Self::clip(demand, limit);
         vars.torque_demand = demand;
 
-        let n = self.hist.len();
-        self.hist_head = wrap_next(self.hist_head, n);
-        self.hist[self.hist_head] = demand;
+        let n = self.st.hist.len();
+        self.st.hist_head = wrap_next(self.st.hist_head, n);
+        self.st.hist[self.st.hist_head] = demand;
 
         let mut delay = self.dead_cycles;
         if self.jitter_cycles > 0.0 {
-            let u = (splitmix64(&mut self.rng) >> 11) as f64 * (1.0 / (1u64 << 53) as f64);
+            let u = (splitmix64(&mut self.st.rng) >> 11) as f64 * (1.0 / (1u64 << 53) as f64);
             delay += self.jitter_cycles * (2.0 * u - 1.0);
         }
         let delay = delay.clamp(0.0, self.max_delay_cycles);
@@ -195,14 +201,14 @@ impl Dyno {
         // [0, 2n), so one conditional subtraction wraps them (no division per tick).
         let i = delay as usize;
         let frac = delay - i as f64;
-        let newer = self.hist[wrap_back(self.hist_head + n - i, n)];
-        self.lag_input = if frac > 0.0 {
-            let older = self.hist[wrap_back(self.hist_head + n - i - 1, n)];
+        let newer = self.st.hist[wrap_back(self.st.hist_head + n - i, n)];
+        self.st.lag_input = if frac > 0.0 {
+            let older = self.st.hist[wrap_back(self.st.hist_head + n - i - 1, n)];
             newer + frac * (older - newer)
         } else {
             newer
         };
-        self.tick += 1;
+        self.st.tick += 1;
     }
 
     /// `n` whole cycles from the tick at `t` to `end` in plain torque control (no
@@ -222,28 +228,32 @@ impl Dyno {
         let delay = self.dead_cycles.clamp(0.0, self.max_delay_cycles);
         let i = delay as usize;
         let frac = delay - i as f64;
-        let len = self.hist.len();
+        let len = self.st.hist.len();
         let first_order = match self.lag_cycle {
             LagStep::First { a, b } if vars.lag_order != 2 => Some((a, b)),
             _ => None,
         };
-        let (start, cycle, inertia, shaft) =
-            (self.start_time, self.cycle, self.inertia, vars.shaft_torque);
+        let (start, cycle, inertia, shaft) = (
+            self.st.start_time,
+            self.cycle,
+            self.inertia,
+            vars.shaft_torque,
+        );
         // The state in locals: the delay line's stores cannot alias them.
-        let mut head = self.hist_head;
-        let mut tick = self.tick;
-        let mut omega = self.omega;
-        let mut lag_x = self.lag_x;
-        let mut lag_dx = self.lag_dx;
-        let mut lag_input = self.lag_input;
+        let mut head = self.st.hist_head;
+        let mut tick = self.st.tick;
+        let mut omega = self.st.omega;
+        let mut lag_x = self.st.lag_x;
+        let mut lag_dx = self.st.lag_dx;
+        let mut lag_input = self.st.lag_input;
         let mut t = t;
         for k in 1..=n {
-            self.omega_prev_tick = omega;
+            self.st.omega_prev_tick = omega;
             head = wrap_next(head, len);
-            self.hist[head] = demand;
-            let newer = self.hist[wrap_back(head + len - i, len)];
+            self.st.hist[head] = demand;
+            let newer = self.st.hist[wrap_back(head + len - i, len)];
             lag_input = if frac > 0.0 {
-                let older = self.hist[wrap_back(head + len - i - 1, len)];
+                let older = self.st.hist[wrap_back(head + len - i - 1, len)];
                 newer + frac * (older - newer)
             } else {
                 newer
@@ -265,17 +275,26 @@ impl Dyno {
                     omega += (shaft * dt - torque_integral) / inertia;
                 }
                 _ => {
-                    (self.omega, self.lag_x, self.lag_dx, self.lag_input) =
-                        (omega, lag_x, lag_dx, lag_input);
+                    (
+                        self.st.omega,
+                        self.st.lag_x,
+                        self.st.lag_dx,
+                        self.st.lag_input,
+                    ) = (omega, lag_x, lag_dx, lag_input);
                     self.advance(vars, dt);
-                    (omega, lag_x, lag_dx) = (self.omega, self.lag_x, self.lag_dx);
+                    (omega, lag_x, lag_dx) = (self.st.omega, self.st.lag_x, self.st.lag_dx);
                 }
             }
             t = t_next;
         }
-        self.hist_head = head;
-        self.tick = tick;
-        (self.omega, self.lag_x, self.lag_dx, self.lag_input) = (omega, lag_x, lag_dx, lag_input);
+        self.st.hist_head = head;
+        self.st.tick = tick;
+        (
+            self.st.omega,
+            self.st.lag_x,
+            self.st.lag_dx,
+            self.st.lag_input,
+        ) = (omega, lag_x, lag_dx, lag_input);
         t
     }
 
@@ -288,13 +307,18 @@ impl Dyno {
         } else {
             LagStep::new(vars.lag_order, vars.time_constant, vars.damping, dt)
         };
-        let torque_integral = step.advance(&mut self.lag_x, &mut self.lag_dx, self.lag_input, dt);
-        if vars.lag_order == 2 && self.lag_x.abs() > vars.torque_max {
+        let torque_integral = step.advance(
+            &mut self.st.lag_x,
+            &mut self.st.lag_dx,
+            self.st.lag_input,
+            dt,
+        );
+        if vars.lag_order == 2 && self.st.lag_x.abs() > vars.torque_max {
             // A second-order overshoot cannot exceed the drive's torque limit.
-            self.lag_x = Self::clip(self.lag_x, vars.torque_max);
-            self.lag_dx = 0.0;
+            self.st.lag_x = Self::clip(self.st.lag_x, vars.torque_max);
+            self.st.lag_dx = 0.0;
         }
-        self.omega += (vars.shaft_torque * dt - torque_integral) / self.inertia;
+        self.st.omega += (vars.shaft_torque * dt - torque_integral) / self.inertia;
     }
 }
 
@@ -326,7 +350,6 @@ impl Model for Dyno {
         let window_cycles = (vars.prediction_window / cycle).round().max(1.0) as usize;
 
         let mut dyno = Dyno {
-            start_time: ctx.start_time,
             cycle,
             inertia: vars.inertia,
             rotor_share: (vars.inertia - vars.inertia_drive_side) / vars.inertia,
@@ -335,34 +358,37 @@ impl Model for Dyno {
             jitter_cycles,
             window_cycles,
             lag_cycle: LagStep::new(vars.lag_order, vars.time_constant, vars.damping, cycle),
-            tick: 0,
-            omega: vars.omega_start,
-            omega_prev_tick: vars.omega_start,
-            lag_x: 0.0,
-            lag_dx: 0.0,
-            lag_input: 0.0,
-            integral: 0.0,
-            last_mode: vars.control_mode,
-            // Seed 0 is as good as any other through SplitMix64's scrambling.
-            rng: (vars.jitter_seed as u64) ^ 0x5EED_D1E0_0000_0000,
-            hist: vec![0.0; hist_len],
-            hist_head: 0,
-            raw: vec![0.0; window_cycles + 1],
-            raw_head: 0,
+            st: DynoState {
+                start_time: ctx.start_time,
+                tick: 0,
+                omega: vars.omega_start,
+                omega_prev_tick: vars.omega_start,
+                lag_x: 0.0,
+                lag_dx: 0.0,
+                lag_input: 0.0,
+                integral: 0.0,
+                last_mode: vars.control_mode,
+                // Seed 0 is as good as any other through SplitMix64's scrambling.
+                rng: (vars.jitter_seed as u64) ^ 0x5EED_D1E0_0000_0000,
+                hist: vec![0.0; hist_len],
+                hist_head: 0,
+                raw: vec![0.0; window_cycles + 1],
+                raw_head: 0,
+            },
         };
         // Start in equilibrium with the inputs at the start: the demand has been constant
         // for as long as the dead time and lag remember.
         let raw = if vars.control_mode == 1 {
-            dyno.integral = Dyno::clip(vars.shaft_torque, vars.torque_max);
+            dyno.st.integral = Dyno::clip(vars.shaft_torque, vars.torque_max);
             dyno.speed_demand(vars)
         } else {
             vars.torque_setpoint
         };
         let demand = Dyno::clip(raw, vars.torque_max);
-        dyno.hist.fill(demand);
-        dyno.raw.fill(raw);
-        dyno.lag_x = demand;
-        dyno.lag_input = demand;
+        dyno.st.hist.fill(demand);
+        dyno.st.raw.fill(raw);
+        dyno.st.lag_x = demand;
+        dyno.st.lag_input = demand;
         vars.torque_demand = demand;
         Ok(dyno)
     }
@@ -373,7 +399,7 @@ impl Model for Dyno {
         let mut t = time;
         if self.tick_time() < t - self.cycle - eps {
             // The host skipped time (not a contiguous run): resume at the next tick.
-            self.tick = ((t - self.start_time) / self.cycle - TICK_EPS)
+            self.st.tick = ((t - self.st.start_time) / self.cycle - TICK_EPS)
                 .ceil()
                 .max(0.0) as u64;
         }
@@ -386,10 +412,11 @@ impl Model for Dyno {
         let n = (step / self.cycle + 0.5) as u64;
         if n >= 1
             && (self.tick_time() - t).abs() <= eps
-            && (self.start_time + (self.tick + n) as i64 as f64 * self.cycle - end).abs() <= eps
+            && (self.st.start_time + (self.st.tick + n) as i64 as f64 * self.cycle - end).abs()
+                <= eps
         {
             if vars.control_mode == 0
-                && self.last_mode == 0
+                && self.st.last_mode == 0
                 && !vars.inertia_compensation
                 && !vars.dead_time_compensation
                 && self.jitter_cycles == 0.0
@@ -418,20 +445,21 @@ impl Model for Dyno {
             self.advance(vars, t_next - t);
             t = t_next;
         }
-        if !self.omega.is_finite() || !self.lag_x.is_finite() {
+        if !self.st.omega.is_finite() || !self.st.lag_x.is_finite() {
             return Err(ModelError::new(format!(
                 "non-finite state (omega = {}, torque_dyno = {})",
-                self.omega, self.lag_x
+                self.st.omega, self.st.lag_x
             )));
         }
         Ok(())
     }
 
     fn calculate_outputs(&mut self, vars: &mut DynoVars) {
-        vars.omega = self.omega;
-        vars.torque_dyno = self.lag_x;
+        vars.omega = self.st.omega;
+        vars.torque_dyno = self.st.lag_x;
         // The rotor part behind the transducer needs (J_rotor/J)(shaft − T_dyno) to accelerate.
-        vars.torque_measured = self.lag_x + self.rotor_share * (vars.shaft_torque - self.lag_x);
+        vars.torque_measured =
+            self.st.lag_x + self.rotor_share * (vars.shaft_torque - self.st.lag_x);
     }
 
     fn parameters_changed(&mut self, vars: &DynoVars) -> Result<(), ModelError> {
@@ -441,48 +469,26 @@ impl Model for Dyno {
 }
 
 impl ModelState for Dyno {
-    fn save_state(&self, w: &mut StateWriter) {
-        // The tick clock's origin: a deserializing host re-initialises at another time.
-        w.f64(self.start_time);
-        w.u64(self.tick);
-        for x in [
-            self.omega,
-            self.omega_prev_tick,
-            self.lag_x,
-            self.lag_dx,
-            self.lag_input,
-            self.integral,
-        ] {
-            w.f64(x);
-        }
-        w.i32(self.last_mode);
-        w.u64(self.rng);
-        w.u64(self.hist_head as u64);
-        w.f64s(self.hist.iter().copied());
-        w.u64(self.raw_head as u64);
-        w.f64s(self.raw.iter().copied());
+    type State = DynoState;
+    fn state(&self) -> &DynoState {
+        &self.st
     }
-
-    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
-        self.start_time = r.f64()?;
-        self.tick = r.u64()?;
-        self.omega = r.f64()?;
-        self.omega_prev_tick = r.f64()?;
-        self.lag_x = r.f64()?;
-        self.lag_dx = r.f64()?;
-        self.lag_input = r.f64()?;
-        self.integral = r.f64()?;
-        self.last_mode = r.i32()?;
-        self.rng = r.u64()?;
-        let (hist_len, raw_len) = (self.hist.len(), self.raw.len());
-        self.hist_head = r.u64()? as usize;
-        r.f64s_into(&mut self.hist)?;
-        self.raw_head = r.u64()? as usize;
-        r.f64s_into(&mut self.raw)?;
-        if self.hist.len() != hist_len
-            || self.raw.len() != raw_len
-            || self.hist_head >= hist_len
-            || self.raw_head >= raw_len
+    fn state_mut(&mut self) -> &mut DynoState {
+        &mut self.st
+    }
+    /// The buffers' lengths follow from dead_time, jitter, cycle_time and
+    /// prediction_window: a state of other ones is refused.
+    fn state_loaded(&mut self) -> Result<(), ModelError> {
+        let st = &self.st;
+        // As initialize sizes them.
+        let (hist_len, raw_len) = (
+            self.max_delay_cycles.ceil() as usize + 2,
+            self.window_cycles + 1,
+        );
+        if st.hist.len() != hist_len
+            || st.raw.len() != raw_len
+            || st.hist_head >= hist_len
+            || st.raw_head >= raw_len
         {
             return Err(ModelError::new(
                 "serialized dyno state does not match dead_time, jitter, cycle_time or prediction_window",

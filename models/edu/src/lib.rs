@@ -3,9 +3,7 @@
 //! as torsional spring-dampers. A stand-in for a supplier's EDU FMU.
 
 use fmu_export::variables::*;
-use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, StateReader, StateWriter,
-};
+use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState};
 
 fmu_export::variables! {
     /// Variables of the EDU model.
@@ -120,16 +118,18 @@ impl Params {
     }
 }
 
-/// Dynamic state. The differential's side gears are massless, so the two shaft torques are
-/// always equal; the twists are kept as their mean and their difference.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct State {
-    omega_m: f64,
-    torque_m: f64,
-    /// Mean twist (φ_l + φ_r)/2 [rad].
-    twist_mean: f64,
-    /// Twist difference φ_l − φ_r [rad].
-    twist_diff: f64,
+fmu_export::states! {
+    /// Dynamic state. The differential's side gears are massless, so the two shaft torques are
+    /// always equal; the twists are kept as their mean and their difference.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    pub struct State {
+        omega_m: f64,
+        torque_m: f64,
+        /// Mean twist (φ_l + φ_r)/2 [rad].
+        twist_mean: f64,
+        /// Twist difference φ_l − φ_r [rad].
+        twist_diff: f64,
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -232,24 +232,12 @@ impl Model for Edu {
 }
 
 impl ModelState for Edu {
-    fn save_state(&self, w: &mut StateWriter) {
-        let st = &self.st;
-        for x in [st.omega_m, st.torque_m, st.twist_mean, st.twist_diff] {
-            w.f64(x);
-        }
+    type State = State;
+    fn state(&self) -> &State {
+        &self.st
     }
-
-    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
-        let st = &mut self.st;
-        for x in [
-            &mut st.omega_m,
-            &mut st.torque_m,
-            &mut st.twist_mean,
-            &mut st.twist_diff,
-        ] {
-            *x = r.f64()?;
-        }
-        Ok(())
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.st
     }
 }
 

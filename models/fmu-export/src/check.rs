@@ -170,6 +170,9 @@ pub enum TableError {
     StartOutsideRange { name: &'static str },
     /// A variable that is not an output declares dependencies.
     DependenciesOfNonOutput { name: &'static str },
+    /// An Enumeration whose items are not 1, 2, … in order, whose start is none of them,
+    /// or with a unit.
+    BadEnumeration { name: &'static str },
     /// A `depends_on` entry that is not the value reference of an input (`dependency`: its
     /// name, `None` when no variable has it).
     DependsOnNonInput {
@@ -293,6 +296,10 @@ impl TableError {
                 .push("'")
                 .push(name)
                 .push("' declares dependencies but is not an output"),
+            TableError::BadEnumeration { name } => m
+                .push("'")
+                .push(name)
+                .push("': an Enumeration has items valued 1, 2, … in order, a start that is one of them and no unit"),
             TableError::DependsOnNonInput {
                 name,
                 dependency,
@@ -408,6 +415,21 @@ pub const fn check_variable(table: &[VarInfo], index: usize) -> Result<(), Table
         };
         if below || above {
             return Err(TableError::StartOutsideRange { name: a.name });
+        }
+    }
+    if let Some(t) = a.enumeration {
+        let mut ok =
+            !t.items.is_empty() && a.unit.is_none() && matches!(a.start, Value::Integer(_));
+        let mut k = 0;
+        while k < t.items.len() {
+            ok = ok && t.items[k].value == k as i32 + 1;
+            k += 1;
+        }
+        if let Value::Integer(i) = a.start {
+            ok = ok && i >= 1 && i <= t.items.len() as i32;
+        }
+        if !ok {
+            return Err(TableError::BadEnumeration { name: a.name });
         }
     }
     let declares = !a.depends_on.is_empty() || !a.init_depends_on.is_empty();

@@ -41,6 +41,10 @@ pub fn canonical_interface<M: Model>() -> String {
             v.depends_on,
             v.init_depends_on
         ));
+        // Only where there is one: the GUIDs of models without Enumerations stay as they were.
+        if let Some(t) = v.enumeration {
+            s.push_str(&format!("enumeration|{t:?}\n"));
+        }
     }
     s
 }
@@ -113,6 +117,9 @@ fn scalar_variable(v: &VarInfo) -> String {
     }
     s.push_str(">\n      <");
     s.push_str(v.var_type().xml_name());
+    if let Some(t) = v.enumeration {
+        s.push_str(&format!(" declaredType=\"{}\"", xml_escape(t.name)));
+    }
     if let Some(u) = v.unit {
         s.push_str(&format!(" unit=\"{}\"", xml_escape(u)));
     }
@@ -162,6 +169,34 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
             xml_escape(u.name),
             u.base_unit_attributes()
         ));
+    }
+    // The Enumeration types, each once (FMI 2.0: between the units and the log categories).
+    let mut types: Vec<&crate::variables::EnumerationType> = Vec::new();
+    for t in table.iter().filter_map(|v| v.enumeration) {
+        if !types.iter().any(|k| k.name == t.name) {
+            types.push(t);
+        }
+    }
+    let mut type_defs = String::new();
+    if !types.is_empty() {
+        type_defs.push_str("  <TypeDefinitions>\n");
+        for t in types {
+            type_defs.push_str(&format!(
+                "    <SimpleType name=\"{}\" description=\"{}\">\n      <Enumeration>\n",
+                xml_escape(t.name),
+                xml_escape(t.description)
+            ));
+            for i in t.items {
+                type_defs.push_str(&format!(
+                    "        <Item name=\"{}\" value=\"{}\" description=\"{}\"/>\n",
+                    xml_escape(i.name),
+                    i.value,
+                    xml_escape(i.description)
+                ));
+            }
+            type_defs.push_str("      </Enumeration>\n    </SimpleType>\n");
+        }
+        type_defs.push_str("  </TypeDefinitions>\n");
     }
     let mut categories = String::new();
     for (name, desc) in LOG_CATEGORIES {
@@ -232,6 +267,7 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
         .replace("{{generationTool}}", &xml_escape(generation_tool))
         .replace("{{numberOfVariables}}", &table.len().to_string())
         .replace("{{unitDefinitions}}\n", &unit_defs)
+        .replace("{{typeDefinitions}}\n", &type_defs)
         .replace("{{logCategories}}\n", &categories)
         .replace("{{defaultExperiment}}", &default_experiment)
         .replace("{{modelVariables}}\n", &variables)
@@ -268,7 +304,23 @@ pub fn render_documentation<M: Model>(template: &str) -> String {
                     b.map_or("∞".into(), format_real)
                 ),
             },
-            xml_escape(v.description)
+            match v.enumeration {
+                None => xml_escape(v.description),
+                Some(t) => format!(
+                    "{} Items: {}.",
+                    xml_escape(v.description),
+                    t.items
+                        .iter()
+                        .map(|i| format!(
+                            "{} <code>{}</code> ({})",
+                            i.value,
+                            xml_escape(i.name),
+                            xml_escape(i.description)
+                        ))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            }
         ));
     }
     let de = info.default_experiment;

@@ -237,7 +237,8 @@ impl<M: Model> Runtime<M> {
             vr_index[v.value_reference as usize] = i as u32 + 1;
             slots[v.value_reference as usize] = Slot {
                 index: i as u32,
-                ty: v.var_type(),
+                // An Enumeration is got and set as an Integer.
+                ty: v.var_type().value_space(),
                 has_start: v.has_start(),
                 settable_init: v.variability != Variability::Constant
                     && (v.causality == Causality::Input || v.has_start()),
@@ -600,7 +601,7 @@ impl<M: Model> Runtime<M> {
     }
 
     fn check_type(&self, function: &str, info: &VarInfo, ty: ScalarType) -> Result<(), fmi2Status> {
-        if info.var_type() == ty {
+        if info.var_type().value_space() == ty.value_space() {
             Ok(())
         } else {
             Err(self.error(&format!(
@@ -858,6 +859,15 @@ impl<M: Model> Runtime<M> {
                 ));
             }
         }
+        if let Some(t) = info.enumeration {
+            return self.error(&format!(
+                "{function}: '{}' = {} is not an item of the Enumeration {} ({})",
+                info.name,
+                value.xml_text(),
+                t.name,
+                t.listed()
+            ));
+        }
         self.error(&format!(
             "{function}: '{}' = {} is outside its range [{}, {}]{}",
             info.name,
@@ -963,7 +973,7 @@ impl<M: Model> Runtime<M> {
     pub fn get_by_name(&mut self, name: &str) -> Option<Value> {
         let i = M::Vars::index_of(name)?;
         let vr = M::Vars::VARIABLES[i].value_reference;
-        let ty = M::Vars::VARIABLES[i].var_type();
+        let ty = M::Vars::VARIABLES[i].var_type().value_space();
         let mut out = [Value::Real(0.0)];
         (self.get("get", ty, &[vr], &mut out, |v| v) == fmi2Status::OK).then_some(out[0])
     }
@@ -1077,7 +1087,7 @@ fn read_variables<V: VarTable>(r: &mut StateReader<'_>) -> Result<V, ModelError>
     for (i, info) in V::VARIABLES.iter().enumerate() {
         let v = match info.var_type() {
             ScalarType::Real => Value::Real(r.f64()?),
-            ScalarType::Integer => Value::Integer(r.i32()?),
+            ScalarType::Integer | ScalarType::Enumeration => Value::Integer(r.i32()?),
             ScalarType::Boolean => Value::Boolean(r.bool()?),
             ScalarType::String => {
                 let text = std::str::from_utf8(r.bytes()?).map_err(|_| {
@@ -1085,12 +1095,6 @@ fn read_variables<V: VarTable>(r: &mut StateReader<'_>) -> Result<V, ModelError>
                 })?;
                 vars.set_str(i, text);
                 continue;
-            }
-            other => {
-                return Err(ModelError::new(format!(
-                    "variable '{}' is {other}, which the export framework does not support",
-                    info.name
-                )))
             }
         };
         vars.set(i, v);

@@ -5,19 +5,37 @@
 use crate::model::ModelError;
 
 /// The dynamic state of a model in a serialized FMU state (fmi2SerializeFMUstate): what
-/// [`crate::Model::initialize`] does not rebuild from the parameters and resources. Every
-/// model implements it, or is [`Stateless`].
+/// [`crate::Model::initialize`] does not rebuild from the parameters and resources. A model
+/// keeps all of it in one struct declared with [`states!`](crate::states!), which writes
+/// and reads every field in declaration order: saving and loading are generated from the
+/// one declaration and cannot disagree. Every model implements it, or is [`Stateless`].
 #[diagnostic::on_unimplemented(
-    message = "the model `{Self}` neither saves its dynamic state nor is `Stateless`",
-    note = "implement `fmu_export::ModelState` (save_state and load_state) for a model with dynamic state, or write `impl fmu_export::Stateless for {Self} {{}}` for a model without"
+    message = "the model `{Self}` neither declares its dynamic state nor is `Stateless`",
+    note = "declare the state with `fmu_export::states!` and implement `fmu_export::ModelState` (state and state_mut) for a model with dynamic state, or write `impl fmu_export::Stateless for {Self} {{}}` for a model without"
 )]
 pub trait ModelState {
-    /// Append the dynamic state (not the variables, not resources) to `w`.
-    fn save_state(&self, w: &mut StateWriter);
+    /// The struct holding the dynamic state (declared with [`states!`](crate::states!)).
+    type State: Stored;
 
-    /// Read back what [`ModelState::save_state`] wrote, into a model initialised with the
-    /// same parameters and resources.
-    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError>;
+    fn state(&self) -> &Self::State;
+    fn state_mut(&mut self) -> &mut Self::State;
+
+    /// After a state was read into a model initialised with the same parameters and
+    /// resources: refuse one that does not fit them (a buffer of another length).
+    fn state_loaded(&mut self) -> Result<(), ModelError> {
+        Ok(())
+    }
+
+    /// Append the dynamic state (not the variables, not resources) to `w`.
+    fn save_state(&self, w: &mut StateWriter) {
+        self.state().save(w);
+    }
+
+    /// Read back what [`ModelState::save_state`] wrote.
+    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        self.state_mut().load(r)?;
+        self.state_loaded()
+    }
 }
 
 /// A model without dynamic state (its outputs follow from parameters and inputs):
@@ -25,11 +43,159 @@ pub trait ModelState {
 pub trait Stateless {}
 
 impl<M: Stateless> ModelState for M {
-    fn save_state(&self, _: &mut StateWriter) {}
+    type State = [f64; 0];
 
-    fn load_state(&mut self, _: &mut StateReader<'_>) -> Result<(), ModelError> {
+    fn state(&self) -> &[f64; 0] {
+        &[]
+    }
+
+    fn state_mut(&mut self) -> &mut [f64; 0] {
+        &mut []
+    }
+}
+
+/// A value in a serialized state: how it is written and read back.
+pub trait Stored {
+    fn save(&self, w: &mut StateWriter);
+    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError>;
+}
+
+impl Stored for f64 {
+    fn save(&self, w: &mut StateWriter) {
+        w.f64(*self);
+    }
+    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        *self = r.f64()?;
         Ok(())
     }
+}
+
+impl Stored for i32 {
+    fn save(&self, w: &mut StateWriter) {
+        w.i32(*self);
+    }
+    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        *self = r.i32()?;
+        Ok(())
+    }
+}
+
+impl Stored for u64 {
+    fn save(&self, w: &mut StateWriter) {
+        w.u64(*self);
+    }
+    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        *self = r.u64()?;
+        Ok(())
+    }
+}
+
+/// An index (a cursor, a ring buffer's head) as a u64; one that does not fit is an error.
+impl Stored for usize {
+    fn save(&self, w: &mut StateWriter) {
+        w.u64(*self as u64);
+    }
+    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        let x = r.u64()?;
+        *self = usize::try_from(x)
+            .map_err(|_| ModelError::new(format!("serialized FMU state: index {x} too large")))?;
+        Ok(())
+    }
+}
+
+impl Stored for bool {
+    fn save(&self, w: &mut StateWriter) {
+        w.bool(*self);
+    }
+    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        *self = r.bool()?;
+        Ok(())
+    }
+}
+
+/// A fixed-size array: its elements, length-prefixed (a state of another model's shape is
+/// refused rather than misread).
+impl<T: Stored, const N: usize> Stored for [T; N] {
+    fn save(&self, w: &mut StateWriter) {
+        w.u64(N as u64);
+        for x in self {
+            x.save(w);
+        }
+    }
+    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        let n = r.len_prefix(1)?;
+        if n != N {
+            return Err(ModelError::new(format!(
+                "serialized FMU state: an array of {n} values where the model has {N}"
+            )));
+        }
+        for x in self.iter_mut() {
+            x.load(r)?;
+        }
+        Ok(())
+    }
+}
+
+/// A buffer whose length the parameters decide: length-prefixed, read into the buffer the
+/// initialised model has ([`ModelState::state_loaded`] checks the length).
+impl Stored for Vec<f64> {
+    fn save(&self, w: &mut StateWriter) {
+        w.f64s(self.iter().copied());
+    }
+    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+        r.f64s_into(self)
+    }
+}
+
+/// Declare a model's dynamic state once: the struct, and its [`Stored`] implementation that
+/// writes and reads every field in declaration order.
+///
+/// ```
+/// fmu_export::states! {
+///     /// The integrator of a PI controller.
+///     #[derive(Clone, Copy, Debug, Default, PartialEq)]
+///     pub struct PiState {
+///         /// ∫e dt [m].
+///         error_integral: f64,
+///         saturated: bool,
+///     }
+/// }
+/// use fmu_export::state::{Stored, StateReader, StateWriter};
+/// let mut w = StateWriter::default();
+/// PiState { error_integral: 1.5, saturated: true }.save(&mut w);
+/// let mut back = PiState::default();
+/// back.load(&mut StateReader::new(&w.bytes)).unwrap();
+/// assert_eq!(back, PiState { error_integral: 1.5, saturated: true });
+/// ```
+#[macro_export]
+macro_rules! states {
+    (
+        $(#[$meta:meta])*
+        $vis:vis struct $name:ident {
+            $(
+                $(#[$fmeta:meta])*
+                $field:ident : $ty:ty
+            ),* $(,)?
+        }
+    ) => {
+        $(#[$meta])*
+        $vis struct $name {
+            $( $(#[$fmeta])* pub $field: $ty, )*
+        }
+
+        impl $crate::state::Stored for $name {
+            fn save(&self, w: &mut $crate::state::StateWriter) {
+                $( $crate::state::Stored::save(&self.$field, w); )*
+            }
+            fn load(
+                &mut self,
+                r: &mut $crate::state::StateReader<'_>,
+            ) -> ::core::result::Result<(), $crate::ModelError> {
+                $( $crate::state::Stored::load(&mut self.$field, r)?; )*
+                Ok(())
+            }
+        }
+    };
 }
 
 /// Little-endian writer for serialized FMU states.

@@ -51,6 +51,40 @@ impl Value {
     }
 }
 
+/// An FMI Enumeration type: its name (`declaredType`), what it means, and its items. Values
+/// travel as Integers (fmi2GetInteger/fmi2SetInteger); the items' values are 1, 2, … in
+/// order ([`crate::check`] requires it), so the declared range is the item set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EnumerationType {
+    pub name: &'static str,
+    pub description: &'static str,
+    pub items: &'static [EnumerationItem],
+}
+
+/// One item of an [`EnumerationType`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EnumerationItem {
+    pub name: &'static str,
+    pub value: i32,
+    pub description: &'static str,
+}
+
+impl EnumerationType {
+    /// The item of value `value`.
+    pub fn item(&self, value: i32) -> Option<&EnumerationItem> {
+        self.items.iter().find(|i| i.value == value)
+    }
+
+    /// `1 first_order, 2 second_order`: the items for a message.
+    pub fn listed(&self) -> String {
+        self.items
+            .iter()
+            .map(|i| format!("{} {}", i.value, i.name))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
 /// Everything modelDescription.xml and the runtime know about one variable.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VarInfo {
@@ -70,6 +104,8 @@ pub struct VarInfo {
     /// For outputs: value references of the inputs it depends on directly (feed-through).
     /// In [`variables!`](crate::variables!) written as the inputs' names.
     pub depends_on: &'static [u32],
+    /// An Enumeration's type (the variable is then an `Enumeration` of it, an i32 field).
+    pub enumeration: Option<&'static EnumerationType>,
     /// For outputs: the further inputs (or parameters) it depends on in initialization mode
     /// only (where the model computes it from its inputs before the first step).
     pub init_depends_on: &'static [u32],
@@ -88,6 +124,7 @@ const fn base(vr: u32, causality: Causality, variability: Variability) -> VarInf
         max: None,
         description: "",
         depends_on: &[],
+        enumeration: None,
         init_depends_on: &[],
     }
 }
@@ -164,6 +201,15 @@ impl VarInfo {
         self.init_depends_on = inputs;
         self
     }
+    /// An Enumeration of `t`: its range is the items' (their values are 1, 2, … in order).
+    pub const fn items(mut self, t: &'static EnumerationType) -> Self {
+        self.enumeration = Some(t);
+        if !t.items.is_empty() {
+            self.min = Some(t.items[0].value as f64);
+            self.max = Some(t.items[t.items.len() - 1].value as f64);
+        }
+        self
+    }
     #[doc(hidden)]
     pub const fn named(mut self, name: &'static str, start: Value) -> Self {
         self.name = name;
@@ -172,7 +218,10 @@ impl VarInfo {
     }
 
     pub const fn var_type(&self) -> ScalarType {
-        self.start.var_type()
+        match self.enumeration {
+            Some(_) => ScalarType::Enumeration,
+            None => self.start.var_type(),
+        }
     }
 
     /// The `initial` attribute in force (explicit or the standard's default, FMI 2.0 §2.2.7).
@@ -257,6 +306,9 @@ macro_rules! __fmi_type {
     (Integer) => {
         i32
     };
+    (Enumeration) => {
+        i32
+    };
     (Boolean) => {
         bool
     };
@@ -323,6 +375,10 @@ macro_rules! __fmi_value {
     (Integer, $e:expr) => {
         $crate::variables::Value::Integer($e)
     };
+    // An Enumeration's value travels as an Integer (its table entry says which type).
+    (Enumeration, $e:expr) => {
+        $crate::variables::Value::Integer($e)
+    };
     (Boolean, $e:expr) => {
         $crate::variables::Value::Boolean($e)
     };
@@ -344,6 +400,15 @@ macro_rules! __fmi_set {
         }
     };
     (Integer, $place:expr, $v:expr) => {
+        match $v {
+            $crate::variables::Value::Integer(x) => {
+                $place = x;
+                true
+            }
+            _ => false,
+        }
+    };
+    (Enumeration, $place:expr, $v:expr) => {
         match $v {
             $crate::variables::Value::Integer(x) => {
                 $place = x;

@@ -5,7 +5,7 @@ use fmu_export::fmi2::*;
 use fmu_export::variables::*;
 use fmu_export::{
     Context, DefaultExperiment, Function, Model, ModelError, ModelInfo, ModelState, Phase, Runtime,
-    StateReader, StateWriter, Value,
+    Value,
 };
 use tb_testkit::Capture;
 
@@ -25,9 +25,12 @@ fmu_export::variables! {
     }
 }
 
-#[derive(Clone, Debug)]
-pub struct Counter {
-    y: f64,
+fmu_export::states! {
+    /// The whole model is its dynamic state.
+    #[derive(Clone, Debug)]
+    pub struct Counter {
+        y: f64,
+    }
 }
 
 impl Model for Counter {
@@ -71,13 +74,12 @@ impl Model for Counter {
 }
 
 impl ModelState for Counter {
-    fn save_state(&self, w: &mut StateWriter) {
-        w.f64(self.y);
+    type State = Self;
+    fn state(&self) -> &Self {
+        self
     }
-
-    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
-        self.y = r.f64()?;
-        Ok(())
+    fn state_mut(&mut self) -> &mut Self {
+        self
     }
 }
 

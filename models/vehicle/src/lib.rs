@@ -8,10 +8,7 @@ pub mod physics;
 pub mod track;
 
 use fmu_export::variables::*;
-use fmu_export::{
-    Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource, StateReader,
-    StateWriter,
-};
+use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource};
 use physics::{soft_sign, wheel_loads, LoadParams, Loads, MagicFormula};
 use std::sync::Arc;
 use track::{Track, TrackPoint};
@@ -57,8 +54,18 @@ fmu_export::variables! {
             .describe("Front lift coefficient, paper's sign: positive presses the car down (default is the bench's mis-set initial value)"),
         c_lift_rear: Real = 2.027 => tunable(15).unit("1").range(-2.0, 6.0)
             .describe("Rear lift coefficient, paper's sign: positive presses the car down (default is the bench's mis-set initial value)"),
+        chassis_model: Enumeration = 1 => parameter(42).items(&CHASSIS_MODEL)
+            .describe("How the accelerations in the load equations follow the car's: a first-order low-pass (chassis_time_constant) or sprung pitch and roll modes (pitch_/roll_frequency and _damping)"),
         chassis_time_constant: Real = 0.05 => tunable(16).unit("s").range(0.001, 5.0)
-            .describe("Time constant of the first-order low-pass on a_x, a_y used in the load equations (the rudimentary chassis)"),
+            .describe("Time constant of the first-order low-pass on a_x, a_y used in the load equations (chassis_model = first_order)"),
+        pitch_frequency: Real = 2.0 => tunable(43).unit("Hz").range(0.2, 20.0)
+            .describe("Natural frequency of the sprung body's pitch mode: how fast the longitudinal load transfer follows a_x (chassis_model = second_order)"),
+        pitch_damping: Real = 0.5 => tunable(44).unit("1").range(0.05, 3.0)
+            .describe("Damping ratio of the pitch mode (below 1 it overshoots; chassis_model = second_order)"),
+        roll_frequency: Real = 2.0 => tunable(45).unit("Hz").range(0.2, 20.0)
+            .describe("Natural frequency of the sprung body's roll mode: how fast the lateral load transfer follows a_y (chassis_model = second_order)"),
+        roll_damping: Real = 0.5 => tunable(46).unit("1").range(0.05, 3.0)
+            .describe("Damping ratio of the roll mode (below 1 it overshoots; chassis_model = second_order)"),
         tyre_B: Real = 12.0 => parameter(17).unit("1").range(0.1, 100.0)
             .describe("Magic Formula stiffness factor B"),
         tyre_C: Real = 1.65 => parameter(18).unit("1").range(1.0, 2.0)
@@ -119,9 +126,9 @@ fmu_export::variables! {
         track_file: String = "" => parameter(40)
             .describe("The track file (CSV with columns s, curvature, grade, z_road_left, z_road_right): an absolute path or a file:// URI; empty: the bundled resources/track.csv"),
         a_x: Real = 0.0 => output(108).unit("m/s2")
-            .describe("Longitudinal acceleration after the chassis low-pass (used in the load equations)"),
+            .describe("Longitudinal acceleration after the chassis (low-pass or pitch mode), used in the load equations"),
         a_y: Real = 0.0 => output(109).unit("m/s2")
-            .describe("Lateral acceleration after the chassis low-pass, positive in a left turn (used in the load equations)"),
+            .describe("Lateral acceleration after the chassis (low-pass or roll mode), positive in a left turn, used in the load equations"),
         a_x_raw: Real = 0.0 => output(110).unit("m/s2")
             .describe("Longitudinal acceleration dv/dt before the low-pass"),
         a_y_raw: Real = 0.0 => output(111).unit("m/s2")
@@ -148,6 +155,75 @@ fmu_export::variables! {
     }
 }
 
+/// `chassis_model`'s items.
+pub const CHASSIS_MODEL: EnumerationType = EnumerationType {
+    name: "ChassisModel",
+    description: "How the load equations' accelerations follow the car's",
+    items: &[
+        EnumerationItem {
+            name: "first_order",
+            value: 1,
+            description: "first-order low-pass of time constant chassis_time_constant",
+        },
+        EnumerationItem {
+            name: "second_order",
+            value: 2,
+            description: "sprung pitch and roll modes: natural frequency and damping ratio each",
+        },
+    ],
+};
+
+/// How the load equations' accelerations follow the car's.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Chassis {
+    /// τ·dâ/dt = a − â.
+    FirstOrder { tau: f64 },
+    /// â'' + 2ζω·â' + ω²·â = ω²·a for pitch (a_x) and roll (a_y).
+    SecondOrder { pitch: Mode, roll: Mode },
+}
+
+/// A sprung mode: ω = 2π·f [rad/s] and ζ.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mode {
+    pub omega: f64,
+    pub zeta: f64,
+}
+
+impl Mode {
+    fn new(frequency: f64, damping: f64) -> Mode {
+        Mode {
+            omega: 2.0 * std::f64::consts::PI * frequency,
+            zeta: damping,
+        }
+    }
+
+    /// The transition matrix over `h` of (â − a, â') with a held: exp(A·h) for
+    /// A = [[0, 1], [−ω², −2ζω]], row-major. Exact for every ζ: the under-, critically and
+    /// over-damped forms (sin/ωd → h as ωd → 0, where the forms meet).
+    pub fn transition(&self, h: f64) -> [f64; 4] {
+        let (w, z) = (self.omega, self.zeta);
+        let sigma = z * w;
+        let d = 1.0 - z * z;
+        // c = cos(ωd·h) or cosh, g = sin(ωd·h)/ωd or sinh/ωd.
+        let (c, g) = if d.abs() < 1e-12 {
+            (1.0, h)
+        } else if d > 0.0 {
+            let wd = w * d.sqrt();
+            ((wd * h).cos(), (wd * h).sin() / wd)
+        } else {
+            let wd = w * (-d).sqrt();
+            ((wd * h).cosh(), (wd * h).sinh() / wd)
+        };
+        let e = (-sigma * h).exp();
+        [
+            e * (c + sigma * g),
+            e * g,
+            -e * w * w * g,
+            e * (c - sigma * g),
+        ]
+    }
+}
+
 /// Parameters in the form the equations use.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Params {
@@ -156,7 +232,7 @@ struct Params {
     c_drag: f64,
     f_roll: f64,
     r: f64,
-    tau_chassis: f64,
+    chassis: Chassis,
     sigma: f64,
     v_min: f64,
     brake_torque_max: f64,
@@ -195,7 +271,15 @@ impl Params {
             c_drag: x.c_drag,
             f_roll: x.f_roll,
             r: x.wheel_radius,
-            tau_chassis: x.chassis_time_constant,
+            chassis: match x.chassis_model {
+                2 => Chassis::SecondOrder {
+                    pitch: Mode::new(x.pitch_frequency, x.pitch_damping),
+                    roll: Mode::new(x.roll_frequency, x.roll_damping),
+                },
+                _ => Chassis::FirstOrder {
+                    tau: x.chassis_time_constant,
+                },
+            },
             sigma: x.relaxation_length,
             v_min: x.v_min,
             brake_torque_max: x.brake_force_max * x.wheel_radius,
@@ -229,23 +313,32 @@ impl Params {
     }
 }
 
-/// The dynamic state; `Copy`, so save/restore is a plain copy.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct State {
-    v: f64,
-    /// Position in `[0, lap length)`.
-    s: f64,
-    distance: f64,
-    lap: i32,
-    /// Time the current lap started; NaN while on an untimed out-lap.
-    lap_start: f64,
-    lap_time: f64,
-    omega_front: [f64; 2],
-    /// Relaxed slips fl, fr, rl, rr.
-    kappa: [f64; 4],
-    ax: f64,
-    ay: f64,
-    ax_raw: f64,
+fmu_export::states! {
+    /// The dynamic state; `Copy`, so save/restore is a plain copy.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    pub struct State {
+        v: f64,
+        /// Position in `[0, lap length)`.
+        s: f64,
+        distance: f64,
+        /// Time the current lap started; NaN while on an untimed out-lap.
+        lap_start: f64,
+        lap_time: f64,
+        /// The chassis' accelerations in the load equations (â_x, â_y), and dv/dt.
+        ax: f64,
+        ay: f64,
+        /// dâ_x/dt, dâ_y/dt: the pitch and roll modes' rates (second order; zero otherwise).
+        ax_rate: f64,
+        ay_rate: f64,
+        ax_raw: f64,
+        lap: i32,
+        omega_front: [f64; 2],
+        /// Relaxed slips fl, fr, rl, rr.
+        kappa: [f64; 4],
+        /// Lookup cursors of the front and rear axle on the track (speed only, not results).
+        cursor_front: usize,
+        cursor_rear: usize,
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -253,12 +346,12 @@ pub struct Vehicle {
     track: Arc<Track>,
     p: Params,
     st: State,
-    /// Lookup cursors of the front and rear axle on the track (speed only, not results).
-    cursor_front: usize,
-    cursor_rear: usize,
     /// Last (κ, μ(κ)) per tyre: the outputs at the end of a step and the first sub-step of
     /// the next one evaluate the Magic Formula at the same slip (a derived value, exact).
     mu_cache: [(f64, f64); 4],
+    /// The second-order chassis' transition matrices (pitch, roll) for the sub-step length
+    /// they were made for (NaN: none yet); derived from the parameters, not state.
+    transitions: (f64, [f64; 4], [f64; 4]),
 }
 
 /// Everything the equations derive from the state at one instant.
@@ -274,11 +367,12 @@ impl Vehicle {
     /// rear wheel speeds `omega_rear`.
     fn forces(&mut self, omega_rear: [f64; 2]) -> Forces {
         let p = &self.p;
-        let st = &self.st;
-        let at = self.track.at(st.s, &mut self.cursor_front);
+        let s_here = self.st.s;
+        let at = self.track.at(s_here, &mut self.st.cursor_front);
         let rear = self
             .track
-            .at(st.s - p.road_wheelbase, &mut self.cursor_rear);
+            .at(s_here - p.road_wheelbase, &mut self.st.cursor_rear);
+        let st = &self.st;
         let mut loads = wheel_loads(&p.loads, st.v, st.ax, st.ay);
         loads.fl += p.road_k * at.z_left;
         loads.fr += p.road_k * at.z_right;
@@ -348,11 +442,29 @@ impl Vehicle {
             let steady = (omegas[k] * p.r - v_new) / speed;
             *kappa = steady + (*kappa - steady) * decay;
         }
-        // Chassis low-pass, exact for a signal held over the sub-step.
-        let alpha = 1.0 - (-h / p.tau_chassis).exp();
+        // The chassis, exact for accelerations held over the sub-step.
         let ay_raw = v_new * v_new * f.at.curvature;
-        st.ax += alpha * (a - st.ax);
-        st.ay += alpha * (ay_raw - st.ay);
+        match p.chassis {
+            Chassis::FirstOrder { tau } => {
+                let alpha = 1.0 - (-h / tau).exp();
+                st.ax += alpha * (a - st.ax);
+                st.ay += alpha * (ay_raw - st.ay);
+            }
+            Chassis::SecondOrder { pitch, roll } => {
+                // The transition matrices depend on h and the modes only: computed once
+                // per sub-step length.
+                if self.transitions.0 != h {
+                    self.transitions = (h, pitch.transition(h), roll.transition(h));
+                }
+                let (_, tp, tr) = self.transitions;
+                let (e, r) = (st.ax - a, st.ax_rate);
+                st.ax = a + tp[0] * e + tp[1] * r;
+                st.ax_rate = tp[2] * e + tp[3] * r;
+                let (e, r) = (st.ay - ay_raw, st.ay_rate);
+                st.ay = ay_raw + tr[0] * e + tr[1] * r;
+                st.ay_rate = tr[2] * e + tr[3] * r;
+            }
+        }
         st.ax_raw = a;
 
         let ds = 0.5 * (st.v + v_new) * h;
@@ -451,15 +563,18 @@ impl Model for Vehicle {
             kappa: [0.0; 4],
             ax: 0.0,
             ay: v0 * v0 * at.curvature,
+            ax_rate: 0.0,
+            ay_rate: 0.0,
             ax_raw: 0.0,
+            cursor_front: cursor,
+            cursor_rear: 0,
         };
         Ok(Vehicle {
             track,
             p,
             st,
-            cursor_front: cursor,
-            cursor_rear: 0,
             mu_cache: [(f64::NAN, 0.0); 4],
+            transitions: (f64::NAN, [0.0; 4], [0.0; 4]),
         })
     }
 
@@ -521,65 +636,24 @@ impl Model for Vehicle {
 
     fn parameters_changed(&mut self, vars: &VehicleVars) -> Result<(), ModelError> {
         self.p = Params::from_vars(vars);
+        self.transitions.0 = f64::NAN;
         Ok(())
     }
 }
 
 impl ModelState for Vehicle {
-    fn save_state(&self, w: &mut StateWriter) {
-        let st = &self.st;
-        for x in [
-            st.v,
-            st.s,
-            st.distance,
-            st.lap_start,
-            st.lap_time,
-            st.ax,
-            st.ay,
-            st.ax_raw,
-        ] {
-            w.f64(x);
-        }
-        w.i32(st.lap);
-        w.f64s(st.omega_front.into_iter());
-        w.f64s(st.kappa.into_iter());
-        w.u64(self.cursor_front as u64);
-        w.u64(self.cursor_rear as u64);
+    type State = State;
+    fn state(&self) -> &State {
+        &self.st
     }
-
-    fn load_state(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
-        let st = &mut self.st;
-        for x in [
-            &mut st.v,
-            &mut st.s,
-            &mut st.distance,
-            &mut st.lap_start,
-            &mut st.lap_time,
-            &mut st.ax,
-            &mut st.ay,
-            &mut st.ax_raw,
-        ] {
-            *x = r.f64()?;
-        }
-        st.lap = r.i32()?;
-        let mut read_array = |out: &mut [f64]| -> Result<(), ModelError> {
-            let n = r.len_prefix(8)?;
-            if n != out.len() {
-                return Err(ModelError::new(format!(
-                    "vehicle state: expected {} values, found {n}",
-                    out.len()
-                )));
-            }
-            for x in out.iter_mut() {
-                *x = r.f64()?;
-            }
-            Ok(())
-        };
-        read_array(&mut st.omega_front)?;
-        read_array(&mut st.kappa)?;
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.st
+    }
+    /// The cursors are search hints: one past this track's end is brought back onto it.
+    fn state_loaded(&mut self) -> Result<(), ModelError> {
         let n = self.track.rows();
-        self.cursor_front = (r.u64()? as usize).min(n - 1);
-        self.cursor_rear = (r.u64()? as usize).min(n - 1);
+        self.st.cursor_front = self.st.cursor_front.min(n - 1);
+        self.st.cursor_rear = self.st.cursor_rear.min(n - 1);
         Ok(())
     }
 }
@@ -601,13 +675,21 @@ Fz_fr = m(½((1−x_cog)·g − a_x·h_cog/l) + x_rc·a_y·h_cog/b_front) + F_li
 F_lift,front/rear = ¼·c_lift,front/rear·A·rho_air·v²      (per wheel; c_lift &gt; 0 presses down)
 Fz_sum = m·g + ½(c_lift,front + c_lift,rear)·A·rho_air·v²  (Eq. 18, without road excitation)
 </pre>
-<p>a<sub>x</sub>, a<sub>y</sub> are the chassis low-pass outputs: τ·dâ/dt = a − â with
-τ = <code>chassis_time_constant</code>, a<sub>x</sub> = dv/dt and a<sub>y</sub> = v²·κ(s).
+<p>a<sub>x</sub>, a<sub>y</sub> are the chassis' outputs â for a<sub>x</sub> = dv/dt and
+a<sub>y</sub> = v²·κ(s). <code>chassis_model</code> = <code>first_order</code> (1, the
+default): a low-pass τ·dâ/dt = a − â, τ = <code>chassis_time_constant</code>.
+<code>second_order</code> (2): the sprung body's pitch (for a<sub>x</sub>) and roll (for
+a<sub>y</sub>) modes, d²â/dt² + 2ζω·dâ/dt + ω²·â = ω²·a with ω = 2π·f, f and ζ =
+<code>pitch_frequency</code>, <code>pitch_damping</code> and <code>roll_frequency</code>,
+<code>roll_damping</code>: below ζ = 1 a step overshoots by exp(−πζ/√(1 − ζ²)). Both are
+integrated exactly for the acceleration held over a sub-step (for a mode, the closed-form
+transition matrix of (â − a, dâ/dt)).
 The road excitation k_road·z (k_road = <code>road_stiffness</code>) is a distance-based signal
 from the track; the rear wheels see the profile <code>road_wheelbase</code> later than the front
 ones. The lift coefficients default to the bench's mis-set initial values (1.653, 2.027);
-<code>c_lift_*</code>, <code>l</code>, <code>b_front</code>, <code>b_rear</code> and
-<code>chassis_time_constant</code> are tunable for the optimiser.</p>
+<code>c_lift_*</code>, <code>l</code>, <code>b_front</code>, <code>b_rear</code>,
+<code>chassis_time_constant</code> and the four mode parameters are tunable for the
+optimiser.</p>
 
 <h3>Tyres</h3>
 <pre>
@@ -647,13 +729,14 @@ at <code>s_start</code> ≠ 0 makes the first lap an untimed out-lap.</p>
 <h3>Numerics and start</h3>
 <p>Each step is split into equal sub-steps of at most <code>substep_max</code> (1 ms by
 default: one per 1 ms macro step). Forces are explicit; the slip relaxation and the chassis
-filter are solved exactly over each sub-step, so they are stable at any sub-step; the explicit
+are solved exactly over each sub-step, so they are stable at any sub-step; the explicit
 front-wheel spin (time constant J/(k<sub>c</sub>·r²) ≈ 4.5 ms with the carcass damping) needs
 sub-steps well below 9 ms. On the Spielberg lap 1 ms and 0.1 ms sub-steps differ by 0.02 s in
 lap time and 0.011 m/s RMS in speed, at a seventh of the cost. The inputs are held over the step, and the
 outputs are those of the state at its end (no direct feed-through: the relaxation length
 breaks the wheel-speed → torque loop). The run starts at <code>v_start</code>, front wheels at
-v/r, slips zero, â<sub>x</sub> = 0 and â<sub>y</sub> = v²·κ(s_start).</p>
+v/r, slips zero, â<sub>x</sub> = 0 and â<sub>y</sub> = v²·κ(s_start) with zero rates (the
+chassis at equilibrium).</p>
 "#;
 
 #[cfg(feature = "fmu")]

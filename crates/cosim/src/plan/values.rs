@@ -105,6 +105,27 @@ impl ParamSlot {
                 }
                 _ => return Err(mismatch()),
             },
+            // An Enumeration by an item's name (`"second_order"`) as well as by its value.
+            ScalarType::Enumeration if value.is_str() => {
+                let text = value.as_str().unwrap_or_default();
+                let items = self.items.as_deref().unwrap_or_default();
+                match items.iter().find(|(n, _)| n == text) {
+                    Some((_, v)) => ParamValue::Integer(i32::try_from(*v).map_err(|_| mismatch())?),
+                    None => {
+                        return Err(invalid(
+                            ctx,
+                            format!(
+                                "'{text}' is not an item of the Enumeration '{name}' ({})",
+                                items
+                                    .iter()
+                                    .map(|(n, value)| format!("{value} '{n}'"))
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ),
+                        ))
+                    }
+                }
+            }
             ScalarType::Integer | ScalarType::Enumeration => {
                 let i = value.as_integer().ok_or_else(mismatch)?;
                 let i = i32::try_from(i).map_err(|_| {
