@@ -407,7 +407,7 @@ bias_weight = 1.0
 
 {measurement}
 [compare]
-cutoff_hz = 2.0
+cutoff_hz = {cutoff}
 filter_order = 2
 distance_step_m = 1.0
 
@@ -459,6 +459,12 @@ max = 2.0
         study_path = study_path.display(),
         name = toml_string(name),
         system = toml_string(system),
+        // The pitch and roll modes ring at 1.5–3 Hz: a comparison that filters them away
+        // (2 Hz, the paper's) could not tell their frequencies apart.
+        cutoff = match chassis {
+            Chassis::FirstOrder => "2.0",
+            Chassis::SecondOrder => "5.0",
+        },
     );
     if chassis == Chassis::SecondOrder {
         text.push_str(

@@ -96,8 +96,60 @@ pub fn circuit() -> (String, String, f64) {
     (track, target, v[0])
 }
 
+/// The suite's own circuit with a road under it: both wheel tracks' heights a smooth random
+/// profile (AR(1) over distance with a 5 m correlation length, the two tracks half
+/// correlated) of `rms` [m], from `seed`; written into `dir`.
+pub fn own_circuit_with_road(dir: &Path, rms: f64, seed: u64) -> Circuit {
+    let (track, target, v0) = circuit();
+    let mut rng = tb_testkit::Noise::new(seed);
+    let rho: f64 = (-1.0f64 / 5.0).exp();
+    let gain = (1.0 - rho * rho).sqrt();
+    let (mut common, mut left, mut right) = (0.0, 0.0, 0.0);
+    let mut text = String::new();
+    for (i, line) in track.lines().enumerate() {
+        if i == 0 {
+            text.push_str(line);
+            text.push('\n');
+            continue;
+        }
+        common = rho * common + gain * rng.gauss();
+        left = rho * left + gain * rng.gauss();
+        right = rho * right + gain * rng.gauss();
+        let f: Vec<&str> = line.split(',').collect();
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        let _ = writeln!(
+            text,
+            "{},{},{},{},{}",
+            f[0],
+            f[1],
+            f[2],
+            rms * half * (common + left),
+            rms * half * (common + right)
+        );
+    }
+    let track_p = dir.join("circuit_track.csv");
+    let target_p = dir.join("truth_target.csv");
+    std::fs::write(&track_p, text).unwrap();
+    std::fs::write(&target_p, target).unwrap();
+    Circuit {
+        track: Some(track_p),
+        target: Some(target_p),
+        v0,
+    }
+}
+
 /// The twin's lap on `circuit` with `truth` set: its recording.
 pub fn truth_lap(dir: &Path, circuit: &Circuit, truth: &[(&str, f64)]) -> tb_table::Table {
+    truth_lap_with(dir, circuit, truth, "")
+}
+
+/// [`truth_lap`] with further `[parameters]` lines (`"vehicle.chassis_model" = "second_order"`).
+pub fn truth_lap_with(
+    dir: &Path,
+    circuit: &Circuit,
+    truth: &[(&str, f64)],
+    lines: &str,
+) -> tb_table::Table {
     let fmu_dir = super::fmu_dir();
     let mut params = String::new();
     if let (Some(track), Some(target)) = (&circuit.track, &circuit.target) {
@@ -117,6 +169,7 @@ pub fn truth_lap(dir: &Path, circuit: &Circuit, truth: &[(&str, f64)]) -> tb_tab
     for (n, x) in truth {
         let _ = writeln!(params, "\"{n}\" = {x:?}");
     }
+    params.push_str(lines);
     let bundled =
         std::fs::read_to_string(twinbench::pack::workspace_root().join("systems/rls_v.toml"))
             .unwrap();

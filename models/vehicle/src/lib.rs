@@ -414,7 +414,7 @@ impl Vehicle {
     /// One explicit sub-step of length `h` starting at time `t`.
     fn substep(&mut self, t: f64, h: f64, omega_rear: [f64; 2], pedal: f64) {
         let f = self.forces(omega_rear);
-        let p = self.p;
+        let p = &self.p;
         let st = &mut self.st;
         let a = (f.fx.iter().sum::<f64>() - f.resistance) / p.loads.m;
         let mut v_new = st.v + a * h;
