@@ -49,12 +49,14 @@ cargo test --release --workspace "$@"
 # The CVODE binding under valgrind's memcheck.
 tools/memcheck.sh
 # The slow tier: whole optimisations (Spielberg, and a lap the suite makes itself), the
-# intervals' coverage on 20 synthetic laps and a study over several laps, FMPy's master
-# over a lap, the SSP in FMPy, libcosim and OMSimulator.
+# intervals' coverage on 20 synthetic laps and a study over several laps, the second-order
+# chassis recovered on a lap of another circuit, FMPy's master over a lap, the SSP in FMPy,
+# libcosim and OMSimulator.
 cargo test --release -p twinbench --features slow-tests \
     --test optimize_spielberg --test optimize_study --test robustness_optimize \
     --test ssp_export --test cross_validation --test own_lap --test omsimulator \
-    --test optimize_speedup --test interval_coverage --test multi_lap "$@"
+    --test optimize_speedup --test interval_coverage --test multi_lap \
+    --test chassis_recovery "$@"
 # The Python package: its wheel (abi3) built from the workspace into the venv, then its
 # tests against the command line the slow tier built (studies on a Dask LocalCluster).
 rm -rf target/wheels
