@@ -34,6 +34,8 @@ pub struct ModelSpec {
     pub test_only: bool,
     pub info: fmu_export::ModelInfo,
     pub model_description: fn() -> String,
+    /// The FMI 3.0 description from the same table (the library serves both).
+    pub model_description3: fn() -> String,
     pub documentation: fn() -> String,
     pub validate: fn() -> Result<(), String>,
     pub guid: fn() -> String,
@@ -53,6 +55,12 @@ impl ModelSpec {
                     MODEL_DESCRIPTION_TEMPLATE,
                     concat!("twinbench ", env!("CARGO_PKG_VERSION")),
                 )
+            },
+            model_description3: || {
+                fmu_export::description3::render_model_description3::<M>(concat!(
+                    "twinbench ",
+                    env!("CARGO_PKG_VERSION")
+                ))
             },
             documentation: || {
                 fmu_export::description::render_documentation::<M>(DOCUMENTATION_TEMPLATE)
@@ -91,14 +99,41 @@ pub fn default_fmu_dir() -> PathBuf {
     }
 }
 
-/// Path of a packed FMU (test FMUs under `test/`).
+/// Which FMI version an archive is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum FmiVersion {
+    V2,
+    V3,
+}
+
+impl FmiVersion {
+    /// `2` or `3` (as `pack --fmi 2,3` names them).
+    pub fn parse(s: &str) -> Option<FmiVersion> {
+        match s.trim() {
+            "2" | "2.0" => Some(FmiVersion::V2),
+            "3" | "3.0" => Some(FmiVersion::V3),
+            _ => None,
+        }
+    }
+}
+
+/// Path of a packed FMU (test FMUs under `test/`): `<name>.fmu` for FMI 2.0,
+/// `<name>-fmi3.fmu` for FMI 3.0.
 pub fn fmu_path(out_dir: &Path, spec: &ModelSpec) -> PathBuf {
+    fmu_path_of(out_dir, spec, FmiVersion::V2)
+}
+
+/// [`fmu_path`] of either version.
+pub fn fmu_path_of(out_dir: &Path, spec: &ModelSpec, version: FmiVersion) -> PathBuf {
     let dir = if spec.test_only {
         out_dir.join("test")
     } else {
         out_dir.to_path_buf()
     };
-    dir.join(format!("{}.fmu", spec.info.name))
+    match version {
+        FmiVersion::V2 => dir.join(format!("{}.fmu", spec.info.name)),
+        FmiVersion::V3 => dir.join(format!("{}-fmi3.fmu", spec.info.name)),
+    }
 }
 
 /// Write `bytes` to `path` atomically (see [`tb_table::write_atomic`]).
@@ -109,17 +144,31 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), PackError> {
     })
 }
 
-/// Assemble one FMU archive in memory.
+/// Assemble one FMI 2.0 FMU archive in memory.
 pub fn fmu_archive(spec: &ModelSpec, library: &[u8]) -> Result<Vec<u8>, PackError> {
+    fmu_archive_of(spec, library, FmiVersion::V2)
+}
+
+/// Assemble one FMU archive of either version in memory: the same library, the version's
+/// model description and platform folder (`linux64`, FMI 3.0's `x86_64-linux`).
+pub fn fmu_archive_of(
+    spec: &ModelSpec,
+    library: &[u8],
+    version: FmiVersion,
+) -> Result<Vec<u8>, PackError> {
     use zip::write::SimpleFileOptions;
+    let (description, platform) = match version {
+        FmiVersion::V2 => ((spec.model_description)(), "linux64"),
+        FmiVersion::V3 => ((spec.model_description3)(), "x86_64-linux"),
+    };
     let mut entries: Vec<(String, Vec<u8>, u32)> = vec![
         (
             "modelDescription.xml".into(),
-            (spec.model_description)().into_bytes(),
+            description.into_bytes(),
             0o644,
         ),
         (
-            format!("binaries/linux64/{}.so", spec.info.identifier),
+            format!("binaries/{platform}/{}.so", spec.info.identifier),
             library.to_vec(),
             0o755,
         ),
@@ -146,8 +195,17 @@ pub fn fmu_archive(spec: &ModelSpec, library: &[u8]) -> Result<Vec<u8>, PackErro
 }
 
 /// Pack the given models (when `names` is empty: every shipped model, not the test FMUs)
-/// into `out_dir`; returns the FMU paths.
+/// into `out_dir` as FMI 2.0 FMUs; returns the FMU paths.
 pub fn pack(names: &[String], out_dir: &Path) -> Result<Vec<PathBuf>, PackError> {
+    pack_versions(names, out_dir, &[FmiVersion::V2])
+}
+
+/// [`pack`] for each of `versions`: one archive per model and version.
+pub fn pack_versions(
+    names: &[String],
+    out_dir: &Path,
+    versions: &[FmiVersion],
+) -> Result<Vec<PathBuf>, PackError> {
     let all = models();
     let specs: Vec<ModelSpec> = if names.is_empty() {
         all.into_iter().filter(|s| !s.test_only).collect()
@@ -178,10 +236,12 @@ pub fn pack(names: &[String], out_dir: &Path) -> Result<Vec<PathBuf>, PackError>
     }
     let mut written = Vec::new();
     for s in &specs {
-        let bytes = fmu_archive(s, s.library)?;
-        let path = fmu_path(out_dir, s);
-        write_atomic(&path, &bytes)?;
-        written.push(path);
+        for &v in versions {
+            let bytes = fmu_archive_of(s, s.library, v)?;
+            let path = fmu_path_of(out_dir, s, v);
+            write_atomic(&path, &bytes)?;
+            written.push(path);
+        }
     }
     Ok(written)
 }

@@ -12,11 +12,28 @@ pub struct PackArgs {
     /// `twinbench pack -o target/fmu` there).
     #[arg(long, short)]
     pub out: Option<PathBuf>,
+    /// FMI versions to pack, comma-separated: `2` (the default, `<model>.fmu`), `3`
+    /// (`<model>-fmi3.fmu`), or `2,3` (both; one library serves both descriptions).
+    #[arg(long, value_name = "VERSIONS", default_value = "2")]
+    pub fmi: String,
 }
 
 pub fn run(args: PackArgs) -> anyhow::Result<()> {
     let out = args.out.unwrap_or_else(crate::pack::default_fmu_dir);
-    for p in crate::pack::pack(&args.models, &out)? {
+    let mut versions = Vec::new();
+    for v in args.fmi.split(',') {
+        match crate::pack::FmiVersion::parse(v) {
+            Some(v) if !versions.contains(&v) => versions.push(v),
+            Some(_) => {}
+            None => anyhow::bail!(
+                "--fmi {}: '{}' is no FMI version twinbench packs (2, 3, or 2,3)",
+                args.fmi,
+                v.trim()
+            ),
+        }
+    }
+    versions.sort();
+    for p in crate::pack::pack_versions(&args.models, &out, &versions)? {
         println!("{}", p.display());
     }
     Ok(())

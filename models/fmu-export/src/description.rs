@@ -51,7 +51,12 @@ pub fn canonical_interface<M: Model>() -> String {
 
 /// GUID derived from the interface: stable across builds, changed by any interface change.
 pub fn guid<M: Model>() -> String {
-    let h = fnv1a_128(canonical_interface::<M>().as_bytes());
+    guid_of(&canonical_interface::<M>())
+}
+
+/// A GUID-shaped FNV-1a-128 hash of `text`.
+pub fn guid_of(text: &str) -> String {
+    let h = fnv1a_128(text.as_bytes());
     let x = format!("{h:032x}");
     format!(
         "{{{}-{}-{}-{}-{}}}",

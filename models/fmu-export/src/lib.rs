@@ -17,12 +17,16 @@
 //! - [`preparsed`]: bundled CSV resources parsed at build time by the model's own parser.
 //! - [`runtime`]: the safe instance and its FMI state machine (also usable natively).
 //! - [`description`]: modelDescription.xml, documentation and GUID from the table.
-//! - [`ffi`]: the panic-guarded C entry points.
+//! - [`description3`]: the FMI 3.0 modelDescription.xml and instantiation token from the
+//!   same table.
+//! - [`ffi`]: the panic-guarded C entry points; [`ffi3`]: FMI 3.0's, on the same runtime.
 
 pub mod check;
 pub mod context;
 pub mod description;
+pub mod description3;
 pub mod ffi;
+pub mod ffi3;
 pub mod model;
 pub mod preparsed;
 pub mod resources;

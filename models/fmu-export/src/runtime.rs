@@ -284,6 +284,13 @@ impl<M: Model> Runtime<M> {
     pub fn guid(&self) -> &str {
         &self.guid
     }
+    /// The variable of value reference `vr`, if the table has one.
+    pub fn var_info(&self, vr: u32) -> Option<&'static VarInfo> {
+        match self.vr_index.get(vr as usize) {
+            Some(&i) if i > 0 => Some(&M::Vars::VARIABLES[i as usize - 1]),
+            _ => None,
+        }
+    }
     pub fn instance_name(&self) -> &str {
         &self.ctx.instance_name
     }

@@ -1,10 +1,12 @@
 //! [`export_fmu!`](crate::export_fmu): the `#[no_mangle]` C symbols of a model's `cdylib`.
 
-/// Export a model as an FMI 2.0 Co-Simulation FMU: defines every `fmi2*` C symbol.
+/// Export a model as an FMI 2.0 and FMI 3.0 Co-Simulation FMU: defines every `fmi2*` and
+/// every `fmi3*` C symbol (one library serves both model descriptions).
 /// Use once per `cdylib`, behind the model crate's `fmu` feature.
 #[macro_export]
 macro_rules! export_fmu {
     ($model:ty) => {
+        $crate::export_fmu3!($model);
         #[allow(non_snake_case, clippy::missing_safety_doc)]
         mod __fmi2_exports {
             use super::*;

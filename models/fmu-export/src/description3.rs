@@ -1,0 +1,202 @@
+//! The FMI 3.0 modelDescription.xml and instantiation token, generated from the same
+//! variable table as the FMI 2.0 one ([`crate::description`]): one model, two FMUs.
+//!
+//! How the table maps: Real → `Float64`, Integer → `Int32`, Boolean → `Boolean`, String →
+//! `String` (its start as a `<Start value>` child), an Enumeration → `Enumeration` of its
+//! `<EnumerationType>` (got and set as `Int64`). FMI 3.0 wants one independent variable:
+//! `time`, on the value reference after the table's largest ([`time_value_reference`]).
+//! The model structure lists each output and initial unknown by value reference, with the
+//! same dependencies as FMI 2.0's indices.
+
+use crate::description::{initial_dependencies, xml_escape};
+use crate::model::Model;
+use crate::runtime::LOG_CATEGORIES;
+use crate::units;
+use crate::variables::{format_real, Causality, Initial, ScalarType, Value, VarInfo, VarTable};
+
+/// The value reference of the independent variable `time`: one past the table's largest.
+pub fn time_value_reference<V: VarTable>() -> u32 {
+    V::VARIABLES
+        .iter()
+        .map(|v| v.value_reference)
+        .max()
+        .map_or(0, |m| m + 1)
+}
+
+/// The instantiation token: the FMI 2.0 GUID's hash over the interface, marked as FMI 3.0
+/// (the two descriptions of one model are two interfaces).
+pub fn instantiation_token<M: Model>() -> String {
+    crate::description::guid_of(&format!(
+        "fmi3.0|{}",
+        crate::description::canonical_interface::<M>()
+    ))
+}
+
+/// The FMI 3.0 element of a variable's type.
+fn element(v: &VarInfo) -> &'static str {
+    element_name(v.var_type())
+}
+
+/// The FMI 3.0 element (and get/set type) of a table type.
+pub fn element_name(t: ScalarType) -> &'static str {
+    match t {
+        ScalarType::Real => "Float64",
+        ScalarType::Integer => "Int32",
+        ScalarType::Boolean => "Boolean",
+        ScalarType::String => "String",
+        ScalarType::Enumeration => "Enumeration",
+    }
+}
+
+fn variable(v: &VarInfo) -> String {
+    let el = element(v);
+    let mut s = format!(
+        "    <{el} name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
+        xml_escape(v.name),
+        v.value_reference,
+        xml_escape(v.description),
+        v.causality.xml_name(),
+        v.variability.xml_name()
+    );
+    if let Some(init) = v.initial {
+        s.push_str(&format!(" initial=\"{}\"", init.xml_name()));
+    }
+    if let Some(t) = v.enumeration {
+        s.push_str(&format!(" declaredType=\"{}\"", xml_escape(t.name)));
+    }
+    if let Some(u) = v.unit {
+        s.push_str(&format!(" unit=\"{}\"", xml_escape(u)));
+    }
+    if let Some(m) = v.min {
+        s.push_str(&format!(" min=\"{}\"", format_real(m)));
+    }
+    if let Some(m) = v.max {
+        s.push_str(&format!(" max=\"{}\"", format_real(m)));
+    }
+    match (v.has_start(), v.start) {
+        (true, Value::Str(text)) => {
+            s.push_str(&format!(
+                ">\n      <Start value=\"{}\"/>\n    </{el}>\n",
+                xml_escape(text)
+            ));
+            return s;
+        }
+        (true, start) => s.push_str(&format!(" start=\"{}\"", xml_escape(&start.xml_text()))),
+        (false, _) => {}
+    }
+    s.push_str("/>\n");
+    s
+}
+
+/// The FMI 3.0 modelDescription.xml of `M`.
+pub fn render_model_description3<M: Model>(generation_tool: &str) -> String {
+    let info = M::INFO;
+    let table = M::Vars::VARIABLES;
+    let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
+    s.push_str(&format!(
+        "<fmiModelDescription\n  fmiVersion=\"3.0\"\n  modelName=\"{}\"\n  instantiationToken=\"{}\"\n  description=\"{}\"\n  version=\"{}\"\n  generationTool=\"{}\"\n  variableNamingConvention=\"flat\">\n",
+        xml_escape(info.name),
+        instantiation_token::<M>(),
+        xml_escape(info.description),
+        xml_escape(info.version),
+        xml_escape(generation_tool)
+    ));
+    s.push_str(&format!(
+        "  <CoSimulation\n    modelIdentifier=\"{}\"\n    needsExecutionTool=\"false\"\n    canBeInstantiatedOnlyOncePerProcess=\"false\"\n    canGetAndSetFMUState=\"true\"\n    canSerializeFMUState=\"true\"\n    providesDirectionalDerivatives=\"false\"\n    providesAdjointDerivatives=\"false\"\n    providesPerElementDependencies=\"false\"\n    canHandleVariableCommunicationStepSize=\"true\"\n    maxOutputDerivativeOrder=\"0\"\n    providesIntermediateUpdate=\"false\"\n    mightReturnEarlyFromDoStep=\"false\"\n    canReturnEarlyAfterIntermediateUpdate=\"false\"\n    hasEventMode=\"false\"\n    providesEvaluateDiscreteStates=\"false\"/>\n",
+        xml_escape(info.identifier)
+    ));
+    // Units, each once.
+    let mut names: Vec<&str> = table.iter().filter_map(|v| v.unit).collect();
+    names.sort_unstable();
+    names.dedup();
+    let defs: Vec<&units::UnitDef> = names.into_iter().filter_map(units::lookup).collect();
+    if !defs.is_empty() {
+        s.push_str("  <UnitDefinitions>\n");
+        for u in defs {
+            s.push_str(&format!(
+                "    <Unit name=\"{}\">\n      <BaseUnit{}/>\n    </Unit>\n",
+                xml_escape(u.name),
+                u.base_unit_attributes()
+            ));
+        }
+        s.push_str("  </UnitDefinitions>\n");
+    }
+    let mut types: Vec<&crate::variables::EnumerationType> = Vec::new();
+    for t in table.iter().filter_map(|v| v.enumeration) {
+        if !types.iter().any(|k| k.name == t.name) {
+            types.push(t);
+        }
+    }
+    if !types.is_empty() {
+        s.push_str("  <TypeDefinitions>\n");
+        for t in types {
+            s.push_str(&format!(
+                "    <EnumerationType name=\"{}\" description=\"{}\">\n",
+                xml_escape(t.name),
+                xml_escape(t.description)
+            ));
+            for i in t.items {
+                s.push_str(&format!(
+                    "      <Item name=\"{}\" value=\"{}\" description=\"{}\"/>\n",
+                    xml_escape(i.name),
+                    i.value,
+                    xml_escape(i.description)
+                ));
+            }
+            s.push_str("    </EnumerationType>\n");
+        }
+        s.push_str("  </TypeDefinitions>\n");
+    }
+    s.push_str("  <LogCategories>\n");
+    for (name, desc) in LOG_CATEGORIES {
+        s.push_str(&format!(
+            "    <Category name=\"{name}\" description=\"{}\"/>\n",
+            xml_escape(desc)
+        ));
+    }
+    s.push_str("  </LogCategories>\n");
+    let de = info.default_experiment;
+    s.push_str(&format!(
+        "  <DefaultExperiment startTime=\"{}\" stopTime=\"{}\" stepSize=\"{}\"/>\n",
+        format_real(de.start_time),
+        format_real(de.stop_time),
+        format_real(de.step_size)
+    ));
+    s.push_str("  <ModelVariables>\n");
+    s.push_str(&format!(
+        "    <Float64 name=\"time\" valueReference=\"{}\" description=\"Simulation time\" causality=\"independent\" variability=\"continuous\" unit=\"s\"/>\n",
+        time_value_reference::<M::Vars>()
+    ));
+    for v in table {
+        s.push_str(&variable(v));
+    }
+    s.push_str("  </ModelVariables>\n  <ModelStructure>\n");
+    let vrs = |deps: &mut dyn Iterator<Item = u32>| {
+        deps.map(|d| d.to_string()).collect::<Vec<_>>().join(" ")
+    };
+    for v in table.iter().filter(|v| v.causality == Causality::Output) {
+        s.push_str(&format!(
+            "    <Output valueReference=\"{}\" dependencies=\"{}\"/>\n",
+            v.value_reference,
+            vrs(&mut v.depends_on.iter().copied())
+        ));
+    }
+    for v in table {
+        let initial_unknown = (v.causality == Causality::Output
+            && matches!(
+                v.effective_initial(),
+                Some(Initial::Approx) | Some(Initial::Calculated)
+            ))
+            || v.causality == Causality::CalculatedParameter;
+        if initial_unknown {
+            let deps = initial_dependencies(table, v);
+            s.push_str(&format!(
+                "    <InitialUnknown valueReference=\"{}\" dependencies=\"{}\"/>\n",
+                v.value_reference,
+                vrs(&mut deps.iter().map(|&i| table[i - 1].value_reference))
+            ));
+        }
+    }
+    s.push_str("  </ModelStructure>\n</fmiModelDescription>\n");
+    s
+}

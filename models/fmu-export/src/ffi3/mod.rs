@@ -1,0 +1,705 @@
+//! The FMI 3.0 Co-Simulation C entry points, generic over the model, on the same
+//! [`Runtime`] (state machine, checks, states) as FMI 2.0's: one model, two FMUs that
+//! behave the same. [`export_fmu!`](crate::export_fmu) defines them as `fmi3*` symbols
+//! beside the `fmi2*` ones in a model's `cdylib`.
+//!
+//! What differs from FMI 2.0: the instance is made by `fmi3InstantiateCoSimulation` with a
+//! resource *path* and a logger that takes plain text; `fmi3EnterInitializationMode`
+//! carries the experiment; Reals are `Float64`, Integers `Int32`, an Enumeration `Int64`, a
+//! Boolean a one-byte `bool`; every get and set says how many values it passes; the
+//! independent variable `time` has a value reference of its own
+//! ([`crate::description3::time_value_reference`]); `fmi3DoStep` reports through flags.
+//! Event mode, clocks, Model Exchange, Scheduled Execution, derivatives and the
+//! configuration mode are not provided (`hasEventMode="false"`, …): each of those calls
+//! answers `fmi3Error` naming what is missing. Messages name the FMI 3.0 functions.
+#![allow(clippy::missing_safety_doc, clippy::too_many_arguments)]
+
+pub mod export;
+
+use crate::ffi::{guarded, guarded_instance, opt_str, Instance};
+use crate::fmi2::fmi2Status;
+use crate::model::Model;
+use crate::runtime::{Logger, Runtime, Snapshot};
+use crate::variables::{ScalarType, Value};
+use std::ffi::{c_char, c_void, CStr, CString};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+#[allow(non_camel_case_types)]
+pub type fmi3Instance = *mut c_void;
+#[allow(non_camel_case_types)]
+pub type fmi3Status = i32;
+#[allow(non_camel_case_types)]
+pub type fmi3FMUState = *mut c_void;
+#[allow(non_camel_case_types)]
+pub type fmi3ValueReference = u32;
+/// `fmi3LogMessageCallback`: the message is plain text (no format string, unlike FMI 2.0).
+#[allow(non_camel_case_types)]
+pub type fmi3LogMessageCallback = unsafe extern "C" fn(
+    env: *mut c_void,
+    status: fmi3Status,
+    category: *const c_char,
+    message: *const c_char,
+);
+
+pub const FMI3_ERROR: fmi3Status = 3;
+pub const VERSION: &CStr = c"3.0";
+
+/// The runtime's messages name FMI 2.0's functions; an FMI 3.0 host is told FMI 3.0's.
+pub fn fmi3_names(message: &str) -> String {
+    const NAMES: [(&str, &str); 10] = [
+        ("fmi2GetReal", "fmi3GetFloat64"),
+        ("fmi2SetReal", "fmi3SetFloat64"),
+        ("fmi2GetInteger", "fmi3GetInt32"),
+        ("fmi2SetInteger", "fmi3SetInt32"),
+        ("fmi2SetupExperiment", "fmi3EnterInitializationMode"),
+        ("fmi2Instantiate", "fmi3InstantiateCoSimulation"),
+        ("fmi2GetFMUstate", "fmi3GetFMUState"),
+        ("fmi2SetFMUstate", "fmi3SetFMUState"),
+        ("fmi2FreeFMUstate", "fmi3FreeFMUState"),
+        ("fmi2DeSerializeFMUstate", "fmi3DeserializeFMUState"),
+    ];
+    if !message.contains("fmi2") {
+        return message.to_string();
+    }
+    let mut m = message.to_string();
+    for (two, three) in NAMES {
+        m = m.replace(two, three);
+    }
+    m.replace("fmi2", "fmi3")
+}
+
+/// Forwards log messages to the host's `fmi3LogMessageCallback` (none: not logged).
+struct CLogger3 {
+    callback: Option<fmi3LogMessageCallback>,
+    env: *mut c_void,
+}
+
+// The host's environment pointer is opaque to us and only handed back to the host.
+unsafe impl Send for CLogger3 {}
+
+impl Logger for CLogger3 {
+    fn log(&self, status: fmi2Status, category: &str, message: &str) {
+        if let Some(cb) = self.callback {
+            let cat = CString::new(category).unwrap_or_default();
+            let msg = CString::new(fmi3_names(message).replace('\0', "\\0")).unwrap_or_default();
+            unsafe { cb(self.env, status.0, cat.as_ptr(), msg.as_ptr()) };
+        }
+    }
+}
+
+/// A Runtime call's status as FMI 3.0's (the same numbers; FMI 3.0 has no Pending).
+fn status(s: fmi2Status) -> fmi3Status {
+    s.0.min(4)
+}
+
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn instantiate_co_simulation<M: Model>(
+    instance_name: *const c_char,
+    token: *const c_char,
+    resource_path: *const c_char,
+    _visible: bool,
+    logging_on: bool,
+    event_mode_used: bool,
+    _early_return_allowed: bool,
+    _required_intermediate: *const fmi3ValueReference,
+    n_required_intermediate: usize,
+    env: *mut c_void,
+    log_message: Option<fmi3LogMessageCallback>,
+    _intermediate_update: *const c_void,
+) -> fmi3Instance {
+    static QUIET_PANICS: std::sync::Once = std::sync::Once::new();
+    QUIET_PANICS.call_once(|| std::panic::set_hook(Box::new(|_| {})));
+    let r = catch_unwind(AssertUnwindSafe(|| {
+        let logger = CLogger3 {
+            callback: log_message,
+            env,
+        };
+        let fail = |msg: String| {
+            logger.log(
+                fmi2Status::ERROR,
+                "logStatusError",
+                &format!("fmi3InstantiateCoSimulation: {msg}"),
+            );
+            std::ptr::null_mut()
+        };
+        let Some(name) = opt_str(instance_name).map(|s| s.into_owned()) else {
+            return fail("instanceName is NULL".into());
+        };
+        // The standard lets an FMU without event mode refuse a host that wants it.
+        if event_mode_used {
+            return fail(format!(
+                "model '{}' has no event mode (hasEventMode=\"false\"): instantiate it with eventModeUsed = false",
+                M::INFO.name
+            ));
+        }
+        if n_required_intermediate > 0 {
+            return fail(format!(
+                "model '{}' provides no intermediate update (providesIntermediateUpdate=\"false\"): {n_required_intermediate} required intermediate variables cannot be served",
+                M::INFO.name
+            ));
+        }
+        let expected = crate::description3::instantiation_token::<M>();
+        match opt_str(token) {
+            Some(t) if t == expected => {}
+            Some(t) => {
+                return fail(format!(
+                    "instantiationToken mismatch: the host passed {t}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
+                    M::INFO.name
+                ))
+            }
+            None => return fail("instantiationToken is NULL".into()),
+        }
+        // FMI 3.0 hands a path (with a trailing separator), not a URI.
+        let resource_dir = opt_str(resource_path)
+            .filter(|p| !p.is_empty())
+            .map(|p| std::path::PathBuf::from(p.into_owned()));
+        let runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on);
+        Box::into_raw(Box::new(Instance {
+            runtime,
+            strings: Vec::new(),
+        })) as fmi3Instance
+    }));
+    r.unwrap_or(std::ptr::null_mut())
+}
+
+/// `fmi3InstantiateModelExchange` and `fmi3InstantiateScheduledExecution`: not provided.
+pub unsafe fn instantiate_unsupported<M: Model>(
+    kind: &str,
+    env: *mut c_void,
+    log_message: Option<fmi3LogMessageCallback>,
+) -> fmi3Instance {
+    let _ = catch_unwind(AssertUnwindSafe(|| {
+        CLogger3 {
+            callback: log_message,
+            env,
+        }
+        .log(
+            fmi2Status::ERROR,
+            "logStatusError",
+            &format!(
+                "fmi3Instantiate{kind}: model '{}' is a Co-Simulation FMU only",
+                M::INFO.name
+            ),
+        )
+    }));
+    std::ptr::null_mut()
+}
+
+pub unsafe fn free_instance<M: Model>(c: fmi3Instance) {
+    crate::ffi::free_instance::<M>(c)
+}
+
+pub unsafe fn set_debug_logging<M: Model>(
+    c: fmi3Instance,
+    on: bool,
+    n: usize,
+    categories: *const *const c_char,
+) -> fmi3Status {
+    status(crate::ffi::set_debug_logging::<M>(
+        c, on as i32, n, categories,
+    ))
+}
+
+pub unsafe fn enter_initialization_mode<M: Model>(
+    c: fmi3Instance,
+    _tolerance_defined: bool,
+    _tolerance: f64,
+    start: f64,
+    stop_defined: bool,
+    stop: f64,
+) -> fmi3Status {
+    status(guarded::<M>(c, "fmi3EnterInitializationMode", |rt| {
+        let s = rt.setup_experiment(start, stop_defined.then_some(stop));
+        if s != fmi2Status::OK {
+            return s;
+        }
+        rt.enter_initialization_mode()
+    }))
+}
+
+pub unsafe fn exit_initialization_mode<M: Model>(c: fmi3Instance) -> fmi3Status {
+    status(crate::ffi::exit_initialization_mode::<M>(c))
+}
+
+pub unsafe fn terminate<M: Model>(c: fmi3Instance) -> fmi3Status {
+    status(crate::ffi::terminate::<M>(c))
+}
+
+pub unsafe fn reset<M: Model>(c: fmi3Instance) -> fmi3Status {
+    status(crate::ffi::reset::<M>(c))
+}
+
+/// A call FMI 3.0 requires to exist that this FMU does not provide: `fmi3Error` with why.
+pub unsafe fn unsupported<M: Model>(c: fmi3Instance, function: &str, why: &str) -> fmi3Status {
+    status(guarded::<M>(c, function, |rt| {
+        rt.error(&format!("{function}: {why}"))
+    }))
+}
+
+/// The value references and the values of a get or set, NULL- and count-checked: every
+/// variable is a scalar, so `n_values` must equal `n_vr`.
+unsafe fn arrays<'a, T>(
+    rt: &Runtime<impl Model>,
+    function: &str,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *const T,
+    n_values: usize,
+) -> Result<(&'a [u32], *const T), fmi2Status> {
+    if n_values != n_vr {
+        return Err(rt.error(&format!(
+            "{function}: {n_values} values for {n_vr} value references (every variable of this FMU is a scalar)"
+        )));
+    }
+    if n_vr == 0 {
+        return Ok((&[], values));
+    }
+    if vr.is_null() || values.is_null() {
+        return Err(rt.error(&format!(
+            "{function}: NULL array with nValueReferences = {n_vr}"
+        )));
+    }
+    Ok((std::slice::from_raw_parts(vr, n_vr), values))
+}
+
+/// Each of `vrs` is a variable of type `want` (FMI 3.0 tells Int32 from an Enumeration's
+/// Int64, which FMI 2.0 both gets as Integer).
+fn of_type<M: Model>(
+    rt: &Runtime<M>,
+    function: &str,
+    vrs: &[u32],
+    want: ScalarType,
+) -> Result<(), fmi2Status> {
+    for &vr in vrs {
+        if let Some(v) = rt.var_info(vr) {
+            if v.var_type() != want {
+                return Err(rt.error(&format!(
+                    "{function}: variable '{}' (vr {vr}) is {}, not {}",
+                    v.name,
+                    super::description3::element_name(v.var_type()),
+                    super::description3::element_name(want)
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+pub unsafe fn get_float64<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *mut f64,
+    n_values: usize,
+) -> fmi3Status {
+    const F: &str = "fmi3GetFloat64";
+    status(guarded::<M>(c, F, |rt| {
+        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values as *const f64, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        let out: &mut [f64] = if n_vr == 0 {
+            &mut []
+        } else {
+            std::slice::from_raw_parts_mut(ptr as *mut f64, n_vr)
+        };
+        // The independent variable is the runtime's time; every other Real its field.
+        let time_vr = crate::description3::time_value_reference::<M::Vars>();
+        if !vrs.contains(&time_vr) {
+            return rt.get_real(vrs, out);
+        }
+        for (k, &v) in vrs.iter().enumerate() {
+            if v == time_vr {
+                out[k] = rt.time();
+            } else {
+                let s = rt.get_real(&vrs[k..=k], &mut out[k..=k]);
+                if s != fmi2Status::OK {
+                    return s;
+                }
+            }
+        }
+        fmi2Status::OK
+    }))
+}
+
+pub unsafe fn set_float64<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *const f64,
+    n_values: usize,
+) -> fmi3Status {
+    const F: &str = "fmi3SetFloat64";
+    status(guarded::<M>(c, F, |rt| {
+        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        if vrs.contains(&crate::description3::time_value_reference::<M::Vars>()) {
+            return rt.error(&format!(
+                "{F}: the independent variable 'time' cannot be set"
+            ));
+        }
+        let vals: &[f64] = if n_vr == 0 {
+            &[]
+        } else {
+            std::slice::from_raw_parts(ptr, n_vr)
+        };
+        rt.set_real(vrs, vals)
+    }))
+}
+
+/// An integer get (`Int32` of Integers, `Int64` of Enumerations).
+unsafe fn get_integers<M: Model, T: Copy>(
+    c: fmi3Instance,
+    function: &str,
+    want: ScalarType,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *mut T,
+    n_values: usize,
+    conv: impl Fn(Value) -> T,
+) -> fmi3Status {
+    status(guarded::<M>(c, function, |rt| {
+        let (vrs, ptr) = match arrays(rt, function, vr, n_vr, values as *const T, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        if let Err(s) = of_type(rt, function, vrs, want) {
+            return s;
+        }
+        let out: &mut [T] = if n_vr == 0 {
+            &mut []
+        } else {
+            std::slice::from_raw_parts_mut(ptr as *mut T, n_vr)
+        };
+        rt.get(function, ScalarType::Integer, vrs, out, conv)
+    }))
+}
+
+pub unsafe fn get_int32<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *mut i32,
+    n_values: usize,
+) -> fmi3Status {
+    get_integers::<M, i32>(
+        c,
+        "fmi3GetInt32",
+        ScalarType::Integer,
+        vr,
+        n_vr,
+        values,
+        n_values,
+        |v| v.as_f64() as i32,
+    )
+}
+
+pub unsafe fn get_int64<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *mut i64,
+    n_values: usize,
+) -> fmi3Status {
+    get_integers::<M, i64>(
+        c,
+        "fmi3GetInt64",
+        ScalarType::Enumeration,
+        vr,
+        n_vr,
+        values,
+        n_values,
+        |v| v.as_f64() as i64,
+    )
+}
+
+pub unsafe fn set_int32<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *const i32,
+    n_values: usize,
+) -> fmi3Status {
+    const F: &str = "fmi3SetInt32";
+    status(guarded::<M>(c, F, |rt| {
+        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        if let Err(s) = of_type(rt, F, vrs, ScalarType::Integer) {
+            return s;
+        }
+        let vals: &[i32] = if n_vr == 0 {
+            &[]
+        } else {
+            std::slice::from_raw_parts(ptr, n_vr)
+        };
+        rt.set(
+            F,
+            ScalarType::Integer,
+            vrs,
+            vals.iter().map(|x| Value::Integer(*x)),
+        )
+    }))
+}
+
+pub unsafe fn set_int64<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *const i64,
+    n_values: usize,
+) -> fmi3Status {
+    const F: &str = "fmi3SetInt64";
+    status(guarded::<M>(c, F, |rt| {
+        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        if let Err(s) = of_type(rt, F, vrs, ScalarType::Enumeration) {
+            return s;
+        }
+        let vals: &[i64] = if n_vr == 0 {
+            &[]
+        } else {
+            std::slice::from_raw_parts(ptr, n_vr)
+        };
+        // An Int64 outside i32 is no item of any Enumeration here: refused as out of range.
+        rt.set(
+            F,
+            ScalarType::Integer,
+            vrs,
+            vals.iter()
+                .map(|x| Value::Integer(i32::try_from(*x).unwrap_or(i32::MIN))),
+        )
+    }))
+}
+
+pub unsafe fn get_boolean<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *mut u8,
+    n_values: usize,
+) -> fmi3Status {
+    const F: &str = "fmi3GetBoolean";
+    status(guarded::<M>(c, F, |rt| {
+        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values as *const u8, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        let out: &mut [u8] = if n_vr == 0 {
+            &mut []
+        } else {
+            std::slice::from_raw_parts_mut(ptr as *mut u8, n_vr)
+        };
+        rt.get(F, ScalarType::Boolean, vrs, out, |v| {
+            (v.as_f64() != 0.0) as u8
+        })
+    }))
+}
+
+pub unsafe fn set_boolean<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *const u8,
+    n_values: usize,
+) -> fmi3Status {
+    const F: &str = "fmi3SetBoolean";
+    status(guarded::<M>(c, F, |rt| {
+        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        let vals: &[u8] = if n_vr == 0 {
+            &[]
+        } else {
+            std::slice::from_raw_parts(ptr, n_vr)
+        };
+        rt.set(
+            F,
+            ScalarType::Boolean,
+            vrs,
+            vals.iter().map(|x| Value::Boolean(*x != 0)),
+        )
+    }))
+}
+
+pub unsafe fn get_string<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *mut *const c_char,
+    n_values: usize,
+) -> fmi3Status {
+    const F: &str = "fmi3GetString";
+    status(guarded_instance::<M>(c, F, |inst| {
+        let (vrs, ptr) = match arrays(
+            &inst.runtime,
+            F,
+            vr,
+            n_vr,
+            values as *const *const c_char,
+            n_values,
+        ) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        // The host reads the strings until its next call: kept in the instance.
+        let strings = &mut inst.strings;
+        strings.clear();
+        let s = inst.runtime.get_strings(F, vrs, |_, s| {
+            strings.push(CString::new(s.replace('\0', "")).unwrap_or_default())
+        });
+        if s == fmi2Status::OK {
+            let out = ptr as *mut *const c_char;
+            for (k, s) in strings.iter().enumerate() {
+                *out.add(k) = s.as_ptr();
+            }
+        }
+        s
+    }))
+}
+
+pub unsafe fn set_string<M: Model>(
+    c: fmi3Instance,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *const *const c_char,
+    n_values: usize,
+) -> fmi3Status {
+    const F: &str = "fmi3SetString";
+    status(guarded::<M>(c, F, |rt| {
+        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        let mut texts = Vec::with_capacity(n_vr);
+        for (k, vr) in vrs.iter().enumerate() {
+            match opt_str(*ptr.add(k)) {
+                Some(t) => texts.push(t),
+                None => return rt.error(&format!("{F}: value {k} (vr {vr}) is NULL")),
+            }
+        }
+        let refs: Vec<&str> = texts.iter().map(|t| t.as_ref()).collect();
+        rt.set_strings(F, vrs, &refs)
+    }))
+}
+
+/// A get or set of a type this FMU has no variable of (Float32, Int8, …, Binary, Clock):
+/// nothing to do for no value reference, else an error naming the first.
+pub unsafe fn no_variable_of_type<M: Model>(
+    c: fmi3Instance,
+    function: &str,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+) -> fmi3Status {
+    status(guarded::<M>(c, function, |rt| {
+        if n_vr == 0 {
+            return fmi2Status::OK;
+        }
+        let first = if vr.is_null() { 0 } else { *vr };
+        match rt.var_info(first) {
+            Some(v) => rt.error(&format!(
+                "{function}: variable '{}' (vr {first}) is {}",
+                v.name,
+                super::description3::element_name(v.var_type())
+            )),
+            None => rt.error(&format!(
+                "{function}: unknown value reference {first} (model '{}' has no variable of this type)",
+                M::INFO.name
+            )),
+        }
+    }))
+}
+
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn do_step<M: Model>(
+    c: fmi3Instance,
+    current: f64,
+    step: f64,
+    _no_set_prior: bool,
+    event_handling_needed: *mut bool,
+    terminate_simulation: *mut bool,
+    early_return: *mut bool,
+    last_successful_time: *mut f64,
+) -> fmi3Status {
+    status(guarded::<M>(c, "fmi3DoStep", |rt| {
+        if event_handling_needed.is_null()
+            || terminate_simulation.is_null()
+            || early_return.is_null()
+            || last_successful_time.is_null()
+        {
+            return rt.error("fmi3DoStep: an output argument is NULL");
+        }
+        let s = rt.do_step(current, step);
+        // No event mode and no early return; a model never ends the run on its own.
+        *event_handling_needed = false;
+        *terminate_simulation = false;
+        *early_return = false;
+        *last_successful_time = rt.last_successful_time();
+        s
+    }))
+}
+
+pub unsafe fn get_fmu_state<M: Model>(c: fmi3Instance, state: *mut fmi3FMUState) -> fmi3Status {
+    status(crate::ffi::get_fmu_state::<M>(c, state))
+}
+
+pub unsafe fn set_fmu_state<M: Model>(c: fmi3Instance, state: fmi3FMUState) -> fmi3Status {
+    status(crate::ffi::set_fmu_state::<M>(c, state))
+}
+
+pub unsafe fn free_fmu_state<M: Model>(c: fmi3Instance, state: *mut fmi3FMUState) -> fmi3Status {
+    status(crate::ffi::free_fmu_state::<M>(c, state))
+}
+
+pub unsafe fn serialized_fmu_state_size<M: Model>(
+    c: fmi3Instance,
+    state: fmi3FMUState,
+    size: *mut usize,
+) -> fmi3Status {
+    status(crate::ffi::serialized_fmu_state_size::<M>(c, state, size))
+}
+
+pub unsafe fn serialize_fmu_state<M: Model>(
+    c: fmi3Instance,
+    state: fmi3FMUState,
+    bytes: *mut u8,
+    size: usize,
+) -> fmi3Status {
+    status(crate::ffi::serialize_fmu_state::<M>(
+        c,
+        state,
+        bytes as *mut _,
+        size,
+    ))
+}
+
+pub unsafe fn deserialize_fmu_state<M: Model>(
+    c: fmi3Instance,
+    bytes: *const u8,
+    size: usize,
+    state: *mut fmi3FMUState,
+) -> fmi3Status {
+    status(guarded::<M>(c, "fmi3DeserializeFMUState", |rt| {
+        if bytes.is_null() || state.is_null() {
+            return rt.error("fmi3DeserializeFMUState: NULL argument");
+        }
+        let data = std::slice::from_raw_parts(bytes, size);
+        match rt.deserialize(data) {
+            Ok(snap) => {
+                if (*state).is_null() {
+                    *state = Box::into_raw(Box::new(snap)) as fmi3FMUState;
+                } else {
+                    *(*state as *mut Snapshot<M>) = snap;
+                }
+                fmi2Status::OK
+            }
+            Err(s) => s,
+        }
+    }))
+}
