@@ -8,8 +8,8 @@ use std::sync::{Arc, OnceLock};
 use tb_fmi::{FmuCache, LoadedFmu};
 
 /// Pack every model and test FMU once per test binary into `target/fmu` (where the
-/// repository's system files find them), so that the tests always run the FMUs of the
-/// current sources.
+/// repository's system files find them), as FMI 2.0 and FMI 3.0 FMUs (`<model>-fmi3.fmu`),
+/// so that the tests always run the FMUs of the current sources.
 pub fn fmu_dir() -> PathBuf {
     static PACKED: OnceLock<PathBuf> = OnceLock::new();
     PACKED
@@ -19,7 +19,9 @@ pub fn fmu_dir() -> PathBuf {
                 .iter()
                 .map(|s| s.info.name.to_string())
                 .collect();
-            twinbench::pack::pack(&all, &dir).expect("packing the FMUs failed");
+            use twinbench::pack::FmiVersion;
+            twinbench::pack::pack_versions(&all, &dir, &[FmiVersion::V2, FmiVersion::V3])
+                .expect("packing the FMUs failed");
             dir
         })
         .clone()
@@ -33,6 +35,16 @@ pub fn fmu(name: &str) -> PathBuf {
         .find(|s| s.info.name == name)
         .unwrap_or_else(|| panic!("no model named {name}"));
     twinbench::pack::fmu_path(&dir, &spec)
+}
+
+/// Path of a packed FMI 3.0 FMU by model name (test FMUs under test/).
+pub fn fmu3(name: &str) -> PathBuf {
+    let dir = fmu_dir();
+    let spec = twinbench::pack::models()
+        .into_iter()
+        .find(|s| s.info.name == name)
+        .unwrap_or_else(|| panic!("no model named {name}"));
+    twinbench::pack::fmu_path_of(&dir, &spec, twinbench::pack::FmiVersion::V3)
 }
 
 /// One unpack cache for all tests of a binary, kept under `target/` (content-addressed and

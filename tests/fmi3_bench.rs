@@ -1,0 +1,82 @@
+//! Issue #35: the bench assembled from the models' FMI 3.0 FMUs gives the FMI 2.0 bench's
+//! lap CSV bit for bit: in process, isolated, and mixed (some instances 2.0, some 3.0).
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+/// `systems/rls_v.toml` with each FMU as `fmus` says (`vehicle` → `vehicle-fmi3.fmu`
+/// when it is in `fmi3`) and, when given, a stop time instead of the lap.
+fn system(dir: &Path, tag: &str, fmi3: &[&str], stop: Option<f64>) -> std::path::PathBuf {
+    let fmus = common::fmu_dir();
+    let mut text =
+        std::fs::read_to_string(twinbench::pack::workspace_root().join("systems/rls_v.toml"))
+            .unwrap();
+    for m in ["vehicle", "driver", "dyno", "edu"] {
+        let file = match fmi3.contains(&m) {
+            true => format!("{m}-fmi3.fmu"),
+            false => format!("{m}.fmu"),
+        };
+        text = text.replace(
+            &format!("\"../target/fmu/{m}.fmu\""),
+            &format!("{:?}", fmus.join(file).display().to_string()),
+        );
+    }
+    if let Some(t) = stop {
+        text = text.replace("stop = \"vehicle.lap >= 1\"", &format!("stop = {t:?}"));
+    }
+    let path = dir.join(format!("{tag}.toml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// `twinbench run SYSTEM [--isolate]`: the CSV's bytes.
+fn run(system: &Path, isolate: bool) -> Vec<u8> {
+    let csv = system.with_extension("csv");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_twinbench"));
+    cmd.arg("run").arg(system).arg("--out").arg(&csv);
+    if isolate {
+        cmd.arg("--isolate");
+    }
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}: {}",
+        system.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::read(&csv).unwrap()
+}
+
+#[test]
+fn the_fmi3_bench_gives_the_fmi2_lap_bit_for_bit_in_process_and_mixed() {
+    let dir = tb_testkit::scratch("fmi3-bench");
+    let all = ["vehicle", "driver", "dyno", "edu"];
+    let two = run(&system(dir.path(), "fmi2", &[], None), false);
+    assert!(two.len() > 1_000_000, "a whole lap");
+    let three = run(&system(dir.path(), "fmi3", &all, None), false);
+    assert!(two == three, "the FMI 3.0 lap differs from the FMI 2.0 lap");
+    let mixed = run(
+        &system(dir.path(), "mixed", &["vehicle", "dyno"], None),
+        false,
+    );
+    assert!(two == mixed, "the mixed lap differs from the FMI 2.0 lap");
+}
+
+#[test]
+fn the_fmi3_bench_isolated_gives_the_fmi2_run_bit_for_bit() {
+    if let Err(why) = tb_fmi::import::sandbox::available() {
+        eprintln!("skipped: the isolated workers cannot be confined here ({why})");
+        return;
+    }
+    let dir = tb_testkit::scratch("fmi3-bench-isolated");
+    let all = ["vehicle", "driver", "dyno", "edu"];
+    // 3 s of the lap: every isolated step is a round trip per instance.
+    let two = run(&system(dir.path(), "fmi2", &[], Some(3.0)), false);
+    let three = run(&system(dir.path(), "fmi3", &all, Some(3.0)), true);
+    assert!(
+        two == three,
+        "the isolated FMI 3.0 run differs from the FMI 2.0 run"
+    );
+}
