@@ -179,3 +179,28 @@ fn fmpy_master_second_order_chassis_matches() {
     };
     assert_ne!(column(&csv), column(&first));
 }
+
+/// Issue #35: FMPy's master (FMU3Slave) over the models' FMI 3.0 FMUs agrees with
+/// twinbench's over the same FMUs, a whole lap, as the FMI 2.0 cross-check does.
+#[test]
+fn fmpy_master_over_the_fmi3_fmus_matches() {
+    let dir = tempfile::tempdir().unwrap();
+    let fmu_dir = common::fmu_dir();
+    let mut text = std::fs::read_to_string(root().join("systems/rls_v.toml")).unwrap();
+    for m in ["vehicle", "driver", "dyno", "edu"] {
+        text = text.replace(
+            &format!("\"../target/fmu/{m}.fmu\""),
+            &format!(
+                "{:?}",
+                fmu_dir.join(format!("{m}-fmi3.fmu")).display().to_string()
+            ),
+        );
+    }
+    let system = dir.path().join("fmi3.toml");
+    std::fs::write(&system, text).unwrap();
+    let csv = dir.path().join("twinbench.csv");
+    let (order, steps) = twinbench_run(&system, None, None, &csv);
+    assert!(steps > 90_000, "a whole lap: {steps} steps");
+    let j = fmpy_run(&system, &[], &csv);
+    check(&j, &order, steps, "FMI 3.0 FMUs, one lap");
+}

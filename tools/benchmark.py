@@ -45,13 +45,17 @@ def machine():
     return {"nproc": os.cpu_count(), "cpu": cpu, "os": platform.platform(), "python": platform.python_version()}
 
 
-def system_variant(tmp, algorithm=None, stop=None):
+def system_variant(tmp, algorithm=None, stop=None, fmi=2):
     text = open(SYSTEM).read().replace('"../target/fmu/', '"' + os.path.join(ROOT, "target", "fmu") + "/")
+    if fmi == 3:
+        # The models' FMI 3.0 FMUs (`twinbench pack --fmi 2,3`): <model>-fmi3.fmu.
+        for m in ("vehicle", "driver", "dyno", "edu"):
+            text = text.replace(f'/{m}.fmu"', f'/{m}-fmi3.fmu"')
     if algorithm:
         text = text.replace('algorithm = "gauss-seidel"', f'algorithm = "{algorithm}"')
     if stop is not None:
         text = text.replace('stop = "vehicle.lap >= 1"', f"stop = {stop!r}")
-    p = os.path.join(tmp, f"rls_v_{algorithm or 'gs'}_{stop or 'lap'}.toml")
+    p = os.path.join(tmp, f"rls_v_{algorithm or 'gs'}_{stop or 'lap'}_fmi{fmi}.toml")
     with open(p, "w") as f:
         f.write(text)
     return p

@@ -184,7 +184,62 @@ class Unit:
 
 
 def vtype(v):
-    return "Integer" if v.type == "Enumeration" else v.type
+    """The exchange table a variable goes into: FMI 2.0's base types (an FMI 3.0 Float64 is
+    a Real, an Int32 or an Enumeration an Integer)."""
+    return {"Enumeration": "Integer", "Float64": "Real", "Int32": "Integer"}.get(v.type, v.type)
+
+
+class Slave3:
+    """FMPy's FMU3Slave behind the FMI 2.0 calls this script makes: Reals are Float64, an
+    Enumeration is got and set as Int64, other Integers as Int32; the experiment goes to
+    fmi3EnterInitializationMode."""
+
+    def __init__(self, md, unzipdir, name):
+        from fmpy.fmi3 import FMU3Slave
+        self.f = FMU3Slave(guid=md.guid, unzipDirectory=unzipdir,
+                           modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        self.enums = {v.valueReference for v in md.modelVariables if v.type == "Enumeration"}
+        self.start, self.stop = 0.0, None
+
+    def instantiate(self, loggingOn=False):
+        self.f.instantiate(loggingOn=loggingOn)
+
+    def setupExperiment(self, startTime, stopTime):
+        self.start, self.stop = startTime, stopTime
+
+    def enterInitializationMode(self):
+        self.f.enterInitializationMode(startTime=self.start, stopTime=self.stop)
+
+    def exitInitializationMode(self):
+        self.f.exitInitializationMode()
+
+    def setReal(self, vr, values):
+        self.f.setFloat64(vr, values)
+
+    def getReal(self, vr):
+        return self.f.getFloat64(vr)
+
+    def setInteger(self, vr, values):
+        for r, x in zip(vr, values):
+            (self.f.setInt64 if r in self.enums else self.f.setInt32)([r], [x])
+
+    def getInteger(self, vr):
+        return [(self.f.getInt64 if r in self.enums else self.f.getInt32)([r])[0] for r in vr]
+
+    def setBoolean(self, vr, values):
+        self.f.setBoolean(vr, values)
+
+    def getBoolean(self, vr):
+        return self.f.getBoolean(vr)
+
+    def doStep(self, currentCommunicationPoint, communicationStepSize):
+        self.f.doStep(currentCommunicationPoint, communicationStepSize)
+
+    def terminate(self):
+        self.f.terminate()
+
+    def freeInstance(self):
+        self.f.freeInstance()
 
 
 class System:
@@ -315,8 +370,11 @@ class System:
     def instantiate(self, fixed_stop):
         for u in self.units:
             md = u.md
-            u.slave = FMU2Slave(guid=md.guid, unzipDirectory=u.unzipdir,
-                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=u.name)
+            if md.fmiVersion.startswith("3"):
+                u.slave = Slave3(md, u.unzipdir, u.name)
+            else:
+                u.slave = FMU2Slave(guid=md.guid, unzipDirectory=u.unzipdir,
+                                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName=u.name)
             u.slave.instantiate(loggingOn=False)
             u.slave.setupExperiment(startTime=self.start, stopTime=fixed_stop)
             for vr, ty, value in u.params:

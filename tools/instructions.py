@@ -14,7 +14,7 @@ Landlock and take the last path every time. The first measures set
 TWINBENCH_WORKER_SANDBOX=assume (the host takes workers as sandboxed without asking the
 kernel, as it finds them natively on this machine); the last sets it to `off`.
 
-Usage: tools/instructions.py [--json] [--set instance.variable=value ...]   (needs valgrind;
+Usage: tools/instructions.py [--json] [--fmi 3] [--set instance.variable=value ...]   (needs valgrind;
   run tools/benchmark.sh first, or `cargo build --release` and `target/release/twinbench
   pack`). `--set` changes a parameter in every measured run, e.g.
   `--set vehicle.chassis_model=second_order` for the second-order chassis' cost.
@@ -51,6 +51,9 @@ def callgrind(system, tmp, env, sets=()):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--fmi", type=int, choices=(2, 3), default=2,
+                    help="the bench of the models' FMI 2.0 FMUs (default) or FMI 3.0 FMUs "
+                         "(pack them first: twinbench pack --fmi 2,3 -o target/fmu)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="a parameter for every measured run (as twinbench run --set)")
     a = ap.parse_args()
@@ -59,10 +62,10 @@ def main():
         # A store of unpacked FMUs of this measurement's own: the first run fills it.
         env["TWINBENCH_CACHE"] = os.path.join(tmp, "unpacked")
         env["TWINBENCH_WORKER_SANDBOX"] = "assume"
-        short = system_variant(tmp, stop=0.001)
+        short = system_variant(tmp, stop=0.001, fmi=a.fmi)
         first, _ = callgrind(short, tmp, env, a.set)
         second, one = callgrind(short, tmp, env, a.set)
-        lap, steps = callgrind(system_variant(tmp), tmp, env, a.set)
+        lap, steps = callgrind(system_variant(tmp, fmi=a.fmi), tmp, env, a.set)
         env["TWINBENCH_WORKER_SANDBOX"] = "off"
         no_landlock, _ = callgrind(short, tmp, env, a.set)
     per_step = (lap - second) / (steps - one)

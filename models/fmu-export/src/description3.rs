@@ -20,7 +20,8 @@ pub fn time_value_reference<V: VarTable>() -> u32 {
         .iter()
         .map(|v| v.value_reference)
         .max()
-        .map_or(0, |m| m + 1)
+        .unwrap_or(0)
+        + 1
 }
 
 /// The instantiation token: the FMI 2.0 GUID's hash over the interface, marked as FMI 3.0

@@ -214,6 +214,8 @@ pub struct Runtime<M: Model> {
     vr_index: Vec<u32>,
     /// value reference -> checks of the fast get/set path.
     slots: Vec<Slot>,
+    /// FMI 3.0: the value reference of the independent variable `time` ([`Runtime::expose_time`]).
+    independent_time: Option<u32>,
     /// Index of the model's `range_check` parameter, if it declares one (0: an input
     /// outside its range is accepted with a warning; 1, the default: refused).
     range_check: Option<usize>,
@@ -257,6 +259,7 @@ impl<M: Model> Runtime<M> {
             run: RunState::INSTANTIATED,
             init_failed: false,
             poisoned: None,
+            independent_time: None,
             ctx: Context {
                 instance_name: instance_name.to_string(),
                 resource_dir,
@@ -284,6 +287,13 @@ impl<M: Model> Runtime<M> {
     pub fn guid(&self) -> &str {
         &self.guid
     }
+    /// The value reference after the table's largest: FMI 3.0's independent variable
+    /// `time` ([`crate::description3::time_value_reference`]).
+    #[inline]
+    pub fn time_value_reference(&self) -> u32 {
+        self.vr_index.len() as u32
+    }
+
     /// The variable of value reference `vr`, if the table has one.
     pub fn var_info(&self, vr: u32) -> Option<&'static VarInfo> {
         match self.vr_index.get(vr as usize) {
@@ -681,10 +691,19 @@ impl<M: Model> Runtime<M> {
                     // (REAL_OFFSETS), so the pointer is in bounds and aligned.
                     out[k] = unsafe { base.add(sl.offset).cast::<f64>().read() };
                 }
+                // FMI 3.0's independent variable: the time (off the fast path).
+                _ if self.independent_time == Some(vr) => out[k] = self.run.time,
                 _ => return self.get_error(F, ScalarType::Real, vr),
             }
         }
         fmi2Status::OK
+    }
+
+    /// Expose the time as the variable of value reference
+    /// [`Runtime::time_value_reference`] (FMI 3.0's independent variable): read by
+    /// [`Runtime::get_real`], refused by every set.
+    pub fn expose_time(&mut self) {
+        self.independent_time = Some(self.time_value_reference());
     }
 
     /// fmi2SetReal: [`Runtime::set`] with each accepted value written straight to its
@@ -841,6 +860,11 @@ impl<M: Model> Runtime<M> {
     /// The message of a refused set (off the fast path).
     #[cold]
     fn set_error(&self, function: &str, ty: ScalarType, vr: u32, value: Value) -> fmi2Status {
+        if self.independent_time == Some(vr) {
+            return self.error(&format!(
+                "{function}: the independent variable 'time' cannot be set (vr {vr})"
+            ));
+        }
         let i = match self.index(function, vr) {
             Ok(i) => i,
             Err(s) => return s,

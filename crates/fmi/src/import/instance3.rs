@@ -77,7 +77,12 @@ pub struct Instance3 {
     pub name: String,
     /// Simulation time of the last successful step.
     pub time: f64,
-    slots: HashMap<u32, Fmi3Slot>,
+    slots: Slots,
+    /// Every variable exchanged as a Real is a scalar Float64, every one exchanged as an
+    /// Integer a scalar Int32: the master's lists (typed by the plan) then go to the FMU in
+    /// one call without a look at each reference, as FMI 2.0's do.
+    reals_are_float64: bool,
+    ints_are_int32: bool,
     names: HashMap<u32, String>,
     /// Set when `fmi3DoStep` asked to end the simulation: the time reached.
     terminate_requested: Option<f64>,
@@ -90,6 +95,66 @@ pub struct Instance3 {
 
 // One instance is used by one thread at a time.
 unsafe impl Send for Instance3 {}
+
+/// Each value reference's slot: a table indexed by the reference when they are dense (an
+/// FMU's usually are, and the elements' internal ones are the smallest free values), else
+/// a map. The master looks every exchanged value up at every step: an index, not a hash.
+enum Slots {
+    /// The slots, and for each reference the type of a scalar that is no array element
+    /// (`None` otherwise): what the one-call paths check.
+    Dense(Vec<Option<Fmi3Slot>>, Vec<Option<Fmi3Type>>),
+    Sparse(HashMap<u32, Fmi3Slot>),
+}
+
+impl Slots {
+    fn new(all: Vec<(u32, Fmi3Slot)>) -> Slots {
+        let max = all.iter().map(|(vr, _)| *vr as usize).max().unwrap_or(0);
+        if max <= 4 * all.len() + 1024 {
+            let mut t = vec![None; max + 1];
+            let mut scalar = vec![None; max + 1];
+            for (vr, s) in all {
+                t[vr as usize] = Some(s);
+                if s.len == 1 && s.vr == vr && !s.element {
+                    scalar[vr as usize] = Some(s.ty);
+                }
+            }
+            Slots::Dense(t, scalar)
+        } else {
+            Slots::Sparse(all.into_iter().collect())
+        }
+    }
+
+    #[inline]
+    fn get(&self, vr: u32) -> Option<Fmi3Slot> {
+        match self {
+            Slots::Dense(t, _) => t.get(vr as usize).copied().flatten(),
+            Slots::Sparse(m) => m.get(&vr).copied(),
+        }
+    }
+
+    /// The type of the scalar (no array element) at `vr`.
+    #[inline]
+    fn scalar_type(&self, vr: u32) -> Option<Fmi3Type> {
+        match self {
+            Slots::Dense(_, k) => k.get(vr as usize).copied().flatten(),
+            Slots::Sparse(m) => m
+                .get(&vr)
+                .filter(|s| s.len == 1 && s.vr == vr && !s.element)
+                .map(|s| s.ty),
+        }
+    }
+
+    fn iter(&self) -> Box<dyn Iterator<Item = (u32, Fmi3Slot)> + '_> {
+        match self {
+            Slots::Dense(t, _) => Box::new(
+                t.iter()
+                    .enumerate()
+                    .filter_map(|(vr, s)| s.map(|s| (vr as u32, s))),
+            ),
+            Slots::Sparse(m) => Box::new(m.iter().map(|(vr, s)| (*vr, *s))),
+        }
+    }
+}
 
 /// The `resourcePath` of FMI 3.0: a native path ending in a separator.
 fn resource_path(dir: &Path) -> String {
@@ -138,20 +203,43 @@ impl Instance3 {
                 sink.last_lines().join(" | ")
             )));
         }
-        let mut slots = HashMap::new();
+        let mut slots = Vec::new();
         let mut names = HashMap::new();
         for v in &md.variables {
             if let Some(s) = v.fmi3 {
-                slots.insert(v.value_reference, s);
+                slots.push((v.value_reference, s));
                 names.insert(v.value_reference, v.name.clone());
             }
         }
+        let scalar = |v: &crate::import::description::ScalarVariable, ty: Fmi3Type| {
+            v.fmi3.is_some_and(|s| {
+                s.ty == ty && s.len == 1 && !s.element && s.vr == v.value_reference
+            })
+        };
+        let reals_are_float64 = md
+            .variables
+            .iter()
+            .filter(|v| v.ty == crate::ScalarType::Real)
+            .all(|v| scalar(v, Fmi3Type::Float64));
+        let ints_are_int32 = md
+            .variables
+            .iter()
+            .filter(|v| {
+                matches!(
+                    v.ty,
+                    crate::ScalarType::Integer | crate::ScalarType::Enumeration
+                )
+            })
+            .all(|v| scalar(v, Fmi3Type::Int32));
+        let slots = Slots::new(slots);
         Ok(Instance3 {
             lib,
             inst,
             name: name.to_string(),
             time: 0.0,
             slots,
+            reals_are_float64,
+            ints_are_int32,
             names,
             terminate_requested: None,
             start: 0.0,
@@ -199,8 +287,7 @@ impl Instance3 {
 
     fn slot(&self, vr: u32) -> Result<Fmi3Slot, FmuError> {
         self.slots
-            .get(&vr)
-            .copied()
+            .get(vr)
             .ok_or_else(|| self.other(format!("no FMI 3.0 variable has value reference {vr}")))
     }
 
@@ -265,11 +352,22 @@ impl Instance3 {
         let vr = [slot.vr];
         macro_rules! get {
             ($f:ident, $t:ty, $name:literal) => {{
-                let mut buf: Vec<$t> = vec![Default::default(); n];
-                let s =
-                    unsafe { (self.lib.api.$f)(self.inst, vr.as_ptr(), 1, buf.as_mut_ptr(), n) };
-                self.check($name, s)?;
-                buf[slot.index as usize]
+                // A scalar on the stack: nothing allocated in the step loop.
+                if n == 1 {
+                    let mut one: [$t; 1] = [Default::default()];
+                    let s = unsafe {
+                        (self.lib.api.$f)(self.inst, vr.as_ptr(), 1, one.as_mut_ptr(), 1)
+                    };
+                    self.check($name, s)?;
+                    one[0]
+                } else {
+                    let mut buf: Vec<$t> = vec![Default::default(); n];
+                    let s = unsafe {
+                        (self.lib.api.$f)(self.inst, vr.as_ptr(), 1, buf.as_mut_ptr(), n)
+                    };
+                    self.check($name, s)?;
+                    buf[slot.index as usize]
+                }
             }};
         }
         Ok(match slot.ty {
@@ -322,8 +420,8 @@ impl Instance3 {
         let name = self
             .slots
             .iter()
-            .find(|(_, s)| **s == slot)
-            .map_or("?", |(vr, _)| self.name_of(*vr));
+            .find(|(_, s)| *s == slot)
+            .map_or("?", |(vr, _)| self.name_of(vr));
         self.other(format!(
             "'{name}' ({}) is {x}, which twinbench cannot carry exactly (64-bit integers travel as doubles, exact up to 2^53)",
             slot.ty.name()
@@ -348,6 +446,13 @@ impl Instance3 {
         };
         macro_rules! set {
             ($get:ident, $set:ident, $t:ty, $gname:literal, $sname:literal) => {{
+                if n == 1 {
+                    // A scalar from the stack: nothing allocated in the step loop.
+                    let one: [$t; 1] = [value as $t];
+                    let s =
+                        unsafe { (self.lib.api.$set)(self.inst, vr.as_ptr(), 1, one.as_ptr(), 1) };
+                    return self.check($sname, s);
+                }
                 let mut buf: Vec<$t> = vec![Default::default(); n];
                 if n > 1 {
                     let s = unsafe {
@@ -440,12 +545,15 @@ impl Instance3 {
     }
 
     /// Whether every reference is a scalar Float64 (one fmi3GetFloat64 call then).
+    #[inline]
     fn all_scalar_float64(&self, vrs: &[u32]) -> bool {
-        vrs.iter().all(|vr| {
-            self.slots
-                .get(vr)
-                .is_some_and(|s| s.ty == Fmi3Type::Float64 && s.len == 1 && s.vr == *vr)
-        })
+        self.reals_are_float64 || self.all_scalar(vrs, Fmi3Type::Float64)
+    }
+
+    /// Whether every reference is a scalar of type `ty` (one call of its type then).
+    #[inline]
+    fn all_scalar(&self, vrs: &[u32], ty: Fmi3Type) -> bool {
+        vrs.iter().all(|&vr| self.slots.scalar_type(vr) == Some(ty))
     }
 
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
@@ -491,6 +599,18 @@ impl Instance3 {
     /// Integer, Enumeration and Boolean values as i32; a value beyond 32 bits is an error
     /// naming the variable (never wrapped).
     pub fn get_int(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        if self.ints_are_int32 || self.all_scalar(vrs, Fmi3Type::Int32) {
+            let s = unsafe {
+                (self.lib.api.get_int32)(
+                    self.inst,
+                    vrs.as_ptr(),
+                    vrs.len(),
+                    out.as_mut_ptr(),
+                    out.len(),
+                )
+            };
+            return self.check("fmi3GetInt32", s);
+        }
         for (vr, o) in vrs.iter().zip(out.iter_mut()) {
             let slot = self.slot(*vr)?;
             let x = self.get_one(slot)?;
@@ -507,6 +627,18 @@ impl Instance3 {
     }
 
     pub fn set_int(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        if self.ints_are_int32 || self.all_scalar(vrs, Fmi3Type::Int32) {
+            let s = unsafe {
+                (self.lib.api.set_int32)(
+                    self.inst,
+                    vrs.as_ptr(),
+                    vrs.len(),
+                    values.as_ptr(),
+                    values.len(),
+                )
+            };
+            return self.check("fmi3SetInt32", s);
+        }
         for (vr, v) in vrs.iter().zip(values) {
             let slot = self.slot(*vr)?;
             self.set_one(*vr, slot, *v as f64)?;
@@ -603,6 +735,25 @@ impl Instance3 {
                 &mut last,
             )
         };
+        // The usual step: completed, no event, no early return, not the end.
+        if s == 0 && early == 0 && terminate == 0 && event == 0 {
+            self.time = t + h;
+            return Ok(());
+        }
+        self.step_outcome(t, h, s, terminate, early, last)
+    }
+
+    /// A step that did more than complete: its error, early return or end of the run.
+    #[cold]
+    fn step_outcome(
+        &mut self,
+        t: f64,
+        h: f64,
+        s: Status,
+        terminate: u8,
+        early: u8,
+        last: f64,
+    ) -> Result<(), FmuError> {
         self.time = t;
         self.check("fmi3DoStep", s)?;
         let reached = if early != 0 && last.is_finite() && last < t + h {

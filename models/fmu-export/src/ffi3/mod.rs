@@ -88,6 +88,7 @@ impl Logger for CLogger3 {
 }
 
 /// A Runtime call's status as FMI 3.0's (the same numbers; FMI 3.0 has no Pending).
+#[inline(always)]
 fn status(s: fmi2Status) -> fmi3Status {
     s.0.min(4)
 }
@@ -153,7 +154,8 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
         let resource_dir = opt_str(resource_path)
             .filter(|p| !p.is_empty())
             .map(|p| std::path::PathBuf::from(p.into_owned()));
-        let runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on);
+        let mut runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on);
+        runtime.expose_time();
         Box::into_raw(Box::new(Instance {
             runtime,
             strings: Vec::new(),
@@ -238,6 +240,7 @@ pub unsafe fn unsupported<M: Model>(c: fmi3Instance, function: &str, why: &str) 
 
 /// The value references and the values of a get or set, NULL- and count-checked: every
 /// variable is a scalar, so `n_values` must equal `n_vr`.
+#[inline(always)]
 unsafe fn arrays<'a, T>(
     rt: &Runtime<impl Model>,
     function: &str,
@@ -246,20 +249,31 @@ unsafe fn arrays<'a, T>(
     values: *const T,
     n_values: usize,
 ) -> Result<(&'a [u32], *const T), fmi2Status> {
-    if n_values != n_vr {
-        return Err(rt.error(&format!(
-            "{function}: {n_values} values for {n_vr} value references (every variable of this FMU is a scalar)"
-        )));
+    if n_values != n_vr || (n_vr > 0 && (vr.is_null() || values.is_null())) {
+        return Err(bad_arrays(rt, function, n_vr, n_values));
     }
     if n_vr == 0 {
         return Ok((&[], values));
     }
-    if vr.is_null() || values.is_null() {
-        return Err(rt.error(&format!(
-            "{function}: NULL array with nValueReferences = {n_vr}"
-        )));
-    }
     Ok((std::slice::from_raw_parts(vr, n_vr), values))
+}
+
+#[cold]
+fn bad_arrays(
+    rt: &Runtime<impl Model>,
+    function: &str,
+    n_vr: usize,
+    n_values: usize,
+) -> fmi2Status {
+    if n_values != n_vr {
+        rt.error(&format!(
+            "{function}: {n_values} values for {n_vr} value references (every variable of this FMU is a scalar)"
+        ))
+    } else {
+        rt.error(&format!(
+            "{function}: NULL array with nValueReferences = {n_vr}"
+        ))
+    }
 }
 
 /// Each of `vrs` is a variable of type `want` (FMI 3.0 tells Int32 from an Enumeration's
@@ -285,6 +299,7 @@ fn of_type<M: Model>(
     Ok(())
 }
 
+#[inline(always)]
 pub unsafe fn get_float64<M: Model>(
     c: fmi3Instance,
     vr: *const fmi3ValueReference,
@@ -303,25 +318,12 @@ pub unsafe fn get_float64<M: Model>(
         } else {
             std::slice::from_raw_parts_mut(ptr as *mut f64, n_vr)
         };
-        // The independent variable is the runtime's time; every other Real its field.
-        let time_vr = crate::description3::time_value_reference::<M::Vars>();
-        if !vrs.contains(&time_vr) {
-            return rt.get_real(vrs, out);
-        }
-        for (k, &v) in vrs.iter().enumerate() {
-            if v == time_vr {
-                out[k] = rt.time();
-            } else {
-                let s = rt.get_real(&vrs[k..=k], &mut out[k..=k]);
-                if s != fmi2Status::OK {
-                    return s;
-                }
-            }
-        }
-        fmi2Status::OK
+        // The independent variable `time` is read there too (Runtime::expose_time).
+        rt.get_real(vrs, out)
     }))
 }
 
+#[inline(always)]
 pub unsafe fn set_float64<M: Model>(
     c: fmi3Instance,
     vr: *const fmi3ValueReference,
@@ -335,7 +337,7 @@ pub unsafe fn set_float64<M: Model>(
             Ok(x) => x,
             Err(s) => return s,
         };
-        if vrs.contains(&crate::description3::time_value_reference::<M::Vars>()) {
+        if vrs.contains(&rt.time_value_reference()) {
             return rt.error(&format!(
                 "{F}: the independent variable 'time' cannot be set"
             ));
@@ -617,6 +619,7 @@ pub unsafe fn no_variable_of_type<M: Model>(
 }
 
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub unsafe fn do_step<M: Model>(
     c: fmi3Instance,
     current: f64,
