@@ -218,6 +218,19 @@ fn n02_an_isolated_fmu_cannot_write_the_store_that_a_later_in_process_run_loads_
     assert!(!victim.contains("unpacking it again"), "{victim}");
 }
 
+/// A scratch folder with a store, a victim FMU already run into it, and the `ESCAPE`
+/// attacker: (folder, store, victim FMU, victim's system, attacker's system).
+fn victim_and_attacker(tag: &str) -> (tempfile::TempDir, PathBuf, PathBuf, PathBuf, PathBuf) {
+    let dir = tb_testkit::scratch(tag);
+    let store = dir.path().join("store");
+    let (victim, _) = hostile_fmu(dir.path(), "NONE");
+    let (attacker, _) = hostile_fmu(dir.path(), "ESCAPE");
+    let (victim_sys, attacker_sys) = (system(dir.path(), &victim), system(dir.path(), &attacker));
+    let (out, err, _) = run(&store, &victim_sys, false, &[], None);
+    assert!(out.status.success(), "{err}");
+    (dir, store, victim, victim_sys, attacker_sys)
+}
+
 /// Red team M1–M4 and issue #33's list: a hostile FMU run with `--isolate` tries to write
 /// the user's home and the project, open a TCP connection, reach an abstract Unix socket
 /// and a System V shared memory segment of the user's, chmod the store, read another FMU's
@@ -229,13 +242,7 @@ fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() 
     if !confinement_here() {
         return;
     }
-    let dir = tb_testkit::scratch("confined-escape");
-    let store = dir.path().join("store");
-    let (victim, _) = hostile_fmu(dir.path(), "NONE");
-    let (attacker, _) = hostile_fmu(dir.path(), "ESCAPE");
-    let (victim_sys, attacker_sys) = (system(dir.path(), &victim), system(dir.path(), &attacker));
-    let (out, err, _) = run(&store, &victim_sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    let (dir, store, victim, victim_sys, attacker_sys) = victim_and_attacker("confined-escape");
     let other = folder_of(&store, &victim).join("binaries/linux64/hostile.so");
     let home = dir.path().join("home");
     let project = dir.path().join("project");
@@ -325,13 +332,7 @@ fn m02_a_bind_mount_of_the_store_reaches_nothing() {
     if !confinement_here() {
         return;
     }
-    let dir = tb_testkit::scratch("m02-bind");
-    let store = dir.path().join("store");
-    let (victim, _) = hostile_fmu(dir.path(), "NONE");
-    let (attacker, _) = hostile_fmu(dir.path(), "ESCAPE");
-    let (victim_sys, attacker_sys) = (system(dir.path(), &victim), system(dir.path(), &attacker));
-    let (out, err, _) = run(&store, &victim_sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    let (dir, store, victim, victim_sys, attacker_sys) = victim_and_attacker("m02-bind");
     let alias = dir.path().join("alias");
     std::fs::create_dir(&alias).unwrap();
     let Some(_mount) = BindMount::new(&store, &alias) else {

@@ -125,6 +125,28 @@ fn scalar_variable(v: &VarInfo) -> String {
     if let Some(t) = v.enumeration {
         s.push_str(&format!(" declaredType=\"{}\"", xml_escape(t.name)));
     }
+    s.push_str(&unit_and_range(v));
+    if v.has_start() {
+        s.push_str(&format!(" start=\"{}\"", xml_escape(&v.start.xml_text())));
+    }
+    s.push_str("/>\n    </ScalarVariable>\n");
+    s
+}
+
+/// Each Enumeration type of `table` once, in the order of first use.
+pub fn enumeration_types(table: &[VarInfo]) -> Vec<&'static crate::variables::EnumerationType> {
+    let mut types: Vec<&'static crate::variables::EnumerationType> = Vec::new();
+    for t in table.iter().filter_map(|v| v.enumeration) {
+        if !types.iter().any(|k| k.name == t.name) {
+            types.push(t);
+        }
+    }
+    types
+}
+
+/// ` unit="…" min="…" max="…"`: the attributes both versions write alike.
+pub fn unit_and_range(v: &VarInfo) -> String {
+    let mut s = String::new();
     if let Some(u) = v.unit {
         s.push_str(&format!(" unit=\"{}\"", xml_escape(u)));
     }
@@ -134,10 +156,6 @@ fn scalar_variable(v: &VarInfo) -> String {
     if let Some(m) = v.max {
         s.push_str(&format!(" max=\"{}\"", format_real(m)));
     }
-    if v.has_start() {
-        s.push_str(&format!(" start=\"{}\"", xml_escape(&v.start.xml_text())));
-    }
-    s.push_str("/>\n    </ScalarVariable>\n");
     s
 }
 
@@ -176,12 +194,7 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
         ));
     }
     // The Enumeration types, each once (FMI 2.0: between the units and the log categories).
-    let mut types: Vec<&crate::variables::EnumerationType> = Vec::new();
-    for t in table.iter().filter_map(|v| v.enumeration) {
-        if !types.iter().any(|k| k.name == t.name) {
-            types.push(t);
-        }
-    }
+    let types = enumeration_types(table);
     let mut type_defs = String::new();
     if !types.is_empty() {
         type_defs.push_str("  <TypeDefinitions>\n");

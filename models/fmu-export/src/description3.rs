@@ -65,15 +65,7 @@ fn variable(v: &VarInfo) -> String {
     if let Some(t) = v.enumeration {
         s.push_str(&format!(" declaredType=\"{}\"", xml_escape(t.name)));
     }
-    if let Some(u) = v.unit {
-        s.push_str(&format!(" unit=\"{}\"", xml_escape(u)));
-    }
-    if let Some(m) = v.min {
-        s.push_str(&format!(" min=\"{}\"", format_real(m)));
-    }
-    if let Some(m) = v.max {
-        s.push_str(&format!(" max=\"{}\"", format_real(m)));
-    }
+    s.push_str(&crate::description::unit_and_range(v));
     match (v.has_start(), v.start) {
         (true, Value::Str(text)) => {
             s.push_str(&format!(
@@ -122,12 +114,7 @@ pub fn render_model_description3<M: Model>(generation_tool: &str) -> String {
         }
         s.push_str("  </UnitDefinitions>\n");
     }
-    let mut types: Vec<&crate::variables::EnumerationType> = Vec::new();
-    for t in table.iter().filter_map(|v| v.enumeration) {
-        if !types.iter().any(|k| k.name == t.name) {
-            types.push(t);
-        }
-    }
+    let types = crate::description::enumeration_types(table);
     if !types.is_empty() {
         s.push_str("  <TypeDefinitions>\n");
         for t in types {

@@ -19,7 +19,7 @@ pub mod export;
 use crate::ffi::{guarded, guarded_instance, opt_str, Instance};
 use crate::fmi2::fmi2Status;
 use crate::model::Model;
-use crate::runtime::{Logger, Runtime, Snapshot};
+use crate::runtime::{Logger, Runtime};
 use crate::variables::{ScalarType, Value};
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -417,6 +417,40 @@ pub unsafe fn get_int64<M: Model>(
     )
 }
 
+/// An integer set (`Int32` of Integers, `Int64` of Enumerations), each value converted.
+#[allow(clippy::too_many_arguments)]
+unsafe fn set_integers<M: Model, T: Copy>(
+    c: fmi3Instance,
+    function: &str,
+    want: ScalarType,
+    vr: *const fmi3ValueReference,
+    n_vr: usize,
+    values: *const T,
+    n_values: usize,
+    conv: impl Fn(T) -> i32,
+) -> fmi3Status {
+    status(guarded::<M>(c, function, |rt| {
+        let (vrs, ptr) = match arrays(rt, function, vr, n_vr, values, n_values) {
+            Ok(x) => x,
+            Err(s) => return s,
+        };
+        if let Err(s) = of_type(rt, function, vrs, want) {
+            return s;
+        }
+        let vals: &[T] = if n_vr == 0 {
+            &[]
+        } else {
+            std::slice::from_raw_parts(ptr, n_vr)
+        };
+        rt.set(
+            function,
+            ScalarType::Integer,
+            vrs,
+            vals.iter().map(|x| Value::Integer(conv(*x))),
+        )
+    }))
+}
+
 pub unsafe fn set_int32<M: Model>(
     c: fmi3Instance,
     vr: *const fmi3ValueReference,
@@ -424,27 +458,16 @@ pub unsafe fn set_int32<M: Model>(
     values: *const i32,
     n_values: usize,
 ) -> fmi3Status {
-    const F: &str = "fmi3SetInt32";
-    status(guarded::<M>(c, F, |rt| {
-        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
-        if let Err(s) = of_type(rt, F, vrs, ScalarType::Integer) {
-            return s;
-        }
-        let vals: &[i32] = if n_vr == 0 {
-            &[]
-        } else {
-            std::slice::from_raw_parts(ptr, n_vr)
-        };
-        rt.set(
-            F,
-            ScalarType::Integer,
-            vrs,
-            vals.iter().map(|x| Value::Integer(*x)),
-        )
-    }))
+    set_integers::<M, i32>(
+        c,
+        "fmi3SetInt32",
+        ScalarType::Integer,
+        vr,
+        n_vr,
+        values,
+        n_values,
+        |x| x,
+    )
 }
 
 pub unsafe fn set_int64<M: Model>(
@@ -454,29 +477,17 @@ pub unsafe fn set_int64<M: Model>(
     values: *const i64,
     n_values: usize,
 ) -> fmi3Status {
-    const F: &str = "fmi3SetInt64";
-    status(guarded::<M>(c, F, |rt| {
-        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
-        if let Err(s) = of_type(rt, F, vrs, ScalarType::Enumeration) {
-            return s;
-        }
-        let vals: &[i64] = if n_vr == 0 {
-            &[]
-        } else {
-            std::slice::from_raw_parts(ptr, n_vr)
-        };
-        // An Int64 outside i32 is no item of any Enumeration here: refused as out of range.
-        rt.set(
-            F,
-            ScalarType::Integer,
-            vrs,
-            vals.iter()
-                .map(|x| Value::Integer(i32::try_from(*x).unwrap_or(i32::MIN))),
-        )
-    }))
+    // An Int64 outside i32 is no item of any Enumeration here: refused as out of range.
+    set_integers::<M, i64>(
+        c,
+        "fmi3SetInt64",
+        ScalarType::Enumeration,
+        vr,
+        n_vr,
+        values,
+        n_values,
+        |x| i32::try_from(x).unwrap_or(i32::MIN),
+    )
 }
 
 pub unsafe fn get_boolean<M: Model>(
@@ -688,21 +699,10 @@ pub unsafe fn deserialize_fmu_state<M: Model>(
     size: usize,
     state: *mut fmi3FMUState,
 ) -> fmi3Status {
-    status(guarded::<M>(c, "fmi3DeserializeFMUState", |rt| {
-        if bytes.is_null() || state.is_null() {
-            return rt.error("fmi3DeserializeFMUState: NULL argument");
-        }
-        let data = std::slice::from_raw_parts(bytes, size);
-        match rt.deserialize(data) {
-            Ok(snap) => {
-                if (*state).is_null() {
-                    *state = Box::into_raw(Box::new(snap)) as fmi3FMUState;
-                } else {
-                    *(*state as *mut Snapshot<M>) = snap;
-                }
-                fmi2Status::OK
-            }
-            Err(s) => s,
-        }
-    }))
+    status(crate::ffi::deserialize_fmu_state::<M>(
+        c,
+        bytes as *const _,
+        size,
+        state,
+    ))
 }
