@@ -80,3 +80,62 @@ fn the_fmi3_bench_isolated_gives_the_fmi2_run_bit_for_bit() {
         "the isolated FMI 3.0 run differs from the FMI 2.0 run"
     );
 }
+
+/// `info` shows an FMI 3.0 FMU's interface (its version, the independent `time`, the
+/// Enumeration `chassis_model` with its own value reference), and `export-ssp` packs a
+/// system of FMI 3.0 FMUs into a package that runs.
+#[test]
+fn info_and_export_ssp_take_the_fmi3_fmus() {
+    let dir = tb_testkit::scratch("fmi3-info-ssp");
+    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(["info", "--json"])
+        .arg(common::fmu3("vehicle"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["fmi_version"], "3.0");
+    let vars = j["variables"].as_array().unwrap();
+    let var = |n: &str| vars.iter().find(|v| v["name"] == n).unwrap().clone();
+    assert_eq!(var("time")["causality"], "independent");
+    assert_eq!(var("chassis_model")["fmi3_type"], "Enumeration");
+    assert_eq!(var("chassis_model")["value_reference"], 42);
+    let system = system(
+        dir.path(),
+        "fmi3",
+        &["vehicle", "driver", "dyno", "edu"],
+        Some(1.0),
+    );
+    let ssp = dir.path().join("bench.ssp");
+    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .arg("export-ssp")
+        .arg(&system)
+        .arg("-o")
+        .arg(&ssp)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = dir.path().join("ssp.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .arg("run")
+        .arg(&ssp)
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = std::fs::read_to_string(&csv).unwrap().lines().count();
+    assert!(rows > 100, "{rows} rows");
+}

@@ -119,8 +119,13 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
     .into_iter()
     .flatten()
     .collect();
+    // FMI 3.0 calls the model's identity its instantiation token.
+    let identity = match md.fmi_version.starts_with('3') {
+        true => "instantiation token",
+        false => "GUID",
+    };
     println!(
-        "FMI {} {}, GUID {}",
+        "FMI {} {}, {identity} {}",
         md.fmi_version,
         interfaces.join(" and "),
         md.guid
