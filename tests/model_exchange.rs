@@ -1,13 +1,14 @@
-//! FMI 2.0 Model Exchange: every FMI 2.0 Reference FMU run through its Model Exchange
+//! Model Exchange, FMI 2.0 and FMI 3.0: every Reference FMU run through its Model Exchange
 //! interface (integrated by twinbench with CVODE) and compared with FMPy's Model Exchange
 //! loop with its CVode solver (`simulate_fmu(..., fmi_type='ModelExchange',
 //! solver='CVode')`, record_events off, output interval = the system's step): every output
 //! sample, and the event times (BouncingBall's bounces, Stair's steps). Each model runs
 //! twice in twinbench, both ways of choosing Model Exchange: the Reference FMU (which
 //! declares both interfaces) with `interface = "model-exchange"`, and an archive stripped of
-//! its `<CoSimulation>` element (Model Exchange only: the default). Then an isolated
-//! instance against the in-process one (bit for bit), Model Exchange and Co-Simulation
-//! instances connected in one system, and the refusals and errors.
+//! its `<CoSimulation>` element (Model Exchange only: the default). FMI 3.0 adds StateSpace,
+//! whose states are an array. Then an isolated instance against the in-process one (bit
+//! for bit), Model Exchange and Co-Simulation instances connected in one system, and the
+//! refusals and errors.
 
 mod common;
 
@@ -33,22 +34,33 @@ fn experiment(model: &str) -> (f64, f64) {
         "Resource" => (1.0, 0.1),
         "Stair" => (10.0, 0.2),
         "VanDerPol" => (20.0, 1e-2),
+        "StateSpace" => (10.0, 0.1),
         m => panic!("no experiment for {m}"),
     }
 }
 
-/// `<Model>.fmu` (both interfaces) and `<Model>_me.fmu` (Model Exchange only, in `dir`).
-fn fmus(model: &str, dir: &Path) -> (PathBuf, PathBuf) {
-    let both = reference::fmu(model, 2);
+/// `xml` without its `<element>` (written `<element .../>` or `<element>...</element>`).
+fn without(xml: &str, element: &str) -> String {
+    let a = xml.find(&format!("<{element}")).unwrap();
+    let close = a + xml[a..].find('>').unwrap();
+    let b = if xml[..close].ends_with('/') {
+        close + 1
+    } else {
+        let end = format!("</{element}>");
+        xml.find(&end).unwrap() + end.len()
+    };
+    format!("{}{}", &xml[..a], &xml[b..])
+}
+
+/// `<Model>.fmu` (both interfaces) and `<Model>_me.fmu` (Model Exchange only, in `dir`),
+/// of FMI `version`.
+fn fmus(model: &str, version: u8, dir: &Path) -> (PathBuf, PathBuf) {
+    let both = reference::fmu(model, version);
     let me_only = reference::variant(
         &both,
         dir,
         &format!("{model}_me"),
-        |xml| {
-            let a = xml.find("<CoSimulation").unwrap();
-            let b = xml.find("</CoSimulation>").unwrap() + "</CoSimulation>".len();
-            format!("{}{}", &xml[..a], &xml[b..])
-        },
+        |xml| without(xml, "CoSimulation"),
         |name| Some(name.to_string()),
     );
     (both, me_only)
@@ -165,10 +177,10 @@ fn same_bits(a: &Table, b: &Table) -> bool {
         })
 }
 
-fn check(model: &str) {
-    let dir = tb_testkit::scratch(&format!("me-{model}"));
+fn check(model: &str, version: u8) {
+    let dir = tb_testkit::scratch(&format!("me-{model}-fmi{version}"));
     let (stop, step) = experiment(model);
-    let (both, me_only) = fmus(model, dir.path());
+    let (both, me_only) = fmus(model, version, dir.path());
     let forced = run_one(
         &both,
         "interface = \"model-exchange\"",
@@ -181,6 +193,26 @@ fn check(model: &str) {
         same_bits(&forced, &only),
         "{model}: the Model Exchange only archive gives another result"
     );
+    // The same through `twinbench run model.fmu`.
+    let csv = dir.path().join("cli.csv");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .arg("run")
+        .arg(&me_only)
+        .args(["--stop", &stop.to_string(), "--step", &step.to_string()])
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cli = Table::read_path(&csv).unwrap();
+    assert!(cli.names().len() > 1 && cli.len() == only.len());
+    for name in cli.names().iter().filter(|n| *n != "time") {
+        assert_eq!(
+            cli.require(name).unwrap(),
+            only.require(&format!("m.{name}")).unwrap(),
+            "{model} (FMI {version}): {name} from `twinbench run`"
+        );
+    }
     let theirs = fmpy(&me_only, &dir.path().join("fmpy.csv"), stop, step, false);
     let mut ours = forced.clone();
     if model == "Stair" {
@@ -193,43 +225,80 @@ fn check(model: &str) {
         ours.truncate(theirs.len());
     }
     let diffs = differences(model, &ours, &theirs);
-    eprintln!("{model} (Model Exchange) vs FMPy CVode: {diffs:?}");
+    eprintln!("{model} (FMI {version}, Model Exchange) vs FMPy CVode: {diffs:?}");
     for (name, d) in diffs {
         assert!(
             d <= TOLERANCE,
-            "{model}: {name} differs from FMPy's Model Exchange result by {d:e} (relative)"
+            "{model} (FMI {version}): {name} differs from FMPy's Model Exchange result by {d:e} (relative)"
         );
     }
 }
 
 #[test]
 fn bouncing_ball() {
-    check("BouncingBall");
+    check("BouncingBall", 2);
 }
 
 #[test]
 fn dahlquist() {
-    check("Dahlquist");
+    check("Dahlquist", 2);
 }
 
 #[test]
 fn feedthrough() {
-    check("Feedthrough");
+    check("Feedthrough", 2);
 }
 
 #[test]
 fn resource() {
-    check("Resource");
+    check("Resource", 2);
 }
 
 #[test]
 fn stair() {
-    check("Stair");
+    check("Stair", 2);
 }
 
 #[test]
 fn van_der_pol() {
-    check("VanDerPol");
+    check("VanDerPol", 2);
+}
+
+#[test]
+fn bouncing_ball_fmi3() {
+    check("BouncingBall", 3);
+}
+
+#[test]
+fn dahlquist_fmi3() {
+    check("Dahlquist", 3);
+}
+
+#[test]
+fn feedthrough_fmi3() {
+    check("Feedthrough", 3);
+}
+
+#[test]
+fn resource_fmi3() {
+    check("Resource", 3);
+}
+
+#[test]
+fn stair_fmi3() {
+    check("Stair", 3);
+}
+
+#[test]
+fn van_der_pol_fmi3() {
+    check("VanDerPol", 3);
+}
+
+/// The states are one array (`der(x)` has the dimension `n`): three states, integrated as
+/// FMPy integrates them.
+#[test]
+fn state_space_fmi3_array_states() {
+    check("StateSpace", 3);
 }
 
 /// The event times of one in-process Model Exchange instance over `stop` in steps of
@@ -273,13 +342,18 @@ fn events_land_where_fmpy_puts_them() {
     // twinbench's ends at t + h (the master's t and h), FMPy's output point at
     // start + (n + 1)·interval: the two may be an ulp apart (3.0000000000000004 and 3.0),
     // and a time event on the grid lands on that point.
-    for (model, tolerance) in [("BouncingBall", 1e-12), ("Stair", 1e-15)] {
+    for (model, version, tolerance) in [
+        ("BouncingBall", 2, 1e-12),
+        ("Stair", 2, 1e-15),
+        ("BouncingBall", 3, 1e-12),
+        ("Stair", 3, 1e-15),
+    ] {
         let dir = tb_testkit::scratch("me-events");
         let (stop, step) = experiment(model);
-        let (_, me_only) = fmus(model, dir.path());
+        let (_, me_only) = fmus(model, version, dir.path());
         let (mut ours, end) = our_events(&me_only, stop, step);
         let (theirs, their_last) = fmpy_events(&me_only, dir.path(), stop, step);
-        eprintln!("{model}: events at {ours:?} (end {end:?}); FMPy: {theirs:?}");
+        eprintln!("{model} (FMI {version}): events at {ours:?} (end {end:?}); FMPy: {theirs:?}");
         if let Some(end) = end {
             // FMPy stops at the terminating event: its last row, recorded once.
             assert_eq!(ours.pop(), Some(end));
@@ -300,9 +374,14 @@ fn events_land_where_fmpy_puts_them() {
 #[test]
 fn an_isolated_instance_equals_the_in_process_one_bit_for_bit() {
     let dir = tb_testkit::scratch("me-isolated");
-    for model in ["BouncingBall", "VanDerPol"] {
+    for (model, version) in [
+        ("BouncingBall", 2),
+        ("VanDerPol", 2),
+        ("BouncingBall", 3),
+        ("StateSpace", 3),
+    ] {
         let (stop, step) = experiment(model);
-        let (both, _) = fmus(model, dir.path());
+        let (both, _) = fmus(model, version, dir.path());
         let inside = run_one(
             &both,
             "interface = \"model-exchange\"",
@@ -317,7 +396,7 @@ fn an_isolated_instance_equals_the_in_process_one_bit_for_bit() {
             step,
             dir.path(),
         );
-        assert!(same_bits(&inside, &isolated), "{model}");
+        assert!(same_bits(&inside, &isolated), "{model} (FMI {version})");
     }
 }
 
@@ -357,16 +436,12 @@ fn model_exchange_and_co_simulation_instances_connect() {
 #[test]
 fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
     let dir = tb_testkit::scratch("me-refused");
-    let (both, me_only) = fmus("Dahlquist", dir.path());
+    let (both, me_only) = fmus("Dahlquist", 2, dir.path());
     let cs_only = reference::variant(
         &both,
         dir.path(),
         "Dahlquist_cs",
-        |xml| {
-            let a = xml.find("<ModelExchange").unwrap();
-            let b = xml.find("</ModelExchange>").unwrap() + "</ModelExchange>".len();
-            format!("{}{}", &xml[..a], &xml[b..])
-        },
+        |xml| without(xml, "ModelExchange"),
         |name| Some(name.to_string()),
     );
     let exp = "[experiment]\nstep = 0.1\nstop = 1\n";
@@ -406,8 +481,21 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
         e.contains("unknown interface \"me\" (co-simulation, model-exchange)"),
         "{e}"
     );
-    // FMI 3.0 Model Exchange is not integrated: said so.
-    let v3 = reference::fmu("Dahlquist", 3);
+    // FMI 3.0 declares no counts: a description whose state vector (its
+    // ContinuousStateDerivative elements) is not the FMU's is refused before the first
+    // step, with both counts.
+    let v3 = reference::variant(
+        &reference::fmu("Dahlquist", 3),
+        dir.path(),
+        "Dahlquist3_two_states",
+        |xml| {
+            xml.replace(
+                "<ContinuousStateDerivative valueReference=\"2\"",
+                "<ContinuousStateDerivative valueReference=\"1\"/>\n    <ContinuousStateDerivative valueReference=\"2\"",
+            )
+        },
+        |name| Some(name.to_string()),
+    );
     let e = run(
         &system_text("", &[("m", &v3, "interface = \"model-exchange\"")], exp),
         dir.path(),
@@ -415,7 +503,7 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
     )
     .unwrap_err();
     assert!(
-        e.contains("twinbench runs FMI 3.0 FMUs through Co-Simulation only"),
+        e.contains("Dahlquist3_two_states.fmu: the model description declares 2 continuous states (the elements of its <ContinuousStateDerivative> variables), but fmi3GetNumberOfContinuousStates returns 1"),
         "{e}"
     );
     // A tolerance out of range.
@@ -439,7 +527,7 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
 fn a_solver_failure_names_the_fmu_instance_time_and_cvode_flag() {
     // Far more accuracy than a double holds: CVODE gives up with CV_TOO_MUCH_ACC.
     let dir = tb_testkit::scratch("me-solver");
-    let (_, me_only) = fmus("VanDerPol", dir.path());
+    let (_, me_only) = fmus("VanDerPol", 2, dir.path());
     let text = system_text(
         "",
         &[("vdp", &me_only, "")],
@@ -457,7 +545,7 @@ fn a_solver_failure_names_the_fmu_instance_time_and_cvode_flag() {
 fn the_system_tolerance_reaches_the_solver() {
     // A tighter tolerance changes the result, a little.
     let dir = tb_testkit::scratch("me-tolerance");
-    let (_, me_only) = fmus("VanDerPol", dir.path());
+    let (_, me_only) = fmus("VanDerPol", 2, dir.path());
     let loose = run_one(&me_only, "", 20.0, 0.01, dir.path());
     let text = system_text(
         "",
@@ -482,8 +570,17 @@ fn the_system_tolerance_reaches_the_solver() {
 /// second time after a reset, each bit for bit the same as the plain run.
 #[test]
 fn ssp_trace_and_reset_keep_a_model_exchange_instance() {
+    paths_of_a_model_exchange_instance(2);
+}
+
+#[test]
+fn ssp_trace_and_reset_keep_an_fmi3_model_exchange_instance() {
+    paths_of_a_model_exchange_instance(3);
+}
+
+fn paths_of_a_model_exchange_instance(version: u8) {
     let dir = tb_testkit::scratch("me-paths");
-    let bb = reference::fmu("BouncingBall", 2);
+    let bb = reference::fmu("BouncingBall", version);
     let text = system_text(
         "",
         &[("m", &bb, "interface = \"model-exchange\"")],
@@ -523,11 +620,26 @@ fn ssp_trace_and_reset_keep_a_model_exchange_instance() {
         );
     }
     let trace = std::fs::read_to_string(dir.path().join("trace.txt")).unwrap();
-    // The calls the FMU receives while twinbench integrates it, not an fmi2DoStep.
+    // The calls the FMU receives while twinbench integrates it, not a DoStep, by their
+    // names in the FMU's version.
+    let (set_time, derivatives, update) = match version {
+        2 => (
+            " m: fmi2SetTime(",
+            " m: fmi2GetDerivatives(",
+            " m: fmi2NewDiscreteStates(newDiscreteStatesNeeded=",
+        ),
+        _ => (
+            " m: fmi3SetTime(",
+            " m: fmi3GetContinuousStateDerivatives(",
+            " m: fmi3UpdateDiscreteStates(discreteStatesNeedUpdate=",
+        ),
+    };
     assert!(
-        trace.matches(" m: fmi2SetTime(").count() >= 300
-            && trace.contains(" m: fmi2GetDerivatives(")
-            && !trace.contains("DoStep"),
+        trace.matches(set_time).count() >= 300
+            && trace.contains(derivatives)
+            && trace.contains(update)
+            && !trace.contains("DoStep")
+            && !trace.contains(if version == 2 { "fmi3" } else { "fmi2" }),
         "{}",
         &trace[..trace.len().min(2000)]
     );

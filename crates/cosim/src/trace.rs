@@ -153,7 +153,12 @@ impl BackendFactory for TracedFactory {
         let name = instance_name.to_string();
         let steps_traced_inside =
             inner.set_call_trace(Arc::new(move |t, function, args, status| {
-                line_sink.call(t, &name, function, args, &status.to_string());
+                // The status by its name in the FMU's version.
+                let status = match fmi3 {
+                    true => status.to_string().replacen("fmi2", "fmi3", 1),
+                    false => status.to_string(),
+                };
+                line_sink.call(t, &name, function, args, &status);
             }));
         Ok(Box::new(Traced {
             inner,

@@ -37,6 +37,6 @@ pub use import::library::Library;
 #[cfg(feature = "import")]
 pub use import::library3::Library3;
 #[cfg(feature = "import")]
-pub use import::model_exchange::{CallTrace, MeInstance, MeSettings, MeStop};
+pub use import::model_exchange::{CallTrace, MeInstance, MeLibrary, MeSettings, MeStop};
 #[cfg(feature = "import")]
 pub use import::FmuError;

@@ -9,17 +9,18 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 use tb_fmi::{
-    FmuError, Instance, Instance3, Library, Library3, MeInstance, MeSettings, ModelDescription,
+    FmuError, Instance, Instance3, Library, Library3, MeInstance, MeLibrary, MeSettings,
+    ModelDescription,
 };
 
-/// A library loaded in the worker: FMI 2.0, or FMI 3.0 with its description, or FMI 2.0
-/// for Model Exchange with its description, the .fmu (for messages) and the solver's
-/// settings.
+/// A library loaded in the worker: FMI 2.0, or FMI 3.0 with its description, or either
+/// version for Model Exchange with its description, the .fmu (for messages) and the
+/// solver's settings.
 #[derive(Clone)]
 enum Loaded {
     V2(Arc<Library>),
     V3(Arc<Library3>, Arc<ModelDescription>),
-    Me(Arc<Library>, Arc<ModelDescription>, PathBuf, MeSettings),
+    Me(MeLibrary, Arc<ModelDescription>, PathBuf, MeSettings),
 }
 
 /// Waits for `child`, ending this process as it ended (the same exit code, the same signal;
@@ -279,20 +280,28 @@ fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
                 message,
             })?;
         if target.model_exchange {
-            let lib =
-                Library::load_model_exchange(std::path::Path::new(&target.path)).map_err(|e| {
-                    tb_fmi::import::archive::library_error(
-                        source,
-                        &md.fmi_version,
-                        &target.model_identifier,
-                        e,
-                    )
-                })?;
+            let path = std::path::Path::new(&target.path);
+            let named = |e| {
+                tb_fmi::import::archive::library_error(
+                    source,
+                    &md.fmi_version,
+                    &target.model_identifier,
+                    e,
+                )
+            };
+            let lib = match md.fmi_version.starts_with("3.") {
+                true => MeLibrary::V3(Arc::new(
+                    Library3::load_model_exchange(path).map_err(named)?,
+                )),
+                false => {
+                    MeLibrary::V2(Arc::new(Library::load_model_exchange(path).map_err(named)?))
+                }
+            };
             let settings = MeSettings {
                 relative_tolerance: (!target.tolerance.is_nan()).then_some(target.tolerance),
             };
             return Ok(Loaded::Me(
-                Arc::new(lib),
+                lib,
                 Arc::new(md),
                 source.to_path_buf(),
                 settings,
@@ -430,7 +439,8 @@ fn probe(library: &Loaded) -> Values {
     Values::Text(match library {
         Loaded::V2(l) => vec![l.version.clone(), l.missing_optional.join(",")],
         Loaded::V3(l, _) => vec![l.version.clone(), String::new()],
-        Loaded::Me(l, ..) => vec![l.version.clone(), l.missing_optional.join(",")],
+        Loaded::Me(MeLibrary::V2(l), ..) => vec![l.version.clone(), l.missing_optional.join(",")],
+        Loaded::Me(MeLibrary::V3(l), ..) => vec![l.version.clone(), String::new()],
     })
 }
 

@@ -6,6 +6,7 @@ use super::description::{self, Interface, ModelDescription};
 use super::library::Library;
 use super::library3::Library3;
 use super::manifest::{self, Manifest, ManifestFile};
+use super::model_exchange::MeLibrary;
 use super::store::{self, CdEntry, IndexEntry};
 use crate::FmuError;
 use sha2::{Digest, Sha256};
@@ -69,7 +70,7 @@ pub struct LoadedFmu {
     library: Mutex<Option<Arc<Library>>>,
     library3: Mutex<Option<Arc<Library3>>>,
     /// The FMI 2.0 library loaded for Model Exchange (its own `modelIdentifier`).
-    library_me: Mutex<Option<Arc<Library>>>,
+    library_me: Mutex<Option<MeLibrary>>,
     /// Whether the cache it came from needs its binaries (not when it describes models
     /// that run natively: [`FmuCache::description_only`]).
     binary_required: bool,
@@ -349,12 +350,6 @@ impl LoadedFmu {
                 has.join(" and ")
             ));
         };
-        if interface == Interface::ModelExchange && self.is_fmi3() {
-            return Err(
-                "twinbench runs FMI 3.0 FMUs through Co-Simulation only (FMI 2.0 Model Exchange FMUs are integrated with CVODE)"
-                    .into(),
-            );
-        }
         // In the archive (the manifest of what was unpacked): a missing or changed file on
         // disk is repaired when the library is loaded (`checked_library_of`).
         if self.binary_required && self.unpacked_file(&entry).is_none() {
@@ -366,9 +361,10 @@ impl LoadedFmu {
         Ok(())
     }
 
-    /// The FMI 2.0 library loaded for Model Exchange ([`Library::load_model_exchange`]),
-    /// on the first call; errors name the .fmu and the library's entry.
-    pub fn library_me(&self) -> Result<Arc<Library>, FmuError> {
+    /// The library loaded for Model Exchange ([`Library::load_model_exchange`],
+    /// [`Library3::load_model_exchange`]), on the first call; errors name the .fmu and the
+    /// library's entry.
+    pub fn library_me(&self) -> Result<MeLibrary, FmuError> {
         let id = self
             .description
             .model_identifier(Interface::ModelExchange)
@@ -381,9 +377,15 @@ impl LoadedFmu {
             return Ok(l.clone());
         }
         let check = self.checked_library_of(Interface::ModelExchange)?;
-        let library = Library::load_model_exchange(&check.path())
-            .map(Arc::new)
-            .map_err(|e| library_error(&self.source, &self.description.fmi_version, id, e))?;
+        let named = |e| library_error(&self.source, &self.description.fmi_version, id, e);
+        let library = match self.is_fmi3() {
+            true => MeLibrary::V3(Arc::new(
+                Library3::load_model_exchange(&check.path()).map_err(named)?,
+            )),
+            false => MeLibrary::V2(Arc::new(
+                Library::load_model_exchange(&check.path()).map_err(named)?,
+            )),
+        };
         *slot = Some(library.clone());
         Ok(library)
     }
@@ -1229,32 +1231,17 @@ fn check_description(
             ),
         });
     }
-    // FMI 2.0: Co-Simulation, or Model Exchange (integrated by twinbench); FMI 3.0:
-    // Co-Simulation.
-    let interface = match (md.default_interface(), fmi3) {
-        (Some(Interface::CoSimulation), _) => Interface::CoSimulation,
-        (Some(Interface::ModelExchange), false) => Interface::ModelExchange,
-        _ => {
-            let kinds: Vec<&str> = [
-                (md.model_exchange.is_some(), "Model Exchange"),
-                (
-                    md.unsupported.iter().any(|u| u.starts_with("Scheduled")),
-                    "Scheduled Execution",
-                ),
-            ]
-            .iter()
-            .filter(|(has, _)| *has)
-            .map(|(_, k)| *k)
-            .collect();
+    // Co-Simulation, or Model Exchange (integrated by twinbench with CVODE); not FMI 3.0's
+    // Scheduled Execution.
+    let interface = match md.default_interface() {
+        Some(i) => i,
+        None => {
+            let scheduled = md.unsupported.iter().any(|u| u.starts_with("Scheduled"));
             return Err(FmuError::Description {
                 path: fmu.to_path_buf(),
-                message: match (kinds.is_empty(), fmi3) {
-                    (true, false) => "neither a <CoSimulation> nor a <ModelExchange> element".into(),
-                    (true, true) => "no <CoSimulation> element".into(),
-                    (false, _) => format!(
-                        "the FMU supports {} only; twinbench needs Co-Simulation for FMI 3.0 FMUs (FMI 2.0 Model Exchange FMUs are integrated with CVODE)",
-                        kinds.join(" and ")
-                    ),
+                message: match scheduled {
+                    false => "neither a <CoSimulation> nor a <ModelExchange> element".into(),
+                    true => "the FMU supports Scheduled Execution only; twinbench runs FMUs through Co-Simulation or Model Exchange".into(),
                 },
             });
         }
@@ -1263,7 +1250,7 @@ fn check_description(
         return Err(FmuError::Description {
             path: fmu.to_path_buf(),
             message: format!(
-                "the FMU needs {what}; twinbench runs FMI 3.0 Co-Simulation without clocks"
+                "the FMU needs {what}; twinbench runs FMI 3.0 Co-Simulation and Model Exchange without clocks"
             ),
         });
     }

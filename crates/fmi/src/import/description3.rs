@@ -173,6 +173,8 @@ struct Reader3 {
     current: Option<Declared>,
     outputs: Vec<Unknown3>,
     initial_unknowns: Vec<Unknown3>,
+    derivatives: Vec<Unknown3>,
+    event_indicators: Vec<Unknown3>,
     /// Variables without a column (Clock): the ModelStructure may list them.
     skipped_vrs: Vec<u32>,
 }
@@ -228,6 +230,12 @@ impl Visit for Reader3 {
             ("ModelStructure", "Output") => self.outputs.push(unknown3(m, "Output")?),
             ("ModelStructure", "InitialUnknown") => {
                 self.initial_unknowns.push(unknown3(m, "InitialUnknown")?)
+            }
+            ("ModelStructure", "ContinuousStateDerivative") => self
+                .derivatives
+                .push(unknown3(m, "ContinuousStateDerivative")?),
+            ("ModelStructure", "EventIndicator") => {
+                self.event_indicators.push(unknown3(m, "EventIndicator")?)
             }
             _ => {}
         }
@@ -297,6 +305,29 @@ impl Reader3 {
         md.outputs = to_unknowns(self.outputs, "Output", &indices, skipped)?;
         md.initial_unknowns =
             to_unknowns(self.initial_unknowns, "InitialUnknown", &indices, skipped)?;
+        // The state vector and the event indicators: an array's elements in its order
+        // (FMI 3.0 §2.4.8: the states are the derivatives' elements, row-major), each value
+        // once (an alias is the same value under another name).
+        let distinct = |list: Vec<Unknown>, md: &ModelDescription| {
+            let mut seen = std::collections::HashSet::new();
+            list.into_iter()
+                .filter(|u| seen.insert(md.variables[u.index - 1].value_reference))
+                .collect::<Vec<Unknown>>()
+        };
+        md.derivatives = distinct(
+            to_unknowns(
+                self.derivatives,
+                "ContinuousStateDerivative",
+                &indices,
+                skipped,
+            )?,
+            &md,
+        );
+        md.number_of_event_indicators = distinct(
+            to_unknowns(self.event_indicators, "EventIndicator", &indices, skipped)?,
+            &md,
+        )
+        .len();
         check_names_and_aliases(&md)?;
         Ok(md)
     }

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 pub enum FmuError {
     #[error("{path}: cannot load shared library: {message}")]
     Load { path: PathBuf, message: String },
-    #[error("{path}: required FMI 2.0 function {symbol} is not exported")]
+    #[error("{path}: required FMI function {symbol} is not exported")]
     MissingSymbol { path: PathBuf, symbol: &'static str },
     #[error("instance '{instance}': {message}")]
     Instantiate { instance: String, message: String },

@@ -173,6 +173,20 @@ impl Instance3 {
         resource_dir: Option<&Path>,
         logging_on: bool,
     ) -> Result<Instance3, FmuError> {
+        Self::instantiate_as(lib, md, name, resource_dir, logging_on, false)
+    }
+
+    /// Instantiate for Co-Simulation, or for Model Exchange (`fmi3InstantiateModelExchange`,
+    /// the library loaded with [`Library3::load_model_exchange`]): the instance that
+    /// [`crate::MeInstance`] integrates.
+    pub(crate) fn instantiate_as(
+        lib: Arc<Library3>,
+        md: &ModelDescription,
+        name: &str,
+        resource_dir: Option<&Path>,
+        logging_on: bool,
+        model_exchange: bool,
+    ) -> Result<Instance3, FmuError> {
         let sink = Box::new(LogSink::new3(name));
         let bad = |m: &str| FmuError::Instantiate {
             instance: name.into(),
@@ -181,25 +195,49 @@ impl Instance3 {
         let c_name = CString::new(name).map_err(|_| bad("instance name contains a NUL byte"))?;
         let c_token = CString::new(md.guid.as_str()).unwrap_or_default();
         let c_res = resource_dir.map(|d| CString::new(resource_path(d)).unwrap_or_default());
-        let inst = unsafe {
-            (lib.api.instantiate_co_simulation)(
-                c_name.as_ptr(),
-                c_token.as_ptr(),
-                c_res.as_ref().map_or(std::ptr::null(), |c| c.as_ptr()),
-                false,
-                logging_on,
-                false, // eventModeUsed
-                false, // earlyReturnAllowed
-                std::ptr::null(),
-                0,
-                &*sink as *const LogSink as *mut c_void,
-                Some(logger),
-                std::ptr::null(),
-            )
+        let env = &*sink as *const LogSink as *mut c_void;
+        let res = c_res.as_ref().map_or(std::ptr::null(), |c| c.as_ptr());
+        let (inst, call) = match (model_exchange, lib.me) {
+            (true, Some(me)) => (
+                unsafe {
+                    (me.instantiate_model_exchange)(
+                        c_name.as_ptr(),
+                        c_token.as_ptr(),
+                        res,
+                        false,
+                        logging_on,
+                        env,
+                        Some(logger),
+                    )
+                },
+                "fmi3InstantiateModelExchange",
+            ),
+            (true, None) => {
+                return Err(bad("the library was not loaded for Model Exchange"));
+            }
+            (false, _) => (
+                unsafe {
+                    (lib.api.instantiate_co_simulation)(
+                        c_name.as_ptr(),
+                        c_token.as_ptr(),
+                        res,
+                        false,
+                        logging_on,
+                        false, // eventModeUsed
+                        false, // earlyReturnAllowed
+                        std::ptr::null(),
+                        0,
+                        env,
+                        Some(logger),
+                        std::ptr::null(),
+                    )
+                },
+                "fmi3InstantiateCoSimulation",
+            ),
         };
         if inst.is_null() {
             return Err(bad(&format!(
-                "fmi3InstantiateCoSimulation returned NULL; the FMU's log: {}",
+                "{call} returned NULL; the FMU's log: {}",
                 sink.last_lines().join(" | ")
             )));
         }
@@ -247,6 +285,15 @@ impl Instance3 {
             tolerance: None,
             sink,
         })
+    }
+
+    /// The FMU's instance, for the Model Exchange calls.
+    pub(crate) fn raw(&self) -> Inst {
+        self.inst
+    }
+
+    pub(crate) fn sink(&self) -> &LogSink {
+        &self.sink
     }
 
     pub fn library(&self) -> &Arc<Library3> {

@@ -1,6 +1,6 @@
 //! A loaded FMI 3.0 library with its functions resolved (beside [`super::library`], the
-//! FMI 2.0 one): every function FMI 3.0 requires of a Co-Simulation FMU, and the check of
-//! `fmi3GetVersion`.
+//! FMI 2.0 one): every function FMI 3.0 requires of a Co-Simulation FMU or, loaded for
+//! Model Exchange, of a Model Exchange FMU ([`Me3Api`]), and the check of `fmi3GetVersion`.
 
 use crate::FmuError;
 use std::ffi::{c_char, c_void, CStr};
@@ -19,11 +19,21 @@ macro_rules! api {
             $(pub $field: unsafe extern "C" fn($($arg),*) $(-> $ret)?,)*
         }
         impl Fmi3Api {
-            fn resolve(lib: &libloading::Library) -> Result<Fmi3Api, &'static str> {
+            /// Every function from `lib`, or `stand_in`'s for one it lacks; Err: the first
+            /// one missing without a stand-in.
+            fn resolve(
+                lib: &libloading::Library,
+                stand_in: impl Fn(&str) -> Option<*mut c_void>,
+            ) -> Result<Fmi3Api, &'static str> {
                 Ok(Fmi3Api {
                     $($field: unsafe {
-                        *lib.get::<unsafe extern "C" fn($($arg),*) $(-> $ret)?>(concat!($sym, "\0").as_bytes())
-                            .map_err(|_| $sym)?
+                        match lib.get::<unsafe extern "C" fn($($arg),*) $(-> $ret)?>(concat!($sym, "\0").as_bytes()) {
+                            Ok(f) => *f,
+                            // SAFETY: a stand-in has the type of the function it stands for.
+                            Err(_) => std::mem::transmute::<*mut c_void, unsafe extern "C" fn($($arg),*) $(-> $ret)?>(
+                                stand_in($sym).ok_or($sym)?,
+                            ),
+                        }
                     },)*
                 })
             }
@@ -77,12 +87,91 @@ api! {
     deserialize_fmu_state: "fmi3DeserializeFMUState": fn(Inst, *const u8, usize, *mut *mut c_void) -> Status;
 }
 
+macro_rules! me3_api {
+    ($($field:ident : $sym:literal : $ty:ty;)*) => {
+        /// The functions of FMI 3.0's Model Exchange interface (FMI 3.0 §3.2), each required
+        /// of an FMU that declares `<ModelExchange>`: what twinbench's integrator calls.
+        #[derive(Clone, Copy)]
+        pub struct Me3Api {
+            $(pub $field: $ty,)*
+        }
+        impl Me3Api {
+            /// Every Model Exchange function from `lib`; Err: the first one missing.
+            fn resolve(lib: &libloading::Library) -> Result<Me3Api, &'static str> {
+                Ok(Me3Api {
+                    // SAFETY: each symbol has the standard's C type for its name
+                    // (fmi3FunctionTypes.h; fmi3Boolean is C's bool).
+                    $($field: unsafe {
+                        *lib.get::<$ty>(concat!($sym, "\0").as_bytes()).map_err(|_| $sym)?
+                    },)*
+                })
+            }
+        }
+    };
+}
+
+me3_api! {
+    instantiate_model_exchange: "fmi3InstantiateModelExchange": unsafe extern "C" fn(
+        *const c_char, *const c_char, *const c_char, bool, bool, *mut c_void, Option<Logger>) -> Inst;
+    enter_event_mode: "fmi3EnterEventMode": unsafe extern "C" fn(Inst) -> Status;
+    update_discrete_states: "fmi3UpdateDiscreteStates": unsafe extern "C" fn(
+        Inst, *mut bool, *mut bool, *mut bool, *mut bool, *mut bool, *mut f64) -> Status;
+    enter_continuous_time_mode: "fmi3EnterContinuousTimeMode": unsafe extern "C" fn(Inst) -> Status;
+    completed_integrator_step: "fmi3CompletedIntegratorStep": unsafe extern "C" fn(
+        Inst, bool, *mut bool, *mut bool) -> Status;
+    set_time: "fmi3SetTime": unsafe extern "C" fn(Inst, f64) -> Status;
+    set_continuous_states: "fmi3SetContinuousStates": unsafe extern "C" fn(Inst, *const f64, usize) -> Status;
+    get_continuous_state_derivatives: "fmi3GetContinuousStateDerivatives": unsafe extern "C" fn(Inst, *mut f64, usize) -> Status;
+    get_event_indicators: "fmi3GetEventIndicators": unsafe extern "C" fn(Inst, *mut f64, usize) -> Status;
+    get_continuous_states: "fmi3GetContinuousStates": unsafe extern "C" fn(Inst, *mut f64, usize) -> Status;
+    get_nominals_of_continuous_states: "fmi3GetNominalsOfContinuousStates": unsafe extern "C" fn(Inst, *mut f64, usize) -> Status;
+    get_number_of_event_indicators: "fmi3GetNumberOfEventIndicators": unsafe extern "C" fn(Inst, *mut usize) -> Status;
+    get_number_of_continuous_states: "fmi3GetNumberOfContinuousStates": unsafe extern "C" fn(Inst, *mut usize) -> Status;
+}
+
+/// Stand in for the Co-Simulation functions in a library loaded for Model Exchange that
+/// does not export them (an FMU without `<CoSimulation>` need not): never called, as a
+/// Model Exchange instance is instantiated and stepped through [`Me3Api`]; an error if
+/// one ever were.
+unsafe extern "C" fn no_instantiate_co_simulation(
+    _: *const c_char,
+    _: *const c_char,
+    _: *const c_char,
+    _: bool,
+    _: bool,
+    _: bool,
+    _: bool,
+    _: *const Vr,
+    _: usize,
+    _: *mut c_void,
+    _: Option<Logger>,
+    _: *const c_void,
+) -> Inst {
+    std::ptr::null_mut()
+}
+
+unsafe extern "C" fn no_do_step(
+    _: Inst,
+    _: f64,
+    _: f64,
+    _: bool,
+    _: *mut u8,
+    _: *mut u8,
+    _: *mut u8,
+    _: *mut f64,
+) -> Status {
+    3
+}
+
 /// A loaded FMI 3.0 library.
 pub struct Library3 {
     pub path: PathBuf,
     /// What `fmi3GetVersion` returned (a "3.x" is required).
     pub version: String,
     pub api: Fmi3Api,
+    /// The Model Exchange functions, when loaded for Model Exchange
+    /// ([`Library3::load_model_exchange`]).
+    pub me: Option<Me3Api>,
     _lib: libloading::Library,
 }
 
@@ -90,15 +179,38 @@ impl Library3 {
     /// Load the library, resolve the functions (every one is required by FMI 3.0 for a
     /// Co-Simulation FMU) and check `fmi3GetVersion`.
     pub fn load(path: &Path) -> Result<Library3, FmuError> {
+        Self::load_as(path, false)
+    }
+
+    /// Load the library for Model Exchange: the common functions as [`Library3::load`] and
+    /// every Model Exchange function ([`Me3Api`]); `fmi3InstantiateCoSimulation` and
+    /// `fmi3DoStep` may be missing. A missing function is named.
+    pub fn load_model_exchange(path: &Path) -> Result<Library3, FmuError> {
+        Self::load_as(path, true)
+    }
+
+    fn load_as(path: &Path, model_exchange: bool) -> Result<Library3, FmuError> {
         super::check_elf(path)?;
         let lib = unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        let api = Fmi3Api::resolve(&lib).map_err(|symbol| FmuError::MissingSymbol {
+        let missing = |symbol| FmuError::MissingSymbol {
             path: path.to_path_buf(),
             symbol,
-        })?;
+        };
+        let api = Fmi3Api::resolve(&lib, |symbol| match (model_exchange, symbol) {
+            (true, "fmi3InstantiateCoSimulation") => {
+                Some(no_instantiate_co_simulation as *mut c_void)
+            }
+            (true, "fmi3DoStep") => Some(no_do_step as *mut c_void),
+            _ => None,
+        })
+        .map_err(missing)?;
+        let me = match model_exchange {
+            true => Some(Me3Api::resolve(&lib).map_err(missing)?),
+            false => None,
+        };
         let v = unsafe { (api.get_version)() };
         let version = if v.is_null() {
             "NULL".to_string()
@@ -115,6 +227,7 @@ impl Library3 {
             path: path.to_path_buf(),
             version,
             api,
+            me,
             _lib: lib,
         })
     }

@@ -34,10 +34,11 @@
 
 pub(crate) mod cvode;
 mod system;
+mod unit;
 
 use super::description::ModelDescription;
 use super::instance::Instance;
-use super::library::{Library, MeApi};
+use super::instance3::Instance3;
 use crate::fmi2::*;
 use crate::functions::Function;
 use crate::{Causality, FmuError, Variability};
@@ -46,6 +47,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use system::FmuSystem;
+pub use unit::MeLibrary;
+use unit::{Call, EventUpdate, MeCalls, Unit, Vector};
 
 /// Whether this build integrates Model Exchange FMUs: SUNDIALS CVODE was found when it was
 /// built (else an instance is refused at instantiation with what to install).
@@ -119,8 +122,8 @@ enum Mode {
 pub struct MeInstance {
     /// Declared first: the integrator (which calls the FMU) goes before the instance.
     solver: Option<Cvode<FmuSystem>>,
-    inst: Instance,
-    api: MeApi,
+    inst: Unit,
+    api: MeCalls,
     fmu: PathBuf,
     nx: usize,
     nz: usize,
@@ -199,7 +202,7 @@ impl MeInstance {
     /// [`Library::load_model_exchange`], `md` its description, `fmu` the .fmu (for
     /// messages).
     pub fn instantiate(
-        lib: Arc<Library>,
+        lib: impl Into<MeLibrary>,
         md: &ModelDescription,
         fmu: &Path,
         name: &str,
@@ -218,9 +221,12 @@ impl MeInstance {
                 cvode::MISSING
             )));
         }
-        let api = lib
-            .me
-            .ok_or_else(|| bad("the library was not loaded for Model Exchange".into()))?;
+        let lib = lib.into();
+        let not_loaded = || bad("the library was not loaded for Model Exchange".into());
+        let api = match &lib {
+            MeLibrary::V2(l) => MeCalls::V2(l.me.ok_or_else(not_loaded)?),
+            MeLibrary::V3(l) => MeCalls::V3(l.me.ok_or_else(not_loaded)?),
+        };
         let me = md
             .model_exchange
             .as_ref()
@@ -248,14 +254,61 @@ impl MeInstance {
                 "the relative tolerance {rtol:e} of the Model Exchange solver is not in (0, 1)"
             )));
         }
-        let inst = Instance::instantiate_as(
-            lib,
-            name,
-            &md.guid,
-            resource_dir,
-            logging_on,
-            fmi2Type::MODEL_EXCHANGE,
-        )?;
+        let inst = match lib {
+            MeLibrary::V2(lib) => Unit::V2(Instance::instantiate_as(
+                lib,
+                name,
+                &md.guid,
+                resource_dir,
+                logging_on,
+                fmi2Type::MODEL_EXCHANGE,
+            )?),
+            MeLibrary::V3(lib) => Unit::V3(Instance3::instantiate_as(
+                lib,
+                md,
+                name,
+                resource_dir,
+                logging_on,
+                true,
+            )?),
+        };
+        if let MeCalls::V3(calls) = api {
+            // FMI 3.0 declares no counts: they are the elements of the model structure's
+            // derivatives and event indicators (an array counts by its elements, its
+            // dimensions from their start values). An FMU that says otherwise would have
+            // its vectors read short or past their end.
+            let fmu_counts = [
+                (
+                    calls.get_number_of_continuous_states,
+                    nx,
+                    "fmi3GetNumberOfContinuousStates",
+                    "continuous states (the elements of its <ContinuousStateDerivative> variables)",
+                ),
+                (
+                    calls.get_number_of_event_indicators,
+                    nz,
+                    "fmi3GetNumberOfEventIndicators",
+                    "event indicators (the elements of its <EventIndicator> variables)",
+                ),
+            ];
+            for (get, declared, call, what) in fmu_counts {
+                let mut n = 0usize;
+                let s = unsafe { get(inst.raw(), &mut n) };
+                if s > 1 {
+                    return Err(bad(format!(
+                        "{}: {call} returned {}",
+                        fmu.display(),
+                        api.status_name(fmi2Status(s))
+                    )));
+                }
+                if n != declared {
+                    return Err(bad(format!(
+                        "{}: the model description declares {declared} {what}, but {call} returns {n}",
+                        fmu.display()
+                    )));
+                }
+            }
+        }
         let continuous_inputs = md
             .variables
             .iter()
@@ -318,12 +371,12 @@ impl MeInstance {
     }
 
     pub fn name(&self) -> &str {
-        &self.inst.name
+        self.inst.name()
     }
 
     /// The FMU's time (for messages).
     pub fn time(&self) -> f64 {
-        self.inst.time
+        self.inst.time()
     }
 
     /// The solver's relative tolerance.
@@ -344,8 +397,8 @@ impl MeInstance {
     fn error(&self, call: &str, problem: String) -> FmuError {
         FmuError::ModelExchange {
             fmu: self.fmu.clone().into_boxed_path(),
-            instance: self.inst.name.clone(),
-            time: self.inst.time,
+            instance: self.inst.name().to_string(),
+            time: self.inst.time(),
             call: call.into(),
             problem,
             log: self.inst.last_log_lines(),
@@ -363,9 +416,23 @@ impl MeInstance {
                 ..
             } => FmuError::ModelExchange {
                 fmu: self.fmu.clone().into_boxed_path(),
-                instance: self.inst.name.clone(),
+                instance: self.inst.name().to_string(),
                 time,
                 call: function.name().into(),
+                problem: format!("returned {status}"),
+                log,
+            },
+            FmuError::Call3 {
+                function,
+                status,
+                time,
+                log,
+                ..
+            } => FmuError::ModelExchange {
+                fmu: self.fmu.clone().into_boxed_path(),
+                instance: self.inst.name().to_string(),
+                time,
+                call: function.into(),
                 problem: format!("returned {status}"),
                 log,
             },
@@ -393,18 +460,16 @@ impl MeInstance {
         status: fmi2Status,
     ) -> Result<(), FmuError> {
         if let Some(trace) = &self.trace {
-            trace(self.inst.time, call, &args(), status);
+            trace(self.inst.time(), call, &args(), status);
         }
         match status.ok() {
             Ok(()) => Ok(()),
-            Err(s) => Err(self.error(call, format!("returned {s}"))),
+            Err(s) => Err(self.error(call, format!("returned {}", self.api.status_name(s)))),
         }
     }
 
     pub fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
-        self.inst
-            .set_debug_logging(on, &[])
-            .map_err(|e| self.wrap(e))
+        self.inst.set_debug_logging(on).map_err(|e| self.wrap(e))
     }
 
     /// As FMPy 0.3.32's Model Exchange loop, `toleranceDefined = false` unless the system
@@ -421,7 +486,8 @@ impl MeInstance {
         self.start = start;
         self.stop = stop;
         let r = self.inst.setup_experiment(start, stop, self.told_tolerance);
-        if let Some(trace) = &self.trace {
+        // FMI 3.0 has no such call: its arguments go with fmi3EnterInitializationMode.
+        if let (Some(trace), false) = (&self.trace, self.api.is_fmi3()) {
             let stop = stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
             let args = match self.told_tolerance {
                 Some(tol) => format!("toleranceDefined=true, tolerance={tol:?}, startTime={start:?}, stopTime={stop}"),
@@ -432,7 +498,7 @@ impl MeInstance {
                 Err(FmuError::Call { status, .. }) => *status,
                 Err(_) => fmi2Status::ERROR,
             };
-            trace(self.inst.time, "fmi2SetupExperiment", &args, status);
+            trace(self.inst.time(), "fmi2SetupExperiment", &args, status);
         }
         r.map_err(|e| self.wrap(e))
     }
@@ -454,10 +520,10 @@ impl MeInstance {
             .map_err(|e| self.wrap(e))?;
         self.mode = Mode::Event;
         let info = self.iterate_discrete_states()?;
-        if info.terminateSimulation != fmi2False {
+        if info.terminate {
             // As FMPy: an error ("Model requested termination during initial event update").
             return Err(self.error(
-                "fmi2NewDiscreteStates",
+                self.api.name(Call::UpdateDiscreteStates),
                 "set terminateSimulation in the initial event iteration, before the first step"
                     .into(),
             ));
@@ -549,8 +615,8 @@ impl MeInstance {
     /// next get or step ([`MeInstance::settle`]).
     fn event_mode_for_set(&mut self) -> Result<(), FmuError> {
         if self.mode == Mode::ContinuousTime {
-            let s = unsafe { (self.api.fmi2EnterEventMode)(self.inst.raw()) };
-            self.check("fmi2EnterEventMode", s)?;
+            let s = unsafe { self.api.enter_event_mode(self.inst.raw()) };
+            self.check(self.api.name(Call::EnterEventMode), s)?;
             self.mode = Mode::Event;
             self.event_pending = true;
         }
@@ -571,53 +637,55 @@ impl MeInstance {
 
     /// `fmi2NewDiscreteStates` until the FMU needs no more (FMI 2.0 §3.2.2, the event
     /// iteration), or asks to terminate; the next time event from the last call.
-    fn iterate_discrete_states(&mut self) -> Result<fmi2EventInfo, FmuError> {
-        let mut info = fmi2EventInfo {
-            newDiscreteStatesNeeded: fmi2True,
+    fn iterate_discrete_states(&mut self) -> Result<EventUpdate, FmuError> {
+        let call = self.api.name(Call::UpdateDiscreteStates);
+        let mut info = EventUpdate {
+            needs_update: true,
             ..Default::default()
         };
         let mut nominals_changed = false;
         let mut iterations = 0;
-        while info.newDiscreteStatesNeeded != fmi2False && info.terminateSimulation == fmi2False {
+        while info.needs_update && !info.terminate {
             iterations += 1;
             if iterations > MAX_EVENT_ITERATIONS {
                 return Err(self.error(
-                    "fmi2NewDiscreteStates",
+                    call,
                     format!("still asks for new discrete states after {MAX_EVENT_ITERATIONS} iterations of one event (the event iteration does not converge)"),
                 ));
             }
-            info = fmi2EventInfo::default();
-            let s = unsafe { (self.api.fmi2NewDiscreteStates)(self.inst.raw(), &mut info) };
+            let s;
+            (s, info) = unsafe { self.api.update_discrete_states(self.inst.raw()) };
             let shown = || {
                 format!(
-                    "newDiscreteStatesNeeded={}, terminateSimulation={}, nominalsOfContinuousStatesChanged={}, valuesOfContinuousStatesChanged={}, nextEventTimeDefined={}, nextEventTime={:?}",
-                    info.newDiscreteStatesNeeded != fmi2False,
-                    info.terminateSimulation != fmi2False,
-                    info.nominalsOfContinuousStatesChanged != fmi2False,
-                    info.valuesOfContinuousStatesChanged != fmi2False,
-                    info.nextEventTimeDefined != fmi2False,
-                    info.nextEventTime
+                    "{}={}, terminateSimulation={}, nominalsOfContinuousStatesChanged={}, valuesOfContinuousStatesChanged={}, nextEventTimeDefined={}, nextEventTime={:?}",
+                    self.api.needs_update_flag(),
+                    info.needs_update,
+                    info.terminate,
+                    info.nominals_changed,
+                    info.values_changed,
+                    info.next_event_time_defined,
+                    info.next_event_time
                 )
             };
-            self.check_with("fmi2NewDiscreteStates", shown, s)?;
-            nominals_changed |= info.nominalsOfContinuousStatesChanged != fmi2False;
+            self.check_with(call, shown, s)?;
+            nominals_changed |= info.nominals_changed;
         }
-        info.nominalsOfContinuousStatesChanged = nominals_changed as fmi2Boolean;
+        info.nominals_changed = nominals_changed;
         self.next_event = None;
-        if info.nextEventTimeDefined != fmi2False {
-            let te = info.nextEventTime;
-            let now = self.inst.time;
+        if info.next_event_time_defined {
+            let te = info.next_event_time;
+            let now = self.inst.time();
             // +inf: no time event (M6). A time event that is not a time, or one before now,
             // would have the integration loop wait for it for ever (M5).
             if te.is_nan() || te == f64::NEG_INFINITY {
                 return Err(self.error(
-                    "fmi2NewDiscreteStates",
+                    call,
                     format!("nextEventTime = {te:?} is not a time (at t = {now:?} s)"),
                 ));
             }
             if te < now && !isclose_in(te, now, self.span()) {
                 return Err(self.error(
-                    "fmi2NewDiscreteStates",
+                    call,
                     format!(
                         "nextEventTime = {te:?} s lies before the current time {now:?} s: a time event must not be in the past"
                     ),
@@ -631,8 +699,8 @@ impl MeInstance {
     }
 
     fn enter_continuous_time_mode(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.api.fmi2EnterContinuousTimeMode)(self.inst.raw()) };
-        self.check("fmi2EnterContinuousTimeMode", s)?;
+        let s = unsafe { self.api.enter_continuous_time_mode(self.inst.raw()) };
+        self.check(self.api.name(Call::EnterContinuousTimeMode), s)?;
         self.mode = Mode::ContinuousTime;
         Ok(())
     }
@@ -642,32 +710,27 @@ impl MeInstance {
     /// True when the FMU asked to end the simulation.
     fn event_iteration(&mut self, enter: bool) -> Result<bool, FmuError> {
         if self.events.len() < MAX_EVENTS_KEPT {
-            self.events.push(self.inst.time);
+            self.events.push(self.inst.time());
         }
         if enter {
-            let s = unsafe { (self.api.fmi2EnterEventMode)(self.inst.raw()) };
-            self.check("fmi2EnterEventMode", s)?;
+            let s = unsafe { self.api.enter_event_mode(self.inst.raw()) };
+            self.check(self.api.name(Call::EnterEventMode), s)?;
             self.mode = Mode::Event;
         }
         let info = self.iterate_discrete_states()?;
-        if info.terminateSimulation != fmi2False {
-            self.terminated_at = Some(self.inst.time);
+        if info.terminate {
+            self.terminated_at = Some(self.inst.time());
             return Ok(true);
         }
         self.enter_continuous_time_mode()?;
-        self.restart_solver(info.nominalsOfContinuousStatesChanged != fmi2False)?;
+        self.restart_solver(info.nominals_changed)?;
         Ok(false)
     }
 
     /// A vector the FMU fills (`fmi2GetContinuousStates`, ...), into `out`.
-    fn get_vector(
-        &self,
-        call: &str,
-        f: fmi2GetRealVectorTYPE,
-        out: &mut [f64],
-    ) -> Result<(), FmuError> {
-        let s = unsafe { f(self.inst.raw(), out.as_mut_ptr(), out.len()) };
-        self.check_with(call, || shown_values(out), s)
+    fn get_vector(&self, v: Vector, out: &mut [f64]) -> Result<(), FmuError> {
+        let s = unsafe { self.api.get(self.inst.raw(), v, out) };
+        self.check_with(self.api.name(Call::Get(v)), || shown_values(out), s)
     }
 
     /// The states into `self.x` and, when `nominals`, the absolute tolerances from the
@@ -677,20 +740,12 @@ impl MeInstance {
             return Ok(());
         }
         let mut x = std::mem::take(&mut self.x);
-        let r = self.get_vector(
-            "fmi2GetContinuousStates",
-            self.api.fmi2GetContinuousStates,
-            &mut x,
-        );
+        let r = self.get_vector(Vector::States, &mut x);
         self.x = x;
         r?;
         if nominals {
             let mut atol = std::mem::take(&mut self.atol);
-            let r = self.get_vector(
-                "fmi2GetNominalsOfContinuousStates",
-                self.api.fmi2GetNominalsOfContinuousStates,
-                &mut atol,
-            );
+            let r = self.get_vector(Vector::Nominals, &mut atol);
             for a in atol.iter_mut() {
                 *a = self.rtol * if a.is_finite() && *a > 0.0 { *a } else { 1.0 };
             }
@@ -706,17 +761,13 @@ impl MeInstance {
             return Ok(());
         }
         let mut z = std::mem::take(&mut self.z);
-        let r = self.get_vector(
-            "fmi2GetEventIndicators",
-            self.api.fmi2GetEventIndicators,
-            &mut z,
-        );
+        let r = self.get_vector(Vector::EventIndicators, &mut z);
         self.z = z;
         r?;
         // A NaN indicator has no sign: its event could never be found.
         match self.z.iter().position(|v| v.is_nan()) {
             Some(k) => Err(self.error(
-                "fmi2GetEventIndicators",
+                self.api.name(Call::Get(Vector::EventIndicators)),
                 format!(
                     "returned NaN for event indicator {} of {}, which has no sign to watch for a crossing",
                     k + 1,
@@ -731,7 +782,7 @@ impl MeInstance {
     /// callbacks when one did, else CVODE's flag and message.
     fn solver_error(&mut self, e: cvode::SolverError) -> FmuError {
         if let Some(f) = self.solver.as_mut().and_then(|s| s.system().failure.take()) {
-            self.inst.time = f.time;
+            self.inst.set_time(f.time);
             return self.error(
                 f.call,
                 format!(
@@ -792,7 +843,7 @@ impl MeInstance {
         );
         let solver = Cvode::new(
             system,
-            self.inst.time,
+            self.inst.time(),
             &self.x,
             &self.atol,
             self.nz,
@@ -810,7 +861,7 @@ impl MeInstance {
         self.read_states(nominals_changed)?;
         self.read_indicators()?;
         self.inputs_changed = false;
-        let (t, rtol) = (self.inst.time, self.rtol);
+        let (t, rtol) = (self.inst.time(), self.rtol);
         let Some(solver) = self.solver.as_mut() else {
             return self.start_solver();
         };
@@ -882,14 +933,14 @@ impl MeInstance {
 
     /// The event detected at the current time, handled (event iteration).
     fn handle_event(&mut self, before: f64) -> Result<(), FmuError> {
-        self.events_here = if self.inst.time == before {
+        self.events_here = if self.inst.time() == before {
             self.events_here + 1
         } else {
             0
         };
         if self.events_here > MAX_EVENT_ITERATIONS {
             return Err(self.error(
-                "fmi2NewDiscreteStates",
+                self.api.name(Call::UpdateDiscreteStates),
                 format!("{MAX_EVENT_ITERATIONS} events at one time: the FMU sets its next event time to the current time again and again"),
             ));
         }
@@ -907,12 +958,12 @@ impl MeInstance {
             self.event_detected = false;
             let before = self.event_start;
             self.handle_event(before)?;
-            let te = self.inst.time;
+            let te = self.inst.time();
             if !(te > target || isclose(te, target)) {
                 return Ok(MeStop::AfterEvent(te));
             }
         }
-        while !(self.inst.time > target || isclose(self.inst.time, target)) {
+        while !(self.inst.time() > target || isclose(self.inst.time(), target)) {
             let mut t_next = target;
             if let Some(te) = self.next_event {
                 if t_next > te && !isclose(t_next, te) {
@@ -920,7 +971,7 @@ impl MeInstance {
                 }
             }
             let time_event = self.next_event.is_some_and(|te| isclose(t_next, te));
-            let before = self.inst.time;
+            let before = self.inst.time();
             let state_event = if t_next <= before || isclose(t_next, before) {
                 // A time event now (or one the FMU set in the past): no integration.
                 false
@@ -929,15 +980,15 @@ impl MeInstance {
             };
             let (step_event, terminate) = self.completed_integrator_step()?;
             if terminate {
-                self.terminated_at = Some(self.inst.time);
+                self.terminated_at = Some(self.inst.time());
                 return Err(self.ended());
             }
-            let time_event = time_event && isclose(self.inst.time, t_next);
+            let time_event = time_event && isclose(self.inst.time(), t_next);
             if time_event || state_event || step_event {
                 if stop_at_events {
                     self.event_detected = true;
                     self.event_start = before;
-                    return Ok(MeStop::BeforeEvent(self.inst.time));
+                    return Ok(MeStop::BeforeEvent(self.inst.time()));
                 }
                 self.handle_event(before)?;
             }
@@ -958,18 +1009,16 @@ impl MeInstance {
             Reached::Root(t) => (t, true),
         };
         if self.nx > 0 {
-            let s = unsafe {
-                (self.api.fmi2SetContinuousStates)(self.inst.raw(), self.x.as_ptr(), self.nx)
-            };
+            let s = unsafe { self.api.set_states(self.inst.raw(), &self.x[..self.nx]) };
             self.check_with(
-                "fmi2SetContinuousStates",
+                self.api.name(Call::SetContinuousStates),
                 || shown_values(&self.x[..self.nx]),
                 s,
             )?;
         }
-        self.inst.time = t;
-        let s = unsafe { (self.api.fmi2SetTime)(self.inst.raw(), t) };
-        self.check_with("fmi2SetTime", || format!("time={t:?}"), s)?;
+        self.inst.set_time(t);
+        let s = unsafe { self.api.set_time(self.inst.raw(), t) };
+        self.check_with(self.api.name(Call::SetTime), || format!("time={t:?}"), s)?;
         Ok(state_event)
     }
 
@@ -979,27 +1028,17 @@ impl MeInstance {
         if !self.completed_step_needed {
             return Ok((false, false));
         }
-        let (mut enter, mut terminate) = (fmi2False, fmi2False);
-        let s = unsafe {
-            (self.api.fmi2CompletedIntegratorStep)(
-                self.inst.raw(),
-                fmi2True,
-                &mut enter,
-                &mut terminate,
-            )
-        };
+        let (s, enter, terminate) = unsafe { self.api.completed_integrator_step(self.inst.raw()) };
         self.check_with(
-            "fmi2CompletedIntegratorStep",
+            self.api.name(Call::CompletedIntegratorStep),
             || {
                 format!(
-                    "noSetFMUStatePriorToCurrentPoint=true, enterEventMode={}, terminateSimulation={}",
-                    enter != fmi2False,
-                    terminate != fmi2False
+                    "noSetFMUStatePriorToCurrentPoint=true, enterEventMode={enter}, terminateSimulation={terminate}"
                 )
             },
             s,
         )?;
-        Ok((enter != fmi2False, terminate != fmi2False))
+        Ok((enter, terminate))
     }
 
     /// A continuous input changed since the integrator started: an event when an event
@@ -1023,10 +1062,10 @@ impl MeInstance {
     /// Co-Simulation FMU would say it (the master then asks [`Self::terminated_by_fmu`]).
     fn ended(&self) -> FmuError {
         FmuError::call(
-            &self.inst.name,
+            self.inst.name(),
             Function::DoStep,
             fmi2Status::DISCARD,
-            self.terminated_at.unwrap_or(self.inst.time),
+            self.terminated_at.unwrap_or(self.inst.time()),
             Vec::new(),
         )
     }

@@ -1,12 +1,13 @@
 //! The FMU as CVODE's system: the right-hand side and the root functions call the FMU
 //! (FMPy's `CVodeSolver.f` and `.g`): `fmi2SetTime`, `fmi2SetContinuousStates`, then
-//! `fmi2GetDerivatives` or `fmi2GetEventIndicators`. An FMU without continuous states has
-//! one dummy state with ẋ = 0 (FMPy's `discrete` case), never set into the FMU.
+//! `fmi2GetDerivatives` or `fmi2GetEventIndicators` (FMI 3.0: the same with `fmi3`, and
+//! `fmi3GetContinuousStateDerivatives`). An FMU without continuous states has one dummy
+//! state with ẋ = 0 (FMPy's `discrete` case), never set into the FMU.
 
 use super::cvode::System;
+use super::unit::{Call, Component, MeCalls, Vector};
 use super::{shown_values, CallTrace};
 use crate::fmi2::*;
-use crate::import::library::MeApi;
 
 /// The FMI call that failed in the last callback, for the error message: `problem` is what
 /// it did (`returned fmi2Error`, `returned NaN for der(x)`).
@@ -18,8 +19,8 @@ pub struct Failure {
 }
 
 pub struct FmuSystem {
-    comp: fmi2Component,
-    api: MeApi,
+    comp: Component,
+    api: MeCalls,
     nx: usize,
     /// The derivatives' names (`der(x)`), for a message about one of them.
     derivative_names: Vec<String>,
@@ -32,8 +33,8 @@ pub struct FmuSystem {
 
 impl FmuSystem {
     pub fn new(
-        comp: fmi2Component,
-        api: MeApi,
+        comp: Component,
+        api: MeCalls,
         derivative_names: Vec<String>,
         trace: Option<CallTrace>,
     ) -> FmuSystem {
@@ -65,7 +66,7 @@ impl FmuSystem {
         }
         self.failure = Some(Failure {
             call,
-            problem: format!("returned {status}"),
+            problem: format!("returned {}", self.api.status_name(status)),
             time,
         });
         if status == fmi2Status::DISCARD {
@@ -86,24 +87,36 @@ impl FmuSystem {
         });
     }
 
+    /// The time into the FMU (`fmi2SetTime`).
+    fn set_time(&mut self, t: f64) -> i32 {
+        // SAFETY: the component is alive while the integrator is (the instance owns both
+        // and drops the integrator first).
+        let s = unsafe { self.api.set_time(self.comp, t) };
+        let call = self.api.name(Call::SetTime);
+        self.traced(t, call, || format!("time={t:?}"), s);
+        self.status(call, s, t)
+    }
+
     /// `fmi2SetTime` and, with states, `fmi2SetContinuousStates`.
     fn set(&mut self, t: f64, x: &[f64]) -> i32 {
-        // SAFETY: the component is alive while the integrator is (the instance owns both
-        // and drops the integrator first); x has nx values.
-        let s = unsafe { (self.api.fmi2SetTime)(self.comp, t) };
-        self.traced(t, "fmi2SetTime", || format!("time={t:?}"), s);
-        let r = self.status("fmi2SetTime", s, t);
+        let r = self.set_time(t);
         if r != 0 || self.nx == 0 {
             return r;
         }
-        let s = unsafe { (self.api.fmi2SetContinuousStates)(self.comp, x.as_ptr(), self.nx) };
-        self.traced(
-            t,
-            "fmi2SetContinuousStates",
-            || shown_values(&x[..self.nx]),
-            s,
-        );
-        self.status("fmi2SetContinuousStates", s, t)
+        // SAFETY: as set_time; x has nx values.
+        let s = unsafe { self.api.set_states(self.comp, &x[..self.nx]) };
+        let call = self.api.name(Call::SetContinuousStates);
+        self.traced(t, call, || shown_values(&x[..self.nx]), s);
+        self.status(call, s, t)
+    }
+
+    /// A vector from the FMU into `out`, traced; its status as a callback's result.
+    fn get(&mut self, t: f64, v: Vector, out: &mut [f64]) -> i32 {
+        // SAFETY: as set_time.
+        let s = unsafe { self.api.get(self.comp, v, out) };
+        let call = self.api.name(Call::Get(v));
+        self.traced(t, call, || shown_values(out), s);
+        self.status(call, s, t)
     }
 }
 
@@ -111,17 +124,13 @@ impl System for FmuSystem {
     fn rhs(&mut self, t: f64, x: &[f64], dx: &mut [f64]) -> i32 {
         if self.nx == 0 {
             dx.iter_mut().for_each(|d| *d = 0.0);
-            let s = unsafe { (self.api.fmi2SetTime)(self.comp, t) };
-            self.traced(t, "fmi2SetTime", || format!("time={t:?}"), s);
-            return self.status("fmi2SetTime", s, t);
+            return self.set_time(t);
         }
         let r = self.set(t, x);
         if r != 0 {
             return r;
         }
-        let s = unsafe { (self.api.fmi2GetDerivatives)(self.comp, dx.as_mut_ptr(), self.nx) };
-        self.traced(t, "fmi2GetDerivatives", || shown_values(dx), s);
-        let r = self.status("fmi2GetDerivatives", s, t);
+        let r = self.get(t, Vector::Derivatives, dx);
         if r != 0 {
             return r;
         }
@@ -129,7 +138,8 @@ impl System for FmuSystem {
         // point outside the model's domain), and stops when it keeps coming back.
         if let Some(k) = dx.iter().position(|d| !d.is_finite()) {
             let what = self.derivative_names[k].clone();
-            self.not_a_number("fmi2GetDerivatives", what, dx[k], t);
+            let call = self.api.name(Call::Get(Vector::Derivatives));
+            self.not_a_number(call, what, dx[k], t);
             self.retried = self.failure.clone();
             return 1;
         }
@@ -141,16 +151,15 @@ impl System for FmuSystem {
         if r != 0 {
             return r;
         }
-        let s = unsafe { (self.api.fmi2GetEventIndicators)(self.comp, g.as_mut_ptr(), g.len()) };
-        self.traced(t, "fmi2GetEventIndicators", || shown_values(g), s);
-        let r = self.status("fmi2GetEventIndicators", s, t);
+        let r = self.get(t, Vector::EventIndicators, g);
         if r != 0 {
             return r;
         }
         // A NaN indicator has no sign: its crossing could never be found.
         if let Some(k) = g.iter().position(|z| z.is_nan()) {
             let what = format!("event indicator {} of {}", k + 1, g.len());
-            self.not_a_number("fmi2GetEventIndicators", what, g[k], t);
+            let call = self.api.name(Call::Get(Vector::EventIndicators));
+            self.not_a_number(call, what, g[k], t);
             return -1;
         }
         0
