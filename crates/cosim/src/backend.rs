@@ -268,12 +268,15 @@ impl Backend for Instance3 {
     fn reset(&mut self) -> Result<(), FmuError> {
         Instance3::reset(self)
     }
+    #[inline]
     fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
         Instance3::get_real(self, vrs, out)
     }
+    #[inline]
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
         Instance3::set_real(self, vrs, values)
     }
+    #[inline]
     fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
         Instance3::get_int(self, vrs, out)
     }
@@ -292,6 +295,7 @@ impl Backend for Instance3 {
     fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
         Instance3::set_string(self, vrs, values)
     }
+    #[inline]
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
         Instance3::do_step(self, t, h)
     }

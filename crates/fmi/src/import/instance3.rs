@@ -306,6 +306,7 @@ impl Instance3 {
         self.sink.set_echo(on)
     }
 
+    #[inline]
     fn check(&self, function: &'static str, status: Status) -> Result<(), FmuError> {
         if status == 0 || status == 1 {
             Ok(())
@@ -315,6 +316,7 @@ impl Instance3 {
     }
 
     #[cold]
+    #[inline(never)]
     fn call_error(&self, function: &'static str, status: Status) -> FmuError {
         FmuError::Call3 {
             instance: self.name.clone(),
@@ -591,30 +593,42 @@ impl Instance3 {
         }
     }
 
-    /// Whether every reference is a scalar Float64 (one fmi3GetFloat64 call then).
-    #[inline]
-    fn all_scalar_float64(&self, vrs: &[u32]) -> bool {
-        self.reals_are_float64 || self.all_scalar(vrs, Fmi3Type::Float64)
-    }
-
     /// Whether every reference is a scalar of type `ty` (one call of its type then).
     #[inline]
     fn all_scalar(&self, vrs: &[u32], ty: Fmi3Type) -> bool {
         vrs.iter().all(|&vr| self.slots.scalar_type(vr) == Some(ty))
     }
 
+    /// The usual call when every Real is a scalar Float64: as short as FMI 2.0's, the
+    /// rest ([`Self::get_real_mixed`]) off the fast path.
+    #[inline]
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        if self.all_scalar_float64(vrs) {
-            let s = unsafe {
-                (self.lib.api.get_float64)(
-                    self.inst,
-                    vrs.as_ptr(),
-                    vrs.len(),
-                    out.as_mut_ptr(),
-                    out.len(),
-                )
-            };
-            return self.check("fmi3GetFloat64", s);
+        if !self.reals_are_float64 {
+            return self.get_real_mixed(vrs, out);
+        }
+        self.get_float64(vrs, out)
+    }
+
+    #[inline]
+    fn get_float64(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        let s = unsafe {
+            (self.lib.api.get_float64)(
+                self.inst,
+                vrs.as_ptr(),
+                vrs.len(),
+                out.as_mut_ptr(),
+                out.len(),
+            )
+        };
+        self.check("fmi3GetFloat64", s)
+    }
+
+    /// Reals of other types or array elements: one call when these are all scalar
+    /// Float64 after all, else one per value.
+    #[inline(never)]
+    fn get_real_mixed(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        if self.all_scalar(vrs, Fmi3Type::Float64) {
+            return self.get_float64(vrs, out);
         }
         for (vr, o) in vrs.iter().zip(out.iter_mut()) {
             let slot = self.slot(*vr)?;
@@ -623,40 +637,77 @@ impl Instance3 {
         Ok(())
     }
 
+    /// As [`Self::get_real`].
+    #[inline]
     pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        if self.all_scalar_float64(vrs) {
-            let s = unsafe {
-                (self.lib.api.set_float64)(
-                    self.inst,
-                    vrs.as_ptr(),
-                    vrs.len(),
-                    values.as_ptr(),
-                    values.len(),
-                )
-            };
-            return self.check("fmi3SetFloat64", s);
+        if !self.reals_are_float64 {
+            return self.set_real_mixed(vrs, values);
         }
+        self.set_float64(vrs, values)
+    }
+
+    #[inline]
+    fn set_float64(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        let s = unsafe {
+            (self.lib.api.set_float64)(
+                self.inst,
+                vrs.as_ptr(),
+                vrs.len(),
+                values.as_ptr(),
+                values.len(),
+            )
+        };
+        self.check("fmi3SetFloat64", s)
+    }
+
+    #[inline(never)]
+    fn set_real_mixed(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        if self.all_scalar(vrs, Fmi3Type::Float64) {
+            return self.set_float64(vrs, values);
+        }
+        self.set_each(vrs, values.iter().copied())
+    }
+
+    /// Values of other types or array elements: one call per value (off the fast path).
+    #[cold]
+    #[inline(never)]
+    fn set_each(&mut self, vrs: &[u32], values: impl Iterator<Item = f64>) -> Result<(), FmuError> {
         for (vr, v) in vrs.iter().zip(values) {
             let slot = self.slot(*vr)?;
-            self.set_one(*vr, slot, *v)?;
+            self.set_one(*vr, slot, v)?;
         }
         Ok(())
     }
 
     /// Integer, Enumeration and Boolean values as i32; a value beyond 32 bits is an error
     /// naming the variable (never wrapped).
+    #[inline]
     pub fn get_int(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        if self.ints_are_int32 || self.all_scalar(vrs, Fmi3Type::Int32) {
-            let s = unsafe {
-                (self.lib.api.get_int32)(
-                    self.inst,
-                    vrs.as_ptr(),
-                    vrs.len(),
-                    out.as_mut_ptr(),
-                    out.len(),
-                )
-            };
-            return self.check("fmi3GetInt32", s);
+        if !self.ints_are_int32 {
+            return self.get_int_mixed(vrs, out);
+        }
+        self.get_int32(vrs, out)
+    }
+
+    #[inline]
+    fn get_int32(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        let s = unsafe {
+            (self.lib.api.get_int32)(
+                self.inst,
+                vrs.as_ptr(),
+                vrs.len(),
+                out.as_mut_ptr(),
+                out.len(),
+            )
+        };
+        self.check("fmi3GetInt32", s)
+    }
+
+    /// Integers of other types: one call per value, each checked to fit 32 bits.
+    #[inline(never)]
+    fn get_int_mixed(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        if self.all_scalar(vrs, Fmi3Type::Int32) {
+            return self.get_int32(vrs, out);
         }
         for (vr, o) in vrs.iter().zip(out.iter_mut()) {
             let slot = self.slot(*vr)?;
@@ -673,24 +724,34 @@ impl Instance3 {
         Ok(())
     }
 
+    #[inline]
     pub fn set_int(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        if self.ints_are_int32 || self.all_scalar(vrs, Fmi3Type::Int32) {
-            let s = unsafe {
-                (self.lib.api.set_int32)(
-                    self.inst,
-                    vrs.as_ptr(),
-                    vrs.len(),
-                    values.as_ptr(),
-                    values.len(),
-                )
-            };
-            return self.check("fmi3SetInt32", s);
+        if !self.ints_are_int32 {
+            return self.set_int_mixed(vrs, values);
         }
-        for (vr, v) in vrs.iter().zip(values) {
-            let slot = self.slot(*vr)?;
-            self.set_one(*vr, slot, *v as f64)?;
+        self.set_int32(vrs, values)
+    }
+
+    #[inline]
+    fn set_int32(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        let s = unsafe {
+            (self.lib.api.set_int32)(
+                self.inst,
+                vrs.as_ptr(),
+                vrs.len(),
+                values.as_ptr(),
+                values.len(),
+            )
+        };
+        self.check("fmi3SetInt32", s)
+    }
+
+    #[inline(never)]
+    fn set_int_mixed(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        if self.all_scalar(vrs, Fmi3Type::Int32) {
+            return self.set_int32(vrs, values);
         }
-        Ok(())
+        self.set_each(vrs, values.iter().map(|v| *v as f64))
     }
 
     pub fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
@@ -767,31 +828,27 @@ impl Instance3 {
     /// One communication step. When the FMU asks to end the simulation the step still
     /// counts (FMPy records its end and stops): the call then reports `fmi2Discard` so that
     /// the master asks [`Instance3::terminated_by_fmu`], which gives the time reached.
+    #[inline]
     pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
-        let (mut event, mut terminate, mut early) = (0u8, 0u8, 0u8);
+        // eventHandlingNeeded, terminateSimulation, earlyReturn: read back as one word.
+        let mut flags = [0u8; 4];
         let mut last = t + h;
+        let [event, terminate, early, _] = flags.each_mut();
         let s = unsafe {
-            (self.lib.api.do_step)(
-                self.inst,
-                t,
-                h,
-                true,
-                &mut event,
-                &mut terminate,
-                &mut early,
-                &mut last,
-            )
+            (self.lib.api.do_step)(self.inst, t, h, true, event, terminate, early, &mut last)
         };
         // The usual step: completed, no event, no early return, not the end.
-        if s == 0 && early == 0 && terminate == 0 && event == 0 {
+        if s == 0 && u32::from_ne_bytes(flags) == 0 {
             self.time = t + h;
             return Ok(());
         }
+        let [_, terminate, early, _] = flags;
         self.step_outcome(t, h, s, terminate, early, last)
     }
 
     /// A step that did more than complete: its error, early return or end of the run.
     #[cold]
+    #[inline(never)]
     fn step_outcome(
         &mut self,
         t: f64,

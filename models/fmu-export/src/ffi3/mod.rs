@@ -87,10 +87,12 @@ impl Logger for CLogger3 {
     }
 }
 
-/// A Runtime call's status as FMI 3.0's (the same numbers; FMI 3.0 has no Pending).
+/// A Runtime call's status as FMI 3.0's: the same numbers (the runtime never answers
+/// FMI 2.0's Pending, which FMI 3.0 lacks).
 #[inline(always)]
 fn status(s: fmi2Status) -> fmi3Status {
-    s.0.min(4)
+    debug_assert!(s.0 <= 4, "the runtime answered {s:?}");
+    s.0
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -238,24 +240,51 @@ pub unsafe fn unsupported<M: Model>(c: fmi3Instance, function: &str, why: &str) 
     }))
 }
 
-/// The value references and the values of a get or set, NULL- and count-checked: every
-/// variable is a scalar, so `n_values` must equal `n_vr`.
+/// Whether a get's or set's arrays can be used: every variable is a scalar, so
+/// `n_values` must equal `n_vr`, and neither may be NULL when there are values. Checked
+/// before the guard, so that the usual call costs what FMI 2.0's does.
 #[inline(always)]
-unsafe fn arrays<'a, T>(
-    rt: &Runtime<impl Model>,
-    function: &str,
+fn arrays_ok<T>(
     vr: *const fmi3ValueReference,
     n_vr: usize,
     values: *const T,
     n_values: usize,
-) -> Result<(&'a [u32], *const T), fmi2Status> {
-    if n_values != n_vr || (n_vr > 0 && (vr.is_null() || values.is_null())) {
-        return Err(bad_arrays(rt, function, n_vr, n_values));
+) -> bool {
+    n_values == n_vr && (n_vr == 0 || !(vr.is_null() || values.is_null()))
+}
+
+/// The refusal of arrays that cannot be used ([`arrays_ok`]), logged through the guard.
+#[cold]
+#[inline(never)]
+unsafe fn refuse_arrays<M: Model>(
+    c: fmi3Instance,
+    function: &str,
+    n_vr: usize,
+    n_values: usize,
+) -> fmi3Status {
+    status(guarded::<M>(c, function, move |rt| {
+        bad_arrays(rt, function, n_vr, n_values)
+    }))
+}
+
+/// `n` values at `p` (checked by [`arrays_ok`]; none when `n` is 0, whatever `p` is).
+#[inline(always)]
+unsafe fn values_at<'a, T>(p: *const T, n: usize) -> &'a [T] {
+    if n == 0 {
+        &[]
+    } else {
+        std::slice::from_raw_parts(p, n)
     }
-    if n_vr == 0 {
-        return Ok((&[], values));
+}
+
+/// As [`values_at`], to be written.
+#[inline(always)]
+unsafe fn values_at_mut<'a, T>(p: *mut T, n: usize) -> &'a mut [T] {
+    if n == 0 {
+        &mut []
+    } else {
+        std::slice::from_raw_parts_mut(p, n)
     }
-    Ok((std::slice::from_raw_parts(vr, n_vr), values))
 }
 
 #[cold]
@@ -278,25 +307,31 @@ fn bad_arrays(
 
 /// Each of `vrs` is a variable of type `want` (FMI 3.0 tells Int32 from an Enumeration's
 /// Int64, which FMI 2.0 both gets as Integer).
+#[inline(always)]
 fn of_type<M: Model>(
     rt: &Runtime<M>,
     function: &str,
     vrs: &[u32],
     want: ScalarType,
 ) -> Result<(), fmi2Status> {
-    for &vr in vrs {
-        if let Some(v) = rt.var_info(vr) {
-            if v.var_type() != want {
-                return Err(rt.error(&format!(
-                    "{function}: variable '{}' (vr {vr}) is {}, not {}",
-                    v.name,
-                    super::description3::element_name(v.var_type()),
-                    super::description3::element_name(want)
-                )));
-            }
-        }
+    match vrs
+        .iter()
+        .find(|&&vr| rt.var_info(vr).is_some_and(|v| v.var_type() != want))
+    {
+        None => Ok(()),
+        Some(&vr) => Err(not_of_type(rt, function, vr, want)),
     }
-    Ok(())
+}
+
+#[cold]
+fn not_of_type<M: Model>(rt: &Runtime<M>, function: &str, vr: u32, want: ScalarType) -> fmi2Status {
+    let v = rt.var_info(vr).expect("found by of_type");
+    rt.error(&format!(
+        "{function}: variable '{}' (vr {vr}) is {}, not {}",
+        v.name,
+        super::description3::element_name(v.var_type()),
+        super::description3::element_name(want)
+    ))
 }
 
 #[inline(always)]
@@ -308,19 +343,12 @@ pub unsafe fn get_float64<M: Model>(
     n_values: usize,
 ) -> fmi3Status {
     const F: &str = "fmi3GetFloat64";
-    status(guarded::<M>(c, F, |rt| {
-        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values as *const f64, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
-        let out: &mut [f64] = if n_vr == 0 {
-            &mut []
-        } else {
-            std::slice::from_raw_parts_mut(ptr as *mut f64, n_vr)
-        };
-        // The independent variable `time` is read there too (Runtime::expose_time).
-        rt.get_real(vrs, out)
-    }))
+    if !arrays_ok(vr, n_vr, values, n_values) {
+        return refuse_arrays::<M>(c, F, n_vr, n_values);
+    }
+    let (vrs, out) = (values_at(vr, n_vr), values_at_mut(values, n_vr));
+    // The independent variable `time` is read there too (Runtime::expose_time).
+    status(guarded::<M>(c, F, move |rt| rt.get_real(vrs, out)))
 }
 
 #[inline(always)]
@@ -332,23 +360,12 @@ pub unsafe fn set_float64<M: Model>(
     n_values: usize,
 ) -> fmi3Status {
     const F: &str = "fmi3SetFloat64";
-    status(guarded::<M>(c, F, |rt| {
-        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
-        if vrs.contains(&rt.time_value_reference()) {
-            return rt.error(&format!(
-                "{F}: the independent variable 'time' cannot be set"
-            ));
-        }
-        let vals: &[f64] = if n_vr == 0 {
-            &[]
-        } else {
-            std::slice::from_raw_parts(ptr, n_vr)
-        };
-        rt.set_real(vrs, vals)
-    }))
+    if !arrays_ok(vr, n_vr, values, n_values) {
+        return refuse_arrays::<M>(c, F, n_vr, n_values);
+    }
+    let (vrs, vals) = (values_at(vr, n_vr), values_at(values, n_vr));
+    // The independent variable `time` is refused there (Runtime::expose_time).
+    status(guarded::<M>(c, F, move |rt| rt.set_real(vrs, vals)))
 }
 
 /// An integer get (`Int32` of Integers, `Int64` of Enumerations).
@@ -362,19 +379,14 @@ unsafe fn get_integers<M: Model, T: Copy>(
     n_values: usize,
     conv: impl Fn(Value) -> T,
 ) -> fmi3Status {
-    status(guarded::<M>(c, function, |rt| {
-        let (vrs, ptr) = match arrays(rt, function, vr, n_vr, values as *const T, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
+    if !arrays_ok(vr, n_vr, values, n_values) {
+        return refuse_arrays::<M>(c, function, n_vr, n_values);
+    }
+    let (vrs, out) = (values_at(vr, n_vr), values_at_mut(values, n_vr));
+    status(guarded::<M>(c, function, move |rt| {
         if let Err(s) = of_type(rt, function, vrs, want) {
             return s;
         }
-        let out: &mut [T] = if n_vr == 0 {
-            &mut []
-        } else {
-            std::slice::from_raw_parts_mut(ptr as *mut T, n_vr)
-        };
         rt.get(function, ScalarType::Integer, vrs, out, conv)
     }))
 }
@@ -429,19 +441,14 @@ unsafe fn set_integers<M: Model, T: Copy>(
     n_values: usize,
     conv: impl Fn(T) -> i32,
 ) -> fmi3Status {
-    status(guarded::<M>(c, function, |rt| {
-        let (vrs, ptr) = match arrays(rt, function, vr, n_vr, values, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
+    if !arrays_ok(vr, n_vr, values, n_values) {
+        return refuse_arrays::<M>(c, function, n_vr, n_values);
+    }
+    let (vrs, vals) = (values_at(vr, n_vr), values_at(values, n_vr));
+    status(guarded::<M>(c, function, move |rt| {
         if let Err(s) = of_type(rt, function, vrs, want) {
             return s;
         }
-        let vals: &[T] = if n_vr == 0 {
-            &[]
-        } else {
-            std::slice::from_raw_parts(ptr, n_vr)
-        };
         rt.set(
             function,
             ScalarType::Integer,
@@ -498,16 +505,11 @@ pub unsafe fn get_boolean<M: Model>(
     n_values: usize,
 ) -> fmi3Status {
     const F: &str = "fmi3GetBoolean";
-    status(guarded::<M>(c, F, |rt| {
-        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values as *const u8, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
-        let out: &mut [u8] = if n_vr == 0 {
-            &mut []
-        } else {
-            std::slice::from_raw_parts_mut(ptr as *mut u8, n_vr)
-        };
+    if !arrays_ok(vr, n_vr, values, n_values) {
+        return refuse_arrays::<M>(c, F, n_vr, n_values);
+    }
+    let (vrs, out) = (values_at(vr, n_vr), values_at_mut(values, n_vr));
+    status(guarded::<M>(c, F, move |rt| {
         rt.get(F, ScalarType::Boolean, vrs, out, |v| {
             (v.as_f64() != 0.0) as u8
         })
@@ -522,16 +524,11 @@ pub unsafe fn set_boolean<M: Model>(
     n_values: usize,
 ) -> fmi3Status {
     const F: &str = "fmi3SetBoolean";
-    status(guarded::<M>(c, F, |rt| {
-        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
-        let vals: &[u8] = if n_vr == 0 {
-            &[]
-        } else {
-            std::slice::from_raw_parts(ptr, n_vr)
-        };
+    if !arrays_ok(vr, n_vr, values, n_values) {
+        return refuse_arrays::<M>(c, F, n_vr, n_values);
+    }
+    let (vrs, vals) = (values_at(vr, n_vr), values_at(values, n_vr));
+    status(guarded::<M>(c, F, move |rt| {
         rt.set(
             F,
             ScalarType::Boolean,
@@ -549,18 +546,11 @@ pub unsafe fn get_string<M: Model>(
     n_values: usize,
 ) -> fmi3Status {
     const F: &str = "fmi3GetString";
-    status(guarded_instance::<M>(c, F, |inst| {
-        let (vrs, ptr) = match arrays(
-            &inst.runtime,
-            F,
-            vr,
-            n_vr,
-            values as *const *const c_char,
-            n_values,
-        ) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
+    if !arrays_ok(vr, n_vr, values, n_values) {
+        return refuse_arrays::<M>(c, F, n_vr, n_values);
+    }
+    let (vrs, out) = (values_at(vr, n_vr), values_at_mut(values, n_vr));
+    status(guarded_instance::<M>(c, F, move |inst| {
         // The host reads the strings until its next call: kept in the instance.
         let strings = &mut inst.strings;
         strings.clear();
@@ -568,9 +558,8 @@ pub unsafe fn get_string<M: Model>(
             strings.push(CString::new(s.replace('\0', "")).unwrap_or_default())
         });
         if s == fmi2Status::OK {
-            let out = ptr as *mut *const c_char;
-            for (k, s) in strings.iter().enumerate() {
-                *out.add(k) = s.as_ptr();
+            for (o, s) in out.iter_mut().zip(strings.iter()) {
+                *o = s.as_ptr();
             }
         }
         s
@@ -585,14 +574,14 @@ pub unsafe fn set_string<M: Model>(
     n_values: usize,
 ) -> fmi3Status {
     const F: &str = "fmi3SetString";
-    status(guarded::<M>(c, F, |rt| {
-        let (vrs, ptr) = match arrays(rt, F, vr, n_vr, values, n_values) {
-            Ok(x) => x,
-            Err(s) => return s,
-        };
+    if !arrays_ok(vr, n_vr, values, n_values) {
+        return refuse_arrays::<M>(c, F, n_vr, n_values);
+    }
+    let (vrs, ptrs) = (values_at(vr, n_vr), values_at(values, n_vr));
+    status(guarded::<M>(c, F, move |rt| {
         let mut texts = Vec::with_capacity(n_vr);
-        for (k, vr) in vrs.iter().enumerate() {
-            match opt_str(*ptr.add(k)) {
+        for (k, (vr, p)) in vrs.iter().zip(ptrs).enumerate() {
+            match opt_str(*p) {
                 Some(t) => texts.push(t),
                 None => return rt.error(&format!("{F}: value {k} (vr {vr}) is NULL")),
             }
@@ -641,21 +630,32 @@ pub unsafe fn do_step<M: Model>(
     early_return: *mut bool,
     last_successful_time: *mut f64,
 ) -> fmi3Status {
-    status(guarded::<M>(c, "fmi3DoStep", |rt| {
-        if event_handling_needed.is_null()
-            || terminate_simulation.is_null()
-            || early_return.is_null()
-            || last_successful_time.is_null()
-        {
-            return rt.error("fmi3DoStep: an output argument is NULL");
-        }
-        let s = rt.do_step(current, step);
+    const F: &str = "fmi3DoStep";
+    if event_handling_needed.is_null()
+        || terminate_simulation.is_null()
+        || early_return.is_null()
+        || last_successful_time.is_null()
+    {
+        return null_output::<M>(c);
+    }
+    // The step alone in the guard, as FMI 2.0's; the flags are plain writes.
+    let s = status(guarded::<M>(c, F, move |rt| rt.do_step(current, step)));
+    if !c.is_null() {
         // No event mode and no early return; a model never ends the run on its own.
         *event_handling_needed = false;
         *terminate_simulation = false;
         *early_return = false;
-        *last_successful_time = rt.last_successful_time();
-        s
+        // SAFETY: `c` is the instance the host was given (a getter: nothing can panic).
+        *last_successful_time = (*(c as *mut Instance<M>)).runtime.last_successful_time();
+    }
+    s
+}
+
+#[cold]
+#[inline(never)]
+unsafe fn null_output<M: Model>(c: fmi3Instance) -> fmi3Status {
+    status(guarded::<M>(c, "fmi3DoStep", |rt| {
+        rt.error("fmi3DoStep: an output argument is NULL")
     }))
 }
 
