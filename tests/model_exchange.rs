@@ -35,6 +35,7 @@ fn experiment(model: &str) -> (f64, f64) {
         "Stair" => (10.0, 0.2),
         "VanDerPol" => (20.0, 1e-2),
         "StateSpace" => (10.0, 0.1),
+        "Roberts" => (1.0, 0.01),
         m => panic!("no experiment for {m}"),
     }
 }
@@ -198,7 +199,8 @@ fn check(model: &str, version: u8) {
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
         .arg("run")
         .arg(&me_only)
-        .args(["--stop", &stop.to_string(), "--step", &step.to_string()])
+        .args(["--start", "0", "--stop", &stop.to_string()])
+        .args(["--step", &step.to_string()])
         .arg("--out")
         .arg(&csv)
         .output()
@@ -292,6 +294,13 @@ fn stair_fmi3() {
 #[test]
 fn van_der_pol_fmi3() {
     check("VanDerPol", 3);
+}
+
+/// Robertson's stiff chemical kinetics (FMI 3.0 only): CVODE's BDF as FMPy's, two event
+/// indicators.
+#[test]
+fn roberts_fmi3() {
+    check("Roberts", 3);
 }
 
 /// The states are one array (`der(x)` has the dimension `n`): three states, integrated as
