@@ -7,8 +7,51 @@
 //! ([`folder_of`]), then the names in it are joined to that folder ([`resolve`]); the
 //! result is absolute, and normalised ([`normalize`]) so that messages print
 //! `/work/systems/rls_v.toml`, not `/work/studies/../systems/rls_v.toml`.
+//!
+//! A **mirror** ([`register_mirror`]) is a folder that holds another machine's files at
+//! their absolute paths below it: a cluster worker without the coordinator's disk keeps a
+//! study's files there (`<mirror>/home/me/project/studies/lap.toml`). A relative name in a
+//! mirrored file then resolves inside the mirror by itself; an absolute one is taken as
+//! the coordinator's path and resolved inside the mirror too; [`unmirror`] gives a mirrored
+//! path back as the coordinator names it (for digests and messages).
 
 use std::path::{Component, Path, PathBuf};
+use std::sync::RwLock;
+
+/// The mirrors of this process ([`register_mirror`]).
+static MIRRORS: RwLock<Vec<PathBuf>> = RwLock::new(Vec::new());
+
+/// Take `root` (absolute) as a mirror of another machine's files: every file the
+/// coordinator names `/a/b` is `root/a/b`. Registering one twice is harmless.
+pub fn register_mirror(root: &Path) {
+    let root = absolute(root);
+    let mut mirrors = MIRRORS.write().unwrap_or_else(|p| p.into_inner());
+    if !mirrors.contains(&root) {
+        mirrors.push(root);
+    }
+}
+
+/// The mirror `path` lies in, if any.
+fn mirror_of(path: &Path) -> Option<PathBuf> {
+    let mirrors = MIRRORS.read().unwrap_or_else(|p| p.into_inner());
+    mirrors
+        .iter()
+        .filter(|root| path.starts_with(root))
+        .max_by_key(|root| root.components().count())
+        .cloned()
+}
+
+/// `path` as the machine whose files a mirror holds names it (`<mirror>/a/b` → `/a/b`);
+/// a path in no mirror as it is.
+pub fn unmirror(path: &Path) -> PathBuf {
+    match mirror_of(path) {
+        Some(root) => match path.strip_prefix(&root) {
+            Ok(rest) => Path::new("/").join(rest),
+            Err(_) => path.to_path_buf(),
+        },
+        None => path.to_path_buf(),
+    }
+}
 
 /// `path` made absolute against the working directory and normalised. A path that is
 /// already absolute is only normalised. Without a working directory (it was removed), the
@@ -35,10 +78,14 @@ pub fn folder_of(path: &Path) -> PathBuf {
 
 /// `name`, as written in a file whose folder is `base`: an absolute name as it is, a
 /// relative one joined to `base`; normalised either way. `base` should come from
-/// [`folder_of`] so that the result is absolute.
+/// [`folder_of`] so that the result is absolute. In a mirror (a file of the coordinator's
+/// on a cluster worker), an absolute name is the coordinator's: resolved in the mirror.
 pub fn resolve(base: &Path, name: &Path) -> PathBuf {
     if name.is_absolute() {
-        normalize(name)
+        match mirror_of(base) {
+            Some(root) => normalize(&root.join(name.strip_prefix("/").unwrap_or(name))),
+            None => normalize(name),
+        }
     } else {
         normalize(&base.join(name))
     }
@@ -96,6 +143,39 @@ fn is_symlink(path: &Path) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A mirror holds the coordinator's files at their paths: names in its files resolve
+    /// inside it, relative or absolute, and its paths read back as the coordinator's.
+    #[test]
+    fn names_in_a_mirror_resolve_inside_it() {
+        let root = Path::new("/srv/worker/mirrors/ab12");
+        register_mirror(root);
+        let base = root.join("home/me/studies");
+        assert_eq!(
+            resolve(&base, Path::new("../systems/lap.toml")),
+            root.join("home/me/systems/lap.toml")
+        );
+        assert_eq!(
+            resolve(&base, Path::new("/home/me/fmu/vehicle.fmu")),
+            root.join("home/me/fmu/vehicle.fmu")
+        );
+        // Outside a mirror an absolute name stays as it is.
+        assert_eq!(
+            resolve(
+                Path::new("/home/me/studies"),
+                Path::new("/home/me/fmu/v.fmu")
+            ),
+            Path::new("/home/me/fmu/v.fmu")
+        );
+        assert_eq!(
+            unmirror(&root.join("home/me/fmu/v.fmu")),
+            Path::new("/home/me/fmu/v.fmu")
+        );
+        assert_eq!(
+            unmirror(Path::new("/elsewhere/x")),
+            Path::new("/elsewhere/x")
+        );
+    }
 
     #[test]
     fn normalize_folds_dots() {

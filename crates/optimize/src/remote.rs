@@ -100,6 +100,18 @@ pub struct InputDigest {
 }
 
 impl InputDigest {
+    /// Each file's content hash: the SHA-256 of its bytes (an FMU's entry starts with its
+    /// archive's), which a worker without the coordinator's disk asks for its copy by.
+    pub fn contents(&self) -> Vec<(PathBuf, String)> {
+        self.files
+            .iter()
+            .map(|(p, d)| {
+                let sha = d.split(' ').next().unwrap_or(d);
+                (p.clone(), sha.to_string())
+            })
+            .collect()
+    }
+
     pub fn of(study: &Study, bench: &Bench) -> Result<InputDigest, OptimizeError> {
         let mut paths = vec![study.path.clone()];
         for l in &bench.laps {
@@ -117,17 +129,20 @@ impl InputDigest {
                 // An FMU's content hash is the unpack cache's (kept in its index: no
                 // second read and hash of the archive); its unpacked content is verified
                 // (a cache `verifying_all` did so when it loaded it, repairing what differed).
+                // A worker's mirror of the coordinator's files (docs/distributed.md) names
+                // each file as the coordinator does, so that the two digests are equal.
+                let named = tb_files::unmirror(&p);
                 if let Some(plan) = plan {
                     let fmu = plan.cache.load(&p).map_err(tb_cosim::SystemError::from)?;
                     fmu.verify_all().map_err(tb_cosim::SystemError::from)?;
                     let digest = format!("{} unpacked {}", fmu.sha256, fmu.manifest_digest());
-                    return Ok((p, digest));
+                    return Ok((named, digest));
                 }
                 let bytes = std::fs::read(&p).map_err(|e| OptimizeError::File {
                     path: p.clone(),
                     message: format!("cannot read: {e}"),
                 })?;
-                Ok((p, format!("{:x}", sha2::Sha256::digest(&bytes))))
+                Ok((named, format!("{:x}", sha2::Sha256::digest(&bytes))))
             })
             .collect::<Result<_, OptimizeError>>()?;
         Ok(InputDigest { files })
@@ -149,7 +164,7 @@ impl InputDigest {
             .find(|(a, b)| a.1 != b.1)
             .map(|(mine, _)| {
                 format!(
-                    "{} differs from the coordinator's copy (its digest here is {}): every worker needs the same files on a shared path, and the same unpacked FMUs",
+                    "{} differs from the coordinator's copy (its digest here is {}): every worker needs the same files (sent with the tasks on a Dask cluster, else on a shared path), and the same unpacked FMUs",
                     mine.0.display(),
                     mine.1
                 )

@@ -527,6 +527,12 @@ impl StudyEvaluatorPy {
         self.digest.clone()
     }
 
+    /// Every file the study reads with the SHA-256 of its bytes (an FMU's archive), as
+    /// the coordinator names it: what a worker without its disk asks for.
+    fn contents(&self) -> Vec<(PathBuf, String)> {
+        self.inner.digest().contents()
+    }
+
     /// Why the coordinator's digest is not this one (None when equal).
     fn mismatch(&self, theirs: &str) -> PyResult<Option<String>> {
         let theirs: tb_optimize::InputDigest = serde_json::from_str(theirs).map_err(|e| {
@@ -832,6 +838,14 @@ fn take_warnings() -> Vec<String> {
     std::mem::take(&mut *KEPT.lock().unwrap_or_else(|p| p.into_inner()))
 }
 
+/// Take `root` as a mirror of the coordinator's files (a cluster worker's copy of a
+/// study, each file at the coordinator's absolute path below it): names in the files
+/// below it resolve inside it, and digests name the files as the coordinator does.
+#[pyfunction]
+fn register_mirror(root: PathBuf) {
+    tb_files::register_mirror(&root);
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // A host that installed its own logger keeps it.
@@ -847,6 +861,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
     m.add_function(wrap_pyfunction!(load_study, m)?)?;
+    m.add_function(wrap_pyfunction!(register_mirror, m)?)?;
     m.add_class::<StudyEvaluatorPy>()?;
     m.add_class::<OptimizerPy>()?;
     Ok(())

@@ -410,9 +410,10 @@ class Study:
             executor: a ``concurrent.futures.Executor`` for the generations' candidates,
                 one task per candidate (Dask: ``Client.get_executor()``), and for the
                 joint fit after the steps (refinement, profiles) one task per point.
-                Every worker process needs twinbench installed and the study's files at
-                the same paths; it loads the study once and keeps it. None: this
-                process's threads.
+                Every worker process needs twinbench installed; on a Dask cluster the
+                study's files travel with the tasks by content (no shared disk needed),
+                with another executor they are read at the same paths. A worker loads
+                the study once and keeps it. None: this process's threads.
             threads: threads for the local runs (all of them without an executor: the
                 generations and the joint fit; with one: the start, identifiability and
                 result runs).
@@ -425,7 +426,8 @@ class Study:
             force: optimise even when the measurement and the twin do not belong together.
             report: write Tab. 1 and the plots.
             progress: called after every generation with a dict (generation,
-                evaluations, best_cost, best_x, failures).
+                evaluations, best_cost, best_x, failures; on a Dask cluster also
+                workers, the workers it has now).
             profiles: profile likelihood of every parameter after the joint refinement
                 (as ``--profiles``); the intervals are then the profiles'.
 
@@ -444,28 +446,44 @@ class Study:
         """
         import json
 
-        function = signals = digest = None
+        function = signals = digest = shipped = None
         if executor is not None:
-            from . import _worker
+            from . import _shipping, _worker
 
             function, signals = _worker.cost, _worker.signals
             digest = self._loaded().digest
-        text = _native.optimize(
-            os.fspath(self.path),
-            os.fspath(out if out is not None else "target/optimize"),
-            _threads(threads),
-            bool(resume),
-            generations,
-            optimizer,
-            bool(force),
-            not report,
-            executor,
-            function,
-            digest,
-            progress,
-            bool(profiles),
-            signals,
-        )
+            # A Dask cluster's workers get the study's files with the tasks.
+            executor = _shipping.shipping(executor, os.fspath(self.path), self._loaded())
+            if isinstance(executor, _shipping.ShippingExecutor):
+                shipped = executor
+                if progress is not None:
+                    # The cluster's workers now (less any refused) in every record.
+                    user_progress = progress
+
+                    def progress(record, _shipped=shipped, _user=user_progress):
+                        record["workers"] = _shipped.workers()
+                        return _user(record)
+
+        try:
+            text = _native.optimize(
+                os.fspath(self.path),
+                os.fspath(out if out is not None else "target/optimize"),
+                _threads(threads),
+                bool(resume),
+                generations,
+                optimizer,
+                bool(force),
+                not report,
+                executor,
+                function,
+                digest,
+                progress,
+                bool(profiles),
+                signals,
+            )
+        finally:
+            if shipped is not None:
+                shipped.close()
         result = json.loads(text)
         # The study's answer (Tab. 1's row "all"): every parameter with its interval; a
         # result without one (written before it was made) gives each step's own.
@@ -536,13 +554,18 @@ class Study:
         if executor is None:
             results = loaded.costs(step, full, _threads(threads))
         else:
-            from . import _worker
+            from . import _shipping, _worker
 
-            futures = [
-                executor.submit(_worker.cost, os.fspath(self.path), loaded.digest, step, v)
-                for v in full
-            ]
-            results = [f.result() for f in futures]
+            executor = _shipping.shipping(executor, os.fspath(self.path), loaded)
+            try:
+                futures = [
+                    executor.submit(_worker.cost, os.fspath(self.path), loaded.digest, step, v)
+                    for v in full
+                ]
+                results = [f.result() for f in futures]
+            finally:
+                if isinstance(executor, _shipping.ShippingExecutor):
+                    executor.close()
         penalty = self.penalty if penalty is None else float(penalty)
         if not (math.isfinite(penalty) and penalty >= 0.0):
             raise TwinbenchError(f"penalty = {penalty!r}: a cost, a finite number >= 0")

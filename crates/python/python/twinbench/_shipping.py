@@ -1,0 +1,385 @@
+"""A study's files sent to Dask workers by their content, not by their path.
+
+A worker of a cluster without a shared disk (Dask on Kubernetes, a cloud cluster, a
+colleague's workstation) has none of the coordinator's files. The coordinator therefore
+hands each file to Dask once, as a future of its bytes published under a name of the study's
+(``twinbench-<id>-<sha256>``, a Dask dataset: the scheduler keeps the task that makes it,
+so the bytes are made again if the worker holding them dies), and every task names the
+files it needs by path, digest and that name only (a few hundred bytes per file). A worker looks each digest up in its own
+content-addressed store (``TWINBENCH_FILES``, else ``~/.cache/twinbench/files``):
+
+- a file it holds is hashed once per process: a copy with another content (a changed
+  byte) is thrown away and fetched again, never used;
+- a file it lacks is the coordinator's own path when that holds the same bytes (a shared
+  file system: nothing travels), else fetched through Dask (the future's bytes, from
+  whichever worker holds them; recomputed from the task graph if that worker died),
+  checked against its digest and written atomically, read-only.
+
+The files are then linked into a **mirror**, a folder holding each at the coordinator's
+absolute path below it, which the Rust side resolves names in (``tb_files::paths``). A
+task also carries the coordinator's twinbench version and platform: a worker with another
+is refused with a message naming it (:class:`WorkerRefused`), and the coordinator sends its
+tasks to the other workers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import sys
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Tuple
+
+from . import _native
+from ._native import TwinbenchError
+
+# The first element of a shipped study's task argument, and its layout's version.
+_TAG = "twinbench-shipment"
+_LAYOUT = 1
+
+_lock = threading.Lock()
+# Content hashes this process has verified in its store, and the mirrors it has built.
+_verified: set = set()
+_mirrors: Dict[str, str] = {}
+
+
+class WorkerRefused(TwinbenchError):
+    """A worker that cannot run the study (another twinbench version or platform): the
+    coordinator sends its tasks elsewhere. ``worker`` is its Dask address."""
+
+    def __init__(self, message: str, worker: str = ""):
+        super().__init__(message)
+        self.worker = worker
+
+    def __reduce__(self):
+        return (WorkerRefused, (str(self), self.worker))
+
+
+def platform_name() -> str:
+    """What a worker must share with the coordinator to run its FMUs' binaries."""
+    return f"{sys.platform}-{platform.machine()}"
+
+
+def store_dir() -> Path:
+    """The worker's content-addressed store of study files."""
+    env = os.environ.get("TWINBENCH_FILES")
+    if env:
+        return Path(env)
+    return Path.home() / ".cache" / "twinbench" / "files"
+
+
+def _sha256_of_file(path: Path) -> Optional[str]:
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def _content(data: bytes) -> bytes:
+    """A file's bytes as a Dask task's result (kept by the scheduler's graph: recomputed on
+    another worker if the one holding them dies)."""
+    return data
+
+
+# ---- the coordinator's side ----
+
+
+class Shipment:
+    """The study's files as tasks name them: per file the coordinator's path, its SHA-256
+    and the Dask key of its bytes. ``arg`` is the first argument of every task."""
+
+    def __init__(self, client: Any, loaded: Any, study: str):
+        import uuid
+
+        self._client = client
+        self._names: List[str] = []
+        ident = uuid.uuid4().hex[:12]
+        files = []
+        self.bytes_per_study = 0
+        contents = loaded.contents()
+        # The study's own path as the Rust side resolved it (absolute, normalised): the
+        # first of its files.
+        study = os.fspath(contents[0][0]) if contents else study
+        for path, sha in contents:
+            path = os.fspath(path)
+            data = Path(path).read_bytes()
+            if hashlib.sha256(data).hexdigest() != sha:
+                raise TwinbenchError(
+                    f"{path} changed since the study was loaded: load it again (twinbench.Study) before sending it to the cluster"
+                )
+            name = f"twinbench-{ident}-{sha}"
+            if name not in self._names:
+                future = client.submit(_content, data, key=name, pure=False)
+                client.publish_dataset(future, name=name)
+                self._names.append(name)
+            files.append((path, sha, name))
+            self.bytes_per_study += len(data)
+        self.arg = (
+            _TAG,
+            _LAYOUT,
+            os.fspath(study),
+            tuple(files),
+            _native.__version__,
+            platform_name(),
+        )
+
+    def close(self) -> None:
+        """Take the study's files off the cluster (the workers keep their stores)."""
+        for name in self._names:
+            try:
+                self._client.unpublish_dataset(name)
+            except Exception:
+                pass
+        self._names = []
+
+
+class ShippingExecutor:
+    """An executor over a Dask client whose tasks carry the study's :class:`Shipment`
+    instead of its path (what the study's native loop submits: ``submit(fn, study,
+    digest, *args)``). A task a worker refuses goes to the others."""
+
+    def __init__(self, client: Any, shipment: Shipment):
+        self.client = client
+        self.shipment = shipment
+        self.refused: Dict[str, str] = {}
+        self._lock = threading.Lock()
+
+    def submit(self, fn, study, *args):
+        return _ShippedTask(self, fn, args)
+
+    def _submit(self, fn, args):
+        kwargs = {}
+        with self._lock:
+            refused = dict(self.refused)
+        if refused:
+            workers = self.client.scheduler_info(n_workers=-1).get("workers", {})
+            allowed = [w for w in workers if w not in refused]
+            if not allowed:
+                raise TwinbenchError(
+                    "no worker of the cluster can run the study: " + "; ".join(refused.values())
+                )
+            kwargs = {"workers": allowed, "allow_other_workers": False}
+        return self.client.submit(fn, self.shipment.arg, *args, pure=False, **kwargs)
+
+    def close(self) -> None:
+        self.shipment.close()
+
+    def workers(self) -> int:
+        """The workers of the cluster now, less the refused ones."""
+        workers = self.client.scheduler_info(n_workers=-1).get("workers", {})
+        return len([w for w in workers if w not in self.refused])
+
+
+class _ShippedTask:
+    """One task: resubmitted to the other workers when one refuses it."""
+
+    def __init__(self, executor: ShippingExecutor, fn, args):
+        self._executor, self._fn, self._args = executor, fn, args
+        self._future = executor._submit(fn, args)
+
+    def result(self, timeout=None):
+        while True:
+            try:
+                return self._future.result(timeout=timeout)
+            except WorkerRefused as e:
+                import warnings
+
+                with self._executor._lock:
+                    first = e.worker not in self._executor.refused
+                    self._executor.refused[e.worker] = str(e)
+                if first:
+                    warnings.warn(f"{e}; its tasks go to the other workers", stacklevel=2)
+                self._future = self._executor._submit(self._fn, self._args)
+
+    def cancel(self):
+        return self._future.cancel()
+
+    def done(self):
+        return self._future.done()
+
+
+def dask_client(executor: Any) -> Any:
+    """The Dask client behind ``executor`` (a ``Client`` or its ``get_executor()``), or
+    None for any other executor."""
+    if executor is None:
+        return None
+    mod = type(executor).__module__
+    if mod.startswith("distributed"):
+        if hasattr(executor, "submit") and hasattr(executor, "scheduler_info"):
+            return executor
+        client = getattr(executor, "_client", None)
+        if client is not None and hasattr(client, "scheduler_info"):
+            return client
+    return None
+
+
+def shipping(executor: Any, study: str, loaded: Any) -> Any:
+    """``executor`` with the study's files sent by content when it is a Dask cluster's;
+    any other executor as it is (its workers read the files at their paths)."""
+    client = dask_client(executor)
+    if client is None:
+        return executor
+    return ShippingExecutor(client, Shipment(client, loaded, study))
+
+
+# ---- the worker's side ----
+
+
+def is_shipment(study: Any) -> bool:
+    return isinstance(study, tuple) and len(study) >= 2 and study[0] == _TAG
+
+
+def _worker_address() -> str:
+    try:
+        from distributed import get_worker
+
+        return get_worker().address
+    except Exception:
+        return f"process {os.getpid()} on {platform.node()}"
+
+
+def _fetch(name: str) -> bytes:
+    """A file's bytes from the cluster (the dataset the coordinator published)."""
+    from distributed import get_client, rejoin, secede
+
+    client = get_client()
+    # Waiting on the cluster: give this task's thread back meanwhile (the bytes may have
+    # to be made again, on a worker whose threads are all waiting here).
+    secede()
+    try:
+        return client.get_dataset(name).result()
+    finally:
+        rejoin()
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".incoming-")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o444)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def _blob(store: Path, path: str, sha: str, key: str) -> Path:
+    """The store's copy of the file of content `sha`, verified; fetched when missing or
+    different."""
+    blob = store / "sha256" / sha[:2] / sha
+    with _lock:
+        if sha in _verified and blob.is_file():
+            return blob
+    if blob.exists():
+        if _sha256_of_file(blob) == sha:
+            with _lock:
+                _verified.add(sha)
+            return blob
+        # A changed copy (a flipped byte, a truncated write): never used, fetched again.
+        import warnings
+
+        warnings.warn(
+            f"worker {_worker_address()}: its stored copy of {path} ({blob}) does not have the content {sha}; fetched again"
+        )
+        try:
+            os.chmod(blob, 0o644)
+            blob.unlink()
+        except OSError:
+            pass
+    # A shared file system: the coordinator's path holds the same bytes here.
+    local = Path(path)
+    data = None
+    if local.is_file() and _sha256_of_file(local) == sha:
+        data = local.read_bytes()
+    if data is None or hashlib.sha256(data).hexdigest() != sha:
+        data = _fetch(key)
+    if hashlib.sha256(data).hexdigest() != sha:
+        raise TwinbenchError(
+            f"worker {_worker_address()}: {path} arrived with another content than its digest {sha}"
+        )
+    _write_atomically(blob, data)
+    with _lock:
+        _verified.add(sha)
+    return blob
+
+
+def _link(target: Path, link: Path) -> None:
+    """`link` made a hard link of `target` (a copy across file systems), replacing what
+    was there."""
+    link.parent.mkdir(parents=True, exist_ok=True)
+    tmp = link.with_name(f".{link.name}.{os.getpid()}.{threading.get_ident()}")
+    try:
+        os.link(target, tmp)
+    except OSError:
+        import shutil
+
+        shutil.copyfile(target, tmp)
+    os.replace(tmp, link)
+
+
+def study_path(study: Any) -> str:
+    """The path a worker loads a study from: the coordinator's path when the task names
+    it by path; for a shipment, the study in this worker's mirror of its files (built once
+    per process), after the version and platform check."""
+    if not is_shipment(study):
+        return study
+    _, layout, coordinator_path, files, version, plat = study[:6]
+    address = _worker_address()
+    if layout != _LAYOUT:
+        raise WorkerRefused(
+            f"worker {address}: the coordinator's tasks are of layout {layout}, this twinbench ({_native.__version__}) reads {_LAYOUT}",
+            address,
+        )
+    if version != _native.__version__:
+        raise WorkerRefused(
+            f"worker {address} runs twinbench {_native.__version__}, the coordinator {version}: install the same version on every worker",
+            address,
+        )
+    if plat != platform_name():
+        raise WorkerRefused(
+            f"worker {address} is {platform_name()}, the coordinator {plat}: the study's FMUs need the coordinator's platform",
+            address,
+        )
+    ident = hashlib.sha256(repr(sorted((p, s) for p, s, _ in files)).encode()).hexdigest()[:32]
+    with _lock:
+        done = _mirrors.get(ident)
+    if done is not None:
+        return done
+    # A shared file system: every file is at the coordinator's path with its content here.
+    if all(_sha256_of_file(Path(p)) == s for p, s, _ in files):
+        with _lock:
+            _mirrors[ident] = coordinator_path
+        return coordinator_path
+    store = store_dir()
+    mirror = store / "mirrors" / ident
+    # Every file in place first, then the mirror's links (a repaired blob is a new file:
+    # the links are made again each time).
+    blobs: List[Tuple[str, Path]] = [(p, _blob(store, p, s, k)) for p, s, k in files]
+    for p, blob in blobs:
+        _link(blob, mirror / p.lstrip("/"))
+    _native.register_mirror(os.fspath(mirror))
+    local = os.fspath(mirror / coordinator_path.lstrip("/"))
+    with _lock:
+        _mirrors[ident] = local
+    return local
+
+
+def forget() -> None:
+    """Forget what this process verified and built (for tests)."""
+    with _lock:
+        _verified.clear()
+        _mirrors.clear()
