@@ -15,14 +15,11 @@ Needs root (or unprivileged user namespaces) for `unshare --mount`; run by tools
 from __future__ import annotations
 
 import hashlib
-import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
 import threading
-import time
 import warnings
 from pathlib import Path
 
@@ -31,93 +28,15 @@ import pytest
 import twinbench
 
 ROOT = Path(__file__).resolve().parents[3]
+sys.path.insert(0, str(ROOT / "tools"))
+from dask_cluster import Cluster, project  # noqa: E402
+
 EXE = Path(os.environ.get("TWINBENCH_EXE", ROOT / "target/release/twinbench"))
-BIN = Path(sys.executable).parent
 GENERATIONS = 2
-
-
-def project(folder: Path) -> Path:
-    """The bundled study, its system, lap and FMUs copied into `folder` with the same
-    layout (the study names them by relative paths): the study's folder."""
-    for rel in ["studies/spielberg.toml", "systems/rls_v.toml", "data/spielberg_lap.csv"]:
-        (folder / rel).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(ROOT / rel, folder / rel)
-    (folder / "target/fmu").mkdir(parents=True)
-    for name in ["vehicle", "driver", "dyno", "edu"]:
-        shutil.copyfile(ROOT / f"target/fmu/{name}.fmu", folder / f"target/fmu/{name}.fmu")
-    return folder / "studies/spielberg.toml"
 
 
 def table1(folder: Path) -> bytes:
     return (folder / "table1.json").read_bytes()
-
-
-class Cluster:
-    """A scheduler and workers started from their command lines; each worker sees an
-    empty folder where `hidden` is."""
-
-    def __init__(self, base: Path, hidden: Path):
-        self.base, self.hidden = base, hidden
-        self.file = base / "scheduler.json"
-        self.workers = {}
-        env = self._env(base / "scheduler")
-        self.scheduler = subprocess.Popen(
-            [BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
-             "--no-dashboard", "--scheduler-file", self.file],
-            cwd=base / "scheduler", env=env,
-            stdout=subprocess.DEVNULL, stderr=open(base / "scheduler.log", "w"),
-        )
-        deadline = time.time() + 60
-        while not self.file.exists():
-            assert self.scheduler.poll() is None, (base / "scheduler.log").read_text()
-            assert time.time() < deadline, "the scheduler did not start"
-            time.sleep(0.1)
-        from dask.distributed import Client
-
-        self.client = Client(scheduler_file=str(self.file), timeout="60s")
-
-    def _env(self, home: Path) -> dict:
-        home.mkdir(parents=True, exist_ok=True)
-        (home / "tmp").mkdir(exist_ok=True)
-        env = {k: v for k, v in os.environ.items() if not k.startswith("TWINBENCH_")}
-        env.update(HOME=str(home), TMPDIR=str(home / "tmp"), PYTHONDONTWRITEBYTECODE="1")
-        return env
-
-    def start_worker(self, name: str, preload: Path | None = None) -> subprocess.Popen:
-        home = self.base / name
-        env = self._env(home)
-        dask = [BIN / "dask", "worker", "--scheduler-file", self.file, "--name", name,
-                "--nthreads", "1", "--no-nanny", "--no-dashboard",
-                "--local-directory", home / "dask"]
-        if preload is not None:
-            dask += ["--preload", preload]
-        # The study's folder is an empty tmpfs in the worker's own mount namespace.
-        cmd = ["unshare", "--mount", "--propagation", "private", "--", "sh", "-c",
-               'mount -t tmpfs tmpfs "$0" && exec "$@"', self.hidden, *map(str, dask)]
-        p = subprocess.Popen(cmd, cwd=home, env=env, stdout=subprocess.DEVNULL,
-                             stderr=open(self.base / f"{name}.log", "w"))
-        self.workers[name] = p
-        return p
-
-    def wait_for(self, n: int):
-        self.client.wait_for_workers(n, timeout=120)
-
-    def store(self, name: str) -> Path:
-        return self.base / name / ".cache/twinbench/files"
-
-    def close(self):
-        try:
-            self.client.close()
-        finally:
-            for p in [*self.workers.values(), self.scheduler]:
-                if p.poll() is None:
-                    p.send_signal(signal.SIGTERM)
-            for p in [*self.workers.values(), self.scheduler]:
-                try:
-                    p.wait(timeout=20)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
 
 
 @pytest.fixture(scope="module")
@@ -212,13 +131,16 @@ def test_a_changed_byte_in_a_workers_store_is_fetched_again(cluster, cli_table, 
     assert "does not have the content" in log and "fetched again" in log, log[-3000:]
 
 
-def test_a_worker_of_another_version_is_refused_by_name(cluster, cli_table, tmp_path):
+def test_workers_of_another_version_or_platform_are_refused_by_name(cluster, cli_table, tmp_path):
     c, study = cluster
     other = tmp_path / "other_version.py"
     other.write_text("import twinbench._native as n\nn.__version__ = '0.0.0-other'\n")
+    alien = tmp_path / "other_platform.py"
+    alien.write_text("import twinbench._shipping as s\ns.platform_name = lambda: 'win32-ARM64'\n")
     c.start_worker("good")
     c.start_worker("old", preload=other)
-    c.wait_for(2)
+    c.start_worker("alien", preload=alien)
+    c.wait_for(3)
     out = tmp_path / "out"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -229,3 +151,6 @@ def test_a_worker_of_another_version_is_refused_by_name(cluster, cli_table, tmp_
     assert said, [str(w.message) for w in caught]
     assert f"the coordinator {twinbench.__version__}" in said[0]
     assert "its tasks go to the other workers" in said[0]
+    assert any("is win32-ARM64, the coordinator linux-x86_64" in str(w.message) for w in caught), [
+        str(w.message) for w in caught
+    ]

@@ -453,8 +453,9 @@ class Study:
             function, signals = _worker.cost, _worker.signals
             digest = self._loaded().digest
             # A Dask cluster's workers get the study's files with the tasks.
+            given = executor
             executor = _shipping.shipping(executor, os.fspath(self.path), self._loaded())
-            if isinstance(executor, _shipping.ShippingExecutor):
+            if executor is not given:
                 shipped = executor
                 if progress is not None:
                     # The cluster's workers now (less any refused) in every record.
@@ -556,16 +557,18 @@ class Study:
         else:
             from . import _shipping, _worker
 
-            executor = _shipping.shipping(executor, os.fspath(self.path), loaded)
+            # A Dask cluster's workers get the study's files with the tasks (a
+            # ShippingExecutor made once serves many calls: `_shipping.shipping`).
+            shipped = _shipping.shipping(executor, os.fspath(self.path), loaded)
             try:
                 futures = [
-                    executor.submit(_worker.cost, os.fspath(self.path), loaded.digest, step, v)
+                    shipped.submit(_worker.cost, os.fspath(self.path), loaded.digest, step, v)
                     for v in full
                 ]
                 results = [f.result() for f in futures]
             finally:
-                if isinstance(executor, _shipping.ShippingExecutor):
-                    executor.close()
+                if shipped is not executor:
+                    shipped.close()
         penalty = self.penalty if penalty is None else float(penalty)
         if not (math.isfinite(penalty) and penalty >= 0.0):
             raise TwinbenchError(f"penalty = {penalty!r}: a cost, a finite number >= 0")
