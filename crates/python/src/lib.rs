@@ -348,12 +348,22 @@ struct PyProgress {
     callback: Py<PyAny>,
     raised: Mutex<Option<PyErr>>,
     stop: Arc<AtomicBool>,
+    /// The step under way: its number (1-based), name and generations.
+    step: Mutex<(usize, String, usize)>,
 }
 
 impl Progress for PyProgress {
+    fn step_started(&self, step: usize, name: &str, generations: usize, _done: usize) {
+        *self.step.lock().unwrap_or_else(|p| p.into_inner()) = (step, name.into(), generations);
+    }
+
     fn generation(&self, record: &GenerationRecord) {
+        let (step, name, generations) = self.step.lock().unwrap_or_else(|p| p.into_inner()).clone();
         Python::attach(|py| {
             let d = PyDict::new(py);
+            let _ = d.set_item("step", step);
+            let _ = d.set_item("step_name", name);
+            let _ = d.set_item("generations", generations);
             let _ = d.set_item("generation", record.generation);
             let _ = d.set_item("evaluations", record.evaluations);
             let _ = d.set_item("best_cost", record.best_cost);
@@ -435,6 +445,7 @@ fn optimize(
             callback,
             raised: Mutex::new(None),
             stop: interrupt.clone(),
+            step: Mutex::new((0, String::new(), 0)),
         })
     });
     let progress = py_progress.clone().map(|p| p as Arc<dyn Progress>);

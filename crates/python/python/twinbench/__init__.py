@@ -425,9 +425,9 @@ class Study:
             out: output folder (default ``target/optimize``, as the command line).
             force: optimise even when the measurement and the twin do not belong together.
             report: write Tab. 1 and the plots.
-            progress: called after every generation with a dict (generation,
-                evaluations, best_cost, best_x, failures; on a Dask cluster also
-                workers, the workers it has now).
+            progress: called after every generation with a dict (step, 1-based,
+                step_name, generations, generation, evaluations, best_cost, best_x,
+                failures; on a Dask cluster also workers, the workers it has now).
             profiles: profile likelihood of every parameter after the joint refinement
                 (as ``--profiles``); the intervals are then the profiles'.
 

@@ -4,9 +4,11 @@
     python -m twinbench optimize studies/spielberg.toml --scheduler tcp://head:8786
 
 ``--local N`` starts a LocalCluster of N worker processes (one thread each);
-``--scheduler`` joins a running cluster (every worker needs twinbench installed and the
-study's files at the same paths). Without either, the candidates run on this machine's
-threads, as ``twinbench optimize``. The output folder gets the same files as the command
+``--scheduler`` joins a running cluster (every worker needs twinbench installed in the
+same version; the study's files travel with the tasks). Without either, the candidates
+run on this machine's threads, as ``twinbench optimize``. A line per generation on stderr
+says the step, the generation, the candidates done, the best cost and the workers
+(``--quiet``: none). The output folder gets the same files as the command
 line's (checkpoint, result.json, table1.json, the report); ``--resume`` continues from
 its checkpoint.
 """
@@ -40,6 +42,7 @@ def _parser() -> argparse.ArgumentParser:
     o.add_argument("--no-report", action="store_true", help="skip Tab. 1 and the plots")
     o.add_argument("--profiles", action="store_true", help="profile likelihood of every parameter (its laps on the cluster too)")
     o.add_argument("--json", action="store_true", help="print the result as JSON")
+    o.add_argument("--quiet", "-q", action="store_true", help="no line per generation on stderr")
     k = sub.add_parser("pack", help="pack twinbench's FMUs (vehicle, driver, dyno, edu) as `twinbench pack` does")
     k.add_argument("models", nargs="*", help="the models to pack (default: all four)")
     k.add_argument("--out", "-o", type=Path, help="output folder (default: ~/.local/share/twinbench/fmu)")
@@ -77,7 +80,19 @@ def _optimize(args: argparse.Namespace) -> int:
                 client = Client(args.scheduler)
         executor = client.get_executor() if client is not None else None
         started = time.perf_counter()
+
+        def progress(r):
+            # One line per generation on stderr (stdout keeps the table or the JSON).
+            workers = f", {r['workers']} workers" if "workers" in r else ""
+            print(
+                f"step {r['step']} {r['step_name']}: generation {r['generation']} of {r['generations']}, "
+                f"{r['evaluations']} candidates done, best cost {r['best_cost']:.6g}{workers}",
+                file=sys.stderr,
+                flush=True,
+            )
+
         result = study.optimize(
+            progress=None if args.quiet else progress,
             executor=executor,
             threads=args.threads,
             resume=args.resume,
