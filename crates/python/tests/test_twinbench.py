@@ -369,6 +369,33 @@ def test_ask_tell_with_an_optimiser_of_ones_own(cli_study):
         study.evaluate(0, [[1.0]])
 
 
+def test_evaluate_on_dask_sends_the_study_files_once_per_cluster(tmp_path):
+    """An ask/tell loop of one's own on a Dask cluster: every generation's costs equal the
+    threads', and the study's files are published to the cluster once (by content), not
+    per call; they leave the cluster with the Study."""
+    import gc
+
+    study = twinbench.Study(STUDY)
+    step = study.steps[0]
+    cands = [[lo + (k + 1) * (hi - lo) / 5 for lo, hi in step.bounds] for k in range(3)]
+    here = study.evaluate(0, cands, threads=1)
+    cluster, client = local_cluster(tmp_path)
+    try:
+        ex = client.get_executor()
+        assert study.evaluate(0, cands, executor=ex) == here
+        published = set(client.list_datasets())
+        files = {sha for _, sha in study._loaded().contents()}
+        assert {n.rsplit("-", 1)[1] for n in published} == files
+        assert study.evaluate(0, cands[::-1], executor=ex) == here[::-1]
+        assert set(client.list_datasets()) == published, "published again"
+        del study
+        gc.collect()
+        assert client.list_datasets() == ()
+    finally:
+        client.close()
+        cluster.close()
+
+
 # ---- the first hour ----
 
 

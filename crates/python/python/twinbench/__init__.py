@@ -365,6 +365,8 @@ class Study:
             self.seed,
         ) = _native.load_study(os.fspath(self.path))
         self._evaluator = None
+        # Per Dask client: the executor that sends this study's files (see _shipping).
+        self._shipped = {}
 
     def __repr__(self) -> str:
         return f"Study({str(self.path)!r}, name={self.name!r})"
@@ -374,6 +376,25 @@ class Study:
         if self._evaluator is None:
             self._evaluator = _native.StudyEvaluatorPy(os.fspath(self.path))
         return self._evaluator
+
+    def _shipping(self, executor):
+        """`executor`, or for a Dask cluster's the one that sends this study's files by
+        content: made once per cluster, its files taken off the cluster when this Study
+        is gone."""
+        from . import _shipping
+
+        client = _shipping.dask_client(executor)
+        if client is None:
+            return executor
+        key = id(client)
+        shipped = self._shipped.get(key)
+        if shipped is None or shipped.client is not client:
+            import weakref
+
+            shipped = _shipping.shipping(executor, os.fspath(self.path), self._loaded())
+            self._shipped[key] = shipped
+            weakref.finalize(self, shipped.close)
+        return shipped
 
     @property
     def steps(self) -> List[StudyStep]:
@@ -557,18 +578,14 @@ class Study:
         else:
             from . import _shipping, _worker
 
-            # A Dask cluster's workers get the study's files with the tasks (a
-            # ShippingExecutor made once serves many calls: `_shipping.shipping`).
-            shipped = _shipping.shipping(executor, os.fspath(self.path), loaded)
-            try:
-                futures = [
-                    shipped.submit(_worker.cost, os.fspath(self.path), loaded.digest, step, v)
-                    for v in full
-                ]
-                results = [f.result() for f in futures]
-            finally:
-                if shipped is not executor:
-                    shipped.close()
+            # A Dask cluster's workers get the study's files with the tasks, published
+            # once for every call on that cluster while this Study lives.
+            shipped = self._shipping(executor)
+            futures = [
+                shipped.submit(_worker.cost, os.fspath(self.path), loaded.digest, step, v)
+                for v in full
+            ]
+            results = [f.result() for f in futures]
         penalty = self.penalty if penalty is None else float(penalty)
         if not (math.isfinite(penalty) and penalty >= 0.0):
             raise TwinbenchError(f"penalty = {penalty!r}: a cost, a finite number >= 0")

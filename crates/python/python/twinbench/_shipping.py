@@ -339,6 +339,13 @@ def study_path(study: Any) -> str:
         return study
     _, layout, coordinator_path, files, version, plat = study[:6]
     address = _worker_address()
+    for p, sha, _ in files:
+        # Names below the mirror and in the store: nothing may climb out of either.
+        parts = Path(p).parts
+        if not p.startswith("/") or ".." in parts or len(sha) != 64 or not all(c in "0123456789abcdef" for c in sha):
+            raise TwinbenchError(
+                f"worker {address}: the coordinator named a file {p!r} with digest {sha!r}; expected an absolute path without '..' and a SHA-256 in hexadecimal"
+            )
     if layout != _LAYOUT:
         raise WorkerRefused(
             f"worker {address}: the coordinator's tasks are of layout {layout}, this twinbench ({_native.__version__}) reads {_LAYOUT}",
