@@ -396,6 +396,19 @@ def test_evaluate_on_dask_sends_the_study_files_once_per_cluster(tmp_path):
         cluster.close()
 
 
+def test_a_worker_refuses_a_shipment_that_would_climb_out_of_its_store(tmp_path, monkeypatch):
+    from twinbench import _shipping
+
+    monkeypatch.setenv("TWINBENCH_FILES", str(tmp_path / "store"))
+    sha = "0" * 64
+    for path, digest in [("/a/../../etc/passwd", sha), ("relative/x.toml", sha), ("/a/x.toml", "../" + "0" * 61)]:
+        shipment = (_shipping._TAG, _shipping._LAYOUT, "/a/x.toml", ((path, digest, "name"),),
+                    twinbench.__version__, _shipping.platform_name())
+        with pytest.raises(twinbench.TwinbenchError, match="expected an absolute path without '..' and a SHA-256"):
+            _shipping.study_path(shipment)
+    assert not (tmp_path / "store").exists()
+
+
 # ---- the first hour ----
 
 

@@ -405,38 +405,32 @@ impl MeInstance {
         }
     }
 
-    /// A common call's error (from [`Instance`]) as this instance's.
+    /// A common call's error (from [`Instance`] or [`Instance3`]) as this instance's.
     fn wrap(&self, e: FmuError) -> FmuError {
-        match e {
+        let (call, status, time, log): (Box<str>, String, f64, Vec<String>) = match e {
             FmuError::Call {
                 function,
                 status,
                 time,
                 log,
                 ..
-            } => FmuError::ModelExchange {
-                fmu: self.fmu.clone().into_boxed_path(),
-                instance: self.inst.name().to_string(),
-                time,
-                call: function.name().into(),
-                problem: format!("returned {status}"),
-                log,
-            },
+            } => (function.name().into(), status.to_string(), time, log),
             FmuError::Call3 {
                 function,
                 status,
                 time,
                 log,
                 ..
-            } => FmuError::ModelExchange {
-                fmu: self.fmu.clone().into_boxed_path(),
-                instance: self.inst.name().to_string(),
-                time,
-                call: function.into(),
-                problem: format!("returned {status}"),
-                log,
-            },
-            other => other,
+            } => (function.into(), status, time, log),
+            other => return other,
+        };
+        FmuError::ModelExchange {
+            fmu: self.fmu.clone().into_boxed_path(),
+            instance: self.inst.name().to_string(),
+            time,
+            call,
+            problem: format!("returned {status}"),
+            log,
         }
     }
 
