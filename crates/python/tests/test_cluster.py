@@ -131,7 +131,7 @@ def test_a_changed_byte_in_a_workers_store_is_fetched_again(cluster, cli_table, 
     assert "does not have the content" in log and "fetched again" in log, log[-3000:]
 
 
-def test_workers_of_another_version_or_platform_are_refused_by_name(cluster, cli_table, tmp_path):
+def test_workers_of_another_version_or_platform_or_without_a_store_are_refused_by_name(cluster, cli_table, tmp_path):
     c, study = cluster
     other = tmp_path / "other_version.py"
     other.write_text("import twinbench._native as n\nn.__version__ = '0.0.0-other'\n")
@@ -140,7 +140,12 @@ def test_workers_of_another_version_or_platform_are_refused_by_name(cluster, cli
     c.start_worker("good")
     c.start_worker("old", preload=other)
     c.start_worker("alien", preload=alien)
-    c.wait_for(3)
+    # A worker whose store is a file, not a folder: it cannot keep the study's files.
+    (tmp_path / "full").mkdir()
+    c.store("full").parent.mkdir(parents=True)
+    c.store("full").write_text("not a folder")
+    c.start_worker("full")
+    c.wait_for(4)
     out = tmp_path / "out"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -154,3 +159,7 @@ def test_workers_of_another_version_or_platform_are_refused_by_name(cluster, cli
     assert any("is win32-ARM64, the coordinator linux-x86_64" in str(w.message) for w in caught), [
         str(w.message) for w in caught
     ]
+    assert any(
+        "cannot keep the study's files in its store" in str(w.message) and "TWINBENCH_FILES" in str(w.message)
+        for w in caught
+    ), [str(w.message) for w in caught]

@@ -373,11 +373,19 @@ def study_path(study: Any) -> str:
         return coordinator_path
     store = store_dir()
     mirror = store / "mirrors" / ident
-    # Every file in place first, then the mirror's links (a repaired blob is a new file:
-    # the links are made again each time).
-    blobs: List[Tuple[str, Path]] = [(p, _blob(store, p, s, k)) for p, s, k in files]
-    for p, blob in blobs:
-        _link(blob, mirror / p.lstrip("/"))
+    try:
+        # Every file in place first, then the mirror's links (a repaired blob is a new
+        # file: the links are made again each time).
+        blobs: List[Tuple[str, Path]] = [(p, _blob(store, p, s, k)) for p, s, k in files]
+        for p, blob in blobs:
+            _link(blob, mirror / p.lstrip("/"))
+    except OSError as e:
+        # A store it cannot write (full, read-only, not its own): this worker cannot run
+        # the study, the others can.
+        raise WorkerRefused(
+            f"worker {address} cannot keep the study's files in its store {store} ({e.strerror or e}: {e.filename}); set TWINBENCH_FILES to a folder it can write",
+            address,
+        ) from e
     _native.register_mirror(os.fspath(mirror))
     local = os.fspath(mirror / coordinator_path.lstrip("/"))
     with _lock:
