@@ -31,13 +31,13 @@ fn system(dir: &Path, tag: &str, fmi3: &[&str], stop: Option<f64>) -> std::path:
     path
 }
 
-/// `twinbench run SYSTEM [--isolate]`: the CSV's bytes.
-fn run(system: &Path, isolate: bool) -> Vec<u8> {
+/// `twinbench run SYSTEM [extra]`: the CSV's bytes.
+fn run_with(system: &Path, extra: &str) -> Vec<u8> {
     let csv = system.with_extension("csv");
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_twinbench"));
     cmd.arg("run").arg(system).arg("--out").arg(&csv);
-    if isolate {
-        cmd.arg("--isolate");
+    if !extra.is_empty() {
+        cmd.arg(extra);
     }
     let out = cmd.output().unwrap();
     assert!(
@@ -47,6 +47,25 @@ fn run(system: &Path, isolate: bool) -> Vec<u8> {
         String::from_utf8_lossy(&out.stderr)
     );
     std::fs::read(&csv).unwrap()
+}
+
+/// `twinbench run SYSTEM [--isolate]`: the CSV's bytes.
+fn run(system: &Path, isolate: bool) -> Vec<u8> {
+    run_with(system, if isolate { "--isolate" } else { "" })
+}
+
+/// `run --native` takes the FMI 3.0 FMUs as it takes the FMI 2.0 ones (their models linked
+/// into the binary, checked by the instantiation token): the same lap.
+#[test]
+fn the_fmi3_bench_runs_native_to_the_same_lap() {
+    let dir = tb_testkit::scratch("fmi3-native");
+    let all = ["vehicle", "driver", "dyno", "edu"];
+    let two = run(&system(dir.path(), "fmi2", &[], Some(20.0)), false);
+    let native = run_with(&system(dir.path(), "fmi3", &all, Some(20.0)), "--native");
+    assert!(
+        two == native,
+        "the native run of the FMI 3.0 system differs"
+    );
 }
 
 #[test]

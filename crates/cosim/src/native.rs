@@ -206,8 +206,10 @@ fn boxed<M: Model>(name: &str, res: Option<PathBuf>, logging: bool) -> Box<dyn B
 pub struct NativeModel {
     /// The model's name (`modelName` of its FMU).
     pub name: &'static str,
-    /// The GUID its FMU carries when built from the linked sources.
+    /// The GUID its FMI 2.0 FMU carries when built from the linked sources.
     pub guid: fn() -> String,
+    /// The instantiation token its FMI 3.0 FMU carries (the same table, another version).
+    pub token: fn() -> String,
     create: Create,
 }
 
@@ -216,6 +218,7 @@ impl NativeModel {
         NativeModel {
             name: M::INFO.name,
             guid: fmu_export::description::guid::<M>,
+            token: fmu_export::description3::instantiation_token::<M>,
             create: boxed::<M>,
         }
     }
@@ -247,10 +250,15 @@ impl NativeFactory {
                 linked.iter().map(|m| m.name).collect::<Vec<_>>().join(", ")
             ));
         };
-        let guid = (m.guid)();
+        // An FMI 3.0 FMU of the model has the same variables under the same value
+        // references (and `time`, which the native model does not expose).
+        let (what, guid) = match fmu.is_fmi3() {
+            true => ("instantiation token", (m.token)()),
+            false => ("GUID", (m.guid)()),
+        };
         if fmu.description.guid != guid {
             return Err(format!(
-                "{}: GUID {} differs from the linked '{}' model's {guid} (the FMU was built from other sources; repack it)",
+                "{}: {what} {} differs from the linked '{}' model's {guid} (the FMU was built from other sources; repack it)",
                 fmu.source.display(),
                 fmu.description.guid,
                 m.name
