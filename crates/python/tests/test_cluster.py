@@ -163,3 +163,39 @@ def test_workers_of_another_version_or_platform_or_without_a_store_are_refused_b
         "cannot keep the study's files in its store" in str(w.message) and "TWINBENCH_FILES" in str(w.message)
         for w in caught
     ), [str(w.message) for w in caught]
+
+
+def test_a_study_naming_its_files_by_absolute_paths_runs_on_workers_without_them(cluster, tmp_path):
+    """Two fitted laps and a held-out one, the system and laps named by absolute paths
+    (the coordinator's): on a worker they resolve in its mirror of those paths."""
+    c, study = cluster
+    project_dir = study.parents[1]
+    lap = (project_dir / "data/spielberg_lap.csv").as_posix()
+    system = (project_dir / "systems/rls_v.toml").as_posix()
+    lines = [
+        line
+        for line in study.read_text().splitlines()
+        if not line.startswith("measurement =") and not line.startswith("system =")
+    ]
+    entries = "".join(
+        f'[[measurement]]\nname = "{name}"\nfile = "{lap}"\nweight = {w}\n{extra}\n'
+        for name, w, extra in [
+            ("one", 1.0, ""),
+            ("two", 2.0, '[measurement.parameters]\n"vehicle.v_start" = 52.5\n'),
+            ("held", 1.0, "hold_out = true\n"),
+        ]
+    )
+    laps = project_dir / "studies/two_laps.toml"
+    laps.write_text(f'system = "{system}"\n' + "\n".join(lines) + "\n\n" + entries)
+    cli = tmp_path / "cli"
+    p = subprocess.run([str(EXE), "optimize", str(laps), "--out", str(cli), "--json",
+                        "--generations", "1"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    c.start_worker("w1")
+    c.start_worker("w2")
+    c.wait_for(2)
+    seen = c.client.run(lambda p=str(laps): os.path.exists(p))
+    assert not any(seen.values()), seen
+    out = tmp_path / "out"
+    twinbench.Study(laps).optimize(executor=c.client.get_executor(), out=out, generations=1)
+    assert table1(out) == table1(cli)

@@ -119,8 +119,8 @@ class Shipment:
                 future = client.submit(_content, data, key=name, pure=False)
                 client.publish_dataset(future, name=name)
                 self._names.append(name)
+                self.bytes_per_study += len(data)
             files.append((path, sha, name))
-            self.bytes_per_study += len(data)
         self.arg = (
             _TAG,
             _LAYOUT,
@@ -321,6 +321,12 @@ def _link(target: Path, link: Path) -> None:
     """`link` made a hard link of `target` (a copy across file systems), replacing what
     was there."""
     link.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        if os.path.samefile(target, link):
+            # Linked already (a file two laps name; a mirror built before).
+            return
+    except OSError:
+        pass
     tmp = link.with_name(f".{link.name}.{os.getpid()}.{threading.get_ident()}")
     try:
         os.link(target, tmp)
@@ -376,7 +382,9 @@ def study_path(study: Any) -> str:
     try:
         # Every file in place first, then the mirror's links (a repaired blob is a new
         # file: the links are made again each time).
-        blobs: List[Tuple[str, Path]] = [(p, _blob(store, p, s, k)) for p, s, k in files]
+        # Each file once (two laps may name one measurement).
+        unique = list(dict.fromkeys(files))
+        blobs: List[Tuple[str, Path]] = [(p, _blob(store, p, s, k)) for p, s, k in unique]
         for p, blob in blobs:
             _link(blob, mirror / p.lstrip("/"))
     except OSError as e:
