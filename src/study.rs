@@ -4,10 +4,12 @@
 
 use anyhow::Context;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
+#[cfg(doc)]
+use tb_optimize::StopOnFlag;
 use tb_optimize::{
-    run_study, Evaluator, OptimizerKind, Progress, RunOptions, Study, StudyOutcome, StudyResult,
+    run_study, Evaluator, OptimizerKind, RunOptions, Study, StudyObserver, StudyOutcome,
+    StudyResult,
 };
 
 /// What to run: the study file, where to write, and the overrides of the command line.
@@ -109,13 +111,13 @@ pub struct Optimized {
 /// `twinbench optimize` without its printing: the Python package runs the same (with its
 /// own evaluator and progress), so both write the same files and fail with the same messages.
 ///
-/// `interrupt`: set (by Ctrl-C) to stop after the generation under way; the error is then
-/// [`Interrupted`], saying how to resume.
+/// `observers` watch the study (progress, a stop condition such as [`StopOnFlag`] for
+/// Ctrl-C: the error is then [`Interrupted`], saying how to resume); the report is one more,
+/// last (unless `--no-report`).
 pub fn optimize(
     args: &StudyRun,
     evaluator: Option<Arc<dyn Evaluator>>,
-    progress: Option<Arc<dyn Progress>>,
-    interrupt: Option<Arc<AtomicBool>>,
+    mut observers: Vec<Arc<dyn StudyObserver>>,
 ) -> anyhow::Result<Optimized> {
     let study = Study::load(&args.study)?;
     std::fs::create_dir_all(&args.out)
@@ -137,13 +139,15 @@ pub fn optimize(
         tb_table::check_output(&name, &inputs)?;
     }
     say_when_no_checkpoint(args.resume, &checkpoint);
+    let report = (!args.no_report).then(|| crate::report::ReportWriter::new(&study, &args.out));
+    if let Some(r) = &report {
+        observers.push(r.clone());
+    }
     let options = RunOptions {
         threads: args.threads,
-        progress,
+        observers,
         checkpoint: Some(checkpoint.clone()),
         resume: args.resume,
-        stop_after: None,
-        interrupt,
         optimizer: args.optimizer,
         generations: args.generations,
         verbose: args.verbose,
@@ -157,11 +161,7 @@ pub fn optimize(
             return Err(Interrupted::new(&checkpoint, args.resume_command()).into())
         }
     };
-    let report = if args.no_report {
-        None
-    } else {
-        Some(crate::report::write_report(&study, &result, &args.out)?)
-    };
+    let report = report.and_then(|r| r.files());
     Ok(Optimized {
         result,
         report,

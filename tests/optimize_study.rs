@@ -6,7 +6,8 @@
 mod common;
 
 use std::path::Path;
-use tb_optimize::{run_study, RunOptions, Study, StudyOutcome, StudyResult};
+use std::sync::Arc;
+use tb_optimize::{run_study, RunOptions, StopAfter, Study, StudyOutcome, StudyResult};
 
 fn study_text(optimizer: &str, body: &str) -> String {
     let root = twinbench::pack::workspace_root();
@@ -132,7 +133,7 @@ fn same_seed_same_result_any_threads_and_after_resume() {
     // 2 more (in step 2), resumed to the end: the same result.
     let cp = dir.path().join("c.json");
     let mut o = options(2, &cp);
-    o.stop_after = Some(1);
+    o.observers = vec![Arc::new(StopAfter::new(1))];
     assert!(matches!(
         run_study(&study, &o).unwrap(),
         StudyOutcome::Interrupted { generations: 1 }
@@ -141,7 +142,7 @@ fn same_seed_same_result_any_threads_and_after_resume() {
         serde_json::from_str(&std::fs::read_to_string(&cp).unwrap()).unwrap();
     assert_eq!(saved["checkpoint"]["current"]["step"], 0);
     o.resume = true;
-    o.stop_after = Some(2);
+    o.observers = vec![Arc::new(StopAfter::new(2))];
     o.threads = 1;
     assert!(matches!(
         run_study(&study, &o).unwrap(),
@@ -174,7 +175,7 @@ fn same_seed_same_result_any_threads_and_after_resume() {
         .unwrap();
         let mut e = o.clone();
         e.checkpoint = Some(edited);
-        e.stop_after = None;
+        e.observers.clear();
         let err = run_study(&study, &e)
             .err()
             .expect("an edited checkpoint is refused");
@@ -184,9 +185,23 @@ fn same_seed_same_result_any_threads_and_after_resume() {
             "{err}"
         );
     }
-    o.stop_after = None;
+    // A caller's own observer beside the stop conditions: it sees the remaining
+    // generations with the threads they ran on, and the result once.
+    let watcher = Arc::new(Watcher::default());
+    o.observers = vec![watcher.clone()];
     o.threads = 2;
     let resumed = finished(run_study(&study, &o).unwrap());
+    {
+        let seen = watcher.seen.lock().unwrap();
+        assert!(
+            !seen.is_empty()
+                && seen
+                    .iter()
+                    .all(|(step, workers)| *step >= 2 && *workers == Some(2)),
+            "{seen:?}"
+        );
+        assert_eq!(*watcher.finished.lock().unwrap(), 1);
+    }
     assert!(resumed.resumed);
     assert_same(
         &two,
@@ -317,5 +332,23 @@ fn study_bounds_outside_the_declared_range_and_connected_inputs_are_refused() {
             .unwrap()
             .to_string();
         assert!(e.contains(expected), "{name}: {e}");
+    }
+}
+
+/// An observer of a caller's own: each generation's step and workers, and the result.
+#[derive(Default)]
+struct Watcher {
+    seen: std::sync::Mutex<Vec<(usize, Option<usize>)>>,
+    finished: std::sync::Mutex<usize>,
+}
+
+impl tb_optimize::StudyObserver for Watcher {
+    fn generation(&self, g: &tb_optimize::GenerationDone<'_>) -> std::ops::ControlFlow<()> {
+        self.seen.lock().unwrap().push((g.step, g.workers));
+        std::ops::ControlFlow::Continue(())
+    }
+    fn finished(&self, _result: &StudyResult) -> Result<(), String> {
+        *self.finished.lock().unwrap() += 1;
+        Ok(())
     }
 }

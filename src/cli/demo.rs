@@ -65,12 +65,17 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let optimise_start = Instant::now();
     let checkpoint = args.out.join(format!("{}.checkpoint.json", study.name()));
     crate::study::say_when_no_checkpoint(args.resume, &checkpoint);
+    // Observers: the bars, Ctrl-C's stop after the generation, the report.
+    let report = crate::report::ReportWriter::new(&study, &args.out);
     let options = RunOptions {
         threads: args.threads,
-        progress: Some(super::progress::Bars::shared()),
+        observers: vec![
+            super::progress::Bars::shared(),
+            std::sync::Arc::new(tb_optimize::StopOnFlag(super::interrupt::flag()?)),
+            report.clone(),
+        ],
         checkpoint: Some(checkpoint.clone()),
         resume: args.resume,
-        interrupt: Some(super::interrupt::flag()?),
         verbose: true,
         ..RunOptions::default()
     };
@@ -84,7 +89,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         }
     };
     let optimise_seconds = optimise_start.elapsed().as_secs_f64();
-    let report = crate::report::write_report(&study, &result, &args.out)?;
+    let report = report.files().expect("written when the study finished");
     println!();
     // The identifiability of each step was printed when the step began (stderr).
     println!("{}", report.table_markdown);

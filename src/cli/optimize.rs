@@ -3,7 +3,8 @@
 
 pub use crate::study::{optimize, Optimized, StudyRun, DEFAULT_OUT};
 use std::path::PathBuf;
-use tb_optimize::OptimizerKind;
+use std::sync::Arc;
+use tb_optimize::{OptimizerKind, StopOnFlag, StudyObserver};
 
 #[derive(clap::Args, Debug)]
 pub struct OptimizeArgs {
@@ -67,17 +68,17 @@ fn parse_kind(s: &str) -> Result<OptimizerKind, String> {
 }
 
 pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
-    let progress = (!args.json).then(super::progress::Bars::shared);
+    // Observers: the bars (not with --json), then Ctrl-C's stop after the generation.
+    let mut observers: Vec<Arc<dyn StudyObserver>> = Vec::new();
+    if !args.json {
+        observers.push(super::progress::Bars::shared());
+    }
+    observers.push(Arc::new(StopOnFlag(super::interrupt::flag()?)));
     let Optimized {
         result,
         report,
         checkpoint,
-    } = optimize(
-        &args.study_run(),
-        None,
-        progress,
-        Some(super::interrupt::flag()?),
-    )?;
+    } = optimize(&args.study_run(), None, observers)?;
     if args.json {
         super::json::print(&serde_json::to_string_pretty(&result)?)?;
     } else {

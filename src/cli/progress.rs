@@ -1,8 +1,9 @@
-//! Progress bars (indicatif) for optimisation studies: the CLI's [`Progress`] observer.
+//! Progress bars (indicatif) for optimisation studies: the CLI's [`StudyObserver`].
 
 use indicatif::{ProgressBar, ProgressStyle};
+use std::ops::ControlFlow;
 use std::sync::{Arc, Mutex};
-use tb_optimize::{GenerationRecord, Progress};
+use tb_optimize::{GenerationDone, StudyObserver};
 
 /// One bar per step on stderr.
 #[derive(Default)]
@@ -11,12 +12,12 @@ pub struct Bars {
 }
 
 impl Bars {
-    pub fn shared() -> Arc<dyn Progress> {
+    pub fn shared() -> Arc<dyn StudyObserver> {
         Arc::new(Bars::default())
     }
 }
 
-impl Progress for Bars {
+impl StudyObserver for Bars {
     fn step_started(&self, step: usize, name: &str, generations: usize, done: usize) {
         let pb = ProgressBar::new(generations as u64);
         pb.set_style(
@@ -33,16 +34,21 @@ impl Progress for Bars {
         }
     }
 
-    fn generation(&self, record: &GenerationRecord) {
+    fn generation(&self, g: &GenerationDone<'_>) -> ControlFlow<()> {
         if let Ok(b) = self.bar.lock() {
             if let Some(pb) = b.as_ref() {
+                let record = g.record;
                 pb.set_position(record.generation as u64);
+                let workers = g
+                    .workers
+                    .map_or(String::new(), |w| format!(", {w} workers"));
                 pb.set_message(format!(
-                    "best cost {:.5}  ({} evaluations)",
+                    "best cost {:.5}  ({} evaluations{workers})",
                     record.best_cost, record.evaluations
                 ));
             }
         }
+        ControlFlow::Continue(())
     }
 
     fn step_finished(&self) {

@@ -104,6 +104,41 @@ pub struct LapTimeDifference {
 /// What Tab. 1's columns mean, printed under it.
 pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit). Row \"all\": the study's answer, every parameter moved together to the least-squares point of every signal (the joint refinement after the steps, docs/optimize.md), from the value its step started from, with [lo, hi] its 95 % confidence interval from the sensitivities there, the residuals' autocorrelation accounted for; \"open\": that end lies beyond the parameter's range; e, m, bias of the row: every signal at the study's start and at the answer.";
 
+/// The report as an observer of a study ([`tb_optimize::StudyObserver`]): Tab. 1 and the
+/// plots are written when the study has its result (not after an interruption), and the
+/// files written are kept for the caller ([`ReportWriter::files`]).
+pub struct ReportWriter {
+    study: Study,
+    folder: PathBuf,
+    written: std::sync::Mutex<Option<ReportFiles>>,
+}
+
+impl ReportWriter {
+    pub fn new(study: &Study, folder: &Path) -> std::sync::Arc<ReportWriter> {
+        std::sync::Arc::new(ReportWriter {
+            study: study.clone(),
+            folder: folder.to_path_buf(),
+            written: std::sync::Mutex::new(None),
+        })
+    }
+
+    /// What it wrote (None before the study's end).
+    pub fn files(&self) -> Option<ReportFiles> {
+        self.written
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+}
+
+impl tb_optimize::StudyObserver for ReportWriter {
+    fn finished(&self, result: &StudyResult) -> Result<(), String> {
+        let files = write_report(&self.study, result, &self.folder).map_err(|e| e.to_string())?;
+        *self.written.lock().unwrap_or_else(|p| p.into_inner()) = Some(files);
+        Ok(())
+    }
+}
+
 /// What was written.
 #[derive(Clone, Debug)]
 pub struct ReportFiles {

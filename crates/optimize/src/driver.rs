@@ -25,15 +25,79 @@ use std::time::Instant;
 use tb_compare::{Comparison, Metrics, PreparedMeasurement, Table, Workspace};
 use tb_fmi::FmuCache;
 
-/// What a study reports while it runs: the library draws nothing, a front end (the CLI's
-/// progress bars, a notebook) implements what it wants.
-pub trait Progress: Send + Sync {
+/// What watches a study while it runs: told of every step and generation and of its
+/// result. The library draws nothing and decides nothing here: the command line's progress
+/// bars, Python's `progress` callback, the stop conditions ([`StopOnFlag`] for Ctrl-C,
+/// [`StopAfter`]) and the report are observers, and a caller attaches its own
+/// ([`RunOptions::observers`]), in order.
+pub trait StudyObserver: Send + Sync {
     /// A step starts (or resumes at generation `done` of `generations`).
     fn step_started(&self, _step: usize, _name: &str, _generations: usize, _done: usize) {}
-    /// A generation of the current step is complete.
-    fn generation(&self, _record: &GenerationRecord) {}
+    /// A generation of the current step is complete and checkpointed. `Break` ends the
+    /// study after it, as an interruption (resumable), while the step has generations left;
+    /// at a step's last generation the study goes on and asks again at the next one.
+    fn generation(&self, _g: &GenerationDone<'_>) -> ControlFlow<()> {
+        ControlFlow::Continue(())
+    }
     /// The current step's optimiser is done.
     fn step_finished(&self) {}
+    /// The study's result, before it is returned (not after an interruption); an error
+    /// (the report could not be written) ends the study with it.
+    fn finished(&self, _result: &StudyResult) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// A generation just completed, as observers see it.
+pub struct GenerationDone<'a> {
+    /// The step (1-based), its name and its generations.
+    pub step: usize,
+    pub name: &'a str,
+    pub generations: usize,
+    /// Generations of the step done so far (this one included).
+    pub done: usize,
+    pub record: &'a GenerationRecord,
+    /// Where the candidates ran: the evaluator's workers (a cluster's, when it can say),
+    /// else this process's threads.
+    pub workers: Option<usize>,
+}
+
+/// Ends the study after the generation under way once `flag` is set (Ctrl-C, a signal).
+pub struct StopOnFlag(pub Arc<std::sync::atomic::AtomicBool>);
+
+impl StudyObserver for StopOnFlag {
+    fn generation(&self, _g: &GenerationDone<'_>) -> ControlFlow<()> {
+        match self.0.load(std::sync::atomic::Ordering::SeqCst) {
+            true => ControlFlow::Break(()),
+            false => ControlFlow::Continue(()),
+        }
+    }
+}
+
+/// Ends the study after `n` generations of this session (an interruption at a chosen point,
+/// for tests of resume).
+pub struct StopAfter {
+    n: usize,
+    seen: std::sync::atomic::AtomicUsize,
+}
+
+impl StopAfter {
+    pub fn new(n: usize) -> StopAfter {
+        StopAfter {
+            n,
+            seen: std::sync::atomic::AtomicUsize::new(0),
+        }
+    }
+}
+
+impl StudyObserver for StopAfter {
+    fn generation(&self, _g: &GenerationDone<'_>) -> ControlFlow<()> {
+        let seen = self.seen.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
+        match seen >= self.n {
+            true => ControlFlow::Break(()),
+            false => ControlFlow::Continue(()),
+        }
+    }
 }
 
 /// How to run a study.
@@ -41,17 +105,14 @@ pub trait Progress: Send + Sync {
 pub struct RunOptions {
     /// Evaluation threads (0: all cores).
     pub threads: usize,
-    /// Told about every step and generation (None: silent).
-    pub progress: Option<Arc<dyn Progress>>,
+    /// Told about every step, generation and the result, in order (progress bars, stop
+    /// conditions, the report, a caller's own): [`StudyObserver`]. One that ends the study
+    /// makes it [`StudyOutcome::Interrupted`], its checkpoint kept.
+    pub observers: Vec<Arc<dyn StudyObserver>>,
     /// Checkpoint file, written after every generation (None: no checkpoint).
     pub checkpoint: Option<PathBuf>,
     /// Continue from the checkpoint when it exists.
     pub resume: bool,
-    /// Stop after this many generations in this session (a test hook for an interruption).
-    pub stop_after: Option<usize>,
-    /// Set from outside (Ctrl-C, a signal): the study stops once the generation under way
-    /// is done and checkpointed, as [`StudyOutcome::Interrupted`].
-    pub interrupt: Option<Arc<std::sync::atomic::AtomicBool>>,
     /// Override the study's optimiser.
     pub optimizer: Option<OptimizerKind>,
     /// Override the generations of every step.
@@ -72,11 +133,9 @@ impl std::fmt::Debug for RunOptions {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("RunOptions")
             .field("threads", &self.threads)
-            .field("progress", &self.progress.is_some())
+            .field("observers", &self.observers.len())
             .field("checkpoint", &self.checkpoint)
             .field("resume", &self.resume)
-            .field("stop_after", &self.stop_after)
-            .field("interrupt", &self.interrupt.is_some())
             .field("optimizer", &self.optimizer)
             .field("generations", &self.generations)
             .field("verbose", &self.verbose)
@@ -245,7 +304,7 @@ impl StudyResult {
 
 pub enum StudyOutcome {
     Finished(Box<StudyResult>),
-    /// Stopped by `RunOptions::stop_after`; the checkpoint holds the state.
+    /// Stopped by an observer (Ctrl-C, [`StopAfter`]); the checkpoint holds the state.
     Interrupted {
         generations: usize,
     },
@@ -444,6 +503,9 @@ pub fn run_study(study: &Study, options: &RunOptions) -> Result<StudyOutcome, Op
         }
     }
     let result = finish_study(&session, state, wall)?;
+    for o in &options.observers {
+        o.finished(&result).map_err(OptimizeError::Observer)?;
+    }
     Ok(StudyOutcome::Finished(Box::new(result)))
 }
 
@@ -813,8 +875,8 @@ fn start_step(
 }
 
 /// The step's generations from where `begun` stands, with a checkpoint after every one.
-/// The best point and its cost; `None` when the session stops (`RunOptions::interrupt` or
-/// `stop_after`) before the last generation, the checkpoint of the last one kept.
+/// The best point and its cost; `None` when the session stops (an observer ends it:
+/// Ctrl-C, [`StopAfter`]) before the last generation, the checkpoint of the last one kept.
 fn run_generations(
     session: &Session,
     state: &mut StudyState,
@@ -822,14 +884,15 @@ fn run_generations(
     begun: &mut StepBegun,
 ) -> Result<Option<(Vec<f64>, f64)>, OptimizeError> {
     let (study, options) = (session.study, session.options);
-    if let Some(p) = &options.progress {
-        p.step_started(
+    for o in &options.observers {
+        o.step_started(
             step.problem.step + 1,
             &step.config.name,
             step.generations,
             begun.optimizer.generation(),
         );
     }
+    let threads = session.pool.current_num_threads();
     let settings = RunSettings {
         max_generations: step.generations,
         threads: options.threads,
@@ -847,9 +910,6 @@ fn run_generations(
         &mut begun.run,
         |opt, run| {
             *session_generations += 1;
-            if let (Some(p), Some(rec)) = (&options.progress, run.history.last()) {
-                p.generation(rec);
-            }
             if let Some(path) = &options.checkpoint {
                 let current = Current {
                     step: step.problem.step,
@@ -863,24 +923,34 @@ fn run_generations(
                     return ControlFlow::Break(());
                 }
             }
-            let asked = options
-                .interrupt
-                .as_ref()
-                .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst));
-            if (asked
-                || options
-                    .stop_after
-                    .is_some_and(|n| *session_generations >= n))
-                && opt.generation() < step.generations
-            {
+            // Every observer sees the generation; any may end the study after it.
+            let mut stop = false;
+            if let Some(rec) = run.history.last() {
+                let done = GenerationDone {
+                    step: step.problem.step + 1,
+                    name: &step.config.name,
+                    generations: step.generations,
+                    done: opt.generation(),
+                    record: rec,
+                    // A cluster's workers come and go: asked at every generation.
+                    workers: match &options.evaluator {
+                        Some(e) => e.workers(),
+                        None => Some(threads),
+                    },
+                };
+                for o in &options.observers {
+                    stop |= o.generation(&done).is_break();
+                }
+            }
+            if stop && opt.generation() < step.generations {
                 interrupted = true;
                 return ControlFlow::Break(());
             }
             ControlFlow::Continue(())
         },
     );
-    if let Some(p) = &options.progress {
-        p.step_finished();
+    for o in &options.observers {
+        o.step_finished();
     }
     if let Some(e) = write_error {
         return Err(e);

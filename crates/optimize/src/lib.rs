@@ -49,7 +49,10 @@ pub mod rng;
 pub mod study;
 
 pub use cmaes::{Cmaes, CmaesSettings};
-pub use driver::{run_study, Progress, RunOptions, StepResult, StudyOutcome, StudyResult};
+pub use driver::{
+    run_study, GenerationDone, RunOptions, StepResult, StopAfter, StopOnFlag, StudyObserver,
+    StudyOutcome, StudyResult,
+};
 pub use ga::{Ga, GaSettings};
 pub use identifiability::Identifiability;
 pub use interval::{Intervals, ParameterInterval};
@@ -90,4 +93,7 @@ pub enum OptimizeError {
     /// checkpoint holds the last whole generation).
     #[error("evaluating candidates: {0}")]
     Evaluator(String),
+    /// An observer of the study failed at its end (the report could not be written).
+    #[error("{0}")]
+    Observer(String),
 }

@@ -49,6 +49,12 @@ pub trait Evaluator: Send + Sync {
         let _ = points;
         Err("this evaluator runs candidates' costs only, not the joint fit's laps".into())
     }
+
+    /// How many workers evaluate the candidates now (a cluster's: they come and go), when
+    /// the evaluator can say.
+    fn workers(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// A point's filtered signals on the grid, per lap and signal: (first grid index, values).

@@ -7,6 +7,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyDict, PyList};
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -15,8 +16,8 @@ use tb_cosim::{LoadOptions, Plan, Simulation};
 use tb_fmi::FmuCache;
 use tb_optimize::optimizer::{to_bounds, to_unit};
 use tb_optimize::{
-    Candidate, Cmaes, Evaluator, Ga, GenerationRecord, LapSignals, OptimizerKind, Progress, Study,
-    StudyEvaluator,
+    Candidate, Cmaes, Evaluator, Ga, GenerationDone, LapSignals, OptimizerKind, StopOnFlag, Study,
+    StudyEvaluator, StudyObserver,
 };
 
 // Declared in the module `twinbench`, where the package exports it: Python shows it as
@@ -262,6 +263,18 @@ impl ExecutorEvaluator {
 }
 
 impl Evaluator for ExecutorEvaluator {
+    /// The cluster's workers now, when the executor says (`workers()`: twinbench's Dask
+    /// executor does).
+    fn workers(&self) -> Option<usize> {
+        Python::attach(|py| {
+            let ex = self.executor.bind(py);
+            if !ex.hasattr("workers").unwrap_or(false) {
+                return None;
+            }
+            ex.call_method0("workers").ok()?.extract::<usize>().ok()
+        })
+    }
+
     fn evaluate(&self, candidates: &[Candidate]) -> Result<Vec<Result<f64, String>>, String> {
         // The task's arguments after study and digest: the step and the values.
         let args = Python::attach(|py| -> PyResult<Vec<Vec<Py<PyAny>>>> {
@@ -341,38 +354,38 @@ fn cancel(futures: &[Bound<'_, PyAny>]) {
     }
 }
 
-/// Tells a Python callable about every generation (a dict per generation). An exception
-/// of the callback stops the study after that generation (its checkpoint kept) and is
-/// raised as itself: a broken callback is not silently skipped.
+/// Tells a Python callable about every generation (a dict per generation): the study's
+/// observer for Python. An exception of the callback stops the study after that generation
+/// (its checkpoint kept) and is raised as itself: a broken callback is not silently
+/// skipped.
 struct PyProgress {
     callback: Py<PyAny>,
     raised: Mutex<Option<PyErr>>,
-    stop: Arc<AtomicBool>,
-    /// The step under way: its number (1-based), name and generations.
-    step: Mutex<(usize, String, usize)>,
 }
 
-impl Progress for PyProgress {
-    fn step_started(&self, step: usize, name: &str, generations: usize, _done: usize) {
-        *self.step.lock().unwrap_or_else(|p| p.into_inner()) = (step, name.into(), generations);
-    }
-
-    fn generation(&self, record: &GenerationRecord) {
-        let (step, name, generations) = self.step.lock().unwrap_or_else(|p| p.into_inner()).clone();
+impl StudyObserver for PyProgress {
+    fn generation(&self, g: &GenerationDone<'_>) -> ControlFlow<()> {
+        let record = g.record;
         Python::attach(|py| {
             let d = PyDict::new(py);
-            let _ = d.set_item("step", step);
-            let _ = d.set_item("step_name", name);
-            let _ = d.set_item("generations", generations);
+            let _ = d.set_item("step", g.step);
+            let _ = d.set_item("step_name", g.name);
+            let _ = d.set_item("generations", g.generations);
+            if let Some(w) = g.workers {
+                let _ = d.set_item("workers", w);
+            }
             let _ = d.set_item("generation", record.generation);
             let _ = d.set_item("evaluations", record.evaluations);
             let _ = d.set_item("best_cost", record.best_cost);
             let _ = d.set_item("best_x", record.best_x.clone());
             let _ = d.set_item("failures", record.failures);
-            if let Err(e) = self.callback.bind(py).call1((d,)) {
-                let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
-                raised.get_or_insert(e);
-                self.stop.store(true, Ordering::SeqCst);
+            match self.callback.bind(py).call1((d,)) {
+                Ok(_) => ControlFlow::Continue(()),
+                Err(e) => {
+                    let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
+                    raised.get_or_insert(e);
+                    ControlFlow::Break(())
+                }
             }
         })
     }
@@ -444,15 +457,17 @@ fn optimize(
         Arc::new(PyProgress {
             callback,
             raised: Mutex::new(None),
-            stop: interrupt.clone(),
-            step: Mutex::new((0, String::new(), 0)),
         })
     });
-    let progress = py_progress.clone().map(|p| p as Arc<dyn Progress>);
+    // Observers: the callback, then Ctrl-C's stop after the generation (the report last).
+    let mut observers: Vec<Arc<dyn StudyObserver>> = Vec::new();
+    if let Some(p) = &py_progress {
+        observers.push(p.clone());
+    }
+    observers.push(Arc::new(StopOnFlag(interrupt.clone())));
     let result = std::thread::scope(|scope| {
-        let flag = interrupt.clone();
         let study = scope.spawn(move || {
-            twinbench::study::optimize(&args, dyn_evaluator, progress, Some(flag))
+            twinbench::study::optimize(&args, dyn_evaluator, observers)
                 .and_then(|o| Ok(serde_json::to_string(&o.result)?))
         });
         while !study.is_finished() {

@@ -448,7 +448,9 @@ class Study:
             report: write Tab. 1 and the plots.
             progress: called after every generation with a dict (step, 1-based,
                 step_name, generations, generation, evaluations, best_cost, best_x,
-                failures; on a Dask cluster also workers, the workers it has now).
+                failures, and workers: this process's threads, or on a Dask cluster the
+                workers it has now). An exception it raises stops the study after that
+                generation, its checkpoint kept, and is raised.
             profiles: profile likelihood of every parameter after the joint refinement
                 (as ``--profiles``); the intervals are then the profiles'.
 
@@ -478,13 +480,6 @@ class Study:
             executor = _shipping.shipping(executor, os.fspath(self.path), self._loaded())
             if executor is not given:
                 shipped = executor
-                if progress is not None:
-                    # The cluster's workers now (less any refused) in every record.
-                    user_progress = progress
-
-                    def progress(record, _shipped=shipped, _user=user_progress):
-                        record["workers"] = _shipped.workers()
-                        return _user(record)
 
         try:
             text = _native.optimize(
