@@ -27,6 +27,8 @@ import pytest
 
 import twinbench
 
+import _studies
+
 ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT / "tools"))
 from dask_cluster import Cluster, project  # noqa: E402
@@ -170,23 +172,10 @@ def test_a_study_naming_its_files_by_absolute_paths_runs_on_workers_without_them
     (the coordinator's): on a worker they resolve in its mirror of those paths."""
     c, study = cluster
     project_dir = study.parents[1]
-    lap = (project_dir / "data/spielberg_lap.csv").as_posix()
-    system = (project_dir / "systems/rls_v.toml").as_posix()
-    lines = [
-        line
-        for line in study.read_text().splitlines()
-        if not line.startswith("measurement =") and not line.startswith("system =")
-    ]
-    entries = "".join(
-        f'[[measurement]]\nname = "{name}"\nfile = "{lap}"\nweight = {w}\n{extra}\n'
-        for name, w, extra in [
-            ("one", 1.0, ""),
-            ("two", 2.0, '[measurement.parameters]\n"vehicle.v_start" = 52.5\n'),
-            ("held", 1.0, "hold_out = true\n"),
-        ]
+    laps = _studies.two_lap_study(
+        study, project_dir / "systems/rls_v.toml", project_dir / "data/spielberg_lap.csv",
+        project_dir / "studies/two_laps.toml",
     )
-    laps = project_dir / "studies/two_laps.toml"
-    laps.write_text(f'system = "{system}"\n' + "\n".join(lines) + "\n\n" + entries)
     cli = tmp_path / "cli"
     p = subprocess.run([str(EXE), "optimize", str(laps), "--out", str(cli), "--json",
                         "--generations", "1"], capture_output=True, text=True)

@@ -22,6 +22,8 @@ import pytest
 
 import twinbench
 
+import _studies
+
 ROOT = Path(__file__).resolve().parents[3]
 EXE = Path(os.environ.get("TWINBENCH_EXE", ROOT / "target/release/twinbench"))
 STUDY = ROOT / "studies/spielberg.toml"
@@ -216,27 +218,10 @@ def test_a_dask_study_gives_the_command_lines_table1(cli_study, tmp_path):
 
 
 def two_lap_study(folder: Path) -> Path:
-    """The bundled study over two laps: the bundled lap twice, the second with weight 2 and
-    its own start speed, a third held out."""
-    text = STUDY.read_text()
-    lap = (ROOT / "data/spielberg_lap.csv").as_posix()
-    system = (ROOT / "systems/rls_v.toml").as_posix()
-    entries = "".join(
-        f'[[measurement]]\nname = "{name}"\nfile = "{lap}"\nweight = {w}\n{extra}\n'
-        for name, w, extra in [
-            ("one", 1.0, ""),
-            ("two", 2.0, '[measurement.parameters]\n"vehicle.v_start" = 52.5\n'),
-            ("held", 1.0, "hold_out = true\n"),
-        ]
+    """The bundled study over two laps (`_studies.two_lap_study`) in `folder`."""
+    return _studies.two_lap_study(
+        STUDY, ROOT / "systems/rls_v.toml", ROOT / "data/spielberg_lap.csv", folder / "two_laps.toml"
     )
-    lines = [
-        line
-        for line in text.splitlines()
-        if not line.startswith("measurement =") and not line.startswith("system =")
-    ]
-    study = folder / "two_laps.toml"
-    study.write_text(f'system = "{system}"\n' + "\n".join(lines) + "\n\n" + entries)
-    return study
 
 
 def test_a_study_of_two_laps_on_dask_equals_the_command_line(tmp_path):
