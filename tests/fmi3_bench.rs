@@ -31,21 +31,30 @@ fn system(dir: &Path, tag: &str, fmi3: &[&str], stop: Option<f64>) -> std::path:
     path
 }
 
+/// `twinbench ARGS`, which must succeed: its standard output.
+fn twinbench<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Vec<u8> {
+    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "twinbench {:?}: {}",
+        args.iter().map(|a| a.as_ref()).collect::<Vec<_>>(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out.stdout
+}
+
 /// `twinbench run SYSTEM [extra]`: the CSV's bytes.
 fn run_with(system: &Path, extra: &str) -> Vec<u8> {
     let csv = system.with_extension("csv");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_twinbench"));
-    cmd.arg("run").arg(system).arg("--out").arg(&csv);
+    let mut args = vec![std::ffi::OsStr::new("run"), system.as_os_str()];
+    args.extend([std::ffi::OsStr::new("--out"), csv.as_os_str()]);
     if !extra.is_empty() {
-        cmd.arg(extra);
+        args.push(std::ffi::OsStr::new(extra));
     }
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}: {}",
-        system.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    twinbench(&args);
     std::fs::read(&csv).unwrap()
 }
 
@@ -106,17 +115,9 @@ fn the_fmi3_bench_isolated_gives_the_fmi2_run_bit_for_bit() {
 #[test]
 fn info_and_export_ssp_take_the_fmi3_fmus() {
     let dir = tb_testkit::scratch("fmi3-info-ssp");
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["info", "--json"])
-        .arg(common::fmu3("vehicle"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let vehicle = common::fmu3("vehicle");
+    let info = twinbench(&["info".as_ref(), "--json".as_ref(), vehicle.as_os_str()]);
+    let j: serde_json::Value = serde_json::from_slice(&info).unwrap();
     assert_eq!(j["fmi_version"], "3.0");
     let vars = j["variables"].as_array().unwrap();
     let var = |n: &str| vars.iter().find(|v| v["name"] == n).unwrap().clone();
@@ -130,31 +131,13 @@ fn info_and_export_ssp_take_the_fmi3_fmus() {
         Some(1.0),
     );
     let ssp = dir.path().join("bench.ssp");
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("export-ssp")
-        .arg(&system)
-        .arg("-o")
-        .arg(&ssp)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let csv = dir.path().join("ssp.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
-        .arg(&ssp)
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let rows = std::fs::read_to_string(&csv).unwrap().lines().count();
+    twinbench(&[
+        "export-ssp".as_ref(),
+        system.as_os_str(),
+        "-o".as_ref(),
+        ssp.as_os_str(),
+    ]);
+    let csv = run(&ssp, false);
+    let rows = String::from_utf8(csv).unwrap().lines().count();
     assert!(rows > 100, "{rows} rows");
 }

@@ -29,22 +29,21 @@ pub fn fmu_dir() -> PathBuf {
 
 /// Path of a packed FMU by model name (test FMUs under test/).
 pub fn fmu(name: &str) -> PathBuf {
-    let dir = fmu_dir();
-    let spec = twinbench::pack::models()
-        .into_iter()
-        .find(|s| s.info.name == name)
-        .unwrap_or_else(|| panic!("no model named {name}"));
-    twinbench::pack::fmu_path(&dir, &spec)
+    fmu_of(name, twinbench::pack::FmiVersion::V2)
 }
 
 /// Path of a packed FMI 3.0 FMU by model name (test FMUs under test/).
 pub fn fmu3(name: &str) -> PathBuf {
+    fmu_of(name, twinbench::pack::FmiVersion::V3)
+}
+
+fn fmu_of(name: &str, version: twinbench::pack::FmiVersion) -> PathBuf {
     let dir = fmu_dir();
     let spec = twinbench::pack::models()
         .into_iter()
         .find(|s| s.info.name == name)
         .unwrap_or_else(|| panic!("no model named {name}"));
-    twinbench::pack::fmu_path_of(&dir, &spec, twinbench::pack::FmiVersion::V3)
+    twinbench::pack::fmu_path_of(&dir, &spec, version)
 }
 
 /// One unpack cache for all tests of a binary, kept under `target/` (content-addressed and

@@ -469,38 +469,30 @@ class Study:
         """
         import json
 
-        function = signals = digest = shipped = None
+        function = signals = digest = None
         if executor is not None:
-            from . import _shipping, _worker
+            from . import _worker
 
             function, signals = _worker.cost, _worker.signals
             digest = self._loaded().digest
             # A Dask cluster's workers get the study's files with the tasks.
-            given = executor
-            executor = _shipping.shipping(executor, os.fspath(self.path), self._loaded())
-            if executor is not given:
-                shipped = executor
-
-        try:
-            text = _native.optimize(
-                os.fspath(self.path),
-                os.fspath(out if out is not None else "target/optimize"),
-                _threads(threads),
-                bool(resume),
-                generations,
-                optimizer,
-                bool(force),
-                not report,
-                executor,
-                function,
-                digest,
-                progress,
-                bool(profiles),
-                signals,
-            )
-        finally:
-            if shipped is not None:
-                shipped.close()
+            executor = self._shipping(executor)
+        text = _native.optimize(
+            os.fspath(self.path),
+            os.fspath(out if out is not None else "target/optimize"),
+            _threads(threads),
+            bool(resume),
+            generations,
+            optimizer,
+            bool(force),
+            not report,
+            executor,
+            function,
+            digest,
+            progress,
+            bool(profiles),
+            signals,
+        )
         result = json.loads(text)
         # The study's answer (Tab. 1's row "all"): every parameter with its interval; a
         # result without one (written before it was made) gives each step's own.

@@ -109,18 +109,20 @@ class Shipment:
         study = os.fspath(contents[0][0]) if contents else study
         for path, sha in contents:
             path = os.fspath(path)
+            name = f"twinbench-{ident}-{sha}"
+            files.append((path, sha, name))
+            if name in self._names:
+                # A file two laps name: sent once.
+                continue
             data = Path(path).read_bytes()
             if hashlib.sha256(data).hexdigest() != sha:
                 raise TwinbenchError(
                     f"{path} changed since the study was loaded: load it again (twinbench.Study) before sending it to the cluster"
                 )
-            name = f"twinbench-{ident}-{sha}"
-            if name not in self._names:
-                future = client.submit(_content, data, key=name, pure=False)
-                client.publish_dataset(future, name=name)
-                self._names.append(name)
-                self.bytes_per_study += len(data)
-            files.append((path, sha, name))
+            future = client.submit(_content, data, key=name, pure=False)
+            client.publish_dataset(future, name=name)
+            self._names.append(name)
+            self.bytes_per_study += len(data)
         self.arg = (
             _TAG,
             _LAYOUT,
@@ -300,11 +302,12 @@ def _blob(store: Path, path: str, sha: str, key: str) -> Path:
             blob.unlink()
         except OSError:
             pass
-    # A shared file system: the coordinator's path holds the same bytes here.
-    local = Path(path)
-    data = None
-    if local.is_file() and _sha256_of_file(local) == sha:
-        data = local.read_bytes()
+    # The coordinator's path when it holds the same bytes here (a shared file system),
+    # else the cluster's copy.
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        data = None
     if data is None or hashlib.sha256(data).hexdigest() != sha:
         data = _fetch(key)
     if hashlib.sha256(data).hexdigest() != sha:
