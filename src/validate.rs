@@ -127,7 +127,7 @@ fn run_twin(
         )?;
     }
     sim.run()?;
-    Ok(sim.recording.clone())
+    Ok(sim.recording().clone())
 }
 
 /// Prepares the lap, runs the fitted twin on it and compares.

@@ -23,7 +23,7 @@ fn simulate(system: &Path, set: &[(&str, toml::Value)]) -> (tb_cosim::RunSummary
         sim.set_parameter(k, v.clone()).unwrap();
     }
     let s = sim.run().unwrap();
-    (s, sim.recording.clone())
+    (s, sim.recording().clone())
 }
 
 struct Measured {
@@ -116,8 +116,12 @@ fn a_tenth_millisecond_step_agrees_with_the_millisecond_step() {
     // Lap times within 0.3% and speed over distance within 1 km/h RMS of each other.
     assert!((l1 / l2 - 1.0).abs() < 3e-3, "1 ms: {l1} s, 0.1 ms: {l2} s");
     let other = Measured {
-        distance: sim.recording.require("vehicle.distance").unwrap().to_vec(),
-        v: sim.recording.require("vehicle.v").unwrap().to_vec(),
+        distance: sim
+            .recording()
+            .require("vehicle.distance")
+            .unwrap()
+            .to_vec(),
+        v: sim.recording().require("vehicle.v").unwrap().to_vec(),
         lap_time: l2,
     };
     let (rms, _) = speed_error_kmh(&r1, &other);
@@ -181,17 +185,17 @@ fn reruns_of_one_simulation_reuse_instances_and_repeat_exactly() {
     let mut sim = Simulation::new(Plan::from_file(file, &path, cache()).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     sim.run().unwrap();
-    let first = sim.recording.clone();
+    let first = sim.recording().clone();
     sim.set_parameter("vehicle.c_lift_front", toml::Value::Float(0.8))
         .unwrap();
     sim.run().unwrap();
-    let changed = sim.recording.require("vehicle.Fz_sum").unwrap().to_vec();
+    let changed = sim.recording().require("vehicle.Fz_sum").unwrap().to_vec();
     sim.set_parameter("vehicle.c_lift_front", toml::Value::Float(1.653))
         .unwrap();
     sim.run().unwrap();
     assert_eq!(
         first.require("vehicle.Fz_sum").unwrap(),
-        sim.recording.require("vehicle.Fz_sum").unwrap()
+        sim.recording().require("vehicle.Fz_sum").unwrap()
     );
     assert!(changed
         .iter()

@@ -41,7 +41,7 @@ fn twinbench_run(
     let mut sim = Simulation::new(sys).unwrap();
     sim.echo_fmu_log = false;
     let summary = sim.run().unwrap();
-    sim.recording.write_csv(out).unwrap();
+    sim.recording().write_csv(out).unwrap();
     (order, summary.steps)
 }
 

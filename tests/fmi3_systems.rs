@@ -55,7 +55,7 @@ fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), String>
     let mut sim = Simulation::new(plan).map_err(|e| e.to_string())?;
     sim.echo_fmu_log = false;
     sim.run().map_err(|e| e.to_string())?;
-    Ok((sim.recording.clone(), notes))
+    Ok((sim.recording().clone(), notes))
 }
 
 /// The dyno (our FMI 2.0 FMU, rad/s) drives an FMI 3.0 sensor in rpm, whose output drives

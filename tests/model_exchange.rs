@@ -121,7 +121,7 @@ fn run(text: &str, dir: &Path, name: &str) -> Result<Table, String> {
     let mut sim = Simulation::new(plan).map_err(|e| e.to_string())?;
     sim.echo_fmu_log = false;
     sim.run().map_err(|e| format!("{e}"))?;
-    Ok(sim.recording.clone())
+    Ok(sim.recording().clone())
 }
 
 /// One Model Exchange instance `m` of `fmu`, every output recorded.
@@ -667,5 +667,5 @@ fn paths_of_a_model_exchange_instance(version: u8) {
     sim.echo_fmu_log = false;
     sim.run().unwrap();
     sim.run().unwrap();
-    assert!(same_bits(&sim.recording, &plain), "the second run");
+    assert!(same_bits(sim.recording(), &plain), "the second run");
 }

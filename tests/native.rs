@@ -36,7 +36,7 @@ fn run(native: bool, set: &[(&str, f64)]) -> (Simulation, Table) {
         sim.set_parameter(k, toml::Value::Float(*v)).unwrap();
     }
     sim.run().unwrap();
-    let rec = sim.recording.clone();
+    let rec = sim.recording().clone();
     (sim, rec)
 }
 
@@ -70,7 +70,7 @@ fn native_lap_is_bit_identical_to_the_fmu_lap() {
         .unwrap();
     sim.run().unwrap();
     let (_, fmu2) = run(false, &[("vehicle.c_lift_front", 0.9)]);
-    assert_bit_identical(&fmu2, &sim.recording);
+    assert_bit_identical(&fmu2, sim.recording());
 }
 
 #[test]

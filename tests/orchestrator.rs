@@ -32,10 +32,10 @@ fn the_last_step_is_clamped_to_the_stop_time() {
     // 1000 full steps and one of 0.5 ms: y = ∫1 dt ends at exactly the stop time.
     assert_eq!(r.steps, 1001);
     assert_eq!(r.simulated_time, 1.0005);
-    let y = *s.recording.require("a.y").unwrap().last().unwrap();
+    let y = *s.recording().require("a.y").unwrap().last().unwrap();
     assert!((y - 1.0005).abs() < 1e-12, "{y}");
     assert_eq!(
-        *s.recording.require("time").unwrap().last().unwrap(),
+        *s.recording().require("time").unwrap().last().unwrap(),
         1.0005
     );
 }
@@ -48,13 +48,13 @@ fn the_tick_time_base_does_not_drift() {
     let mut s = sim(f, &p);
     let r = s.run().unwrap();
     assert_eq!(r.steps, 100_000);
-    let t = s.recording.require("time").unwrap();
+    let t = s.recording().require("time").unwrap();
     // Every recorded time is exactly k·h (k integer), no accumulated rounding.
     for (k, &x) in t.iter().enumerate() {
         assert_eq!(x, k as f64 * 1000.0 * 1e-3, "row {k}");
     }
     assert_eq!(
-        *s.recording.require("a.steps").unwrap().last().unwrap(),
+        *s.recording().require("a.steps").unwrap().last().unwrap(),
         100_000.0
     );
 }
@@ -66,7 +66,7 @@ fn results_are_csv_with_a_units_row_written_atomically() {
     s.run().unwrap();
     let scratch = tb_testkit::scratch("orch-csv");
     let out = scratch.path().join("lap.csv");
-    s.recording.write_csv(&out).unwrap();
+    s.recording().write_csv(&out).unwrap();
     let text = std::fs::read_to_string(&out).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("time,a.y,a.steps"));
@@ -158,7 +158,7 @@ fn strings_are_set_connected_recorded_and_quoted_in_the_csv() {
     let (f, p) = faulty_system(body, "strings");
     let mut s = sim(f, &p);
     s.run().unwrap();
-    let rec = &s.recording;
+    let rec = s.recording();
     assert_eq!(
         rec.text_at(1).unwrap(),
         ["lap, one 0", "lap, one 1", "lap, one 2", "lap, one 3"]
@@ -186,7 +186,7 @@ fn strings_are_set_connected_recorded_and_quoted_in_the_csv() {
     .unwrap();
     let mut iso = Simulation::new(plan).unwrap();
     iso.run().unwrap();
-    assert_eq!(iso.recording.text_at(2), rec.text_at(2));
+    assert_eq!(iso.recording().text_at(2), rec.text_at(2));
     // A String parameter of the wrong type is refused by the plan, naming it.
     let bad = body.replace("\"a.tag\" = \"lap, one\"", "\"a.tag\" = 3");
     let (f, p) = faulty_system(&bad, "strings-bad");

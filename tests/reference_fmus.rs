@@ -131,7 +131,7 @@ fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String
     let mut sim = Simulation::new(plan).unwrap();
     sim.echo_fmu_log = false;
     let summary = sim.run().map_err(|e| format!("{}: {e}", c.model))?;
-    Ok((sim.recording.clone(), summary.stopped_by))
+    Ok((sim.recording().clone(), summary.stopped_by))
 }
 
 /// The largest difference of each output FMPy recorded, and the rows compared.
@@ -415,13 +415,13 @@ fn strings_are_set_recorded_and_connected(version: u8) {
     let mut sim = Simulation::new(plan).unwrap();
     sim.run().unwrap();
     for k in [1, 2] {
-        let col = sim.recording.text_at(k).unwrap();
+        let col = sim.recording().text_at(k).unwrap();
         assert_eq!(col.len(), 3);
         assert!(col.iter().all(|v| v == "a, \"quoted\" text"), "{col:?}");
     }
     // And through the CSV writer and reader.
     let csv = dir.path().join("strings.csv");
-    sim.recording.write_csv(&csv).unwrap();
+    sim.recording().write_csv(&csv).unwrap();
     let back = Table::read_any(&csv).unwrap();
     assert_eq!(back.text_at(1).unwrap()[2], "a, \"quoted\" text");
 }
@@ -511,9 +511,9 @@ fn fmi2_stair_isolated_ends_where_in_process_does() {
     let mut sim = Simulation::new(plan).unwrap();
     let s = sim.run().unwrap();
     assert_eq!(s.stopped_by, stopped);
-    assert_eq!(sim.recording.column_at(0), in_process.column_at(0));
-    assert_eq!(sim.recording.column_at(1), in_process.column_at(1));
-    assert_eq!(*sim.recording.column_at(0).last().unwrap(), 9.0);
+    assert_eq!(sim.recording().column_at(0), in_process.column_at(0));
+    assert_eq!(sim.recording().column_at(1), in_process.column_at(1));
+    assert_eq!(*sim.recording().column_at(0).last().unwrap(), 9.0);
 }
 
 /// FMI 3.0 in a worker process: every column equal to the in-process run, bit for bit

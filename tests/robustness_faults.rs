@@ -216,15 +216,15 @@ fn isolated_runs_give_the_same_results_as_in_process_runs() {
     let mut b = simulation(&text, &isolated(Duration::from_secs(10)));
     a.run().unwrap();
     b.run().unwrap();
-    assert_eq!(a.recording.names(), b.recording.names());
-    for (x, y) in a.recording.columns().iter().zip(b.recording.columns()) {
+    assert_eq!(a.recording().names(), b.recording().names());
+    for (x, y) in a.recording().columns().iter().zip(b.recording().columns()) {
         assert_eq!(x, y);
     }
     // Instance reuse: a second run on the same workers.
     b.set_parameter("supplier.gain", toml::Value::Float(2.0))
         .unwrap();
     b.run().unwrap();
-    let y = b.recording.require("supplier.y").unwrap();
+    let y = b.recording().require("supplier.y").unwrap();
     assert!((y.last().unwrap() - 4.0).abs() < 1e-9, "{y:?}");
 }
 

@@ -36,7 +36,7 @@ fn twinbench_csv(system: &Path, out: &Path) -> u64 {
     let mut sim = Simulation::new(Plan::load(system, cache).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
-    sim.recording.write_csv(out).unwrap();
+    sim.recording().write_csv(out).unwrap();
     s.steps
 }
 

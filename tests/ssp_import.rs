@@ -40,7 +40,7 @@ fn run_lib(system: &Path) -> (tb_cosim::RunSummary, tb_cosim::Table) {
     let mut sim = Simulation::new(Plan::load(system, cache).unwrap()).unwrap();
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
-    (s, sim.recording.clone())
+    (s, sim.recording().clone())
 }
 
 fn empty(dir: &Path) -> bool {
@@ -347,7 +347,7 @@ fn hand_written_ssp_gives_what_physics_says() {
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
     assert_eq!(s.steps, 2000);
-    let t = &sim.recording;
+    let t = sim.recording();
     let last = |name: &str| -> f64 {
         let c = t
             .column(name)

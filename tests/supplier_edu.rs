@@ -42,7 +42,7 @@ fn run(system: Plan) -> (RunSummary, Table) {
     let mut sim = Simulation::new(system).unwrap();
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
-    (s, sim.recording.clone())
+    (s, sim.recording().clone())
 }
 
 fn load(path: &Path) -> Plan {

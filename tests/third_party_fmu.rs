@@ -124,7 +124,7 @@ fn run(sys: Plan) -> Table {
     sim.echo_fmu_log = false;
     let s = sim.run().unwrap();
     assert_eq!(s.steps, 1000);
-    sim.recording.clone()
+    sim.recording().clone()
 }
 
 /// `src` (u = 1, gain 2) drives `dst` through `y_direct -> u`: dst.y = 2·t.

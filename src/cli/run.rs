@@ -90,12 +90,12 @@ pub struct RunArgs {
 /// so in the message and, with `--json`, in a document with `"complete": false`.
 fn failed_run(args: &RunArgs, sim: &Simulation, error: tb_cosim::SystemError) -> anyhow::Error {
     let error = anyhow::Error::new(error);
-    let rows = sim.recording.len();
-    let reached = sim.recording.column_at(0).last().copied();
+    let rows = sim.recording().len();
+    let reached = sim.recording().column_at(0).last().copied();
     let mut kept = None;
     if let (Some(out), Some(t)) = (&args.out, reached) {
         let partial = incomplete_path(out);
-        match sim.recording.write_any(&partial) {
+        match sim.recording().write_any(&partial) {
             Ok(()) => kept = Some((partial, t)),
             Err(e) => eprintln!(
                 "warning: the rows recorded before the failure could not be written to {}: {e}",
@@ -253,7 +253,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .collect();
     let mut sim = Simulation::new(system.clone())?;
     if let Some(instance) = &instance {
-        super::run_fmu::own_names(&mut sim.recording, instance)?;
+        super::run_fmu::own_names(sim.recording_mut(), instance)?;
     }
     sim.record_events(args.record_events)?;
     for s in &args.set {
@@ -293,7 +293,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         Err(e) => return Err(failed_run(&args, &sim, e)),
     };
     if let Some(out) = &args.out {
-        sim.recording
+        sim.recording()
             .write_any(out)
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
@@ -324,7 +324,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "stopped_by": summary.stopped_by,
             "order": order,
             "backends": system.instances.iter().map(|i| (i.name.clone(), i.factory.kind())).collect::<std::collections::BTreeMap<_, _>>(),
-            "recorded_rows": sim.recording.len(),
+            "recorded_rows": sim.recording().len(),
             "out": args.out,
         });
         super::json::print(&serde_json::to_string_pretty(&j)?)?;
@@ -346,7 +346,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             println!(
                 "results         {} ({} rows)",
                 out.display(),
-                sim.recording.len()
+                sim.recording().len()
             );
         }
     }

@@ -11,6 +11,7 @@ pub mod config;
 pub mod isolated;
 pub mod master;
 pub mod native;
+pub mod observe;
 pub mod plan;
 pub mod replay;
 pub mod ssp;
@@ -19,6 +20,7 @@ pub mod trace;
 
 pub use config::{Algorithm, StepConvention, StopConfig, SystemFile};
 pub use master::{RunSummary, Simulation};
+pub use observe::{Ended, Moment, RunObserver, RunView};
 pub use plan::{
     ConnectionDef, Endpoint, InstanceDef, LoadOptions, ParamSlot, ParamValue, Plan, Stop,
 };

@@ -6,9 +6,11 @@
 //! Instances are created once and reset between runs.
 
 use crate::config::{Algorithm, ReplayBasis};
+use crate::observe::{Ended, Moment, Recording, RunObserver, RunView, StopWhen};
 use crate::plan::{Endpoint, ParamSlot, ParamValue, Plan, Stop};
 use crate::replay::Cursor;
 use crate::{backend::Backend, invalid, SystemError};
+use std::ops::ControlFlow;
 use std::sync::Arc;
 use std::time::Instant;
 use tb_fmi::fmi2::fmi2Status;
@@ -214,6 +216,21 @@ fn not_finite(i: &dyn Backend, name: &str, plan: &Plan, sig: usize, x: f64) -> S
 }
 
 impl Exchange {
+    pub fn plan(&self) -> &Arc<Plan> {
+        &self.plan
+    }
+
+    /// The exchange buffer, by slot.
+    #[inline]
+    pub fn signals(&self) -> &[f64] {
+        &self.signals
+    }
+
+    /// The String slots' values (empty for other slots).
+    pub fn texts(&self) -> &[String] {
+        &self.texts
+    }
+
     /// Read every unit's record-only outputs (before a recorded row: the values at the
     /// same communication point as the others', as no input changed since each unit's step).
     pub fn publish_recorded(&mut self) -> Result<(), SystemError> {
@@ -452,17 +469,39 @@ impl RunSummary {
     }
 }
 
+/// What one run keeps while it goes on, besides the simulation.
+struct RunState {
+    /// Start time and horizon, s.
+    span: (f64, f64),
+    /// The plan's stop condition, an observer of this run.
+    stop: Option<StopWhen>,
+    /// The first reason an observer gave to end the run.
+    ended: Option<String>,
+    /// The last moment the observers were told of.
+    last: Moment,
+}
+
+/// `a` unless it continues: the first reason to end a run wins.
+#[inline]
+fn first_break(a: ControlFlow<String>, b: ControlFlow<String>) -> ControlFlow<String> {
+    match a {
+        ControlFlow::Break(_) => a,
+        ControlFlow::Continue(()) => b,
+    }
+}
+
 /// A runnable system: a [`Plan`] plus its instances and exchange buffers.
 pub struct Simulation {
     plan: Arc<Plan>,
     ex: Exchange,
     algorithm: Box<dyn MasterAlgorithm>,
-    /// The recorded signals of the last run (time first).
-    pub recording: Table,
+    /// The recorded signals of the last run (time first): the first observer.
+    recording: Recording,
+    /// The caller's observers ([`Simulation::observe`]), after the recording and the stop
+    /// condition.
+    observers: Vec<Box<dyn RunObserver>>,
     /// Echo FMU messages with status OK to the log (off: kept only for error reports).
     pub echo_fmu_log: bool,
-    /// The recording has text columns (String signals).
-    has_text: bool,
     /// A row before and after each event of a Model Exchange instance, as FMPy's
     /// `record_events` ([`Simulation::record_events`]).
     record_events: bool,
@@ -551,17 +590,9 @@ impl Simulation {
                 f.params.push((slot.vr, value.clone()));
             }
         }
-        let (names, record_units) = plan.record_columns();
-        let mut recording = Table::new(plan.path.display().to_string(), names, record_units)
-            .map_err(|e| invalid(plan.path.display().to_string(), format!("record: {e}")))?;
-        for (k, &slot) in plan.record.iter().enumerate() {
-            if plan.signals.signals[slot].is_text() {
-                recording.set_text(k + 1);
-            }
-        }
-        let has_text = (0..recording.names().len()).any(|k| recording.is_text(k));
         Ok(Simulation {
-            has_text,
+            recording: Recording::new(&plan)?,
+            observers: Vec::new(),
             algorithm: algorithm(plan.file.experiment.algorithm),
             ex: Exchange {
                 signals: vec![0.0; plan.signals.len()],
@@ -570,7 +601,6 @@ impl Simulation {
                 units,
             },
             plan,
-            recording,
             echo_fmu_log: true,
             record_events: false,
         })
@@ -593,16 +623,18 @@ impl Simulation {
             ));
         }
         self.record_events = on;
+        self.recording.event_rows = on;
         Ok(())
     }
 
-    /// One step of the units in `order` (Gauss-Seidel), with a recorded row before and after
-    /// each event inside it.
+    /// One step of the units in `order` (Gauss-Seidel), with the observers told of each
+    /// event inside it (the recording's rows before and after it).
     fn step_recording_events(
         &mut self,
         order: &[usize],
         t: f64,
         h: f64,
+        run: &mut RunState,
     ) -> Result<(), SystemError> {
         for &u in order {
             self.ex.set_inputs(u)?;
@@ -612,13 +644,71 @@ impl Simulation {
                     MeStop::BeforeEvent(te) | MeStop::AfterEvent(te) => {
                         self.ex.time_replays_at(te);
                         self.ex.publish(u, te)?;
-                        self.record(te)?;
+                        self.notify(Moment::Event, te, run)?;
                     }
                 }
             }
             self.ex.publish(u, t + h)?;
         }
         Ok(())
+    }
+
+    /// Tell every observer of a moment: the recording, the stop condition, the caller's.
+    /// The first reason to end the run is kept in `run`.
+    #[inline(always)]
+    fn notify(&mut self, moment: Moment, t: f64, run: &mut RunState) -> Result<(), SystemError> {
+        run.last = moment;
+        let mut now = RunView::new(&mut self.ex, t, moment, run.span);
+        let mut flow = self.recording.observe(&mut now)?;
+        if let Some(stop) = &mut run.stop {
+            flow = first_break(flow, stop.observe(&mut now)?);
+        }
+        for o in &mut self.observers {
+            flow = first_break(flow, o.observe(&mut now)?);
+        }
+        if let ControlFlow::Break(reason) = flow {
+            run.ended.get_or_insert(reason);
+        }
+        Ok(())
+    }
+
+    /// Tell every observer the run completed.
+    fn notify_finished(
+        &mut self,
+        t: f64,
+        run: &mut RunState,
+        how: &Ended,
+    ) -> Result<(), SystemError> {
+        let mut now = RunView::new(&mut self.ex, t, run.last, run.span);
+        self.recording.finished(&mut now, how)?;
+        if let Some(stop) = &mut run.stop {
+            stop.finished(&mut now, how)?;
+        }
+        for o in &mut self.observers {
+            o.finished(&mut now, how)?;
+        }
+        Ok(())
+    }
+
+    /// Attach an observer of every later run ([`RunObserver`]): it sees each moment after
+    /// the recording and the stop condition, in the order attached.
+    pub fn observe(&mut self, observer: Box<dyn RunObserver>) {
+        self.observers.push(observer);
+    }
+
+    /// Take the caller's observers off (returned in the order attached).
+    pub fn take_observers(&mut self) -> Vec<Box<dyn RunObserver>> {
+        std::mem::take(&mut self.observers)
+    }
+
+    /// The recorded signals of the last run (time first).
+    pub fn recording(&self) -> &Table {
+        self.recording.table()
+    }
+
+    /// The recording, to rename its columns before a run (`twinbench run model.fmu`).
+    pub fn recording_mut(&mut self) -> &mut Table {
+        self.recording.table_mut()
     }
 
     /// The plan this simulation runs.
@@ -766,22 +856,6 @@ impl Simulation {
         Ok(())
     }
 
-    #[inline]
-    fn record(&mut self, t: f64) -> Result<(), SystemError> {
-        self.ex.publish_recorded()?;
-        let signals = &self.ex.signals;
-        self.recording
-            .push_row(std::iter::once(t).chain(self.plan.record.iter().map(|&s| signals[s])));
-        if self.has_text {
-            for (k, &s) in self.plan.record.iter().enumerate() {
-                if self.recording.is_text(k + 1) {
-                    self.recording.push_text(k + 1, &self.ex.texts[s]);
-                }
-            }
-        }
-        Ok(())
-    }
-
     /// The plan's consistency checks, after initialisation.
     fn check_consistency(&mut self) -> Result<(), SystemError> {
         let plan = self.plan.clone();
@@ -872,38 +946,39 @@ impl Simulation {
         let plan = self.plan.clone();
         let exp = &plan.file.experiment;
         let (start, h) = (exp.start, exp.step);
-        let (fixed_stop, condition) = match &plan.stop {
+        let (fixed_stop, max_time) = match &plan.stop {
             Stop::Time(t) => (Some(*t), None),
-            Stop::When {
-                condition,
-                max_time,
-            } => (None, Some((condition, *max_time))),
+            Stop::When { max_time, .. } => (None, Some(*max_time)),
         };
-        self.recording.clear();
+        // A run that fails before its start keeps no rows of an earlier one.
+        self.recording.table_mut().clear();
         self.ex.signals.iter_mut().for_each(|s| *s = 0.0);
         for u in &mut self.ex.units {
             if let Unit::Replay(r) = u {
                 r.cursor = Cursor::default();
             }
         }
+        // Integer ticks: t_k = start + k·h exactly, no accumulated drift.
+        let span = fixed_stop.unwrap_or(start + max_time.unwrap_or(0.0)) - start;
+        let mut run = RunState {
+            span: (start, start + span),
+            stop: StopWhen::new(&plan),
+            ended: None,
+            last: Moment::Start,
+        };
         self.instantiate_all(start, fixed_stop)?;
         self.initialize(start)?;
         self.check_consistency()?;
-        self.record(start)?;
-        // Integer ticks: t_k = start + k·h exactly, no accumulated drift.
-        let span = fixed_stop.unwrap_or(start + condition.map_or(0.0, |c| c.1)) - start;
+        self.notify(Moment::Start, start, &mut run)?;
         let full_steps = (span / h * (1.0 + 1e-12)).floor() as u64;
         let last = span - full_steps as f64 * h;
         let total_steps = full_steps + u64::from(last > h * 1e-9);
-        let decimation = plan.file.record.decimation as u64;
         let grid = plan.file.experiment.step_convention == crate::config::StepConvention::Grid;
         let order = &plan.order;
-        let mut stopped_by = format!("stop time {} s", start + span);
         let mut k = 0u64;
         let mut t_end = start;
-        let mut met = false;
-        let mut ended_by_fmu = false;
-        while k < total_steps {
+        let mut ended = Ended::Horizon;
+        while k < total_steps && run.ended.is_none() {
             let t = start + k as f64 * h;
             let step = match (grid, k == full_steps) {
                 (false, false) => h,
@@ -914,7 +989,7 @@ impl Simulation {
             };
             self.ex.time_replays_at(t);
             let stepped = match self.record_events {
-                true => self.step_recording_events(order, t, step),
+                true => self.step_recording_events(order, t, step, &mut run),
                 false => self.algorithm.step(&mut self.ex, order, t, step),
             };
             if let Err(e) = stepped {
@@ -925,47 +1000,31 @@ impl Simulation {
                 self.ex.publish_all(time)?;
                 k += 1;
                 t_end = time;
-                // With event rows the FMU's end in an event follows the row before that
-                // event, at the same time: as FMPy's `record_events`, that row is the last.
-                let recorded =
-                    self.record_events && self.recording.column_at(0).last() == Some(&time);
-                if !recorded {
-                    self.record(t_end)?;
-                }
-                stopped_by = format!(
-                    "instance '{instance}' asked to end the simulation at t = {time} s (fmi2Discard with fmi2Terminated, or fmi3DoStep's terminateSimulation)"
-                );
-                ended_by_fmu = true;
+                self.notify(Moment::EndedByFmu, t_end, &mut run)?;
+                ended = Ended::Fmu { instance };
                 break;
             }
             k += 1;
-            t_end = if k == total_steps && fixed_stop.is_some() {
+            let last = k == total_steps && fixed_stop.is_some();
+            t_end = if last {
                 start + span
             } else {
                 start + k as f64 * h
             };
             self.ex.time_replays_at(t_end);
-            met = condition.is_some_and(|(c, _)| c.holds(self.ex.signals[c.slot]));
-            // Rows stay on the decimation grid (a uniform time base for filters); only a
-            // fixed stop time adds its final row.
-            if k.is_multiple_of(decimation) || (k == total_steps && fixed_stop.is_some()) {
-                self.record(t_end)?;
-            }
-            if met {
-                break;
-            }
+            self.notify(Moment::Step { k, last }, t_end, &mut run)?;
         }
-        if let Some((c, max_time)) = condition.filter(|_| !ended_by_fmu) {
-            if !met {
-                return Err(SystemError::Stop(format!(
-                    "{}: the run did not complete within max_time = {max_time} s: the stop condition {c} never held ({} = {} at the end)",
-                    plan.path.display(),
-                    c.signal,
-                    self.ex.signals[c.slot]
-                )));
-            }
-            stopped_by = c.to_string();
+        if let (Ended::Horizon, Some(reason)) = (&ended, run.ended.take()) {
+            ended = Ended::Observer(reason);
         }
+        self.notify_finished(t_end, &mut run, &ended)?;
+        let stopped_by = match &ended {
+            Ended::Horizon => format!("stop time {} s", start + span),
+            Ended::Observer(reason) => reason.clone(),
+            Ended::Fmu { instance } => format!(
+                "instance '{instance}' asked to end the simulation at t = {t_end} s (fmi2Discard with fmi2Terminated, or fmi3DoStep's terminateSimulation)"
+            ),
+        };
         let reported = self.read_reported()?;
         let summary = RunSummary {
             steps: k,

@@ -320,7 +320,7 @@ signals = ["src.label", "snk.text_out", "snk.gear_out"]
     );
     assert_eq!(column(&sim, "snk.gear_out"), [1.0, 2.0, 3.0, 1.0, 2.0]);
     // In CSV, text is quoted.
-    let csv = String::from_utf8(sim.recording.to_csv()).unwrap();
+    let csv = String::from_utf8(sim.recording().to_csv()).unwrap();
     assert!(csv.contains("\"lap 3\",\"got:lap 3\",1"), "{csv}");
 }
 
@@ -329,12 +329,12 @@ fn a_simulation_is_reused_bit_for_bit_and_takes_new_parameters() {
     let b = Bench::new();
     let mut sim = b.sim(&chain("jacobi"));
     sim.run().unwrap();
-    let first = sim.recording.clone();
+    let first = sim.recording().clone();
     sim.run().unwrap();
-    assert_eq!(sim.recording.columns(), first.columns());
+    assert_eq!(sim.recording().columns(), first.columns());
     sim.free_instances();
     sim.run().unwrap();
-    assert_eq!(sim.recording.columns(), first.columns());
+    assert_eq!(sim.recording().columns(), first.columns());
     // A parameter changed between runs is applied at the next initialisation.
     sim.set_parameter("g1.k", toml::Value::Float(4.0)).unwrap();
     assert_eq!(sim.parameter("g1.k"), Some(4.0));
@@ -368,9 +368,9 @@ fn decimation_records_every_nth_step_and_the_stop_time() {
 fn the_recording_has_a_units_row_from_the_descriptions() {
     let b = Bench::new();
     let (sim, _) = b.run(&chain("gauss-seidel"));
-    assert_eq!(sim.recording.names(), ["time", "int.x", "g1.y", "g2.y"]);
-    assert_eq!(sim.recording.units().unwrap(), ["s", "m", "", ""]);
-    let csv = String::from_utf8(sim.recording.to_csv()).unwrap();
+    assert_eq!(sim.recording().names(), ["time", "int.x", "g1.y", "g2.y"]);
+    assert_eq!(sim.recording().units().unwrap(), ["s", "m", "", ""]);
+    let csv = String::from_utf8(sim.recording().to_csv()).unwrap();
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("time,int.x,g1.y,g2.y"));
     assert_eq!(lines.next(), Some("s,m,,"));

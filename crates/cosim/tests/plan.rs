@@ -468,7 +468,7 @@ fn a_failed_check_stops_the_run_before_the_first_step() {
             "check failed after initialisation: a.y_kmh = 36 and b.y_kmh = 36.1 differ by 0.277 % (at most 0.1 % allowed): the two laps differ",
         ],
     );
-    assert!(sim.recording.is_empty());
+    assert!(sim.recording().is_empty());
 }
 
 #[test]

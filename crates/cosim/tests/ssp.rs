@@ -225,11 +225,11 @@ fn an_exported_package_runs_bit_for_bit_like_its_system_file() {
         assert_eq!(toml_summary.steps, 12);
         assert_eq!(ssp_summary.steps, toml_summary.steps);
         assert_eq!(ssp_summary.reported, toml_summary.reported);
-        assert_eq!(ssp_sim.recording.names(), toml_sim.recording.names());
-        assert_eq!(ssp_sim.recording.units(), toml_sim.recording.units());
+        assert_eq!(ssp_sim.recording().names(), toml_sim.recording().names());
+        assert_eq!(ssp_sim.recording().units(), toml_sim.recording().units());
         assert_eq!(
-            ssp_sim.recording.to_csv(),
-            toml_sim.recording.to_csv(),
+            ssp_sim.recording().to_csv(),
+            toml_sim.recording().to_csv(),
             "{algorithm}"
         );
     }
@@ -392,7 +392,7 @@ fn a_fixed_stop_time_and_the_default_recording_round_trip() {
     let (toml_sim, _) = b.run(text);
     let (ssp_sim, summary) = run(&b, &out);
     assert_eq!(summary.steps, 4);
-    assert_eq!(ssp_sim.recording.to_csv(), toml_sim.recording.to_csv());
+    assert_eq!(ssp_sim.recording().to_csv(), toml_sim.recording().to_csv());
     // x = 1·t from 0.5 to 1.5 and g.y = 2·x: exact.
     assert_eq!(
         support::column(&ssp_sim, "int.x"),

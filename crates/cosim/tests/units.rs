@@ -156,7 +156,7 @@ signals = ["snk.v_out", "speeds.v"]
     assert_close(last(&sim, "snk.v_out"), 20.0, 1e-14);
     // The replayed column is recorded in its own unit.
     assert_eq!(last(&sim, "speeds.v"), 72.0);
-    assert_eq!(sim.recording.units().unwrap(), ["s", "m/s", "km/h"]);
+    assert_eq!(sim.recording().units().unwrap(), ["s", "m/s", "km/h"]);
 }
 
 #[test]

@@ -242,7 +242,7 @@ impl WorkerPool {
             let summary = w.sim.run();
             self.runs.fetch_add(1, Ordering::Relaxed);
             summary.map_err(|e| describe_failure(&e))?;
-            uniform_table(&w.sim.recording).map_err(|e| e.to_string())
+            uniform_table(w.sim.recording()).map_err(|e| e.to_string())
         })
     }
 
@@ -291,7 +291,7 @@ impl WorkerPool {
         self.runs.fetch_add(1, Ordering::Relaxed);
         let summary = summary.map_err(|e| describe_failure(&e))?;
         *self.run_seconds.lock().unwrap_or_else(|e| e.into_inner()) += summary.wall_time;
-        let table = uniform_table(&w.sim.recording).map_err(|e| e.to_string())?;
+        let table = uniform_table(w.sim.recording()).map_err(|e| e.to_string())?;
         let comparison = prepared
             .compare(&table, &mut w.ws)
             .map_err(|e| format!("comparison: {e}"))?;

@@ -112,7 +112,7 @@ fn run(
         Ok((summary, lap_time, order, plan.warnings.clone(), sim))
     });
     let (summary, lap_time, order, warnings, sim) = outcome.map_err(error)?;
-    let rec = &sim.recording;
+    let rec = sim.recording();
     let d = PyDict::new(py);
     d.set_item("names", rec.names().to_vec())?;
     d.set_item("units", rec.units().map(|u| u.to_vec()))?;

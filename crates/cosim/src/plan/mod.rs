@@ -466,6 +466,15 @@ impl Plan {
     }
 
     /// Names and units of the recorded columns (time first).
+    /// The exchange slot of a signal by name (`instance.variable` or a replay's column), for
+    /// an observer of a run: a recorded name, else a signal the plan exchanges.
+    pub fn slot_of(&self, name: &str) -> Option<usize> {
+        let recorded = self.record_names.iter().position(|n| n == name);
+        recorded
+            .map(|k| self.record[k])
+            .or_else(|| self.signals.signals.iter().position(|s| s.name == name))
+    }
+
     pub fn record_columns(&self) -> (Vec<String>, Vec<String>) {
         let mut names = vec!["time".to_string()];
         let mut units = vec!["s".to_string()];

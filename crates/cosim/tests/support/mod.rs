@@ -280,7 +280,7 @@ pub fn quiet(mut sim: Simulation) -> Simulation {
 
 /// A recorded numeric column.
 pub fn column<'a>(sim: &'a Simulation, name: &str) -> &'a [f64] {
-    sim.recording
+    sim.recording()
         .require(name)
         .unwrap_or_else(|e| panic!("{e}"))
 }
@@ -288,12 +288,12 @@ pub fn column<'a>(sim: &'a Simulation, name: &str) -> &'a [f64] {
 /// A recorded text column.
 pub fn texts<'a>(sim: &'a Simulation, name: &str) -> &'a [String] {
     let k = sim
-        .recording
+        .recording()
         .names()
         .iter()
         .position(|n| n == name)
         .unwrap_or_else(|| panic!("no column {name}"));
-    sim.recording.text_at(k).expect("a text column")
+    sim.recording().text_at(k).expect("a text column")
 }
 
 /// The last recorded value of a column.

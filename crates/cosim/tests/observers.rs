@@ -1,0 +1,207 @@
+//! Observers of a run: a caller's observer sees every moment (the start, each step, the
+//! end) with the values of that moment, record-only outputs included; it can end the run
+//! with its reason or fail it with its error; the recording and the stop condition, the
+//! master's own observers, are unchanged by it. Binary fractions make every value exact.
+
+mod support;
+
+use std::ops::ControlFlow;
+use std::sync::{Arc, Mutex};
+use support::{column, Bench};
+use tb_cosim::{Ended, Moment, RunObserver, RunView, SystemError};
+
+/// integrator (u = 0.5, x0 = 1) -> g (k = 2), h = 1/8, stop 2 s, every 4th step recorded.
+/// `g.y` is read by the recording only (no connection reads it).
+fn system(experiment: &str) -> String {
+    format!(
+        r#"connections = ["int.x -> g.u"]
+
+[[instance]]
+name = "int"
+fmu = "integrator"
+
+[[instance]]
+name = "g"
+fmu = "gain"
+
+[parameters]
+"int.x0" = 1.0
+"int.u" = 0.5
+"g.k" = 2.0
+
+[experiment]
+step = 0.125
+{experiment}
+
+[record]
+signals = ["int.x", "g.y"]
+decimation = 4
+"#
+    )
+}
+
+/// What a watcher saw: (moment, time, int.x, g.y) at each moment, and how the run ended.
+#[derive(Default)]
+struct Seen {
+    moments: Vec<(Moment, f64, f64, f64)>,
+    finished: Vec<(Ended, f64, f64)>,
+}
+
+/// An observer that writes down what it sees, and ends or fails the run when told to.
+struct Watcher {
+    seen: Arc<Mutex<Seen>>,
+    slots: (usize, usize),
+    /// End the run once int.x reaches this.
+    end_at: Option<f64>,
+    /// Fail the run at this step.
+    fail_at: Option<u64>,
+}
+
+impl Watcher {
+    fn new(sim: &tb_cosim::Simulation) -> (Watcher, Arc<Mutex<Seen>>) {
+        let slot = |name: &str| sim.plan().slot_of(name).expect(name);
+        let seen = Arc::new(Mutex::new(Seen::default()));
+        let w = Watcher {
+            seen: seen.clone(),
+            slots: (slot("int.x"), slot("g.y")),
+            end_at: None,
+            fail_at: None,
+        };
+        (w, seen)
+    }
+}
+
+impl RunObserver for Watcher {
+    fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError> {
+        let (t, moment) = (now.time(), now.moment());
+        let signals = now.signals()?;
+        let (x, y) = (signals[self.slots.0], signals[self.slots.1]);
+        self.seen.lock().unwrap().moments.push((moment, t, x, y));
+        if let (Moment::Step { k, .. }, Some(at)) = (moment, self.fail_at) {
+            if k == at {
+                return Err(SystemError::Stop(format!("the watcher failed at step {k}")));
+            }
+        }
+        match self.end_at {
+            Some(x_end) if x >= x_end => Ok(ControlFlow::Break(format!("int.x reached {x}"))),
+            _ => Ok(ControlFlow::Continue(())),
+        }
+    }
+
+    fn finished(&mut self, now: &mut RunView<'_>, how: &Ended) -> Result<(), SystemError> {
+        let x = now.signals()?[self.slots.0];
+        self.seen
+            .lock()
+            .unwrap()
+            .finished
+            .push((how.clone(), now.time(), x));
+        Ok(())
+    }
+}
+
+#[test]
+fn an_observer_sees_every_moment_with_its_values_and_changes_nothing() {
+    let b = Bench::new();
+    let text = system("stop = 2.0");
+    let (plain, plain_summary) = b.run(&text);
+    let mut sim = b.sim(&text);
+    let (watcher, seen) = Watcher::new(&sim);
+    sim.observe(Box::new(watcher));
+    let summary = sim.run().unwrap();
+    // The recording and the summary are those of a run without the observer, bit for bit.
+    assert_eq!(sim.recording().to_csv(), plain.recording().to_csv());
+    assert_eq!(summary.steps, plain_summary.steps);
+    assert_eq!(summary.stopped_by, "stop time 2 s");
+    let seen = seen.lock().unwrap();
+    // The start, then each of the 16 steps, the last one marked.
+    assert_eq!(seen.moments.len(), 17);
+    assert_eq!(seen.moments[0].0, Moment::Start);
+    for (k, &(moment, t, x, y)) in seen.moments.iter().enumerate().skip(1) {
+        let k = k as u64;
+        assert_eq!(moment, Moment::Step { k, last: k == 16 });
+        assert_eq!(t, k as f64 * 0.125);
+        // x_k = 1 + k·u·h exactly; g.y = 2·x at every step, recorded (every 4th) or not:
+        // the observer's question read the record-only output at that step.
+        assert_eq!(x, 1.0 + k as f64 * 0.0625, "step {k}");
+        assert_eq!(y, 2.0 * x, "step {k}");
+    }
+    assert_eq!(seen.finished, [(Ended::Horizon, 2.0, 2.0)]);
+    // The recording kept its own rows only: every 4th step.
+    assert_eq!(column(&sim, "time"), [0.0, 0.5, 1.0, 1.5, 2.0]);
+}
+
+#[test]
+fn an_observer_ends_the_run_with_its_reason_and_every_observer_sees_that_step() {
+    let b = Bench::new();
+    let mut sim = b.sim(&system("stop = 2.0"));
+    let (mut ender, _) = Watcher::new(&sim);
+    ender.end_at = Some(1.375);
+    let (after, seen) = Watcher::new(&sim);
+    sim.observe(Box::new(ender));
+    sim.observe(Box::new(after));
+    let summary = sim.run().unwrap();
+    // x = 1 + k/16 reaches 1.375 at step 6 (t = 0.75 s): the run ends there.
+    assert_eq!(summary.steps, 6);
+    assert_eq!(summary.simulated_time, 0.75);
+    assert_eq!(summary.stopped_by, "int.x reached 1.375");
+    let seen = seen.lock().unwrap();
+    assert_eq!(seen.moments.last().unwrap().1, 0.75);
+    assert_eq!(
+        seen.finished,
+        [(Ended::Observer("int.x reached 1.375".into()), 0.75, 1.375)]
+    );
+    // The recording's rows stay on its grid: the steps of the run that are every 4th.
+    assert_eq!(column(&sim, "time"), [0.0, 0.5]);
+}
+
+#[test]
+fn the_plans_stop_condition_is_an_observer_before_the_callers() {
+    let b = Bench::new();
+    // The condition holds at step 4 (x = 1.25); the caller would end the run at step 6.
+    let text = system("stop = \"int.x >= 1.25\"\nmax_time = 10.0");
+    let mut sim = b.sim(&text);
+    let (mut ender, seen) = Watcher::new(&sim);
+    ender.end_at = Some(1.375);
+    sim.observe(Box::new(ender));
+    let summary = sim.run().unwrap();
+    assert_eq!(summary.steps, 4);
+    assert_eq!(summary.stopped_by, "int.x >= 1.25");
+    assert_eq!(
+        seen.lock().unwrap().finished,
+        [(Ended::Observer("int.x >= 1.25".into()), 0.5, 1.25)]
+    );
+    // Both reasons at the same step: the plan's condition is told first, its reason wins.
+    let mut sim = b.sim(&text);
+    let (mut ender, _) = Watcher::new(&sim);
+    ender.end_at = Some(1.25);
+    sim.observe(Box::new(ender));
+    assert_eq!(sim.run().unwrap().stopped_by, "int.x >= 1.25");
+    // A condition that never holds still fails the run at max_time, observed or not.
+    let mut sim = b.sim(&system("stop = \"int.x < 0\"\nmax_time = 0.5"));
+    let (watcher, seen) = Watcher::new(&sim);
+    sim.observe(Box::new(watcher));
+    let e = sim.run().unwrap_err().to_string();
+    assert!(
+        e.contains("did not complete within max_time = 0.5 s"),
+        "{e}"
+    );
+    // The caller's observer was not told of a finish: the run failed.
+    assert!(seen.lock().unwrap().finished.is_empty());
+}
+
+#[test]
+fn an_observers_error_fails_the_run_and_taking_it_off_runs_again() {
+    let b = Bench::new();
+    let text = system("stop = 2.0");
+    let mut sim = b.sim(&text);
+    let (mut failing, seen) = Watcher::new(&sim);
+    failing.fail_at = Some(3);
+    sim.observe(Box::new(failing));
+    let e = sim.run().unwrap_err().to_string();
+    assert_eq!(e, "the watcher failed at step 3");
+    assert!(seen.lock().unwrap().finished.is_empty());
+    assert_eq!(sim.take_observers().len(), 1);
+    let (plain, _) = b.run(&text);
+    sim.run().unwrap();
+    assert_eq!(sim.recording().to_csv(), plain.recording().to_csv());
+}
