@@ -228,3 +228,64 @@ fn a_replayed_column_without_a_unit_takes_the_inputs_and_a_wrong_one_names_the_f
     assert!(!o.status.success(), "m into a unit 1 input was accepted");
     assert!(e.contains("units = { drive = \"1\" }"), "{e}");
 }
+
+#[test]
+fn ctrl_c_ends_a_run_after_its_step_and_keeps_its_rows_as_incomplete() {
+    let dir = tb_testkit::scratch("interrupted");
+    let fmu = common::fmu("faulty");
+    let sys = dir.path().join("t.toml");
+    // 1e8 steps: far longer than the test waits.
+    std::fs::write(
+        &sys,
+        format!(
+            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\n[experiment]\nstep = 1e-3\nstop = 1e5\n",
+            fmu.display().to_string()
+        ),
+    )
+    .unwrap();
+    let (out, trace) = (dir.path().join("r.csv"), dir.path().join("calls.txt"));
+    std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(["run", sys.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args(["--trace-fmi", trace.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The run is under way once the trace shows steps (no race with the start-up).
+    let started = std::time::Instant::now();
+    while !std::fs::read_to_string(&trace).is_ok_and(|t| t.contains("fmi2DoStep")) {
+        assert!(started.elapsed().as_secs() < 60, "the run did not start");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    // SAFETY: a signal to our own child process.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let o = child.wait_with_output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{e}");
+    let partial = dir.path().join("r.incomplete.csv");
+    assert!(
+        e.contains("the run ended early; the ")
+            && e.contains("interrupted by SIGINT or SIGTERM (Ctrl-C) at t = ")
+            && e.contains(&format!("{} (incomplete)", partial.display())),
+        "{e}"
+    );
+    // The earlier complete result stays; the rows go to the incomplete file, y = t each.
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "time,a.y\n0,0\n");
+    let t = tb_table::Table::read_path(&partial).unwrap();
+    let (time, y) = (t.require("time").unwrap(), t.require("a.y").unwrap());
+    let last_t = *time.last().unwrap();
+    assert!(last_t > 0.0 && last_t < 1e5, "recorded until {last_t}");
+    assert!(
+        e.contains(&format!("at t = {} s", tb_files::number(last_t))),
+        "{e}"
+    );
+    assert!((y.last().unwrap() - last_t).abs() < 1e-6 * last_t.max(1.0));
+    // The trace was finished (its file complete) and no temporary file stays.
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+}

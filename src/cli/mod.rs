@@ -188,6 +188,10 @@ pub fn main() -> ExitCode {
             eprintln!("{e}");
             ExitCode::from(interrupt::EXIT_INTERRUPTED)
         }
+        Err(e) if e.downcast_ref::<interrupt::RunInterrupted>().is_some() => {
+            eprintln!("{e}");
+            ExitCode::from(interrupt::EXIT_INTERRUPTED)
+        }
         Err(e) => {
             eprintln!("error: {}", message(&e));
             ExitCode::FAILURE

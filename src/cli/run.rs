@@ -2,6 +2,7 @@
 
 pub use crate::bench::set_parameter;
 use anyhow::Context;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::{LoadOptions, Plan, Simulation};
@@ -88,7 +89,13 @@ pub struct RunArgs {
 /// A run that failed: what it recorded up to the failure is kept, in a file named as
 /// incomplete beside `--out` (a complete result there from an earlier run stays), and said
 /// so in the message and, with `--json`, in a document with `"complete": false`.
-fn failed_run(args: &RunArgs, sim: &Simulation, error: tb_cosim::SystemError) -> anyhow::Error {
+/// `what`: "failed", or "ended early" (Ctrl-C).
+fn failed_run(
+    args: &RunArgs,
+    sim: &Simulation,
+    error: tb_cosim::SystemError,
+    what: &str,
+) -> anyhow::Error {
     let error = anyhow::Error::new(error);
     let rows = sim.recording().len();
     let reached = sim.recording().column_at(0).last().copied();
@@ -118,7 +125,7 @@ fn failed_run(args: &RunArgs, sim: &Simulation, error: tb_cosim::SystemError) ->
     }
     match kept {
         Some((path, t)) => error.context(format!(
-            "the run failed; the {rows} rows recorded up to t = {} s are in {} (incomplete)",
+            "the run {what}; the {rows} rows recorded up to t = {} s are in {} (incomplete)",
             tb_files::number(t),
             path.display()
         )),
@@ -276,9 +283,30 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         };
         set_parameter(&system, &mut sim, &name, &value).with_context(|| format!("--set {s}"))?;
     }
+    // The CLI's observers of the run: Ctrl-C (or SIGTERM) ends it keeping its rows, a
+    // progress bar on a terminal.
+    let interrupt = super::interrupt::run_flag()?;
+    sim.observe(Box::new(super::progress::StopRunOnFlag(interrupt.clone())));
+    if std::io::stderr().is_terminal() {
+        let until = match &system.stop {
+            tb_cosim::Stop::Time(t) => format!("of {} s", tb_files::number(*t)),
+            tb_cosim::Stop::When {
+                condition,
+                max_time,
+            } => format!(
+                "until {condition} (at most {} s)",
+                tb_files::number(*max_time)
+            ),
+        };
+        sim.observe(Box::new(super::progress::RunBar::new(until)));
+    }
     // A run that completed keeps its results even when an instance then fails to end.
     let trace = options.trace.as_ref().map(|t| t.sink.clone());
     let result = sim.run();
+    drop(sim.take_observers());
+    // While the results are written a signal ends the process at once, their temporary
+    // files removed (nothing half-written stays).
+    super::interrupt::install_default();
     if let (Some(sink), Some(path)) = (&trace, &args.trace_fmi) {
         // The instances are freed first so that their last calls are in the trace; a
         // failed run keeps its trace (it is what the trace is for).
@@ -290,7 +318,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let (summary, after_run) = match result {
         Ok(s) => (s, None),
         Err(tb_cosim::SystemError::AfterRun { summary, error }) => (*summary, Some(error)),
-        Err(e) => return Err(failed_run(&args, &sim, e)),
+        Err(e) if interrupt.load(std::sync::atomic::Ordering::SeqCst) => {
+            let e = failed_run(&args, &sim, e, "ended early");
+            return Err(super::interrupt::RunInterrupted(super::message(&e)).into());
+        }
+        Err(e) => return Err(failed_run(&args, &sim, e, "failed")),
     };
     if let Some(out) = &args.out {
         sim.recording()

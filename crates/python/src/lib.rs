@@ -56,14 +56,25 @@ fn toml_value(v: &Bound<'_, PyAny>, name: &str) -> PyResult<toml::Value> {
 
 /// Runs a system; returns a dict with `names`, `units`, `columns` (little-endian float64
 /// bytes per column), `text` (the String columns) and `summary`.
+/// `observer` is called as `observer(time, values)` at the start, every `every` s of
+/// simulated time (default: each recorded row's interval) and at the end.
 #[pyfunction]
-#[pyo3(signature = (system, parameters=None, stop=None))]
+#[pyo3(signature = (system, parameters=None, stop=None, observer=None, every=None))]
 fn run(
     py: Python<'_>,
     system: PathBuf,
     parameters: Option<Vec<(String, Bound<'_, PyAny>)>>,
     stop: Option<Bound<'_, PyAny>>,
+    observer: Option<Py<PyAny>>,
+    every: Option<f64>,
 ) -> PyResult<Py<PyAny>> {
+    if let Some(e) = every.filter(|e| !(e.is_finite() && *e > 0.0)) {
+        return Err(TwinbenchError::new_err(format!(
+            "every = {e}: expected a positive time in s (how often the observer is called)"
+        )));
+    }
+    let raised: Arc<Mutex<Option<PyErr>>> = Arc::default();
+    let observer_raised = raised.clone();
     let parameters: Vec<(String, toml::Value)> = parameters
         .unwrap_or_default()
         .into_iter()
@@ -102,7 +113,17 @@ fn run(
             twinbench::bench::set_parameter(&plan, &mut sim, name, value)
                 .map_err(|e| e.context(format!("parameters[\"{name}\"]")))?;
         }
-        let summary = sim.run()?;
+        if let Some(callback) = observer {
+            sim.observe(Box::new(PyRunObserver::new(
+                &plan,
+                callback,
+                every,
+                observer_raised,
+            )));
+        }
+        let summary = sim.run();
+        drop(sim.take_observers());
+        let summary = summary?;
         let lap_time = twinbench::bench::lap_time(&summary, &plan);
         let order: Vec<String> = plan
             .order
@@ -111,6 +132,10 @@ fn run(
             .collect();
         Ok((summary, lap_time, order, plan.warnings.clone(), sim))
     });
+    // An exception of the observer is raised as itself.
+    if let Some(e) = raised.lock().unwrap_or_else(|p| p.into_inner()).take() {
+        return Err(e);
+    }
     let (summary, lap_time, order, warnings, sim) = outcome.map_err(error)?;
     let rec = sim.recording();
     let d = PyDict::new(py);
@@ -143,6 +168,126 @@ fn run(
     s.set_item("warnings", warnings)?;
     d.set_item("summary", s)?;
     Ok(d.into_any().unbind())
+}
+
+/// Calls a Python callable with the time and the recorded signals' values during a run (a
+/// live plot, a progress display, a condition of one's own). It returns None or True to go
+/// on, False or a reason (str) to end the run there; an exception fails the run and is
+/// raised as itself.
+struct PyRunObserver {
+    callback: Py<PyAny>,
+    /// The recorded signals: name, slot, text.
+    signals: Vec<(String, usize, bool)>,
+    /// Called every this many steps.
+    every_steps: u64,
+    raised: Arc<Mutex<Option<PyErr>>>,
+    /// The time of the last call (the end is not told twice).
+    last_call: Option<f64>,
+}
+
+impl PyRunObserver {
+    fn new(
+        plan: &Plan,
+        callback: Py<PyAny>,
+        every: Option<f64>,
+        raised: Arc<Mutex<Option<PyErr>>>,
+    ) -> PyRunObserver {
+        let h = plan.file.experiment.step;
+        let every_steps = match every {
+            Some(e) => (e / h).round().max(1.0) as u64,
+            None => plan.file.record.decimation as u64,
+        };
+        let signals = plan
+            .record
+            .iter()
+            .zip(&plan.record_names)
+            .map(|(&slot, name)| (name.clone(), slot, plan.signals.signals[slot].is_text()))
+            .collect();
+        PyRunObserver {
+            callback,
+            signals,
+            every_steps: every_steps.max(1),
+            raised,
+            last_call: None,
+        }
+    }
+
+    fn call(
+        &mut self,
+        now: &mut tb_cosim::RunView<'_>,
+    ) -> Result<ControlFlow<String>, tb_cosim::SystemError> {
+        let t = now.time();
+        self.last_call = Some(t);
+        let values = now.signals()?.to_vec();
+        let texts = match self.signals.iter().any(|s| s.2) {
+            true => now.texts()?.to_vec(),
+            false => Vec::new(),
+        };
+        Python::attach(|py| {
+            let answer = (|| -> PyResult<ControlFlow<String>> {
+                // Ctrl-C while Python watches: KeyboardInterrupt, raised as itself.
+                py.check_signals()?;
+                let d = PyDict::new(py);
+                for (name, slot, text) in &self.signals {
+                    match text {
+                        true => d.set_item(name, &texts[*slot])?,
+                        false => d.set_item(name, values[*slot])?,
+                    }
+                }
+                let r = self.callback.bind(py).call1((t, d))?;
+                if r.is_none() {
+                    return Ok(ControlFlow::Continue(()));
+                }
+                if let Ok(b) = r.cast::<PyBool>() {
+                    return Ok(match b.is_true() {
+                        true => ControlFlow::Continue(()),
+                        false => ControlFlow::Break(format!(
+                            "the observer at t = {} s",
+                            tb_files::number(t)
+                        )),
+                    });
+                }
+                match r.extract::<String>() {
+                    Ok(reason) => Ok(ControlFlow::Break(reason)),
+                    Err(_) => Err(pyo3::exceptions::PyTypeError::new_err(format!(
+                        "the run's observer returned {}: expected None or True (go on), False or a reason (str) to end the run",
+                        r.repr().map(|s| s.to_string()).unwrap_or_default()
+                    ))),
+                }
+            })();
+            answer.map_err(|e| {
+                let message = format!("the observer raised {e} at t = {} s", tb_files::number(t));
+                let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
+                raised.get_or_insert(e);
+                tb_cosim::SystemError::Stop(message)
+            })
+        })
+    }
+}
+
+impl tb_cosim::RunObserver for PyRunObserver {
+    fn observe(
+        &mut self,
+        now: &mut tb_cosim::RunView<'_>,
+    ) -> Result<ControlFlow<String>, tb_cosim::SystemError> {
+        match now.moment() {
+            tb_cosim::Moment::Start => self.call(now),
+            tb_cosim::Moment::Step { k, .. } if k % self.every_steps == 0 => self.call(now),
+            _ => Ok(ControlFlow::Continue(())),
+        }
+    }
+
+    fn finished(
+        &mut self,
+        now: &mut tb_cosim::RunView<'_>,
+        _how: &tb_cosim::Ended,
+    ) -> Result<(), tb_cosim::SystemError> {
+        if self.last_call != Some(now.time()) {
+            // The run has ended: a reason to end it changes nothing.
+            let _ = self.call(now)?;
+        }
+        Ok(())
+    }
 }
 
 fn system_name(sim: &Simulation) -> String {

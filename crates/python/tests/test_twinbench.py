@@ -117,6 +117,50 @@ def test_stop_override_and_condition():
     assert 99.4 < r.signals["vehicle.distance"][-1] < 100.06
 
 
+def test_an_observer_watches_the_run_and_can_end_it():
+    """`twinbench.run(..., observer=f, every=1.0)`: f sees the start, every simulated
+    second and the end, with the values the recording has at those times (bit for bit);
+    its reason ends the run; its exception is raised as itself."""
+    seen = []
+
+    def watch(t, values):
+        seen.append((t, values["vehicle.v"], values["vehicle.distance"]))
+        return "enough of this lap" if t >= 5.0 else None
+
+    r = twinbench.run(SYSTEM, observer=watch, every=1.0)
+    assert r.summary["stopped_by"] == "enough of this lap"
+    assert r.signals["time"][-1] == 5.0
+    # Calls at 0, 1, ..., 5 s (1000 steps of 1 ms each); the end was the last call.
+    assert [s[0] for s in seen] == [float(k) for k in range(6)]
+    for t, v, distance in seen:
+        row = int(np.searchsorted(r.signals["time"], t))
+        assert r.signals["time"][row] == t
+        assert same_bits(np.array([v, distance]),
+                         np.array([r.signals["vehicle.v"][row], r.signals["vehicle.distance"][row]]))
+    # Going on by default: the whole lap with the observer equals the lap without it.
+    calls = []
+    watched = twinbench.run(SYSTEM, stop=3.0, observer=lambda t, v: calls.append(t))
+    plain = twinbench.run(SYSTEM, stop=3.0)
+    for name, column in plain.signals.items():
+        assert same_bits(watched.signals[name], column), name
+    # Default: at each recorded row (here every 5 ms), the end told once.
+    assert calls == list(watched.signals["time"])
+
+    class Broken(Exception):
+        pass
+
+    def broken(t, values):
+        if t > 0.5:
+            raise Broken("a plot window went away")
+
+    with pytest.raises(Broken, match="a plot window went away"):
+        twinbench.run(SYSTEM, observer=broken)
+    with pytest.raises(TypeError, match="expected None or True"):
+        twinbench.run(SYSTEM, observer=lambda t, v: 42)
+    with pytest.raises(twinbench.TwinbenchError, match="every = 0: expected a positive time"):
+        twinbench.run(SYSTEM, observer=lambda t, v: None, every=0.0)
+
+
 def test_a_bad_system_raises_the_command_lines_message(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text((SYSTEM.read_text()).replace('"vehicle.v -> driver.v"', '"vehicle.vv -> driver.v"'))

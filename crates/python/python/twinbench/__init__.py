@@ -147,6 +147,8 @@ def run(
     system: PathLike,
     parameters: Optional[Mapping[str, Union[float, int, bool, str]]] = None,
     stop: Optional[Union[float, str]] = None,
+    observer: Optional[Callable[[float, Dict[str, Union[float, str]]], Any]] = None,
+    every: Optional[float] = None,
 ) -> Result:
     """Run a system file and return its recording.
 
@@ -156,6 +158,14 @@ def run(
             against the variable's type and range before the run).
         stop: a stop time in s, or a condition such as ``"vehicle.lap >= 1"``; None keeps
             the system file's.
+        observer: watches the run while it goes on (a live plot, a progress display, a
+            condition of your own): called as ``observer(time, values)``, ``values`` the
+            recorded signals' values at that time (``{"vehicle.v": 31.2, ...}``), at the
+            start, every ``every`` s of simulated time and at the end. It returns None or
+            True to go on, False or a reason (a str, the summary's ``stopped_by``) to end
+            the run there; an exception fails the run and is raised as itself.
+        every: how often the observer is called, in s of simulated time (rounded to whole
+            steps); default: at each recorded row.
 
     Returns:
         A :class:`Result`: ``result.signals["vehicle.v"]`` is a numpy array.
@@ -165,7 +175,7 @@ def run(
             message is the command line's).
     """
     items = list((parameters or {}).items())
-    raw = _native.run(os.fspath(system), items, stop)
+    raw = _native.run(os.fspath(system), items, stop, observer, every)
     names = raw["names"]
     units = raw["units"] or [""] * len(names)
     signals = {
