@@ -479,6 +479,10 @@ struct RunState {
     ended: Option<String>,
     /// The last moment the observers were told of.
     last: Moment,
+    /// Steps since the caller's observers were last called, and how many they can do
+    /// without seeing.
+    steps_unseen: u64,
+    step_interval: u64,
 }
 
 /// `a` unless it continues: the first reason to end a run wins.
@@ -663,8 +667,24 @@ impl Simulation {
         if let Some(stop) = &mut run.stop {
             flow = first_break(flow, stop.observe(&mut now)?);
         }
-        for o in &mut self.observers {
-            flow = first_break(flow, o.observe(&mut now)?);
+        if !self.observers.is_empty() {
+            // The caller's observers see a step once the fewest steps any of them can do
+            // without seeing have passed; every other moment always.
+            let due = match moment {
+                Moment::Step { .. } => {
+                    run.steps_unseen += 1;
+                    run.steps_unseen >= run.step_interval
+                }
+                _ => true,
+            };
+            if due {
+                let mut interval = u64::MAX;
+                for o in &mut self.observers {
+                    flow = first_break(flow, o.observe(&mut now)?);
+                    interval = interval.min(o.step_interval().max(1));
+                }
+                (run.steps_unseen, run.step_interval) = (0, interval);
+            }
         }
         if let ControlFlow::Break(reason) = flow {
             run.ended.get_or_insert(reason);
@@ -965,6 +985,8 @@ impl Simulation {
             stop: StopWhen::new(&plan),
             ended: None,
             last: Moment::Start,
+            steps_unseen: 0,
+            step_interval: 1,
         };
         self.instantiate_all(start, fixed_stop)?;
         self.initialize(start)?;

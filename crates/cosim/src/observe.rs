@@ -141,6 +141,15 @@ pub trait RunObserver: Send {
     /// given is the summary's `stopped_by`. An error fails the run with that error.
     fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError>;
 
+    /// How many steps this observer can do without seeing (1: it sees every step). The
+    /// master may call it more often, for another observer, but never less; the start,
+    /// events, an FMU's end and the end are always told. Asked again after every call, so
+    /// it may change as the run goes on (the CLI's Ctrl-C adapts it to the steps' wall
+    /// time). The recording and the stop condition see every step.
+    fn step_interval(&self) -> u64 {
+        1
+    }
+
     /// The run completed (not called for a run that failed), with the values at its end.
     fn finished(&mut self, _now: &mut RunView<'_>, _how: &Ended) -> Result<(), SystemError> {
         Ok(())

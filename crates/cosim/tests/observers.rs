@@ -55,6 +55,8 @@ struct Watcher {
     end_at: Option<f64>,
     /// Fail the run at this step.
     fail_at: Option<u64>,
+    /// The steps it can do without seeing.
+    interval: u64,
 }
 
 impl Watcher {
@@ -66,6 +68,7 @@ impl Watcher {
             slots: (slot("int.x"), slot("g.y")),
             end_at: None,
             fail_at: None,
+            interval: 1,
         };
         (w, seen)
     }
@@ -86,6 +89,10 @@ impl RunObserver for Watcher {
             Some(x_end) if x >= x_end => Ok(ControlFlow::Break(format!("int.x reached {x}"))),
             _ => Ok(ControlFlow::Continue(())),
         }
+    }
+
+    fn step_interval(&self) -> u64 {
+        self.interval
     }
 
     fn finished(&mut self, now: &mut RunView<'_>, how: &Ended) -> Result<(), SystemError> {
@@ -204,4 +211,37 @@ fn an_observers_error_fails_the_run_and_taking_it_off_runs_again() {
     let (plain, _) = b.run(&text);
     sim.run().unwrap();
     assert_eq!(sim.recording().to_csv(), plain.recording().to_csv());
+}
+
+#[test]
+fn an_observer_sees_the_steps_it_asks_for_and_every_other_moment() {
+    let b = Bench::new();
+    let mut sim = b.sim(&system("stop = 2.0"));
+    let (mut sparse, sparse_seen) = Watcher::new(&sim);
+    sparse.interval = 5;
+    sim.observe(Box::new(sparse));
+    sim.run().unwrap();
+    let steps = |seen: &Arc<Mutex<Seen>>| -> Vec<Moment> {
+        seen.lock().unwrap().moments.iter().map(|m| m.0).collect()
+    };
+    // Every 5th step of 16, after the start; the end is told by `finished`.
+    let step = |k: u64| Moment::Step { k, last: k == 16 };
+    assert_eq!(
+        steps(&sparse_seen),
+        [Moment::Start, step(5), step(10), step(15)]
+    );
+    assert_eq!(sparse_seen.lock().unwrap().finished.len(), 1);
+    // Beside one that sees every step, it is called as often: never less than it asked.
+    let mut sim = b.sim(&system("stop = 2.0"));
+    let (mut sparse, sparse_seen) = Watcher::new(&sim);
+    sparse.interval = 5;
+    let (mut half, _) = Watcher::new(&sim);
+    half.interval = 2;
+    sim.observe(Box::new(sparse));
+    sim.observe(Box::new(half));
+    sim.run().unwrap();
+    let expected: Vec<Moment> = std::iter::once(Moment::Start)
+        .chain((2..=16).step_by(2).map(step))
+        .collect();
+    assert_eq!(steps(&sparse_seen), expected);
 }

@@ -266,6 +266,10 @@ impl PyRunObserver {
 }
 
 impl tb_cosim::RunObserver for PyRunObserver {
+    fn step_interval(&self) -> u64 {
+        self.every_steps
+    }
+
     fn observe(
         &mut self,
         now: &mut tb_cosim::RunView<'_>,
