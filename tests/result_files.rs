@@ -42,6 +42,21 @@ fn refused(o: &Output, what: &str) -> String {
     e
 }
 
+/// A system of the `faulty` test FMU as instance `a` (u = 1: y = t), with more parameter
+/// lines and the stop time, in `dir`.
+fn faulty_system(dir: &Path, parameters: &str, stop: &str) -> PathBuf {
+    let sys = dir.join("t.toml");
+    std::fs::write(
+        &sys,
+        format!(
+            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n{parameters}\n[experiment]\nstep = 1e-3\nstop = {stop}\n",
+            common::fmu("faulty").display().to_string()
+        ),
+    )
+    .unwrap();
+    sys
+}
+
 #[test]
 fn out_onto_a_fifo_a_device_a_link_a_folder_or_an_input_is_refused_before_the_run() {
     let dir = tb_testkit::scratch("outs");
@@ -126,16 +141,11 @@ impl FifoLike for std::fs::FileType {
 #[test]
 fn a_complete_run_keeps_its_results_when_an_instance_fails_to_end() {
     let dir = tb_testkit::scratch("terminate");
-    let fmu = common::fmu("faulty");
-    let sys = dir.path().join("t.toml");
-    std::fs::write(
-        &sys,
-        format!(
-            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\"a.fault_kind\" = 9\n\"a.fault_time\" = 100.0\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n",
-            fmu.display().to_string()
-        ),
-    )
-    .unwrap();
+    let sys = faulty_system(
+        dir.path(),
+        "\"a.fault_kind\" = 9\n\"a.fault_time\" = 100.0\n",
+        "1.0",
+    );
     let out = dir.path().join("r.csv");
     let o = run_out(&sys, &out);
     assert!(!o.status.success(), "the terminate error is an error");
@@ -155,16 +165,11 @@ fn a_complete_run_keeps_its_results_when_an_instance_fails_to_end() {
 #[test]
 fn a_failed_run_keeps_what_it_recorded_in_a_file_named_incomplete() {
     let dir = tb_testkit::scratch("incomplete");
-    let fmu = common::fmu("faulty");
-    let sys = dir.path().join("t.toml");
-    std::fs::write(
-        &sys,
-        format!(
-            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\"a.fault_kind\" = 1\n\"a.fault_time\" = 0.5\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n",
-            fmu.display().to_string()
-        ),
-    )
-    .unwrap();
+    let sys = faulty_system(
+        dir.path(),
+        "\"a.fault_kind\" = 1\n\"a.fault_time\" = 0.5\n",
+        "1.0",
+    );
     let out = dir.path().join("r.csv");
     // A complete result from an earlier run stays where it is.
     std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
@@ -232,17 +237,8 @@ fn a_replayed_column_without_a_unit_takes_the_inputs_and_a_wrong_one_names_the_f
 #[test]
 fn ctrl_c_ends_a_run_after_its_step_and_keeps_its_rows_as_incomplete() {
     let dir = tb_testkit::scratch("interrupted");
-    let fmu = common::fmu("faulty");
-    let sys = dir.path().join("t.toml");
     // 1e8 steps: far longer than the test waits.
-    std::fs::write(
-        &sys,
-        format!(
-            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\n[experiment]\nstep = 1e-3\nstop = 1e5\n",
-            fmu.display().to_string()
-        ),
-    )
-    .unwrap();
+    let sys = faulty_system(dir.path(), "", "1e5");
     let (out, trace) = (dir.path().join("r.csv"), dir.path().join("calls.txt"));
     std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
     let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
