@@ -2,7 +2,8 @@
 //! once into a [`Plan`] (FMUs loaded, names resolved, everything checked), a [`Simulation`]
 //! runs a plan with a master algorithm ([`master`]) over units behind one small trait
 //! ([`backend`]: an FMU in-process, a model linked natively, an FMU isolated in a worker
-//! process), and records a [`tb_table::Table`]. Replayed measurement channels
+//! process), and records a [`tb_table::Table`]; what watches a run, the recording and the
+//! stop condition included, is an observer ([`observe`]). Replayed measurement channels
 //! ([`replay`]) are units too. [`ssp`] writes a system as an SSP package, [`ssp_import`]
 //! reads one as a system file.
 

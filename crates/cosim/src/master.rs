@@ -2,8 +2,10 @@
 //! exchange of values between units ([`Exchange`]) is shared; how the units are stepped
 //! within one macro step is a [`MasterAlgorithm`] ([`GaussSeidel`] in the plan's stepping
 //! order, [`Jacobi`] all from the same values). Initialisation propagates outputs to inputs
-//! to a fixed point; the run ends at the stop time or when the plan's condition holds.
-//! Instances are created once and reset between runs.
+//! to a fixed point. After each moment of a run the observers are told
+//! ([`crate::observe`]): the recording, the plan's stop condition, a caller's own; the run
+//! ends at the stop time or when one of them ends it. Instances are created once and reset
+//! between runs.
 
 use crate::config::{Algorithm, ReplayBasis};
 use crate::observe::{Ended, Moment, Recording, RunObserver, RunView, StopWhen};
