@@ -208,3 +208,34 @@ fn range_check_0_uses_an_out_of_range_input_with_a_warning() {
         "{log}"
     );
 }
+
+/// A get or set whose value references and values differ in length is refused before the
+/// FMU is called: FMI 2.0 passes no count of values, so the FMU would read or write past
+/// the shorter slice.
+#[test]
+fn values_of_another_length_than_the_references_are_refused_before_the_call() {
+    let mut i = instance("dyno");
+    i.setup_experiment(0.0, None, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap();
+    let mut two = [f64::NAN; 2];
+    let e = i.get_real(&[1, 2, 3], &mut two).unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "instance 'host': fmi2GetReal was given 3 value references and 2 values"
+    );
+    // Nothing was written.
+    assert!(two.iter().all(|x| x.is_nan()));
+    let e = i.set_integer(&[1], &[1, 2]).unwrap_err().to_string();
+    assert!(
+        e.contains("fmi2SetInteger was given 1 value references and 2 values"),
+        "{e}"
+    );
+    let mut one = [0];
+    assert!(i.get_boolean(&[1, 2], &mut one).is_err());
+    assert!(i.set_real(&[], &[1.0]).is_err());
+    // Equal lengths go through (the shaft torque and torque setpoint inputs, 0 N·m).
+    i.get_real(&[1, 2], &mut two).unwrap();
+    assert_eq!(two, [0.0, 0.0]);
+    i.terminate().ok();
+}

@@ -53,6 +53,17 @@ pub enum FmuError {
         problem: String,
         log: Vec<String>,
     },
+    /// A get or set given value references and values of different lengths (a caller's
+    /// mistake, refused before the FMU could read or write past the values).
+    #[error(
+        "instance '{instance}': {function} was given {references} value references and {values} values"
+    )]
+    Lengths {
+        instance: String,
+        function: Function,
+        references: usize,
+        values: usize,
+    },
     #[error("instance '{instance}': {what} is not provided by this FMU")]
     Unsupported {
         instance: String,

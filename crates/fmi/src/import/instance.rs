@@ -159,6 +159,18 @@ impl Instance {
         }
     }
 
+    /// The FMU writes or reads as many values as references: a shorter slice would let it
+    /// past its end, so a difference is refused.
+    #[cold]
+    fn lengths(&self, function: Function, references: usize, values: usize) -> FmuError {
+        FmuError::Lengths {
+            instance: self.name.clone(),
+            function,
+            references,
+            values,
+        }
+    }
+
     #[cold]
     fn call_error(&self, function: Function, status: fmi2Status) -> FmuError {
         FmuError::call(
@@ -232,7 +244,9 @@ impl Instance {
 
     #[inline]
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        debug_assert_eq!(vrs.len(), out.len());
+        if vrs.len() != out.len() {
+            return Err(self.lengths(Function::GetReal, vrs.len(), out.len()));
+        }
         let s = unsafe {
             (self.lib.api.fmi2GetReal)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
         };
@@ -241,7 +255,9 @@ impl Instance {
 
     #[inline]
     pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        debug_assert_eq!(vrs.len(), values.len());
+        if vrs.len() != values.len() {
+            return Err(self.lengths(Function::SetReal, vrs.len(), values.len()));
+        }
         let s = unsafe {
             (self.lib.api.fmi2SetReal)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
         };
@@ -249,6 +265,9 @@ impl Instance {
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        if vrs.len() != out.len() {
+            return Err(self.lengths(Function::GetInteger, vrs.len(), out.len()));
+        }
         let s = unsafe {
             (self.lib.api.fmi2GetInteger)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
         };
@@ -256,6 +275,9 @@ impl Instance {
     }
 
     pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        if vrs.len() != values.len() {
+            return Err(self.lengths(Function::SetInteger, vrs.len(), values.len()));
+        }
         let s = unsafe {
             (self.lib.api.fmi2SetInteger)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
         };
@@ -263,6 +285,9 @@ impl Instance {
     }
 
     pub fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        if vrs.len() != out.len() {
+            return Err(self.lengths(Function::GetBoolean, vrs.len(), out.len()));
+        }
         let s = unsafe {
             (self.lib.api.fmi2GetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
         };
@@ -270,6 +295,9 @@ impl Instance {
     }
 
     pub fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        if vrs.len() != values.len() {
+            return Err(self.lengths(Function::SetBoolean, vrs.len(), values.len()));
+        }
         let s = unsafe {
             (self.lib.api.fmi2SetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
         };
