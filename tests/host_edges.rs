@@ -234,6 +234,7 @@ fn values_of_another_length_than_the_references_are_refused_before_the_call() {
     let mut one = [0];
     assert!(i.get_boolean(&[1, 2], &mut one).is_err());
     assert!(i.set_real(&[], &[1.0]).is_err());
+    assert!(i.set_string(&[1, 2], &["one"]).is_err());
     // Equal lengths go through (the shaft torque and torque setpoint inputs, 0 N·m).
     i.get_real(&[1, 2], &mut two).unwrap();
     assert_eq!(two, [0.0, 0.0]);

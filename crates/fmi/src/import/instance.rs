@@ -322,6 +322,9 @@ impl Instance {
 
     /// Set String variables (a NUL inside a value is refused).
     pub fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        if vrs.len() != values.len() {
+            return Err(self.lengths(Function::SetString, vrs.len(), values.len()));
+        }
         let c: Vec<CString> = values
             .iter()
             .map(|v| CString::new(*v))
