@@ -77,6 +77,34 @@ fn the_fmi3_bench_runs_native_to_the_same_lap() {
     );
 }
 
+/// FMI 3.0's independent variable `time` of an FMU run natively is the FMU's: a system
+/// recording `vehicle.time` and `edu.time` runs `--native` to the CSV of its FMUs, and
+/// the columns are the instances' time after each step.
+#[test]
+fn the_fmi3_time_variable_runs_native_as_in_the_fmu() {
+    let dir = tb_testkit::scratch("fmi3-native-time");
+    let all = ["vehicle", "driver", "dyno", "edu"];
+    let path = system(dir.path(), "fmi3-time", &all, Some(2.0));
+    let text = std::fs::read_to_string(&path).unwrap().replace(
+        "signals = [\n",
+        "signals = [\n    \"vehicle.time\", \"edu.time\",\n",
+    );
+    std::fs::write(&path, text).unwrap();
+    let fmus = run(&path, false);
+    let native = run_with(&path, "--native");
+    assert!(fmus == native, "the native run differs from the FMUs'");
+    let t = tb_table::Table::read_path(path.with_extension("csv")).unwrap();
+    let time = t.require("time").unwrap();
+    assert_eq!(time.last(), Some(&2.0));
+    // The instances sum their steps (t + h), the master counts ticks (k·h): the same times
+    // to within rounding.
+    for name in ["vehicle.time", "edu.time"] {
+        for (&own, &tick) in t.require(name).unwrap().iter().zip(time) {
+            assert!((own - tick).abs() <= 1e-12, "{name}: {own} at t = {tick}");
+        }
+    }
+}
+
 #[test]
 fn the_fmi3_bench_gives_the_fmi2_lap_bit_for_bit_in_process_and_mixed() {
     let dir = tb_testkit::scratch("fmi3-bench");

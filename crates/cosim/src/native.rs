@@ -125,9 +125,8 @@ impl<M: Model> Backend for NativeBackend<M> {
     }
     #[inline]
     fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        self.call(Function::GetReal, |rt| {
-            rt.get("fmi2GetReal", ScalarType::Real, vrs, out, |v| v.as_f64())
-        })
+        // The FMU's own path (fields read directly, FMI 3.0's `time` when exposed).
+        self.call(Function::GetReal, |rt| rt.get_real(vrs, out))
     }
     #[inline]
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
@@ -194,11 +193,21 @@ impl<M: Model> Backend for NativeBackend<M> {
     }
 }
 
-/// Creates one boxed native instance: (instance name, resource folder, logging).
-type Create = fn(&str, Option<PathBuf>, bool) -> Box<dyn Backend>;
+/// Creates one boxed native instance: (instance name, resource folder, logging, the
+/// independent variable `time` of an FMI 3.0 FMU exposed).
+type Create = fn(&str, Option<PathBuf>, bool, bool) -> Box<dyn Backend>;
 
-fn boxed<M: Model>(name: &str, res: Option<PathBuf>, logging: bool) -> Box<dyn Backend> {
-    Box::new(NativeBackend::<M>::new(name, res, logging))
+fn boxed<M: Model>(
+    name: &str,
+    res: Option<PathBuf>,
+    logging: bool,
+    fmi3_time: bool,
+) -> Box<dyn Backend> {
+    let mut b = NativeBackend::<M>::new(name, res, logging);
+    if fmi3_time {
+        b.rt.expose_time();
+    }
+    Box::new(b)
 }
 
 /// A model linked into the host: one row of the host's model registry.
@@ -237,6 +246,8 @@ pub struct NativeFactory {
     model: &'static str,
     resource_dir: PathBuf,
     create: Create,
+    /// In place of an FMI 3.0 FMU: its independent variable `time` is read as the FMU's.
+    fmi3: bool,
 }
 
 impl NativeFactory {
@@ -251,7 +262,7 @@ impl NativeFactory {
             ));
         };
         // An FMI 3.0 FMU of the model has the same variables under the same value
-        // references (and `time`, which the native model does not expose).
+        // references, and `time` one past them, which the native instance then exposes.
         let (what, guid) = match fmu.is_fmi3() {
             true => ("instantiation token", (m.token)()),
             false => ("GUID", (m.guid)()),
@@ -268,6 +279,7 @@ impl NativeFactory {
             model: m.name,
             resource_dir: fmu.resource_dir(),
             create: m.create,
+            fmi3: fmu.is_fmi3(),
         })
     }
 
@@ -283,7 +295,12 @@ impl BackendFactory for NativeFactory {
     fn create(&self, instance_name: &str, logging: bool) -> Result<Box<dyn Backend>, FmuError> {
         // Same resource rule as the FFI layer: a missing folder is passed as is (the model
         // reports what it cannot find).
-        let mut b = (self.create)(instance_name, Some(self.resource_dir.clone()), logging);
+        let mut b = (self.create)(
+            instance_name,
+            Some(self.resource_dir.clone()),
+            logging,
+            self.fmi3,
+        );
         if logging {
             b.set_debug_logging(true)?;
         }
