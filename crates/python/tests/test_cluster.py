@@ -20,12 +20,14 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 import warnings
 from pathlib import Path
 
 import pytest
 
 import twinbench
+from twinbench import _shipping
 
 import _studies
 
@@ -188,3 +190,46 @@ def test_a_study_naming_its_files_by_absolute_paths_runs_on_workers_without_them
     out = tmp_path / "out"
     twinbench.Study(laps).optimize(executor=c.client.get_executor(), out=out, generations=1)
     assert table1(out) == table1(cli)
+
+
+def test_the_files_of_a_coordinator_that_died_are_taken_off_by_the_next_study(cluster, tmp_path):
+    """A coordinator killed (SIGKILL) cannot take its study's files off the cluster; the
+    next study's coordinator does, and keeps its own and those of one still alive."""
+    c, study = cluster
+    c.start_worker("w1")
+    c.wait_for(1)
+    script = (
+        "import sys, twinbench\n"
+        "from dask.distributed import Client\n"
+        f"client = Client(scheduler_file={str(c.file)!r}, timeout='60s')\n"
+        f"study = twinbench.Study({str(study)!r})\n"
+        "study._shipping(client.get_executor())\n"
+        "print(client.id, flush=True)\n"
+        "sys.stdin.read()\n"
+    )
+    coordinators = [
+        subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE, text=True)
+        for _ in range(2)
+    ]
+    try:
+        dead, alive = (p.stdout.readline().strip() for p in coordinators)
+        assert dead and alive
+        owners = {_shipping._owner(n) for n in c.client.list_datasets()}
+        assert {dead, alive} <= owners, owners
+        coordinators[0].kill()
+        coordinators[0].wait()
+        # The scheduler notices the closed connection at once; wait until it has.
+        deadline = time.time() + 30
+        while dead in c.client.run_on_scheduler(_shipping._client_ids):
+            assert time.time() < deadline, "the scheduler still lists the killed coordinator"
+            time.sleep(0.1)
+        mine = twinbench.Study(study)  # its files stay published while it lives
+        mine._shipping(c.client.get_executor())
+        owners = {_shipping._owner(n) for n in c.client.list_datasets()}
+        assert dead not in owners and {alive, c.client.id} <= owners, owners
+    finally:
+        for p in coordinators:
+            if p.poll() is None:
+                p.kill()
+            p.wait()

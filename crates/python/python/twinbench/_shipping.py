@@ -3,7 +3,7 @@
 A worker of a cluster without a shared disk (Dask on Kubernetes, a cloud cluster, a
 colleague's workstation) has none of the coordinator's files. The coordinator therefore
 hands each file to Dask once, as a future of its bytes published under a name of the study's
-(``twinbench-<id>-<sha256>``, a Dask dataset: the scheduler keeps the task that makes it,
+(``twinbench-<client>-<id>-<sha256>``, a Dask dataset: the scheduler keeps the task that makes it,
 so the bytes are made again if the worker holding them dies), and every task names the
 files it needs by path, digest and that name only (a few hundred bytes per file). A worker looks each digest up in its own
 content-addressed store (``TWINBENCH_FILES``, else ``~/.cache/twinbench/files``):
@@ -100,7 +100,10 @@ class Shipment:
 
         self._client = client
         self._names: List[str] = []
-        ident = uuid.uuid4().hex[:12]
+        sweep_orphans(client)
+        # The coordinator's client in every name: the next study on the cluster takes off
+        # the files of one that died (sweep_orphans).
+        ident = f"{client.id}-{uuid.uuid4().hex[:12]}"
         files = []
         self.bytes_per_study = 0
         contents = loaded.contents()
@@ -140,6 +143,42 @@ class Shipment:
             except Exception:
                 pass
         self._names = []
+
+
+def _owner(name: str) -> Optional[str]:
+    """The client that published a dataset ``twinbench-<client>-<12 hex>-<sha256>``."""
+    rest = name[len("twinbench-"):] if name.startswith("twinbench-") else ""
+    tail = 1 + 12 + 1 + 64
+    if len(rest) <= tail or rest[-65] != "-" or rest[-78] != "-":
+        return None
+    return rest[:-tail]
+
+
+def _client_ids(dask_scheduler=None) -> List[str]:
+    return list(dask_scheduler.clients)
+
+
+def sweep_orphans(client: Any) -> List[str]:
+    """Take off the cluster the files of coordinators that are gone: one that died (killed,
+    crashed, its machine lost) could not take its own off, and the scheduler keeps
+    published datasets, their bytes held by a worker, until it restarts. Returns the names
+    taken off; best effort (a cluster that does not answer keeps them)."""
+    try:
+        names = [n for n in client.list_datasets() if _owner(n) is not None]
+        if not names:
+            return []
+        alive = set(client.run_on_scheduler(_client_ids))
+    except Exception:
+        return []
+    gone = []
+    for name in names:
+        if _owner(name) not in alive:
+            try:
+                client.unpublish_dataset(name)
+                gone.append(name)
+            except Exception:
+                pass
+    return gone
 
 
 class ShippingExecutor:
