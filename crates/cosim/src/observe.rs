@@ -133,8 +133,9 @@ impl<'a> RunView<'a> {
     }
 }
 
-/// Something that watches a run. Every observer sees every moment, in the order they were
-/// attached (the recording first, then the stop condition, then the caller's).
+/// Something that watches a run. Each observer is told of the moments it asks for (every
+/// one but the steps it skips, [`RunObserver::step_interval`]), in the order the observers
+/// were attached: the recording first, then the stop condition, then the caller's.
 pub trait RunObserver: Send {
     /// A moment of the run. `Break(reason)` ends the run after this moment (after the
     /// step an event row is part of): every observer still sees it, the first reason
