@@ -137,45 +137,26 @@ impl Drop for RunBar {
 }
 
 /// Ends a run at the first SIGINT or SIGTERM ([`super::interrupt::run_flag`]): the run
-/// fails after the step under way, so its rows are kept as an incomplete result. It looks
-/// at the flag every 1 to 4096 steps, as many as take about a millisecond of wall time
-/// (doubled while calls come faster, halved when they come slower than every 20 ms): a
-/// Ctrl-C is answered within a few milliseconds, and a lap's loop is not slowed.
-pub struct StopRunOnFlag {
-    flag: Arc<AtomicBool>,
-    interval: u64,
-    last_call: std::time::Instant,
-}
-
-impl StopRunOnFlag {
-    pub fn new(flag: Arc<AtomicBool>) -> StopRunOnFlag {
-        StopRunOnFlag {
-            flag,
-            interval: 1,
-            last_call: std::time::Instant::now(),
-        }
-    }
-}
+/// fails after the step under way, so its rows are kept as an incomplete result. It sees
+/// no step until the signal's flag wakes it ([`RunObserver::wake_flag`]): the master reads
+/// the flag at every step, and nothing else is done.
+pub struct StopRunOnFlag(pub Arc<AtomicBool>);
 
 impl RunObserver for StopRunOnFlag {
     fn step_interval(&self) -> u64 {
-        self.interval
+        u64::MAX
+    }
+
+    fn wake_flag(&self) -> Option<Arc<AtomicBool>> {
+        Some(self.0.clone())
     }
 
     fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError> {
-        if self.flag.load(Ordering::Relaxed) {
+        if self.0.load(Ordering::Relaxed) {
             return Err(SystemError::Stop(format!(
                 "interrupted by SIGINT or SIGTERM (Ctrl-C) at t = {} s",
                 tb_files::number(now.time())
             )));
-        }
-        let wall = std::time::Instant::now();
-        let since = wall.duration_since(self.last_call).as_secs_f64();
-        self.last_call = wall;
-        if since < 1e-3 {
-            self.interval = (self.interval * 2).min(4096);
-        } else if since > 20e-3 {
-            self.interval = (self.interval / 2).max(1);
         }
         Ok(ControlFlow::Continue(()))
     }

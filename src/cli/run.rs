@@ -286,9 +286,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     // The CLI's observers of the run: Ctrl-C (or SIGTERM) ends it keeping its rows, a
     // progress bar on a terminal.
     let interrupt = super::interrupt::run_flag()?;
-    sim.observe(Box::new(super::progress::StopRunOnFlag::new(
-        interrupt.clone(),
-    )));
+    sim.observe(Box::new(super::progress::StopRunOnFlag(interrupt.clone())));
     if std::io::stderr().is_terminal() {
         let until = match &system.stop {
             tb_cosim::Stop::Time(t) => format!("of {} s", tb_files::number(*t)),

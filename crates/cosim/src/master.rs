@@ -13,6 +13,7 @@ use crate::plan::{Endpoint, ParamSlot, ParamValue, Plan, Stop};
 use crate::replay::Cursor;
 use crate::{backend::Backend, invalid, SystemError};
 use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 use tb_fmi::fmi2::fmi2Status;
@@ -187,6 +188,7 @@ fn step_error(f: &mut FmuUnit, e: FmuError) -> SystemError {
     }
 }
 
+#[inline(always)]
 fn read_reals(
     i: &mut dyn Backend,
     batch: &mut Batch<f64>,
@@ -481,10 +483,76 @@ struct RunState {
     ended: Option<String>,
     /// The last moment the observers were told of.
     last: Moment,
-    /// Steps since the caller's observers were last called, and how many they can do
-    /// without seeing.
-    steps_unseen: u64,
-    step_interval: u64,
+    /// The step at which each of the caller's observers is next due, and the first of
+    /// those.
+    due: Vec<u64>,
+    next_due: u64,
+    /// The caller's observers that a flag wakes ([`RunObserver::wake_flag`]): index, flag.
+    wake: Vec<(usize, Arc<AtomicBool>)>,
+}
+
+/// The caller's observers, once [`RunState::callers_due`]: each at every moment but the
+/// steps it lets pass ([`RunObserver::step_interval`], counted from the start or its last
+/// step) unless its flag woke it.
+#[inline(never)]
+fn notify_callers(
+    observers: &mut [Box<dyn RunObserver>],
+    moment: Moment,
+    now: &mut RunView<'_>,
+    run: &mut RunState,
+    mut flow: ControlFlow<String>,
+) -> Result<ControlFlow<String>, SystemError> {
+    let k = match moment {
+        Moment::Step { k, .. } => {
+            // One woken by its flag is due now (an atomic load per flag and step).
+            let mut woken = false;
+            for &(i, ref flag) in &run.wake {
+                if flag.load(Ordering::Relaxed) {
+                    run.due[i] = k;
+                    woken = true;
+                }
+            }
+            debug_assert!(k >= run.next_due || woken, "callers_due said so");
+            Some(k)
+        }
+        Moment::Start => {
+            run.due.clear();
+            run.due.resize(observers.len(), 0);
+            run.wake = (observers.iter().enumerate())
+                .filter_map(|(i, o)| o.wake_flag().map(|f| (i, f)))
+                .collect();
+            Some(0)
+        }
+        Moment::Event | Moment::EndedByFmu => None,
+    };
+    let mut next_due = u64::MAX;
+    for (o, due) in observers.iter_mut().zip(&mut run.due) {
+        match k {
+            Some(k) if k >= *due => {
+                flow = first_break(flow, o.observe(now)?);
+                *due = k.saturating_add(o.step_interval().max(1));
+            }
+            Some(_) => {}
+            None => flow = first_break(flow, o.observe(now)?),
+        }
+        next_due = next_due.min(*due);
+    }
+    run.next_due = next_due;
+    Ok(flow)
+}
+
+impl RunState {
+    /// Whether a caller's observer is to be told of this moment: the lap loop's check, a
+    /// comparison and a load per wake flag while none is.
+    #[inline(always)]
+    fn callers_due(&self, moment: Moment) -> bool {
+        match moment {
+            Moment::Step { k, .. } => {
+                k >= self.next_due || self.wake.iter().any(|(_, f)| f.load(Ordering::Relaxed))
+            }
+            _ => true,
+        }
+    }
 }
 
 /// `a` unless it continues: the first reason to end a run wins.
@@ -669,24 +737,8 @@ impl Simulation {
         if let Some(stop) = &mut run.stop {
             flow = first_break(flow, stop.observe(&mut now)?);
         }
-        if !self.observers.is_empty() {
-            // The caller's observers see a step once the fewest steps any of them can do
-            // without seeing have passed; every other moment always.
-            let due = match moment {
-                Moment::Step { .. } => {
-                    run.steps_unseen += 1;
-                    run.steps_unseen >= run.step_interval
-                }
-                _ => true,
-            };
-            if due {
-                let mut interval = u64::MAX;
-                for o in &mut self.observers {
-                    flow = first_break(flow, o.observe(&mut now)?);
-                    interval = interval.min(o.step_interval().max(1));
-                }
-                (run.steps_unseen, run.step_interval) = (0, interval);
-            }
+        if !self.observers.is_empty() && run.callers_due(moment) {
+            flow = notify_callers(&mut self.observers, moment, &mut now, run, flow)?;
         }
         if let ControlFlow::Break(reason) = flow {
             run.ended.get_or_insert(reason);
@@ -987,8 +1039,9 @@ impl Simulation {
             stop: StopWhen::new(&plan),
             ended: None,
             last: Moment::Start,
-            steps_unseen: 0,
-            step_interval: 1,
+            due: Vec::new(),
+            next_due: 0,
+            wake: Vec::new(),
         };
         self.instantiate_all(start, fixed_stop)?;
         self.initialize(start)?;

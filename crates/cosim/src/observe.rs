@@ -18,6 +18,7 @@ use crate::master::Exchange;
 use crate::plan::{Condition, Plan};
 use crate::SystemError;
 use std::ops::ControlFlow;
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use tb_table::Table;
 
@@ -142,18 +143,65 @@ pub trait RunObserver: Send {
     /// given is the summary's `stopped_by`. An error fails the run with that error.
     fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError>;
 
-    /// How many steps this observer can do without seeing (1: it sees every step). The
-    /// master may call it more often, for another observer, but never less; the start,
-    /// events, an FMU's end and the end are always told. Asked again after every call, so
-    /// it may change as the run goes on (the CLI's Ctrl-C adapts it to the steps' wall
-    /// time). The recording and the stop condition see every step.
+    /// Every how many steps this observer sees one (1: each): with `n` it sees steps n,
+    /// 2n, 3n... (counted from its last one when `n` changes); the start, events, an FMU's
+    /// end and the end are always told. Asked again after every step it sees, so it may
+    /// change as the run goes on (the CLI's Ctrl-C adapts it to the steps' wall time). The
+    /// recording and the stop condition see every step.
     fn step_interval(&self) -> u64 {
         1
+    }
+
+    /// A flag that, once set (by a signal handler, by another thread: a stop button), has
+    /// the master call this observer at the next step whatever its `step_interval`: an
+    /// observer that must answer at once but has nothing to do until then asks for no
+    /// steps (`u64::MAX`) and gives its flag, which the master reads at every step (an
+    /// atomic load). Asked at the start of each run.
+    fn wake_flag(&self) -> Option<Arc<AtomicBool>> {
+        None
     }
 
     /// The run completed (not called for a run that failed), with the values at its end.
     fn finished(&mut self, _now: &mut RunView<'_>, _how: &Ended) -> Result<(), SystemError> {
         Ok(())
+    }
+}
+
+/// The steps an observer that must answer promptly but cheaply (Ctrl-C) lets pass between
+/// two looks: about a millisecond of wall time, from 1 to 4096 steps, doubled while its
+/// calls come faster and halved when they come slower than every 20 ms. So a lap's loop
+/// (a microsecond per step) is not slowed, and a slow FMU's run is still looked at after
+/// each step.
+pub struct WallClockInterval {
+    steps: u64,
+    last_call: std::time::Instant,
+}
+
+impl Default for WallClockInterval {
+    fn default() -> Self {
+        WallClockInterval {
+            steps: 1,
+            last_call: std::time::Instant::now(),
+        }
+    }
+}
+
+impl WallClockInterval {
+    /// The steps to let pass now ([`RunObserver::step_interval`]).
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// At each call: adapt to the wall time since the last one.
+    pub fn called(&mut self) {
+        let wall = std::time::Instant::now();
+        let since = wall.duration_since(self.last_call).as_secs_f64();
+        self.last_call = wall;
+        if since < 1e-3 {
+            self.steps = (self.steps * 2).min(4096);
+        } else if since > 20e-3 {
+            self.steps = (self.steps / 2).max(1);
+        }
     }
 }
 

@@ -6,6 +6,7 @@
 mod support;
 
 use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use support::{column, Bench};
 use tb_cosim::{Ended, Moment, RunObserver, RunView, SystemError};
@@ -214,7 +215,7 @@ fn an_observers_error_fails_the_run_and_taking_it_off_runs_again() {
 }
 
 #[test]
-fn an_observer_sees_the_steps_it_asks_for_and_every_other_moment() {
+fn each_observer_sees_the_steps_it_asks_for_and_every_other_moment() {
     let b = Bench::new();
     let mut sim = b.sim(&system("stop = 2.0"));
     let (mut sparse, sparse_seen) = Watcher::new(&sim);
@@ -231,17 +232,81 @@ fn an_observer_sees_the_steps_it_asks_for_and_every_other_moment() {
         [Moment::Start, step(5), step(10), step(15)]
     );
     assert_eq!(sparse_seen.lock().unwrap().finished.len(), 1);
-    // Beside one that sees every step, it is called as often: never less than it asked.
+    // Beside another that asks for every 2nd step, each sees exactly its own.
     let mut sim = b.sim(&system("stop = 2.0"));
     let (mut sparse, sparse_seen) = Watcher::new(&sim);
     sparse.interval = 5;
-    let (mut half, _) = Watcher::new(&sim);
+    let (mut half, half_seen) = Watcher::new(&sim);
     half.interval = 2;
     sim.observe(Box::new(sparse));
     sim.observe(Box::new(half));
     sim.run().unwrap();
+    assert_eq!(
+        steps(&sparse_seen),
+        [Moment::Start, step(5), step(10), step(15)]
+    );
     let expected: Vec<Moment> = std::iter::once(Moment::Start)
         .chain((2..=16).step_by(2).map(step))
         .collect();
-    assert_eq!(steps(&sparse_seen), expected);
+    assert_eq!(steps(&half_seen), expected);
+}
+
+/// Sees no step until its flag is set; then ends the run.
+struct Sleeper {
+    flag: Arc<AtomicBool>,
+    seen: Arc<Mutex<Vec<Moment>>>,
+}
+
+impl RunObserver for Sleeper {
+    fn step_interval(&self) -> u64 {
+        u64::MAX
+    }
+
+    fn wake_flag(&self) -> Option<Arc<AtomicBool>> {
+        Some(self.flag.clone())
+    }
+
+    fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError> {
+        self.seen.lock().unwrap().push(now.moment());
+        match self.flag.load(Ordering::Relaxed) {
+            true => Ok(ControlFlow::Break("woken".into())),
+            false => Ok(ControlFlow::Continue(())),
+        }
+    }
+}
+
+/// Sets a flag at one step (as a signal handler or a stop button would).
+struct Setter(Arc<AtomicBool>, u64);
+
+impl RunObserver for Setter {
+    fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError> {
+        if now.moment()
+            == (Moment::Step {
+                k: self.1,
+                last: false,
+            })
+        {
+            self.0.store(true, Ordering::Relaxed);
+        }
+        Ok(ControlFlow::Continue(()))
+    }
+}
+
+#[test]
+fn an_observer_that_asks_for_no_steps_is_woken_by_its_flag_at_the_next_step() {
+    let b = Bench::new();
+    let mut sim = b.sim(&system("stop = 2.0"));
+    let (flag, seen) = (Arc::new(AtomicBool::new(false)), Arc::default());
+    sim.observe(Box::new(Setter(flag.clone(), 6)));
+    sim.observe(Box::new(Sleeper {
+        flag,
+        seen: Arc::clone(&seen),
+    }));
+    let summary = sim.run().unwrap();
+    // Set during step 6's calls: the sleeper sees step 7, its first, and ends the run.
+    assert_eq!(
+        *seen.lock().unwrap(),
+        [Moment::Start, Moment::Step { k: 7, last: false }]
+    );
+    assert_eq!((summary.steps, summary.stopped_by.as_str()), (7, "woken"));
 }

@@ -113,6 +113,11 @@ fn run(
             twinbench::bench::set_parameter(&plan, &mut sim, name, value)
                 .map_err(|e| e.context(format!("parameters[\"{name}\"]")))?;
         }
+        // Ctrl-C while the run goes on: KeyboardInterrupt after the step under way.
+        sim.observe(Box::new(PySignals {
+            interval: tb_cosim::observe::WallClockInterval::default(),
+            raised: observer_raised.clone(),
+        }));
         if let Some(callback) = observer {
             sim.observe(Box::new(PyRunObserver::new(
                 &plan,
@@ -168,6 +173,43 @@ fn run(
     s.set_item("warnings", warnings)?;
     d.set_item("summary", s)?;
     Ok(d.into_any().unbind())
+}
+
+/// Asks Python whether a signal came (Ctrl-C) about once per millisecond of wall time of a
+/// run: its exception (KeyboardInterrupt) fails the run and is raised as itself.
+struct PySignals {
+    interval: tb_cosim::observe::WallClockInterval,
+    raised: Arc<Mutex<Option<PyErr>>>,
+}
+
+impl tb_cosim::RunObserver for PySignals {
+    fn step_interval(&self) -> u64 {
+        self.interval.steps()
+    }
+
+    fn observe(
+        &mut self,
+        now: &mut tb_cosim::RunView<'_>,
+    ) -> Result<ControlFlow<String>, tb_cosim::SystemError> {
+        self.interval.called();
+        Python::attach(|py| {
+            py.check_signals().inspect_err(|e| {
+                // Where the run was stopped, on the exception itself (Python 3.11+).
+                let note = format!(
+                    "twinbench.run: stopped after the step to t = {} s",
+                    tb_files::number(now.time())
+                );
+                let _ = e.value(py).call_method1("add_note", (note,));
+            })
+        })
+        .map_err(|e| {
+            let message = format!("{e} at t = {} s", tb_files::number(now.time()));
+            let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
+            raised.get_or_insert(e);
+            tb_cosim::SystemError::Stop(message)
+        })?;
+        Ok(ControlFlow::Continue(()))
+    }
 }
 
 /// Calls a Python callable with the time and the recorded signals' values during a run (a

@@ -14,6 +14,7 @@ import math
 import os
 import signal
 import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -159,6 +160,24 @@ def test_an_observer_watches_the_run_and_can_end_it():
         twinbench.run(SYSTEM, observer=lambda t, v: 42)
     with pytest.raises(twinbench.TwinbenchError, match="every = 0: expected a positive time"):
         twinbench.run(SYSTEM, observer=lambda t, v: None, every=0.0)
+
+
+def test_ctrl_c_during_a_run_raises_keyboard_interrupt_where_the_run_was():
+    """SIGINT while a long run goes on (here 3000 s of simulated time, seconds of wall
+    time) stops it after the step under way: KeyboardInterrupt, saying where."""
+
+    def start_the_clock(t, values):
+        # At the run's start, inside the run: the signal cannot come before it.
+        threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+
+    with pytest.raises(KeyboardInterrupt) as caught:
+        twinbench.run(SYSTEM, stop=3000.0, observer=start_the_clock, every=1e4)
+    if sys.version_info < (3, 11):
+        return  # no exception notes before Python 3.11
+    notes = getattr(caught.value, "__notes__", [])
+    assert any(n.startswith("twinbench.run: stopped after the step to t = ") for n in notes), notes
+    t = float(notes[-1].split("t = ")[1].split(" s")[0])
+    assert 0.0 < t < 3000.0
 
 
 def test_a_bad_system_raises_the_command_lines_message(tmp_path):
