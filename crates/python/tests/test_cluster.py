@@ -207,9 +207,13 @@ def test_the_files_of_a_coordinator_that_died_are_taken_off_by_the_next_study(cl
         "print(client.id, flush=True)\n"
         "sys.stdin.read()\n"
     )
+    # A killed process cannot remove its unpacked FMUs: they go to the test's folder.
+    scratch = tmp_path / "coordinators-tmp"
+    scratch.mkdir()
     coordinators = [
         subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE,
-                         stdout=subprocess.PIPE, text=True)
+                         stdout=subprocess.PIPE, text=True,
+                         env={**os.environ, "TMPDIR": str(scratch)})
         for _ in range(2)
     ]
     try:
