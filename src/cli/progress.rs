@@ -111,10 +111,9 @@ impl RunObserver for RunBar {
     }
 
     fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError> {
-        if let Moment::Step { k, .. } = now.moment() {
-            if k % 16 == 0 {
-                self.update(now);
-            }
+        // Every 16th step (`step_interval`), and the start.
+        if let Moment::Step { .. } = now.moment() {
+            self.update(now);
         }
         Ok(ControlFlow::Continue(()))
     }

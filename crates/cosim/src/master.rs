@@ -576,9 +576,6 @@ pub struct Simulation {
     observers: Vec<Box<dyn RunObserver>>,
     /// Echo FMU messages with status OK to the log (off: kept only for error reports).
     pub echo_fmu_log: bool,
-    /// A row before and after each event of a Model Exchange instance, as FMPy's
-    /// `record_events` ([`Simulation::record_events`]).
-    record_events: bool,
 }
 
 impl Simulation {
@@ -676,7 +673,6 @@ impl Simulation {
             },
             plan,
             echo_fmu_log: true,
-            record_events: false,
         })
     }
 
@@ -696,7 +692,6 @@ impl Simulation {
                 ),
             ));
         }
-        self.record_events = on;
         self.recording.event_rows = on;
         Ok(())
     }
@@ -1065,7 +1060,7 @@ impl Simulation {
                 (true, true) => (start + span) - t,
             };
             self.ex.time_replays_at(t);
-            let stepped = match self.record_events {
+            let stepped = match self.recording.event_rows {
                 true => self.step_recording_events(order, t, step, &mut run),
                 false => self.algorithm.step(&mut self.ex, order, t, step),
             };

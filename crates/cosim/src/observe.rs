@@ -215,7 +215,8 @@ pub struct Recording {
     /// The recording has text columns (String signals).
     has_text: bool,
     decimation: u64,
-    /// Rows before and after events are recorded (`Simulation::record_events`).
+    /// Rows before and after events are recorded (`Simulation::record_events`; the master
+    /// then steps event by event).
     pub(crate) event_rows: bool,
 }
 

@@ -318,7 +318,8 @@ impl tb_cosim::RunObserver for PyRunObserver {
     ) -> Result<ControlFlow<String>, tb_cosim::SystemError> {
         match now.moment() {
             tb_cosim::Moment::Start => self.call(now),
-            tb_cosim::Moment::Step { k, .. } if k % self.every_steps == 0 => self.call(now),
+            // Every `every_steps`-th step (`step_interval`).
+            tb_cosim::Moment::Step { .. } => self.call(now),
             _ => Ok(ControlFlow::Continue(())),
         }
     }
