@@ -439,3 +439,66 @@ fn every_fmu_ships_its_documentation_and_notices() {
         }
     }
 }
+
+/// Red team P7, FMI 2.0: a hostile host's double free, call after free, foreign FMU state
+/// and endless step are refused with fmi2Error and a logged reason, never followed.
+#[test]
+fn a_hostile_hosts_double_free_call_after_free_foreign_state_and_endless_step_are_refused() {
+    let f = load("vehicle");
+    let mut i = Instance::instantiate(
+        f.library().unwrap(),
+        "hostile-host",
+        &f.description.guid,
+        Some(&f.resource_dir()),
+        true,
+    )
+    .unwrap();
+    init(&mut i);
+    let library = f.library().unwrap();
+    let api = &library.api;
+    let c = i.raw();
+    let said = |i: &Instance| i.last_log_lines().join("\n");
+    unsafe {
+        let started = std::time::Instant::now();
+        assert_eq!((api.fmi2DoStep)(c, 0.0, 1e300, 1), fmi2Status::ERROR);
+        assert!(started.elapsed() < std::time::Duration::from_secs(5));
+        assert!(said(&i).contains("internal steps"), "{}", said(&i));
+        let mut bogus = [0u64; 64];
+        let foreign = bogus.as_mut_ptr() as fmi2FMUstate;
+        assert_eq!(
+            (api.fmi2SetFMUstate.unwrap())(c, foreign),
+            fmi2Status::ERROR
+        );
+        let mut s: fmi2FMUstate = std::ptr::null_mut();
+        assert_eq!((api.fmi2GetFMUstate.unwrap())(c, &mut s), fmi2Status::OK);
+        let mut again = s;
+        assert_eq!((api.fmi2FreeFMUstate.unwrap())(c, &mut s), fmi2Status::OK);
+        assert_eq!(
+            (api.fmi2FreeFMUstate.unwrap())(c, &mut again),
+            fmi2Status::ERROR
+        );
+        assert!(
+            said(&i).contains("not one of this instance's"),
+            "{}",
+            said(&i)
+        );
+        assert_eq!(bogus, [0u64; 64]);
+        // A made-up instance pointer.
+        assert_eq!(
+            (api.fmi2DoStep)(foreign as fmi2Component, 0.0, 1e-3, 1),
+            fmi2Status::ERROR
+        );
+        // Freed by the host, then used and freed again (the Instance's own drop frees it a
+        // third time): refused each time.
+        (api.fmi2FreeInstance)(c);
+        let mut y = [0.0];
+        let v = vr(&f, "v");
+        assert_eq!(
+            (api.fmi2GetReal)(c, &v, 1, y.as_mut_ptr()),
+            fmi2Status::ERROR
+        );
+        (api.fmi2FreeInstance)(c);
+    }
+    let log = said(&i);
+    assert!(log.contains("the instance was freed"), "{log}");
+}

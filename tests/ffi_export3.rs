@@ -349,3 +349,69 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
         free(c);
     }
 }
+
+/// Red team P7: a hostile host's double free, call after free, foreign FMU state and
+/// endless step are refused with fmi3Error and a logged reason; the FMU never aborts or
+/// reads freed memory. (They aborted, answered fmi3OK after the free, and never returned.)
+#[test]
+fn a_hostile_hosts_double_free_call_after_free_foreign_state_and_endless_step_are_refused() {
+    let f = open("vehicle");
+    unsafe {
+        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
+        let get_state: unsafe extern "C" fn(Inst, *mut *mut c_void) -> i32 =
+            f.sym("fmi3GetFMUState");
+        let set_state: unsafe extern "C" fn(Inst, *mut c_void) -> i32 = f.sym("fmi3SetFMUState");
+        let free_state: unsafe extern "C" fn(Inst, *mut *mut c_void) -> i32 =
+            f.sym("fmi3FreeFMUState");
+        let size: unsafe extern "C" fn(Inst, *mut c_void, *mut usize) -> i32 =
+            f.sym("fmi3SerializedFMUStateSize");
+        let c = f.instantiate(false);
+        f.init(c);
+        f.messages();
+        // A step whose internal steps have no end in sight: refused at once.
+        let started = std::time::Instant::now();
+        for h in [1e5, 1e300] {
+            let (s, _, _) = f.step(c, 0.0, h);
+            assert_eq!(s, 3, "a step of {h} s");
+            let m = f.messages();
+            assert!(m.contains("internal steps") && m.contains("refused"), "{m}");
+        }
+        assert!(started.elapsed() < std::time::Duration::from_secs(5));
+        // The instance still steps afterwards (a refused call is an error, not a crash).
+        f.call0("fmi3Reset", c);
+        f.init(c);
+        assert_eq!(f.step(c, 0.0, 1e-3).0, 0, "{}", f.messages());
+        // States: a foreign pointer, a double free.
+        let mut s: *mut c_void = std::ptr::null_mut();
+        assert_eq!(get_state(c, &mut s), 0);
+        let mut bogus = [0u64; 64];
+        let foreign = bogus.as_mut_ptr() as *mut c_void;
+        assert_eq!(set_state(c, foreign), 3);
+        let mut n = 0usize;
+        assert_eq!(size(c, foreign, &mut n), 3);
+        let mut foreign_too = foreign;
+        assert_eq!(free_state(c, &mut foreign_too), 3);
+        let m = f.messages();
+        assert!(m.contains("not one of this instance's"), "{m}");
+        assert_eq!(bogus, [0u64; 64], "the FMU wrote through a foreign pointer");
+        let mut again = s;
+        assert_eq!(free_state(c, &mut s), 0);
+        assert!(s.is_null());
+        assert_eq!(free_state(c, &mut again), 3, "a state freed twice");
+        assert_eq!(set_state(c, again), 3, "a freed state restored");
+        f.messages();
+        // The instance: a call after the free, and a second free.
+        free(c);
+        let (status, _) = f.get_f64(c, &[f.vr("v")]);
+        assert_eq!(status, 3, "a call after fmi3FreeInstance");
+        let m = f.messages();
+        assert!(m.contains("the instance was freed"), "{m}");
+        free(c);
+        let m = f.messages();
+        assert!(m.contains("fmi3FreeInstance") && m.contains("freed"), "{m}");
+        // A pointer that was never an instance.
+        assert_eq!(f.get_f64(foreign, &[0]).0, 3);
+        assert_eq!(f.step(std::ptr::null_mut(), 0.0, 1e-3).0, 3);
+        free(foreign);
+    }
+}

@@ -8,84 +8,18 @@
 
 mod common;
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 use tb_cosim::backend::BackendFactory;
 use tb_cosim::isolated::{IsolatedFactory, IsolationOptions};
-use zip::write::SimpleFileOptions;
-
-const MODEL_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="hostile" guid="{8c4e810f-3df3-4a00-8276-176fa3c9f000}" generationTool="twinbench tests (gcc)">
-  <CoSimulation modelIdentifier="hostile" canHandleVariableCommunicationStepSize="true"/>
-  <ModelVariables>
-    <ScalarVariable name="u" valueReference="0" causality="input" variability="continuous"><Real start="1"/></ScalarVariable>
-    <ScalarVariable name="y" valueReference="1" causality="output" variability="continuous" initial="calculated"><Real/></ScalarVariable>
-  </ModelVariables>
-  <ModelStructure>
-    <Outputs><Unknown index="2" dependencies=""/></Outputs>
-    <InitialUnknowns><Unknown index="2" dependencies="1"/></InitialUnknowns>
-  </ModelStructure>
-</fmiModelDescription>
-"#;
 
 /// `hostile.fmu` built with `-DFAULT=<fault>` in `dir`.
 fn hostile_fmu(dir: &Path, fault: &str) -> PathBuf {
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hostile/hostile.c");
-    let so = dir.join(format!("hostile-{fault}.so"));
-    let out = Command::new("gcc")
-        .args(["-shared", "-fPIC", "-O1", "-Wall", "-Werror"])
-        .arg(format!("-DFAULT={fault}"))
-        .arg("-o")
-        .arg(&so)
-        .arg(&source)
-        .output()
-        .expect("gcc runs");
-    assert!(
-        out.status.success(),
-        "gcc: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let fmu = dir.join(format!("hostile-{fault}.fmu"));
-    let mut zip = zip::ZipWriter::new(std::fs::File::create(&fmu).unwrap());
-    let o = SimpleFileOptions::default();
-    zip.start_file("modelDescription.xml", o).unwrap();
-    zip.write_all(MODEL_DESCRIPTION.as_bytes()).unwrap();
-    zip.start_file("binaries/linux64/hostile.so", o).unwrap();
-    zip.write_all(&std::fs::read(&so).unwrap()).unwrap();
-    zip.finish().unwrap();
-    fmu
+    common::hostile::fmu(dir, fault).0
 }
 
-fn system(dir: &Path, fmu: &Path) -> PathBuf {
-    let sys = dir.join(format!(
-        "{}.toml",
-        fmu.file_stem().unwrap().to_string_lossy()
-    ));
-    std::fs::write(
-        &sys,
-        format!(
-            r#"[fmus]
-hostile = "{}"
-
-[[instance]]
-name = "h"
-fmu = "hostile"
-
-[experiment]
-step = 0.1
-stop = 1.0
-
-[record]
-signals = ["h.y"]
-"#,
-            fmu.display()
-        ),
-    )
-    .unwrap();
-    sys
-}
+use common::hostile::system;
 
 fn twinbench(args: &[&str]) -> (Output, String, Duration) {
     let started = Instant::now();

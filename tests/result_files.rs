@@ -236,7 +236,17 @@ fn a_replayed_column_without_a_unit_takes_the_inputs_and_a_wrong_one_names_the_f
 
 #[test]
 fn ctrl_c_ends_a_run_after_its_step_and_keeps_its_rows_as_incomplete() {
-    let dir = tb_testkit::scratch("interrupted");
+    interrupted_run_keeps_its_rows_as_incomplete(libc::SIGINT);
+}
+
+/// SIGTERM (a batch system's stop, a container's) as Ctrl-C: the rows kept, marked.
+#[test]
+fn sigterm_ends_a_run_after_its_step_and_keeps_its_rows_as_incomplete() {
+    interrupted_run_keeps_its_rows_as_incomplete(libc::SIGTERM);
+}
+
+fn interrupted_run_keeps_its_rows_as_incomplete(signal: i32) {
+    let dir = tb_testkit::scratch(&format!("interrupted-{signal}"));
     // 1e8 steps: far longer than the test waits.
     let sys = faulty_system(dir.path(), "", "1e5");
     let (out, trace) = (dir.path().join("r.csv"), dir.path().join("calls.txt"));
@@ -254,7 +264,7 @@ fn ctrl_c_ends_a_run_after_its_step_and_keeps_its_rows_as_incomplete() {
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     // SAFETY: a signal to our own child process.
-    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    unsafe { libc::kill(child.id() as i32, signal) };
     let o = child.wait_with_output().unwrap();
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{e}");

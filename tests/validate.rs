@@ -1,7 +1,8 @@
 //! `twinbench validate RESULT.json MEASUREMENT`: the fitted twin on a lap it was not fitted
 //! on. On the fitted lap itself (prepared anew by `lap` from the measurement and its track)
 //! it must give the e the same twin reaches on the study's own bench; a file that is not a
-//! study result is refused by name.
+//! study result is refused by name; and the system and measurement a result file names are
+//! never run or read (red team P4).
 
 mod common;
 
@@ -84,6 +85,7 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
     }
     let md = std::fs::read_to_string(d.join("val/validation.md")).unwrap();
     assert!(md.contains("| 2 | Fz_rl |"), "{md}");
+    a_result_file_never_decides_what_code_runs(d, &result, &meas, &track, rows);
     // Not a result: named, and what was expected.
     std::fs::write(d.join("bad.json"), "{\"study\": 1}").unwrap();
     let o = twinbench(
@@ -102,4 +104,50 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
         e.contains("bad.json: not a study result (the result.json `twinbench optimize` writes)"),
         "{e}"
     );
+}
+
+/// Red team P4: a result whose "system" names a hostile FMU's system and whose
+/// "measurement" names a file that is not there: `validate` runs and reads neither (the
+/// fitted lap's e is the answer's, from the result), and gives the table it gave before.
+fn a_result_file_never_decides_what_code_runs(
+    d: &std::path::Path,
+    result: &serde_json::Value,
+    meas: &std::path::Path,
+    track: &std::path::Path,
+    rows: &[serde_json::Value],
+) {
+    let (fmu, _) = common::hostile::fmu(d, "DOORS");
+    let sys = common::hostile::system(d, &fmu);
+    let mut hostile = result.clone();
+    hostile["system"] = serde_json::json!(sys);
+    hostile["measurement"] = serde_json::json!(d.join("no-such-lap.csv"));
+    std::fs::write(d.join("hostile.json"), hostile.to_string()).unwrap();
+    let o = twinbench(
+        d,
+        &[
+            "validate",
+            "hostile.json",
+            meas.to_str().unwrap(),
+            "--track",
+            track.to_str().unwrap(),
+            "--out",
+            "val3",
+            "--json",
+        ],
+    );
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{e}");
+    assert!(!e.contains("hostile:"), "the result's system ran: {e}");
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["rows"].as_array().unwrap(), rows);
+    // The fitted lap's e is the answer's as the study computed it.
+    for r in rows {
+        let answer = result["joint"]["e"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["signal"] == r["signal"])
+            .unwrap();
+        assert_eq!(r["e_fitted"], answer["after"]["e"], "{r}");
+    }
 }

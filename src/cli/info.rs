@@ -21,6 +21,9 @@ pub struct InfoArgs {
     /// Watchdog of the --isolate check [s].
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
     pub worker_timeout: f64,
+    /// Limits of the confined worker (as `twinbench run --worker-limits`).
+    #[arg(long, value_name = "KEY=VALUE,...", value_parser = |s: &str| tb_cosim::isolated::confine::Limits::parse(s))]
+    pub worker_limits: Option<tb_cosim::isolated::confine::Limits>,
     /// Load a shared library with RTLD_GLOBAL first (e.g. libpython for a pythonfmu FMU);
     /// with --isolate, in the worker.
     #[arg(long, value_name = "LIBRARY")]
@@ -43,6 +46,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             timeout: tb_cosim::isolated::watchdog(args.worker_timeout)
                 .map_err(|m| anyhow::anyhow!("--worker-timeout: {m}"))?,
             preload: args.preload.clone(),
+            limits: args.worker_limits,
             ..Default::default()
         };
         LibraryCheck::Loaded(tb_cosim::isolated::probe(&fmu, &options)?)

@@ -38,6 +38,11 @@ pub struct RunArgs {
     /// Watchdog of isolated instances: the longest wait for one call [s].
     #[arg(long, value_name = "SECONDS", default_value_t = 10.0)]
     pub worker_timeout: f64,
+    /// Limits of confined workers: memory (address space), scratch (the size of its
+    /// scratch folder), files (open), threads, e.g. `memory=2G,scratch=64M` (default
+    /// memory=4G,scratch=256M,files=1024,threads=256; TWINBENCH_WORKER_LIMITS sets them too).
+    #[arg(long, value_name = "KEY=VALUE,...", value_parser = |s: &str| tb_cosim::isolated::confine::Limits::parse(s))]
+    pub worker_limits: Option<tb_cosim::isolated::confine::Limits>,
     /// Write every FMI call of the traced instances to FILE: the function, its arguments
     /// with variable names and values, and the status (for debugging a supplier's FMU).
     #[arg(long, value_name = "FILE")]
@@ -183,6 +188,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         isolation: tb_cosim::isolated::IsolationOptions {
             timeout,
             mode: args.isolate.map(|m| m.mode()).unwrap_or_default(),
+            limits: args.worker_limits,
             ..Default::default()
         },
         trace: args

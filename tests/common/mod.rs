@@ -1,6 +1,7 @@
 //! Shared helpers of the integration tests: the packed FMUs and a cache to load them.
 #![allow(dead_code)]
 
+pub mod hostile;
 pub mod synthetic;
 
 use std::path::PathBuf;

@@ -462,6 +462,58 @@ def test_a_worker_refuses_a_shipment_that_would_climb_out_of_its_store(tmp_path,
     assert not (tmp_path / "store").exists()
 
 
+def _shipment(files, coordinator="/proj/study.toml"):
+    from twinbench import _shipping
+
+    return (_shipping._TAG, _shipping._LAYOUT, coordinator, tuple(files), twinbench.__version__,
+            _shipping.platform_name())
+
+
+def test_a_path_shipped_with_two_digests_is_refused(tmp_path, monkeypatch):
+    # Red team 5: one path named twice with two digests was resolved silently (the last won).
+    from twinbench import _shipping
+
+    monkeypatch.setenv("TWINBENCH_FILES", str(tmp_path / "store"))
+    shipment = _shipment([("/proj/study.toml", "a" * 64, "k1"), ("/proj/study.toml", "b" * 64, "k2")])
+    with pytest.raises(twinbench.TwinbenchError, match="named the file '/proj/study.toml' twice, with the digests a+ and b+"):
+        _shipping.study_path(shipment)
+    assert not (tmp_path / "store").exists()
+
+
+def test_a_link_planted_in_a_workers_mirror_is_refused_not_followed(tmp_path, monkeypatch):
+    # Red team 5: a symbolic link planted inside a worker's mirror (by someone who can write
+    # its store) was followed by mkdir and os.replace, out of the store.
+    import hashlib
+
+    from twinbench import _shipping
+
+    store = tmp_path / "store"
+    monkeypatch.setenv("TWINBENCH_FILES", str(store))
+    _shipping.forget()
+    data = b"name = 'x'\n"
+    sha = hashlib.sha256(data).hexdigest()
+    # The blob is in the store already (no cluster needed to fetch it), the coordinator's
+    # path is not on this machine: the mirror is built.
+    blob = store / "sha256" / sha[:2] / sha
+    blob.parent.mkdir(parents=True)
+    blob.write_bytes(data)
+    files = [("/proj/study.toml", sha, "k")]
+    ident = hashlib.sha256(repr(sorted((p, s) for p, s, _ in files)).encode()).hexdigest()[:32]
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (store / "mirrors" / ident).mkdir(parents=True)
+    (store / "mirrors" / ident / "proj").symlink_to(elsewhere)
+    with pytest.raises(twinbench.TwinbenchError, match="symbolic link or not a folder: something was planted"):
+        _shipping.study_path(_shipment(files))
+    assert list(elsewhere.iterdir()) == []
+    # Removed, the mirror is built as it should be.
+    (store / "mirrors" / ident / "proj").unlink()
+    local = _shipping.study_path(_shipment(files))
+    assert Path(local).read_bytes() == data
+    assert Path(local).parent.resolve().is_relative_to(store.resolve())
+    _shipping.forget()
+
+
 # ---- the first hour ----
 
 
@@ -690,9 +742,9 @@ def test_a_rust_warning_reaches_python_as_a_twinbench_warning(tmp_path, monkeypa
     monkeypatch.setenv("TWINBENCH_CACHE", str(store))
     twinbench.run(SYSTEM, stop=0.01)
     os.chmod(store, 0o777)
-    with pytest.warns(twinbench.TwinbenchWarning, match="repaired to mode 755"):
+    with pytest.warns(twinbench.TwinbenchWarning, match="repaired to mode 700"):
         twinbench.run(SYSTEM, stop=0.01)
-    assert os.stat(store).st_mode & 0o777 == 0o755
+    assert os.stat(store).st_mode & 0o777 == 0o700
 
 
 def test_optimizer_and_evaluate_inputs_are_checked():
@@ -714,3 +766,93 @@ def test_optimizer_and_evaluate_inputs_are_checked():
     opt = twinbench.Optimizer("cmaes", [(0.5, 1.5)] * 2)
     with pytest.raises(twinbench.TwinbenchError, match=r"Optimizer.restore: the state is not the JSON text Optimizer.save\(\) gives"):
         opt.restore("garbage")
+
+
+# ---- the fifth red team ----
+
+
+def test_sigterm_stops_python_m_optimize_after_its_generation_and_says_how_to_resume(tmp_path):
+    """SIGTERM (a batch system's stop) during `python -m twinbench optimize`: as Ctrl-C on the
+    command line, the generation under way finishes, the checkpoint is kept, the message
+    names the command that resumes it (this one, with its options), no traceback, exit 130."""
+    out = tmp_path / "opt"
+    cmd = [sys_executable(), "-m", "twinbench", "optimize", str(STUDY), "--out", str(out),
+           "--threads", "2", "--generations", "2", "--no-report", "--quiet"]
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    checkpoint = out / "spielberg.checkpoint.json"
+    import time
+
+    started = time.monotonic()
+    while not checkpoint.exists():
+        assert child.poll() is None, child.communicate()
+        assert time.monotonic() - started < 120, "no checkpoint after 2 minutes"
+        time.sleep(0.05)
+    child.send_signal(signal.SIGTERM)
+    stdout, stderr = child.communicate(timeout=120)
+    assert child.returncode == 130, stderr
+    assert "Traceback" not in stderr, stderr
+    last = stderr.strip().splitlines()[-1]
+    assert last == (f"interrupted: checkpoint kept ({checkpoint}); resume with "
+                    f"`python -m twinbench optimize {STUDY} --resume --out {out} --generations 2 --no-report`"), last
+    json.loads(checkpoint.read_text().split('"checkpoint":', 1)[1][:-2])
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+    # The resume command, as printed (its first word is the Python that runs twinbench).
+    resumed = subprocess.run([sys_executable(), *last.split("`")[1].split()[1:], "--threads", "2", "--quiet"],
+                             capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    assert (out / "result.json").exists()
+
+
+def test_the_resume_command_keeps_the_cluster():
+    import argparse
+
+    from twinbench.__main__ import _resume_command
+
+    args = argparse.Namespace(study=Path("s.toml"), out=Path("o"), scheduler="tcp://head:8786", local=None,
+                              generations=None, optimizer="ga", no_report=False)
+    assert _resume_command(args) == ("python -m twinbench optimize s.toml --resume --out o "
+                                     "--scheduler tcp://head:8786 --optimizer ga")
+    args.scheduler, args.local = None, 3
+    assert "--local 3" in _resume_command(args)
+
+
+def test_an_edited_and_redigested_checkpoint_is_refused_from_python(tmp_path):
+    # M14 from Python: a checkpoint whose finished step was edited (its cost after set to 0)
+    # and whose digest was made again is refused on resume, naming the step.
+    import hashlib
+
+    def stop_in_step_2(record):
+        if record["step"] == 2:
+            raise RuntimeError("stop here")
+
+    with pytest.raises(RuntimeError, match="stop here"):
+        twinbench.Study(STUDY).optimize(out=tmp_path, generations=1, progress=stop_in_step_2, report=False,
+                                        threads=2)
+    cp = tmp_path / "spielberg.checkpoint.json"
+    v = json.loads(cp.read_text())
+    assert len(v["checkpoint"]["completed"]) == 1
+    v["checkpoint"]["completed"][0]["cost_after"] = 0.0
+    body = json.dumps(v["checkpoint"], separators=(",", ":"))
+    cp.write_text('{"sha256":"' + hashlib.sha256(body.encode()).hexdigest() + '","checkpoint":' + body + "}\n")
+    with pytest.raises(twinbench.TwinbenchError, match="step 1 'lift' of the checkpoint says its cost after was 0.0"):
+        twinbench.Study(STUDY).optimize(out=tmp_path, generations=1, resume=True, report=False, threads=2)
+
+
+@pytest.mark.parametrize("bounds,says", [
+    ((-1e308, 1e308), "outside the declared range"),
+    ((5.0, 100.0), "outside the declared range"),
+    ((1.5, 0.5), "min"),
+    ((float("nan"), 1.0), "min"),
+])
+def test_profiles_with_hostile_bounds_are_refused_before_a_lap_runs(bounds, says, tmp_path):
+    # --profiles steps out to the bounds: bounds past what the FMU declares, reversed or not
+    # numbers are refused when the study is read, naming the parameter.
+    text = STUDY.read_text().replace("min = 0.2\nmax = 2.5", f"min = {bounds[0]!r}\nmax = {bounds[1]!r}".replace("nan", "nan"), 1)
+    text = text.replace('system = "../systems/', f'system = "{ROOT}/systems/').replace(
+        'measurement = "../data/', f'measurement = "{ROOT}/data/')
+    study = tmp_path / "hostile.toml"
+    study.write_text(text)
+    with pytest.raises(twinbench.TwinbenchError, match=says) as caught:
+        twinbench.Study(study).optimize(out=tmp_path / "o", generations=1, profiles=True, report=False)
+    assert "c_lift_front" in str(caught.value)
+    assert not (tmp_path / "o" / "hostile.checkpoint.json").exists()

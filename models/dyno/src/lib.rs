@@ -393,6 +393,10 @@ impl Model for Dyno {
         Ok(dyno)
     }
 
+    fn internal_steps(&self, step: f64) -> f64 {
+        step / self.cycle
+    }
+
     fn do_step(&mut self, vars: &mut DynoVars, time: f64, step: f64) -> Result<(), ModelError> {
         let eps = TICK_EPS * self.cycle;
         let end = time + step;

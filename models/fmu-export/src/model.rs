@@ -110,6 +110,14 @@ pub trait Model: ModelState + Clone + Send + Sized + 'static {
     /// it here. Must not allocate.
     fn do_step(&mut self, vars: &mut Self::Vars, time: f64, step: f64) -> Result<(), ModelError>;
 
+    /// How many internal steps [`Model::do_step`] takes for a step of `step` seconds (1 for
+    /// a model that takes a step whole). The runtime refuses a step of more than
+    /// [`crate::runtime::MAX_INTERNAL_STEPS`] before the model runs it: a host's
+    /// `doStep(t, 1e300)` would otherwise never return.
+    fn internal_steps(&self, _step: f64) -> f64 {
+        1.0
+    }
+
     /// Write the outputs (and the exposed locals) computed from the state, the parameters
     /// and the inputs in `vars`: the Modelica Reference FMUs' `calculateValues`. The runtime
     /// calls it after [`Model::initialize`], after every [`Model::do_step`] that succeeded,

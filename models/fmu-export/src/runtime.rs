@@ -200,6 +200,10 @@ const NO_SLOT: Slot = Slot {
 
 const STATE_MAGIC: &[u8; 8] = b"TBFMUST1";
 
+/// The most internal steps one doStep may take ([`Model::internal_steps`]): a million
+/// (a 1000 s step of the vehicle's 1 ms sub-steps, about a second of computing).
+pub const MAX_INTERNAL_STEPS: f64 = 1e6;
+
 pub struct Runtime<M: Model> {
     pub vars: M::Vars,
     model: Option<M>,
@@ -560,6 +564,10 @@ impl<M: Model> Runtime<M> {
         let Some(m) = self.model.as_mut() else {
             return self.step_failed(current_time, ModelError::new("model not initialised"));
         };
+        let internal = m.internal_steps(step);
+        if internal.is_nan() || internal > MAX_INTERNAL_STEPS {
+            return self.refuse_long_step(current_time, step, internal);
+        }
         match m.do_step(&mut self.vars, current_time, step) {
             Ok(()) => {
                 m.calculate_outputs(&mut self.vars);
@@ -587,6 +595,15 @@ impl<M: Model> Runtime<M> {
         let stop = self.run.stop_time.unwrap_or(f64::NAN);
         self.error(&format!(
             "fmi2DoStep: step from {current_time} by {step} ends after stopTime {stop}"
+        ))
+    }
+
+    /// A step that would take more internal steps than the limit (off the fast path).
+    #[cold]
+    fn refuse_long_step(&self, current_time: f64, step: f64, internal: f64) -> fmi2Status {
+        self.error(&format!(
+            "fmi2DoStep: the step from {current_time} s by {step} s would take {internal:.3e} internal steps of model '{}', more than the {MAX_INTERNAL_STEPS:.0e} one step may take; refused (split it into shorter communication steps)",
+            M::INFO.name
         ))
     }
 

@@ -389,7 +389,7 @@ fn the_c_entry_points_catch_panics_and_refuse_null_pointers() {
             ffi::do_step::<Counter>(std::ptr::null_mut(), 0.0, 0.1, fmi2True),
             fmi2Status::ERROR
         );
-        ffi::free_instance::<Counter>(c);
+        ffi::free_instance::<Counter>(c, "fmi2FreeInstance");
     }
 }
 
@@ -537,6 +537,6 @@ fn the_c_entry_points_pass_strings_both_ways() {
             ffi::set_string::<Counter>(c, [VR_SOURCE].as_ptr(), 1, null.as_ptr()),
             fmi2Status::ERROR
         );
-        ffi::free_instance::<Counter>(c);
+        ffi::free_instance::<Counter>(c, "fmi2FreeInstance");
     }
 }

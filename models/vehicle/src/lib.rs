@@ -578,6 +578,10 @@ impl Model for Vehicle {
         })
     }
 
+    fn internal_steps(&self, step: f64) -> f64 {
+        step / self.p.substep_max
+    }
+
     fn do_step(&mut self, vars: &mut VehicleVars, time: f64, step: f64) -> Result<(), ModelError> {
         // A step a rounding unit longer than a multiple of substep_max (a host's nanosecond
         // clock) must not cost an extra sub-step.

@@ -39,8 +39,9 @@ pub struct IsolatedBackend {
     dead: Option<String>,
     /// The FMU's last messages, as the worker reported them with an error.
     sink: LogSink,
-    /// A confined worker's scratch folder, removed after the worker (dropped last).
-    _scratch: Option<super::confine::Scratch>,
+    /// A confined worker's scratch folder, removed after the worker (dropped last), and its
+    /// limits (named when it dies).
+    _scratch: Option<(super::confine::Scratch, super::confine::Limits)>,
 }
 
 impl IsolatedBackend {
@@ -160,20 +161,42 @@ impl IsolatedBackend {
                         .iter()
                         .cloned(),
                 );
+                let limits = match options.limits {
+                    Some(l) => l,
+                    None => super::confine::Limits::from_env().map_err(fail)?,
+                };
+                let env = super::confine::inherit::passed_names();
                 let spec = super::confine::Spec {
                     scratch: scratch.path.clone(),
                     read: super::confine::existing(read),
+                    limits,
+                    env: env.clone(),
                 };
                 let json = serde_json::to_string(&spec)
                     .map_err(|e| fail(format!("cannot describe the confinement: {e}")))?;
-                cmd.env(super::confine::SPEC_ENV, json);
-                Some(scratch)
+                // An environment from the allowlist, never the host's (its keys, tokens,
+                // agent sockets).
+                cmd.env_clear()
+                    .envs(super::confine::inherit::environment(&env))
+                    .env(super::confine::SPEC_ENV, json);
+                Some((scratch, limits))
             }
         };
         cmd.arg("worker")
             .stdin(Stdio::from(OwnedFd::from(worker)))
             .stdout(Stdio::null())
             .stderr(Stdio::piped());
+        // No descriptor the host inherited or opened (a CI runner's, a shell's `3>>file`, a
+        // Python host's) reaches the worker: all but stdio closed at the exec.
+        let fd_limit = super::confine::inherit::descriptor_limit();
+        // SAFETY: the closure makes system calls only (no allocation, no lock): safe between
+        // fork and exec.
+        unsafe {
+            std::os::unix::process::CommandExt::pre_exec(&mut cmd, move || {
+                super::confine::inherit::cloexec_from(3, fd_limit);
+                Ok(())
+            });
+        }
         let mut child = cmd
             .spawn()
             .map_err(|e| fail(format!("cannot run {} worker: {e}", exe.display())))?;
@@ -287,9 +310,22 @@ impl IsolatedBackend {
             (Some(c), _) => format!("the worker process exited with code {c}"),
             (None, Some(sig)) => format!(
                 "the worker process was killed by signal {sig} ({})",
-                signal_name(sig)
+                signal_name(sig),
             ),
             _ => format!("the worker process ended: {status}"),
+        }
+    }
+
+    /// A confined worker's limits, for the message of its end: an FMU that died or hung may
+    /// have run into one.
+    fn limits_note(&self) -> String {
+        match &self._scratch {
+            Some((_, l)) => format!(
+                "; a confined worker's limits: {} (--worker-limits or {})",
+                l.describe(),
+                super::confine::LIMITS_ENV
+            ),
+            None => String::new(),
         }
     }
 
@@ -332,7 +368,17 @@ impl IsolatedBackend {
                     self.timeout
                 ))
             }
-            Err(Some(_)) => Err(format!("{} (crashed)", self.bury(false))),
+            Err(Some(_)) => {
+                let end = self.bury(false);
+                // A worker that died of a signal by itself may have run into a limit (a
+                // crash after a failed allocation).
+                let note = if end.contains("killed by signal") {
+                    self.limits_note()
+                } else {
+                    String::new()
+                };
+                Err(format!("{end} (crashed){note}"))
+            }
         }
     }
 
@@ -637,6 +683,8 @@ fn signal_name(sig: i32) -> &'static str {
         libc::SIGILL => "SIGILL: illegal instruction",
         libc::SIGKILL => "SIGKILL",
         libc::SIGTERM => "SIGTERM",
+        libc::SIGSYS => "SIGSYS: a system call the confinement refuses",
+        libc::SIGXFSZ => "SIGXFSZ: file size limit exceeded",
         _ => "signal",
     }
 }

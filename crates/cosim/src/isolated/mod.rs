@@ -76,6 +76,8 @@ pub struct IsolationOptions {
     /// folder: the files of the system's `*_file` parameters (set when the plan is compiled;
     /// shared by the plan's instances).
     pub readable: Arc<std::sync::RwLock<Vec<PathBuf>>>,
+    /// A confined worker's limits; `None`: [`confine::LIMITS_ENV`], else the defaults.
+    pub limits: Option<confine::Limits>,
 }
 
 impl Default for IsolationOptions {
@@ -86,6 +88,7 @@ impl Default for IsolationOptions {
             preload: Vec::new(),
             mode: confine::Mode::default(),
             readable: Arc::default(),
+            limits: None,
         }
     }
 }

@@ -512,6 +512,26 @@ pub enum Failure {
     Other(String),
 }
 
+impl Failure {
+    /// Adds `notes` (the worker's limits a failed call ran into) to what the host reports:
+    /// to the FMU's log lines, or to the message.
+    pub fn add_notes(&mut self, notes: Vec<String>) {
+        if notes.is_empty() {
+            return;
+        }
+        let said = |n: &str| format!("[twinbench worker] {n}");
+        match self {
+            Failure::Call { log, .. }
+            | Failure::Call3 { log, .. }
+            | Failure::ModelExchange { log, .. } => log.extend(notes.iter().map(|n| said(n))),
+            Failure::Instantiate(m) | Failure::Other(m) => {
+                m.push_str(&format!(" ({})", notes.join("; ")))
+            }
+            Failure::Unsupported(_) => {}
+        }
+    }
+}
+
 impl From<FmuError> for Failure {
     fn from(e: FmuError) -> Failure {
         match e {

@@ -86,8 +86,8 @@ fn guard(host: libc::pid_t) {
 /// else runs in the namespace). An FMU sees its parent as the namespace's init, which
 /// ignores the signals it could send; the guard and the host are not in its namespace.
 /// Returns in the worker; `Err` before any process was started.
-fn guard_confined(host: libc::pid_t) -> Result<(), String> {
-    super::confine::new_pid_namespace()?;
+fn guard_confined(host: libc::pid_t, spec: &super::confine::Spec) -> Result<(), String> {
+    super::confine::new_namespaces(&spec.scratch, &spec.limits)?;
     let mut fds = [0i32; 2];
     // SAFETY: a pipe for the worker's status, from the init to the guard.
     if unsafe { libc::pipe(fds.as_mut_ptr()) } != 0 {
@@ -164,6 +164,9 @@ pub fn serve_stdio() -> i32 {
         }
         libc::dup2(2, 1);
     }
+    // Nothing the host inherited reaches the FMU: every descriptor but the channel and
+    // stdio closed (the host marked them close-on-exec too).
+    super::confine::inherit::close_all_but(fd);
     let host = unsafe { libc::getppid() };
     // Before anything is loaded, above all before any thread exists (Landlock and seccomp
     // hold for the calling thread and what it starts): confined, unless the host asked for
@@ -173,7 +176,7 @@ pub fn serve_stdio() -> i32 {
         guard(host);
         watch_host(host);
         let stream = unsafe { <UnixStream as std::os::fd::FromRawFd>::from_raw_fd(fd) };
-        return serve(stream);
+        return serve(stream, None);
     };
     let cannot = |why: String| -> i32 {
         eprintln!("twinbench worker: cannot confine the FMU: {why}");
@@ -183,7 +186,7 @@ pub fn serve_stdio() -> i32 {
         Ok(s) => s,
         Err(e) => return cannot(format!("the host's confinement is not readable: {e}")),
     };
-    if let Err(why) = guard_confined(host) {
+    if let Err(why) = guard_confined(host, &spec) {
         return cannot(why);
     }
     std::env::remove_var(super::confine::SPEC_ENV);
@@ -191,7 +194,7 @@ pub fn serve_stdio() -> i32 {
         return cannot(why);
     }
     let stream = unsafe { <UnixStream as std::os::fd::FromRawFd>::from_raw_fd(fd) };
-    serve(stream)
+    serve(stream, Some(&spec))
 }
 
 /// Die with the host even when stuck inside the FMU (a closed socket is noticed only
@@ -211,7 +214,9 @@ fn watch_host(host: libc::pid_t) {
         });
 }
 
-fn serve(stream: UnixStream) -> i32 {
+/// Serves requests until the host closes the socket or says quit; a confined worker's
+/// `spec` says which limits a failed call may have run into.
+fn serve(stream: UnixStream, spec: Option<&super::confine::Spec>) -> i32 {
     let mut worker = Worker::default();
     // A request's length and body usually come in one read.
     let mut reader = std::io::BufReader::new(&stream);
@@ -232,10 +237,13 @@ fn serve(stream: UnixStream) -> i32 {
         if reader.read_exact(&mut request).is_err() {
             return 0;
         }
-        let Some(response) = worker.serve(&request) else {
+        let Some(mut response) = worker.serve(&request) else {
             drop(worker);
             return 0;
         };
+        if let (Some(error), Some(spec)) = (response.error.as_mut(), spec) {
+            error.add_notes(spec.limits.reached(&spec.scratch));
+        }
         answer.start_frame();
         response.encode(&mut answer);
         if (&stream).write_all(answer.finish_frame()).is_err() {

@@ -83,11 +83,12 @@ pub(crate) fn prepare(dir: &Path) -> Result<(), String> {
         ));
     }
     if meta.mode() & 0o022 != 0 {
-        // Ours, made writable for others (a chmod by a process of this user, M1): repaired,
-        // never replaced by another store. What others could have written meanwhile is
-        // caught where it matters: every library is checked against its FMU's archive
-        // before it is loaded.
-        let repaired = meta.mode() & 0o7777 & !0o022;
+        // Ours, made writable for others (a chmod by a process of this user, M1): repaired
+        // to the mode it is created with (700: others can neither list nor read the
+        // suppliers' binaries in it, P8), never replaced by another store. What others could
+        // have written meanwhile is caught where it matters: every library is checked
+        // against its FMU's archive before it is loaded.
+        let repaired = 0o700;
         std::fs::set_permissions(dir, std::fs::Permissions::from_mode(repaired)).map_err(|e| {
             format!(
                 "other users can write into it (mode {:o}) and it cannot be repaired: {e}",
@@ -545,11 +546,12 @@ mod tests {
         prepare(&store).unwrap();
         let mode = std::fs::metadata(&store).unwrap().permissions().mode();
         assert_eq!(mode & 0o777, 0o700);
-        // Made writable for everyone (M1's chmod): repaired in place, not replaced.
+        // Made writable for everyone (M1's chmod): repaired in place, not replaced, to the
+        // mode it was created with (P8: it became 755, and others read every FMU in it).
         std::fs::set_permissions(&store, std::fs::Permissions::from_mode(0o777)).unwrap();
         prepare(&store).unwrap();
         let mode = std::fs::metadata(&store).unwrap().permissions().mode();
-        assert_eq!(mode & 0o777, 0o755);
+        assert_eq!(mode & 0o7777, 0o700);
         let file = dir.path().join("file");
         std::fs::write(&file, b"").unwrap();
         assert!(prepare(&file).is_err());

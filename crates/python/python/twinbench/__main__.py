@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
+import signal
 import sys
 import time
 from pathlib import Path
@@ -121,11 +123,43 @@ def _optimize(args: argparse.Namespace) -> int:
     return 0
 
 
+def _resume_command(args: argparse.Namespace) -> str:
+    """The command that continues an interrupted study where it stopped (on the same
+    cluster)."""
+    words = ["python", "-m", "twinbench", "optimize", str(args.study), "--resume", "--out", str(args.out)]
+    if args.scheduler is not None:
+        words += ["--scheduler", args.scheduler]
+    elif args.local is not None:
+        words += ["--local", str(args.local)]
+    if args.generations is not None:
+        words += ["--generations", str(args.generations)]
+    if args.optimizer is not None:
+        words += ["--optimizer", args.optimizer]
+    if args.no_report:
+        words.append("--no-report")
+    return " ".join(shlex.quote(w) for w in words)
+
+
+def _interrupted(args: argparse.Namespace) -> int:
+    """Ctrl-C or SIGTERM during a study: as the command line says it, without a traceback:
+    where the checkpoint is and the command that resumes it; exit code 130."""
+    checkpoints = sorted(args.out.glob("*.checkpoint.json")) if args.out.is_dir() else []
+    kept = f"checkpoint kept ({checkpoints[0]}); " if checkpoints else "no generation was finished; "
+    print(f"interrupted: {kept}resume with `{_resume_command(args)}`", file=sys.stderr)
+    return 130
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     try:
         if args.command == "optimize":
-            return _optimize(args)
+            # SIGTERM (a batch system's or a container's stop) as Ctrl-C: the study stops
+            # after the generation under way, its checkpoint kept.
+            signal.signal(signal.SIGTERM, signal.default_int_handler)
+            try:
+                return _optimize(args)
+            except KeyboardInterrupt:
+                return _interrupted(args)
         if args.command == "pack":
             return _pack(args)
     except TwinbenchError as e:

@@ -24,11 +24,11 @@ tasks to the other workers.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 import platform
 import sys
-import tempfile
 import threading
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
@@ -300,22 +300,57 @@ def _fetch(name: str) -> bytes:
         rejoin()
 
 
-def _write_atomically(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".incoming-")
+def _open_folder(root: Path, rel: str) -> int:
+    """A descriptor of the folder `rel` below `root` (made where missing), reached one
+    component at a time without following a symbolic link: a link planted anywhere in the
+    store (by someone with write access to it) is refused, never followed out of it."""
+    fd = os.open(root, os.O_RDONLY | os.O_DIRECTORY)
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o444)
-        os.replace(tmp, path)
+        for part in Path(rel).parts:
+            if part in ("", ".", "..", "/"):
+                raise TwinbenchError(f"worker {_worker_address()}: {rel!r} is not a plain path below {root}")
+            try:
+                os.mkdir(part, 0o700, dir_fd=fd)
+            except FileExistsError:
+                pass
+            try:
+                nxt = os.open(part, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW, dir_fd=fd)
+            except OSError as e:
+                if e.errno in (errno.ELOOP, errno.ENOTDIR):
+                    raise TwinbenchError(
+                        f"worker {_worker_address()}: {root / rel} leads through {part!r}, which is a symbolic link or not a folder: "
+                        f"something was planted in the store {root}; remove it (twinbench follows no link there)"
+                    ) from e
+                raise
+            os.close(fd)
+            fd = nxt
+        return fd
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        os.close(fd)
         raise
+
+
+def _write_atomically(path: Path, data: bytes, root: Path) -> None:
+    """`path` (below `root`) written whole or not at all, without following a link."""
+    folder = _open_folder(root, os.path.relpath(path.parent, root))
+    try:
+        tmp = f".incoming-{os.getpid()}-{threading.get_ident()}-{path.name}"
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600, dir_fd=folder)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+                os.fchmod(f.fileno(), 0o444)
+            os.replace(tmp, path.name, src_dir_fd=folder, dst_dir_fd=folder)
+        except BaseException:
+            try:
+                os.unlink(tmp, dir_fd=folder)
+            except OSError:
+                pass
+            raise
+    finally:
+        os.close(folder)
 
 
 def _blob(store: Path, path: str, sha: str, key: str) -> Path:
@@ -353,30 +388,34 @@ def _blob(store: Path, path: str, sha: str, key: str) -> Path:
         raise TwinbenchError(
             f"worker {_worker_address()}: {path} arrived with another content than its digest {sha}"
         )
-    _write_atomically(blob, data)
+    _write_atomically(blob, data, store)
     with _lock:
         _verified.add(sha)
     return blob
 
 
-def _link(target: Path, link: Path) -> None:
-    """`link` made a hard link of `target` (a copy across file systems), replacing what
-    was there."""
-    link.parent.mkdir(parents=True, exist_ok=True)
+def _link(target: Path, link: Path, root: Path) -> None:
+    """`link` (below `root`) made a hard link of `target` (a copy across file systems),
+    replacing what was there; no symbolic link on the way is followed."""
+    folder = _open_folder(root, os.path.relpath(link.parent, root))
     try:
-        if os.path.samefile(target, link):
-            # Linked already (a file two laps name; a mirror built before).
-            return
-    except OSError:
-        pass
-    tmp = link.with_name(f".{link.name}.{os.getpid()}.{threading.get_ident()}")
-    try:
-        os.link(target, tmp)
-    except OSError:
-        import shutil
-
-        shutil.copyfile(target, tmp)
-    os.replace(tmp, link)
+        try:
+            st = os.stat(link.name, dir_fd=folder, follow_symlinks=False)
+            if os.path.samestat(st, os.stat(target)):
+                # Linked already (a file two laps name; a mirror built before).
+                return
+        except OSError:
+            pass
+        tmp = f".{link.name}.{os.getpid()}.{threading.get_ident()}"
+        try:
+            os.link(target, tmp, dst_dir_fd=folder)
+        except OSError:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o444, dir_fd=folder)
+            with os.fdopen(fd, "wb") as out, open(target, "rb") as src:
+                out.write(src.read())
+        os.replace(tmp, link.name, src_dir_fd=folder, dst_dir_fd=folder)
+    finally:
+        os.close(folder)
 
 
 def study_path(study: Any) -> str:
@@ -393,6 +432,12 @@ def study_path(study: Any) -> str:
         if not p.startswith("/") or ".." in parts or len(sha) != 64 or not all(c in "0123456789abcdef" for c in sha):
             raise TwinbenchError(
                 f"worker {address}: the coordinator named a file {p!r} with digest {sha!r}; expected an absolute path without '..' and a SHA-256 in hexadecimal"
+            )
+    digests: dict = {}
+    for p, sha, _ in files:
+        if digests.setdefault(p, sha) != sha:
+            raise TwinbenchError(
+                f"worker {address}: the coordinator named the file {p!r} twice, with the digests {digests[p]} and {sha}: one path has one content"
             )
     if layout != _LAYOUT:
         raise WorkerRefused(
@@ -422,13 +467,14 @@ def study_path(study: Any) -> str:
     store = store_dir()
     mirror = store / "mirrors" / ident
     try:
+        store.mkdir(mode=0o700, parents=True, exist_ok=True)
         # Every file in place first, then the mirror's links (a repaired blob is a new
         # file: the links are made again each time).
         # Each file once (two laps may name one measurement).
         unique = list(dict.fromkeys(files))
         blobs: List[Tuple[str, Path]] = [(p, _blob(store, p, s, k)) for p, s, k in unique]
         for p, blob in blobs:
-            _link(blob, mirror / p.lstrip("/"))
+            _link(blob, mirror / p.lstrip("/"), store)
     except OSError as e:
         # A store it cannot write (full, read-only, not its own): this worker cannot run
         # the study, the others can.

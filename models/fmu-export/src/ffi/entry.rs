@@ -75,20 +75,28 @@ pub unsafe fn instantiate<M: Model>(
                 Err(e) => return fail(e),
             },
         };
+        let kept = match logger.callback {
+            Some(f) => super::handles::SlotLogger::Fmi2(f, logger.env),
+            None => super::handles::SlotLogger::None,
+        };
         let runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on != 0);
-        Box::into_raw(Box::new(Instance {
-            runtime,
-            strings: Vec::new(),
-        })) as fmi2Component
+        super::handle_for(Instance::new(runtime), kept) as fmi2Component
     }));
     r.unwrap_or(std::ptr::null_mut())
 }
 
-pub unsafe fn free_instance<M: Model>(c: fmi2Component) {
-    if !c.is_null() {
-        let _ = catch_unwind(AssertUnwindSafe(|| {
-            drop(Box::from_raw(c as *mut Instance<M>))
-        }));
+/// Frees the instance behind `c` (and the states it gave out that the host did not free);
+/// a second free, or a handle this library did not give out, is logged and ignored.
+pub unsafe fn free_instance<M: Model>(c: fmi2Component, function: &str) {
+    match super::handles::release(c) {
+        Ok(p) => {
+            let _ = catch_unwind(AssertUnwindSafe(|| {
+                drop(Box::from_raw(p as *mut Instance<M>))
+            }));
+        }
+        // FMI allows NULL (nothing to free).
+        Err(_) if c.is_null() => {}
+        Err(why) => super::handles::log_stale(c, function, why),
     }
 }
 
@@ -331,39 +339,77 @@ pub unsafe fn set_string<M: Model>(
 }
 
 pub unsafe fn get_fmu_state<M: Model>(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
-    guarded::<M>(c, "fmi2GetFMUstate", |rt| {
+    guarded_instance::<M>(c, "fmi2GetFMUstate", |inst| {
         if state.is_null() {
-            return rt.error("fmi2GetFMUstate: FMUstate pointer is NULL");
+            return inst
+                .runtime
+                .error("fmi2GetFMUstate: FMUstate pointer is NULL");
         }
         if (*state).is_null() {
-            match rt.snapshot() {
+            match inst.runtime.snapshot() {
                 Ok(s) => {
-                    *state = Box::into_raw(Box::new(s)) as fmi2FMUstate;
+                    let p = Box::into_raw(Box::new(s));
+                    inst.states.push(p);
+                    *state = p as fmi2FMUstate;
                     fmi2Status::OK
                 }
                 Err(s) => s,
             }
+        } else if inst.owns(*state) {
+            inst.runtime
+                .snapshot_into(&mut *(*state as *mut Snapshot<M>))
         } else {
-            rt.snapshot_into(&mut *(*state as *mut Snapshot<M>))
+            not_a_state(inst, "fmi2GetFMUstate")
         }
     })
 }
 
+/// A state pointer this instance did not give out, or one freed: refused, never followed.
+#[cold]
+fn not_a_state<M: Model>(inst: &Instance<M>, function: &str) -> fmi2Status {
+    inst.runtime.error(&format!(
+        "{function}: the FMUstate is not one of this instance's (freed already, another instance's, or not an FMU state at all); refused"
+    ))
+}
+
+/// The state `state` names, if this instance gave it out.
+unsafe fn own_state<'a, M: Model>(
+    inst: &Instance<M>,
+    function: &str,
+    state: fmi2FMUstate,
+) -> Result<&'a Snapshot<M>, fmi2Status> {
+    if state.is_null() {
+        return Err(inst.runtime.error(&format!("{function}: FMUstate is NULL")));
+    }
+    if !inst.owns(state) {
+        return Err(not_a_state(inst, function));
+    }
+    Ok(&*(state as *const Snapshot<M>))
+}
+
 pub unsafe fn set_fmu_state<M: Model>(c: fmi2Component, state: fmi2FMUstate) -> fmi2Status {
-    guarded::<M>(c, "fmi2SetFMUstate", |rt| {
-        if state.is_null() {
-            return rt.error("fmi2SetFMUstate: FMUstate is NULL");
+    guarded_instance::<M>(c, "fmi2SetFMUstate", |inst| {
+        match own_state(inst, "fmi2SetFMUstate", state) {
+            Ok(s) => inst.runtime.restore(s),
+            Err(status) => status,
         }
-        rt.restore(&*(state as *const Snapshot<M>))
     })
 }
 
 pub unsafe fn free_fmu_state<M: Model>(c: fmi2Component, state: *mut fmi2FMUstate) -> fmi2Status {
-    guarded::<M>(c, "fmi2FreeFMUstate", |_rt| {
-        if !state.is_null() && !(*state).is_null() {
-            drop(Box::from_raw(*state as *mut Snapshot<M>));
-            *state = std::ptr::null_mut();
+    guarded_instance::<M>(c, "fmi2FreeFMUstate", |inst| {
+        if state.is_null() || (*state).is_null() {
+            return fmi2Status::OK;
         }
+        let Some(k) = inst
+            .states
+            .iter()
+            .position(|&s| s as fmi2FMUstate == *state)
+        else {
+            return not_a_state(inst, "fmi2FreeFMUstate");
+        };
+        drop(Box::from_raw(inst.states.swap_remove(k)));
+        *state = std::ptr::null_mut();
         fmi2Status::OK
     })
 }
@@ -373,12 +419,19 @@ pub unsafe fn serialized_fmu_state_size<M: Model>(
     state: fmi2FMUstate,
     size: *mut usize,
 ) -> fmi2Status {
-    guarded::<M>(c, "fmi2SerializedFMUstateSize", |rt| {
-        if state.is_null() || size.is_null() {
-            return rt.error("fmi2SerializedFMUstateSize: NULL argument");
+    guarded_instance::<M>(c, "fmi2SerializedFMUstateSize", |inst| {
+        if size.is_null() {
+            return inst
+                .runtime
+                .error("fmi2SerializedFMUstateSize: NULL argument");
         }
-        *size = rt.serialize(&*(state as *const Snapshot<M>)).len();
-        fmi2Status::OK
+        match own_state(inst, "fmi2SerializedFMUstateSize", state) {
+            Ok(s) => {
+                *size = inst.runtime.serialize(s).len();
+                fmi2Status::OK
+            }
+            Err(status) => status,
+        }
     })
 }
 
@@ -388,13 +441,17 @@ pub unsafe fn serialize_fmu_state<M: Model>(
     bytes: *mut fmi2Byte,
     size: usize,
 ) -> fmi2Status {
-    guarded::<M>(c, "fmi2SerializeFMUstate", |rt| {
-        if state.is_null() || bytes.is_null() {
-            return rt.error("fmi2SerializeFMUstate: NULL argument");
+    guarded_instance::<M>(c, "fmi2SerializeFMUstate", |inst| {
+        if bytes.is_null() {
+            return inst.runtime.error("fmi2SerializeFMUstate: NULL argument");
         }
-        let data = rt.serialize(&*(state as *const Snapshot<M>));
+        let s = match own_state(inst, "fmi2SerializeFMUstate", state) {
+            Ok(s) => s,
+            Err(status) => return status,
+        };
+        let data = inst.runtime.serialize(s);
         if data.len() > size {
-            return rt.error(&format!(
+            return inst.runtime.error(&format!(
                 "fmi2SerializeFMUstate: buffer of {size} bytes, the state needs {}",
                 data.len()
             ));
@@ -410,15 +467,20 @@ pub unsafe fn deserialize_fmu_state<M: Model>(
     size: usize,
     state: *mut fmi2FMUstate,
 ) -> fmi2Status {
-    guarded::<M>(c, "fmi2DeSerializeFMUstate", |rt| {
+    guarded_instance::<M>(c, "fmi2DeSerializeFMUstate", |inst| {
         if bytes.is_null() || state.is_null() {
-            return rt.error("fmi2DeSerializeFMUstate: NULL argument");
+            return inst.runtime.error("fmi2DeSerializeFMUstate: NULL argument");
+        }
+        if !(*state).is_null() && !inst.owns(*state) {
+            return not_a_state(inst, "fmi2DeSerializeFMUstate");
         }
         let data = std::slice::from_raw_parts(bytes as *const u8, size);
-        match rt.deserialize(data) {
+        match inst.runtime.deserialize(data) {
             Ok(snap) => {
                 if (*state).is_null() {
-                    *state = Box::into_raw(Box::new(snap)) as fmi2FMUstate;
+                    let p = Box::into_raw(Box::new(snap));
+                    inst.states.push(p);
+                    *state = p as fmi2FMUstate;
                 } else {
                     *(*state as *mut Snapshot<M>) = snap;
                 }

@@ -45,7 +45,7 @@ macro_rules! export_fmu {
             }
             #[no_mangle]
             pub unsafe extern "C" fn fmi2FreeInstance(c: fmi2Component) {
-                ffi::free_instance::<M>(c)
+                ffi::free_instance::<M>(c, "fmi2FreeInstance")
             }
             #[no_mangle]
             pub unsafe extern "C" fn fmi2SetupExperiment(

@@ -12,7 +12,7 @@
 use crate::fmi2::*;
 use crate::model::Model;
 use crate::runtime::{Logger, Runtime};
-use std::ffi::{CStr, CString};
+use std::ffi::{c_void, CStr, CString};
 use std::os::raw::c_char;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
@@ -50,11 +50,76 @@ impl Logger for CLogger {
     }
 }
 
-/// The component handed to the host.
+/// The component behind a handle given to the host ([`handles`]).
 pub struct Instance<M: Model> {
     pub runtime: Runtime<M>,
     /// The strings of the last fmi2GetString: the host may read them until the next call.
     pub strings: Vec<CString>,
+    /// The FMU states this instance gave out and the host has not freed: a state pointer
+    /// the host passes is used only if it is one of them (a foreign or freed one is
+    /// refused, never followed).
+    pub states: Vec<*mut crate::runtime::Snapshot<M>>,
+}
+
+impl<M: Model> Instance<M> {
+    pub fn new(runtime: Runtime<M>) -> Self {
+        Instance {
+            runtime,
+            strings: Vec::new(),
+            states: Vec::new(),
+        }
+    }
+
+    /// Whether `state` is one this instance gave out and that is not freed.
+    pub fn owns(&self, state: *mut c_void) -> bool {
+        self.states.iter().any(|&s| s as *mut c_void == state)
+    }
+}
+
+impl<M: Model> Drop for Instance<M> {
+    fn drop(&mut self) {
+        // States the host did not free go with their instance.
+        for s in self.states.drain(..) {
+            // SAFETY: each was made by Box::into_raw here and is listed once.
+            drop(unsafe { Box::from_raw(s) });
+        }
+    }
+}
+
+/// The handle for a new instance (None: [`handles::SLOTS`] instances are alive).
+pub(crate) fn handle_for<M: Model>(
+    instance: Instance<M>,
+    logger: handles::SlotLogger,
+) -> *mut c_void {
+    let p = Box::into_raw(Box::new(instance));
+    match handles::register(p as *mut c_void, logger) {
+        Some(h) => h,
+        None => {
+            // SAFETY: the box made above, never handed out.
+            let i = unsafe { Box::from_raw(p) };
+            i.runtime.error(&format!(
+                "fmi2Instantiate: {} instances of this FMU are alive in this process, the most it serves",
+                handles::SLOTS
+            ));
+            std::ptr::null_mut()
+        }
+    }
+}
+
+/// The instance behind the handle `c`; a stale or made-up handle is logged (where its slot
+/// kept a logger) and refused.
+#[inline(always)]
+unsafe fn instance_of<'a, M: Model>(
+    c: fmi2Component,
+    function: &str,
+) -> Result<&'a mut Instance<M>, fmi2Status> {
+    match handles::resolve(c) {
+        Ok(p) => Ok(&mut *(p as *mut Instance<M>)),
+        Err(why) => {
+            handles::log_stale(c, function, why);
+            Err(fmi2Status::ERROR)
+        }
+    }
 }
 
 /// The message of a caught panic (for the log and the poisoned instance).
@@ -74,10 +139,10 @@ pub(crate) unsafe fn guarded_instance<M: Model>(
     function: &str,
     f: impl FnOnce(&mut Instance<M>) -> fmi2Status,
 ) -> fmi2Status {
-    if c.is_null() {
-        return fmi2Status::ERROR;
-    }
-    let inst = &mut *(c as *mut Instance<M>);
+    let inst = match instance_of::<M>(c, function) {
+        Ok(i) => i,
+        Err(s) => return s,
+    };
     match catch_unwind(AssertUnwindSafe(|| f(inst))) {
         Ok(s) => s,
         Err(payload) => {
@@ -94,10 +159,10 @@ pub(crate) unsafe fn guarded<M: Model>(
     function: &str,
     f: impl FnOnce(&mut Runtime<M>) -> fmi2Status,
 ) -> fmi2Status {
-    if c.is_null() {
-        return fmi2Status::ERROR;
-    }
-    let inst = &mut *(c as *mut Instance<M>);
+    let inst = match instance_of::<M>(c, function) {
+        Ok(i) => i,
+        Err(s) => return s,
+    };
     match catch_unwind(AssertUnwindSafe(|| f(&mut inst.runtime))) {
         Ok(s) => s,
         Err(payload) => {
@@ -158,6 +223,7 @@ pub(crate) unsafe fn opt_str<'a>(p: *const c_char) -> Option<std::borrow::Cow<'a
 
 pub mod entry;
 mod export;
+pub mod handles;
 
 pub use entry::*;
 

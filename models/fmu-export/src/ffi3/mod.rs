@@ -156,12 +156,13 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
         let resource_dir = opt_str(resource_path)
             .filter(|p| !p.is_empty())
             .map(|p| std::path::PathBuf::from(p.into_owned()));
+        let kept = match logger.callback {
+            Some(f) => crate::ffi::handles::SlotLogger::Fmi3(f, logger.env),
+            None => crate::ffi::handles::SlotLogger::None,
+        };
         let mut runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on);
         runtime.expose_time();
-        Box::into_raw(Box::new(Instance {
-            runtime,
-            strings: Vec::new(),
-        })) as fmi3Instance
+        crate::ffi::handle_for(Instance::new(runtime), kept) as fmi3Instance
     }));
     r.unwrap_or(std::ptr::null_mut())
 }
@@ -190,7 +191,7 @@ pub unsafe fn instantiate_unsupported<M: Model>(
 }
 
 pub unsafe fn free_instance<M: Model>(c: fmi3Instance) {
-    crate::ffi::free_instance::<M>(c)
+    crate::ffi::free_instance::<M>(c, "fmi3FreeInstance")
 }
 
 pub unsafe fn set_debug_logging<M: Model>(
@@ -640,13 +641,14 @@ pub unsafe fn do_step<M: Model>(
     }
     // The step alone in the guard, as FMI 2.0's; the flags are plain writes.
     let s = status(guarded::<M>(c, F, move |rt| rt.do_step(current, step)));
-    if !c.is_null() {
+    if let Ok(p) = crate::ffi::handles::resolve(c) {
         // No event mode and no early return; a model never ends the run on its own.
         *event_handling_needed = false;
         *terminate_simulation = false;
         *early_return = false;
-        // SAFETY: `c` is the instance the host was given (a getter: nothing can panic).
-        *last_successful_time = (*(c as *mut Instance<M>)).runtime.last_successful_time();
+        // SAFETY: the instance behind the handle the host was given (a getter: nothing can
+        // panic).
+        *last_successful_time = (*(p as *mut Instance<M>)).runtime.last_successful_time();
     }
     s
 }

@@ -4,17 +4,22 @@
 //!
 //! - **a process tree that ends with the run**: the worker runs in a PID namespace of its
 //!   own (root: `unshare(CLONE_NEWPID)`; another user: with a user namespace), under an init
-//!   that ends with the worker; the kernel then kills every process left in the namespace
-//!   (a daemon the FMU forked included), and a process in it cannot name, signal or trace
-//!   one outside; an IPC and a network namespace of its own too (no System V IPC object,
-//!   abstract Unix socket or network interface of the host's);
+//!   that ends with the worker; the kernel then kills every process left in the namespace,
+//!   and a process in it cannot name, signal or trace one outside; an IPC and a network
+//!   namespace of its own too (no System V IPC object, abstract Unix socket or network
+//!   interface of the host's), and a mount namespace whose only change is the scratch
+//!   folder's tmpfs;
+//! - **nothing inherited**: an environment from an allowlist ([`inherit`]), no descriptor
+//!   but its channel and stdio;
+//! - **bounded resources** ([`limits`]): address space, a scratch folder of a fixed size,
+//!   open files, threads; no child processes;
 //! - **no privileges**: every capability dropped (bounding, ambient, effective, permitted,
 //!   inheritable) with the securebits locked, so that a root worker is root without any
 //!   capability; `no_new_privs`, so no exec gains any;
-//! - **a filtered system-call set** (`seccompiler`): no chmod/chown, mount, ptrace, module
-//!   loading, namespaces, raw devices (mknod), extended attributes or file times, BPF,
-//!   `io_uring`, keyrings, clock or host names; sockets of the Unix family only (no network
-//!   of any kind, whatever the kernel's Landlock has);
+//! - **a filtered system-call set** ([`filter`]): no socket of any family beyond the channel
+//!   it has, no new process, no chmod/chown, mount, ptrace, module loading, namespaces, raw
+//!   devices, extended attributes or file times, BPF, `io_uring`, keyrings, clock or host
+//!   names, no x32 call;
 //! - **Landlock** (the `landlock` crate): write access to the worker's scratch folder only
 //!   (its working directory, `TMPDIR` and `HOME`); read and execute access to the system's
 //!   libraries, a few named system files, its own `/proc` entry, the FMU's unpacked folder
@@ -23,21 +28,24 @@
 //!   4 and later); no signals to and no abstract Unix sockets of processes outside
 //!   (Landlock 6 and later).
 //!
-//! What is required: a PID namespace, the seccomp filter and Landlock 3 (Linux 6.2) for the
-//! file system. Where one of them cannot be set up the worker says why and exits with
-//! [`CANNOT_CONFINE`] before loading anything; the host refuses the FMU unless the user
-//! asked for crash isolation only (`--isolate=crash-only`, [`MODE_ENV`]).
+//! What is required: PID, IPC, network and mount namespaces, the seccomp filter and Landlock
+//! 3 (Linux 6.2) for the file system. Where one of them cannot be set up the worker says why
+//! and exits with [`CANNOT_CONFINE`] before loading anything; the host refuses the FMU unless
+//! the user asked for crash isolation only (`--isolate=crash-only`, [`MODE_ENV`]).
+
+pub mod filter;
+pub mod inherit;
+pub mod limits;
+pub(crate) mod scratch;
+
+pub use limits::{Limits, LIMITS_ENV};
+pub(crate) use scratch::Scratch;
 
 use landlock::{
     path_beneath_rules, Access, AccessFs, AccessNet, LandlockStatus, Ruleset, RulesetAttr,
     RulesetCreatedAttr, RulesetStatus, Scope, ABI,
 };
-use seccompiler::{
-    BpfProgram, SeccompAction, SeccompCmpArgLen, SeccompCmpOp, SeccompCondition, SeccompFilter,
-    SeccompRule,
-};
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The worker's exit code when it cannot confine itself (before anything was loaded).
@@ -49,12 +57,16 @@ pub use tb_fmi::import::sandbox::MODE_ENV;
 pub(crate) const SPEC_ENV: &str = "TWINBENCH_WORKER_CONFINE";
 
 /// What the host grants a worker.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Spec {
     /// The only folder the worker can write (created by the host, removed after the run).
     pub scratch: PathBuf,
     /// Folders and files it can read (and execute) besides the system's.
     pub read: Vec<PathBuf>,
+    /// Its resource limits.
+    pub limits: Limits,
+    /// Variables of the environment it keeps besides the allowlist's ([`inherit::PASS_ENV`]).
+    pub env: Vec<String>,
 }
 
 /// What isolation a run asked for.
@@ -175,140 +187,10 @@ fn drop_capabilities() -> Result<(), String> {
     Ok(())
 }
 
-/// The system calls an FMU has no business with, refused with EPERM.
-fn refused() -> Vec<i64> {
-    let mut calls = vec![
-        libc::SYS_chmod,
-        libc::SYS_fchmod,
-        libc::SYS_fchmodat,
-        libc::SYS_chown,
-        libc::SYS_fchown,
-        libc::SYS_lchown,
-        libc::SYS_fchownat,
-        libc::SYS_mount,
-        libc::SYS_umount2,
-        libc::SYS_pivot_root,
-        libc::SYS_chroot,
-        libc::SYS_ptrace,
-        libc::SYS_process_vm_readv,
-        libc::SYS_process_vm_writev,
-        libc::SYS_init_module,
-        libc::SYS_finit_module,
-        libc::SYS_delete_module,
-        libc::SYS_kexec_load,
-        libc::SYS_kexec_file_load,
-        libc::SYS_reboot,
-        libc::SYS_swapon,
-        libc::SYS_swapoff,
-        libc::SYS_setns,
-        libc::SYS_unshare,
-        libc::SYS_mknod,
-        libc::SYS_mknodat,
-        libc::SYS_setxattr,
-        libc::SYS_lsetxattr,
-        libc::SYS_fsetxattr,
-        libc::SYS_removexattr,
-        libc::SYS_lremovexattr,
-        libc::SYS_fremovexattr,
-        libc::SYS_utime,
-        libc::SYS_utimes,
-        libc::SYS_utimensat,
-        libc::SYS_futimesat,
-        libc::SYS_acct,
-        libc::SYS_quotactl,
-        libc::SYS_bpf,
-        libc::SYS_perf_event_open,
-        libc::SYS_keyctl,
-        libc::SYS_add_key,
-        libc::SYS_request_key,
-        libc::SYS_open_by_handle_at,
-        libc::SYS_name_to_handle_at,
-        libc::SYS_settimeofday,
-        libc::SYS_clock_settime,
-        libc::SYS_clock_adjtime,
-        libc::SYS_adjtimex,
-        libc::SYS_sethostname,
-        libc::SYS_setdomainname,
-        libc::SYS_syslog,
-        libc::SYS_userfaultfd,
-        libc::SYS_io_uring_setup,
-        libc::SYS_io_uring_enter,
-        libc::SYS_io_uring_register,
-        libc::SYS_pidfd_getfd,
-        libc::SYS_move_mount,
-        libc::SYS_open_tree,
-        libc::SYS_fsopen,
-        libc::SYS_fsmount,
-        libc::SYS_fsconfig,
-        libc::SYS_fspick,
-        libc::SYS_mount_setattr,
-    ];
-    #[cfg(target_arch = "x86_64")]
-    calls.extend([libc::SYS_iopl, libc::SYS_ioperm]);
-    // fchmodat2 (Linux 6.6), not yet named by every libc.
-    #[cfg(target_arch = "x86_64")]
-    calls.push(452);
-    calls
-}
-
-fn arch() -> Result<seccompiler::TargetArch, String> {
-    std::env::consts::ARCH
-        .try_into()
-        .map_err(|_| format!("no seccomp filter for {}", std::env::consts::ARCH))
-}
-
-/// The seccomp filters: the refused calls and every socket but a Unix one (EPERM), clone
-/// with a namespace flag (EPERM), and clone3, whose flags a filter cannot read (ENOSYS, so
-/// that the C library falls back to clone).
-fn filters() -> Result<Vec<BpfProgram>, String> {
-    let cond = |arg: u8, op: SeccompCmpOp, v: u64| {
-        SeccompCondition::new(arg, SeccompCmpArgLen::Dword, op, v).map_err(|e| e.to_string())
-    };
-    let rule = |c: Vec<SeccompCondition>| SeccompRule::new(c).map_err(|e| e.to_string());
-    let mut rules: BTreeMap<i64, Vec<SeccompRule>> =
-        refused().into_iter().map(|c| (c, Vec::new())).collect();
-    let not_unix = rule(vec![cond(0, SeccompCmpOp::Ne, libc::AF_UNIX as u64)?])?;
-    rules.insert(libc::SYS_socket, vec![not_unix.clone()]);
-    rules.insert(libc::SYS_socketpair, vec![not_unix]);
-    let namespaces = [
-        libc::CLONE_NEWNS,
-        libc::CLONE_NEWUTS,
-        libc::CLONE_NEWIPC,
-        libc::CLONE_NEWUSER,
-        libc::CLONE_NEWPID,
-        libc::CLONE_NEWNET,
-        libc::CLONE_NEWCGROUP,
-    ];
-    rules.insert(
-        libc::SYS_clone,
-        namespaces
-            .iter()
-            .map(|&f| rule(vec![cond(0, SeccompCmpOp::MaskedEq(f as u64), f as u64)?]))
-            .collect::<Result<_, _>>()?,
-    );
-    let eperm = SeccompFilter::new(
-        rules,
-        SeccompAction::Allow,
-        SeccompAction::Errno(libc::EPERM as u32),
-        arch()?,
-    )
-    .map_err(|e| e.to_string())?;
-    let clone3 = SeccompFilter::new(
-        BTreeMap::from([(libc::SYS_clone3, Vec::new())]),
-        SeccompAction::Allow,
-        SeccompAction::Errno(libc::ENOSYS as u32),
-        arch()?,
-    )
-    .map_err(|e| e.to_string())?;
-    [eperm, clone3]
-        .into_iter()
-        .map(|f| BpfProgram::try_from(f).map_err(|e| e.to_string()))
-        .collect()
-}
-
 /// Confines this process (single-threaded: Landlock and seccomp hold for the calling thread
-/// and whatever it starts afterwards). Called in the worker, inside its PID namespace.
+/// and whatever it starts afterwards). Called in the worker, inside its namespaces.
 pub fn confine(spec: &Spec) -> Result<(), String> {
+    spec.limits.apply()?;
     drop_capabilities()?;
     std::env::set_current_dir(&spec.scratch).map_err(|e| {
         format!(
@@ -316,6 +198,7 @@ pub fn confine(spec: &Spec) -> Result<(), String> {
             spec.scratch.display()
         )
     })?;
+    inherit::keep_only(&spec.env);
     for var in ["TMPDIR", "TMP", "TEMP", "HOME"] {
         std::env::set_var(var, &spec.scratch);
     }
@@ -330,9 +213,7 @@ pub fn confine(spec: &Spec) -> Result<(), String> {
     let latest = ABI::V6;
     let read = AccessFs::from_read(latest);
     let mut paths: Vec<PathBuf> = SYSTEM_READ.iter().map(PathBuf::from).collect();
-    // This process's own /proc entry (not /proc/self: a rule holds for the folder it names
-    // when made).
-    paths.push(PathBuf::from(format!("/proc/{}", std::process::id())));
+    paths.push(own_proc_entry()?);
     paths.extend(spec.read.iter().cloned());
     let status = Ruleset::default()
         .handle_access(AccessFs::from_all(latest))
@@ -361,23 +242,36 @@ pub fn confine(spec: &Spec) -> Result<(), String> {
             "this kernel's Landlock (ABI {abi}) cannot keep the FMU from truncating files it may not write (ABI 3, Linux 6.2, is needed)"
         ));
     }
-    for f in filters()? {
-        seccompiler::apply_filter(&f).map_err(|e| format!("seccomp: {e}"))?;
-    }
-    Ok(())
+    filter::apply()
 }
 
-/// The PID, IPC and network namespaces the worker runs in: root makes them; another user
-/// makes them with a user namespace of its own. Called in the guard before it starts the worker's init.
-pub fn new_pid_namespace() -> Result<(), String> {
-    // SAFETY: unshare with documented flags, in a single-threaded process.
+/// This process's own `/proc` entry on the procfs it sees: `/proc/self` resolved now. The
+/// process runs in a PID namespace of its own but sees the host's procfs, where its number
+/// is not the one `getpid` gives inside the namespace (that one names another process
+/// there). A rule holds for the folder it names when made, so `/proc/self` itself would
+/// not do.
+fn own_proc_entry() -> Result<PathBuf, String> {
+    let me = std::fs::read_link("/proc/self")
+        .map_err(|e| format!("cannot find this process's /proc entry: {e}"))?;
+    Ok(Path::new("/proc").join(me))
+}
+
+/// The namespaces the worker runs in: PID, IPC, network and mount. Root makes them;
+/// another user makes them with a user namespace of its own (mapping its own user and
+/// group to themselves). In the mount namespace, made private, a tmpfs of `limits.scratch`
+/// bytes is mounted on the scratch folder. Called in the guard before it starts the
+/// worker's init.
+pub fn new_namespaces(scratch: &Path, limits: &Limits) -> Result<(), String> {
+    // With the PID namespace an IPC and a network namespace of its own: the user's System
+    // V shared memory, semaphores and message queues, its abstract Unix sockets and
+    // every network interface (loopback included) are out of reach, whatever the
+    // worker's user id and the kernel's Landlock.
+    let flags = libc::CLONE_NEWPID | libc::CLONE_NEWIPC | libc::CLONE_NEWNET | libc::CLONE_NEWNS;
+    // SAFETY: geteuid, getegid and unshare with documented flags, in a single-threaded
+    // process.
+    let (uid, gid) = unsafe { (libc::geteuid(), libc::getegid()) };
     let r = unsafe {
-        // With the PID namespace an IPC and a network namespace of its own: the user's System
-        // V shared memory, semaphores and message queues, its abstract Unix sockets and
-        // every network interface (loopback included) are out of reach, whatever the
-        // worker's user id and the kernel's Landlock.
-        let flags = libc::CLONE_NEWPID | libc::CLONE_NEWIPC | libc::CLONE_NEWNET;
-        if libc::geteuid() == 0 {
+        if uid == 0 {
             libc::unshare(flags)
         } else {
             libc::unshare(libc::CLONE_NEWUSER | flags)
@@ -385,40 +279,61 @@ pub fn new_pid_namespace() -> Result<(), String> {
     };
     if r != 0 {
         return Err(format!(
-            "cannot make a PID, IPC and network namespace (so that nothing the FMU starts outlives the run, and it reaches no other process's shared memory or sockets): {}",
+            "cannot make a PID, IPC, network and mount namespace (so that nothing the FMU starts outlives the run, it reaches no other process's shared memory or sockets, and its scratch folder has a size): {}",
             std::io::Error::last_os_error()
         ));
     }
+    if uid != 0 {
+        for (file, text) in [
+            ("/proc/self/setgroups", "deny".to_string()),
+            ("/proc/self/uid_map", format!("{uid} {uid} 1")),
+            ("/proc/self/gid_map", format!("{gid} {gid} 1")),
+        ] {
+            std::fs::write(file, text)
+                .map_err(|e| format!("cannot map the user in its user namespace ({file}): {e}"))?;
+        }
+    }
+    mount_scratch(scratch, limits.scratch)
+}
+
+/// Makes every mount of this (new) mount namespace private, then mounts a tmpfs of `size`
+/// bytes, mode 700, on `scratch`: what the FMU writes there has that limit, and goes with
+/// the namespace.
+fn mount_scratch(scratch: &Path, size: u64) -> Result<(), String> {
+    use std::os::unix::ffi::OsStrExt;
+    let err = |what: &str| format!("{what}: {}", std::io::Error::last_os_error());
+    let target = std::ffi::CString::new(scratch.as_os_str().as_bytes())
+        .map_err(|_| "the scratch folder's path has a NUL byte".to_string())?;
+    let options =
+        std::ffi::CString::new(format!("size={size},mode=0700")).expect("no NUL in the options");
+    // SAFETY: mount(2) with NUL-terminated strings that live across the calls.
+    unsafe {
+        if libc::mount(
+            std::ptr::null(),
+            c"/".as_ptr(),
+            std::ptr::null(),
+            libc::MS_REC | libc::MS_PRIVATE,
+            std::ptr::null(),
+        ) != 0
+        {
+            return Err(err("cannot make the worker's mounts private"));
+        }
+        if libc::mount(
+            c"tmpfs".as_ptr(),
+            target.as_ptr(),
+            c"tmpfs".as_ptr(),
+            libc::MS_NOSUID | libc::MS_NODEV,
+            options.as_ptr().cast(),
+        ) != 0
+        {
+            return Err(err(&format!(
+                "cannot mount a tmpfs of {} on the scratch folder {}",
+                limits::size_text(size),
+                scratch.display()
+            )));
+        }
+    }
     Ok(())
-}
-
-/// The host's side: the scratch folder of one worker, removed with it.
-pub(crate) struct Scratch {
-    pub path: PathBuf,
-}
-
-impl Scratch {
-    pub fn new() -> std::io::Result<Scratch> {
-        use std::os::unix::fs::DirBuilderExt;
-        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-        let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.subsec_nanos());
-        let path = std::env::temp_dir().join(format!(
-            "twinbench-worker-{}-{n}-{nanos:08x}",
-            std::process::id()
-        ));
-        std::fs::DirBuilder::new().mode(0o700).create(&path)?;
-        Ok(Scratch { path })
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        // remove_dir_all follows no link the FMU left in it.
-        let _ = std::fs::remove_dir_all(&self.path);
-    }
 }
 
 /// The folders and files of `paths` that exist, as given (a missing one is no rule).
