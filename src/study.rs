@@ -162,6 +162,16 @@ pub fn optimize(
         }
     };
     let report = report.and_then(|r| r.files());
+    if report.is_none() {
+        // Without the report the answer is still written: result.json is the study's
+        // result, what validate, export and Python read (the report writes it otherwise).
+        let path = args.out.join("result.json");
+        tb_table::write_atomic(
+            &path,
+            &serde_json::to_vec_pretty(&result).expect("a result serialises"),
+        )
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     Ok(Optimized {
         result,
         report,

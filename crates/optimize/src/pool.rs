@@ -144,11 +144,11 @@ impl WorkerPool {
                         message: format!(
                             "step '{}': the bounds [{}, {}] of '{}' leave its declared range [{}, {}]",
                             step.name,
-                            p.min,
-                            p.max,
+                            tb_files::number(p.min),
+                            tb_files::number(p.max),
                             p.name,
-                            slot.min.map_or("-inf".into(), |m| m.to_string()),
-                            slot.max.map_or("inf".into(), |m| m.to_string())
+                            slot.min.map_or("-inf".into(), tb_files::number),
+                            slot.max.map_or("inf".into(), tb_files::number)
                         ),
                     });
                 }

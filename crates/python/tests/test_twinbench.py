@@ -830,7 +830,7 @@ def test_an_edited_and_redigested_checkpoint_is_refused_from_python(tmp_path):
                                         threads=2)
     cp = tmp_path / "spielberg.checkpoint.json"
     v = json.loads(cp.read_text())
-    assert len(v["checkpoint"]["completed"]) == 1
+    assert len(v["checkpoint"]["completed"]) >= 1
     v["checkpoint"]["completed"][0]["cost_after"] = 0.0
     body = json.dumps(v["checkpoint"], separators=(",", ":"))
     cp.write_text('{"sha256":"' + hashlib.sha256(body.encode()).hexdigest() + '","checkpoint":' + body + "}\n")
@@ -839,10 +839,10 @@ def test_an_edited_and_redigested_checkpoint_is_refused_from_python(tmp_path):
 
 
 @pytest.mark.parametrize("bounds,says", [
-    ((-1e308, 1e308), "outside the declared range"),
-    ((5.0, 100.0), "outside the declared range"),
-    ((1.5, 0.5), "min"),
-    ((float("nan"), 1.0), "min"),
+    ((-1e308, 1e308), r"bounds \[-1e\+?308, 1e\+?308\] of 'vehicle.c_lift_front' leave its declared range \[-2, 6\]"),
+    ((5.0, 100.0), r"bounds \[5, 100\] of 'vehicle.c_lift_front' leave its declared range \[-2, 6\]"),
+    ((1.5, 0.5), r"'vehicle.c_lift_front': bounds \[1.5, 0.5\] are not an interval"),
+    ((float("nan"), 1.0), r"'vehicle.c_lift_front': bounds \[NaN, 1\] are not an interval"),
 ])
 def test_profiles_with_hostile_bounds_are_refused_before_a_lap_runs(bounds, says, tmp_path):
     # --profiles steps out to the bounds: bounds past what the FMU declares, reversed or not
