@@ -232,9 +232,16 @@ fn periodic_average(x: &[f64], window: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Centred moving average of the target's acceleration [samples]: a_x is measured, not
+/// differentiated, and carries little noise; 3 m keep a braking point where it is.
+pub const ACCELERATION_WINDOW: usize = 3;
+
 /// The driver's target speed over distance: v on a 1 m grid, smoothed over 9 m periodically,
-/// rows `s,v` from 0 to the lap length, the last repeating the first speed so that the
-/// target closes on itself.
+/// with the car's own acceleration (the measured a_x, over 3 m) where the measurement has
+/// one, so that the driver's feed-forward is what the car did rather than the slope of a
+/// smoothed speed (which rounds every braking point off by the smoothing's length); rows
+/// `s,v[,a]` from 0 to the lap length, the last repeating the first so that the target
+/// closes on itself.
 pub fn target_speed_csv(m: &Measurement) -> Result<String, LapError> {
     let (d, v) = (m.distance(), m.require("v")?);
     let lap = lap_length(m)?;
@@ -244,11 +251,36 @@ pub fn target_speed_csv(m: &Measurement) -> Result<String, LapError> {
     }
     let grid: Vec<f64> = (0..=n).map(|k| k as f64 * SPACING_M).collect();
     let smooth = periodic_average(&speed_on(d, v, &grid), TARGET_WINDOW);
-    let mut out = String::from("s,v\n");
-    for (s, x) in grid.iter().zip(&smooth) {
-        let _ = writeln!(out, "{s:.3},{x:.4}");
+    let acceleration = match m.signal("a_x")? {
+        Some(a_x) => Some(periodic_average(
+            &speed_on(d, a_x, &grid),
+            ACCELERATION_WINDOW,
+        )),
+        None => None,
+    };
+    let mut out = String::from(if acceleration.is_some() {
+        "s,v,a\n"
+    } else {
+        "s,v\n"
+    });
+    for (k, (s, x)) in grid.iter().zip(&smooth).enumerate() {
+        match &acceleration {
+            Some(a) => {
+                let _ = writeln!(out, "{s:.3},{x:.4},{:.4}", a[k]);
+            }
+            None => {
+                let _ = writeln!(out, "{s:.3},{x:.4}");
+            }
+        }
     }
-    let _ = writeln!(out, "{lap:.3},{:.4}", smooth[0]);
+    match &acceleration {
+        Some(a) => {
+            let _ = writeln!(out, "{lap:.3},{:.4},{:.4}", smooth[0], a[0]);
+        }
+        None => {
+            let _ = writeln!(out, "{lap:.3},{:.4}", smooth[0]);
+        }
+    }
     Ok(out)
 }
 
@@ -331,7 +363,16 @@ fn system_toml(
     let parameters = doc["parameters"]
         .as_table_mut()
         .expect("systems/rls_v.toml has [parameters]");
-    parameters.clear();
+    // The bench's own parameters stay (the car the twin stands for: its driveline, the
+    // driver's feed-forward); the start values and files are the lap's.
+    for start in [
+        "vehicle.v_start",
+        "dyno_rl.omega_start",
+        "dyno_rr.omega_start",
+        "edu.omega_wheel_start",
+    ] {
+        parameters.remove(start);
+    }
     parameters.decor_mut().set_prefix(
         "\n# The lap's track and target speed; the flying lap starts at the measured speed.\n",
     );

@@ -9,7 +9,7 @@ mod target;
 fn main() {
     println!("cargo:rerun-if-changed=src/target.rs");
     let csv = "resources/target_speed.csv";
-    fmu_export::preparsed::build(csv, "target_speed.preparsed", 2, |text| {
+    fmu_export::preparsed::build(csv, "target_speed.preparsed", 3, |text| {
         target::TargetSpeed::parse(text, csv)
             .ok()
             .map(|t| t.values())

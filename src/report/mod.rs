@@ -61,6 +61,10 @@ pub struct TableParameter {
     pub interval: Option<(Option<f64>, Option<f64>)>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interval_statement: Option<String>,
+    /// The interval with the model's share (docs/optimize.md, "The model check"): the one
+    /// to quote where the model check finds the twin wanting.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval_with_model: Option<(Option<f64>, Option<f64>)>,
     pub initial: f64,
     pub optimized: f64,
     pub change_percent: f64,
@@ -86,6 +90,9 @@ pub struct Table1 {
     /// The held-out laps: every signal at the study's start and with its answer.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hold_out: Option<TableStep>,
+    /// Whether the twin, not the noise, limits the answer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_check: Option<tb_optimize::model_check::ModelCheck>,
     /// The twin's lap time minus the vehicle's [s], with the initial and with the optimised
     /// parameters (over the distance both cover; what `time_over_distance` shows).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -102,7 +109,7 @@ pub struct LapTimeDifference {
 }
 
 /// What Tab. 1's columns mean, printed under it.
-pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit). Row \"all\": the study's answer, every parameter moved together to the least-squares point of every signal (the joint refinement after the steps, docs/optimize.md), from the value its step started from, with [lo, hi] its 95 % confidence interval from the sensitivities there, the residuals' autocorrelation accounted for; \"open\": that end lies beyond the parameter's range; e, m, bias of the row: every signal at the study's start and at the answer.";
+pub const TABLE1_LEGEND: &str = "e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one, both low-pass filtered and on a 1 m distance grid (0: equal); m: the slope of the regression of the twin's signal on the measured one (1: same scale); bias: the mean relative difference, twin − measurement (0 %: same level); R² (in table1.json): the regression's coefficient of determination. Parameters: change in % (value before → after, in the parameter's unit). Row \"all\": the study's answer, every parameter moved together to the least-squares point of every signal (the joint refinement after the steps, docs/optimize.md), from the value its step started from, with [lo, hi] its 95 % interval of the scatter around the twin's best fit (from the sensitivities there, the residuals' autocorrelation accounted for: what the noise leaves uncertain where the twin is the right model), and \"with the model's share\" the 95 % interval that adds what the twin cannot represent of this car (the model check's terms fitted with the parameters; quote it where the model check finds the twin wanting); \"open\": that end lies beyond the parameter's range; e, m, bias of the row: every signal at the study's start and at the answer.";
 
 /// The report as an observer of a study ([`tb_optimize::StudyObserver`]): Tab. 1 and the
 /// plots are written when the study has its result (not after an interruption), and the
@@ -157,6 +164,7 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
         unit: p.unit.clone().filter(|u| !u.is_empty() && u != "1"),
         interval: p.interval.filter(|_| with_interval),
         interval_statement: p.interval_statement.clone().filter(|_| with_interval),
+        interval_with_model: p.interval_with_model.filter(|_| with_interval),
         initial: p.before,
         optimized: p.after,
         change_percent: p.change_percent,
@@ -179,6 +187,7 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
     Table1 {
         study: result.study.clone(),
         lap_time_difference,
+        model_check: joint.and_then(|j| j.model_check.clone()),
         steps: result
             .steps
             .iter()
@@ -214,6 +223,27 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
     }
 }
 
+/// The sentence under Tab. 1 that names the values to load into the bench, and why the
+/// row "all" can fit a signal worse than its step did.
+pub fn values_to_load(joint: &TableStep) -> String {
+    let values = joint
+        .parameters
+        .iter()
+        .map(|p| {
+            let unit = p
+                .unit
+                .as_deref()
+                .map(|u| format!(" {u}"))
+                .unwrap_or_default();
+            format!("{} = {:.4}{unit}", short(&p.name), p.optimized)
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    format!(
+        "The values to load into the bench are the row \"all\" ({values}; `parameters_final` in result.json, `twinbench run SYSTEM --params result.json` applies them). Its e can be higher than a step's: each step minimised e + β·|bias| of its own signals with the other steps' parameters held, the row \"all\" minimises the squared error of every signal with every parameter free, a different objective (docs/optimize.md)."
+    )
+}
+
 /// Tab. 1 as Markdown (parameters listed on a step's first row, as in the paper).
 pub fn table1_markdown(t: &Table1) -> String {
     let mut s = String::new();
@@ -245,6 +275,16 @@ pub fn table1_markdown(t: &Table1) -> String {
                     Some((lo, hi)) => format!(" [{}, {}]", end(lo), end(hi)),
                     None if p.interval_statement.is_some() => " [no interval]".into(),
                     None => String::new(),
+                };
+                let interval = match p.interval_with_model {
+                    Some((lo, hi)) => {
+                        format!(
+                            "{interval}, with the model's share [{}, {}]",
+                            end(lo),
+                            end(hi)
+                        )
+                    }
+                    None => interval,
                 };
                 format!(
                     "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit}{interval})",
@@ -284,6 +324,12 @@ pub fn table1_markdown(t: &Table1) -> String {
             Some(format!("- {}: {why}", short(&p.name)))
         })
         .collect();
+    if let Some(j) = &t.joint {
+        s.push_str(&format!("\n{}\n", values_to_load(j)));
+    }
+    if let Some(c) = &t.model_check {
+        s.push_str(&format!("\nModel check ({}): {}.\n", c.method, c.detail));
+    }
     if !statements.is_empty() {
         s.push_str("\nAbout the intervals:\n");
         s.push_str(&statements.join("\n"));

@@ -175,8 +175,16 @@ pub fn truth_lap_with(
             .unwrap();
     let start = bundled.find("[parameters]").unwrap();
     let end = bundled.find("# The vehicle's track and").unwrap();
+    // The bench's own parameters (the car's driveline, the driver's feed-forward) stay, as
+    // `twinbench lap` keeps them; the start values are the circuit's.
+    let kept: String = bundled[start + "[parameters]".len()..end]
+        .lines()
+        .filter(|l| l.starts_with('"') && !l.contains("_start\""))
+        .filter(|l| !params.contains(l.split('=').next().unwrap_or("").trim()))
+        .map(|l| format!("{l}\n"))
+        .collect();
     let text = format!(
-        "{}[parameters]\n{params}\n{}",
+        "{}[parameters]\n{kept}{params}\n{}",
         &bundled[..start],
         &bundled[end..]
     )

@@ -167,6 +167,14 @@ pub struct ParameterChange {
     /// Why the interval is open or missing, in words.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interval_statement: Option<String>,
+    /// The standard error of `after` (absent where there is no interval).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_error: Option<f64>,
+    /// The interval that includes the twin's share of the error as well as the scatter
+    /// ([`crate::model_check`]): the one to quote where the model check finds the twin
+    /// wanting; [lo, hi], an end `None` where it is open.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval_with_model: Option<(Option<f64>, Option<f64>)>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -262,6 +270,10 @@ pub struct JointResult {
     /// The joint refinement (absent with `refine = false`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub refinement: Option<Refinement>,
+    /// Whether the twin, not the noise, limits the answer ([`crate::model_check`]; absent
+    /// where it could not be made, and in results written before it was).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_check: Option<crate::model_check::ModelCheck>,
 }
 
 /// The twin's laps of a study, on the comparison's uniform time grid: at the first step's
@@ -1058,6 +1070,11 @@ fn finish_step(
                 .as_ref()
                 .and_then(|iv| iv.get(&p.name))
                 .and_then(|i| i.statement.clone()),
+            std_error: intervals
+                .as_ref()
+                .and_then(|iv| iv.get(&p.name))
+                .and_then(|i| i.std_error),
+            interval_with_model: None,
         })
         .collect();
     let before: Vec<&Comparison> = std::iter::once(&start.before)
@@ -1181,7 +1198,7 @@ fn joint_answer(
             &session.pool,
             run,
         );
-        return Ok((None, iv, None));
+        return Ok((None, iv, None, None));
     }
     // One series per lap and signal; each lap a segment of its own for the long-run
     // covariance (laps are independent of each other).
@@ -1233,19 +1250,16 @@ fn joint_answer(
         Err(why) => {
             let why = format!("no joint refinement and no interval: {why}");
             let iv = crate::interval::Intervals::none(&j.names, &x, why, 2 * x.len() + 1);
-            return Ok((None, iv, None));
+            return Ok((None, iv, None, None));
         }
     };
     let objective_before = frame.per_point(frame.objective(&raw));
     let solution = frame.minimise(&x, raw, sens, &vec![true; x.len()], crate::fit::ANSWER);
     let laps = frame.laps();
-    let iv = crate::interval::sandwich(
-        &j.names,
-        &solution.x,
-        &j.bounds,
-        &frame.blocks(&solution),
-        laps,
-    );
+    let blocks = frame.blocks(&solution);
+    let iv = crate::interval::sandwich(&j.names, &solution.x, &j.bounds, &blocks, laps);
+    let iv = noise_floor(iv, &blocks, &j, &solution.x);
+    let checked = model_check(session, &j, &blocks, &solution.x, &iv);
     let refinement = Refinement {
         method: crate::fit::METHOD.into(),
         parameters: j.names.clone(),
@@ -1279,14 +1293,95 @@ fn joint_answer(
         )
     });
     state.set(&index, &solution.x);
-    Ok((Some(refinement), iv, profiles))
+    Ok((Some(refinement), iv, profiles, checked))
 }
 
-/// The refinement, the intervals at the answer, the profiles when asked for.
+/// A residual of the wheel loads below this RMS [N] is no spread to estimate (a lap the
+/// twin made itself without noise: what is left is the CSV's rounding and the objective's
+/// numerical roughness, which would give a collapsed interval).
+const LOAD_NOISE_FLOOR_N: f64 = 2.0;
+
+/// The intervals, unless every load signal's residual is below [`LOAD_NOISE_FLOOR_N`]:
+/// then none, saying why.
+fn noise_floor(
+    iv: crate::interval::Intervals,
+    blocks: &[crate::interval::Block],
+    j: &JointProblem,
+    x: &[f64],
+) -> crate::interval::Intervals {
+    let n = j.signals.len().max(1);
+    let loads: Vec<f64> = blocks
+        .iter()
+        .enumerate()
+        .filter(|(b, _)| j.signals[b % n].starts_with("Fz"))
+        .map(|(_, b)| {
+            (b.residual.iter().map(|e| e * e).sum::<f64>() / b.residual.len().max(1) as f64).sqrt()
+        })
+        .collect();
+    if loads.is_empty() || loads.iter().any(|&r| !(r < LOAD_NOISE_FLOOR_N)) {
+        return iv;
+    }
+    let worst = loads.iter().cloned().fold(0.0f64, f64::max);
+    crate::interval::Intervals::none(
+        &j.names,
+        x,
+        format!(
+            "no interval: the twin matches the measured wheel loads to {worst:.2} N RMS, below the floor of {LOAD_NOISE_FLOOR_N} N at which a spread can be estimated (a lap without noise, made by the twin itself)"
+        ),
+        iv.laps,
+    )
+}
+
+/// The model check at the answer ([`crate::model_check`]), from the laps' measured
+/// kinematics; `None` where a lap has no a_x or a_y, or the check cannot be made.
+fn model_check(
+    session: &Session,
+    j: &JointProblem,
+    blocks: &[crate::interval::Block],
+    x: &[f64],
+    iv: &crate::interval::Intervals,
+) -> Option<crate::model_check::Outcome> {
+    let study = session.study;
+    let kinematics: Vec<crate::model_check::Kinematics> = session
+        .bench
+        .laps
+        .iter()
+        .map(|l| {
+            let p =
+                PreparedMeasurement::new(&l.measurement, &["v", "a_x", "a_y"], &study.file.compare)
+                    .ok()?;
+            Some(crate::model_check::Kinematics {
+                start: 0,
+                v: p.measured("v")?.to_vec(),
+                a_x: p.measured("a_x")?.to_vec(),
+                a_y: p.measured("a_y")?.to_vec(),
+                step_m: p.grid().step(),
+            })
+        })
+        .collect::<Option<_>>()?;
+    let n = j.signals.len().max(1);
+    let signals: Vec<&str> = (0..blocks.len())
+        .map(|b| j.signals[b % n].as_str())
+        .collect();
+    let scatter: Vec<Option<(Option<f64>, Option<f64>)>> = j
+        .names
+        .iter()
+        .map(|name| {
+            iv.get(name)
+                .filter(|p| p.std_error.is_some())
+                .map(|p| (p.lo, p.hi))
+        })
+        .collect();
+    crate::model_check::check(blocks, &signals, &kinematics, x, &j.bounds, &scatter)
+}
+
+/// The refinement, the intervals at the answer, the profiles when asked for, the model
+/// check.
 type JointAnswer = (
     Option<Refinement>,
     crate::interval::Intervals,
     Option<crate::profile::Profiles>,
+    Option<crate::model_check::Outcome>,
 );
 
 /// Every parameter's value at the study's start: the first step's start point, the others
@@ -1335,7 +1430,8 @@ fn finish_study(
     let j = JointProblem::of(study, &state.checkpoint.completed);
     let prepared = session.bench.prepare(&j.signals, &study.file.compare)?;
     let sequential: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
-    let (refinement, intervals, profiles) = joint_answer(session, &mut state, &j, &prepared)?;
+    let (refinement, intervals, profiles, checked) =
+        joint_answer(session, &mut state, &j, &prepared)?;
     // The joint row of Tab. 1: every signal of every lap at the study's start and at its
     // answer (a study of one lap has both laps already).
     let all: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
@@ -1425,30 +1521,9 @@ fn finish_study(
                     Some(p) => p.statement.clone(),
                     None => iv.and_then(|i| i.statement.clone()),
                 };
-                // The steps' own answer outside the joint interval: the steps' cost and the
-                // least-squares fit disagree by more than the data's scatter.
-                let steps_value = sequential[slot];
-                let outside = refinement.is_some()
-                    && interval.is_some_and(|(lo, hi)| {
-                        lo.is_some_and(|lo| steps_value < lo) || hi.is_some_and(|hi| steps_value > hi)
-                    });
-                let statement = match (statement, outside) {
-                    (s, false) => s,
-                    (s, true) => {
-                        let unit = workers
-                            .parameter_unit(name)
-                            .filter(|u| !u.is_empty() && *u != "1")
-                            .map(|u| format!(" {u}"))
-                            .unwrap_or_default();
-                        let said = format!(
-                            "the steps' own answer, {steps_value:.4}{unit}, lies outside this interval: the steps' cost (e + β·|bias|) and the least-squares fit disagree on it by more than the data's scatter, a sign of a difference between the twin and the car in what this parameter does (or of steps that did not converge); the interval shows the scatter only"
-                        );
-                        Some(match s {
-                            Some(s) => format!("{s}; {said}"),
-                            None => said,
-                        })
-                    }
-                };
+                let with_model = checked
+                    .as_ref()
+                    .and_then(|c| c.with_model.get(k).copied().flatten());
                 ParameterChange {
                     name: name.clone(),
                     unit: workers.parameter_unit(name).map(str::to_string),
@@ -1467,11 +1542,14 @@ fn finish_study(
                         None => intervals.method.clone(),
                     }),
                     interval_statement: statement,
+                    std_error: iv.and_then(|i| i.std_error),
+                    interval_with_model: with_model,
                 }
             })
             .collect(),
         e: rows(&|k| session.bench.label(k), &before, &after),
         refinement,
+        model_check: checked.map(|c| c.check),
     };
     let joint_intervals = Some(intervals);
     let (simulations, simulation_seconds) = session.bench.runs();

@@ -127,6 +127,14 @@ pub struct Intervals {
     pub critical_value: f64,
     /// Statements about the whole step (a failed run, a short grid).
     pub notes: Vec<String>,
+    /// The covariance of the estimates, in the parameters' units, in their order (empty in
+    /// results written before it was kept, and where there is no interval).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub covariance: Vec<Vec<f64>>,
+    /// Their correlation (the covariance scaled by the standard errors; `None` where a
+    /// parameter has no spread).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub correlation: Vec<Vec<Option<f64>>>,
 }
 
 impl Intervals {
@@ -157,6 +165,8 @@ impl Intervals {
             laps,
             critical_value: Z95,
             notes: vec![why],
+            covariance: Vec::new(),
+            correlation: Vec::new(),
         }
     }
 }
@@ -439,6 +449,19 @@ pub(crate) fn sandwich(
             }
         })
         .collect();
+    let covariance: Vec<Vec<f64>> = (0..p)
+        .map(|i| (0..p).map(|j| cov[i][j] * span[i] * span[j]).collect())
+        .collect();
+    let correlation: Vec<Vec<Option<f64>>> = (0..p)
+        .map(|i| {
+            (0..p)
+                .map(|j| {
+                    let d = (covariance[i][i] * covariance[j][j]).sqrt();
+                    (d > 0.0).then(|| covariance[i][j] / d)
+                })
+                .collect()
+        })
+        .collect();
     Intervals {
         method: METHOD.into(),
         level: 0.95,
@@ -448,40 +471,75 @@ pub(crate) fn sandwich(
         laps,
         critical_value: cv,
         notes,
+        covariance,
+        correlation,
     }
 }
 
-/// The Bartlett bandwidth: twice the lag at which the scores' autocorrelation (summed over
-/// the parameters and the segments) first falls below 0.05; at least [`MIN_BANDWIDTH`], at
-/// most a quarter of the shortest segment's `n` grid points (true when that cut it).
+/// The Bartlett bandwidth: the widest of the parameters' own ([`bandwidth_of_one`] of each
+/// parameter's scores, over the segments): a parameter whose scores stay correlated
+/// longer than the others' sets it (a pooled autocorrelation let the parameter with the
+/// largest scores decide, and c_lift_front's were under-covered). True when the cap cut it.
 fn bandwidth(scores: &[Vec<Vec<f64>>], n: usize) -> (usize, bool) {
+    let p = scores.iter().find_map(|s| s.first()).map_or(0, |x| x.len());
     let cap = (n / MAX_SHARE).max(MIN_BANDWIDTH);
+    let widest = (0..p)
+        .map(|i| {
+            let one: Vec<Vec<f64>> = scores
+                .iter()
+                .map(|seg| seg.iter().map(|g| g[i]).collect())
+                .collect();
+            bandwidth_of_one(&one, n, LAGS, 0.05, MIN_BANDWIDTH, MAX_SHARE)
+        })
+        .max()
+        .unwrap_or(MIN_BANDWIDTH);
+    let capped = widest >= cap
+        && (0..p).any(|i| {
+            let one: Vec<Vec<f64>> = scores
+                .iter()
+                .map(|seg| seg.iter().map(|g| g[i]).collect())
+                .collect();
+            autocorrelation(&one, cap / LAGS) >= 0.05
+        });
+    (widest, capped)
+}
+
+/// The autocorrelation at lag `k` of a scalar series in segments (each summed within
+/// itself).
+fn autocorrelation(series: &[Vec<f64>], k: usize) -> f64 {
     let dot = |k: usize| -> f64 {
-        scores
+        series
             .iter()
-            .map(|seg| {
-                (0..seg.len().saturating_sub(k))
-                    .map(|g| {
-                        seg[g]
-                            .iter()
-                            .zip(&seg[g + k])
-                            .map(|(a, b)| a * b)
-                            .sum::<f64>()
-                    })
+            .map(|s| {
+                (0..s.len().saturating_sub(k))
+                    .map(|g| s[g] * s[g + k])
                     .sum::<f64>()
             })
             .sum()
     };
     let c0 = dot(0);
     if c0 <= 0.0 || c0.is_nan() {
-        return (MIN_BANDWIDTH, false);
+        return 0.0;
     }
+    dot(k) / c0
+}
+
+/// A scalar series' Bartlett bandwidth: `lags` × the first lag at which its autocorrelation
+/// falls below `cut`, within [`min`, n/`share`] (`n` the shortest segment's length).
+pub(crate) fn bandwidth_of_one(
+    series: &[Vec<f64>],
+    n: usize,
+    lags: usize,
+    cut: f64,
+    min: usize,
+    share: usize,
+) -> usize {
+    let cap = (n / share).max(min);
     let mut k = 1;
-    while LAGS * k < cap && dot(k) / c0 >= 0.05 {
+    while lags * k < cap && autocorrelation(series, k) >= cut {
         k += 1;
     }
-    let capped = LAGS * k >= cap && dot(k) / c0 >= 0.05;
-    ((LAGS * k).clamp(MIN_BANDWIDTH, cap), capped)
+    (lags * k).clamp(min, cap)
 }
 
 fn mul(a: &[Vec<f64>], b: &[Vec<f64>]) -> Vec<Vec<f64>> {

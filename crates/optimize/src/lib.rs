@@ -41,6 +41,7 @@ pub mod fit;
 pub mod ga;
 pub mod identifiability;
 pub mod interval;
+pub mod model_check;
 pub mod optimizer;
 pub mod pool;
 pub mod profile;

@@ -29,6 +29,10 @@ fmu_export::variables! {
         v: Real = 0.0 => input(1).unit("m/s").describe("Vehicle speed"),
         s: Real = 0.0 => input(2).unit("m")
             .describe("Distance along the track (may grow past the lap length or wrap at it)"),
+        omega_rl: Real = 0.0 => input(3).unit("rad/s")
+            .describe("Rear left (driven) wheel speed, for the traction limit (unconnected: 0, no limit)"),
+        omega_rr: Real = 0.0 => input(4).unit("rad/s")
+            .describe("Rear right (driven) wheel speed, for the traction limit (unconnected: 0, no limit)"),
         accel_pedal: Real = 0.0 => output(10).unit("1").range(0.0, 1.0)
             .describe("Accelerator pedal, 0..1 (share of the available drive force)"),
         brake_pedal: Real = 0.0 => output(11).unit("1").range(0.0, 1.0)
@@ -39,8 +43,8 @@ fmu_export::variables! {
             .describe("Length of the target's lap (the last s of the target file)"),
         target_speed_file: String = "" => parameter(40)
             .describe("The target speed file (CSV with columns s, v): an absolute path or a file:// URI; empty: the bundled resources/target_speed.csv"),
-        preview_time: Real = 0.2 => tunable(20).unit("s").range(0.0, 5.0)
-            .describe("The driver looks ahead by v·preview_time along the target"),
+        preview_time: Real = 0.0 => tunable(20).unit("s").range(0.0, 5.0)
+            .describe("The driver takes the target's acceleration v·preview_time ahead (with preview_distance_min): the delay from pedal to tyre force it anticipates (0: the chain's few milliseconds are covered by preview_distance_min)"),
         preview_distance_min: Real = 1.0 => tunable(21).unit("m").range(0.0, 1000.0)
             .describe("Least preview distance (at low speed)"),
         speed_loop_bandwidth: Real = 1.5 => tunable(22).unit("Hz").range(0.01, 50.0)
@@ -65,6 +69,16 @@ fmu_export::variables! {
             .describe("Air density for the driving-resistance feed-forward"),
         f_roll: Real = 0.02 => tunable(32).unit("1").range(0.0, 1.0)
             .describe("Rolling resistance coefficient for the feed-forward"),
+        wheel_radius: Real = 0.345 => tunable(33).unit("m").range(0.05, 2.0)
+            .describe("Rolling radius of the driven wheels, for their slip"),
+        slip_limit: Real = 0.12 => tunable(34).unit("1").range(0.0, 1.0)
+            .describe("Traction limit: the driver eases the accelerator when a driven wheel's slip exceeds it, as a racing driver keeps the wheels at their grip (0: off)"),
+        traction_gain: Real = 60.0 => tunable(35).unit("1/s").range(0.0, 1e4)
+            .describe("How fast the accelerator's limit falls per unit of slip above slip_limit"),
+        traction_recovery: Real = 4.0 => tunable(36).unit("1/s").range(0.0, 1e4)
+            .describe("How fast the accelerator's limit returns to 1 while the slip is below slip_limit"),
+        pedal_limit: Real = 1.0 => local(53).unit("1")
+            .describe("The accelerator's present limit from the traction limit (1: none)"),
         v_preview: Real = 0.0 => local(50).unit("m/s")
             .describe("Target speed at the preview point"),
         a_target: Real = 0.0 => local(51).unit("m/s2")
@@ -80,6 +94,8 @@ fmu_export::states! {
     pub struct DriverState {
         /// ∫ speed error dt [m], the PI's integral state.
         error_integral: f64,
+        /// The accelerator's limit from the traction limit, 0..1.
+        pedal_limit: f64,
     }
 }
 
@@ -104,11 +120,35 @@ impl Driver {
         Self::kp(vars) * self.st.error_integral / vars.integral_time
     }
 
-    /// Target at the preview point: (v_preview, a_target).
+    /// The traction limit over a step: the accelerator's limit falls while a driven wheel
+    /// slips more than `slip_limit` and recovers while none does (a racing driver's throttle
+    /// on a corner exit). Unconnected wheel speeds (0) read as no slip.
+    fn traction(&mut self, vars: &DriverVars, step: f64) {
+        if vars.slip_limit <= 0.0 {
+            self.st.pedal_limit = 1.0;
+            return;
+        }
+        let v = vars.v.max(1.0);
+        let slip = (vars.omega_rl.max(vars.omega_rr) * vars.wheel_radius - v) / v;
+        let change = if slip > vars.slip_limit {
+            -vars.traction_gain * (slip - vars.slip_limit)
+        } else {
+            vars.traction_recovery
+        };
+        self.st.pedal_limit = (self.st.pedal_limit + change * step).clamp(0.0, 1.0);
+    }
+
+    /// Target at the preview point: (v_preview, a_target). The target's own acceleration
+    /// where it carries one (a measured lap's a_x), else v·dv/ds of its speed.
     fn preview(&self, vars: &DriverVars) -> (f64, f64) {
         let distance = (vars.v.max(0.0) * vars.preview_time).max(vars.preview_distance_min);
-        let (vp, slope) = self.target.at_near(vars.s + distance, &self.hint_preview);
-        (vp, vp * slope)
+        let at = vars.s + distance;
+        let (vp, slope) = self.target.at_near(at, &self.hint_preview);
+        if self.target.has_acceleration() {
+            (vp, self.target.acceleration_near(at, &self.hint_preview))
+        } else {
+            (vp, vp * slope)
+        }
     }
 
     /// Pedals from the state and the inputs in `vars`; writes every output. Returns the
@@ -130,13 +170,14 @@ impl Driver {
         } else {
             (0.0, -force / (vars.mass * vars.brake_decel_max))
         };
-        vars.accel_pedal = accel.min(1.0);
+        vars.accel_pedal = accel.min(self.st.pedal_limit);
         vars.brake_pedal = brake.min(1.0);
+        vars.pedal_limit = self.st.pedal_limit;
         vars.v_target = v_target;
         vars.v_preview = vp;
         vars.a_target = a_target;
         vars.a_demand = a_demand;
-        if accel >= 1.0 {
+        if accel >= self.st.pedal_limit {
             1
         } else if brake >= 1.0 {
             -1
@@ -167,7 +208,7 @@ impl Model for Driver {
                 let (path, text) = ctx.read_resource(TARGET_FILE)?;
                 // The bundled file as the build parsed it, unless it was changed since.
                 let digest = fmu_export::preparsed::digest(text.as_bytes());
-                match fmu_export::preparsed::decode(TARGET_PREPARSED, digest, 2)
+                match fmu_export::preparsed::decode(TARGET_PREPARSED, digest, 3)
                     .and_then(|v| TargetSpeed::from_values(&v))
                 {
                     Some(target) => Ok(target),
@@ -188,6 +229,7 @@ impl Model for Driver {
             target,
             st: DriverState {
                 error_integral: 0.0,
+                pedal_limit: 1.0,
             },
             hint_here: Cell::new(0),
             hint_preview: Cell::new(0),
@@ -212,6 +254,7 @@ impl Model for Driver {
             let bound = vars.integral_limit * vars.integral_time / Self::kp(vars);
             self.st.error_integral = self.st.error_integral.clamp(-bound, bound);
         }
+        self.traction(vars, step);
         Ok(())
     }
 
@@ -252,8 +295,12 @@ k<sub>p</sub>·(e + ∫e dt / T<sub>i</sub>),&nbsp; k<sub>p</sub> = 2π·f<sub>b
 <p class="eq">F = m·a<sub>demand</sub> + k<sub>ff</sub>·(½·ρ·c<sub>d</sub>A·v² + f<sub>roll</sub>·m·g)</p>
 <p class="eq">F ≥ 0: accel_pedal = min(1, F / min(F<sub>max</sub>, P<sub>max</sub>/v)), brake_pedal = 0;&nbsp;
 F &lt; 0: brake_pedal = min(1, −F / (m·a<sub>brake,max</sub>)), accel_pedal = 0</p>
-<p>t<sub>p</sub> = <code>preview_time</code> (0.2 s), d<sub>min</sub> =
-<code>preview_distance_min</code>, f<sub>bw</sub> = <code>speed_loop_bandwidth</code>
+<p>t<sub>p</sub> = <code>preview_time</code> (0 s), d<sub>min</sub> =
+<code>preview_distance_min</code> (1 m): the target's acceleration is taken where the car
+is (1 m ahead: the few milliseconds from pedal to tyre force), so a target that is a car's
+measured speed is followed as that car drove it, without the lag or lead a longer preview
+gives (a preview of 0.2 s made the twin's a_x run 4 m behind a measured lap's; set it to
+the delay of a slower powertrain), f<sub>bw</sub> = <code>speed_loop_bandwidth</code>
 (1.5 Hz: for the plant dv/dt = a the loop crosses over there), T<sub>i</sub> =
 <code>integral_time</code> (0.5 s), k<sub>ff</sub> = <code>feed_forward_gain</code>. The
 feed-forward gains are the car's: <code>mass</code> 880 kg, <code>drive_force_max</code>
@@ -262,7 +309,15 @@ feed-forward gains are the car's: <code>mass</code> 880 kg, <code>drive_force_ma
 its available torque), <code>brake_decel_max</code> 23 m/s², resistance with c<sub>d</sub>A =
 1.1505 m², ρ = 1.18 kg/m³, f<sub>roll</sub> = 0.02 (downforce and grade are left to the
 PI). Anti-windup: the integral stops while a pedal is at its stop and the error pushes
-further, and its part is bounded by <code>integral_limit</code>. One signed force decides
+further, and its part is bounded by <code>integral_limit</code>.</p>
+<h3>Traction</h3>
+<p>As a racing driver keeps the driven wheels at their grip out of a corner, the
+accelerator is limited: with the driven wheels' speeds <code>omega_rl</code>,
+<code>omega_rr</code> and <code>wheel_radius</code> r, κ = (max ω·r − v)/max(v, 1 m/s);
+while κ &gt; <code>slip_limit</code> (0.12, about the tyres' peak) the limit falls at
+<code>traction_gain</code>·(κ − slip_limit) per second, otherwise it returns to 1 at
+<code>traction_recovery</code> per second; accel_pedal = min(pedal, limit). Unconnected wheel
+speeds read as no slip; <code>slip_limit</code> = 0 turns it off.</p><p> One signed force decides
 the pedal, so the two pedals are never pressed together.</p>
 <p>Stepping: the integral advances by e·h with the inputs held over the step; the outputs
 at the end of a step use those inputs (no direct feed-through). <code>v_target</code> is

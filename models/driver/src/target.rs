@@ -5,14 +5,20 @@ use std::cell::Cell;
 
 /// The fastest target speed a lap may hold [m/s] (720 km/h): faster is an error value.
 pub const MAX_SPEED: f64 = 200.0;
+/// The largest acceleration a target may ask for [m/s²] (10 g): more is a logger's error.
+pub const MAX_ACCELERATION: f64 = 100.0;
 /// The shortest lap a target may describe [m].
 pub const MIN_LAP_LENGTH: f64 = 10.0;
 
-/// Target speed over distance; periodic with the lap length (the file's last `s`).
+/// Target speed over distance; periodic with the lap length (the file's last `s`). With
+/// the optional column `a` [m/s²], the target's own acceleration (a measured lap's a_x): the
+/// driver's feed-forward takes it instead of differentiating the speed.
 #[derive(Debug, PartialEq)]
 pub struct TargetSpeed {
     s: Vec<f64>,
     v: Vec<f64>,
+    /// The acceleration at each row (empty: the file has none).
+    a: Vec<f64>,
     /// 1/spacing when the rows are evenly spaced: the segment is then found by one
     /// multiplication instead of a binary search (the same segment, checked).
     inv_spacing: Option<f64>,
@@ -45,8 +51,9 @@ impl TargetSpeed {
             })
         };
         let (is, iv) = (column("s")?, column("v")?);
+        let ia = names.iter().position(|n| *n == "a");
 
-        let (mut s, mut v) = (Vec::new(), Vec::new());
+        let (mut s, mut v, mut a) = (Vec::new(), Vec::new(), Vec::new());
         for (line, row) in lines {
             let fields: Vec<&str> = row.split(',').map(str::trim).collect();
             let field = |i: usize, name: &str| -> Result<f64, ModelError> {
@@ -89,6 +96,16 @@ impl TargetSpeed {
                     ),
                 ));
             }
+            if let Some(ia) = ia {
+                let ai = field(ia, "a")?;
+                if ai.abs() > MAX_ACCELERATION {
+                    return Err(err(
+                        line,
+                        format!("a = {ai:?} m/s2 is beyond what a car's target may ask ({MAX_ACCELERATION} m/s2)"),
+                    ));
+                }
+                a.push(ai);
+            }
             s.push(si);
             v.push(vi);
         }
@@ -104,36 +121,75 @@ impl TargetSpeed {
                 "{file}: a lap of {lap:?} m is not a circuit (at least {MIN_LAP_LENGTH} m)"
             )));
         }
-        Ok(Self::from_columns(s, v))
+        Ok(Self::from_columns(s, v, a))
     }
 
-    fn from_columns(s: Vec<f64>, v: Vec<f64>) -> TargetSpeed {
+    fn from_columns(s: Vec<f64>, v: Vec<f64>, a: Vec<f64>) -> TargetSpeed {
         let spacing = (s[s.len() - 1] - s[0]) / (s.len() - 1) as f64;
         let even = s
             .windows(2)
             .all(|w| ((w[1] - w[0]) - spacing).abs() <= 1e-9 * spacing);
         let inv_spacing = even.then_some(1.0 / spacing);
-        TargetSpeed { s, v, inv_spacing }
+        TargetSpeed {
+            s,
+            v,
+            a,
+            inv_spacing,
+        }
     }
 
-    /// The rows as numbers, (s, v) pairs (a build script stores them: `preparsed`).
+    /// The rows as numbers, (s, v, a) triples, a NaN without an acceleration column (a build
+    /// script stores them: `preparsed`).
     pub fn values(&self) -> Vec<f64> {
-        self.s
-            .iter()
-            .zip(&self.v)
-            .flat_map(|(&s, &v)| [s, v])
+        (0..self.s.len())
+            .flat_map(|k| {
+                [
+                    self.s[k],
+                    self.v[k],
+                    self.a.get(k).copied().unwrap_or(f64::NAN),
+                ]
+            })
             .collect()
     }
 
     /// A target from [`TargetSpeed::values`] of a parsed file (the same numbers, the
     /// same target).
     pub fn from_values(values: &[f64]) -> Option<TargetSpeed> {
-        if !values.len().is_multiple_of(2) || values.len() < 4 {
+        if !values.len().is_multiple_of(3) || values.len() < 6 {
             return None;
         }
-        let s = values.chunks_exact(2).map(|r| r[0]).collect();
-        let v = values.chunks_exact(2).map(|r| r[1]).collect();
-        Some(Self::from_columns(s, v))
+        let s = values.chunks_exact(3).map(|r| r[0]).collect();
+        let v = values.chunks_exact(3).map(|r| r[1]).collect();
+        let a: Vec<f64> = values.chunks_exact(3).map(|r| r[2]).collect();
+        let a = if a.iter().all(|x| x.is_nan()) {
+            Vec::new()
+        } else {
+            a
+        };
+        Some(Self::from_columns(s, v, a))
+    }
+
+    /// Whether the target carries its own acceleration.
+    pub fn has_acceleration(&self) -> bool {
+        !self.a.is_empty()
+    }
+
+    /// The target's acceleration at `s` (linear between rows; the column `a`), with the
+    /// segment found from `hint` as [`TargetSpeed::at_near`] does. 0 without the column.
+    pub fn acceleration_near(&self, s: f64, hint: &Cell<usize>) -> f64 {
+        if self.a.is_empty() {
+            return 0.0;
+        }
+        let _ = self.at_near(s, hint);
+        let k = hint.get();
+        if k == 0 {
+            return self.a[0];
+        }
+        let n = self.s.len();
+        let k = (k - 1).min(n - 2);
+        let x = fmu_export::resources::wrap_distance(s, self.lap_length());
+        let w = ((x - self.s[k]) / (self.s[k + 1] - self.s[k])).clamp(0.0, 1.0);
+        self.a[k] + w * (self.a[k + 1] - self.a[k])
     }
 
     /// Lap length: the last `s` of the file; positions wrap modulo it.
@@ -200,13 +256,13 @@ mod tests {
         use fmu_export::preparsed::{decode, digest};
         let text = std::str::from_utf8(include_bytes!("../resources/target_speed.csv")).unwrap();
         let parsed = TargetSpeed::parse(text, "target_speed.csv").unwrap();
-        let values = decode(crate::TARGET_PREPARSED, digest(text.as_bytes()), 2)
+        let values = decode(crate::TARGET_PREPARSED, digest(text.as_bytes()), 3)
             .expect("the build embeds the bundled target");
         let from = TargetSpeed::from_values(&values).unwrap();
         assert_eq!(from, parsed);
         let changed = text.replacen("52.4390", "52.4391", 1);
         assert_ne!(changed, text);
-        assert!(decode(crate::TARGET_PREPARSED, digest(changed.as_bytes()), 2).is_none());
+        assert!(decode(crate::TARGET_PREPARSED, digest(changed.as_bytes()), 3).is_none());
     }
 
     #[test]

@@ -126,13 +126,13 @@ fmu_export::variables! {
         track_file: String = "" => parameter(40)
             .describe("The track file (CSV with columns s, curvature, grade, z_road_left, z_road_right): an absolute path or a file:// URI; empty: the bundled resources/track.csv"),
         a_x: Real = 0.0 => output(108).unit("m/s2")
-            .describe("Longitudinal acceleration after the chassis (low-pass or pitch mode), used in the load equations"),
+            .describe("Longitudinal acceleration of the car, dv/dt: what an accelerometer on it measures (the logger's a_x)"),
         a_y: Real = 0.0 => output(109).unit("m/s2")
-            .describe("Lateral acceleration after the chassis (low-pass or roll mode), positive in a left turn, used in the load equations"),
-        a_x_raw: Real = 0.0 => output(110).unit("m/s2")
-            .describe("Longitudinal acceleration dv/dt before the low-pass"),
-        a_y_raw: Real = 0.0 => output(111).unit("m/s2")
-            .describe("Lateral acceleration v²·curvature before the low-pass"),
+            .describe("Lateral acceleration of the car, v²·curvature, positive in a left turn: what an accelerometer on it measures"),
+        a_x_chassis: Real = 0.0 => output(110).unit("m/s2")
+            .describe("Longitudinal acceleration after the chassis (low-pass or pitch mode): the one the load equations use"),
+        a_y_chassis: Real = 0.0 => output(111).unit("m/s2")
+            .describe("Lateral acceleration after the chassis (low-pass or roll mode): the one the load equations use"),
         Fz_fl: Real = 0.0 => output(112).unit("N").describe("Tyre vertical load, front left"),
         Fz_fr: Real = 0.0 => output(113).unit("N").describe("Tyre vertical load, front right"),
         Fz_rl: Real = 0.0 => output(114).unit("N").describe("Tyre vertical load, rear left"),
@@ -612,10 +612,10 @@ impl Model for Vehicle {
         x.lap = st.lap;
         x.lap_time = st.lap_time;
         x.lap_length = self.track.length();
-        x.a_x = st.ax;
-        x.a_y = st.ay;
-        x.a_x_raw = st.ax_raw;
-        x.a_y_raw = st.v * st.v * f.at.curvature;
+        x.a_x = st.ax_raw;
+        x.a_y = st.v * st.v * f.at.curvature;
+        x.a_x_chassis = st.ax;
+        x.a_y_chassis = st.ay;
         x.Fz_fl = f.loads.fl;
         x.Fz_fr = f.loads.fr;
         x.Fz_rl = f.loads.rl;
@@ -679,8 +679,11 @@ Fz_fr = m(½((1−x_cog)·g − a_x·h_cog/l) + x_rc·a_y·h_cog/b_front) + F_li
 F_lift,front/rear = ¼·c_lift,front/rear·A·rho_air·v²      (per wheel; c_lift &gt; 0 presses down)
 Fz_sum = m·g + ½(c_lift,front + c_lift,rear)·A·rho_air·v²  (Eq. 18, without road excitation)
 </pre>
-<p>a<sub>x</sub>, a<sub>y</sub> are the chassis' outputs â for a<sub>x</sub> = dv/dt and
-a<sub>y</sub> = v²·κ(s). <code>chassis_model</code> = <code>first_order</code> (1, the
+<p>a<sub>x</sub>, a<sub>y</sub> in the loads are the chassis' outputs â (the outputs
+<code>a_x_chassis</code>, <code>a_y_chassis</code>) for the car's accelerations
+a<sub>x</sub> = dv/dt and a<sub>y</sub> = v²·κ(s) (the outputs <code>a_x</code>,
+<code>a_y</code>: what an accelerometer on the car measures, to be compared with a logger's).
+<code>chassis_model</code> = <code>first_order</code> (1, the
 default): a low-pass τ·dâ/dt = a − â, τ = <code>chassis_time_constant</code>.
 <code>second_order</code> (2): the sprung body's pitch (for a<sub>x</sub>) and roll (for
 a<sub>y</sub>) modes, d²â/dt² + 2ζω·dâ/dt + ω²·â = ω²·a with ω = 2π·f, f and ζ =

@@ -25,6 +25,9 @@ pub(crate) enum SlotLogger {
     Fmi3(super::super::ffi3::fmi3LogMessageCallback, *mut c_void),
 }
 
+/// 32 bytes, aligned to 32: a handle is checked with one subtraction, one comparison and
+/// one bit test, and the slot is the handle itself.
+#[repr(C, align(32))]
 struct Slot {
     /// The instance (a `Box<Instance<M>>`), or null.
     instance: AtomicPtr<c_void>,
@@ -61,13 +64,19 @@ pub enum Stale {
     Freed,
 }
 
+const _: () = assert!(std::mem::size_of::<Slot>() == 32);
+
 /// The slot a handle is the address of, if any.
 #[inline(always)]
 fn slot_of(handle: *mut c_void) -> Option<&'static Slot> {
     let base = TABLE.as_ptr() as usize;
     let at = (handle as usize).wrapping_sub(base);
-    let size = std::mem::size_of::<Slot>();
-    (at < SLOTS * size && at.is_multiple_of(size)).then(|| &TABLE[at / size])
+    if at < SLOTS * 32 && at & 31 == 0 {
+        // SAFETY: inside the table and at a slot's start: the slot itself, static.
+        Some(unsafe { &*(handle as *const Slot) })
+    } else {
+        None
+    }
 }
 
 /// A handle for `instance` (a `Box` turned into a raw pointer), with the logger to keep;
