@@ -50,6 +50,7 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
             "{p}"
         );
     }
+    the_answer_applies_to_a_run_as_set_does(d, &root, &result);
     let meas = root.join("data/spielberg_lap.csv");
     let track = root.join("data/spielberg_lap_track.csv");
     let o = twinbench(
@@ -102,6 +103,66 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(
         e.contains("bad.json: not a study result (the result.json `twinbench optimize` writes)"),
+        "{e}"
+    );
+}
+
+/// `run SYSTEM --params result.json` gives the lap `run SYSTEM --set …` gives with the
+/// answer's values typed out (bit for bit); a `--set` after it wins; a result naming a
+/// parameter the system does not have is refused by name.
+fn the_answer_applies_to_a_run_as_set_does(
+    d: &std::path::Path,
+    root: &std::path::Path,
+    result: &serde_json::Value,
+) {
+    let system = root.join("systems/rls_v.toml");
+    let system = system.to_str().unwrap();
+    let o = twinbench(
+        d,
+        &["run", system, "--params", "opt/result.json", "-o", "params.csv"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut args = vec!["run".to_string(), system.to_string()];
+    for p in result["parameters_final"].as_array().unwrap() {
+        let (name, value) = (p[0].as_str().unwrap(), p[1].as_f64().unwrap());
+        args.push("--set".into());
+        args.push(format!("{name}={value}"));
+    }
+    args.extend(["-o".to_string(), "set.csv".to_string()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = twinbench(d, &args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (a, b) = (
+        std::fs::read(d.join("params.csv")).unwrap(),
+        std::fs::read(d.join("set.csv")).unwrap(),
+    );
+    assert!(a == b, "run --params and run --set differ");
+    // A --set after --params wins: the lap changes.
+    let o = twinbench(
+        d,
+        &[
+            "run",
+            system,
+            "--params",
+            "opt/result.json",
+            "--set",
+            "vehicle.l=3.0",
+            "-o",
+            "params_l.csv",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read(d.join("params_l.csv")).unwrap() != a);
+    // A parameter the system does not have: named, with the result file.
+    let text = std::fs::read_to_string(d.join("opt/result.json"))
+        .unwrap()
+        .replace("\"vehicle.b_rear\"", "\"vehicle.b_rearr\"");
+    std::fs::write(d.join("renamed.json"), text).unwrap();
+    let o = twinbench(d, &["run", system, "--params", "renamed.json"]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("--params renamed.json: vehicle.b_rearr") && e.contains("b_rear"),
         "{e}"
     );
 }

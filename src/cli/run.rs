@@ -20,6 +20,10 @@ pub struct RunArgs {
     /// Override a parameter: instance.variable=value (repeatable).
     #[arg(long = "set", value_name = "INSTANCE.VARIABLE=VALUE")]
     pub set: Vec<String>,
+    /// Apply a study's answer: every value of `parameters_final` in RESULT.json (the
+    /// result `twinbench optimize` writes), before any `--set` (which wins).
+    #[arg(long, value_name = "RESULT.json")]
+    pub params: Option<PathBuf>,
     /// Print a JSON summary.
     #[arg(long)]
     pub json: bool,
@@ -269,8 +273,30 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         super::run_fmu::own_names(sim.recording_mut(), instance)?;
     }
     sim.record_events(args.record_events)?;
-    for s in &args.set {
-        let (name, value) = parse_assignment(s)?;
+    // A study's answer first, so that a `--set` of the same parameter wins.
+    let answer = match &args.params {
+        Some(path) => {
+            let result = crate::validate::read_result(path)?;
+            result
+                .parameters_final
+                .iter()
+                .map(|(name, value)| {
+                    (
+                        format!("--params {}: {name}", path.display()),
+                        name.clone(),
+                        toml::Value::Float(*value),
+                    )
+                })
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    let assignments = args
+        .set
+        .iter()
+        .map(|s| parse_assignment(s).map(|(n, v)| (format!("--set {s}"), n, v)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    for (what, name, value) in answer.into_iter().chain(assignments) {
         let name = match &instance {
             // The FMU's own variable name; `instance.variable` as in a system is taken too
             // when the FMU has no variable of that whole name (red team M17).
@@ -287,7 +313,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             }
             None => name,
         };
-        set_parameter(&system, &mut sim, &name, &value).with_context(|| format!("--set {s}"))?;
+        set_parameter(&system, &mut sim, &name, &value).with_context(|| what.clone())?;
     }
     // The CLI's observers of the run: Ctrl-C (or SIGTERM) ends it keeping its rows, a
     // progress bar on a terminal.

@@ -1,6 +1,6 @@
 //! Driver of the road-load simulation: follows a distance-based target speed `v(s)`.
 //!
-//! The target comes from a resource file (`target_speed.csv`, columns `s,v`). The driver
+//! The target comes from a resource file (`target_speed.csv`, columns `s,v[,a]`). The driver
 //! looks ahead by `preview_time`, feeds forward the target's acceleration `v·dv/ds` and
 //! the driving resistance, closes a PI loop on the speed error, and turns the force demand
 //! into exactly one pedal: the accelerator for a positive demand, the brake for a negative
@@ -278,8 +278,11 @@ const DOCUMENTATION: &str = r#"
 stronger or weaker powertrain drives the same lap.</p>
 <h3>Target</h3>
 <p><code>resources/target_speed.csv</code>: a header naming the columns <code>s</code> [m]
-and <code>v</code> [m/s], then rows with strictly increasing s ≥ 0 (at least two; finite,
-v ≥ 0). The target is piecewise linear in s and periodic: the lap length L is the last s
+and <code>v</code> [m/s], optionally <code>a</code> [m/s²] (the car's own longitudinal
+acceleration there, the feed-forward's a<sub>target</sub> in place of v·dv/ds: a measured
+speed smoothed over 9 m rounds off every braking point, the measured acceleration does
+not), then rows with strictly increasing s ≥ 0 (at least two; finite, v ≥ 0, |a| at most
+100 m/s²). The target is piecewise linear in s and periodic: the lap length L is the last s
 of the file and every position is taken modulo L, so the vehicle's <code>s</code> may keep
 growing over several laps or wrap at L itself. The default file is the Spielberg lap of
 <code>data/spielberg_lap.csv</code>, resampled every 1 m and smoothed over 9 m
@@ -289,7 +292,7 @@ missing or malformed file fails the initialisation with the file and row named.<
 <h3>Control law</h3>
 <p class="eq">s<sub>p</sub> = s + max(v·t<sub>p</sub>, d<sub>min</sub>),&nbsp;
 v<sub>p</sub> = v<sub>target</sub>(s<sub>p</sub>),&nbsp;
-a<sub>target</sub> = v<sub>p</sub>·dv<sub>target</sub>/ds(s<sub>p</sub>)</p>
+a<sub>target</sub> = a(s<sub>p</sub>) with a column <code>a</code>, else v<sub>p</sub>·dv<sub>target</sub>/ds(s<sub>p</sub>)</p>
 <p class="eq">e = v<sub>p</sub> − v,&nbsp; a<sub>demand</sub> = k<sub>ff</sub>·a<sub>target</sub> +
 k<sub>p</sub>·(e + ∫e dt / T<sub>i</sub>),&nbsp; k<sub>p</sub> = 2π·f<sub>bw</sub></p>
 <p class="eq">F = m·a<sub>demand</sub> + k<sub>ff</sub>·(½·ρ·c<sub>d</sub>A·v² + f<sub>roll</sub>·m·g)</p>
