@@ -138,6 +138,98 @@ pub fn lap_length(m: &Measurement) -> Result<f64, LapError> {
     Ok(length)
 }
 
+/// The units a logger writes wheel loads in, by the factor from newtons: a load channel in
+/// one of them without its unit declared reads as that factor times the car's weight.
+const LOAD_UNITS: [(&str, f64); 4] = [
+    ("N", 1.0),
+    ("daN", 0.1),
+    ("lbf", 1.0 / 4.448_221_615_260_5),
+    ("kN", 1e-3),
+];
+
+/// Each load signal's share of the car's weight at rest.
+const LOAD_SHARES: [(&str, f64); 7] = [
+    ("Fz_sum", 1.0),
+    ("Fz_front", 0.5),
+    ("Fz_rear", 0.5),
+    ("Fz_fl", 0.25),
+    ("Fz_fr", 0.25),
+    ("Fz_rl", 0.25),
+    ("Fz_rr", 0.25),
+];
+
+/// A load channel whose scale is not newtons: its mean over the slowest quarter of the lap
+/// (little downforce) against its share of the twin's weight m·g. The car's own mass,
+/// weight distribution and downforce move that ratio by well under a factor of two; a
+/// load in kN, daN or lbf moves it by 1000, 10 or 4.45, so a ratio nearer one of those
+/// than 1 refuses the lap with the likely unit named, the file's own channel and the
+/// signal it maps to. (A whole study in kN ran to a bias of +119,339 % with every
+/// parameter on a bound before this check.)
+pub fn check_load_unit(m: &Measurement, map: &ChannelMap, mass: f64) -> Result<(), LapError> {
+    let table = m.table();
+    let Some(v) = m.signal("v")? else {
+        return Ok(());
+    };
+    let mut sorted: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if sorted.len() < 8 {
+        return Ok(());
+    }
+    sorted.sort_by(f64::total_cmp);
+    let slow = sorted[sorted.len() / 4];
+    let weight = mass * 9.81;
+    for (signal, share) in LOAD_SHARES {
+        let Some(fz) = m.signal(signal)? else {
+            continue;
+        };
+        let (sum, n) = fz
+            .iter()
+            .zip(v)
+            .filter(|(f, v)| **v <= slow && f.is_finite())
+            .fold((0.0, 0usize), |(s, n), (f, _)| (s + f, n + 1));
+        if n == 0 {
+            continue;
+        }
+        let ratio = sum / n as f64 / (share * weight);
+        if !(ratio > 0.0) {
+            continue;
+        }
+        let (unit, factor) = LOAD_UNITS
+            .iter()
+            .min_by(|a, b| {
+                (ratio / a.1)
+                    .ln()
+                    .abs()
+                    .total_cmp(&(ratio / b.1).ln().abs())
+            })
+            .copied()
+            .expect("units listed");
+        if unit == "N" {
+            continue;
+        }
+        let channel = match map.0.get(signal) {
+            Some(c) => format!("channel `{c}` (the study's {signal})"),
+            None => format!("channel `{signal}`"),
+        };
+        let declared = table
+            .names()
+            .iter()
+            .position(|n| n == signal)
+            .and_then(|i| table.units().and_then(|u| u.get(i)))
+            .map(|u| u.trim().to_string())
+            .filter(|u| !u.is_empty());
+        return Err(LapError::Invalid(format!(
+            "{}: {channel} looks like {unit}, not N: over the slowest quarter of the lap (v ≤ {slow:.1} m/s) it averages {:.4} of its share ({share}) of the car's weight (m·g = {mass} kg · 9.81 m/s² = {weight:.0} N), about the factor {factor:.4} of {unit}; {}",
+            table.source(),
+            ratio,
+            match declared {
+                Some(u) => format!("the file declares `{u}`: correct the unit row (or the MDF channel's unit) to `{unit}`"),
+                None => format!("declare its unit (a units row under the CSV header with `{unit}` under it, or the MDF channel's unit)"),
+            }
+        )));
+    }
+    Ok(())
+}
+
 /// How a speed logged in km/h or mph without a declared unit shows against the other
 /// signals: the ratio of the speed read as m/s to the speed the distance or a_x implies.
 const SPEED_UNITS: [(&str, f64); 2] = [("km/h", 3.6), ("mph", 3600.0 / 1609.344)];
@@ -704,6 +796,7 @@ pub fn prepare(o: &LapOptions) -> Result<LapFiles, LapError> {
 fn prepare_in(o: &LapOptions) -> Result<LapFiles, LapError> {
     let m = Measurement::load(&o.measurement, &o.channels)?;
     check_speed_unit(&m)?;
+    check_load_unit(&m, &o.channels, vehicle::VehicleVars::default().m)?;
     // Everything that can refuse the lap before its folder is made.
     let lap = lap_length(&m)?;
     let track_text = match &o.track {

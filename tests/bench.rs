@@ -67,15 +67,30 @@ fn rls_v_drives_the_spielberg_lap() {
     let meas = measured();
     let (s, rec) = simulate(&root().join("systems/rls_v.toml"), &[]);
     let lap = s.value("vehicle.lap_time").expect("lap completed");
-    // Lap time within 3% of the measurement's 97.49 s (measured here: 98.13 s, +0.7%).
+    // The twin drives the lap as the car did: the initial twin's lap time within 0.15 s of
+    // the car's 97.49 s (measured here: +0.07 s; it was +0.63 s when the driver lagged a
+    // target of the speed alone and the driveline lost 4 % the car did not).
     assert!(
-        (lap / meas.lap_time - 1.0).abs() < 0.03,
+        (lap - meas.lap_time).abs() < 0.15,
         "lap time {lap} s vs {}",
         meas.lap_time
     );
-    // RMS speed error over distance below 2 km/h (measured here: 1.56 km/h).
+    // RMS speed error over distance below 1 km/h (measured here: 0.30 km/h; 1.56 before).
     let (rms, max) = speed_error_kmh(&rec, &meas);
-    assert!(rms < 2.0, "RMS speed error {rms} km/h (max {max})");
+    assert!(rms < 1.0, "RMS speed error {rms} km/h (max {max})");
+    // Its a_x over distance follows the measured (filtered, 1 m grid, as the study compares):
+    // R² at least 0.97 (measured here: 0.996).
+    let cmp = twinbench::bench::compare_table(
+        &rec,
+        &root().join("data/spielberg_lap.csv"),
+        None,
+        &["a_x".to_string()],
+        &tb_compare::CompareSettings::default(),
+    )
+    .unwrap();
+    let r2 = cmp.get("a_x").unwrap().r_squared;
+    eprintln!("lap {lap} s, speed RMS {rms} km/h, a_x R² {r2}");
+    assert!(r2 >= 0.97, "a_x R² {r2}");
     // Eq. 17 along the lap: Fz_sum is the sum of the four loads (1e-9 relative), and never
     // below the weight by more than the road excitation can take away (lift presses down).
     let sum = rec.require("vehicle.Fz_sum").unwrap();

@@ -227,3 +227,127 @@ print(repr(float(r["lap_length"][-1])))
     let fmpy: f64 = String::from_utf8_lossy(&o.stdout).trim().parse().unwrap();
     assert_eq!(fmpy, ours);
 }
+
+/// Wheel loads logged in kN, daN or lbf without a units row: `lap` refuses the lap naming
+/// the likely unit and the file's own channel (mapped: the signal too), before any file is
+/// written; the same file in N passes; a declared unit is converted and passes.
+#[test]
+fn wheel_loads_in_kn_dan_or_lbf_without_their_unit_are_refused_naming_it() {
+    let dir = tb_testkit::scratch("load-units");
+    let d = dir.path();
+    let text = std::fs::read_to_string(root().join("data/spielberg_lap.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    let loads: Vec<usize> = (0..header.len())
+        .filter(|&i| header[i].starts_with("Fz_"))
+        .collect();
+    assert_eq!(loads.len(), 4);
+    // Every other row (a lighter file), the loads divided by `factor`; `names` renames the
+    // header, `units` adds a units row.
+    let write = |name: &str, factor: f64, names: &[(&str, &str)], units: Option<&str>| {
+        let mut h: Vec<String> = header.iter().map(|s| s.to_string()).collect();
+        for (from, to) in names {
+            let i = h.iter().position(|x| x == from).unwrap();
+            h[i] = to.to_string();
+        }
+        let mut out = format!("{}\n", h.join(","));
+        if let Some(u) = units {
+            let row: Vec<&str> = header
+                .iter()
+                .map(|n| match *n {
+                    "time" => "s",
+                    "distance" => "m",
+                    "v" => "m/s",
+                    "a_x" | "a_y" => "m/s2",
+                    "omega_rl" | "omega_rr" => "rad/s",
+                    n if n.starts_with("Fz_") => u,
+                    _ => "",
+                })
+                .collect();
+            out.push_str(&format!("{}\n", row.join(",")));
+        }
+        for r in rows.iter().step_by(2) {
+            let cells: Vec<String> = r
+                .iter()
+                .enumerate()
+                .map(|(i, x)| {
+                    if loads.contains(&i) {
+                        format!("{}", x / factor)
+                    } else {
+                        format!("{x}")
+                    }
+                })
+                .collect();
+            out.push_str(&format!("{}\n", cells.join(",")));
+        }
+        let p = d.join(name);
+        std::fs::write(&p, out).unwrap();
+        p
+    };
+    let track = root().join("data/spielberg_lap_track.csv");
+    let lap = |meas: &Path, out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "lap",
+            meas.to_str().unwrap(),
+            "--track",
+            track.to_str().unwrap(),
+            "--out",
+        ];
+        let out = d.join(out);
+        let out_s = out.to_str().unwrap().to_string();
+        args.push(&out_s);
+        args.extend_from_slice(extra);
+        let o = twinbench(&args);
+        (o, out)
+    };
+    for (unit, factor) in [("kN", 1000.0), ("daN", 10.0), ("lbf", 4.448_221_615_260_5)] {
+        let meas = write(&format!("lap_{unit}.csv"), factor, &[], None);
+        let (o, out) = lap(&meas, unit, &[]);
+        assert!(!o.status.success(), "{unit}: accepted");
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            e.contains(&format!("looks like {unit}, not N"))
+                && e.contains("lap_")
+                && e.contains("Fz_"),
+            "{unit}: {e}"
+        );
+        assert!(!out.exists(), "{unit}: a refused lap left its folder");
+    }
+    // Logger names through a channel map: the file's channel and the signal both named.
+    let meas = write(
+        "logger_kn.csv",
+        1000.0,
+        &[
+            ("Fz_fl", "LoadFL"),
+            ("Fz_fr", "LoadFR"),
+            ("Fz_rl", "LoadRL"),
+            ("Fz_rr", "LoadRR"),
+        ],
+        None,
+    );
+    let map = d.join("map.toml");
+    std::fs::write(
+        &map,
+        "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\n",
+    )
+    .unwrap();
+    let (o, _) = lap(&meas, "logger", &["--channels", map.to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("looks like kN") && e.contains("channel `LoadFL` (the study's Fz_fl)"),
+        "{e}"
+    );
+    // In N, and in kN with its unit declared: accepted.
+    let (o, _) = lap(&write("lap_n.csv", 1.0, &[], None), "n", &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (o, _) = lap(
+        &write("lap_kn_declared.csv", 1000.0, &[], Some("kN")),
+        "kn",
+        &[],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -31,12 +31,25 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
             study.to_str().unwrap(),
             "--generations",
             "1",
-            "--json",
             "--out",
             "opt",
         ],
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Its stdout is no terminal (`optimize … > log.txt`): a plain line per generation, with
+    // an ETA, before Tab. 1.
+    let log = String::from_utf8_lossy(&o.stdout);
+    for step in ["step 1 ", "step 2 "] {
+        let line = log
+            .lines()
+            .find(|l| l.starts_with(step) && l.contains("generation 1/1"))
+            .unwrap_or_else(|| panic!("no generation line of {step}in {log}"));
+        assert!(line.contains("best cost") && line.contains("ETA"), "{line}");
+    }
+    assert!(
+        log.find("generation 1/1").unwrap() < log.find("| all |").unwrap(),
+        "{log}"
+    );
     let result: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("opt/result.json")).unwrap()).unwrap();
     // Every parameter of the study's answer carries an interval (or a statement why not)
@@ -119,7 +132,14 @@ fn the_answer_applies_to_a_run_as_set_does(
     let system = system.to_str().unwrap();
     let o = twinbench(
         d,
-        &["run", system, "--params", "opt/result.json", "-o", "params.csv"],
+        &[
+            "run",
+            system,
+            "--params",
+            "opt/result.json",
+            "-o",
+            "params.csv",
+        ],
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let mut args = vec!["run".to_string(), system.to_string()];

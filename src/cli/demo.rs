@@ -70,7 +70,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let options = RunOptions {
         threads: args.threads,
         observers: vec![
-            super::progress::Bars::shared(),
+            super::progress::Bars::for_cli(false),
             std::sync::Arc::new(tb_optimize::StopOnFlag(super::interrupt::flag()?)),
             report.clone(),
         ],

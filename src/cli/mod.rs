@@ -27,7 +27,7 @@ pub mod worker;
 #[command(
     name = "twinbench",
     version,
-    about = "Digital twin of a powertrain test bench: FMI Co-Simulation models (exports FMI 2.0; imports FMI 2.0 and 3.0 FMUs and SSP 1.0 packages), orchestrator, optimiser, bench analysis"
+    about = "Digital twin of a powertrain test bench: FMI Co-Simulation models (exports FMI 2.0 and 3.0 FMUs and SSP 1.0 packages; imports FMI 2.0 and 3.0 FMUs, Co-Simulation and Model Exchange, and SSP 1.0 packages), orchestrator, optimiser, bench analysis"
 )]
 pub struct Cli {
     /// More log output (repeat for more).

@@ -8,20 +8,89 @@ use std::sync::{Arc, Mutex};
 use tb_cosim::{Ended, Moment, RunObserver, RunView, SystemError};
 use tb_optimize::{GenerationDone, StudyObserver};
 
-/// One bar per step on stderr.
+/// Where plain progress lines go.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lines {
+    Stdout,
+    Stderr,
+}
+
+/// One bar per step on stderr when it is a terminal, and a plain line per generation with
+/// an ETA where no bar can be seen (`optimize … > log.txt`, `nohup`, CI, a batch job).
 #[derive(Default)]
 pub struct Bars {
     bar: Mutex<Option<ProgressBar>>,
+    lines: Option<Lines>,
+    /// The current step's start here (wall clock, generations done then), for the ETA.
+    clock: Mutex<Option<(std::time::Instant, usize)>>,
 }
 
 impl Bars {
-    pub fn shared() -> Arc<dyn StudyObserver> {
-        Arc::new(Bars::default())
+    /// The bars for the CLI: a bar on a terminal's stderr; plain lines on stdout when it is
+    /// not a terminal (it holds the log; not with `--json`, whose stdout is the document),
+    /// else on stderr when that is not a terminal.
+    pub fn for_cli(json: bool) -> Arc<dyn StudyObserver> {
+        use std::io::IsTerminal;
+        let lines = if !json && !std::io::stdout().is_terminal() {
+            Some(Lines::Stdout)
+        } else if !std::io::stderr().is_terminal() {
+            Some(Lines::Stderr)
+        } else {
+            None
+        };
+        Arc::new(Bars {
+            lines,
+            ..Bars::default()
+        })
+    }
+}
+
+/// A duration in words for a log line: `42 s`, `3 min 5 s`, `1 h 12 min`.
+pub fn duration(seconds: f64) -> String {
+    let s = seconds.max(0.0).round() as u64;
+    match s {
+        0..=59 => format!("{s} s"),
+        60..=3599 => format!("{} min {} s", s / 60, s % 60),
+        _ => format!("{} h {} min", s / 3600, (s % 3600) / 60),
+    }
+}
+
+/// Writes one progress line and flushes it (a log read while the study runs).
+pub fn print_line(to: Lines, line: &str) {
+    use std::io::Write;
+    match to {
+        Lines::Stdout => {
+            let mut out = std::io::stdout().lock();
+            let _ = writeln!(out, "{line}");
+            let _ = out.flush();
+        }
+        Lines::Stderr => {
+            let mut out = std::io::stderr().lock();
+            let _ = writeln!(out, "{line}");
+            let _ = out.flush();
+        }
     }
 }
 
 impl StudyObserver for Bars {
     fn step_started(&self, step: usize, name: &str, generations: usize, done: usize) {
+        if let Ok(mut c) = self.clock.lock() {
+            *c = Some((std::time::Instant::now(), done));
+        }
+        if let Some(to) = self.lines {
+            let resumed = if done > 0 {
+                format!(", resumed at generation {done}")
+            } else {
+                String::new()
+            };
+            print_line(
+                to,
+                &format!("step {step} {name}: {generations} generations{resumed}"),
+            );
+        }
+        if self.lines.is_some() && !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+            return;
+        }
         let pb = ProgressBar::new(generations as u64);
         pb.set_style(
             ProgressStyle::with_template(
@@ -38,6 +107,35 @@ impl StudyObserver for Bars {
     }
 
     fn generation(&self, g: &GenerationDone<'_>) -> ControlFlow<()> {
+        if let Some(to) = self.lines {
+            let record = g.record;
+            let eta = self
+                .clock
+                .lock()
+                .ok()
+                .and_then(|c| *c)
+                .map(|(start, from)| {
+                    let elapsed = start.elapsed().as_secs_f64();
+                    let per = elapsed / (g.done.saturating_sub(from)).max(1) as f64;
+                    let left = g.generations.saturating_sub(g.done);
+                    format!(
+                        "{} elapsed, ETA {} for the step",
+                        duration(elapsed),
+                        duration(per * left as f64)
+                    )
+                })
+                .unwrap_or_default();
+            let workers = g
+                .workers
+                .map_or(String::new(), |w| format!(", {w} workers"));
+            print_line(
+                to,
+                &format!(
+                    "step {} {}: generation {}/{}, best cost {:.5} ({} evaluations{workers}), {eta}",
+                    g.step, g.name, g.done, g.generations, record.best_cost, record.evaluations
+                ),
+            );
+        }
         if let Ok(b) = self.bar.lock() {
             if let Some(pb) = b.as_ref() {
                 let record = g.record;
@@ -57,7 +155,7 @@ impl StudyObserver for Bars {
     fn step_finished(&self) {
         if let Ok(mut b) = self.bar.lock() {
             if let Some(pb) = b.take() {
-                pb.finish();
+                pb.abandon();
             }
         }
     }

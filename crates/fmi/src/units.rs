@@ -69,6 +69,9 @@ pub const UNITS: &[UnitDef] = &[
     // Units data loggers write (measurements, not model variables).
     unit("g", 0, 1, -2, 0, 9.80665),
     unit("kN", 1, 1, -2, 0, 1000.0),
+    unit("daN", 1, 1, -2, 0, 10.0),
+    unit("lbf", 1, 1, -2, 0, 4.448_221_615_260_5),
+    unit("mph", 0, 1, -1, 0, 0.447_04),
     unit("km", 0, 1, 0, 0, 1000.0),
     unit("mm", 0, 1, 0, 0, 0.001),
     unit("ms", 0, 0, 1, 0, 0.001),

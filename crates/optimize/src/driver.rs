@@ -1372,7 +1372,21 @@ fn model_check(
                 .map(|p| (p.lo, p.hi))
         })
         .collect();
-    crate::model_check::check(blocks, &signals, &kinematics, x, &j.bounds, &scatter)
+    let std_error: Vec<Option<f64>> = j
+        .names
+        .iter()
+        .map(|name| iv.get(name).and_then(|p| p.std_error))
+        .collect();
+    crate::model_check::check(
+        blocks,
+        &signals,
+        &kinematics,
+        x,
+        &j.bounds,
+        &scatter,
+        &std_error,
+        iv.critical_value,
+    )
 }
 
 /// The refinement, the intervals at the answer, the profiles when asked for, the model

@@ -497,7 +497,7 @@ const MAX_PERSISTENCE: f64 = 0.995;
 /// replicates of one lap and the standardised errors spread 1.4–1.9 times what they
 /// should. The VAR(1) takes up the persistence with p² numbers estimated from every
 /// point; what it leaves needs a bandwidth of a few points.
-fn prewhiten(scores: &[Vec<Vec<f64>>]) -> (nalgebra::DMatrix<f64>, Vec<Vec<Vec<f64>>>) {
+pub(crate) fn prewhiten(scores: &[Vec<Vec<f64>>]) -> (nalgebra::DMatrix<f64>, Vec<Vec<Vec<f64>>>) {
     use nalgebra::{DMatrix, DVector};
     let p = scores.iter().find_map(|s| s.first()).map_or(0, |x| x.len());
     let identity = DMatrix::<f64>::identity(p, p);

@@ -139,6 +139,8 @@ pub(crate) fn check(
     x: &[f64],
     bounds: &[(f64, f64)],
     scatter: &[Option<(Option<f64>, Option<f64>)>],
+    std_error: &[Option<f64>],
+    critical_value: f64,
 ) -> Option<Outcome> {
     let p = x.len();
     let span: Vec<f64> = bounds
@@ -281,13 +283,33 @@ pub(crate) fn check(
     let band_a = bandwidth_of(&augmented, n_min);
     let cov = &a_inv * long_run(&demeaned(&augmented), band_a) * &a_inv;
     let cv = crate::interval::critical_value((band_a + 1) as f64 / n_all as f64);
+    let spread = regime_spread(blocks, kinematics, p, &span);
     let mut with_model = Vec::with_capacity(p);
     for i in 0..p {
+        // No sign of a discrepancy: the scatter is the answer's whole uncertainty, and the
+        // interval with the model's share is the scatter interval (the regimes' spread on
+        // the twin's own laps is their noise, and would only widen it).
+        if !discrepancy {
+            with_model.push(scatter[i]);
+            continue;
+        }
         let c = x[i] + step[i] * span[i];
         let se = cov[(i, i)].max(0.0).sqrt() * span[i];
+        // The scatter and the regimes' disagreement together (a random effect of the
+        // driving regime), around the answer.
+        // The scatter at its critical value; τ, estimated from a handful of regimes, at
+        // Student's t of their degrees of freedom.
+        let wide = std_error[i].map(|s| {
+            let (tau, df) = spread[i].map_or((0.0, 1), |(t, df)| (t * span[i], df));
+            ((critical_value * s).powi(2) + (t975(df) * tau).powi(2)).sqrt()
+        });
         with_model.push(scatter[i].map(|(lo, hi)| {
             let lo = lo.map(|lo| lo.min(c - cv * se));
             let hi = hi.map(|hi| hi.max(c + cv * se));
+            let (lo, hi) = match wide {
+                Some(w) => (lo.map(|lo| lo.min(x[i] - w)), hi.map(|hi| hi.max(x[i] + w))),
+                None => (lo, hi),
+            };
             (
                 lo.filter(|&v| v >= bounds[i].0),
                 hi.filter(|&v| v <= bounds[i].1),
@@ -306,6 +328,197 @@ pub(crate) fn check(
         },
         with_model,
     })
+}
+
+/// The driving regimes: the measured a_x in thirds (braking, lifting or coasting,
+/// accelerating) by |a_y| in halves (straight, cornering) by v in halves (slow, fast: the
+/// downforce, and a sprung car's ride height, go with v²).
+const REGIMES: usize = 12;
+/// A regime with fewer grid points than this is left out.
+const MIN_REGIME: usize = 100;
+
+/// Student's t two-sided 95 % quantile for `df` degrees of freedom (1–10; beyond, 10's).
+fn t975(df: usize) -> f64 {
+    const T: [f64; 10] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+    ];
+    T[df.clamp(1, 10) - 1]
+}
+
+/// How much the parameters' answer depends on the driving regime beyond the noise, per
+/// parameter: τ (in range-scaled units) and its degrees of freedom (the regimes that see
+/// the parameter, less one); `None` where fewer than two regimes see it.
+///
+/// Each regime's own answer is one Gauss–Newton step from the study's answer with the
+/// rows of that regime only (every signal, every parameter free), its noise covariance the
+/// sandwich of its own scores (VAR(1)-prewhitened Bartlett, as the scatter interval's);
+/// the spread between regimes beyond that noise is DerSimonian and Laird's moment estimate
+/// τ² of a random effect. Where the twin is the right model every regime wants the same
+/// parameters and τ² is about zero; where the car is not the twin, braking, accelerating
+/// and cornering each want other values of l, the lifts and the track widths (the twin
+/// takes up what it does not have differently in each), and τ measures by how much the
+/// parameters are then a matter of which part of the lap one asks.
+fn regime_spread(
+    blocks: &[Block],
+    kinematics: &[Kinematics],
+    p: usize,
+    span: &[f64],
+) -> Vec<Option<(f64, usize)>> {
+    struct Row {
+        c: f64,
+        j: DVector<f64>,
+        e: f64,
+        segment: usize,
+        g: usize,
+        ax: f64,
+        ay: f64,
+        v: f64,
+    }
+    let mut rows = Vec::new();
+    for block in blocks {
+        let m = block.residual.len() as f64;
+        let var = block.residual.iter().map(|e| e * e).sum::<f64>() / m;
+        let c = block.factor.unwrap_or(block.weight / var);
+        let Some(kin) = kinematics.get(block.segment) else {
+            return vec![None; p];
+        };
+        for (k, (row, &e)) in block.rows.iter().zip(&block.residual).enumerate() {
+            let g = block.start + k;
+            let Some(i) = g.checked_sub(kin.start).filter(|&i| i < kin.a_x.len()) else {
+                continue;
+            };
+            rows.push(Row {
+                c,
+                j: DVector::from_iterator(p, row.iter().zip(span).map(|(j, s)| j * s)),
+                e,
+                segment: block.segment,
+                g,
+                ax: kin.a_x[i],
+                ay: kin.a_y[i].abs(),
+                v: kin.v[i],
+            });
+        }
+    }
+    if rows.is_empty() || !rows.iter().all(|r| r.c.is_finite() && r.e.is_finite()) {
+        return vec![None; p];
+    }
+    let quantile = |mut v: Vec<f64>, q: f64| {
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * q) as usize]
+    };
+    let ax: Vec<f64> = rows.iter().map(|r| r.ax).collect();
+    let (x1, x2) = (quantile(ax.clone(), 1.0 / 3.0), quantile(ax, 2.0 / 3.0));
+    let y1 = quantile(rows.iter().map(|r| r.ay).collect(), 0.5);
+    let v1 = quantile(rows.iter().map(|r| r.v).collect(), 0.5);
+    let regime = |r: &Row| {
+        let a = if r.ax < x1 {
+            0
+        } else if r.ax < x2 {
+            1
+        } else {
+            2
+        };
+        4 * a + 2 * usize::from(r.ay >= y1) + usize::from(r.v >= v1)
+    };
+    // Per lap, the grid's extent, for the score series.
+    let mut segments: Vec<usize> = rows.iter().map(|r| r.segment).collect();
+    segments.sort_unstable();
+    segments.dedup();
+    let extents: Vec<(usize, usize)> = segments
+        .iter()
+        .map(|&s| {
+            let of = rows.iter().filter(|r| r.segment == s);
+            let lo = of.clone().map(|r| r.g).min().unwrap_or(0);
+            (lo, of.map(|r| r.g + 1).max().unwrap_or(lo))
+        })
+        .collect();
+    let n_min = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
+    // Each regime's step and its noise variance, per parameter.
+    let mut answers: Vec<Vec<(f64, f64)>> = vec![Vec::new(); p];
+    for reg in 0..REGIMES {
+        let mine: Vec<&Row> = rows.iter().filter(|r| regime(r) == reg).collect();
+        let points = {
+            let mut g: Vec<(usize, usize)> = mine.iter().map(|r| (r.segment, r.g)).collect();
+            g.sort_unstable();
+            g.dedup();
+            g.len()
+        };
+        if points < MIN_REGIME {
+            continue;
+        }
+        let mut a = DMatrix::<f64>::zeros(p, p);
+        let mut total = DVector::<f64>::zeros(p);
+        let mut scores: Vec<Vec<DVector<f64>>> = extents
+            .iter()
+            .map(|(lo, hi)| vec![DVector::zeros(p); hi - lo])
+            .collect();
+        let mut inside: Vec<Vec<bool>> = extents
+            .iter()
+            .map(|(lo, hi)| vec![false; hi - lo])
+            .collect();
+        for r in &mine {
+            a += r.c * &r.j * r.j.transpose();
+            total += r.c * r.e * &r.j;
+            let s = segments.binary_search(&r.segment).expect("listed");
+            scores[s][r.g - extents[s].0] += r.c * r.e * &r.j;
+            inside[s][r.g - extents[s].0] = true;
+        }
+        // Demeaned over the regime's own points (its mean score is the regime's answer,
+        // not its noise).
+        let mean = &total / points as f64;
+        for (seg, inside) in scores.iter_mut().zip(&inside) {
+            for (v, _) in seg.iter_mut().zip(inside).filter(|(_, &i)| i) {
+                *v -= &mean;
+            }
+        }
+        let a_inv = pinv(&a);
+        let step = -(&a_inv * total);
+        let omega = whitened_long_run(&scores, n_min);
+        let cov = &a_inv * omega * &a_inv;
+        for i in 0..p {
+            let (d, v) = (step[i], cov[(i, i)]);
+            // A parameter the regime does not see: left out (its direction was dropped).
+            if a[(i, i)] > 0.0 && v.is_finite() && v > 0.0 && d.is_finite() {
+                answers[i].push((d, v));
+            }
+        }
+    }
+    answers
+        .iter()
+        .map(|est| {
+            if est.len() < 2 {
+                return None;
+            }
+            let w: Vec<f64> = est.iter().map(|(_, v)| 1.0 / v).collect();
+            let sw: f64 = w.iter().sum();
+            let sw2: f64 = w.iter().map(|w| w * w).sum();
+            let mean = est.iter().zip(&w).map(|((d, _), w)| w * d).sum::<f64>() / sw;
+            let q: f64 = est
+                .iter()
+                .zip(&w)
+                .map(|((d, _), w)| w * (d - mean).powi(2))
+                .sum();
+            let df = (est.len() - 1) as f64;
+            let tau2 = ((q - df) / (sw - sw2 / sw)).max(0.0);
+            Some((tau2.sqrt(), est.len() - 1))
+        })
+        .collect()
+}
+
+/// The long-run covariance of a score series as the scatter interval takes it: whitened by
+/// a VAR(1), Bartlett of the rest, recoloured ([`crate::interval::prewhiten`]).
+fn whitened_long_run(series: &[Vec<DVector<f64>>], n: usize) -> DMatrix<f64> {
+    let plain: Vec<Vec<Vec<f64>>> = series
+        .iter()
+        .map(|s| s.iter().map(|x| x.iter().copied().collect()).collect())
+        .collect();
+    let (recolour, whitened) = crate::interval::prewhiten(&plain);
+    let whitened: Vec<Vec<DVector<f64>>> = whitened
+        .iter()
+        .map(|s| s.iter().map(|x| DVector::from_column_slice(x)).collect())
+        .collect();
+    let band = bandwidth_of(&whitened, n);
+    &recolour * long_run(&whitened, band) * recolour.transpose()
 }
 
 fn p_text(p: f64) -> String {

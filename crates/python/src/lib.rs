@@ -98,7 +98,20 @@ fn run(
     };
     let outcome = py.detach(move || -> anyhow::Result<_> {
         let cache = Arc::new(FmuCache::temporary(false)?);
-        let mut file = Plan::read_system(&system, &cache)?;
+        // One FMU, run on its own as `twinbench run model.fmu` runs it (its default
+        // experiment, every output, its own variable names).
+        let alone = twinbench::cli::run_fmu::is_fmu(&system);
+        let (mut file, instance) = if alone {
+            use clap::{Args, FromArgMatches};
+            let path = system.to_string_lossy().into_owned();
+            let matches = twinbench::cli::run::RunArgs::augment_args(clap::Command::new("run"))
+                .try_get_matches_from(["run", path.as_str()])?;
+            let args = twinbench::cli::run::RunArgs::from_arg_matches(&matches)?;
+            let (file, instance) = twinbench::cli::run_fmu::system(&args, &cache)?;
+            (file, Some(instance))
+        } else {
+            (Plan::read_system(&system, &cache)?, None)
+        };
         if let Some(s) = stop {
             file.experiment.stop = s;
         }
@@ -109,7 +122,16 @@ fn run(
         let plan = Arc::new(Plan::compile(file, &system, cache, &options)?);
         let mut sim = Simulation::new(plan.clone())?;
         sim.echo_fmu_log = false;
+        if let Some(instance) = &instance {
+            twinbench::cli::run_fmu::own_names(sim.recording_mut(), instance)?;
+        }
         for (name, value) in &parameters {
+            // One FMU: its own variable names, as the command line's --set takes them.
+            let name = match &instance {
+                Some(i) if plan.parameter(name).is_err() => format!("{i}.{name}"),
+                _ => name.clone(),
+            };
+            let name = &name;
             twinbench::bench::set_parameter(&plan, &mut sim, name, value)
                 .map_err(|e| e.context(format!("parameters[\"{name}\"]")))?;
         }

@@ -107,6 +107,17 @@ def test_run_gives_the_bits_of_run_out(tmp_path):
     assert frame.index.name == "time" and len(frame) == len(expected["time"])
 
 
+def test_one_fmu_runs_on_its_own_as_the_command_line_runs_it(tmp_path):
+    fmu = ROOT / "target" / "fmu" / "dyno.fmu"
+    out = tmp_path / "dyno.csv"
+    cli("run", fmu, "--out", out, "--set", "time_constant=0.02")
+    expected = read_csv(out)
+    result = twinbench.run(fmu, parameters={"time_constant": 0.02})
+    assert list(result.signals) == list(expected)
+    for name, column in expected.items():
+        assert same_bits(result.signals[name], column), name
+
+
 def test_stop_override_and_condition():
     r = twinbench.run(SYSTEM, stop=2.0)
     assert r.signals["time"][-1] == pytest.approx(2.0, abs=1e-12)
@@ -282,7 +293,16 @@ def test_a_dask_study_gives_the_command_lines_table1(cli_study, tmp_path):
         lo, hi = mine["interval"]
         assert lo is None or lo < mine["value"]
         assert hi is None or mine["value"] < hi
+        # The interval with the model's share holds the scatter interval.
+        assert mine["std_error"] == p["std_error"] and mine["std_error"] > 0
+        wlo, whi = mine["interval_with_model"]
+        assert (wlo is None or lo is None or wlo <= lo) and (whi is None or hi is None or whi >= hi)
     assert params["vehicle.l"]["unit"] == "m"
+    # The model check, in words an engineer reads.
+    check = result["model_check"]
+    assert check == expected["joint"]["model_check"]
+    assert isinstance(check["discrepancy"], bool) and 0.0 <= check["p_value"] <= 1.0
+    assert "the twin" in check["detail"]
 
 
 def two_lap_study(folder: Path) -> Path:

@@ -153,7 +153,9 @@ def run(
     """Run a system file and return its recording.
 
     Args:
-        system: the system description (TOML) or an SSP 1.0 package (``.ssp``).
+        system: the system description (TOML), an SSP 1.0 package (``.ssp``), or one FMU
+            (``.fmu``, run on its own as ``twinbench run model.fmu`` runs it: its default
+            experiment, every output, named by the FMU's own variables).
         parameters: ``{"instance.variable": value}``, as ``twinbench run --set`` (checked
             against the variable's type and range before the run).
         stop: a stop time in s, or a condition such as ``"vehicle.lap >= 1"``; None keeps
@@ -470,8 +472,13 @@ class Study:
             refined together, with the intervals; ``joint_intervals``; ``profiles`` when
             asked for), and ``"parameters"``: each fitted parameter by name with its
             ``value`` (the study's answer), ``unit``, ``interval`` (``[lo, hi]``, ``None``
-            for an open end; ``None`` when there is none), ``interval_method`` and
-            ``interval_statement`` (why an interval is open or missing).
+            for an open end; ``None`` when there is none), ``interval_method``,
+            ``interval_statement`` (why an interval is open or missing), ``std_error``
+            and ``interval_with_model`` (the interval that adds what the twin cannot
+            represent of this car: the one to quote when the model check finds a
+            discrepancy); and ``"model_check"``: ``discrepancy`` (True: the twin cannot
+            represent this lap within its noise), ``statistic``, ``p_value``, ``method``,
+            ``detail`` (the verdict in words).
 
         Raises:
             TwinbenchError: a bad study, system or measurement; a checkpoint of other
@@ -515,9 +522,16 @@ class Study:
                 "interval": list(p["interval"]) if p.get("interval") is not None else None,
                 "interval_method": p.get("interval_method"),
                 "interval_statement": p.get("interval_statement"),
+                "std_error": p.get("std_error"),
+                "interval_with_model": list(p["interval_with_model"])
+                if p.get("interval_with_model") is not None
+                else None,
             }
             for p in rows
         }
+        # Whether the twin, not the noise, limits the answer (None where it could not be
+        # made, or the result is older than the check).
+        result["model_check"] = joint.get("model_check") if joint else None
         return result
 
     @_forward_warnings
