@@ -182,7 +182,8 @@ fn a_diverging_coupling_is_stopped_early_and_named() {
         .find(|(n, _)| n == "vehicle.lap_time")
         .unwrap()
         .1;
-    assert!((lap_time - 98.116).abs() < 0.2, "lap {lap_time} s");
+    // The lap at a 5 ms step: 97.54 s measured (the 1 ms bench 97.56 s, the car 97.49 s).
+    assert!((lap_time - 97.54).abs() < 0.2, "lap {lap_time} s");
 }
 
 /// `range_check = 0`: an input outside its range is used as it is, with a warning.

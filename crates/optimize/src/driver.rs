@@ -1535,9 +1535,21 @@ fn finish_study(
                     Some(p) => p.statement.clone(),
                     None => iv.and_then(|i| i.statement.clone()),
                 };
+                // Where the model check finds the twin wanting, the steps' own answer (the
+                // same twin under another objective, e + β·|bias|) is part of what the lap
+                // leaves open: the spread across objectives joins the regimes' spread.
+                let fired = checked.as_ref().is_some_and(|c| c.check.discrepancy);
+                let steps_value = sequential[slot];
                 let with_model = checked
                     .as_ref()
-                    .and_then(|c| c.with_model.get(k).copied().flatten());
+                    .and_then(|c| c.with_model.get(k).copied().flatten())
+                    .map(|(lo, hi)| match fired {
+                        true => (
+                            lo.map(|lo| lo.min(steps_value)),
+                            hi.map(|hi| hi.max(steps_value)),
+                        ),
+                        false => (lo, hi),
+                    });
                 ParameterChange {
                     name: name.clone(),
                     unit: workers.parameter_unit(name).map(str::to_string),
