@@ -190,7 +190,7 @@ pub fn check_load_unit(m: &Measurement, map: &ChannelMap, mass: f64) -> Result<(
             continue;
         }
         let ratio = sum / n as f64 / (share * weight);
-        if !(ratio > 0.0) {
+        if ratio.is_nan() || ratio <= 0.0 {
             continue;
         }
         let (unit, factor) = LOAD_UNITS
@@ -343,13 +343,9 @@ pub fn target_speed_csv(m: &Measurement) -> Result<String, LapError> {
     }
     let grid: Vec<f64> = (0..=n).map(|k| k as f64 * SPACING_M).collect();
     let smooth = periodic_average(&speed_on(d, v, &grid), TARGET_WINDOW);
-    let acceleration = match m.signal("a_x")? {
-        Some(a_x) => Some(periodic_average(
-            &speed_on(d, a_x, &grid),
-            ACCELERATION_WINDOW,
-        )),
-        None => None,
-    };
+    let acceleration = m
+        .signal("a_x")?
+        .map(|a_x| periodic_average(&speed_on(d, a_x, &grid), ACCELERATION_WINDOW));
     let mut out = String::from(if acceleration.is_some() {
         "s,v,a\n"
     } else {

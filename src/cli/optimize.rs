@@ -69,9 +69,10 @@ fn parse_kind(s: &str) -> Result<OptimizerKind, String> {
 
 pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
     // Observers: the bars (not with --json), then Ctrl-C's stop after the generation.
-    let mut observers: Vec<Arc<dyn StudyObserver>> = Vec::new();
-    observers.push(super::progress::Bars::for_cli(args.json));
-    observers.push(Arc::new(StopOnFlag(super::interrupt::flag()?)));
+    let observers: Vec<Arc<dyn StudyObserver>> = vec![
+        super::progress::Bars::for_cli(args.json),
+        Arc::new(StopOnFlag(super::interrupt::flag()?)),
+    ];
     let Optimized {
         result,
         report,

@@ -1258,8 +1258,8 @@ fn joint_answer(
     let laps = frame.laps();
     let blocks = frame.blocks(&solution);
     let iv = crate::interval::sandwich(&j.names, &solution.x, &j.bounds, &blocks, laps);
-    let iv = noise_floor(iv, &blocks, &j, &solution.x);
-    let checked = model_check(session, &j, &blocks, &solution.x, &iv);
+    let iv = noise_floor(iv, &blocks, j, &solution.x);
+    let checked = model_check(session, j, &blocks, &solution.x, &iv);
     let refinement = Refinement {
         method: crate::fit::METHOD.into(),
         parameters: j.names.clone(),
@@ -1318,7 +1318,7 @@ fn noise_floor(
             (b.residual.iter().map(|e| e * e).sum::<f64>() / b.residual.len().max(1) as f64).sqrt()
         })
         .collect();
-    if loads.is_empty() || loads.iter().any(|&r| !(r < LOAD_NOISE_FLOOR_N)) {
+    if loads.is_empty() || loads.iter().any(|&r| r.is_nan() || r >= LOAD_NOISE_FLOOR_N) {
         return iv;
     }
     let worst = loads.iter().cloned().fold(0.0f64, f64::max);
@@ -1363,30 +1363,7 @@ fn model_check(
     let signals: Vec<&str> = (0..blocks.len())
         .map(|b| j.signals[b % n].as_str())
         .collect();
-    let scatter: Vec<Option<(Option<f64>, Option<f64>)>> = j
-        .names
-        .iter()
-        .map(|name| {
-            iv.get(name)
-                .filter(|p| p.std_error.is_some())
-                .map(|p| (p.lo, p.hi))
-        })
-        .collect();
-    let std_error: Vec<Option<f64>> = j
-        .names
-        .iter()
-        .map(|name| iv.get(name).and_then(|p| p.std_error))
-        .collect();
-    crate::model_check::check(
-        blocks,
-        &signals,
-        &kinematics,
-        x,
-        &j.bounds,
-        &scatter,
-        &std_error,
-        iv.critical_value,
-    )
+    crate::model_check::check(blocks, &signals, &kinematics, x, &j.bounds, &j.names, iv)
 }
 
 /// The refinement, the intervals at the answer, the profiles when asked for, the model

@@ -532,7 +532,7 @@ pub(crate) fn prewhiten(scores: &[Vec<Vec<f64>>]) -> (nalgebra::DMatrix<f64>, Ve
     for (k, &l) in e.eigenvalues.iter().enumerate() {
         if top > 0.0 && l > 1e-10 * top {
             let v = e.eigenvectors.column(k);
-            s0_inv += (&v * v.transpose()) / l;
+            s0_inv += (v * v.transpose()) / l;
         }
     }
     let mut a = &s1 * &scale * s0_inv * &scale;

@@ -138,10 +138,24 @@ pub(crate) fn check(
     kinematics: &[Kinematics],
     x: &[f64],
     bounds: &[(f64, f64)],
-    scatter: &[Option<(Option<f64>, Option<f64>)>],
-    std_error: &[Option<f64>],
-    critical_value: f64,
+    names: &[String],
+    intervals: &crate::interval::Intervals,
 ) -> Option<Outcome> {
+    // Each parameter's scatter interval and standard error (none where it has no interval).
+    let scatter: Vec<Option<(Option<f64>, Option<f64>)>> = names
+        .iter()
+        .map(|name| {
+            intervals
+                .get(name)
+                .filter(|p| p.std_error.is_some())
+                .map(|p| (p.lo, p.hi))
+        })
+        .collect();
+    let std_error: Vec<Option<f64>> = names
+        .iter()
+        .map(|name| intervals.get(name).and_then(|p| p.std_error))
+        .collect();
+    let critical_value = intervals.critical_value;
     let p = x.len();
     let span: Vec<f64> = bounds
         .iter()
@@ -261,12 +275,12 @@ pub(crate) fn check(
     let discrepancy = p_value < ALPHA;
     let detail = if discrepancy {
         format!(
-            "the twin cannot represent this lap within its noise: the wheel loads' residual at the answer follows the car's pitch and roll rates (W = {w:.1}, {q} terms, p = {}), which the twin's chassis does not reproduce; the intervals show only the scatter around the twin's best fit, and the intervals with the model's share are the ones to quote",
+            "the twin cannot represent this lap within its noise: the wheel loads' residual at the answer follows the car's pitch and roll rates (W = {w:.1}, {q} terms, {}), which the twin's chassis does not reproduce; the intervals show only the scatter around the twin's best fit, and the intervals with the model's share are the ones to quote",
             p_text(p_value)
         )
     } else {
         format!(
-            "no sign that the twin cannot represent this lap: its residual does not follow the car's pitch and roll rates beyond the noise (W = {w:.1}, {q} terms, p = {}); the intervals hold the answer's scatter",
+            "no sign that the twin cannot represent this lap: its residual does not follow the car's pitch and roll rates beyond the noise (W = {w:.1}, {q} terms, {}); the intervals hold the answer's scatter",
             p_text(p_value)
         )
     };
@@ -523,9 +537,9 @@ fn whitened_long_run(series: &[Vec<DVector<f64>>], n: usize) -> DMatrix<f64> {
 
 fn p_text(p: f64) -> String {
     if p < 1e-3 {
-        "< 0.001".into()
+        "p < 0.001".into()
     } else {
-        format!("{p:.3}")
+        format!("p = {p:.3}")
     }
 }
 
