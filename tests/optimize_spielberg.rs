@@ -116,12 +116,22 @@ fn spielberg_two_step_study_recovers_the_truth() {
         .iter()
         .find(|p| p.name == "vehicle.l")
         .unwrap();
+    // The bundled lap's car is not the twin (a sprung chassis, an effective wheelbase of
+    // 3.41 m): the model check says so, and l's interval with the model's share holds the
+    // effective value and is wider than the scatter interval.
+    let check = joint.model_check.as_ref().expect("a model check");
+    assert!(check.discrepancy && check.p_value < 0.05, "{check:?}");
     assert!(
-        l.interval_statement
-            .as_deref()
-            .is_some_and(|s| s.contains("the steps' own answer") && s.contains("lies outside")),
-        "{l:?}"
+        check.detail.contains("the twin cannot represent this lap"),
+        "{check:?}"
     );
+    let (lo, hi) = l
+        .interval_with_model
+        .expect("an interval with the model's share");
+    let (lo, hi) = (lo.expect("closed below"), hi.expect("closed above"));
+    assert!(lo <= 3.41 && 3.41 <= hi, "{l:?}");
+    let (slo, shi) = l.interval.unwrap();
+    assert!(hi - lo > shi.unwrap() - slo.unwrap(), "{l:?}");
 
     // Identifiability of step 1.
     let id = &r.steps[0].identifiability;

@@ -97,8 +97,8 @@ fn ssp_validates_and_runs_in_fmpy_exactly_as_its_semantics_predict() {
     let ssp = dir.path().join("bench.ssp");
     let summary = export(&system, &ssp, stop);
     assert_eq!(summary["components"], 5);
-    assert_eq!(summary["connections"], 12);
-    assert_eq!(summary["parameters"], 4);
+    assert_eq!(summary["connections"], 14);
+    assert_eq!(summary["parameters"], 7);
     assert_eq!(summary["fmus"].as_array().unwrap().len(), 4);
     let tb = dir.path().join("twinbench.csv");
     twinbench_csv(&system, &tb);

@@ -351,37 +351,32 @@ pub(crate) fn sandwich(
     }
     // Andrews–Monahan: the scores whitened by a VAR(1) first, the Bartlett estimate of what
     // is left (a short bandwidth), recoloured.
-    let (recolour, whitened) = prewhiten(&scores);
-    let scores = whitened;
-    let (bandwidth, capped) = bandwidth(&scores, n);
+    // Each lap whitened by a VAR(1) of its own (laps of different circuits and speeds
+    // persist differently; pooled, a second lap could widen the interval), the Bartlett
+    // estimate of what is left at the laps' common bandwidth, recoloured per lap and summed
+    // (laps are independent).
+    let per: Vec<(nalgebra::DMatrix<f64>, Vec<Vec<Vec<f64>>>)> = scores
+        .iter()
+        .map(|seg| prewhiten(std::slice::from_ref(seg)))
+        .collect();
+    let whitened: Vec<Vec<Vec<f64>>> = per.iter().flat_map(|(_, w)| w.iter().cloned()).collect();
+    let (bandwidth, capped) = bandwidth(&whitened, n);
     if capped {
         notes.push(format!(
             "the residuals stay correlated beyond {bandwidth} grid points (a quarter of the compared stretch): the long-run covariance is cut there, and the intervals may be narrower than the data warrant"
         ));
     }
     let mut meat = vec![vec![0.0; p]; p];
-    for seg in &scores {
-        let len = seg.len();
-        for k in 0..=bandwidth.min(len.saturating_sub(1)) {
-            let w = if k == 0 {
-                1.0
-            } else {
-                1.0 - k as f64 / (bandwidth + 1) as f64
-            };
-            for g in 0..len - k {
-                for i in 0..p {
-                    for j in 0..p {
-                        let v = seg[g][i] * seg[g + k][j];
-                        meat[i][j] += w * v;
-                        if k > 0 {
-                            meat[j][i] += w * v;
-                        }
-                    }
+    for (recolour, w) in &per {
+        for seg in w {
+            let one = recoloured(recolour, &bartlett(seg, bandwidth, p));
+            for i in 0..p {
+                for j in 0..p {
+                    meat[i][j] += one[i][j];
                 }
             }
         }
     }
-    let meat = recoloured(&recolour, &meat);
     // B⁻¹ on the directions the signals see; a parameter in a direction they do not see has
     // no interval.
     let (vals, vecs) = super::cmaes::symmetric_eigen(&bread);
@@ -559,6 +554,32 @@ pub(crate) fn prewhiten(scores: &[Vec<Vec<f64>>]) -> (nalgebra::DMatrix<f64>, Ve
         })
         .collect();
     (recolour, whitened)
+}
+
+/// The Bartlett long-run covariance Σ_{|k|≤L} (1 − |k|/(L+1)) Σ_g x_g x_{g+k}ᵀ of one lap's
+/// series of `p`-vectors.
+fn bartlett(seg: &[Vec<f64>], bandwidth: usize, p: usize) -> Vec<Vec<f64>> {
+    let mut meat = vec![vec![0.0; p]; p];
+    let len = seg.len();
+    for k in 0..=bandwidth.min(len.saturating_sub(1)) {
+        let w = if k == 0 {
+            1.0
+        } else {
+            1.0 - k as f64 / (bandwidth + 1) as f64
+        };
+        for g in 0..len - k {
+            for i in 0..p {
+                for j in 0..p {
+                    let v = seg[g][i] * seg[g + k][j];
+                    meat[i][j] += w * v;
+                    if k > 0 {
+                        meat[j][i] += w * v;
+                    }
+                }
+            }
+        }
+    }
+    meat
 }
 
 /// R·M·Rᵀ.

@@ -519,20 +519,30 @@ fn regime_spread(
         .collect()
 }
 
-/// The long-run covariance of a score series as the scatter interval takes it: whitened by
-/// a VAR(1), Bartlett of the rest, recoloured ([`crate::interval::prewhiten`]).
+/// The long-run covariance of a score series as the scatter interval takes it: each lap
+/// whitened by a VAR(1) of its own, Bartlett of the rest at the laps' common bandwidth,
+/// recoloured per lap and summed ([`crate::interval::prewhiten`]).
 fn whitened_long_run(series: &[Vec<DVector<f64>>], n: usize) -> DMatrix<f64> {
-    let plain: Vec<Vec<Vec<f64>>> = series
+    let per: Vec<(DMatrix<f64>, Vec<Vec<DVector<f64>>>)> = series
         .iter()
-        .map(|s| s.iter().map(|x| x.iter().copied().collect()).collect())
+        .map(|s| {
+            let plain: Vec<Vec<f64>> = s.iter().map(|x| x.iter().copied().collect()).collect();
+            let (recolour, whitened) = crate::interval::prewhiten(std::slice::from_ref(&plain));
+            let whitened = whitened
+                .iter()
+                .map(|s| s.iter().map(|x| DVector::from_column_slice(x)).collect())
+                .collect();
+            (recolour, whitened)
+        })
         .collect();
-    let (recolour, whitened) = crate::interval::prewhiten(&plain);
-    let whitened: Vec<Vec<DVector<f64>>> = whitened
-        .iter()
-        .map(|s| s.iter().map(|x| DVector::from_column_slice(x)).collect())
-        .collect();
-    let band = bandwidth_of(&whitened, n);
-    &recolour * long_run(&whitened, band) * recolour.transpose()
+    let all: Vec<Vec<DVector<f64>>> = per.iter().flat_map(|(_, w)| w.iter().cloned()).collect();
+    let band = bandwidth_of(&all, n);
+    let dim = series.iter().find_map(|s| s.first()).map_or(0, |x| x.len());
+    let mut out = DMatrix::zeros(dim, dim);
+    for (recolour, w) in &per {
+        out += recolour * long_run(w, band) * recolour.transpose();
+    }
+    out
 }
 
 fn p_text(p: f64) -> String {
