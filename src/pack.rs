@@ -194,6 +194,37 @@ pub fn fmu_archive_of(
     Ok(zip.finish()?.into_inner())
 }
 
+/// Whether the FMI 2.0 FMU at `path` holds this binary's `spec`: its library and every
+/// resource byte for byte (a missing, unreadable or older FMU is not current). What the
+/// demo checks before it runs a bundle packed by an earlier build.
+pub fn is_current(spec: &ModelSpec, path: &Path) -> bool {
+    use std::io::Read;
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let Ok(mut zip) = zip::ZipArchive::new(std::io::BufReader::new(file)) else {
+        return false;
+    };
+    let mut same = |name: &str, want: &[u8]| -> bool {
+        let Ok(mut entry) = zip.by_name(name) else {
+            return false;
+        };
+        if entry.size() != want.len() as u64 {
+            return false;
+        }
+        let mut got = Vec::with_capacity(want.len());
+        entry.read_to_end(&mut got).is_ok() && got == want
+    };
+    same(
+        &format!("binaries/linux64/{}.so", spec.info.identifier),
+        spec.library,
+    ) && spec
+        .info
+        .resources
+        .iter()
+        .all(|r| same(&format!("resources/{}", r.name), r.content))
+}
+
 /// Pack the given models (when `names` is empty: every shipped model, not the test FMUs)
 /// into `out_dir` as FMI 2.0 FMUs; returns the FMU paths.
 pub fn pack(names: &[String], out_dir: &Path) -> Result<Vec<PathBuf>, PackError> {

@@ -134,15 +134,17 @@ const BUNDLE: &[(&str, &[u8])] = &[
 
 /// The bundled lap and the shipped FMUs in `dir`, at the paths the bundled files name
 /// (`systems/rls_v.toml` finds its FMUs in `target/fmu`): what the demo and the benchmark
-/// run, with no sources needed. The FMUs are packed when missing or when `repack`.
+/// run, with no sources needed. The FMUs are packed when missing, when they are not this
+/// binary's (a bundle packed by an earlier build would run the old models), or when
+/// `repack`.
 pub(crate) fn prepare_bundle(dir: &std::path::Path, repack: bool) -> anyhow::Result<()> {
     write_bundle(dir)?;
     let fmu_dir = dir.join("target").join("fmu");
-    let missing = crate::pack::models()
+    let stale = crate::pack::models()
         .iter()
         .filter(|s| !s.test_only)
-        .any(|s| !crate::pack::fmu_path(&fmu_dir, s).exists());
-    if missing || repack {
+        .any(|s| !crate::pack::is_current(s, &crate::pack::fmu_path(&fmu_dir, s)));
+    if stale || repack {
         eprintln!("packing the FMUs into {} ...", fmu_dir.display());
         crate::pack::pack(&[], &fmu_dir)?;
     }
