@@ -163,3 +163,36 @@ fn write_bundle(dir: &std::path::Path) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    /// A bundle whose FMU is not this binary's (an earlier build's, here another model's
+    /// bytes) is repacked; a current one is left as it is.
+    #[test]
+    fn a_bundle_packed_by_another_build_is_repacked() {
+        let dir = tempfile::tempdir().unwrap();
+        super::prepare_bundle(dir.path(), false).unwrap();
+        let fmu_dir = dir.path().join("target/fmu");
+        let spec = crate::pack::models()
+            .into_iter()
+            .find(|s| s.package == "driver")
+            .unwrap();
+        let spec = &spec;
+        let driver = crate::pack::fmu_path(&fmu_dir, spec);
+        assert!(crate::pack::is_current(spec, &driver));
+        // Left alone when current (the file is not rewritten).
+        let before = std::fs::metadata(&driver).unwrap().modified().unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        super::prepare_bundle(dir.path(), false).unwrap();
+        assert_eq!(
+            std::fs::metadata(&driver).unwrap().modified().unwrap(),
+            before
+        );
+        // Another build's FMU in its place: repacked.
+        let other = std::fs::read(fmu_dir.join("dyno.fmu")).unwrap();
+        std::fs::write(&driver, other).unwrap();
+        assert!(!crate::pack::is_current(spec, &driver));
+        super::prepare_bundle(dir.path(), false).unwrap();
+        assert!(crate::pack::is_current(spec, &driver));
+    }
+}
