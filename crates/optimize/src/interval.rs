@@ -355,7 +355,7 @@ pub(crate) fn sandwich(
     // persist differently; pooled, a second lap could widen the interval), the Bartlett
     // estimate of what is left at the laps' common bandwidth, recoloured per lap and summed
     // (laps are independent).
-    let per: Vec<(nalgebra::DMatrix<f64>, Vec<Vec<Vec<f64>>>)> = scores
+    let per: Vec<Whitened> = scores
         .iter()
         .map(|seg| prewhiten(std::slice::from_ref(seg)))
         .collect();
@@ -476,6 +476,9 @@ pub(crate) fn sandwich(
     }
 }
 
+/// One lap's recolouring matrix (I − A)⁻¹ and its whitened scores.
+type Whitened = (nalgebra::DMatrix<f64>, Vec<Vec<Vec<f64>>>);
+
 /// The largest singular value the VAR(1) of the scores may have: nearer 1 the recolouring
 /// (I − A)⁻¹ would amplify the error of A without bound (Andrews and Monahan cap it at 0.97
 /// for series sampled once per correlation time; on a 1 m grid a residual that persists
@@ -492,7 +495,7 @@ const MAX_PERSISTENCE: f64 = 0.995;
 /// replicates of one lap and the standardised errors spread 1.4–1.9 times what they
 /// should. The VAR(1) takes up the persistence with p² numbers estimated from every
 /// point; what it leaves needs a bandwidth of a few points.
-pub(crate) fn prewhiten(scores: &[Vec<Vec<f64>>]) -> (nalgebra::DMatrix<f64>, Vec<Vec<Vec<f64>>>) {
+pub(crate) fn prewhiten(scores: &[Vec<Vec<f64>>]) -> Whitened {
     use nalgebra::{DMatrix, DVector};
     let p = scores.iter().find_map(|s| s.first()).map_or(0, |x| x.len());
     let identity = DMatrix::<f64>::identity(p, p);

@@ -523,7 +523,8 @@ fn regime_spread(
 /// whitened by a VAR(1) of its own, Bartlett of the rest at the laps' common bandwidth,
 /// recoloured per lap and summed ([`crate::interval::prewhiten`]).
 fn whitened_long_run(series: &[Vec<DVector<f64>>], n: usize) -> DMatrix<f64> {
-    let per: Vec<(DMatrix<f64>, Vec<Vec<DVector<f64>>>)> = series
+    type Whitened = (DMatrix<f64>, Vec<Vec<DVector<f64>>>);
+    let per: Vec<Whitened> = series
         .iter()
         .map(|s| {
             let plain: Vec<Vec<f64>> = s.iter().map(|x| x.iter().copied().collect()).collect();
