@@ -225,4 +225,36 @@ with open(si, "w") as f:
             "Tab. 1 differs: {x} (MDF 4) against {y} (CSV)"
         );
     }
+    // `validate` on the logger-named lap with the study's channel map: the fitted lap's
+    // column is the answer's e (the study's own, from its result), per signal, with no
+    // note asking for a mapping the study already has.
+    let val = dir.path().join("validate_mdf");
+    let text = twinbench(&[
+        "validate",
+        a.join("optimize/result.json").to_str().unwrap(),
+        mf4.to_str().unwrap(),
+        "--channels",
+        map.to_str().unwrap(),
+        "--track",
+        track.to_str().unwrap(),
+        "--out",
+        val.to_str().unwrap(),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(v["notes"].as_array().unwrap().is_empty(), "{v}");
+    for row in v["rows"].as_array().unwrap() {
+        let signal = row["signal"].as_str().unwrap();
+        let answer = ra["joint"]["e"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|e| e["signal"] == signal)
+            .unwrap_or_else(|| panic!("no joint e of {signal}"))["after"]["e"]
+            .as_f64()
+            .unwrap();
+        assert_eq!(row["e_fitted"].as_f64().unwrap(), answer, "{row}");
+        // The same lap prepared anew gives the answer's e again (1e-3).
+        assert!((row["e"].as_f64().unwrap() - answer).abs() < 1e-3, "{row}");
+    }
 }
