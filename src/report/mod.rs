@@ -223,20 +223,21 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
     }
 }
 
+/// " m" after a value of a parameter in metres; nothing for one without a unit.
+fn unit_suffix(p: &TableParameter) -> String {
+    p.unit
+        .as_deref()
+        .map(|u| format!(" {u}"))
+        .unwrap_or_default()
+}
+
 /// The sentence under Tab. 1 that names the values to load into the bench, and why the
 /// row "all" can fit a signal worse than its step did.
 pub fn values_to_load(joint: &TableStep) -> String {
     let values = joint
         .parameters
         .iter()
-        .map(|p| {
-            let unit = p
-                .unit
-                .as_deref()
-                .map(|u| format!(" {u}"))
-                .unwrap_or_default();
-            format!("{} = {:.4}{unit}", short(&p.name), p.optimized)
-        })
+        .map(|p| format!("{} = {:.4}{}", short(&p.name), p.optimized, unit_suffix(p)))
         .collect::<Vec<_>>()
         .join(", ");
     format!(
@@ -265,11 +266,7 @@ pub fn table1_markdown(t: &Table1) -> String {
             .parameters
             .iter()
             .map(|p| {
-                let unit = p
-                    .unit
-                    .as_deref()
-                    .map(|u| format!(" {u}"))
-                    .unwrap_or_default();
+                let unit = unit_suffix(p);
                 let end = |e: Option<f64>| e.map_or("open".to_string(), |x| format!("{x:.4}"));
                 let interval = match p.interval {
                     Some((lo, hi)) => format!(" [{}, {}]", end(lo), end(hi)),

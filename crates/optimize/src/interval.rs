@@ -63,11 +63,13 @@ const MIN_LENGTHS: usize = 8;
 /// wide, so that the kernel's downweighting of the correlation it does see costs little (its
 /// bias is about the correlation length over the bandwidth); the fixed-b critical value
 /// pays for the noisier estimate.
-const LAGS: usize = 4;
+pub(crate) const LAGS: usize = 4;
+/// The autocorrelation below which a lag of the scores no longer counts.
+pub(crate) const CUT: f64 = 0.05;
 /// The bandwidth at most this fraction of the grid.
-const MAX_SHARE: usize = 4;
+pub(crate) const MAX_SHARE: usize = 4;
 /// The shortest Bartlett bandwidth [grid points].
-const MIN_BANDWIDTH: usize = 10;
+pub(crate) const MIN_BANDWIDTH: usize = 10;
 
 /// One parameter's interval.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -524,15 +526,7 @@ pub(crate) fn prewhiten(scores: &[Vec<Vec<f64>>]) -> Whitened {
     );
     let scale = DMatrix::from_diagonal(&d);
     let s0_scaled = &scale * &s0 * &scale;
-    let e = s0_scaled.symmetric_eigen();
-    let top = e.eigenvalues.iter().cloned().fold(0.0f64, f64::max);
-    let mut s0_inv = DMatrix::<f64>::zeros(p, p);
-    for (k, &l) in e.eigenvalues.iter().enumerate() {
-        if top > 0.0 && l > 1e-10 * top {
-            let v = e.eigenvectors.column(k);
-            s0_inv += (v * v.transpose()) / l;
-        }
-    }
+    let s0_inv = pinv(&s0_scaled);
     let mut a = &s1 * &scale * s0_inv * &scale;
     if !a.iter().all(|v| v.is_finite()) {
         return (identity, scores.to_vec());
@@ -585,6 +579,22 @@ fn bartlett(seg: &[Vec<f64>], bandwidth: usize, p: usize) -> Vec<Vec<f64>> {
     meat
 }
 
+/// The Moore–Penrose inverse of a symmetric matrix (directions below 1e-10 of the largest
+/// eigenvalue dropped).
+pub(crate) fn pinv(a: &nalgebra::DMatrix<f64>) -> nalgebra::DMatrix<f64> {
+    let e = a.clone().symmetric_eigen();
+    let top = e.eigenvalues.iter().cloned().fold(0.0f64, f64::max);
+    let n = a.nrows();
+    let mut out = nalgebra::DMatrix::zeros(n, n);
+    for (k, &l) in e.eigenvalues.iter().enumerate() {
+        if top > 0.0 && l > 1e-10 * top {
+            let v = e.eigenvectors.column(k);
+            out += (1.0 / l) * v * v.transpose();
+        }
+    }
+    out
+}
+
 /// R·M·Rᵀ.
 fn recoloured(r: &nalgebra::DMatrix<f64>, m: &[Vec<f64>]) -> Vec<Vec<f64>> {
     let p = m.len();
@@ -608,7 +618,7 @@ fn bandwidth(scores: &[Vec<Vec<f64>>], n: usize) -> (usize, bool) {
                 .iter()
                 .map(|seg| seg.iter().map(|g| g[i]).collect())
                 .collect();
-            bandwidth_of_one(&one, n, LAGS, 0.05, MIN_BANDWIDTH, MAX_SHARE)
+            bandwidth_of_one(&one, n, LAGS, CUT, MIN_BANDWIDTH, MAX_SHARE)
         })
         .max()
         .unwrap_or(MIN_BANDWIDTH);
@@ -618,7 +628,7 @@ fn bandwidth(scores: &[Vec<Vec<f64>>], n: usize) -> (usize, bool) {
                 .iter()
                 .map(|seg| seg.iter().map(|g| g[i]).collect())
                 .collect();
-            autocorrelation(&one, cap / LAGS) >= 0.05
+            autocorrelation(&one, cap / LAGS) >= CUT
         });
     (widest, capped)
 }

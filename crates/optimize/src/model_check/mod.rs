@@ -46,13 +46,10 @@ const K: usize = 4;
 const REPLICATIONS: usize = 4000;
 /// Length of each simulated series.
 const SIMULATED: usize = 400;
-/// The autocorrelation below which a lag no longer counts (as the intervals' rule).
-const CUT: f64 = 0.05;
-/// The bandwidth: this many times the lag at which the autocorrelation falls below [`CUT`].
-const LAGS: usize = 4;
-/// Bandwidth bounds: at least this many grid points, at most a quarter of the shortest lap.
-const MIN_BANDWIDTH: usize = 10;
-const MAX_SHARE: usize = 4;
+// The bandwidth rule is the scatter interval's.
+use crate::interval::{pinv, CUT, LAGS, MAX_SHARE, MIN_BANDWIDTH};
+
+mod regimes;
 
 /// The verdict of the test, as the result carries it (`joint.model_check`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -129,9 +126,9 @@ pub(crate) struct Outcome {
 }
 
 /// The test at the answer `x` from the refinement's `blocks` (`signals[b]` the signal of
-/// block `b`), the laps' kinematics (by segment), and the scatter intervals `scatter`
-/// (`None` where a parameter has none). `None` when the signals carry none of the terms
-/// or the lap is too short to estimate the scores' autocorrelation.
+/// block `b`), the laps' kinematics (by segment), and the scatter `intervals` of the
+/// parameters `names`. `None` when the signals carry none of the terms or the lap is too
+/// short to estimate the scores' autocorrelation.
 pub(crate) fn check(
     blocks: &[Block],
     signals: &[&str],
@@ -141,7 +138,7 @@ pub(crate) fn check(
     names: &[String],
     intervals: &crate::interval::Intervals,
 ) -> Option<Outcome> {
-    // Each parameter's scatter interval and standard error (none where it has no interval).
+    // Each parameter's scatter interval (none where it has no interval).
     let scatter: Vec<Option<(Option<f64>, Option<f64>)>> = names
         .iter()
         .map(|name| {
@@ -151,128 +148,228 @@ pub(crate) fn check(
                 .map(|p| (p.lo, p.hi))
         })
         .collect();
-    let std_error: Vec<Option<f64>> = names
-        .iter()
-        .map(|name| intervals.get(name).and_then(|p| p.std_error))
-        .collect();
-    let critical_value = intervals.critical_value;
-    let p = x.len();
     let span: Vec<f64> = bounds
         .iter()
         .map(|(lo, hi)| (hi - lo).max(1e-300))
         .collect();
-    let rates: Vec<Vec<[f64; 4]>> = kinematics.iter().map(Kinematics::rates).collect();
-    // Each row: the block's factor, the sensitivities (range-scaled), the terms, the
-    // residual, the lap and its grid index.
-    struct Row {
-        c: f64,
-        j: DVector<f64>,
-        z: DVector<f64>,
-        e: f64,
-        segment: usize,
-        g: usize,
+    let terms = Terms::of(blocks, signals, kinematics, &span)?;
+    let info = Information::of(&terms);
+    let check = score_test(&terms, &info);
+    // No sign of a discrepancy: the scatter is the answer's whole uncertainty, and the
+    // interval with the model's share is the scatter interval (the regimes' spread on
+    // the twin's own laps is their noise, and would only widen it).
+    if !check.discrepancy {
+        return Some(Outcome {
+            check,
+            with_model: scatter,
+        });
     }
-    let mut rows = Vec::new();
-    for (b, block) in blocks.iter().enumerate() {
-        let Some((px, py)) = pattern(signals[b]) else {
-            continue;
-        };
-        let m = block.residual.len() as f64;
-        let var = block.residual.iter().map(|e| e * e).sum::<f64>() / m;
-        let c = block.factor.unwrap_or(block.weight / var);
-        let (kin, rate) = (kinematics.get(block.segment)?, &rates[block.segment]);
-        for (k, (row, &e)) in block.rows.iter().zip(&block.residual).enumerate() {
-            let g = block.start + k;
-            let Some(r) = g.checked_sub(kin.start).and_then(|i| rate.get(i)) else {
+    let fitted = discrepancy_fit(&terms, &info, x, &span);
+    let spread = regimes::spread(blocks, kinematics, x.len(), &span);
+    let with_model = (0..x.len())
+        .map(|i| {
+            // The scatter at its critical value and the regimes' disagreement τ (a random
+            // effect of the driving regime, estimated from a handful of regimes: Student's
+            // t of their degrees of freedom), around the answer.
+            let wide = intervals.get(&names[i]).and_then(|p| p.std_error).map(|s| {
+                let (tau, df) = spread[i].map_or((0.0, 1), |(t, df)| (t * span[i], df));
+                ((intervals.critical_value * s).powi(2) + (regimes::t975(df) * tau).powi(2)).sqrt()
+            });
+            let (c, half) = fitted[i];
+            scatter[i].map(|(lo, hi)| {
+                let lo = lo.map(|lo| lo.min(c - half));
+                let hi = hi.map(|hi| hi.max(c + half));
+                let (lo, hi) = match wide {
+                    Some(w) => (lo.map(|lo| lo.min(x[i] - w)), hi.map(|hi| hi.max(x[i] + w))),
+                    None => (lo, hi),
+                };
+                (
+                    lo.filter(|&v| v >= bounds[i].0),
+                    hi.filter(|&v| v <= bounds[i].1),
+                )
+            })
+        })
+        .collect();
+    Some(Outcome { check, with_model })
+}
+
+/// One grid point of one load signal: the block's factor, the sensitivities
+/// (range-scaled), the terms, the residual, the lap and its grid index.
+struct TermRow {
+    c: f64,
+    j: DVector<f64>,
+    z: DVector<f64>,
+    e: f64,
+    segment: usize,
+    g: usize,
+}
+
+/// The rows of the signals that carry the terms, with the terms they carry (`q` of [`K`],
+/// scaled to unit weighted size) and the laps' extents on the grid.
+struct Terms {
+    rows: Vec<TermRow>,
+    p: usize,
+    q: usize,
+    laps: Laps,
+}
+
+impl Terms {
+    fn of(
+        blocks: &[Block],
+        signals: &[&str],
+        kinematics: &[Kinematics],
+        span: &[f64],
+    ) -> Option<Terms> {
+        let p = span.len();
+        let rates: Vec<Vec<[f64; 4]>> = kinematics.iter().map(Kinematics::rates).collect();
+        let mut rows = Vec::new();
+        for (b, block) in blocks.iter().enumerate() {
+            let Some((px, py)) = pattern(signals[b]) else {
                 continue;
             };
-            rows.push(Row {
-                c,
-                j: DVector::from_iterator(p, row.iter().zip(&span).map(|(j, s)| j * s)),
-                z: DVector::from_vec(vec![px * r[0], px * r[1], py * r[2], py * r[3]]),
-                e,
-                segment: block.segment,
-                g,
-            });
+            let c = block_factor(block);
+            let (kin, rate) = (kinematics.get(block.segment)?, &rates[block.segment]);
+            for (k, (row, &e)) in block.rows.iter().zip(&block.residual).enumerate() {
+                let g = block.start + k;
+                let Some(r) = g.checked_sub(kin.start).and_then(|i| rate.get(i)) else {
+                    continue;
+                };
+                rows.push(TermRow {
+                    c,
+                    j: DVector::from_iterator(p, row.iter().zip(span).map(|(j, s)| j * s)),
+                    z: DVector::from_vec(vec![px * r[0], px * r[1], py * r[2], py * r[3]]),
+                    e,
+                    segment: block.segment,
+                    g,
+                });
+            }
+        }
+        if rows.is_empty() || !rows.iter().all(|r| r.c.is_finite()) {
+            return None;
+        }
+        // The terms a study's signals carry (an axle study has no roll): the others dropped.
+        let carried: Vec<usize> = (0..K)
+            .filter(|&k| rows.iter().any(|r| r.z[k] != 0.0))
+            .collect();
+        let q = carried.len();
+        if q == 0 {
+            return None;
+        }
+        for r in rows.iter_mut() {
+            r.z = DVector::from_iterator(q, carried.iter().map(|&k| r.z[k]));
+        }
+        // Scale the terms to unit weighted size (conditioning only: W does not change).
+        let mut size = DVector::<f64>::zeros(q);
+        for r in &rows {
+            size += r.z.map(|v| r.c * v * v);
+        }
+        let size = size.map(|s| if s > 0.0 { s.sqrt() } else { 1.0 });
+        for r in rows.iter_mut() {
+            r.z.component_div_assign(&size);
+        }
+        let laps = Laps::of(rows.iter().map(|r| (r.segment, r.g)));
+        if laps.n_min < 8 * MIN_BANDWIDTH {
+            return None;
+        }
+        Some(Terms { rows, p, q, laps })
+    }
+}
+
+/// A block's factor in the objective: the fit's, else its weight over its own mean
+/// squared residual.
+fn block_factor(block: &Block) -> f64 {
+    let m = block.residual.len() as f64;
+    let var = block.residual.iter().map(|e| e * e).sum::<f64>() / m;
+    block.factor.unwrap_or(block.weight / var)
+}
+
+/// The laps of a set of grid points: their segment numbers (sorted) and each one's extent
+/// [lo, hi) on the grid, the shortest and all together.
+pub(super) struct Laps {
+    segments: Vec<usize>,
+    extents: Vec<(usize, usize)>,
+    n_min: usize,
+    n_all: usize,
+}
+
+impl Laps {
+    fn of(points: impl Iterator<Item = (usize, usize)> + Clone) -> Laps {
+        let mut segments: Vec<usize> = points.clone().map(|(s, _)| s).collect();
+        segments.sort_unstable();
+        segments.dedup();
+        let extents: Vec<(usize, usize)> = segments
+            .iter()
+            .map(|&seg| {
+                let of = points.clone().filter(|(s, _)| *s == seg).map(|(_, g)| g);
+                let lo = of.clone().min().unwrap_or(0);
+                (lo, of.map(|g| g + 1).max().unwrap_or(lo))
+            })
+            .collect();
+        let n_min = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
+        let n_all = extents.iter().map(|(a, b)| b - a).sum();
+        Laps {
+            segments,
+            extents,
+            n_min,
+            n_all,
         }
     }
-    if rows.is_empty() || !rows.iter().all(|r| r.c.is_finite()) {
-        return None;
+
+    /// A zero series of `dim`-vectors per lap.
+    fn zeros(&self, dim: usize) -> Vec<Vec<DVector<f64>>> {
+        self.extents
+            .iter()
+            .map(|(a, b)| vec![DVector::zeros(dim); b - a])
+            .collect()
     }
-    // The terms a study's signals carry (an axle study has no roll): the others dropped.
-    let carried: Vec<usize> = (0..K)
-        .filter(|&k| rows.iter().any(|r| r.z[k] != 0.0))
-        .collect();
-    let q = carried.len();
-    if q == 0 {
-        return None;
+
+    /// The lap and the index within it of grid point `g` of `segment`.
+    fn at(&self, segment: usize, g: usize) -> (usize, usize) {
+        let s = self.segments.binary_search(&segment).expect("listed");
+        (s, g - self.extents[s].0)
     }
-    for r in rows.iter_mut() {
-        r.z = DVector::from_iterator(q, carried.iter().map(|&k| r.z[k]));
+}
+
+/// The weighted information of the sensitivities and the terms: JᵀCJ, JᵀCZ, ZᵀCZ.
+struct Information {
+    jj: DMatrix<f64>,
+    jz: DMatrix<f64>,
+    zz: DMatrix<f64>,
+}
+
+impl Information {
+    fn of(t: &Terms) -> Information {
+        let (mut jj, mut jz, mut zz) = (
+            DMatrix::<f64>::zeros(t.p, t.p),
+            DMatrix::<f64>::zeros(t.p, t.q),
+            DMatrix::<f64>::zeros(t.q, t.q),
+        );
+        for r in &t.rows {
+            jj += r.c * &r.j * r.j.transpose();
+            jz += r.c * &r.j * r.z.transpose();
+            zz += r.c * &r.z * r.z.transpose();
+        }
+        Information { jj, jz, zz }
     }
-    // Scale the terms to unit weighted size (conditioning only: W does not change).
-    let mut size = DVector::<f64>::zeros(q);
-    for r in &rows {
-        size += r.z.map(|v| r.c * v * v);
-    }
-    let size = size.map(|s| if s > 0.0 { s.sqrt() } else { 1.0 });
-    for r in rows.iter_mut() {
-        r.z.component_div_assign(&size);
-    }
-    let (mut ajj, mut ajz, mut azz) = (
-        DMatrix::<f64>::zeros(p, p),
-        DMatrix::<f64>::zeros(p, q),
-        DMatrix::<f64>::zeros(q, q),
-    );
-    for r in &rows {
-        ajj += r.c * &r.j * r.j.transpose();
-        ajz += r.c * &r.j * r.z.transpose();
-        azz += r.c * &r.z * r.z.transpose();
-    }
-    let m = pinv(&ajj) * &ajz;
-    // The scores of the terms made orthogonal to the sensitivities, and the augmented
-    // scores [j; z]·e, per lap and grid point.
-    let mut segments: Vec<usize> = rows.iter().map(|r| r.segment).collect();
-    segments.sort_unstable();
-    segments.dedup();
-    let extent = |seg: usize| {
-        let of = rows.iter().filter(|r| r.segment == seg);
-        let lo = of.clone().map(|r| r.g).min().unwrap_or(0);
-        let hi = of.map(|r| r.g + 1).max().unwrap_or(0);
-        (lo, hi)
-    };
-    let extents: Vec<(usize, usize)> = segments.iter().map(|&s| extent(s)).collect();
-    let mut scores: Vec<Vec<DVector<f64>>> = extents
-        .iter()
-        .map(|(a, b)| vec![DVector::zeros(q); b - a])
-        .collect();
-    let mut augmented: Vec<Vec<DVector<f64>>> = extents
-        .iter()
-        .map(|(a, b)| vec![DVector::zeros(p + q); b - a])
-        .collect();
-    for r in &rows {
-        let s = segments.binary_search(&r.segment).expect("listed");
-        let i = r.g - extents[s].0;
+}
+
+/// The score test of the terms, made orthogonal to the sensitivities, with its verdict.
+fn score_test(t: &Terms, info: &Information) -> ModelCheck {
+    let m = pinv(&info.jj) * &info.jz;
+    let mut scores = t.laps.zeros(t.q);
+    for r in &t.rows {
+        let (s, i) = t.laps.at(r.segment, r.g);
         let zt = &r.z - m.transpose() * &r.j;
         scores[s][i] += r.c * r.e * zt;
-        let mut a = DVector::zeros(p + q);
-        a.rows_mut(0, p).copy_from(&r.j);
-        a.rows_mut(p, q).copy_from(&r.z);
-        augmented[s][i] += r.c * r.e * a;
     }
-    let n_min = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
-    let n_all: usize = extents.iter().map(|(a, b)| b - a).sum();
-    if n_min < 8 * MIN_BANDWIDTH {
-        return None;
-    }
-    // The test.
     let u: DVector<f64> = scores.iter().flatten().sum();
-    let bandwidth = bandwidth(&scores, n_min);
+    let bandwidth = bandwidth(&scores, t.laps.n_min);
     let omega = long_run(&demeaned(&scores), bandwidth);
     let w = (u.transpose() * pinv(&omega) * &u)[(0, 0)];
-    let b = (bandwidth + 1) as f64 / n_all as f64;
-    let p_value = fixed_b_p_value(w, q, b);
+    let b = (bandwidth + 1) as f64 / t.laps.n_all as f64;
+    let p_value = fixed_b_p_value(w, t.q, b);
     let discrepancy = p_value < ALPHA;
+    let q = t.q;
     let detail = if discrepancy {
         format!(
             "the twin cannot represent this lap within its noise: the wheel loads' residual at the answer follows the car's pitch and roll rates (W = {w:.1}, {q} terms, {}), which the twin's chassis does not reproduce; the intervals show only the scatter around the twin's best fit, and the intervals with the model's share are the ones to quote",
@@ -284,237 +381,47 @@ pub(crate) fn check(
             p_text(p_value)
         )
     };
-    // The parameters with the discrepancy term: one Gauss-Newton step from the answer.
+    ModelCheck {
+        discrepancy,
+        statistic: w,
+        p_value,
+        degrees_of_freedom: q,
+        bandwidth,
+        method: METHOD.into(),
+        detail,
+    }
+}
+
+/// The parameters fitted together with the terms (a discrepancy linear in the car's pitch
+/// and roll rates): one Gauss–Newton step from the answer and the sandwich of the
+/// augmented scores, per parameter (the estimate, the half-width at the fixed-b critical
+/// value), in the parameters' units.
+fn discrepancy_fit(t: &Terms, info: &Information, x: &[f64], span: &[f64]) -> Vec<(f64, f64)> {
+    let (p, q) = (t.p, t.q);
+    let mut augmented = t.laps.zeros(p + q);
+    for r in &t.rows {
+        let (s, i) = t.laps.at(r.segment, r.g);
+        let mut a = DVector::zeros(p + q);
+        a.rows_mut(0, p).copy_from(&r.j);
+        a.rows_mut(p, q).copy_from(&r.z);
+        augmented[s][i] += r.c * r.e * a;
+    }
     let mut a = DMatrix::<f64>::zeros(p + q, p + q);
-    a.view_mut((0, 0), (p, p)).copy_from(&ajj);
-    a.view_mut((0, p), (p, q)).copy_from(&ajz);
-    a.view_mut((p, 0), (q, p)).copy_from(&ajz.transpose());
-    a.view_mut((p, p), (q, q)).copy_from(&azz);
+    a.view_mut((0, 0), (p, p)).copy_from(&info.jj);
+    a.view_mut((0, p), (p, q)).copy_from(&info.jz);
+    a.view_mut((p, 0), (q, p)).copy_from(&info.jz.transpose());
+    a.view_mut((p, p), (q, q)).copy_from(&info.zz);
     let a_inv = pinv(&a);
     let total: DVector<f64> = augmented.iter().flatten().sum();
     // The residual is simulated − measured: the step that lowers it is −A⁻¹·Σψ.
     let step = -(&a_inv * total);
-    let band_a = bandwidth_of(&augmented, n_min);
-    let cov = &a_inv * long_run(&demeaned(&augmented), band_a) * &a_inv;
-    let cv = crate::interval::critical_value((band_a + 1) as f64 / n_all as f64);
-    let spread = regime_spread(blocks, kinematics, p, &span);
-    let mut with_model = Vec::with_capacity(p);
-    for i in 0..p {
-        // No sign of a discrepancy: the scatter is the answer's whole uncertainty, and the
-        // interval with the model's share is the scatter interval (the regimes' spread on
-        // the twin's own laps is their noise, and would only widen it).
-        if !discrepancy {
-            with_model.push(scatter[i]);
-            continue;
-        }
-        let c = x[i] + step[i] * span[i];
-        let se = cov[(i, i)].max(0.0).sqrt() * span[i];
-        // The scatter and the regimes' disagreement together (a random effect of the
-        // driving regime), around the answer.
-        // The scatter at its critical value; τ, estimated from a handful of regimes, at
-        // Student's t of their degrees of freedom.
-        let wide = std_error[i].map(|s| {
-            let (tau, df) = spread[i].map_or((0.0, 1), |(t, df)| (t * span[i], df));
-            ((critical_value * s).powi(2) + (t975(df) * tau).powi(2)).sqrt()
-        });
-        with_model.push(scatter[i].map(|(lo, hi)| {
-            let lo = lo.map(|lo| lo.min(c - cv * se));
-            let hi = hi.map(|hi| hi.max(c + cv * se));
-            let (lo, hi) = match wide {
-                Some(w) => (lo.map(|lo| lo.min(x[i] - w)), hi.map(|hi| hi.max(x[i] + w))),
-                None => (lo, hi),
-            };
-            (
-                lo.filter(|&v| v >= bounds[i].0),
-                hi.filter(|&v| v <= bounds[i].1),
-            )
-        }));
-    }
-    Some(Outcome {
-        check: ModelCheck {
-            discrepancy,
-            statistic: w,
-            p_value,
-            degrees_of_freedom: q,
-            bandwidth,
-            method: METHOD.into(),
-            detail,
-        },
-        with_model,
-    })
-}
-
-/// The driving regimes: the measured a_x in thirds (braking, lifting or coasting,
-/// accelerating) by |a_y| in halves (straight, cornering) by v in halves (slow, fast: the
-/// downforce, and a sprung car's ride height, go with v²).
-const REGIMES: usize = 12;
-/// A regime with fewer grid points than this is left out.
-const MIN_REGIME: usize = 100;
-
-/// Student's t two-sided 95 % quantile for `df` degrees of freedom (1–10; beyond, 10's).
-fn t975(df: usize) -> f64 {
-    const T: [f64; 10] = [
-        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
-    ];
-    T[df.clamp(1, 10) - 1]
-}
-
-/// How much the parameters' answer depends on the driving regime beyond the noise, per
-/// parameter: τ (in range-scaled units) and its degrees of freedom (the regimes that see
-/// the parameter, less one); `None` where fewer than two regimes see it.
-///
-/// Each regime's own answer is one Gauss–Newton step from the study's answer with the
-/// rows of that regime only (every signal, every parameter free), its noise covariance the
-/// sandwich of its own scores (VAR(1)-prewhitened Bartlett, as the scatter interval's);
-/// the spread between regimes beyond that noise is DerSimonian and Laird's moment estimate
-/// τ² of a random effect. Where the twin is the right model every regime wants the same
-/// parameters and τ² is about zero; where the car is not the twin, braking, accelerating
-/// and cornering each want other values of l, the lifts and the track widths (the twin
-/// takes up what it does not have differently in each), and τ measures by how much the
-/// parameters are then a matter of which part of the lap one asks.
-fn regime_spread(
-    blocks: &[Block],
-    kinematics: &[Kinematics],
-    p: usize,
-    span: &[f64],
-) -> Vec<Option<(f64, usize)>> {
-    struct Row {
-        c: f64,
-        j: DVector<f64>,
-        e: f64,
-        segment: usize,
-        g: usize,
-        ax: f64,
-        ay: f64,
-        v: f64,
-    }
-    let mut rows = Vec::new();
-    for block in blocks {
-        let m = block.residual.len() as f64;
-        let var = block.residual.iter().map(|e| e * e).sum::<f64>() / m;
-        let c = block.factor.unwrap_or(block.weight / var);
-        let Some(kin) = kinematics.get(block.segment) else {
-            return vec![None; p];
-        };
-        for (k, (row, &e)) in block.rows.iter().zip(&block.residual).enumerate() {
-            let g = block.start + k;
-            let Some(i) = g.checked_sub(kin.start).filter(|&i| i < kin.a_x.len()) else {
-                continue;
-            };
-            rows.push(Row {
-                c,
-                j: DVector::from_iterator(p, row.iter().zip(span).map(|(j, s)| j * s)),
-                e,
-                segment: block.segment,
-                g,
-                ax: kin.a_x[i],
-                ay: kin.a_y[i].abs(),
-                v: kin.v[i],
-            });
-        }
-    }
-    if rows.is_empty() || !rows.iter().all(|r| r.c.is_finite() && r.e.is_finite()) {
-        return vec![None; p];
-    }
-    let quantile = |mut v: Vec<f64>, q: f64| {
-        v.sort_by(f64::total_cmp);
-        v[((v.len() - 1) as f64 * q) as usize]
-    };
-    let ax: Vec<f64> = rows.iter().map(|r| r.ax).collect();
-    let (x1, x2) = (quantile(ax.clone(), 1.0 / 3.0), quantile(ax, 2.0 / 3.0));
-    let y1 = quantile(rows.iter().map(|r| r.ay).collect(), 0.5);
-    let v1 = quantile(rows.iter().map(|r| r.v).collect(), 0.5);
-    let regime = |r: &Row| {
-        let a = if r.ax < x1 {
-            0
-        } else if r.ax < x2 {
-            1
-        } else {
-            2
-        };
-        4 * a + 2 * usize::from(r.ay >= y1) + usize::from(r.v >= v1)
-    };
-    // Per lap, the grid's extent, for the score series.
-    let mut segments: Vec<usize> = rows.iter().map(|r| r.segment).collect();
-    segments.sort_unstable();
-    segments.dedup();
-    let extents: Vec<(usize, usize)> = segments
-        .iter()
-        .map(|&s| {
-            let of = rows.iter().filter(|r| r.segment == s);
-            let lo = of.clone().map(|r| r.g).min().unwrap_or(0);
-            (lo, of.map(|r| r.g + 1).max().unwrap_or(lo))
-        })
-        .collect();
-    let n_min = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
-    // Each regime's step and its noise variance, per parameter.
-    let mut answers: Vec<Vec<(f64, f64)>> = vec![Vec::new(); p];
-    for reg in 0..REGIMES {
-        let mine: Vec<&Row> = rows.iter().filter(|r| regime(r) == reg).collect();
-        let points = {
-            let mut g: Vec<(usize, usize)> = mine.iter().map(|r| (r.segment, r.g)).collect();
-            g.sort_unstable();
-            g.dedup();
-            g.len()
-        };
-        if points < MIN_REGIME {
-            continue;
-        }
-        let mut a = DMatrix::<f64>::zeros(p, p);
-        let mut total = DVector::<f64>::zeros(p);
-        let mut scores: Vec<Vec<DVector<f64>>> = extents
-            .iter()
-            .map(|(lo, hi)| vec![DVector::zeros(p); hi - lo])
-            .collect();
-        let mut inside: Vec<Vec<bool>> = extents
-            .iter()
-            .map(|(lo, hi)| vec![false; hi - lo])
-            .collect();
-        for r in &mine {
-            a += r.c * &r.j * r.j.transpose();
-            total += r.c * r.e * &r.j;
-            let s = segments.binary_search(&r.segment).expect("listed");
-            scores[s][r.g - extents[s].0] += r.c * r.e * &r.j;
-            inside[s][r.g - extents[s].0] = true;
-        }
-        // Demeaned over the regime's own points (its mean score is the regime's answer,
-        // not its noise).
-        let mean = &total / points as f64;
-        for (seg, inside) in scores.iter_mut().zip(&inside) {
-            for (v, _) in seg.iter_mut().zip(inside).filter(|(_, &i)| i) {
-                *v -= &mean;
-            }
-        }
-        let a_inv = pinv(&a);
-        let step = -(&a_inv * total);
-        let omega = whitened_long_run(&scores, n_min);
-        let cov = &a_inv * omega * &a_inv;
-        for i in 0..p {
-            let (d, v) = (step[i], cov[(i, i)]);
-            // A parameter the regime does not see: left out (its direction was dropped).
-            if a[(i, i)] > 0.0 && v.is_finite() && v > 0.0 && d.is_finite() {
-                answers[i].push((d, v));
-            }
-        }
-    }
-    answers
-        .iter()
-        .map(|est| {
-            if est.len() < 2 {
-                return None;
-            }
-            let w: Vec<f64> = est.iter().map(|(_, v)| 1.0 / v).collect();
-            let sw: f64 = w.iter().sum();
-            let sw2: f64 = w.iter().map(|w| w * w).sum();
-            let mean = est.iter().zip(&w).map(|((d, _), w)| w * d).sum::<f64>() / sw;
-            let q: f64 = est
-                .iter()
-                .zip(&w)
-                .map(|((d, _), w)| w * (d - mean).powi(2))
-                .sum();
-            let df = (est.len() - 1) as f64;
-            let tau2 = ((q - df) / (sw - sw2 / sw)).max(0.0);
-            Some((tau2.sqrt(), est.len() - 1))
+    let band = bandwidth_of(&augmented, t.laps.n_min);
+    let cov = &a_inv * long_run(&demeaned(&augmented), band) * &a_inv;
+    let cv = crate::interval::critical_value((band + 1) as f64 / t.laps.n_all as f64);
+    (0..p)
+        .map(|i| {
+            let se = cov[(i, i)].max(0.0).sqrt() * span[i];
+            (x[i] + step[i] * span[i], cv * se)
         })
         .collect()
 }
@@ -552,22 +459,6 @@ fn p_text(p: f64) -> String {
     } else {
         format!("p = {p:.3}")
     }
-}
-
-/// The Moore–Penrose inverse of a symmetric matrix (directions below 1e-10 of the largest
-/// eigenvalue dropped).
-fn pinv(a: &DMatrix<f64>) -> DMatrix<f64> {
-    let e = a.clone().symmetric_eigen();
-    let top = e.eigenvalues.iter().cloned().fold(0.0f64, f64::max);
-    let n = a.nrows();
-    let mut out = DMatrix::zeros(n, n);
-    for (k, &l) in e.eigenvalues.iter().enumerate() {
-        if top > 0.0 && l > 1e-10 * top {
-            let v = e.eigenvectors.column(k);
-            out += (1.0 / l) * v * v.transpose();
-        }
-    }
-    out
 }
 
 /// Each lap's series less its own mean.
