@@ -1245,7 +1245,7 @@ fn joint_answer(
             Err(why) => vec![Err(format!("the evaluator failed: {why}")); points.len()],
         }
     };
-    let (frame, raw, sens) = match Frame::new(series, j.bounds.clone(), &x, simulate) {
+    let (mut frame, raw, sens) = match Frame::new(series, j.bounds.clone(), &x, simulate) {
         Ok(f) => f,
         Err(why) => {
             let why = format!("no joint refinement and no interval: {why}");
@@ -1253,11 +1253,15 @@ fn joint_answer(
             return Ok((None, iv, None, None));
         }
     };
+    if let Some(times) = lap_clocks(session) {
+        let bin_s = crate::noise_time::BIN_OF_PERIOD / session.study.file.compare.cutoff_hz;
+        frame.set_clocks(times, bin_s);
+    }
     let objective_before = frame.per_point(frame.objective(&raw));
     let solution = frame.minimise(&x, raw, sens, &vec![true; x.len()], crate::fit::ANSWER);
     let laps = frame.laps();
     let blocks = frame.blocks(&solution);
-    let iv = crate::interval::sandwich(&j.names, &solution.x, &j.bounds, &blocks, laps);
+    let iv = frame.sandwich(&j.names, &solution.x, &j.bounds, &blocks, laps);
     let iv = noise_floor(iv, &blocks, j, &solution.x);
     let checked = model_check(session, j, &blocks, &solution.x, &iv);
     let refinement = Refinement {
@@ -1330,6 +1334,33 @@ fn noise_floor(
         ),
         iv.laps,
     )
+}
+
+/// Per lap, the time at each grid point, from its measured speed (Σ step/v, the speed held
+/// at 0.5 m/s or more: a standing start counts as slow, not as forever). `None` where a
+/// lap has no speed: the intervals are then estimated on the distance grid.
+fn lap_clocks(session: &Session) -> Option<Vec<Vec<f64>>> {
+    let compare = &session.study.file.compare;
+    session
+        .bench
+        .laps
+        .iter()
+        .map(|l| {
+            let p = PreparedMeasurement::new(&l.measurement, &["v"], compare).ok()?;
+            let step = p.grid().step();
+            let mut t = 0.0;
+            let times = p
+                .measured("v")?
+                .iter()
+                .map(|v| {
+                    let now = t;
+                    t += step / v.abs().max(0.5);
+                    now
+                })
+                .collect();
+            Some(times)
+        })
+        .collect()
 }
 
 /// The model check at the answer ([`crate::model_check`]), from the laps' measured

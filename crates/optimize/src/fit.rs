@@ -103,6 +103,9 @@ pub(crate) struct Frame<'a, F> {
     pub bounds: Vec<(f64, f64)>,
     simulate: F,
     laps: std::sync::atomic::AtomicUsize,
+    /// The laps' clocks (per lap, the time at each grid point) and the time bin: the
+    /// sandwich then also estimates the noise in time ([`crate::noise_time`]).
+    clocks: Option<(Vec<Vec<f64>>, f64)>,
 }
 
 /// The residuals (simulated − measured) of every series on its range at one point.
@@ -199,6 +202,7 @@ impl<'a, F: Laps> Frame<'a, F> {
             bounds,
             simulate,
             laps: std::sync::atomic::AtomicUsize::new(points.len()),
+            clocks: None,
         };
         let raws: Vec<Raw> = runs
             .iter()
@@ -479,7 +483,7 @@ impl<'a, F: Laps> Frame<'a, F> {
         let names: Vec<String> = free.iter().map(|i| i.to_string()).collect();
         let xf: Vec<f64> = free.iter().map(|&i| x[i]).collect();
         let bf: Vec<(f64, f64)> = free.iter().map(|&i| self.bounds[i]).collect();
-        let iv = super::interval::sandwich(&names, &xf, &bf, &blocks, 0);
+        let iv = self.sandwich(&names, &xf, &bf, &blocks, 0);
         let mut out = vec![None; x.len()];
         for (k, &i) in free.iter().enumerate() {
             out[i] = iv.parameters[k].std_error;
@@ -522,6 +526,32 @@ impl<'a, F: Laps> Frame<'a, F> {
         }
         let se = self.std_errors(&solution.x, &solution.raw, &solution.sensitivities);
         (naive, se.iter().map(|s| s.map_or(0.0, |s| s * s)).collect())
+    }
+
+    /// Gives the frame the laps' clocks (per lap, the measured time at each grid point) and
+    /// the width of a time bin, for the noise in time ([`crate::noise_time`]).
+    pub fn set_clocks(&mut self, times: Vec<Vec<f64>>, bin_s: f64) {
+        self.clocks = Some((times, bin_s));
+    }
+
+    /// The sandwich intervals of `blocks` ([`crate::interval::sandwich_with`], with the
+    /// frame's clocks where it has them).
+    pub fn sandwich(
+        &self,
+        names: &[String],
+        x: &[f64],
+        bounds: &[(f64, f64)],
+        blocks: &[Block],
+        laps: usize,
+    ) -> super::interval::Intervals {
+        let clocks = self
+            .clocks
+            .as_ref()
+            .map(|(times, bin_s)| crate::noise_time::Clocks {
+                times,
+                bin_s: *bin_s,
+            });
+        super::interval::sandwich_with(names, x, bounds, blocks, laps, clocks.as_ref())
     }
 
     /// The objective per compared grid point (1 where every residual is at its σ).

@@ -80,8 +80,14 @@ pub struct ParameterInterval {
     /// or no interval at all).
     pub lo: Option<f64>,
     pub hi: Option<f64>,
-    /// The standard error (None: not determined).
+    /// The standard error (None: not determined): `std_error_noise` where it is known.
     pub std_error: Option<f64>,
+    /// The standard error from the scores' own long-run covariance, and from the residuals'
+    /// autocovariance in time ([`crate::noise_time`]), where the laps' clocks were known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_error_scores: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std_error_noise: Option<f64>,
     /// Why there is no interval, or no end, in words (None: a closed interval).
     pub statement: Option<String>,
 }
@@ -159,6 +165,8 @@ impl Intervals {
                     lo: None,
                     hi: None,
                     std_error: None,
+                    std_error_scores: None,
+                    std_error_noise: None,
                     statement: Some(why.clone()),
                 })
                 .collect(),
@@ -291,6 +299,20 @@ pub(crate) fn sandwich(
     blocks: &[Block],
     laps: usize,
 ) -> Intervals {
+    sandwich_with(names, x, bounds, blocks, laps, None)
+}
+
+/// The sandwich, and where the laps' `clocks` are known, with the meat from the residuals'
+/// autocovariance in time ([`crate::noise_time`]), the scores' own long-run covariance
+/// kept beside it (`std_error_scores`).
+pub(crate) fn sandwich_with(
+    names: &[String],
+    x: &[f64],
+    bounds: &[(f64, f64)],
+    blocks: &[Block],
+    laps: usize,
+    clocks: Option<&crate::noise_time::Clocks>,
+) -> Intervals {
     let p = x.len();
     // Work in parameters scaled by their range, for a well-conditioned information.
     let span: Vec<f64> = bounds
@@ -402,6 +424,22 @@ pub(crate) fn sandwich(
         notes.push("the signals do not see any of the step's parameters".into());
     }
     let cov = mul(&mul(&inv, &meat), &inv);
+    let factor = |b: &Block| {
+        b.factor.unwrap_or_else(|| {
+            let m = b.residual.len() as f64;
+            b.weight / (b.residual.iter().map(|e| e * e).sum::<f64>() / m)
+        })
+    };
+    let in_time = clocks.and_then(|c| crate::noise_time::meat(blocks, &span, factor, c));
+    let cov_noise = in_time.as_ref().map(|t| mul(&mul(&inv, &t.meat), &inv));
+    if in_time.as_ref().is_some_and(|t| t.capped) {
+        notes.push(
+            "the residuals stay correlated beyond a quarter of the lap in time: their autocovariance is cut there, and the intervals may be narrower than the data warrant".into(),
+        );
+    }
+    // The noise in time where it could be estimated; the scores' own beside it.
+    let cov_scores = cov;
+    let cov = cov_noise.clone().unwrap_or_else(|| cov_scores.clone());
     let cv = critical_value((bandwidth + 1) as f64 / n_all as f64);
     let parameters = (0..p)
         .map(|i| {
@@ -417,6 +455,8 @@ pub(crate) fn sandwich(
                 lo: None,
                 hi: None,
                 std_error: None,
+                std_error_scores: None,
+                std_error_noise: None,
                 statement: Some(statement),
             };
             if unseen[i] > 0.1 {
@@ -433,6 +473,8 @@ pub(crate) fn sandwich(
                 ));
             }
             let se = cov[i][i].max(0.0).sqrt() * span[i];
+            let std_error_scores = cov_noise.as_ref().map(|_| cov_scores[i][i].max(0.0).sqrt() * span[i]);
+            let std_error_noise = cov_noise.as_ref().map(|c| c[i][i].max(0.0).sqrt() * span[i]);
             let (lo, hi) = (x[i] - cv * se, x[i] + cv * se);
             let (lo, hi) = ((lo >= lo_b).then_some(lo), (hi <= hi_b).then_some(hi));
             let statement = match (lo, hi) {
@@ -447,6 +489,8 @@ pub(crate) fn sandwich(
                 lo,
                 hi,
                 std_error: Some(se),
+                std_error_scores,
+                std_error_noise,
                 statement,
             }
         })

@@ -42,6 +42,7 @@ pub mod ga;
 pub mod identifiability;
 pub mod interval;
 pub mod model_check;
+pub(crate) mod noise_time;
 pub mod optimizer;
 pub mod pool;
 pub mod profile;
