@@ -288,8 +288,7 @@ mod tests {
             let iv = sandwich_with(&names, &[a, b], &bounds, &[block()], 0, Some(&clocks));
             let pb = &iv.parameters[1];
             z.push((b - truth[1]) / pb.std_error.expect("a standard error"));
-            if pb.lo.is_some_and(|lo| lo <= truth[1]) && pb.hi.is_some_and(|hi| truth[1] <= hi)
-            {
+            if pb.lo.is_some_and(|lo| lo <= truth[1]) && pb.hi.is_some_and(|hi| truth[1] <= hi) {
                 covered += 1;
             }
             let on_grid = sandwich(&names, &[a, b], &bounds, &[block()], 0);
