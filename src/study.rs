@@ -36,6 +36,8 @@ pub struct StudyRun {
     pub verbose: bool,
     /// Profile likelihood of every parameter after the refinement.
     pub profiles: bool,
+    /// Refits of a moving-block bootstrap of the joint answer (0: none).
+    pub bootstrap: usize,
 }
 
 impl StudyRun {
@@ -54,6 +56,9 @@ impl StudyRun {
         }
         if self.profiles {
             c.push_str(" --profiles");
+        }
+        if self.bootstrap > 0 {
+            c.push_str(&format!(" --bootstrap {}", self.bootstrap));
         }
         c
     }
@@ -154,6 +159,7 @@ pub fn optimize(
         force: args.force,
         evaluator,
         profiles: args.profiles,
+        bootstrap: args.bootstrap,
     };
     let result = match run_study(&study, &options)? {
         StudyOutcome::Finished(r) => r,

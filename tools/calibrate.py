@@ -56,6 +56,7 @@ def fit(kind: str, circuit: str, seed: int, out: Path, generations: int, extra: 
            "parameters": result["joint"]["parameters"], "model_check": result["joint"].get("model_check"),
            "intervals": {k: v for k, v in (result.get("joint_intervals") or {}).items() if k != "parameters"},
            "joint_intervals_parameters": (result.get("joint_intervals") or {}).get("parameters", []),
+           "bootstrap": result["joint"].get("bootstrap"),
            "simulations": result["simulations"], "wall_seconds": result["wall_seconds"]}
     done.write_text(json.dumps(rec, indent=1))
     return rec
@@ -84,6 +85,11 @@ def summarise(recs: list) -> dict:
                              rel=(p["after"] - truth) / truth,
                              width=(hi - lo) / abs(truth) if iv else math.nan,
                              width_model=(him - lom) / abs(truth) if ivm else math.nan))
+        # The bootstrap where it ran: its standard error over the sandwich's, and whether its
+        # percentile interval holds the truth.
+        boots = [next((q for q in r["bootstrap"]["parameters"] if q["name"] == n), None)
+                 for r in recs if r.get("bootstrap")]
+        boots = [b for b in boots if b and b.get("ratio") is not None and b.get("interval")]
         zs = [x["z"] for x in rows if not math.isnan(x["z"])]
         mz = sum(zs) / len(zs) if zs else math.nan
         table[n] = dict(
@@ -92,6 +98,10 @@ def summarise(recs: list) -> dict:
             mean_z=mz, mean_rel_error=sum(x["rel"] for x in rows) / len(rows),
             mean_width=sum(x["width"] for x in rows) / len(rows),
             mean_width_model=sum(x["width_model"] for x in rows) / len(rows),
+            bootstrap_laps=len(boots),
+            bootstrap_ratio_median=sorted(b["ratio"] for b in boots)[len(boots) // 2] if boots else math.nan,
+            bootstrap_inside=sum(b["interval"][0] <= r["truth"][n] <= b["interval"][1]
+                                 for b, r in zip(boots, [r for r in recs if r.get("bootstrap")])),
         )
     fired = [r["model_check"]["discrepancy"] for r in recs if r.get("model_check")]
     return {"laps": len(recs), "parameters": table,
@@ -108,9 +118,11 @@ def main(argv=None):
     a.add_argument("--jobs", type=int, default=2)
     a.add_argument("--out", type=Path, required=True)
     a.add_argument("--chassis", default=None, help="second-order: the studies fit the pitch and roll modes too")
+    a.add_argument("--bootstrap", type=int, default=0, metavar="N",
+                   help="a moving-block bootstrap of every answer with N refits (its standard error against the sandwich's)")
     args = a.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    extra = []
+    extra = ["--bootstrap", str(args.bootstrap)] if args.bootstrap else []
     jobs = [(c, s) for c in args.circuits.split(",") for s in range(args.first_seed, args.first_seed + args.laps)]
     with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
         recs = list(pool.map(lambda cs: fit(args.kind, cs[0], cs[1], args.out, args.generations, extra, args.chassis),
@@ -127,6 +139,12 @@ def main(argv=None):
     for n, t in s["parameters"].items():
         print(f"| {n} | {t['inside']}/{t['n']} | {t['inside_model']}/{t['n']} | {t['sd_z']:.2f} | {t['mean_z']:+.2f} | "
               f"{100 * t['mean_rel_error']:+.2f} % | {100 * t['mean_width']:.1f} % | {100 * t['mean_width_model']:.1f} % |")
+    if any(t["bootstrap_laps"] for t in s["parameters"].values()):
+        print()
+        print("| parameter | bootstrap SE / sandwich SE (median) | bootstrap percentile interval holds the truth |")
+        print("|---|---:|---:|")
+        for n, t in s["parameters"].items():
+            print(f"| {n} | {t['bootstrap_ratio_median']:.2f} | {t['bootstrap_inside']}/{t['bootstrap_laps']} |")
     return 1 if bad else 0
 
 

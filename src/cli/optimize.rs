@@ -39,6 +39,11 @@ pub struct OptimizeArgs {
     /// on a grid, the others re-optimised; intervals and plots from it (docs/optimize.md)
     #[arg(long)]
     pub profiles: bool,
+    /// A moving-block bootstrap of the joint answer with N refits from it (residuals
+    /// resampled in blocks as long as their persistence): each parameter's bootstrap standard
+    /// error against the sandwich's, a check of the intervals (docs/optimize.md)
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub bootstrap: usize,
 }
 
 impl OptimizeArgs {
@@ -55,6 +60,7 @@ impl OptimizeArgs {
             force: self.force,
             verbose: !self.json,
             profiles: self.profiles,
+            bootstrap: self.bootstrap,
         }
     }
 }

@@ -93,6 +93,9 @@ pub struct Table1 {
     /// Whether the twin, not the noise, limits the answer.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_check: Option<tb_optimize::model_check::ModelCheck>,
+    /// The moving-block bootstrap of the answer, where asked for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bootstrap: Option<tb_optimize::bootstrap::Bootstrap>,
     /// The twin's lap time minus the vehicle's [s], with the initial and with the optimised
     /// parameters (over the distance both cover; what `time_over_distance` shows).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -188,6 +191,7 @@ pub fn table1(result: &StudyResult, lap_time_difference: Option<LapTimeDifferenc
         study: result.study.clone(),
         lap_time_difference,
         model_check: joint.and_then(|j| j.model_check.clone()),
+        bootstrap: joint.and_then(|j| j.bootstrap.clone()),
         steps: result
             .steps
             .iter()
@@ -326,6 +330,12 @@ pub fn table1_markdown(t: &Table1) -> String {
     }
     if let Some(c) = &t.model_check {
         s.push_str(&format!("\nModel check ({}): {}.\n", c.method, c.detail));
+    }
+    if let Some(b) = &t.bootstrap {
+        s.push_str(&format!(
+            "\n{} (1: the sandwich's intervals are as wide as the refits scatter; the refits see only the noise, not the twin's share).\n",
+            b.summary(|n| short(n).to_string())
+        ));
     }
     if !statements.is_empty() {
         s.push_str("\nAbout the intervals:\n");

@@ -127,6 +127,9 @@ pub struct RunOptions {
     /// Profile likelihood of every parameter after the joint refinement (as the study's
     /// `profiles = true`).
     pub profiles: bool,
+    /// A moving-block bootstrap of the joint answer with this many refits
+    /// ([`crate::bootstrap`]; 0: none, as the study's `bootstrap = N`).
+    pub bootstrap: usize,
 }
 
 impl std::fmt::Debug for RunOptions {
@@ -142,6 +145,7 @@ impl std::fmt::Debug for RunOptions {
             .field("force", &self.force)
             .field("evaluator", &self.evaluator.is_some())
             .field("profiles", &self.profiles)
+            .field("bootstrap", &self.bootstrap)
             .finish()
     }
 }
@@ -274,6 +278,9 @@ pub struct JointResult {
     /// where it could not be made, and in results written before it was).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_check: Option<crate::model_check::ModelCheck>,
+    /// The moving-block bootstrap of the answer, where asked for (`--bootstrap N`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bootstrap: Option<crate::bootstrap::Bootstrap>,
 }
 
 /// The twin's laps of a study, on the comparison's uniform time grid: at the first step's
@@ -1198,7 +1205,7 @@ fn joint_answer(
             &session.pool,
             run,
         );
-        return Ok((None, iv, None, None));
+        return Ok((None, iv, None, None, None));
     }
     // One series per lap and signal; each lap a segment of its own for the long-run
     // covariance (laps are independent of each other).
@@ -1250,7 +1257,7 @@ fn joint_answer(
         Err(why) => {
             let why = format!("no joint refinement and no interval: {why}");
             let iv = crate::interval::Intervals::none(&j.names, &x, why, 2 * x.len() + 1);
-            return Ok((None, iv, None, None));
+            return Ok((None, iv, None, None, None));
         }
     };
     if let Some(times) = lap_clocks(session) {
@@ -1296,8 +1303,24 @@ fn joint_answer(
             walks.as_ref().unwrap_or(&session.pool),
         )
     });
+    let replicates = study.file.bootstrap.max(session.options.bootstrap);
+    let bootstrap = (replicates > 0).then(|| {
+        let se: Vec<Option<f64>> = j
+            .names
+            .iter()
+            .map(|n| iv.get(n).and_then(|p| p.std_error))
+            .collect();
+        crate::bootstrap::run(
+            &mut frame,
+            &solution,
+            &j.names,
+            &se,
+            replicates,
+            study.file.seed,
+        )
+    });
     state.set(&index, &solution.x);
-    Ok((Some(refinement), iv, profiles, checked))
+    Ok((Some(refinement), iv, profiles, checked, bootstrap))
 }
 
 /// A residual of the wheel loads below this RMS [N] is no spread to estimate (a lap the
@@ -1404,6 +1427,7 @@ type JointAnswer = (
     crate::interval::Intervals,
     Option<crate::profile::Profiles>,
     Option<crate::model_check::Outcome>,
+    Option<crate::bootstrap::Bootstrap>,
 );
 
 /// Every parameter's value at the study's start: the first step's start point, the others
@@ -1452,7 +1476,7 @@ fn finish_study(
     let j = JointProblem::of(study, &state.checkpoint.completed);
     let prepared = session.bench.prepare(&j.signals, &study.file.compare)?;
     let sequential: Vec<f64> = state.assignment.iter().map(|p| p.1).collect();
-    let (refinement, intervals, profiles, checked) =
+    let (refinement, intervals, profiles, checked, bootstrap) =
         joint_answer(session, &mut state, &j, &prepared)?;
     // The joint row of Tab. 1: every signal of every lap at the study's start and at its
     // answer (a study of one lap has both laps already).
@@ -1584,6 +1608,7 @@ fn finish_study(
         e: rows(&|k| session.bench.label(k), &before, &after),
         refinement,
         model_check: checked.map(|c| c.check),
+        bootstrap,
     };
     let joint_intervals = Some(intervals);
     let (simulations, simulation_seconds) = session.bench.runs();

@@ -33,6 +33,7 @@
 //! (bit-exact optimiser state in the checkpoint) the same result as an uninterrupted one.
 
 pub mod bench;
+pub mod bootstrap;
 pub mod checkpoint;
 pub mod cmaes;
 pub mod driver;

@@ -60,6 +60,10 @@ pub struct StudyFile {
     /// `twinbench optimize --profiles` asks for it too).
     #[serde(default)]
     pub profiles: bool,
+    /// Refits of a moving-block bootstrap of the joint answer (`tb_optimize::bootstrap`;
+    /// `twinbench optimize --bootstrap N` asks for it too); 0: none.
+    #[serde(default)]
+    pub bootstrap: usize,
 }
 
 fn yes() -> bool {

@@ -608,7 +608,7 @@ impl StudyObserver for PyProgress {
 /// Runs a study as `twinbench optimize --json` does (same files in `out`); returns the
 /// result as JSON. `executor` and `function`: evaluate the generations there.
 #[pyfunction]
-#[pyo3(signature = (study, out, threads, resume, generations, optimizer, force, no_report, executor=None, function=None, digest=None, progress=None, profiles=false, signals=None))]
+#[pyo3(signature = (study, out, threads, resume, generations, optimizer, force, no_report, executor=None, function=None, digest=None, progress=None, profiles=false, signals=None, bootstrap=0))]
 #[allow(clippy::too_many_arguments)]
 fn optimize(
     py: Python<'_>,
@@ -626,6 +626,7 @@ fn optimize(
     progress: Option<Py<PyAny>>,
     profiles: bool,
     signals: Option<Py<PyAny>>,
+    bootstrap: usize,
 ) -> PyResult<String> {
     let optimizer = optimizer
         .map(|o| match o.as_str() {
@@ -658,6 +659,7 @@ fn optimize(
         no_report,
         force,
         profiles,
+        bootstrap,
     };
     let (args_study, args_out, resume) =
         (args.study.clone(), args.out.clone(), args.resume_command());

@@ -433,6 +433,7 @@ class Study:
         report: bool = True,
         progress: Optional[Callable[[Dict[str, Any]], None]] = None,
         profiles: bool = False,
+        bootstrap: int = 0,
     ) -> Dict[str, Any]:
         """Run the study, as ``twinbench optimize --json``, and return its result.
 
@@ -465,6 +466,10 @@ class Study:
                 generation, its checkpoint kept, and is raised.
             profiles: profile likelihood of every parameter after the joint refinement
                 (as ``--profiles``); the intervals are then the profiles'.
+            bootstrap: refits of a moving-block bootstrap of the answer (as
+                ``--bootstrap N``; 0: none); ``result["joint"]["bootstrap"]`` then has
+                each parameter's bootstrap ``std_error``, its ``ratio`` to the sandwich's
+                and a percentile ``interval``.
 
         Returns:
             The result as a dict (per step: parameters before/after, e before/after,
@@ -509,6 +514,7 @@ class Study:
             progress,
             bool(profiles),
             signals,
+            int(bootstrap),
         )
         result = json.loads(text)
         # The study's answer (Tab. 1's row "all"): every parameter with its interval; a

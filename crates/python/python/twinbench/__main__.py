@@ -43,6 +43,7 @@ def _parser() -> argparse.ArgumentParser:
     o.add_argument("--force", action="store_true", help="optimise even when measurement and twin do not belong together")
     o.add_argument("--no-report", action="store_true", help="skip Tab. 1 and the plots")
     o.add_argument("--profiles", action="store_true", help="profile likelihood of every parameter (its laps on the cluster too)")
+    o.add_argument("--bootstrap", type=int, default=0, metavar="N", help="a moving-block bootstrap of the answer with N refits (a check of the intervals)")
     o.add_argument("--json", action="store_true", help="print the result as JSON")
     o.add_argument("--quiet", "-q", action="store_true", help="no line per generation on stderr")
     k = sub.add_parser("pack", help="pack twinbench's FMUs (vehicle, driver, dyno, edu) as `twinbench pack` does")
@@ -104,6 +105,7 @@ def _optimize(args: argparse.Namespace) -> int:
             force=args.force,
             report=not args.no_report,
             profiles=args.profiles,
+            bootstrap=args.bootstrap,
         )
         wall = time.perf_counter() - started
     finally:
