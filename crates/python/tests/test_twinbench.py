@@ -364,6 +364,34 @@ def test_the_joint_fit_and_its_profiles_run_on_dask_as_on_the_command_line(tmp_p
     assert table1(tmp_path / "dask") == table1(tmp_path / "cli")
 
 
+def test_the_bootstrap_runs_on_dask_as_on_the_command_line(tmp_path):
+    # The lift step alone with `--bootstrap 4`: the refits' laps are tasks on the workers,
+    # and the bootstrap (its draws seeded by the study) is the command line's to the bit.
+    text = STUDY.read_text()
+    text = text[: text.index("# Step 2")].replace('"../', f'"{ROOT.as_posix()}/')
+    study = tmp_path / "lift.toml"
+    study.write_text(text)
+    cli("optimize", study, "--out", tmp_path / "cli", "--json", "--generations", "3", "--bootstrap", "4")
+    cluster, client = local_cluster(tmp_path)
+    try:
+        result = twinbench.Study(study).optimize(
+            executor=client.get_executor(), out=tmp_path / "dask", generations=3, bootstrap=4
+        )
+        served = client.run(lambda: __import__("twinbench._worker")._worker.points())
+    finally:
+        client.close()
+        cluster.close()
+    expected = json.loads((tmp_path / "cli" / "result.json").read_text())
+    boot = result["joint"]["bootstrap"]
+    assert boot == expected["joint"]["bootstrap"]
+    assert boot["replicates"] == 4 and boot["completed"] == 4 and boot["block"] >= 10
+    for p in boot["parameters"]:
+        lo, hi = p["interval"]
+        assert p["std_error"] > 0 and p["ratio"] > 0 and lo < hi
+    assert sum(served.values()) == expected["joint"]["refinement"]["laps"] + boot["laps"]
+    assert "Bootstrap (4 of 4 refits" in (tmp_path / "dask" / "table1.md").read_text()
+
+
 def test_a_worker_killed_mid_study_changes_nothing(cli_study, tmp_path):
     cluster, client = local_cluster(tmp_path)
     killed = []
