@@ -249,6 +249,66 @@ pub fn values_to_load(joint: &TableStep) -> String {
     )
 }
 
+/// The intervals' statements (parameter, statement) merged into one line per cause, with
+/// the parameters it concerns and what to do next; a statement of no known cause stays as
+/// it is, under its parameter. A parameter is named once per cause.
+pub fn merged_statements(items: &[(String, String)]) -> Vec<String> {
+    // (what the statement says, the line's opening, what to do next)
+    const CAUSES: [(&[&str], &str, &str); 3] = [
+        (
+            &["on its lower bound", "on its upper bound"],
+            "On a bound of its range, the optimum beyond it",
+            "widen the range in the study where the value beyond is physical; where it is not, the parameter is virtual here (it takes up what the twin misses, see the model check) and its value holds for this twin only",
+        ),
+        (
+            &["not determined"],
+            "Not determined by these signals",
+            "fit a second lap (a second `[[measurement]]` in the study) or add a signal that sees it; `twinbench validate` on a lap not fitted shows what the answer predicts",
+        ),
+        (
+            &["open below", "open above"],
+            "Interval open (any value to the range's end fits)",
+            "the signals barely see it: a second lap or another signal closes it",
+        ),
+    ];
+    let mut lines = Vec::new();
+    let mut known = vec![false; items.len()];
+    for (says, opening, next) in CAUSES {
+        let mut names: Vec<String> = Vec::new();
+        for (k, (name, why)) in items.iter().enumerate() {
+            if let Some(s) = says.iter().find(|s| why.contains(*s)) {
+                known[k] = true;
+                let which = if s.contains("lower") || s.contains("below") {
+                    " (low end)"
+                } else if s.contains("upper") || s.contains("above") {
+                    " (high end)"
+                } else {
+                    ""
+                };
+                let named = format!("{name}{which}");
+                if !names.contains(&named) {
+                    names.push(named);
+                }
+            }
+        }
+        if !names.is_empty() {
+            lines.push(format!("- {opening}: {}. Next: {next}.", names.join(", ")));
+        }
+    }
+    for ((name, why), known) in items.iter().zip(known) {
+        if !known {
+            let line = match why.strip_prefix(&format!("{name}: ")) {
+                Some(rest) => format!("- {name}: {rest}"),
+                None => format!("- {name}: {why}"),
+            };
+            if !lines.contains(&line) {
+                lines.push(line);
+            }
+        }
+    }
+    lines
+}
+
 /// Tab. 1 as Markdown (parameters listed on a step's first row, as in the paper).
 pub fn table1_markdown(t: &Table1) -> String {
     let mut s = String::new();
@@ -315,16 +375,14 @@ pub fn table1_markdown(t: &Table1) -> String {
             ));
         }
     }
-    let statements: Vec<String> = t
-        .steps
-        .iter()
-        .chain(&t.joint)
-        .flat_map(|st| &st.parameters)
-        .filter_map(|p| {
-            let why = p.interval_statement.as_ref()?;
-            Some(format!("- {}: {why}", short(&p.name)))
-        })
-        .collect();
+    let statements = merged_statements(
+        &t.steps
+            .iter()
+            .chain(&t.joint)
+            .flat_map(|st| &st.parameters)
+            .filter_map(|p| Some((short(&p.name).to_string(), p.interval_statement.clone()?)))
+            .collect::<Vec<_>>(),
+    );
     if let Some(j) = &t.joint {
         s.push_str(&format!("\n{}\n", values_to_load(j)));
     }
@@ -610,4 +668,46 @@ pub fn write_report(
         table_markdown: md,
         files,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Statements of one cause make one line naming every parameter it concerns, with
+    /// what to do next; one of no known cause stays under its parameter.
+    #[test]
+    fn statements_are_merged_per_cause_with_what_to_do_next() {
+        let items: Vec<(String, String)> = [
+            ("c_lift_front", "on its lower bound (0.2): the optimum is not inside the range, so no interval; the data want it beyond [0.2, 2.5]"),
+            ("l", "on its upper bound (4.5): the optimum is not inside the range"),
+            ("b_front", "not determined by these signals within [0.9, 2]"),
+            ("b_rear", "b_rear: not determined by these signals within [0.9, 2] m"),
+            ("c_lift_rear", "open above: any value up to the bound 2.5 fits"),
+            ("mass", "mass: the profile stopped: a lap failed"),
+        ]
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+        let lines = merged_statements(&items);
+        assert_eq!(lines.len(), 4, "{lines:#?}");
+        assert!(
+            lines[0].starts_with("- On a bound of its range")
+                && lines[0].contains("c_lift_front (low end), l (high end)")
+                && lines[0].contains("virtual"),
+            "{}",
+            lines[0]
+        );
+        assert!(
+            lines[1].contains("b_front, b_rear")
+                && lines[1].contains("second lap")
+                && lines[1].contains("twinbench validate"),
+            "{}",
+            lines[1]
+        );
+        assert!(lines[2].contains("c_lift_rear (high end)"), "{}", lines[2]);
+        assert_eq!(lines[3], "- mass: the profile stopped: a lap failed");
+        // Nothing to say, nothing said.
+        assert!(merged_statements(&[]).is_empty());
+    }
 }
