@@ -285,7 +285,7 @@ not), then rows with strictly increasing s ≥ 0 (at least two; finite, v ≥ 0,
 100 m/s²). The target is piecewise linear in s and periodic: the lap length L is the last s
 of the file and every position is taken modulo L, so the vehicle's <code>s</code> may keep
 growing over several laps or wrap at L itself. The default file is the Spielberg lap of
-<code>data/spielberg_lap.csv</code>, resampled every 1 m and smoothed over 9 m
+<code>data/spielberg_lap.csv</code>, resampled every 1 m and smoothed over 3 m
 (<code>twinbench lap</code> makes the same file for any measured lap; provenance in
 <code>resources/NOTICE</code>). <code>target_speed_file</code> names another file. A
 missing or malformed file fails the initialisation with the file and row named.</p>
