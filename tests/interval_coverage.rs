@@ -149,14 +149,14 @@ fn the_95_percent_intervals_hold_the_truth_in_90_percent_of_the_twins_own_laps_w
     eprintln!("model check fired on {fired} of {laps} laps");
     // The target is every parameter at 90 % and sd(z) within [0.8, 1.25] (the standard
     // error itself calibrated, not only the critical value). Measured on these 20 laps
-    // (2026-12-01): c_lift_front 20/20 and 1.06, c_lift_rear 19/20 and 1.17, l 17/20 and
-    // 1.35, b_front 20/20 and 0.83, b_rear 19/20 and 1.09; on tools/calibrate.py's 20 laps
-    // c_lift_front is the one short (13/20, 1.57). Until the wheelbase and c_lift_front are
-    // calibrated on every set (docs/optimize.md, "Calibration"), the test holds the level
-    // reached: 85 % and [0.8, 1.4] for each, and the target for the three that meet it on
-    // both sets.
+    // (2026-12-01, the noise in time, `lap`'s 3 m speed target): c_lift_front 19/20 and
+    // 1.07, c_lift_rear 19/20 and 1.24, l 18/20 and 1.17, b_front 20/20 and 0.84, b_rear
+    // 19/20 and 1.02; on tools/calibrate.py's 20 laps (a truth of its own per lap)
+    // c_lift_front is the one short (17/20, 1.44). Until it is calibrated on every set
+    // (docs/optimize.md, "Calibration"), the test holds the level reached for it: 85 % and
+    // [0.8, 1.4]; the target for the four that meet it on both sets.
     for (k, (n, _)) in TRUTH.iter().enumerate() {
-        let calibrated = !matches!(*n, "vehicle.l" | "vehicle.c_lift_front");
+        let calibrated = *n != "vehicle.c_lift_front";
         let (coverage, spread) = match calibrated {
             true => (0.9, 0.8..=1.25),
             false => (0.85, 0.8..=1.4),
