@@ -126,6 +126,82 @@ fn a_missing_channel_and_an_unknown_unit_name_the_file_and_the_channel() {
     assert!(e.contains("unknown unit 'furlong/fortnight'"), "{e}");
 }
 
+/// The bundled lap with the wheel loads renamed as a logger names them (`LoadFL`, …), one
+/// row's `LoadFR` set to `nan` if `nan_row` is given, and `LoadRR` absent if `drop_rr`.
+fn logger_named_lap(dir: &Path, name: &str, drop_rr: bool, nan_row: Option<usize>) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("data/spielberg_lap.csv")).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let header: Vec<String> = lines[0]
+        .split(',')
+        .map(|c| match c {
+            "Fz_fl" => "LoadFL".into(),
+            "Fz_fr" => "LoadFR".into(),
+            "Fz_rl" => "LoadRL".into(),
+            "Fz_rr" if drop_rr => "Other".into(),
+            "Fz_rr" => "LoadRR".into(),
+            c => c.into(),
+        })
+        .collect();
+    if let Some(row) = nan_row {
+        let k = header.iter().position(|c| c == "LoadFR").unwrap();
+        let mut cells: Vec<String> = lines[row].split(',').map(str::to_string).collect();
+        cells[k] = "nan".into();
+        lines[row] = cells.join(",");
+    }
+    lines[0] = header.join(",");
+    let path = dir.join(name);
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    path
+}
+
+#[test]
+fn errors_about_mapped_channels_name_the_files_own_channels() {
+    let dir = tb_testkit::scratch("mapped-channels");
+    let map = dir.path().join("map.toml");
+    std::fs::write(
+        &map,
+        "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\n",
+    )
+    .unwrap();
+    let track = root().join("data/spielberg_lap_track.csv");
+    let lap = |meas: &Path| {
+        failure(&[
+            "lap",
+            meas.to_str().unwrap(),
+            "--channels",
+            map.to_str().unwrap(),
+            "--track",
+            track.to_str().unwrap(),
+            "--out",
+            dir.path().join("lap").to_str().unwrap(),
+        ])
+    };
+    // A missing channel: the closest and the list are the file's channels, not the
+    // signals the map renamed them to.
+    let e = lap(&logger_named_lap(dir.path(), "no_rr.csv", true, None));
+    assert!(e.contains("no channel `LoadRR`"), "{e}");
+    assert!(
+        e.contains("closest channels: LoadFR, LoadRL, LoadFL"),
+        "{e}"
+    );
+    assert!(
+        e.contains(
+            "channels in the file: time, distance, v, a_x, a_y, LoadFL, LoadFR, LoadRL, Other"
+        ),
+        "{e}"
+    );
+    // A NaN in a mapped channel is told under the file's channel.
+    let e = lap(&logger_named_lap(dir.path(), "nan.csv", false, Some(50)));
+    assert!(
+        e.contains("line 51, column `LoadFR`") && e.contains("not finite"),
+        "{e}"
+    );
+    // Two signals given one channel are refused, both named.
+    std::fs::write(&map, "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFL\"\n").unwrap();
+    let e = lap(&logger_named_lap(dir.path(), "ok.csv", false, None));
+    assert!(e.contains("gives channel `LoadFL` to two signals"), "{e}");
+}
+
 #[test]
 fn a_measurement_of_another_circuit_is_refused_before_optimising() {
     common::fmu_dir();

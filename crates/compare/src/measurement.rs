@@ -300,27 +300,106 @@ impl Measurement {
         let file = path.display().to_string();
         map.check(&format!("channel map for {file}"))?;
         let mut table = Table::read_any(path)?;
+        // Looked up among the file's own names (a map that swaps two channels works, and a
+        // missing channel is told with the file's channels, not the renamed ones).
+        let original: Vec<String> = table.names().to_vec();
+        let mut renames: Vec<(usize, String)> = Vec::new();
         for (signal, channel) in &map.0 {
-            let i = table
-                .names()
-                .iter()
-                .position(|n| n == channel)
-                .ok_or_else(|| Error::MissingChannel {
+            let i = original.iter().position(|n| n == channel).ok_or_else(|| {
+                Error::MissingChannel {
                     file: file.clone(),
                     signal: signal.clone(),
                     channel: channel.clone(),
                     closest: tb_files::names::closest(
                         channel,
-                        table.names().iter().map(String::as_str),
+                        original.iter().map(String::as_str),
                         3,
                     )
                     .join(", "),
-                    available: table.names().join(", "),
-                })?;
-            table.rename(i, signal)?;
+                    available: original.join(", "),
+                }
+            })?;
+            if let Some((_, other)) = renames.iter().find(|(k, _)| *k == i) {
+                return Err(Error::Settings(format!(
+                    "{file}: the channel map gives channel `{channel}` to two signals, `{other}` and `{signal}`"
+                )));
+            }
+            renames.push((i, signal.clone()));
         }
-        to_si(&mut table, &file, map)?;
-        Self::from_table(table)
+        table.rename_many(&renames)?;
+        let in_file = |e: Error| file_channels(e, map);
+        to_si(&mut table, &file, map).map_err(in_file)?;
+        Self::from_table(table).map_err(in_file)
+    }
+}
+
+/// An error about a column that the channel map renamed names the file's own channel (what
+/// the user sees in the file), not twinbench's signal.
+fn file_channels(e: Error, map: &ChannelMap) -> Error {
+    let channel = |column: String| map.0.get(&column).cloned().unwrap_or(column);
+    match e {
+        Error::Table(TableError::NonFinite {
+            file,
+            row,
+            column,
+            value,
+        }) => Error::Table(TableError::NonFinite {
+            file,
+            row,
+            column: channel(column),
+            value,
+        }),
+        Error::Table(TableError::Malformed {
+            file,
+            row,
+            column,
+            value,
+        }) => Error::Table(TableError::Malformed {
+            file,
+            row,
+            column: channel(column),
+            value,
+        }),
+        Error::NonIncreasingTime {
+            file,
+            row,
+            column,
+            previous,
+            value,
+        } => Error::NonIncreasingTime {
+            file,
+            row,
+            column: channel(column),
+            previous,
+            value,
+        },
+        Error::DistanceBackwards {
+            file,
+            row,
+            column,
+            previous,
+            value,
+        } => Error::DistanceBackwards {
+            file,
+            row,
+            column: channel(column),
+            previous,
+            value,
+        },
+        Error::NonUniformSampling {
+            file,
+            row,
+            column,
+            step,
+            expected,
+        } => Error::NonUniformSampling {
+            file,
+            row,
+            column: channel(column),
+            step,
+            expected,
+        },
+        other => other,
     }
 }
 
