@@ -332,10 +332,15 @@ mod in_flight {
 pub struct FolderLock {
     _file: std::fs::File,
     pub path: PathBuf,
+    /// The folder did not exist before: a run that wrote nothing into it (refused before
+    /// its first result) takes it away again, instead of leaving a folder holding only
+    /// the lock.
+    created: bool,
 }
 
 impl FolderLock {
     pub fn acquire(dir: &Path) -> std::io::Result<FolderLock> {
+        let created = !dir.exists();
         std::fs::create_dir_all(dir)
             .map_err(|e| refuse(dir, format!("cannot create the folder: {e}")))?;
         // Results go only into a folder of this user: in another user's folder (a shared
@@ -406,7 +411,11 @@ impl FolderLock {
         }
         file.set_len(0)?;
         write!(file, "{}", std::process::id())?;
-        Ok(FolderLock { _file: file, path })
+        Ok(FolderLock {
+            _file: file,
+            path,
+            created,
+        })
     }
 }
 
@@ -417,5 +426,18 @@ impl Drop for FolderLock {
         // and closing our descriptor alone would leave the folder locked while it lives.
         // SAFETY: flock on an open descriptor of ours.
         unsafe { libc::flock(self._file.as_raw_fd(), libc::LOCK_UN) };
+        // A folder this lock made and nothing else wrote into: gone again (a folder that
+        // holds anything else, or that was there before, stays as it is).
+        if let (true, Some(dir)) = (self.created, self.path.parent()) {
+            let only_the_lock = std::fs::read_dir(dir).is_ok_and(|entries| {
+                entries
+                    .map(|e| e.map(|e| e.path() == self.path))
+                    .all(|same| same.unwrap_or(false))
+            });
+            if only_the_lock {
+                let _ = std::fs::remove_file(&self.path);
+                let _ = std::fs::remove_dir(dir);
+            }
+        }
     }
 }

@@ -29,3 +29,23 @@ fn a_dropped_lock_is_free_even_while_a_forked_child_lives() {
     }
     relocked.expect("the folder is free once the lock is dropped");
 }
+
+/// A folder the lock made and nothing else wrote into (a run refused before its first
+/// result) is gone once the lock is dropped; one with a result in it, or one that was there
+/// before, stays.
+#[test]
+fn a_folder_made_for_nothing_is_taken_away_again() {
+    let base = tempfile::tempdir().unwrap();
+    let fresh = base.path().join("refused");
+    drop(FolderLock::acquire(&fresh).unwrap());
+    assert!(!fresh.exists(), "the empty output folder is left behind");
+    let written = base.path().join("written");
+    let lock = FolderLock::acquire(&written).unwrap();
+    std::fs::write(written.join("result.json"), "{}").unwrap();
+    drop(lock);
+    assert!(written.join("result.json").is_file());
+    let before = base.path().join("before");
+    std::fs::create_dir(&before).unwrap();
+    drop(FolderLock::acquire(&before).unwrap());
+    assert!(before.is_dir(), "a folder that was there before is kept");
+}
