@@ -585,6 +585,14 @@ fn cache_prune_removes_unused_folders_and_keeps_those_in_use() {
         info.contains("folders  2 (") && info.contains("1 in use"),
         "{info}"
     );
+    // Each folder with the model its description names, not only its digest.
+    let description = std::fs::read_to_string(held.dir.join("modelDescription.xml")).unwrap();
+    let name = description
+        .split("modelName=\"")
+        .nth(1)
+        .and_then(|r| r.split('"').next())
+        .unwrap();
+    assert!(info.contains(&format!("{name} (FMI ")), "{info}");
     let pruned = twinbench(&["cache", "prune", "--older-than", "0"]);
     assert!(
         pruned.contains("removed  1 folders") && pruned.contains("kept     1 folders in use"),

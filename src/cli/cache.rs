@@ -122,8 +122,9 @@ pub fn run(args: CacheArgs) -> anyhow::Result<()> {
             );
             for f in folders.iter().rev() {
                 println!(
-                    "  {}  {:>10}  last used {}{}",
+                    "  {}  {:<28}  {:>10}  last used {}{}",
                     f.path.file_name().unwrap_or_default().to_string_lossy(),
+                    model_of(&f.path),
                     shown(f.bytes),
                     days_ago(f.last_used),
                     if f.in_use {
@@ -174,5 +175,35 @@ mod tests {
         assert_eq!(parse_size("1.5 kib").unwrap(), 1536);
         assert!(parse_size("5 furlongs").is_err());
         assert!(parse_size("-1").is_err());
+    }
+}
+
+/// The model a store folder holds, as its model description names it: `vehicle (FMI 2.0)`
+/// (the folder's name is a digest of the FMU's bytes; a user looks for the model). Read
+/// from the first 64 KiB of `modelDescription.xml`, a supplier's text: control characters
+/// dropped, at most 40 characters; `?` where there is none.
+fn model_of(folder: &std::path::Path) -> String {
+    use std::io::Read;
+    let mut head = Vec::new();
+    let read = std::fs::File::open(folder.join("modelDescription.xml"))
+        .and_then(|f| f.take(64 * 1024).read_to_end(&mut head));
+    if read.is_err() {
+        return "?".into();
+    }
+    let text = String::from_utf8_lossy(&head);
+    let attribute = |name: &str| {
+        let start = text.find(&format!(" {name}=\""))? + name.len() + 3;
+        let end = text[start..].find('"')? + start;
+        let value: String = text[start..end]
+            .chars()
+            .filter(|c| !c.is_control())
+            .take(40)
+            .collect();
+        Some(value)
+    };
+    match (attribute("modelName"), attribute("fmiVersion")) {
+        (Some(name), Some(version)) => format!("{name} (FMI {version})"),
+        (Some(name), None) => name,
+        _ => "?".into(),
     }
 }
