@@ -162,22 +162,6 @@ pub fn run(args: CacheArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sizes_take_units() {
-        assert_eq!(parse_size("1000").unwrap(), 1000);
-        assert_eq!(parse_size("500M").unwrap(), 500_000_000);
-        assert_eq!(parse_size("2G").unwrap(), 2_000_000_000);
-        assert_eq!(parse_size("1GiB").unwrap(), 1 << 30);
-        assert_eq!(parse_size("1.5 kib").unwrap(), 1536);
-        assert!(parse_size("5 furlongs").is_err());
-        assert!(parse_size("-1").is_err());
-    }
-}
-
 /// The model a store folder holds, as its model description names it: `vehicle (FMI 2.0)`
 /// (the folder's name is a digest of the FMU's bytes; a user looks for the model). Read
 /// from the first 64 KiB of `modelDescription.xml`, a supplier's text: control characters
@@ -205,5 +189,21 @@ fn model_of(folder: &std::path::Path) -> String {
         (Some(name), Some(version)) => format!("{name} (FMI {version})"),
         (Some(name), None) => name,
         _ => "?".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_take_units() {
+        assert_eq!(parse_size("1000").unwrap(), 1000);
+        assert_eq!(parse_size("500M").unwrap(), 500_000_000);
+        assert_eq!(parse_size("2G").unwrap(), 2_000_000_000);
+        assert_eq!(parse_size("1GiB").unwrap(), 1 << 30);
+        assert_eq!(parse_size("1.5 kib").unwrap(), 1536);
+        assert!(parse_size("5 furlongs").is_err());
+        assert!(parse_size("-1").is_err());
     }
 }
