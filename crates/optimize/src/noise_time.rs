@@ -221,18 +221,6 @@ mod tests {
     use super::*;
     use crate::interval::{sandwich, sandwich_with};
 
-    /// A standard normal number: Box–Muller from a small LCG (deterministic).
-    fn gauss(seed: &mut u64) -> f64 {
-        let mut u = || {
-            *seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((*seed >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        };
-        let (a, b) = (u(), u());
-        (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
-    }
-
     /// A lap of 200 m stretches, straights at 70 m/s and corners at 20 m/s, on a 1 m grid;
     /// a load y = a + b·(v/70)² (b seen on the straights, as a lift coefficient is) with a
     /// noise that persists 1 s in time (AR(1)), the same on a straight as in a corner. The
@@ -256,8 +244,8 @@ mod tests {
             times: &clocks_times,
             bin_s: 0.05,
         };
-        let mut seed = 4242u64;
-        let mut gauss = || gauss(&mut seed);
+        let mut rng = crate::rng::Rng::new(4242);
+        let mut gauss = || rng.normal();
         let (cases, mut covered) = (200, 0);
         let (mut z, mut z_scores) = (Vec::new(), Vec::new());
         for _ in 0..cases {
