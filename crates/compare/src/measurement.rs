@@ -335,72 +335,20 @@ impl Measurement {
 
 /// An error about a column that the channel map renamed names the file's own channel (what
 /// the user sees in the file), not twinbench's signal.
-fn file_channels(e: Error, map: &ChannelMap) -> Error {
-    let channel = |column: String| map.0.get(&column).cloned().unwrap_or(column);
-    match e {
-        Error::Table(TableError::NonFinite {
-            file,
-            row,
-            column,
-            value,
-        }) => Error::Table(TableError::NonFinite {
-            file,
-            row,
-            column: channel(column),
-            value,
-        }),
-        Error::Table(TableError::Malformed {
-            file,
-            row,
-            column,
-            value,
-        }) => Error::Table(TableError::Malformed {
-            file,
-            row,
-            column: channel(column),
-            value,
-        }),
-        Error::NonIncreasingTime {
-            file,
-            row,
-            column,
-            previous,
-            value,
-        } => Error::NonIncreasingTime {
-            file,
-            row,
-            column: channel(column),
-            previous,
-            value,
-        },
-        Error::DistanceBackwards {
-            file,
-            row,
-            column,
-            previous,
-            value,
-        } => Error::DistanceBackwards {
-            file,
-            row,
-            column: channel(column),
-            previous,
-            value,
-        },
-        Error::NonUniformSampling {
-            file,
-            row,
-            column,
-            step,
-            expected,
-        } => Error::NonUniformSampling {
-            file,
-            row,
-            column: channel(column),
-            step,
-            expected,
-        },
-        other => other,
+fn file_channels(mut e: Error, map: &ChannelMap) -> Error {
+    match &mut e {
+        Error::Table(TableError::NonFinite { column, .. })
+        | Error::Table(TableError::Malformed { column, .. })
+        | Error::NonIncreasingTime { column, .. }
+        | Error::DistanceBackwards { column, .. }
+        | Error::NonUniformSampling { column, .. } => {
+            if let Some(channel) = map.0.get(column.as_str()) {
+                *column = channel.clone();
+            }
+        }
+        _ => {}
     }
+    e
 }
 
 /// Converts every known signal from its declared unit to SI (no unit declared: SI assumed).
