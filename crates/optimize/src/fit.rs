@@ -254,27 +254,22 @@ impl<'a, F: Laps> Frame<'a, F> {
             .iter()
             .zip(&self.ranges)
             .zip(run)
-            .map(|((s, want), (got, y))| {
+            .enumerate()
+            .map(|(b, ((s, want), (got, y)))| {
                 if got.start > want.start || got.end < want.end {
                     return Err(format!(
                         "a lap does not cover the compared stretch of {} (grid points {}..{})",
                         s.name, want.start, want.end
                     ));
                 }
+                let shift = self.shift.as_ref().map(|shift| &shift[b]);
                 Ok(want
                     .clone()
-                    .map(|g| y[g - got.start] - s.measured[g])
-                    .collect::<Vec<f64>>())
-            })
-            .zip(0..)
-            .map(|(e, b)| match (&self.shift, e) {
-                (Some(shift), Ok(mut e)) => {
-                    for (e, d) in e.iter_mut().zip(&shift[b]) {
-                        *e -= d;
-                    }
-                    Ok(e)
-                }
-                (_, e) => e,
+                    .map(|g| {
+                        let e = y[g - got.start] - s.measured[g];
+                        shift.map_or(e, |d| e - d[g - want.start])
+                    })
+                    .collect())
             })
             .collect()
     }
