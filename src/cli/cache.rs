@@ -163,33 +163,25 @@ pub fn run(args: CacheArgs) -> anyhow::Result<()> {
 }
 
 /// The model a store folder holds, as its model description names it: `vehicle (FMI 2.0)`
-/// (the folder's name is a digest of the FMU's bytes; a user looks for the model). Read
-/// from the first 64 KiB of `modelDescription.xml`, a supplier's text: control characters
-/// dropped, at most 40 characters; `?` where there is none.
+/// (the folder's name is a digest of the FMU's bytes; a user looks for the model). The
+/// description is the importer's parse (FMI 2.0 or 3.0); its name is a supplier's text:
+/// control characters dropped, at most 40 characters; `?` where it cannot be read.
 fn model_of(folder: &std::path::Path) -> String {
-    use std::io::Read;
-    let mut head = Vec::new();
-    let read = std::fs::File::open(folder.join("modelDescription.xml"))
-        .and_then(|f| f.take(64 * 1024).read_to_end(&mut head));
-    if read.is_err() {
-        return "?".into();
-    }
-    let text = String::from_utf8_lossy(&head);
-    let attribute = |name: &str| {
-        let start = text.find(&format!(" {name}=\""))? + name.len() + 3;
-        let end = text[start..].find('"')? + start;
-        let value: String = text[start..end]
-            .chars()
-            .filter(|c| !c.is_control())
-            .take(40)
-            .collect();
-        Some(value)
-    };
-    match (attribute("modelName"), attribute("fmiVersion")) {
-        (Some(name), Some(version)) => format!("{name} (FMI {version})"),
-        (Some(name), None) => name,
-        _ => "?".into(),
-    }
+    std::fs::read_to_string(folder.join("modelDescription.xml"))
+        .ok()
+        .and_then(|xml| tb_fmi::import::description::parse(&xml).ok())
+        .map_or_else(
+            || "?".into(),
+            |d| {
+                let name: String = d
+                    .model_name
+                    .chars()
+                    .filter(|c| !c.is_control())
+                    .take(40)
+                    .collect();
+                format!("{name} (FMI {})", d.fmi_version)
+            },
+        )
 }
 
 #[cfg(test)]
