@@ -71,20 +71,45 @@ pub(crate) fn meat(
     let mut capped = false;
     for seg in segments {
         let of: Vec<&Block> = blocks.iter().filter(|b| b.segment == seg).collect();
-        let times = clocks.times.get(seg)?;
+        let lap = Binned::of(&of, clocks.times.get(seg)?, clocks.bin_s, span, &factor)?;
+        let window = Window::of(&lap)?;
+        capped |= window.capped;
+        lap.add_meat(&window, &mut total);
+    }
+    Some(NoiseMeat {
+        meat: total,
+        capped,
+    })
+}
+
+/// One lap in time bins: per signal, the bins' mean residual (NaN where a bin has none) and
+/// the summed weighted, range-scaled sensitivities.
+struct Binned {
+    mean: Vec<Vec<f64>>,
+    jsum: Vec<Vec<Vec<f64>>>,
+    /// Bins.
+    n: usize,
+}
+
+impl Binned {
+    fn of(
+        of: &[&Block],
+        times: &[f64],
+        bin_s: f64,
+        span: &[f64],
+        factor: &impl Fn(&Block) -> f64,
+    ) -> Option<Binned> {
+        let p = span.len();
         let start = of.iter().map(|b| b.start).min()?;
         let end = of.iter().map(|b| b.start + b.residual.len()).max()?;
         if end > times.len() || start >= end {
             return None;
         }
         let t0 = times[start];
-        let bin = |g: usize| ((times[g] - t0) / clocks.bin_s).max(0.0) as usize;
+        let bin = |g: usize| ((times[g] - t0) / bin_s).max(0.0) as usize;
         let n = bin(end - 1) + 1;
-        let s_count = of.len();
-        // Per signal: the bins' mean residual (NaN where a bin has none) and the summed
-        // weighted sensitivities.
-        let mut mean = vec![vec![f64::NAN; n]; s_count];
-        let mut jsum = vec![vec![vec![0.0; p]; n]; s_count];
+        let mut mean = vec![vec![f64::NAN; n]; of.len()];
+        let mut jsum = vec![vec![vec![0.0; p]; n]; of.len()];
         for (s, b) in of.iter().enumerate() {
             let c = factor(b);
             let (mut sum, mut count) = (vec![0.0; n], vec![0usize; n]);
@@ -102,95 +127,55 @@ pub(crate) fn meat(
                 }
             }
         }
-        // Γ(k) between every pair of signals, each from the bin pairs both have.
-        let cap = n / 4;
-        let gamma_at = |k: usize| -> Vec<Vec<f64>> {
-            (0..s_count)
-                .map(|a| {
-                    (0..s_count)
-                        .map(|b| {
-                            let (mut sum, mut pairs) = (0.0, 0usize);
-                            for i in 0..n - k {
-                                let v = mean[a][i] * mean[b][i + k];
-                                if v.is_finite() {
-                                    sum += v;
-                                    pairs += 1;
-                                }
+        Some(Binned { mean, jsum, n })
+    }
+
+    /// Γ(k) between every pair of signals, each from the bin pairs both have.
+    fn gamma_at(&self, k: usize) -> Vec<Vec<f64>> {
+        let signals = self.mean.len();
+        (0..signals)
+            .map(|a| {
+                (0..signals)
+                    .map(|b| {
+                        let (mut sum, mut pairs) = (0.0, 0usize);
+                        for i in 0..self.n - k {
+                            let v = self.mean[a][i] * self.mean[b][i + k];
+                            if v.is_finite() {
+                                sum += v;
+                                pairs += 1;
                             }
-                            if pairs > 0 {
-                                sum / pairs as f64
-                            } else {
-                                0.0
-                            }
-                        })
-                        .collect()
-                })
-                .collect()
-        };
-        if cap < 2 * K {
-            return None;
-        }
-        let trace = |g: &[Vec<f64>]| (0..s_count).map(|s| g[s][s]).sum::<f64>();
-        let mut gamma = vec![gamma_at(0)];
-        let var = trace(&gamma[0]);
-        if !(var > 0.0 && var.is_finite()) {
-            return None;
-        }
-        let band = C * ((n as f64).log10() / n as f64).sqrt();
-        // m̂: the first lag after which K in a row stay within the band.
-        let mut m = None;
-        let mut quiet = 0;
-        let mut k = 1;
-        while k <= cap {
-            gamma.push(gamma_at(k));
-            if (trace(&gamma[k]) / var).abs() < band {
-                quiet += 1;
-                if quiet == K {
-                    m = Some(k - K);
-                    break;
-                }
-            } else {
-                quiet = 0;
-            }
-            k += 1;
-        }
-        let m = match m {
-            Some(m) => m.max(1),
-            None => {
-                capped = true;
-                cap / 2
-            }
-        };
-        let width = (2 * m).min(cap);
-        while gamma.len() <= width {
-            gamma.push(gamma_at(gamma.len()));
-        }
-        let weight = |k: usize| {
-            if k <= m {
-                1.0
-            } else {
-                (2.0 - k as f64 / m as f64).max(0.0)
-            }
-        };
-        // M = Σ_i Ĵ_iᵀ Σ_k w_k Γ(k) Ĵ_{i+k} (and its transpose for k > 0).
-        for (k, g) in gamma.iter().enumerate().take(width + 1) {
-            let w = weight(k);
+                        }
+                        if pairs > 0 {
+                            sum / pairs as f64
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Adds M = Σ_i Ĵ_iᵀ Σ_k w_k Γ(k) Ĵ_{i+k} (and its transpose for k > 0) to `total`.
+    fn add_meat(&self, window: &Window, total: &mut [Vec<f64>]) {
+        let p = total.len();
+        for (k, g) in window.gamma.iter().enumerate().take(window.width + 1) {
+            let w = window.weight(k);
             if w == 0.0 {
                 continue;
             }
             let mut lagged = vec![vec![0.0; p]; p];
-            for i in 0..n - k {
-                for a in 0..s_count {
-                    let ja = &jsum[a][i];
+            for i in 0..self.n - k {
+                for (lane, g_row) in self.jsum.iter().zip(g) {
+                    let ja = &lane[i];
                     if ja.iter().all(|v| *v == 0.0) {
                         continue;
                     }
-                    for b in 0..s_count {
-                        let gab = g[a][b];
+                    for (&gab, other) in g_row.iter().zip(&self.jsum) {
                         if gab == 0.0 {
                             continue;
                         }
-                        let jb = &jsum[b][i + k];
+                        let jb = &other[i + k];
                         for (x, row) in lagged.iter_mut().enumerate() {
                             let f = w * gab * ja[x];
                             for (y, cell) in row.iter_mut().enumerate() {
@@ -210,10 +195,72 @@ pub(crate) fn meat(
             }
         }
     }
-    Some(NoiseMeat {
-        meat: total,
-        capped,
-    })
+}
+
+/// Politis' flat-top window of a lap's Γ: flat to `m`, zero at `width` (2m, at most a
+/// quarter of the lap); Γ(0..=width) computed.
+struct Window {
+    gamma: Vec<Vec<Vec<f64>>>,
+    m: usize,
+    width: usize,
+    /// No lag stayed within the band before a quarter of the lap.
+    capped: bool,
+}
+
+impl Window {
+    fn of(lap: &Binned) -> Option<Window> {
+        let (n, signals) = (lap.n, lap.mean.len());
+        let cap = n / 4;
+        if cap < 2 * K {
+            return None;
+        }
+        let trace = |g: &[Vec<f64>]| (0..signals).map(|s| g[s][s]).sum::<f64>();
+        let mut gamma = vec![lap.gamma_at(0)];
+        let var = trace(&gamma[0]);
+        if !(var > 0.0 && var.is_finite()) {
+            return None;
+        }
+        let band = C * ((n as f64).log10() / n as f64).sqrt();
+        // m̂: the first lag after which K in a row stay within the band.
+        let mut m = None;
+        let mut quiet = 0;
+        let mut k = 1;
+        while k <= cap {
+            gamma.push(lap.gamma_at(k));
+            if (trace(&gamma[k]) / var).abs() < band {
+                quiet += 1;
+                if quiet == K {
+                    m = Some(k - K);
+                    break;
+                }
+            } else {
+                quiet = 0;
+            }
+            k += 1;
+        }
+        let (m, capped) = match m {
+            Some(m) => (m.max(1), false),
+            None => (cap / 2, true),
+        };
+        let width = (2 * m).min(cap);
+        while gamma.len() <= width {
+            gamma.push(lap.gamma_at(gamma.len()));
+        }
+        Some(Window {
+            gamma,
+            m,
+            width,
+            capped,
+        })
+    }
+
+    fn weight(&self, k: usize) -> f64 {
+        if k <= self.m {
+            1.0
+        } else {
+            (2.0 - k as f64 / self.m as f64).max(0.0)
+        }
+    }
 }
 
 #[cfg(test)]
