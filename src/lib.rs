@@ -7,6 +7,8 @@
 //! - [`bench`]: setting a parameter, a run's lap time, a comparison, an error's message;
 //! - [`study`]: an optimisation study run to its files (result, report, checkpoint);
 //! - [`validate`]: the fitted twin on a lap it was not fitted on;
+//! - [`export_twin`]: the fitted twin handed on (FMUs with its start values, SSP, SSV, a
+//!   system file, a parameter table);
 //! - [`cli`]: one module per subcommand, over the modules above (the Python package uses
 //!   them directly, never `cli`).
 //!
@@ -17,6 +19,7 @@
 
 pub mod bench;
 pub mod cli;
+pub mod export_twin;
 pub mod lap;
 pub mod pack;
 pub mod registry;

@@ -36,6 +36,9 @@ pub struct ModelSpec {
     pub model_description: fn() -> String,
     /// The FMI 3.0 description from the same table (the library serves both).
     pub model_description3: fn() -> String,
+    /// A fitted twin's descriptions ([`crate::export_twin`]), FMI 2.0 and 3.0.
+    pub fitted_description: fn(&fmu_export::description::Fitting) -> String,
+    pub fitted_description3: fn(&fmu_export::description::Fitting) -> String,
     pub documentation: fn() -> String,
     pub validate: fn() -> Result<(), String>,
     pub guid: fn() -> String,
@@ -61,6 +64,19 @@ impl ModelSpec {
                     "twinbench ",
                     env!("CARGO_PKG_VERSION")
                 ))
+            },
+            fitted_description: |f| {
+                fmu_export::description::render_fitted_description::<M>(
+                    MODEL_DESCRIPTION_TEMPLATE,
+                    concat!("twinbench ", env!("CARGO_PKG_VERSION")),
+                    f,
+                )
+            },
+            fitted_description3: |f| {
+                fmu_export::description3::render_fitted_description3::<M>(
+                    concat!("twinbench ", env!("CARGO_PKG_VERSION")),
+                    f,
+                )
             },
             documentation: || {
                 fmu_export::description::render_documentation::<M>(DOCUMENTATION_TEMPLATE)
@@ -156,10 +172,40 @@ pub fn fmu_archive_of(
     library: &[u8],
     version: FmiVersion,
 ) -> Result<Vec<u8>, PackError> {
+    let description = match version {
+        FmiVersion::V2 => (spec.model_description)(),
+        FmiVersion::V3 => (spec.model_description3)(),
+    };
+    archive(spec, library, version, description, &[])
+}
+
+/// A fitted twin's FMU ([`crate::export_twin`]): the model's archive with the fitted
+/// description, and `resources` added or put in place of the bundled ones of that name.
+pub fn fitted_archive(
+    spec: &ModelSpec,
+    library: &[u8],
+    version: FmiVersion,
+    fitting: &fmu_export::description::Fitting,
+    resources: &[(String, Vec<u8>)],
+) -> Result<Vec<u8>, PackError> {
+    let description = match version {
+        FmiVersion::V2 => (spec.fitted_description)(fitting),
+        FmiVersion::V3 => (spec.fitted_description3)(fitting),
+    };
+    archive(spec, library, version, description, resources)
+}
+
+fn archive(
+    spec: &ModelSpec,
+    library: &[u8],
+    version: FmiVersion,
+    description: String,
+    resources: &[(String, Vec<u8>)],
+) -> Result<Vec<u8>, PackError> {
     use zip::write::SimpleFileOptions;
-    let (description, platform) = match version {
-        FmiVersion::V2 => ((spec.model_description)(), "linux64"),
-        FmiVersion::V3 => ((spec.model_description3)(), "x86_64-linux"),
+    let platform = match version {
+        FmiVersion::V2 => "linux64",
+        FmiVersion::V3 => "x86_64-linux",
     };
     let mut entries: Vec<(String, Vec<u8>, u32)> = vec![
         (
@@ -179,7 +225,12 @@ pub fn fmu_archive_of(
         ),
     ];
     for r in spec.info.resources {
-        entries.push((format!("resources/{}", r.name), r.content.to_vec(), 0o644));
+        if !resources.iter().any(|(n, _)| n == r.name) {
+            entries.push((format!("resources/{}", r.name), r.content.to_vec(), 0o644));
+        }
+    }
+    for (name, content) in resources {
+        entries.push((format!("resources/{name}"), content.clone(), 0o644));
     }
     entries.sort_by(|a, b| a.0.cmp(&b.0));
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));

@@ -178,6 +178,9 @@ def twin_lap(args, out: Path):
         "vehicle.b_rear": round(rng.uniform(1.3, 1.55), 4),
     }
     kappa, target, track = circuit(args.circuit)
+    if args.noise_seed is not None:
+        # The same truth with another draw of the noise: replicates of one lap.
+        rng = np.random.default_rng([args.seed, args.noise_seed])
     params = {}
     if track is None:
         left, right = road(len(kappa), args.road_rms, args.seed + 1)
@@ -344,6 +347,8 @@ def main(argv=None):
     a.add_argument("--circuit", default="own")
     a.add_argument("--seed", type=int, default=1)
     a.add_argument("--out", type=Path, required=True)
+    a.add_argument("--noise-seed", type=int, default=None,
+                   help="twin: draw the noise from this seed (the truth stays the --seed's)")
     a.add_argument("--sigma", type=float, default=150.0, help="twin: AR(1) load noise [N]")
     a.add_argument("--rho", type=float, default=0.995, help="twin: AR(1) correlation per 5 ms")
     a.add_argument("--white", type=float, default=25.0, help="car: white load noise [N]")

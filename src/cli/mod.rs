@@ -9,6 +9,7 @@ pub mod cache;
 pub mod compare;
 pub mod demo;
 pub mod export_ssp;
+pub mod export_twin;
 pub mod identify;
 pub mod info;
 pub mod interrupt;
@@ -53,6 +54,8 @@ pub enum Command {
     Lap(lap::LapArgs),
     /// Write a system as an SSP 1.0 package (SystemStructure.ssd, FMUs under resources/).
     ExportSsp(export_ssp::ExportSspArgs),
+    /// Hand on a study's fitted twin: FMUs with the answer as start values, SSP, SSV, a system file, a parameter table.
+    ExportTwin(export_twin::ExportTwinArgs),
     /// Compare a simulation result with a vehicle measurement on a distance basis.
     Compare(compare::CompareArgs),
     /// Optimise the twin's parameters against a vehicle measurement (a study file).
@@ -79,6 +82,7 @@ impl Command {
             Command::Info(a) => a.json,
             Command::Lap(a) => a.json,
             Command::ExportSsp(a) => a.json,
+            Command::ExportTwin(a) => a.json,
             Command::Compare(a) => a.json,
             Command::Optimize(a) => a.json,
             Command::Validate(a) => a.json,
@@ -173,6 +177,7 @@ pub fn main() -> ExitCode {
         Command::Info(a) => info::run(a),
         Command::Lap(a) => lap::run(a),
         Command::ExportSsp(a) => export_ssp::run(a),
+        Command::ExportTwin(a) => export_twin::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Optimize(a) => optimize::run(a),
         Command::Validate(a) => validate::run(a),

@@ -703,6 +703,61 @@ fn parameter_value(
     }
 }
 
+/// The system's parameter values as one SSV document (SSP 1.0's file of parameter values):
+/// each named `component.connector` as a system-level binding names them, typed as in the
+/// package. A path value is written as the system file gives it.
+pub fn parameter_set(system: &Plan, name: &str) -> Result<String, SspError> {
+    let mut x = format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<ssv:ParameterSet xmlns:ssv=\"{NS_SSV}\" xmlns:ssc=\"{NS_SSC}\" version=\"1.0\" name=\"{}\">\n  <ssv:Parameters>\n",
+        esc(name)
+    );
+    let mut units = BTreeSet::new();
+    for (full, value) in &system.file.parameters {
+        let (u, v) = split_name(full)
+            .ok_or_else(|| SspError::Unsupported(format!("'{full}' is not instance.variable")))?;
+        let inst = system
+            .instances
+            .iter()
+            .find(|i| i.name == u)
+            .ok_or_else(|| SspError::Unsupported(format!("'{full}': not an FMU instance")))?;
+        let sv = inst
+            .variable(v, "ssv export")
+            .map_err(|e| SspError::Unsupported(e.to_string()))?;
+        let md = inst.description();
+        if let Some(unit) = md.unit_of(sv) {
+            units.insert(unit.to_string());
+        }
+        x.push_str(&format!(
+            "    <ssv:Parameter name=\"{}.{}\">{}</ssv:Parameter>\n",
+            esc(u),
+            esc(&sv.name),
+            parameter_value(md, sv, value)
+        ));
+    }
+    x.push_str("  </ssv:Parameters>\n");
+    if !units.is_empty() {
+        x.push_str("  <ssv:Units>\n");
+        for u in units {
+            let Some(def) = system
+                .instances
+                .iter()
+                .find_map(|i| i.description().unit_def(&u).copied())
+                .or_else(|| tb_fmi::units::lookup(&u).copied())
+            else {
+                continue;
+            };
+            let base = def.base_unit_attributes();
+            x.push_str(&format!(
+                "    <ssc:Unit name=\"{}\"><ssc:BaseUnit{base}/></ssc:Unit>\n",
+                esc(&u)
+            ));
+        }
+        x.push_str("  </ssv:Units>\n");
+    }
+    x.push_str("</ssv:ParameterSet>\n");
+    Ok(x)
+}
+
 /// Write the SSP archive (atomically).
 pub fn export(
     system: &Plan,

@@ -197,8 +197,8 @@ impl Model for Driver {
         default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 10.0, step_size: 1e-3 },
         documentation: DOCUMENTATION,
         resources: &[
-            Resource { name: TARGET_FILE, content: include_bytes!("../resources/target_speed.csv") },
-            Resource { name: "NOTICE", content: include_bytes!("../resources/NOTICE") },
+            Resource { name: TARGET_FILE, content: include_bytes!("../resources/target_speed.csv"), default_of: Some("target_speed_file") },
+            Resource { name: "NOTICE", content: include_bytes!("../resources/NOTICE"), default_of: None },
         ],
     };
 

@@ -68,6 +68,34 @@ pub fn guid_of(text: &str) -> String {
     )
 }
 
+/// What `twinbench export-twin` changes in a model's description: the fitted twin's start
+/// values, its own identity and its provenance. The default changes nothing: the packed
+/// model's description.
+#[derive(Clone, Debug, Default)]
+pub struct Fitting {
+    /// Start values by variable name, as the value's XML text (a Real's shortest text that
+    /// reads back to the same f64: what the binary applies, see [`crate::fitted`]).
+    pub starts: Vec<(String, String)>,
+    /// The fitted FMU's own GUID (FMI 2.0) or instantiation token (FMI 3.0): its start
+    /// values differ from the model's, so it is another FMU.
+    pub token: Option<String>,
+    /// The description's `description` attribute.
+    pub description: Option<String>,
+    /// Provenance: a well-formed XML fragment, the content of the `twinbench` tool
+    /// annotation (FMI 2.0's `VendorAnnotations`, FMI 3.0's `Annotations`).
+    pub annotation: Option<String>,
+}
+
+impl Fitting {
+    /// The start value's XML text of `v`: the fitted one, else the table's.
+    pub fn start_text(&self, v: &VarInfo) -> Option<String> {
+        match self.starts.iter().find(|(n, _)| n == v.name) {
+            Some((_, text)) => Some(text.clone()),
+            None => v.has_start().then(|| v.start.xml_text()),
+        }
+    }
+}
+
 /// Consistency of a variable table, by the rules of [`crate::check`]: the first broken rule
 /// of each variable, all of them in one message. A table made by `variables!` passed them at
 /// compile time already; the packer still refuses any table that fails them (a
@@ -108,7 +136,7 @@ fn used_units<M: Model>() -> Vec<&'static units::UnitDef> {
     names.into_iter().filter_map(units::lookup).collect()
 }
 
-fn scalar_variable(v: &VarInfo) -> String {
+fn scalar_variable(v: &VarInfo, fitting: &Fitting) -> String {
     let mut s = format!(
         "    <ScalarVariable name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
         xml_escape(v.name),
@@ -126,8 +154,8 @@ fn scalar_variable(v: &VarInfo) -> String {
         s.push_str(&format!(" declaredType=\"{}\"", xml_escape(t.name)));
     }
     s.push_str(&unit_and_range(v));
-    if v.has_start() {
-        s.push_str(&format!(" start=\"{}\"", xml_escape(&v.start.xml_text())));
+    if let Some(start) = fitting.start_text(v) {
+        s.push_str(&format!(" start=\"{}\"", xml_escape(&start)));
     }
     s.push_str("/>\n    </ScalarVariable>\n");
     s
@@ -181,6 +209,16 @@ pub fn initial_dependencies(table: &[VarInfo], v: &VarInfo) -> Vec<usize> {
 
 /// Fill the modelDescription.xml template (fmu-templates/modelDescription.xml).
 pub fn render_model_description<M: Model>(template: &str, generation_tool: &str) -> String {
+    render_fitted_description::<M>(template, generation_tool, &Fitting::default())
+}
+
+/// [`render_model_description`] of a fitted twin: its start values, GUID, description and
+/// provenance annotation from `fitting`.
+pub fn render_fitted_description<M: Model>(
+    template: &str,
+    generation_tool: &str,
+    fitting: &Fitting,
+) -> String {
     let info = M::INFO;
     let table = M::Vars::VARIABLES;
     let index_of_vr = |vr: u32| table.iter().position(|v| v.value_reference == vr).unwrap() + 1;
@@ -223,7 +261,7 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
             xml_escape(desc)
         ));
     }
-    let variables: String = table.iter().map(scalar_variable).collect();
+    let variables: String = table.iter().map(|v| scalar_variable(v, fitting)).collect();
 
     let mut outputs = String::new();
     let mut initial_unknowns = String::new();
@@ -276,18 +314,30 @@ pub fn render_model_description<M: Model>(template: &str, generation_tool: &str)
         format_real(de.step_size)
     );
 
+    let annotations = match &fitting.annotation {
+        Some(a) => format!(
+            "  <VendorAnnotations>\n    <Tool name=\"twinbench\">\n{a}    </Tool>\n  </VendorAnnotations>\n"
+        ),
+        None => String::new(),
+    };
     template
         .replace("{{modelName}}", &xml_escape(info.name))
         .replace("{{modelIdentifier}}", &xml_escape(info.identifier))
-        .replace("{{guid}}", &guid::<M>())
-        .replace("{{description}}", &xml_escape(info.description))
+        .replace("{{guid}}", &fitting.token.clone().unwrap_or_else(guid::<M>))
+        .replace(
+            "{{description}}",
+            &xml_escape(fitting.description.as_deref().unwrap_or(info.description)),
+        )
         .replace("{{version}}", &xml_escape(info.version))
         .replace("{{generationTool}}", &xml_escape(generation_tool))
         .replace("{{numberOfVariables}}", &table.len().to_string())
         .replace("{{unitDefinitions}}\n", &unit_defs)
         .replace("{{typeDefinitions}}\n", &type_defs)
         .replace("{{logCategories}}\n", &categories)
-        .replace("{{defaultExperiment}}", &default_experiment)
+        .replace(
+            "{{defaultExperiment}}\n",
+            &format!("{default_experiment}\n{annotations}"),
+        )
         .replace("{{modelVariables}}\n", &variables)
         .replace("{{modelStructure}}\n", &structure)
 }

@@ -8,7 +8,7 @@
 //! The model structure lists each output and initial unknown by value reference, with the
 //! same dependencies as FMI 2.0's indices.
 
-use crate::description::{initial_dependencies, xml_escape};
+use crate::description::{initial_dependencies, xml_escape, Fitting};
 use crate::model::Model;
 use crate::runtime::LOG_CATEGORIES;
 use crate::units;
@@ -49,7 +49,7 @@ pub fn element_name(t: ScalarType) -> &'static str {
     }
 }
 
-fn variable(v: &VarInfo) -> String {
+fn variable(v: &VarInfo, fitting: &Fitting) -> String {
     let el = element(v);
     let mut s = format!(
         "    <{el} name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
@@ -66,16 +66,16 @@ fn variable(v: &VarInfo) -> String {
         s.push_str(&format!(" declaredType=\"{}\"", xml_escape(t.name)));
     }
     s.push_str(&crate::description::unit_and_range(v));
-    match (v.has_start(), v.start) {
-        (true, Value::Str(text)) => {
+    match (fitting.start_text(v), v.start) {
+        (Some(text), Value::Str(_)) => {
             s.push_str(&format!(
                 ">\n      <Start value=\"{}\"/>\n    </{el}>\n",
-                xml_escape(text)
+                xml_escape(&text)
             ));
             return s;
         }
-        (true, start) => s.push_str(&format!(" start=\"{}\"", xml_escape(&start.xml_text()))),
-        (false, _) => {}
+        (Some(text), _) => s.push_str(&format!(" start=\"{}\"", xml_escape(&text))),
+        (None, _) => {}
     }
     s.push_str("/>\n");
     s
@@ -83,14 +83,22 @@ fn variable(v: &VarInfo) -> String {
 
 /// The FMI 3.0 modelDescription.xml of `M`.
 pub fn render_model_description3<M: Model>(generation_tool: &str) -> String {
+    render_fitted_description3::<M>(generation_tool, &Fitting::default())
+}
+
+/// [`render_model_description3`] of a fitted twin (see [`Fitting`]).
+pub fn render_fitted_description3<M: Model>(generation_tool: &str, fitting: &Fitting) -> String {
     let info = M::INFO;
     let table = M::Vars::VARIABLES;
     let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
     s.push_str(&format!(
         "<fmiModelDescription\n  fmiVersion=\"3.0\"\n  modelName=\"{}\"\n  instantiationToken=\"{}\"\n  description=\"{}\"\n  version=\"{}\"\n  generationTool=\"{}\"\n  variableNamingConvention=\"flat\">\n",
         xml_escape(info.name),
-        instantiation_token::<M>(),
-        xml_escape(info.description),
+        fitting
+            .token
+            .clone()
+            .unwrap_or_else(instantiation_token::<M>),
+        xml_escape(fitting.description.as_deref().unwrap_or(info.description)),
         xml_escape(info.version),
         xml_escape(generation_tool)
     ));
@@ -156,7 +164,7 @@ pub fn render_model_description3<M: Model>(generation_tool: &str) -> String {
         time_value_reference::<M::Vars>()
     ));
     for v in table {
-        s.push_str(&variable(v));
+        s.push_str(&variable(v, fitting));
     }
     s.push_str("  </ModelVariables>\n  <ModelStructure>\n");
     let vrs = |deps: &mut dyn Iterator<Item = u32>| {
@@ -185,6 +193,12 @@ pub fn render_model_description3<M: Model>(generation_tool: &str) -> String {
             ));
         }
     }
-    s.push_str("  </ModelStructure>\n</fmiModelDescription>\n");
+    s.push_str("  </ModelStructure>\n");
+    if let Some(a) = &fitting.annotation {
+        s.push_str(&format!(
+            "  <Annotations>\n    <Annotation type=\"twinbench\">\n{a}    </Annotation>\n  </Annotations>\n"
+        ));
+    }
+    s.push_str("</fmiModelDescription>\n");
     s
 }

@@ -27,6 +27,7 @@ pub mod description;
 pub mod description3;
 pub mod ffi;
 pub mod ffi3;
+pub mod fitted;
 pub mod model;
 pub mod preparsed;
 pub mod resources;

@@ -34,6 +34,10 @@ pub struct ModelInfo {
 pub struct Resource {
     pub name: &'static str,
     pub content: &'static [u8],
+    /// The String parameter (a `*_file` path) whose empty value means this file: where
+    /// `twinbench export-twin` puts a fitted twin's own file (its track, its target), so
+    /// that the FMU needs no path set by any host.
+    pub default_of: Option<&'static str>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -214,6 +214,9 @@ pub struct Runtime<M: Model> {
     poisoned: Option<String>,
     ctx: Context,
     guid: String,
+    /// A fitted twin's start values (`resources/fitted_start_values.toml`), applied after
+    /// the table's defaults at instantiation and at reset.
+    fitted: Option<std::sync::Arc<crate::fitted::FittedStarts>>,
     /// value reference -> table index + 1 (0: unknown).
     vr_index: Vec<u32>,
     /// value reference -> checks of the fast get/set path.
@@ -271,6 +274,7 @@ impl<M: Model> Runtime<M> {
                 cache: Default::default(),
             },
             guid: crate::description::guid::<M>(),
+            fitted: None,
             vr_index,
             slots,
             range_check: table
@@ -280,6 +284,14 @@ impl<M: Model> Runtime<M> {
             logging_on,
             categories: LOG_EVERYTHING,
         }
+    }
+
+    /// A fitted twin's instance: its start values over the table's, its own GUID.
+    pub fn with_fitted(mut self, fitted: crate::fitted::FittedStarts) -> Self {
+        fitted.apply(&mut self.vars);
+        self.guid = fitted.token.clone();
+        self.fitted = Some(std::sync::Arc::new(fitted));
+        self
     }
 
     pub fn phase(&self) -> Phase {
@@ -530,6 +542,9 @@ impl<M: Model> Runtime<M> {
     /// fmi2Reset: back to freshly instantiated, start values restored.
     pub fn reset(&mut self) -> fmi2Status {
         self.vars = M::Vars::default();
+        if let Some(f) = &self.fitted {
+            f.apply(&mut self.vars);
+        }
         self.model = None;
         self.run = RunState::INSTANTIATED;
         self.init_failed = false;

@@ -508,8 +508,8 @@ impl Model for Vehicle {
         default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 100.0, step_size: 1e-3 },
         documentation: DOCUMENTATION,
         resources: &[
-            Resource { name: TRACK_FILE, content: include_bytes!("../resources/track.csv") },
-            Resource { name: "NOTICE", content: include_bytes!("../resources/NOTICE") },
+            Resource { name: TRACK_FILE, content: include_bytes!("../resources/track.csv"), default_of: Some("track_file") },
+            Resource { name: "NOTICE", content: include_bytes!("../resources/NOTICE"), default_of: None },
         ],
     };
 

@@ -56,17 +56,6 @@ pub unsafe fn instantiate<M: Model>(
                 fmu_type.0
             ));
         }
-        let expected = crate::description::guid::<M>();
-        match opt_str(guid) {
-            Some(g) if g == expected => {}
-            Some(g) => {
-                return fail(format!(
-                    "GUID mismatch: the host passed {g}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
-                    M::INFO.name
-                ))
-            }
-            None => return fail("fmuGUID is NULL".into()),
-        }
         let resource_dir = match opt_str(resource_location) {
             None => None,
             Some(uri) if uri.is_empty() => None,
@@ -75,11 +64,34 @@ pub unsafe fn instantiate<M: Model>(
                 Err(e) => return fail(e),
             },
         };
+        // A fitted twin's start values, and the GUID its description has.
+        let fitted = match resource_dir
+            .as_deref()
+            .map(crate::fitted::FittedStarts::load::<M::Vars>)
+            .transpose()
+        {
+            Ok(f) => f.flatten(),
+            Err(e) => return fail(e),
+        };
+        let expected = crate::description::guid::<M>();
+        match opt_str(guid) {
+            Some(g) if g == expected || fitted.as_ref().is_some_and(|f| f.token == *g) => {}
+            Some(g) => {
+                return fail(format!(
+                    "GUID mismatch: the host passed {g}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
+                    M::INFO.name
+                ))
+            }
+            None => return fail("fmuGUID is NULL".into()),
+        }
         let kept = match logger.callback {
             Some(f) => super::handles::SlotLogger::Fmi2(f, logger.env),
             None => super::handles::SlotLogger::None,
         };
-        let runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on != 0);
+        let mut runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on != 0);
+        if let Some(f) = fitted {
+            runtime = runtime.with_fitted(f);
+        }
         super::handle_for(Instance::new(runtime), kept) as fmi2Component
     }));
     r.unwrap_or(std::ptr::null_mut())

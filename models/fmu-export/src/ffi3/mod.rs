@@ -141,9 +141,22 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
                 M::INFO.name
             ));
         }
+        // FMI 3.0 hands a path (with a trailing separator), not a URI.
+        let resource_dir = opt_str(resource_path)
+            .filter(|p| !p.is_empty())
+            .map(|p| std::path::PathBuf::from(p.into_owned()));
+        // A fitted twin's start values, and the token its description has.
+        let fitted = match resource_dir
+            .as_deref()
+            .map(crate::fitted::FittedStarts::load::<M::Vars>)
+            .transpose()
+        {
+            Ok(f) => f.flatten(),
+            Err(e) => return fail(e),
+        };
         let expected = crate::description3::instantiation_token::<M>();
         match opt_str(token) {
-            Some(t) if t == expected => {}
+            Some(t) if t == expected || fitted.as_ref().is_some_and(|f| f.token == *t) => {}
             Some(t) => {
                 return fail(format!(
                     "instantiationToken mismatch: the host passed {t}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
@@ -152,15 +165,14 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
             }
             None => return fail("instantiationToken is NULL".into()),
         }
-        // FMI 3.0 hands a path (with a trailing separator), not a URI.
-        let resource_dir = opt_str(resource_path)
-            .filter(|p| !p.is_empty())
-            .map(|p| std::path::PathBuf::from(p.into_owned()));
         let kept = match logger.callback {
             Some(f) => crate::ffi::handles::SlotLogger::Fmi3(f, logger.env),
             None => crate::ffi::handles::SlotLogger::None,
         };
         let mut runtime = Runtime::<M>::new(&name, resource_dir, Box::new(logger), logging_on);
+        if let Some(f) = fitted {
+            runtime = runtime.with_fitted(f);
+        }
         runtime.expose_time();
         crate::ffi::handle_for(Instance::new(runtime), kept) as fmi3Instance
     }));
