@@ -1043,6 +1043,39 @@ fn pack(
         .map_err(error)
 }
 
+/// The fitted twin of the study result at `result` handed on into `out` (as `twinbench
+/// export-twin`): FMUs with the answer as start values (FMI `versions`, 2 and/or 3), SSP,
+/// SSV, the system file and the parameter table; returns the summary as JSON.
+#[pyfunction]
+#[pyo3(signature = (result, out, versions))]
+fn export_twin(
+    py: Python<'_>,
+    result: PathBuf,
+    out: PathBuf,
+    versions: Vec<u32>,
+) -> PyResult<String> {
+    let mut v = Vec::new();
+    for x in versions {
+        v.push(
+            twinbench::pack::FmiVersion::parse(&x.to_string()).ok_or_else(|| {
+                TwinbenchError::new_err(format!("fmi: {x} is not an FMI version (2 or 3)"))
+            })?,
+        );
+    }
+    v.sort();
+    v.dedup();
+    let ex = py
+        .detach(|| {
+            twinbench::export_twin::export_twin(
+                &result,
+                &out,
+                &twinbench::export_twin::ExportOptions { versions: v },
+            )
+        })
+        .map_err(error)?;
+    serde_json::to_string(&ex).map_err(error)
+}
+
 /// Every warning of the Rust code (`log::warn!`), kept until the call returns to Python,
 /// whose package turns each into a `warnings.warn` (`TwinbenchWarning`): none is dropped
 /// (M13), and no Python is called from the simulation's threads.
@@ -1100,6 +1133,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(pack, m)?)?;
+    m.add_function(wrap_pyfunction!(export_twin, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
     m.add_function(wrap_pyfunction!(load_study, m)?)?;

@@ -904,3 +904,33 @@ def test_profiles_with_hostile_bounds_are_refused_before_a_lap_runs(bounds, says
         twinbench.Study(study).optimize(out=tmp_path / "o", generations=1, profiles=True, report=False)
     assert "c_lift_front" in str(caught.value)
     assert not (tmp_path / "o" / "hostile.checkpoint.json").exists()
+
+
+def test_a_study_result_hands_its_fitted_twin_on(tmp_path):
+    # The lift step alone, one generation: its result's export_twin writes the FMUs whose
+    # start values are the answer; the bare FMUs (no value set) run the lap that the
+    # study's system gives with the answer set, bit for bit.
+    text = STUDY.read_text()
+    text = text[: text.index("# Step 2")].replace('"../', f'"{ROOT.as_posix()}/')
+    study = tmp_path / "lift.toml"
+    study.write_text(text)
+    result = twinbench.Study(study).optimize(out=tmp_path / "opt", generations=1, report=False, threads=2)
+    assert isinstance(result, twinbench.StudyResult) and isinstance(result, dict)
+    summary = result.export_twin(tmp_path / "twin", fmi=[2])
+    assert summary["fitted_instances"] == ["vehicle", "driver", "dyno_rl", "dyno_rr", "edu"]
+    assert "fmu/vehicle.fmu" in summary["files"] and "fmu/vehicle-fmi3.fmu" not in summary["files"]
+    system = (tmp_path / "twin" / "fitted_system.toml").read_text()
+    bare = system[: system.index("[parameters]")] + system[system.index("[[check]]"):]
+    (tmp_path / "twin" / "bare.toml").write_text(bare)
+    fitted = twinbench.run(tmp_path / "twin" / "bare.toml")
+    answer = dict(result["parameters_final"])
+    assert set(answer) == {"vehicle.c_lift_front", "vehicle.c_lift_rear"}
+    original = twinbench.run(Path(result["system"]), parameters=answer)
+    for name in ["vehicle.Fz_sum", "vehicle.Fz_fl", "vehicle.v"]:
+        assert np.array_equal(fitted[name], original[name]), name
+    # A folder holding other files is refused, and they stay.
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("mine")
+    with pytest.raises(twinbench.TwinbenchError, match="not an earlier export-twin output"):
+        result.export_twin(tmp_path / "mine")
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "mine"

@@ -68,6 +68,7 @@ __all__ = [
     "Metrics",
     "Study",
     "StudyStep",
+    "StudyResult",
     "Optimizer",
     "TwinbenchError",
     "TwinbenchWarning",
@@ -343,6 +344,35 @@ class Optimizer:
 
 
 @dataclass(frozen=True)
+class StudyResult(dict):
+    """A study's result (a dict, as ``twinbench optimize --json`` prints it) that knows its
+    ``result.json`` (``path``) and hands the fitted twin on."""
+
+    path: Path
+
+    def export_twin(self, out: PathLike, fmi: Sequence[int] = (2, 3)) -> Dict[str, Any]:
+        """Write the fitted twin into the folder ``out``, as ``twinbench export-twin``:
+        ``fmu/<instance>.fmu`` (and ``-fmi3.fmu``) whose start values are the answer,
+        ``fitted_system.toml``, ``fitted_twin.ssp``, ``fitted_twin.ssv``,
+        ``parameters.csv``/``.json`` and ``provenance.json``.
+
+        Args:
+            out: a new folder, or an earlier export's.
+            fmi: the FMI versions of the fitted FMUs (2, 3 or both).
+
+        Returns:
+            The summary: ``folder``, ``files``, ``fitted_instances``,
+            ``copied_instances`` (a supplier's FMUs, copied as they are), ``notes``.
+
+        Raises:
+            TwinbenchError: the result's FMUs are from another build, the folder holds
+                other files, a file it names cannot be read.
+        """
+        import json
+
+        return json.loads(_native.export_twin(os.fspath(self.path), os.fspath(out), [int(v) for v in fmi]))
+
+
 class StudyStep:
     """A step of a study: its parameters, their bounds and start values (None: the
     value before the step)."""
@@ -516,7 +546,8 @@ class Study:
             signals,
             int(bootstrap),
         )
-        result = json.loads(text)
+        result = StudyResult(json.loads(text))
+        result.path = Path(os.fspath(out if out is not None else "target/optimize")) / "result.json"
         # The study's answer (Tab. 1's row "all"): every parameter with its interval; a
         # result without one (written before it was made) gives each step's own.
         joint = result.get("joint")
