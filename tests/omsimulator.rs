@@ -7,27 +7,9 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn omsimulator() -> PathBuf {
-    let exe = std::env::var_os("TWINBENCH_OMSIMULATOR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            let out = Command::new(twinbench::pack::workspace_root().join("tools/omsimulator.sh"))
-                .output()
-                .expect("tools/omsimulator.sh runs");
-            assert!(
-                out.status.success(),
-                "tools/omsimulator.sh: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            PathBuf::from(String::from_utf8_lossy(&out.stdout).trim())
-        });
-    assert!(exe.is_file(), "no OMSimulator at {}", exe.display());
-    exe
-}
-
 /// Run OMSimulator in `dir` (its temporary folders go there); its log on failure.
 fn run(dir: &Path, args: &[&std::ffi::OsStr]) -> String {
-    let out = Command::new(omsimulator())
+    let out = Command::new(common::omsimulator())
         .current_dir(dir)
         .args(args)
         .output()

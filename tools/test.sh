@@ -56,7 +56,7 @@ cargo test --release -p twinbench --features slow-tests \
     --test optimize_spielberg --test optimize_study --test robustness_optimize \
     --test ssp_export --test cross_validation --test own_lap --test omsimulator \
     --test optimize_speedup --test interval_coverage --test multi_lap \
-    --test chassis_recovery "$@"
+    --test chassis_recovery --test export_twin_tools "$@"
 # The Python package: its wheel (abi3) built from the workspace into the venv, then its
 # tests against the command line the slow tier built (studies on a Dask LocalCluster).
 rm -rf target/wheels

@@ -90,3 +90,24 @@ pub fn worker_options() -> tb_cosim::LoadOptions {
 pub mod cfmu;
 pub mod python;
 pub mod reference;
+
+/// OMSimulator 3.0: TWINBENCH_OMSIMULATOR, else built from source by tools/omsimulator.sh.
+pub fn omsimulator() -> PathBuf {
+    let exe = std::env::var_os("TWINBENCH_OMSIMULATOR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            let out = std::process::Command::new(
+                twinbench::pack::workspace_root().join("tools/omsimulator.sh"),
+            )
+            .output()
+            .expect("tools/omsimulator.sh runs");
+            assert!(
+                out.status.success(),
+                "tools/omsimulator.sh: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            PathBuf::from(String::from_utf8_lossy(&out.stdout).trim())
+        });
+    assert!(exe.is_file(), "no OMSimulator at {}", exe.display());
+    exe
+}

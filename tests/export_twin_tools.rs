@@ -1,0 +1,164 @@
+//! The demo's fitted twin (`twinbench export-twin` on the demo's result) in other tools:
+//! FMPy's master over the fitted FMUs alone (no value set) gives the lap `twinbench run
+//! --set <answer>` gives, bit for bit; the fitted SSP gives in FMPy's `simulate_ssp` and in
+//! OMSimulator, bit for bit, what the study's bench with the answer set gives in the same
+//! tool (each tool has its own master: docs/cross_validation.md).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn twinbench(dir: &Path, args: &[&str]) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "twinbench {args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn python(args: &[&str]) -> serde_json::Value {
+    let o = Command::new(common::python::python())
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+fn tool(name: &str) -> String {
+    twinbench::pack::workspace_root()
+        .join("tools")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+/// The study's bench with the answer written into its `[parameters]`, exported as an SSP.
+fn bench_ssp_with_answer(d: &Path, system: &Path, answer: &[(String, f64)]) -> PathBuf {
+    let mut text = std::fs::read_to_string(system).unwrap();
+    let mut lines = String::new();
+    for (name, value) in answer {
+        lines.push_str(&format!("\"{name}\" = {value:?}\n"));
+    }
+    text = text.replacen("[parameters]\n", &format!("[parameters]\n{lines}"), 1);
+    let path = system.with_file_name("with_answer.toml");
+    std::fs::write(&path, text).unwrap();
+    let ssp = d.join("with_answer.ssp");
+    twinbench(
+        d,
+        &[
+            "export-ssp",
+            path.to_str().unwrap(),
+            "-o",
+            ssp.to_str().unwrap(),
+        ],
+    );
+    ssp
+}
+
+#[test]
+fn the_demos_fitted_twin_runs_bit_for_bit_in_fmpy_and_omsimulator() {
+    common::fmu_dir();
+    let dir = tb_testkit::scratch("export-twin-tools");
+    let d = dir.path();
+    twinbench(d, &["demo", "--out", "demo"]);
+    twinbench(
+        d,
+        &[
+            "export-twin",
+            "demo/result.json",
+            "--out",
+            "twin",
+            "--fmi",
+            "2",
+        ],
+    );
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("demo/result.json")).unwrap())
+            .unwrap();
+    let system = PathBuf::from(result["system"].as_str().unwrap());
+    let answer: Vec<(String, f64)> = result["parameters_final"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p[0].as_str().unwrap().to_string(), p[1].as_f64().unwrap()))
+        .collect();
+    let mut args = vec!["run".to_string(), system.display().to_string()];
+    for (n, v) in &answer {
+        args.extend(["--set".into(), format!("{n}={v:?}")]);
+    }
+    args.extend(["-o".into(), "set.csv".into()]);
+    twinbench(d, &args.iter().map(String::as_str).collect::<Vec<_>>());
+
+    // FMPy's FMU2Slave over the fitted FMUs alone, the whole lap.
+    let text = std::fs::read_to_string(d.join("twin/fitted_system.toml")).unwrap();
+    let (head, tail) = text.split_at(text.find("[parameters]").unwrap());
+    let bare = format!("{head}{}", &tail[tail.find("\n[").unwrap() + 1..]);
+    std::fs::write(d.join("twin/bare.toml"), bare).unwrap();
+    let j = python(&[
+        &tool("fmpy_cosim.py"),
+        d.join("twin/bare.toml").to_str().unwrap(),
+        "--compare",
+        d.join("set.csv").to_str().unwrap(),
+        "--json",
+    ]);
+    let cmp = j["compare"].as_object().unwrap();
+    assert!(cmp.len() > 20, "{cmp:?}");
+    for (name, c) in cmp {
+        assert_eq!(c["bitwise_equal"], true, "FMPy over the fitted FMUs, {name}: {c}");
+    }
+
+    // The fitted SSP against the bench with the answer set, 10 s, in each tool.
+    let with_answer = bench_ssp_with_answer(d, &system, &answer);
+    let fitted = d.join("twin/fitted_twin.ssp");
+    let fmpy = |ssp: &Path, out: &str| {
+        python(&[
+            &tool("ssp_check.py"),
+            ssp.to_str().unwrap(),
+            "--fmpy",
+            "--stop",
+            "10",
+            "--save",
+            d.join(out).to_str().unwrap(),
+            "--json",
+        ]);
+        std::fs::read(d.join(out)).unwrap()
+    };
+    assert!(
+        fmpy(&fitted, "fmpy_fitted.csv") == fmpy(&with_answer, "fmpy_answer.csv"),
+        "FMPy's simulate_ssp: the fitted SSP's run differs from the bench's with the answer"
+    );
+    let oms = |ssp: &Path, out: &str| {
+        let o = Command::new(common::omsimulator())
+            .current_dir(d)
+            .arg(ssp)
+            .arg("--stopTime=10")
+            .arg(format!("--resultFile={}", d.join(out).display()))
+            .output()
+            .unwrap();
+        let log =
+            String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success() && !log.contains("error:"), "{log}");
+        std::fs::read(d.join(out)).unwrap()
+    };
+    let (a, b) = (
+        oms(&fitted, "oms_fitted.csv"),
+        oms(&with_answer, "oms_answer.csv"),
+    );
+    assert!(a.len() > 100_000, "OMSimulator wrote {} bytes", a.len());
+    assert!(
+        a == b,
+        "OMSimulator: the fitted SSP's run differs from the bench's with the answer"
+    );
+}
