@@ -116,7 +116,10 @@ fn the_demos_fitted_twin_runs_bit_for_bit_in_fmpy_and_omsimulator() {
     let cmp = j["compare"].as_object().unwrap();
     assert!(cmp.len() > 20, "{cmp:?}");
     for (name, c) in cmp {
-        assert_eq!(c["bitwise_equal"], true, "FMPy over the fitted FMUs, {name}: {c}");
+        assert_eq!(
+            c["bitwise_equal"], true,
+            "FMPy over the fitted FMUs, {name}: {c}"
+        );
     }
 
     // The fitted SSP against the bench with the answer set, 10 s, in each tool.

@@ -50,6 +50,12 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
         log.find("generation 1/1").unwrap() < log.find("| all |").unwrap(),
         "{log}"
     );
+    // The joint refinement after the steps says where it stands too, and when it is done.
+    let refined = log
+        .lines()
+        .find(|l| l.starts_with("joint refinement: ") && l.ends_with(", done"))
+        .unwrap_or_else(|| panic!("no line of the joint refinement in {log}"));
+    assert!(refined.contains(" laps of 5 parameters"), "{refined}");
     let result: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("opt/result.json")).unwrap()).unwrap();
     // Every parameter of the study's answer carries an interval (or a statement why not)

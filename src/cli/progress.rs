@@ -6,7 +6,7 @@ use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use tb_cosim::{Ended, Moment, RunObserver, RunView, SystemError};
-use tb_optimize::{GenerationDone, StudyObserver};
+use tb_optimize::{GenerationDone, PhaseProgress, StudyObserver};
 
 /// Where plain progress lines go.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -23,6 +23,23 @@ pub struct Bars {
     lines: Option<Lines>,
     /// The current step's start here (wall clock, generations done then), for the ETA.
     clock: Mutex<Option<(std::time::Instant, usize)>>,
+    /// The phase after the steps: its spinner on a terminal, and when its last plain line
+    /// was printed (one every [`PHASE_LINE_S`] at most).
+    phase: Mutex<Option<(&'static str, Option<ProgressBar>, std::time::Instant)>>,
+}
+
+/// The least time between two plain lines of a phase after the steps (its end is always
+/// said): a profile's hundreds of batches do not flood a log.
+const PHASE_LINE_S: f64 = 5.0;
+
+/// A phase's name in words.
+fn phase_words(phase: &str) -> &str {
+    match phase {
+        "refinement" => "joint refinement",
+        "profiles" => "profile likelihood",
+        "bootstrap" => "bootstrap refits",
+        other => other,
+    }
 }
 
 impl Bars {
@@ -101,6 +118,9 @@ impl StudyObserver for Bars {
         );
         pb.set_prefix(format!("step {step} {name}"));
         pb.set_position(done as u64);
+        // An interrupted step's bar stays where it stopped (a dropped bar would be
+        // finished: "22/22" after an interrupt at generation 1).
+        let pb = pb.with_finish(indicatif::ProgressFinish::Abandon);
         if let Ok(mut b) = self.bar.lock() {
             *b = Some(pb);
         }
@@ -159,6 +179,60 @@ impl StudyObserver for Bars {
             }
         }
     }
+
+    fn phase(&self, p: &PhaseProgress<'_>) {
+        let Ok(mut now) = self.phase.lock() else {
+            return;
+        };
+        let fresh = !matches!(now.as_ref(), Some((name, ..)) if *name == p.phase);
+        if fresh {
+            if let Some((_, Some(old), _)) = now.take() {
+                old.abandon();
+            }
+            let spinner = (self.lines.is_none()
+                || std::io::IsTerminal::is_terminal(&std::io::stderr()))
+            .then(|| {
+                let pb = ProgressBar::new_spinner().with_finish(indicatif::ProgressFinish::Abandon);
+                pb.set_style(
+                    ProgressStyle::with_template("{spinner} {prefix}: {msg}  ({elapsed})")
+                        .expect("valid template"),
+                );
+                pb.set_prefix(phase_words(p.phase).to_string());
+                pb.enable_steady_tick(std::time::Duration::from_millis(200));
+                pb
+            });
+            // Long enough ago that the first batch gets its line.
+            let before = std::time::Instant::now()
+                .checked_sub(std::time::Duration::from_secs_f64(PHASE_LINE_S))
+                .unwrap_or_else(std::time::Instant::now);
+            *now = Some((p.phase, spinner, before));
+        }
+        let Some((_, spinner, last_line)) = now.as_mut() else {
+            return;
+        };
+        let text = format!(
+            "{} laps of {} parameters, {}{}",
+            p.laps,
+            p.parameters.len(),
+            duration(p.seconds),
+            if p.done { ", done" } else { "" }
+        );
+        if let Some(pb) = spinner {
+            pb.set_message(text.clone());
+            if p.done {
+                pb.abandon();
+            }
+        }
+        if let Some(to) = self.lines {
+            if p.done || last_line.elapsed().as_secs_f64() >= PHASE_LINE_S {
+                print_line(to, &format!("{}: {text}", phase_words(p.phase)));
+                *last_line = std::time::Instant::now();
+            }
+        }
+        if p.done {
+            *now = None;
+        }
+    }
 }
 
 /// The progress of one run (`twinbench run`) on stderr: simulated time against the stop
@@ -170,20 +244,64 @@ pub struct RunBar {
     /// What ends the run, for the bar's text: "of 90 s", "until vehicle.lap >= 1 (at most
     /// 200 s)".
     until: String,
+    /// Where no bar can be seen: a plain line per tenth of the run, here.
+    lines: Option<Lines>,
+    /// The tenths already said.
+    said: u64,
 }
 
 impl RunBar {
-    pub fn new(until: String) -> RunBar {
+    /// A bar on a terminal's stderr, or with `lines` a plain line per tenth of the run
+    /// (`run … > log.txt`, a batch job), each with an ETA.
+    pub fn new(until: String, lines: Option<Lines>) -> RunBar {
         RunBar {
             started: std::time::Instant::now(),
             bar: None,
             until,
+            lines,
+            said: 0,
+        }
+    }
+
+    /// Where a run's plain lines go: stdout when it is not a terminal (it holds the log; not
+    /// with `--json`, whose stdout is the document), else stderr when that is not one;
+    /// None on a terminal (the bar).
+    pub fn lines_for_cli(json: bool) -> Option<Lines> {
+        use std::io::IsTerminal;
+        if !std::io::stderr().is_terminal() {
+            Some(if !json && !std::io::stdout().is_terminal() {
+                Lines::Stdout
+            } else {
+                Lines::Stderr
+            })
+        } else {
+            None
         }
     }
 
     fn update(&mut self, now: &RunView<'_>) {
         let span = now.horizon() - now.start();
         let done = ((now.time() - now.start()) / span * 1000.0).clamp(0.0, 1000.0) as u64;
+        let elapsed = self.started.elapsed().as_secs_f64();
+        if let Some(to) = self.lines {
+            let tenth = done / 100;
+            if tenth > self.said && elapsed >= 0.5 {
+                self.said = tenth;
+                let left = elapsed / (done.max(1) as f64) * (1000 - done) as f64;
+                print_line(
+                    to,
+                    &format!(
+                        "run: {} %, t = {:.1} s {}, {} elapsed, ETA {} (at most)",
+                        tenth * 10,
+                        now.time(),
+                        self.until,
+                        duration(elapsed),
+                        duration(left)
+                    ),
+                );
+            }
+            return;
+        }
         if self.bar.is_none() {
             if self.started.elapsed().as_secs_f64() < 0.5 {
                 return;

@@ -319,7 +319,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     // progress bar on a terminal.
     let interrupt = super::interrupt::run_flag()?;
     sim.observe(Box::new(super::progress::StopRunOnFlag(interrupt.clone())));
-    if std::io::stderr().is_terminal() {
+    let lines = super::progress::RunBar::lines_for_cli(args.json);
+    if std::io::stderr().is_terminal() || lines.is_some() {
         let until = match &system.stop {
             tb_cosim::Stop::Time(t) => format!("of {} s", tb_files::number(*t)),
             tb_cosim::Stop::When {
@@ -330,7 +331,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
                 tb_files::number(*max_time)
             ),
         };
-        sim.observe(Box::new(super::progress::RunBar::new(until)));
+        sim.observe(Box::new(super::progress::RunBar::new(until, lines)));
     }
     // A run that completed keeps its results even when an instance then fails to end.
     let trace = options.trace.as_ref().map(|t| t.sink.clone());

@@ -41,10 +41,77 @@ pub trait StudyObserver: Send + Sync {
     }
     /// The current step's optimiser is done.
     fn step_finished(&self) {}
+    /// The work after the steps, which has no generations (the joint refinement, the
+    /// profiles, the bootstrap) ran a batch of laps, or ended (`done`).
+    fn phase(&self, _p: &PhaseProgress<'_>) {}
     /// The study's result, before it is returned (not after an interruption); an error
     /// (the report could not be written) ends the study with it.
     fn finished(&self, _result: &StudyResult) -> Result<(), String> {
         Ok(())
+    }
+}
+
+/// Where the work after the steps stands, as observers see it.
+#[derive(Clone, Copy, Debug)]
+pub struct PhaseProgress<'a> {
+    /// `refinement`, `profiles` or `bootstrap`.
+    pub phase: &'static str,
+    /// The parameters it works on, by name.
+    pub parameters: &'a [String],
+    /// Laps run in this phase so far.
+    pub laps: usize,
+    /// Seconds since the phase began.
+    pub seconds: f64,
+    /// The phase is over.
+    pub done: bool,
+}
+
+/// The phases' progress, told to the observers after every batch of laps (from any thread:
+/// the profiles' walks run side by side).
+struct Phases<'a> {
+    observers: &'a [Arc<dyn StudyObserver>],
+    parameters: &'a [String],
+    /// Laps per point (one per lap of the study).
+    laps_per_point: usize,
+    now: std::sync::Mutex<(&'static str, usize, std::time::Instant)>,
+}
+
+impl<'a> Phases<'a> {
+    fn new(
+        observers: &'a [Arc<dyn StudyObserver>],
+        parameters: &'a [String],
+        laps_per_point: usize,
+    ) -> Self {
+        Phases {
+            observers,
+            parameters,
+            laps_per_point,
+            now: std::sync::Mutex::new(("refinement", 0, std::time::Instant::now())),
+        }
+    }
+
+    fn begin(&self, phase: &'static str) {
+        *self.now.lock().unwrap_or_else(|p| p.into_inner()) = (phase, 0, std::time::Instant::now());
+    }
+
+    /// `points` points ran (or, with `done`, the phase ended).
+    fn ran(&self, points: usize, done: bool) {
+        let (phase, laps, seconds) = {
+            let mut now = self.now.lock().unwrap_or_else(|p| p.into_inner());
+            now.1 += points * self.laps_per_point;
+            (now.0, now.1, now.2.elapsed().as_secs_f64())
+        };
+        // Told outside the lock: an observer may take its time (Python's GIL).
+        let p = PhaseProgress {
+            phase,
+            parameters: self.parameters,
+            laps,
+            seconds,
+            done,
+        };
+        for o in self.observers {
+            o.phase(&p);
+        }
     }
 }
 
@@ -1232,7 +1299,7 @@ fn joint_answer(
     let local = crate::fit::on_pool(&session.pool, |y: &[f64]| {
         bench.signals(&values(y), prepared, &j.signals)
     });
-    let simulate = |points: &[Vec<f64>]| -> Vec<crate::fit::Simulated> {
+    let simulate_points = |points: &[Vec<f64>]| -> Vec<crate::fit::Simulated> {
         let Some(remote) = remote else {
             return local(points);
         };
@@ -1252,6 +1319,12 @@ fn joint_answer(
             Err(why) => vec![Err(format!("the evaluator failed: {why}")); points.len()],
         }
     };
+    let phases = Phases::new(&session.options.observers, &j.names, prepared.len());
+    let simulate = |points: &[Vec<f64>]| -> Vec<crate::fit::Simulated> {
+        let runs = simulate_points(points);
+        phases.ran(points.len(), false);
+        runs
+    };
     let (mut frame, raw, sens) = match Frame::new(series, j.bounds.clone(), &x, simulate) {
         Ok(f) => f,
         Err(why) => {
@@ -1266,6 +1339,7 @@ fn joint_answer(
     }
     let objective_before = frame.per_point(frame.objective(&raw));
     let solution = frame.minimise(&x, raw, sens, &vec![true; x.len()], crate::fit::ANSWER);
+    phases.ran(0, true);
     let laps = frame.laps();
     let blocks = frame.blocks(&solution);
     let iv = frame.sandwich(&j.names, &solution.x, &j.bounds, &blocks, laps);
@@ -1294,14 +1368,17 @@ fn joint_answer(
         // On an evaluator every walk (two per parameter) waits on its own tasks, so all of
         // them run at once and the cluster gets every walk's laps together.
         let walks = remote.and_then(|_| thread_pool(2 * j.names.len()).ok());
-        crate::profile::profiles(
+        phases.begin("profiles");
+        let profiles = crate::profile::profiles(
             &frame,
             &j.names,
             &units,
             &solution,
             iv.critical_value,
             walks.as_ref().unwrap_or(&session.pool),
-        )
+        );
+        phases.ran(0, true);
+        profiles
     });
     let replicates = study.file.bootstrap.max(session.options.bootstrap);
     let bootstrap = (replicates > 0).then(|| {
@@ -1310,14 +1387,17 @@ fn joint_answer(
             .iter()
             .map(|n| iv.get(n).and_then(|p| p.std_error))
             .collect();
-        crate::bootstrap::run(
+        phases.begin("bootstrap");
+        let bootstrap = crate::bootstrap::run(
             &mut frame,
             &solution,
             &j.names,
             &se,
             replicates,
             study.file.seed,
-        )
+        );
+        phases.ran(0, true);
+        bootstrap
     });
     state.set(&index, &solution.x);
     Ok((Some(refinement), iv, profiles, checked, bootstrap))

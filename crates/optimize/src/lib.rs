@@ -53,8 +53,8 @@ pub mod study;
 
 pub use cmaes::{Cmaes, CmaesSettings};
 pub use driver::{
-    run_study, GenerationDone, RunOptions, StepResult, StopAfter, StopOnFlag, StudyObserver,
-    StudyOutcome, StudyResult,
+    run_study, GenerationDone, PhaseProgress, RunOptions, StepResult, StopAfter, StopOnFlag,
+    StudyObserver, StudyOutcome, StudyResult,
 };
 pub use ga::{Ga, GaSettings};
 pub use identifiability::Identifiability;

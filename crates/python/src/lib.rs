@@ -578,10 +578,29 @@ struct PyProgress {
 }
 
 impl StudyObserver for PyProgress {
+    /// The refinement, the profiles and the bootstrap: a record per batch of laps. They
+    /// have no generation to stop after: an exception the callback raises is raised when
+    /// the study returns.
+    fn phase(&self, p: &tb_optimize::PhaseProgress<'_>) {
+        Python::attach(|py| {
+            let d = PyDict::new(py);
+            let _ = d.set_item("phase", p.phase);
+            let _ = d.set_item("parameters", p.parameters.to_vec());
+            let _ = d.set_item("laps", p.laps);
+            let _ = d.set_item("seconds", p.seconds);
+            let _ = d.set_item("done", p.done);
+            if let Err(e) = self.callback.bind(py).call1((d,)) {
+                let mut raised = self.raised.lock().unwrap_or_else(|p| p.into_inner());
+                raised.get_or_insert(e);
+            }
+        })
+    }
+
     fn generation(&self, g: &GenerationDone<'_>) -> ControlFlow<()> {
         let record = g.record;
         Python::attach(|py| {
             let d = PyDict::new(py);
+            let _ = d.set_item("phase", "generation");
             let _ = d.set_item("step", g.step);
             let _ = d.set_item("step_name", g.name);
             let _ = d.set_item("generations", g.generations);

@@ -914,8 +914,16 @@ def test_a_study_result_hands_its_fitted_twin_on(tmp_path):
     text = text[: text.index("# Step 2")].replace('"../', f'"{ROOT.as_posix()}/')
     study = tmp_path / "lift.toml"
     study.write_text(text)
-    result = twinbench.Study(study).optimize(out=tmp_path / "opt", generations=1, report=False, threads=2)
+    records = []
+    result = twinbench.Study(study).optimize(out=tmp_path / "opt", generations=1, report=False, threads=2,
+                                             progress=records.append)
     assert isinstance(result, twinbench.StudyResult) and isinstance(result, dict)
+    # Progress: the generation's record, then the joint refinement's, which ends done.
+    assert records[0]["phase"] == "generation" and records[0]["generation"] == 1
+    refinement = [r for r in records if r["phase"] == "refinement"]
+    assert refinement and refinement[-1]["done"] is True, records
+    assert refinement[-1]["parameters"] == ["vehicle.c_lift_front", "vehicle.c_lift_rear"]
+    assert refinement[-1]["laps"] == result["joint"]["refinement"]["laps"], (refinement, result["joint"]["refinement"])
     summary = result.export_twin(tmp_path / "twin", fmi=[2])
     assert summary["fitted_instances"] == ["vehicle", "driver", "dyno_rl", "dyno_rr", "edu"]
     assert "fmu/vehicle.fmu" in summary["files"] and "fmu/vehicle-fmi3.fmu" not in summary["files"]

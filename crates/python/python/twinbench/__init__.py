@@ -489,11 +489,16 @@ class Study:
             out: output folder (default ``target/optimize``, as the command line).
             force: optimise even when the measurement and the twin do not belong together.
             report: write Tab. 1 and the plots.
-            progress: called after every generation with a dict (step, 1-based,
-                step_name, generations, generation, evaluations, best_cost, best_x,
-                failures, and workers: this process's threads, or on a Dask cluster the
-                workers it has now). An exception it raises stops the study after that
-                generation, its checkpoint kept, and is raised.
+            progress: called after every generation with a dict (``phase``:
+                ``"generation"``, step, 1-based, step_name, generations, generation,
+                evaluations, best_cost, best_x, failures, and workers: this process's
+                threads, or on a Dask cluster the workers it has now). An exception it
+                raises stops the study after that generation, its checkpoint kept, and is
+                raised. After the steps, the joint refinement, the profiles and the
+                bootstrap send a record per batch of laps: ``phase`` (``"refinement"``,
+                ``"profiles"``, ``"bootstrap"``), ``parameters`` (their names), ``laps``
+                (so far in the phase), ``seconds`` and ``done`` (the phase's last record);
+                an exception raised for one of those is raised when the study returns.
             profiles: profile likelihood of every parameter after the joint refinement
                 (as ``--profiles``); the intervals are then the profiles'.
             bootstrap: refits of a moving-block bootstrap of the answer (as
