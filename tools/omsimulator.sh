@@ -10,21 +10,24 @@ here=$(cd "$(dirname "$0")" && pwd)
 . "$here/pins.sh"
 prefix=${TWINBENCH_OMSIMULATOR_PREFIX:-$HOME/.cache/twinbench/omsimulator}
 exe="$prefix/bin/OMSimulator"
+# A source tree tools/fetch_sources.sh fetched at the pinned commits (when the archive is
+# not at hand).
+tree="${TWINBENCH_SOURCES_CACHE:-$HOME/.cache/twinbench/sources}/omsimulator-$OMSIMULATOR_COMMIT"
 if [ "${1:-}" = "--check" ]; then
-    # Can the tests have OMSimulator? (built already, or its archive is there)
+    # Can the tests have OMSimulator? (built already, its archive is there, or a fetched tree)
     [ -x "$exe" ] && exit 0
     archive="${TWINBENCH_OMSIMULATOR_SOURCES:-$here/../../shared/omsimulator}/$OMSIMULATOR_ARCHIVE"
-    [ -f "$archive" ]
+    [ -f "$archive" ] || [ -f "$tree/CMakeLists.txt" ]
     exit $?
 fi
 if [ ! -x "$exe" ]; then
     sources=${TWINBENCH_OMSIMULATOR_SOURCES:-$here/../../shared/omsimulator}
     archive="$sources/$OMSIMULATOR_ARCHIVE"
-    if [ ! -f "$archive" ]; then
-        echo "error: OMSimulator's source archive $OMSIMULATOR_ARCHIVE is not in $sources (set TWINBENCH_OMSIMULATOR_SOURCES; README, 'What the tests need')" >&2
+    if [ ! -f "$archive" ] && [ ! -f "$tree/CMakeLists.txt" ]; then
+        echo "error: OMSimulator's source archive $OMSIMULATOR_ARCHIVE is not in $sources (set TWINBENCH_OMSIMULATOR_SOURCES, or let tools/fetch_sources.sh omsimulator fetch it; README, 'What the tests need')" >&2
         exit 2
     fi
-    if ! echo "$OMSIMULATOR_SHA256  $archive" | sha256sum --check --status; then
+    if [ -f "$archive" ] && ! echo "$OMSIMULATOR_SHA256  $archive" | sha256sum --check --status; then
         echo "error: $archive is not the pinned OMSimulator archive (SHA-256 $(sha256sum "$archive" | cut -d' ' -f1), expected $OMSIMULATOR_SHA256)" >&2
         exit 2
     fi
@@ -40,12 +43,23 @@ if [ ! -x "$exe" ]; then
     work=$(mktemp -d)
     trap 'rm -rf "$work" "$tmp"' EXIT
     mkdir -p "$(dirname "$prefix")"
-    tar -xzf "$archive" -C "$work"
-    src=$(find "$work" -mindepth 1 -maxdepth 1 -type d | head -n 1)
+    if [ -f "$archive" ]; then
+        tar -xzf "$archive" -C "$work"
+        src=$(find "$work" -mindepth 1 -maxdepth 1 -type d | head -n 1)
+    else
+        src="$work/oms-src"
+        cp -a "$tree" "$src"
+    fi
     cmake -S "$src" -B "$src/build" -DCMAKE_INSTALL_PREFIX="$tmp" -DCMAKE_BUILD_TYPE=Release \
         >"$work/cmake.log" 2>&1 || { tail -20 "$work/cmake.log" >&2; exit 1; }
-    cmake --build "$src/build" --target install -j"$(nproc)" \
-        >"$work/build.log" 2>&1 || { tail -30 "$work/build.log" >&2; exit 1; }
+    # Its progress, a line per tenth of the build (the whole log is kept for a failure).
+    set +o pipefail
+    cmake --build "$src/build" --target install -j"$(nproc)" 2>&1 | tee "$work/build.log" \
+        | awk 'match($0, /^\[ *[0-9]+%\]/) { p = substr($0, 2, RLENGTH - 3) + 0;
+               if (p >= last + 10) { last = p - p % 10; printf "== OMSimulator build: %d %%\n", last > "/dev/stderr"; fflush("/dev/stderr") } }'
+    status=${PIPESTATUS[0]}
+    set -o pipefail
+    [ "$status" = 0 ] || { tail -30 "$work/build.log" >&2; exit 1; }
     rm -rf "$prefix"
     mv "$tmp" "$prefix"
 fi

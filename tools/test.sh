@@ -10,6 +10,14 @@ cd "$(dirname "$0")/.."
 # else, or one line that says what is missing and where to get it.
 . tools/pins.sh
 export TWINBENCH_REFERENCE_FMUS="${TWINBENCH_REFERENCE_FMUS:-$(cd .. && pwd)/shared/reference-fmus}"
+# Not beside the clone: fetched at their pinned commits into a cache when the network allows
+# (tools/fetch_sources.sh), and only then missing.
+if [ ! -f "$TWINBENCH_REFERENCE_FMUS/src/fmi2Functions.c" ]; then
+    if fetched=$(tools/fetch_sources.sh reference-fmus); then
+        export TWINBENCH_REFERENCE_FMUS="$fetched"
+    fi
+fi
+tools/omsimulator.sh --check || tools/fetch_sources.sh omsimulator >/dev/null || true
 missing=()
 [ -f "$TWINBENCH_REFERENCE_FMUS/src/fmi2Functions.c" ] \
     || missing+=("the Modelica Reference FMUs' sources ($REFERENCE_FMUS_REPOSITORY at commit $REFERENCE_FMUS_COMMIT) at $TWINBENCH_REFERENCE_FMUS (or set TWINBENCH_REFERENCE_FMUS)")
