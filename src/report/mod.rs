@@ -109,6 +109,11 @@ pub struct LapTimeDifference {
     pub optimized_s: f64,
     /// The measured lap time [s] over the same distance.
     pub measured_s: f64,
+    /// That distance [m]: the stretch both laps cover on the comparison's grid (a little
+    /// shorter than the lap, so `measured_s` is a little less than the lap time `lap` reads
+    /// from the whole measurement).
+    #[serde(default)]
+    pub distance_m: f64,
 }
 
 /// What Tab. 1's columns mean, printed under it.
@@ -402,8 +407,8 @@ pub fn table1_markdown(t: &Table1) -> String {
     }
     if let Some(d) = t.lap_time_difference {
         s.push_str(&format!(
-            "\nLap time, twin − vehicle: {:+.3} s initial, {:+.3} s optimised (measured {:.3} s).\n",
-            d.initial_s, d.optimized_s, d.measured_s
+            "\nLap time, twin − vehicle: {:+.3} s initial, {:+.3} s optimised (measured {:.3} s over the {:.0} m both cover on the comparison's grid).\n",
+            d.initial_s, d.optimized_s, d.measured_s, d.distance_m
         ));
     }
     s.push_str(&format!("\n{TABLE1_LEGEND}\n"));
@@ -546,20 +551,21 @@ pub fn write_report(
 
     // Tab. 1, with the lap times' difference the time plot below shows.
     let (rm, m) = prepared.on_grid(meas, "time", false, &mut ws)?;
-    let mut lap_gap = |lap: &Table| -> Result<(f64, f64), ReportError> {
+    let mut lap_gap = |lap: &Table| -> Result<(f64, f64, f64), ReportError> {
         let (ro, o) = prepared.on_grid(lap, "time", false, &mut ws)?;
         let end = rm.end.min(ro.end);
         let (measured, twin) = (m[end - 1 - rm.start] - m[0], o[end - 1 - ro.start] - o[0]);
-        Ok((twin - measured, measured))
+        Ok((twin - measured, measured, grid.at(end - 1) - grid.at(rm.start)))
     };
-    let (initial_gap, _) = lap_gap(initial)?;
-    let (optimized_gap, measured_s) = lap_gap(optimised)?;
+    let (initial_gap, ..) = lap_gap(initial)?;
+    let (optimized_gap, measured_s, distance_m) = lap_gap(optimised)?;
     let t = table1(
         result,
         Some(LapTimeDifference {
             initial_s: initial_gap,
             optimized_s: optimized_gap,
             measured_s,
+            distance_m,
         }),
     );
     let md = table1_markdown(&t);
