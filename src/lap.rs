@@ -690,7 +690,9 @@ pub fn prepare_several(
         let mut entries = String::new();
         for (k, ((m, channels), name)) in measurements.iter().zip(&names).enumerate() {
             let o = LapOptions {
-                measurement: tb_files::absolute(m),
+                // As given: a relative one stays relative in the studies (a tree moved as
+                // a whole still finds it).
+                measurement: m.clone(),
                 channels: channels.clone(),
                 track: match tracks.len() {
                     0 => None,
