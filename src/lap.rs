@@ -238,6 +238,9 @@ const SPEED_UNITS: [(&str, f64); 2] = [("km/h", 3.6), ("mph", 3600.0 / 1609.344)
 /// m/s; one logged in km/h or mph would then be a target 3.6 or 2.24 times too fast. The
 /// file's distance column (∫v dt against it) or a_x (dv/dt against it, least squares) shows
 /// the factor: within 10 % of km/h's or mph's, the lap is refused with its unit named.
+/// Whatever the unit, a speed that disagrees with the file's own distance by more than
+/// [`SPEED_AGREEMENT`] (with a_x: twice that) is refused too: a wrong channel or a scale
+/// would be a wrong target for the whole study.
 pub fn check_speed_unit(m: &Measurement) -> Result<(), LapError> {
     let table = m.table();
     let Some(iv) = table.names().iter().position(|n| n == "v") else {
@@ -246,11 +249,38 @@ pub fn check_speed_unit(m: &Measurement) -> Result<(), LapError> {
     let declared = table
         .units()
         .is_some_and(|u| u.get(iv).is_some_and(|u| !u.trim().is_empty()));
-    if declared {
+    let Some((ratio, against, tolerance)) = speed_ratio(m)? else {
         return Ok(());
+    };
+    let unit = SPEED_UNITS
+        .iter()
+        .find(|(_, f)| (ratio / f - 1.0).abs() < 0.1);
+    match unit {
+        Some((unit, f)) if !declared => Err(LapError::Invalid(format!(
+            "{}: v has no unit and looks like {unit}, not m/s: read as m/s it is {ratio:.2} times the speed {against} implies ({unit}: {f:.2}); declare its unit (a units row under the CSV header with `{unit}` under v, or the MDF channel's unit)",
+            table.source(),
+        ))),
+        _ if (ratio - 1.0).abs() > tolerance => Err(LapError::Invalid(format!(
+            "{}: v is {ratio:.2} times the speed {against} implies (they agree within {:.0} % on a logger's lap): a wrong channel for v, or a speed scaled by a wrong factor{}; check the channel map and the units row",
+            table.source(),
+            100.0 * tolerance,
+            if declared { "" } else { " or in a unit not declared" }
+        ))),
+        _ => Ok(()),
     }
-    let (t, v) = (m.time(), table.column_at(iv));
-    let ratio = match (m.distance_source(), m.signal("a_x")?) {
+}
+
+/// How far v may stray from the speed the distance column implies (a logger's distance
+/// and speed come from one sensor or from GPS and wheel speed: a few per cent apart).
+const SPEED_AGREEMENT: f64 = 0.1;
+
+/// v read as it is against the speed the file's distance column (∫v dt over the distance
+/// driven) or a_x (dv/dt against a_x, least squares, both averaged over half a second so
+/// that a_x's vibration does not dilute the slope) implies: the ratio, what it was taken
+/// against, and how far from 1 it may lie.
+fn speed_ratio(m: &Measurement) -> Result<Option<(f64, &'static str, f64)>, LapError> {
+    let (t, v) = (m.time(), m.require("v")?);
+    let found = match (m.distance_source(), m.signal("a_x")?) {
         (tb_compare::DistanceSource::Column, _) => {
             let d = m.distance();
             // ∫v dt by the trapezoid rule (only its total is needed).
@@ -258,36 +288,23 @@ pub fn check_speed_unit(m: &Measurement) -> Result<(), LapError> {
                 .map(|k| 0.5 * (v[k] + v[k - 1]) * (t[k] - t[k - 1]))
                 .sum();
             let driven = d[d.len() - 1] - d[0];
-            (driven > 0.0).then(|| integrated / driven)
+            (driven > 0.0).then(|| (integrated / driven, "the distance column", SPEED_AGREEMENT))
         }
         (_, Some(ax)) if t.len() > 2 => {
+            let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+            let w = ((0.25 / dt).round() as usize).clamp(1, t.len() / 4 + 1);
             let (mut num, mut den) = (0.0, 0.0);
-            for k in 1..t.len() - 1 {
-                let dv = (v[k + 1] - v[k - 1]) / (t[k + 1] - t[k - 1]);
-                num += dv * ax[k];
-                den += ax[k] * ax[k];
+            for k in w..t.len().saturating_sub(w) {
+                let dv = (v[k + w] - v[k - w]) / (t[k + w] - t[k - w]);
+                let a = ax[k - w..=k + w].iter().sum::<f64>() / (2 * w + 1) as f64;
+                num += dv * a;
+                den += a * a;
             }
-            (den > 0.0).then(|| num / den)
+            (den > 0.0).then(|| (num / den, "a_x", 2.0 * SPEED_AGREEMENT))
         }
         _ => None,
     };
-    let Some(ratio) = ratio.filter(|r| r.is_finite()) else {
-        return Ok(());
-    };
-    match SPEED_UNITS
-        .iter()
-        .find(|(_, f)| (ratio / f - 1.0).abs() < 0.1)
-    {
-        Some((unit, f)) => Err(LapError::Invalid(format!(
-            "{}: v has no unit and looks like {unit}, not m/s: read as m/s it is {ratio:.2} times the speed {} implies ({unit}: {f:.2}); declare its unit (a units row under the CSV header with `{unit}` under v, or the MDF channel's unit)",
-            table.source(),
-            match m.distance_source() {
-                tb_compare::DistanceSource::Column => "the distance column",
-                tb_compare::DistanceSource::IntegratedFromSpeed => "a_x",
-            }
-        ))),
-        None => Ok(()),
-    }
+    Ok(found.filter(|(r, ..)| r.is_finite()))
 }
 
 /// `v` resampled onto `grid` by distance (linear, held at the ends).

@@ -122,7 +122,7 @@ fn an_unknown_key_in_a_channel_map_is_refused_with_the_keys_a_map_has() {
     );
 }
 
-/// The speed column times 3.6 (km/h) or 2.237 (mph), without a units row.
+/// The speed column times `factor` (3.6: km/h, 2.237: mph), without a units row.
 fn scaled_speed(dir: &Path, name: &str, factor: f64, header: &str) -> PathBuf {
     lap_with(dir, name, header, |cells| {
         let v: f64 = cells[2].parse().unwrap();
@@ -183,6 +183,21 @@ fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
         fmus.to_str().unwrap(),
     ));
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A speed 2.7 times its own distance's (no unit it could be in): refused all the same,
+    // declared unit or not.
+    let m = scaled_speed(dir.path(), "scaled.csv", 2.7, HEADER);
+    let out = dir.path().join("scaled");
+    let e = failure(&lap_args(
+        m.to_str().unwrap(),
+        out.to_str().unwrap(),
+        fmus.to_str().unwrap(),
+    ));
+    assert!(
+        e.contains("v is 2.70 times the speed the distance column implies")
+            && e.contains("a wrong channel for v"),
+        "{e}"
+    );
+    assert!(!out.exists());
 }
 
 #[test]

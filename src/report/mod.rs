@@ -555,7 +555,11 @@ pub fn write_report(
         let (ro, o) = prepared.on_grid(lap, "time", false, &mut ws)?;
         let end = rm.end.min(ro.end);
         let (measured, twin) = (m[end - 1 - rm.start] - m[0], o[end - 1 - ro.start] - o[0]);
-        Ok((twin - measured, measured, grid.at(end - 1) - grid.at(rm.start)))
+        Ok((
+            twin - measured,
+            measured,
+            grid.at(end - 1) - grid.at(rm.start),
+        ))
     };
     let (initial_gap, ..) = lap_gap(initial)?;
     let (optimized_gap, measured_s, distance_m) = lap_gap(optimised)?;
