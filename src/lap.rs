@@ -828,6 +828,12 @@ fn prepare_in(o: &LapOptions) -> Result<LapFiles, LapError> {
         None => None,
     };
     let mut warnings = Vec::new();
+    if o.chassis == Chassis::SecondOrder {
+        warnings.push(format!(
+            "--chassis second-order: the study gets a third step fitting the chassis' pitch and roll modes ({}) and compares at 5 Hz; a mode this lap's braking or cornering does not excite runs to its range's end, and Tab. 1 then gives no interval for it (docs/optimize.md, 'The second-order chassis')",
+            Chassis::MODE_PARAMETERS.join(", ")
+        ));
+    }
     std::fs::create_dir_all(&o.out).map_err(|e| {
         LapError::Invalid(format!(
             "{}: cannot create the output folder: {e}",

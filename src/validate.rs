@@ -296,6 +296,10 @@ pub fn markdown(v: &Validation) -> String {
     if v.default_settings {
         s.push_str("\nThe result carries no comparison settings (written by an older twinbench): the defaults were used (2 Hz, order 2, 1 m).\n");
     }
-    s.push_str(&format!("\n{}\n", crate::report::TABLE1_LEGEND));
+    s.push_str(&format!("\n{VALIDATION_LEGEND}\n"));
     s
 }
+
+/// What the validation table's columns mean (its own: it has no parameters and no row
+/// "all").
+pub const VALIDATION_LEGEND: &str = "The twin with the study's answer (`parameters_final`) on a lap it was not fitted on, each signal compared as the study compared it (the same filter and distance grid). e: the error measure (1 − R²)/2 + |m − 1|/2 of the twin's signal against the measured one (0: equal); e fitted lap: the same signal's e on the lap the study fitted, with the answer (a range where the study's steps gave several); m: the slope of the regression of the twin's signal on the measured one (1: same scale); R²: the regression's coefficient of determination; bias: the mean relative difference, twin − measurement. An e much above the fitted lap's says the answer does not carry over to this lap (docs/optimize.md, 'On a lap not fitted').";
