@@ -105,6 +105,7 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
     }
     let md = std::fs::read_to_string(d.join("val/validation.md")).unwrap();
     assert!(md.contains("| 2 | Fz_rl |"), "{md}");
+    the_same_lap_in_a_loggers_names_validates_alike(d, &meas, &track, rows);
     a_result_file_never_decides_what_code_runs(d, &result, &meas, &track, rows);
     // Not a result: named, and what was expected.
     std::fs::write(d.join("bad.json"), "{\"study\": 1}").unwrap();
@@ -237,4 +238,63 @@ fn a_result_file_never_decides_what_code_runs(
             .unwrap();
         assert_eq!(r["e_fitted"], answer["after"]["e"], "{r}");
     }
+}
+
+/// The same lap with a logger's channel names and a channel map: every row (the fitted
+/// lap's e, the answer's, and this lap's) as with the study's names, to the bit.
+fn the_same_lap_in_a_loggers_names_validates_alike(
+    d: &std::path::Path,
+    meas: &std::path::Path,
+    track: &std::path::Path,
+    rows: &[serde_json::Value],
+) {
+    let names = [
+        ("v", "GPS_Speed"),
+        ("a_x", "AccLong"),
+        ("a_y", "AccLat"),
+        ("Fz_fl", "LoadFL"),
+        ("Fz_fr", "LoadFR"),
+        ("Fz_rl", "LoadRL"),
+        ("Fz_rr", "LoadRR"),
+    ];
+    let text = std::fs::read_to_string(meas).unwrap();
+    let (header, body) = text.split_once('\n').unwrap();
+    let header: Vec<String> = header
+        .split(',')
+        .map(|h| {
+            names
+                .iter()
+                .find(|(ours, _)| *ours == h)
+                .map_or(h.to_string(), |(_, theirs)| theirs.to_string())
+        })
+        .collect();
+    std::fs::write(
+        d.join("logger.csv"),
+        format!("{}\n{body}", header.join(",")),
+    )
+    .unwrap();
+    let map: String = names
+        .iter()
+        .map(|(ours, theirs)| format!("{ours} = \"{theirs}\"\n"))
+        .collect();
+    std::fs::write(d.join("map.toml"), format!("[channels]\n{map}")).unwrap();
+    let o = twinbench(
+        d,
+        &[
+            "validate",
+            "opt/result.json",
+            "logger.csv",
+            "--channels",
+            "map.toml",
+            "--track",
+            track.to_str().unwrap(),
+            "--out",
+            "val_logger",
+            "--json",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["rows"].as_array().unwrap(), rows, "{v}");
+    assert!(v["notes"].as_array().unwrap().is_empty(), "{v}");
 }
