@@ -1,8 +1,16 @@
 //! Reports of an optimisation study: the paper's Tab. 1 as Markdown and JSON, and plots
 //! (SVG + PNG): Fz_sum over distance measured / initial / optimised, filtered and unfiltered
-//! (Fig. 7); time over distance (Fig. 6); best cost per generation; a_x of twin and car.
+//! (Fig. 7); time over distance (Fig. 6); best cost per generation; a_x of twin and car;
+//! and report.html, all of it on one self-contained page with every compared signal, the
+//! parameters' picture and the inputs' digests ([`html`]).
 //! Everything comes from the study's result and the laps it kept: the report simulates
 //! nothing.
+
+mod forest;
+pub mod html;
+mod provenance;
+mod signals;
+mod truth;
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -309,6 +317,45 @@ pub fn merged_statements(items: &[(String, String)]) -> Vec<String> {
     lines
 }
 
+/// One parameter of Tab. 1 in words: its change, its values and intervals (the Markdown
+/// table's cell and the HTML table's, so both say the same).
+pub fn parameter_line(p: &TableParameter) -> String {
+    let unit = unit_suffix(p);
+    let end = |e: Option<f64>| e.map_or("open".to_string(), |x| format!("{x:.4}"));
+    let interval = match p.interval {
+        Some((lo, hi)) => format!(" [{}, {}]", end(lo), end(hi)),
+        None if p.interval_statement.is_some() => " [no interval]".into(),
+        None => String::new(),
+    };
+    let interval = match p.interval_with_model {
+        Some((lo, hi)) => format!(
+            "{interval}, with the model's share [{}, {}]",
+            end(lo),
+            end(hi)
+        ),
+        None => interval,
+    };
+    format!(
+        "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit}{interval})",
+        short(&p.name),
+        p.change_percent,
+        p.initial,
+        p.optimized
+    )
+}
+
+/// The intervals' statements of every parameter of Tab. 1, merged per cause.
+pub fn table1_statements(t: &Table1) -> Vec<String> {
+    merged_statements(
+        &t.steps
+            .iter()
+            .chain(&t.joint)
+            .flat_map(|st| &st.parameters)
+            .filter_map(|p| Some((short(&p.name).to_string(), p.interval_statement.clone()?)))
+            .collect::<Vec<_>>(),
+    )
+}
+
 /// Tab. 1 as Markdown (parameters listed on a step's first row, as in the paper).
 pub fn table1_markdown(t: &Table1) -> String {
     let mut s = String::new();
@@ -329,32 +376,7 @@ pub fn table1_markdown(t: &Table1) -> String {
         let params = st
             .parameters
             .iter()
-            .map(|p| {
-                let unit = unit_suffix(p);
-                let end = |e: Option<f64>| e.map_or("open".to_string(), |x| format!("{x:.4}"));
-                let interval = match p.interval {
-                    Some((lo, hi)) => format!(" [{}, {}]", end(lo), end(hi)),
-                    None if p.interval_statement.is_some() => " [no interval]".into(),
-                    None => String::new(),
-                };
-                let interval = match p.interval_with_model {
-                    Some((lo, hi)) => {
-                        format!(
-                            "{interval}, with the model's share [{}, {}]",
-                            end(lo),
-                            end(hi)
-                        )
-                    }
-                    None => interval,
-                };
-                format!(
-                    "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit}{interval})",
-                    short(&p.name),
-                    p.change_percent,
-                    p.initial,
-                    p.optimized
-                )
-            })
+            .map(parameter_line)
             .collect::<Vec<_>>()
             .join("<br>");
         for (k, r) in st.signals.iter().enumerate() {
@@ -375,14 +397,7 @@ pub fn table1_markdown(t: &Table1) -> String {
             ));
         }
     }
-    let statements = merged_statements(
-        &t.steps
-            .iter()
-            .chain(&t.joint)
-            .flat_map(|st| &st.parameters)
-            .filter_map(|p| Some((short(&p.name).to_string(), p.interval_statement.clone()?)))
-            .collect::<Vec<_>>(),
-    );
+    let statements = table1_statements(t);
     if let Some(j) = &t.joint {
         s.push_str(&format!("\n{}\n", values_to_load(j)));
     }
@@ -662,6 +677,19 @@ pub fn write_report(
     plot.save_both(&stem)?;
     files.push(stem.with_extension("svg"));
     files.push(stem.with_extension("png"));
+
+    // All of it on one page to hand on, with every compared signal and the parameters'
+    // picture (html.rs).
+    let laps = [meas, initial, optimised];
+    let signals = signals::figures(study, &prepared, laps, &mut ws)?;
+    let page = html::page(&html::Page {
+        study,
+        result,
+        table: &t,
+        signals: &signals,
+        plots: &files,
+    })?;
+    write(&folder.join("report.html"), page.as_bytes(), &mut files)?;
 
     Ok(ReportFiles {
         folder: folder.to_path_buf(),
