@@ -107,6 +107,7 @@ th.n,td.n{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 td.better{color:var(--good)}
 td.worse{color:var(--bad)}
 tbody.step{border-top:2px solid #a9b3bf}
+td.params{min-width:22em}
 td.params div{margin-bottom:2px}
 .verdict{border-left:4px solid var(--good);background:var(--soft);padding:8px 14px;margin:12px 0}
 .verdict.wanting{border-left-color:var(--warn)}
