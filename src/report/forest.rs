@@ -123,7 +123,7 @@ fn legend(rows: &[Row]) -> String {
 fn row_svg(top: f64, k: usize, row: &Row) -> String {
     let y = top + 40.0;
     let mut s = String::new();
-    if k % 2 == 0 {
+    if k.is_multiple_of(2) {
         s.push_str(&format!(
             r##"<rect x="0" y="{top}" width="{WIDTH}" height="{ROW}" fill="#f6f8fa"/>"##
         ));
