@@ -73,7 +73,7 @@ pub fn page(p: &Page) -> Result<String, ReportError> {
     s.push_str(&facts(p));
     s.push_str(&table1_section(p.table));
     s.push_str(&parameters_section(&rows, truth.as_ref()));
-    s.push_str(&signals_section(p.signals));
+    s.push_str(&signals_section(p.study, p.signals));
     s.push_str(&plots_section(p)?);
     s.push_str(&provenance_section(&provenance, p.result));
     s.push_str("</main>\n</body>\n</html>\n");
@@ -348,12 +348,18 @@ fn parameters_section(rows: &[Row], truth: Option<&Truth>) -> String {
 }
 
 /// Every compared signal, or why one is missing.
-fn signals_section(figures: &[SignalFigure]) -> String {
-    let mut s = String::from(
+fn signals_section(study: &Study, figures: &[SignalFigure]) -> String {
+    // A study of several laps draws its first fitted one (the laps the result keeps).
+    let lap = match study.laps.first() {
+        Some(lap) if study.laps.len() > 1 => format!(" (the first fitted lap, {})", lap.name),
+        _ => String::new(),
+    };
+    let mut s = format!(
         "<section id=\"signals\"><h2>Signals: the vehicle measured against the twin</h2>\n\
          <p class=\"muted\">Each signal the study compares, and the four wheel loads, over the \
-         lap's distance, filtered as the comparison sees them: the vehicle (black), the twin with \
-         the initial parameters (grey) and with the optimised ones.</p>\n",
+         lap's distance{}, filtered as the comparison sees them: the vehicle (black), the twin \
+         with the initial parameters (grey) and with the optimised ones.</p>\n",
+        esc(&lap)
     );
     for f in figures {
         match f {
