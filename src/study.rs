@@ -27,7 +27,7 @@ pub struct StudyRun {
     pub optimizer: Option<OptimizerKind>,
     /// Override the generations of every step.
     pub generations: Option<usize>,
-    /// Skip the report (Tab. 1 and plots).
+    /// Skip the report (Tab. 1, plots and report.html).
     pub no_report: bool,
     /// Optimise even when the first run says the measurement and the twin do not belong
     /// together.
@@ -140,6 +140,7 @@ pub fn optimize(
         args.out.join("result.json"),
         args.out.join("table1.json"),
         args.out.join("table1.md"),
+        args.out.join("report.html"),
     ] {
         tb_table::check_output(&name, &inputs)?;
     }

@@ -31,6 +31,8 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 # The Model Exchange solver's library (Debian's libsundials-dev), before anything is built.
 tools/sundials.sh
+# The headless browser tests/report_html.rs opens report.html in (Debian's chromium).
+tools/chromium.sh
 if ! target/venv/bin/python -c "import fmpy, numpy, scipy, pythonfmu, libcosimpy, asammdf, distributed, pandas, pytest, maturin" 2>/dev/null; then
     echo "== creating target/venv (tools/requirements.txt)"
     python3 -m venv target/venv

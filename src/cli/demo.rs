@@ -2,7 +2,8 @@
 //! measurement and the packed FMUs into `<out>/bundle` (they are embedded in the binary: no
 //! sources needed), runs the paper's two-step optimisation with the whole virtual bench
 //! (RLS/v) in the loop against the Spielberg measurement, prints Tab. 1 and writes the
-//! report (Tab. 1 as Markdown and JSON, plots as SVG and PNG) to `<out>`.
+//! report (Tab. 1 as Markdown and JSON, plots as SVG and PNG, all of it in report.html) to
+//! `<out>`.
 
 use anyhow::Context;
 use std::path::PathBuf;
@@ -11,7 +12,7 @@ use tb_optimize::{run_study, RunOptions, Study, StudyOutcome};
 
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
-    /// Output folder.
+    /// Output folder (Tab. 1, plots, report.html).
     #[arg(long, short, default_value = "target/demo")]
     pub out: PathBuf,
     /// Repack the FMUs even if they exist.
@@ -108,6 +109,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         wall.elapsed().as_secs_f64()
     );
     println!("report        {}", report.folder.display());
+    println!(
+        "page          {} (all of it on one page)",
+        report.folder.join("report.html").display()
+    );
     for f in &report.files {
         println!("  {}", f.display());
     }
@@ -130,6 +135,11 @@ const BUNDLE: &[(&str, &[u8])] = &[
         include_bytes!("../../data/spielberg_lap.csv"),
     ),
     ("data/README.md", include_bytes!("../../data/README.md")),
+    // The lap's truth: report.html marks it beside each parameter's answer.
+    (
+        "data/spielberg_lap_truth.json",
+        include_bytes!("../../data/spielberg_lap_truth.json"),
+    ),
 ];
 
 /// The bundled lap and the shipped FMUs in `dir`, at the paths the bundled files name

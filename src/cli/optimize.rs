@@ -19,7 +19,7 @@ pub struct OptimizeArgs {
     /// Evaluation threads (default: all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Output folder: checkpoint, result JSON, Tab. 1 and plots.
+    /// Output folder: checkpoint, result JSON, Tab. 1, plots and report.html.
     #[arg(long, short, default_value = DEFAULT_OUT)]
     pub out: PathBuf,
     /// Override the study's optimiser (ga or cmaes).
@@ -28,7 +28,7 @@ pub struct OptimizeArgs {
     /// Override the generations of every step.
     #[arg(long)]
     pub generations: Option<usize>,
-    /// Skip the report (Tab. 1 and plots).
+    /// Skip the report (Tab. 1, plots and report.html).
     #[arg(long)]
     pub no_report: bool,
     /// Optimise even when the first run says the measurement and the twin do not belong
@@ -101,6 +101,8 @@ pub fn run(args: OptimizeArgs) -> anyhow::Result<()> {
         println!("checkpoint  {}", checkpoint.display());
         if let Some(r) = &report {
             println!("report      {}", r.folder.display());
+            // The page to open first, or to hand on: everything above on one page.
+            println!("page        {}", r.folder.join("report.html").display());
         }
     }
     Ok(())

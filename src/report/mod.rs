@@ -1,8 +1,17 @@
 //! Reports of an optimisation study: the paper's Tab. 1 as Markdown and JSON, and plots
 //! (SVG + PNG): Fz_sum over distance measured / initial / optimised, filtered and unfiltered
-//! (Fig. 7); time over distance (Fig. 6); best cost per generation; a_x of twin and car.
+//! (Fig. 7); time over distance (Fig. 6); best cost per generation; a_x of twin and car;
+//! and report.html, all of it on one self-contained page with every compared signal, the
+//! parameters' picture and the inputs' digests ([`html`]).
 //! Everything comes from the study's result and the laps it kept: the report simulates
 //! nothing.
+
+mod forest;
+pub mod html;
+mod plots;
+mod provenance;
+mod signals;
+mod truth;
 
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -314,6 +323,45 @@ pub fn merged_statements(items: &[(String, String)]) -> Vec<String> {
     lines
 }
 
+/// One parameter of Tab. 1 in words: its change, its values and intervals (the Markdown
+/// table's cell and the HTML table's, so both say the same).
+pub fn parameter_line(p: &TableParameter) -> String {
+    let unit = unit_suffix(p);
+    let end = |e: Option<f64>| e.map_or("open".to_string(), |x| format!("{x:.4}"));
+    let interval = match p.interval {
+        Some((lo, hi)) => format!(" [{}, {}]", end(lo), end(hi)),
+        None if p.interval_statement.is_some() => " [no interval]".into(),
+        None => String::new(),
+    };
+    let interval = match p.interval_with_model {
+        Some((lo, hi)) => format!(
+            "{interval}, with the model's share [{}, {}]",
+            end(lo),
+            end(hi)
+        ),
+        None => interval,
+    };
+    format!(
+        "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit}{interval})",
+        short(&p.name),
+        p.change_percent,
+        p.initial,
+        p.optimized
+    )
+}
+
+/// The intervals' statements of every parameter of Tab. 1, merged per cause.
+pub fn table1_statements(t: &Table1) -> Vec<String> {
+    merged_statements(
+        &t.steps
+            .iter()
+            .chain(&t.joint)
+            .flat_map(|st| &st.parameters)
+            .filter_map(|p| Some((short(&p.name).to_string(), p.interval_statement.clone()?)))
+            .collect::<Vec<_>>(),
+    )
+}
+
 /// Tab. 1 as Markdown (parameters listed on a step's first row, as in the paper).
 pub fn table1_markdown(t: &Table1) -> String {
     let mut s = String::new();
@@ -334,32 +382,7 @@ pub fn table1_markdown(t: &Table1) -> String {
         let params = st
             .parameters
             .iter()
-            .map(|p| {
-                let unit = unit_suffix(p);
-                let end = |e: Option<f64>| e.map_or("open".to_string(), |x| format!("{x:.4}"));
-                let interval = match p.interval {
-                    Some((lo, hi)) => format!(" [{}, {}]", end(lo), end(hi)),
-                    None if p.interval_statement.is_some() => " [no interval]".into(),
-                    None => String::new(),
-                };
-                let interval = match p.interval_with_model {
-                    Some((lo, hi)) => {
-                        format!(
-                            "{interval}, with the model's share [{}, {}]",
-                            end(lo),
-                            end(hi)
-                        )
-                    }
-                    None => interval,
-                };
-                format!(
-                    "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit}{interval})",
-                    short(&p.name),
-                    p.change_percent,
-                    p.initial,
-                    p.optimized
-                )
-            })
+            .map(parameter_line)
             .collect::<Vec<_>>()
             .join("<br>");
         for (k, r) in st.signals.iter().enumerate() {
@@ -380,14 +403,7 @@ pub fn table1_markdown(t: &Table1) -> String {
             ));
         }
     }
-    let statements = merged_statements(
-        &t.steps
-            .iter()
-            .chain(&t.joint)
-            .flat_map(|st| &st.parameters)
-            .filter_map(|p| Some((short(&p.name).to_string(), p.interval_statement.clone()?)))
-            .collect::<Vec<_>>(),
-    );
+    let statements = table1_statements(t);
     if let Some(j) = &t.joint {
         s.push_str(&format!("\n{}\n", values_to_load(j)));
     }
@@ -450,87 +466,9 @@ pub fn write_report(
         &mut files,
     )?;
 
-    // Best cost per generation, per step.
-    let mut plot = LinePlot::new(
-        "How the optimiser converged: the best cost so far in each generation (weighted e + bias term)",
-        "generation",
-        "best cost (log scale)",
-    )
-    .log_y(true)
-    .integer_x(true);
-    for s in &result.steps {
-        let pts: Vec<(f64, f64)> = s
-            .history
-            .iter()
-            .map(|h| (h.generation as f64, h.best_cost))
-            .collect();
-        plot = plot.series(
-            format!("step {} {} ({})", s.step, s.name, s.optimizer),
-            &pts,
-        );
-    }
-    let stem = folder.join("best_cost_per_generation");
-    plot.save_both(&stem)?;
-    files.push(stem.with_extension("svg"));
-    files.push(stem.with_extension("png"));
-
-    // The profiles, one plot per parameter: the statistic against the held value, the
-    // threshold, and the parabola of the sandwich interval for comparison.
-    if let Some(profiles) = &result.profiles {
-        let wald = |name: &str| {
-            result
-                .joint_intervals
-                .as_ref()
-                .and_then(|j| j.get(name))
-                .and_then(|p| p.std_error)
-        };
-        for p in &profiles.parameters {
-            let unit = result
-                .joint
-                .as_ref()
-                .and_then(|j| j.parameters.iter().find(|q| q.name == p.name))
-                .and_then(|q| q.unit.clone())
-                .filter(|u| !u.is_empty() && u != "1")
-                .map(|u| format!(" [{u}]"))
-                .unwrap_or_default();
-            let pts: Vec<(f64, f64)> = p.points.iter().map(|q| (q.value, q.statistic)).collect();
-            let (lo, hi) = pts
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), q| {
-                    (a.min(q.0), b.max(q.0))
-                });
-            let mut plot = LinePlot::new(
-                format!(
-                    "Profile of {}: the others re-optimised at each value; 95 % interval where the statistic is below {:.2}",
-                    short(&p.name),
-                    profiles.threshold
-                ),
-                format!("{}{unit}", short(&p.name)),
-                "profile statistic ΔS/κ",
-            )
-            .series("profile", &pts)
-            // The threshold is what the profile is judged against (black); the parabola is
-            // context (grey), so the two never share a style.
-            .styled(
-                "95 % threshold (c², c the fixed-b critical value)",
-                &[(lo, profiles.threshold), (hi, profiles.threshold)],
-                Style::Reference,
-            );
-            if let Some(se) = wald(&p.name) {
-                let parabola: Vec<(f64, f64)> = (0..=40)
-                    .map(|k| {
-                        let x = lo + (hi - lo) * k as f64 / 40.0;
-                        (x, ((x - p.value) / se).powi(2))
-                    })
-                    .collect();
-                plot = plot.styled("sandwich interval's parabola", &parabola, Style::Faint);
-            }
-            let stem = folder.join(format!("profile_{}", short(&p.name)));
-            plot.save_both(&stem)?;
-            files.push(stem.with_extension("svg"));
-            files.push(stem.with_extension("png"));
-        }
-    }
+    // How the optimiser converged, and the profiles where run (plots.rs).
+    plots::convergence(result, folder, &mut files)?;
+    plots::profiles(result, folder, &mut files)?;
 
     // The laps with the initial and the optimised parameters, as the study ran them.
     let initial = result
@@ -672,6 +610,19 @@ pub fn write_report(
     plot.save_both(&stem)?;
     files.push(stem.with_extension("svg"));
     files.push(stem.with_extension("png"));
+
+    // All of it on one page to hand on, with every compared signal and the parameters'
+    // picture (html.rs).
+    let laps = [meas, initial, optimised];
+    let signals = signals::figures(study, &prepared, laps, &mut ws)?;
+    let page = html::page(&html::Page {
+        study,
+        result,
+        table: &t,
+        signals: &signals,
+        plots: &files,
+    })?;
+    write(&folder.join("report.html"), page.as_bytes(), &mut files)?;
 
     Ok(ReportFiles {
         folder: folder.to_path_buf(),

@@ -202,6 +202,20 @@ impl LinePlot {
         self.save_png(&stem.with_extension("png"))
     }
 
+    /// The SVG as text, for a page that carries its pictures inline (the HTML report)
+    /// rather than as files beside it.
+    pub fn svg_string(&self) -> Result<String, PlotError> {
+        register_font();
+        let place = Path::new("(inline SVG)");
+        let mut svg = String::new();
+        {
+            let root = SVGBackend::with_string(&mut svg, self.size).into_drawing_area();
+            self.draw(&root, place)?;
+            root.present().map_err(|e| self.error(place, &e))?;
+        }
+        Ok(svg)
+    }
+
     fn error(&self, path: &Path, e: &dyn std::fmt::Display) -> PlotError {
         PlotError::Draw {
             title: self.title.clone(),
@@ -475,6 +489,8 @@ mod tests {
         p.save_both(&dir.join("sine")).unwrap();
         let svg = std::fs::read_to_string(dir.join("sine.svg")).unwrap();
         assert!(svg.contains("<svg") && svg.contains("sine"));
+        // The same picture as text (the HTML report's inline SVG).
+        assert_eq!(p.svg_string().unwrap(), svg);
         let png = std::fs::read(dir.join("sine.png")).unwrap();
         assert_eq!(&png[1..4], b"PNG");
         let logp = LinePlot::new("bode", "f [Hz]", "|H| [dB]")

@@ -122,6 +122,10 @@ def _optimize(args: argparse.Namespace) -> int:
         where = f"Dask ({args.scheduler or f'LocalCluster of {args.local}'})" if client is not None else "local threads"
         print(f"{result['simulations']} full-lap simulations here, candidates on {where}, {wall:.1f} s")
         print(f"result      {args.out / 'result.json'}")
+        page = args.out / "report.html"
+        if not args.no_report and page.exists():
+            # The page to open first, or to hand on: the whole report on one page.
+            print(f"page        {page}")
     return 0
 
 
