@@ -259,7 +259,7 @@ pub fn values_to_load(joint: &TableStep) -> String {
         .collect::<Vec<_>>()
         .join(", ");
     format!(
-        "The values to load into the bench are the row \"all\" ({values}; `parameters_final` in result.json, `twinbench run SYSTEM --params result.json` applies them). Its e can be higher than a step's: each step minimised e + β·|bias| of its own signals with the other steps' parameters held, the row \"all\" minimises the squared error of every signal with every parameter free, a different objective (docs/optimize.md)."
+        "The values to load into the bench are the row \"all\" ({values}; `parameters_final` in result.json, `twinbench run SYSTEM --params result.json` applies them, `twinbench export-twin result.json --out DIR` hands them on as FMUs, SSP and a table). Its e can be higher than a step's: each step minimised e + β·|bias| of its own signals with the other steps' parameters held, the row \"all\" minimises the squared error of every signal with every parameter free, a different objective (docs/optimize.md)."
     )
 }
 
