@@ -260,6 +260,9 @@ pub fn check_speed_unit(m: &Measurement) -> Result<(), LapError> {
             "{}: v has no unit and looks like {unit}, not m/s: read as m/s it is {ratio:.2} times the speed {against} implies ({unit}: {f:.2}); declare its unit (a units row under the CSV header with `{unit}` under v, or the MDF channel's unit)",
             table.source(),
         ))),
+        // A logger's error value (1e308) in one sample: named by its sample in
+        // [`lap_length`], which says more than the ratio it throws off.
+        _ if m.require("v")?.iter().any(|x| x.abs() > MAX_SPEED_M_S) => Ok(()),
         _ if (ratio - 1.0).abs() > tolerance => Err(LapError::Invalid(format!(
             "{}: v is {ratio:.2} times the speed {against} implies (they agree within {:.0} % on a logger's lap): a wrong channel for v, or a speed scaled by a wrong factor{}; check the channel map and the units row",
             table.source(),
