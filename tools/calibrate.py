@@ -52,7 +52,10 @@ def fit(kind: str, circuit: str, seed: int, out: Path, generations: int, extra: 
         return {"error": p.stderr[-2000:], "lap": str(d)}
     result = json.loads(p.stdout)
     truth = json.loads((d / "truth.json").read_text())
-    rec = {"lap": str(d), "kind": kind, "circuit": circuit, "seed": seed, "truth": truth["truth"],
+    # The car's chassis modes are truths too where the study fits them (--chassis).
+    truth_values = dict(truth["truth"])
+    truth_values.update({f"vehicle.{k}": v for k, v in truth.get("modes", {}).items()})
+    rec = {"lap": str(d), "kind": kind, "circuit": circuit, "seed": seed, "truth": truth_values,
            "parameters": result["joint"]["parameters"], "model_check": result["joint"].get("model_check"),
            "intervals": {k: v for k, v in (result.get("joint_intervals") or {}).items() if k != "parameters"},
            "joint_intervals_parameters": (result.get("joint_intervals") or {}).get("parameters", []),
@@ -68,6 +71,8 @@ def summarise(recs: list) -> dict:
     for n in names:
         rows = []
         for r in recs:
+            if n not in r["truth"]:
+                continue
             p = next(p for p in r["parameters"] if p["name"] == n)
             truth = r["truth"][n]
             iv = p.get("interval")
