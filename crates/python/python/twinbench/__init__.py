@@ -343,7 +343,6 @@ class Optimizer:
         self._inner.restore(state)
 
 
-@dataclass(frozen=True)
 class StudyResult(dict):
     """A study's result (a dict, as ``twinbench optimize --json`` prints it) that knows its
     ``result.json`` (``path``) and hands the fitted twin on."""
@@ -373,6 +372,7 @@ class StudyResult(dict):
         return json.loads(_native.export_twin(os.fspath(self.path), os.fspath(out), [int(v) for v in fmi]))
 
 
+@dataclass(frozen=True)
 class StudyStep:
     """A step of a study: its parameters, their bounds and start values (None: the
     value before the step)."""
