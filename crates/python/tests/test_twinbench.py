@@ -404,7 +404,7 @@ def test_a_worker_killed_mid_study_changes_nothing(cli_study, tmp_path):
 
     def progress(record):
         # In the second generation's candidates: kill a worker while it runs one.
-        if record["generation"] == 1 and not killed:
+        if record["phase"] == "generation" and record["generation"] == 1 and not killed:
             threading.Timer(0.4, kill_one).start()
 
     try:
@@ -935,7 +935,7 @@ def test_a_study_result_hands_its_fitted_twin_on(tmp_path):
     assert set(answer) == {"vehicle.c_lift_front", "vehicle.c_lift_rear"}
     original = twinbench.run(Path(result["system"]), parameters=answer)
     for name in ["vehicle.Fz_sum", "vehicle.Fz_fl", "vehicle.v"]:
-        assert np.array_equal(fitted[name], original[name]), name
+        assert np.array_equal(fitted.signals[name], original.signals[name]), name
     # A folder holding other files is refused, and they stay.
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("mine")

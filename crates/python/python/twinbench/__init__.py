@@ -499,6 +499,8 @@ class Study:
                 ``"profiles"``, ``"bootstrap"``), ``parameters`` (their names), ``laps``
                 (so far in the phase), ``seconds`` and ``done`` (the phase's last record);
                 an exception raised for one of those is raised when the study returns.
+                A callback that reads a generation's fields checks ``record["phase"] ==
+                "generation"`` first.
             profiles: profile likelihood of every parameter after the joint refinement
                 (as ``--profiles``); the intervals are then the profiles'.
             bootstrap: refits of a moving-block bootstrap of the answer (as
