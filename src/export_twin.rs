@@ -35,9 +35,9 @@ use tb_optimize::StudyResult;
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
     #[error(transparent)]
-    Result(#[from] crate::validate::ValidateError),
+    Result(Box<crate::validate::ValidateError>),
     #[error(transparent)]
-    System(#[from] tb_cosim::SystemError),
+    System(Box<tb_cosim::SystemError>),
     #[error(transparent)]
     Ssp(#[from] tb_cosim::ssp::SspError),
     #[error("{path}: {message}")]
@@ -46,6 +46,19 @@ pub enum ExportError {
     Fmu { fmu: PathBuf, message: String },
     #[error("{name}: {message}")]
     Parameter { name: String, message: String },
+}
+
+// Boxed: the wrapped errors are large, and every function here returns this one.
+impl From<crate::validate::ValidateError> for ExportError {
+    fn from(e: crate::validate::ValidateError) -> Self {
+        ExportError::Result(Box::new(e))
+    }
+}
+
+impl From<tb_cosim::SystemError> for ExportError {
+    fn from(e: tb_cosim::SystemError) -> Self {
+        ExportError::System(Box::new(e))
+    }
 }
 
 fn io(path: &Path, e: impl std::fmt::Display) -> ExportError {

@@ -301,6 +301,7 @@ fn the_fitted_twin_runs_its_lap_bit_for_bit_from_every_output() {
         std::fs::read_to_string(d.join("mine/notes.txt")).unwrap(),
         "mine"
     );
+    an_fmu_of_another_build_is_refused_by_name(d, &bench, &result_path);
 }
 
 /// An FMU whose library is not this build's: the fitted copy would not be the FMU the study
@@ -327,9 +328,9 @@ fn an_fmu_of_another_build_is_refused_by_name(d: &Path, bench: &Path, result_pat
         }
         w.finish().unwrap();
     }
-    let text = std::fs::read_to_string(&bench).unwrap();
+    let text = std::fs::read_to_string(bench).unwrap();
     let vehicle = common::fmu("vehicle").display().to_string();
-    std::fs::write(&bench, text.replace(&vehicle, stale.to_str().unwrap())).unwrap();
+    std::fs::write(bench, text.replace(&vehicle, stale.to_str().unwrap())).unwrap();
     let o = twinbench(
         d,
         &[
