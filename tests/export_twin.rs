@@ -301,6 +301,7 @@ fn the_fitted_twin_runs_its_lap_bit_for_bit_from_every_output() {
         std::fs::read_to_string(d.join("mine/notes.txt")).unwrap(),
         "mine"
     );
+    an_edited_start_file_refuses_the_instantiation(d, &twin);
     an_fmu_of_another_build_is_refused_by_name(d, &bench, &result_path);
 }
 
@@ -309,25 +310,11 @@ fn the_fitted_twin_runs_its_lap_bit_for_bit_from_every_output() {
 fn an_fmu_of_another_build_is_refused_by_name(d: &Path, bench: &Path, result_path: &Path) {
     // The vehicle's FMU with one byte of its library changed.
     let stale = d.join("vehicle_old.fmu");
-    {
-        use std::io::{Read, Write};
-        let mut z =
-            zip::ZipArchive::new(std::fs::File::open(common::fmu("vehicle")).unwrap()).unwrap();
-        let mut w = zip::ZipWriter::new(std::fs::File::create(&stale).unwrap());
-        for i in 0..z.len() {
-            let mut f = z.by_index(i).unwrap();
-            let name = f.name().to_string();
-            let mut bytes = Vec::new();
-            f.read_to_end(&mut bytes).unwrap();
-            if name.ends_with(".so") {
-                bytes.push(0);
-            }
-            w.start_file(name, zip::write::SimpleFileOptions::default())
-                .unwrap();
-            w.write_all(&bytes).unwrap();
+    rewrite_fmu(&common::fmu("vehicle"), &stale, |name, bytes| {
+        if name.ends_with(".so") {
+            bytes.push(0);
         }
-        w.finish().unwrap();
-    }
+    });
     let text = std::fs::read_to_string(bench).unwrap();
     let vehicle = common::fmu("vehicle").display().to_string();
     std::fs::write(bench, text.replace(&vehicle, stale.to_str().unwrap())).unwrap();
@@ -346,4 +333,69 @@ fn an_fmu_of_another_build_is_refused_by_name(d: &Path, bench: &Path, result_pat
         e.contains("vehicle_old.fmu") && e.contains("twinbench pack"),
         "{e}"
     );
+}
+
+/// A copy of the FMU `from` at `to`, each entry passed through `edit` (its name, its bytes).
+fn rewrite_fmu(from: &Path, to: &Path, edit: impl Fn(&str, &mut Vec<u8>)) {
+    use std::io::{Read, Write};
+    let mut z = zip::ZipArchive::new(std::fs::File::open(from).unwrap()).unwrap();
+    let mut w = zip::ZipWriter::new(std::fs::File::create(to).unwrap());
+    for i in 0..z.len() {
+        let mut f = z.by_index(i).unwrap();
+        let name = f.name().to_string();
+        let mut bytes = Vec::new();
+        f.read_to_end(&mut bytes).unwrap();
+        edit(&name, &mut bytes);
+        w.start_file(name, zip::write::SimpleFileOptions::default())
+            .unwrap();
+        w.write_all(&bytes).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// A fitted FMU whose start-value file was edited: a value out of the variable's range, a
+/// name the model does not have, a value of another type. Each refuses the instantiation,
+/// naming the file and the variable, before the first step.
+fn an_edited_start_file_refuses_the_instantiation(d: &Path, twin: &Path) {
+    let bare = std::fs::read_to_string(twin.join("bare.toml")).unwrap();
+    for (edit, says) in [
+        (
+            "c_lift_front = 99.0\n",
+            "`c_lift_front` = 99.0: expected a finite value in [-2, 6]",
+        ),
+        (
+            "c_lift_fornt = 1.0\n",
+            "no variable named `c_lift_fornt` in this model",
+        ),
+        (
+            "c_lift_front = \"high\"\n",
+            "`c_lift_front` = \"high\": expected a number",
+        ),
+    ] {
+        let edited = twin.join("fmu/vehicle_edited.fmu");
+        rewrite_fmu(&twin.join("fmu/vehicle.fmu"), &edited, |name, bytes| {
+            if name.ends_with("fitted_start_values.toml") {
+                let text = String::from_utf8(bytes.clone()).unwrap();
+                let kept: String = text
+                    .lines()
+                    .filter(|l| !l.starts_with("c_lift_front ="))
+                    .map(|l| format!("{l}\n"))
+                    .collect();
+                *bytes = format!("{kept}{edit}").into_bytes();
+            }
+        });
+        let system = twin.join("edited.toml");
+        std::fs::write(
+            &system,
+            bare.replace("\"fmu/vehicle.fmu\"", "\"fmu/vehicle_edited.fmu\""),
+        )
+        .unwrap();
+        let o = twinbench(d, &["run", system.to_str().unwrap()]);
+        assert!(!o.status.success(), "{edit}: the run went on");
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            e.contains("fitted_start_values.toml") && e.contains(says),
+            "{edit}: {e}"
+        );
+    }
 }
