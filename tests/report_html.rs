@@ -151,6 +151,13 @@ fn chromium(profile: &Path, extra: &[String], page: &Path) -> Output {
     // scratch folder, so that nothing stays behind.
     let home = profile.join("home");
     std::fs::create_dir_all(&home).unwrap();
+    // Its singleton socket goes into its temporary folder, and a socket's path has at most
+    // 107 bytes: a clone's deep scratch folder is too long ("Socket path too long"), so a
+    // short folder under /tmp, removed when Chromium is done.
+    let sockets = tempfile::Builder::new()
+        .prefix("tb-chromium-")
+        .tempdir_in("/tmp")
+        .unwrap();
     let offline = Command::new("unshare")
         .args(["-n", "true"])
         .status()
@@ -182,7 +189,7 @@ fn chromium(profile: &Path, extra: &[String], page: &Path) -> Output {
     .args(extra)
     .arg(format!("file://{}", page.display()))
     .env("HOME", &home)
-    .env("TMPDIR", &home)
+    .env("TMPDIR", sockets.path())
     .env("XDG_CONFIG_HOME", &home)
     .env("XDG_CACHE_HOME", &home);
     // Into files, not pipes: a DOM of a megabyte would fill a pipe read only at the end.
