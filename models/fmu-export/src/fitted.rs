@@ -55,6 +55,19 @@ impl FittedStarts {
             .map_err(|e| format!("{}: {e}", path.display()))
     }
 
+    /// The file in the resource folder a host gave at instantiation (none given: none).
+    pub fn of_instance<V: VarTable>(
+        resource_dir: Option<&Path>,
+    ) -> Result<Option<FittedStarts>, String> {
+        Ok(resource_dir.map(Self::load::<V>).transpose()?.flatten())
+    }
+
+    /// Whether a host's GUID (instantiation token) names this FMU: the model's own, or the
+    /// fitted description's when there are fitted starts.
+    pub fn accepts(fitted: Option<&FittedStarts>, given: &str, model: &str) -> bool {
+        given == model || fitted.is_some_and(|f| f.token == given)
+    }
+
     /// The file's text, checked against the table `V`.
     pub fn parse<V: VarTable>(text: &str) -> Result<FittedStarts, String> {
         let table: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
@@ -136,15 +149,5 @@ impl FittedStarts {
                 Start::Text(s) => vars.set_str(*index, s),
             };
         }
-    }
-
-    /// How many start values the file sets.
-    pub fn len(&self) -> usize {
-        self.values.len()
-    }
-
-    /// Whether the file sets none.
-    pub fn is_empty(&self) -> bool {
-        self.values.is_empty()
     }
 }

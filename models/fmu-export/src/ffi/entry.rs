@@ -65,17 +65,14 @@ pub unsafe fn instantiate<M: Model>(
             },
         };
         // A fitted twin's start values, and the GUID its description has.
-        let fitted = match resource_dir
-            .as_deref()
-            .map(crate::fitted::FittedStarts::load::<M::Vars>)
-            .transpose()
-        {
-            Ok(f) => f.flatten(),
-            Err(e) => return fail(e),
-        };
+        let fitted =
+            match crate::fitted::FittedStarts::of_instance::<M::Vars>(resource_dir.as_deref()) {
+                Ok(f) => f,
+                Err(e) => return fail(e),
+            };
         let expected = crate::description::guid::<M>();
         match opt_str(guid) {
-            Some(g) if g == expected || fitted.as_ref().is_some_and(|f| f.token == *g) => {}
+            Some(g) if crate::fitted::FittedStarts::accepts(fitted.as_ref(), &g, &expected) => {}
             Some(g) => {
                 return fail(format!(
                     "GUID mismatch: the host passed {g}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",

@@ -146,17 +146,14 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
             .filter(|p| !p.is_empty())
             .map(|p| std::path::PathBuf::from(p.into_owned()));
         // A fitted twin's start values, and the token its description has.
-        let fitted = match resource_dir
-            .as_deref()
-            .map(crate::fitted::FittedStarts::load::<M::Vars>)
-            .transpose()
-        {
-            Ok(f) => f.flatten(),
-            Err(e) => return fail(e),
-        };
+        let fitted =
+            match crate::fitted::FittedStarts::of_instance::<M::Vars>(resource_dir.as_deref()) {
+                Ok(f) => f,
+                Err(e) => return fail(e),
+            };
         let expected = crate::description3::instantiation_token::<M>();
         match opt_str(token) {
-            Some(t) if t == expected || fitted.as_ref().is_some_and(|f| f.token == *t) => {}
+            Some(t) if crate::fitted::FittedStarts::accepts(fitted.as_ref(), &t, &expected) => {}
             Some(t) => {
                 return fail(format!(
                     "instantiationToken mismatch: the host passed {t}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
