@@ -118,7 +118,29 @@ fn registry_entries(models: &[ModelCrate]) -> String {
     out
 }
 
+/// The allocator and lock functions the executable interposes (src/interpose.rs): put in
+/// its dynamic symbol table, so that the libraries it loads call them.
+const INTERPOSED: [&str; 14] = [
+    "malloc",
+    "calloc",
+    "realloc",
+    "free",
+    "memalign",
+    "aligned_alloc",
+    "valloc",
+    "pvalloc",
+    "posix_memalign",
+    "pthread_mutex_lock",
+    "pthread_mutex_trylock",
+    "pthread_rwlock_rdlock",
+    "pthread_rwlock_wrlock",
+    "pthread_spin_lock",
+];
+
 fn main() {
+    for name in INTERPOSED {
+        println!("cargo:rustc-link-arg-bin=twinbench=-Wl,--export-dynamic-symbol={name}");
+    }
     let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("set by cargo"));
     let models = model_crates(&root);
     for p in [

@@ -22,6 +22,7 @@ pub mod cli;
 pub mod export_twin;
 pub mod lap;
 pub mod pack;
+pub mod realtime_check;
 pub mod registry;
 pub mod report;
 pub mod study;

@@ -19,6 +19,7 @@ pub mod modal;
 pub mod optimize;
 pub mod pack;
 pub mod progress;
+pub mod realtime_check;
 pub mod run;
 pub mod run_fmu;
 pub mod validate;
@@ -62,6 +63,8 @@ pub enum Command {
     Optimize(optimize::OptimizeArgs),
     /// Run the fitted twin on a lap it was not fitted on: e, m, R², bias per signal.
     Validate(validate::ValidateArgs),
+    /// Is an FMU fit for a real-time target? Counts allocations, locks, log messages and system calls of its steps, times them; exit 0 when clean.
+    RealtimeCheck(realtime_check::RealtimeCheckArgs),
     /// Modal analysis of a torsional drivetrain chain.
     Modal(modal::ModalArgs),
     /// Identify the dyno loop from a step response or a frequency sweep.
@@ -87,6 +90,7 @@ impl Command {
             Command::Optimize(a) => a.json,
             Command::Validate(a) => a.json,
             Command::Modal(a) => a.json,
+            Command::RealtimeCheck(a) => a.json,
             Command::Identify(a) => a.json(),
             Command::Pack(_) | Command::Demo(_) | Command::Cache(_) | Command::Worker(_) => false,
         }
@@ -182,6 +186,18 @@ pub fn main() -> ExitCode {
         Command::Optimize(a) => optimize::run(a),
         Command::Validate(a) => validate::run(a),
         Command::Modal(a) => modal::run(a),
+        Command::RealtimeCheck(a) => match realtime_check::run(a) {
+            Ok(true) => Ok(()),
+            Ok(false) => {
+                command_finished();
+                return ExitCode::from(realtime_check::EXIT_NOT_CLEAN);
+            }
+            Err(e) => {
+                command_finished();
+                eprintln!("error: {}", message(&e));
+                return ExitCode::from(realtime_check::EXIT_ERROR);
+            }
+        },
         Command::Identify(a) => identify::run(a),
         Command::Cache(a) => cache::run(a),
         Command::Worker(a) => worker::run(a),

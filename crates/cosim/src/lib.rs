@@ -14,6 +14,7 @@ pub mod master;
 pub mod native;
 pub mod observe;
 pub mod plan;
+pub mod realtime;
 pub mod replay;
 pub mod ssp;
 pub mod ssp_import;

@@ -69,6 +69,29 @@ impl IsolatedBackend {
         Ok(b)
     }
 
+    /// A real-time check of the initialised instance ([`crate::realtime`]): the worker's
+    /// measurement.
+    pub(super) fn realtime(
+        &mut self,
+        spec: &crate::realtime::CheckSpec,
+    ) -> Result<crate::realtime::Measurement, FmuError> {
+        let function = "realtime-check";
+        let json = serde_json::to_string(spec).expect("a check's settings serialise");
+        let op = Request::Realtime(json);
+        self.queue(&op);
+        let answer = self.call(function, std::slice::from_ref(&op))?;
+        match answer.into_iter().next() {
+            Some(Values::Text(t)) if t.len() == 1 => serde_json::from_str(&t[0]).map_err(|e| {
+                self.isolated_error(function, format!("protocol error ({e})"), Vec::new())
+            }),
+            _ => Err(self.isolated_error(
+                function,
+                "protocol error (no measurement)".into(),
+                Vec::new(),
+            )),
+        }
+    }
+
     /// Load the FMU's library in a fresh worker and report on it.
     pub(super) fn probe(
         fmu: &LoadedFmu,

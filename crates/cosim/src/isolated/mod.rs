@@ -137,6 +137,27 @@ pub fn probe(fmu: &LoadedFmu, options: &IsolationOptions) -> Result<LibraryRepor
     IsolatedBackend::probe(fmu, options)
 }
 
+/// A real-time check of `fmu` in a worker of its own: instantiated, initialised at
+/// `spec.start` with the inputs there, then measured ([`crate::realtime`]). The worker ends
+/// with the check (its system-call trap cannot be taken off).
+pub fn realtime_check(
+    fmu: &LoadedFmu,
+    options: &IsolationOptions,
+    run: RunAs,
+    spec: &crate::realtime::CheckSpec,
+) -> Result<crate::realtime::Measurement, FmuError> {
+    let mut b = IsolatedBackend::start("realtime-check", fmu, options, false, run)?;
+    b.setup_experiment(spec.start, None, None)?;
+    b.enter_initialization_mode()?;
+    let mut inputs = vec![0.0; spec.inputs.vrs.len()];
+    spec.inputs.at(spec.start, &mut 0, &mut inputs);
+    if !inputs.is_empty() {
+        b.set_real(&spec.inputs.vrs, &inputs)?;
+    }
+    b.exit_initialization_mode()?;
+    b.realtime(spec)
+}
+
 /// Creates instances that run in their own worker process.
 pub struct IsolatedFactory {
     pub fmu: Arc<LoadedFmu>,

@@ -35,6 +35,9 @@ pub mod op {
     /// After a discarded step: two Reals, whether the FMU asks to end the simulation (1 or
     /// 0) and its last successful time.
     pub const FMU_TERMINATED: u8 = 203;
+    /// A real-time check of the instance (its settings as JSON, `tb_cosim::realtime`):
+    /// answered with one string, the measurement as JSON.
+    pub const REALTIME: u8 = 204;
 
     pub const SET_DEBUG_LOGGING: u8 = Function::SetDebugLogging as u8;
     pub const SETUP_EXPERIMENT: u8 = Function::SetupExperiment as u8;
@@ -223,6 +226,10 @@ pub enum Request<'a> {
         t: f64,
         h: f64,
     },
+    /// Step the initialised instance under the real-time check's counters
+    /// ([`crate::realtime::CheckSpec`] as JSON); answered with [`Answer::Texts`] (1: the
+    /// [`crate::realtime::Measurement`] as JSON).
+    Realtime(String),
 }
 
 /// What a get is answered with: so many values of one kind (the answer has no count).
@@ -256,6 +263,7 @@ impl Request<'_> {
             Request::GetString { .. } => op::GET_STRING,
             Request::FmuTerminated => op::FMU_TERMINATED,
             Request::DoStep { .. } => op::DO_STEP,
+            Request::Realtime(_) => op::REALTIME,
         }
     }
 
@@ -268,6 +276,7 @@ impl Request<'_> {
             }
             Request::GetString { vrs } => Some(Answer::Texts(vrs.len())),
             Request::Probe(_) => Some(Answer::Texts(2)),
+            Request::Realtime(_) => Some(Answer::Texts(1)),
             Request::FmuTerminated => Some(Answer::Reals(2)),
             _ => None,
         }
@@ -291,6 +300,7 @@ impl Request<'_> {
                 e.u8(*logging as u8);
             }
             Request::Probe(library) => library.encode(e),
+            Request::Realtime(spec) => e.str(spec),
             Request::SetDebugLogging(on) => e.u8(*on as u8),
             Request::SetupExperiment {
                 start,
@@ -344,6 +354,7 @@ impl Request<'_> {
                 logging: d.u8()? != 0,
             },
             op::PROBE => Request::Probe(LibraryTarget::decode(d)?),
+            op::REALTIME => Request::Realtime(d.str()?),
             op::QUIT => Request::Quit,
             op::SET_DEBUG_LOGGING => Request::SetDebugLogging(d.u8()? != 0),
             op::SETUP_EXPERIMENT => {
@@ -426,6 +437,7 @@ impl Request<'_> {
                 logging,
             },
             Request::Probe(library) => Request::Probe(library),
+            Request::Realtime(spec) => Request::Realtime(spec),
             Request::Quit => Request::Quit,
             Request::SetDebugLogging(on) => Request::SetDebugLogging(on),
             Request::SetupExperiment {
@@ -941,9 +953,10 @@ mod tests {
             Request::GetString { .. } => 16,
             Request::FmuTerminated => 17,
             Request::DoStep { .. } => 18,
+            Request::Realtime(_) => 19,
         }
     }
-    const VARIANTS: usize = 19;
+    const VARIANTS: usize = 20;
 
     /// At least one request of every variant.
     fn every_request() -> Vec<Request<'static>> {
@@ -956,6 +969,7 @@ mod tests {
                 logging: true,
             },
             Request::Probe(target()),
+            Request::Realtime("{\"steps\": 3}".into()),
             Request::Quit,
             Request::SetDebugLogging(true),
             Request::SetDebugLogging(false),

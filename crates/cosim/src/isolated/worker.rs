@@ -473,9 +473,19 @@ fn call(i: &mut dyn Backend, op: Request<'_>) -> Result<Option<Values>, Failure>
             i.set_string(&vrs, &refs)?
         }
         Request::DoStep { t, h } => i.do_step(t, h)?,
+        Request::Realtime(spec) => return realtime(i, &spec).map(Some),
         op => return get(i, op).map(Some),
     }
     Ok(None)
+}
+
+/// A real-time check of the instance: the measurement as JSON.
+fn realtime(i: &mut dyn Backend, spec: &str) -> Result<Values, Failure> {
+    let spec: crate::realtime::CheckSpec =
+        serde_json::from_str(spec).map_err(|e| protocol(format!("real-time check: {e}")))?;
+    let m = crate::realtime::measure(i, &spec)?;
+    let json = serde_json::to_string(&m).map_err(|e| protocol(e.to_string()))?;
+    Ok(Values::Text(vec![json]))
 }
 
 /// A get's values (the operations that are answered).

@@ -56,6 +56,8 @@ impl LogSink {
     /// A message of the FMU's, cut at [`MAX_LINE_CHARS`] and with control characters
     /// escaped (an FMU's text reaches a terminal: no escape sequences, no 10 MB lines).
     pub fn push(&self, status: fmi2Status, category: &str, message: &str) {
+        // A real-time check counts the message; what the host does with it is not the FMU's.
+        let _paused = tb_rtcount::log_message();
         let line = format!(
             "[{}] {}: {}",
             self.status_name(status),
