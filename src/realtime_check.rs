@@ -35,6 +35,8 @@ pub struct Options {
     pub mode: Mode,
     /// The longest the worker may take for the whole check [s].
     pub timeout: f64,
+    /// Libraries the worker loads before the FMU's (libpython for a pythonfmu FMU).
+    pub preload: Vec<PathBuf>,
 }
 
 impl Default for Options {
@@ -49,6 +51,7 @@ impl Default for Options {
             instructions: false,
             mode: Mode::Confined,
             timeout: 600.0,
+            preload: Vec::new(),
         }
     }
 }
@@ -63,7 +66,8 @@ pub struct Report {
     pub duration: f64,
     pub steps_per_pass: u64,
     pub inputs: Vec<String>,
-    pub input_file: Option<PathBuf>,
+    /// Where the inputs come from: a file, a bench's run; none: held at their starts.
+    pub input_file: Option<String>,
     pub isolation: String,
     pub measurement: Measurement,
     pub instructions: Option<Instructions>,
@@ -85,11 +89,11 @@ impl Report {
             format!(
                 "  {} steps of {} s ({} s) × {} passes after initialisation; inputs: {}",
                 self.steps_per_pass,
-                self.step,
-                self.duration,
+                tb_files::number(self.step),
+                tb_files::number(self.duration),
                 self.measurement.passes,
                 match (&self.input_file, self.inputs.len()) {
-                    (Some(f), n) => format!("{n} from {}", f.display()),
+                    (Some(f), n) => format!("{n} from {f}"),
                     (None, 0) => "none".into(),
                     (None, n) => format!("{n} held at their start values"),
                 }
@@ -122,36 +126,158 @@ impl Report {
 pub fn check(o: &Options) -> anyhow::Result<Report> {
     let cache = FmuCache::temporary(false)?;
     let fmu = cache.load(&o.fmu)?;
-    let md = &fmu.description;
-    if !md.supports(Interface::CoSimulation) {
+    co_simulation(&fmu)?;
+    let de = fmu
+        .description
+        .default_experiment
+        .clone()
+        .unwrap_or_default();
+    let start = de.start_time.unwrap_or(0.0);
+    let (inputs, names) = inputs(&fmu, o.input.as_deref())?;
+    let until = match &o.input {
+        Some(_) => inputs.time.last().copied(),
+        None => de.stop_time,
+    };
+    let run = Run {
+        start,
+        step: o.step.or(de.step_size).unwrap_or(1e-3),
+        duration: o
+            .duration
+            .or(until.map(|s| s - start).filter(|d| *d > 0.0))
+            .unwrap_or(10.0),
+        inputs,
+        names,
+        from: o.input.as_ref().map(|f| f.display().to_string()),
+        parameters: Vec::new(),
+    };
+    measure_and_judge(&fmu, &o.fmu, run, o)
+}
+
+/// Every FMU of a bench (`SYSTEM.toml`), each with the inputs and parameters its first
+/// instance has on the bench: the bench is run once (in this process, as `run` runs it),
+/// every output recorded at every step, and each FMU then checked in a worker of its own
+/// over the same time with the inputs the bench gave it.
+pub fn check_bench(system: &Path, o: &Options) -> anyhow::Result<Vec<(String, Report)>> {
+    let cache = std::sync::Arc::new(FmuCache::temporary(false)?);
+    let mut file = tb_cosim::SystemFile::load(system)?;
+    file.record = tb_cosim::config::RecordConfig {
+        signals: Vec::new(),
+        decimation: 1,
+    };
+    let plan = std::sync::Arc::new(tb_cosim::Plan::compile(
+        file,
+        system,
+        cache,
+        &tb_cosim::LoadOptions::default(),
+    )?);
+    let mut sim = tb_cosim::Simulation::new(plan.clone())?;
+    sim.run()
+        .with_context(|| format!("the bench's run ({})", system.display()))?;
+    let table = sim.recording();
+    let time = table
+        .column("time")?
+        .context("the bench's recording has no time")?
+        .to_vec();
+    let (start, end) = (time[0], *time.last().expect("a run records its start"));
+    let mut seen = std::collections::BTreeSet::new();
+    let mut reports = Vec::new();
+    for (k, instance) in plan.instances.iter().enumerate() {
+        if !seen.insert(instance.fmu.source.clone()) {
+            continue; // one check per FMU: its first instance's inputs
+        }
+        co_simulation(&instance.fmu)?;
+        let mut inputs = Inputs {
+            time: time.clone(),
+            ..Default::default()
+        };
+        let mut names = Vec::new();
+        for c in plan
+            .connections
+            .iter()
+            .filter(|c| c.to_unit == k && c.to_ty == tb_fmi::ScalarType::Real)
+        {
+            let from = table
+                .column(&c.from_name)?
+                .with_context(|| format!("the bench's recording has no {}", c.from_name))?;
+            inputs.vrs.push(c.to_vr);
+            inputs
+                .columns
+                .push(from.iter().map(|x| c.scale * x + c.offset).collect());
+            names.push(c.to_name.clone());
+        }
+        let parameters = plan
+            .parameters
+            .iter()
+            .filter(|(slot, _)| slot.unit == k)
+            .filter_map(|(slot, v)| match v {
+                tb_cosim::plan::ParamValue::Real(x) => Some((slot.vr, *x)),
+                _ => None,
+            })
+            .collect();
+        let run = Run {
+            start,
+            step: o.step.unwrap_or(plan.file.experiment.step),
+            duration: o.duration.unwrap_or(end - start),
+            inputs,
+            names,
+            from: Some(format!("the bench's run of {}", system.display())),
+            parameters,
+        };
+        let report = measure_and_judge(&instance.fmu, &instance.fmu.source, run, o)
+            .with_context(|| format!("instance {}", instance.name))?;
+        reports.push((instance.name.clone(), report));
+    }
+    Ok(reports)
+}
+
+fn co_simulation(fmu: &LoadedFmu) -> anyhow::Result<()> {
+    if !fmu.description.supports(Interface::CoSimulation) {
         bail!(
             "{}: realtime-check steps Co-Simulation FMUs; this one has Model Exchange only (a solver of the host's would be measured with it)",
-            o.fmu.display()
+            fmu.source.display()
         );
     }
-    let de = md.default_experiment.clone().unwrap_or_default();
-    let start = de.start_time.unwrap_or(0.0);
-    let step = o.step.or(de.step_size).unwrap_or(1e-3);
+    Ok(())
+}
+
+/// One FMU's run: when, with what.
+struct Run {
+    start: f64,
+    step: f64,
+    duration: f64,
+    inputs: Inputs,
+    names: Vec<String>,
+    /// Where the inputs come from (None: held at their starts).
+    from: Option<String>,
+    parameters: Vec<(u32, f64)>,
+}
+
+fn measure_and_judge(
+    fmu: &LoadedFmu,
+    shown: &Path,
+    run: Run,
+    o: &Options,
+) -> anyhow::Result<Report> {
+    let Run {
+        start,
+        step,
+        duration,
+        ..
+    } = run;
     if !(step.is_finite() && step > 0.0) {
         bail!("--step {step}: expected a step of more than 0 s");
     }
-    let (inputs, names) = inputs(&fmu, o.input.as_deref())?;
-    let duration = match (o.duration, &o.input) {
-        (Some(d), _) => d,
-        (None, Some(_)) => inputs.time.last().copied().unwrap_or(start) - start,
-        (None, None) => de
-            .stop_time
-            .map(|s| s - start)
-            .filter(|d| *d > 0.0)
-            .unwrap_or(10.0),
-    };
     if !(duration.is_finite() && duration >= step) {
         bail!("--duration {duration}: expected at least one step of {step} s");
     }
     let steps = (duration / step).round() as u64;
     if steps.saturating_mul(o.passes.max(1) as u64) > 100_000_000 {
-        bail!("{steps} steps × {} passes: more than 10⁸ steps; shorten --duration or make --step longer", o.passes);
+        bail!(
+            "{steps} steps × {} passes: more than 10⁸ steps; shorten --duration or make --step longer",
+            o.passes
+        );
     }
+    let md = &fmu.description;
     let outputs: Vec<u32> = md
         .variables
         .iter()
@@ -163,38 +289,40 @@ pub fn check(o: &Options) -> anyhow::Result<Report> {
         step,
         steps,
         passes: o.passes.max(1),
-        inputs,
+        inputs: run.inputs,
         outputs,
+        parameters: run.parameters,
         count_syscalls: true,
     };
     let options = IsolationOptions {
         mode: o.mode,
         timeout: tb_cosim::isolated::watchdog(o.timeout)
             .map_err(|m| anyhow::anyhow!("--timeout: {m}"))?,
+        preload: o.preload.iter().map(|p| tb_files::absolute(p)).collect(),
         ..Default::default()
     };
-    let run = RunAs {
+    let interface = RunAs {
         interface: Interface::CoSimulation,
         me: Default::default(),
     };
     let measurement =
-        tb_cosim::isolated::realtime_check(&fmu, &options, run, &spec).map_err(|e| {
-            anyhow::anyhow!("{}: {}", o.fmu.display(), crate::bench::message(&e.into()))
+        tb_cosim::isolated::realtime_check(fmu, &options, interface, &spec).map_err(|e| {
+            anyhow::anyhow!("{}: {}", shown.display(), crate::bench::message(&e.into()))
         })?;
     let instructions = match o.instructions {
-        true => Some(count_instructions(&fmu, &spec, &options, run)?),
+        true => Some(count_instructions(fmu, &spec, &options, interface)?),
         false => None,
     };
     let items = report::judge(&measurement, step, o.budget, instructions.as_ref());
     Ok(Report {
-        fmu: o.fmu.clone(),
+        fmu: shown.to_path_buf(),
         model: md.model_name.clone(),
         fmi_version: md.fmi_version.clone(),
         step,
         duration,
         steps_per_pass: steps,
-        inputs: names,
-        input_file: o.input.clone(),
+        inputs: run.names,
+        input_file: run.from,
         isolation: match o.mode {
             Mode::Confined => "confined".into(),
             Mode::CrashOnly => "crash-only".into(),
@@ -294,6 +422,7 @@ fn count_instructions(
     let valgrind =
         which("valgrind").context("--instructions needs valgrind (apt-get install valgrind)")?;
     let dir = tempfile::tempdir()?;
+
     let exe = options.resolve_exe().map_err(|m| anyhow::anyhow!(m))?;
     let do_step = if fmu.is_fmi3() {
         "fmi3DoStep"
@@ -306,7 +435,7 @@ fn count_instructions(
     std::fs::write(
         &script,
         format!(
-            "#!/bin/sh\nexec '{}' --tool=callgrind --callgrind-out-file='{}/cg.%p' --dump-instr=no --dump-line=no --zero-before={do_step} --dump-after={do_step} '{}' \"$@\"\n",
+            "#!/bin/sh\nexec '{}' --tool=callgrind --callgrind-out-file='{}/cg.%p' --dump-instr=no --dump-line=no --collect-atstart=no --toggle-collect={do_step} --zero-before={do_step} --dump-after={do_step} '{}' \"$@\"\n",
             valgrind.display(),
             dumps.display(),
             exe.display()
@@ -395,6 +524,9 @@ fn harvest_dumps(dir: &Path, stop: &std::sync::atomic::AtomicBool) -> anyhow::Re
                 .and_then(|v| v.parse::<u64>().ok())
                 .with_context(|| format!("callgrind dump {name} has no total"))?;
             by_n.insert(n, total);
+            if let Some(keep) = std::env::var_os("TWINBENCH_KEEP_CALLGRIND") {
+                std::fs::copy(&path, Path::new(&keep).join(&name))?;
+            }
             std::fs::remove_file(&path)?;
         }
         if last {

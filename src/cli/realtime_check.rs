@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct RealtimeCheckArgs {
-    /// The FMU (FMI 2.0 or 3.0 Co-Simulation).
+    /// The FMU (FMI 2.0 or 3.0 Co-Simulation), or a bench's system file (`.toml`): then
+    /// every FMU of the bench, each with the inputs and parameters its first instance has
+    /// on the bench's run.
     pub fmu: PathBuf,
     /// Communication step [s] (default: the FMU's default experiment's, else 1e-3).
     #[arg(long, value_name = "SECONDS")]
@@ -35,6 +37,10 @@ pub struct RealtimeCheckArgs {
     /// The longest the whole check may take [s].
     #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
     pub timeout: f64,
+    /// A library the worker loads (RTLD_GLOBAL) before the FMU's, e.g. libpython for an
+    /// FMU built with pythonfmu (repeatable).
+    #[arg(long, value_name = "LIB")]
+    pub preload: Vec<PathBuf>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -54,8 +60,12 @@ pub fn run(args: RealtimeCheckArgs) -> anyhow::Result<bool> {
             );
         }
     }
+    let bench = args.fmu.extension().is_some_and(|e| e == "toml");
+    if bench && args.input.is_some() {
+        anyhow::bail!("--input: a bench's FMUs take their inputs from the bench's run");
+    }
     let options = crate::realtime_check::Options {
-        fmu: args.fmu,
+        fmu: args.fmu.clone(),
         step: args.step,
         duration: args.duration,
         input: args.input,
@@ -64,10 +74,29 @@ pub fn run(args: RealtimeCheckArgs) -> anyhow::Result<bool> {
         instructions: args.instructions,
         mode: args.isolate.mode(),
         timeout: args.timeout,
+        preload: args.preload,
     };
+    if bench {
+        let reports = crate::realtime_check::check_bench(&args.fmu, &options)?;
+        if args.json {
+            let all: Vec<serde_json::Value> = reports
+                .iter()
+                .map(|(instance, r)| serde_json::json!({"instance": instance, "report": r}))
+                .collect();
+            super::json::print(&serde_json::to_string_pretty(&all)?)?;
+        } else {
+            for (instance, r) in &reports {
+                println!("instance {instance}:");
+                for l in r.lines() {
+                    println!("{l}");
+                }
+            }
+        }
+        return Ok(reports.iter().all(|(_, r)| r.clean));
+    }
     let report = crate::realtime_check::check(&options)?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        super::json::print(&serde_json::to_string_pretty(&report)?)?;
     } else {
         for l in report.lines() {
             println!("{l}");

@@ -148,6 +148,7 @@ pub fn realtime_check(
 ) -> Result<crate::realtime::Measurement, FmuError> {
     let mut b = IsolatedBackend::start("realtime-check", fmu, options, false, run)?;
     b.setup_experiment(spec.start, None, None)?;
+    crate::realtime::measure::set_parameters(&mut b, spec)?;
     b.enter_initialization_mode()?;
     let mut inputs = vec![0.0; spec.inputs.vrs.len()];
     spec.inputs.at(spec.start, &mut 0, &mut inputs);

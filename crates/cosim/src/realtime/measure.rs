@@ -93,6 +93,7 @@ fn one_step(
 fn initialise_again(i: &mut dyn Backend, spec: &CheckSpec) -> Result<(), FmuError> {
     i.reset()?;
     i.setup_experiment(spec.start, None, None)?;
+    set_parameters(i, spec)?;
     i.enter_initialization_mode()?;
     let mut inputs = vec![0.0; spec.inputs.vrs.len()];
     spec.inputs.at(spec.start, &mut 0, &mut inputs);
@@ -100,6 +101,15 @@ fn initialise_again(i: &mut dyn Backend, spec: &CheckSpec) -> Result<(), FmuErro
         i.set_real(&spec.inputs.vrs, &inputs)?;
     }
     i.exit_initialization_mode()
+}
+
+/// The spec's parameters, before initialisation.
+pub fn set_parameters(i: &mut dyn Backend, spec: &CheckSpec) -> Result<(), FmuError> {
+    let (vrs, values): (Vec<u32>, Vec<f64>) = spec.parameters.iter().copied().unzip();
+    if vrs.is_empty() {
+        return Ok(());
+    }
+    i.set_real(&vrs, &values)
 }
 
 /// Keeps the five slowest steps, slowest first (capacity 6: no allocation).

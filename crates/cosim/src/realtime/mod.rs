@@ -33,6 +33,9 @@ pub struct CheckSpec {
     pub inputs: Inputs,
     /// The Real outputs read after every step.
     pub outputs: Vec<u32>,
+    /// Real parameters set after instantiation, before initialisation (value reference,
+    /// value): a bench's own values.
+    pub parameters: Vec<(u32, f64)>,
     /// Count system calls (the trap); off for an instruction count under valgrind, which
     /// does not run seccomp filters of its guest.
     pub count_syscalls: bool,
