@@ -206,10 +206,11 @@ impl LatenessHistogram {
     }
 }
 
-/// The lateness of every step, kept without allocating per step: counts in preallocated
-/// log-linear buckets (for the quantiles), the coarse bins, and the exact extremes.
-pub struct Lateness {
-    /// Steps on time (lateness ≤ 0) by their slack's magnitude; late ones by lateness.
+/// A distribution of signed durations (the steps' lateness, their execution time, the
+/// sleeps' wake-up latency), kept without allocating per step: counts in preallocated
+/// log-linear buckets (for the quantiles), the coarse lateness bins, the exact extremes.
+pub struct Histogram {
+    /// Values ≤ 0 (a step on time: its slack) by magnitude; values > 0 (late) by value.
     slack: Box<[u64]>,
     late: Box<[u64]>,
     coarse: [u64; 5],
@@ -218,9 +219,9 @@ pub struct Lateness {
     min: Nanos,
 }
 
-impl Default for Lateness {
+impl Default for Histogram {
     fn default() -> Self {
-        Lateness {
+        Histogram {
             slack: vec![0; BUCKETS].into_boxed_slice(),
             late: vec![0; BUCKETS].into_boxed_slice(),
             coarse: [0; 5],
@@ -231,7 +232,7 @@ impl Default for Lateness {
     }
 }
 
-impl Lateness {
+impl Histogram {
     #[inline]
     pub fn add(&mut self, lateness: Nanos) {
         self.count += 1;
@@ -256,8 +257,8 @@ impl Lateness {
         self.count
     }
 
-    /// The lateness at quantile `q` (0 to 1), ns: the latest value of its bucket, so never
-    /// earlier than the true quantile and at most 1.6 % later (bounded by the exact
+    /// The value at quantile `q` (0 to 1), ns: the largest value of its bucket, so never
+    /// below the true quantile and at most 1.6 % later (bounded by the exact
     /// maximum). None without steps.
     pub fn quantile(&self, q: f64) -> Option<Nanos> {
         if self.count == 0 {
@@ -309,7 +310,11 @@ pub struct Pacer<C: Clock> {
     start_time: f64,
     end_wall: Nanos,
     last_time: f64,
-    lateness: Lateness,
+    lateness: Histogram,
+    /// Each step's execution time: from the previous step's end (its wake-up) to its own.
+    step_time: Histogram,
+    /// How long after its deadline each sleep returned (the system's timer latency).
+    wake_up: Histogram,
     overruns: u64,
     frames_lost: u64,
     first_overrun: Option<(f64, Nanos)>,
@@ -334,7 +339,9 @@ impl<C: Clock> Pacer<C> {
             start_time: 0.0,
             end_wall: 0,
             last_time: 0.0,
-            lateness: Lateness::default(),
+            lateness: Histogram::default(),
+            step_time: Histogram::default(),
+            wake_up: Histogram::default(),
             overruns: 0,
             frames_lost: 0,
             first_overrun: None,
@@ -353,7 +360,9 @@ impl<C: Clock> Pacer<C> {
     pub fn start(&mut self, t: f64) {
         let now = self.clock.now();
         // A run again (a Simulation runs more than once): a fresh measure.
-        self.lateness = Lateness::default();
+        self.lateness = Histogram::default();
+        self.step_time = Histogram::default();
+        self.wake_up = Histogram::default();
         (self.overruns, self.frames_lost) = (0, 0);
         (self.first_overrun, self.stopped) = (None, false);
         (self.anchor_wall, self.anchor_time) = (now, t);
@@ -368,11 +377,14 @@ impl<C: Clock> Pacer<C> {
         let deadline = self.deadline(t);
         let late = now - deadline;
         self.lateness.add(late);
+        self.step_time.add(now - self.end_wall);
         let period = (t - self.last_time) / self.factor;
         self.last_time = t;
         if late <= 0 {
             self.sleep_until(deadline);
-            self.end_wall = self.clock.now().max(deadline);
+            let woke = self.clock.now();
+            self.wake_up.add(woke - deadline);
+            self.end_wall = woke.max(deadline);
             return ControlFlow::Continue(());
         }
         self.end_wall = now;
@@ -422,13 +434,12 @@ impl<C: Clock> Pacer<C> {
         (self.interrupt.as_ref()).is_some_and(|f| f.load(Ordering::Relaxed))
     }
 
-    pub fn lateness(&self) -> &Lateness {
+    pub fn lateness(&self) -> &Histogram {
         &self.lateness
     }
 
     /// What the run measured, in seconds.
     pub fn report(&self) -> PacingReport {
-        let s = |ns: Option<Nanos>| ns.map(|n| n as f64 * 1e-9);
         let l = &self.lateness;
         let simulated = self.last_time - self.start_time;
         PacingReport {
@@ -442,13 +453,9 @@ impl<C: Clock> Pacer<C> {
                 time,
                 lateness: late as f64 * 1e-9,
             }),
-            lateness: LatenessSummary {
-                max: s(l.max()),
-                p99_9: s(l.quantile(0.999)),
-                p99: s(l.quantile(0.99)),
-                median: s(l.quantile(0.5)),
-                min: s(l.min()),
-            },
+            lateness: Quantiles::of(l),
+            step_time: Quantiles::of(&self.step_time),
+            wake_up_latency: Quantiles::of(&self.wake_up),
             histogram: LatenessHistogram::from(l.coarse()),
             simulated_time: simulated,
             scheduled_wall_time: simulated / self.factor,
@@ -472,7 +479,12 @@ pub struct PacingReport {
     /// Policy stop ended the run.
     pub stopped_at_overrun: bool,
     pub first_overrun: Option<FirstOverrun>,
-    pub lateness: LatenessSummary,
+    pub lateness: Quantiles,
+    /// Each step's execution time (with the other observers' work, the recording's).
+    pub step_time: Quantiles,
+    /// How long after their deadlines the sleeps returned: the system's timer and
+    /// scheduling latency, which a step's slack must cover too.
+    pub wake_up_latency: Quantiles,
     pub histogram: LatenessHistogram,
     /// Simulated time paced, s, and the wall time it was to take (÷ factor) and took: from
     /// the start (after initialisation) to the last step's end.
@@ -488,14 +500,27 @@ pub struct FirstOverrun {
     pub lateness: f64,
 }
 
-/// Lateness statistics, s; quantiles within 1.6 % (never earlier than the true value).
+/// A distribution's statistics, s; quantiles within 1.6 % (never below the true value).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct LatenessSummary {
+pub struct Quantiles {
     pub max: Option<f64>,
     pub p99_9: Option<f64>,
     pub p99: Option<f64>,
     pub median: Option<f64>,
     pub min: Option<f64>,
+}
+
+impl Quantiles {
+    fn of(h: &Histogram) -> Quantiles {
+        let s = |ns: Option<Nanos>| ns.map(|n| n as f64 * 1e-9);
+        Quantiles {
+            max: s(h.max()),
+            p99_9: s(h.quantile(0.999)),
+            p99: s(h.quantile(0.99)),
+            median: s(h.quantile(0.5)),
+            min: s(h.min()),
+        }
+    }
 }
 
 impl PacingReport {
@@ -530,7 +555,17 @@ impl PacingReport {
         let bins: Vec<String> = (self.histogram.bins().iter())
             .map(|(name, n)| format!("{name} {n}"))
             .collect();
-        s += &format!("lateness bins   {}", bins.join(", "));
+        s += &format!("lateness bins   {}\n", bins.join(", "));
+        let (st, wu) = (&self.step_time, &self.wake_up_latency);
+        s += &format!(
+            "step time       median {}, p99.9 {}, max {}; woken after the deadline by median {}, p99.9 {}, max {}",
+            w(st.median),
+            w(st.p99_9),
+            w(st.max),
+            w(wu.median),
+            w(wu.p99_9),
+            w(wu.max)
+        );
         s
     }
 }
@@ -659,6 +694,7 @@ pub struct Prepared {
     policy: Option<(libc::c_int, libc::sched_param)>,
     affinity: Option<libc::cpu_set_t>,
     locked: bool,
+    timer_slack: Option<libc::c_ulong>,
 }
 
 const FIFO_MEANS: &str =
@@ -748,7 +784,31 @@ pub fn prepare(request: &RealtimeRequest) -> Prepared {
         policy: None,
         affinity: None,
         locked: false,
+        timer_slack: None,
     };
+    // Always: a normal thread's sleeps may end up to its timer slack (50 µs by default)
+    // late, so that the kernel can batch wake-ups; a paced run wants its deadline. (A
+    // SCHED_FIFO thread has no slack; this matters when that is refused or not asked.)
+    {
+        let asked = "timer slack 1 ns (prctl PR_SET_TIMERSLACK)".to_string();
+        // SAFETY: prctl with integer arguments only.
+        let old = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK, 0, 0, 0, 0) };
+        let r = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) };
+        match r {
+            0 => {
+                prepared.timer_slack = (old > 0).then_some(old as libc::c_ulong);
+                prepared.attempts.push(Attempt::obtained(asked));
+            }
+            _ => {
+                let (e, _) = os_error();
+                prepared.attempts.push(Attempt::refused(
+                    asked,
+                    format!("prctl: {e}"),
+                    "sleeps may end up to 50 µs late: deadlines may be missed by timer slack",
+                ));
+            }
+        }
+    }
     if request.lock_memory {
         let asked = "mlockall(MCL_CURRENT|MCL_FUTURE)".to_string();
         let (capable, limit) = memlock_allowance();
@@ -885,6 +945,9 @@ impl Prepared {
             if self.locked {
                 libc::munlockall();
             }
+            if let Some(slack) = self.timer_slack {
+                libc::prctl(libc::PR_SET_TIMERSLACK, slack, 0, 0, 0);
+            }
         }
     }
 }
@@ -957,6 +1020,8 @@ mod tests {
         assert_eq!(r.histogram.slack, 3);
         assert_eq!(r.lateness.max, Some(-0.8e-3));
         assert!((r.wall_time - 3e-3).abs() < 1e-12, "{}", r.wall_time);
+        assert_eq!(r.step_time.max, Some(0.2e-3));
+        assert_eq!(r.wake_up_latency.max, Some(0.0));
         drop(p);
         assert_eq!(clock.sleeps, vec![6 * MS, 7 * MS, 8 * MS]);
     }
@@ -1075,7 +1140,7 @@ mod tests {
 
     #[test]
     fn quantiles_are_within_the_histograms_resolution_and_never_early() {
-        let mut l = Lateness::default();
+        let mut l = Histogram::default();
         // 1000 steps: slack from -999 µs to 0 in 1 µs steps.
         let values: Vec<Nanos> = (0..1000).map(|k| -(k as Nanos) * 1000).collect();
         for &v in &values {
