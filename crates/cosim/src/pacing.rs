@@ -451,7 +451,7 @@ impl<C: Clock> Pacer<C> {
             stopped_at_overrun: self.stopped,
             first_overrun: self.first_overrun.map(|(time, late)| FirstOverrun {
                 time,
-                lateness: late as f64 * 1e-9,
+                lateness: late as f64 / 1e9,
             }),
             lateness: Quantiles::of(l),
             step_time: Quantiles::of(&self.step_time),
@@ -459,7 +459,7 @@ impl<C: Clock> Pacer<C> {
             histogram: LatenessHistogram::from(l.coarse()),
             simulated_time: simulated,
             scheduled_wall_time: simulated / self.factor,
-            wall_time: (self.end_wall - self.start_wall) as f64 * 1e-9,
+            wall_time: (self.end_wall - self.start_wall) as f64 / 1e9,
         }
     }
 }
@@ -512,7 +512,9 @@ pub struct Quantiles {
 
 impl Quantiles {
     fn of(h: &Histogram) -> Quantiles {
-        let s = |ns: Option<Nanos>| ns.map(|n| n as f64 * 1e-9);
+        // ns ÷ 1e9, not × 1e-9: the division of a whole number is rounded once (0.00094208,
+        // not 0.0009420800000000001).
+        let s = |ns: Option<Nanos>| ns.map(|n| n as f64 / 1e9);
         Quantiles {
             max: s(h.max()),
             p99_9: s(h.quantile(0.999)),
