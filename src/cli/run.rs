@@ -93,6 +93,49 @@ pub struct RunArgs {
     /// event's time (FMPy's `record_events`), besides the output points.
     #[arg(long)]
     pub record_events: bool,
+    /// Pace the run: each macro step waits for its wall-clock deadline, start + t / FACTOR
+    /// (1, the default: the wall clock keeps simulated time; 2: twice as fast), with
+    /// SCHED_FIFO, mlockall and a CPU of its own where the system allows (a line on stderr
+    /// says what was refused). The summary reports the steps' lateness. docs/realtime.md.
+    #[arg(long, num_args = 0..=1, default_missing_value = "1", value_name = "FACTOR",
+          allow_negative_numbers = true, value_parser = parse_factor)]
+    pub realtime: Option<tb_cosim::pacing::RealTimeFactor>,
+    /// With --realtime: the SCHED_FIFO priority, 1 to 99 (0: the normal scheduler, not asked).
+    #[arg(long, value_name = "N", default_value_t = 80, requires = "realtime",
+          value_parser = clap::value_parser!(i32).range(0..=99))]
+    pub realtime_priority: i32,
+    /// With --realtime: the CPU the run has to itself (default: the last this process may
+    /// use; `none`: not asked).
+    #[arg(long, value_name = "N|none", requires = "realtime", value_parser = parse_cpu)]
+    pub realtime_cpu: Option<tb_cosim::pacing::CpuRequest>,
+    /// With --realtime: what a step that finishes after its deadline does. continue: the
+    /// later deadlines keep the schedule (the run catches up); skip: the schedule restarts
+    /// one step after now (the frames lost are counted); stop: the run ends there, its rows
+    /// kept, `stopped by` saying so.
+    #[arg(long, value_name = "continue|skip|stop", default_value = "continue",
+          requires = "realtime", value_parser = |s: &str| tb_cosim::pacing::OverrunPolicy::from_name(s))]
+    pub overrun: tb_cosim::pacing::OverrunPolicy,
+}
+
+/// `--realtime FACTOR`: a finite number above 0.
+fn parse_factor(s: &str) -> Result<tb_cosim::pacing::RealTimeFactor, String> {
+    let x: f64 = s.trim().parse().map_err(|_| {
+        format!(
+            "'{s}' is not a number (a real-time factor: 1 keeps real time, 2 runs twice as fast)"
+        )
+    })?;
+    tb_cosim::pacing::RealTimeFactor::new(x).map_err(|e| e.to_string())
+}
+
+/// `--realtime-cpu N|none`.
+fn parse_cpu(s: &str) -> Result<tb_cosim::pacing::CpuRequest, String> {
+    match s.trim() {
+        "none" => Ok(tb_cosim::pacing::CpuRequest::Any),
+        n => n
+            .parse()
+            .map(tb_cosim::pacing::CpuRequest::Cpu)
+            .map_err(|_| format!("'{s}' is not a CPU number (0, 1, ...) or `none`")),
+    }
 }
 
 /// A run that failed: what it recorded up to the failure is kept, in a file named as
@@ -333,10 +376,36 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         };
         sim.observe(Box::new(super::progress::RunBar::new(until, lines)));
     }
+    // A paced run: the pacer last, so that each step's deadline covers the other observers'
+    // work too; the system asked for priority, locked memory and a CPU just before the run.
+    let paced = args.realtime.map(|factor| {
+        use tb_cosim::pacing;
+        let pacer = pacing::Pacer::new(pacing::Monotonic, factor, args.overrun)
+            .with_interrupt(interrupt.clone());
+        let (observer, report) = pacing::PacedRun::new(pacer);
+        sim.observe(Box::new(observer));
+        let prepared = pacing::prepare(&pacing::RealtimeRequest {
+            fifo_priority: (args.realtime_priority > 0).then_some(args.realtime_priority),
+            lock_memory: true,
+            cpu: args.realtime_cpu.unwrap_or(pacing::CpuRequest::Last),
+        });
+        for a in &prepared.attempts {
+            eprintln!("{}", a.line());
+        }
+        (report, prepared)
+    });
     // A run that completed keeps its results even when an instance then fails to end.
     let trace = options.trace.as_ref().map(|t| t.sink.clone());
     let result = sim.run();
+    // Dropping the pacer publishes its report.
     drop(sim.take_observers());
+    // The results are written at normal priority, on any CPU.
+    let paced = paced.map(|(report, prepared)| {
+        let attempts = prepared.attempts.clone();
+        prepared.restore();
+        let report = report.lock().unwrap_or_else(|p| p.into_inner()).take();
+        (report, attempts)
+    });
     // While the results are written a signal ends the process at once, their temporary
     // files removed (nothing half-written stays).
     super::interrupt::install_default();
@@ -392,6 +461,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "recorded_rows": sim.recording().len(),
             "out": args.out,
         });
+        let mut j = j;
+        if let Some((report, attempts)) = &paced {
+            let mut r = serde_json::to_value(report)?;
+            r["system"] = serde_json::to_value(attempts)?;
+            j["realtime"] = r;
+        }
         super::json::print(&serde_json::to_string_pretty(&j)?)?;
     } else {
         println!("system          {}", args.system.display());
@@ -407,6 +482,19 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             summary.wall_time,
             summary.wall_time * 1e9 / summary.steps.max(1) as f64
         );
+        if let Some((report, attempts)) = &paced {
+            if let Some(r) = report {
+                println!("{}", r.text());
+            }
+            let got: Vec<String> = attempts
+                .iter()
+                .map(|a| {
+                    let how = if a.obtained { "obtained" } else { "refused" };
+                    format!("{} {how}", a.asked)
+                })
+                .collect();
+            println!("real-time setup {}", got.join("; "));
+        }
         if let Some(out) = &args.out {
             println!(
                 "results         {} ({} rows)",

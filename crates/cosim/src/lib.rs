@@ -13,6 +13,7 @@ pub mod isolated;
 pub mod master;
 pub mod native;
 pub mod observe;
+pub mod pacing;
 pub mod plan;
 pub mod realtime;
 pub mod replay;
