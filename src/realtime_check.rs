@@ -37,6 +37,9 @@ pub struct Options {
     pub timeout: f64,
     /// Libraries the worker loads before the FMU's (libpython for a pythonfmu FMU).
     pub preload: Vec<PathBuf>,
+    /// The `twinbench` executable the worker runs (default: this one, or
+    /// `TWINBENCH_WORKER_EXE`): only it counts allocations.
+    pub worker_exe: Option<PathBuf>,
 }
 
 impl Default for Options {
@@ -52,6 +55,7 @@ impl Default for Options {
             mode: Mode::Confined,
             timeout: 600.0,
             preload: Vec::new(),
+            worker_exe: None,
         }
     }
 }
@@ -127,11 +131,7 @@ pub fn check(o: &Options) -> anyhow::Result<Report> {
     let cache = FmuCache::temporary(false)?;
     let fmu = cache.load(&o.fmu)?;
     co_simulation(&fmu)?;
-    let de = fmu
-        .description
-        .default_experiment
-        .clone()
-        .unwrap_or_default();
+    let de = fmu.description.default_experiment.unwrap_or_default();
     let start = de.start_time.unwrap_or(0.0);
     let (inputs, names) = inputs(&fmu, o.input.as_deref())?;
     let until = match &o.input {
@@ -299,6 +299,7 @@ fn measure_and_judge(
         timeout: tb_cosim::isolated::watchdog(o.timeout)
             .map_err(|m| anyhow::anyhow!("--timeout: {m}"))?,
         preload: o.preload.iter().map(|p| tb_files::absolute(p)).collect(),
+        worker_exe: o.worker_exe.clone(),
         ..Default::default()
     };
     let interface = RunAs {
@@ -368,7 +369,7 @@ fn inputs(fmu: &LoadedFmu, file: Option<&Path>) -> anyhow::Result<(Inputs, Vec<S
     let names = table.names().to_vec();
     let time_col = names.iter().position(|n| n == "time").unwrap_or(0);
     let time = table.column_at(time_col).to_vec();
-    if time.windows(2).any(|w| !(w[1] >= w[0])) || time.iter().any(|t| !t.is_finite()) {
+    if time.windows(2).any(|w| w[1] < w[0]) || time.iter().any(|t| !t.is_finite()) {
         bail!(
             "--input {}: column '{}' is not a non-decreasing time",
             file.display(),
@@ -441,10 +442,6 @@ fn count_instructions(
             exe.display()
         ),
     )?;
-    std::os::unix::fs::PermissionsExt::set_mode(
-        &mut std::fs::metadata(&script)?.permissions(),
-        0o755,
-    );
     std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755))?;
     let spec = CheckSpec {
         passes: 1,

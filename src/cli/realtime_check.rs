@@ -75,6 +75,7 @@ pub fn run(args: RealtimeCheckArgs) -> anyhow::Result<bool> {
         mode: args.isolate.mode(),
         timeout: args.timeout,
         preload: args.preload,
+        worker_exe: None,
     };
     if bench {
         let reports = crate::realtime_check::check_bench(&args.fmu, &options)?;

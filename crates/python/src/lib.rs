@@ -1095,6 +1095,64 @@ fn export_twin(
     serde_json::to_string(&ex).map_err(error)
 }
 
+/// `twinbench realtime-check` of an FMU, or of every FMU of a bench (a `.toml` system):
+/// the report as JSON (a list of `{instance, report}` for a bench). `worker` is the
+/// `twinbench` executable the FMU runs in (only it counts allocations).
+#[pyfunction]
+#[pyo3(signature = (fmu, worker, step=None, duration=None, input=None, passes=10, budget=None, instructions=false, isolate="confined", timeout=600.0, preload=Vec::new()))]
+#[allow(clippy::too_many_arguments)]
+fn realtime_check(
+    py: Python<'_>,
+    fmu: PathBuf,
+    worker: PathBuf,
+    step: Option<f64>,
+    duration: Option<f64>,
+    input: Option<PathBuf>,
+    passes: u32,
+    budget: Option<f64>,
+    instructions: bool,
+    isolate: &str,
+    timeout: f64,
+    preload: Vec<PathBuf>,
+) -> PyResult<String> {
+    let mode = match isolate {
+        "confined" => tb_cosim::isolated::confine::Mode::Confined,
+        "crash-only" => tb_cosim::isolated::confine::Mode::CrashOnly,
+        other => {
+            return Err(TwinbenchError::new_err(format!(
+                "isolate={other:?}: expected \"confined\" or \"crash-only\""
+            )))
+        }
+    };
+    let o = twinbench::realtime_check::Options {
+        fmu: fmu.clone(),
+        step,
+        duration,
+        input,
+        passes,
+        budget,
+        instructions,
+        mode,
+        timeout,
+        preload,
+        worker_exe: Some(worker),
+    };
+    let json = py.detach(|| -> anyhow::Result<String> {
+        if fmu.extension().is_some_and(|e| e == "toml") {
+            let all: Vec<serde_json::Value> = twinbench::realtime_check::check_bench(&fmu, &o)?
+                .into_iter()
+                .map(|(instance, r)| serde_json::json!({"instance": instance, "report": r}))
+                .collect();
+            Ok(serde_json::to_string(&all)?)
+        } else {
+            Ok(serde_json::to_string(&twinbench::realtime_check::check(
+                &o,
+            )?)?)
+        }
+    });
+    json.map_err(error)
+}
+
 /// Every warning of the Rust code (`log::warn!`), kept until the call returns to Python,
 /// whose package turns each into a `warnings.warn` (`TwinbenchWarning`): none is dropped
 /// (M13), and no Python is called from the simulation's threads.
@@ -1153,6 +1211,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(pack, m)?)?;
     m.add_function(wrap_pyfunction!(export_twin, m)?)?;
+    m.add_function(wrap_pyfunction!(realtime_check, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
     m.add_function(wrap_pyfunction!(load_study, m)?)?;

@@ -942,3 +942,27 @@ def test_a_study_result_hands_its_fitted_twin_on(tmp_path):
     with pytest.raises(twinbench.TwinbenchError, match="not an earlier export-twin output"):
         result.export_twin(tmp_path / "mine")
     assert (tmp_path / "mine" / "notes.txt").read_text() == "mine"
+
+
+def test_realtime_check_says_what_a_step_does(tmp_path, monkeypatch):
+    # Our dyno is clean; a bench's FMUs each get the bench's inputs; the report is the
+    # command line's (items with verdicts, the measurement).
+    exe = ROOT / "target" / "release" / "twinbench"
+    dyno = ROOT / "target" / "fmu" / "dyno.fmu"
+    r = twinbench.realtime_check(dyno, duration=1.0, passes=2, executable=exe)
+    assert r["clean"] is True, r
+    assert r["measurement"]["passes"] == 2 and r["steps_per_pass"] == 1000
+    verdicts = {i["name"]: i["verdict"] for i in r["items"]}
+    assert verdicts["allocations"] == "clean" and verdicts["system calls"] == "clean"
+    assert verdicts["step time"] == "measured"
+    bench = twinbench.realtime_check(ROOT / "systems" / "rls_v.toml", duration=2.0, passes=1, executable=exe)
+    assert [b["instance"] for b in bench] == ["vehicle", "driver", "dyno_rl", "edu"]
+    assert all(b["report"]["clean"] for b in bench)
+    # A bad option is refused naming it.
+    with pytest.raises(twinbench.TwinbenchError, match="isolate"):
+        twinbench.realtime_check(dyno, isolate="none", executable=exe)
+    # No twinbench executable: said, not guessed.
+    monkeypatch.delenv("TWINBENCH_WORKER_EXE", raising=False)
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with pytest.raises(twinbench.TwinbenchError, match="the twinbench executable"):
+        twinbench.realtime_check(dyno)

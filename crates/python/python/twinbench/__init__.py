@@ -16,6 +16,7 @@ command line's message.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import warnings
@@ -62,6 +63,7 @@ __all__ = [
     "__version__",
     "run",
     "pack",
+    "realtime_check",
     "compare",
     "Result",
     "Comparison",
@@ -141,6 +143,84 @@ def pack(out: Optional[PathLike] = None, models: Optional[Sequence[str]] = None)
     """
     written = _native.pack(None if out is None else os.fspath(out), None if models is None else list(models))
     return [Path(p) for p in written]
+
+
+def _worker_executable(executable: Optional[PathLike]) -> str:
+    """The twinbench executable a check's worker runs: given, else $TWINBENCH_WORKER_EXE,
+    else `twinbench` on the PATH."""
+    import shutil
+
+    found = executable or os.environ.get("TWINBENCH_WORKER_EXE") or shutil.which("twinbench")
+    if not found:
+        raise TwinbenchError(
+            "realtime_check runs the FMU in a worker that is the twinbench executable (it "
+            "counts the allocations); none was found: pass executable=, set "
+            "TWINBENCH_WORKER_EXE, or put twinbench on the PATH (cargo install --path .)"
+        )
+    return os.fspath(found)
+
+
+@_forward_warnings
+def realtime_check(
+    fmu: PathLike,
+    step: Optional[float] = None,
+    duration: Optional[float] = None,
+    input: Optional[PathLike] = None,
+    passes: int = 10,
+    budget: Optional[float] = None,
+    instructions: bool = False,
+    isolate: str = "confined",
+    timeout: float = 600.0,
+    preload: Sequence[PathLike] = (),
+    executable: Optional[PathLike] = None,
+) -> Union[Dict[str, Any], List[Dict[str, Any]]]:
+    """Whether an FMU is fit for a real-time target, as ``twinbench realtime-check`` says.
+
+    After initialisation the FMU is stepped in an isolated worker; each step's FMI calls
+    (inputs set, ``doStep``, outputs read) are watched for allocations, locks, log
+    messages and system calls (each by name), and timed.
+
+    Args:
+        fmu: an FMU (FMI 2.0 or 3.0 Co-Simulation), or a bench's system file (``.toml``):
+            then every FMU of the bench with the inputs its first instance has on the
+            bench's run.
+        step: the communication step [s] (default: the FMU's default experiment's, else
+            1e-3; a bench's own step).
+        duration: simulated time of one pass [s].
+        input: CSV or MDF 4 file of the inputs over time (columns named as the FMU's Real
+            inputs).
+        passes: passes over the duration (the instance reset between them).
+        budget: the longest step allowed [s] (without it the step's time is measured, not
+            judged).
+        instructions: also count ``doStep``'s instructions per step under callgrind.
+        isolate: ``"confined"`` (default) or ``"crash-only"``.
+        timeout: the longest the whole check may take [s].
+        preload: libraries the worker loads before the FMU's (libpython for pythonfmu).
+        executable: the twinbench executable the worker runs (default:
+            ``$TWINBENCH_WORKER_EXE``, else ``twinbench`` on the PATH).
+
+    Returns:
+        The report (``items`` with each verdict, ``clean``, the ``measurement``), or for a
+        bench a list of ``{"instance": ..., "report": ...}``.
+
+    Raises:
+        TwinbenchError: an FMU that cannot be checked, a bad input file or option.
+    """
+    worker = _worker_executable(executable)
+    text = _native.realtime_check(
+        os.fspath(fmu),
+        worker,
+        step,
+        duration,
+        None if input is None else os.fspath(input),
+        passes,
+        budget,
+        instructions,
+        isolate,
+        timeout,
+        [os.fspath(p) for p in preload],
+    )
+    return json.loads(text)
 
 
 @_forward_warnings
