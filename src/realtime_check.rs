@@ -436,7 +436,7 @@ fn count_instructions(
     std::fs::write(
         &script,
         format!(
-            "#!/bin/sh\nexec '{}' --tool=callgrind --callgrind-out-file='{}/cg.%p' --dump-instr=no --dump-line=no --collect-atstart=no --toggle-collect={do_step} --zero-before={do_step} --dump-after={do_step} '{}' \"$@\"\n",
+            "#!/bin/sh\nexec '{}' -q --tool=callgrind --callgrind-out-file='{}/cg.%p' --dump-instr=no --collect-atstart=no --toggle-collect={do_step} --zero-before={do_step} --dump-after={do_step} '{}' \"$@\"\n",
             valgrind.display(),
             dumps.display(),
             exe.display()
@@ -479,6 +479,13 @@ fn count_instructions(
         .enumerate()
         .max_by_key(|(_, c)| *c)
         .expect("not empty");
+    let (kafter, after) = counts
+        .iter()
+        .copied()
+        .enumerate()
+        .skip(1)
+        .max_by_key(|(_, c)| *c)
+        .unwrap_or((0, counts[0]));
     let mut sorted = counts.clone();
     sorted.sort_unstable();
     Ok(Instructions {
@@ -488,6 +495,8 @@ fn count_instructions(
         max,
         max_at: spec.start + kmax as f64 * spec.step,
         first: counts[0],
+        max_after_first: after,
+        max_after_first_at: spec.start + kafter as f64 * spec.step,
     })
 }
 

@@ -35,6 +35,9 @@ pub struct Instructions {
     pub max_at: f64,
     /// The first step's (often the one that finishes setting up).
     pub first: u64,
+    /// The most expensive step after the first, and its time [s].
+    pub max_after_first: u64,
+    pub max_after_first_at: f64,
 }
 
 /// The ratio of the most expensive step to the mean that still counts as no hidden slow
@@ -61,17 +64,31 @@ pub fn judge(
         time(&m.step_time, &m.noise, step, budget),
     ];
     if let Some(ins) = instructions {
-        let ratio = ins.max as f64 / ins.mean.max(1.0);
-        items.push(item(
-            "instructions",
-            ratio <= MAX_OVER_MEAN,
-            format!(
-                "doStep: mean {:.0}, median {}, max {} at t = {:.4} s ({ratio:.2} × the mean; at most {MAX_OVER_MEAN}), first step {} ({} steps, callgrind)",
-                ins.mean, ins.median, ins.max, ins.max_at, ins.first, ins.steps
-            ),
-        ));
+        items.push(instructions_item(ins));
     }
     items
+}
+
+/// The most expensive step against the mean. The first step alone above the limit is the
+/// one exception said by name (work an FMU leaves from initialisation to its first step:
+/// a target's first cycle must allow for it); any later step above it fails.
+fn instructions_item(ins: &Instructions) -> Item {
+    let mean = ins.mean.max(1.0);
+    let ratio = ins.max as f64 / mean;
+    let later = ins.max_after_first as f64 / mean;
+    let mut says = format!(
+        "doStep: mean {:.0}, median {}, max {} at t = {:.4} s ({ratio:.2} × the mean; at most {MAX_OVER_MEAN}) over {} steps (callgrind)",
+        ins.mean, ins.median, ins.max, ins.max_at, ins.steps
+    );
+    if ratio > MAX_OVER_MEAN && later <= MAX_OVER_MEAN {
+        says.push_str(&format!(
+            "; the one exception is the first step ({}, {:.1} × the mean: work left from initialisation to the first step, which a target's first cycle must allow for); after it the max is {} ({later:.2} ×)",
+            ins.first,
+            ins.first as f64 / mean,
+            ins.max_after_first
+        ));
+    }
+    item("instructions", later <= MAX_OVER_MEAN, says)
 }
 
 fn item(name: &str, clean: bool, says: String) -> Item {
@@ -321,8 +338,27 @@ mod tests {
             max,
             max_at: 0.5,
             first: 1200,
+            max_after_first: max,
+            max_after_first_at: 0.5,
         };
         assert!(clean(&judge(&m, 1e-3, None, Some(&ins(2900)))));
         assert!(!clean(&judge(&m, 1e-3, None, Some(&ins(3100)))));
+        // The first step alone above the limit: clean, and said.
+        let first = Instructions {
+            max: 9000,
+            max_at: 0.0,
+            first: 9000,
+            max_after_first: 1100,
+            ..ins(1100)
+        };
+        let items = judge(&m, 1e-3, None, Some(&first));
+        assert!(clean(&items));
+        assert!(items[5].says.contains("the one exception is the first step (9000, 9.0 × the mean"));
+        // Another step above it is not.
+        let later = Instructions {
+            max_after_first: 3500,
+            ..first
+        };
+        assert!(!clean(&judge(&m, 1e-3, None, Some(&later))));
     }
 }
