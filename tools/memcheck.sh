@@ -4,11 +4,7 @@
 # access or a definitely lost block fails. (Miri cannot run them: CVODE is C.)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-command -v valgrind >/dev/null || {
-    SUDO=$([ "$(id -u)" = 0 ] || echo sudo)
-    $SUDO apt-get install -y -qq valgrind >/dev/null \
-        || { $SUDO apt-get update -qq >/dev/null && $SUDO apt-get install -y -qq valgrind >/dev/null; }
-}
+tools/valgrind.sh
 bin=$(cargo test --release -p tb-fmi --lib --no-run --message-format=json 2>/dev/null \
     | python3 -c 'import json,sys
 for l in sys.stdin:

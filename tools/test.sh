@@ -43,6 +43,8 @@ export TWINBENCH_PYTHON="$PWD/target/venv/bin/python"
 # The pythonfmu supplier EDU (tests/supplier_edu.rs, systems/rls_v_supplier.toml) and the
 # link to the libpython a native host must preload for it.
 "$TWINBENCH_PYTHON" tools/supplier_edu/build.py
+# valgrind: realtime-check's instruction count in the fast tier, memcheck after it.
+tools/valgrind.sh
 # OMSimulator for the host tests (built once per machine into ~/.cache/twinbench).
 TWINBENCH_OMSIMULATOR="$(tools/omsimulator.sh)"
 export TWINBENCH_OMSIMULATOR
