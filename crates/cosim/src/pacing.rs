@@ -504,6 +504,7 @@ pub struct FirstOverrun {
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Quantiles {
     pub max: Option<f64>,
+    pub p99_99: Option<f64>,
     pub p99_9: Option<f64>,
     pub p99: Option<f64>,
     pub median: Option<f64>,
@@ -517,6 +518,7 @@ impl Quantiles {
         let s = |ns: Option<Nanos>| ns.map(|n| n as f64 / 1e9);
         Quantiles {
             max: s(h.max()),
+            p99_99: s(h.quantile(0.9999)),
             p99_9: s(h.quantile(0.999)),
             p99: s(h.quantile(0.99)),
             median: s(h.quantile(0.5)),
@@ -560,9 +562,10 @@ impl PacingReport {
         s += &format!("lateness bins   {}\n", bins.join(", "));
         let (st, wu) = (&self.step_time, &self.wake_up_latency);
         s += &format!(
-            "step time       median {}, p99.9 {}, max {}; woken after the deadline by median {}, p99.9 {}, max {}",
+            "step time       median {}, p99.9 {}, p99.99 {}, max {}; woken after the deadline by median {}, p99.9 {}, max {}",
             w(st.median),
             w(st.p99_9),
+            w(st.p99_99),
             w(st.max),
             w(wu.median),
             w(wu.p99_9),

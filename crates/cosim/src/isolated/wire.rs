@@ -969,7 +969,6 @@ mod tests {
                 logging: true,
             },
             Request::Probe(target()),
-            Request::Realtime("{\"steps\": 3}".into()),
             Request::Quit,
             Request::SetDebugLogging(true),
             Request::SetDebugLogging(false),
@@ -1015,6 +1014,7 @@ mod tests {
             },
             Request::FmuTerminated,
             Request::DoStep { t: 1.25, h: 1e-3 },
+            Request::Realtime("{\"steps\": 3}".into()),
         ]
     }
 
