@@ -226,80 +226,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     if args.keep_extracted {
         eprintln!("unpacked FMUs kept in {}", cache.root().display());
     }
-    let timeout = tb_cosim::isolated::watchdog(args.worker_timeout)
-        .map_err(|m| anyhow::anyhow!("--worker-timeout: {m}"))?;
-    let options = LoadOptions {
-        native: args.native,
-        native_models: crate::registry::native_models(),
-        isolate: args.isolate.is_some(),
-        isolation: tb_cosim::isolated::IsolationOptions {
-            timeout,
-            mode: args.isolate.map(|m| m.mode()).unwrap_or_default(),
-            limits: args.worker_limits,
-            ..Default::default()
-        },
-        trace: args
-            .trace_fmi
-            .as_ref()
-            .map(|path| tb_cosim::trace::TraceOptions {
-                sink: tb_cosim::trace::TraceSink::new(Box::new(tb_cosim::trace::TraceFile::new(
-                    path,
-                ))),
-                instances: args.trace_instances.clone(),
-            }),
-        tolerance: args.tolerance,
-        step_convention: args.step_convention,
-    };
-    if let Some(t) = args.tolerance {
-        if !(t > 0.0 && t < 1.0) {
-            anyhow::bail!(
-                "--tolerance {}: a relative tolerance is a number between 0 and 1 (e.g. 1e-6)",
-                tb_files::number(t)
-            );
-        }
-    }
-    // One FMU on its own: a system of one instance, its recorded columns under the FMU's
-    // own names and `--set` naming the FMU's variables.
-    let alone = super::run_fmu::is_fmu(&args.system);
-    let (system, instance) = match alone {
-        true => {
-            let (file, instance) = super::run_fmu::system(&args, &cache)?;
-            let plan = Plan::compile(file, &args.system, cache, &options)?;
-            (Arc::new(plan), Some(instance))
-        }
-        false => {
-            super::run_fmu::refuse_fmu_options(&args)?;
-            (
-                Arc::new(Plan::load_with(&args.system, cache, &options)?),
-                None,
-            )
-        }
-    };
-    if let Some(out) = &args.out {
-        // Before the run: a result must not replace a device, a link, a folder or an input.
-        let files = system.input_files();
-        let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
-        inputs.extend(files.iter().map(|p| p.as_path()));
-        tb_table::check_output(out, &inputs)?;
-        // Where a failed run keeps its rows (M9): never an input of the run (the system,
-        // an --input file, an FMU), a folder or a link either.
-        let partial = incomplete_path(out);
-        inputs.push(out);
-        tb_table::check_output(&partial, &inputs).with_context(|| {
-            format!(
-                "{}: where a failed run would keep its rows (choose another --out)",
-                partial.display()
-            )
-        })?;
-    }
-    // The trace file is created on its first line, after this check.
-    if let Some(trace) = &args.trace_fmi {
-        let files = system.input_files();
-        let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
-        inputs.extend(files.iter().map(|p| p.as_path()));
-        inputs.extend(args.out.as_deref());
-        tb_table::check_output(trace, &inputs).context("--trace-fmi")?;
-    }
+    let options = load_options(&args)?;
+    let (system, instance) = load_plan(&args, cache, &options)?;
+    check_outputs(&args, &system)?;
     for w in &system.warnings {
         eprintln!("warning: {w}");
     }
@@ -316,84 +245,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         super::run_fmu::own_names(sim.recording_mut(), instance)?;
     }
     sim.record_events(args.record_events)?;
-    // A study's answer first, so that a `--set` of the same parameter wins.
-    let answer = match &args.params {
-        Some(path) => {
-            let result = crate::validate::read_result(path)?;
-            result
-                .parameters_final
-                .iter()
-                .map(|(name, value)| {
-                    (
-                        format!("--params {}: {name}", path.display()),
-                        name.clone(),
-                        toml::Value::Float(*value),
-                    )
-                })
-                .collect()
-        }
-        None => Vec::new(),
-    };
-    let assignments = args
-        .set
-        .iter()
-        .map(|s| parse_assignment(s).map(|(n, v)| (format!("--set {s}"), n, v)))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    for (what, name, value) in answer.into_iter().chain(assignments) {
-        let name = match &instance {
-            // The FMU's own variable name; `instance.variable` as in a system is taken too
-            // when the FMU has no variable of that whole name (red team M17).
-            Some(i) => {
-                let own = format!("{i}.{name}");
-                match name.strip_prefix(&format!("{i}.")) {
-                    Some(_)
-                        if system.parameter(&own).is_err() && system.parameter(&name).is_ok() =>
-                    {
-                        name
-                    }
-                    _ => own,
-                }
-            }
-            None => name,
-        };
-        set_parameter(&system, &mut sim, &name, &value).with_context(|| what.clone())?;
-    }
-    // The CLI's observers of the run: Ctrl-C (or SIGTERM) ends it keeping its rows, a
-    // progress bar on a terminal.
-    let interrupt = super::interrupt::run_flag()?;
-    sim.observe(Box::new(super::progress::StopRunOnFlag(interrupt.clone())));
-    let lines = super::progress::RunBar::lines_for_cli(args.json);
-    if std::io::stderr().is_terminal() || lines.is_some() {
-        let until = match &system.stop {
-            tb_cosim::Stop::Time(t) => format!("of {} s", tb_files::number(*t)),
-            tb_cosim::Stop::When {
-                condition,
-                max_time,
-            } => format!(
-                "until {condition} (at most {} s)",
-                tb_files::number(*max_time)
-            ),
-        };
-        sim.observe(Box::new(super::progress::RunBar::new(until, lines)));
-    }
-    // A paced run: the pacer last, so that each step's deadline covers the other observers'
-    // work too; the system asked for priority, locked memory and a CPU just before the run.
-    let paced = args.realtime.map(|factor| {
-        use tb_cosim::pacing;
-        let pacer = pacing::Pacer::new(pacing::Monotonic, factor, args.overrun)
-            .with_interrupt(interrupt.clone());
-        let (observer, report) = pacing::PacedRun::new(pacer);
-        sim.observe(Box::new(observer));
-        let prepared = pacing::prepare(&pacing::RealtimeRequest {
-            fifo_priority: (args.realtime_priority > 0).then_some(args.realtime_priority),
-            lock_memory: true,
-            cpu: args.realtime_cpu.unwrap_or(pacing::CpuRequest::Last),
-        });
-        for a in &prepared.attempts {
-            eprintln!("{}", a.line());
-        }
-        (report, prepared)
-    });
+    apply_parameters(&args, &system, &mut sim, instance.as_deref())?;
+    let (interrupt, paced) = observe(&args, &system, &mut sim)?;
     // A run that completed keeps its results even when an instance then fails to end.
     let trace = options.trace.as_ref().map(|t| t.sink.clone());
     let result = sim.run();
@@ -443,6 +296,218 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             summary.stopped_by
         )));
     }
+    print_summary(&args, &system, &sim, &summary, &order, &paced)
+}
+
+/// How the system's instances are run (`--native`, `--isolate`, `--trace-fmi`, ...).
+fn load_options(args: &RunArgs) -> anyhow::Result<LoadOptions> {
+    let timeout = tb_cosim::isolated::watchdog(args.worker_timeout)
+        .map_err(|m| anyhow::anyhow!("--worker-timeout: {m}"))?;
+    let options = LoadOptions {
+        native: args.native,
+        native_models: crate::registry::native_models(),
+        isolate: args.isolate.is_some(),
+        isolation: tb_cosim::isolated::IsolationOptions {
+            timeout,
+            mode: args.isolate.map(|m| m.mode()).unwrap_or_default(),
+            limits: args.worker_limits,
+            ..Default::default()
+        },
+        trace: args
+            .trace_fmi
+            .as_ref()
+            .map(|path| tb_cosim::trace::TraceOptions {
+                sink: tb_cosim::trace::TraceSink::new(Box::new(tb_cosim::trace::TraceFile::new(
+                    path,
+                ))),
+                instances: args.trace_instances.clone(),
+            }),
+        tolerance: args.tolerance,
+        step_convention: args.step_convention,
+    };
+    if let Some(t) = args.tolerance {
+        if !(t > 0.0 && t < 1.0) {
+            anyhow::bail!(
+                "--tolerance {}: a relative tolerance is a number between 0 and 1 (e.g. 1e-6)",
+                tb_files::number(t)
+            );
+        }
+    }
+    Ok(options)
+}
+
+/// The plan of the system file, SSP package or single FMU (with its instance's name).
+fn load_plan(
+    args: &RunArgs,
+    cache: Arc<FmuCache>,
+    options: &LoadOptions,
+) -> anyhow::Result<(Arc<Plan>, Option<String>)> {
+    // One FMU on its own: a system of one instance, its recorded columns under the FMU's
+    // own names and `--set` naming the FMU's variables.
+    let alone = super::run_fmu::is_fmu(&args.system);
+    Ok(match alone {
+        true => {
+            let (file, instance) = super::run_fmu::system(args, &cache)?;
+            let plan = Plan::compile(file, &args.system, cache, options)?;
+            (Arc::new(plan), Some(instance))
+        }
+        false => {
+            super::run_fmu::refuse_fmu_options(args)?;
+            (
+                Arc::new(Plan::load_with(&args.system, cache, options)?),
+                None,
+            )
+        }
+    })
+}
+
+/// Before the run: `--out`, where a failed run keeps its rows, and `--trace-fmi` replace
+/// no input, device, link or folder.
+fn check_outputs(args: &RunArgs, system: &Plan) -> anyhow::Result<()> {
+    if let Some(out) = &args.out {
+        // Before the run: a result must not replace a device, a link, a folder or an input.
+        let files = system.input_files();
+        let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
+        inputs.extend(files.iter().map(|p| p.as_path()));
+        tb_table::check_output(out, &inputs)?;
+        // Where a failed run keeps its rows (M9): never an input of the run (the system,
+        // an --input file, an FMU), a folder or a link either.
+        let partial = incomplete_path(out);
+        inputs.push(out);
+        tb_table::check_output(&partial, &inputs).with_context(|| {
+            format!(
+                "{}: where a failed run would keep its rows (choose another --out)",
+                partial.display()
+            )
+        })?;
+    }
+    // The trace file is created on its first line, after this check.
+    if let Some(trace) = &args.trace_fmi {
+        let files = system.input_files();
+        let mut inputs: Vec<&std::path::Path> = vec![args.system.as_path()];
+        inputs.extend(files.iter().map(|p| p.as_path()));
+        inputs.extend(args.out.as_deref());
+        tb_table::check_output(trace, &inputs).context("--trace-fmi")?;
+    }
+    Ok(())
+}
+
+/// A study's answer (`--params`), then `--set`, on the instances before the run.
+fn apply_parameters(
+    args: &RunArgs,
+    system: &Plan,
+    sim: &mut Simulation,
+    instance: Option<&str>,
+) -> anyhow::Result<()> {
+    // A study's answer first, so that a `--set` of the same parameter wins.
+    let answer = match &args.params {
+        Some(path) => {
+            let result = crate::validate::read_result(path)?;
+            result
+                .parameters_final
+                .iter()
+                .map(|(name, value)| {
+                    (
+                        format!("--params {}: {name}", path.display()),
+                        name.clone(),
+                        toml::Value::Float(*value),
+                    )
+                })
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    let assignments = args
+        .set
+        .iter()
+        .map(|s| parse_assignment(s).map(|(n, v)| (format!("--set {s}"), n, v)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    for (what, name, value) in answer.into_iter().chain(assignments) {
+        let name = match instance {
+            // The FMU's own variable name; `instance.variable` as in a system is taken too
+            // when the FMU has no variable of that whole name (red team M17).
+            Some(i) => {
+                let own = format!("{i}.{name}");
+                match name.strip_prefix(&format!("{i}.")) {
+                    Some(_)
+                        if system.parameter(&own).is_err() && system.parameter(&name).is_ok() =>
+                    {
+                        name
+                    }
+                    _ => own,
+                }
+            }
+            None => name,
+        };
+        set_parameter(system, sim, &name, &value).with_context(|| what.clone())?;
+    }
+    Ok(())
+}
+
+/// What a paced run leaves: the pacer's report and what the system gave.
+type Paced = Option<(
+    Option<tb_cosim::pacing::PacingReport>,
+    Vec<tb_cosim::pacing::Attempt>,
+)>;
+/// The pacer's report slot and what was asked of the system, before the run.
+type Pacing = Option<(
+    Arc<std::sync::Mutex<Option<tb_cosim::pacing::PacingReport>>>,
+    tb_cosim::pacing::Prepared,
+)>;
+
+/// The CLI's observers of the run: Ctrl-C (or SIGTERM) ends it keeping its rows, a
+/// progress bar on a terminal, the pacer of `--realtime`. Returns the Ctrl-C flag.
+fn observe(
+    args: &RunArgs,
+    system: &Plan,
+    sim: &mut Simulation,
+) -> anyhow::Result<(Arc<std::sync::atomic::AtomicBool>, Pacing)> {
+    let interrupt = super::interrupt::run_flag()?;
+    sim.observe(Box::new(super::progress::StopRunOnFlag(interrupt.clone())));
+    let lines = super::progress::RunBar::lines_for_cli(args.json);
+    if std::io::stderr().is_terminal() || lines.is_some() {
+        let until = match &system.stop {
+            tb_cosim::Stop::Time(t) => format!("of {} s", tb_files::number(*t)),
+            tb_cosim::Stop::When {
+                condition,
+                max_time,
+            } => format!(
+                "until {condition} (at most {} s)",
+                tb_files::number(*max_time)
+            ),
+        };
+        sim.observe(Box::new(super::progress::RunBar::new(until, lines)));
+    }
+    // A paced run: the pacer last, so that each step's deadline covers the other observers'
+    // work too; the system asked for priority, locked memory and a CPU just before the run.
+    let paced = args.realtime.map(|factor| {
+        use tb_cosim::pacing;
+        let pacer = pacing::Pacer::new(pacing::Monotonic, factor, args.overrun)
+            .with_interrupt(interrupt.clone());
+        let (observer, report) = pacing::PacedRun::new(pacer);
+        sim.observe(Box::new(observer));
+        let prepared = pacing::prepare(&pacing::RealtimeRequest {
+            fifo_priority: (args.realtime_priority > 0).then_some(args.realtime_priority),
+            lock_memory: true,
+            cpu: args.realtime_cpu.unwrap_or(pacing::CpuRequest::Last),
+        });
+        for a in &prepared.attempts {
+            eprintln!("{}", a.line());
+        }
+        (report, prepared)
+    });
+    Ok((interrupt, paced))
+}
+
+/// The run's summary: JSON with `--json`, else lines.
+fn print_summary(
+    args: &RunArgs,
+    system: &Plan,
+    sim: &Simulation,
+    summary: &tb_cosim::RunSummary,
+    order: &[String],
+    paced: &Paced,
+) -> anyhow::Result<()> {
     let rtf = summary.simulated_time / summary.wall_time.max(1e-12);
     if args.json {
         let j = serde_json::json!({
@@ -453,7 +518,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
             "wall_time": summary.wall_time,
             "real_time_factor": rtf,
             "ns_per_step": summary.wall_time * 1e9 / summary.steps.max(1) as f64,
-            "lap_time": super::lap_time(&summary, &system),
+            "lap_time": super::lap_time(summary, system),
             "reported": summary.reported.iter().cloned().collect::<std::collections::BTreeMap<_, _>>(),
             "stopped_by": summary.stopped_by,
             "order": order,
@@ -474,7 +539,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         println!("stepping order  {}", order.join(", "));
         println!("steps           {}", summary.steps);
         println!("simulated time  {:.3} s", summary.simulated_time);
-        if let Some(l) = super::lap_time(&summary, &system) {
+        if let Some(l) = super::lap_time(summary, system) {
             println!("lap time        {l:.3} s");
         }
         println!(

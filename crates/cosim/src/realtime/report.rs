@@ -353,7 +353,9 @@ mod tests {
         };
         let items = judge(&m, 1e-3, None, Some(&first));
         assert!(clean(&items));
-        assert!(items[5].says.contains("the one exception is the first step (9000, 9.0 × the mean"));
+        assert!(items[5]
+            .says
+            .contains("the one exception is the first step (9000, 9.0 × the mean"));
         // Another step above it is not.
         let later = Instructions {
             max_after_first: 3500,
