@@ -134,11 +134,11 @@ fn row_svg(top: f64, k: usize, row: &Row) -> String {
         .map(|u| format!(" [{u}]"))
         .unwrap_or_default();
     s.push_str(&format!(
-        r##"<text x="12" y="{}" font-size="14" font-weight="600">{}</text><text x="12" y="{}" fill="#5b6676">{:+.1} %{}</text>"##,
+        r##"<text x="12" y="{}" font-size="14" font-weight="600">{}</text><text x="12" y="{}" fill="#5b6676">{}{}</text>"##,
         y - 4.0,
         esc(&row.name),
         y + 14.0,
-        row.change_percent,
+        super::change_words(row.change_percent, row.start, row.answer),
         esc(&unit)
     ));
     // Everything drawn lies within its strip: the close-up's values and the start.

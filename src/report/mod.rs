@@ -342,12 +342,23 @@ pub fn parameter_line(p: &TableParameter) -> String {
         None => interval,
     };
     format!(
-        "{}: {:+.1} % ({:.4}{unit} → {:.4}{unit}{interval})",
+        "{}: {} ({:.4}{unit} → {:.4}{unit}{interval})",
         short(&p.name),
-        p.change_percent,
+        change_words(p.change_percent, p.initial, p.optimized),
         p.initial,
         p.optimized
     )
+}
+
+/// A parameter's change in words: `+12.3 %`; from a start of zero, where no ratio exists,
+/// `from 0` (and `unchanged` when it stayed there), never `NaN %`.
+pub fn change_words(change_percent: f64, initial: f64, optimized: f64) -> String {
+    match change_percent.is_finite() {
+        true => format!("{change_percent:+.1} %"),
+        false if initial == 0.0 && optimized == 0.0 => "unchanged".into(),
+        false if initial == 0.0 => "from 0".into(),
+        false => "change not defined".into(),
+    }
 }
 
 /// The intervals' statements of every parameter of Tab. 1, merged per cause.
@@ -637,6 +648,14 @@ mod tests {
 
     /// Statements of one cause make one line naming every parameter it concerns, with
     /// what to do next; one of no known cause stays under its parameter.
+    #[test]
+    fn a_change_from_zero_is_said_in_words_not_as_nan_percent() {
+        assert_eq!(change_words(12.34, 1.0, 1.1234), "+12.3 %");
+        assert_eq!(change_words(f64::NAN, 0.0, 0.5), "from 0");
+        assert_eq!(change_words(f64::NAN, 0.0, 0.0), "unchanged");
+        assert_eq!(change_words(-50.0, 2.0, 1.0), "-50.0 %");
+    }
+
     #[test]
     fn statements_are_merged_per_cause_with_what_to_do_next() {
         let items: Vec<(String, String)> = [

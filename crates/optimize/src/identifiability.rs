@@ -79,7 +79,7 @@ pub(crate) fn check(
         .zip(bounds)
         .map(|(&x, &(lo, hi))| if x.abs() > 1e-12 { x.abs() } else { hi - lo })
         .collect();
-    let residuals = residuals(&perturbed(x0, &scale), step, prepared, pool, run);
+    let residuals = residuals(&perturbed(x0, &scale, bounds), step, prepared, pool, run);
     let (blocks, failures) = jacobian(residuals, step, prepared, x0.len());
     let combined = analyse(&step.signals, &blocks, &scale, null_ratio);
     let per_signal = step
@@ -107,14 +107,22 @@ pub(crate) fn check(
 }
 
 /// The points of the central differences: each parameter moved by +`REL_STEP` and then
-/// −`REL_STEP` of its scale.
-fn perturbed(x0: &[f64], scale: &[f64]) -> Vec<Vec<f64>> {
+/// −`REL_STEP` of its scale, about a centre moved inside its declared range (a start on a
+/// bound is stepped inward: a run outside the range would fail and leave the parameter
+/// unseen). The pair stays 2·`REL_STEP` of its scale apart.
+fn perturbed(x0: &[f64], scale: &[f64], bounds: &[(f64, f64)]) -> Vec<Vec<f64>> {
     (0..2 * x0.len())
         .map(|j| {
             let i = j / 2;
             let sign = if j % 2 == 0 { 1.0 } else { -1.0 };
+            let h = REL_STEP * scale[i];
+            let (lo, hi) = bounds[i];
+            let centre = match lo + h <= hi - h {
+                true => x0[i].clamp(lo + h, hi - h),
+                false => x0[i],
+            };
             let mut x = x0.to_vec();
-            x[i] += sign * REL_STEP * scale[i];
+            x[i] = centre + sign * h;
             x
         })
         .collect()
@@ -362,5 +370,31 @@ impl Identifiability {
     /// Whether the step's signals together leave a direction unseen.
     pub fn has_unseen(&self) -> bool {
         !self.combined.unseen.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_start_on_a_bound_is_stepped_inward() {
+        // On the lower bound, on the upper bound, inside: each pair 2·REL_STEP·scale apart,
+        // both points within the range.
+        let x0 = [0.5, 2.0, 1.0];
+        let scale = [0.5, 2.0, 1.0];
+        let bounds = [(0.5, 1.5), (0.0, 2.0), (0.0, 2.0)];
+        let p = super::perturbed(&x0, &scale, &bounds);
+        for i in 0..3 {
+            let (plus, minus) = (p[2 * i][i], p[2 * i + 1][i]);
+            assert!(
+                (plus - minus - 2.0 * super::REL_STEP * scale[i]).abs() < 1e-12,
+                "{i}"
+            );
+            assert!(
+                minus >= bounds[i].0 && plus <= bounds[i].1,
+                "{i}: {minus} {plus}"
+            );
+        }
+        // Inside the range the centre is the start itself.
+        assert_eq!(p[4][2], 1.0 + super::REL_STEP);
     }
 }
