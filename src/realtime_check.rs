@@ -60,6 +60,22 @@ impl Default for Options {
     }
 }
 
+impl Options {
+    /// The numbers given, checked before anything is loaded or run.
+    fn check_numbers(&self) -> anyhow::Result<()> {
+        let bad = |x: Option<f64>| x.filter(|x| !(x.is_finite() && *x > 0.0));
+        if let Some(s) = bad(self.step) {
+            bail!("--step {s}: expected a step of more than 0 s");
+        }
+        for (name, v) in [("--budget", self.budget), ("--duration", self.duration)] {
+            if let Some(x) = bad(v) {
+                bail!("{name} {x}: expected a positive number of seconds");
+            }
+        }
+        Ok(())
+    }
+}
+
 /// What the check found.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
@@ -77,6 +93,14 @@ pub struct Report {
     pub instructions: Option<Instructions>,
     pub items: Vec<Item>,
     pub clean: bool,
+}
+
+/// One FMU of a bench and its report (a bench's check, as JSON: a list of these).
+#[derive(Clone, Debug, Serialize)]
+pub struct InstanceReport {
+    /// The first instance of the FMU, whose inputs it was checked with.
+    pub instance: String,
+    pub report: Report,
 }
 
 impl Report {
@@ -110,12 +134,7 @@ impl Report {
         let failed: Vec<&str> = self
             .items
             .iter()
-            .filter(|i| {
-                !matches!(
-                    i.verdict,
-                    report::Verdict::Clean | report::Verdict::Measured
-                )
-            })
+            .filter(|i| !i.verdict.passes())
             .map(|i| i.name.as_str())
             .collect();
         out.push(match failed.is_empty() {
@@ -128,6 +147,7 @@ impl Report {
 
 /// Checks `o.fmu`.
 pub fn check(o: &Options) -> anyhow::Result<Report> {
+    o.check_numbers()?;
     let cache = FmuCache::temporary(false)?;
     let fmu = cache.load(&o.fmu)?;
     co_simulation(&fmu)?;
@@ -157,7 +177,8 @@ pub fn check(o: &Options) -> anyhow::Result<Report> {
 /// instance has on the bench: the bench is run once (in this process, as `run` runs it),
 /// every output recorded at every step, and each FMU then checked in a worker of its own
 /// over the same time with the inputs the bench gave it.
-pub fn check_bench(system: &Path, o: &Options) -> anyhow::Result<Vec<(String, Report)>> {
+pub fn check_bench(system: &Path, o: &Options) -> anyhow::Result<Vec<InstanceReport>> {
+    o.check_numbers()?;
     let cache = std::sync::Arc::new(FmuCache::temporary(false)?);
     let mut file = tb_cosim::SystemFile::load(system)?;
     file.record = tb_cosim::config::RecordConfig {
@@ -225,7 +246,10 @@ pub fn check_bench(system: &Path, o: &Options) -> anyhow::Result<Vec<(String, Re
         };
         let report = measure_and_judge(&instance.fmu, &instance.fmu.source, run, o)
             .with_context(|| format!("instance {}", instance.name))?;
-        reports.push((instance.name.clone(), report));
+        reports.push(InstanceReport {
+            instance: instance.name.clone(),
+            report,
+        });
     }
     Ok(reports)
 }
@@ -302,10 +326,8 @@ fn measure_and_judge(
         worker_exe: o.worker_exe.clone(),
         ..Default::default()
     };
-    let interface = RunAs {
-        interface: Interface::CoSimulation,
-        me: Default::default(),
-    };
+    // Co-Simulation: the FMU's default interface once `co_simulation` passed.
+    let interface = RunAs::default_for(fmu);
     let measurement =
         tb_cosim::isolated::realtime_check(fmu, &options, interface, &spec).map_err(|e| {
             anyhow::anyhow!("{}: {}", shown.display(), crate::bench::message(&e.into()))
@@ -347,13 +369,7 @@ fn inputs(fmu: &LoadedFmu, file: Option<&Path>) -> anyhow::Result<(Inputs, Vec<S
     let Some(file) = file else {
         let starts: Vec<Vec<f64>> = real_inputs
             .iter()
-            .map(|v| {
-                vec![v
-                    .start
-                    .as_deref()
-                    .and_then(|s| s.parse().ok())
-                    .unwrap_or(0.0)]
-            })
+            .map(|v| vec![v.start_f64().unwrap_or(0.0)])
             .collect();
         return Ok((
             Inputs {

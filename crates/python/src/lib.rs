@@ -1139,11 +1139,9 @@ fn realtime_check(
     };
     let json = py.detach(|| -> anyhow::Result<String> {
         if fmu.extension().is_some_and(|e| e == "toml") {
-            let all: Vec<serde_json::Value> = twinbench::realtime_check::check_bench(&fmu, &o)?
-                .into_iter()
-                .map(|(instance, r)| serde_json::json!({"instance": instance, "report": r}))
-                .collect();
-            Ok(serde_json::to_string(&all)?)
+            Ok(serde_json::to_string(
+                &twinbench::realtime_check::check_bench(&fmu, &o)?,
+            )?)
         } else {
             Ok(serde_json::to_string(&twinbench::realtime_check::check(
                 &o,

@@ -147,15 +147,7 @@ pub fn realtime_check(
     spec: &crate::realtime::CheckSpec,
 ) -> Result<crate::realtime::Measurement, FmuError> {
     let mut b = IsolatedBackend::start("realtime-check", fmu, options, false, run)?;
-    b.setup_experiment(spec.start, None, None)?;
-    crate::realtime::measure::set_parameters(&mut b, spec)?;
-    b.enter_initialization_mode()?;
-    let mut inputs = vec![0.0; spec.inputs.vrs.len()];
-    spec.inputs.at(spec.start, &mut 0, &mut inputs);
-    if !inputs.is_empty() {
-        b.set_real(&spec.inputs.vrs, &inputs)?;
-    }
-    b.exit_initialization_mode()?;
+    crate::realtime::measure::initialise(&mut b, spec)?;
     b.realtime(spec)
 }
 

@@ -36,7 +36,7 @@ pub fn measure(i: &mut dyn Backend, spec: &CheckSpec) -> Result<Measurement, Fmu
     tb_rtcount::reset();
     for pass in 0..spec.passes.max(1) {
         if pass > 0 {
-            if let Err(e) = initialise_again(i, spec) {
+            if let Err(e) = i.reset().and_then(|()| initialise(i, spec)) {
                 m.notes.push(format!(
                     "{pass} pass(es) of {}: the instance could not be reset for another ({e})",
                     spec.passes
@@ -89,11 +89,14 @@ fn one_step(
     Ok(())
 }
 
-/// Reset, then initialised again at `start` with the inputs there.
-fn initialise_again(i: &mut dyn Backend, spec: &CheckSpec) -> Result<(), FmuError> {
-    i.reset()?;
+/// Set up, the spec's Real parameters set, and initialised at `start` with the inputs
+/// there: the host's first initialisation and every pass after a reset.
+pub fn initialise(i: &mut dyn Backend, spec: &CheckSpec) -> Result<(), FmuError> {
     i.setup_experiment(spec.start, None, None)?;
-    set_parameters(i, spec)?;
+    let (vrs, values): (Vec<u32>, Vec<f64>) = spec.parameters.iter().copied().unzip();
+    if !vrs.is_empty() {
+        i.set_real(&vrs, &values)?;
+    }
     i.enter_initialization_mode()?;
     let mut inputs = vec![0.0; spec.inputs.vrs.len()];
     spec.inputs.at(spec.start, &mut 0, &mut inputs);
@@ -101,15 +104,6 @@ fn initialise_again(i: &mut dyn Backend, spec: &CheckSpec) -> Result<(), FmuErro
         i.set_real(&spec.inputs.vrs, &inputs)?;
     }
     i.exit_initialization_mode()
-}
-
-/// The spec's parameters, before initialisation.
-pub fn set_parameters(i: &mut dyn Backend, spec: &CheckSpec) -> Result<(), FmuError> {
-    let (vrs, values): (Vec<u32>, Vec<f64>) = spec.parameters.iter().copied().unzip();
-    if vrs.is_empty() {
-        return Ok(());
-    }
-    i.set_real(&vrs, &values)
 }
 
 /// Keeps the five slowest steps, slowest first (capacity 6: no allocation).

@@ -16,6 +16,13 @@ pub enum Verdict {
     Measured,
 }
 
+impl Verdict {
+    /// Whether the item lets the check pass: clean, or a figure that is not judged.
+    pub fn passes(self) -> bool {
+        matches!(self, Verdict::Clean | Verdict::Measured)
+    }
+}
+
 /// One item of the check.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Item {
@@ -232,9 +239,7 @@ fn time(t: &TimeStats, noise: &TimeStats, step: f64, budget: Option<f64>) -> Ite
 
 /// Whether every judged item is clean.
 pub fn clean(items: &[Item]) -> bool {
-    items
-        .iter()
-        .all(|i| matches!(i.verdict, Verdict::Clean | Verdict::Measured))
+    items.iter().all(|i| i.verdict.passes())
 }
 
 /// The items as text lines.
