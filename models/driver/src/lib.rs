@@ -107,6 +107,17 @@ pub struct Driver {
     /// hints only: results do not depend on them).
     hint_here: Cell<usize>,
     hint_preview: Cell<usize>,
+    /// The last [`Driver::targets`] and the bits of the inputs it came from (s, v,
+    /// preview_time, preview_distance_min).
+    last_targets: Cell<Option<([u64; 4], Targets)>>,
+}
+
+/// What the target asks at the car and at the preview point.
+#[derive(Clone, Copy, Debug)]
+struct Targets {
+    v_preview: f64,
+    a_target: f64,
+    v_target: f64,
 }
 
 impl Driver {
@@ -142,20 +153,44 @@ impl Driver {
     /// where it carries one (a measured lap's a_x), else v·dv/ds of its speed.
     fn preview(&self, vars: &DriverVars) -> (f64, f64) {
         let distance = (vars.v.max(0.0) * vars.preview_time).max(vars.preview_distance_min);
-        let at = vars.s + distance;
-        let (vp, slope) = self.target.at_near(at, &self.hint_preview);
-        if self.target.has_acceleration() {
-            (vp, self.target.acceleration_near(at, &self.hint_preview))
-        } else {
-            (vp, vp * slope)
+        self.target
+            .speed_and_acceleration_near(vars.s + distance, &self.hint_preview)
+    }
+
+    /// The target's numbers for the inputs in `vars`: (v_preview, a_target, v_target). A
+    /// step asks twice for the same inputs (the pedals before the integral moves, the
+    /// outputs after): the second answer is the first's, kept with the inputs it came from.
+    fn targets(&self, vars: &DriverVars) -> Targets {
+        let key = [
+            vars.s.to_bits(),
+            vars.v.to_bits(),
+            vars.preview_time.to_bits(),
+            vars.preview_distance_min.to_bits(),
+        ];
+        if let Some((k, t)) = self.last_targets.get() {
+            if k == key {
+                return t;
+            }
         }
+        let (v_preview, a_target) = self.preview(vars);
+        let v_target = self.target.at_near(vars.s, &self.hint_here).0;
+        let t = Targets {
+            v_preview,
+            a_target,
+            v_target,
+        };
+        self.last_targets.set(Some((key, t)));
+        t
     }
 
     /// Pedals from the state and the inputs in `vars`; writes every output. Returns the
     /// pedal saturation: +1 accelerator at its stop, −1 brake at its stop, 0 neither.
     fn write_outputs(&self, vars: &mut DriverVars) -> i32 {
-        let (vp, a_target) = self.preview(vars);
-        let v_target = self.target.at_near(vars.s, &self.hint_here).0;
+        let Targets {
+            v_preview: vp,
+            a_target,
+            v_target,
+        } = self.targets(vars);
         let error = v_target - vars.v;
         let a_fb = Self::kp(vars) * error + self.integral_part(vars);
         let ff = vars.feed_forward_gain;
@@ -233,6 +268,7 @@ impl Model for Driver {
             },
             hint_here: Cell::new(0),
             hint_preview: Cell::new(0),
+            last_targets: Cell::new(None),
         };
         Ok(driver)
     }

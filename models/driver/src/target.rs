@@ -180,14 +180,30 @@ impl TargetSpeed {
         if self.a.is_empty() {
             return 0.0;
         }
-        let _ = self.at_near(s, hint);
-        let k = hint.get();
+        let (k, x) = self.locate(s, hint);
+        self.acceleration_in(k, x)
+    }
+
+    /// The driver's preview: the target speed at `s` and the acceleration the target asks
+    /// for there (its own column `a` where it has one, else v·dv/ds), from one search of the
+    /// segment: the same bits as [`TargetSpeed::at_near`] and
+    /// [`TargetSpeed::acceleration_near`] called one after the other.
+    pub fn speed_and_acceleration_near(&self, s: f64, hint: &Cell<usize>) -> (f64, f64) {
+        let (k, x) = self.locate(s, hint);
+        let (v, slope) = self.speed_in(k, x);
+        if self.a.is_empty() {
+            (v, v * slope)
+        } else {
+            (v, self.acceleration_in(k, x))
+        }
+    }
+
+    /// The column `a` interpolated in the segment `k` (as [`TargetSpeed::locate`] gives it).
+    fn acceleration_in(&self, k: usize, x: f64) -> f64 {
         if k == 0 {
             return self.a[0];
         }
-        let n = self.s.len();
-        let k = (k - 1).min(n - 2);
-        let x = fmu_export::resources::wrap_distance(s, self.lap_length());
+        let k = (k - 1).min(self.s.len() - 2);
         let w = ((x - self.s[k]) / (self.s[k + 1] - self.s[k])).clamp(0.0, 1.0);
         self.a[k] + w * (self.a[k + 1] - self.a[k])
     }
@@ -207,9 +223,16 @@ impl TargetSpeed {
     /// updated): the driver moves a few centimetres per step, so the segment is almost
     /// always the same or the next one. Same segment, same bits as without the hint.
     pub fn at_near(&self, s: f64, hint: &Cell<usize>) -> (f64, f64) {
+        let (k, x) = self.locate(s, hint);
+        self.speed_in(k, x)
+    }
+
+    /// `s` wrapped into the lap (x) and the number k of rows with s_k <= x, searched from
+    /// `hint` (updated to k).
+    #[inline]
+    fn locate(&self, s: f64, hint: &Cell<usize>) -> (usize, f64) {
         let x = fmu_export::resources::wrap_distance(s, self.lap_length());
         let n = self.s.len();
-        // k: the number of rows with s_k <= x (partition_point's answer).
         let h = hint.get();
         let k = if h > 0 && h < n && self.s[h - 1] <= x && x < self.s[h] {
             h
@@ -219,10 +242,17 @@ impl TargetSpeed {
             self.segment(x)
         };
         hint.set(k);
+        (k, x)
+    }
+
+    /// The target speed and its slope in the segment `k` at `x` (as [`TargetSpeed::locate`]
+    /// gives them).
+    #[inline]
+    fn speed_in(&self, k: usize, x: f64) -> (f64, f64) {
         if k == 0 {
             return (self.v[0], 0.0);
         }
-        let k = (k - 1).min(n - 2);
+        let k = (k - 1).min(self.s.len() - 2);
         let slope = (self.v[k + 1] - self.v[k]) / (self.s[k + 1] - self.s[k]);
         (self.v[k] + slope * (x - self.s[k]), slope)
     }

@@ -378,3 +378,59 @@ fn restored_state_repeats_the_trajectory_bit_for_bit() {
     // The stretch includes both pedals in use (turn 1 braking at about 300 m).
     assert!(first.iter().any(|p| p.1 != 0) && first.iter().any(|p| p.0 != 0));
 }
+
+#[test]
+fn one_preview_lookup_gives_the_bits_of_the_two_it_replaces() {
+    // The bundled target carries its own acceleration; the second has none (v·dv/ds).
+    let bundled = std::fs::read_to_string(default_resources().join(TARGET_FILE)).unwrap();
+    let with_a = TargetSpeed::parse(&bundled, "bundled").unwrap();
+    assert!(with_a.has_acceleration());
+    let without_a = TargetSpeed::parse("s,v\n0,10\n50,20\n120,15\n200,10\n", "plain").unwrap();
+    assert!(!without_a.has_acceleration());
+    for target in [&with_a, &without_a] {
+        let lap = target.lap_length();
+        let (fused_hint, hint) = (Cell::new(0), Cell::new(0));
+        // Forward in small steps (the hint's usual case), then jumps and wraps.
+        let positions = (0..4000).map(|k| k as f64 * 0.37).chain([
+            -5.0,
+            3.0 * lap + 1.5,
+            0.0,
+            lap,
+            lap * 0.5,
+            -lap * 2.25,
+        ]);
+        for s in positions {
+            let (v, a) = target.speed_and_acceleration_near(s, &fused_hint);
+            let (v_alone, slope) = target.at_near(s, &hint);
+            let a_alone = if target.has_acceleration() {
+                target.acceleration_near(s, &hint)
+            } else {
+                v_alone * slope
+            };
+            assert_eq!(v.to_bits(), v_alone.to_bits(), "speed at s = {s}");
+            assert_eq!(a.to_bits(), a_alone.to_bits(), "acceleration at s = {s}");
+        }
+    }
+}
+
+#[test]
+fn a_preview_time_changed_between_steps_is_seen_at_the_same_position() {
+    // The target lookups of a step are kept with the inputs they came from: a tunable
+    // preview_time set with s and v unchanged must give the new preview, as a fresh
+    // driver gives it.
+    let mut rt = driver(Some(default_resources()), 40.0, 250.0);
+    assert_eq!(rt.do_step(0.0, 1e-3).0, OK);
+    let before = get(&mut rt, "v_preview");
+    assert_eq!(rt.set_by_name("preview_time", Value::Real(2.0)).0, OK);
+    assert_eq!(rt.do_step(1e-3, 1e-3).0, OK);
+    let after = get(&mut rt, "v_preview");
+    let mut fresh = driver(Some(default_resources()), 40.0, 250.0);
+    assert_eq!(fresh.set_by_name("preview_time", Value::Real(2.0)).0, OK);
+    assert_eq!(fresh.do_step(0.0, 1e-3).0, OK);
+    assert_ne!(
+        after.to_bits(),
+        before.to_bits(),
+        "80 m further on the target differs"
+    );
+    assert_eq!(after.to_bits(), get(&mut fresh, "v_preview").to_bits());
+}

@@ -352,6 +352,12 @@ pub struct Vehicle {
     /// The second-order chassis' transition matrices (pitch, roll) for the sub-step length
     /// they were made for (NaN: none yet); derived from the parameters, not state.
     transitions: (f64, [f64; 4], [f64; 4]),
+    /// The track under the front and the rear axle and the bits of the (s, road_wheelbase)
+    /// they are for: the outputs at the end of a step and the first sub-step of the next
+    /// one look them up at the same s (a derived value, exact).
+    track_here: Option<([u64; 2], TrackPoint, TrackPoint)>,
+    /// The first-order chassis' 1 − e^(−h/τ) and the bits of the (h, τ) it is for.
+    first_order: ([u64; 2], f64),
 }
 
 /// Everything the equations derive from the state at one instant.
@@ -368,10 +374,18 @@ impl Vehicle {
     fn forces(&mut self, omega_rear: [f64; 2]) -> Forces {
         let p = &self.p;
         let s_here = self.st.s;
-        let at = self.track.at(s_here, &mut self.st.cursor_front);
-        let rear = self
-            .track
-            .at(s_here - p.road_wheelbase, &mut self.st.cursor_rear);
+        let key = [s_here.to_bits(), p.road_wheelbase.to_bits()];
+        let (at, rear) = match self.track_here {
+            Some((k, at, rear)) if k == key => (at, rear),
+            _ => {
+                let at = self.track.at(s_here, &mut self.st.cursor_front);
+                let rear = self
+                    .track
+                    .at(s_here - p.road_wheelbase, &mut self.st.cursor_rear);
+                self.track_here = Some((key, at, rear));
+                (at, rear)
+            }
+        };
         let st = &self.st;
         let mut loads = wheel_loads(&p.loads, st.v, st.ax, st.ay);
         loads.fl += p.road_k * at.z_left;
@@ -446,7 +460,11 @@ impl Vehicle {
         let ay_raw = v_new * v_new * f.at.curvature;
         match p.chassis {
             Chassis::FirstOrder { tau } => {
-                let alpha = 1.0 - (-h / tau).exp();
+                // 1 − e^(−h/τ) depends on h and τ only: computed once per sub-step length.
+                if self.first_order.0 != [h.to_bits(), tau.to_bits()] {
+                    self.first_order = ([h.to_bits(), tau.to_bits()], 1.0 - (-h / tau).exp());
+                }
+                let alpha = self.first_order.1;
                 st.ax += alpha * (a - st.ax);
                 st.ay += alpha * (ay_raw - st.ay);
             }
@@ -575,6 +593,8 @@ impl Model for Vehicle {
             st,
             mu_cache: [(f64::NAN, 0.0); 4],
             transitions: (f64::NAN, [0.0; 4], [0.0; 4]),
+            track_here: None,
+            first_order: ([f64::NAN.to_bits(); 2], 0.0),
         })
     }
 
@@ -641,6 +661,8 @@ impl Model for Vehicle {
     fn parameters_changed(&mut self, vars: &VehicleVars) -> Result<(), ModelError> {
         self.p = Params::from_vars(vars);
         self.transitions.0 = f64::NAN;
+        // μ(κ) is the tyre's: new parameters, new curve.
+        self.mu_cache = [(f64::NAN, 0.0); 4];
         Ok(())
     }
 }

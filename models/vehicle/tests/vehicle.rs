@@ -608,3 +608,28 @@ fn starts_in_a_consistent_state() {
     // Road excitation at the start: loads differ from Eq. 18 by k·Σz only.
     assert!(get(&mut rt, "Fz_sum") > 8000.0);
 }
+
+/// A chassis time constant tuned between steps takes effect at the next step: the
+/// first-order chassis moves by 1 − e^(−h/τ) of the way to the new acceleration, with the
+/// new τ (1e-12 relative), not the τ of the steps before.
+#[test]
+fn tunable_chassis_time_constant_takes_effect() {
+    let (mut rt, _) = runtime::<Vehicle>(Some(bundled_resources()), &[("substep_max", r(DT))]);
+    set(&mut rt, "omega_rl", 160.0);
+    set(&mut rt, "omega_rr", 160.0);
+    assert_eq!(rt.exit_initialization_mode(), fmi2Status::OK);
+    assert_eq!(rt.do_step(0.0, DT), fmi2Status::OK);
+    let ax_before = get(&mut rt, "a_x_chassis");
+    set(&mut rt, "chassis_time_constant", 0.2);
+    assert_eq!(rt.do_step(DT, DT), fmi2Status::OK);
+    let (a, ax) = (get(&mut rt, "a_x"), get(&mut rt, "a_x_chassis"));
+    let expected = ax_before + (1.0 - (-DT / 0.2f64).exp()) * (a - ax_before);
+    assert!(
+        (ax - expected).abs() <= 1e-12 * expected.abs().max(1.0),
+        "a_x_chassis {ax}, expected {expected} (before {ax_before}, a_x {a})"
+    );
+    assert!(
+        (a - ax_before).abs() > 0.1,
+        "the test needs the chassis to move: {a} vs {ax_before}"
+    );
+}
