@@ -9,6 +9,7 @@
 
 pub mod backend;
 pub mod config;
+pub mod exchange;
 pub mod isolated;
 pub mod master;
 pub mod native;

@@ -14,7 +14,7 @@
 //! [`Simulation`]: crate::Simulation
 //! [`Simulation::observe`]: crate::Simulation::observe
 
-use crate::master::Exchange;
+use crate::exchange::Exchange;
 use crate::plan::{Condition, Plan};
 use crate::SystemError;
 use std::ops::ControlFlow;
