@@ -1,7 +1,7 @@
 //! What a model may know of its instance: its name, its resource folder, the start time, and
 //! the resources it parsed (kept across re-initialisation and fmi2Reset).
 
-use crate::model::ModelError;
+use crate::error::ModelError;
 use crate::resources::read_text;
 use std::any::Any;
 use std::collections::HashMap;

@@ -1,9 +1,19 @@
 //! modelDescription.xml, documentation and GUID, generated from the variable table.
 
 use crate::model::Model;
-use crate::runtime::LOG_CATEGORIES;
 use crate::units;
 use crate::variables::{format_real, Causality, VarInfo, VarTable};
+
+/// Log categories declared in modelDescription.xml, in bit order.
+pub const LOG_CATEGORIES: &[(&str, &str)] = &[
+    (
+        "logStatusError",
+        "Errors: bad calls, bad values, model failures",
+    ),
+    ("logStatusWarning", "Warnings"),
+    ("logEvents", "Information: initialisation, resets, states"),
+    ("logAll", "All of the above"),
+];
 
 /// FNV-1a, 128 bit: a stable hash with no dependency (not for security, only identity).
 fn fnv1a_128(data: &[u8]) -> u128 {

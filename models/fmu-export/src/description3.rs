@@ -8,9 +8,9 @@
 //! The model structure lists each output and initial unknown by value reference, with the
 //! same dependencies as FMI 2.0's indices.
 
+use crate::description::LOG_CATEGORIES;
 use crate::description::{initial_dependencies, xml_escape, Fitting};
 use crate::model::Model;
-use crate::runtime::LOG_CATEGORIES;
 use crate::units;
 use crate::variables::{format_real, Causality, Initial, ScalarType, Value, VarInfo, VarTable};
 

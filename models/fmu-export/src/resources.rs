@@ -2,7 +2,7 @@
 //! every instance that names it, the path a String parameter names, and the wrap of a
 //! distance on a closed lap (the lookups of distance-based resources: track, target).
 
-use crate::model::ModelError;
+use crate::error::ModelError;
 use std::any::Any;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -26,8 +26,7 @@ pub fn wrap_distance(s: f64, length: f64) -> f64 {
 /// is refused: the host resolves it (the orchestrator against the system file's folder).
 pub fn parameter_path(parameter: &str, value: &str) -> Result<PathBuf, ModelError> {
     let path = if value.starts_with("file:") {
-        crate::ffi::resource_dir_from_uri(value)
-            .map_err(|e| ModelError::new(format!("'{parameter}': {e}")))?
+        resource_dir_from_uri(value).map_err(|e| ModelError::new(format!("'{parameter}': {e}")))?
     } else {
         PathBuf::from(value)
     };
@@ -87,6 +86,50 @@ pub fn shared_file<T: Any + Send + Sync>(
 pub fn read_text(path: &Path) -> Result<String, ModelError> {
     tb_files::input::read_to_string(path, tb_files::Limit::DATA)
         .map_err(|e| ModelError::new(e.to_string()))
+}
+
+/// Decode `fmuResourceLocation` (a file URI, percent-encoded) into a folder path.
+pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
+    // `file://host/path` names a file on another machine (N28: it was read as the local
+    // path /host/path).
+    if let Some(authority) = uri.strip_prefix("file://") {
+        let host = authority.split('/').next().unwrap_or_default();
+        if !host.is_empty() && host != "localhost" {
+            return Err(format!(
+                "'{}' names a file on the host '{}': only local files (file:///path) can be read",
+                tb_files::excerpt(uri),
+                tb_files::excerpt(host)
+            ));
+        }
+    }
+    let rest = uri
+        .strip_prefix("file://localhost/")
+        .map(|r| format!("/{r}"))
+        .or_else(|| uri.strip_prefix("file:///").map(|r| format!("/{r}")))
+        .or_else(|| uri.strip_prefix("file:/").map(|r| format!("/{r}")))
+        .ok_or_else(|| format!("fmuResourceLocation '{uri}' is not a file URI"))?;
+    let bytes = rest.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%' {
+            let hex = bytes
+                .get(i + 1..i + 3)
+                .and_then(|h| std::str::from_utf8(h).ok())
+                .and_then(|h| u8::from_str_radix(h, 16).ok())
+                .ok_or_else(|| {
+                    format!("fmuResourceLocation '{uri}': bad percent escape at byte {i}")
+                })?;
+            out.push(hex);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    let s = String::from_utf8(out)
+        .map_err(|_| format!("fmuResourceLocation '{uri}' is not UTF-8 after decoding"))?;
+    Ok(PathBuf::from(s))
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! [`Stateless`] one) and the little-endian writer and reader it uses (the runtime writes
 //! its own fields and the variables with the same pair).
 
-use crate::model::ModelError;
+use crate::error::ModelError;
 
 /// The dynamic state of a model in a serialized FMU state (fmi2SerializeFMUstate): what
 /// [`crate::Model::initialize`] does not rebuild from the parameters and resources. A model

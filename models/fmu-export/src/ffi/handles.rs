@@ -22,7 +22,7 @@ pub(crate) enum SlotLogger {
     /// FMI 2.0's `fmi2CallbackLogger` and its environment.
     Fmi2(crate::fmi2::fmi2CallbackLogger, *mut c_void),
     /// FMI 3.0's `fmi3LogMessageCallback` and its environment.
-    Fmi3(super::super::ffi3::fmi3LogMessageCallback, *mut c_void),
+    Fmi3(crate::ffi3::types::fmi3LogMessageCallback, *mut c_void),
 }
 
 /// 32 bytes, aligned to 32: a handle is checked with one subtraction, one comparison and
@@ -173,10 +173,10 @@ pub(crate) fn log_stale(handle: *mut c_void, function: &str, why: Stale) {
                 );
             }
             2 if f != 0 => {
-                let cb: super::super::ffi3::fmi3LogMessageCallback = std::mem::transmute(f);
+                let cb: crate::ffi3::types::fmi3LogMessageCallback = std::mem::transmute(f);
                 cb(
                     env,
-                    super::super::ffi3::FMI3_ERROR,
+                    crate::ffi3::types::FMI3_ERROR,
                     c"logStatusError".as_ptr(),
                     plain.as_ptr(),
                 );

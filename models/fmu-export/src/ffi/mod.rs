@@ -11,11 +11,11 @@
 
 use crate::fmi2::*;
 use crate::model::Model;
+pub use crate::resources::resource_dir_from_uri;
 use crate::runtime::{Logger, Runtime};
 use std::ffi::{c_void, CStr, CString};
 use std::os::raw::c_char;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::path::PathBuf;
 
 /// Forwards log messages to the host's `fmi2CallbackLogger`.
 pub(crate) struct CLogger {
@@ -171,50 +171,6 @@ pub(crate) unsafe fn guarded<M: Model>(
                 .unwrap_or(fmi2Status::ERROR)
         }
     }
-}
-
-/// Decode `fmuResourceLocation` (a file URI, percent-encoded) into a folder path.
-pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
-    // `file://host/path` names a file on another machine (N28: it was read as the local
-    // path /host/path).
-    if let Some(authority) = uri.strip_prefix("file://") {
-        let host = authority.split('/').next().unwrap_or_default();
-        if !host.is_empty() && host != "localhost" {
-            return Err(format!(
-                "'{}' names a file on the host '{}': only local files (file:///path) can be read",
-                tb_files::excerpt(uri),
-                tb_files::excerpt(host)
-            ));
-        }
-    }
-    let rest = uri
-        .strip_prefix("file://localhost/")
-        .map(|r| format!("/{r}"))
-        .or_else(|| uri.strip_prefix("file:///").map(|r| format!("/{r}")))
-        .or_else(|| uri.strip_prefix("file:/").map(|r| format!("/{r}")))
-        .ok_or_else(|| format!("fmuResourceLocation '{uri}' is not a file URI"))?;
-    let bytes = rest.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        if bytes[i] == b'%' {
-            let hex = bytes
-                .get(i + 1..i + 3)
-                .and_then(|h| std::str::from_utf8(h).ok())
-                .and_then(|h| u8::from_str_radix(h, 16).ok())
-                .ok_or_else(|| {
-                    format!("fmuResourceLocation '{uri}': bad percent escape at byte {i}")
-                })?;
-            out.push(hex);
-            i += 3;
-        } else {
-            out.push(bytes[i]);
-            i += 1;
-        }
-    }
-    let s = String::from_utf8(out)
-        .map_err(|_| format!("fmuResourceLocation '{uri}' is not UTF-8 after decoding"))?;
-    Ok(PathBuf::from(s))
 }
 
 pub(crate) unsafe fn opt_str<'a>(p: *const c_char) -> Option<std::borrow::Cow<'a, str>> {

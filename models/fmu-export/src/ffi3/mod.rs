@@ -15,6 +15,9 @@
 #![allow(clippy::missing_safety_doc, clippy::too_many_arguments)]
 
 pub mod export;
+pub mod types;
+
+pub use types::*;
 
 use crate::ffi::{guarded, guarded_instance, opt_str, Instance};
 use crate::fmi2::fmi2Status;
@@ -24,24 +27,6 @@ use crate::variables::{ScalarType, Value};
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-#[allow(non_camel_case_types)]
-pub type fmi3Instance = *mut c_void;
-#[allow(non_camel_case_types)]
-pub type fmi3Status = i32;
-#[allow(non_camel_case_types)]
-pub type fmi3FMUState = *mut c_void;
-#[allow(non_camel_case_types)]
-pub type fmi3ValueReference = u32;
-/// `fmi3LogMessageCallback`: the message is plain text (no format string, unlike FMI 2.0).
-#[allow(non_camel_case_types)]
-pub type fmi3LogMessageCallback = unsafe extern "C" fn(
-    env: *mut c_void,
-    status: fmi3Status,
-    category: *const c_char,
-    message: *const c_char,
-);
-
-pub const FMI3_ERROR: fmi3Status = 3;
 pub const VERSION: &CStr = c"3.0";
 
 /// The runtime's messages name FMI 2.0's functions; an FMI 3.0 host is told FMI 3.0's.
