@@ -21,7 +21,8 @@
 //! Every file is written atomically, and the folder is refused if it holds anything but a
 //! previous export (nothing the user wrote is overwritten).
 
-use crate::pack::{FmiVersion, ModelSpec};
+use crate::pack::FmiVersion;
+use crate::registry::ModelSpec;
 use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};

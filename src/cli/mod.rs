@@ -21,6 +21,7 @@ pub mod pack;
 pub mod progress;
 pub mod realtime_check;
 pub mod run;
+pub mod run_args;
 pub mod run_fmu;
 pub mod validate;
 pub mod worker;

@@ -6,7 +6,7 @@
 //! names (a column without a unit takes its input's). Everything else (checks, messages,
 //! the summary, `--out`, `--set`, `--isolate`, `--trace-fmi`) is `run`'s.
 
-use super::run::RunArgs;
+use super::run_args::RunArgs;
 use anyhow::{bail, Context};
 use std::path::Path;
 use tb_cosim::SystemFile;

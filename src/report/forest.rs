@@ -9,7 +9,7 @@
 //!
 //! Hand-written SVG (not tb-plot's line plots): markers and bars, no lines over distance.
 
-use super::html::esc;
+use super::escape::esc;
 use super::truth::Truth;
 use super::{short, Table1, TableParameter};
 

@@ -8,6 +8,7 @@
 //! where the page came from ([`super::provenance`]). Everything that comes from a file or
 //! a name is escaped: a path or a variable may hold `<` or `&`.
 
+pub use super::escape::esc;
 use super::forest::{self, Row};
 use super::provenance::{self, Provenance};
 use super::signals::SignalFigure;
@@ -27,22 +28,6 @@ pub struct Page<'a> {
     pub signals: &'a [SignalFigure],
     /// The files the report wrote before the page: their SVGs are inlined.
     pub plots: &'a [PathBuf],
-}
-
-/// Text for HTML, in an element or an attribute.
-pub fn esc(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 /// A sentence of the Markdown report in HTML: escaped, its `code` spans as code.

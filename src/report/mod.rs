@@ -6,6 +6,7 @@
 //! Everything comes from the study's result and the laps it kept: the report simulates
 //! nothing.
 
+mod escape;
 mod forest;
 pub mod html;
 mod plots;
