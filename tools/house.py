@@ -1,0 +1,141 @@
+#!/usr/bin/env python3
+"""The house's measures (docs/design.md, "Measured"): the sizes and error types a maintainer
+reads before changing code, counted over the tracked Rust files of the checkout.
+
+- functions over 100 lines, tests excluded (files under a `tests/` folder, `tests.rs`, and
+  the `#[cfg(test)]` module at the end of a file), by brace matching: from the `fn` line to
+  the closing brace at the same indentation;
+- files over 1,000 lines (every tracked `.rs` file, tests included);
+- `Result<_, String>` in the signatures of the library crates (`crates/`, `models/`),
+  tests excluded;
+- the tests' checks of an error's kind: `matches!(` against a variant, and single-line
+  `assert!(... .contains(...))` on a message.
+
+Usage: tools/house.py [--json] [--list]   (from anywhere in the checkout)
+"""
+import argparse
+import json
+import os
+import re
+import subprocess
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FN = re.compile(r'^(\s*)(pub(\([a-z:]+\))? )?(const )?(unsafe )?(async )?(extern "C" )?fn (\w+)')
+
+
+def tracked():
+    out = subprocess.check_output(["git", "ls-files", "*.rs"], cwd=ROOT, text=True)
+    return [p for p in out.split() if os.path.exists(os.path.join(ROOT, p))]
+
+
+def is_test_file(p):
+    return "/tests/" in p or p.startswith("tests/") or p.endswith("/tests.rs") or p == "tests.rs"
+
+
+def code_lines(p):
+    """The file's lines up to its test module (`#[cfg(test)]` followed by `mod`)."""
+    lines = open(os.path.join(ROOT, p), encoding="utf-8").read().split("\n")
+    for i, l in enumerate(lines):
+        if l.strip() == "#[cfg(test)]" and i + 1 < len(lines) and re.match(r"\s*(pub )?mod \w+", lines[i + 1]):
+            return lines[:i]
+    return lines
+
+
+def long_functions(files, limit=100):
+    found = []
+    for p in files:
+        if is_test_file(p):
+            continue
+        lines = code_lines(p)
+        for i, l in enumerate(lines):
+            m = FN.match(l)
+            if not m or l.rstrip().endswith(";"):
+                continue
+            ind = len(m.group(1))
+            j = i + 1
+            while j < len(lines) and not (
+                lines[j].startswith(" " * ind + "}")
+                and (len(lines[j]) == ind + 1 or lines[j][ind + 1] in " ;),")
+            ):
+                j += 1
+            n = j - i + 1
+            if n > limit:
+                found.append((n, p, i + 1, m.group(8)))
+    return sorted(found, reverse=True)
+
+
+def long_files(files, limit=1000):
+    out = []
+    for p in files:
+        n = sum(1 for _ in open(os.path.join(ROOT, p), encoding="utf-8"))
+        if n > limit:
+            out.append((n, p))
+    return sorted(out, reverse=True)
+
+
+def string_results(files):
+    pat = re.compile(r"Result<[^<>]*(<[^<>]*>)?[^<>]*,\s*String>")
+    out = []
+    for p in files:
+        if is_test_file(p) or not (p.startswith("crates/") or p.startswith("models/")):
+            continue
+        if p.startswith("crates/python/") or p.startswith("crates/testkit/"):
+            continue
+        for i, l in enumerate(code_lines(p)):
+            if pat.search(l):
+                out.append((p, i + 1))
+    return out
+
+
+def kind_checks(files):
+    variant = message = 0
+    for p in files:
+        text = open(os.path.join(ROOT, p), encoding="utf-8").read()
+        if not is_test_file(p):
+            i = text.find("#[cfg(test)]")
+            if i < 0:
+                continue
+            text = text[i:]
+        variant += len(re.findall(r"matches!\(", text))
+        message += len(re.findall(r"assert!\([^\n]*\.contains\(", text))
+    return variant, message
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--list", action="store_true", help="name every long function, long file and String error")
+    a = ap.parse_args()
+    files = tracked()
+    fns, big, strs = long_functions(files), long_files(files), string_results(files)
+    variant, message = kind_checks(files)
+    result = {
+        "functions_over_100_lines": len(fns),
+        "files_over_1000_lines": len(big),
+        "result_string_in_library_crates": len(strs),
+        "tests_matching_a_variant": variant,
+        "tests_matching_a_message": message,
+    }
+    if a.json:
+        if a.list:
+            result["functions"] = [f"{p}:{line} {name} {n}" for n, p, line, name in fns]
+            result["files"] = [f"{p} {n}" for n, p in big]
+        print(json.dumps(result, indent=1))
+        return
+    for k, v in result.items():
+        print(f"{k.replace('_', ' ')}: {v}")
+    if a.list:
+        for n, p, line, name in fns:
+            print(f"  fn {p}:{line} {name}: {n} lines")
+        for n, p in big:
+            print(f"  file {p}: {n} lines")
+        by_crate = {}
+        for p, _ in strs:
+            c = "/".join(p.split("/")[:2])
+            by_crate[c] = by_crate.get(c, 0) + 1
+        for c, n in sorted(by_crate.items(), key=lambda x: -x[1]):
+            print(f"  Result<_, String> in {c}: {n}")
+
+
+if __name__ == "__main__":
+    main()
