@@ -460,6 +460,173 @@ fn points(
     range.zip(y).map(|(g, &v)| (grid.at(g), v)).collect()
 }
 
+/// The three laps a report draws (the measurement, the twin with the initial and with the
+/// optimised parameters) and the comparison that puts them on its distance grid.
+struct Laps<'a> {
+    prepared: &'a PreparedMeasurement,
+    meas: &'a Table,
+    initial: &'a Table,
+    optimised: &'a Table,
+}
+
+impl Laps<'_> {
+    fn grid(&self) -> &tb_compare::DistanceGrid {
+        self.prepared.grid()
+    }
+}
+
+/// The twin's lap time minus the vehicle's, with the initial and the optimised parameters,
+/// over the distance both cover on the comparison's grid.
+fn lap_time_difference(
+    laps: &Laps<'_>,
+    ws: &mut Workspace,
+) -> Result<LapTimeDifference, ReportError> {
+    let (prepared, grid) = (laps.prepared, laps.grid());
+    let (rm, m) = prepared.on_grid(laps.meas, "time", false, ws)?;
+    let mut lap_gap = |lap: &Table| -> Result<(f64, f64, f64), ReportError> {
+        let (ro, o) = prepared.on_grid(lap, "time", false, ws)?;
+        let end = rm.end.min(ro.end);
+        let (measured, twin) = (m[end - 1 - rm.start] - m[0], o[end - 1 - ro.start] - o[0]);
+        Ok((
+            twin - measured,
+            measured,
+            grid.at(end - 1) - grid.at(rm.start),
+        ))
+    };
+    let (initial_gap, ..) = lap_gap(laps.initial)?;
+    let (optimized_gap, measured_s, distance_m) = lap_gap(laps.optimised)?;
+    Ok(LapTimeDifference {
+        initial_s: initial_gap,
+        optimized_s: optimized_gap,
+        measured_s,
+        distance_m,
+    })
+}
+
+/// Saves a plot as `stem`.svg and .png in `folder` and lists both.
+fn save_plot(
+    save: impl FnOnce(&Path) -> Result<(), tb_plot::PlotError>,
+    folder: &Path,
+    stem: &str,
+    files: &mut Vec<PathBuf>,
+) -> Result<(), ReportError> {
+    let stem = folder.join(stem);
+    save(&stem)?;
+    files.push(stem.with_extension("svg"));
+    files.push(stem.with_extension("png"));
+    Ok(())
+}
+
+/// The sum of the wheel loads (the lift coefficients' signal): the whole lap filtered, as
+/// the comparison sees it; unfiltered over the first stretch, where the road's excitation
+/// is readable (over a whole lap it is a band).
+fn plot_fz_sum(
+    laps: &Laps<'_>,
+    cutoff: f64,
+    folder: &Path,
+    ws: &mut Workspace,
+    files: &mut Vec<PathBuf>,
+) -> Result<(), ReportError> {
+    let (prepared, grid) = (laps.prepared, laps.grid());
+    for (filtered, stem, title, window) in [
+        (
+            true,
+            "fz_sum_filtered",
+            format!("Sum of the four wheel loads over the lap, low-pass filtered at {cutoff} Hz: vehicle against twin"),
+            None,
+        ),
+        (
+            false,
+            "fz_sum_unfiltered",
+            format!("Sum of the four wheel loads, unfiltered, first {UNFILTERED_WINDOW_M} m of the lap: vehicle against twin"),
+            Some(UNFILTERED_WINDOW_M),
+        ),
+    ] {
+        let (rm, m) = prepared.on_grid(laps.meas, "Fz_sum", filtered, ws)?;
+        let (ri, i) = prepared.on_grid(laps.initial, "Fz_sum", filtered, ws)?;
+        let (ro, o) = prepared.on_grid(laps.optimised, "Fz_sum", filtered, ws)?;
+        let within = |p: Vec<(f64, f64)>| match window {
+            Some(w) => p.into_iter().filter(|q| q.0 <= w).collect(),
+            None => p,
+        };
+        let plot = LinePlot::new(title, "distance [m]", "Fz_sum [N]")
+            .styled("twin, initial parameters", &within(points(grid, ri, &i)), Style::Faint)
+            .series("twin, optimised parameters", &within(points(grid, ro, &o)))
+            .reference("vehicle (measured)", &within(points(grid, rm, &m)));
+        save_plot(|stem| plot.save_both(stem), folder, stem, files)?;
+    }
+    Ok(())
+}
+
+/// Time over distance, and below it the twin's time minus the vehicle's: the lap times'
+/// difference is a fraction of a percent, invisible on the lap's scale.
+fn plot_time_over_distance(
+    laps: &Laps<'_>,
+    folder: &Path,
+    ws: &mut Workspace,
+    files: &mut Vec<PathBuf>,
+) -> Result<(), ReportError> {
+    let (prepared, grid) = (laps.prepared, laps.grid());
+    let (rm, m) = prepared.on_grid(laps.meas, "time", false, ws)?;
+    let (ro, o) = prepared.on_grid(laps.optimised, "time", false, ws)?;
+    let vehicle = points(grid, rm.clone(), &m);
+    let twin = points(grid, ro.clone(), &o);
+    let gap: Vec<(f64, f64)> = {
+        let (a, b) = (rm.start.max(ro.start), rm.end.min(ro.end));
+        (a..b)
+            .map(|g| {
+                (
+                    grid.at(g),
+                    (o[g - ro.start] - o[0]) - (m[g - rm.start] - m[0]),
+                )
+            })
+            .collect()
+    };
+    let end_gap = gap.last().map(|q| q.1).unwrap_or(f64::NAN);
+    let figure = Figure::new(1200)
+        .panel(
+            LinePlot::new(
+                "Time over distance: vehicle against the twin (bench) with the optimised parameters",
+                "distance [m]",
+                "time [s]",
+            )
+            .series("twin (bench), optimised parameters", &twin)
+            .reference("vehicle (measured)", &vehicle),
+            500,
+        )
+        .panel(
+            LinePlot::new(
+                format!("Twin's time minus the vehicle's over distance ({end_gap:+.2} s at the end of the lap)"),
+                "distance [m]",
+                "time difference [s]",
+            )
+            .series("twin − vehicle", &gap),
+            300,
+        );
+    save_plot(|stem| figure.save_both(stem), folder, "time_over_distance", files)
+}
+
+/// a_x of twin and car.
+fn plot_a_x(
+    laps: &Laps<'_>,
+    cutoff: f64,
+    folder: &Path,
+    ws: &mut Workspace,
+    files: &mut Vec<PathBuf>,
+) -> Result<(), ReportError> {
+    let (prepared, grid) = (laps.prepared, laps.grid());
+    let (rm, m) = prepared.on_grid(laps.meas, "a_x", true, ws)?;
+    let (ro, o) = prepared.on_grid(laps.optimised, "a_x", true, ws)?;
+    let plot = LinePlot::new(
+        format!("Longitudinal acceleration over distance, low-pass filtered at {cutoff} Hz: vehicle against twin"),
+        "distance [m]",
+        "a_x [m/s²]",
+    )
+    .series("twin (bench), optimised parameters", &points(grid, ro, &o))
+    .reference("vehicle (measured)", &points(grid, rm, &m));
+    save_plot(|stem| plot.save_both(stem), folder, "a_x_over_distance", files)
+}
+
 /// Writes Tab. 1 (Markdown, JSON), the result JSON and the plots into `folder`, from the
 /// result and its laps.
 pub fn write_report(
@@ -495,33 +662,17 @@ pub fn write_report(
         .ok_or(ReportError::MissingLap("optimised"))?;
     let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
     let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum", "a_x"], &study.file.compare)?;
-    let grid = prepared.grid();
     let mut ws = Workspace::new();
     let meas: &Table = measurement.table();
 
     // Tab. 1, with the lap times' difference the time plot below shows.
-    let (rm, m) = prepared.on_grid(meas, "time", false, &mut ws)?;
-    let mut lap_gap = |lap: &Table| -> Result<(f64, f64, f64), ReportError> {
-        let (ro, o) = prepared.on_grid(lap, "time", false, &mut ws)?;
-        let end = rm.end.min(ro.end);
-        let (measured, twin) = (m[end - 1 - rm.start] - m[0], o[end - 1 - ro.start] - o[0]);
-        Ok((
-            twin - measured,
-            measured,
-            grid.at(end - 1) - grid.at(rm.start),
-        ))
+    let laps = Laps {
+        prepared: &prepared,
+        meas,
+        initial,
+        optimised,
     };
-    let (initial_gap, ..) = lap_gap(initial)?;
-    let (optimized_gap, measured_s, distance_m) = lap_gap(optimised)?;
-    let t = table1(
-        result,
-        Some(LapTimeDifference {
-            initial_s: initial_gap,
-            optimized_s: optimized_gap,
-            measured_s,
-            distance_m,
-        }),
-    );
+    let t = table1(result, Some(lap_time_difference(&laps, &mut ws)?));
     let md = table1_markdown(&t);
     write(&folder.join("table1.md"), md.as_bytes(), &mut files)?;
     write(
@@ -530,98 +681,10 @@ pub fn write_report(
         &mut files,
     )?;
 
-    // The sum of the wheel loads (the lift coefficients' signal): the whole lap filtered, as
-    // the comparison sees it; unfiltered over the first stretch, where the road's
-    // excitation is readable (over a whole lap it is a band).
     let cutoff = study.file.compare.cutoff_hz;
-    for (filtered, stem, title, window) in [
-        (
-            true,
-            "fz_sum_filtered",
-            format!("Sum of the four wheel loads over the lap, low-pass filtered at {cutoff} Hz: vehicle against twin"),
-            None,
-        ),
-        (
-            false,
-            "fz_sum_unfiltered",
-            format!("Sum of the four wheel loads, unfiltered, first {UNFILTERED_WINDOW_M} m of the lap: vehicle against twin"),
-            Some(UNFILTERED_WINDOW_M),
-        ),
-    ] {
-        let (rm, m) = prepared.on_grid(meas, "Fz_sum", filtered, &mut ws)?;
-        let (ri, i) = prepared.on_grid(initial, "Fz_sum", filtered, &mut ws)?;
-        let (ro, o) = prepared.on_grid(optimised, "Fz_sum", filtered, &mut ws)?;
-        let within = |p: Vec<(f64, f64)>| match window {
-            Some(w) => p.into_iter().filter(|q| q.0 <= w).collect(),
-            None => p,
-        };
-        let plot = LinePlot::new(title, "distance [m]", "Fz_sum [N]")
-            .styled("twin, initial parameters", &within(points(grid, ri, &i)), Style::Faint)
-            .series("twin, optimised parameters", &within(points(grid, ro, &o)))
-            .reference("vehicle (measured)", &within(points(grid, rm, &m)));
-        let stem = folder.join(stem);
-        plot.save_both(&stem)?;
-        files.push(stem.with_extension("svg"));
-        files.push(stem.with_extension("png"));
-    }
-
-    // Time over distance, and below it the twin's time minus the vehicle's: the lap times'
-    // difference is a fraction of a percent, invisible on the lap's scale.
-    let (rm, m) = prepared.on_grid(meas, "time", false, &mut ws)?;
-    let (ro, o) = prepared.on_grid(optimised, "time", false, &mut ws)?;
-    let vehicle = points(grid, rm.clone(), &m);
-    let twin = points(grid, ro.clone(), &o);
-    let gap: Vec<(f64, f64)> = {
-        let (a, b) = (rm.start.max(ro.start), rm.end.min(ro.end));
-        (a..b)
-            .map(|g| {
-                (
-                    grid.at(g),
-                    (o[g - ro.start] - o[0]) - (m[g - rm.start] - m[0]),
-                )
-            })
-            .collect()
-    };
-    let end_gap = gap.last().map(|q| q.1).unwrap_or(f64::NAN);
-    let figure = Figure::new(1200)
-        .panel(
-            LinePlot::new(
-                "Time over distance: vehicle against the twin (bench) with the optimised parameters",
-                "distance [m]",
-                "time [s]",
-            )
-            .series("twin (bench), optimised parameters", &twin)
-            .reference("vehicle (measured)", &vehicle),
-            500,
-        )
-        .panel(
-            LinePlot::new(
-                format!("Twin's time minus the vehicle's over distance ({end_gap:+.2} s at the end of the lap)"),
-                "distance [m]",
-                "time difference [s]",
-            )
-            .series("twin − vehicle", &gap),
-            300,
-        );
-    let stem = folder.join("time_over_distance");
-    figure.save_both(&stem)?;
-    files.push(stem.with_extension("svg"));
-    files.push(stem.with_extension("png"));
-
-    // a_x of twin and car.
-    let (rm, m) = prepared.on_grid(meas, "a_x", true, &mut ws)?;
-    let (ro, o) = prepared.on_grid(optimised, "a_x", true, &mut ws)?;
-    let plot = LinePlot::new(
-        format!("Longitudinal acceleration over distance, low-pass filtered at {cutoff} Hz: vehicle against twin"),
-        "distance [m]",
-        "a_x [m/s²]",
-    )
-    .series("twin (bench), optimised parameters", &points(grid, ro, &o))
-    .reference("vehicle (measured)", &points(grid, rm, &m));
-    let stem = folder.join("a_x_over_distance");
-    plot.save_both(&stem)?;
-    files.push(stem.with_extension("svg"));
-    files.push(stem.with_extension("png"));
+    plot_fz_sum(&laps, cutoff, folder, &mut ws, &mut files)?;
+    plot_time_over_distance(&laps, folder, &mut ws, &mut files)?;
+    plot_a_x(&laps, cutoff, folder, &mut ws, &mut files)?;
 
     // All of it on one page to hand on, with every compared signal and the parameters'
     // picture (html.rs).
