@@ -1,7 +1,7 @@
 //! `twinbench info`: an FMU's capabilities and variables.
 
 use std::path::PathBuf;
-use tb_fmi::FmuCache;
+use tb_fmi::{FmuCache, LoadedFmu};
 
 #[derive(clap::Args, Debug)]
 pub struct InfoArgs {
@@ -40,7 +40,24 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
     let cache = FmuCache::temporary(false)?;
     // Reading the archive and its model description runs none of the FMU's code.
     let fmu = cache.load(&args.fmu)?;
-    let check = if let Some(mode) = args.isolate {
+    let check = check_library(&args, &fmu)?;
+    let gaps = fmu.description.model_structure_gaps();
+    if args.json {
+        return print_json(&args, &fmu, &check, &gaps);
+    }
+    print_summary(&args, &fmu, &check);
+    for g in &gaps {
+        eprintln!("warning: {}: {g}", args.fmu.display());
+    }
+    println!();
+    print_variables(&fmu.description);
+    Ok(())
+}
+
+/// Loads the FMU's library when asked (here with --check, in a worker with --isolate) and
+/// says what it found; without either, none of the FMU's code runs.
+fn check_library(args: &InfoArgs, fmu: &LoadedFmu) -> anyhow::Result<LibraryCheck> {
+    Ok(if let Some(mode) = args.isolate {
         let options = tb_cosim::isolated::IsolationOptions {
             mode: mode.mode(),
             timeout: tb_cosim::isolated::watchdog(args.worker_timeout)
@@ -49,7 +66,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             limits: args.worker_limits,
             ..Default::default()
         };
-        LibraryCheck::Loaded(tb_cosim::isolated::probe(&fmu, &options)?)
+        LibraryCheck::Loaded(tb_cosim::isolated::probe(fmu, &options)?)
     } else if args.check {
         for lib in &args.preload {
             tb_fmi::import::library::preload_global(lib)?;
@@ -69,43 +86,56 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
         }
     } else {
         LibraryCheck::NotLoaded
-    };
+    })
+}
+
+/// `--json`: the whole description, the library check and the warnings.
+fn print_json(
+    args: &InfoArgs,
+    fmu: &LoadedFmu,
+    check: &LibraryCheck,
+    gaps: &[String],
+) -> anyhow::Result<()> {
     let md = &fmu.description;
     let cs = md.co_simulation.clone().unwrap_or_default();
-    let gaps = md.model_structure_gaps();
-    if args.json {
-        let vars: Vec<serde_json::Value> = md
-            .variables
-            .iter()
-            .map(|v| {
-                serde_json::json!({
-                    "name": v.name, "value_reference": v.declared_value_reference(), "array_element": v.array_element(), "type": v.ty.name(),
-                    "fmi3_type": v.fmi3.map(|s| s.ty.name()),
-                    "causality": v.causality.xml_name(), "variability": v.variability.xml_name(), "unit": md.unit_of(v),
-                    "start": v.start, "min": v.min, "max": v.max, "description": v.description,
-                })
+    let vars: Vec<serde_json::Value> = md
+        .variables
+        .iter()
+        .map(|v| {
+            serde_json::json!({
+                "name": v.name, "value_reference": v.declared_value_reference(), "array_element": v.array_element(), "type": v.ty.name(),
+                "fmi3_type": v.fmi3.map(|s| s.ty.name()),
+                "causality": v.causality.xml_name(), "variability": v.variability.xml_name(), "unit": md.unit_of(v),
+                "start": v.start, "min": v.min, "max": v.max, "description": v.description,
             })
-            .collect();
-        let j = serde_json::json!({
-            "fmu": args.fmu, "model_name": md.model_name, "guid": md.guid, "fmi_version": md.fmi_version,
-            "generation_tool": md.generation_tool, "model_identifier": cs.model_identifier,
-            "can_get_and_set_fmu_state": cs.can_get_and_set_fmu_state,
-            "can_serialize_fmu_state": cs.can_serialize_fmu_state,
-            "can_be_instantiated_only_once_per_process": cs.can_be_instantiated_only_once_per_process,
-            "can_handle_variable_communication_step_size": cs.can_handle_variable_communication_step_size,
-            "default_experiment": md.default_experiment.map(|d| serde_json::json!({"start": d.start_time, "stop": d.stop_time, "step": d.step_size})),
-            "library": {
-                "entry": fmu.library_entry(),
-                "checked": matches!(check, LibraryCheck::Loaded(_)),
-                "fmi2GetVersion": match &check { LibraryCheck::Loaded(r) => Some(&r.version), LibraryCheck::NotLoaded => None },
-                "missing_optional_functions": match &check { LibraryCheck::Loaded(r) => Some(&r.missing_optional), LibraryCheck::NotLoaded => None },
-            },
-            "warnings": gaps,
-            "variables": vars,
-        });
-        super::json::print(&serde_json::to_string_pretty(&j)?)?;
-        return Ok(());
-    }
+        })
+        .collect();
+    let j = serde_json::json!({
+        "fmu": args.fmu, "model_name": md.model_name, "guid": md.guid, "fmi_version": md.fmi_version,
+        "generation_tool": md.generation_tool, "model_identifier": cs.model_identifier,
+        "can_get_and_set_fmu_state": cs.can_get_and_set_fmu_state,
+        "can_serialize_fmu_state": cs.can_serialize_fmu_state,
+        "can_be_instantiated_only_once_per_process": cs.can_be_instantiated_only_once_per_process,
+        "can_handle_variable_communication_step_size": cs.can_handle_variable_communication_step_size,
+        "default_experiment": md.default_experiment.map(|d| serde_json::json!({"start": d.start_time, "stop": d.stop_time, "step": d.step_size})),
+        "library": {
+            "entry": fmu.library_entry(),
+            "checked": matches!(check, LibraryCheck::Loaded(_)),
+            "fmi2GetVersion": match &check { LibraryCheck::Loaded(r) => Some(&r.version), LibraryCheck::NotLoaded => None },
+            "missing_optional_functions": match &check { LibraryCheck::Loaded(r) => Some(&r.missing_optional), LibraryCheck::NotLoaded => None },
+        },
+        "warnings": gaps,
+        "variables": vars,
+    });
+    super::json::print(&serde_json::to_string_pretty(&j)?)?;
+    Ok(())
+}
+
+/// The model, its interfaces and identity, the tool, the capabilities, the default
+/// experiment and the library.
+fn print_summary(args: &InfoArgs, fmu: &LoadedFmu, check: &LibraryCheck) {
+    let md = &fmu.description;
+    let cs = md.co_simulation.clone().unwrap_or_default();
     println!("{}  ({})", md.model_name, args.fmu.display());
     if !md.description.is_empty() {
         println!("{}", md.description);
@@ -169,10 +199,11 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             }
         ),
     }
-    for g in &gaps {
-        eprintln!("warning: {}: {g}", args.fmu.display());
-    }
-    println!();
+}
+
+/// One line per variable: name, value reference, type, causality, variability, unit, start,
+/// range and description.
+fn print_variables(md: &tb_fmi::ModelDescription) {
     // An FMI 3.0 value reference may take ten digits.
     let vr_width = md
         .variables
@@ -207,7 +238,6 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
             v.description
         );
     }
-    Ok(())
 }
 
 /// `start 0 s, stop 100 s, step 0.001 s, tolerance 1e-6`: the attributes the FMU gives.

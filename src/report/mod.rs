@@ -603,7 +603,12 @@ fn plot_time_over_distance(
             .series("twin − vehicle", &gap),
             300,
         );
-    save_plot(|stem| figure.save_both(stem), folder, "time_over_distance", files)
+    save_plot(
+        |stem| figure.save_both(stem),
+        folder,
+        "time_over_distance",
+        files,
+    )
 }
 
 /// a_x of twin and car.
@@ -624,7 +629,12 @@ fn plot_a_x(
     )
     .series("twin (bench), optimised parameters", &points(grid, ro, &o))
     .reference("vehicle (measured)", &points(grid, rm, &m));
-    save_plot(|stem| plot.save_both(stem), folder, "a_x_over_distance", files)
+    save_plot(
+        |stem| plot.save_both(stem),
+        folder,
+        "a_x_over_distance",
+        files,
+    )
 }
 
 /// Writes Tab. 1 (Markdown, JSON), the result JSON and the plots into `folder`, from the
