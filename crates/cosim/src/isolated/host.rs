@@ -156,53 +156,7 @@ impl IsolatedBackend {
                 None
             }
             super::confine::Mode::Confined => {
-                let scratch = super::confine::Scratch::new()
-                    .map_err(|e| fail(format!("cannot make the worker's scratch folder: {e}")))?;
-                let mut read: Vec<PathBuf> = vec![fmu_dir.to_path_buf()];
-                for p in &options.preload {
-                    // A preloaded interpreter reads its installation (libpython: its
-                    // standard library beside `lib/`), found where the library really is.
-                    let real = std::fs::canonicalize(p).unwrap_or_else(|_| p.clone());
-                    for lib in [p.clone(), real] {
-                        if let Some(prefix) = lib.parent().and_then(Path::parent) {
-                            read.push(prefix.to_path_buf());
-                        }
-                        read.push(lib);
-                    }
-                }
-                // An embedded Python's own search path, when the user set one.
-                for var in ["PYTHONHOME", "PYTHONPATH"] {
-                    if let Some(v) = std::env::var_os(var) {
-                        read.extend(std::env::split_paths(&v));
-                    }
-                }
-                read.extend(
-                    options
-                        .readable
-                        .read()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .iter()
-                        .cloned(),
-                );
-                let limits = match options.limits {
-                    Some(l) => l,
-                    None => super::confine::Limits::from_env().map_err(fail)?,
-                };
-                let env = super::confine::inherit::passed_names();
-                let spec = super::confine::Spec {
-                    scratch: scratch.path.clone(),
-                    read: super::confine::existing(read),
-                    limits,
-                    env: env.clone(),
-                };
-                let json = serde_json::to_string(&spec)
-                    .map_err(|e| fail(format!("cannot describe the confinement: {e}")))?;
-                // An environment from the allowlist, never the host's (its keys, tokens,
-                // agent sockets).
-                cmd.env_clear()
-                    .envs(super::confine::inherit::environment(&env))
-                    .env(super::confine::SPEC_ENV, json);
-                Some((scratch, limits))
+                Some(confine(&mut cmd, options, fmu_dir).map_err(fail)?)
             }
         };
         cmd.arg("worker")
@@ -540,6 +494,65 @@ impl IsolatedBackend {
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
         self.control("fmi2SetDebugLogging", Request::SetDebugLogging(on))
     }
+}
+
+/// The confinement of a worker about to start: a scratch folder of its own, and what it
+/// may read (its FMU's folder, the preloads and their installations, an embedded Python's
+/// search path, the files of `*_file` parameters), passed to it in its environment, which
+/// is the allowlist's, never the host's. Why it cannot be set up, as the cause of the
+/// worker's failure to start.
+fn confine(
+    cmd: &mut Command,
+    options: &IsolationOptions,
+    fmu_dir: &Path,
+) -> Result<(super::confine::Scratch, super::confine::Limits), String> {
+    let scratch = super::confine::Scratch::new()
+        .map_err(|e| format!("cannot make the worker's scratch folder: {e}"))?;
+    let mut read: Vec<PathBuf> = vec![fmu_dir.to_path_buf()];
+    for p in &options.preload {
+        // A preloaded interpreter reads its installation (libpython: its
+        // standard library beside `lib/`), found where the library really is.
+        let real = std::fs::canonicalize(p).unwrap_or_else(|_| p.clone());
+        for lib in [p.clone(), real] {
+            if let Some(prefix) = lib.parent().and_then(Path::parent) {
+                read.push(prefix.to_path_buf());
+            }
+            read.push(lib);
+        }
+    }
+    // An embedded Python's own search path, when the user set one.
+    for var in ["PYTHONHOME", "PYTHONPATH"] {
+        if let Some(v) = std::env::var_os(var) {
+            read.extend(std::env::split_paths(&v));
+        }
+    }
+    read.extend(
+        options
+            .readable
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+            .cloned(),
+    );
+    let limits = match options.limits {
+        Some(l) => l,
+        None => super::confine::Limits::from_env()?,
+    };
+    let env = super::confine::inherit::passed_names();
+    let spec = super::confine::Spec {
+        scratch: scratch.path.clone(),
+        read: super::confine::existing(read),
+        limits,
+        env: env.clone(),
+    };
+    let json = serde_json::to_string(&spec)
+        .map_err(|e| format!("cannot describe the confinement: {e}"))?;
+    // An environment from the allowlist, never the host's (its keys, tokens,
+    // agent sockets).
+    cmd.env_clear()
+        .envs(super::confine::inherit::environment(&env))
+        .env(super::confine::SPEC_ENV, json);
+    Ok((scratch, limits))
 }
 
 /// Write all of `bytes`.
