@@ -149,7 +149,61 @@ pub fn validate(o: &ValidateOptions) -> Result<Validation, ValidateError> {
     let measurement = Measurement::load(&o.measurement, &o.channels)?;
     let default_settings = result.compare.is_none();
     let settings = result.compare.clone().unwrap_or_default();
-    // Every validation signal of the study, in step order, each once.
+    let signals = validation_signals(&result);
+    let mut names: Vec<&str> = signals.iter().map(|s| s.1.as_str()).collect();
+    if !names.contains(&"Fz_sum") {
+        names.push("Fz_sum");
+    }
+    let prepared = PreparedMeasurement::new(&measurement, &names, &settings)?;
+    let mut ws = Workspace::new();
+    let cmp = prepared.compare(&table, &mut ws)?;
+    let (rows, notes) = rows(&result, &signals, &cmp);
+    // The lap times over the distance both cover, and Fz_sum over distance.
+    let (rm, m) = prepared.on_grid(measurement.table(), "time", false, &mut ws)?;
+    let (ro, t) = prepared.on_grid(&table, "time", false, &mut ws)?;
+    let end = rm.end.min(ro.end);
+    let lap_time_difference_s = (t[end - 1 - ro.start] - t[0]) - (m[end - 1 - rm.start] - m[0]);
+    let stem = o.out.join("validation_fz_sum");
+    plot_fz_sum(
+        &prepared,
+        measurement.table(),
+        &table,
+        settings.cutoff_hz,
+        &stem,
+        &mut ws,
+    )?;
+    let mut v = Validation {
+        result: o.result.clone(),
+        measurement: o.measurement.clone(),
+        parameters: result.parameters_final.clone(),
+        rows,
+        lap_time_difference_s,
+        system: lap.system.clone(),
+        files: vec![stem.with_extension("svg"), stem.with_extension("png")],
+        default_settings,
+        notes,
+    };
+    let md = markdown(&v);
+    for (name, bytes) in [
+        ("validation.md", md.into_bytes()),
+        (
+            "validation.json",
+            serde_json::to_vec_pretty(&v).expect("serialises"),
+        ),
+    ] {
+        let path = o.out.join(name);
+        tb_table::write_atomic(&path, &bytes).map_err(|source| ValidateError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        v.files.push(path);
+    }
+    Ok(v)
+}
+
+/// Every validation signal of the study, in step order, each once: (step, signal, its e
+/// after that step).
+fn validation_signals(result: &StudyResult) -> Vec<(usize, String, f64)> {
     let mut signals: Vec<(usize, String, f64)> = Vec::new();
     for s in &result.steps {
         for e in &s.e {
@@ -158,13 +212,16 @@ pub fn validate(o: &ValidateOptions) -> Result<Validation, ValidateError> {
             }
         }
     }
-    let mut names: Vec<&str> = signals.iter().map(|s| s.1.as_str()).collect();
-    if !names.contains(&"Fz_sum") {
-        names.push("Fz_sum");
-    }
-    let prepared = PreparedMeasurement::new(&measurement, &names, &settings)?;
-    let mut ws = Workspace::new();
-    let cmp = prepared.compare(&table, &mut ws)?;
+    signals
+}
+
+/// The table's rows: each validation signal's e on this lap beside its e on the fitted lap
+/// (the answer's, from the result), with a note when the result has no joint answer.
+fn rows(
+    result: &StudyResult,
+    signals: &[(usize, String, f64)],
+    cmp: &tb_compare::Comparison,
+) -> (Vec<ValidationRow>, Vec<String>) {
     // The same twin on the lap it was fitted on: the answer's e as the study computed it
     // (with its own channel map), from the result. Nothing the result names is run or read
     // again: a result file is data, and the system and measurement it names may come from
@@ -184,7 +241,7 @@ pub fn validate(o: &ValidateOptions) -> Result<Validation, ValidateError> {
             "the result has no joint answer (written by an older twinbench): each step's e after the step is shown as the fitted lap's".to_string(),
         );
     }
-    let rows = signals
+    let rows: Vec<ValidationRow> = signals
         .iter()
         .map(|(step, name, e_step)| {
             let m: &Metrics = cmp.get(name).expect("compared above");
@@ -217,56 +274,36 @@ pub fn validate(o: &ValidateOptions) -> Result<Validation, ValidateError> {
             }
         })
         .collect();
-    // The lap times over the distance both cover, and Fz_sum over distance.
-    let (rm, m) = prepared.on_grid(measurement.table(), "time", false, &mut ws)?;
-    let (ro, t) = prepared.on_grid(&table, "time", false, &mut ws)?;
-    let end = rm.end.min(ro.end);
-    let lap_time_difference_s = (t[end - 1 - ro.start] - t[0]) - (m[end - 1 - rm.start] - m[0]);
+    (rows, notes)
+}
+
+/// Fz_sum of the vehicle and the fitted twin over distance, filtered as compared.
+fn plot_fz_sum(
+    prepared: &PreparedMeasurement,
+    measured: &tb_table::Table,
+    table: &tb_table::Table,
+    cutoff_hz: f64,
+    stem: &Path,
+    ws: &mut Workspace,
+) -> Result<(), ValidateError> {
     let grid = prepared.grid();
     let points = |r: std::ops::Range<usize>, v: &[f64]| -> Vec<(f64, f64)> {
         r.clone().map(|g| (grid.at(g), v[g - r.start])).collect()
     };
-    let (rm, fm) = prepared.on_grid(measurement.table(), "Fz_sum", true, &mut ws)?;
-    let (ro, fo) = prepared.on_grid(&table, "Fz_sum", true, &mut ws)?;
+    let (rm, fm) = prepared.on_grid(measured, "Fz_sum", true, ws)?;
+    let (ro, fo) = prepared.on_grid(table, "Fz_sum", true, ws)?;
     let plot = tb_plot::LinePlot::new(
         format!(
             "Sum of the four wheel loads on a lap not fitted, low-pass filtered at {} Hz: vehicle against the fitted twin",
-            settings.cutoff_hz
+            cutoff_hz
         ),
         "distance [m]",
         "Fz_sum [N]",
     )
     .series("twin, fitted parameters", &points(ro, &fo))
     .reference("vehicle (measured)", &points(rm, &fm));
-    let stem = o.out.join("validation_fz_sum");
-    plot.save_both(&stem)?;
-    let mut v = Validation {
-        result: o.result.clone(),
-        measurement: o.measurement.clone(),
-        parameters: result.parameters_final.clone(),
-        rows,
-        lap_time_difference_s,
-        system: lap.system.clone(),
-        files: vec![stem.with_extension("svg"), stem.with_extension("png")],
-        default_settings,
-        notes,
-    };
-    let md = markdown(&v);
-    for (name, bytes) in [
-        ("validation.md", md.into_bytes()),
-        (
-            "validation.json",
-            serde_json::to_vec_pretty(&v).expect("serialises"),
-        ),
-    ] {
-        let path = o.out.join(name);
-        tb_table::write_atomic(&path, &bytes).map_err(|source| ValidateError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        v.files.push(path);
-    }
-    Ok(v)
+    plot.save_both(stem)?;
+    Ok(())
 }
 
 /// The table as Markdown, as Tab. 1 has it.
