@@ -379,7 +379,7 @@ fn unknown(m: &Attrs) -> Result<Unknown, String> {
 /// Parse modelDescription.xml text (FMI 2.0, or 3.0 by its `fmiVersion`). Errors say what
 /// is wrong; the caller adds the file.
 pub fn parse(xml: &str) -> Result<ModelDescription, String> {
-    if super::archive::sniff_fmi_version(xml).is_some_and(|v| v.starts_with("3.")) {
+    if super::reader::sniff_fmi_version(xml).is_some_and(|v| v.starts_with("3.")) {
         return super::description3::parse(xml);
     }
     let mut r = Reader2::default();

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::import::description::{self, ModelDescription};
+use crate::import::reader::sniff_fmi_version;
 use crate::import::store::CdEntry;
 use crate::FmuError;
 use std::io::{Read, Seek};
@@ -266,14 +267,4 @@ pub fn library_entry(fmi_version: &str, model_identifier: &str) -> String {
     } else {
         format!("binaries/linux64/{model_identifier}.so")
     }
-}
-
-/// The `fmiVersion` attribute's value, found without parsing the XML.
-pub(crate) fn sniff_fmi_version(xml: &str) -> Option<&str> {
-    let i = xml.find("fmiVersion")?;
-    let rest = xml[i + "fmiVersion".len()..].trim_start();
-    let rest = rest.strip_prefix('=')?.trim_start();
-    let q = rest.chars().next().filter(|c| *c == '"' || *c == '\'')?;
-    let rest = &rest[1..];
-    Some(&rest[..rest.find(q)?])
 }
