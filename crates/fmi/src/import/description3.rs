@@ -18,100 +18,11 @@
 //!   Execution are listed in `unsupported` (the archive check refuses such an FMU before
 //!   anything runs).
 
-use super::description::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
+use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
+pub use super::model::{Fmi3Slot, Fmi3Type};
 use super::reader::{num, walk, Attrs, Shared, Version, Visit};
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 use std::collections::HashMap;
-
-/// An FMI 3.0 variable type (the element name in `ModelVariables`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Fmi3Type {
-    Float32,
-    Float64,
-    Int8,
-    UInt8,
-    Int16,
-    UInt16,
-    Int32,
-    UInt32,
-    Int64,
-    UInt64,
-    Boolean,
-    String,
-    Binary,
-    Enumeration,
-}
-
-impl Fmi3Type {
-    fn parse(name: &str) -> Option<Fmi3Type> {
-        use Fmi3Type::*;
-        Some(match name {
-            "Float32" => Float32,
-            "Float64" => Float64,
-            "Int8" => Int8,
-            "UInt8" => UInt8,
-            "Int16" => Int16,
-            "UInt16" => UInt16,
-            "Int32" => Int32,
-            "UInt32" => UInt32,
-            "Int64" => Int64,
-            "UInt64" => UInt64,
-            "Boolean" => Boolean,
-            "String" => String,
-            "Binary" => Binary,
-            "Enumeration" => Enumeration,
-            _ => return None,
-        })
-    }
-
-    pub fn name(self) -> &'static str {
-        use Fmi3Type::*;
-        match self {
-            Float32 => "Float32",
-            Float64 => "Float64",
-            Int8 => "Int8",
-            UInt8 => "UInt8",
-            Int16 => "Int16",
-            UInt16 => "UInt16",
-            Int32 => "Int32",
-            UInt32 => "UInt32",
-            Int64 => "Int64",
-            UInt64 => "UInt64",
-            Boolean => "Boolean",
-            String => "String",
-            Binary => "Binary",
-            Enumeration => "Enumeration",
-        }
-    }
-
-    /// The FMI 2.0 kind twinbench exchanges it as. Integers wider than 32 bits (UInt32,
-    /// Int64, UInt64) travel as Real (an f64: exact up to 2^53, and a value it cannot carry
-    /// exactly is an error naming the variable, never rounded in silence).
-    pub fn kind(self) -> ScalarType {
-        use Fmi3Type::*;
-        match self {
-            Float32 | Float64 | UInt32 | Int64 | UInt64 => ScalarType::Real,
-            Boolean => ScalarType::Boolean,
-            String | Binary => ScalarType::String,
-            Enumeration => ScalarType::Enumeration,
-            _ => ScalarType::Integer,
-        }
-    }
-}
-
-/// Where an FMI 3.0 value lives: its type, the FMU's value reference, and for an array
-/// element its position in the array (row-major) and the array's element count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Fmi3Slot {
-    pub ty: Fmi3Type,
-    pub vr: u32,
-    pub index: u32,
-    pub len: u32,
-    /// An array's element (a one-element array's too), not a scalar.
-    pub element: bool,
-    /// A structural parameter: it sizes arrays, so twinbench never changes it.
-    pub structural: bool,
-}
 
 /// A variable as declared, before arrays are expanded.
 struct Declared {

@@ -8,9 +8,8 @@
 //! which element it is. Instances are created with event mode and early return off, as
 //! FMPy's master does; `terminateSimulation` from `fmi3DoStep` ends the run at the step's end.
 
-use super::description::ModelDescription;
-use super::description3::{Fmi3Slot, Fmi3Type};
 use super::log::LogSink;
+use super::model::{Fmi3Slot, Fmi3Type, ModelDescription, ScalarVariable};
 use crate::fmi2::fmi2Status;
 use crate::functions::Function;
 use crate::FmuError;
@@ -249,7 +248,7 @@ impl Instance3 {
                 names.insert(v.value_reference, v.name.clone());
             }
         }
-        let scalar = |v: &crate::import::description::ScalarVariable, ty: Fmi3Type| {
+        let scalar = |v: &ScalarVariable, ty: Fmi3Type| {
             v.fmi3.is_some_and(|s| {
                 s.ty == ty && s.len == 1 && !s.element && s.vr == v.value_reference
             })

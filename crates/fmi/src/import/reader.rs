@@ -5,7 +5,7 @@
 //! type definitions and their enumeration items, log categories). Each version's reader
 //! adds its variables and model structure.
 
-use super::description::{CoSimulation, DefaultExperiment, ModelDescription, ModelExchange};
+use super::model::{CoSimulation, DefaultExperiment, ModelDescription, ModelExchange};
 use crate::units::UnitDef;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::Reader;

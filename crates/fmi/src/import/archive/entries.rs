@@ -2,7 +2,8 @@
 //! written.
 
 use super::*;
-use crate::import::description::{self, ModelDescription};
+use crate::import::description;
+use crate::import::model::ModelDescription;
 use crate::import::reader::sniff_fmi_version;
 use crate::import::store::CdEntry;
 use crate::FmuError;

@@ -36,9 +36,9 @@ pub(crate) mod cvode;
 mod system;
 mod unit;
 
-use super::description::ModelDescription;
 use super::instance::Instance;
 use super::instance3::Instance3;
+use super::model::ModelDescription;
 use crate::fmi2::*;
 use crate::functions::Function;
 use crate::{Causality, FmuError, Variability};
