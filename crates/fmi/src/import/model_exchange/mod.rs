@@ -32,6 +32,7 @@
 //! steps per integration; an FMU without continuous states gets one dummy state (ẋ = 0), so
 //! that root finding still watches its event indicators.
 
+mod calls;
 pub(crate) mod cvode;
 mod system;
 mod unit;
@@ -42,13 +43,14 @@ use super::model::ModelDescription;
 use crate::fmi2::*;
 use crate::functions::Function;
 use crate::{Causality, FmuError, Variability};
+pub use calls::CallTrace;
+use calls::{shown_values, Call, EventUpdate, MeCalls, Vector};
 use cvode::{Cvode, Reached, Settings};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use system::FmuSystem;
 pub use unit::MeLibrary;
-use unit::{Call, EventUpdate, MeCalls, Unit, Vector};
+use unit::Unit;
 
 /// Whether this build integrates Model Exchange FMUs: SUNDIALS CVODE was found when it was
 /// built (else an instance is refused at instantiation with what to install).
@@ -165,18 +167,6 @@ pub struct MeInstance {
     event_start: f64,
     /// The times of the events handled since initialisation (the first [`MAX_EVENTS_KEPT`]).
     events: Vec<f64>,
-}
-
-/// Where an instance reports each FMI call it makes on its own between the master's calls
-/// (`--trace-fmi`): the instance's time, the function, its arguments and the status. The
-/// calls the master makes through the instance (get, set, initialisation) are the master's
-/// to trace.
-pub type CallTrace = Arc<dyn Fn(f64, &str, &str, fmi2Status) + Send + Sync>;
-
-/// `[1.0, 2.5]`: values as their shortest round-trip text.
-pub(crate) fn shown_values(x: &[f64]) -> String {
-    let items: Vec<String> = x.iter().map(|v| format!("{v:?}")).collect();
-    format!("[{}]", items.join(", "))
 }
 
 /// Where [`MeInstance::step_to_event`] stopped.
