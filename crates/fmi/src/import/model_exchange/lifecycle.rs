@@ -39,114 +39,17 @@ impl MeInstance {
             )));
         }
         let lib = lib.into();
-        let not_loaded = || bad("the library was not loaded for Model Exchange".into());
-        let api = match &lib {
-            MeLibrary::V2(l) => MeCalls::V2(l.me.ok_or_else(not_loaded)?),
-            MeLibrary::V3(l) => MeCalls::V3(l.me.ok_or_else(not_loaded)?),
-        };
+        let api = me_calls(&lib, &bad)?;
         let me = md
             .model_exchange
             .as_ref()
             .ok_or_else(|| bad(format!("{}: no <ModelExchange> element", fmu.display())))?;
-        let (nx, nz) = (
-            md.number_of_continuous_states(),
-            md.number_of_event_indicators,
-        );
-        if nx > MAX_SIZE || nz > MAX_SIZE {
-            return Err(bad(format!(
-                "{}: {nx} continuous states and {nz} event indicators; twinbench integrates at most {MAX_SIZE} of each",
-                fmu.display()
-            )));
-        }
-        if nx > MAX_STATES {
-            return Err(bad(format!(
-                "{}: {nx} continuous states; twinbench's Model Exchange solver uses a dense Jacobian ({:.1} GB for these) and integrates at most {MAX_STATES} states: run the FMU as Co-Simulation if it has that interface",
-                fmu.display(),
-                (nx as f64).powi(2) * 8.0 / 1e9
-            )));
-        }
-        let rtol = settings.relative_tolerance_for(md);
-        if !(rtol.is_finite() && rtol > 0.0 && rtol < 1.0) {
-            return Err(bad(format!(
-                "the relative tolerance {rtol:e} of the Model Exchange solver is not in (0, 1)"
-            )));
-        }
-        let inst = match lib {
-            MeLibrary::V2(lib) => Unit::V2(Instance::instantiate_as(
-                lib,
-                name,
-                &md.guid,
-                resource_dir,
-                logging_on,
-                fmi2Type::MODEL_EXCHANGE,
-            )?),
-            MeLibrary::V3(lib) => Unit::V3(Instance3::instantiate_as(
-                lib,
-                md,
-                name,
-                resource_dir,
-                logging_on,
-                true,
-            )?),
-        };
-        if let MeCalls::V3(calls) = api {
-            // FMI 3.0 declares no counts: they are the elements of the model structure's
-            // derivatives and event indicators (an array counts by its elements, its
-            // dimensions from their start values). An FMU that says otherwise would have
-            // its vectors read short or past their end.
-            let fmu_counts = [
-                (
-                    calls.get_number_of_continuous_states,
-                    nx,
-                    "fmi3GetNumberOfContinuousStates",
-                    "continuous states (the elements of its <ContinuousStateDerivative> variables)",
-                ),
-                (
-                    calls.get_number_of_event_indicators,
-                    nz,
-                    "fmi3GetNumberOfEventIndicators",
-                    "event indicators (the elements of its <EventIndicator> variables)",
-                ),
-            ];
-            for (get, declared, call, what) in fmu_counts {
-                let mut n = 0usize;
-                let s = unsafe { get(inst.raw(), &mut n) };
-                if s > 1 {
-                    return Err(bad(format!(
-                        "{}: {call} returned {}",
-                        fmu.display(),
-                        api.status_name(fmi2Status(s))
-                    )));
-                }
-                if n != declared {
-                    return Err(bad(format!(
-                        "{}: the model description declares {declared} {what}, but {call} returns {n}",
-                        fmu.display()
-                    )));
-                }
-            }
-        }
-        let continuous_inputs = md
-            .variables
-            .iter()
-            .filter(|v| {
-                v.causality == Causality::Input
-                    && v.variability == Variability::Continuous
-                    && v.ty == crate::ScalarType::Real
-            })
-            .map(|v| (v.value_reference, ()))
-            .collect();
-        let derivative_names = (0..nx)
-            .map(|k| {
-                md.derivatives
-                    .get(k)
-                    .and_then(|u| md.variables.get(u.index.wrapping_sub(1)))
-                    .map_or_else(
-                        || format!("derivative {} of {nx}", k + 1),
-                        |v| v.name.clone(),
-                    )
-            })
-            .collect();
+        let (nx, nz) = checked_sizes(md, fmu, &bad)?;
+        let rtol = checked_tolerance(&settings, md, &bad)?;
+        let inst = instantiate_unit(lib, md, name, resource_dir, logging_on)?;
+        check_fmi3_counts(api, &inst, (nx, nz), fmu, &bad)?;
+        let continuous_inputs = continuous_inputs(md);
+        let derivative_names = derivative_names(md, nx);
         let n = nx.max(1);
         Ok(MeInstance {
             solver: None,
@@ -254,4 +157,163 @@ impl MeInstance {
         self.inputs_changed = false;
         self.inst.reset().map_err(|e| self.wrap(e))
     }
+}
+
+// The steps of [`MeInstance::instantiate`], in its order: the checks before the FMU is
+// instantiated, the instantiation, the FMU's own counts, what the instance keeps.
+
+/// The Model Exchange functions of `lib`, which must have been loaded for Model Exchange.
+fn me_calls(lib: &MeLibrary, bad: &impl Fn(String) -> FmuError) -> Result<MeCalls, FmuError> {
+    let not_loaded = || bad("the library was not loaded for Model Exchange".into());
+    Ok(match lib {
+        MeLibrary::V2(l) => MeCalls::V2(l.me.ok_or_else(not_loaded)?),
+        MeLibrary::V3(l) => MeCalls::V3(l.me.ok_or_else(not_loaded)?),
+    })
+}
+
+/// The numbers of continuous states and event indicators: at most [`MAX_SIZE`] of each (a
+/// description is untrusted), and at most [`MAX_STATES`] states (the dense Jacobian).
+fn checked_sizes(
+    md: &ModelDescription,
+    fmu: &Path,
+    bad: &impl Fn(String) -> FmuError,
+) -> Result<(usize, usize), FmuError> {
+    let (nx, nz) = (
+        md.number_of_continuous_states(),
+        md.number_of_event_indicators,
+    );
+    if nx > MAX_SIZE || nz > MAX_SIZE {
+        return Err(bad(format!(
+            "{}: {nx} continuous states and {nz} event indicators; twinbench integrates at most {MAX_SIZE} of each",
+            fmu.display()
+        )));
+    }
+    if nx > MAX_STATES {
+        return Err(bad(format!(
+            "{}: {nx} continuous states; twinbench's Model Exchange solver uses a dense Jacobian ({:.1} GB for these) and integrates at most {MAX_STATES} states: run the FMU as Co-Simulation if it has that interface",
+            fmu.display(),
+            (nx as f64).powi(2) * 8.0 / 1e9
+        )));
+    }
+    Ok((nx, nz))
+}
+
+/// The solver's relative tolerance ([`MeSettings::relative_tolerance_for`]), in (0, 1).
+fn checked_tolerance(
+    settings: &MeSettings,
+    md: &ModelDescription,
+    bad: &impl Fn(String) -> FmuError,
+) -> Result<f64, FmuError> {
+    let rtol = settings.relative_tolerance_for(md);
+    if !(rtol.is_finite() && rtol > 0.0 && rtol < 1.0) {
+        return Err(bad(format!(
+            "the relative tolerance {rtol:e} of the Model Exchange solver is not in (0, 1)"
+        )));
+    }
+    Ok(rtol)
+}
+
+/// The FMU instantiated for Model Exchange, in the version of its library.
+fn instantiate_unit(
+    lib: MeLibrary,
+    md: &ModelDescription,
+    name: &str,
+    resource_dir: Option<&Path>,
+    logging_on: bool,
+) -> Result<Unit, FmuError> {
+    Ok(match lib {
+        MeLibrary::V2(lib) => Unit::V2(Instance::instantiate_as(
+            lib,
+            name,
+            &md.guid,
+            resource_dir,
+            logging_on,
+            fmi2Type::MODEL_EXCHANGE,
+        )?),
+        MeLibrary::V3(lib) => Unit::V3(Instance3::instantiate_as(
+            lib,
+            md,
+            name,
+            resource_dir,
+            logging_on,
+            true,
+        )?),
+    })
+}
+
+/// An FMI 3.0 FMU's own counts of continuous states and event indicators, as the
+/// description declares them (`nx`, `nz`); nothing to check in FMI 2.0.
+fn check_fmi3_counts(
+    api: MeCalls,
+    inst: &Unit,
+    (nx, nz): (usize, usize),
+    fmu: &Path,
+    bad: &impl Fn(String) -> FmuError,
+) -> Result<(), FmuError> {
+    if let MeCalls::V3(calls) = api {
+        // FMI 3.0 declares no counts: they are the elements of the model structure's
+        // derivatives and event indicators (an array counts by its elements, its
+        // dimensions from their start values). An FMU that says otherwise would have
+        // its vectors read short or past their end.
+        let fmu_counts = [
+            (
+                calls.get_number_of_continuous_states,
+                nx,
+                "fmi3GetNumberOfContinuousStates",
+                "continuous states (the elements of its <ContinuousStateDerivative> variables)",
+            ),
+            (
+                calls.get_number_of_event_indicators,
+                nz,
+                "fmi3GetNumberOfEventIndicators",
+                "event indicators (the elements of its <EventIndicator> variables)",
+            ),
+        ];
+        for (get, declared, call, what) in fmu_counts {
+            let mut n = 0usize;
+            let s = unsafe { get(inst.raw(), &mut n) };
+            if s > 1 {
+                return Err(bad(format!(
+                    "{}: {call} returned {}",
+                    fmu.display(),
+                    api.status_name(fmi2Status(s))
+                )));
+            }
+            if n != declared {
+                return Err(bad(format!(
+                    "{}: the model description declares {declared} {what}, but {call} returns {n}",
+                    fmu.display()
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The continuous Real inputs (settable in continuous-time mode), by value reference.
+fn continuous_inputs(md: &ModelDescription) -> HashMap<u32, ()> {
+    md.variables
+        .iter()
+        .filter(|v| {
+            v.causality == Causality::Input
+                && v.variability == Variability::Continuous
+                && v.ty == crate::ScalarType::Real
+        })
+        .map(|v| (v.value_reference, ()))
+        .collect()
+}
+
+/// The derivatives' names in state order (`der(x)`), for messages.
+fn derivative_names(md: &ModelDescription, nx: usize) -> Vec<String> {
+    (0..nx)
+        .map(|k| {
+            md.derivatives
+                .get(k)
+                .and_then(|u| md.variables.get(u.index.wrapping_sub(1)))
+                .map_or_else(
+                    || format!("derivative {} of {nx}", k + 1),
+                    |v| v.name.clone(),
+                )
+        })
+        .collect()
 }
