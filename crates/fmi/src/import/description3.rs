@@ -395,9 +395,30 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
         .collect();
     let mut free = FreeValueReferences::new(declared.iter().map(|d| d.var.value_reference));
     // The total first, before a single element is made.
+    check_total(&declared, &structural_start)?;
+    for mut d in declared {
+        // String and Binary starts are <Start value> children.
+        if d.var.start.is_none() && !d.starts.is_empty() {
+            d.var.start = Some(d.starts[0].clone());
+        }
+        if d.dims.is_empty() {
+            push_scalar(md, d);
+            continue;
+        }
+        push_array(md, d, &structural_start, &mut free)?;
+    }
+    Ok(())
+}
+
+/// All declared variables expand into at most [`MAX_TOTAL_ELEMENTS`] values (elements and
+/// their aliases).
+fn check_total(
+    declared: &[Declared],
+    structural_start: &HashMap<u32, (String, Option<String>)>,
+) -> Result<(), String> {
     let mut expanded = 0u64;
-    for d in &declared {
-        let total = element_count(d, &structural_start)?;
+    for d in declared {
+        let total = element_count(d, structural_start)?;
         expanded = expanded.saturating_add(total.saturating_mul(1 + d.aliases.len() as u64));
         if expanded > MAX_TOTAL_ELEMENTS {
             return Err(format!(
@@ -406,86 +427,92 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
             ));
         }
     }
-    for mut d in declared {
-        let name = d.var.name.clone();
-        // String and Binary starts are <Start value> children.
-        if d.var.start.is_none() && !d.starts.is_empty() {
-            d.var.start = Some(d.starts[0].clone());
-        }
-        if d.dims.is_empty() {
-            d.var.fmi3 = Some(Fmi3Slot {
+    Ok(())
+}
+
+/// A scalar: the variable with its [`Fmi3Slot`], then its aliases (the same variable under
+/// other names).
+fn push_scalar(md: &mut ModelDescription, mut d: Declared) {
+    d.var.fmi3 = Some(Fmi3Slot {
+        ty: d.ty,
+        vr: d.var.value_reference,
+        index: 0,
+        len: 1,
+        element: false,
+        structural: d.structural,
+    });
+    let aliases: Vec<ScalarVariable> = d
+        .aliases
+        .iter()
+        .map(|a| ScalarVariable {
+            name: a.clone(),
+            ..d.var.clone()
+        })
+        .collect();
+    md.variables.push(d.var);
+    md.variables.extend(aliases);
+}
+
+/// An array: one variable per element, `name[i]` or `name[i,j]` (1-based subscripts of
+/// its row-major position), each with its start value (one for all, or one each) and an
+/// internal value reference of its own, which the aliases' elements share.
+fn push_array(
+    md: &mut ModelDescription,
+    d: Declared,
+    structural_start: &HashMap<u32, (String, Option<String>)>,
+    free: &mut FreeValueReferences,
+) -> Result<(), String> {
+    let name = d.var.name.clone();
+    let sizes = dimension_sizes(&d, structural_start)?;
+    let total = element_count(&d, structural_start)?;
+    let starts: Vec<String> = if !d.starts.is_empty() {
+        d.starts.clone()
+    } else {
+        d.var
+            .start
+            .as_deref()
+            .map(|s| s.split_whitespace().map(str::to_string).collect())
+            .unwrap_or_default()
+    };
+    if !starts.is_empty() && starts.len() as u64 != total && starts.len() != 1 {
+        return Err(format!(
+            "variable '{name}': {} start values for an array of {total} elements",
+            starts.len()
+        ));
+    }
+    // The elements' internal value references, shared by the aliases' elements.
+    let element_vrs = (0..total)
+        .map(|_| free.next())
+        .collect::<Option<Vec<u32>>>()
+        .ok_or_else(|| format!("variable '{name}': no value reference left for its elements"))?;
+    // An alias's elements share the original's value references.
+    for base in std::iter::once(&name).chain(d.aliases.iter()) {
+        for k in 0..total {
+            // Row-major position → 1-based subscripts.
+            let mut rest = k;
+            let mut subs = vec![0u64; sizes.len()];
+            for (j, &n) in sizes.iter().enumerate().rev() {
+                subs[j] = rest % n + 1;
+                rest /= n;
+            }
+            let subs: Vec<String> = subs.iter().map(u64::to_string).collect();
+            let mut v = d.var.clone();
+            v.name = format!("{base}[{}]", subs.join(","));
+            v.start = match starts.len() {
+                0 => None,
+                1 => Some(starts[0].clone()),
+                _ => Some(starts[k as usize].clone()),
+            };
+            v.value_reference = element_vrs[k as usize];
+            v.fmi3 = Some(Fmi3Slot {
                 ty: d.ty,
                 vr: d.var.value_reference,
-                index: 0,
-                len: 1,
-                element: false,
+                index: k as u32,
+                len: total as u32,
+                element: true,
                 structural: d.structural,
             });
-            let aliases: Vec<ScalarVariable> = d
-                .aliases
-                .iter()
-                .map(|a| ScalarVariable {
-                    name: a.clone(),
-                    ..d.var.clone()
-                })
-                .collect();
-            md.variables.push(d.var);
-            md.variables.extend(aliases);
-            continue;
-        }
-        let sizes = dimension_sizes(&d, &structural_start)?;
-        let total = element_count(&d, &structural_start)?;
-        let starts: Vec<String> = if !d.starts.is_empty() {
-            d.starts.clone()
-        } else {
-            d.var
-                .start
-                .as_deref()
-                .map(|s| s.split_whitespace().map(str::to_string).collect())
-                .unwrap_or_default()
-        };
-        if !starts.is_empty() && starts.len() as u64 != total && starts.len() != 1 {
-            return Err(format!(
-                "variable '{name}': {} start values for an array of {total} elements",
-                starts.len()
-            ));
-        }
-        // The elements' internal value references, shared by the aliases' elements.
-        let element_vrs = (0..total)
-            .map(|_| free.next())
-            .collect::<Option<Vec<u32>>>()
-            .ok_or_else(|| {
-                format!("variable '{name}': no value reference left for its elements")
-            })?;
-        // An alias's elements share the original's value references.
-        for base in std::iter::once(&name).chain(d.aliases.iter()) {
-            for k in 0..total {
-                // Row-major position → 1-based subscripts.
-                let mut rest = k;
-                let mut subs = vec![0u64; sizes.len()];
-                for (j, &n) in sizes.iter().enumerate().rev() {
-                    subs[j] = rest % n + 1;
-                    rest /= n;
-                }
-                let subs: Vec<String> = subs.iter().map(u64::to_string).collect();
-                let mut v = d.var.clone();
-                v.name = format!("{base}[{}]", subs.join(","));
-                v.start = match starts.len() {
-                    0 => None,
-                    1 => Some(starts[0].clone()),
-                    _ => Some(starts[k as usize].clone()),
-                };
-                v.value_reference = element_vrs[k as usize];
-                v.fmi3 = Some(Fmi3Slot {
-                    ty: d.ty,
-                    vr: d.var.value_reference,
-                    index: k as u32,
-                    len: total as u32,
-                    element: true,
-                    structural: d.structural,
-                });
-                md.variables.push(v);
-            }
+            md.variables.push(v);
         }
     }
     Ok(())
