@@ -1,7 +1,7 @@
 //! The FMI 2.0 reader of modelDescription.xml: the elements both versions share
-//! ([`super::reader`]), then the `<ScalarVariable>`s and the model structure, checked as FMI
-//! 2.0 asks (unique names and alias sets, causality with variability, model structure
-//! indices in range).
+//! (`reader.rs`), then the `<ScalarVariable>`s and the model structure, checked as FMI 2.0
+//! asks (unique names and alias sets, causality with variability, model structure indices
+//! in range).
 
 use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
 use super::reader::{num, walk, Attrs, Shared, Version, Visit};

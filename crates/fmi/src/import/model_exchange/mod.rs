@@ -37,7 +37,7 @@
 //! (instantiation to reset), `values.rs` (get and set), `step.rs` (a communication step),
 //! `events.rs` (event mode and the event iteration), `solver.rs` (CVODE driven from the
 //! instance). Below them: `calls.rs` and `unit.rs` (the FMI version's calls and instance),
-//! `system.rs` (the FMU as CVODE's system) and [`cvode`] (the binding).
+//! `system.rs` (the FMU as CVODE's system) and `cvode.rs` (the binding).
 
 mod calls;
 pub(crate) mod cvode;
