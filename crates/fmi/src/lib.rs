@@ -27,8 +27,6 @@ pub use schema::{Causality, Initial, ScalarType, Variability};
 #[cfg(feature = "import")]
 pub use import::archive::{FmuCache, LoadedFmu};
 #[cfg(feature = "import")]
-pub use import::description::{Interface, ModelDescription, VarKey};
-#[cfg(feature = "import")]
 pub use import::instance::{FmuState, Instance};
 #[cfg(feature = "import")]
 pub use import::instance3::Instance3;
@@ -36,6 +34,8 @@ pub use import::instance3::Instance3;
 pub use import::library::Library;
 #[cfg(feature = "import")]
 pub use import::library3::Library3;
+#[cfg(feature = "import")]
+pub use import::model::{Interface, ModelDescription, VarKey};
 #[cfg(feature = "import")]
 pub use import::model_exchange::{CallTrace, MeInstance, MeLibrary, MeSettings, MeStop};
 #[cfg(feature = "import")]

@@ -18,100 +18,11 @@
 //!   Execution are listed in `unsupported` (the archive check refuses such an FMU before
 //!   anything runs).
 
-use super::description::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
+use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
+pub use super::model::{Fmi3Slot, Fmi3Type};
 use super::reader::{num, walk, Attrs, Shared, Version, Visit};
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 use std::collections::HashMap;
-
-/// An FMI 3.0 variable type (the element name in `ModelVariables`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Fmi3Type {
-    Float32,
-    Float64,
-    Int8,
-    UInt8,
-    Int16,
-    UInt16,
-    Int32,
-    UInt32,
-    Int64,
-    UInt64,
-    Boolean,
-    String,
-    Binary,
-    Enumeration,
-}
-
-impl Fmi3Type {
-    fn parse(name: &str) -> Option<Fmi3Type> {
-        use Fmi3Type::*;
-        Some(match name {
-            "Float32" => Float32,
-            "Float64" => Float64,
-            "Int8" => Int8,
-            "UInt8" => UInt8,
-            "Int16" => Int16,
-            "UInt16" => UInt16,
-            "Int32" => Int32,
-            "UInt32" => UInt32,
-            "Int64" => Int64,
-            "UInt64" => UInt64,
-            "Boolean" => Boolean,
-            "String" => String,
-            "Binary" => Binary,
-            "Enumeration" => Enumeration,
-            _ => return None,
-        })
-    }
-
-    pub fn name(self) -> &'static str {
-        use Fmi3Type::*;
-        match self {
-            Float32 => "Float32",
-            Float64 => "Float64",
-            Int8 => "Int8",
-            UInt8 => "UInt8",
-            Int16 => "Int16",
-            UInt16 => "UInt16",
-            Int32 => "Int32",
-            UInt32 => "UInt32",
-            Int64 => "Int64",
-            UInt64 => "UInt64",
-            Boolean => "Boolean",
-            String => "String",
-            Binary => "Binary",
-            Enumeration => "Enumeration",
-        }
-    }
-
-    /// The FMI 2.0 kind twinbench exchanges it as. Integers wider than 32 bits (UInt32,
-    /// Int64, UInt64) travel as Real (an f64: exact up to 2^53, and a value it cannot carry
-    /// exactly is an error naming the variable, never rounded in silence).
-    pub fn kind(self) -> ScalarType {
-        use Fmi3Type::*;
-        match self {
-            Float32 | Float64 | UInt32 | Int64 | UInt64 => ScalarType::Real,
-            Boolean => ScalarType::Boolean,
-            String | Binary => ScalarType::String,
-            Enumeration => ScalarType::Enumeration,
-            _ => ScalarType::Integer,
-        }
-    }
-}
-
-/// Where an FMI 3.0 value lives: its type, the FMU's value reference, and for an array
-/// element its position in the array (row-major) and the array's element count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Fmi3Slot {
-    pub ty: Fmi3Type,
-    pub vr: u32,
-    pub index: u32,
-    pub len: u32,
-    /// An array's element (a one-element array's too), not a scalar.
-    pub element: bool,
-    /// A structural parameter: it sizes arrays, so twinbench never changes it.
-    pub structural: bool,
-}
 
 /// A variable as declared, before arrays are expanded.
 struct Declared {
@@ -484,9 +395,30 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
         .collect();
     let mut free = FreeValueReferences::new(declared.iter().map(|d| d.var.value_reference));
     // The total first, before a single element is made.
+    check_total(&declared, &structural_start)?;
+    for mut d in declared {
+        // String and Binary starts are <Start value> children.
+        if d.var.start.is_none() && !d.starts.is_empty() {
+            d.var.start = Some(d.starts[0].clone());
+        }
+        if d.dims.is_empty() {
+            push_scalar(md, d);
+            continue;
+        }
+        push_array(md, d, &structural_start, &mut free)?;
+    }
+    Ok(())
+}
+
+/// All declared variables expand into at most [`MAX_TOTAL_ELEMENTS`] values (elements and
+/// their aliases).
+fn check_total(
+    declared: &[Declared],
+    structural_start: &HashMap<u32, (String, Option<String>)>,
+) -> Result<(), String> {
     let mut expanded = 0u64;
-    for d in &declared {
-        let total = element_count(d, &structural_start)?;
+    for d in declared {
+        let total = element_count(d, structural_start)?;
         expanded = expanded.saturating_add(total.saturating_mul(1 + d.aliases.len() as u64));
         if expanded > MAX_TOTAL_ELEMENTS {
             return Err(format!(
@@ -495,86 +427,92 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
             ));
         }
     }
-    for mut d in declared {
-        let name = d.var.name.clone();
-        // String and Binary starts are <Start value> children.
-        if d.var.start.is_none() && !d.starts.is_empty() {
-            d.var.start = Some(d.starts[0].clone());
-        }
-        if d.dims.is_empty() {
-            d.var.fmi3 = Some(Fmi3Slot {
+    Ok(())
+}
+
+/// A scalar: the variable with its [`Fmi3Slot`], then its aliases (the same variable under
+/// other names).
+fn push_scalar(md: &mut ModelDescription, mut d: Declared) {
+    d.var.fmi3 = Some(Fmi3Slot {
+        ty: d.ty,
+        vr: d.var.value_reference,
+        index: 0,
+        len: 1,
+        element: false,
+        structural: d.structural,
+    });
+    let aliases: Vec<ScalarVariable> = d
+        .aliases
+        .iter()
+        .map(|a| ScalarVariable {
+            name: a.clone(),
+            ..d.var.clone()
+        })
+        .collect();
+    md.variables.push(d.var);
+    md.variables.extend(aliases);
+}
+
+/// An array: one variable per element, `name[i]` or `name[i,j]` (1-based subscripts of
+/// its row-major position), each with its start value (one for all, or one each) and an
+/// internal value reference of its own, which the aliases' elements share.
+fn push_array(
+    md: &mut ModelDescription,
+    d: Declared,
+    structural_start: &HashMap<u32, (String, Option<String>)>,
+    free: &mut FreeValueReferences,
+) -> Result<(), String> {
+    let name = d.var.name.clone();
+    let sizes = dimension_sizes(&d, structural_start)?;
+    let total = element_count(&d, structural_start)?;
+    let starts: Vec<String> = if !d.starts.is_empty() {
+        d.starts.clone()
+    } else {
+        d.var
+            .start
+            .as_deref()
+            .map(|s| s.split_whitespace().map(str::to_string).collect())
+            .unwrap_or_default()
+    };
+    if !starts.is_empty() && starts.len() as u64 != total && starts.len() != 1 {
+        return Err(format!(
+            "variable '{name}': {} start values for an array of {total} elements",
+            starts.len()
+        ));
+    }
+    // The elements' internal value references, shared by the aliases' elements.
+    let element_vrs = (0..total)
+        .map(|_| free.next())
+        .collect::<Option<Vec<u32>>>()
+        .ok_or_else(|| format!("variable '{name}': no value reference left for its elements"))?;
+    // An alias's elements share the original's value references.
+    for base in std::iter::once(&name).chain(d.aliases.iter()) {
+        for k in 0..total {
+            // Row-major position → 1-based subscripts.
+            let mut rest = k;
+            let mut subs = vec![0u64; sizes.len()];
+            for (j, &n) in sizes.iter().enumerate().rev() {
+                subs[j] = rest % n + 1;
+                rest /= n;
+            }
+            let subs: Vec<String> = subs.iter().map(u64::to_string).collect();
+            let mut v = d.var.clone();
+            v.name = format!("{base}[{}]", subs.join(","));
+            v.start = match starts.len() {
+                0 => None,
+                1 => Some(starts[0].clone()),
+                _ => Some(starts[k as usize].clone()),
+            };
+            v.value_reference = element_vrs[k as usize];
+            v.fmi3 = Some(Fmi3Slot {
                 ty: d.ty,
                 vr: d.var.value_reference,
-                index: 0,
-                len: 1,
-                element: false,
+                index: k as u32,
+                len: total as u32,
+                element: true,
                 structural: d.structural,
             });
-            let aliases: Vec<ScalarVariable> = d
-                .aliases
-                .iter()
-                .map(|a| ScalarVariable {
-                    name: a.clone(),
-                    ..d.var.clone()
-                })
-                .collect();
-            md.variables.push(d.var);
-            md.variables.extend(aliases);
-            continue;
-        }
-        let sizes = dimension_sizes(&d, &structural_start)?;
-        let total = element_count(&d, &structural_start)?;
-        let starts: Vec<String> = if !d.starts.is_empty() {
-            d.starts.clone()
-        } else {
-            d.var
-                .start
-                .as_deref()
-                .map(|s| s.split_whitespace().map(str::to_string).collect())
-                .unwrap_or_default()
-        };
-        if !starts.is_empty() && starts.len() as u64 != total && starts.len() != 1 {
-            return Err(format!(
-                "variable '{name}': {} start values for an array of {total} elements",
-                starts.len()
-            ));
-        }
-        // The elements' internal value references, shared by the aliases' elements.
-        let element_vrs = (0..total)
-            .map(|_| free.next())
-            .collect::<Option<Vec<u32>>>()
-            .ok_or_else(|| {
-                format!("variable '{name}': no value reference left for its elements")
-            })?;
-        // An alias's elements share the original's value references.
-        for base in std::iter::once(&name).chain(d.aliases.iter()) {
-            for k in 0..total {
-                // Row-major position → 1-based subscripts.
-                let mut rest = k;
-                let mut subs = vec![0u64; sizes.len()];
-                for (j, &n) in sizes.iter().enumerate().rev() {
-                    subs[j] = rest % n + 1;
-                    rest /= n;
-                }
-                let subs: Vec<String> = subs.iter().map(u64::to_string).collect();
-                let mut v = d.var.clone();
-                v.name = format!("{base}[{}]", subs.join(","));
-                v.start = match starts.len() {
-                    0 => None,
-                    1 => Some(starts[0].clone()),
-                    _ => Some(starts[k as usize].clone()),
-                };
-                v.value_reference = element_vrs[k as usize];
-                v.fmi3 = Some(Fmi3Slot {
-                    ty: d.ty,
-                    vr: d.var.value_reference,
-                    index: k as u32,
-                    len: total as u32,
-                    element: true,
-                    structural: d.structural,
-                });
-                md.variables.push(v);
-            }
+            md.variables.push(v);
         }
     }
     Ok(())

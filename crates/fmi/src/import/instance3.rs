@@ -8,9 +8,8 @@
 //! which element it is. Instances are created with event mode and early return off, as
 //! FMPy's master does; `terminateSimulation` from `fmi3DoStep` ends the run at the step's end.
 
-use super::description::ModelDescription;
-use super::description3::{Fmi3Slot, Fmi3Type};
 use super::log::LogSink;
+use super::model::{Fmi3Slot, Fmi3Type, ModelDescription, ScalarVariable};
 use crate::fmi2::fmi2Status;
 use crate::functions::Function;
 use crate::FmuError;
@@ -165,6 +164,44 @@ fn resource_path(dir: &Path) -> String {
     s
 }
 
+/// Each variable's slot and name, by its value reference (an array element's internal one).
+fn value_slots(md: &ModelDescription) -> (Vec<(u32, Fmi3Slot)>, HashMap<u32, String>) {
+    let mut slots = Vec::new();
+    let mut names = HashMap::new();
+    for v in &md.variables {
+        if let Some(s) = v.fmi3 {
+            slots.push((v.value_reference, s));
+            names.insert(v.value_reference, v.name.clone());
+        }
+    }
+    (slots, names)
+}
+
+/// Whether every variable exchanged as a Real is a scalar Float64, and whether every one
+/// exchanged as an Integer is a scalar Int32 (the one-call paths of [`Instance3`]).
+fn one_call_types(md: &ModelDescription) -> (bool, bool) {
+    let scalar = |v: &ScalarVariable, ty: Fmi3Type| {
+        v.fmi3
+            .is_some_and(|s| s.ty == ty && s.len == 1 && !s.element && s.vr == v.value_reference)
+    };
+    let reals_are_float64 = md
+        .variables
+        .iter()
+        .filter(|v| v.ty == crate::ScalarType::Real)
+        .all(|v| scalar(v, Fmi3Type::Float64));
+    let ints_are_int32 = md
+        .variables
+        .iter()
+        .filter(|v| {
+            matches!(
+                v.ty,
+                crate::ScalarType::Integer | crate::ScalarType::Enumeration
+            )
+        })
+        .all(|v| scalar(v, Fmi3Type::Int32));
+    (reals_are_float64, ints_are_int32)
+}
+
 impl Instance3 {
     pub fn instantiate(
         lib: Arc<Library3>,
@@ -241,34 +278,8 @@ impl Instance3 {
                 sink.last_lines().join(" | ")
             )));
         }
-        let mut slots = Vec::new();
-        let mut names = HashMap::new();
-        for v in &md.variables {
-            if let Some(s) = v.fmi3 {
-                slots.push((v.value_reference, s));
-                names.insert(v.value_reference, v.name.clone());
-            }
-        }
-        let scalar = |v: &crate::import::description::ScalarVariable, ty: Fmi3Type| {
-            v.fmi3.is_some_and(|s| {
-                s.ty == ty && s.len == 1 && !s.element && s.vr == v.value_reference
-            })
-        };
-        let reals_are_float64 = md
-            .variables
-            .iter()
-            .filter(|v| v.ty == crate::ScalarType::Real)
-            .all(|v| scalar(v, Fmi3Type::Float64));
-        let ints_are_int32 = md
-            .variables
-            .iter()
-            .filter(|v| {
-                matches!(
-                    v.ty,
-                    crate::ScalarType::Integer | crate::ScalarType::Enumeration
-                )
-            })
-            .all(|v| scalar(v, Fmi3Type::Int32));
+        let (slots, names) = value_slots(md);
+        let (reals_are_float64, ints_are_int32) = one_call_types(md);
         let slots = Slots::new(slots);
         Ok(Instance3 {
             lib,
@@ -485,14 +496,46 @@ impl Instance3 {
                 self.name_of(vr_tb)
             )));
         }
-        let n = slot.len as usize;
-        let vr = [slot.vr];
         // fmi3Boolean is a C bool: only 0 or 1 may be written.
         let value = if slot.ty == Fmi3Type::Boolean {
             (value != 0.0) as u8 as f64
         } else {
             value
         };
+        self.check_fits(vr_tb, slot.ty, value)?;
+        self.write_one(slot, value)
+    }
+
+    /// A value set into an integer variable must fit its FMI 3.0 type.
+    fn check_fits(&self, vr_tb: u32, ty: Fmi3Type, value: f64) -> Result<(), FmuError> {
+        // An integer value must fit the FMU's type exactly: no wrapping, no truncation.
+        let fits = |lo: f64, hi: f64| value.fract() == 0.0 && value >= lo && value <= hi;
+        let in_range = match ty {
+            Fmi3Type::Int8 => fits(i8::MIN as f64, i8::MAX as f64),
+            Fmi3Type::UInt8 => fits(0.0, u8::MAX as f64),
+            Fmi3Type::Int16 => fits(i16::MIN as f64, i16::MAX as f64),
+            Fmi3Type::UInt16 => fits(0.0, u16::MAX as f64),
+            Fmi3Type::Int32 => fits(i32::MIN as f64, i32::MAX as f64),
+            Fmi3Type::UInt32 => fits(0.0, u32::MAX as f64),
+            Fmi3Type::UInt64 => fits(0.0, f64::MAX),
+            Fmi3Type::Int64 | Fmi3Type::Enumeration => fits(f64::MIN, f64::MAX),
+            _ => true,
+        };
+        if !in_range {
+            return Err(self.other(format!(
+                "{value} does not fit '{}' ({})",
+                self.name_of(vr_tb),
+                ty.name()
+            )));
+        }
+        Ok(())
+    }
+
+    /// `value` (in range) into `slot` by the typed call of its type: a scalar from the
+    /// stack, an array element by reading the array, changing it and writing it back.
+    fn write_one(&mut self, slot: Fmi3Slot, value: f64) -> Result<(), FmuError> {
+        let n = slot.len as usize;
+        let vr = [slot.vr];
         macro_rules! set {
             ($get:ident, $set:ident, $t:ty, $gname:literal, $sname:literal) => {{
                 if n == 1 {
@@ -514,28 +557,7 @@ impl Instance3 {
                 self.check($sname, s)
             }};
         }
-        // An integer value must fit the FMU's type exactly: no wrapping, no truncation.
-        let fits = |lo: f64, hi: f64| value.fract() == 0.0 && value >= lo && value <= hi;
-        let ty = slot.ty;
-        let in_range = match ty {
-            Fmi3Type::Int8 => fits(i8::MIN as f64, i8::MAX as f64),
-            Fmi3Type::UInt8 => fits(0.0, u8::MAX as f64),
-            Fmi3Type::Int16 => fits(i16::MIN as f64, i16::MAX as f64),
-            Fmi3Type::UInt16 => fits(0.0, u16::MAX as f64),
-            Fmi3Type::Int32 => fits(i32::MIN as f64, i32::MAX as f64),
-            Fmi3Type::UInt32 => fits(0.0, u32::MAX as f64),
-            Fmi3Type::UInt64 => fits(0.0, f64::MAX),
-            Fmi3Type::Int64 | Fmi3Type::Enumeration => fits(f64::MIN, f64::MAX),
-            _ => true,
-        };
-        if !in_range {
-            return Err(self.other(format!(
-                "{value} does not fit '{}' ({})",
-                self.name_of(vr_tb),
-                ty.name()
-            )));
-        }
-        match ty {
+        match slot.ty {
             Fmi3Type::Float32 => set!(
                 get_float32,
                 set_float32,

@@ -5,8 +5,10 @@
 //!   store of unpacked FMUs with its stat index ([`store`]) and the manifests that every
 //!   file is verified against before use ([`manifest`]); [`sandbox`]: the isolated worker's
 //!   read-only store;
-//! - [`description`]: what twinbench knows of an FMU, and the FMI 2.0 modelDescription.xml
-//!   reader; [`description3`]: the FMI 3.0 reader; [`reader`]: what both share;
+//! - [`model`]: what twinbench knows of an FMU (the model description's types);
+//!   [`description`]: the modelDescription.xml reader, which hands the text to the one of
+//!   its version, [`description2`] (FMI 2.0) or [`description3`] (FMI 3.0); [`reader`]: what
+//!   both share;
 //! - [`library`] and [`library3`]: a loaded shared library with its functions resolved;
 //! - [`instance`] and [`instance3`]: a safe handle on one FMU instance (the same calls for
 //!   both versions);
@@ -16,6 +18,7 @@
 
 pub mod archive;
 pub mod description;
+pub mod description2;
 pub mod description3;
 mod error;
 pub mod instance;
@@ -24,6 +27,7 @@ pub mod library;
 pub mod library3;
 pub mod log;
 mod manifest;
+pub mod model;
 pub mod model_exchange;
 pub(crate) mod reader;
 pub mod sandbox;

@@ -1,10 +1,11 @@
-//! What the FMI 2.0 and FMI 3.0 modelDescription.xml readers share: the walk over the
-//! XML (with the check that the document is complete), the attribute helpers, and the
-//! elements both versions have (the root, `<CoSimulation>`, `<DefaultExperiment>`, unit
-//! definitions with display units, type definitions and their enumeration items, log
-//! categories). Each version's reader adds its variables and model structure.
+//! What the FMI 2.0 and FMI 3.0 modelDescription.xml readers share: the version found
+//! before either reads ([`sniff_fmi_version`]), the walk over the XML (with the check that
+//! the document is complete), the attribute helpers, and the elements both versions have
+//! (the root, `<CoSimulation>`, `<DefaultExperiment>`, unit definitions with display units,
+//! type definitions and their enumeration items, log categories). Each version's reader
+//! adds its variables and model structure.
 
-use super::description::{CoSimulation, DefaultExperiment, ModelDescription, ModelExchange};
+use super::model::{CoSimulation, DefaultExperiment, ModelDescription, ModelExchange};
 use crate::units::UnitDef;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::Reader;
@@ -65,6 +66,16 @@ pub(crate) fn walk(xml: &str, v: &mut impl Visit) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// The `fmiVersion` attribute's value, found without parsing the XML.
+pub(crate) fn sniff_fmi_version(xml: &str) -> Option<&str> {
+    let i = xml.find("fmiVersion")?;
+    let rest = xml[i + "fmiVersion".len()..].trim_start();
+    let rest = rest.strip_prefix('=')?.trim_start();
+    let q = rest.chars().next().filter(|c| *c == '"' || *c == '\'')?;
+    let rest = &rest[1..];
+    Some(&rest[..rest.find(q)?])
 }
 
 /// The elements both versions share, read into the description as they come.

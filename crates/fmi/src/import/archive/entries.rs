@@ -2,7 +2,9 @@
 //! written.
 
 use super::*;
-use crate::import::description::{self, ModelDescription};
+use crate::import::description;
+use crate::import::model::{Interface, ModelDescription};
+use crate::import::reader::sniff_fmi_version;
 use crate::import::store::CdEntry;
 use crate::FmuError;
 use std::io::{Read, Seek};
@@ -156,7 +158,24 @@ pub(crate) fn check_description(
     names: &[String],
     binary_required: bool,
 ) -> Result<(ModelDescription, String), FmuError> {
-    let md = description::parse(xml).map_err(|message| FmuError::Description {
+    let md = parse_description(fmu, xml)?;
+    check_fmi_version(fmu, &md)?;
+    let interface = runnable_interface(fmu, &md)?;
+    let id = md
+        .model_identifier(interface)
+        .expect("the interface is declared")
+        .to_string();
+    check_model_identifier(fmu, &id)?;
+    let so = library_entry(&md.fmi_version, &id);
+    if binary_required && !names.contains(&so) {
+        return Err(missing_library(fmu, &so, &id, names));
+    }
+    Ok((md, id))
+}
+
+/// The description read (an FMI 1.0 one named by its version when it does not read).
+fn parse_description(fmu: &Path, xml: &str) -> Result<ModelDescription, FmuError> {
+    description::parse(xml).map_err(|message| FmuError::Description {
         path: fmu.to_path_buf(),
         // An FMI 1.0 description may not even parse as 2.0: name the version then.
         message: match sniff_fmi_version(xml) {
@@ -165,7 +184,11 @@ pub(crate) fn check_description(
             }
             _ => message,
         },
-    })?;
+    })
+}
+
+/// FMI 2.0 or 3.0.
+fn check_fmi_version(fmu: &Path, md: &ModelDescription) -> Result<(), FmuError> {
     let fmi3 = md.fmi_version.starts_with("3.");
     if md.fmi_version != "2.0" && !fmi3 {
         return Err(FmuError::Description {
@@ -176,6 +199,12 @@ pub(crate) fn check_description(
             ),
         });
     }
+    Ok(())
+}
+
+/// The interface the FMU runs through by default, when twinbench can run it: Co-Simulation
+/// or Model Exchange, and nothing the description lists as unsupported (clocks).
+fn runnable_interface(fmu: &Path, md: &ModelDescription) -> Result<Interface, FmuError> {
     // Co-Simulation, or Model Exchange (integrated by twinbench with CVODE); not FMI 3.0's
     // Scheduled Execution.
     let interface = match md.default_interface() {
@@ -199,10 +228,11 @@ pub(crate) fn check_description(
             ),
         });
     }
-    let id = md
-        .model_identifier(interface)
-        .expect("the interface is declared")
-        .to_string();
+    Ok(interface)
+}
+
+/// A `modelIdentifier` that is a C identifier.
+fn check_model_identifier(fmu: &Path, id: &str) -> Result<(), FmuError> {
     // Used as a file name and a C symbol prefix: a path here would load a library from
     // outside the cache.
     if id.is_empty()
@@ -216,46 +246,48 @@ pub(crate) fn check_description(
             ),
         });
     }
-    let so = library_entry(&md.fmi_version, &id);
-    if binary_required && !names.contains(&so) {
-        // Name the platforms the FMU has binaries for (a Windows- or macOS-only FMU is a
-        // common mistake); a platform folder with no file in it has none.
-        let mut platforms: Vec<&str> = names
-            .iter()
-            .filter_map(|n| n.strip_prefix("binaries/"))
-            .filter_map(|n| n.split_once('/'))
-            .filter(|(p, rest)| !p.is_empty() && !rest.is_empty() && !rest.ends_with('/'))
-            .map(|(p, _)| p)
-            .collect();
-        platforms.sort();
-        platforms.dedup();
-        let has = if platforms.is_empty() {
-            "no binaries at all".to_string()
-        } else {
-            format!("binaries for {}", platforms.join(", "))
-        };
-        let dir = &so[..=so.rfind('/').expect("a folder")];
-        let mut here: Vec<&str> = names
-            .iter()
-            .filter_map(|n| n.strip_prefix(dir))
-            .filter(|n| !n.is_empty() && !n.ends_with('/'))
-            .collect();
-        here.sort();
-        let why = if !here.is_empty() {
-            let shown: Vec<&str> = here.iter().take(5).copied().collect();
-            format!(
-                "{dir} holds {}{} but not the library its modelIdentifier \"{id}\" names",
-                shown.join(", "),
-                if here.len() > 5 { ", ..." } else { "" }
-            )
-        } else if names.iter().any(|n| n.starts_with(dir)) {
-            format!("the folder {dir} is empty (the FMU has {has})")
-        } else {
-            format!("the FMU has no binary for this platform; it has {has}")
-        };
-        return Err(arch(fmu, format!("no {so} ({why})")));
-    }
-    Ok((md, id))
+    Ok(())
+}
+
+/// The error of an archive without the library `so` that the `modelIdentifier` `id` names:
+/// what its `names` hold instead.
+fn missing_library(fmu: &Path, so: &str, id: &str, names: &[String]) -> FmuError {
+    // Name the platforms the FMU has binaries for (a Windows- or macOS-only FMU is a
+    // common mistake); a platform folder with no file in it has none.
+    let mut platforms: Vec<&str> = names
+        .iter()
+        .filter_map(|n| n.strip_prefix("binaries/"))
+        .filter_map(|n| n.split_once('/'))
+        .filter(|(p, rest)| !p.is_empty() && !rest.is_empty() && !rest.ends_with('/'))
+        .map(|(p, _)| p)
+        .collect();
+    platforms.sort();
+    platforms.dedup();
+    let has = if platforms.is_empty() {
+        "no binaries at all".to_string()
+    } else {
+        format!("binaries for {}", platforms.join(", "))
+    };
+    let dir = &so[..=so.rfind('/').expect("a folder")];
+    let mut here: Vec<&str> = names
+        .iter()
+        .filter_map(|n| n.strip_prefix(dir))
+        .filter(|n| !n.is_empty() && !n.ends_with('/'))
+        .collect();
+    here.sort();
+    let why = if !here.is_empty() {
+        let shown: Vec<&str> = here.iter().take(5).copied().collect();
+        format!(
+            "{dir} holds {}{} but not the library its modelIdentifier \"{id}\" names",
+            shown.join(", "),
+            if here.len() > 5 { ", ..." } else { "" }
+        )
+    } else if names.iter().any(|n| n.starts_with(dir)) {
+        format!("the folder {dir} is empty (the FMU has {has})")
+    } else {
+        format!("the FMU has no binary for this platform; it has {has}")
+    };
+    arch(fmu, format!("no {so} ({why})"))
 }
 
 /// Where the Linux x86-64 library of an FMU lies in its archive: `binaries/linux64/` in
@@ -266,14 +298,4 @@ pub fn library_entry(fmi_version: &str, model_identifier: &str) -> String {
     } else {
         format!("binaries/linux64/{model_identifier}.so")
     }
-}
-
-/// The `fmiVersion` attribute's value, found without parsing the XML.
-pub(crate) fn sniff_fmi_version(xml: &str) -> Option<&str> {
-    let i = xml.find("fmiVersion")?;
-    let rest = xml[i + "fmiVersion".len()..].trim_start();
-    let rest = rest.strip_prefix('=')?.trim_start();
-    let q = rest.chars().next().filter(|c| *c == '"' || *c == '\'')?;
-    let rest = &rest[1..];
-    Some(&rest[..rest.find(q)?])
 }

@@ -2,10 +2,10 @@
 //! shared by every twinbench process, their shared library loaded once and shared by every
 //! instance.
 
-use super::description::{Interface, ModelDescription};
 use super::library::Library;
 use super::library3::Library3;
 use super::manifest::{self, Manifest, ManifestFile};
+use super::model::{Interface, ModelDescription};
 use super::model_exchange::MeLibrary;
 use crate::FmuError;
 use sha2::{Digest, Sha256};

@@ -4,9 +4,8 @@
 //! `fmi3GetContinuousStateDerivatives`). An FMU without continuous states has one dummy
 //! state with ẋ = 0 (FMPy's `discrete` case), never set into the FMU.
 
+use super::calls::{shown_values, Call, CallTrace, Component, MeCalls, Vector};
 use super::cvode::System;
-use super::unit::{Call, Component, MeCalls, Vector};
-use super::{shown_values, CallTrace};
 use crate::fmi2::*;
 
 /// The FMI call that failed in the last callback, for the error message: `problem` is what

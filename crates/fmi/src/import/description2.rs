@@ -1,0 +1,211 @@
+//! The FMI 2.0 reader of modelDescription.xml: the elements both versions share
+//! (`reader.rs`), then the `<ScalarVariable>`s and the model structure, checked as FMI 2.0
+//! asks (unique names and alias sets, causality with variability, model structure indices
+//! in range).
+
+use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
+use super::reader::{num, walk, Attrs, Shared, Version, Visit};
+use crate::schema::{Causality, Initial, ScalarType, Variability};
+
+fn unknown(m: &Attrs) -> Result<Unknown, String> {
+    let index = m
+        .get("index")
+        .and_then(|s| s.trim().parse().ok())
+        .ok_or("ModelStructure: <Unknown> without a valid index")?;
+    let dependencies = match m.get("dependencies") {
+        None => None,
+        Some(s) => Some(
+            s.split_whitespace()
+                .map(|d| {
+                    d.parse()
+                        .map_err(|_| format!("ModelStructure: bad dependency '{d}'"))
+                })
+                .collect::<Result<Vec<usize>, String>>()?,
+        ),
+    };
+    Ok(Unknown {
+        index,
+        dependencies,
+    })
+}
+
+/// Parse an FMI 2.0 modelDescription.xml.
+pub fn parse(xml: &str) -> Result<ModelDescription, String> {
+    let mut r = Reader2::default();
+    walk(xml, &mut r)?;
+    r.finish()
+}
+
+/// The FMI 2.0 reader: the shared elements, then `<ScalarVariable>`s and the model
+/// structure.
+#[derive(Default)]
+struct Reader2 {
+    md: ModelDescription,
+    shared: Shared,
+    current: Option<ScalarVariable>,
+}
+
+impl Visit for Reader2 {
+    fn start(
+        &mut self,
+        stack: &[String],
+        name: &str,
+        m: &Attrs,
+        empty: bool,
+    ) -> Result<(), String> {
+        let parent = stack.last().map(String::as_str).unwrap_or("");
+        if self
+            .shared
+            .start(&mut self.md, Version::V2, parent, name, m, empty)?
+        {
+            return Ok(());
+        }
+        match (parent, name) {
+            ("ModelVariables", "ScalarVariable") => {
+                let v = scalar_variable(m)?;
+                if empty {
+                    return Err(format!("variable '{}' has no type element", v.name));
+                }
+                self.current = Some(v);
+            }
+            ("ScalarVariable", t @ ("Real" | "Integer" | "Boolean" | "String" | "Enumeration")) => {
+                if let Some(v) = self.current.as_mut() {
+                    let ctx = format!("variable '{}'", v.name);
+                    v.ty = ScalarType::parse(t).expect("matched above");
+                    v.declared_type = m.get("declaredType").cloned();
+                    v.unit = m.get("unit").cloned();
+                    v.start = m.get("start").cloned();
+                    v.min = num(m, "min", &ctx)?;
+                    v.max = num(m, "max", &ctx)?;
+                    v.nominal = num(m, "nominal", &ctx)?;
+                }
+            }
+            ("Outputs", "Unknown") => self.md.outputs.push(unknown(m)?),
+            ("Derivatives", "Unknown") => self.md.derivatives.push(unknown(m)?),
+            ("InitialUnknowns", "Unknown") => self.md.initial_unknowns.push(unknown(m)?),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn end(&mut self, _stack: &[String], name: &str) {
+        if name == "ScalarVariable" {
+            self.md.variables.extend(self.current.take());
+        }
+        self.shared.end(&mut self.md, Version::V2, name);
+    }
+}
+
+impl Reader2 {
+    /// The description, checked: unique names, aliases as the standard allows them, model
+    /// structure indices in range.
+    fn finish(mut self) -> Result<ModelDescription, String> {
+        self.shared.finish(&mut self.md)?;
+        let md = self.md;
+        check_names_and_aliases(&md)?;
+        for v in &md.variables {
+            check_combination(v)?;
+        }
+        let n = md.variables.len();
+        for u in md
+            .outputs
+            .iter()
+            .chain(&md.derivatives)
+            .chain(&md.initial_unknowns)
+        {
+            if u.index == 0 || u.index > n {
+                return Err(format!(
+                    "ModelStructure refers to variable index {} of {n}",
+                    u.index
+                ));
+            }
+            if let Some(d) = u.dependencies.iter().flatten().find(|&&d| d == 0 || d > n) {
+                return Err(format!(
+                    "ModelStructure: dependency index {d} of variable {} is not in 1..={n}",
+                    u.index
+                ));
+            }
+        }
+        Ok(md)
+    }
+}
+
+/// A `<ScalarVariable>`'s own attributes (its type comes with its child element).
+fn scalar_variable(m: &Attrs) -> Result<ScalarVariable, String> {
+    let vname = m
+        .get("name")
+        .cloned()
+        .ok_or("<ScalarVariable> without a name")?;
+    let vr = m
+        .get("valueReference")
+        .and_then(|s| s.trim().parse().ok())
+        .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
+    let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
+    let causality = match m.get("causality") {
+        Some(c) => Causality::parse(c).map_err(ctx)?,
+        None => Causality::DEFAULT,
+    };
+    let variability = match m.get("variability") {
+        Some(v) => Variability::parse(v).map_err(ctx)?,
+        None => Variability::DEFAULT,
+    };
+    let initial = match m.get("initial") {
+        Some(i) => Some(Initial::parse(i).map_err(ctx)?),
+        None => None,
+    };
+    Ok(ScalarVariable {
+        name: vname,
+        value_reference: vr,
+        description: m.get("description").cloned().unwrap_or_default(),
+        causality,
+        variability,
+        initial,
+        ty: ScalarType::Real,
+        declared_type: None,
+        unit: None,
+        start: None,
+        min: None,
+        max: None,
+        nominal: None,
+        fmi3: None,
+    })
+}
+
+/// The combinations of causality and variability FMI 2.0 allows (section 2.2.7, the table
+/// after the definition of `variability`): a parameter is fixed or tunable, an input or an
+/// output is not (a `constant` output is), only a local or an output is constant, and the
+/// independent variable is continuous. FMPy refuses the same combinations.
+fn check_combination(v: &ScalarVariable) -> Result<(), String> {
+    use Causality as C;
+    use Variability as V;
+    let allowed = match v.variability {
+        V::Constant => matches!(v.causality, C::Output | C::Local),
+        V::Fixed | V::Tunable => {
+            matches!(
+                v.causality,
+                C::Parameter | C::CalculatedParameter | C::Local
+            )
+        }
+        V::Discrete => matches!(v.causality, C::Input | C::Output | C::Local),
+        V::Continuous => matches!(
+            v.causality,
+            C::Input | C::Output | C::Local | C::Independent
+        ),
+    };
+    if allowed {
+        return Ok(());
+    }
+    Err(format!(
+        "variable '{}': causality=\"{}\" with variability=\"{}\" is not allowed (FMI 2.0, section 2.2.7: {})",
+        v.name,
+        v.causality,
+        v.variability,
+        match v.causality {
+            C::Parameter | C::CalculatedParameter => "a parameter is fixed or tunable",
+            C::Input => "an input is discrete or continuous",
+            C::Output => "an output is constant, discrete or continuous",
+            C::Independent => "the independent variable is continuous",
+            C::Local => "",
+        }
+    ))
+}
