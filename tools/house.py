@@ -49,7 +49,14 @@ def long_functions(files, limit=100):
         lines = code_lines(p)
         for i, l in enumerate(lines):
             m = FN.match(l)
-            if not m or l.rstrip().endswith(";"):
+            if not m:
+                continue
+            # A declaration without a body (a trait's, an `extern` block's), on one line or
+            # several: its signature ends with `;` before any `{`.
+            k = i
+            while k < len(lines) and not lines[k].rstrip().endswith(("{", ";")):
+                k += 1
+            if k < len(lines) and lines[k].rstrip().endswith(";"):
                 continue
             ind = len(m.group(1))
             j = i + 1
