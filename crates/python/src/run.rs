@@ -37,38 +37,10 @@ pub(crate) fn run(
         .into_iter()
         .map(|(n, v)| toml_value(&v, &n).map(|t| (n, t)))
         .collect::<PyResult<_>>()?;
-    let stop = match stop {
-        None => None,
-        Some(s) if s.is_instance_of::<PyBool>() => {
-            return Err(TwinbenchError::new_err(
-                "stop: expected a time in s or a condition such as \"vehicle.lap >= 1\"",
-            ))
-        }
-        Some(s) => Some(match s.extract::<f64>() {
-            Ok(t) => StopConfig::Time(t),
-            Err(_) => StopConfig::Word(s.extract::<String>().map_err(|_| {
-                TwinbenchError::new_err(
-                    "stop: expected a time in s or a condition such as \"vehicle.lap >= 1\"",
-                )
-            })?),
-        }),
-    };
+    let stop = stop_condition(stop)?;
     let outcome = py.detach(move || -> anyhow::Result<_> {
         let cache = Arc::new(FmuCache::temporary(false)?);
-        // One FMU, run on its own as `twinbench run model.fmu` runs it (its default
-        // experiment, every output, its own variable names).
-        let alone = twinbench::cli::run_fmu::is_fmu(&system);
-        let (mut file, instance) = if alone {
-            use clap::{Args, FromArgMatches};
-            let path = system.to_string_lossy().into_owned();
-            let matches = twinbench::cli::run::RunArgs::augment_args(clap::Command::new("run"))
-                .try_get_matches_from(["run", path.as_str()])?;
-            let args = twinbench::cli::run::RunArgs::from_arg_matches(&matches)?;
-            let (file, instance) = twinbench::cli::run_fmu::system(&args, &cache)?;
-            (file, Some(instance))
-        } else {
-            (Plan::read_system(&system, &cache)?, None)
-        };
+        let (mut file, instance) = system_file(&system, &cache)?;
         if let Some(s) = stop {
             file.experiment.stop = s;
         }
@@ -121,6 +93,60 @@ pub(crate) fn run(
         return Err(e);
     }
     let (summary, lap_time, order, warnings, sim) = outcome.map_err(error)?;
+    result_dict(py, &sim, &summary, lap_time, order, warnings)
+}
+
+/// `stop`: a time in s or a condition as the system file's, never a boolean.
+fn stop_condition(stop: Option<Bound<'_, PyAny>>) -> PyResult<Option<StopConfig>> {
+    Ok(match stop {
+        None => None,
+        Some(s) if s.is_instance_of::<PyBool>() => {
+            return Err(TwinbenchError::new_err(
+                "stop: expected a time in s or a condition such as \"vehicle.lap >= 1\"",
+            ))
+        }
+        Some(s) => Some(match s.extract::<f64>() {
+            Ok(t) => StopConfig::Time(t),
+            Err(_) => StopConfig::Word(s.extract::<String>().map_err(|_| {
+                TwinbenchError::new_err(
+                    "stop: expected a time in s or a condition such as \"vehicle.lap >= 1\"",
+                )
+            })?),
+        }),
+    })
+}
+
+/// The system file of `system`; one FMU is run on its own as `twinbench run model.fmu` runs
+/// it (its default experiment, every output, its own variable names), and its instance's
+/// name comes with it.
+fn system_file(
+    system: &std::path::Path,
+    cache: &Arc<FmuCache>,
+) -> anyhow::Result<(tb_cosim::config::SystemFile, Option<String>)> {
+    let alone = twinbench::cli::run_fmu::is_fmu(system);
+    Ok(if alone {
+        use clap::{Args, FromArgMatches};
+        let path = system.to_string_lossy().into_owned();
+        let matches = twinbench::cli::run::RunArgs::augment_args(clap::Command::new("run"))
+            .try_get_matches_from(["run", path.as_str()])?;
+        let args = twinbench::cli::run::RunArgs::from_arg_matches(&matches)?;
+        let (file, instance) = twinbench::cli::run_fmu::system(&args, cache)?;
+        (file, Some(instance))
+    } else {
+        (Plan::read_system(system, cache)?, None)
+    })
+}
+
+/// The run as Python's `twinbench.run` returns it: names, units, the columns as bytes, the
+/// String columns and the summary.
+fn result_dict(
+    py: Python<'_>,
+    sim: &Simulation,
+    summary: &tb_cosim::RunSummary,
+    lap_time: Option<f64>,
+    order: Vec<String>,
+    warnings: Vec<String>,
+) -> PyResult<Py<PyAny>> {
     let rec = sim.recording();
     let d = PyDict::new(py);
     d.set_item("names", rec.names().to_vec())?;
@@ -141,7 +167,7 @@ pub(crate) fn run(
     d.set_item("columns", columns)?;
     d.set_item("text", text)?;
     let s = PyDict::new(py);
-    s.set_item("system", system_name(&sim))?;
+    s.set_item("system", system_name(sim))?;
     s.set_item("steps", summary.steps)?;
     s.set_item("simulated_time", summary.simulated_time)?;
     s.set_item("wall_time", summary.wall_time)?;

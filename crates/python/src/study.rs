@@ -229,6 +229,50 @@ impl StudyObserver for PyProgress {
     }
 }
 
+/// `optimizer`: ga, cmaes or cma-es.
+fn optimizer_kind(o: &str) -> PyResult<OptimizerKind> {
+    match o {
+        "ga" => Ok(OptimizerKind::Ga),
+        "cmaes" | "cma-es" => Ok(OptimizerKind::Cmaes),
+        _ => Err(TwinbenchError::new_err(format!(
+            "unknown optimiser '{o}' (ga, cmaes)"
+        ))),
+    }
+}
+
+/// Runs the study on a thread of its own while this one, Python's main thread, looks for
+/// Ctrl-C (Python sees a signal only where it holds the GIL): a signal sets `interrupt`,
+/// and the study stops after the generation under way. The result as JSON.
+fn run_watching_signals(
+    py: Python<'_>,
+    args: &twinbench::study::StudyRun,
+    dyn_evaluator: Option<Arc<dyn Evaluator>>,
+    observers: Vec<Arc<dyn StudyObserver>>,
+    interrupt: &AtomicBool,
+) -> anyhow::Result<String> {
+    std::thread::scope(|scope| {
+        let study = scope.spawn(move || {
+            twinbench::study::optimize(args, dyn_evaluator, observers)
+                .and_then(|o| Ok(serde_json::to_string(&o.result)?))
+        });
+        while !study.is_finished() {
+            py.detach(|| std::thread::sleep(std::time::Duration::from_millis(50)));
+            if py.check_signals().is_err() && !interrupt.swap(true, Ordering::SeqCst) {
+                eprintln!("interrupt: stopping after the generation under way");
+            }
+        }
+        study.join().unwrap_or_else(|p| {
+            Err(anyhow::anyhow!(
+                "the study panicked: {}",
+                p.downcast_ref::<String>()
+                    .map(String::as_str)
+                    .or_else(|| p.downcast_ref::<&str>().copied())
+                    .unwrap_or("(no message)")
+            ))
+        })
+    })
+}
+
 /// Runs a study as `twinbench optimize --json` does (same files in `out`); returns the
 /// result as JSON. `executor` and `function`: evaluate the generations there.
 #[pyfunction]
@@ -252,15 +296,7 @@ pub(crate) fn optimize(
     signals: Option<Py<PyAny>>,
     bootstrap: usize,
 ) -> PyResult<String> {
-    let optimizer = optimizer
-        .map(|o| match o.as_str() {
-            "ga" => Ok(OptimizerKind::Ga),
-            "cmaes" | "cma-es" => Ok(OptimizerKind::Cmaes),
-            _ => Err(TwinbenchError::new_err(format!(
-                "unknown optimiser '{o}' (ga, cmaes)"
-            ))),
-        })
-        .transpose()?;
+    let optimizer = optimizer.map(|o| optimizer_kind(&o)).transpose()?;
     let evaluator = match (executor, function) {
         (Some(executor), Some(function)) => Some(Arc::new(ExecutorEvaluator {
             executor,
@@ -305,27 +341,7 @@ pub(crate) fn optimize(
         observers.push(p.clone());
     }
     observers.push(Arc::new(StopOnFlag(interrupt.clone())));
-    let result = std::thread::scope(|scope| {
-        let study = scope.spawn(move || {
-            twinbench::study::optimize(&args, dyn_evaluator, observers)
-                .and_then(|o| Ok(serde_json::to_string(&o.result)?))
-        });
-        while !study.is_finished() {
-            py.detach(|| std::thread::sleep(std::time::Duration::from_millis(50)));
-            if py.check_signals().is_err() && !interrupt.swap(true, Ordering::SeqCst) {
-                eprintln!("interrupt: stopping after the generation under way");
-            }
-        }
-        study.join().unwrap_or_else(|p| {
-            Err(anyhow::anyhow!(
-                "the study panicked: {}",
-                p.downcast_ref::<String>()
-                    .map(String::as_str)
-                    .or_else(|| p.downcast_ref::<&str>().copied())
-                    .unwrap_or("(no message)")
-            ))
-        })
-    });
+    let result = run_watching_signals(py, &args, dyn_evaluator, observers, &interrupt);
     if let Some(e) = evaluator.and_then(|e| e.raised.lock().ok().and_then(|mut r| r.take())) {
         return Err(e);
     }
