@@ -372,6 +372,21 @@ const fn find(table: &[VarInfo], vr: u32) -> Option<&VarInfo> {
 /// references), then its own attributes, then its dependencies. The first broken rule.
 pub const fn check_variable(table: &[VarInfo], index: usize) -> Result<(), TableError> {
     let a = &table[index];
+    if let Err(e) = check_unique(table, index) {
+        return Err(e);
+    }
+    if let Err(e) = check_attributes(a) {
+        return Err(e);
+    }
+    if let Err(e) = check_enumeration(a) {
+        return Err(e);
+    }
+    check_dependencies(table, a)
+}
+
+/// Its name and value reference against the later variables'.
+const fn check_unique(table: &[VarInfo], index: usize) -> Result<(), TableError> {
+    let a = &table[index];
     let mut j = index + 1;
     while j < table.len() {
         let b = &table[j];
@@ -387,6 +402,12 @@ pub const fn check_variable(table: &[VarInfo], index: usize) -> Result<(), Table
         }
         j += 1;
     }
+    Ok(())
+}
+
+/// Its own attributes: a known unit, a description, what its type allows, the start within
+/// the range.
+const fn check_attributes(a: &VarInfo) -> Result<(), TableError> {
     if let Some(unit) = a.unit {
         if !known_unit(unit) {
             return Err(TableError::UnknownUnit { name: a.name, unit });
@@ -417,6 +438,11 @@ pub const fn check_variable(table: &[VarInfo], index: usize) -> Result<(), Table
             return Err(TableError::StartOutsideRange { name: a.name });
         }
     }
+    Ok(())
+}
+
+/// An Enumeration's items numbered from 1 and its start one of them.
+const fn check_enumeration(a: &VarInfo) -> Result<(), TableError> {
     if let Some(t) = a.enumeration {
         let mut ok =
             !t.items.is_empty() && a.unit.is_none() && matches!(a.start, Value::Integer(_));
@@ -432,6 +458,11 @@ pub const fn check_variable(table: &[VarInfo], index: usize) -> Result<(), Table
             return Err(TableError::BadEnumeration { name: a.name });
         }
     }
+    Ok(())
+}
+
+/// Dependencies only of outputs: on inputs, and at initialisation on inputs and parameters.
+const fn check_dependencies(table: &[VarInfo], a: &VarInfo) -> Result<(), TableError> {
     let declares = !a.depends_on.is_empty() || !a.init_depends_on.is_empty();
     if declares && !matches!(a.causality, Causality::Output) {
         return Err(TableError::DependenciesOfNonOutput { name: a.name });

@@ -217,22 +217,8 @@ pub fn initial_dependencies(table: &[VarInfo], v: &VarInfo) -> Vec<usize> {
     deps
 }
 
-/// Fill the modelDescription.xml template (fmu-templates/modelDescription.xml).
-pub fn render_model_description<M: Model>(template: &str, generation_tool: &str) -> String {
-    render_fitted_description::<M>(template, generation_tool, &Fitting::default())
-}
-
-/// [`render_model_description`] of a fitted twin: its start values, GUID, description and
-/// provenance annotation from `fitting`.
-pub fn render_fitted_description<M: Model>(
-    template: &str,
-    generation_tool: &str,
-    fitting: &Fitting,
-) -> String {
-    let info = M::INFO;
-    let table = M::Vars::VARIABLES;
-    let index_of_vr = |vr: u32| table.iter().position(|v| v.value_reference == vr).unwrap() + 1;
-
+/// `<UnitDefinitions>`' units: each unit the model's variables use, once.
+fn unit_definitions<M: Model>() -> String {
     let mut unit_defs = String::new();
     for u in used_units::<M>() {
         unit_defs.push_str(&format!(
@@ -241,7 +227,11 @@ pub fn render_fitted_description<M: Model>(
             u.base_unit_attributes()
         ));
     }
-    // The Enumeration types, each once (FMI 2.0: between the units and the log categories).
+    unit_defs
+}
+
+/// The Enumeration types, each once (FMI 2.0: between the units and the log categories).
+fn type_definitions(table: &[VarInfo]) -> String {
     let types = enumeration_types(table);
     let mut type_defs = String::new();
     if !types.is_empty() {
@@ -264,6 +254,11 @@ pub fn render_fitted_description<M: Model>(
         }
         type_defs.push_str("  </TypeDefinitions>\n");
     }
+    type_defs
+}
+
+/// `<LogCategories>`' entries.
+fn log_categories() -> String {
     let mut categories = String::new();
     for (name, desc) in LOG_CATEGORIES {
         categories.push_str(&format!(
@@ -271,8 +266,12 @@ pub fn render_fitted_description<M: Model>(
             xml_escape(desc)
         ));
     }
-    let variables: String = table.iter().map(|v| scalar_variable(v, fitting)).collect();
+    categories
+}
 
+/// `<ModelStructure>`: the outputs with their dependencies and the initial unknowns.
+fn model_structure(table: &[VarInfo]) -> String {
+    let index_of_vr = |vr: u32| table.iter().position(|v| v.value_reference == vr).unwrap() + 1;
     let mut outputs = String::new();
     let mut initial_unknowns = String::new();
     for (i, v) in table.iter().enumerate() {
@@ -316,6 +315,30 @@ pub fn render_fitted_description<M: Model>(
             "    <InitialUnknowns>\n{initial_unknowns}    </InitialUnknowns>\n"
         ));
     }
+    structure
+}
+
+/// Fill the modelDescription.xml template (fmu-templates/modelDescription.xml).
+pub fn render_model_description<M: Model>(template: &str, generation_tool: &str) -> String {
+    render_fitted_description::<M>(template, generation_tool, &Fitting::default())
+}
+
+/// [`render_model_description`] of a fitted twin: its start values, GUID, description and
+/// provenance annotation from `fitting`.
+pub fn render_fitted_description<M: Model>(
+    template: &str,
+    generation_tool: &str,
+    fitting: &Fitting,
+) -> String {
+    let info = M::INFO;
+    let table = M::Vars::VARIABLES;
+
+    let unit_defs = unit_definitions::<M>();
+    let type_defs = type_definitions(table);
+    let categories = log_categories();
+    let variables: String = table.iter().map(|v| scalar_variable(v, fitting)).collect();
+
+    let structure = model_structure(table);
     let de = info.default_experiment;
     let default_experiment = format!(
         "<DefaultExperiment startTime=\"{}\" stopTime=\"{}\" stepSize=\"{}\"/>",

@@ -81,31 +81,8 @@ fn variable(v: &VarInfo, fitting: &Fitting) -> String {
     s
 }
 
-/// The FMI 3.0 modelDescription.xml of `M`.
-pub fn render_model_description3<M: Model>(generation_tool: &str) -> String {
-    render_fitted_description3::<M>(generation_tool, &Fitting::default())
-}
-
-/// [`render_model_description3`] of a fitted twin (see [`Fitting`]).
-pub fn render_fitted_description3<M: Model>(generation_tool: &str, fitting: &Fitting) -> String {
-    let info = M::INFO;
-    let table = M::Vars::VARIABLES;
-    let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
-    s.push_str(&format!(
-        "<fmiModelDescription\n  fmiVersion=\"3.0\"\n  modelName=\"{}\"\n  instantiationToken=\"{}\"\n  description=\"{}\"\n  version=\"{}\"\n  generationTool=\"{}\"\n  variableNamingConvention=\"flat\">\n",
-        xml_escape(info.name),
-        fitting
-            .token
-            .clone()
-            .unwrap_or_else(instantiation_token::<M>),
-        xml_escape(fitting.description.as_deref().unwrap_or(info.description)),
-        xml_escape(info.version),
-        xml_escape(generation_tool)
-    ));
-    s.push_str(&format!(
-        "  <CoSimulation\n    modelIdentifier=\"{}\"\n    needsExecutionTool=\"false\"\n    canBeInstantiatedOnlyOncePerProcess=\"false\"\n    canGetAndSetFMUState=\"true\"\n    canSerializeFMUState=\"true\"\n    providesDirectionalDerivatives=\"false\"\n    providesAdjointDerivatives=\"false\"\n    providesPerElementDependencies=\"false\"\n    canHandleVariableCommunicationStepSize=\"true\"\n    maxOutputDerivativeOrder=\"0\"\n    providesIntermediateUpdate=\"false\"\n    mightReturnEarlyFromDoStep=\"false\"\n    canReturnEarlyAfterIntermediateUpdate=\"false\"\n    hasEventMode=\"false\"\n    providesEvaluateDiscreteStates=\"false\"/>\n",
-        xml_escape(info.identifier)
-    ));
+/// The units (each once), the Enumeration types and the log categories.
+fn push_definitions(s: &mut String, table: &[VarInfo]) {
     // Units, each once.
     let mut names: Vec<&str> = table.iter().filter_map(|v| v.unit).collect();
     names.sort_unstable();
@@ -151,22 +128,12 @@ pub fn render_fitted_description3<M: Model>(generation_tool: &str, fitting: &Fit
         ));
     }
     s.push_str("  </LogCategories>\n");
-    let de = info.default_experiment;
-    s.push_str(&format!(
-        "  <DefaultExperiment startTime=\"{}\" stopTime=\"{}\" stepSize=\"{}\"/>\n",
-        format_real(de.start_time),
-        format_real(de.stop_time),
-        format_real(de.step_size)
-    ));
-    s.push_str("  <ModelVariables>\n");
-    s.push_str(&format!(
-        "    <Float64 name=\"time\" valueReference=\"{}\" description=\"Simulation time\" causality=\"independent\" variability=\"continuous\" unit=\"s\"/>\n",
-        time_value_reference::<M::Vars>()
-    ));
-    for v in table {
-        s.push_str(&variable(v, fitting));
-    }
-    s.push_str("  </ModelVariables>\n  <ModelStructure>\n");
+}
+
+/// `<ModelStructure>`: the outputs and the initial unknowns with their dependencies, by
+/// value reference.
+fn push_model_structure(s: &mut String, table: &[VarInfo]) {
+    s.push_str("  <ModelStructure>\n");
     let vrs = |deps: &mut dyn Iterator<Item = u32>| {
         deps.map(|d| d.to_string()).collect::<Vec<_>>().join(" ")
     };
@@ -194,6 +161,51 @@ pub fn render_fitted_description3<M: Model>(generation_tool: &str, fitting: &Fit
         }
     }
     s.push_str("  </ModelStructure>\n");
+}
+
+/// The FMI 3.0 modelDescription.xml of `M`.
+pub fn render_model_description3<M: Model>(generation_tool: &str) -> String {
+    render_fitted_description3::<M>(generation_tool, &Fitting::default())
+}
+
+/// [`render_model_description3`] of a fitted twin (see [`Fitting`]).
+pub fn render_fitted_description3<M: Model>(generation_tool: &str, fitting: &Fitting) -> String {
+    let info = M::INFO;
+    let table = M::Vars::VARIABLES;
+    let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
+    s.push_str(&format!(
+        "<fmiModelDescription\n  fmiVersion=\"3.0\"\n  modelName=\"{}\"\n  instantiationToken=\"{}\"\n  description=\"{}\"\n  version=\"{}\"\n  generationTool=\"{}\"\n  variableNamingConvention=\"flat\">\n",
+        xml_escape(info.name),
+        fitting
+            .token
+            .clone()
+            .unwrap_or_else(instantiation_token::<M>),
+        xml_escape(fitting.description.as_deref().unwrap_or(info.description)),
+        xml_escape(info.version),
+        xml_escape(generation_tool)
+    ));
+    s.push_str(&format!(
+        "  <CoSimulation\n    modelIdentifier=\"{}\"\n    needsExecutionTool=\"false\"\n    canBeInstantiatedOnlyOncePerProcess=\"false\"\n    canGetAndSetFMUState=\"true\"\n    canSerializeFMUState=\"true\"\n    providesDirectionalDerivatives=\"false\"\n    providesAdjointDerivatives=\"false\"\n    providesPerElementDependencies=\"false\"\n    canHandleVariableCommunicationStepSize=\"true\"\n    maxOutputDerivativeOrder=\"0\"\n    providesIntermediateUpdate=\"false\"\n    mightReturnEarlyFromDoStep=\"false\"\n    canReturnEarlyAfterIntermediateUpdate=\"false\"\n    hasEventMode=\"false\"\n    providesEvaluateDiscreteStates=\"false\"/>\n",
+        xml_escape(info.identifier)
+    ));
+    push_definitions(&mut s, table);
+    let de = info.default_experiment;
+    s.push_str(&format!(
+        "  <DefaultExperiment startTime=\"{}\" stopTime=\"{}\" stepSize=\"{}\"/>\n",
+        format_real(de.start_time),
+        format_real(de.stop_time),
+        format_real(de.step_size)
+    ));
+    s.push_str("  <ModelVariables>\n");
+    s.push_str(&format!(
+        "    <Float64 name=\"time\" valueReference=\"{}\" description=\"Simulation time\" causality=\"independent\" variability=\"continuous\" unit=\"s\"/>\n",
+        time_value_reference::<M::Vars>()
+    ));
+    for v in table {
+        s.push_str(&variable(v, fitting));
+    }
+    s.push_str("  </ModelVariables>\n");
+    push_model_structure(&mut s, table);
     if let Some(a) = &fitting.annotation {
         s.push_str(&format!(
             "  <Annotations>\n    <Annotation type=\"twinbench\">\n{a}    </Annotation>\n  </Annotations>\n"
