@@ -544,6 +544,32 @@ fn study_toml(o: &LapOptions, name: &str) -> String {
     )
 }
 
+/// The third step of a study on the second-order chassis: its pitch and roll modes.
+const CHASSIS_STEP: &str = r#"
+# Step 3: the second-order chassis' pitch and roll modes (system.toml sets
+# vehicle.chassis_model = "second_order"), validated on the four wheel loads and the
+# accelerations the loads follow.
+[[step]]
+name = "chassis"
+signals = ["Fz_rl", "Fz_rr", "Fz_fl", "Fz_fr"]
+[[step.parameter]]
+name = "vehicle.pitch_frequency"
+min = 0.5
+max = 8.0
+[[step.parameter]]
+name = "vehicle.pitch_damping"
+min = 0.1
+max = 1.5
+[[step.parameter]]
+name = "vehicle.roll_frequency"
+min = 0.5
+max = 8.0
+[[step.parameter]]
+name = "vehicle.roll_damping"
+min = 0.1
+max = 1.5
+"#;
+
 /// The study file's text: its measurement part given (one `[measurement]` or several
 /// `[[measurement]]`), the rest the paper's two steps, and with the second-order chassis a
 /// third that fits its modes.
@@ -625,32 +651,7 @@ max = 2.0
         },
     );
     if chassis == Chassis::SecondOrder {
-        text.push_str(
-            r#"
-# Step 3: the second-order chassis' pitch and roll modes (system.toml sets
-# vehicle.chassis_model = "second_order"), validated on the four wheel loads and the
-# accelerations the loads follow.
-[[step]]
-name = "chassis"
-signals = ["Fz_rl", "Fz_rr", "Fz_fl", "Fz_fr"]
-[[step.parameter]]
-name = "vehicle.pitch_frequency"
-min = 0.5
-max = 8.0
-[[step.parameter]]
-name = "vehicle.pitch_damping"
-min = 0.1
-max = 1.5
-[[step.parameter]]
-name = "vehicle.roll_frequency"
-min = 0.5
-max = 8.0
-[[step.parameter]]
-name = "vehicle.roll_damping"
-min = 0.1
-max = 1.5
-"#,
-        );
+        text.push_str(CHASSIS_STEP);
     }
     text
 }
