@@ -288,6 +288,7 @@ fn run_frf(a: FrfArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The FRF at log-spaced frequencies beside the fitted model, then the fit.
 fn frf_table(frf: &Frf, f: &FrfFit, a: &FrfArgs, ts: &TimeSeries, w: &WelchConfig) -> String {
     let mut s = String::new();
     let _ = writeln!(
@@ -337,6 +338,13 @@ fn frf_table(frf: &Frf, f: &FrfFit, a: &FrfArgs, ts: &TimeSeries, w: &WelchConfi
             model_phase[k].to_degrees()
         );
     }
+    write_fit(&mut s, frf, f, a, ts);
+    s
+}
+
+/// The fitted lag below the FRF table: its order and model, the dead time, the time constant
+/// or mode, the gain and residual, and the low-frequency group delay it explains.
+fn write_fit(s: &mut String, frf: &Frf, f: &FrfFit, a: &FrfArgs, ts: &TimeSeries) {
     let _ = writeln!(
         s,
         "\nFit ({} order lag, {} model, {:.1}–{:.1} Hz, {} bins with coherence ≥ {}):",
@@ -393,7 +401,6 @@ fn frf_table(frf: &Frf, f: &FrfFit, a: &FrfArgs, ts: &TimeSeries, w: &WelchConfi
             ms(coherent.iter().sum::<f64>() / coherent.len() as f64)
         );
     }
-    s
 }
 
 fn plots(frf: &Frf, f: &FrfFit, stem: &Path) -> anyhow::Result<()> {
