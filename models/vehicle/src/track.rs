@@ -68,37 +68,7 @@ impl Track {
                     format!("{} fields, the header has {}", fields.len(), names.len()),
                 ));
             }
-            let mut x = [0.0; 5];
-            for k in 0..5 {
-                let f = fields[col[k]];
-                x[k] = f.parse::<f64>().map_err(|_| {
-                    err(
-                        line,
-                        format!(
-                            "column '{}': '{}' is not a number",
-                            COLUMNS[k],
-                            fmu_export::excerpt(f)
-                        ),
-                    )
-                })?;
-                if !x[k].is_finite() {
-                    return Err(err(
-                        line,
-                        format!("column '{}': {f} is not finite", COLUMNS[k]),
-                    ));
-                }
-            }
-            if let Some(k) = (1..5).find(|&k| x[k].abs() > LIMITS[k - 1]) {
-                return Err(err(
-                    line,
-                    format!(
-                        "column '{}': {:?} is more than a circuit has (at most {} in size)",
-                        COLUMNS[k],
-                        x[k],
-                        LIMITS[k - 1]
-                    ),
-                ));
-            }
+            let x = row_values(file, line, &fields, &col)?;
             if let Some(&prev) = s.last() {
                 if x[0] <= prev {
                     return Err(err(
@@ -227,6 +197,49 @@ impl Track {
             z_right: lerp(a.z_right, b.z_right),
         }
     }
+}
+
+/// The five numbers of a data row (`col`: where each of [`COLUMNS`] is among the fields),
+/// each finite and of a circuit's size.
+fn row_values(
+    file: &str,
+    line: usize,
+    fields: &[&str],
+    col: &[usize; 5],
+) -> Result<[f64; 5], ModelError> {
+    let err = |line: usize, msg: String| ModelError::new(format!("{file}: row {line}: {msg}"));
+    let mut x = [0.0; 5];
+    for k in 0..5 {
+        let f = fields[col[k]];
+        x[k] = f.parse::<f64>().map_err(|_| {
+            err(
+                line,
+                format!(
+                    "column '{}': '{}' is not a number",
+                    COLUMNS[k],
+                    fmu_export::excerpt(f)
+                ),
+            )
+        })?;
+        if !x[k].is_finite() {
+            return Err(err(
+                line,
+                format!("column '{}': {f} is not finite", COLUMNS[k]),
+            ));
+        }
+    }
+    if let Some(k) = (1..5).find(|&k| x[k].abs() > LIMITS[k - 1]) {
+        return Err(err(
+            line,
+            format!(
+                "column '{}': {:?} is more than a circuit has (at most {} in size)",
+                COLUMNS[k],
+                x[k],
+                LIMITS[k - 1]
+            ),
+        ));
+    }
+    Ok(x)
 }
 
 #[cfg(test)]
