@@ -554,6 +554,38 @@ impl Simulation {
         Ok(out)
     }
 
+    /// Before a run: no rows, values or replay positions of an earlier one (a run that fails
+    /// before its start keeps none of them).
+    fn clear_last_run(&mut self) {
+        self.recording.table_mut().clear();
+        self.ex.signals.iter_mut().for_each(|s| *s = 0.0);
+        for u in &mut self.ex.units {
+            if let Unit::Replay(r) = u {
+                r.cursor = Cursor::default();
+            }
+        }
+    }
+
+    /// After a run: every instance is ended, even after one fails to end; the first error
+    /// is reported with the (complete) run's summary.
+    fn terminate_all(&mut self, summary: RunSummary) -> Result<RunSummary, SystemError> {
+        let mut first_error = None;
+        for u in &mut self.ex.units {
+            if let Unit::Fmu(f) = u {
+                if let Err(e) = f.backend().terminate() {
+                    first_error.get_or_insert(e);
+                }
+            }
+        }
+        match first_error {
+            None => Ok(summary),
+            Some(e) => Err(SystemError::AfterRun {
+                summary: Box::new(summary),
+                error: Box::new(e.into()),
+            }),
+        }
+    }
+
     /// Run the experiment once (again: instances are reset and reused).
     pub fn run(&mut self) -> Result<RunSummary, SystemError> {
         let wall = Instant::now();
@@ -564,14 +596,7 @@ impl Simulation {
             Stop::Time(t) => (Some(*t), None),
             Stop::When { max_time, .. } => (None, Some(*max_time)),
         };
-        // A run that fails before its start keeps no rows of an earlier one.
-        self.recording.table_mut().clear();
-        self.ex.signals.iter_mut().for_each(|s| *s = 0.0);
-        for u in &mut self.ex.units {
-            if let Unit::Replay(r) = u {
-                r.cursor = Cursor::default();
-            }
-        }
+        self.clear_last_run();
         // Integer ticks: t_k = start + k·h exactly, no accumulated drift.
         let span = fixed_stop.unwrap_or(start + max_time.unwrap_or(0.0)) - start;
         let mut run = RunState {
@@ -635,13 +660,7 @@ impl Simulation {
             ended = Ended::Observer(reason);
         }
         self.notify_finished(t_end, &mut run, &ended)?;
-        let stopped_by = match &ended {
-            Ended::Horizon => format!("stop time {} s", start + span),
-            Ended::Observer(reason) => reason.clone(),
-            Ended::Fmu { instance } => format!(
-                "instance '{instance}' asked to end the simulation at t = {t_end} s (fmi2Discard with fmi2Terminated, or fmi3DoStep's terminateSimulation)"
-            ),
-        };
+        let stopped_by = stopped_by(&ended, start + span, t_end);
         let reported = self.read_reported()?;
         let summary = RunSummary {
             steps: k,
@@ -650,22 +669,17 @@ impl Simulation {
             stopped_by,
             reported,
         };
-        // Every instance is ended, even after one fails to end; the first error is reported
-        // with the (complete) run's summary.
-        let mut first_error = None;
-        for u in &mut self.ex.units {
-            if let Unit::Fmu(f) = u {
-                if let Err(e) = f.backend().terminate() {
-                    first_error.get_or_insert(e);
-                }
-            }
-        }
-        match first_error {
-            None => Ok(summary),
-            Some(e) => Err(SystemError::AfterRun {
-                summary: Box::new(summary),
-                error: Box::new(e.into()),
-            }),
-        }
+        self.terminate_all(summary)
+    }
+}
+
+/// What ended a run, as its summary says it.
+fn stopped_by(ended: &Ended, stop_time: f64, t_end: f64) -> String {
+    match ended {
+        Ended::Horizon => format!("stop time {} s", stop_time),
+        Ended::Observer(reason) => reason.clone(),
+        Ended::Fmu { instance } => format!(
+            "instance '{instance}' asked to end the simulation at t = {t_end} s (fmi2Discard with fmi2Terminated, or fmi3DoStep's terminateSimulation)"
+        ),
     }
 }
