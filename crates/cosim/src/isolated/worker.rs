@@ -519,7 +519,8 @@ fn get(i: &mut dyn Backend, op: Request<'_>) -> Result<Values, Failure> {
     })
 }
 
-#[cfg(test)]
+// These run a model linked in natively: they need the `native` feature (on by default).
+#[cfg(all(test, feature = "native"))]
 mod tests {
     use super::*;
     use crate::native::NativeBackend;
