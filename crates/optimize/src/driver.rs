@@ -5,6 +5,7 @@
 use super::bench::{Bench, LapBench};
 use super::checkpoint::{Checkpoint, Current, StepStart};
 use super::cmaes::Cmaes;
+use super::cost::StepCost;
 use super::exact;
 use super::fit::{Frame, Refinement, Series};
 use super::ga::Ga;
@@ -14,7 +15,7 @@ use super::optimizer::{
     RunSettings, RunState,
 };
 use super::pool::Outcome;
-use super::remote::{Candidate, Evaluator, StepCost};
+use super::remote::{Candidate, Evaluator};
 use super::study::{OptimizerKind, StepConfig, Study};
 use super::OptimizeError;
 use serde::{Deserialize, Serialize};
@@ -24,6 +25,10 @@ use std::sync::Arc;
 use std::time::Instant;
 use tb_compare::{Comparison, Metrics, PreparedMeasurement, Table, Workspace};
 use tb_fmi::FmuCache;
+
+// The cost lives in its own file (the bench and a remote worker share it); named here too,
+// where callers have always found it.
+pub use super::cost::cost_of;
 
 /// What watches a study while it runs: told of every step and generation and of its
 /// result. The library draws nothing and decides nothing here: the command line's progress
@@ -394,21 +399,6 @@ pub enum StudyOutcome {
     Interrupted {
         generations: usize,
     },
-}
-
-/// The cost of a comparison: Σ w·(e + β·|bias|) / Σ w over the step's signals.
-pub fn cost_of(cmp: &Comparison, signals: &[String], weights: &[f64], bias_weight: f64) -> f64 {
-    let mut num = 0.0;
-    let mut den = 0.0;
-    for (s, w) in signals.iter().zip(weights) {
-        let m = match cmp.get(s) {
-            Some(m) => m,
-            None => return f64::NAN,
-        };
-        num += w * (m.e + bias_weight * m.bias.abs());
-        den += w;
-    }
-    num / den
 }
 
 /// One step's cost over the bench.

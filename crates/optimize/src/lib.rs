@@ -36,6 +36,7 @@ pub mod bench;
 pub mod bootstrap;
 pub mod checkpoint;
 pub mod cmaes;
+mod cost;
 pub mod driver;
 pub mod exact;
 pub mod fit;
@@ -52,6 +53,7 @@ pub mod rng;
 pub mod study;
 
 pub use cmaes::{Cmaes, CmaesSettings};
+pub use cost::StepCost;
 pub use driver::{
     run_study, GenerationDone, PhaseProgress, RunOptions, StepResult, StopAfter, StopOnFlag,
     StudyObserver, StudyOutcome, StudyResult,
@@ -61,7 +63,7 @@ pub use identifiability::Identifiability;
 pub use interval::{Intervals, ParameterInterval};
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
 pub use pool::WorkerPool;
-pub use remote::{Candidate, Evaluator, InputDigest, LapSignals, StepCost, StudyEvaluator};
+pub use remote::{Candidate, Evaluator, InputDigest, LapSignals, StudyEvaluator};
 pub use rng::Rng;
 pub use study::{OptimizerKind, Study, StudyFile};
 
