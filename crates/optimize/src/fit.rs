@@ -33,8 +33,9 @@
 //! The same iteration with one parameter held re-optimises the others at a profile point
 //! ([`crate::profile`]).
 
+use super::block::Block;
 use super::cmaes::symmetric_eigen;
-use super::interval::{Block, REL_STEP};
+use super::interval::REL_STEP;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;

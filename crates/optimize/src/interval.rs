@@ -32,6 +32,7 @@
 //! autocorrelation (fewer than 8 × 10 points) is said too. Each such case carries a
 //! statement in words.
 
+use crate::block::Block;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use tb_compare::{PreparedMeasurement, Table, Workspace};
@@ -274,21 +275,6 @@ pub(crate) fn at_optimum(
         });
     }
     sandwich(names, x, bounds, &blocks, laps)
-}
-
-/// One signal's residuals and sensitivity rows from grid point `start` on.
-pub(crate) struct Block {
-    pub start: usize,
-    pub residual: Vec<f64>,
-    /// ∂(simulated)/∂θ_i at each grid point, in the parameters' own units.
-    pub rows: Vec<Vec<f64>>,
-    pub weight: f64,
-    /// The lap the block belongs to: the long-run covariance sums within a lap only.
-    pub segment: usize,
-    /// The factor w_s/σ_s² when the fit held it fixed ([`crate::fit`]: the sandwich must
-    /// weigh the residuals as the objective did); `None`: w_s over the block's own mean
-    /// squared residual.
-    pub factor: Option<f64>,
 }
 
 /// The sandwich covariance from the signals' blocks, and the intervals from it.

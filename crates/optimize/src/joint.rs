@@ -229,7 +229,7 @@ const LOAD_NOISE_FLOOR_N: f64 = 2.0;
 /// then none, saying why.
 fn noise_floor(
     iv: crate::interval::Intervals,
-    blocks: &[crate::interval::Block],
+    blocks: &[crate::block::Block],
     j: &JointProblem,
     x: &[f64],
 ) -> crate::interval::Intervals {
@@ -288,7 +288,7 @@ fn lap_clocks(session: &Session) -> Option<Vec<Vec<f64>>> {
 fn model_check(
     session: &Session,
     j: &JointProblem,
-    blocks: &[crate::interval::Block],
+    blocks: &[crate::block::Block],
     x: &[f64],
     iv: &crate::interval::Intervals,
 ) -> Option<crate::model_check::Outcome> {

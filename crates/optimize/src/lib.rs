@@ -33,6 +33,7 @@
 //! (bit-exact optimiser state in the checkpoint) the same result as an uninterrupted one.
 
 pub mod bench;
+mod block;
 pub mod bootstrap;
 pub mod checkpoint;
 pub mod cmaes;

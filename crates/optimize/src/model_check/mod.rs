@@ -32,7 +32,7 @@
 //! where it is not, the parameters are no longer asked to stand in for the missing
 //! dynamics, and the interval moves and widens to what the lap can tell.
 
-use crate::interval::Block;
+use crate::block::Block;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
