@@ -2,9 +2,13 @@
 //! ([`crate::fit`]), the intervals there, and what is made at that point on request or
 //! where it can be (the profiles, the bootstrap, the model check).
 
-use super::fit::{Frame, Refinement, Series};
+use super::bootstrap::Bootstrap;
+use super::fit::{Frame, Laps, Refinement, Series, Solution};
+use super::interval::Intervals;
 use super::observe::Phases;
 use super::optimizer::thread_pool;
+use super::profile::Profiles;
+use super::remote::Evaluator;
 use super::results::StepResult;
 use super::session::{Session, StudyState};
 use super::study::Study;
@@ -72,70 +76,11 @@ pub(crate) fn joint_answer(
     };
     if !study.file.refine {
         // One fitted lap (the study's check): the intervals at the steps' answer.
-        let run = |y: &[f64]| workers.run(&values(y), &prepared[0]).map(|o| o.table);
-        let best = state
-            .laps
-            .optimized
-            .as_ref()
-            .expect("the final lap is run before the intervals");
-        let iv = crate::interval::at_optimum(
-            &j.names,
-            &j.signals,
-            &j.weights,
-            &x,
-            &j.bounds,
-            &prepared[0],
-            best,
-            &session.pool,
-            run,
-        );
+        let iv = intervals_at_steps_answer(session, state, j, prepared, &x, &values);
         return Ok((None, iv, None, None, None));
     }
-    // One series per lap and signal; each lap a segment of its own for the long-run
-    // covariance (laps are independent of each other).
-    let series: Vec<Series> = prepared
-        .iter()
-        .enumerate()
-        .flat_map(|(k, p)| {
-            let label = bench.label(k);
-            j.signals.iter().zip(&j.weights).map(move |(s, &w)| Series {
-                name: match &label {
-                    Some(l) => format!("{s} of lap '{l}'"),
-                    None => s.clone(),
-                },
-                weight: w,
-                measured: p.measured(s).unwrap_or(&[]),
-                segment: k,
-            })
-        })
-        .collect();
-    // The laps of a batch of points: on the evaluator's workers when the study has one
-    // (each point one task, which runs its laps and returns the filtered signals), else
-    // on this process's threads; the same signals to the bit either way.
-    let remote = session.options.evaluator.as_deref();
-    let local = crate::fit::on_pool(&session.pool, |y: &[f64]| {
-        bench.signals(&values(y), prepared, &j.signals)
-    });
-    let simulate_points = |points: &[Vec<f64>]| -> Vec<crate::fit::Simulated> {
-        let Some(remote) = remote else {
-            return local(points);
-        };
-        let all: Vec<Vec<f64>> = points.iter().map(|y| values(y)).collect();
-        match remote.signals(&all) {
-            Ok(runs) => runs
-                .into_iter()
-                .map(|r| {
-                    r.map(|series| {
-                        series
-                            .into_iter()
-                            .map(|(start, v)| (start..start + v.len(), v))
-                            .collect()
-                    })
-                })
-                .collect(),
-            Err(why) => vec![Err(format!("the evaluator failed: {why}")); points.len()],
-        }
-    };
+    let series = joint_series(session, j, prepared);
+    let simulate_points = joint_laps(session, j, prepared, &values);
     let phases = Phases::new(&session.options.observers, &j.names, prepared.len());
     let simulate = |points: &[Vec<f64>]| -> Vec<crate::fit::Simulated> {
         let runs = simulate_points(points);
@@ -176,48 +121,180 @@ pub(crate) fn joint_answer(
         converged: solution.converged,
         statement: solution.statement.clone(),
     };
-    let profiles = (study.file.profiles || session.options.profiles).then(|| {
-        let units: Vec<Option<String>> = j
-            .names
-            .iter()
-            .map(|n| workers.parameter_unit(n).map(str::to_string))
-            .collect();
-        // On an evaluator every walk (two per parameter) waits on its own tasks, so all of
-        // them run at once and the cluster gets every walk's laps together.
-        let walks = remote.and_then(|_| thread_pool(2 * j.names.len()).ok());
-        phases.begin("profiles");
-        let profiles = crate::profile::profiles(
-            &frame,
-            &j.names,
-            &units,
-            &solution,
-            iv.critical_value,
-            walks.as_ref().unwrap_or(&session.pool),
-        );
-        phases.ran(0, true);
-        profiles
-    });
+    let profiles = (study.file.profiles || session.options.profiles)
+        .then(|| joint_profiles(session, j, &frame, &solution, &iv, &phases));
     let replicates = study.file.bootstrap.max(session.options.bootstrap);
-    let bootstrap = (replicates > 0).then(|| {
-        let se: Vec<Option<f64>> = j
-            .names
-            .iter()
-            .map(|n| iv.get(n).and_then(|p| p.std_error))
-            .collect();
-        phases.begin("bootstrap");
-        let bootstrap = crate::bootstrap::run(
-            &mut frame,
-            &solution,
-            &j.names,
-            &se,
-            replicates,
-            study.file.seed,
-        );
-        phases.ran(0, true);
-        bootstrap
-    });
+    let bootstrap = (replicates > 0)
+        .then(|| joint_bootstrap(session, j, &mut frame, &solution, &iv, &phases, replicates));
     state.set(&index, &solution.x);
     Ok((Some(refinement), iv, profiles, checked, bootstrap))
+}
+
+/// Without the refinement (`refine = false`): the intervals at the steps' answer `x`,
+/// around the final lap the study already ran. `values(y)` is every parameter's value with
+/// the study's parameters at `y`.
+fn intervals_at_steps_answer<V>(
+    session: &Session,
+    state: &StudyState,
+    j: &JointProblem,
+    prepared: &[PreparedMeasurement],
+    x: &[f64],
+    values: &V,
+) -> Intervals
+where
+    V: Fn(&[f64]) -> Vec<f64> + Sync,
+{
+    let workers = session.bench.workers();
+    let run = |y: &[f64]| workers.run(&values(y), &prepared[0]).map(|o| o.table);
+    let best = state
+        .laps
+        .optimized
+        .as_ref()
+        .expect("the final lap is run before the intervals");
+    crate::interval::at_optimum(
+        &j.names,
+        &j.signals,
+        &j.weights,
+        x,
+        &j.bounds,
+        &prepared[0],
+        best,
+        &session.pool,
+        run,
+    )
+}
+
+/// One series per lap and signal; each lap a segment of its own for the long-run
+/// covariance (laps are independent of each other).
+fn joint_series<'a>(
+    session: &Session,
+    j: &'a JointProblem,
+    prepared: &'a [PreparedMeasurement],
+) -> Vec<Series<'a>> {
+    let bench = &session.bench;
+    prepared
+        .iter()
+        .enumerate()
+        .flat_map(|(k, p)| {
+            let label = bench.label(k);
+            j.signals.iter().zip(&j.weights).map(move |(s, &w)| Series {
+                name: match &label {
+                    Some(l) => format!("{s} of lap '{l}'"),
+                    None => s.clone(),
+                },
+                weight: w,
+                measured: p.measured(s).unwrap_or(&[]),
+                segment: k,
+            })
+        })
+        .collect()
+}
+
+/// The laps of a batch of points: on the evaluator's workers when the study has one
+/// (each point one task, which runs its laps and returns the filtered signals), else
+/// on this process's threads; the same signals to the bit either way. `values(y)` is
+/// every parameter's value with the study's parameters at `y`.
+fn joint_laps<'a, V>(
+    session: &'a Session,
+    j: &'a JointProblem,
+    prepared: &'a [PreparedMeasurement],
+    values: &'a V,
+) -> impl Laps + 'a
+where
+    V: Fn(&[f64]) -> Vec<f64> + Sync,
+{
+    let bench = &session.bench;
+    let remote: Option<&'a dyn Evaluator> = session.options.evaluator.as_deref();
+    let local = crate::fit::on_pool(&session.pool, move |y: &[f64]| {
+        bench.signals(&values(y), prepared, &j.signals)
+    });
+    move |points: &[Vec<f64>]| -> Vec<crate::fit::Simulated> {
+        let Some(remote) = remote else {
+            return local(points);
+        };
+        let all: Vec<Vec<f64>> = points.iter().map(|y| values(y)).collect();
+        match remote.signals(&all) {
+            Ok(runs) => runs
+                .into_iter()
+                .map(|r| {
+                    r.map(|series| {
+                        series
+                            .into_iter()
+                            .map(|(start, v)| (start..start + v.len(), v))
+                            .collect()
+                    })
+                })
+                .collect(),
+            Err(why) => vec![Err(format!("the evaluator failed: {why}")); points.len()],
+        }
+    }
+}
+
+/// The profile likelihood of every parameter at the answer ([`crate::profile`]), its walks
+/// on the evaluator's workers where the study has one.
+fn joint_profiles<F: Laps>(
+    session: &Session,
+    j: &JointProblem,
+    frame: &Frame<'_, F>,
+    solution: &Solution,
+    iv: &Intervals,
+    phases: &Phases,
+) -> Profiles {
+    let remote = session.options.evaluator.as_deref();
+    let units: Vec<Option<String>> = j
+        .names
+        .iter()
+        .map(|n| {
+            session
+                .bench
+                .workers()
+                .parameter_unit(n)
+                .map(str::to_string)
+        })
+        .collect();
+    // On an evaluator every walk (two per parameter) waits on its own tasks, so all of
+    // them run at once and the cluster gets every walk's laps together.
+    let walks = remote.and_then(|_| thread_pool(2 * j.names.len()).ok());
+    phases.begin("profiles");
+    let profiles = crate::profile::profiles(
+        frame,
+        &j.names,
+        &units,
+        solution,
+        iv.critical_value,
+        walks.as_ref().unwrap_or(&session.pool),
+    );
+    phases.ran(0, true);
+    profiles
+}
+
+/// The moving-block bootstrap of the answer with `replicates` refits
+/// ([`crate::bootstrap`]), from the study's seed.
+fn joint_bootstrap<F: Laps>(
+    session: &Session,
+    j: &JointProblem,
+    frame: &mut Frame<'_, F>,
+    solution: &Solution,
+    iv: &Intervals,
+    phases: &Phases,
+    replicates: usize,
+) -> Bootstrap {
+    let se: Vec<Option<f64>> = j
+        .names
+        .iter()
+        .map(|n| iv.get(n).and_then(|p| p.std_error))
+        .collect();
+    phases.begin("bootstrap");
+    let bootstrap = crate::bootstrap::run(
+        frame,
+        solution,
+        &j.names,
+        &se,
+        replicates,
+        session.study.file.seed,
+    );
+    phases.ran(0, true);
+    bootstrap
 }
 
 /// A residual of the wheel loads below this RMS [N] is no spread to estimate (a lap the
