@@ -305,8 +305,79 @@ pub(crate) fn sandwich_with(
         .iter()
         .map(|(lo, hi)| (hi - lo).max(1e-300))
         .collect();
-    // The scores per segment (a lap): its blocks' grid points, summed where signals share
-    // one. Segments are independent: the long-run covariance sums within each.
+    let (segments, extents) = segments_of(blocks);
+    // The shortest segment decides whether the autocorrelation can be estimated at all;
+    // all of them together are the fixed-b ratio's n (independent laps add to the long-run
+    // estimate's degrees of freedom as one lap of their summed length would).
+    let n = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
+    let n_all = extents.iter().map(|(a, b)| b - a).sum::<usize>();
+    let Some((bread, scores)) = bread_and_scores(blocks, &segments, &extents, &span) else {
+        // A perfect fit (a synthetic lap without noise): no spread to scale by.
+        return Intervals::none(
+            names,
+            x,
+            "no interval: the twin matches the measurement exactly (no residual to estimate the spread from)".into(),
+            laps,
+        );
+    };
+    let mut notes = Vec::new();
+    if n < MIN_LENGTHS * MIN_BANDWIDTH {
+        let why = format!(
+            "no interval: the compared stretch ({n} grid points) is shorter than {MIN_LENGTHS} correlation lengths of the residuals (at least {MIN_BANDWIDTH} points each), too short to estimate their autocorrelation"
+        );
+        return Intervals::none(names, x, why, laps);
+    }
+    let (meat, bandwidth) = scores_meat(&scores, n, p, &mut notes);
+    let (inv, unseen, top) = inverse_on_seen(&bread, p);
+    if top <= 0.0 {
+        notes.push("the signals do not see any of the step's parameters".into());
+    }
+    let cov = mul(&mul(&inv, &meat), &inv);
+    let factor = |b: &Block| {
+        b.factor.unwrap_or_else(|| {
+            let m = b.residual.len() as f64;
+            b.weight / (b.residual.iter().map(|e| e * e).sum::<f64>() / m)
+        })
+    };
+    let in_time = clocks.and_then(|c| crate::noise_time::meat(blocks, &span, factor, c));
+    let cov_noise = in_time.as_ref().map(|t| mul(&mul(&inv, &t.meat), &inv));
+    if in_time.as_ref().is_some_and(|t| t.capped) {
+        notes.push(
+            "the residuals stay correlated beyond a quarter of the lap in time: their autocovariance is cut there, and the intervals may be narrower than the data warrant".into(),
+        );
+    }
+    // The noise in time where it could be estimated; the scores' own beside it.
+    let cov_scores = cov;
+    let cov = cov_noise.clone().unwrap_or_else(|| cov_scores.clone());
+    let cv = critical_value((bandwidth + 1) as f64 / n_all as f64);
+    let spread = Spread {
+        cov: &cov,
+        cov_scores: &cov_scores,
+        cov_noise: cov_noise.as_deref(),
+        span: &span,
+        cv,
+    };
+    let parameters = (0..p)
+        .map(|i| parameter_interval(i, names, x, bounds, unseen[i], &spread))
+        .collect();
+    let (covariance, correlation) = in_units(&cov, &span, p);
+    Intervals {
+        method: METHOD.into(),
+        level: 0.95,
+        parameters,
+        grid_points: extents.iter().map(|(a, b)| b - a).sum(),
+        bandwidth,
+        laps,
+        critical_value: cv,
+        notes,
+        covariance,
+        correlation,
+    }
+}
+
+/// The blocks' segments (a lap each), in order, and each one's extent on the grid: its
+/// blocks' grid points, from the first start to the last end.
+fn segments_of(blocks: &[Block]) -> (Vec<usize>, Vec<(usize, usize)>) {
     let mut segments: Vec<usize> = blocks.iter().map(|b| b.segment).collect();
     segments.sort_unstable();
     segments.dedup();
@@ -317,33 +388,39 @@ pub(crate) fn sandwich_with(
         (start, end)
     };
     let extents: Vec<(usize, usize)> = segments.iter().map(|&g| extent(g)).collect();
+    (segments, extents)
+}
+
+/// The information and the scores per segment (a lap) at each of its grid points.
+type BreadAndScores = (Vec<Vec<f64>>, Vec<Vec<Vec<f64>>>);
+
+/// The information ("bread") and the scores per segment (a lap) at each of its grid
+/// points, summed where signals share one, in range-scaled parameters. Segments are
+/// independent: the long-run covariance sums within each. `None` where a block's residual
+/// has no spread to scale by.
+fn bread_and_scores(
+    blocks: &[Block],
+    segments: &[usize],
+    extents: &[(usize, usize)],
+    span: &[f64],
+) -> Option<BreadAndScores> {
+    let p = span.len();
     let mut bread = vec![vec![0.0; p]; p];
     let mut scores: Vec<Vec<Vec<f64>>> = extents
         .iter()
         .map(|(a, b)| vec![vec![0.0; p]; b - a])
         .collect();
-    // The shortest segment decides whether the autocorrelation can be estimated at all;
-    // all of them together are the fixed-b ratio's n (independent laps add to the long-run
-    // estimate's degrees of freedom as one lap of their summed length would).
-    let n = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
-    let n_all = extents.iter().map(|(a, b)| b - a).sum::<usize>();
     for b in blocks {
         let g = segments.binary_search(&b.segment).expect("listed");
         let (start, _) = extents[g];
         let m = b.residual.len() as f64;
         let var = b.residual.iter().map(|e| e * e).sum::<f64>() / m;
         if !(var.is_finite() && var > 0.0) {
-            // A perfect fit (a synthetic lap without noise): no spread to scale by.
-            return Intervals::none(
-                names,
-                x,
-                "no interval: the twin matches the measurement exactly (no residual to estimate the spread from)".into(),
-                laps,
-            );
+            return None;
         }
         let c = b.factor.unwrap_or(b.weight / var);
         for (k, (row, e)) in b.rows.iter().zip(&b.residual).enumerate() {
-            let row: Vec<f64> = row.iter().zip(&span).map(|(j, s)| j * s).collect();
+            let row: Vec<f64> = row.iter().zip(span).map(|(j, s)| j * s).collect();
             for i in 0..p {
                 scores[g][b.start - start + k][i] += c * row[i] * e;
                 for j in 0..p {
@@ -352,13 +429,17 @@ pub(crate) fn sandwich_with(
             }
         }
     }
-    let mut notes = Vec::new();
-    if n < MIN_LENGTHS * MIN_BANDWIDTH {
-        let why = format!(
-            "no interval: the compared stretch ({n} grid points) is shorter than {MIN_LENGTHS} correlation lengths of the residuals (at least {MIN_BANDWIDTH} points each), too short to estimate their autocorrelation"
-        );
-        return Intervals::none(names, x, why, laps);
-    }
+    Some((bread, scores))
+}
+
+/// The scores' long-run covariance ("meat") and the Bartlett bandwidth it used; a note
+/// where the bandwidth was cut.
+fn scores_meat(
+    scores: &[Vec<Vec<f64>>],
+    n: usize,
+    p: usize,
+    notes: &mut Vec<String>,
+) -> (Vec<Vec<f64>>, usize) {
     // Andrews–Monahan: the scores whitened by a VAR(1) first, the Bartlett estimate of what
     // is left (a short bandwidth), recoloured.
     // Each lap whitened by a VAR(1) of its own (laps of different circuits and speeds
@@ -387,9 +468,14 @@ pub(crate) fn sandwich_with(
             }
         }
     }
-    // B⁻¹ on the directions the signals see; a parameter in a direction they do not see has
-    // no interval.
-    let (vals, vecs) = super::cmaes::symmetric_eigen(&bread);
+    (meat, bandwidth)
+}
+
+/// B⁻¹ on the directions the signals see; a parameter in a direction they do not see has
+/// no interval. The inverse, each parameter's largest share in an unseen direction, and
+/// the information's largest eigenvalue.
+fn inverse_on_seen(bread: &[Vec<f64>], p: usize) -> (Vec<Vec<f64>>, Vec<f64>, f64) {
+    let (vals, vecs) = super::cmaes::symmetric_eigen(bread);
     let top = vals.iter().cloned().fold(0.0f64, f64::max);
     let mut unseen = vec![0.0f64; p];
     let mut inv = vec![vec![0.0; p]; p];
@@ -406,81 +492,99 @@ pub(crate) fn sandwich_with(
             }
         }
     }
-    if top <= 0.0 {
-        notes.push("the signals do not see any of the step's parameters".into());
-    }
-    let cov = mul(&mul(&inv, &meat), &inv);
-    let factor = |b: &Block| {
-        b.factor.unwrap_or_else(|| {
-            let m = b.residual.len() as f64;
-            b.weight / (b.residual.iter().map(|e| e * e).sum::<f64>() / m)
-        })
+    (inv, unseen, top)
+}
+
+/// What a parameter's interval is read from: the covariances of the estimate in
+/// range-scaled parameters (the one the intervals use, the scores' own, the noise in
+/// time's where it was estimated), the ranges and the critical value.
+struct Spread<'a> {
+    cov: &'a [Vec<f64>],
+    cov_scores: &'a [Vec<f64>],
+    cov_noise: Option<&'a [Vec<f64>]>,
+    span: &'a [f64],
+    cv: f64,
+}
+
+/// Parameter i's interval, or why it has none: not seen by the signals (`unseen`, its
+/// largest share in a direction they do not see), on a bound, or open on a side.
+fn parameter_interval(
+    i: usize,
+    names: &[String],
+    x: &[f64],
+    bounds: &[(f64, f64)],
+    unseen: f64,
+    spread: &Spread,
+) -> ParameterInterval {
+    let Spread {
+        cov,
+        cov_scores,
+        cov_noise,
+        span,
+        cv,
+    } = *spread;
+    let (lo_b, hi_b) = bounds[i];
+    let range = format!("[{}, {}]", tb_files::number(lo_b), tb_files::number(hi_b));
+    let bare = |statement: String| ParameterInterval {
+        name: names[i].clone(),
+        value: x[i],
+        lo: None,
+        hi: None,
+        std_error: None,
+        std_error_scores: None,
+        std_error_noise: None,
+        statement: Some(statement),
     };
-    let in_time = clocks.and_then(|c| crate::noise_time::meat(blocks, &span, factor, c));
-    let cov_noise = in_time.as_ref().map(|t| mul(&mul(&inv, &t.meat), &inv));
-    if in_time.as_ref().is_some_and(|t| t.capped) {
-        notes.push(
-            "the residuals stay correlated beyond a quarter of the lap in time: their autocovariance is cut there, and the intervals may be narrower than the data warrant".into(),
-        );
+    if unseen > 0.1 {
+        return bare(format!(
+            "not determined by these signals within {range}: the information has a direction they do not see, and this parameter is in it"
+        ));
     }
-    // The noise in time where it could be estimated; the scores' own beside it.
-    let cov_scores = cov;
-    let cov = cov_noise.clone().unwrap_or_else(|| cov_scores.clone());
-    let cv = critical_value((bandwidth + 1) as f64 / n_all as f64);
-    let parameters = (0..p)
-        .map(|i| {
-            let (lo_b, hi_b) = bounds[i];
-            let range = format!(
-                "[{}, {}]",
-                tb_files::number(lo_b),
-                tb_files::number(hi_b)
-            );
-            let bare = |statement: String| ParameterInterval {
-                name: names[i].clone(),
-                value: x[i],
-                lo: None,
-                hi: None,
-                std_error: None,
-                std_error_scores: None,
-                std_error_noise: None,
-                statement: Some(statement),
-            };
-            if unseen[i] > 0.1 {
-                return bare(format!(
-                    "not determined by these signals within {range}: the information has a direction they do not see, and this parameter is in it"
-                ));
-            }
-            let tol = ON_BOUND * (hi_b - lo_b);
-            if x[i] - lo_b <= tol || hi_b - x[i] <= tol {
-                let which = if x[i] - lo_b <= tol { "lower" } else { "upper" };
-                return bare(format!(
-                    "on its {which} bound ({}): the optimum is not inside the range, so no interval; the data want it beyond {range}",
-                    tb_files::number(if which == "lower" { lo_b } else { hi_b })
-                ));
-            }
-            let se = cov[i][i].max(0.0).sqrt() * span[i];
-            let std_error_scores = cov_noise.as_ref().map(|_| cov_scores[i][i].max(0.0).sqrt() * span[i]);
-            let std_error_noise = cov_noise.as_ref().map(|c| c[i][i].max(0.0).sqrt() * span[i]);
-            let (lo, hi) = (x[i] - cv * se, x[i] + cv * se);
-            let (lo, hi) = ((lo >= lo_b).then_some(lo), (hi <= hi_b).then_some(hi));
-            let statement = match (lo, hi) {
-                (None, None) => Some(format!("not determined by these signals within {range}")),
-                (None, Some(_)) => Some(format!("open below: any value down to the bound {} fits", tb_files::number(lo_b))),
-                (Some(_), None) => Some(format!("open above: any value up to the bound {} fits", tb_files::number(hi_b))),
-                _ => None,
-            };
-            ParameterInterval {
-                name: names[i].clone(),
-                value: x[i],
-                lo,
-                hi,
-                std_error: Some(se),
-                std_error_scores,
-                std_error_noise,
-                statement,
-            }
-        })
-        .collect();
+    let tol = ON_BOUND * (hi_b - lo_b);
+    if x[i] - lo_b <= tol || hi_b - x[i] <= tol {
+        let which = if x[i] - lo_b <= tol { "lower" } else { "upper" };
+        return bare(format!(
+            "on its {which} bound ({}): the optimum is not inside the range, so no interval; the data want it beyond {range}",
+            tb_files::number(if which == "lower" { lo_b } else { hi_b })
+        ));
+    }
+    let se = cov[i][i].max(0.0).sqrt() * span[i];
+    let std_error_scores = cov_noise
+        .as_ref()
+        .map(|_| cov_scores[i][i].max(0.0).sqrt() * span[i]);
+    let std_error_noise = cov_noise
+        .as_ref()
+        .map(|c| c[i][i].max(0.0).sqrt() * span[i]);
+    let (lo, hi) = (x[i] - cv * se, x[i] + cv * se);
+    let (lo, hi) = ((lo >= lo_b).then_some(lo), (hi <= hi_b).then_some(hi));
+    let statement = match (lo, hi) {
+        (None, None) => Some(format!("not determined by these signals within {range}")),
+        (None, Some(_)) => Some(format!(
+            "open below: any value down to the bound {} fits",
+            tb_files::number(lo_b)
+        )),
+        (Some(_), None) => Some(format!(
+            "open above: any value up to the bound {} fits",
+            tb_files::number(hi_b)
+        )),
+        _ => None,
+    };
+    ParameterInterval {
+        name: names[i].clone(),
+        value: x[i],
+        lo,
+        hi,
+        std_error: Some(se),
+        std_error_scores,
+        std_error_noise,
+        statement,
+    }
+}
+
+/// The covariance in the parameters' own units (from the range-scaled `cov`), and the
+/// correlation (the covariance scaled by the standard errors; `None` where a parameter
+/// has no spread).
+fn in_units(cov: &[Vec<f64>], span: &[f64], p: usize) -> (Vec<Vec<f64>>, Vec<Vec<Option<f64>>>) {
     let covariance: Vec<Vec<f64>> = (0..p)
         .map(|i| (0..p).map(|j| cov[i][j] * span[i] * span[j]).collect())
         .collect();
@@ -494,18 +598,7 @@ pub(crate) fn sandwich_with(
                 .collect()
         })
         .collect();
-    Intervals {
-        method: METHOD.into(),
-        level: 0.95,
-        parameters,
-        grid_points: extents.iter().map(|(a, b)| b - a).sum(),
-        bandwidth,
-        laps,
-        critical_value: cv,
-        notes,
-        covariance,
-        correlation,
-    }
+    (covariance, correlation)
 }
 
 /// One lap's recolouring matrix (I − A)⁻¹ and its whitened scores.
