@@ -46,6 +46,7 @@ pub mod ga;
 pub mod identifiability;
 pub mod interval;
 mod joint;
+mod long_run;
 pub mod model_check;
 pub(crate) mod noise_time;
 mod observe;
