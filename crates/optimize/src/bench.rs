@@ -3,9 +3,8 @@
 //! weighted and summed, the laps run in parallel; a study of one lap is exactly the
 //! single-lap cost.
 
-use super::driver::cost_of;
+use super::cost::{cost_of, StepCost};
 use super::pool::{Outcome, WorkerPool};
-use super::remote::StepCost;
 use super::study::{Lap, Study};
 use super::OptimizeError;
 use rayon::prelude::*;

@@ -22,7 +22,7 @@
 //! interval with the model's share is).
 
 use crate::fit::{Frame, Laps, Limits, Solution};
-use crate::interval::{bandwidth_of_one, CUT, LAGS, MAX_SHARE, MIN_BANDWIDTH};
+use crate::long_run::{bandwidth_of_one, CUT, LAGS, MAX_SHARE, MIN_BANDWIDTH};
 use serde::{Deserialize, Serialize};
 
 /// A replicate's refit: at most 4 iterations, converged within 0.3 standard errors.

@@ -9,10 +9,11 @@
 //! checkpoint is refused, not trusted; and what it says is checked against the study
 //! (steps, parameters, bounds, finite costs) before anything is taken from it.
 
-use super::driver::{RunOptions, StepResult};
 use super::exact;
 use super::identifiability::Identifiability;
 use super::optimizer::RunState;
+use super::options::RunOptions;
+use super::results::StepResult;
 use super::study::{OptimizerKind, Study};
 use super::OptimizeError;
 use serde::{Deserialize, Serialize};

@@ -33,8 +33,9 @@
 //! The same iteration with one parameter held re-optimises the others at a profile point
 //! ([`crate::profile`]).
 
+use super::block::Block;
 use super::cmaes::symmetric_eigen;
-use super::interval::{Block, REL_STEP};
+use super::interval::REL_STEP;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -163,6 +164,29 @@ pub struct Refinement {
     pub converged: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub statement: Option<String>,
+}
+
+/// Where a Levenberg–Marquardt descent stands: the point, its residuals and
+/// sensitivities, its S, the damping λ, the laps run, and why it stopped early (if it did).
+struct Descent {
+    x: Vec<f64>,
+    raw: Raw,
+    sens: Vec<Option<Raw>>,
+    s: f64,
+    lambda: f64,
+    laps: usize,
+    statement: Option<String>,
+}
+
+/// What an iteration's damped steps came to.
+enum Stride {
+    /// A step was taken: the next iteration starts from it.
+    Taken,
+    /// No step is left to take, or the last one was short: the fit is done.
+    Converged,
+    /// A lap for the sensitivities failed: the fit stops where it is (the statement says
+    /// why).
+    Stopped,
 }
 
 impl<'a, F: Laps> Frame<'a, F> {
@@ -371,115 +395,46 @@ impl<'a, F: Laps> Frame<'a, F> {
         free: &[bool],
         limits: Limits,
     ) -> Solution {
-        let p = x0.len();
         let span: Vec<f64> = self.bounds.iter().map(|(lo, hi)| hi - lo).collect();
-        let (mut x, mut raw, mut sens) = (x0.to_vec(), raw0, sens0);
-        let mut s = self.objective(&raw);
-        let mut lambda = LAMBDA_START;
-        let mut statement = None;
+        let s = self.objective(&raw0);
+        let mut at = Descent {
+            x: x0.to_vec(),
+            raw: raw0,
+            sens: sens0,
+            s,
+            lambda: LAMBDA_START,
+            laps: 0,
+            statement: None,
+        };
         let mut converged = false;
         let mut iterations = 0;
-        let mut laps = 0;
-        'outer: while iterations < limits.max_iterations {
+        while iterations < limits.max_iterations {
             iterations += 1;
             // Normal equations in range-scaled parameters.
-            let (a, g) = self.normal_equations(&raw, &sens, &span);
-            // A parameter on a bound that the descent pushes out stays there.
-            let active: Vec<usize> = (0..p)
-                .filter(|&i| free[i])
-                .filter(|&i| {
-                    let (lo, hi) = self.bounds[i];
-                    let tol = 1e-12 * span[i];
-                    !((x[i] - lo <= tol && g[i] > 0.0) || (hi - x[i] <= tol && g[i] < 0.0))
-                })
-                .collect();
-            if active.is_empty() {
+            let (a, g) = self.normal_equations(&at.raw, &at.sens, &span);
+            let active = self.active(&at.x, &g, free, &span);
+            if active.is_empty() || self.close_enough(&at, &a, &g, &active, &span, limits) {
                 converged = true;
                 break;
             }
-            // Close enough: the Gauss–Newton step (λ = 0) moves no parameter by more than
-            // a tenth of its standard error (the sandwich at this point, no laps): what is
-            // left is far inside the interval, and more laps would not change the answer.
-            if let Some(gn) = solve(&a, &g, &active, 0.0) {
-                let se = self.std_errors(&x, &raw, &sens);
-                if active
-                    .iter()
-                    .zip(&gn)
-                    .all(|(&i, d)| se[i].is_some_and(|se| (d * span[i]).abs() <= limits.close * se))
-                {
+            match self.stride(&mut at, &a, &g, &active, free, &span) {
+                Stride::Taken => {}
+                Stride::Converged => {
                     converged = true;
                     break;
                 }
-            }
-            loop {
-                // Two trials in one batch (both cores busy): λ and 10λ, the first that
-                // lowers S taken.
-                let mut trials = Vec::new();
-                for l in [lambda, 10.0 * lambda] {
-                    let Some(delta) = solve(&a, &g, &active, l) else {
-                        continue;
-                    };
-                    let mut trial = x.clone();
-                    for (k, &i) in active.iter().enumerate() {
-                        let (lo, hi) = self.bounds[i];
-                        trial[i] = (x[i] + delta[k] * span[i]).clamp(lo, hi);
-                    }
-                    if trial != x {
-                        trials.push((l, trial));
-                    }
-                }
-                if trials.is_empty() {
-                    converged = true;
-                    break 'outer;
-                }
-                let points: Vec<Vec<f64>> = trials.iter().map(|t| t.1.clone()).collect();
-                laps += points.len();
-                let accepted =
-                    trials
-                        .into_iter()
-                        .zip(self.run(&points))
-                        .find_map(|((l, trial), r)| match r {
-                            Ok(r) if self.objective(&r) < s => Some((l, trial, r)),
-                            _ => None,
-                        });
-                match accepted {
-                    Some((l, trial, r)) => {
-                        let s_new = self.objective(&r);
-                        let small = s - s_new <= RELATIVE_DECREASE * s;
-                        laps += 2 * free.iter().filter(|&&f| f).count();
-                        match self.sensitivities_at(&trial, free) {
-                            Ok(j) => {
-                                (x, raw, sens, s) = (trial, r, j, s_new);
-                            }
-                            Err(e) => {
-                                statement = Some(format!(
-                                    "stopped: a lap for the sensitivities at an accepted point failed ({e})"
-                                ));
-                                break 'outer;
-                            }
-                        }
-                        lambda = (l / 3.0).max(1e-12);
-                        // A step accepted only at λ ≥ 1 is far shorter than the
-                        // Gauss–Newton one: the quadratic model no longer predicts S, and
-                        // what is left of the way is S's roughness, not its minimum.
-                        if small || l >= LAMBDA_ROUGH {
-                            converged = true;
-                            break 'outer;
-                        }
-                        continue 'outer;
-                    }
-                    // Both worse, or laps that failed or fell short of the stretch: shorter
-                    // steps.
-                    None => {
-                        lambda *= 100.0;
-                        if lambda > LAMBDA_MAX {
-                            converged = true;
-                            break 'outer;
-                        }
-                    }
-                }
+                Stride::Stopped => break,
             }
         }
+        let Descent {
+            x,
+            raw,
+            sens,
+            s,
+            laps,
+            mut statement,
+            ..
+        } = at;
         if !converged && statement.is_none() {
             statement = Some(format!(
                 "not converged after {} iterations (S still falling)",
@@ -495,6 +450,120 @@ impl<'a, F: Laps> Frame<'a, F> {
             statement,
             raw,
             sensitivities: sens,
+        }
+    }
+
+    /// The free parameters the descent may move at `x` (`g` the gradient): a parameter on a
+    /// bound that the descent pushes out stays there.
+    fn active(&self, x: &[f64], g: &[f64], free: &[bool], span: &[f64]) -> Vec<usize> {
+        (0..x.len())
+            .filter(|&i| free[i])
+            .filter(|&i| {
+                let (lo, hi) = self.bounds[i];
+                let tol = 1e-12 * span[i];
+                !((x[i] - lo <= tol && g[i] > 0.0) || (hi - x[i] <= tol && g[i] < 0.0))
+            })
+            .collect()
+    }
+
+    /// Close enough: the Gauss–Newton step (λ = 0) moves no parameter by more than
+    /// a tenth of its standard error (the sandwich at this point, no laps): what is
+    /// left is far inside the interval, and more laps would not change the answer.
+    fn close_enough(
+        &self,
+        at: &Descent,
+        a: &[Vec<f64>],
+        g: &[f64],
+        active: &[usize],
+        span: &[f64],
+        limits: Limits,
+    ) -> bool {
+        let Some(gn) = solve(a, g, active, 0.0) else {
+            return false;
+        };
+        let se = self.std_errors(&at.x, &at.raw, &at.sens);
+        active
+            .iter()
+            .zip(&gn)
+            .all(|(&i, d)| se[i].is_some_and(|se| (d * span[i]).abs() <= limits.close * se))
+    }
+
+    /// One iteration's damped steps from `at`: λ and 10λ tried in one batch, the first that
+    /// lowers S taken (with the sensitivities there); where both are worse, shorter steps
+    /// (λ × 100) until one is taken or the damping runs out.
+    fn stride(
+        &self,
+        at: &mut Descent,
+        a: &[Vec<f64>],
+        g: &[f64],
+        active: &[usize],
+        free: &[bool],
+        span: &[f64],
+    ) -> Stride {
+        loop {
+            // Two trials in one batch (both cores busy): λ and 10λ, the first that
+            // lowers S taken.
+            let mut trials = Vec::new();
+            for l in [at.lambda, 10.0 * at.lambda] {
+                let Some(delta) = solve(a, g, active, l) else {
+                    continue;
+                };
+                let mut trial = at.x.clone();
+                for (k, &i) in active.iter().enumerate() {
+                    let (lo, hi) = self.bounds[i];
+                    trial[i] = (at.x[i] + delta[k] * span[i]).clamp(lo, hi);
+                }
+                if trial != at.x {
+                    trials.push((l, trial));
+                }
+            }
+            if trials.is_empty() {
+                return Stride::Converged;
+            }
+            let points: Vec<Vec<f64>> = trials.iter().map(|t| t.1.clone()).collect();
+            at.laps += points.len();
+            let s = at.s;
+            let accepted = trials
+                .into_iter()
+                .zip(self.run(&points))
+                .find_map(|((l, trial), r)| match r {
+                    Ok(r) if self.objective(&r) < s => Some((l, trial, r)),
+                    _ => None,
+                });
+            match accepted {
+                Some((l, trial, r)) => {
+                    let s_new = self.objective(&r);
+                    let small = at.s - s_new <= RELATIVE_DECREASE * at.s;
+                    at.laps += 2 * free.iter().filter(|&&f| f).count();
+                    match self.sensitivities_at(&trial, free) {
+                        Ok(j) => {
+                            (at.x, at.raw, at.sens, at.s) = (trial, r, j, s_new);
+                        }
+                        Err(e) => {
+                            at.statement = Some(format!(
+                                "stopped: a lap for the sensitivities at an accepted point failed ({e})"
+                            ));
+                            return Stride::Stopped;
+                        }
+                    }
+                    at.lambda = (l / 3.0).max(1e-12);
+                    // A step accepted only at λ ≥ 1 is far shorter than the
+                    // Gauss–Newton one: the quadratic model no longer predicts S, and
+                    // what is left of the way is S's roughness, not its minimum.
+                    if small || l >= LAMBDA_ROUGH {
+                        return Stride::Converged;
+                    }
+                    return Stride::Taken;
+                }
+                // Both worse, or laps that failed or fell short of the stretch: shorter
+                // steps.
+                None => {
+                    at.lambda *= 100.0;
+                    if at.lambda > LAMBDA_MAX {
+                        return Stride::Converged;
+                    }
+                }
+            }
         }
     }
 

@@ -32,6 +32,8 @@
 //! autocorrelation (fewer than 8 × 10 points) is said too. Each such case carries a
 //! statement in words.
 
+use crate::block::Block;
+use crate::long_run::{scores_meat, MIN_BANDWIDTH};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use tb_compare::{PreparedMeasurement, Table, Workspace};
@@ -59,17 +61,6 @@ const NULL_RATIO: f64 = 1e-9;
 const ON_BOUND: f64 = 1e-6;
 /// At least this many correlation lengths of grid for the long-run covariance.
 const MIN_LENGTHS: usize = 8;
-/// The Bartlett bandwidth in lags at which the scores' autocorrelation falls below 0.05:
-/// wide, so that the kernel's downweighting of the correlation it does see costs little (its
-/// bias is about the correlation length over the bandwidth); the fixed-b critical value
-/// pays for the noisier estimate.
-pub(crate) const LAGS: usize = 4;
-/// The autocorrelation below which a lag of the scores no longer counts.
-pub(crate) const CUT: f64 = 0.05;
-/// The bandwidth at most this fraction of the grid.
-pub(crate) const MAX_SHARE: usize = 4;
-/// The shortest Bartlett bandwidth [grid points].
-pub(crate) const MIN_BANDWIDTH: usize = 10;
 
 /// One parameter's interval.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -276,21 +267,6 @@ pub(crate) fn at_optimum(
     sandwich(names, x, bounds, &blocks, laps)
 }
 
-/// One signal's residuals and sensitivity rows from grid point `start` on.
-pub(crate) struct Block {
-    pub start: usize,
-    pub residual: Vec<f64>,
-    /// ∂(simulated)/∂θ_i at each grid point, in the parameters' own units.
-    pub rows: Vec<Vec<f64>>,
-    pub weight: f64,
-    /// The lap the block belongs to: the long-run covariance sums within a lap only.
-    pub segment: usize,
-    /// The factor w_s/σ_s² when the fit held it fixed ([`crate::fit`]: the sandwich must
-    /// weigh the residuals as the objective did); `None`: w_s over the block's own mean
-    /// squared residual.
-    pub factor: Option<f64>,
-}
-
 /// The sandwich covariance from the signals' blocks, and the intervals from it.
 pub(crate) fn sandwich(
     names: &[String],
@@ -319,53 +295,21 @@ pub(crate) fn sandwich_with(
         .iter()
         .map(|(lo, hi)| (hi - lo).max(1e-300))
         .collect();
-    // The scores per segment (a lap): its blocks' grid points, summed where signals share
-    // one. Segments are independent: the long-run covariance sums within each.
-    let mut segments: Vec<usize> = blocks.iter().map(|b| b.segment).collect();
-    segments.sort_unstable();
-    segments.dedup();
-    let extent = |seg: usize| {
-        let of = blocks.iter().filter(|b| b.segment == seg);
-        let start = of.clone().map(|b| b.start).min().unwrap_or(0);
-        let end = of.map(|b| b.start + b.residual.len()).max().unwrap_or(0);
-        (start, end)
-    };
-    let extents: Vec<(usize, usize)> = segments.iter().map(|&g| extent(g)).collect();
-    let mut bread = vec![vec![0.0; p]; p];
-    let mut scores: Vec<Vec<Vec<f64>>> = extents
-        .iter()
-        .map(|(a, b)| vec![vec![0.0; p]; b - a])
-        .collect();
+    let (segments, extents) = segments_of(blocks);
     // The shortest segment decides whether the autocorrelation can be estimated at all;
     // all of them together are the fixed-b ratio's n (independent laps add to the long-run
     // estimate's degrees of freedom as one lap of their summed length would).
     let n = extents.iter().map(|(a, b)| b - a).min().unwrap_or(0);
     let n_all = extents.iter().map(|(a, b)| b - a).sum::<usize>();
-    for b in blocks {
-        let g = segments.binary_search(&b.segment).expect("listed");
-        let (start, _) = extents[g];
-        let m = b.residual.len() as f64;
-        let var = b.residual.iter().map(|e| e * e).sum::<f64>() / m;
-        if !(var.is_finite() && var > 0.0) {
-            // A perfect fit (a synthetic lap without noise): no spread to scale by.
-            return Intervals::none(
-                names,
-                x,
-                "no interval: the twin matches the measurement exactly (no residual to estimate the spread from)".into(),
-                laps,
-            );
-        }
-        let c = b.factor.unwrap_or(b.weight / var);
-        for (k, (row, e)) in b.rows.iter().zip(&b.residual).enumerate() {
-            let row: Vec<f64> = row.iter().zip(&span).map(|(j, s)| j * s).collect();
-            for i in 0..p {
-                scores[g][b.start - start + k][i] += c * row[i] * e;
-                for j in 0..p {
-                    bread[i][j] += c * row[i] * row[j];
-                }
-            }
-        }
-    }
+    let Some((bread, scores)) = bread_and_scores(blocks, &segments, &extents, &span) else {
+        // A perfect fit (a synthetic lap without noise): no spread to scale by.
+        return Intervals::none(
+            names,
+            x,
+            "no interval: the twin matches the measurement exactly (no residual to estimate the spread from)".into(),
+            laps,
+        );
+    };
     let mut notes = Vec::new();
     if n < MIN_LENGTHS * MIN_BANDWIDTH {
         let why = format!(
@@ -373,53 +317,8 @@ pub(crate) fn sandwich_with(
         );
         return Intervals::none(names, x, why, laps);
     }
-    // Andrews–Monahan: the scores whitened by a VAR(1) first, the Bartlett estimate of what
-    // is left (a short bandwidth), recoloured.
-    // Each lap whitened by a VAR(1) of its own (laps of different circuits and speeds
-    // persist differently; pooled, a second lap could widen the interval), the Bartlett
-    // estimate of what is left at the laps' common bandwidth, recoloured per lap and summed
-    // (laps are independent).
-    let per: Vec<Whitened> = scores
-        .iter()
-        .map(|seg| prewhiten(std::slice::from_ref(seg)))
-        .collect();
-    let whitened: Vec<Vec<Vec<f64>>> = per.iter().flat_map(|(_, w)| w.iter().cloned()).collect();
-    let (bandwidth, capped) = bandwidth(&whitened, n);
-    if capped {
-        notes.push(format!(
-            "the residuals stay correlated beyond {bandwidth} grid points (a quarter of the compared stretch): the long-run covariance is cut there, and the intervals may be narrower than the data warrant"
-        ));
-    }
-    let mut meat = vec![vec![0.0; p]; p];
-    for (recolour, w) in &per {
-        for seg in w {
-            let one = recoloured(recolour, &bartlett(seg, bandwidth, p));
-            for i in 0..p {
-                for j in 0..p {
-                    meat[i][j] += one[i][j];
-                }
-            }
-        }
-    }
-    // B⁻¹ on the directions the signals see; a parameter in a direction they do not see has
-    // no interval.
-    let (vals, vecs) = super::cmaes::symmetric_eigen(&bread);
-    let top = vals.iter().cloned().fold(0.0f64, f64::max);
-    let mut unseen = vec![0.0f64; p];
-    let mut inv = vec![vec![0.0; p]; p];
-    for (k, &l) in vals.iter().enumerate() {
-        if top <= 0.0 || top.is_nan() || l <= NULL_RATIO * top {
-            for (i, u) in unseen.iter_mut().enumerate() {
-                *u = u.max(vecs[i][k].abs());
-            }
-            continue;
-        }
-        for i in 0..p {
-            for j in 0..p {
-                inv[i][j] += vecs[i][k] * vecs[j][k] / l;
-            }
-        }
-    }
+    let (meat, bandwidth) = scores_meat(&scores, n, p, &mut notes);
+    let (inv, unseen, top) = inverse_on_seen(&bread, p);
     if top <= 0.0 {
         notes.push("the signals do not see any of the step's parameters".into());
     }
@@ -441,73 +340,17 @@ pub(crate) fn sandwich_with(
     let cov_scores = cov;
     let cov = cov_noise.clone().unwrap_or_else(|| cov_scores.clone());
     let cv = critical_value((bandwidth + 1) as f64 / n_all as f64);
+    let spread = Spread {
+        cov: &cov,
+        cov_scores: &cov_scores,
+        cov_noise: cov_noise.as_deref(),
+        span: &span,
+        cv,
+    };
     let parameters = (0..p)
-        .map(|i| {
-            let (lo_b, hi_b) = bounds[i];
-            let range = format!(
-                "[{}, {}]",
-                tb_files::number(lo_b),
-                tb_files::number(hi_b)
-            );
-            let bare = |statement: String| ParameterInterval {
-                name: names[i].clone(),
-                value: x[i],
-                lo: None,
-                hi: None,
-                std_error: None,
-                std_error_scores: None,
-                std_error_noise: None,
-                statement: Some(statement),
-            };
-            if unseen[i] > 0.1 {
-                return bare(format!(
-                    "not determined by these signals within {range}: the information has a direction they do not see, and this parameter is in it"
-                ));
-            }
-            let tol = ON_BOUND * (hi_b - lo_b);
-            if x[i] - lo_b <= tol || hi_b - x[i] <= tol {
-                let which = if x[i] - lo_b <= tol { "lower" } else { "upper" };
-                return bare(format!(
-                    "on its {which} bound ({}): the optimum is not inside the range, so no interval; the data want it beyond {range}",
-                    tb_files::number(if which == "lower" { lo_b } else { hi_b })
-                ));
-            }
-            let se = cov[i][i].max(0.0).sqrt() * span[i];
-            let std_error_scores = cov_noise.as_ref().map(|_| cov_scores[i][i].max(0.0).sqrt() * span[i]);
-            let std_error_noise = cov_noise.as_ref().map(|c| c[i][i].max(0.0).sqrt() * span[i]);
-            let (lo, hi) = (x[i] - cv * se, x[i] + cv * se);
-            let (lo, hi) = ((lo >= lo_b).then_some(lo), (hi <= hi_b).then_some(hi));
-            let statement = match (lo, hi) {
-                (None, None) => Some(format!("not determined by these signals within {range}")),
-                (None, Some(_)) => Some(format!("open below: any value down to the bound {} fits", tb_files::number(lo_b))),
-                (Some(_), None) => Some(format!("open above: any value up to the bound {} fits", tb_files::number(hi_b))),
-                _ => None,
-            };
-            ParameterInterval {
-                name: names[i].clone(),
-                value: x[i],
-                lo,
-                hi,
-                std_error: Some(se),
-                std_error_scores,
-                std_error_noise,
-                statement,
-            }
-        })
+        .map(|i| parameter_interval(i, names, x, bounds, unseen[i], &spread))
         .collect();
-    let covariance: Vec<Vec<f64>> = (0..p)
-        .map(|i| (0..p).map(|j| cov[i][j] * span[i] * span[j]).collect())
-        .collect();
-    let correlation: Vec<Vec<Option<f64>>> = (0..p)
-        .map(|i| {
-            (0..p)
-                .map(|j| {
-                    let d = (covariance[i][i] * covariance[j][j]).sqrt();
-                    (d > 0.0).then(|| covariance[i][j] / d)
-                })
-                .collect()
-        })
-        .collect();
+    let (covariance, correlation) = in_units(&cov, &span, p);
     Intervals {
         method: METHOD.into(),
         level: 0.95,
@@ -522,197 +365,191 @@ pub(crate) fn sandwich_with(
     }
 }
 
-/// One lap's recolouring matrix (I − A)⁻¹ and its whitened scores.
-type Whitened = (nalgebra::DMatrix<f64>, Vec<Vec<Vec<f64>>>);
-
-/// The largest singular value the VAR(1) of the scores may have: nearer 1 the recolouring
-/// (I − A)⁻¹ would amplify the error of A without bound (Andrews and Monahan cap it at 0.97
-/// for series sampled once per correlation time; on a 1 m grid a residual that persists
-/// for a second is 0.98 per point, so the cap sits higher).
-const MAX_PERSISTENCE: f64 = 0.995;
-
-/// The scores whitened by a VAR(1) fitted to them (pooled over the segments, least
-/// squares, its largest singular value at most [`MAX_PERSISTENCE`]): (I − A)⁻¹ to
-/// recolour with, and u_g = ψ_g − A·ψ_{g−1} from each segment's second point on.
-///
-/// Why: the residuals of a logged load persist for a second or more (tens of grid points);
-/// the Bartlett estimate of such scores needs a bandwidth of hundreds of points, a quarter
-/// of a lap, and is then so noisy that the standard error varied threefold between
-/// replicates of one lap and the standardised errors spread 1.4–1.9 times what they
-/// should. The VAR(1) takes up the persistence with p² numbers estimated from every
-/// point; what it leaves needs a bandwidth of a few points.
-pub(crate) fn prewhiten(scores: &[Vec<Vec<f64>>]) -> Whitened {
-    use nalgebra::{DMatrix, DVector};
-    let p = scores.iter().find_map(|s| s.first()).map_or(0, |x| x.len());
-    let identity = DMatrix::<f64>::identity(p, p);
-    let (mut s1, mut s0) = (DMatrix::<f64>::zeros(p, p), DMatrix::<f64>::zeros(p, p));
-    for seg in scores {
-        for g in 1..seg.len() {
-            let (a, b) = (
-                DVector::from_column_slice(&seg[g]),
-                DVector::from_column_slice(&seg[g - 1]),
-            );
-            s1 += &a * b.transpose();
-            s0 += &b * b.transpose();
-        }
-    }
-    // Scaled to unit diagonal for the inverse (A itself does not depend on the scaling).
-    let d = DVector::from_iterator(
-        p,
-        (0..p).map(|i| {
-            let v = s0[(i, i)];
-            if v > 0.0 && v.is_finite() {
-                1.0 / v.sqrt()
-            } else {
-                0.0
-            }
-        }),
-    );
-    let scale = DMatrix::from_diagonal(&d);
-    let s0_scaled = &scale * &s0 * &scale;
-    let s0_inv = pinv(&s0_scaled);
-    let mut a = &s1 * &scale * s0_inv * &scale;
-    if !a.iter().all(|v| v.is_finite()) {
-        return (identity, scores.to_vec());
-    }
-    let largest = a.singular_values().iter().cloned().fold(0.0f64, f64::max);
-    if largest > MAX_PERSISTENCE {
-        a *= MAX_PERSISTENCE / largest;
-    }
-    let Some(recolour) = (&identity - &a).try_inverse() else {
-        return (identity, scores.to_vec());
+/// The blocks' segments (a lap each), in order, and each one's extent on the grid: its
+/// blocks' grid points, from the first start to the last end.
+fn segments_of(blocks: &[Block]) -> (Vec<usize>, Vec<(usize, usize)>) {
+    let mut segments: Vec<usize> = blocks.iter().map(|b| b.segment).collect();
+    segments.sort_unstable();
+    segments.dedup();
+    let extent = |seg: usize| {
+        let of = blocks.iter().filter(|b| b.segment == seg);
+        let start = of.clone().map(|b| b.start).min().unwrap_or(0);
+        let end = of.map(|b| b.start + b.residual.len()).max().unwrap_or(0);
+        (start, end)
     };
-    let whitened = scores
-        .iter()
-        .map(|seg| {
-            (1..seg.len())
-                .map(|g| {
-                    let prev = DVector::from_column_slice(&seg[g - 1]);
-                    let u = DVector::from_column_slice(&seg[g]) - &a * prev;
-                    u.iter().copied().collect()
-                })
-                .collect()
-        })
-        .collect();
-    (recolour, whitened)
+    let extents: Vec<(usize, usize)> = segments.iter().map(|&g| extent(g)).collect();
+    (segments, extents)
 }
 
-/// The Bartlett long-run covariance Σ_{|k|≤L} (1 − |k|/(L+1)) Σ_g x_g x_{g+k}ᵀ of one lap's
-/// series of `p`-vectors.
-fn bartlett(seg: &[Vec<f64>], bandwidth: usize, p: usize) -> Vec<Vec<f64>> {
-    let mut meat = vec![vec![0.0; p]; p];
-    let len = seg.len();
-    for k in 0..=bandwidth.min(len.saturating_sub(1)) {
-        let w = if k == 0 {
-            1.0
-        } else {
-            1.0 - k as f64 / (bandwidth + 1) as f64
-        };
-        for g in 0..len - k {
+/// The information and the scores per segment (a lap) at each of its grid points.
+type BreadAndScores = (Vec<Vec<f64>>, Vec<Vec<Vec<f64>>>);
+
+/// The information ("bread") and the scores per segment (a lap) at each of its grid
+/// points, summed where signals share one, in range-scaled parameters. Segments are
+/// independent: the long-run covariance sums within each. `None` where a block's residual
+/// has no spread to scale by.
+fn bread_and_scores(
+    blocks: &[Block],
+    segments: &[usize],
+    extents: &[(usize, usize)],
+    span: &[f64],
+) -> Option<BreadAndScores> {
+    let p = span.len();
+    let mut bread = vec![vec![0.0; p]; p];
+    let mut scores: Vec<Vec<Vec<f64>>> = extents
+        .iter()
+        .map(|(a, b)| vec![vec![0.0; p]; b - a])
+        .collect();
+    for b in blocks {
+        let g = segments.binary_search(&b.segment).expect("listed");
+        let (start, _) = extents[g];
+        let m = b.residual.len() as f64;
+        let var = b.residual.iter().map(|e| e * e).sum::<f64>() / m;
+        if !(var.is_finite() && var > 0.0) {
+            return None;
+        }
+        let c = b.factor.unwrap_or(b.weight / var);
+        for (k, (row, e)) in b.rows.iter().zip(&b.residual).enumerate() {
+            let row: Vec<f64> = row.iter().zip(span).map(|(j, s)| j * s).collect();
             for i in 0..p {
+                scores[g][b.start - start + k][i] += c * row[i] * e;
                 for j in 0..p {
-                    let v = seg[g][i] * seg[g + k][j];
-                    meat[i][j] += w * v;
-                    if k > 0 {
-                        meat[j][i] += w * v;
-                    }
+                    bread[i][j] += c * row[i] * row[j];
                 }
             }
         }
     }
-    meat
+    Some((bread, scores))
 }
 
-/// The Moore–Penrose inverse of a symmetric matrix (directions below 1e-10 of the largest
-/// eigenvalue dropped).
-pub(crate) fn pinv(a: &nalgebra::DMatrix<f64>) -> nalgebra::DMatrix<f64> {
-    let e = a.clone().symmetric_eigen();
-    let top = e.eigenvalues.iter().cloned().fold(0.0f64, f64::max);
-    let n = a.nrows();
-    let mut out = nalgebra::DMatrix::zeros(n, n);
-    for (k, &l) in e.eigenvalues.iter().enumerate() {
-        if top > 0.0 && l > 1e-10 * top {
-            let v = e.eigenvectors.column(k);
-            out += (1.0 / l) * v * v.transpose();
+/// B⁻¹ on the directions the signals see; a parameter in a direction they do not see has
+/// no interval. The inverse, each parameter's largest share in an unseen direction, and
+/// the information's largest eigenvalue.
+fn inverse_on_seen(bread: &[Vec<f64>], p: usize) -> (Vec<Vec<f64>>, Vec<f64>, f64) {
+    let (vals, vecs) = super::cmaes::symmetric_eigen(bread);
+    let top = vals.iter().cloned().fold(0.0f64, f64::max);
+    let mut unseen = vec![0.0f64; p];
+    let mut inv = vec![vec![0.0; p]; p];
+    for (k, &l) in vals.iter().enumerate() {
+        if top <= 0.0 || top.is_nan() || l <= NULL_RATIO * top {
+            for (i, u) in unseen.iter_mut().enumerate() {
+                *u = u.max(vecs[i][k].abs());
+            }
+            continue;
+        }
+        for i in 0..p {
+            for j in 0..p {
+                inv[i][j] += vecs[i][k] * vecs[j][k] / l;
+            }
         }
     }
-    out
+    (inv, unseen, top)
 }
 
-/// R·M·Rᵀ.
-fn recoloured(r: &nalgebra::DMatrix<f64>, m: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    let p = m.len();
-    let m = nalgebra::DMatrix::from_fn(p, p, |i, j| m[i][j]);
-    let out = r * m * r.transpose();
-    (0..p)
-        .map(|i| (0..p).map(|j| out[(i, j)]).collect())
-        .collect()
+/// What a parameter's interval is read from: the covariances of the estimate in
+/// range-scaled parameters (the one the intervals use, the scores' own, the noise in
+/// time's where it was estimated), the ranges and the critical value.
+struct Spread<'a> {
+    cov: &'a [Vec<f64>],
+    cov_scores: &'a [Vec<f64>],
+    cov_noise: Option<&'a [Vec<f64>]>,
+    span: &'a [f64],
+    cv: f64,
 }
 
-/// The Bartlett bandwidth: the widest of the parameters' own ([`bandwidth_of_one`] of each
-/// parameter's scores, over the segments): a parameter whose scores stay correlated
-/// longer than the others' sets it (a pooled autocorrelation let the parameter with the
-/// largest scores decide, and c_lift_front's were under-covered). True when the cap cut it.
-fn bandwidth(scores: &[Vec<Vec<f64>>], n: usize) -> (usize, bool) {
-    let p = scores.iter().find_map(|s| s.first()).map_or(0, |x| x.len());
-    let cap = (n / MAX_SHARE).max(MIN_BANDWIDTH);
-    let widest = (0..p)
-        .map(|i| {
-            let one: Vec<Vec<f64>> = scores
-                .iter()
-                .map(|seg| seg.iter().map(|g| g[i]).collect())
-                .collect();
-            bandwidth_of_one(&one, n, LAGS, CUT, MIN_BANDWIDTH, MAX_SHARE)
-        })
-        .max()
-        .unwrap_or(MIN_BANDWIDTH);
-    let capped = widest >= cap
-        && (0..p).any(|i| {
-            let one: Vec<Vec<f64>> = scores
-                .iter()
-                .map(|seg| seg.iter().map(|g| g[i]).collect())
-                .collect();
-            autocorrelation(&one, cap / LAGS) >= CUT
-        });
-    (widest, capped)
-}
-
-/// The autocorrelation at lag `k` of a scalar series in segments (each summed within
-/// itself).
-fn autocorrelation(series: &[Vec<f64>], k: usize) -> f64 {
-    let dot = |k: usize| -> f64 {
-        series
-            .iter()
-            .map(|s| {
-                (0..s.len().saturating_sub(k))
-                    .map(|g| s[g] * s[g + k])
-                    .sum::<f64>()
-            })
-            .sum()
+/// Parameter i's interval, or why it has none: not seen by the signals (`unseen`, its
+/// largest share in a direction they do not see), on a bound, or open on a side.
+fn parameter_interval(
+    i: usize,
+    names: &[String],
+    x: &[f64],
+    bounds: &[(f64, f64)],
+    unseen: f64,
+    spread: &Spread,
+) -> ParameterInterval {
+    let Spread {
+        cov,
+        cov_scores,
+        cov_noise,
+        span,
+        cv,
+    } = *spread;
+    let (lo_b, hi_b) = bounds[i];
+    let range = format!("[{}, {}]", tb_files::number(lo_b), tb_files::number(hi_b));
+    let bare = |statement: String| ParameterInterval {
+        name: names[i].clone(),
+        value: x[i],
+        lo: None,
+        hi: None,
+        std_error: None,
+        std_error_scores: None,
+        std_error_noise: None,
+        statement: Some(statement),
     };
-    let c0 = dot(0);
-    if c0 <= 0.0 || c0.is_nan() {
-        return 0.0;
+    if unseen > 0.1 {
+        return bare(format!(
+            "not determined by these signals within {range}: the information has a direction they do not see, and this parameter is in it"
+        ));
     }
-    dot(k) / c0
+    let tol = ON_BOUND * (hi_b - lo_b);
+    if x[i] - lo_b <= tol || hi_b - x[i] <= tol {
+        let which = if x[i] - lo_b <= tol { "lower" } else { "upper" };
+        return bare(format!(
+            "on its {which} bound ({}): the optimum is not inside the range, so no interval; the data want it beyond {range}",
+            tb_files::number(if which == "lower" { lo_b } else { hi_b })
+        ));
+    }
+    let se = cov[i][i].max(0.0).sqrt() * span[i];
+    let std_error_scores = cov_noise
+        .as_ref()
+        .map(|_| cov_scores[i][i].max(0.0).sqrt() * span[i]);
+    let std_error_noise = cov_noise
+        .as_ref()
+        .map(|c| c[i][i].max(0.0).sqrt() * span[i]);
+    let (lo, hi) = (x[i] - cv * se, x[i] + cv * se);
+    let (lo, hi) = ((lo >= lo_b).then_some(lo), (hi <= hi_b).then_some(hi));
+    let statement = match (lo, hi) {
+        (None, None) => Some(format!("not determined by these signals within {range}")),
+        (None, Some(_)) => Some(format!(
+            "open below: any value down to the bound {} fits",
+            tb_files::number(lo_b)
+        )),
+        (Some(_), None) => Some(format!(
+            "open above: any value up to the bound {} fits",
+            tb_files::number(hi_b)
+        )),
+        _ => None,
+    };
+    ParameterInterval {
+        name: names[i].clone(),
+        value: x[i],
+        lo,
+        hi,
+        std_error: Some(se),
+        std_error_scores,
+        std_error_noise,
+        statement,
+    }
 }
 
-/// A scalar series' Bartlett bandwidth: `lags` × the first lag at which its autocorrelation
-/// falls below `cut`, within [`min`, n/`share`] (`n` the shortest segment's length).
-pub(crate) fn bandwidth_of_one(
-    series: &[Vec<f64>],
-    n: usize,
-    lags: usize,
-    cut: f64,
-    min: usize,
-    share: usize,
-) -> usize {
-    let cap = (n / share).max(min);
-    let mut k = 1;
-    while lags * k < cap && autocorrelation(series, k) >= cut {
-        k += 1;
-    }
-    (lags * k).clamp(min, cap)
+/// The covariance in the parameters' own units (from the range-scaled `cov`), and the
+/// correlation (the covariance scaled by the standard errors; `None` where a parameter
+/// has no spread).
+fn in_units(cov: &[Vec<f64>], span: &[f64], p: usize) -> (Vec<Vec<f64>>, Vec<Vec<Option<f64>>>) {
+    let covariance: Vec<Vec<f64>> = (0..p)
+        .map(|i| (0..p).map(|j| cov[i][j] * span[i] * span[j]).collect())
+        .collect();
+    let correlation: Vec<Vec<Option<f64>>> = (0..p)
+        .map(|i| {
+            (0..p)
+                .map(|j| {
+                    let d = (covariance[i][i] * covariance[j][j]).sqrt();
+                    (d > 0.0).then(|| covariance[i][j] / d)
+                })
+                .collect()
+        })
+        .collect();
+    (covariance, correlation)
 }
 
 fn mul(a: &[Vec<f64>], b: &[Vec<f64>]) -> Vec<Vec<f64>> {

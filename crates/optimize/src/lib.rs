@@ -33,35 +33,47 @@
 //! (bit-exact optimiser state in the checkpoint) the same result as an uninterrupted one.
 
 pub mod bench;
+mod block;
 pub mod bootstrap;
 pub mod checkpoint;
 pub mod cmaes;
+mod cost;
 pub mod driver;
 pub mod exact;
+mod finish;
 pub mod fit;
 pub mod ga;
 pub mod identifiability;
 pub mod interval;
+mod joint;
+mod long_run;
 pub mod model_check;
 pub(crate) mod noise_time;
+mod observe;
 pub mod optimizer;
+mod options;
 pub mod pool;
 pub mod profile;
 pub mod remote;
+mod results;
 pub mod rng;
+mod session;
+mod step;
+mod step_loop;
 pub mod study;
 
 pub use cmaes::{Cmaes, CmaesSettings};
-pub use driver::{
-    run_study, GenerationDone, PhaseProgress, RunOptions, StepResult, StopAfter, StopOnFlag,
-    StudyObserver, StudyOutcome, StudyResult,
-};
+pub use cost::StepCost;
+pub use driver::run_study;
 pub use ga::{Ga, GaSettings};
 pub use identifiability::Identifiability;
 pub use interval::{Intervals, ParameterInterval};
+pub use observe::{GenerationDone, PhaseProgress, StopAfter, StopOnFlag, StudyObserver};
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
+pub use options::RunOptions;
 pub use pool::WorkerPool;
-pub use remote::{Candidate, Evaluator, InputDigest, LapSignals, StepCost, StudyEvaluator};
+pub use remote::{Candidate, Evaluator, InputDigest, LapSignals, StudyEvaluator};
+pub use results::{StepResult, StudyOutcome, StudyResult};
 pub use rng::Rng;
 pub use study::{OptimizerKind, Study, StudyFile};
 

@@ -31,7 +31,7 @@
 //! (The larger of the two per parameter was tried: it made the track widths' intervals
 //! too wide on the twin's own laps, sd(z) 0.76.)
 
-use crate::interval::Block;
+use crate::block::Block;
 
 /// The width of a time bin as a share of the compare filter's period: the filtered
 /// residual is nearly constant over a tenth of a period, so a bin's mean stands for it.

@@ -67,97 +67,14 @@ impl WorkerPool {
         lap: &Lap,
         cache: Arc<FmuCache>,
     ) -> Result<WorkerPool, OptimizeError> {
-        let mut file = SystemFile::load(&lap.system_path)?;
-        if let Some(r) = &study.file.record {
-            file.record.signals = r.signals.clone();
-            file.record.decimation = r.decimation;
-        }
-        let plan = Arc::new(Plan::compile(
-            file,
-            &lap.system_path,
-            cache,
-            &LoadOptions::default(),
-        )?);
+        let plan = compile_lap(study, lap, cache)?;
         let mut sim = Simulation::new(plan.clone())?;
         sim.echo_fmu_log = false;
-        let mut slots: Vec<ParamSlot> = Vec::new();
-        let mut initial = Vec::new();
-        // Fixed values: numbers join the assignment (reported with the results); other
-        // types are set once on every worker.
-        let mut fixed = Vec::new();
-        let study_dir = tb_files::folder_of(&study.path);
-        let not_connected = |slot: &ParamSlot| -> Result<(), OptimizeError> {
-            match plan.driving_connection(slot) {
-                Some(c) => Err(OptimizeError::File {
-                    path: study.path.clone(),
-                    message: format!(
-                        "'{}' is an input connected to {} (\"{}\"): the connection sets it every step, a study cannot",
-                        slot.name, c.from_name, c.text
-                    ),
-                }),
-                None => Ok(()),
-            }
-        };
-        for (name, value) in &study.file.parameters {
-            let ctx = format!("{}: parameter \"{name}\"", study.path.display());
-            let slot = plan.parameter(name)?;
-            not_connected(&slot)?;
-            let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, &study_dir);
-            // A value some lap sets for itself is fixed on every lap's workers, never part
-            // of the assignment (which is the same on every lap).
-            let per_lap = study.laps.iter().any(|l| l.parameters.contains_key(name));
-            match v {
-                ParamValue::Real(x) if !per_lap => {
-                    slots.push(slot);
-                    initial.push(x);
-                }
-                other => fixed.push((slot, other)),
-            }
-        }
-        for (name, value) in &lap.parameters {
-            let ctx = format!(
-                "{}: lap '{}': parameter \"{name}\"",
-                study.path.display(),
-                lap.name
-            );
-            let slot = plan.parameter(name)?;
-            not_connected(&slot)?;
-            let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, &study_dir);
-            fixed.retain(|(s, _)| s.name != slot.name);
-            fixed.push((slot, v));
-        }
+        let (mut slots, mut initial, fixed) = fixed_values(study, lap, &plan)?;
         for (slot, v) in &fixed {
             sim.set(slot, v.clone());
         }
-        for step in &study.file.steps {
-            for p in &step.parameters {
-                if slots.iter().any(|s| s.name == p.name) {
-                    continue;
-                }
-                let slot = plan.parameter(&p.name)?;
-                not_connected(&slot)?;
-                // The bounds within the variable's declared range (else every candidate
-                // outside it fails, and the best point cannot be evaluated).
-                if slot.min.is_some_and(|m| p.min < m) || slot.max.is_some_and(|m| p.max > m) {
-                    return Err(OptimizeError::File {
-                        path: study.path.clone(),
-                        message: format!(
-                            "step '{}': the bounds [{}, {}] of '{}' leave its declared range [{}, {}]",
-                            step.name,
-                            tb_files::number(p.min),
-                            tb_files::number(p.max),
-                            p.name,
-                            slot.min.map_or("-inf".into(), tb_files::number),
-                            slot.max.map_or("inf".into(), tb_files::number)
-                        ),
-                    });
-                }
-                let x = sim.value_of(&slot).unwrap_or(p.min);
-                slot.real(x)?;
-                slots.push(slot);
-                initial.push(x);
-            }
-        }
+        add_step_parameters(study, &plan, &sim, &mut slots, &mut initial)?;
         let pool = WorkerPool {
             plan,
             slots,
@@ -297,6 +214,120 @@ impl WorkerPool {
             .map_err(|e| format!("comparison: {e}"))?;
         Ok(Outcome { comparison, table })
     }
+}
+
+/// The lap's system compiled once, with the study's record override.
+fn compile_lap(study: &Study, lap: &Lap, cache: Arc<FmuCache>) -> Result<Arc<Plan>, OptimizeError> {
+    let mut file = SystemFile::load(&lap.system_path)?;
+    if let Some(r) = &study.file.record {
+        file.record.signals = r.signals.clone();
+        file.record.decimation = r.decimation;
+    }
+    let plan = Arc::new(Plan::compile(
+        file,
+        &lap.system_path,
+        cache,
+        &LoadOptions::default(),
+    )?);
+    Ok(plan)
+}
+
+/// A study cannot set an input that a connection drives: the connection sets it every step.
+fn not_connected(plan: &Plan, study: &Study, slot: &ParamSlot) -> Result<(), OptimizeError> {
+    match plan.driving_connection(slot) {
+        Some(c) => Err(OptimizeError::File {
+            path: study.path.clone(),
+            message: format!(
+                "'{}' is an input connected to {} (\"{}\"): the connection sets it every step, a study cannot",
+                slot.name, c.from_name, c.text
+            ),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// The study's fixed values and the lap's own, resolved: the slots and values that join
+/// the assignment, and the values set once on every worker.
+type Resolved = (Vec<ParamSlot>, Vec<f64>, Vec<(ParamSlot, ParamValue)>);
+
+/// The study's fixed values, then the lap's own (a lap's value replaces the study's).
+fn fixed_values(study: &Study, lap: &Lap, plan: &Plan) -> Result<Resolved, OptimizeError> {
+    let mut slots: Vec<ParamSlot> = Vec::new();
+    let mut initial = Vec::new();
+    // Fixed values: numbers join the assignment (reported with the results); other
+    // types are set once on every worker.
+    let mut fixed = Vec::new();
+    let study_dir = tb_files::folder_of(&study.path);
+    for (name, value) in &study.file.parameters {
+        let ctx = format!("{}: parameter \"{name}\"", study.path.display());
+        let slot = plan.parameter(name)?;
+        not_connected(plan, study, &slot)?;
+        let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, &study_dir);
+        // A value some lap sets for itself is fixed on every lap's workers, never part
+        // of the assignment (which is the same on every lap).
+        let per_lap = study.laps.iter().any(|l| l.parameters.contains_key(name));
+        match v {
+            ParamValue::Real(x) if !per_lap => {
+                slots.push(slot);
+                initial.push(x);
+            }
+            other => fixed.push((slot, other)),
+        }
+    }
+    for (name, value) in &lap.parameters {
+        let ctx = format!(
+            "{}: lap '{}': parameter \"{name}\"",
+            study.path.display(),
+            lap.name
+        );
+        let slot = plan.parameter(name)?;
+        not_connected(plan, study, &slot)?;
+        let v = slot.resolve_path(slot.value_from_toml(value, &ctx)?, &study_dir);
+        fixed.retain(|(s, _)| s.name != slot.name);
+        fixed.push((slot, v));
+    }
+    Ok((slots, initial, fixed))
+}
+
+/// The steps' parameters the study does not fix join the assignment, each at the value
+/// `sim` has for it (its system's, with the fixed values set).
+fn add_step_parameters(
+    study: &Study,
+    plan: &Plan,
+    sim: &Simulation,
+    slots: &mut Vec<ParamSlot>,
+    initial: &mut Vec<f64>,
+) -> Result<(), OptimizeError> {
+    for step in &study.file.steps {
+        for p in &step.parameters {
+            if slots.iter().any(|s| s.name == p.name) {
+                continue;
+            }
+            let slot = plan.parameter(&p.name)?;
+            not_connected(plan, study, &slot)?;
+            // The bounds within the variable's declared range (else every candidate
+            // outside it fails, and the best point cannot be evaluated).
+            if slot.min.is_some_and(|m| p.min < m) || slot.max.is_some_and(|m| p.max > m) {
+                return Err(OptimizeError::File {
+                    path: study.path.clone(),
+                    message: format!(
+                        "step '{}': the bounds [{}, {}] of '{}' leave its declared range [{}, {}]",
+                        step.name,
+                        tb_files::number(p.min),
+                        tb_files::number(p.max),
+                        p.name,
+                        slot.min.map_or("-inf".into(), tb_files::number),
+                        slot.max.map_or("inf".into(), tb_files::number)
+                    ),
+                });
+            }
+            let x = sim.value_of(&slot).unwrap_or(p.min);
+            slot.real(x)?;
+            slots.push(slot);
+            initial.push(x);
+        }
+    }
+    Ok(())
 }
 
 /// The recording as a comparison table, without a last row that is off the decimated time

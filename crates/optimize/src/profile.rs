@@ -262,7 +262,6 @@ struct Side {
     bounded: bool,
 }
 
-/// Parameter i from the answer towards `sign`, point by point.
 /// What every side starts from.
 struct Around<'a> {
     name: &'a str,
@@ -272,6 +271,7 @@ struct Around<'a> {
     threshold: f64,
 }
 
+/// Parameter i from the answer towards `sign`, point by point.
 fn walk<F>(frame: &Frame<'_, F>, at: &Around, i: usize, sign: f64) -> Side
 where
     F: Laps,
@@ -285,24 +285,9 @@ where
     } = *at;
     let p = answer.x.len();
     let (lo_b, hi_b) = frame.bounds[i];
-    let se = sandwich[i].max(0.0).sqrt();
-    let step = if se > 0.0 && se.is_finite() {
-        (STEP_SE * se).min(0.25 * (hi_b - lo_b))
-    } else {
-        0.1 * (hi_b - lo_b)
-    };
+    let step = walk_step(sandwich[i], lo_b, hi_b);
     let k = kappa(naive, sandwich, i);
-    // The others' change per unit of θ_i along the information's regression (naive
-    // covariance: Cov(θ_j, θ_i)/Var(θ_i)).
-    let slope: Vec<f64> = (0..p)
-        .map(|j| {
-            if naive[i][i] > 0.0 {
-                naive[j][i] / naive[i][i]
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let slope = regression_slope(naive, i, p);
     let free: Vec<bool> = (0..p).map(|j| j != i).collect();
     let mut side = Side {
         points: Vec::new(),
@@ -313,25 +298,12 @@ where
     let (mut prev_value, mut prev_x) = (answer.x[i], answer.x.clone());
     let mut above = 0;
     for _ in 0..MAX_POINTS {
-        let at_bound = if sign < 0.0 {
-            prev_value <= lo_b
-        } else {
-            prev_value >= hi_b
-        };
-        if at_bound {
+        if reached_bound(prev_value, lo_b, hi_b, sign) {
             side.bounded = true;
             break;
         }
         let value = (prev_value + sign * step).clamp(lo_b, hi_b);
-        let mut x0 = prev_x.clone();
-        for j in 0..p {
-            let (lo, hi) = frame.bounds[j];
-            x0[j] = if j == i {
-                value
-            } else {
-                (prev_x[j] + slope[j] * (value - prev_value)).clamp(lo, hi)
-            };
-        }
+        let x0 = start_of_point(&frame.bounds, &prev_x, prev_value, value, &slope, i);
         // This point's own laps (the frame's count is shared with the walks running at
         // the same time): its start's (the lap there and one forward difference per free
         // parameter) and the fit's.
@@ -367,11 +339,7 @@ where
     }
     side.end = crossing(answer.x[i], &side.points, threshold);
     if side.end.is_none() && side.stop.is_none() && !side.bounded {
-        side.bounded = if sign < 0.0 {
-            prev_value <= lo_b
-        } else {
-            prev_value >= hi_b
-        };
+        side.bounded = reached_bound(prev_value, lo_b, hi_b, sign);
         if !side.bounded {
             side.stop = Some(format!(
                 "the profile of {name} stays below the threshold over {MAX_POINTS} points ({} to {}): open on that side",
@@ -381,6 +349,64 @@ where
         }
     }
     side
+}
+
+/// The walk's step: [`STEP_SE`] sandwich standard errors (`variance` the sandwich's
+/// variance of the parameter), at most a quarter of its range; a tenth of the range where
+/// there is no standard error.
+fn walk_step(variance: f64, lo_b: f64, hi_b: f64) -> f64 {
+    let se = variance.max(0.0).sqrt();
+    if se > 0.0 && se.is_finite() {
+        (STEP_SE * se).min(0.25 * (hi_b - lo_b))
+    } else {
+        0.1 * (hi_b - lo_b)
+    }
+}
+
+/// The others' change per unit of θ_i along the information's regression (naive
+/// covariance: Cov(θ_j, θ_i)/Var(θ_i)).
+fn regression_slope(naive: &[Vec<f64>], i: usize, p: usize) -> Vec<f64> {
+    (0..p)
+        .map(|j| {
+            if naive[i][i] > 0.0 {
+                naive[j][i] / naive[i][i]
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Whether a side walking towards `sign` stands on the parameter's bound at `value`.
+fn reached_bound(value: f64, lo_b: f64, hi_b: f64, sign: f64) -> bool {
+    if sign < 0.0 {
+        value <= lo_b
+    } else {
+        value >= hi_b
+    }
+}
+
+/// A point's start: parameter i at `value`, the others moved from the previous point
+/// (`prev_x`, where parameter i was `prev_value`) along the regression `slope`, each within
+/// its bounds.
+fn start_of_point(
+    bounds: &[(f64, f64)],
+    prev_x: &[f64],
+    prev_value: f64,
+    value: f64,
+    slope: &[f64],
+    i: usize,
+) -> Vec<f64> {
+    let mut x0 = prev_x.to_vec();
+    for j in 0..x0.len() {
+        let (lo, hi) = bounds[j];
+        x0[j] = if j == i {
+            value
+        } else {
+            (prev_x[j] + slope[j] * (value - prev_value)).clamp(lo, hi)
+        };
+    }
+    x0
 }
 
 #[cfg(test)]

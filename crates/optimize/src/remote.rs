@@ -13,7 +13,6 @@
 //! naming the file.
 
 use super::bench::Bench;
-use super::driver::cost_of;
 use super::pool::WorkerPool;
 use super::study::Study;
 use super::OptimizeError;
@@ -24,6 +23,10 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use tb_compare::PreparedMeasurement;
 use tb_fmi::FmuCache;
+
+// The step's cost lives beside `cost_of` (the bench shares it); named here too, where a
+// worker's callers have always found it.
+pub use super::cost::StepCost;
 
 /// One candidate of a study step: the step (0-based) and the value of every parameter of
 /// the study, in [`WorkerPool::assignment`]'s order.
@@ -59,41 +62,6 @@ pub trait Evaluator: Send + Sync {
 
 /// A point's filtered signals on the grid, per lap and signal: (first grid index, values).
 pub type LapSignals = Vec<(usize, Vec<f64>)>;
-
-/// The cost of a step's comparison: its signals, their weights and the bias weight.
-#[derive(Clone, Debug)]
-pub struct StepCost {
-    pub signals: Vec<String>,
-    pub weights: Vec<f64>,
-    pub bias_weight: f64,
-}
-
-impl StepCost {
-    pub fn of_step(study: &Study, step: usize) -> Option<StepCost> {
-        let s = study.file.steps.get(step)?;
-        Some(StepCost {
-            signals: s.signals.clone(),
-            weights: s.weights(),
-            bias_weight: s.bias_weight.unwrap_or(study.file.bias_weight),
-        })
-    }
-
-    /// The cost of one run on the bench (the one function local and remote evaluation share).
-    pub fn of(
-        &self,
-        workers: &WorkerPool,
-        values: &[f64],
-        prepared: &PreparedMeasurement,
-    ) -> Result<f64, String> {
-        let o = workers.run(values, prepared)?;
-        Ok(cost_of(
-            &o.comparison,
-            &self.signals,
-            &self.weights,
-            self.bias_weight,
-        ))
-    }
-}
 
 /// SHA-256 of each file a study reads, in a fixed order: the study, its measurement and
 /// every input of its system ([`tb_cosim::Plan::input_files`]). An FMU's entry is its

@@ -442,55 +442,89 @@ impl Study {
     }
 
     fn validate(&self) -> Result<(), OptimizeError> {
-        let bad = |m: String| OptimizeError::File {
-            path: self.path.clone(),
-            message: m,
-        };
         let f = &self.file;
         if f.steps.is_empty() {
-            return Err(bad("no [[step]]".into()));
+            return Err(self.bad("no [[step]]".into()));
         }
         if let Measurements::Laps(laps) = &f.measurement {
-            if laps.iter().all(|l| l.hold_out) {
-                return Err(bad(
-                    "every [[measurement]] is held out: at least one lap must be fitted".into(),
-                ));
-            }
-            if laps.iter().filter(|l| !l.hold_out).count() > 1 && !f.refine {
-                return Err(bad(
-                    "several fitted laps need refine = true: their intervals come from the joint fit over all laps".into(),
-                ));
-            }
-            let fitted: Vec<String> = f.steps.iter().flat_map(|s| s.parameter_names()).collect();
-            let mut names = Vec::new();
-            for (k, l) in laps.iter().enumerate() {
-                let name = l.name.clone().unwrap_or_else(|| {
-                    l.file
-                        .file_stem()
-                        .map_or("lap".into(), |s| s.to_string_lossy().into_owned())
-                });
-                if !(l.weight.is_finite() && l.weight > 0.0) {
-                    return Err(bad(format!(
-                        "[[measurement]] {} ({name}): weight = {}: a lap's weight must be a finite number > 0 (hold it out with hold_out = true)",
-                        k + 1,
-                        l.weight
-                    )));
-                }
-                if let Some(p) = l.parameters.keys().find(|p| fitted.contains(p)) {
-                    return Err(bad(format!(
-                        "[[measurement]] {} ({name}): '{p}' is a parameter the study fits: a lap can set only values of its own (track, target, start values)",
-                        k + 1
-                    )));
-                }
-                if names.contains(&name) {
-                    return Err(bad(format!(
-                        "[[measurement]] {}: the name '{name}' is taken by another lap (give each a name = \"...\")",
-                        k + 1
-                    )));
-                }
-                names.push(name);
-            }
+            self.validate_laps(laps)?;
         }
+        self.validate_settings()?;
+        self.validate_sizes()?;
+        let p = &f.plausibility;
+        if ![p.lap_length, p.lap_time, p.r_squared_v]
+            .iter()
+            .all(|x| x.is_finite() && *x >= 0.0)
+        {
+            return Err(self.bad("[plausibility]: bounds must be finite numbers ≥ 0".into()));
+        }
+        for s in &f.steps {
+            self.validate_step(s)?;
+        }
+        Ok(())
+    }
+
+    /// An error in the study file, with its path.
+    fn bad(&self, m: String) -> OptimizeError {
+        OptimizeError::File {
+            path: self.path.clone(),
+            message: m,
+        }
+    }
+
+    /// The `[[measurement]]` laps: at least one fitted (several only with the joint fit),
+    /// each with a finite weight > 0, none setting a fitted parameter, each name once.
+    fn validate_laps(&self, laps: &[LapConfig]) -> Result<(), OptimizeError> {
+        let bad = |m: String| self.bad(m);
+        let f = &self.file;
+        if laps.iter().all(|l| l.hold_out) {
+            return Err(bad(
+                "every [[measurement]] is held out: at least one lap must be fitted".into(),
+            ));
+        }
+        if laps.iter().filter(|l| !l.hold_out).count() > 1 && !f.refine {
+            return Err(bad(
+                "several fitted laps need refine = true: their intervals come from the joint fit over all laps".into(),
+            ));
+        }
+        let fitted: Vec<String> = f.steps.iter().flat_map(|s| s.parameter_names()).collect();
+        let mut names = Vec::new();
+        for (k, l) in laps.iter().enumerate() {
+            let name = l.name.clone().unwrap_or_else(|| {
+                l.file
+                    .file_stem()
+                    .map_or("lap".into(), |s| s.to_string_lossy().into_owned())
+            });
+            if !(l.weight.is_finite() && l.weight > 0.0) {
+                return Err(bad(format!(
+                    "[[measurement]] {} ({name}): weight = {}: a lap's weight must be a finite number > 0 (hold it out with hold_out = true)",
+                    k + 1,
+                    l.weight
+                )));
+            }
+            if let Some(p) = l.parameters.keys().find(|p| fitted.contains(p)) {
+                return Err(bad(format!(
+                    "[[measurement]] {} ({name}): '{p}' is a parameter the study fits: a lap can set only values of its own (track, target, start values)",
+                    k + 1
+                )));
+            }
+            if names.contains(&name) {
+                return Err(bad(format!(
+                    "[[measurement]] {}: the name '{name}' is taken by another lap (give each a name = \"...\")",
+                    k + 1
+                )));
+            }
+            names.push(name);
+        }
+        Ok(())
+    }
+
+    /// The study's settings: profiles need the joint fit; the comparison's settings; at
+    /// least one generation; a finite penalty above any real cost; a finite bias weight
+    /// ≥ 0 and null ratio > 0.
+    fn validate_settings(&self) -> Result<(), OptimizeError> {
+        let bad = |m: String| self.bad(m);
+        let f = &self.file;
         if f.profiles && !f.refine {
             return Err(bad(
                 "profiles = true needs refine = true: a profile is measured from the joint least-squares point the refinement finds".into(),
@@ -519,6 +553,14 @@ impl Study {
                 f.penalty, f.bias_weight, f.null_ratio
             )));
         }
+        Ok(())
+    }
+
+    /// The optimiser's sizes: a CMA-ES population of at least 4, at most
+    /// `MAX_POPULATION` candidates per generation and `MAX_GENERATIONS` generations.
+    fn validate_sizes(&self) -> Result<(), OptimizeError> {
+        let bad = |m: String| self.bad(m);
+        let f = &self.file;
         // Sizes that would exhaust memory or never finish are refused up front.
         const MAX_POPULATION: usize = 10_000;
         const MAX_GENERATIONS: usize = 1_000_000;
@@ -544,75 +586,80 @@ impl Study {
         {
             return Err(bad(format!("generations: at most {MAX_GENERATIONS}")));
         }
-        let p = &f.plausibility;
-        if ![p.lap_length, p.lap_time, p.r_squared_v]
-            .iter()
-            .all(|x| x.is_finite() && *x >= 0.0)
-        {
-            return Err(bad(
-                "[plausibility]: bounds must be finite numbers ≥ 0".into()
-            ));
+        Ok(())
+    }
+
+    /// One step: parameters and signals, one non-negative weight per signal with a finite
+    /// sum above zero, a finite bias weight ≥ 0, at least one generation, its parameters
+    /// (each once).
+    fn validate_step(&self, s: &StepConfig) -> Result<(), OptimizeError> {
+        let bad = |m: String| self.bad(m);
+        let ctx = format!("step '{}'", s.name);
+        if s.parameters.is_empty() || s.signals.is_empty() {
+            return Err(bad(format!("{ctx}: needs parameters and signals")));
         }
-        for s in &f.steps {
-            let ctx = format!("step '{}'", s.name);
-            if s.parameters.is_empty() || s.signals.is_empty() {
-                return Err(bad(format!("{ctx}: needs parameters and signals")));
-            }
-            if s.weights().len() != s.signals.len()
-                || s.weights().iter().any(|w| !w.is_finite() || *w < 0.0)
-            {
+        if s.weights().len() != s.signals.len()
+            || s.weights().iter().any(|w| !w.is_finite() || *w < 0.0)
+        {
+            return Err(bad(format!(
+                "{ctx}: weights must be one non-negative number per signal"
+            )));
+        }
+        // The cost divides by the sum: zero, or a sum that overflows (two weights of
+        // 1e308), would make every candidate's cost 0 or NaN.
+        let sum = s.weights().iter().sum::<f64>();
+        if sum <= 0.0 {
+            return Err(bad(format!("{ctx}: the weights sum to zero")));
+        }
+        if !sum.is_finite() {
+            return Err(bad(format!(
+                "{ctx}: the weights sum to {sum} (they overflow a double): scale them down, only their ratios matter"
+            )));
+        }
+        if let Some(b) = s.bias_weight {
+            if !(b.is_finite() && b >= 0.0) {
                 return Err(bad(format!(
-                    "{ctx}: weights must be one non-negative number per signal"
+                    "{ctx}: bias_weight must be a finite number ≥ 0, got {b}"
                 )));
             }
-            // The cost divides by the sum: zero, or a sum that overflows (two weights of
-            // 1e308), would make every candidate's cost 0 or NaN.
-            let sum = s.weights().iter().sum::<f64>();
-            if sum <= 0.0 {
-                return Err(bad(format!("{ctx}: the weights sum to zero")));
-            }
-            if !sum.is_finite() {
+        }
+        if s.generations == Some(0) {
+            return Err(bad(format!("{ctx}: generations must be at least 1")));
+        }
+        for p in &s.parameters {
+            self.validate_parameter(&ctx, p)?;
+        }
+        let mut names = s.parameter_names();
+        names.sort();
+        names.dedup();
+        if names.len() != s.parameters.len() {
+            return Err(bad(format!("{ctx}: a parameter appears twice")));
+        }
+        Ok(())
+    }
+
+    /// One of a step's parameters (`ctx` names the step): instance.variable, bounds that
+    /// are an interval, a start within them.
+    fn validate_parameter(&self, ctx: &str, p: &ParameterConfig) -> Result<(), OptimizeError> {
+        let bad = |m: String| self.bad(m);
+        if tb_cosim::split_name(&p.name).is_none() {
+            return Err(bad(format!(
+                "{ctx}: parameter '{}' is not instance.variable",
+                p.name
+            )));
+        }
+        if !(p.min.is_finite() && p.max.is_finite() && p.min < p.max) {
+            return Err(bad(format!(
+                "{ctx}: parameter '{}': bounds [{}, {}] are not an interval",
+                p.name, p.min, p.max
+            )));
+        }
+        if let Some(x) = p.start {
+            if !(p.min..=p.max).contains(&x) {
                 return Err(bad(format!(
-                    "{ctx}: the weights sum to {sum} (they overflow a double): scale them down, only their ratios matter"
+                    "{ctx}: parameter '{}': start {x} outside [{}, {}]",
+                    p.name, p.min, p.max
                 )));
-            }
-            if let Some(b) = s.bias_weight {
-                if !(b.is_finite() && b >= 0.0) {
-                    return Err(bad(format!(
-                        "{ctx}: bias_weight must be a finite number ≥ 0, got {b}"
-                    )));
-                }
-            }
-            if s.generations == Some(0) {
-                return Err(bad(format!("{ctx}: generations must be at least 1")));
-            }
-            for p in &s.parameters {
-                if tb_cosim::split_name(&p.name).is_none() {
-                    return Err(bad(format!(
-                        "{ctx}: parameter '{}' is not instance.variable",
-                        p.name
-                    )));
-                }
-                if !(p.min.is_finite() && p.max.is_finite() && p.min < p.max) {
-                    return Err(bad(format!(
-                        "{ctx}: parameter '{}': bounds [{}, {}] are not an interval",
-                        p.name, p.min, p.max
-                    )));
-                }
-                if let Some(x) = p.start {
-                    if !(p.min..=p.max).contains(&x) {
-                        return Err(bad(format!(
-                            "{ctx}: parameter '{}': start {x} outside [{}, {}]",
-                            p.name, p.min, p.max
-                        )));
-                    }
-                }
-            }
-            let mut names = s.parameter_names();
-            names.sort();
-            names.dedup();
-            if names.len() != s.parameters.len() {
-                return Err(bad(format!("{ctx}: a parameter appears twice")));
             }
         }
         Ok(())

@@ -32,7 +32,7 @@
 //! where it is not, the parameters are no longer asked to stand in for the missing
 //! dynamics, and the interval moves and widens to what the lap can tell.
 
-use crate::interval::Block;
+use crate::block::Block;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -47,7 +47,7 @@ const REPLICATIONS: usize = 4000;
 /// Length of each simulated series.
 const SIMULATED: usize = 400;
 // The bandwidth rule is the scatter interval's.
-use crate::interval::{pinv, CUT, LAGS, MAX_SHARE, MIN_BANDWIDTH};
+use crate::long_run::{pinv, CUT, LAGS, MAX_SHARE, MIN_BANDWIDTH};
 
 mod regimes;
 
@@ -428,14 +428,14 @@ fn discrepancy_fit(t: &Terms, info: &Information, x: &[f64], span: &[f64]) -> Ve
 
 /// The long-run covariance of a score series as the scatter interval takes it: each lap
 /// whitened by a VAR(1) of its own, Bartlett of the rest at the laps' common bandwidth,
-/// recoloured per lap and summed ([`crate::interval::prewhiten`]).
+/// recoloured per lap and summed ([`crate::long_run::prewhiten`]).
 fn whitened_long_run(series: &[Vec<DVector<f64>>], n: usize) -> DMatrix<f64> {
     type Whitened = (DMatrix<f64>, Vec<Vec<DVector<f64>>>);
     let per: Vec<Whitened> = series
         .iter()
         .map(|s| {
             let plain: Vec<Vec<f64>> = s.iter().map(|x| x.iter().copied().collect()).collect();
-            let (recolour, whitened) = crate::interval::prewhiten(std::slice::from_ref(&plain));
+            let (recolour, whitened) = crate::long_run::prewhiten(std::slice::from_ref(&plain));
             let whitened = whitened
                 .iter()
                 .map(|s| s.iter().map(|x| DVector::from_column_slice(x)).collect())
@@ -506,7 +506,7 @@ fn bandwidth_of(series: &[Vec<DVector<f64>>], n: usize) -> usize {
                 .iter()
                 .map(|s| s.iter().map(|x| x[d]).collect())
                 .collect();
-            crate::interval::bandwidth_of_one(&one, n, LAGS, CUT, MIN_BANDWIDTH, MAX_SHARE)
+            crate::long_run::bandwidth_of_one(&one, n, LAGS, CUT, MIN_BANDWIDTH, MAX_SHARE)
         })
         .max()
         .unwrap_or(MIN_BANDWIDTH)

@@ -12,7 +12,7 @@
 //! parameters are then a matter of which part of the lap one asks.
 
 use super::{block_factor, pinv, whitened_long_run, Kinematics, Laps};
-use crate::interval::Block;
+use crate::block::Block;
 use nalgebra::{DMatrix, DVector};
 
 /// The driving regimes: the measured a_x in thirds (braking, lifting or coasting,
