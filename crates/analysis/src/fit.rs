@@ -282,6 +282,36 @@ impl Evaluator {
 
 /// Fit a dead time + lag to an FRF estimate.
 pub fn fit(frf: &Frf, cfg: &FitConfig) -> Result<FrfFit> {
+    check_sampling(frf, cfg)?;
+    let dt = if frf.fs > 0.0 { 1.0 / frf.fs } else { 0.0 };
+    let h = frf.h();
+    let sel = fitted_bins(frf, &h, cfg)?;
+    let bins = Bins::new(frf, &h, &sel, cfg.sampling, dt);
+    let first = bins.first_order();
+    let params = match cfg.order {
+        LagOrder::First => first,
+        LagOrder::Second => bins.second_order(&first),
+    };
+    let (c, ln_k) = bins.cost(cfg.order, &params);
+    Ok(FrfFit {
+        order: cfg.order,
+        gain: ln_k.exp(),
+        dead_time: params[0],
+        time_constant: (cfg.order == LagOrder::First).then_some(params[1]),
+        natural_frequency: (cfg.order == LagOrder::Second).then_some(params[1]),
+        damping_ratio: (cfg.order == LagOrder::Second).then_some(params[2]),
+        f_lo: frf.freq[sel[0]],
+        f_hi: frf.freq[sel[sel.len() - 1]],
+        bins: sel.len(),
+        rms_residual: (c / bins.wsum).sqrt(),
+        sampling: cfg.sampling,
+        dt,
+    })
+}
+
+/// The data suit the model form: the sampled forms need the sampling frequency, and the
+/// dyno-cycle form data sampled at its (positive) controller cycle.
+fn check_sampling(frf: &Frf, cfg: &FitConfig) -> Result<()> {
     match cfg.sampling {
         Sampling::Continuous => {}
         Sampling::HeldInput if !frf.fs.is_finite() || frf.fs <= 0.0 => {
@@ -304,8 +334,12 @@ pub fn fit(frf: &Frf, cfg: &FitConfig) -> Result<FrfFit> {
             }
         }
     }
-    let dt = if frf.fs > 0.0 { 1.0 / frf.fs } else { 0.0 };
-    let h = frf.h();
+    Ok(())
+}
+
+/// The bins the fit uses (indices into the FRF): above 0 Hz, in the configured band, coherent
+/// enough, with a finite non-zero response; at least 4 of them.
+fn fitted_bins(frf: &Frf, h: &[Complex64], cfg: &FitConfig) -> Result<Vec<usize>> {
     let sel: Vec<usize> = (0..frf.freq.len())
         .filter(|&k| {
             let f = frf.freq[k];
@@ -326,94 +360,124 @@ pub fn fit(frf: &Frf, cfg: &FitConfig) -> Result<FrfFit> {
             cfg.min_coherence
         )));
     }
-    let w: Vec<f64> = sel.iter().map(|&k| 2.0 * PI * frf.freq[k]).collect();
-    let hs: Vec<Complex64> = sel.iter().map(|&k| h[k]).collect();
-    let wt: Vec<f64> = sel.iter().map(|&k| frf.coherence[k]).collect();
-    let wsum: f64 = wt.iter().sum();
-    // Cost for given time parameters, with the optimal log-gain in closed form.
-    let cost = |order: LagOrder, p: &[f64; 3]| -> (f64, f64) {
-        let ev = Evaluator::new(order, p, cfg.sampling, dt);
+    Ok(sel)
+}
+
+/// The fitted bins and the model form compared with them: what the cost of a parameter
+/// set is computed from.
+struct Bins {
+    /// Angular frequency of each bin, rad/s.
+    w: Vec<f64>,
+    /// The FRF at each bin.
+    hs: Vec<Complex64>,
+    /// Each bin's weight, its coherence, and their sum.
+    wt: Vec<f64>,
+    wsum: f64,
+    sampling: Sampling,
+    dt: f64,
+}
+
+impl Bins {
+    fn new(frf: &Frf, h: &[Complex64], sel: &[usize], sampling: Sampling, dt: f64) -> Bins {
+        let w: Vec<f64> = sel.iter().map(|&k| 2.0 * PI * frf.freq[k]).collect();
+        let hs: Vec<Complex64> = sel.iter().map(|&k| h[k]).collect();
+        let wt: Vec<f64> = sel.iter().map(|&k| frf.coherence[k]).collect();
+        let wsum: f64 = wt.iter().sum();
+        Bins {
+            w,
+            hs,
+            wt,
+            wsum,
+            sampling,
+            dt,
+        }
+    }
+
+    /// Cost for given time parameters, with the optimal log-gain in closed form:
+    /// `(cost, ln K)`.
+    fn cost(&self, order: LagOrder, p: &[f64; 3]) -> (f64, f64) {
+        let (w, hs, wt, wsum) = (&self.w, &self.hs, &self.wt, self.wsum);
+        let ev = Evaluator::new(order, p, self.sampling, self.dt);
         let r: Vec<Complex64> = w
             .iter()
-            .zip(&hs)
+            .zip(hs)
             .map(|(&wk, hk)| (ev.at(wk) / hk).ln())
             .collect();
-        let ln_k = -r.iter().zip(&wt).map(|(z, q)| z.re * q).sum::<f64>() / wsum;
+        let ln_k = -r.iter().zip(wt).map(|(z, q)| z.re * q).sum::<f64>() / wsum;
         let c = r
             .iter()
-            .zip(&wt)
+            .zip(wt)
             .map(|(z, q)| q * ((z.re + ln_k).powi(2) + z.im.powi(2)))
             .sum::<f64>();
         (c, ln_k)
-    };
+    }
 
-    // Start: phase of H (unwrapped over the selected bins) ≈ −ωT_d − atan(ωT).
-    let phase = crate::frf::unwrap(&hs.iter().map(|z| z.arg()).collect::<Vec<_>>());
-    // Start T from the magnitude: 1/|H|² = (1 + ω²T²)/K², linear in ω².
-    let t0 = {
+    /// The start of the time constant, from the magnitude: 1/|H|² = (1 + ω²T²)/K², linear
+    /// in ω² (else the period of the highest bin).
+    fn start_time_constant(&self) -> f64 {
+        let (w, hs, wt) = (&self.w, &self.hs, &self.wt);
         let xs: Vec<f64> = w.iter().map(|x| x * x).collect();
         let ys: Vec<f64> = hs.iter().map(|z| 1.0 / z.norm_sqr()).collect();
-        let (a, b) = linear_fit(&xs, &ys, &wt);
+        let (a, b) = linear_fit(&xs, &ys, wt);
         if a > 0.0 && b > 0.0 {
             (b / a).sqrt()
         } else {
             1.0 / w[w.len() - 1]
         }
-    };
-    let td_for = |t: f64| -> f64 {
-        // least squares through the origin of −φ − atan(ωT) against ω
+    }
+
+    /// The dead time that goes with time constant `t`, from the unwrapped `phase` of H:
+    /// least squares through the origin of −φ − atan(ωT) against ω.
+    fn dead_time_for(&self, phase: &[f64], t: f64) -> f64 {
+        let (w, wt) = (&self.w, &self.wt);
         let num: f64 = w
             .iter()
-            .zip(&phase)
-            .zip(&wt)
+            .zip(phase)
+            .zip(wt)
             .map(|((wk, ph), q)| q * wk * (-ph - (wk * t).atan()))
             .sum();
-        let den: f64 = w.iter().zip(&wt).map(|(wk, q)| q * wk * wk).sum();
+        let den: f64 = w.iter().zip(wt).map(|(wk, q)| q * wk * wk).sum();
         (num / den).max(0.0)
-    };
-    let first = {
-        let start = [td_for(t0), t0.max(1e-9).ln()];
-        let f = |x: &[f64]| cost(LagOrder::First, &[x[0], x[1].exp(), 0.0]).0;
+    }
+
+    /// The first-order fit `[T_d, T, 0]`: a Nelder–Mead search, then a finer one, started
+    /// from the phase and the magnitude.
+    fn first_order(&self) -> [f64; 3] {
+        let w = &self.w;
+        // Start: phase of H (unwrapped over the selected bins) ≈ −ωT_d − atan(ωT).
+        let phase = crate::frf::unwrap(&self.hs.iter().map(|z| z.arg()).collect::<Vec<_>>());
+        let t0 = self.start_time_constant();
+        let start = [self.dead_time_for(&phase, t0), t0.max(1e-9).ln()];
+        let f = |x: &[f64]| self.cost(LagOrder::First, &[x[0], x[1].exp(), 0.0]).0;
         let scale = 1.0 / w[w.len() - 1];
         let (x, _) = nelder_mead(&f, &start, &[scale, 0.3], 4000, 1e-15);
         let (x, _) = nelder_mead(&f, &x, &[scale * 0.1, 0.05], 4000, 1e-15);
         [x[0], x[1].exp(), 0.0]
-    };
-    let params = match cfg.order {
-        LagOrder::First => first,
-        LagOrder::Second => {
-            let mut best: Option<([f64; 3], f64)> = None;
-            for zeta in [0.3, 0.7, 1.0, 1.5] {
-                // a second-order lag with the same low-frequency delay as the first-order fit
-                let wn = 2.0 * zeta / first[1].max(1e-9);
-                let start = [first[0], wn.ln(), f64::ln(zeta)];
-                let f = |x: &[f64]| cost(LagOrder::Second, &[x[0], x[1].exp(), x[2].exp()]).0;
-                let scale = 1.0 / w[w.len() - 1];
-                let (x, v) = nelder_mead(&f, &start, &[scale, 0.3, 0.3], 6000, 1e-15);
-                let (x, v2) = nelder_mead(&f, &x, &[scale * 0.1, 0.05, 0.05], 6000, 1e-15);
-                let v = v.min(v2);
-                if best.as_ref().is_none_or(|b| v < b.1) {
-                    best = Some(([x[0], x[1].exp(), x[2].exp()], v));
-                }
+    }
+
+    /// The second-order fit `[T_d, ω_n, ζ]`: the best of searches started at several
+    /// damping ratios from the first-order fit `first`.
+    fn second_order(&self, first: &[f64; 3]) -> [f64; 3] {
+        let w = &self.w;
+        let mut best: Option<([f64; 3], f64)> = None;
+        for zeta in [0.3, 0.7, 1.0, 1.5] {
+            // a second-order lag with the same low-frequency delay as the first-order fit
+            let wn = 2.0 * zeta / first[1].max(1e-9);
+            let start = [first[0], wn.ln(), f64::ln(zeta)];
+            let f = |x: &[f64]| {
+                self.cost(LagOrder::Second, &[x[0], x[1].exp(), x[2].exp()])
+                    .0
+            };
+            let scale = 1.0 / w[w.len() - 1];
+            let (x, v) = nelder_mead(&f, &start, &[scale, 0.3, 0.3], 6000, 1e-15);
+            let (x, v2) = nelder_mead(&f, &x, &[scale * 0.1, 0.05, 0.05], 6000, 1e-15);
+            let v = v.min(v2);
+            if best.as_ref().is_none_or(|b| v < b.1) {
+                best = Some(([x[0], x[1].exp(), x[2].exp()], v));
             }
-            best.expect("at least one start").0
         }
-    };
-    let (c, ln_k) = cost(cfg.order, &params);
-    Ok(FrfFit {
-        order: cfg.order,
-        gain: ln_k.exp(),
-        dead_time: params[0],
-        time_constant: (cfg.order == LagOrder::First).then_some(params[1]),
-        natural_frequency: (cfg.order == LagOrder::Second).then_some(params[1]),
-        damping_ratio: (cfg.order == LagOrder::Second).then_some(params[2]),
-        f_lo: frf.freq[sel[0]],
-        f_hi: frf.freq[sel[sel.len() - 1]],
-        bins: sel.len(),
-        rms_residual: (c / wsum).sqrt(),
-        sampling: cfg.sampling,
-        dt,
-    })
+        best.expect("at least one start").0
+    }
 }
 
 /// Weighted least squares `y = a + b x`; returns `(a, b)`.

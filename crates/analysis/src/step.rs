@@ -90,21 +90,9 @@ pub fn analyse(
     let u = ts.column(setpoint)?;
     let y = ts.column(response)?;
     let t = ts.time();
-    let err = |message: String| AnalysisError::StepResponse {
-        file: ts.source().to_string(),
-        message,
-    };
+    let err = |message: String| step_error(ts.source(), message);
     let n = t.len();
-    let (k, du) = (1..n)
-        .map(|k| (k, u[k] - u[k - 1]))
-        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
-        .unwrap_or((0, 0.0));
-    if du == 0.0 {
-        return Err(AnalysisError::NoStep {
-            file: ts.source().to_string(),
-            column: setpoint.to_string(),
-        });
-    }
+    let k = find_step(ts, u, n, setpoint)?;
     let t0 = t[k];
     let tail = ((n - k) / 10).max(1);
     if n - k < 10 {
@@ -113,15 +101,7 @@ pub fn analyse(
             n - k
         )));
     }
-    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
-    let pre = &y[..k];
-    let y0 = mean(pre);
-    let sigma = if pre.len() > 2 {
-        (pre.iter().map(|v| (v - y0).powi(2)).sum::<f64>() / (pre.len() - 1) as f64).sqrt()
-    } else {
-        0.0
-    };
-    let y1 = mean(&y[n - tail..]);
+    let (y0, sigma, y1) = levels(y, k, n, tail);
     let dy = y1 - y0;
     if dy.abs() <= 4.0 * sigma || dy == 0.0 {
         return Err(err(format!(
@@ -130,44 +110,9 @@ pub fn analyse(
     }
     // Normalised response after the step.
     let r: Vec<f64> = y.iter().map(|v| (v - y0) / dy).collect();
-    let crossing = |level: f64, from: usize| -> Option<f64> {
-        (from.max(1)..n).find(|&j| r[j] >= level).map(|j| {
-            if j == 0 || r[j - 1] >= level {
-                t[j]
-            } else {
-                t[j - 1] + (level - r[j - 1]) / (r[j] - r[j - 1]) * (t[j] - t[j - 1])
-            }
-        })
-    };
     let start_level = cfg.start_threshold.max(4.0 * sigma / dy.abs());
-    let t_start =
-        crossing(start_level, k).ok_or_else(|| err("the response never starts".into()))?;
-    let t_lo = crossing(cfg.rise_low, k).ok_or_else(|| {
-        err(format!(
-            "the response never reaches {} %",
-            cfg.rise_low * 100.0
-        ))
-    })?;
-    let t_hi = crossing(cfg.rise_high, k).ok_or_else(|| {
-        err(format!(
-            "the response never reaches {} %",
-            cfg.rise_high * 100.0
-        ))
-    })?;
-    let transient_time = match (k..n).rev().find(|&j| (r[j] - 1.0).abs() > cfg.band) {
-        None => Some(0.0),
-        Some(j) if j + 1 < n => {
-            // interpolate the band edge between the last outside sample and the next
-            let edge = if r[j] > 1.0 {
-                1.0 + cfg.band
-            } else {
-                1.0 - cfg.band
-            };
-            let tc = t[j] + (edge - r[j]) / (r[j + 1] - r[j]) * (t[j + 1] - t[j]);
-            Some(tc - t0)
-        }
-        Some(_) => None,
-    };
+    let (t_start, t_lo, t_hi) = response_times(&r, t, k, start_level, cfg, ts.source())?;
+    let transient_time = transient_time(&r, t, k, cfg.band, t0);
     let overshoot = r[k..].iter().fold(0.0_f64, |a, v| a.max(v - 1.0));
     let fit = fit_step(&t[k..], &y[k..], t0, (t_start - t0, t_hi - t_lo))?;
     Ok(StepResult {
@@ -189,6 +134,105 @@ pub fn analyse(
             ..fit
         },
     })
+}
+
+/// An error in the step response of the file `source`.
+fn step_error(source: &str, message: String) -> AnalysisError {
+    AnalysisError::StepResponse {
+        file: source.to_string(),
+        message,
+    }
+}
+
+/// The step: the sample (of the first `n`) at which the setpoint `u` changes most; an
+/// error when it never changes.
+fn find_step(ts: &TimeSeries, u: &[f64], n: usize, setpoint: &str) -> Result<usize> {
+    let (k, du) = (1..n)
+        .map(|k| (k, u[k] - u[k - 1]))
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .unwrap_or((0, 0.0));
+    if du == 0.0 {
+        return Err(AnalysisError::NoStep {
+            file: ts.source().to_string(),
+            column: setpoint.to_string(),
+        });
+    }
+    Ok(k)
+}
+
+/// The response's levels around the step at sample `k`: `(y0, σ, y1)`, the mean before the
+/// step, the noise's standard deviation before it, and the mean over the last `tail` of
+/// the `n` samples.
+fn levels(y: &[f64], k: usize, n: usize, tail: usize) -> (f64, f64, f64) {
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    let pre = &y[..k];
+    let y0 = mean(pre);
+    let sigma = if pre.len() > 2 {
+        (pre.iter().map(|v| (v - y0).powi(2)).sum::<f64>() / (pre.len() - 1) as f64).sqrt()
+    } else {
+        0.0
+    };
+    let y1 = mean(&y[n - tail..]);
+    (y0, sigma, y1)
+}
+
+/// When the normalised response `r` first reaches `level` from sample `from` on (at least
+/// 1), interpolated linearly between samples.
+fn crossing(r: &[f64], t: &[f64], level: f64, from: usize) -> Option<f64> {
+    let n = t.len();
+    (from.max(1)..n).find(|&j| r[j] >= level).map(|j| {
+        if j == 0 || r[j - 1] >= level {
+            t[j]
+        } else {
+            t[j - 1] + (level - r[j - 1]) / (r[j] - r[j - 1]) * (t[j] - t[j - 1])
+        }
+    })
+}
+
+/// The absolute times the normalised response `r` starts (reaches `start_level`) and
+/// crosses the rise time's low and high shares after the step at sample `k`; an error for
+/// the first it never reaches.
+fn response_times(
+    r: &[f64],
+    t: &[f64],
+    k: usize,
+    start_level: f64,
+    cfg: &StepConfig,
+    source: &str,
+) -> Result<(f64, f64, f64)> {
+    let err = |message: String| step_error(source, message);
+    let t_start =
+        crossing(r, t, start_level, k).ok_or_else(|| err("the response never starts".into()))?;
+    let t_lo = crossing(r, t, cfg.rise_low, k).ok_or_else(|| {
+        err(format!(
+            "the response never reaches {} %",
+            cfg.rise_low * 100.0
+        ))
+    })?;
+    let t_hi = crossing(r, t, cfg.rise_high, k).ok_or_else(|| {
+        err(format!(
+            "the response never reaches {} %",
+            cfg.rise_high * 100.0
+        ))
+    })?;
+    Ok((t_start, t_lo, t_hi))
+}
+
+/// Time from the step (at `t0`, sample `k`) to the normalised response `r` entering the
+/// settling band `±band` for good, the band edge interpolated; `None` when the record ends
+/// outside it.
+fn transient_time(r: &[f64], t: &[f64], k: usize, band: f64, t0: f64) -> Option<f64> {
+    let n = t.len();
+    match (k..n).rev().find(|&j| (r[j] - 1.0).abs() > band) {
+        None => Some(0.0),
+        Some(j) if j + 1 < n => {
+            // interpolate the band edge between the last outside sample and the next
+            let edge = if r[j] > 1.0 { 1.0 + band } else { 1.0 - band };
+            let tc = t[j] + (edge - r[j]) / (r[j + 1] - r[j]) * (t[j + 1] - t[j]);
+            Some(tc - t0)
+        }
+        Some(_) => None,
+    }
 }
 
 /// Fit `y = a + b·(1 − exp(−(t − t0 − T_d)/T))` (0 before `t0 + T_d`) to the samples after

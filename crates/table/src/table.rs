@@ -139,43 +139,9 @@ impl Table {
         source: &str,
         keep: &dyn Fn(usize, &str) -> bool,
     ) -> Result<Self> {
-        let mut rdr = BufReader::new(reader);
+        let mut file = Lines::new(reader, source);
         let mut line = String::new();
-        let mut lineno: u64 = 0;
-        // The next non-blank line, trimmed of its terminator, and its 1-based number.
-        let mut next_line = |line: &mut String| -> Result<Option<u64>> {
-            loop {
-                line.clear();
-                let n = rdr.read_line(line).map_err(|e| Error::Io {
-                    path: source.into(),
-                    source: e,
-                })?;
-                if n == 0 {
-                    return Ok(None);
-                }
-                lineno += 1;
-                let t = line.trim_end_matches(['\n', '\r']);
-                let t = if lineno == 1 {
-                    t.trim_start_matches('\u{feff}')
-                } else {
-                    t
-                };
-                if !t.trim().is_empty() && !t.trim_start().starts_with('#') {
-                    *line = t.to_owned();
-                    return Ok(Some(lineno));
-                }
-            }
-        };
-
-        if next_line(&mut line)?.is_none() {
-            return Err(Error::Empty {
-                file: source.into(),
-                what: "no header row",
-            });
-        }
-        let sep = separator(&line);
-        let names: Vec<String> = fields(&line, sep).collect();
-        check_duplicates(source, &names)?;
+        let (sep, names) = read_header(&mut file, &mut line, source)?;
         let ncol = names.len();
         let mut columns: Vec<Vec<f64>> = vec![Vec::new(); ncol];
         let mut text: Vec<Option<Vec<String>>> = names
@@ -187,18 +153,8 @@ impl Table {
         let mut units = None;
         let mut first = true;
         let mut row_fields: Vec<String> = Vec::with_capacity(ncol);
-        while let Some(row) = next_line(&mut line)? {
-            row_fields.clear();
-            row_fields.extend(fields(&line, sep));
-            let found = row_fields.len();
-            if found != ncol {
-                return Err(Error::RaggedRow {
-                    file: source.into(),
-                    row,
-                    expected: ncol,
-                    found,
-                });
-            }
+        while let Some(row) = file.next(&mut line)? {
+            split_record(&line, sep, row, ncol, &mut row_fields, source)?;
             if first {
                 first = false;
                 if is_units_row(&row_fields) {
@@ -207,27 +163,9 @@ impl Table {
                 }
             }
             if lines.is_empty() {
-                // A column whose first value is words, not a number, holds text.
-                for (j, f) in row_fields.iter().enumerate() {
-                    if f.parse::<f64>().is_err() && is_words(f) {
-                        text[j] = Some(Vec::new());
-                    }
-                }
+                mark_text_columns(&row_fields, &mut text);
             }
-            for (j, field) in row_fields.iter().enumerate() {
-                if let Some(t) = &mut text[j] {
-                    t.push(field.clone());
-                    columns[j].push(f64::NAN);
-                    continue;
-                }
-                let v: f64 = field.parse().map_err(|_| Error::Malformed {
-                    file: source.into(),
-                    row,
-                    column: names[j].clone(),
-                    value: tb_files::excerpt(field),
-                })?;
-                columns[j].push(v);
-            }
+            push_record(&row_fields, row, &names, &mut text, &mut columns, source)?;
             lines.push(row);
         }
         if lines.is_empty() {
@@ -544,6 +482,130 @@ impl Table {
             value: self.columns[col][row],
         }
     }
+}
+
+/// The lines of a CSV file as the table reads them: blank lines and `#` comments skipped,
+/// each line trimmed of its terminator (and the first of a UTF-8 BOM), and numbered as an
+/// editor shows them (the skipped lines counted) so that errors point at the right line.
+struct Lines<'s, R> {
+    rdr: BufReader<R>,
+    lineno: u64,
+    source: &'s str,
+}
+
+impl<'s, R: Read> Lines<'s, R> {
+    fn new(reader: R, source: &'s str) -> Self {
+        Lines {
+            rdr: BufReader::new(reader),
+            lineno: 0,
+            source,
+        }
+    }
+
+    /// The next non-blank line, trimmed of its terminator, into `line`, and its 1-based
+    /// number; `None` at the end of the file.
+    fn next(&mut self, line: &mut String) -> Result<Option<u64>> {
+        loop {
+            line.clear();
+            let n = self.rdr.read_line(line).map_err(|e| Error::Io {
+                path: self.source.into(),
+                source: e,
+            })?;
+            if n == 0 {
+                return Ok(None);
+            }
+            self.lineno += 1;
+            let t = line.trim_end_matches(['\n', '\r']);
+            let t = if self.lineno == 1 {
+                t.trim_start_matches('\u{feff}')
+            } else {
+                t
+            };
+            if !t.trim().is_empty() && !t.trim_start().starts_with('#') {
+                *line = t.to_owned();
+                return Ok(Some(self.lineno));
+            }
+        }
+    }
+}
+
+/// The header row: the separator it uses and the column names (no name twice). A file
+/// without one is empty.
+fn read_header<R: Read>(
+    file: &mut Lines<'_, R>,
+    line: &mut String,
+    source: &str,
+) -> Result<(char, Vec<String>)> {
+    if file.next(line)?.is_none() {
+        return Err(Error::Empty {
+            file: source.into(),
+            what: "no header row",
+        });
+    }
+    let sep = separator(line);
+    let names: Vec<String> = fields(line, sep).collect();
+    check_duplicates(source, &names)?;
+    Ok((sep, names))
+}
+
+/// The fields of the record on line `row` into `row_fields`: as many as the header has
+/// columns, else the row is ragged.
+fn split_record(
+    line: &str,
+    sep: char,
+    row: u64,
+    ncol: usize,
+    row_fields: &mut Vec<String>,
+    source: &str,
+) -> Result<()> {
+    row_fields.clear();
+    row_fields.extend(fields(line, sep));
+    let found = row_fields.len();
+    if found != ncol {
+        return Err(Error::RaggedRow {
+            file: source.into(),
+            row,
+            expected: ncol,
+            found,
+        });
+    }
+    Ok(())
+}
+
+/// On the first record: a column whose first value is words, not a number, holds text.
+fn mark_text_columns(row_fields: &[String], text: &mut [Option<Vec<String>>]) {
+    for (j, f) in row_fields.iter().enumerate() {
+        if f.parse::<f64>().is_err() && is_words(f) {
+            text[j] = Some(Vec::new());
+        }
+    }
+}
+
+/// One record's fields appended to the columns: a text column keeps the string (its
+/// number NaN), any other must hold a number (else the line `row` is malformed).
+fn push_record(
+    row_fields: &[String],
+    row: u64,
+    names: &[String],
+    text: &mut [Option<Vec<String>>],
+    columns: &mut [Vec<f64>],
+    source: &str,
+) -> Result<()> {
+    for (j, field) in row_fields.iter().enumerate() {
+        if let Some(t) = &mut text[j] {
+            t.push(field.clone());
+            columns[j].push(f64::NAN);
+            continue;
+        }
+        let v: f64 = field.parse().map_err(|_| Error::Malformed {
+            file: source.into(),
+            row,
+            column: names[j].clone(),
+            value: tb_files::excerpt(field),
+        })?;
+        columns[j].push(v);
+    }
+    Ok(())
 }
 
 fn check_duplicates(source: &str, names: &[String]) -> Result<()> {

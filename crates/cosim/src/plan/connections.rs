@@ -4,7 +4,7 @@
 
 use super::instances::Units;
 use super::units::{self, unit_conversion, Conversion};
-use super::{ConnectionDef, Endpoint, SignalTable};
+use super::{ConnectionDef, Endpoint, InstanceDef, SignalTable};
 use crate::config::{ConnectionConfig, Interpolation, SystemFile};
 use crate::{invalid, split_name, SystemError};
 use tb_fmi::import::description::{ModelDescription, ScalarVariable};
@@ -75,6 +75,44 @@ fn connection(
         .ok_or_else(|| invalid(ctx, "expected \"instance.output -> instance.input\""))?;
     let (a, b) = (a.trim(), b.trim());
     let from = units.endpoint(ctx, a)?;
+    let (to_unit, to_sv) = target_input(units, b, ctx)?;
+    let to_def = &units.instances[to_unit];
+    let (from_unit_name, from_md) =
+        source_unit(units, &from, (a, b), (to_def, to_sv), text, ctx, notes)?;
+    check_types(&from, a, to_sv, b, ctx)?;
+    let conversion = checked_conversion(
+        conn,
+        units,
+        (&from, a),
+        (from_md, from_unit_name.as_deref()),
+        to_def.description(),
+        to_sv,
+        ctx,
+    )?;
+    if let Some(note) = &conversion.note {
+        notes.push(format!("connection \"{text}\": {note}"));
+    }
+    Ok(ConnectionDef {
+        text: text.clone(),
+        from_slot: signals.slot(&from, a),
+        from,
+        from_name: a.to_string(),
+        to_unit,
+        to_vr: to_sv.value_reference,
+        to_ty: to_sv.ty,
+        to_name: b.to_string(),
+        scale: conversion.scale,
+        offset: conversion.offset,
+    })
+}
+
+/// The input a connection drives, `b` (`instance.variable`): the unit, an instance (a
+/// replayed channel cannot be driven), and its variable, which must be an input.
+fn target_input<'u>(
+    units: Units<'u>,
+    b: &str,
+    ctx: &str,
+) -> Result<(usize, &'u ScalarVariable), SystemError> {
     let (tu, tv) = split_name(b)
         .ok_or_else(|| invalid(ctx, format!("'{b}' is not of the form instance.variable")))?;
     let to_unit = units.index(tu).ok_or_else(|| units.unknown(ctx, tu))?;
@@ -95,12 +133,27 @@ fn connection(
             ),
         ));
     }
-    let (from_unit_name, from_md) = match &from {
+    Ok((to_unit, to_sv))
+}
+
+/// The source `a`'s unit and, for an FMU variable, the model description that defines it;
+/// an FMU variable must be an output. A replayed column without a unit takes the input
+/// `b`'s, said in a note.
+fn source_unit<'u>(
+    units: Units<'u>,
+    from: &Endpoint,
+    (a, b): (&str, &str),
+    (to_def, to_sv): (&InstanceDef, &ScalarVariable),
+    text: &str,
+    ctx: &str,
+    notes: &mut Vec<String>,
+) -> Result<(Option<String>, Option<&'u ModelDescription>), SystemError> {
+    Ok(match from {
         Endpoint::Fmu {
             unit, unit_name, ..
         } => {
             let sv = units
-                .variable(&from)
+                .variable(from)
                 .expect("an FMU endpoint names a variable");
             if sv.causality != Causality::Output {
                 return Err(invalid(
@@ -126,17 +179,30 @@ fn connection(
             (None, None)
         }
         Endpoint::Replay { unit_name, .. } => (Some(unit_name.clone()), None),
-    };
-    check_types(&from, a, to_sv, b, ctx)?;
+    })
+}
+
+/// The connection's conversion ([`connection_conversion`]) from the source `a` (its model
+/// description, if an FMU's, and its unit) to the input `to_sv` of `to_md`, its error put
+/// in the connection's context; for a replayed column the fix it names is the column's
+/// unit in the `[[replay]]`, not a scale.
+fn checked_conversion(
+    conn: &ConnectionConfig,
+    units: Units<'_>,
+    (from, a): (&Endpoint, &str),
+    (from_md, from_unit_name): (Option<&ModelDescription>, Option<&str>),
+    to_md: &ModelDescription,
+    to_sv: &ScalarVariable,
+    ctx: &str,
+) -> Result<Conversion, SystemError> {
     let empty = ModelDescription::default();
-    let to_md = to_def.description();
-    let conversion = connection_conversion(
+    connection_conversion(
         conn,
-        (from_md.unwrap_or(&empty), from_unit_name.as_deref()),
+        (from_md.unwrap_or(&empty), from_unit_name),
         (to_md, to_md.unit_of(to_sv)),
         to_sv.ty,
     )
-    .map_err(|m| match &from {
+    .map_err(|m| match from {
         // The fix for a replayed column is its unit, not a scale.
         Endpoint::Replay { unit, column, .. } => {
             let r = units.replay(*unit);
@@ -150,21 +216,6 @@ fn connection(
             )
         }
         _ => invalid(ctx, m),
-    })?;
-    if let Some(note) = &conversion.note {
-        notes.push(format!("connection \"{text}\": {note}"));
-    }
-    Ok(ConnectionDef {
-        text: text.clone(),
-        from_slot: signals.slot(&from, a),
-        from,
-        from_name: a.to_string(),
-        to_unit,
-        to_vr: to_sv.value_reference,
-        to_ty: to_sv.ty,
-        to_name: b.to_string(),
-        scale: conversion.scale,
-        offset: conversion.offset,
     })
 }
 

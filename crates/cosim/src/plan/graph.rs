@@ -6,8 +6,17 @@ use super::{ConnectionDef, Endpoint, InstanceDef};
 use crate::config::SystemFile;
 use crate::split_name;
 use std::collections::HashMap;
-use tb_fmi::import::description::ScalarVariable;
+use tb_fmi::import::description::{ModelDescription, ScalarVariable, Unknown};
 use tb_fmi::{Causality, VarKey};
+
+/// A node of the feed-through graph: a connected input or output, as (instance, value
+/// space and value reference).
+type Node = (usize, VarKey);
+
+/// The feed-through graph: from each node, the nodes it feeds directly, each edge marked
+/// `true` when it is certain (a connection, or a dependency the FMU declares) and `false`
+/// when only assumed (an output that declares no dependencies).
+type Edges = HashMap<Node, Vec<(Node, bool)>>;
 
 /// Direct feed-through cycles: output -> input (connection) -> output of the same instance
 /// (declared dependency). Cycles made only of declared dependencies are errors; cycles
@@ -18,9 +27,34 @@ pub(crate) fn check_feedthrough_cycles(
     connections: &[ConnectionDef],
     warnings: &mut Vec<String>,
 ) -> Result<(), String> {
-    // Nodes: (instance, value space, value reference) of connected inputs and outputs.
-    type Node = (usize, VarKey);
-    let mut edges: HashMap<Node, Vec<(Node, bool)>> = HashMap::new();
+    let mut edges = connection_edges(connections);
+    for (k, inst) in instances.iter().enumerate() {
+        dependency_edges(k, inst, &mut edges);
+    }
+    let Some(cycle) = first_cycle(&edges) else {
+        return Ok(());
+    };
+    // The cycle starts and ends at the same node.
+    let text = cycle
+        .iter()
+        .map(|(n, _)| node_name(instances, n))
+        .collect::<Vec<_>>();
+    let text = text.join(" -> ");
+    if cycle.iter().all(|c| c.1) {
+        return Err(format!(
+            "direct feed-through cycle (an algebraic loop): {text}"
+        ));
+    }
+    warnings.push(format!(
+        "possible feed-through cycle through outputs that declare no dependencies: {text}"
+    ));
+    Ok(())
+}
+
+/// The connections' edges: an FMU output feeds the input it is connected to (a replayed
+/// column is fed by nothing, so it is no part of a cycle).
+fn connection_edges(connections: &[ConnectionDef]) -> Edges {
+    let mut edges: Edges = HashMap::new();
     for c in connections {
         if let Endpoint::Fmu { unit, vr, ty, .. } = c.from {
             edges
@@ -29,111 +63,121 @@ pub(crate) fn check_feedthrough_cycles(
                 .push(((c.to_unit, c.to_key()), true));
         }
     }
-    for (k, inst) in instances.iter().enumerate() {
-        let md = inst.description();
-        // Every output: the ModelStructure's entry, or none (an output missing from it may
-        // depend on every input, as one without a `dependencies` attribute). The entries by
-        // index, once (a scan per output was quadratic, M11).
-        let mut listed: HashMap<usize, &tb_fmi::import::description::Unknown> =
-            HashMap::with_capacity(md.outputs.len());
-        for o in &md.outputs {
-            listed.entry(o.index).or_insert(o);
-        }
-        let outputs = md
-            .variables
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| v.causality == Causality::Output)
-            .map(|(i, v)| (v, listed.get(&(i + 1)).copied()));
-        for (out, o) in outputs {
-            let (deps, declared): (Vec<&ScalarVariable>, bool) =
-                match o.and_then(|o| o.dependencies.as_ref()) {
-                    Some(d) => (
-                        d.iter()
-                            .filter_map(|i| md.variables.get(i - 1))
-                            .filter(|v| v.causality == Causality::Input)
-                            .collect(),
-                        true,
-                    ),
-                    None => (
-                        md.variables
-                            .iter()
-                            .filter(|v| v.causality == Causality::Input)
-                            .collect(),
-                        false,
-                    ),
-                };
-            // An output that is an alias of an input is that input, not a loop through it.
-            for inp in deps.into_iter().filter(|i| i.key() != out.key()) {
-                edges
-                    .entry((k, inp.key()))
-                    .or_default()
-                    .push(((k, out.key()), declared));
-            }
+    edges
+}
+
+/// Instance `k`'s edges: each input feeds every output that depends on it.
+fn dependency_edges(k: usize, inst: &InstanceDef, edges: &mut Edges) {
+    let md = inst.description();
+    // Every output: the ModelStructure's entry, or none (an output missing from it may
+    // depend on every input, as one without a `dependencies` attribute). The entries by
+    // index, once (a scan per output was quadratic, M11).
+    let mut listed: HashMap<usize, &Unknown> = HashMap::with_capacity(md.outputs.len());
+    for o in &md.outputs {
+        listed.entry(o.index).or_insert(o);
+    }
+    let outputs = md
+        .variables
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.causality == Causality::Output)
+        .map(|(i, v)| (v, listed.get(&(i + 1)).copied()));
+    for (out, o) in outputs {
+        let (deps, declared) = output_dependencies(md, o);
+        // An output that is an alias of an input is that input, not a loop through it.
+        for inp in deps.into_iter().filter(|i| i.key() != out.key()) {
+            edges
+                .entry((k, inp.key()))
+                .or_default()
+                .push(((k, out.key()), declared));
         }
     }
-    let name = |n: &Node| {
-        let inst = &instances[n.0];
-        let v = inst
-            .description()
-            .variables
-            .iter()
-            .find(|v| v.has_key(n.1))
-            .map(|v| v.name.as_str())
-            .unwrap_or("?");
-        format!("{}.{v}", inst.name)
-    };
-    // DFS for a cycle.
+}
+
+/// The inputs an output (with its ModelStructure entry `o`, if any) depends on, and whether
+/// the FMU declares them: its `dependencies`, else every input (assumed).
+fn output_dependencies<'m>(
+    md: &'m ModelDescription,
+    o: Option<&Unknown>,
+) -> (Vec<&'m ScalarVariable>, bool) {
+    match o.and_then(|o| o.dependencies.as_ref()) {
+        Some(d) => (
+            d.iter()
+                .filter_map(|i| md.variables.get(i - 1))
+                .filter(|v| v.causality == Causality::Input)
+                .collect(),
+            true,
+        ),
+        None => (
+            md.variables
+                .iter()
+                .filter(|v| v.causality == Causality::Input)
+                .collect(),
+            false,
+        ),
+    }
+}
+
+/// A node by its system name, `instance.variable` (`?` for a variable the instance does not
+/// have).
+fn node_name(instances: &[InstanceDef], n: &Node) -> String {
+    let inst = &instances[n.0];
+    let v = inst
+        .description()
+        .variables
+        .iter()
+        .find(|v| v.has_key(n.1))
+        .map(|v| v.name.as_str())
+        .unwrap_or("?");
+    format!("{}.{v}", inst.name)
+}
+
+/// The first cycle of the graph, by a depth-first search from each node in order: its
+/// edges from the node it starts at round to that node.
+fn first_cycle(edges: &Edges) -> Option<Vec<(Node, bool)>> {
     let mut color: HashMap<Node, u8> = HashMap::new();
     let mut nodes: Vec<Node> = edges.keys().copied().collect();
     nodes.sort();
-    type Edges = HashMap<Node, Vec<(Node, bool)>>;
-    fn dfs(
-        n: Node,
-        edges: &Edges,
-        color: &mut HashMap<Node, u8>,
-        path: &mut Vec<(Node, bool)>,
-    ) -> Option<Vec<(Node, bool)>> {
-        color.insert(n, 1);
-        if let Some(next) = edges.get(&n) {
-            for &(m, declared) in next {
-                path.push((m, declared));
-                match color.get(&m).copied().unwrap_or(0) {
-                    1 => {
-                        let start = path.iter().position(|p| p.0 == m).unwrap_or(0);
-                        return Some(path[start..].to_vec());
-                    }
-                    0 => {
-                        if let Some(c) = dfs(m, edges, color, path) {
-                            return Some(c);
-                        }
-                    }
-                    _ => {}
-                }
-                path.pop();
-            }
-        }
-        color.insert(n, 2);
-        None
-    }
     for n in nodes {
         if color.get(&n).copied().unwrap_or(0) == 0 {
             let mut path = vec![(n, true)];
-            if let Some(cycle) = dfs(n, &edges, &mut color, &mut path) {
-                // The cycle starts and ends at the same node.
-                let text = cycle.iter().map(|(n, _)| name(n)).collect::<Vec<_>>();
-                let text = text.join(" -> ");
-                if cycle.iter().all(|c| c.1) {
-                    return Err(format!(
-                        "direct feed-through cycle (an algebraic loop): {text}"
-                    ));
-                }
-                warnings.push(format!("possible feed-through cycle through outputs that declare no dependencies: {text}"));
-                return Ok(());
+            if let Some(cycle) = dfs(n, edges, &mut color, &mut path) {
+                return Some(cycle);
             }
         }
     }
-    Ok(())
+    None
+}
+
+/// The depth-first search from `n` along `path`: the cycle it closes, if any. `color`
+/// marks the nodes on the path (1) and those done (2).
+fn dfs(
+    n: Node,
+    edges: &Edges,
+    color: &mut HashMap<Node, u8>,
+    path: &mut Vec<(Node, bool)>,
+) -> Option<Vec<(Node, bool)>> {
+    color.insert(n, 1);
+    if let Some(next) = edges.get(&n) {
+        for &(m, declared) in next {
+            path.push((m, declared));
+            match color.get(&m).copied().unwrap_or(0) {
+                1 => {
+                    let start = path.iter().position(|p| p.0 == m).unwrap_or(0);
+                    return Some(path[start..].to_vec());
+                }
+                0 => {
+                    if let Some(c) = dfs(m, edges, color, path) {
+                        return Some(c);
+                    }
+                }
+                _ => {}
+            }
+            path.pop();
+        }
+    }
+    color.insert(n, 2);
+    None
 }
 
 /// Stepping order: the explicit one, or a topological order of the connections

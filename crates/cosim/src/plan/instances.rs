@@ -70,49 +70,10 @@ pub(super) fn instances(
     let mut instances: Vec<InstanceDef> = Vec::new();
     let mut native_fallback = Vec::new();
     for inst in &file.instances {
-        let fmu = loaded.get(inst.fmu.as_str()).ok_or_else(|| {
-            invalid(
-                format!("{ctx_file}: instance '{}'", inst.name),
-                format!(
-                    "fmu '{}' is not in [fmus] (known: {})",
-                    inst.fmu,
-                    file.fmus.keys().cloned().collect::<Vec<_>>().join(", ")
-                ),
-            )
-        })?;
-        if instances.iter().any(|i| i.name == inst.name)
-            || inst.name.contains('.')
-            || !valid_unit_name(&inst.name)
-        {
-            return Err(invalid(
-                ctx_file,
-                format!(
-                    "instance name '{}' is repeated, empty, or contains a '.', a quote, a separator or a control character",
-                    inst.name
-                ),
-            ));
-        }
+        let fmu = instance_fmu(file, loaded, inst, ctx_file)?;
+        check_instance_name(&instances, inst, ctx_file)?;
         let run = run_as(file, inst, fmu, ctx_file)?;
-        let md = &fmu.description;
-        let only_once = match run.interface {
-            Interface::CoSimulation => md
-                .co_simulation
-                .as_ref()
-                .is_some_and(|c| c.can_be_instantiated_only_once_per_process),
-            Interface::ModelExchange => md
-                .model_exchange
-                .as_ref()
-                .is_some_and(|m| m.can_be_instantiated_only_once_per_process),
-        };
-        if only_once && file.instances.iter().filter(|i| i.fmu == inst.fmu).count() > 1 {
-            return Err(invalid(
-                ctx_file,
-                format!(
-                    "FMU '{}' can be instantiated only once per process",
-                    inst.fmu
-                ),
-            ));
-        }
+        check_only_once(file, inst, fmu, run.interface, ctx_file)?;
         let factory = backend(
             file,
             inst,
@@ -123,24 +84,7 @@ pub(super) fn instances(
             &mut native_fallback,
         )?;
         let ctx = format!("{ctx_file}: instance '{}'", inst.name);
-        let tolerance = inst
-            .tolerance
-            .or(file.experiment.tolerance)
-            .or_else(|| fmu.description.default_experiment.as_ref()?.tolerance);
-        if let Some(t) = inst.tolerance {
-            check_tolerance(t, &format!("{ctx}: tolerance"))?;
-        }
-        if let Some(t) =
-            tolerance.filter(|_| inst.tolerance.is_none() && file.experiment.tolerance.is_none())
-        {
-            check_tolerance(
-                t,
-                &format!(
-                    "{ctx}: the DefaultExperiment tolerance of {}",
-                    fmu.source.display()
-                ),
-            )?;
-        }
+        let tolerance = instance_tolerance(file, inst, fmu, &ctx)?;
         let def = InstanceDef {
             name: inst.name.clone(),
             fmu: fmu.clone(),
@@ -150,13 +94,136 @@ pub(super) fn instances(
             tolerance,
             factory,
         };
-        for theirs in inst.ports.values() {
-            if def.description().variable(theirs).is_none() {
-                def.variable(theirs, &format!("{ctx_file}: port map of '{}'", inst.name))?;
-            }
-        }
+        check_port_map(&def, inst, ctx_file)?;
         instances.push(def);
     }
+    check_traced_instances(options, &instances, ctx_file)?;
+    Ok((instances, native_fallback))
+}
+
+/// The loaded FMU an instance names (its key in `[fmus]`).
+fn instance_fmu<'l>(
+    file: &SystemFile,
+    loaded: &'l HashMap<String, Arc<LoadedFmu>>,
+    inst: &InstanceConfig,
+    ctx_file: &str,
+) -> Result<&'l Arc<LoadedFmu>, SystemError> {
+    loaded.get(inst.fmu.as_str()).ok_or_else(|| {
+        invalid(
+            format!("{ctx_file}: instance '{}'", inst.name),
+            format!(
+                "fmu '{}' is not in [fmus] (known: {})",
+                inst.fmu,
+                file.fmus.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        )
+    })
+}
+
+/// An instance's name is new (none of the `instances` before it has it), has no `.` (a name
+/// `instance.variable` splits at it) and can head a result column as it is.
+fn check_instance_name(
+    instances: &[InstanceDef],
+    inst: &InstanceConfig,
+    ctx_file: &str,
+) -> Result<(), SystemError> {
+    if instances.iter().any(|i| i.name == inst.name)
+        || inst.name.contains('.')
+        || !valid_unit_name(&inst.name)
+    {
+        return Err(invalid(
+            ctx_file,
+            format!(
+                "instance name '{}' is repeated, empty, or contains a '.', a quote, a separator or a control character",
+                inst.name
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// An FMU that can be instantiated only once per process (through the interface this
+/// instance uses) is the FMU of no other instance.
+fn check_only_once(
+    file: &SystemFile,
+    inst: &InstanceConfig,
+    fmu: &LoadedFmu,
+    interface: Interface,
+    ctx_file: &str,
+) -> Result<(), SystemError> {
+    let md = &fmu.description;
+    let only_once = match interface {
+        Interface::CoSimulation => md
+            .co_simulation
+            .as_ref()
+            .is_some_and(|c| c.can_be_instantiated_only_once_per_process),
+        Interface::ModelExchange => md
+            .model_exchange
+            .as_ref()
+            .is_some_and(|m| m.can_be_instantiated_only_once_per_process),
+    };
+    if only_once && file.instances.iter().filter(|i| i.fmu == inst.fmu).count() > 1 {
+        return Err(invalid(
+            ctx_file,
+            format!(
+                "FMU '{}' can be instantiated only once per process",
+                inst.fmu
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// An instance's relative tolerance: its own, else the experiment's, else the FMU's
+/// DefaultExperiment one; checked where it is given (the instance's, or the FMU's when it
+/// is the one used; the experiment's is checked with the experiment).
+fn instance_tolerance(
+    file: &SystemFile,
+    inst: &InstanceConfig,
+    fmu: &LoadedFmu,
+    ctx: &str,
+) -> Result<Option<f64>, SystemError> {
+    let tolerance = inst
+        .tolerance
+        .or(file.experiment.tolerance)
+        .or_else(|| fmu.description.default_experiment.as_ref()?.tolerance);
+    if let Some(t) = inst.tolerance {
+        check_tolerance(t, &format!("{ctx}: tolerance"))?;
+    }
+    if let Some(t) =
+        tolerance.filter(|_| inst.tolerance.is_none() && file.experiment.tolerance.is_none())
+    {
+        check_tolerance(
+            t,
+            &format!(
+                "{ctx}: the DefaultExperiment tolerance of {}",
+                fmu.source.display()
+            ),
+        )?;
+    }
+    Ok(tolerance)
+}
+
+/// Every variable an instance's port map names is one of its FMU's.
+fn check_port_map(
+    def: &InstanceDef,
+    inst: &InstanceConfig,
+    ctx_file: &str,
+) -> Result<(), SystemError> {
+    for theirs in inst.ports.values() {
+        if def.description().variable(theirs).is_none() {
+            def.variable(theirs, &format!("{ctx_file}: port map of '{}'", inst.name))?;
+        }
+    }
+    Ok(())
+}
+
+/// Every instance `--trace-instances` names is one of the system's.
+fn check_traced_instances(
+    options: &LoadOptions,
+    instances: &[InstanceDef],
+    ctx_file: &str,
+) -> Result<(), SystemError> {
     if let Some(t) = &options.trace {
         let names: Vec<&str> = instances.iter().map(|i| i.name.as_str()).collect();
         if let Some(unknown) = t.instances.iter().find(|n| !names.contains(&n.as_str())) {
@@ -169,7 +236,7 @@ pub(super) fn instances(
             ));
         }
     }
-    Ok((instances, native_fallback))
+    Ok(())
 }
 
 /// The interface an instance runs through (its `interface`, else the FMU's default),
