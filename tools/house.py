@@ -9,7 +9,11 @@ reads before changing code, counted over the tracked Rust files of the checkout.
 - `Result<_, String>` in the signatures of the library crates (`crates/`, `models/`),
   tests excluded;
 - the tests' checks of an error's kind: `matches!(` against a variant, and single-line
-  `assert!(... .contains(...))` on a message.
+  `assert!(... .contains(...))` on a message;
+- circles of imports between the files of one crate (`use crate::…`, `use super::…`, and
+  paths written out in the code), tests excluded: files that import each other, directly or
+  round a loop. A module's `mod` and `pub use` lines count as imports of the file that
+  re-exports (a file that only declares its children is no circle with them).
 
 Usage: tools/house.py [--json] [--list]   (from anywhere in the checkout)
 """
@@ -108,6 +112,103 @@ def kind_checks(files):
     return variant, message
 
 
+
+def crate_of(p):
+    """(crate root folder, source folder) of a tracked file, or None."""
+    parts = p.split("/")
+    if "src" not in parts:
+        return None
+    i = parts.index("src")
+    return "/".join(parts[:i]), "/".join(parts[: i + 1])
+
+
+def module_file(src, segments):
+    """The file of a module path below `src`, the longest prefix that names a file."""
+    for n in range(len(segments), 0, -1):
+        base = os.path.join(src, *segments[:n])
+        for cand in (base + ".rs", os.path.join(base, "mod.rs")):
+            if os.path.exists(os.path.join(ROOT, cand)):
+                return cand
+    return None
+
+
+def module_path(src, p):
+    rel = os.path.relpath(p, src)[:-3].split("/")
+    if rel[-1] in ("mod", "lib", "main"):
+        rel = rel[:-1]
+    return rel
+
+
+# `$crate::` in a macro is resolved where the macro is used: no import of this file.
+PATH = re.compile(r"(?<!\$)\b(crate|super)((?:::[A-Za-z_][A-Za-z0-9_]*)+)")
+
+
+def circles(files):
+    """Strongly connected groups of more than one file, per crate."""
+    edges = {}
+    for p in files:
+        if is_test_file(p) or not p.endswith(".rs"):
+            continue
+        c = crate_of(p)
+        if not c:
+            continue
+        _, src = c
+        here = module_path(src, p)
+        text = "\n".join(code_lines(p))
+        text = re.sub(r"//[^\n]*", "", text)
+        targets = set()
+        for m in PATH.finditer(text):
+            segs = m.group(2).split("::")[1:]
+            if m.group(1) == "crate":
+                base = []
+            else:
+                base = list(here)
+                # `super` of a file `a/b.rs` (module a::b) is `a`; of `a/mod.rs` too.
+                rest = m.group(2).split("::")[1:]
+                base = base[:-1]
+                while rest and rest[0] == "super":
+                    base = base[:-1]
+                    rest = rest[1:]
+                segs = rest
+            f = module_file(src, base + segs)
+            if f and f != p:
+                targets.add(f)
+        edges[p] = targets
+    # Tarjan's strongly connected components.
+    index, low, stack, on, out = {}, {}, [], set(), []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in edges.get(v, ()):
+            if w not in edges:
+                continue
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                group.append(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                out.append(sorted(group))
+
+    import sys
+    sys.setrecursionlimit(10000)
+    for v in list(edges):
+        if v not in index:
+            visit(v)
+    return out
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--json", action="store_true")
@@ -116,17 +217,21 @@ def main():
     files = tracked()
     fns, big, strs = long_functions(files), long_files(files), string_results(files)
     variant, message = kind_checks(files)
+    loops = circles(files)
     result = {
         "functions_over_100_lines": len(fns),
         "files_over_1000_lines": len(big),
         "result_string_in_library_crates": len(strs),
         "tests_matching_a_variant": variant,
         "tests_matching_a_message": message,
+        "circles_inside_crates": len(loops),
+        "files_in_the_largest_circle": max((len(c) for c in loops), default=0),
     }
     if a.json:
         if a.list:
             result["functions"] = [f"{p}:{line} {name} {n}" for n, p, line, name in fns]
             result["files"] = [f"{p} {n}" for n, p in big]
+            result["circles"] = loops
         print(json.dumps(result, indent=1))
         return
     for k, v in result.items():
@@ -136,6 +241,8 @@ def main():
             print(f"  fn {p}:{line} {name}: {n} lines")
         for n, p in big:
             print(f"  file {p}: {n} lines")
+        for c in loops:
+            print(f"  circle: {', '.join(c)}")
         by_crate = {}
         for p, _ in strs:
             c = "/".join(p.split("/")[:2])
