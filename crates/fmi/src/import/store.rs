@@ -230,7 +230,7 @@ pub(crate) fn read_entry(store: &Path, key: &str) -> Option<IndexEntry> {
 pub(crate) fn write_entry(store: &Path, entry: &IndexEntry) -> std::io::Result<()> {
     let path = entry_path(store, &entry.key);
     super::manifest::make_dir(&store.join(INDEX_DIR))?;
-    let tmp = super::archive::unique_sibling(&path);
+    let tmp = unique_sibling(&path);
     let written = (|| {
         let mut f = super::manifest::create_file(&tmp, super::manifest::FILE_MODE)?;
         f.write_all(entry.to_text().as_bytes())?;
@@ -439,7 +439,7 @@ pub fn prune(
             report.kept_in_use += 1;
             continue;
         }
-        let aside = super::archive::unique_sibling(&f.path);
+        let aside = unique_sibling(&f.path);
         if std::fs::rename(&f.path, &aside).is_ok() {
             drop(lock);
             let _ = std::fs::remove_dir_all(&aside);
@@ -481,7 +481,7 @@ pub(crate) struct TestDir(PathBuf);
 #[cfg(test)]
 impl TestDir {
     pub(crate) fn new() -> TestDir {
-        let dir = std::env::temp_dir().join(super::archive::unique_name("tb-fmi-test"));
+        let dir = std::env::temp_dir().join(unique_name("tb-fmi-test"));
         std::fs::create_dir_all(&dir).unwrap();
         TestDir(dir)
     }
@@ -495,6 +495,30 @@ impl Drop for TestDir {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
     }
+}
+
+/// `<prefix>-<pid>-<counter>-<clock>`: a name no other thread or process uses (the clock
+/// for processes in other PID namespaces, which may share the id).
+pub(crate) fn unique_name(prefix: &str) -> String {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    format!(
+        "{prefix}-{}-{}-{nanos:x}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// A sibling of `path` that no other thread or process uses.
+pub(crate) fn unique_sibling(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map_or("x".into(), |n| n.to_string_lossy().into_owned());
+    path.with_file_name(unique_name(&format!(".{name}.tmp")))
 }
 
 #[cfg(test)]

@@ -4,6 +4,7 @@
 use super::*;
 use crate::import::manifest::{self};
 use crate::import::store::{self, CdEntry, IndexEntry};
+use crate::import::store::{unique_name, unique_sibling};
 use crate::FmuError;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;

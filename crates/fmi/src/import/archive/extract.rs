@@ -3,36 +3,12 @@
 
 use super::*;
 use crate::import::manifest::{self, Manifest, ManifestFile};
-use crate::import::store::{self, CdEntry};
+use crate::import::store::{self, unique_sibling, CdEntry};
 use crate::FmuError;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::Read;
-use std::path::{Path, PathBuf};
-
-/// `<prefix>-<pid>-<counter>-<clock>`: a name no other thread or process uses (the clock
-/// for processes in other PID namespaces, which may share the id).
-pub(crate) fn unique_name(prefix: &str) -> String {
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
-    format!(
-        "{prefix}-{}-{}-{nanos:x}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    )
-}
-
-/// A sibling of `path` that no other thread or process uses.
-pub(crate) fn unique_sibling(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map_or("x".into(), |n| n.to_string_lossy().into_owned());
-    path.with_file_name(unique_name(&format!(".{name}.tmp")))
-}
+use std::path::Path;
 
 /// The error of an archive that changed since it was loaded (a repair needs its bytes).
 pub(crate) fn changed_since(fmu: &Path) -> FmuError {
