@@ -467,8 +467,9 @@ impl<'a, F: Laps> Frame<'a, F> {
     }
 
     /// Close enough: the Gauss–Newton step (λ = 0) moves no parameter by more than
-    /// a tenth of its standard error (the sandwich at this point, no laps): what is
-    /// left is far inside the interval, and more laps would not change the answer.
+    /// `limits.close` of its standard error (the sandwich at this point, no laps; 0.3 for
+    /// the answer, 0.25 for a profile's points): what is left is far inside the interval,
+    /// and more laps would not change the answer.
     fn close_enough(
         &self,
         at: &Descent,

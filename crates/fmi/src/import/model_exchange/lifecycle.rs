@@ -88,6 +88,9 @@ impl MeInstance {
         self.inst.set_debug_logging(on).map_err(|e| self.wrap(e))
     }
 
+    /// As FMPy 0.3.32's Model Exchange loop, `toleranceDefined = false` unless the system
+    /// gives a tolerance (the instance's, the experiment's, `run --tolerance`): then the FMU
+    /// is told it. Either way the solver integrates with [`MeInstance::relative_tolerance`].
     pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
         self.start = start;
         self.stop = stop;

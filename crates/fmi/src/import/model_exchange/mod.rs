@@ -297,9 +297,6 @@ impl MeInstance {
         }
     }
 
-    /// As FMPy 0.3.32's Model Exchange loop, `toleranceDefined = false` unless the system
-    /// gives a tolerance (the instance's, the experiment's, `run --tolerance`): then the FMU
-    /// is told it. Either way the solver integrates with [`MeInstance::relative_tolerance`].
     /// The run's length, the scale of its time comparisons ([`isclose_in`]): unbounded
     /// without a stop time.
     fn span(&self) -> f64 {
