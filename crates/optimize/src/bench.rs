@@ -6,7 +6,7 @@
 use super::cost::{cost_of, StepCost};
 use super::pool::{Outcome, WorkerPool};
 use super::study::{Lap, Study};
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::Arc;

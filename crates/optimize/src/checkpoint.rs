@@ -15,7 +15,7 @@ use super::optimizer::RunState;
 use super::options::RunOptions;
 use super::results::StepResult;
 use super::study::{OptimizerKind, Study};
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use tb_compare::Comparison;

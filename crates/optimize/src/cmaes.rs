@@ -8,7 +8,7 @@
 use super::exact;
 use super::optimizer::{all_finite, restore_state, Optimizer, SavedState};
 use super::rng::Rng;
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use serde::{Deserialize, Serialize};
 
 /// Settings (the study file's `[optimizer]` table for `kind = "cmaes"`).

@@ -13,7 +13,7 @@ use super::finish::finish_study;
 use super::session::{Session, StudyState};
 use super::step_loop::run_step;
 use super::study::Study;
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use std::time::Instant;
 
 // The cost, the observers, the options and what a study records live in files of their own

@@ -12,7 +12,7 @@ use super::results::{JointResult, ParameterChange, SignalChange, StepResult, Stu
 use super::session::{Session, StudyState};
 use super::step::{Step, StepBegun};
 use super::study::StepConfig;
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use std::time::Instant;
 use tb_compare::{Comparison, PreparedMeasurement, Table, Workspace};
 

@@ -12,7 +12,7 @@ use super::remote::Evaluator;
 use super::results::StepResult;
 use super::session::{Session, StudyState};
 use super::study::Study;
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use tb_compare::PreparedMeasurement;
 
 /// Every parameter the steps fit (first appearance: its bounds and its value before its

@@ -39,6 +39,7 @@ pub mod checkpoint;
 pub mod cmaes;
 mod cost;
 pub mod driver;
+pub mod error;
 pub mod exact;
 mod finish;
 pub mod fit;
@@ -65,6 +66,7 @@ pub mod study;
 pub use cmaes::{Cmaes, CmaesSettings};
 pub use cost::StepCost;
 pub use driver::run_study;
+pub use error::OptimizeError;
 pub use ga::{Ga, GaSettings};
 pub use identifiability::Identifiability;
 pub use interval::{Intervals, ParameterInterval};
@@ -76,39 +78,3 @@ pub use remote::{Candidate, Evaluator, InputDigest, LapSignals, StudyEvaluator};
 pub use results::{StepResult, StudyOutcome, StudyResult};
 pub use rng::Rng;
 pub use study::{OptimizerKind, Study, StudyFile};
-
-use std::path::PathBuf;
-
-#[derive(Debug, thiserror::Error)]
-pub enum OptimizeError {
-    #[error("{path}: {message}")]
-    File { path: PathBuf, message: String },
-    #[error("{0}")]
-    Invalid(String),
-    // Transparent: the inner errors name their file, instance or row already, and a
-    // prefixed message with a source would print the cause twice in the CLI's chain.
-    #[error(transparent)]
-    System(#[from] tb_cosim::SystemError),
-    #[error(transparent)]
-    Compare(#[from] tb_compare::Error),
-    #[error("checkpoint: {0}")]
-    Checkpoint(String),
-    #[error("{0}")]
-    Implausible(String),
-    #[error("thread pool: {0}")]
-    Threads(String),
-    #[error("step '{step}': the start point cannot be evaluated: {reason}")]
-    Start { step: String, reason: String },
-    /// A step that ran and found nothing (every candidate failed).
-    #[error("step '{step}': {reason}")]
-    StepFailed { step: String, reason: String },
-    #[error(transparent)]
-    Io(#[from] std::io::Error),
-    /// The evaluator of a distributed study failed (not a candidate: the study stops, its
-    /// checkpoint holds the last whole generation).
-    #[error("evaluating candidates: {0}")]
-    Evaluator(String),
-    /// An observer of the study failed at its end (the report could not be written).
-    #[error("{0}")]
-    Observer(String),
-}

@@ -11,7 +11,7 @@
 //! turned into a penalty (their reason logged), per-generation callback (checkpoint,
 //! progress, interruption).
 
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;

@@ -9,7 +9,7 @@
 //! candidate it ran before).
 
 use super::study::{Lap, Study};
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use tb_compare::{Comparison, PreparedMeasurement, Table, Workspace};

@@ -15,7 +15,7 @@
 use super::bench::Bench;
 use super::pool::WorkerPool;
 use super::study::Study;
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use serde::{Deserialize, Serialize};
 use sha2::Digest;
 use std::collections::HashMap;

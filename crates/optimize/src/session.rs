@@ -8,7 +8,7 @@ use super::optimizer::thread_pool;
 use super::options::RunOptions;
 use super::results::StudyLaps;
 use super::study::{OptimizerKind, Study};
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use std::sync::Arc;
 use tb_fmi::FmuCache;
 

@@ -12,7 +12,7 @@ use super::pool::Outcome;
 use super::remote::{Candidate, Evaluator};
 use super::session::Session;
 use super::study::{OptimizerKind, StepConfig, Study};
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use tb_compare::{Comparison, PreparedMeasurement};
 
 /// One step's cost over the bench.

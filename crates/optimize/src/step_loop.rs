@@ -13,7 +13,7 @@ use super::results::{StepResult, StudyLaps};
 use super::session::{Session, StudyState};
 use super::step::{make_optimizer, Step, StepBegun};
 use super::study::{StepConfig, Study};
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use std::ops::ControlFlow;
 use tb_compare::{Comparison, PreparedMeasurement, Table, Workspace};
 

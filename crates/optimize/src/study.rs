@@ -4,7 +4,7 @@
 
 use super::cmaes::CmaesSettings;
 use super::ga::GaSettings;
-use super::OptimizeError;
+use crate::error::OptimizeError;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use tb_compare::{ChannelMap, CompareSettings};
