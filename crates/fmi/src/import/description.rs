@@ -1,7 +1,7 @@
 //! The model description: what twinbench knows of an FMU (FMI 2.0 and 3.0 alike: the types
 //! of [`super::model`]), and the front of the modelDescription.xml readers, which hands the
 //! text to the reader of its version: FMI 2.0 [`super::description2`], FMI 3.0
-//! [`super::description3`] (what both share: [`super::reader`]). Tolerant as the standard
+//! [`super::description3`] (what both share: `reader.rs`). Tolerant as the standard
 //! asks: unknown attributes and elements (vendor annotations, tool extensions) are ignored.
 
 pub use super::model::{

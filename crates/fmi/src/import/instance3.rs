@@ -622,7 +622,7 @@ impl Instance3 {
     }
 
     /// The usual call when every Real is a scalar Float64: as short as FMI 2.0's, the
-    /// rest ([`Self::get_real_mixed`]) off the fast path.
+    /// rest (`get_real_mixed`) off the fast path.
     #[inline]
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
         if !self.reals_are_float64 {

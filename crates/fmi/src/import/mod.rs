@@ -2,12 +2,12 @@
 //! from archive to running instance.
 //!
 //! - [`archive`]: archive checks (untrusted input), the unpack cache and the machine-wide
-//!   store of unpacked FMUs with its stat index ([`store`]) and the manifests that every
-//!   file is verified against before use ([`manifest`]); [`sandbox`]: the isolated worker's
+//!   store of unpacked FMUs with its stat index (`store.rs`) and the manifests that every
+//!   file is verified against before use (`manifest.rs`); [`sandbox`]: the isolated worker's
 //!   read-only store;
 //! - [`model`]: what twinbench knows of an FMU (the model description's types);
 //!   [`description`]: the modelDescription.xml reader, which hands the text to the one of
-//!   its version, [`description2`] (FMI 2.0) or [`description3`] (FMI 3.0); [`reader`]: what
+//!   its version, [`description2`] (FMI 2.0) or [`description3`] (FMI 3.0); `reader.rs`: what
 //!   both share;
 //! - [`library`] and [`library3`]: a loaded shared library with its functions resolved;
 //! - [`instance`] and [`instance3`]: a safe handle on one FMU instance (the same calls for

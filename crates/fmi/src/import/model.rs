@@ -164,7 +164,7 @@ pub struct CoSimulation {
     pub can_serialize_fmu_state: bool,
     pub can_interpolate_inputs: bool,
     pub provides_directional_derivative: bool,
-    /// FMI 3.0 `fixedInternalStepSize` [s]: the step the FMU takes inside (a host's hint
+    /// FMI 3.0 `fixedInternalStepSize` (s): the step the FMU takes inside (a host's hint
     /// for the communication step; FMPy's default output interval).
     pub fixed_internal_step_size: Option<f64>,
 }

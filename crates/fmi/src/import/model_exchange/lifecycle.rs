@@ -16,7 +16,7 @@ use std::path::Path;
 
 impl MeInstance {
     /// Instantiate an FMU for Model Exchange: `lib` loaded with
-    /// [`Library::load_model_exchange`], `md` its description, `fmu` the .fmu (for
+    /// [`Library::load_model_exchange`](crate::import::library::Library::load_model_exchange), `md` its description, `fmu` the .fmu (for
     /// messages).
     pub fn instantiate(
         lib: impl Into<MeLibrary>,

@@ -1,5 +1,5 @@
 //! FMI 2.0 Model Exchange: an instance that twinbench integrates itself, with SUNDIALS
-//! CVODE ([`cvode`]) between communication points, so that to the master it is one more
+//! CVODE (`cvode.rs`) between communication points, so that to the master it is one more
 //! Co-Simulation unit: [`MeInstance::do_step`]`(t, h)` integrates from t to t + h and
 //! handles the events inside (FMI 2.0 §3.1, the calling sequence of §3.2.3):
 //!
