@@ -352,12 +352,13 @@ pub struct Vehicle {
     /// The second-order chassis' transition matrices (pitch, roll) for the sub-step length
     /// they were made for (NaN: none yet); derived from the parameters, not state.
     transitions: (f64, [f64; 4], [f64; 4]),
-    /// The track under the front and the rear axle and the bits of the (s, road_wheelbase)
-    /// they are for: the outputs at the end of a step and the first sub-step of the next
-    /// one look them up at the same s (a derived value, exact).
-    track_here: Option<([u64; 2], TrackPoint, TrackPoint)>,
-    /// The first-order chassis' 1 − e^(−h/τ) and the bits of the (h, τ) it is for.
-    first_order: ([u64; 2], f64),
+    /// The track under the front and the rear axle and the bits of the s they are for: the
+    /// outputs at the end of a step and the first sub-step of the next one look them up at
+    /// the same s (a derived value, exact; `road_wheelbase` is fixed after initialisation).
+    track_here: Option<(u64, TrackPoint, TrackPoint)>,
+    /// The first-order chassis' 1 − e^(−h/τ) for the sub-step length it was made for (NaN:
+    /// none yet); derived from the parameters, as `transitions`.
+    first_order: (f64, f64),
 }
 
 /// Everything the equations derive from the state at one instant.
@@ -374,7 +375,7 @@ impl Vehicle {
     fn forces(&mut self, omega_rear: [f64; 2]) -> Forces {
         let p = &self.p;
         let s_here = self.st.s;
-        let key = [s_here.to_bits(), p.road_wheelbase.to_bits()];
+        let key = s_here.to_bits();
         let (at, rear) = match self.track_here {
             Some((k, at, rear)) if k == key => (at, rear),
             _ => {
@@ -461,8 +462,8 @@ impl Vehicle {
         match p.chassis {
             Chassis::FirstOrder { tau } => {
                 // 1 − e^(−h/τ) depends on h and τ only: computed once per sub-step length.
-                if self.first_order.0 != [h.to_bits(), tau.to_bits()] {
-                    self.first_order = ([h.to_bits(), tau.to_bits()], 1.0 - (-h / tau).exp());
+                if self.first_order.0 != h {
+                    self.first_order = (h, 1.0 - (-h / tau).exp());
                 }
                 let alpha = self.first_order.1;
                 st.ax += alpha * (a - st.ax);
@@ -594,7 +595,7 @@ impl Model for Vehicle {
             mu_cache: [(f64::NAN, 0.0); 4],
             transitions: (f64::NAN, [0.0; 4], [0.0; 4]),
             track_here: None,
-            first_order: ([f64::NAN.to_bits(); 2], 0.0),
+            first_order: (f64::NAN, 0.0),
         })
     }
 
@@ -661,6 +662,7 @@ impl Model for Vehicle {
     fn parameters_changed(&mut self, vars: &VehicleVars) -> Result<(), ModelError> {
         self.p = Params::from_vars(vars);
         self.transitions.0 = f64::NAN;
+        self.first_order.0 = f64::NAN;
         // μ(κ) is the tyre's: new parameters, new curve.
         self.mu_cache = [(f64::NAN, 0.0); 4];
         Ok(())
