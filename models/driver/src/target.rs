@@ -176,7 +176,10 @@ impl TargetSpeed {
 
     /// The target's acceleration at `s` (linear between rows; the column `a`), with the
     /// segment found from `hint` as [`TargetSpeed::at_near`] does. 0 without the column.
-    pub fn acceleration_near(&self, s: f64, hint: &Cell<usize>) -> f64 {
+    /// The driver takes it with the speed ([`TargetSpeed::speed_and_acceleration_near`]);
+    /// the tests hold that against this lookup on its own.
+    #[cfg(test)]
+    pub(crate) fn acceleration_near(&self, s: f64, hint: &Cell<usize>) -> f64 {
         if self.a.is_empty() {
             return 0.0;
         }
@@ -186,8 +189,8 @@ impl TargetSpeed {
 
     /// The driver's preview: the target speed at `s` and the acceleration the target asks
     /// for there (its own column `a` where it has one, else v·dv/ds), from one search of the
-    /// segment: the same bits as [`TargetSpeed::at_near`] and
-    /// [`TargetSpeed::acceleration_near`] called one after the other.
+    /// segment: the same bits as [`TargetSpeed::at_near`] and a lookup of the column `a`
+    /// with the same hint, called one after the other.
     pub fn speed_and_acceleration_near(&self, s: f64, hint: &Cell<usize>) -> (f64, f64) {
         let (k, x) = self.locate(s, hint);
         let (v, slope) = self.speed_in(k, x);
