@@ -57,7 +57,7 @@ pub fn run(args: InfoArgs) -> anyhow::Result<()> {
 /// Loads the FMU's library when asked (here with --check, in a worker with --isolate) and
 /// says what it found; without either, none of the FMU's code runs.
 fn check_library(args: &InfoArgs, fmu: &LoadedFmu) -> anyhow::Result<LibraryCheck> {
-    Ok(if let Some(mode) = args.isolate {
+    if let Some(mode) = args.isolate {
         let options = tb_cosim::isolated::IsolationOptions {
             mode: mode.mode(),
             timeout: tb_cosim::isolated::watchdog(args.worker_timeout)
@@ -66,27 +66,30 @@ fn check_library(args: &InfoArgs, fmu: &LoadedFmu) -> anyhow::Result<LibraryChec
             limits: args.worker_limits,
             ..Default::default()
         };
-        LibraryCheck::Loaded(tb_cosim::isolated::probe(fmu, &options)?)
-    } else if args.check {
-        for lib in &args.preload {
-            tb_fmi::import::library::preload_global(lib)?;
-        }
-        if fmu.is_fmi3() {
-            let lib = fmu.library3()?;
-            LibraryCheck::Loaded(tb_cosim::isolated::LibraryReport {
-                version: lib.version.clone(),
-                missing_optional: Vec::new(),
-            })
-        } else {
-            let lib = fmu.library()?;
-            LibraryCheck::Loaded(tb_cosim::isolated::LibraryReport {
-                version: lib.version.clone(),
-                missing_optional: lib.missing_optional.iter().map(|s| s.to_string()).collect(),
-            })
+        return Ok(LibraryCheck::Loaded(tb_cosim::isolated::probe(
+            fmu, &options,
+        )?));
+    }
+    if !args.check {
+        return Ok(LibraryCheck::NotLoaded);
+    }
+    for lib in &args.preload {
+        tb_fmi::import::library::preload_global(lib)?;
+    }
+    let report = if fmu.is_fmi3() {
+        let lib = fmu.library3()?;
+        tb_cosim::isolated::LibraryReport {
+            version: lib.version.clone(),
+            missing_optional: Vec::new(),
         }
     } else {
-        LibraryCheck::NotLoaded
-    })
+        let lib = fmu.library()?;
+        tb_cosim::isolated::LibraryReport {
+            version: lib.version.clone(),
+            missing_optional: lib.missing_optional.iter().map(|s| s.to_string()).collect(),
+        }
+    };
+    Ok(LibraryCheck::Loaded(report))
 }
 
 /// `--json`: the whole description, the library check and the warnings.
