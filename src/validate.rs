@@ -6,6 +6,7 @@
 //! R² and bias per signal, beside the values the fitted lap reached, and a plot.
 
 use crate::lap::{LapError, LapOptions};
+use crate::report::points;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use tb_compare::{ChannelMap, Measurement, Metrics, PreparedMeasurement, Workspace};
@@ -287,9 +288,6 @@ fn plot_fz_sum(
     ws: &mut Workspace,
 ) -> Result<(), ValidateError> {
     let grid = prepared.grid();
-    let points = |r: std::ops::Range<usize>, v: &[f64]| -> Vec<(f64, f64)> {
-        r.clone().map(|g| (grid.at(g), v[g - r.start])).collect()
-    };
     let (rm, fm) = prepared.on_grid(measured, "Fz_sum", true, ws)?;
     let (ro, fo) = prepared.on_grid(table, "Fz_sum", true, ws)?;
     let plot = tb_plot::LinePlot::new(
@@ -300,8 +298,8 @@ fn plot_fz_sum(
         "distance [m]",
         "Fz_sum [N]",
     )
-    .series("twin, fitted parameters", &points(ro, &fo))
-    .reference("vehicle (measured)", &points(rm, &fm));
+    .series("twin, fitted parameters", &points(grid, ro, &fo))
+    .reference("vehicle (measured)", &points(grid, rm, &fm));
     plot.save_both(stem)?;
     Ok(())
 }

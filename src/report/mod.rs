@@ -452,7 +452,8 @@ fn write(path: &Path, bytes: &[u8], files: &mut Vec<PathBuf>) -> Result<(), Repo
     Ok(())
 }
 
-fn points(
+/// A signal on the comparison's grid as (distance, value) points, for a plot.
+pub(crate) fn points(
     grid: &tb_compare::DistanceGrid,
     range: std::ops::Range<usize>,
     y: &[f64],
