@@ -11,6 +11,8 @@ pub struct UnknownName {
     pub expected: &'static [&'static str],
 }
 
+impl std::error::Error for UnknownName {}
+
 impl fmt::Display for UnknownName {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(

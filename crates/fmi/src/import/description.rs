@@ -12,7 +12,7 @@ pub use crate::schema::{Causality, Initial, ScalarType, Variability};
 
 /// Parse modelDescription.xml text (FMI 2.0, or 3.0 by its `fmiVersion`). Errors say what
 /// is wrong; the caller adds the file.
-pub fn parse(xml: &str) -> Result<ModelDescription, String> {
+pub fn parse(xml: &str) -> Result<ModelDescription, super::error::DescriptionError> {
     if super::reader::sniff_fmi_version(xml).is_some_and(|v| v.starts_with("3.")) {
         return super::description3::parse(xml);
     }

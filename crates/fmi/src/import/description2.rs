@@ -3,24 +3,26 @@
 //! asks (unique names and alias sets, causality with variability, model structure indices
 //! in range).
 
+use super::error::DescriptionError;
 use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
 use super::reader::{num, walk, Attrs, Shared, Version, Visit};
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 
-fn unknown(m: &Attrs) -> Result<Unknown, String> {
+fn unknown(m: &Attrs) -> Result<Unknown, DescriptionError> {
     let index = m
         .get("index")
         .and_then(|s| s.trim().parse().ok())
-        .ok_or("ModelStructure: <Unknown> without a valid index")?;
+        .ok_or(DescriptionError::UnknownIndex)?;
     let dependencies = match m.get("dependencies") {
         None => None,
         Some(s) => Some(
             s.split_whitespace()
                 .map(|d| {
-                    d.parse()
-                        .map_err(|_| format!("ModelStructure: bad dependency '{d}'"))
+                    d.parse().map_err(|_| DescriptionError::Dependency {
+                        dependency: d.to_string(),
+                    })
                 })
-                .collect::<Result<Vec<usize>, String>>()?,
+                .collect::<Result<Vec<usize>, DescriptionError>>()?,
         ),
     };
     Ok(Unknown {
@@ -30,7 +32,7 @@ fn unknown(m: &Attrs) -> Result<Unknown, String> {
 }
 
 /// Parse an FMI 2.0 modelDescription.xml.
-pub fn parse(xml: &str) -> Result<ModelDescription, String> {
+pub fn parse(xml: &str) -> Result<ModelDescription, DescriptionError> {
     let mut r = Reader2::default();
     walk(xml, &mut r)?;
     r.finish()
@@ -52,7 +54,7 @@ impl Visit for Reader2 {
         name: &str,
         m: &Attrs,
         empty: bool,
-    ) -> Result<(), String> {
+    ) -> Result<(), DescriptionError> {
         let parent = stack.last().map(String::as_str).unwrap_or("");
         if self
             .shared
@@ -64,7 +66,7 @@ impl Visit for Reader2 {
             ("ModelVariables", "ScalarVariable") => {
                 let v = scalar_variable(m)?;
                 if empty {
-                    return Err(format!("variable '{}' has no type element", v.name));
+                    return Err(DescriptionError::NoTypeElement { variable: v.name });
                 }
                 self.current = Some(v);
             }
@@ -99,7 +101,7 @@ impl Visit for Reader2 {
 impl Reader2 {
     /// The description, checked: unique names, aliases as the standard allows them, model
     /// structure indices in range.
-    fn finish(mut self) -> Result<ModelDescription, String> {
+    fn finish(mut self) -> Result<ModelDescription, DescriptionError> {
         self.shared.finish(&mut self.md)?;
         let md = self.md;
         check_names_and_aliases(&md)?;
@@ -114,16 +116,17 @@ impl Reader2 {
             .chain(&md.initial_unknowns)
         {
             if u.index == 0 || u.index > n {
-                return Err(format!(
-                    "ModelStructure refers to variable index {} of {n}",
-                    u.index
-                ));
+                return Err(DescriptionError::Index {
+                    index: u.index,
+                    count: n,
+                });
             }
             if let Some(d) = u.dependencies.iter().flatten().find(|&&d| d == 0 || d > n) {
-                return Err(format!(
-                    "ModelStructure: dependency index {d} of variable {} is not in 1..={n}",
-                    u.index
-                ));
+                return Err(DescriptionError::DependencyIndex {
+                    dependency: *d,
+                    index: u.index,
+                    count: n,
+                });
             }
         }
         Ok(md)
@@ -131,16 +134,23 @@ impl Reader2 {
 }
 
 /// A `<ScalarVariable>`'s own attributes (its type comes with its child element).
-fn scalar_variable(m: &Attrs) -> Result<ScalarVariable, String> {
+fn scalar_variable(m: &Attrs) -> Result<ScalarVariable, DescriptionError> {
     let vname = m
         .get("name")
         .cloned()
-        .ok_or("<ScalarVariable> without a name")?;
+        .ok_or_else(|| DescriptionError::Unnamed {
+            element: "ScalarVariable".into(),
+        })?;
     let vr = m
         .get("valueReference")
         .and_then(|s| s.trim().parse().ok())
-        .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
-    let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
+        .ok_or_else(|| DescriptionError::ValueReference {
+            variable: vname.clone(),
+        })?;
+    let ctx = |source| DescriptionError::Schema {
+        variable: vname.clone(),
+        source,
+    };
     let causality = match m.get("causality") {
         Some(c) => Causality::parse(c).map_err(ctx)?,
         None => Causality::DEFAULT,
@@ -175,7 +185,7 @@ fn scalar_variable(m: &Attrs) -> Result<ScalarVariable, String> {
 /// after the definition of `variability`): a parameter is fixed or tunable, an input or an
 /// output is not (a `constant` output is), only a local or an output is constant, and the
 /// independent variable is continuous. FMPy refuses the same combinations.
-fn check_combination(v: &ScalarVariable) -> Result<(), String> {
+fn check_combination(v: &ScalarVariable) -> Result<(), DescriptionError> {
     use Causality as C;
     use Variability as V;
     let allowed = match v.variability {
@@ -195,17 +205,16 @@ fn check_combination(v: &ScalarVariable) -> Result<(), String> {
     if allowed {
         return Ok(());
     }
-    Err(format!(
-        "variable '{}': causality=\"{}\" with variability=\"{}\" is not allowed (FMI 2.0, section 2.2.7: {})",
-        v.name,
-        v.causality,
-        v.variability,
-        match v.causality {
+    Err(DescriptionError::Combination {
+        variable: v.name.clone(),
+        causality: v.causality,
+        variability: v.variability,
+        rule: match v.causality {
             C::Parameter | C::CalculatedParameter => "a parameter is fixed or tunable",
             C::Input => "an input is discrete or continuous",
             C::Output => "an output is constant, discrete or continuous",
             C::Independent => "the independent variable is continuous",
             C::Local => "",
-        }
-    ))
+        },
+    })
 }

@@ -18,6 +18,7 @@
 //!   Execution are listed in `unsupported` (the archive check refuses such an FMU before
 //!   anything runs).
 
+use super::error::DescriptionError;
 use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
 pub use super::model::{Fmi3Slot, Fmi3Type};
 use super::reader::{num, walk, Attrs, Shared, Version, Visit};
@@ -48,27 +49,31 @@ struct Unknown3 {
     dependencies: Option<Vec<u32>>,
 }
 
-fn unknown3(m: &Attrs, what: &str) -> Result<Unknown3, String> {
+fn unknown3(m: &Attrs, what: &str) -> Result<Unknown3, DescriptionError> {
     let vr = m
         .get("valueReference")
         .and_then(|s| s.trim().parse().ok())
-        .ok_or_else(|| format!("ModelStructure: <{what}> without a valid valueReference"))?;
+        .ok_or_else(|| DescriptionError::EntryValueReference {
+            element: what.to_string(),
+        })?;
     let dependencies = match m.get("dependencies") {
         None => None,
         Some(s) => Some(
             s.split_whitespace()
                 .map(|d| {
-                    d.parse()
-                        .map_err(|_| format!("ModelStructure: bad dependency '{d}' of <{what}>"))
+                    d.parse().map_err(|_| DescriptionError::EntryDependency {
+                        dependency: d.to_string(),
+                        element: what.to_string(),
+                    })
                 })
-                .collect::<Result<Vec<u32>, String>>()?,
+                .collect::<Result<Vec<u32>, DescriptionError>>()?,
         ),
     };
     Ok(Unknown3 { vr, dependencies })
 }
 
 /// Parse an FMI 3.0 modelDescription.xml.
-pub fn parse(xml: &str) -> Result<ModelDescription, String> {
+pub fn parse(xml: &str) -> Result<ModelDescription, DescriptionError> {
     let mut r = Reader3::default();
     walk(xml, &mut r)?;
     r.finish()
@@ -97,7 +102,7 @@ impl Visit for Reader3 {
         name: &str,
         m: &Attrs,
         empty: bool,
-    ) -> Result<(), String> {
+    ) -> Result<(), DescriptionError> {
         let parent = stack.last().map(String::as_str).unwrap_or("");
         if self
             .shared
@@ -132,9 +137,12 @@ impl Visit for Reader3 {
             }
             (_, "Alias") if in_variable => {
                 if let Some(d) = self.current.as_mut() {
-                    let a = m.get("name").cloned().ok_or_else(|| {
-                        format!("variable '{}': <Alias> without a name", d.var.name)
-                    })?;
+                    let a =
+                        m.get("name")
+                            .cloned()
+                            .ok_or_else(|| DescriptionError::UnnamedAlias {
+                                variable: d.var.name.clone(),
+                            })?;
                     d.aliases.push(a);
                 }
             }
@@ -163,15 +171,19 @@ impl Visit for Reader3 {
 
 impl Reader3 {
     /// A variable element of `<ModelVariables>` (None: a Clock, which has no column).
-    fn variable(&mut self, t: &str, m: &Attrs) -> Result<Option<Declared>, String> {
+    fn variable(&mut self, t: &str, m: &Attrs) -> Result<Option<Declared>, DescriptionError> {
         let vname = m
             .get("name")
             .cloned()
-            .ok_or_else(|| format!("<{t}> without a name"))?;
+            .ok_or_else(|| DescriptionError::Unnamed {
+                element: t.to_string(),
+            })?;
         let vr: u32 = m
             .get("valueReference")
             .and_then(|s| s.trim().parse().ok())
-            .ok_or_else(|| format!("variable '{vname}': missing or bad valueReference"))?;
+            .ok_or_else(|| DescriptionError::ValueReference {
+                variable: vname.clone(),
+            })?;
         if t == "Clock" {
             self.md
                 .unsupported
@@ -185,9 +197,9 @@ impl Reader3 {
         }
         let Some(ty) = Fmi3Type::parse(t) else {
             if t != "Clock" {
-                return Err(format!(
-                    "ModelVariables: <{t}> is not an FMI 3.0 variable element (Float64, Int32, Boolean, String, …; an FMI 2.0 description under fmiVersion=\"3.0\"?)"
-                ));
+                return Err(DescriptionError::NotAVariable {
+                    element: t.to_string(),
+                });
             }
             self.skipped_vrs.push(vr);
             return Ok(None);
@@ -197,7 +209,7 @@ impl Reader3 {
 
     /// Arrays expanded, value references of the model structure turned into indices, names
     /// and aliases checked.
-    fn finish(mut self) -> Result<ModelDescription, String> {
+    fn finish(mut self) -> Result<ModelDescription, DescriptionError> {
         self.shared.finish(&mut self.md)?;
         let mut md = self.md;
         // Every declared value reference, a zero-size array's too (it has no element).
@@ -246,8 +258,11 @@ impl Reader3 {
 
 /// A declared variable's attributes (FMI 3.0: variables other than Float32/Float64 are
 /// discrete by default; a structural parameter is a parameter twinbench never changes).
-fn declared(vname: String, vr: u32, ty: Fmi3Type, m: &Attrs) -> Result<Declared, String> {
-    let ctx = |e: crate::schema::UnknownName| format!("variable '{vname}': {e}");
+fn declared(vname: String, vr: u32, ty: Fmi3Type, m: &Attrs) -> Result<Declared, DescriptionError> {
+    let ctx = |source| DescriptionError::Schema {
+        variable: vname.clone(),
+        source,
+    };
     let structural = m.get("causality").map(String::as_str) == Some("structuralParameter");
     let causality = match m.get("causality").map(String::as_str) {
         Some("structuralParameter") => Causality::Parameter,
@@ -264,7 +279,7 @@ fn declared(vname: String, vr: u32, ty: Fmi3Type, m: &Attrs) -> Result<Declared,
         None => None,
     };
     let at = format!("variable '{vname}'");
-    let bound = |key: &str| -> Result<Option<f64>, String> {
+    let bound = |key: &str| -> Result<Option<f64>, DescriptionError> {
         match ty.kind() == ScalarType::Real {
             true => num(m, key, &at),
             false => Ok(m.get(key).and_then(|s| s.trim().parse().ok())),
@@ -297,27 +312,28 @@ fn declared(vname: String, vr: u32, ty: Fmi3Type, m: &Attrs) -> Result<Declared,
 }
 
 /// A `<Dimension>`: a fixed size, or a structural parameter's value reference.
-fn dimension(m: &Attrs, variable: &str) -> Result<Dim, String> {
+fn dimension(m: &Attrs, variable: &str) -> Result<Dim, DescriptionError> {
+    let variable = variable.to_string();
     if m.contains_key("start") && m.contains_key("valueReference") {
-        return Err(format!(
-            "variable '{variable}': a <Dimension> has start or valueReference, not both"
-        ));
+        return Err(DescriptionError::DimensionBoth { variable });
     }
     if let Some(s) = m.get("start") {
         return Ok(Dim::Fixed(s.trim().parse().map_err(|_| {
-            format!("variable '{variable}': Dimension start=\"{s}\" is not a size")
+            DescriptionError::DimensionStart {
+                variable,
+                found: s.clone(),
+            }
         })?));
     }
     if let Some(r) = m.get("valueReference") {
         return Ok(Dim::Parameter(r.trim().parse().map_err(|_| {
-            format!(
-                "variable '{variable}': Dimension valueReference=\"{r}\" is not a value reference"
-            )
+            DescriptionError::DimensionValueReference {
+                variable,
+                found: r.clone(),
+            }
         })?));
     }
-    Err(format!(
-        "variable '{variable}': <Dimension> has neither start nor valueReference"
-    ))
+    Err(DescriptionError::DimensionNeither { variable })
 }
 
 /// Model-structure entries by value reference → by 1-based index (an array's entry for
@@ -327,25 +343,29 @@ fn to_unknowns(
     what: &str,
     indices: &HashMap<u32, Vec<usize>>,
     skipped: &[u32],
-) -> Result<Vec<Unknown>, String> {
+) -> Result<Vec<Unknown>, DescriptionError> {
     let mut out = Vec::new();
     for u in list {
         if skipped.contains(&u.vr) {
             continue;
         }
-        let idx = indices.get(&u.vr).ok_or_else(|| {
-            format!(
-                "ModelStructure: <{what} valueReference=\"{}\"> names no variable",
-                u.vr
-            )
-        })?;
+        let idx = indices
+            .get(&u.vr)
+            .ok_or_else(|| DescriptionError::EntryNoVariable {
+                element: what.to_string(),
+                value_reference: u.vr,
+            })?;
         let deps = match u.dependencies {
             None => None,
             Some(ds) => {
                 let mut v = Vec::new();
                 for d in ds.into_iter().filter(|d| !skipped.contains(d)) {
                     v.extend(indices.get(&d).ok_or_else(|| {
-                        format!("ModelStructure: dependency {d} of <{what} valueReference=\"{}\"> names no variable", u.vr)
+                        DescriptionError::DependencyNoVariable {
+                            dependency: d,
+                            element: what.to_string(),
+                            value_reference: u.vr,
+                        }
                     })?);
                 }
                 Some(v)
@@ -367,21 +387,22 @@ const MAX_TOTAL_ELEMENTS: u64 = 1_000_000;
 
 /// Value references are unique among the declared variables (FMI 3.0 §2.4.7: one value
 /// reference names one variable; other names of it are `<Alias>`es).
-fn unique_value_references(declared: &[Declared]) -> Result<(), String> {
+fn unique_value_references(declared: &[Declared]) -> Result<(), DescriptionError> {
     let mut seen: HashMap<u32, &str> = HashMap::with_capacity(declared.len());
     for d in declared {
         if let Some(first) = seen.insert(d.var.value_reference, &d.var.name) {
-            return Err(format!(
-                "value reference {} is declared twice, for '{first}' and '{}' (FMI 3.0 gives every variable its own; another name of one variable is an <Alias>)",
-                d.var.value_reference, d.var.name
-            ));
+            return Err(DescriptionError::DuplicateValueReference {
+                value_reference: d.var.value_reference,
+                first: first.to_string(),
+                second: d.var.name.clone(),
+            });
         }
     }
     Ok(())
 }
 
 /// Declared variables → one [`ScalarVariable`] per value (arrays element by element).
-fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), String> {
+fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), DescriptionError> {
     unique_value_references(&declared)?;
     let structural_start: HashMap<u32, (String, Option<String>)> = declared
         .iter()
@@ -415,16 +436,16 @@ fn expand(md: &mut ModelDescription, declared: Vec<Declared>) -> Result<(), Stri
 fn check_total(
     declared: &[Declared],
     structural_start: &HashMap<u32, (String, Option<String>)>,
-) -> Result<(), String> {
+) -> Result<(), DescriptionError> {
     let mut expanded = 0u64;
     for d in declared {
         let total = element_count(d, structural_start)?;
         expanded = expanded.saturating_add(total.saturating_mul(1 + d.aliases.len() as u64));
         if expanded > MAX_TOTAL_ELEMENTS {
-            return Err(format!(
-                "variable '{}': the arrays so far hold more than {MAX_TOTAL_ELEMENTS} values in all (elements and their aliases): more than twinbench expands into columns",
-                d.var.name
-            ));
+            return Err(DescriptionError::TooManyValues {
+                variable: d.var.name.clone(),
+                limit: MAX_TOTAL_ELEMENTS,
+            });
         }
     }
     Ok(())
@@ -461,7 +482,7 @@ fn push_array(
     d: Declared,
     structural_start: &HashMap<u32, (String, Option<String>)>,
     free: &mut FreeValueReferences,
-) -> Result<(), String> {
+) -> Result<(), DescriptionError> {
     let name = d.var.name.clone();
     let sizes = dimension_sizes(&d, structural_start)?;
     let total = element_count(&d, structural_start)?;
@@ -475,16 +496,19 @@ fn push_array(
             .unwrap_or_default()
     };
     if !starts.is_empty() && starts.len() as u64 != total && starts.len() != 1 {
-        return Err(format!(
-            "variable '{name}': {} start values for an array of {total} elements",
-            starts.len()
-        ));
+        return Err(DescriptionError::StartValues {
+            variable: name,
+            starts: starts.len(),
+            elements: total,
+        });
     }
     // The elements' internal value references, shared by the aliases' elements.
     let element_vrs = (0..total)
         .map(|_| free.next())
         .collect::<Option<Vec<u32>>>()
-        .ok_or_else(|| format!("variable '{name}': no value reference left for its elements"))?;
+        .ok_or_else(|| DescriptionError::NoValueReferenceLeft {
+            variable: name.clone(),
+        })?;
     // An alias's elements share the original's value references.
     for base in std::iter::once(&name).chain(d.aliases.iter()) {
         for k in 0..total {
@@ -558,7 +582,7 @@ impl FreeValueReferences {
 fn dimension_sizes(
     d: &Declared,
     structural_start: &HashMap<u32, (String, Option<String>)>,
-) -> Result<Vec<u64>, String> {
+) -> Result<Vec<u64>, DescriptionError> {
     let name = &d.var.name;
     let mut sizes = Vec::new();
     for dim in &d.dims {
@@ -566,13 +590,17 @@ fn dimension_sizes(
             Dim::Fixed(n) => *n,
             Dim::Parameter(vr) => {
                 let (pname, start) = structural_start.get(vr).ok_or_else(|| {
-                    format!("variable '{name}': a Dimension refers to value reference {vr}, which is no structural parameter")
+                    DescriptionError::DimensionNotStructural {
+                        variable: name.clone(),
+                        value_reference: *vr,
+                    }
                 })?;
                 start
                     .as_deref()
                     .and_then(|s| s.trim().parse::<u64>().ok())
-                    .ok_or_else(|| {
-                        format!("variable '{name}': its dimension '{pname}' has no start value that is a size")
+                    .ok_or_else(|| DescriptionError::DimensionNoStart {
+                        variable: name.clone(),
+                        parameter: pname.clone(),
                     })?
             }
         });
@@ -584,14 +612,15 @@ fn dimension_sizes(
 fn element_count(
     d: &Declared,
     structural_start: &HashMap<u32, (String, Option<String>)>,
-) -> Result<u64, String> {
+) -> Result<u64, DescriptionError> {
     let sizes = dimension_sizes(d, structural_start)?;
     match sizes.iter().try_fold(1u64, |a, &n| a.checked_mul(n)) {
         Some(t) if t <= MAX_ELEMENTS => Ok(t),
-        _ => Err(format!(
-            "variable '{}': an array of dimensions {sizes:?}, more than {MAX_ELEMENTS} elements",
-            d.var.name
-        )),
+        _ => Err(DescriptionError::ArrayTooLarge {
+            variable: d.var.name.clone(),
+            sizes,
+            limit: MAX_ELEMENTS,
+        }),
     }
 }
 

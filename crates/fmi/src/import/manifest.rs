@@ -3,6 +3,7 @@
 //! `.complete`. A file is used only after it was opened through folders that only this user
 //! can write ([`open_checked`]) and found as the manifest says ([`verify_file`]).
 
+use super::error::FileCheckError;
 use std::fs::File;
 use std::io::{Read, Write};
 use std::os::fd::{AsRawFd, FromRawFd};
@@ -167,19 +168,20 @@ fn euid() -> u32 {
 
 /// Why a folder or file of the store cannot be trusted: another owner, or group or other
 /// write permission; `None` when it can.
-pub(crate) fn untrusted(meta: &std::fs::Metadata) -> Option<String> {
+pub(crate) fn untrusted(meta: &std::fs::Metadata, at: &Path) -> Option<FileCheckError> {
     let me = euid();
     if meta.uid() != me {
-        return Some(format!(
-            "it belongs to user id {}, not to this user ({me})",
-            meta.uid()
-        ));
+        return Some(FileCheckError::Owner {
+            path: at.to_path_buf(),
+            owner: meta.uid(),
+            me,
+        });
     }
     if meta.mode() & 0o022 != 0 {
-        return Some(format!(
-            "mode {:o}: group or others can write it",
-            meta.mode() & 0o7777
-        ));
+        return Some(FileCheckError::Writable {
+            path: at.to_path_buf(),
+            mode: meta.mode() & 0o7777,
+        });
     }
     None
 }
@@ -206,9 +208,15 @@ fn openat(dir: &File, name: &[u8], flags: i32) -> std::io::Result<File> {
 /// checking every folder from `root` down and the file itself: owned by this user, not
 /// writable by group or others, the file regular. The reason otherwise, naming the path
 /// and its mode.
-pub(crate) fn open_checked(root: &Path, rel: &str) -> Result<(File, std::fs::Metadata), String> {
-    let c = std::ffi::CString::new(root.as_os_str().as_bytes())
-        .map_err(|_| format!("{}: the path holds a NUL byte", root.display()))?;
+pub(crate) fn open_checked(
+    root: &Path,
+    rel: &str,
+) -> Result<(File, std::fs::Metadata), FileCheckError> {
+    let c = std::ffi::CString::new(root.as_os_str().as_bytes()).map_err(|_| {
+        FileCheckError::NulByte {
+            path: root.to_path_buf(),
+        }
+    })?;
     // SAFETY: open on a NUL-terminated path; the result is owned.
     let fd = unsafe {
         libc::open(
@@ -219,21 +227,21 @@ pub(crate) fn open_checked(root: &Path, rel: &str) -> Result<(File, std::fs::Met
         )
     };
     if fd < 0 {
-        return Err(format!(
-            "{}: cannot open: {}",
-            root.display(),
-            std::io::Error::last_os_error()
-        ));
+        return Err(FileCheckError::Open {
+            path: root.to_path_buf(),
+            source: std::io::Error::last_os_error(),
+        });
     }
     // SAFETY: a descriptor just opened and owned by nobody else.
     let mut dir = unsafe { File::from_raw_fd(fd) };
     let mut at = root.to_path_buf();
-    let check = |f: &File, at: &Path| -> Result<std::fs::Metadata, String> {
-        let meta = f
-            .metadata()
-            .map_err(|e| format!("{}: cannot read: {e}", at.display()))?;
-        match untrusted(&meta) {
-            Some(why) => Err(format!("{}: {why}", at.display())),
+    let check = |f: &File, at: &Path| -> Result<std::fs::Metadata, FileCheckError> {
+        let meta = f.metadata().map_err(|source| FileCheckError::Read {
+            path: at.to_path_buf(),
+            source,
+        })?;
+        match untrusted(&meta, at) {
+            Some(why) => Err(why),
             None => Ok(meta),
         }
     };
@@ -252,22 +260,25 @@ pub(crate) fn open_checked(root: &Path, rel: &str) -> Result<(File, std::fs::Met
             let link = e.raw_os_error() == Some(libc::ELOOP)
                 || (e.raw_os_error() == Some(libc::ENOTDIR)
                     && std::fs::symlink_metadata(&at).is_ok_and(|m| m.file_type().is_symlink()));
+            let path = at.to_path_buf();
             if link {
-                format!("{}: is a symbolic link", at.display())
+                FileCheckError::Link { path }
             } else {
-                format!("{}: cannot open: {e}", at.display())
+                FileCheckError::Open { path, source: e }
             }
         })?;
         let meta = check(&f, &at)?;
         if last {
             if !meta.is_file() {
-                return Err(format!("{}: not a regular file", at.display()));
+                return Err(FileCheckError::NotRegular { path: at });
             }
             return Ok((f, meta));
         }
         dir = f;
     }
-    Err(format!("{}: no file named", root.display()))
+    Err(FileCheckError::NoFileNamed {
+        path: root.to_path_buf(),
+    })
 }
 
 /// Reads `f` whole (at most `max` bytes) and hashes it.
@@ -298,33 +309,38 @@ pub(crate) fn hash_file(mut f: &File) -> std::io::Result<(u64, String)> {
 
 /// Checks one unpacked file (`dir/<entry.path>`, opened through [`open_checked`] from
 /// `root`) against its manifest entry: size, mode and hash. The reason otherwise.
-pub(crate) fn verify_file(root: &Path, dir_rel: &str, entry: &ManifestFile) -> Result<(), String> {
+pub(crate) fn verify_file(
+    root: &Path,
+    dir_rel: &str,
+    entry: &ManifestFile,
+) -> Result<(), FileCheckError> {
     let rel = format!("{dir_rel}/{}", entry.path);
     let (f, meta) = open_checked(root, &rel)?;
     let shown = root.join(&rel);
     if meta.mode() & 0o7777 != entry.mode {
-        return Err(format!(
-            "{}: mode {:o}, the unpacking set {:o}",
-            shown.display(),
-            meta.mode() & 0o7777,
-            entry.mode
-        ));
+        return Err(FileCheckError::Mode {
+            path: shown,
+            found: meta.mode() & 0o7777,
+            expected: entry.mode,
+        });
     }
     if meta.len() != entry.size {
-        return Err(format!(
-            "{}: {} bytes, {} when unpacked",
-            shown.display(),
-            meta.len(),
-            entry.size
-        ));
+        return Err(FileCheckError::Size {
+            path: shown,
+            found: meta.len(),
+            expected: entry.size,
+        });
     }
-    let (n, hash) = hash_file(&f).map_err(|e| format!("{}: cannot read: {e}", shown.display()))?;
+    let (n, hash) = hash_file(&f).map_err(|source| FileCheckError::Read {
+        path: shown.clone(),
+        source,
+    })?;
     if n != entry.size || hash != entry.hash {
-        return Err(format!(
-            "{}: its content is not the unpacked one (BLAKE3 {hash}, {} when unpacked)",
-            shown.display(),
-            entry.hash
-        ));
+        return Err(FileCheckError::Content {
+            path: shown,
+            found: hash,
+            expected: entry.hash.clone(),
+        });
     }
     Ok(())
 }

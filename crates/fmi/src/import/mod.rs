@@ -33,7 +33,7 @@ pub(crate) mod reader;
 pub mod sandbox;
 mod store;
 
-pub use error::FmuError;
+pub use error::{DescriptionError, FileCheckError, FmuError, FolderError, InterfaceError};
 
 /// Whether `path` is a shared library this process can load, read from its ELF header:
 /// an x86-64 library, 64-bit, little-endian. The dynamic loader reports a library for

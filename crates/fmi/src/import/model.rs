@@ -4,6 +4,7 @@
 //! Read from modelDescription.xml by [`super::description`]; everything after loading
 //! (plan, units, recording) uses these types alone.
 
+use super::error::DescriptionError;
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 use crate::units::UnitDef;
 use std::collections::HashMap;
@@ -211,17 +212,24 @@ impl Interface {
     }
 
     /// The interface of a name; the error lists the names there are.
-    pub fn from_name(name: &str) -> Result<Interface, String> {
+    pub fn from_name(name: &str) -> Result<Interface, UnknownInterface> {
         Interface::ALL
             .into_iter()
             .find(|i| i.name() == name)
-            .ok_or_else(|| {
-                format!(
-                    "unknown interface \"{name}\" ({})",
-                    Interface::ALL.map(Interface::name).join(", ")
-                )
+            .ok_or_else(|| UnknownInterface {
+                name: name.to_string(),
             })
     }
+}
+
+/// A name that is no interface's ([`Interface::from_name`]); the message lists the names.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "unknown interface \"{name}\" ({})",
+    Interface::ALL.map(Interface::name).join(", ")
+)]
+pub struct UnknownInterface {
+    pub name: String,
 }
 
 impl std::fmt::Display for Interface {
@@ -452,15 +460,16 @@ pub use tb_files::names::{closest, edit_distance};
 /// start values must not contradict each other (one value has one start). An input or a
 /// parameter whose aliases are locals or outputs (as OpenModelica exports them) is allowed.
 /// FMI 3.0 declares aliases explicitly (`<Alias>`), each the same variable by design.
-pub(crate) fn check_names_and_aliases(md: &ModelDescription) -> Result<(), String> {
+pub(crate) fn check_names_and_aliases(md: &ModelDescription) -> Result<(), DescriptionError> {
     let mut by_name: HashMap<&str, u32> = HashMap::new();
     let mut sets: HashMap<VarKey, Vec<&ScalarVariable>> = HashMap::new();
     for v in &md.variables {
         if let Some(vr) = by_name.insert(&v.name, v.value_reference) {
-            return Err(format!(
-                "variable name '{}' appears twice (value references {vr} and {})",
-                v.name, v.value_reference
-            ));
+            return Err(DescriptionError::DuplicateName {
+                name: v.name.clone(),
+                first: vr,
+                second: v.value_reference,
+            });
         }
         sets.entry(v.key()).or_default().push(v);
     }
@@ -476,14 +485,15 @@ pub(crate) fn check_names_and_aliases(md: &ModelDescription) -> Result<(), Strin
             .filter(|x| matches!(x.causality, Causality::Input | Causality::Parameter))
             .collect();
         if settable.len() > 1 {
-            return Err(format!(
-                "value reference {vr} of {ty} is shared by {} '{}' ({}) and '{}' ({}): an alias set can have at most one variable that is set (FMI 2.0, section 2.2.7)",
-                if settable.len() > 2 { "more than" } else { "both" },
-                settable[0].name,
-                settable[0].causality,
-                settable[1].name,
-                settable[1].causality
-            ));
+            return Err(DescriptionError::AliasSet {
+                value_reference: vr,
+                ty,
+                more: settable.len() > 2,
+                first: settable[0].name.clone(),
+                first_causality: settable[0].causality,
+                second: settable[1].name.clone(),
+                second_causality: settable[1].causality,
+            });
         }
         let starts: Vec<&&ScalarVariable> = set.iter().filter(|x| x.start.is_some()).collect();
         if let Some(b) = starts
@@ -492,13 +502,14 @@ pub(crate) fn check_names_and_aliases(md: &ModelDescription) -> Result<(), Strin
             .find(|b| !same_start(starts[0], b, ty))
         {
             let a = starts[0];
-            return Err(format!(
-                "value reference {vr} of {ty} is shared by '{}' (start {}) and '{}' (start {}): one value cannot have two start values (FMI 2.0, section 2.2.7)",
-                a.name,
-                a.start.as_deref().unwrap_or_default(),
-                b.name,
-                b.start.as_deref().unwrap_or_default()
-            ));
+            return Err(DescriptionError::AliasStarts {
+                value_reference: vr,
+                ty,
+                first: a.name.clone(),
+                first_start: a.start.clone().unwrap_or_default(),
+                second: b.name.clone(),
+                second_start: b.start.clone().unwrap_or_default(),
+            });
         }
     }
     Ok(())

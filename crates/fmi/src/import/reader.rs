@@ -5,6 +5,7 @@
 //! type definitions and their enumeration items, log categories). Each version's reader
 //! adds its variables and model structure.
 
+use super::error::DescriptionError;
 use super::model::{CoSimulation, DefaultExperiment, ModelDescription, ModelExchange};
 use crate::units::UnitDef;
 use quick_xml::events::{BytesStart, Event};
@@ -25,21 +26,29 @@ pub(crate) enum Version {
 pub(crate) trait Visit {
     /// An element opens: `stack` holds its ancestors (the root first), `empty` is true for
     /// `<a/>` (no end follows).
-    fn start(&mut self, stack: &[String], name: &str, m: &Attrs, empty: bool)
-        -> Result<(), String>;
+    fn start(
+        &mut self,
+        stack: &[String],
+        name: &str,
+        m: &Attrs,
+        empty: bool,
+    ) -> Result<(), DescriptionError>;
     /// An element (with children) closes: `stack` holds its ancestors.
     fn end(&mut self, stack: &[String], name: &str);
 }
 
 /// Walks `xml`, telling `v` every element; refuses a document that ends before its root
 /// closes (a truncated file must not pass for a shorter model).
-pub(crate) fn walk(xml: &str, v: &mut impl Visit) -> Result<(), String> {
+pub(crate) fn walk(xml: &str, v: &mut impl Visit) -> Result<(), DescriptionError> {
     let mut reader = Reader::from_str(xml);
     let mut stack: Vec<String> = Vec::new();
     loop {
         let ev = reader
             .read_event()
-            .map_err(|e| format!("XML error at byte {}: {e}", reader.buffer_position()))?;
+            .map_err(|source| DescriptionError::Xml {
+                position: reader.buffer_position(),
+                source,
+            })?;
         let (e, empty) = match &ev {
             Event::Start(e) => (e, false),
             Event::Empty(e) => (e, true),
@@ -59,11 +68,10 @@ pub(crate) fn walk(xml: &str, v: &mut impl Visit) -> Result<(), String> {
         }
     }
     if let Some(open) = stack.last() {
-        return Err(format!(
-            "the file ends before <{open}> is closed (truncated?): {} element{} open",
-            stack.len(),
-            if stack.len() == 1 { "" } else { "s" }
-        ));
+        return Err(DescriptionError::Truncated {
+            open: open.clone(),
+            depth: stack.len(),
+        });
     }
     Ok(())
 }
@@ -99,7 +107,7 @@ impl Shared {
         name: &str,
         m: &Attrs,
         empty: bool,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, DescriptionError> {
         match (parent, name) {
             ("", "fmiModelDescription") => {
                 self.saw_root = true;
@@ -110,9 +118,9 @@ impl Shared {
                 root_attributes(md, m, token)?;
             }
             ("", other) => {
-                return Err(format!(
-                    "root element is <{other}>, expected <fmiModelDescription>"
-                ))
+                return Err(DescriptionError::Root {
+                    found: other.to_string(),
+                })
             }
             ("fmiModelDescription", "CoSimulation") => {
                 md.co_simulation = Some(co_simulation(m, version)?)
@@ -124,7 +132,12 @@ impl Shared {
                 md.default_experiment = Some(default_experiment(m)?)
             }
             ("UnitDefinitions", "Unit") => {
-                let uname = m.get("name").cloned().ok_or("<Unit> without a name")?;
+                let uname = m
+                    .get("name")
+                    .cloned()
+                    .ok_or_else(|| DescriptionError::Unnamed {
+                        element: "Unit".into(),
+                    })?;
                 self.current_unit = Some((uname, UnitDef::DIMENSIONLESS));
                 if empty {
                     md.units.extend(self.current_unit.take());
@@ -157,7 +170,7 @@ impl Shared {
         name: &str,
         m: &Attrs,
         empty: bool,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, DescriptionError> {
         match (version, parent, name) {
             (Version::V2, "TypeDefinitions", "SimpleType") => {
                 self.current_type = m.get("name").cloned()
@@ -198,9 +211,9 @@ impl Shared {
     }
 
     /// The document is read: it had its root; the display units join the units.
-    pub fn finish(self, md: &mut ModelDescription) -> Result<(), String> {
+    pub fn finish(self, md: &mut ModelDescription) -> Result<(), DescriptionError> {
         if !self.saw_root {
-            return Err("no <fmiModelDescription> element".into());
+            return Err(DescriptionError::NoRoot);
         }
         for d in self.display_units {
             if md.unit_def(&d.0).is_none() {
@@ -213,7 +226,7 @@ impl Shared {
 
 /// `<CoSimulation>`'s capabilities (FMI 3.0 spells two flags `FMUState` and has no input
 /// interpolation flag).
-fn co_simulation(m: &Attrs, version: Version) -> Result<CoSimulation, String> {
+fn co_simulation(m: &Attrs, version: Version) -> Result<CoSimulation, DescriptionError> {
     let (state, serialize, derivatives) = match version {
         Version::V2 => (
             "canGetAndSetFMUstate",
@@ -227,10 +240,11 @@ fn co_simulation(m: &Attrs, version: Version) -> Result<CoSimulation, String> {
         ),
     };
     Ok(CoSimulation {
-        model_identifier: m
-            .get("modelIdentifier")
-            .cloned()
-            .ok_or("<CoSimulation> has no modelIdentifier")?,
+        model_identifier: m.get("modelIdentifier").cloned().ok_or(
+            DescriptionError::NoModelIdentifier {
+                element: "CoSimulation",
+            },
+        )?,
         needs_execution_tool: flag(m, "needsExecutionTool"),
         can_handle_variable_communication_step_size: flag(
             m,
@@ -255,7 +269,7 @@ fn co_simulation(m: &Attrs, version: Version) -> Result<CoSimulation, String> {
 /// `<ModelExchange>`'s attributes (FMI 3.0 spells the directional derivatives in the
 /// plural, and has no `completedIntegratorStepNotNeeded`: its `needsCompletedIntegratorStep`
 /// says the opposite, default false).
-fn model_exchange(m: &Attrs, version: Version) -> Result<ModelExchange, String> {
+fn model_exchange(m: &Attrs, version: Version) -> Result<ModelExchange, DescriptionError> {
     let (derivatives, not_needed) = match version {
         Version::V2 => (
             "providesDirectionalDerivative",
@@ -267,10 +281,11 @@ fn model_exchange(m: &Attrs, version: Version) -> Result<ModelExchange, String> 
         ),
     };
     Ok(ModelExchange {
-        model_identifier: m
-            .get("modelIdentifier")
-            .cloned()
-            .ok_or("<ModelExchange> has no modelIdentifier")?,
+        model_identifier: m.get("modelIdentifier").cloned().ok_or(
+            DescriptionError::NoModelIdentifier {
+                element: "ModelExchange",
+            },
+        )?,
         needs_execution_tool: flag(m, "needsExecutionTool"),
         completed_integrator_step_not_needed: not_needed,
         can_be_instantiated_only_once_per_process: flag(m, "canBeInstantiatedOnlyOncePerProcess"),
@@ -285,14 +300,17 @@ fn model_exchange(m: &Attrs, version: Version) -> Result<ModelExchange, String> 
     })
 }
 
-pub(crate) fn attrs(e: &BytesStart) -> Result<Attrs, String> {
+pub(crate) fn attrs(e: &BytesStart) -> Result<Attrs, DescriptionError> {
     let mut m = HashMap::new();
     for a in e.attributes() {
-        let a = a.map_err(|e| format!("bad attribute: {e}"))?;
+        let a = a.map_err(DescriptionError::Attribute)?;
         let key = String::from_utf8_lossy(a.key.as_ref()).into_owned();
         let val = a
             .unescape_value()
-            .map_err(|e| format!("bad attribute value of '{key}': {e}"))?;
+            .map_err(|source| DescriptionError::AttributeValue {
+                attribute: key.clone(),
+                source,
+            })?;
         m.insert(key, val.into_owned());
     }
     Ok(m)
@@ -302,19 +320,26 @@ pub(crate) fn num(
     m: &HashMap<String, String>,
     key: &str,
     ctx: &str,
-) -> Result<Option<f64>, String> {
+) -> Result<Option<f64>, DescriptionError> {
     match m.get(key) {
         None => Ok(None),
         Some(s) => s
             .trim()
             .parse()
             .map(Some)
-            .map_err(|_| format!("{ctx}: attribute {key}=\"{s}\" is not a number")),
+            .map_err(|_| DescriptionError::NotANumber {
+                context: ctx.to_string(),
+                attribute: key.to_string(),
+                found: s.clone(),
+            }),
     }
 }
 
 /// `<BaseUnit>` (the same in FMI 2.0 and 3.0) into `u`.
-pub(crate) fn base_unit(m: &HashMap<String, String>, u: &mut UnitDef) -> Result<(), String> {
+pub(crate) fn base_unit(
+    m: &HashMap<String, String>,
+    u: &mut UnitDef,
+) -> Result<(), DescriptionError> {
     u.kg = int_attr(m, "kg");
     u.m = int_attr(m, "m");
     u.s = int_attr(m, "s");
@@ -329,7 +354,9 @@ pub(crate) fn base_unit(m: &HashMap<String, String>, u: &mut UnitDef) -> Result<
 }
 
 /// `<DefaultExperiment>` (the same in FMI 2.0 and 3.0).
-pub(crate) fn default_experiment(m: &HashMap<String, String>) -> Result<DefaultExperiment, String> {
+pub(crate) fn default_experiment(
+    m: &HashMap<String, String>,
+) -> Result<DefaultExperiment, DescriptionError> {
     Ok(DefaultExperiment {
         start_time: num(m, "startTime", "DefaultExperiment")?,
         stop_time: num(m, "stopTime", "DefaultExperiment")?,
@@ -342,12 +369,15 @@ pub(crate) fn default_experiment(m: &HashMap<String, String>) -> Result<DefaultE
 pub(crate) fn enumeration_item(
     m: &HashMap<String, String>,
     ty: &str,
-) -> Result<(String, i64), String> {
+) -> Result<(String, i64), DescriptionError> {
     let item = m.get("name").cloned().unwrap_or_default();
     let value = m
         .get("value")
         .and_then(|v| v.trim().parse::<i64>().ok())
-        .ok_or_else(|| format!("Enumeration '{ty}': item '{item}' has no integer value"))?;
+        .ok_or_else(|| DescriptionError::EnumerationItem {
+            ty: ty.to_string(),
+            item: item.clone(),
+        })?;
     Ok((item, value))
 }
 
@@ -357,9 +387,11 @@ pub(crate) fn enumeration_item(
 pub(crate) fn display_unit(
     m: &HashMap<String, String>,
     unit: &(String, UnitDef),
-) -> Result<Option<(String, UnitDef)>, String> {
+) -> Result<Option<(String, UnitDef)>, DescriptionError> {
     let Some(name) = m.get("name") else {
-        return Err(format!("unit '{}': <DisplayUnit> without a name", unit.0));
+        return Err(DescriptionError::UnnamedDisplayUnit {
+            unit: unit.0.clone(),
+        });
     };
     if flag(m, "inverse") {
         return Ok(None);
@@ -368,9 +400,12 @@ pub(crate) fn display_unit(
     let factor = num(m, "factor", &ctx)?.unwrap_or(1.0);
     let offset = num(m, "offset", &ctx)?.unwrap_or(0.0);
     if factor == 0.0 || !factor.is_finite() || !offset.is_finite() {
-        return Err(format!(
-            "{ctx}: factor {factor} and offset {offset} do not define a unit"
-        ));
+        return Err(DescriptionError::DisplayUnit {
+            unit: unit.0.clone(),
+            name: name.clone(),
+            factor,
+            offset,
+        });
     }
     let base = &unit.1;
     Ok(Some((
@@ -389,7 +424,7 @@ pub(crate) fn root_attributes(
     md: &mut ModelDescription,
     m: &HashMap<String, String>,
     token: &str,
-) -> Result<(), String> {
+) -> Result<(), DescriptionError> {
     let get = |key: &str| m.get(key).cloned().unwrap_or_default();
     md.fmi_version = get("fmiVersion");
     md.model_name = get("modelName");
@@ -399,12 +434,12 @@ pub(crate) fn root_attributes(
     // A count that is not one (M17: "-5" was taken as 0) is refused, naming it.
     md.number_of_event_indicators = match m.get("numberOfEventIndicators") {
         None => 0,
-        Some(s) => s.trim().parse().map_err(|_| {
-            format!(
-                "<fmiModelDescription numberOfEventIndicators=\"{}\">: expected a whole number >= 0",
-                tb_files::shown(s, 40, true)
-            )
-        })?,
+        Some(s) => s
+            .trim()
+            .parse()
+            .map_err(|_| DescriptionError::EventIndicators {
+                found: tb_files::shown(s, 40, true),
+            })?,
     };
     Ok(())
 }

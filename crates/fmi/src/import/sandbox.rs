@@ -29,7 +29,7 @@ pub fn crash_only_by_environment() -> Option<String> {
 const CREATE_RULESET_VERSION: u32 = 1;
 
 /// Landlock's ABI version, or why there is none.
-fn abi() -> Result<i64, String> {
+fn abi() -> Result<i64, SandboxError> {
     // SAFETY: the documented version query: no attribute, size 0.
     let v = unsafe {
         libc::syscall(
@@ -42,9 +42,11 @@ fn abi() -> Result<i64, String> {
     if v < 1 {
         let e = std::io::Error::last_os_error();
         return Err(match e.raw_os_error() {
-            Some(libc::ENOSYS) => "this kernel has no Landlock".to_string(),
-            Some(libc::EOPNOTSUPP) => "Landlock is disabled on this system".to_string(),
-            _ => format!("Landlock is not available: {e}"),
+            Some(libc::ENOSYS) => SandboxError::NoLandlock,
+            Some(libc::EOPNOTSUPP) => SandboxError::Disabled,
+            errno => SandboxError::Unavailable {
+                errno: errno.unwrap_or(0),
+            },
         });
     }
     Ok(v)
@@ -52,12 +54,12 @@ fn abi() -> Result<i64, String> {
 
 /// Whether isolated workers are confined here; the reason when not (memorised: the kernel does
 /// not change under a process).
-pub fn available() -> Result<(), String> {
-    static ANSWER: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+pub fn available() -> Result<(), SandboxError> {
+    static ANSWER: std::sync::OnceLock<Result<(), SandboxError>> = std::sync::OnceLock::new();
     ANSWER
         .get_or_init(|| {
-            if let Some(why) = crash_only_by_environment() {
-                return Err(why);
+            if let Some(setting) = crash_only_by_environment() {
+                return Err(SandboxError::Environment { setting });
             }
             if std::env::var_os(SANDBOX_ENV).is_some_and(|v| v == "assume") {
                 return Ok(());
@@ -65,10 +67,31 @@ pub fn available() -> Result<(), String> {
             // ABI 3 (Linux 6.2): what a confined worker requires.
             abi().and_then(|v| match v {
                 v if v >= 3 => Ok(()),
-                v => Err(format!(
-                    "this kernel's Landlock is ABI {v}; confinement needs 3"
-                )),
+                version => Err(SandboxError::Abi {
+                    version,
+                    required: 3,
+                }),
             })
         })
         .clone()
+}
+
+/// Why isolated workers are not confined here.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SandboxError {
+    /// The environment turned confinement off (`setting`: the variable and its value).
+    #[error("{setting}")]
+    Environment { setting: String },
+    #[error("this kernel has no Landlock")]
+    NoLandlock,
+    #[error("Landlock is disabled on this system")]
+    Disabled,
+    /// The version query failed otherwise (`errno`: the kernel's error number).
+    #[error(
+        "Landlock is not available: {}",
+        std::io::Error::from_raw_os_error(*errno)
+    )]
+    Unavailable { errno: i32 },
+    #[error("this kernel's Landlock is ABI {version}; confinement needs {required}")]
+    Abi { version: i64, required: i64 },
 }

@@ -60,27 +60,27 @@ pub(crate) fn store_dir_from(var: impl Fn(&str) -> Option<OsString>) -> Option<P
 /// Creates the machine-wide store if needed (its own folder private to the user) and checks
 /// that it can be trusted with libraries that twinbench loads: a folder of this user that
 /// no other user can write into, and that this user can write into. The reason otherwise.
-pub(crate) fn prepare(dir: &Path) -> Result<(), String> {
+pub(crate) fn prepare(dir: &Path) -> Result<(), StoreError> {
     use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
     if let Some(parent) = dir.parent() {
-        std::fs::create_dir_all(parent).map_err(|e| format!("cannot create it: {e}"))?;
+        std::fs::create_dir_all(parent).map_err(StoreError::Create)?;
     }
     match std::fs::DirBuilder::new().mode(0o700).create(dir) {
         Ok(()) => {}
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-        Err(e) => return Err(format!("cannot create it: {e}")),
+        Err(e) => return Err(StoreError::Create(e)),
     }
-    let meta = std::fs::metadata(dir).map_err(|e| format!("cannot read it: {e}"))?;
+    let meta = std::fs::metadata(dir).map_err(StoreError::Read)?;
     if !meta.is_dir() {
-        return Err("it is not a folder".into());
+        return Err(StoreError::NotAFolder);
     }
     // SAFETY: geteuid has no preconditions and cannot fail.
     let me = unsafe { libc::geteuid() };
     if meta.uid() != me {
-        return Err(format!(
-            "it belongs to user id {}, not to this user ({me})",
-            meta.uid()
-        ));
+        return Err(StoreError::Owner {
+            owner: meta.uid(),
+            me,
+        });
     }
     if meta.mode() & 0o022 != 0 {
         // Ours, made writable for others (a chmod by a process of this user, M1): repaired
@@ -89,25 +89,48 @@ pub(crate) fn prepare(dir: &Path) -> Result<(), String> {
         // have written meanwhile is caught where it matters: every library is checked
         // against its FMU's archive before it is loaded.
         let repaired = 0o700;
-        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(repaired)).map_err(|e| {
-            format!(
-                "other users can write into it (mode {:o}) and it cannot be repaired: {e}",
-                meta.mode() & 0o7777
-            )
-        })?;
+        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(repaired)).map_err(
+            |source| StoreError::Repair {
+                mode: meta.mode() & 0o7777,
+                source,
+            },
+        )?;
         log::warn!(
             "{}: the store of unpacked FMUs was writable by other users (mode {:o}); repaired to mode {repaired:o}",
             dir.display(),
             meta.mode() & 0o7777
         );
     }
-    let c = std::ffi::CString::new(dir.as_os_str().as_bytes())
-        .map_err(|_| "its path holds a NUL byte".to_string())?;
+    let c = std::ffi::CString::new(dir.as_os_str().as_bytes()).map_err(|_| StoreError::NulByte)?;
     // SAFETY: access on a NUL-terminated path we own.
     if unsafe { libc::access(c.as_ptr(), libc::W_OK | libc::X_OK) } != 0 {
-        return Err("this user cannot write into it".into());
+        return Err(StoreError::NotWritable);
     }
     Ok(())
+}
+
+/// Why the machine-wide store cannot be used (the message follows the store's path).
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum StoreError {
+    #[error("cannot create it: {0}")]
+    Create(#[source] std::io::Error),
+    #[error("cannot read it: {0}")]
+    Read(#[source] std::io::Error),
+    #[error("it is not a folder")]
+    NotAFolder,
+    #[error("it belongs to user id {owner}, not to this user ({me})")]
+    Owner { owner: u32, me: u32 },
+    /// Ours, writable by others, and the mode could not be set back.
+    #[error("other users can write into it (mode {mode:o}) and it cannot be repaired: {source}")]
+    Repair {
+        mode: u32,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("its path holds a NUL byte")]
+    NulByte,
+    #[error("this user cannot write into it")]
+    NotWritable,
 }
 
 /// One entry of an archive's central directory, as the index fingerprints it.

@@ -175,14 +175,15 @@ pub(crate) fn check_description(
 
 /// The description read (an FMI 1.0 one named by its version when it does not read).
 fn parse_description(fmu: &Path, xml: &str) -> Result<ModelDescription, FmuError> {
-    description::parse(xml).map_err(|message| FmuError::Description {
-        path: fmu.to_path_buf(),
+    description::parse(xml).map_err(|source| match sniff_fmi_version(xml) {
         // An FMI 1.0 description may not even parse as 2.0: name the version then.
-        message: match sniff_fmi_version(xml) {
-            Some(v) if v != "2.0" && !v.starts_with("3.") => {
-                format!("fmiVersion is \"{v}\"; twinbench runs FMI 2.0 and 3.0 FMUs")
-            }
-            _ => message,
+        Some(v) if v != "2.0" && !v.starts_with("3.") => FmuError::Description {
+            path: fmu.to_path_buf(),
+            message: format!("fmiVersion is \"{v}\"; twinbench runs FMI 2.0 and 3.0 FMUs"),
+        },
+        _ => FmuError::DescriptionParse {
+            path: fmu.to_path_buf(),
+            source,
         },
     })
 }

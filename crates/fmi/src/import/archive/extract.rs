@@ -2,6 +2,7 @@
 //! and renamed into place.
 
 use super::*;
+use crate::import::error::FolderError;
 use crate::import::manifest::{self, Manifest, ManifestFile};
 use crate::import::store::{self, unique_sibling, CdEntry};
 use crate::FmuError;
@@ -77,16 +78,16 @@ pub(crate) fn check_folder(
     rel: &str,
     sha: &str,
     entries: &[CdEntry],
-) -> Result<(Manifest, Vec<u8>), String> {
+) -> Result<(Manifest, Vec<u8>), FolderError> {
     let (f, _) = manifest::open_checked(base, &format!("{rel}/{}", manifest::MANIFEST))?;
     let (text, _) = manifest::read_hashed(&f, manifest::MAX_MANIFEST_BYTES)
-        .map_err(|e| format!("its manifest: {e}"))?;
+        .map_err(FolderError::ManifestRead)?;
     let m = std::str::from_utf8(&text)
         .ok()
         .and_then(Manifest::parse)
-        .ok_or("its manifest is damaged")?;
+        .ok_or(FolderError::ManifestDamaged)?;
     if m.archive != sha {
-        return Err("its manifest is of another archive".into());
+        return Err(FolderError::OtherArchive);
     }
     let files = archive_files(entries);
     let same = files.len() == m.files.len()
@@ -95,30 +96,28 @@ pub(crate) fn check_folder(
             .zip(&m.files)
             .all(|((name, e), f)| *name == f.path && e.size == f.size && e.crc32 == f.crc32);
     if !same {
-        return Err("its manifest does not list the archive's files".into());
+        return Err(FolderError::OtherFiles);
     }
     let md = m
         .file("modelDescription.xml")
-        .ok_or("no modelDescription.xml")?;
+        .ok_or(FolderError::NoDescription)?;
     let (f, meta) = manifest::open_checked(base, &format!("{rel}/modelDescription.xml"))?;
     use std::os::unix::fs::MetadataExt;
     if meta.len() != md.size || meta.mode() & 0o7777 != md.mode {
-        return Err(format!(
-            "{}: {} bytes, mode {:o}; unpacked: {} bytes, mode {:o}",
-            base.join(rel).join("modelDescription.xml").display(),
-            meta.len(),
-            meta.mode() & 0o7777,
-            md.size,
-            md.mode
-        ));
+        return Err(FolderError::DescriptionChanged {
+            path: base.join(rel).join("modelDescription.xml"),
+            size: meta.len(),
+            mode: meta.mode() & 0o7777,
+            unpacked_size: md.size,
+            unpacked_mode: md.mode,
+        });
     }
-    let (bytes, hash) = manifest::read_hashed(&f, MAX_DESCRIPTION_BYTES)
-        .map_err(|e| format!("modelDescription.xml: {e}"))?;
+    let (bytes, hash) =
+        manifest::read_hashed(&f, MAX_DESCRIPTION_BYTES).map_err(FolderError::DescriptionRead)?;
     if hash != md.hash {
-        return Err(format!(
-            "{}: its content is not the unpacked one",
-            base.join(rel).join("modelDescription.xml").display()
-        ));
+        return Err(FolderError::DescriptionContent {
+            path: base.join(rel).join("modelDescription.xml"),
+        });
     }
     Ok((m, bytes))
 }

@@ -7,6 +7,7 @@ use super::library3::Library3;
 use super::manifest::{self, Manifest, ManifestFile};
 use super::model::{Interface, ModelDescription};
 use super::model_exchange::MeLibrary;
+use crate::import::error::{FileCheckError, InterfaceError};
 use crate::FmuError;
 use sha2::{Digest, Sha256};
 use std::fs::File;
@@ -96,8 +97,8 @@ impl FileCheck {
     /// Checks the file: every folder from `base` down and the file owned by this user and
     /// writable by no one else, no symbolic link, a regular file of the size, mode and
     /// hash. The reason otherwise.
-    pub fn verify(&self) -> Result<(), String> {
-        let (dir, name) = self.rel.split_once('/').ok_or("no folder")?;
+    pub fn verify(&self) -> Result<(), FileCheckError> {
+        let (dir, name) = self.rel.split_once('/').ok_or(FileCheckError::NoFolder)?;
         manifest::verify_file(
             &self.base,
             dir,
@@ -268,7 +269,7 @@ impl LoadedFmu {
     /// Reports a damaged folder once and unpacks the archive again into a fresh folder in
     /// its place. Fails when the archive is no longer the one loaded, or the new unpacking
     /// is not the same content.
-    fn unpack_again(&self, reason: &str) -> Result<(), FmuError> {
+    fn unpack_again(&self, reason: &dyn std::fmt::Display) -> Result<(), FmuError> {
         log::warn!(
             "{}: the unpacked FMU {} differs from what was unpacked ({reason}); unpacking it again",
             self.dir.display(),
@@ -334,26 +335,25 @@ impl LoadedFmu {
 
     /// Whether an instance can run through `interface`: the FMU declares it, and has its
     /// library for this platform. Err: why not, in words for a message.
-    pub fn check_interface(&self, interface: Interface) -> Result<(), String> {
+    pub fn check_interface(&self, interface: Interface) -> Result<(), InterfaceError> {
         let Some(entry) = self.library_entry_of(interface) else {
             let has: Vec<&str> = Interface::ALL
                 .into_iter()
                 .filter(|i| self.description.supports(*i))
                 .map(Interface::name)
                 .collect();
-            return Err(format!(
-                "the FMU has no <{}> element (it supports {} only)",
-                interface.element(),
-                has.join(" and ")
-            ));
+            return Err(InterfaceError::NotDeclared {
+                element: interface.element(),
+                supported: has,
+            });
         };
         // In the archive (the manifest of what was unpacked): a missing or changed file on
         // disk is repaired when the library is loaded (`checked_library_of`).
         if self.binary_required && self.unpacked_file(&entry).is_none() {
-            return Err(format!(
-                "no {entry}, the {} library (the FMU has no binary of it for this platform)",
-                interface.element()
-            ));
+            return Err(InterfaceError::NoBinary {
+                entry,
+                element: interface.element(),
+            });
         }
         Ok(())
     }
