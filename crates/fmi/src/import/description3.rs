@@ -710,14 +710,23 @@ mod tests {
             "<Float64 name=\"y\" valueReference=\"5\" causality=\"output\" start=\"1 2\">",
         );
         let e = parse(&xml).unwrap_err();
-        assert!(e.contains("'y': 2 start values for an array of 6"), "{e}");
+        assert!(
+            matches!(&e, DescriptionError::StartValues { variable, starts: 2, elements: 6 } if variable == "y"),
+            "{e}"
+        );
         let xml = XML.replace(
             "<Dimension valueReference=\"1\"/>",
             "<Dimension valueReference=\"4\"/>",
         );
         let e = parse(&xml).unwrap_err();
         assert!(
-            e.contains("value reference 4, which is no structural parameter"),
+            matches!(
+                &e,
+                DescriptionError::DimensionNotStructural {
+                    value_reference: 4,
+                    ..
+                }
+            ),
             "{e}"
         );
     }
@@ -738,7 +747,7 @@ mod tests {
         );
         let e = parse(&xml).unwrap_err();
         assert!(
-            e.contains("'a10': the arrays so far hold more than 1000000 values in all"),
+            matches!(&e, DescriptionError::TooManyValues { variable, limit: 1_000_000 } if variable == "a10"),
             "{e}"
         );
     }
@@ -781,7 +790,7 @@ mod tests {
         );
         let e = parse(&xml).unwrap_err();
         assert!(
-            e.contains("'y': a <Dimension> has start or valueReference, not both"),
+            matches!(&e, DescriptionError::DimensionBoth { variable } if variable == "y"),
             "{e}"
         );
     }
@@ -799,7 +808,11 @@ mod tests {
 </fmiModelDescription>"#;
         let e = parse(xml).unwrap_err();
         assert!(
-            e.contains("value reference 1 is declared twice, for 'u1' and 'u2'"),
+            matches!(
+                &e,
+                DescriptionError::DuplicateValueReference { value_reference: 1, first, second }
+                    if first == "u1" && second == "u2"
+            ),
             "{e}"
         );
     }
