@@ -61,6 +61,14 @@ pub enum TableError {
         candidates: String,
     },
 
+    /// An MDF 4 file refused before the reader sees it.
+    #[error("{file}: MDF 4: {source}")]
+    Mdf {
+        file: String,
+        #[source]
+        source: crate::mdf::MdfError,
+    },
+
     /// Columns of different lengths, names that do not match the columns, and the like.
     #[error("{0}")]
     Shape(String),

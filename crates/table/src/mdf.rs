@@ -25,10 +25,20 @@ use std::io::Write;
 use std::path::Path;
 
 mod check;
+mod error;
 pub use check::{MAX_CELLS, MAX_FORMULA, MAX_METADATA, MAX_WORK};
+pub use error::MdfError;
 
 fn mdf_error(name: &str, what: impl std::fmt::Display) -> TableError {
     TableError::Shape(format!("{name}: MDF 4: {what}"))
+}
+
+/// A refusal of the check, or a failed copy, naming the file.
+fn refused(name: &str) -> impl FnOnce(MdfError) -> TableError + '_ {
+    move |source| TableError::Mdf {
+        file: name.to_string(),
+        source,
+    }
 }
 
 fn number(v: &Option<DecodedValue>) -> f64 {
@@ -64,8 +74,8 @@ pub fn read(path: &Path) -> Result<Table> {
             source,
         })?;
     let name = path.display().to_string();
-    check::check(&bytes).map_err(|e| mdf_error(&name, e))?;
-    let file = in_memory(&bytes).map_err(|e| mdf_error(&name, e))?;
+    check::check(&bytes).map_err(refused(&name))?;
+    let file = in_memory(&bytes).map_err(refused(&name))?;
     drop(bytes);
     read_checked(&file, &name)
 }
@@ -73,28 +83,24 @@ pub fn read(path: &Path) -> Result<Table> {
 /// Reads MDF 4 bytes into a table named `name` (in errors too), with the same checks as
 /// [`read`].
 pub fn read_bytes(bytes: &[u8], name: &str) -> Result<Table> {
-    check::check(bytes).map_err(|e| mdf_error(name, e))?;
-    let file = in_memory(bytes).map_err(|e| mdf_error(name, e))?;
+    check::check(bytes).map_err(refused(name))?;
+    let file = in_memory(bytes).map_err(refused(name))?;
     read_checked(&file, name)
 }
 
 /// The checked bytes as an anonymous in-memory file (`memfd_create`): the crate opens files
 /// by path only, and through `/proc/self/fd/N` it reads exactly these bytes, which nobody
 /// else can change.
-fn in_memory(bytes: &[u8]) -> std::result::Result<std::fs::File, String> {
+fn in_memory(bytes: &[u8]) -> std::result::Result<std::fs::File, MdfError> {
     use std::os::fd::FromRawFd;
     // SAFETY: a plain system call with a NUL-terminated name; the descriptor it returns is
     // owned by the File from here on.
     let fd = unsafe { libc::memfd_create(c"twinbench-mdf".as_ptr(), libc::MFD_CLOEXEC) };
     if fd < 0 {
-        return Err(format!(
-            "cannot make an in-memory copy for the MDF reader: {}",
-            std::io::Error::last_os_error()
-        ));
+        return Err(MdfError::InMemory(std::io::Error::last_os_error()));
     }
     let mut file = unsafe { std::fs::File::from_raw_fd(fd) };
-    file.write_all(bytes)
-        .map_err(|e| format!("cannot make an in-memory copy for the MDF reader: {e}"))?;
+    file.write_all(bytes).map_err(MdfError::InMemory)?;
     Ok(file)
 }
 

@@ -32,6 +32,7 @@
 //!
 //! Every refusal names the block by its type and offset, and what is wrong.
 
+use super::error::MdfError;
 use std::collections::{HashMap, HashSet};
 
 /// The longest algebraic conversion formula read (the crate parses it recursively, for every
@@ -173,12 +174,14 @@ impl<'a> File<'a> {
     }
 
     /// The block header at `at`, reached from `from`.
-    fn header(&self, at: u64, from: &str) -> Result<Block, String> {
+    fn header(&self, at: u64, from: &str) -> Result<Block, MdfError> {
         let size = self.size;
         if at >= size || size - at < 24 {
-            return Err(format!(
-                "{from} points to offset {at}, past the end of the file ({size} bytes; truncated?)"
-            ));
+            return Err(MdfError::PastEnd {
+                from: from.to_string(),
+                at,
+                size,
+            });
         }
         let i = at as usize;
         let id: [u8; 4] = self.bytes[i..i + 4].try_into().expect("4 bytes");
@@ -187,10 +190,11 @@ impl<'a> File<'a> {
             && id[2].is_ascii_uppercase()
             && id[3].is_ascii_uppercase())
         {
-            return Err(format!(
-                "{from} points to offset {at}, where no block starts (the bytes there are \"{}\", not \"##\" and a block type)",
-                id.escape_ascii()
-            ));
+            return Err(MdfError::NoBlock {
+                from: from.to_string(),
+                at,
+                found: id.escape_ascii().to_string(),
+            });
         }
         let b = Block {
             at,
@@ -199,26 +203,24 @@ impl<'a> File<'a> {
             links: self.u64(at + 16),
         };
         if b.len < 24 {
-            return Err(format!(
-                "{} has a length of {} bytes, less than its 24-byte header",
-                b.name(),
-                b.len
-            ));
+            return Err(MdfError::ShortBlock {
+                block: b.name(),
+                length: b.len,
+            });
         }
         if b.len > size - at {
-            return Err(format!(
-                "{} is {} bytes long, past the end of the file ({size} bytes; truncated?)",
-                b.name(),
-                b.len
-            ));
+            return Err(MdfError::LongBlock {
+                block: b.name(),
+                length: b.len,
+                size,
+            });
         }
         if b.links > (b.len - 24) / 8 {
-            return Err(format!(
-                "{} has {} links, more than its {} bytes hold",
-                b.name(),
-                b.links,
-                b.len
-            ));
+            return Err(MdfError::LinksOverflow {
+                block: b.name(),
+                links: b.links,
+                length: b.len,
+            });
         }
         Ok(b)
     }
@@ -245,7 +247,7 @@ impl<'a> File<'a> {
     }
 
     /// The blocks the crate reads at fixed offsets are long enough for them.
-    fn fixed_layout(&self, b: &Block) -> Result<(), String> {
+    fn fixed_layout(&self, b: &Block) -> Result<(), MdfError> {
         let (links, len) = match &b.id {
             b"##HD" => (6, 104),
             b"##DG" => (4, 64),
@@ -270,30 +272,28 @@ impl<'a> File<'a> {
             _ => return Ok(()),
         };
         if b.links < links || b.len < len {
-            return Err(format!(
-                "{} has {} links and {} bytes; its fields need at least {links} links and {len} bytes",
-                b.name(),
-                b.links,
-                b.len
-            ));
+            return Err(MdfError::Layout {
+                block: b.name(),
+                links: b.links,
+                length: b.len,
+                links_needed: links,
+                length_needed: len,
+            });
         }
         Ok(())
     }
 
     /// Steps 1 and 2: the identification and header blocks, then every reachable block.
-    fn blocks(&mut self) -> Result<(), String> {
+    fn blocks(&mut self) -> Result<(), MdfError> {
         let size = self.size;
         if size < 64 + 104 {
-            return Err(format!(
-                "the file is {size} bytes long, shorter than the identification and header blocks of an MDF 4 file (168 bytes)"
-            ));
+            return Err(MdfError::ShortFile { size });
         }
         let file_id = &self.bytes[0..8];
         if file_id != b"MDF     " && file_id != b"UnFinMF " {
-            return Err(format!(
-                "not an MDF file (it starts with \"{}\", not \"MDF     \")",
-                file_id.escape_ascii()
-            ));
+            return Err(MdfError::NotMdf {
+                found: file_id.escape_ascii().to_string(),
+            });
         }
         let version = std::str::from_utf8(&self.bytes[8..16])
             .ok()
@@ -305,17 +305,13 @@ impl<'a> File<'a> {
             (major == 4 && minor < 100).then(|| major * 100 + minor)
         });
         if number.is_none_or(|n| n < 410) {
-            return Err(format!(
-                "version \"{}\": twinbench reads MDF 4.10 and later 4.x files",
-                self.bytes[8..16].escape_ascii()
-            ));
+            return Err(MdfError::Version {
+                found: self.bytes[8..16].escape_ascii().to_string(),
+            });
         }
         let hd = self.header(64, "the identification block")?;
         if !hd.is(b"##HD") {
-            return Err(format!(
-                "{} where the header block (##HD) must be",
-                hd.name()
-            ));
+            return Err(MdfError::NoHeader { block: hd.name() });
         }
         let max_blocks = size / 24;
         let mut todo = vec![hd];
@@ -328,9 +324,10 @@ impl<'a> File<'a> {
                 }
                 let t = self.header(target, &Self::origin(&b, i))?;
                 if self.blocks.len() as u64 >= max_blocks {
-                    return Err(format!(
-                        "more than {max_blocks} blocks reachable in a file of {size} bytes (one per 24 bytes at most)"
-                    ));
+                    return Err(MdfError::TooManyBlocks {
+                        limit: max_blocks,
+                        size,
+                    });
                 }
                 self.blocks.insert(target, t);
                 todo.push(t);
@@ -357,7 +354,7 @@ impl<'a> File<'a> {
 
     /// Step 3: no cycle among the links the crate may follow (an iterative depth-first
     /// search with colours: grey on the path, black done).
-    fn no_cycle(&self) -> Result<(), String> {
+    fn no_cycle(&self) -> Result<(), MdfError> {
         const GREY: u8 = 1;
         const BLACK: u8 = 2;
         let mut colour: HashMap<u64, u8> = HashMap::with_capacity(self.blocks.len());
@@ -392,16 +389,15 @@ impl<'a> File<'a> {
                         cycle.splice(4..n - 3, ["...".to_string()]);
                     }
                     cycle.push(format!("{} at {}", t.id(), t.at));
-                    return Err(format!(
-                        "{} leads back to {}: a cycle in the file's links ({})",
-                        Self::origin(&b, i),
-                        if target == b.at {
+                    return Err(MdfError::Cycle {
+                        from: Self::origin(&b, i),
+                        target: if target == b.at {
                             "the same block".to_string()
                         } else {
                             t.name()
                         },
-                        cycle.join(" -> ")
-                    ));
+                        cycle,
+                    });
                 }
                 Some(_) => {}
                 None => {
@@ -414,14 +410,14 @@ impl<'a> File<'a> {
     }
 
     /// The block at a link, of the type the crate expects there.
-    fn expect(&self, at: u64, id: &[u8; 4], from: &str) -> Result<Block, String> {
+    fn expect(&self, at: u64, id: &[u8; 4], from: &str) -> Result<Block, MdfError> {
         let b = self.blocks[&at];
         if !b.is(id) {
-            return Err(format!(
-                "{from} leads to {}, where a {} must be",
-                b.name(),
-                String::from_utf8_lossy(id)
-            ));
+            return Err(MdfError::Unexpected {
+                from: from.to_string(),
+                block: b.name(),
+                expected: String::from_utf8_lossy(id).into_owned(),
+            });
         }
         Ok(b)
     }
@@ -481,22 +477,22 @@ struct Walk<'f, 'a> {
 }
 
 impl Walk<'_, '_> {
-    fn once(&mut self, b: &Block, what: &str) -> Result<(), String> {
+    fn once(&mut self, b: &Block, what: &'static str) -> Result<(), MdfError> {
         let set = if what == "data" {
             &mut self.data
         } else {
             &mut self.structure
         };
         if !set.insert(b.at) {
-            return Err(format!(
-                "{} is linked twice as {what}: each belongs to one chain",
-                b.name()
-            ));
+            return Err(MdfError::LinkedTwice {
+                block: b.name(),
+                what,
+            });
         }
         Ok(())
     }
 
-    fn run(mut self) -> Result<Costs, String> {
+    fn run(mut self) -> Result<Costs, MdfError> {
         let f = self.file;
         let hd = f.blocks[&64];
         let mut from = File::origin(&hd, 0);
@@ -511,15 +507,15 @@ impl Walk<'_, '_> {
         Ok(self.costs)
     }
 
-    fn data_group(&mut self, dg: &Block) -> Result<(), String> {
+    fn data_group(&mut self, dg: &Block) -> Result<(), MdfError> {
         let f = self.file;
         self.costs.metadata += 256;
         let rid = u64::from(f.u8(dg.at + 56));
         if !matches!(rid, 0 | 1 | 2 | 4 | 8) {
-            return Err(format!(
-                "{} has record IDs of {rid} bytes; MDF 4 allows 0, 1, 2, 4 or 8",
-                dg.name()
-            ));
+            return Err(MdfError::RecordIdSize {
+                block: dg.name(),
+                size: rid,
+            });
         }
         let fragments = self.data_chain(dg)?;
         let mut groups = Vec::new();
@@ -551,18 +547,17 @@ impl Walk<'_, '_> {
                 continue;
             }
             if g.record == 0 {
-                return Err(format!(
-                    "{} has records of 0 bytes (record ID, data and invalidation bytes)",
-                    g.block.name()
-                ));
+                return Err(MdfError::EmptyRecords {
+                    block: g.block.name(),
+                });
             }
             if !self.unfinalized && g.cycles > n {
-                return Err(format!(
-                    "{} says it has {} records (its cycle count) of {} bytes, but its data holds {n}",
-                    g.block.name(),
-                    g.cycles,
-                    g.record
-                ));
+                return Err(MdfError::CycleCount {
+                    block: g.block.name(),
+                    cycles: g.cycles,
+                    record: g.record,
+                    records: n,
+                });
             }
             let c = &mut self.costs;
             for ch in g.channels.iter().filter(|c| c.read) {
@@ -588,7 +583,7 @@ impl Walk<'_, '_> {
         Ok(())
     }
 
-    fn channel_group(&mut self, cg: &Block, rid: u64) -> Result<Group, String> {
+    fn channel_group(&mut self, cg: &Block, rid: u64) -> Result<Group, MdfError> {
         let f = self.file;
         self.costs.metadata += 256;
         let mut channels = Vec::new();
@@ -610,7 +605,7 @@ impl Walk<'_, '_> {
         })
     }
 
-    fn channel(&mut self, cn: &Block) -> Result<Channel, String> {
+    fn channel(&mut self, cn: &Block) -> Result<Channel, MdfError> {
         let f = self.file;
         let cn_type = f.u8(cn.at + 88);
         let data_type = f.u8(cn.at + 90);
@@ -634,11 +629,12 @@ impl Walk<'_, '_> {
                 3 if cc.links > 4 => {
                     let formula = f.text_len(f.link(&cc, 4));
                     if formula > MAX_FORMULA {
-                        return Err(format!(
-                            "{}: the formula of its algebraic conversion ({}) is {formula} bytes long, more than {MAX_FORMULA}",
-                            cn.name(),
-                            cc.name()
-                        ));
+                        return Err(MdfError::Formula {
+                            channel: cn.name(),
+                            conversion: cc.name(),
+                            length: formula,
+                            limit: MAX_FORMULA,
+                        });
                     }
                     metadata += formula;
                     cost += formula;
@@ -649,16 +645,16 @@ impl Walk<'_, '_> {
         let read = reads_channel(cn_type, data_type, conversion);
         if read {
             if data_type <= 3 && !(1..=64).contains(&bits) {
-                return Err(format!(
-                    "{} is an integer of {bits} bits; MDF 4 integers have 1 to 64",
-                    cn.name()
-                ));
+                return Err(MdfError::IntegerBits {
+                    channel: cn.name(),
+                    bits,
+                });
             }
             if bit_offset > 7 {
-                return Err(format!(
-                    "{} has a bit offset of {bit_offset}; it is 0 to 7",
-                    cn.name()
-                ));
+                return Err(MdfError::BitOffset {
+                    channel: cn.name(),
+                    offset: bit_offset,
+                });
             }
             metadata += f.text_len(f.link(cn, 2)) + f.text_len(f.link(cn, 6));
         }
@@ -672,15 +668,15 @@ impl Walk<'_, '_> {
 
     /// The next block of an `##HL` as the crate finds it: its first link that is not 0, else
     /// the address after its links.
-    fn hl_next(&self, hl: &Block) -> Result<u64, String> {
+    fn hl_next(&self, hl: &Block) -> Result<u64, MdfError> {
         match self.file.links_of(hl).iter().find(|&&(_, t)| t != 0) {
             Some(&(_, t)) => Ok(t),
-            None => Err(format!("{} links to no data block", hl.name())),
+            None => Err(MdfError::NoDataBlock { block: hl.name() }),
         }
     }
 
     /// The data blocks of a data group in the crate's order: (offset of the data, bytes).
-    fn data_chain(&mut self, dg: &Block) -> Result<Vec<(u64, u64)>, String> {
+    fn data_chain(&mut self, dg: &Block) -> Result<Vec<(u64, u64)>, MdfError> {
         let f = self.file;
         let mut out = Vec::new();
         let mut from = File::origin(dg, 2);
@@ -744,16 +740,15 @@ impl Walk<'_, '_> {
         rid: u64,
         groups: &[Group],
         fragments: &[(u64, u64)],
-    ) -> Result<Vec<u64>, String> {
+    ) -> Result<Vec<u64>, MdfError> {
         let mut sizes: HashMap<u64, u64> = HashMap::new();
         for g in groups {
             if sizes.insert(g.record_id, g.record).is_some() {
-                return Err(format!(
-                    "two channel groups of {} have the record ID {} ({} is the second)",
-                    dg.name(),
-                    g.record_id,
-                    g.block.name()
-                ));
+                return Err(MdfError::SharedRecordId {
+                    block: dg.name(),
+                    record_id: g.record_id,
+                    second: g.block.name(),
+                });
             }
         }
         let mut counts: HashMap<u64, u64> = HashMap::new();
@@ -783,26 +778,18 @@ impl Walk<'_, '_> {
 
 /// Why a block met in a data chain is not one the crate can read (`##DT`, or in a data
 /// group's chain `##DL` and `##HL`).
-fn not_data(b: &Block, from: &str) -> String {
+fn not_data(b: &Block, from: &str) -> MdfError {
+    let (from, block) = (from.to_string(), b.name());
     match &b.id {
-        b"##DZ" => format!(
-            "{from} leads to {}: compressed data is not read by twinbench's MDF reader (write the file uncompressed)",
-            b.name()
-        ),
-        b"##DV" => format!(
-            "{from} leads to {}: data without invalidation bytes (MDF 4.2) is not read by twinbench's MDF reader",
-            b.name()
-        ),
-        _ => format!(
-            "{from} leads to {}, where data (##DT, or ##DL or ##HL from a data group) must be",
-            b.name()
-        ),
+        b"##DZ" => MdfError::Compressed { from, block },
+        b"##DV" => MdfError::NoInvalidation { from, block },
+        _ => MdfError::NotData { from, block },
     }
 }
 
 /// Checks an MDF 4 file's bytes (see the module's documentation); the error says what is
 /// wrong and where (the caller adds the file's name).
-pub fn check(bytes: &[u8]) -> Result<(), String> {
+pub fn check(bytes: &[u8]) -> Result<(), MdfError> {
     let mut file = File {
         bytes,
         size: bytes.len() as u64,
@@ -821,22 +808,23 @@ pub fn check(bytes: &[u8]) -> Result<(), String> {
     let table = (1 + costs.table_channels).saturating_mul(costs.table_rows);
     let cells = costs.cells.saturating_add(table);
     if cells > MAX_CELLS {
-        return Err(format!(
-            "the channels hold {} samples and make a table of {table} values; twinbench reads at most {MAX_CELLS} from one file",
-            costs.cells
-        ));
+        return Err(MdfError::Cells {
+            cells: costs.cells,
+            table,
+            limit: MAX_CELLS,
+        });
     }
     if costs.work > MAX_WORK {
-        return Err(format!(
-            "reading its channels takes {} steps (samples times their conversion's table or formula, data blocks and records scanned per channel), more than {MAX_WORK}",
-            costs.work
-        ));
+        return Err(MdfError::Work {
+            steps: costs.work,
+            limit: MAX_WORK,
+        });
     }
     if costs.metadata > MAX_METADATA {
-        return Err(format!(
-            "its channels, conversions, names and units take {} bytes to hold, more than {MAX_METADATA}",
-            costs.metadata
-        ));
+        return Err(MdfError::Metadata {
+            bytes: costs.metadata,
+            limit: MAX_METADATA,
+        });
     }
     Ok(())
 }
