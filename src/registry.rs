@@ -72,7 +72,9 @@ impl ModelSpec {
             documentation: || {
                 fmu_export::description::render_documentation::<M>(DOCUMENTATION_TEMPLATE)
             },
-            validate: fmu_export::description::validate_table::<M::Vars>,
+            validate: || {
+                fmu_export::description::validate_table::<M::Vars>().map_err(|e| e.to_string())
+            },
             guid: fmu_export::description::guid::<M>,
         }
     }

@@ -110,9 +110,30 @@ fn link_cvode() {
     println!("cargo:rustc-cfg=tb_cvode");
 }
 
+/// A definition of `sundials_config.h` that is not what the binding assumes (a build script
+/// has no thiserror: its Display by hand).
+#[cfg(feature = "import")]
+struct Mismatch {
+    name: &'static str,
+    /// The defined value; `None` when the name is not defined.
+    found: Option<String>,
+    expected: &'static str,
+}
+
+#[cfg(feature = "import")]
+impl std::fmt::Display for Mismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (name, expected) = (self.name, self.expected);
+        match &self.found {
+            Some(v) => write!(f, "{name} is {v}, expected {expected}"),
+            None => write!(f, "{name} is not defined, expected {expected}"),
+        }
+    }
+}
+
 /// `Err(what differs)` when `sundials_config.h` is not what the binding assumes.
 #[cfg(feature = "import")]
-fn check_config(text: &str) -> Result<(), String> {
+fn check_config(text: &str) -> Result<(), Mismatch> {
     let define = |name: &str| {
         text.lines().find_map(|l| {
             let mut w = l.split_whitespace();
@@ -123,8 +144,13 @@ fn check_config(text: &str) -> Result<(), String> {
     for (name, want) in EXPECTED {
         match define(name) {
             Some(v) if v == want => {}
-            Some(v) => return Err(format!("{name} is {v}, expected {want}")),
-            None => return Err(format!("{name} is not defined, expected {want}")),
+            found => {
+                return Err(Mismatch {
+                    name,
+                    found,
+                    expected: want,
+                })
+            }
         }
     }
     Ok(())

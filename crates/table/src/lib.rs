@@ -8,7 +8,7 @@ pub mod mdf;
 mod output;
 mod table;
 
-pub use error::{Result, TableError};
+pub use error::{MdfError, Result, TableError};
 pub use table::Table;
 
 /// Whether a path names an MDF file (`.mf4`, `.mdf`, any case).

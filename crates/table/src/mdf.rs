@@ -25,9 +25,8 @@ use std::io::Write;
 use std::path::Path;
 
 mod check;
-mod error;
+pub use crate::error::MdfError;
 pub use check::{MAX_CELLS, MAX_FORMULA, MAX_METADATA, MAX_WORK};
-pub use error::MdfError;
 
 fn mdf_error(name: &str, what: impl std::fmt::Display) -> TableError {
     TableError::Shape(format!("{name}: MDF 4: {what}"))

@@ -1,5 +1,6 @@
 //! modelDescription.xml, documentation and GUID, generated from the variable table.
 
+use crate::check::TableError;
 use crate::model::Model;
 use crate::units;
 use crate::variables::{format_real, Causality, VarInfo, VarTable};
@@ -110,17 +111,24 @@ impl Fitting {
 /// of each variable, all of them in one message. A table made by `variables!` passed them at
 /// compile time already; the packer still refuses any table that fails them (a
 /// [`VarTable`] written by hand).
-pub fn validate_table<V: VarTable>() -> Result<(), String> {
+pub fn validate_table<V: VarTable>() -> Result<(), InvalidTable> {
     let t = V::VARIABLES;
-    let errors: Vec<String> = (0..t.len())
+    let errors: Vec<TableError> = (0..t.len())
         .filter_map(|i| crate::check::check_variable(t, i).err())
-        .map(|e| e.to_string())
         .collect();
     if errors.is_empty() {
         Ok(())
     } else {
-        Err(errors.join("; "))
+        Err(InvalidTable { errors })
     }
+}
+
+/// The broken rules of a variable table ([`validate_table`]): the first of each variable,
+/// in the table's order.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{}", errors.iter().map(TableError::to_string).collect::<Vec<_>>().join("; "))]
+pub struct InvalidTable {
+    pub errors: Vec<TableError>,
 }
 
 /// Escape text for an XML attribute or element.

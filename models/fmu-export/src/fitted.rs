@@ -19,8 +19,55 @@
 //! its declared range: anything else refuses the instantiation, naming the file and the
 //! variable (a broken file is never half applied).
 
+use crate::error::ModelError;
 use crate::variables::{Causality, ScalarType, Value, VarTable, Variability};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// Why a fitted start value file refuses the instantiation.
+#[derive(Debug, thiserror::Error)]
+pub enum FittedError {
+    /// The file cannot be read (not a regular file, too large, not text).
+    #[error(transparent)]
+    Read(#[from] ModelError),
+    #[error("{path}: {source}")]
+    Invalid {
+        path: PathBuf,
+        #[source]
+        source: StartsError,
+    },
+}
+
+/// What is wrong in a fitted start value file's text: the key or variable, and what was
+/// expected.
+#[derive(Debug, thiserror::Error)]
+pub enum StartsError {
+    #[error("{0}")]
+    Toml(#[from] toml::de::Error),
+    #[error("expected `token = \"…\"`, the fitted FMU's GUID")]
+    NoToken,
+    #[error("expected a `[start]` table of start values")]
+    NoStartTable,
+    #[error("unknown key `{key}` (expected `token` and `[start]`)")]
+    UnknownKey { key: String },
+    #[error("no variable named `{name}` in this model")]
+    NoVariable { name: String },
+    #[error("`{variable}` is not a parameter or input with a start value: it cannot be fitted")]
+    NotFittable { variable: &'static str },
+    /// `value` as the file writes it; `expected` the model's type in words.
+    #[error("`{variable}` = {value}: expected {expected} (its type in the model)")]
+    Type {
+        variable: &'static str,
+        value: String,
+        expected: &'static str,
+    },
+    #[error("`{variable}` = {value}: expected a finite value in [{min}, {max}]")]
+    Range {
+        variable: &'static str,
+        value: String,
+        min: f64,
+        max: f64,
+    },
+}
 
 /// The file's name in `resources/`.
 pub const START_FILE: &str = "fitted_start_values.toml";
@@ -44,21 +91,21 @@ pub struct FittedStarts {
 impl FittedStarts {
     /// The file in `resource_dir`, if there is one; an error names the file, the variable
     /// and what was expected.
-    pub fn load<V: VarTable>(resource_dir: &Path) -> Result<Option<FittedStarts>, String> {
+    pub fn load<V: VarTable>(resource_dir: &Path) -> Result<Option<FittedStarts>, FittedError> {
         let path = resource_dir.join(START_FILE);
         if !path.exists() {
             return Ok(None);
         }
-        let text = crate::resources::read_text(&path).map_err(|e| e.to_string())?;
+        let text = crate::resources::read_text(&path)?;
         Self::parse::<V>(&text)
             .map(Some)
-            .map_err(|e| format!("{}: {e}", path.display()))
+            .map_err(|source| FittedError::Invalid { path, source })
     }
 
     /// The file in the resource folder a host gave at instantiation (none given: none).
     pub fn of_instance<V: VarTable>(
         resource_dir: Option<&Path>,
-    ) -> Result<Option<FittedStarts>, String> {
+    ) -> Result<Option<FittedStarts>, FittedError> {
         Ok(resource_dir.map(Self::load::<V>).transpose()?.flatten())
     }
 
@@ -69,24 +116,22 @@ impl FittedStarts {
     }
 
     /// The file's text, checked against the table `V`.
-    pub fn parse<V: VarTable>(text: &str) -> Result<FittedStarts, String> {
-        let table: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
+    pub fn parse<V: VarTable>(text: &str) -> Result<FittedStarts, StartsError> {
+        let table: toml::Table = text.parse()?;
         let token = match table.get("token") {
             Some(toml::Value::String(t)) if !t.is_empty() => t.clone(),
-            _ => return Err("expected `token = \"…\"`, the fitted FMU's GUID".into()),
+            _ => return Err(StartsError::NoToken),
         };
         let Some(toml::Value::Table(start)) = table.get("start") else {
-            return Err("expected a `[start]` table of start values".into());
+            return Err(StartsError::NoStartTable);
         };
         if let Some(other) = table.keys().find(|k| *k != "token" && *k != "start") {
-            return Err(format!(
-                "unknown key `{other}` (expected `token` and `[start]`)"
-            ));
+            return Err(StartsError::UnknownKey { key: other.clone() });
         }
         let mut values = Vec::with_capacity(start.len());
         for (name, value) in start {
             let Some(index) = V::index_of(name) else {
-                return Err(format!("no variable named `{name}` in this model"));
+                return Err(StartsError::NoVariable { name: name.clone() });
             };
             values.push((index, Self::checked::<V>(index, value)?));
         }
@@ -95,22 +140,18 @@ impl FittedStarts {
 
     /// `value` as variable `index`'s start: its type, finite, in its range, and a variable
     /// a host may give a start value.
-    fn checked<V: VarTable>(index: usize, value: &toml::Value) -> Result<Start, String> {
+    fn checked<V: VarTable>(index: usize, value: &toml::Value) -> Result<Start, StartsError> {
         let v = &V::VARIABLES[index];
         let settable = v.has_start()
             && v.variability != Variability::Constant
             && matches!(v.causality, Causality::Parameter | Causality::Input);
         if !settable {
-            return Err(format!(
-                "`{}` is not a parameter or input with a start value: it cannot be fitted",
-                v.name
-            ));
+            return Err(StartsError::NotFittable { variable: v.name });
         }
-        let wrong = |expected: &str| {
-            format!(
-                "`{}` = {value}: expected {expected} (its type in the model)",
-                v.name
-            )
+        let wrong = |expected| StartsError::Type {
+            variable: v.name,
+            value: value.to_string(),
+            expected,
         };
         let start = match (v.var_type().value_space(), value) {
             (ScalarType::Real, toml::Value::Float(x)) => Start::Value(Value::Real(*x)),
@@ -132,10 +173,12 @@ impl FittedStarts {
                 v.max.unwrap_or(f64::INFINITY),
             );
             if !f.is_finite() || f < lo || f > hi {
-                return Err(format!(
-                    "`{}` = {value}: expected a finite value in [{lo}, {hi}]",
-                    v.name
-                ));
+                return Err(StartsError::Range {
+                    variable: v.name,
+                    value: value.to_string(),
+                    min: lo,
+                    max: hi,
+                });
             }
         }
         Ok(start)

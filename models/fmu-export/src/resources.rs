@@ -89,17 +89,16 @@ pub fn read_text(path: &Path) -> Result<String, ModelError> {
 }
 
 /// Decode `fmuResourceLocation` (a file URI, percent-encoded) into a folder path.
-pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
+pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, UriError> {
     // `file://host/path` names a file on another machine (N28: it was read as the local
     // path /host/path).
     if let Some(authority) = uri.strip_prefix("file://") {
         let host = authority.split('/').next().unwrap_or_default();
         if !host.is_empty() && host != "localhost" {
-            return Err(format!(
-                "'{}' names a file on the host '{}': only local files (file:///path) can be read",
-                tb_files::excerpt(uri),
-                tb_files::excerpt(host)
-            ));
+            return Err(UriError::OtherHost {
+                uri: tb_files::excerpt(uri),
+                host: tb_files::excerpt(host),
+            });
         }
     }
     let rest = uri
@@ -107,7 +106,9 @@ pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
         .map(|r| format!("/{r}"))
         .or_else(|| uri.strip_prefix("file:///").map(|r| format!("/{r}")))
         .or_else(|| uri.strip_prefix("file:/").map(|r| format!("/{r}")))
-        .ok_or_else(|| format!("fmuResourceLocation '{uri}' is not a file URI"))?;
+        .ok_or_else(|| UriError::NotAFile {
+            uri: uri.to_string(),
+        })?;
     let bytes = rest.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
@@ -117,8 +118,9 @@ pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
                 .get(i + 1..i + 3)
                 .and_then(|h| std::str::from_utf8(h).ok())
                 .and_then(|h| u8::from_str_radix(h, 16).ok())
-                .ok_or_else(|| {
-                    format!("fmuResourceLocation '{uri}': bad percent escape at byte {i}")
+                .ok_or_else(|| UriError::PercentEscape {
+                    uri: uri.to_string(),
+                    at: i,
                 })?;
             out.push(hex);
             i += 3;
@@ -127,9 +129,27 @@ pub fn resource_dir_from_uri(uri: &str) -> Result<PathBuf, String> {
             i += 1;
         }
     }
-    let s = String::from_utf8(out)
-        .map_err(|_| format!("fmuResourceLocation '{uri}' is not UTF-8 after decoding"))?;
+    let s = String::from_utf8(out).map_err(|_| UriError::NotUtf8 {
+        uri: uri.to_string(),
+    })?;
     Ok(PathBuf::from(s))
+}
+
+/// Why a resource location (`fmuResourceLocation`, a `file:` parameter) names no local
+/// folder.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum UriError {
+    /// `uri` and `host` are shortened for the message.
+    #[error(
+        "'{uri}' names a file on the host '{host}': only local files (file:///path) can be read"
+    )]
+    OtherHost { uri: String, host: String },
+    #[error("fmuResourceLocation '{uri}' is not a file URI")]
+    NotAFile { uri: String },
+    #[error("fmuResourceLocation '{uri}': bad percent escape at byte {at}")]
+    PercentEscape { uri: String, at: usize },
+    #[error("fmuResourceLocation '{uri}' is not UTF-8 after decoding")]
+    NotUtf8 { uri: String },
 }
 
 #[cfg(test)]

@@ -32,7 +32,7 @@
 //!
 //! Every refusal names the block by its type and offset, and what is wrong.
 
-use super::error::MdfError;
+use crate::error::MdfError;
 use std::collections::{HashMap, HashSet};
 
 /// The longest algebraic conversion formula read (the crate parses it recursively, for every

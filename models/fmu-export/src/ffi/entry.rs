@@ -61,14 +61,14 @@ pub unsafe fn instantiate<M: Model>(
             Some(uri) if uri.is_empty() => None,
             Some(uri) => match resource_dir_from_uri(&uri) {
                 Ok(p) => Some(p),
-                Err(e) => return fail(e),
+                Err(e) => return fail(e.to_string()),
             },
         };
         // A fitted twin's start values, and the GUID its description has.
         let fitted =
             match crate::fitted::FittedStarts::of_instance::<M::Vars>(resource_dir.as_deref()) {
                 Ok(f) => f,
-                Err(e) => return fail(e),
+                Err(e) => return fail(e.to_string()),
             };
         let expected = crate::description::guid::<M>();
         match opt_str(guid) {

@@ -134,7 +134,7 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
         let fitted =
             match crate::fitted::FittedStarts::of_instance::<M::Vars>(resource_dir.as_deref()) {
                 Ok(f) => f,
-                Err(e) => return fail(e),
+                Err(e) => return fail(e.to_string()),
             };
         let expected = crate::description3::instantiation_token::<M>();
         match opt_str(token) {
