@@ -283,9 +283,9 @@ fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
                 message: e.to_string(),
             })?;
         let md =
-            tb_fmi::import::description::parse(&xml).map_err(|message| FmuError::Description {
+            tb_fmi::import::description::parse(&xml).map_err(|e| FmuError::DescriptionParse {
                 path: source.to_path_buf(),
-                message,
+                source: e,
             })?;
         if target.model_exchange {
             let path = std::path::Path::new(&target.path);
