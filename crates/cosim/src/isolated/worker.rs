@@ -285,7 +285,7 @@ fn load_library(target: &LibraryTarget) -> Result<Loaded, FmuError> {
         let md =
             tb_fmi::import::description::parse(&xml).map_err(|e| FmuError::DescriptionParse {
                 path: source.to_path_buf(),
-                source: e,
+                source: Box::new(e),
             })?;
         if target.model_exchange {
             let path = std::path::Path::new(&target.path);

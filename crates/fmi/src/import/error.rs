@@ -85,12 +85,13 @@ pub enum FmuError {
     Archive { path: PathBuf, message: String },
     #[error("{path}: modelDescription.xml: {message}")]
     Description { path: PathBuf, message: String },
-    /// A modelDescription.xml that cannot be read as the standard asks.
+    /// A modelDescription.xml that cannot be read as the standard asks (boxed: the error
+    /// stays small).
     #[error("{path}: modelDescription.xml: {source}")]
     DescriptionParse {
         path: PathBuf,
         #[source]
-        source: DescriptionError,
+        source: Box<DescriptionError>,
     },
 }
 

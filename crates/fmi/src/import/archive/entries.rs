@@ -183,7 +183,7 @@ fn parse_description(fmu: &Path, xml: &str) -> Result<ModelDescription, FmuError
         },
         _ => FmuError::DescriptionParse {
             path: fmu.to_path_buf(),
-            source,
+            source: Box::new(source),
         },
     })
 }
