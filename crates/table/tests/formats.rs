@@ -1,7 +1,7 @@
 //! Tables through their file formats: CSV separators, comments, text columns and quoting;
 //! MDF 4 written and read back with units.
 
-use tb_table::Table;
+use tb_table::{MdfError, Table, TableError};
 
 fn scratch() -> tempfile::TempDir {
     tempfile::Builder::new()
@@ -24,9 +24,9 @@ fn csv_with_semicolons_tabs_comments_and_a_units_row() {
             t.text_at(2).unwrap(),
             &["start".to_string(), format!("a{sep} b")]
         );
-        let e = t.require("note").unwrap_err().to_string();
+        let e = t.require("note").unwrap_err();
         assert!(
-            e.contains("line 4, column `note`: malformed number \"start\""),
+            matches!(&e, TableError::Malformed { row: 4, column, value, .. } if column == "note" && value == "start"),
             "{e}"
         );
     }
@@ -77,8 +77,9 @@ fn mdf4_round_trip_keeps_values_bit_for_bit_and_units() {
     }
     // Not an MDF file: a clear error naming the file.
     std::fs::write(dir.path().join("bad.mf4"), b"not an mdf file at all").unwrap();
-    let e = Table::read_any(&dir.path().join("bad.mf4"))
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("bad.mf4") && e.contains("MDF 4"), "{e}");
+    let e = Table::read_any(&dir.path().join("bad.mf4")).unwrap_err();
+    assert!(
+        matches!(&e, TableError::Mdf { file, source: MdfError::ShortFile { size: 22 } } if file.ends_with("bad.mf4")),
+        "{e}"
+    );
 }
