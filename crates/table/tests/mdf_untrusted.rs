@@ -3,8 +3,8 @@
 //! the `mdf4-rs` crate sees it: no panic, no endless loop, no memory growth. Each case
 //! would have crashed, hung or exhausted memory in the crate.
 
-use tb_table::mdf::{read_bytes, to_bytes};
-use tb_table::Table;
+use tb_table::mdf::{read_bytes, to_bytes, MdfError};
+use tb_table::{Table, TableError};
 
 /// A file as twinbench writes it: `time` and two channels, `rows` records.
 fn valid(rows: usize) -> Vec<u8> {
@@ -90,17 +90,20 @@ fn dl_data(count: u32, each: u64) -> Vec<u8> {
     d
 }
 
-/// Reading is refused with a message naming the file, "MDF 4" and every fragment.
-fn refused(bytes: &[u8], fragments: &[&str]) -> String {
-    let e = read_bytes(bytes, "damaged.mf4")
-        .expect_err("a damaged file must be refused")
-        .to_string();
-    assert!(e.starts_with("damaged.mf4: MDF 4: "), "{e}");
+/// Reading is refused with a message naming the file, "MDF 4" and every fragment (the
+/// block and its offset, where the wording is the point); the refusal, for its kind.
+fn refused(bytes: &[u8], fragments: &[&str]) -> MdfError {
+    let e = read_bytes(bytes, "damaged.mf4").expect_err("a damaged file must be refused");
+    let text = e.to_string();
+    assert!(text.starts_with("damaged.mf4: MDF 4: "), "{text}");
     for f in fragments {
-        assert!(e.contains(f), "expected {f:?} in: {e}");
+        assert!(text.contains(f), "expected {f:?} in: {text}");
     }
-    eprintln!("{e}");
-    e
+    eprintln!("{text}");
+    match e {
+        TableError::Mdf { file, source } if file == "damaged.mf4" => source,
+        other => panic!("not an MDF refusal: {other}"),
+    }
 }
 
 #[test]
@@ -189,13 +192,13 @@ fn an_hl_block_linking_to_itself_is_refused() {
     let hl = append(&mut b, b"##HL", &[0], &[0; 8]);
     put(&mut b, hl + 32, hl);
     set_link(&mut b, l.dg, 2, hl);
-    refused(
+    let e = refused(
         &b,
-        &[
-            &format!("the ##HL at offset {hl}, the address after its links"),
-            "a cycle",
-        ],
+        &[&format!(
+            "the ##HL at offset {hl}, the address after its links"
+        )],
     );
+    assert!(matches!(e, MdfError::Cycle { .. }), "{e}");
 }
 
 #[test]
@@ -216,40 +219,40 @@ fn a_link_past_the_end_and_a_truncated_file_are_refused() {
     // A link to the last 8 bytes: no room for a block header.
     let mut b = valid(50);
     set_link(&mut b, l.cn[0], 2, size - 8);
-    refused(
-        &b,
-        &["link 2 (name) points to offset", "past the end of the file"],
+    let e = refused(&b, &["link 2 (name)"]);
+    assert!(
+        matches!(e, MdfError::PastEnd { at, size: s, .. } if at == size - 8 && s == size),
+        "{e}"
     );
 
     // A link into the middle of a block.
     let mut b = valid(50);
     set_link(&mut b, l.cg, 1, l.cn[0] + 8);
-    refused(
-        &b,
-        &[
-            "link 1 (first channel) points to offset",
-            "where no block starts",
-        ],
+    let e = refused(&b, &["link 1 (first channel)"]);
+    assert!(
+        matches!(e, MdfError::NoBlock { at, .. } if at == l.cn[0] + 8),
+        "{e}"
     );
 
     // The file cut short: its last block (the data) runs past the end.
     let mut b = valid(50);
     b.truncate(b.len() - 100);
-    refused(
+    let e = refused(
         &b,
-        &[
-            &format!("the ##DT at offset {}", l.dt),
-            "past the end of the file",
-            "truncated?",
-        ],
+        &[&format!(
+            "the ##DT at offset {} is {} bytes long, past the end of the file ({} bytes; truncated?)",
+            l.dt,
+            size - l.dt,
+            size - 100
+        )],
     );
+    assert!(matches!(e, MdfError::LongBlock { .. }), "{e}");
 
     // Cut inside the header block, and nearly empty.
-    refused(
-        &valid(50)[..120],
-        &["shorter than the identification and header blocks"],
-    );
-    refused(&valid(50)[..8], &["shorter than"]);
+    let e = refused(&valid(50)[..120], &[]);
+    assert!(matches!(e, MdfError::ShortFile { size: 120 }), "{e}");
+    let e = refused(&valid(50)[..8], &[]);
+    assert!(matches!(e, MdfError::ShortFile { size: 8 }), "{e}");
 }
 
 #[test]
@@ -311,7 +314,8 @@ fn records_of_zero_bytes_and_impossible_fields_are_refused() {
     let mut b = valid(50);
     let l = layout(&b);
     b[l.cg as usize + 96..l.cg as usize + 104].fill(0);
-    refused(&b, &["has records of 0 bytes"]);
+    let e = refused(&b, &[]);
+    assert!(matches!(e, MdfError::EmptyRecords { .. }), "{e}");
 
     // An integer channel of 0 bits.
     let mut b = valid(50);
@@ -328,7 +332,8 @@ fn records_of_zero_bytes_and_impossible_fields_are_refused() {
     // Record IDs of 3 bytes.
     let mut b = valid(50);
     b[l.dg as usize + 56] = 3;
-    refused(&b, &["has record IDs of 3 bytes"]);
+    let e = refused(&b, &[]);
+    assert!(matches!(e, MdfError::RecordIdSize { size: 3, .. }), "{e}");
 
     // A version whose number overflows the crate's arithmetic.
     let mut b = valid(50);
@@ -339,7 +344,11 @@ fn records_of_zero_bytes_and_impossible_fields_are_refused() {
     );
     // One that overflowed the check's own arithmetic (found by the mdf4 fuzz target).
     b[8..16].copy_from_slice(b"42949673");
-    refused(&b, &["version \"42949673\""]);
+    let e = refused(&b, &[]);
+    assert!(
+        matches!(&e, MdfError::Version { found } if found == "42949673"),
+        "{e}"
+    );
 
     // A block whose length is shorter than its links.
     let mut b = valid(50);
@@ -355,15 +364,26 @@ fn records_of_zero_bytes_and_impossible_fields_are_refused() {
     // A channel block too short for the fields the crate reads at fixed offsets.
     let mut b = valid(50);
     put(&mut b, l.cn[0] + 16, 2);
-    refused(
-        &b,
-        &["has 2 links and 160 bytes; its fields need at least 8 links and 160 bytes"],
+    let e = refused(&b, &[]);
+    assert!(
+        matches!(
+            e,
+            MdfError::Layout {
+                links: 2,
+                length: 160,
+                links_needed: 8,
+                length_needed: 160,
+                ..
+            }
+        ),
+        "{e}"
     );
 
     // Compressed data, which the crate cannot read from a data group.
     let mut b = valid(50);
     b[l.dt as usize + 2..l.dt as usize + 4].copy_from_slice(b"DZ");
-    refused(&b, &["compressed data is not read"]);
+    let e = refused(&b, &[]);
+    assert!(matches!(e, MdfError::Compressed { .. }), "{e}");
 }
 
 #[test]
@@ -412,9 +432,16 @@ fn samples_multiplied_by_channels_or_by_a_table_conversion_are_bounded() {
         last = at;
     }
     set_link(&mut b, last, 0, 0);
-    refused(
-        &b,
-        &["samples", "twinbench reads at most 268435456 from one file"],
+    let e = refused(&b, &[]);
+    assert!(
+        matches!(
+            e,
+            MdfError::Cells {
+                limit: 268435456,
+                ..
+            }
+        ),
+        "{e}"
     );
 
     // A value table of 65535 entries applied to each of 20000 samples of three channels.
@@ -426,12 +453,15 @@ fn samples_multiplied_by_channels_or_by_a_table_conversion_are_bounded() {
     for cn in l.cn {
         set_link(&mut b, cn, 4, cc);
     }
-    refused(
-        &b,
-        &[
-            "reading its channels takes",
-            "steps",
-            "more than 2147483648",
-        ],
+    let e = refused(&b, &[]);
+    assert!(
+        matches!(
+            e,
+            MdfError::Work {
+                limit: 2147483648,
+                ..
+            }
+        ),
+        "{e}"
     );
 }
