@@ -298,7 +298,7 @@ mod tests {
         let dg = u64::from_le_bytes(b[88..96].try_into().unwrap()) as usize;
         let past = b.len() as u64 + 4096;
         b[dg + 40..dg + 48].copy_from_slice(&past.to_le_bytes());
-        assert!(check::check(&b).is_err());
+        assert!(matches!(check::check(&b), Err(MdfError::PastEnd { .. })));
         let file = in_memory(&b).unwrap();
         let e = read_checked(&file, "lap.mf4").unwrap_err().to_string();
         assert!(

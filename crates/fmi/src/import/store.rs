@@ -601,7 +601,7 @@ mod tests {
         assert_eq!(mode & 0o7777, 0o700);
         let file = dir.path().join("file");
         std::fs::write(&file, b"").unwrap();
-        assert!(prepare(&file).is_err());
+        assert!(matches!(prepare(&file), Err(StoreError::NotAFolder)));
     }
 
     #[test]
