@@ -1,7 +1,6 @@
 //! modelDescription.xml, documentation and GUID, generated from the variable table.
 
 use crate::model::Model;
-use crate::units;
 use crate::variables::{format_real, Causality, VarInfo, VarTable};
 
 /// Log categories declared in modelDescription.xml, in bit order.
@@ -139,13 +138,6 @@ pub fn xml_escape(s: &str) -> String {
     out
 }
 
-fn used_units<M: Model>() -> Vec<&'static units::UnitDef> {
-    let mut names: Vec<&str> = M::Vars::VARIABLES.iter().filter_map(|v| v.unit).collect();
-    names.sort_unstable();
-    names.dedup();
-    names.into_iter().filter_map(units::lookup).collect()
-}
-
 fn scalar_variable(v: &VarInfo, fitting: &Fitting) -> String {
     let mut s = format!(
         "    <ScalarVariable name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
@@ -217,10 +209,11 @@ pub fn initial_dependencies(table: &[VarInfo], v: &VarInfo) -> Vec<usize> {
     deps
 }
 
-/// `<UnitDefinitions>`' units: each unit the model's variables use, once.
-fn unit_definitions<M: Model>() -> String {
+/// `<UnitDefinitions>`' units: each unit the variables of `table` use, once (FMI 2.0 and
+/// 3.0 write them alike).
+pub fn unit_definitions(table: &[VarInfo]) -> String {
     let mut unit_defs = String::new();
-    for u in used_units::<M>() {
+    for u in crate::variables::used_units(table) {
         unit_defs.push_str(&format!(
             "    <Unit name=\"{}\">\n      <BaseUnit{}/>\n    </Unit>\n",
             xml_escape(u.name),
@@ -333,7 +326,7 @@ pub fn render_fitted_description<M: Model>(
     let info = M::INFO;
     let table = M::Vars::VARIABLES;
 
-    let unit_defs = unit_definitions::<M>();
+    let unit_defs = unit_definitions(table);
     let type_defs = type_definitions(table);
     let categories = log_categories();
     let variables: String = table.iter().map(|v| scalar_variable(v, fitting)).collect();

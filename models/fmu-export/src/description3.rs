@@ -11,7 +11,6 @@
 use crate::description::LOG_CATEGORIES;
 use crate::description::{initial_dependencies, xml_escape, Fitting};
 use crate::model::Model;
-use crate::units;
 use crate::variables::{format_real, Causality, Initial, ScalarType, Value, VarInfo, VarTable};
 
 /// The value reference of the independent variable `time`: one past the table's largest.
@@ -84,19 +83,10 @@ fn variable(v: &VarInfo, fitting: &Fitting) -> String {
 /// The units (each once), the Enumeration types and the log categories.
 fn push_definitions(s: &mut String, table: &[VarInfo]) {
     // Units, each once.
-    let mut names: Vec<&str> = table.iter().filter_map(|v| v.unit).collect();
-    names.sort_unstable();
-    names.dedup();
-    let defs: Vec<&units::UnitDef> = names.into_iter().filter_map(units::lookup).collect();
-    if !defs.is_empty() {
+    let units = crate::description::unit_definitions(table);
+    if !units.is_empty() {
         s.push_str("  <UnitDefinitions>\n");
-        for u in defs {
-            s.push_str(&format!(
-                "    <Unit name=\"{}\">\n      <BaseUnit{}/>\n    </Unit>\n",
-                xml_escape(u.name),
-                u.base_unit_attributes()
-            ));
-        }
+        s.push_str(&units);
         s.push_str("  </UnitDefinitions>\n");
     }
     let types = crate::description::enumeration_types(table);
