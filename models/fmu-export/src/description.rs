@@ -223,35 +223,54 @@ pub fn unit_definitions(table: &[VarInfo]) -> String {
     unit_defs
 }
 
-/// The Enumeration types, each once (FMI 2.0: between the units and the log categories).
-fn type_definitions(table: &[VarInfo]) -> String {
+/// The FMI version a description is written for, where FMI 2.0 and 3.0 write the same
+/// definitions differently.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Version {
+    Fmi2,
+    Fmi3,
+}
+
+/// `<TypeDefinitions>` with each Enumeration type once, or nothing when there is none: FMI
+/// 2.0's `<SimpleType><Enumeration>`, FMI 3.0's `<EnumerationType>`.
+pub fn type_definitions(table: &[VarInfo], version: Version) -> String {
     let types = enumeration_types(table);
-    let mut type_defs = String::new();
-    if !types.is_empty() {
-        type_defs.push_str("  <TypeDefinitions>\n");
-        for t in types {
-            type_defs.push_str(&format!(
-                "    <SimpleType name=\"{}\" description=\"{}\">\n      <Enumeration>\n",
-                xml_escape(t.name),
-                xml_escape(t.description)
-            ));
-            for i in t.items {
-                type_defs.push_str(&format!(
-                    "        <Item name=\"{}\" value=\"{}\" description=\"{}\"/>\n",
-                    xml_escape(i.name),
-                    i.value,
-                    xml_escape(i.description)
-                ));
-            }
-            type_defs.push_str("      </Enumeration>\n    </SimpleType>\n");
-        }
-        type_defs.push_str("  </TypeDefinitions>\n");
+    if types.is_empty() {
+        return String::new();
     }
+    let (element, inner, item_indent) = match version {
+        Version::Fmi2 => ("SimpleType", Some("Enumeration"), "        "),
+        Version::Fmi3 => ("EnumerationType", None, "      "),
+    };
+    let mut type_defs = String::from("  <TypeDefinitions>\n");
+    for t in types {
+        type_defs.push_str(&format!(
+            "    <{element} name=\"{}\" description=\"{}\">\n",
+            xml_escape(t.name),
+            xml_escape(t.description)
+        ));
+        if let Some(inner) = inner {
+            type_defs.push_str(&format!("      <{inner}>\n"));
+        }
+        for i in t.items {
+            type_defs.push_str(&format!(
+                "{item_indent}<Item name=\"{}\" value=\"{}\" description=\"{}\"/>\n",
+                xml_escape(i.name),
+                i.value,
+                xml_escape(i.description)
+            ));
+        }
+        if let Some(inner) = inner {
+            type_defs.push_str(&format!("      </{inner}>\n"));
+        }
+        type_defs.push_str(&format!("    </{element}>\n"));
+    }
+    type_defs.push_str("  </TypeDefinitions>\n");
     type_defs
 }
 
-/// `<LogCategories>`' entries.
-fn log_categories() -> String {
+/// `<LogCategories>`' entries (the same in FMI 2.0 and 3.0).
+pub fn log_categories() -> String {
     let mut categories = String::new();
     for (name, desc) in LOG_CATEGORIES {
         categories.push_str(&format!(
@@ -327,7 +346,7 @@ pub fn render_fitted_description<M: Model>(
     let table = M::Vars::VARIABLES;
 
     let unit_defs = unit_definitions(table);
-    let type_defs = type_definitions(table);
+    let type_defs = type_definitions(table, Version::Fmi2);
     let categories = log_categories();
     let variables: String = table.iter().map(|v| scalar_variable(v, fitting)).collect();
 

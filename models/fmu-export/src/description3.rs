@@ -8,8 +8,9 @@
 //! The model structure lists each output and initial unknown by value reference, with the
 //! same dependencies as FMI 2.0's indices.
 
-use crate::description::LOG_CATEGORIES;
-use crate::description::{initial_dependencies, xml_escape, Fitting};
+use crate::description::{
+    initial_dependencies, log_categories, type_definitions, xml_escape, Fitting, Version,
+};
 use crate::model::Model;
 use crate::variables::{format_real, Causality, Initial, ScalarType, Value, VarInfo, VarTable};
 
@@ -89,34 +90,9 @@ fn push_definitions(s: &mut String, table: &[VarInfo]) {
         s.push_str(&units);
         s.push_str("  </UnitDefinitions>\n");
     }
-    let types = crate::description::enumeration_types(table);
-    if !types.is_empty() {
-        s.push_str("  <TypeDefinitions>\n");
-        for t in types {
-            s.push_str(&format!(
-                "    <EnumerationType name=\"{}\" description=\"{}\">\n",
-                xml_escape(t.name),
-                xml_escape(t.description)
-            ));
-            for i in t.items {
-                s.push_str(&format!(
-                    "      <Item name=\"{}\" value=\"{}\" description=\"{}\"/>\n",
-                    xml_escape(i.name),
-                    i.value,
-                    xml_escape(i.description)
-                ));
-            }
-            s.push_str("    </EnumerationType>\n");
-        }
-        s.push_str("  </TypeDefinitions>\n");
-    }
+    s.push_str(&type_definitions(table, Version::Fmi3));
     s.push_str("  <LogCategories>\n");
-    for (name, desc) in LOG_CATEGORIES {
-        s.push_str(&format!(
-            "    <Category name=\"{name}\" description=\"{}\"/>\n",
-            xml_escape(desc)
-        ));
-    }
+    s.push_str(&log_categories());
     s.push_str("  </LogCategories>\n");
 }
 
