@@ -6,7 +6,7 @@
 
 mod common;
 
-use tb_fmi::{Causality, Instance, ScalarType};
+use tb_fmi::{Causality, FmuInstance, Instance, ScalarType};
 
 fn perturbed(v: &tb_fmi::import::description::ScalarVariable) -> f64 {
     let x = v.start_f64().unwrap_or(0.0);

@@ -6,7 +6,7 @@ mod common;
 use common::{load, vr};
 use fmu_export::fmi2::*;
 use std::ffi::CString;
-use tb_fmi::Instance;
+use tb_fmi::{FmuInstance, Instance};
 
 fn faulty(name: &str) -> (std::sync::Arc<tb_fmi::LoadedFmu>, Instance) {
     let f = load("faulty");
@@ -133,7 +133,7 @@ fn wrong_guid_is_refused_with_a_message() {
 fn percent_in_messages_survives_the_printf_logger() {
     let (_f, mut i) = faulty("percent");
     let e = i
-        .set_debug_logging(true, &["100%s%d"])
+        .set_debug_categories(true, &["100%s%d"])
         .unwrap_err()
         .to_string();
     assert!(e.contains("unknown log category '100%s%d'"), "{e}");

@@ -9,7 +9,7 @@ use common::reference;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::{Plan, Simulation, SystemFile};
-use tb_fmi::FmuCache;
+use tb_fmi::{FmuCache, FmuInstance};
 
 /// FMI 3.0 Feedthrough as a supplier's speed sensor: its continuous Float64 input and output
 /// declared in `unit` (the C code passes the value through whatever the unit).

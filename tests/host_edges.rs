@@ -4,6 +4,7 @@
 
 mod common;
 
+use tb_fmi::FmuInstance;
 use tb_fmi::Instance;
 
 fn instance(model: &str) -> Instance {
@@ -17,7 +18,7 @@ fn instance(model: &str) -> Instance {
     )
     .unwrap();
     i.set_echo(false);
-    i.set_debug_logging(true, &[]).unwrap();
+    i.set_debug_categories(true, &[]).unwrap();
     i
 }
 

@@ -39,4 +39,4 @@ pub use import::model::{Interface, ModelDescription, VarKey};
 #[cfg(feature = "import")]
 pub use import::model_exchange::{CallTrace, MeInstance, MeLibrary, MeSettings, MeStop};
 #[cfg(feature = "import")]
-pub use import::FmuError;
+pub use import::{FmuError, FmuInstance};

@@ -37,6 +37,92 @@ const fn unit(name: &'static str, kg: i32, m: i32, s: i32, rad: i32, factor: f64
 impl UnitDef {
     /// A `<Unit>` before its `<BaseUnit>` is read: dimensionless, factor 1.
     pub const DIMENSIONLESS: UnitDef = unit("", 0, 0, 0, 0, 1.0);
+
+    /// A unit of a model's own, built up from its base units: `s/m` is
+    /// `UnitDef::named("s/m").s(1).m(-1)`. Dimensionless with factor 1 until told
+    /// otherwise.
+    pub const fn named(name: &'static str) -> UnitDef {
+        UnitDef {
+            name,
+            ..UnitDef::DIMENSIONLESS
+        }
+    }
+    /// The exponent of the kilogram.
+    pub const fn kg(mut self, exponent: i32) -> UnitDef {
+        self.kg = exponent;
+        self
+    }
+    /// The exponent of the metre.
+    pub const fn m(mut self, exponent: i32) -> UnitDef {
+        self.m = exponent;
+        self
+    }
+    /// The exponent of the second.
+    pub const fn s(mut self, exponent: i32) -> UnitDef {
+        self.s = exponent;
+        self
+    }
+    /// The exponent of the ampere.
+    pub const fn ampere(mut self, exponent: i32) -> UnitDef {
+        self.a = exponent;
+        self
+    }
+    /// The exponent of the kelvin.
+    pub const fn kelvin(mut self, exponent: i32) -> UnitDef {
+        self.k = exponent;
+        self
+    }
+    /// The exponent of the mole.
+    pub const fn mol(mut self, exponent: i32) -> UnitDef {
+        self.mol = exponent;
+        self
+    }
+    /// The exponent of the candela.
+    pub const fn cd(mut self, exponent: i32) -> UnitDef {
+        self.cd = exponent;
+        self
+    }
+    /// The exponent of the radian.
+    pub const fn rad(mut self, exponent: i32) -> UnitDef {
+        self.rad = exponent;
+        self
+    }
+    /// value_in_SI = factor · value + offset.
+    pub const fn factor(mut self, factor: f64) -> UnitDef {
+        self.factor = factor;
+        self
+    }
+    /// value_in_SI = factor · value + offset.
+    pub const fn offset(mut self, offset: f64) -> UnitDef {
+        self.offset = offset;
+        self
+    }
+
+    /// The same unit: name, base-unit exponents, factor and offset (a `const fn`, for the
+    /// export framework's compile-time check of a model's own units).
+    pub const fn same_as(&self, other: &UnitDef) -> bool {
+        let (a, b) = (self.name.as_bytes(), other.name.as_bytes());
+        if a.len() != b.len() {
+            return false;
+        }
+        let mut i = 0;
+        while i < a.len() {
+            if a[i] != b[i] {
+                return false;
+            }
+            i += 1;
+        }
+        self.kg == other.kg
+            && self.m == other.m
+            && self.s == other.s
+            && self.a == other.a
+            && self.k == other.k
+            && self.mol == other.mol
+            && self.cd == other.cd
+            && self.rad == other.rad
+            && self.factor == other.factor
+            && self.offset == other.offset
+    }
 }
 
 /// Every unit twinbench knows: the ones a model may declare, and a logger's.
@@ -142,6 +228,22 @@ mod tests {
                 assert_ne!(a.name, b.name);
             }
         }
+    }
+
+    #[test]
+    fn a_unit_built_from_its_base_units_equals_the_tables() {
+        let n_m = UnitDef::named("N.m").kg(1).m(2).s(-2);
+        assert!(n_m.same_as(lookup("N.m").unwrap()));
+        assert!(!n_m.factor(1000.0).same_as(lookup("N.m").unwrap()));
+        let rpm = UnitDef::named("rpm")
+            .s(-1)
+            .rad(1)
+            .factor(std::f64::consts::PI / 30.0);
+        assert!(rpm.same_as(lookup("rpm").unwrap()));
+        assert!(!UnitDef::named("s/m")
+            .s(1)
+            .m(-1)
+            .same_as(lookup("m/s").unwrap()));
     }
 
     #[test]

@@ -83,6 +83,33 @@
 //! }
 //! ```
 //!
+//! A unit of the model's own under a name the shared table defines otherwise (`m/s` is not
+//! a second per metre):
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! const SLOWNESS: UnitDef = UnitDef::named("m/s").s(1).m(-1);
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         k: Real = 1.0 => parameter(1).own_unit(&SLOWNESS).describe("Gain"),
+//!     }
+//! }
+//! ```
+//!
+//! Two definitions of one unit name in one model:
+//!
+//! ```compile_fail,E0080
+//! use fmu_export::variables::*;
+//! const PER_KM: UnitDef = UnitDef::named("1/km").m(-1).factor(0.001);
+//! const PER_KM_TOO: UnitDef = UnitDef::named("1/km").m(-1);
+//! fmu_export::variables! {
+//!     pub struct Vars {
+//!         a: Real = 1.0 => parameter(1).own_unit(&PER_KM).describe("A"),
+//!         b: Real = 1.0 => parameter(2).own_unit(&PER_KM_TOO).describe("B"),
+//!     }
+//! }
+//! ```
+//!
 //! No description:
 //!
 //! ```compile_fail,E0080
@@ -140,7 +167,7 @@
 //! }
 //! ```
 
-use crate::units::UNITS;
+use crate::units::{UnitDef, UNITS};
 use crate::variables::{Causality, ScalarType, Value, VarInfo, Variability};
 use std::fmt;
 
@@ -158,6 +185,14 @@ pub enum TableError {
     /// A unit that is not in [`crate::units::UNITS`].
     UnknownUnit {
         name: &'static str,
+        unit: &'static str,
+    },
+    /// A unit of the model's own ([`VarInfo::own_unit`]) that differs from the shared
+    /// table's or from another variable's unit of the same name (`first`, the variable that
+    /// names it first or, with the shared table, `first` = `name`).
+    UnitRedefined {
+        name: &'static str,
+        first: &'static str,
         unit: &'static str,
     },
     /// A variable without description.
@@ -276,7 +311,17 @@ impl TableError {
                 .push(name)
                 .push("': unknown unit '")
                 .push(unit)
-                .push("' (not in fmu_export::units::UNITS)"),
+                .push("' (not in fmu_export::units::UNITS; declare a unit of the model's own with .own_unit)"),
+            TableError::UnitRedefined { name, first, unit } => {
+                let m = m.push("'").push(name).push("': its unit '").push(unit);
+                if str_eq(name, first) {
+                    m.push("' is defined otherwise in fmu_export::units::UNITS: give it a name of its own")
+                } else {
+                    m.push("' is defined otherwise for '")
+                        .push(first)
+                        .push("': one name, one definition")
+                }
+            }
             TableError::NoDescription { name } => {
                 m.push("'").push(name).push("' has no description")
             }
@@ -345,15 +390,50 @@ const fn str_eq(a: &str, b: &str) -> bool {
     true
 }
 
-const fn known_unit(unit: &str) -> bool {
+/// The shared table's definition of `unit`.
+const fn shared_unit(unit: &str) -> Option<&'static UnitDef> {
     let mut i = 0;
     while i < UNITS.len() {
         if str_eq(UNITS[i].name, unit) {
-            return true;
+            return Some(&UNITS[i]);
         }
         i += 1;
     }
-    false
+    None
+}
+
+/// The definition a variable's unit has: its own, else the shared table's.
+const fn unit_of(v: &VarInfo) -> Option<&'static UnitDef> {
+    match (v.unit_definition, v.unit) {
+        (Some(own), _) => Some(own),
+        (None, Some(unit)) => shared_unit(unit),
+        (None, None) => None,
+    }
+}
+
+/// Its unit is known: the shared table's, or its own that the shared table does not
+/// define otherwise.
+const fn check_unit(a: &VarInfo) -> Result<(), TableError> {
+    let Some(unit) = a.unit else {
+        return Ok(());
+    };
+    match (a.unit_definition, shared_unit(unit)) {
+        (None, None) => Err(TableError::UnknownUnit { name: a.name, unit }),
+        (Some(own), Some(shared)) if !own.same_as(shared) => Err(TableError::UnitRedefined {
+            name: a.name,
+            first: a.name,
+            unit,
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// `a` and `b` name the same unit with different definitions.
+const fn units_conflict(a: &VarInfo, b: &VarInfo) -> bool {
+    match (a.unit, b.unit, unit_of(a), unit_of(b)) {
+        (Some(x), Some(y), Some(da), Some(db)) => str_eq(x, y) && !da.same_as(db),
+        _ => false,
+    }
 }
 
 /// The variable with value reference `vr`, if any.
@@ -393,6 +473,16 @@ const fn check_unique(table: &[VarInfo], index: usize) -> Result<(), TableError>
         if str_eq(a.name, b.name) {
             return Err(TableError::DuplicateName { name: a.name });
         }
+        if units_conflict(a, b) {
+            return Err(TableError::UnitRedefined {
+                name: b.name,
+                first: a.name,
+                unit: match a.unit {
+                    Some(u) => u,
+                    None => "",
+                },
+            });
+        }
         if a.value_reference == b.value_reference {
             return Err(TableError::SharedValueReference {
                 first: a.name,
@@ -408,10 +498,8 @@ const fn check_unique(table: &[VarInfo], index: usize) -> Result<(), TableError>
 /// Its own attributes: a known unit, a description, what its type allows, the start within
 /// the range.
 const fn check_attributes(a: &VarInfo) -> Result<(), TableError> {
-    if let Some(unit) = a.unit {
-        if !known_unit(unit) {
-            return Err(TableError::UnknownUnit { name: a.name, unit });
-        }
+    if let Err(e) = check_unit(a) {
+        return Err(e);
     }
     if a.description.is_empty() {
         return Err(TableError::NoDescription { name: a.name });
@@ -582,5 +670,78 @@ mod tests {
         for (table, message) in cases {
             assert_eq!(check_table(table).unwrap_err().to_string(), message);
         }
+    }
+
+    const SLOWNESS: UnitDef = UnitDef::named("s/m").s(1).m(-1);
+
+    #[test]
+    fn a_unit_of_the_models_own_passes_where_the_shared_table_has_none() {
+        let table = [v(parameter(1).own_unit(&SLOWNESS).describe("k"), "k")];
+        assert_eq!(check_table(&table), Ok(()));
+        // The same name alone is an unknown unit: the definition is what makes it known.
+        let bare = [v(parameter(1).unit("s/m").describe("k"), "k")];
+        assert!(matches!(
+            check_table(&bare),
+            Err(TableError::UnknownUnit {
+                name: "k",
+                unit: "s/m"
+            })
+        ));
+        // Restating a shared unit exactly is allowed (the model may be explicit).
+        const NEWTON: UnitDef = UnitDef::named("N").kg(1).m(1).s(-2);
+        let restated = [
+            v(parameter(1).own_unit(&NEWTON).describe("f"), "f"),
+            v(parameter(2).unit("N").describe("g"), "g"),
+        ];
+        assert_eq!(check_table(&restated), Ok(()));
+    }
+
+    #[test]
+    fn a_unit_of_the_models_own_may_not_redefine_a_name() {
+        // A kilonewton called "N": against the shared table.
+        const KILO: UnitDef = UnitDef::named("N").kg(1).m(1).s(-2).factor(1000.0);
+        let shared = [v(parameter(1).own_unit(&KILO).describe("f"), "f")];
+        let e = check_table(&shared).unwrap_err();
+        assert!(matches!(
+            e,
+            TableError::UnitRedefined {
+                name: "f",
+                first: "f",
+                unit: "N"
+            }
+        ));
+        // Two of the model's own under one name.
+        const FAST: UnitDef = UnitDef::named("s/m").s(1).m(-1).factor(0.001);
+        let own = [
+            v(parameter(1).own_unit(&SLOWNESS).describe("a"), "a"),
+            v(parameter(2).own_unit(&FAST).describe("b"), "b"),
+        ];
+        assert!(matches!(
+            check_table(&own),
+            Err(TableError::UnitRedefined {
+                name: "b",
+                first: "a",
+                unit: "s/m"
+            })
+        ));
+        // The message says which variables and what to do.
+        assert_eq!(
+            check_table(&own).unwrap_err().to_string(),
+            "'b': its unit 's/m' is defined otherwise for 'a': one name, one definition"
+        );
+    }
+
+    #[test]
+    fn the_description_declares_a_unit_of_the_models_own() {
+        let table = [
+            v(parameter(1).own_unit(&SLOWNESS).describe("k"), "k"),
+            v(parameter(2).unit("N").describe("f"), "f"),
+        ];
+        let units = crate::description::unit_definitions(&table);
+        assert_eq!(
+            units,
+            "    <Unit name=\"N\">\n      <BaseUnit kg=\"1\" m=\"1\" s=\"-2\"/>\n    </Unit>\n\
+             \x20   <Unit name=\"s/m\">\n      <BaseUnit m=\"-1\" s=\"1\"/>\n    </Unit>\n"
+        );
     }
 }

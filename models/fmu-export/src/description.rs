@@ -2,7 +2,6 @@
 
 use crate::check::TableError;
 use crate::model::Model;
-use crate::units;
 use crate::variables::{format_real, Causality, VarInfo, VarTable};
 
 /// Log categories declared in modelDescription.xml, in bit order.
@@ -147,13 +146,6 @@ pub fn xml_escape(s: &str) -> String {
     out
 }
 
-fn used_units<M: Model>() -> Vec<&'static units::UnitDef> {
-    let mut names: Vec<&str> = M::Vars::VARIABLES.iter().filter_map(|v| v.unit).collect();
-    names.sort_unstable();
-    names.dedup();
-    names.into_iter().filter_map(units::lookup).collect()
-}
-
 fn scalar_variable(v: &VarInfo, fitting: &Fitting) -> String {
     let mut s = format!(
         "    <ScalarVariable name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
@@ -225,10 +217,11 @@ pub fn initial_dependencies(table: &[VarInfo], v: &VarInfo) -> Vec<usize> {
     deps
 }
 
-/// `<UnitDefinitions>`' units: each unit the model's variables use, once.
-fn unit_definitions<M: Model>() -> String {
+/// `<UnitDefinitions>`' units: each unit the variables of `table` use, once (FMI 2.0 and
+/// 3.0 write them alike).
+pub fn unit_definitions(table: &[VarInfo]) -> String {
     let mut unit_defs = String::new();
-    for u in used_units::<M>() {
+    for u in crate::variables::used_units(table) {
         unit_defs.push_str(&format!(
             "    <Unit name=\"{}\">\n      <BaseUnit{}/>\n    </Unit>\n",
             xml_escape(u.name),
@@ -238,35 +231,54 @@ fn unit_definitions<M: Model>() -> String {
     unit_defs
 }
 
-/// The Enumeration types, each once (FMI 2.0: between the units and the log categories).
-fn type_definitions(table: &[VarInfo]) -> String {
+/// The FMI version a description is written for, where FMI 2.0 and 3.0 write the same
+/// definitions differently.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Version {
+    Fmi2,
+    Fmi3,
+}
+
+/// `<TypeDefinitions>` with each Enumeration type once, or nothing when there is none: FMI
+/// 2.0's `<SimpleType><Enumeration>`, FMI 3.0's `<EnumerationType>`.
+pub fn type_definitions(table: &[VarInfo], version: Version) -> String {
     let types = enumeration_types(table);
-    let mut type_defs = String::new();
-    if !types.is_empty() {
-        type_defs.push_str("  <TypeDefinitions>\n");
-        for t in types {
-            type_defs.push_str(&format!(
-                "    <SimpleType name=\"{}\" description=\"{}\">\n      <Enumeration>\n",
-                xml_escape(t.name),
-                xml_escape(t.description)
-            ));
-            for i in t.items {
-                type_defs.push_str(&format!(
-                    "        <Item name=\"{}\" value=\"{}\" description=\"{}\"/>\n",
-                    xml_escape(i.name),
-                    i.value,
-                    xml_escape(i.description)
-                ));
-            }
-            type_defs.push_str("      </Enumeration>\n    </SimpleType>\n");
-        }
-        type_defs.push_str("  </TypeDefinitions>\n");
+    if types.is_empty() {
+        return String::new();
     }
+    let (element, inner, item_indent) = match version {
+        Version::Fmi2 => ("SimpleType", Some("Enumeration"), "        "),
+        Version::Fmi3 => ("EnumerationType", None, "      "),
+    };
+    let mut type_defs = String::from("  <TypeDefinitions>\n");
+    for t in types {
+        type_defs.push_str(&format!(
+            "    <{element} name=\"{}\" description=\"{}\">\n",
+            xml_escape(t.name),
+            xml_escape(t.description)
+        ));
+        if let Some(inner) = inner {
+            type_defs.push_str(&format!("      <{inner}>\n"));
+        }
+        for i in t.items {
+            type_defs.push_str(&format!(
+                "{item_indent}<Item name=\"{}\" value=\"{}\" description=\"{}\"/>\n",
+                xml_escape(i.name),
+                i.value,
+                xml_escape(i.description)
+            ));
+        }
+        if let Some(inner) = inner {
+            type_defs.push_str(&format!("      </{inner}>\n"));
+        }
+        type_defs.push_str(&format!("    </{element}>\n"));
+    }
+    type_defs.push_str("  </TypeDefinitions>\n");
     type_defs
 }
 
-/// `<LogCategories>`' entries.
-fn log_categories() -> String {
+/// `<LogCategories>`' entries (the same in FMI 2.0 and 3.0).
+pub fn log_categories() -> String {
     let mut categories = String::new();
     for (name, desc) in LOG_CATEGORIES {
         categories.push_str(&format!(
@@ -341,8 +353,8 @@ pub fn render_fitted_description<M: Model>(
     let info = M::INFO;
     let table = M::Vars::VARIABLES;
 
-    let unit_defs = unit_definitions::<M>();
-    let type_defs = type_definitions(table);
+    let unit_defs = unit_definitions(table);
+    let type_defs = type_definitions(table, Version::Fmi2);
     let categories = log_categories();
     let variables: String = table.iter().map(|v| scalar_variable(v, fitting)).collect();
 

@@ -8,10 +8,10 @@
 //! The model structure lists each output and initial unknown by value reference, with the
 //! same dependencies as FMI 2.0's indices.
 
-use crate::description::LOG_CATEGORIES;
-use crate::description::{initial_dependencies, xml_escape, Fitting};
+use crate::description::{
+    initial_dependencies, log_categories, type_definitions, xml_escape, Fitting, Version,
+};
 use crate::model::Model;
-use crate::units;
 use crate::variables::{format_real, Causality, Initial, ScalarType, Value, VarInfo, VarTable};
 
 /// The value reference of the independent variable `time`: one past the table's largest.
@@ -84,49 +84,15 @@ fn variable(v: &VarInfo, fitting: &Fitting) -> String {
 /// The units (each once), the Enumeration types and the log categories.
 fn push_definitions(s: &mut String, table: &[VarInfo]) {
     // Units, each once.
-    let mut names: Vec<&str> = table.iter().filter_map(|v| v.unit).collect();
-    names.sort_unstable();
-    names.dedup();
-    let defs: Vec<&units::UnitDef> = names.into_iter().filter_map(units::lookup).collect();
-    if !defs.is_empty() {
+    let units = crate::description::unit_definitions(table);
+    if !units.is_empty() {
         s.push_str("  <UnitDefinitions>\n");
-        for u in defs {
-            s.push_str(&format!(
-                "    <Unit name=\"{}\">\n      <BaseUnit{}/>\n    </Unit>\n",
-                xml_escape(u.name),
-                u.base_unit_attributes()
-            ));
-        }
+        s.push_str(&units);
         s.push_str("  </UnitDefinitions>\n");
     }
-    let types = crate::description::enumeration_types(table);
-    if !types.is_empty() {
-        s.push_str("  <TypeDefinitions>\n");
-        for t in types {
-            s.push_str(&format!(
-                "    <EnumerationType name=\"{}\" description=\"{}\">\n",
-                xml_escape(t.name),
-                xml_escape(t.description)
-            ));
-            for i in t.items {
-                s.push_str(&format!(
-                    "      <Item name=\"{}\" value=\"{}\" description=\"{}\"/>\n",
-                    xml_escape(i.name),
-                    i.value,
-                    xml_escape(i.description)
-                ));
-            }
-            s.push_str("    </EnumerationType>\n");
-        }
-        s.push_str("  </TypeDefinitions>\n");
-    }
+    s.push_str(&type_definitions(table, Version::Fmi3));
     s.push_str("  <LogCategories>\n");
-    for (name, desc) in LOG_CATEGORIES {
-        s.push_str(&format!(
-            "    <Category name=\"{name}\" description=\"{}\"/>\n",
-            xml_escape(desc)
-        ));
-    }
+    s.push_str(&log_categories());
     s.push_str("  </LogCategories>\n");
 }
 

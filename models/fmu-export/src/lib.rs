@@ -26,6 +26,8 @@ pub mod check;
 pub mod context;
 pub mod description;
 pub mod description3;
+mod entry_points;
+mod enumeration;
 pub mod error;
 pub mod ffi;
 pub mod ffi3;

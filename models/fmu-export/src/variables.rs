@@ -6,6 +6,7 @@
 //! causality checks, ranges) and generates `modelDescription.xml` and the documentation.
 
 pub use tb_fmi::schema::{format_real, Causality, Initial, ScalarType, Variability};
+pub use tb_fmi::units::UnitDef;
 
 /// A typed scalar value. Strings appear here only as start values of the table (a
 /// String variable's value at run time is read and written with
@@ -85,6 +86,21 @@ impl EnumerationType {
     }
 }
 
+/// Each unit the variables of `table` use, once, in the order of their names: the model's
+/// own definition where it gave one, else the shared table's.
+pub fn used_units(table: &[VarInfo]) -> Vec<&'static UnitDef> {
+    let mut units: Vec<&'static UnitDef> = table
+        .iter()
+        .filter_map(|v| {
+            v.unit_definition
+                .or_else(|| v.unit.and_then(tb_fmi::units::lookup))
+        })
+        .collect();
+    units.sort_unstable_by(|a, b| a.name.cmp(b.name));
+    units.dedup_by(|a, b| a.name == b.name);
+    units
+}
+
 /// Everything modelDescription.xml and the runtime know about one variable.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VarInfo {
@@ -96,8 +112,12 @@ pub struct VarInfo {
     pub variability: Variability,
     /// `None`: the standard's default for this causality/variability.
     pub initial: Option<Initial>,
-    /// Unit name, one of [`crate::units::UNITS`]; `None` for dimensionless flags and modes.
+    /// Unit name, one of [`crate::units::UNITS`] or the model's own ([`Self::own_unit`]);
+    /// `None` for dimensionless flags and modes.
     pub unit: Option<&'static str>,
+    /// The model's own definition of [`Self::unit`], for a unit the shared table does not
+    /// know; `None`: the shared table's.
+    pub unit_definition: Option<&'static UnitDef>,
     pub min: Option<f64>,
     pub max: Option<f64>,
     pub description: &'static str,
@@ -120,6 +140,7 @@ const fn base(vr: u32, causality: Causality, variability: Variability) -> VarInf
         variability,
         initial: None,
         unit: None,
+        unit_definition: None,
         min: None,
         max: None,
         description: "",
@@ -167,6 +188,14 @@ pub const fn local(vr: u32) -> VarInfo {
 impl VarInfo {
     pub const fn unit(mut self, unit: &'static str) -> Self {
         self.unit = Some(unit);
+        self
+    }
+    /// A unit of the model's own, defined in the model's crate (`UnitDef::named("s/m")
+    /// .s(1).m(-1)`): declared in the model description like the shared table's units, with
+    /// no edit elsewhere. The check refuses a name the shared table defines differently.
+    pub const fn own_unit(mut self, definition: &'static UnitDef) -> Self {
+        self.unit = Some(definition.name);
+        self.unit_definition = Some(definition);
         self
     }
     pub const fn min(mut self, min: f64) -> Self {

@@ -54,7 +54,7 @@ fmu_export::variables! {
             .describe("Front lift coefficient, paper's sign: positive presses the car down (default is the bench's mis-set initial value)"),
         c_lift_rear: Real = 2.027 => tunable(15).unit("1").range(-2.0, 6.0)
             .describe("Rear lift coefficient, paper's sign: positive presses the car down (default is the bench's mis-set initial value)"),
-        chassis_model: Enumeration = 1 => parameter(42).items(&CHASSIS_MODEL)
+        chassis_model: Enumeration = ChassisModel::FirstOrder.value() => parameter(42).items(&CHASSIS_MODEL)
             .describe("How the accelerations in the load equations follow the car's: a first-order low-pass (chassis_time_constant) or sprung pitch and roll modes (pitch_/roll_frequency and _damping)"),
         chassis_time_constant: Real = 0.05 => tunable(16).unit("s").range(0.001, 5.0)
             .describe("Time constant of the first-order low-pass on a_x, a_y used in the load equations (chassis_model = first_order)"),
@@ -155,23 +155,15 @@ fmu_export::variables! {
     }
 }
 
-/// `chassis_model`'s items.
-pub const CHASSIS_MODEL: EnumerationType = EnumerationType {
-    name: "ChassisModel",
-    description: "How the load equations' accelerations follow the car's",
-    items: &[
-        EnumerationItem {
-            name: "first_order",
-            value: 1,
-            description: "first-order low-pass of time constant chassis_time_constant",
-        },
-        EnumerationItem {
-            name: "second_order",
-            value: 2,
-            description: "sprung pitch and roll modes: natural frequency and damping ratio each",
-        },
-    ],
-};
+fmu_export::enumeration! {
+    /// `chassis_model`'s items: how the load equations' accelerations follow the car's.
+    pub enum ChassisModel in CHASSIS_MODEL {
+        description: "How the load equations' accelerations follow the car's",
+        FirstOrder = "first_order" => "first-order low-pass of time constant chassis_time_constant",
+        SecondOrder = "second_order"
+            => "sprung pitch and roll modes: natural frequency and damping ratio each",
+    }
+}
 
 /// How the load equations' accelerations follow the car's.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -271,12 +263,12 @@ impl Params {
             c_drag: x.c_drag,
             f_roll: x.f_roll,
             r: x.wheel_radius,
-            chassis: match x.chassis_model {
-                2 => Chassis::SecondOrder {
+            chassis: match ChassisModel::of(x.chassis_model) {
+                ChassisModel::SecondOrder => Chassis::SecondOrder {
                     pitch: Mode::new(x.pitch_frequency, x.pitch_damping),
                     roll: Mode::new(x.roll_frequency, x.roll_damping),
                 },
-                _ => Chassis::FirstOrder {
+                ChassisModel::FirstOrder => Chassis::FirstOrder {
                     tau: x.chassis_time_constant,
                 },
             },

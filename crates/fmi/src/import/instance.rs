@@ -5,7 +5,7 @@ use super::library::Library;
 use super::log::{fmi2_logger, log_env, LogEnv, LogSink};
 use crate::fmi2::*;
 use crate::functions::Function;
-use crate::FmuError;
+use crate::{FmuError, FmuInstance};
 use std::ffi::{c_void, CString};
 use std::path::Path;
 use std::sync::Arc;
@@ -142,15 +142,6 @@ impl Instance {
         &self.lib
     }
 
-    pub fn last_log_lines(&self) -> Vec<String> {
-        self.sink.last_lines()
-    }
-
-    /// Stop echoing OK-status messages to the `log` crate (they are still kept).
-    pub fn set_echo(&mut self, on: bool) {
-        self.sink.set_echo(on);
-    }
-
     #[inline]
     fn check(&self, function: Function, status: fmi2Status) -> Result<(), FmuError> {
         match status.ok() {
@@ -187,7 +178,8 @@ impl Instance {
         &self.sink
     }
 
-    pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Result<(), FmuError> {
+    /// `fmi2SetDebugLogging` for the given categories (none: all of them).
+    pub fn set_debug_categories(&mut self, on: bool, categories: &[&str]) -> Result<(), FmuError> {
         let c: Vec<CString> = categories
             .iter()
             .map(|s| CString::new(*s).unwrap_or_default())
@@ -197,182 +189,6 @@ impl Instance {
             (self.lib.api.fmi2SetDebugLogging)(self.comp, on as fmi2Boolean, p.len(), p.as_ptr())
         };
         self.check(Function::SetDebugLogging, s)
-    }
-
-    /// `fmi2SetupExperiment`; `tolerance` Some: `toleranceDefined = fmi2True` with it.
-    pub fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        tolerance: Option<f64>,
-    ) -> Result<(), FmuError> {
-        self.time = start;
-        let s = unsafe {
-            (self.lib.api.fmi2SetupExperiment)(
-                self.comp,
-                tolerance.is_some() as fmi2Boolean,
-                tolerance.unwrap_or(0.0),
-                start,
-                stop.is_some() as fmi2Boolean,
-                stop.unwrap_or(0.0),
-            )
-        };
-        self.check(Function::SetupExperiment, s)
-    }
-
-    pub fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2EnterInitializationMode)(self.comp) };
-        self.check(Function::EnterInitializationMode, s)
-    }
-
-    pub fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2ExitInitializationMode)(self.comp) };
-        self.check(Function::ExitInitializationMode, s)
-    }
-
-    pub fn terminate(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2Terminate)(self.comp) };
-        self.check(Function::Terminate, s)
-    }
-
-    pub fn reset(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2Reset)(self.comp) };
-        self.sink.clear();
-        self.time = 0.0;
-        self.check(Function::Reset, s)
-    }
-
-    #[inline]
-    pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        if vrs.len() != out.len() {
-            return Err(self.lengths(Function::GetReal, vrs.len(), out.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2GetReal)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
-        };
-        self.check(Function::GetReal, s)
-    }
-
-    #[inline]
-    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        if vrs.len() != values.len() {
-            return Err(self.lengths(Function::SetReal, vrs.len(), values.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2SetReal)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
-        };
-        self.check(Function::SetReal, s)
-    }
-
-    pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        if vrs.len() != out.len() {
-            return Err(self.lengths(Function::GetInteger, vrs.len(), out.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2GetInteger)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
-        };
-        self.check(Function::GetInteger, s)
-    }
-
-    pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        if vrs.len() != values.len() {
-            return Err(self.lengths(Function::SetInteger, vrs.len(), values.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2SetInteger)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
-        };
-        self.check(Function::SetInteger, s)
-    }
-
-    pub fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        if vrs.len() != out.len() {
-            return Err(self.lengths(Function::GetBoolean, vrs.len(), out.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2GetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
-        };
-        self.check(Function::GetBoolean, s)
-    }
-
-    pub fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        if vrs.len() != values.len() {
-            return Err(self.lengths(Function::SetBoolean, vrs.len(), values.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2SetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
-        };
-        self.check(Function::SetBoolean, s)
-    }
-
-    /// Read String variables into `out` (one per value reference). The FMU's strings are
-    /// copied at once: the standard keeps them valid only until the next call.
-    pub fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
-        let mut ptrs: Vec<fmi2String> = vec![std::ptr::null(); vrs.len()];
-        let s = unsafe {
-            (self.lib.api.fmi2GetString)(self.comp, vrs.as_ptr(), vrs.len(), ptrs.as_mut_ptr())
-        };
-        self.check(Function::GetString, s)?;
-        out.clear();
-        for (p, vr) in ptrs.into_iter().zip(vrs) {
-            // SAFETY: the FMU keeps its strings valid until its next call.
-            out.push(unsafe { super::string_from_fmu(p, &self.name, "fmi2GetString", *vr) }?);
-        }
-        Ok(())
-    }
-
-    /// Set String variables (a NUL inside a value is refused).
-    pub fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
-        if vrs.len() != values.len() {
-            return Err(self.lengths(Function::SetString, vrs.len(), values.len()));
-        }
-        let c: Vec<CString> = values
-            .iter()
-            .map(|v| CString::new(*v))
-            .collect::<Result<_, _>>()
-            .map_err(|_| FmuError::Instantiate {
-                instance: self.name.clone(),
-                message: "fmi2SetString: a value contains a NUL byte".into(),
-            })?;
-        let p: Vec<fmi2String> = c.iter().map(|s| s.as_ptr()).collect();
-        let s =
-            unsafe { (self.lib.api.fmi2SetString)(self.comp, vrs.as_ptr(), vrs.len(), p.as_ptr()) };
-        self.check(Function::SetString, s)
-    }
-
-    /// One communication step; on success the instance's time advances.
-    #[inline]
-    pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2DoStep)(self.comp, t, h, fmi2True) };
-        if s == fmi2Status::OK {
-            self.time = t + h;
-            Ok(())
-        } else {
-            self.time = t;
-            self.check(Function::DoStep, s).map(|_| self.time = t + h)
-        }
-    }
-
-    /// After a step returned `fmi2Discard`: whether the FMU asks to end the simulation
-    /// (`fmi2GetBooleanStatus(fmi2Terminated)`), and then its last successful time
-    /// (`fmi2GetRealStatus(fmi2LastSuccessfulTime)`, else the step's start). `None` when
-    /// it does not ask, or cannot say (the optional functions are missing or fail).
-    pub fn terminated_by_fmu(&mut self) -> Option<f64> {
-        let get_bool = self.lib.api.fmi2GetBooleanStatus?;
-        let mut terminated: fmi2Boolean = fmi2False;
-        let s = unsafe { get_bool(self.comp, fmi2StatusKind::TERMINATED, &mut terminated) };
-        if !s.is_ok() || terminated == fmi2False {
-            return None;
-        }
-        let mut last = self.time;
-        if let Some(get_real) = self.lib.api.fmi2GetRealStatus {
-            let mut t: fmi2Real = self.time;
-            let s = unsafe { get_real(self.comp, fmi2StatusKind::LAST_SUCCESSFUL_TIME, &mut t) };
-            if s.is_ok() && t.is_finite() {
-                last = t;
-            }
-        }
-        self.time = last;
-        Some(last)
     }
 
     fn unsupported(&self, function: Function) -> FmuError {
@@ -463,6 +279,205 @@ impl Instance {
         };
         self.check(Function::DeSerializeFMUstate, s)?;
         Ok(FmuState(st))
+    }
+}
+
+impl FmuInstance for Instance {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn time(&self) -> f64 {
+        self.time
+    }
+
+    fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
+        self.set_debug_categories(on, &[])
+    }
+
+    fn last_log_lines(&self) -> Vec<String> {
+        self.sink.last_lines()
+    }
+
+    /// Stop echoing OK-status messages to the `log` crate (they are still kept).
+    fn set_echo(&mut self, on: bool) {
+        self.sink.set_echo(on);
+    }
+
+    /// `fmi2SetupExperiment`; `tolerance` Some: `toleranceDefined = fmi2True` with it.
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
+        self.time = start;
+        let s = unsafe {
+            (self.lib.api.fmi2SetupExperiment)(
+                self.comp,
+                tolerance.is_some() as fmi2Boolean,
+                tolerance.unwrap_or(0.0),
+                start,
+                stop.is_some() as fmi2Boolean,
+                stop.unwrap_or(0.0),
+            )
+        };
+        self.check(Function::SetupExperiment, s)
+    }
+
+    fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2EnterInitializationMode)(self.comp) };
+        self.check(Function::EnterInitializationMode, s)
+    }
+
+    fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2ExitInitializationMode)(self.comp) };
+        self.check(Function::ExitInitializationMode, s)
+    }
+
+    fn terminate(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2Terminate)(self.comp) };
+        self.check(Function::Terminate, s)
+    }
+
+    fn reset(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2Reset)(self.comp) };
+        self.sink.clear();
+        self.time = 0.0;
+        self.check(Function::Reset, s)
+    }
+
+    #[inline]
+    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        if vrs.len() != out.len() {
+            return Err(self.lengths(Function::GetReal, vrs.len(), out.len()));
+        }
+        let s = unsafe {
+            (self.lib.api.fmi2GetReal)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
+        };
+        self.check(Function::GetReal, s)
+    }
+
+    #[inline]
+    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        if vrs.len() != values.len() {
+            return Err(self.lengths(Function::SetReal, vrs.len(), values.len()));
+        }
+        let s = unsafe {
+            (self.lib.api.fmi2SetReal)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        };
+        self.check(Function::SetReal, s)
+    }
+
+    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        if vrs.len() != out.len() {
+            return Err(self.lengths(Function::GetInteger, vrs.len(), out.len()));
+        }
+        let s = unsafe {
+            (self.lib.api.fmi2GetInteger)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
+        };
+        self.check(Function::GetInteger, s)
+    }
+
+    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        if vrs.len() != values.len() {
+            return Err(self.lengths(Function::SetInteger, vrs.len(), values.len()));
+        }
+        let s = unsafe {
+            (self.lib.api.fmi2SetInteger)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        };
+        self.check(Function::SetInteger, s)
+    }
+
+    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        if vrs.len() != out.len() {
+            return Err(self.lengths(Function::GetBoolean, vrs.len(), out.len()));
+        }
+        let s = unsafe {
+            (self.lib.api.fmi2GetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
+        };
+        self.check(Function::GetBoolean, s)
+    }
+
+    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        if vrs.len() != values.len() {
+            return Err(self.lengths(Function::SetBoolean, vrs.len(), values.len()));
+        }
+        let s = unsafe {
+            (self.lib.api.fmi2SetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        };
+        self.check(Function::SetBoolean, s)
+    }
+
+    /// Read String variables into `out` (one per value reference). The FMU's strings are
+    /// copied at once: the standard keeps them valid only until the next call.
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        let mut ptrs: Vec<fmi2String> = vec![std::ptr::null(); vrs.len()];
+        let s = unsafe {
+            (self.lib.api.fmi2GetString)(self.comp, vrs.as_ptr(), vrs.len(), ptrs.as_mut_ptr())
+        };
+        self.check(Function::GetString, s)?;
+        out.clear();
+        for (p, vr) in ptrs.into_iter().zip(vrs) {
+            // SAFETY: the FMU keeps its strings valid until its next call.
+            out.push(unsafe { super::string_from_fmu(p, &self.name, "fmi2GetString", *vr) }?);
+        }
+        Ok(())
+    }
+
+    /// Set String variables (a NUL inside a value is refused).
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        if vrs.len() != values.len() {
+            return Err(self.lengths(Function::SetString, vrs.len(), values.len()));
+        }
+        let c: Vec<CString> = values
+            .iter()
+            .map(|v| CString::new(*v))
+            .collect::<Result<_, _>>()
+            .map_err(|_| FmuError::Instantiate {
+                instance: self.name.clone(),
+                message: "fmi2SetString: a value contains a NUL byte".into(),
+            })?;
+        let p: Vec<fmi2String> = c.iter().map(|s| s.as_ptr()).collect();
+        let s =
+            unsafe { (self.lib.api.fmi2SetString)(self.comp, vrs.as_ptr(), vrs.len(), p.as_ptr()) };
+        self.check(Function::SetString, s)
+    }
+
+    /// One communication step; on success the instance's time advances.
+    #[inline]
+    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.fmi2DoStep)(self.comp, t, h, fmi2True) };
+        if s == fmi2Status::OK {
+            self.time = t + h;
+            Ok(())
+        } else {
+            self.time = t;
+            self.check(Function::DoStep, s).map(|_| self.time = t + h)
+        }
+    }
+
+    /// After a step returned `fmi2Discard`: whether the FMU asks to end the simulation
+    /// (`fmi2GetBooleanStatus(fmi2Terminated)`), and then its last successful time
+    /// (`fmi2GetRealStatus(fmi2LastSuccessfulTime)`, else the step's start). `None` when
+    /// it does not ask, or cannot say (the optional functions are missing or fail).
+    fn terminated_by_fmu(&mut self) -> Option<f64> {
+        let get_bool = self.lib.api.fmi2GetBooleanStatus?;
+        let mut terminated: fmi2Boolean = fmi2False;
+        let s = unsafe { get_bool(self.comp, fmi2StatusKind::TERMINATED, &mut terminated) };
+        if !s.is_ok() || terminated == fmi2False {
+            return None;
+        }
+        let mut last = self.time;
+        if let Some(get_real) = self.lib.api.fmi2GetRealStatus {
+            let mut t: fmi2Real = self.time;
+            let s = unsafe { get_real(self.comp, fmi2StatusKind::LAST_SUCCESSFUL_TIME, &mut t) };
+            if s.is_ok() && t.is_finite() {
+                last = t;
+            }
+        }
+        self.time = last;
+        Some(last)
     }
 }
 

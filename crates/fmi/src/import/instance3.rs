@@ -12,7 +12,7 @@ use super::log::LogSink;
 use super::model::{Fmi3Slot, Fmi3Type, ModelDescription, ScalarVariable};
 use crate::fmi2::fmi2Status;
 use crate::functions::Function;
-use crate::FmuError;
+use crate::{FmuError, FmuInstance};
 use std::collections::HashMap;
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::path::Path;
@@ -310,12 +310,6 @@ impl Instance3 {
     pub fn library(&self) -> &Arc<Library3> {
         &self.lib
     }
-    pub fn last_log_lines(&self) -> Vec<String> {
-        self.sink.last_lines()
-    }
-    pub fn set_echo(&mut self, on: bool) {
-        self.sink.set_echo(on)
-    }
 
     #[inline]
     fn check(&self, function: &'static str, status: Status) -> Result<(), FmuError> {
@@ -353,57 +347,6 @@ impl Instance3 {
 
     fn name_of(&self, vr: u32) -> &str {
         self.names.get(&vr).map_or("?", String::as_str)
-    }
-
-    pub fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.set_debug_logging)(self.inst, on, 0, std::ptr::null()) };
-        self.check("fmi3SetDebugLogging", s)
-    }
-
-    /// FMI 3.0 has no fmi2SetupExperiment: start and stop go with the initialization mode.
-    pub fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        tolerance: Option<f64>,
-    ) -> Result<(), FmuError> {
-        self.tolerance = tolerance;
-        self.start = start;
-        self.time = start;
-        self.stop = stop;
-        Ok(())
-    }
-
-    pub fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let s = unsafe {
-            (self.lib.api.enter_initialization_mode)(
-                self.inst,
-                self.tolerance.is_some(),
-                self.tolerance.unwrap_or(0.0),
-                self.start,
-                self.stop.is_some(),
-                self.stop.unwrap_or(0.0),
-            )
-        };
-        self.check("fmi3EnterInitializationMode", s)
-    }
-
-    pub fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.exit_initialization_mode)(self.inst) };
-        self.check("fmi3ExitInitializationMode", s)
-    }
-
-    pub fn terminate(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.terminate)(self.inst) };
-        self.check("fmi3Terminate", s)
-    }
-
-    pub fn reset(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.reset)(self.inst) };
-        self.sink.clear();
-        self.time = 0.0;
-        self.terminate_requested = None;
-        self.check("fmi3Reset", s)
     }
 
     /// Read one variable (an array element reads its whole array) as f64.
@@ -621,16 +564,6 @@ impl Instance3 {
         vrs.iter().all(|&vr| self.slots.scalar_type(vr) == Some(ty))
     }
 
-    /// The usual call when every Real is a scalar Float64: as short as FMI 2.0's, the
-    /// rest (`get_real_mixed`) off the fast path.
-    #[inline]
-    pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        if !self.reals_are_float64 {
-            return self.get_real_mixed(vrs, out);
-        }
-        self.get_float64(vrs, out)
-    }
-
     #[inline]
     fn get_float64(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
         let s = unsafe {
@@ -657,15 +590,6 @@ impl Instance3 {
             *o = self.get_one(slot)?;
         }
         Ok(())
-    }
-
-    /// As [`Self::get_real`].
-    #[inline]
-    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        if !self.reals_are_float64 {
-            return self.set_real_mixed(vrs, values);
-        }
-        self.set_float64(vrs, values)
     }
 
     #[inline]
@@ -776,98 +700,6 @@ impl Instance3 {
         self.set_each(vrs, values.iter().map(|v| *v as f64))
     }
 
-    pub fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
-        out.clear();
-        for vr in vrs {
-            let slot = self.slot(*vr)?;
-            let n = slot.len as usize;
-            if slot.ty == Fmi3Type::Binary {
-                let mut sizes = vec![0usize; n];
-                let mut ptrs: Vec<*const u8> = vec![std::ptr::null(); n];
-                let s = unsafe {
-                    (self.lib.api.get_binary)(
-                        self.inst,
-                        &slot.vr,
-                        1,
-                        sizes.as_mut_ptr(),
-                        ptrs.as_mut_ptr(),
-                        n,
-                    )
-                };
-                self.check("fmi3GetBinary", s)?;
-                let (p, len) = (ptrs[slot.index as usize], sizes[slot.index as usize]);
-                super::too_long(len, &self.name, "fmi3GetBinary", *vr)?;
-                let bytes = if p.is_null() || len == 0 {
-                    &[][..]
-                } else {
-                    unsafe { std::slice::from_raw_parts(p, len) }
-                };
-                out.push(bytes.iter().map(|b| format!("{b:02x}")).collect());
-                continue;
-            }
-            let mut ptrs: Vec<*const c_char> = vec![std::ptr::null(); n];
-            let s =
-                unsafe { (self.lib.api.get_string)(self.inst, &slot.vr, 1, ptrs.as_mut_ptr(), n) };
-            self.check("fmi3GetString", s)?;
-            // SAFETY: the FMU keeps its strings valid until its next call.
-            out.push(unsafe {
-                super::string_from_fmu(ptrs[slot.index as usize], &self.name, "fmi3GetString", *vr)
-            }?);
-        }
-        Ok(())
-    }
-
-    pub fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
-        for (vr, v) in vrs.iter().zip(values) {
-            let slot = self.slot(*vr)?;
-            if slot.len != 1 {
-                return Err(self.other(format!(
-                    "'{}': String arrays are not supported",
-                    self.name_of(*vr)
-                )));
-            }
-            if slot.ty == Fmi3Type::Binary {
-                let bytes = hex_bytes(v).ok_or_else(|| {
-                    self.other(format!(
-                        "'{}' is Binary: \"{v}\" is not an even number of hexadecimal digits",
-                        self.name_of(*vr)
-                    ))
-                })?;
-                let (p, len) = (bytes.as_ptr(), bytes.len());
-                let s = unsafe { (self.lib.api.set_binary)(self.inst, &slot.vr, 1, &len, &p, 1) };
-                self.check("fmi3SetBinary", s)?;
-                continue;
-            }
-            let c = CString::new(*v)
-                .map_err(|_| self.other("fmi3SetString: a value contains a NUL byte".into()))?;
-            let p = c.as_ptr();
-            let s = unsafe { (self.lib.api.set_string)(self.inst, &slot.vr, 1, &p, 1) };
-            self.check("fmi3SetString", s)?;
-        }
-        Ok(())
-    }
-
-    /// One communication step. When the FMU asks to end the simulation the step still
-    /// counts (FMPy records its end and stops): the call then reports `fmi2Discard` so that
-    /// the master asks [`Instance3::terminated_by_fmu`], which gives the time reached.
-    #[inline]
-    pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
-        // eventHandlingNeeded, terminateSimulation, earlyReturn: read back as one word.
-        let mut flags = [0u8; 4];
-        let mut last = t + h;
-        let [event, terminate, early, _] = flags.each_mut();
-        let s = unsafe {
-            (self.lib.api.do_step)(self.inst, t, h, true, event, terminate, early, &mut last)
-        };
-        // The usual step: completed, no event, no early return, not the end.
-        if s == 0 && u32::from_ne_bytes(flags) == 0 {
-            self.time = t + h;
-            return Ok(());
-        }
-        let [_, terminate, early, _] = flags;
-        self.step_outcome(t, h, s, terminate, early, last)
-    }
-
     /// A step that did more than complete: its error, early return or end of the run.
     #[cold]
     #[inline(never)]
@@ -916,11 +748,6 @@ impl Instance3 {
         Ok(())
     }
 
-    /// After `fmi3DoStep` set `terminateSimulation`: the time reached.
-    pub fn terminated_by_fmu(&mut self) -> Option<f64> {
-        self.terminate_requested
-    }
-
     pub fn get_state(&mut self) -> Result<Fmu3State, FmuError> {
         let mut st = std::ptr::null_mut();
         let s = unsafe { (self.lib.api.get_fmu_state)(self.inst, &mut st) };
@@ -957,6 +784,210 @@ impl Instance3 {
         };
         self.check("fmi3DeserializeFMUState", s)?;
         Ok(Fmu3State(st))
+    }
+}
+
+impl FmuInstance for Instance3 {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// FMI 3.0's Int32, Int64, UInt… and Enumeration all travel as an FMI 2.0 Integer.
+    #[inline]
+    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        self.get_int(vrs, out)
+    }
+
+    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        self.set_int(vrs, values)
+    }
+
+    /// A Boolean travels as an FMI 2.0 Boolean (an integer); `get_int` reads FMI 3.0's.
+    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
+        self.get_int(vrs, out)
+    }
+
+    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        self.set_int(vrs, values)
+    }
+
+    fn last_log_lines(&self) -> Vec<String> {
+        self.sink.last_lines()
+    }
+
+    fn set_echo(&mut self, on: bool) {
+        self.sink.set_echo(on)
+    }
+
+    fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.set_debug_logging)(self.inst, on, 0, std::ptr::null()) };
+        self.check("fmi3SetDebugLogging", s)
+    }
+
+    /// FMI 3.0 has no fmi2SetupExperiment: start and stop go with the initialization mode.
+    fn setup_experiment(
+        &mut self,
+        start: f64,
+        stop: Option<f64>,
+        tolerance: Option<f64>,
+    ) -> Result<(), FmuError> {
+        self.tolerance = tolerance;
+        self.start = start;
+        self.time = start;
+        self.stop = stop;
+        Ok(())
+    }
+
+    fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe {
+            (self.lib.api.enter_initialization_mode)(
+                self.inst,
+                self.tolerance.is_some(),
+                self.tolerance.unwrap_or(0.0),
+                self.start,
+                self.stop.is_some(),
+                self.stop.unwrap_or(0.0),
+            )
+        };
+        self.check("fmi3EnterInitializationMode", s)
+    }
+
+    fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.exit_initialization_mode)(self.inst) };
+        self.check("fmi3ExitInitializationMode", s)
+    }
+
+    fn terminate(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.terminate)(self.inst) };
+        self.check("fmi3Terminate", s)
+    }
+
+    fn reset(&mut self) -> Result<(), FmuError> {
+        let s = unsafe { (self.lib.api.reset)(self.inst) };
+        self.sink.clear();
+        self.time = 0.0;
+        self.terminate_requested = None;
+        self.check("fmi3Reset", s)
+    }
+
+    /// The usual call when every Real is a scalar Float64: as short as FMI 2.0's, the
+    /// rest (`get_real_mixed`) off the fast path.
+    #[inline]
+    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
+        if !self.reals_are_float64 {
+            return self.get_real_mixed(vrs, out);
+        }
+        self.get_float64(vrs, out)
+    }
+
+    /// As [`Self::get_real`].
+    #[inline]
+    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
+        if !self.reals_are_float64 {
+            return self.set_real_mixed(vrs, values);
+        }
+        self.set_float64(vrs, values)
+    }
+
+    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
+        out.clear();
+        for vr in vrs {
+            let slot = self.slot(*vr)?;
+            let n = slot.len as usize;
+            if slot.ty == Fmi3Type::Binary {
+                let mut sizes = vec![0usize; n];
+                let mut ptrs: Vec<*const u8> = vec![std::ptr::null(); n];
+                let s = unsafe {
+                    (self.lib.api.get_binary)(
+                        self.inst,
+                        &slot.vr,
+                        1,
+                        sizes.as_mut_ptr(),
+                        ptrs.as_mut_ptr(),
+                        n,
+                    )
+                };
+                self.check("fmi3GetBinary", s)?;
+                let (p, len) = (ptrs[slot.index as usize], sizes[slot.index as usize]);
+                super::too_long(len, &self.name, "fmi3GetBinary", *vr)?;
+                let bytes = if p.is_null() || len == 0 {
+                    &[][..]
+                } else {
+                    unsafe { std::slice::from_raw_parts(p, len) }
+                };
+                out.push(bytes.iter().map(|b| format!("{b:02x}")).collect());
+                continue;
+            }
+            let mut ptrs: Vec<*const c_char> = vec![std::ptr::null(); n];
+            let s =
+                unsafe { (self.lib.api.get_string)(self.inst, &slot.vr, 1, ptrs.as_mut_ptr(), n) };
+            self.check("fmi3GetString", s)?;
+            // SAFETY: the FMU keeps its strings valid until its next call.
+            out.push(unsafe {
+                super::string_from_fmu(ptrs[slot.index as usize], &self.name, "fmi3GetString", *vr)
+            }?);
+        }
+        Ok(())
+    }
+
+    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
+        for (vr, v) in vrs.iter().zip(values) {
+            let slot = self.slot(*vr)?;
+            if slot.len != 1 {
+                return Err(self.other(format!(
+                    "'{}': String arrays are not supported",
+                    self.name_of(*vr)
+                )));
+            }
+            if slot.ty == Fmi3Type::Binary {
+                let bytes = hex_bytes(v).ok_or_else(|| {
+                    self.other(format!(
+                        "'{}' is Binary: \"{v}\" is not an even number of hexadecimal digits",
+                        self.name_of(*vr)
+                    ))
+                })?;
+                let (p, len) = (bytes.as_ptr(), bytes.len());
+                let s = unsafe { (self.lib.api.set_binary)(self.inst, &slot.vr, 1, &len, &p, 1) };
+                self.check("fmi3SetBinary", s)?;
+                continue;
+            }
+            let c = CString::new(*v)
+                .map_err(|_| self.other("fmi3SetString: a value contains a NUL byte".into()))?;
+            let p = c.as_ptr();
+            let s = unsafe { (self.lib.api.set_string)(self.inst, &slot.vr, 1, &p, 1) };
+            self.check("fmi3SetString", s)?;
+        }
+        Ok(())
+    }
+
+    /// One communication step. When the FMU asks to end the simulation the step still
+    /// counts (FMPy records its end and stops): the call then reports `fmi2Discard` so that
+    /// the master asks [`Instance3::terminated_by_fmu`], which gives the time reached.
+    #[inline]
+    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        // eventHandlingNeeded, terminateSimulation, earlyReturn: read back as one word.
+        let mut flags = [0u8; 4];
+        let mut last = t + h;
+        let [event, terminate, early, _] = flags.each_mut();
+        let s = unsafe {
+            (self.lib.api.do_step)(self.inst, t, h, true, event, terminate, early, &mut last)
+        };
+        // The usual step: completed, no event, no early return, not the end.
+        if s == 0 && u32::from_ne_bytes(flags) == 0 {
+            self.time = t + h;
+            return Ok(());
+        }
+        let [_, terminate, early, _] = flags;
+        self.step_outcome(t, h, s, terminate, early, last)
+    }
+
+    /// After `fmi3DoStep` set `terminateSimulation`: the time reached.
+    fn terminated_by_fmu(&mut self) -> Option<f64> {
+        self.terminate_requested
     }
 }
 

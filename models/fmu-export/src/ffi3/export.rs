@@ -15,120 +15,57 @@ macro_rules! export_fmu3 {
             type M = $model;
             type Vr = fmi3ValueReference;
 
-            #[no_mangle]
-            pub extern "C" fn fmi3GetVersion() -> *const c_char {
-                VERSION.as_ptr()
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetDebugLogging(c: fmi3Instance, on: bool, n: usize, cat: *const *const c_char) -> fmi3Status {
-                set_debug_logging::<M>(c, on, n, cat)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
-                name: *const c_char,
-                token: *const c_char,
-                resources: *const c_char,
-                visible: bool,
-                logging_on: bool,
-                event_mode_used: bool,
-                early_return_allowed: bool,
-                required: *const Vr,
-                n_required: usize,
-                env: *mut c_void,
-                log: Option<fmi3LogMessageCallback>,
-                intermediate: *const c_void,
-            ) -> fmi3Instance {
-                instantiate_co_simulation::<M>(
-                    name, token, resources, visible, logging_on, event_mode_used,
-                    early_return_allowed, required, n_required, env, log, intermediate,
-                )
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3InstantiateModelExchange(
-                _name: *const c_char,
-                _token: *const c_char,
-                _resources: *const c_char,
-                _visible: bool,
-                _logging_on: bool,
-                env: *mut c_void,
-                log: Option<fmi3LogMessageCallback>,
-            ) -> fmi3Instance {
-                instantiate_unsupported::<M>("ModelExchange", env, log)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3InstantiateScheduledExecution(
-                _name: *const c_char,
-                _token: *const c_char,
-                _resources: *const c_char,
-                _visible: bool,
-                _logging_on: bool,
-                env: *mut c_void,
-                log: Option<fmi3LogMessageCallback>,
-                _clock_update: *const c_void,
-                _lock: *const c_void,
-                _unlock: *const c_void,
-            ) -> fmi3Instance {
-                instantiate_unsupported::<M>("ScheduledExecution", env, log)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3FreeInstance(c: fmi3Instance) {
-                free_instance::<M>(c)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3EnterInitializationMode(c: fmi3Instance, td: bool, tol: f64, start: f64, sd: bool, stop: f64) -> fmi3Status {
-                enter_initialization_mode::<M>(c, td, tol, start, sd, stop)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3ExitInitializationMode(c: fmi3Instance) -> fmi3Status {
-                exit_initialization_mode::<M>(c)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3Terminate(c: fmi3Instance) -> fmi3Status {
-                terminate::<M>(c)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3Reset(c: fmi3Instance) -> fmi3Status {
-                reset::<M>(c)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3GetFloat64(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut f64, nv: usize) -> fmi3Status {
-                get_float64::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetFloat64(c: fmi3Instance, vr: *const Vr, n: usize, v: *const f64, nv: usize) -> fmi3Status {
-                set_float64::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3GetInt32(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut i32, nv: usize) -> fmi3Status {
-                get_int32::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetInt32(c: fmi3Instance, vr: *const Vr, n: usize, v: *const i32, nv: usize) -> fmi3Status {
-                set_int32::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3GetInt64(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut i64, nv: usize) -> fmi3Status {
-                get_int64::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetInt64(c: fmi3Instance, vr: *const Vr, n: usize, v: *const i64, nv: usize) -> fmi3Status {
-                set_int64::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3GetBoolean(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut u8, nv: usize) -> fmi3Status {
-                get_boolean::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetBoolean(c: fmi3Instance, vr: *const Vr, n: usize, v: *const u8, nv: usize) -> fmi3Status {
-                set_boolean::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3GetString(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut *const c_char, nv: usize) -> fmi3Status {
-                get_string::<M>(c, vr, n, v, nv)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetString(c: fmi3Instance, vr: *const Vr, n: usize, v: *const *const c_char, nv: usize) -> fmi3Status {
-                set_string::<M>(c, vr, n, v, nv)
+            $crate::__fmi_entry_points! {
+                fmi3GetVersion() -> *const c_char => VERSION.as_ptr();
+                fmi3SetDebugLogging(c: fmi3Instance, on: bool, n: usize, cat: *const *const c_char)
+                    -> fmi3Status => set_debug_logging::<M>(c, on, n, cat);
+                fmi3InstantiateCoSimulation(name: *const c_char, token: *const c_char,
+                    resources: *const c_char, visible: bool, logging_on: bool, event_mode_used: bool,
+                    early_return_allowed: bool, required: *const Vr, n_required: usize,
+                    env: *mut c_void, log: Option<fmi3LogMessageCallback>, intermediate: *const c_void)
+                    -> fmi3Instance => instantiate_co_simulation::<M>(
+                        name, token, resources, visible, logging_on, event_mode_used,
+                        early_return_allowed, required, n_required, env, log, intermediate,
+                    );
+                fmi3InstantiateModelExchange(_name: *const c_char, _token: *const c_char,
+                    _resources: *const c_char, _visible: bool, _logging_on: bool, env: *mut c_void,
+                    log: Option<fmi3LogMessageCallback>)
+                    -> fmi3Instance => instantiate_unsupported::<M>("ModelExchange", env, log);
+                fmi3InstantiateScheduledExecution(_name: *const c_char, _token: *const c_char,
+                    _resources: *const c_char, _visible: bool, _logging_on: bool, env: *mut c_void,
+                    log: Option<fmi3LogMessageCallback>, _clock_update: *const c_void,
+                    _lock: *const c_void, _unlock: *const c_void)
+                    -> fmi3Instance => instantiate_unsupported::<M>("ScheduledExecution", env, log);
+                fmi3FreeInstance(c: fmi3Instance) => free_instance::<M>(c);
+                fmi3EnterInitializationMode(c: fmi3Instance, td: bool, tol: f64, start: f64, sd: bool,
+                    stop: f64)
+                    -> fmi3Status => enter_initialization_mode::<M>(c, td, tol, start, sd, stop);
+                fmi3ExitInitializationMode(c: fmi3Instance)
+                    -> fmi3Status => exit_initialization_mode::<M>(c);
+                fmi3Terminate(c: fmi3Instance) -> fmi3Status => terminate::<M>(c);
+                fmi3Reset(c: fmi3Instance) -> fmi3Status => reset::<M>(c);
+                fmi3GetFloat64(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut f64, nv: usize)
+                    -> fmi3Status => get_float64::<M>(c, vr, n, v, nv);
+                fmi3SetFloat64(c: fmi3Instance, vr: *const Vr, n: usize, v: *const f64, nv: usize)
+                    -> fmi3Status => set_float64::<M>(c, vr, n, v, nv);
+                fmi3GetInt32(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut i32, nv: usize)
+                    -> fmi3Status => get_int32::<M>(c, vr, n, v, nv);
+                fmi3SetInt32(c: fmi3Instance, vr: *const Vr, n: usize, v: *const i32, nv: usize)
+                    -> fmi3Status => set_int32::<M>(c, vr, n, v, nv);
+                fmi3GetInt64(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut i64, nv: usize)
+                    -> fmi3Status => get_int64::<M>(c, vr, n, v, nv);
+                fmi3SetInt64(c: fmi3Instance, vr: *const Vr, n: usize, v: *const i64, nv: usize)
+                    -> fmi3Status => set_int64::<M>(c, vr, n, v, nv);
+                fmi3GetBoolean(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut u8, nv: usize)
+                    -> fmi3Status => get_boolean::<M>(c, vr, n, v, nv);
+                fmi3SetBoolean(c: fmi3Instance, vr: *const Vr, n: usize, v: *const u8, nv: usize)
+                    -> fmi3Status => set_boolean::<M>(c, vr, n, v, nv);
+                fmi3GetString(c: fmi3Instance, vr: *const Vr, n: usize, v: *mut *const c_char,
+                    nv: usize)
+                    -> fmi3Status => get_string::<M>(c, vr, n, v, nv);
+                fmi3SetString(c: fmi3Instance, vr: *const Vr, n: usize, v: *const *const c_char,
+                    nv: usize)
+                    -> fmi3Status => set_string::<M>(c, vr, n, v, nv);
             }
             $crate::__fmi3_none_of_type!(M, fmi3GetFloat32, fmi3SetFloat32, f32);
             $crate::__fmi3_none_of_type!(M, fmi3GetInt8, fmi3SetInt8, i8);
@@ -137,58 +74,36 @@ macro_rules! export_fmu3 {
             $crate::__fmi3_none_of_type!(M, fmi3GetUInt16, fmi3SetUInt16, u16);
             $crate::__fmi3_none_of_type!(M, fmi3GetUInt32, fmi3SetUInt32, u32);
             $crate::__fmi3_none_of_type!(M, fmi3GetUInt64, fmi3SetUInt64, u64);
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3GetBinary(c: fmi3Instance, vr: *const Vr, n: usize, _sizes: *mut usize, _v: *mut *const u8, _nv: usize) -> fmi3Status {
-                no_variable_of_type::<M>(c, "fmi3GetBinary", vr, n)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetBinary(c: fmi3Instance, vr: *const Vr, n: usize, _sizes: *const usize, _v: *const *const u8, _nv: usize) -> fmi3Status {
-                no_variable_of_type::<M>(c, "fmi3SetBinary", vr, n)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3GetClock(c: fmi3Instance, vr: *const Vr, n: usize, _v: *mut bool) -> fmi3Status {
-                no_variable_of_type::<M>(c, "fmi3GetClock", vr, n)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetClock(c: fmi3Instance, vr: *const Vr, n: usize, _v: *const bool) -> fmi3Status {
-                no_variable_of_type::<M>(c, "fmi3SetClock", vr, n)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3DoStep(
-                c: fmi3Instance,
-                current: f64,
-                step: f64,
-                no_set_prior: bool,
-                event_handling_needed: *mut bool,
-                terminate_simulation: *mut bool,
-                early_return: *mut bool,
-                last_successful_time: *mut f64,
-            ) -> fmi3Status {
-                do_step::<M>(c, current, step, no_set_prior, event_handling_needed, terminate_simulation, early_return, last_successful_time)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3GetFMUState(c: fmi3Instance, s: *mut fmi3FMUState) -> fmi3Status {
-                get_fmu_state::<M>(c, s)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SetFMUState(c: fmi3Instance, s: fmi3FMUState) -> fmi3Status {
-                set_fmu_state::<M>(c, s)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3FreeFMUState(c: fmi3Instance, s: *mut fmi3FMUState) -> fmi3Status {
-                free_fmu_state::<M>(c, s)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SerializedFMUStateSize(c: fmi3Instance, s: fmi3FMUState, size: *mut usize) -> fmi3Status {
-                serialized_fmu_state_size::<M>(c, s, size)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3SerializeFMUState(c: fmi3Instance, s: fmi3FMUState, b: *mut u8, size: usize) -> fmi3Status {
-                serialize_fmu_state::<M>(c, s, b, size)
-            }
-            #[no_mangle]
-            pub unsafe extern "C" fn fmi3DeserializeFMUState(c: fmi3Instance, b: *const u8, size: usize, s: *mut fmi3FMUState) -> fmi3Status {
-                deserialize_fmu_state::<M>(c, b, size, s)
+            $crate::__fmi_entry_points! {
+                fmi3GetBinary(c: fmi3Instance, vr: *const Vr, n: usize, _sizes: *mut usize,
+                    _v: *mut *const u8, _nv: usize)
+                    -> fmi3Status => no_variable_of_type::<M>(c, "fmi3GetBinary", vr, n);
+                fmi3SetBinary(c: fmi3Instance, vr: *const Vr, n: usize, _sizes: *const usize,
+                    _v: *const *const u8, _nv: usize)
+                    -> fmi3Status => no_variable_of_type::<M>(c, "fmi3SetBinary", vr, n);
+                fmi3GetClock(c: fmi3Instance, vr: *const Vr, n: usize, _v: *mut bool)
+                    -> fmi3Status => no_variable_of_type::<M>(c, "fmi3GetClock", vr, n);
+                fmi3SetClock(c: fmi3Instance, vr: *const Vr, n: usize, _v: *const bool)
+                    -> fmi3Status => no_variable_of_type::<M>(c, "fmi3SetClock", vr, n);
+                fmi3DoStep(c: fmi3Instance, current: f64, step: f64, no_set_prior: bool,
+                    event_handling_needed: *mut bool, terminate_simulation: *mut bool,
+                    early_return: *mut bool, last_successful_time: *mut f64)
+                    -> fmi3Status => do_step::<M>(c, current, step, no_set_prior,
+                        event_handling_needed, terminate_simulation, early_return,
+                        last_successful_time);
+                fmi3GetFMUState(c: fmi3Instance, s: *mut fmi3FMUState)
+                    -> fmi3Status => get_fmu_state::<M>(c, s);
+                fmi3SetFMUState(c: fmi3Instance, s: fmi3FMUState)
+                    -> fmi3Status => set_fmu_state::<M>(c, s);
+                fmi3FreeFMUState(c: fmi3Instance, s: *mut fmi3FMUState)
+                    -> fmi3Status => free_fmu_state::<M>(c, s);
+                fmi3SerializedFMUStateSize(c: fmi3Instance, s: fmi3FMUState, size: *mut usize)
+                    -> fmi3Status => serialized_fmu_state_size::<M>(c, s, size);
+                fmi3SerializeFMUState(c: fmi3Instance, s: fmi3FMUState, b: *mut u8, size: usize)
+                    -> fmi3Status => serialize_fmu_state::<M>(c, s, b, size);
+                fmi3DeserializeFMUState(c: fmi3Instance, b: *const u8, size: usize,
+                    s: *mut fmi3FMUState)
+                    -> fmi3Status => deserialize_fmu_state::<M>(c, b, size, s);
             }
             $crate::__fmi3_not_provided!(M, fmi3EnterEventMode(), "this FMU has no event mode (hasEventMode=\"false\")");
             $crate::__fmi3_not_provided!(M, fmi3EnterStepMode(), "step mode is entered by fmi3ExitInitializationMode: this FMU has no event mode (hasEventMode=\"false\")");
@@ -229,25 +144,13 @@ macro_rules! export_fmu3 {
 #[macro_export]
 macro_rules! __fmi3_none_of_type {
     ($m:ty, $get:ident, $set:ident, $t:ty) => {
-        #[no_mangle]
-        pub unsafe extern "C" fn $get(
-            c: $crate::ffi3::fmi3Instance,
-            vr: *const u32,
-            n: usize,
-            _v: *mut $t,
-            _nv: usize,
-        ) -> $crate::ffi3::fmi3Status {
-            $crate::ffi3::no_variable_of_type::<$m>(c, stringify!($get), vr, n)
-        }
-        #[no_mangle]
-        pub unsafe extern "C" fn $set(
-            c: $crate::ffi3::fmi3Instance,
-            vr: *const u32,
-            n: usize,
-            _v: *const $t,
-            _nv: usize,
-        ) -> $crate::ffi3::fmi3Status {
-            $crate::ffi3::no_variable_of_type::<$m>(c, stringify!($set), vr, n)
+        $crate::__fmi_entry_points! {
+            $get(c: $crate::ffi3::fmi3Instance, vr: *const u32, n: usize, _v: *mut $t, _nv: usize)
+                -> $crate::ffi3::fmi3Status
+                => $crate::ffi3::no_variable_of_type::<$m>(c, stringify!($get), vr, n);
+            $set(c: $crate::ffi3::fmi3Instance, vr: *const u32, n: usize, _v: *const $t, _nv: usize)
+                -> $crate::ffi3::fmi3Status
+                => $crate::ffi3::no_variable_of_type::<$m>(c, stringify!($set), vr, n);
         }
     };
 }
@@ -258,12 +161,11 @@ macro_rules! __fmi3_none_of_type {
 #[macro_export]
 macro_rules! __fmi3_not_provided {
     ($m:ty, $name:ident ($($arg:ident : $t:ty),*), $why:literal) => {
-        #[no_mangle]
-        pub unsafe extern "C" fn $name(
-            c: $crate::ffi3::fmi3Instance $(, $arg: $t)*
-        ) -> $crate::ffi3::fmi3Status {
-            $(let _ = $arg;)*
-            $crate::ffi3::unsupported::<$m>(c, stringify!($name), $why)
+        $crate::__fmi_entry_points! {
+            $name(c: $crate::ffi3::fmi3Instance $(, $arg: $t)*) -> $crate::ffi3::fmi3Status => {
+                $(let _ = $arg;)*
+                $crate::ffi3::unsupported::<$m>(c, stringify!($name), $why)
+            };
         }
     };
 }

@@ -42,6 +42,7 @@
 mod calls;
 pub(crate) mod cvode;
 mod events;
+mod instance;
 mod lifecycle;
 mod solver;
 mod step;
