@@ -18,12 +18,14 @@
 mod connections;
 mod experiment;
 mod graph;
+mod problems;
 mod instances;
 mod readers;
 mod stop;
 pub(crate) mod units;
 mod values;
 
+pub use problems::{ConversionError, OrderError};
 pub use readers::{Cadence, Reader};
 pub use stop::{Condition, Op, Stop};
 pub use values::{ParamSlot, ParamValue};
@@ -371,9 +373,9 @@ impl Plan {
         warnings.extend(structure_gaps(&loaded));
         warnings.extend(connections::unconnected_inputs(&file, units, &connections));
         graph::check_feedthrough_cycles(&instances, &connections, &mut warnings)
-            .map_err(|m| invalid(&ctx, m))?;
-        let order =
-            graph::stepping_order(&file, units, &connections).map_err(|m| invalid(&ctx, m))?;
+            .map_err(|m| invalid(&ctx, m.to_string()))?;
+        let order = graph::stepping_order(&file, units, &connections)
+            .map_err(|m| invalid(&ctx, m.to_string()))?;
         for w in &warnings {
             log::warn!("{ctx}: {w}");
         }
