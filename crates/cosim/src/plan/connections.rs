@@ -3,12 +3,12 @@
 //! the inputs left unconnected.
 
 use super::instances::Units;
+use super::problems::ConversionError;
 use super::units::{self, unit_conversion, Conversion};
 use super::{ConnectionDef, Endpoint, InstanceDef, SignalTable};
 use crate::config::{ConnectionConfig, Interpolation, SystemFile};
 use crate::{invalid, split_name, SystemError};
 use tb_fmi::import::description::{ModelDescription, ScalarVariable};
-use super::problems::ConversionError;
 use tb_fmi::{Causality, ScalarType, Variability};
 
 /// The checked connections (each source given its exchange slot), and the notes on unit

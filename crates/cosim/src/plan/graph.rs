@@ -1,8 +1,8 @@
 //! Stage "order": the connection graph's direct feed-through cycles, and the stepping
 //! order.
 
-use super::problems::OrderError;
 use super::instances::Units;
+use super::problems::OrderError;
 use super::{ConnectionDef, Endpoint, InstanceDef};
 use crate::config::SystemFile;
 use crate::split_name;

@@ -18,8 +18,8 @@
 mod connections;
 mod experiment;
 mod graph;
-mod problems;
 mod instances;
+mod problems;
 mod readers;
 mod stop;
 pub(crate) mod units;

@@ -13,7 +13,9 @@ pub enum ConversionError {
     #[error("a scale, an offset or a unit applies to Real inputs only, this one is {ty}")]
     NotReal { ty: &'static str },
     /// `end`: `from_unit` or `to_unit`; `known`: the unit table's names.
-    #[error("{end} = '{unit}' is defined neither by the FMU nor in twinbench's unit table ({known})")]
+    #[error(
+        "{end} = '{unit}' is defined neither by the FMU nor in twinbench's unit table ({known})"
+    )]
     UnknownUnit {
         end: &'static str,
         unit: String,

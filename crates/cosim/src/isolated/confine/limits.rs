@@ -291,7 +291,7 @@ mod tests {
             ("scratch=18446744073709551615T", "is not a size"),
         ] {
             let e = Limits::parse(text).unwrap_err();
-            assert!(e.contains(says), "{text}: {e}");
+            assert!(e.to_string().contains(says), "{text}: {e}");
         }
     }
 
