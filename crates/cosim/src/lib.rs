@@ -62,6 +62,13 @@ pub enum SystemError {
     },
     #[error("{0}")]
     Stop(String),
+    /// An observer's own input or output failed (the file it writes, the pipe it reads):
+    /// the run fails with it, named by the observer.
+    #[error("observer '{observer}': {error}")]
+    Observer {
+        observer: String,
+        error: std::io::Error,
+    },
     /// An FMU asked to end the simulation (a step returned `fmi2Discard` with
     /// `fmi2Terminated` true): the run ends normally at its last successful time. Only seen
     /// between the master's step and its run loop.
