@@ -347,7 +347,7 @@ impl tb_optimize::StudyObserver for Watcher {
         self.seen.lock().unwrap().push((g.step, g.workers));
         std::ops::ControlFlow::Continue(())
     }
-    fn finished(&self, _result: &StudyResult) -> Result<(), String> {
+    fn finished(&self, _result: &StudyResult) -> Result<(), tb_optimize::ObserverError> {
         *self.finished.lock().unwrap() += 1;
         Ok(())
     }

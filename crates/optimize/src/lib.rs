@@ -41,6 +41,7 @@ mod cost;
 pub mod driver;
 pub mod error;
 pub mod exact;
+pub mod failure;
 mod finish;
 pub mod fit;
 pub mod ga;
@@ -67,10 +68,13 @@ pub use cmaes::{Cmaes, CmaesSettings};
 pub use cost::StepCost;
 pub use driver::run_study;
 pub use error::OptimizeError;
+pub use failure::{EvaluatorError, FailureKind, RunError};
 pub use ga::{Ga, GaSettings};
 pub use identifiability::Identifiability;
 pub use interval::{Intervals, ParameterInterval};
-pub use observe::{GenerationDone, PhaseProgress, StopAfter, StopOnFlag, StudyObserver};
+pub use observe::{
+    GenerationDone, ObserverError, PhaseProgress, StopAfter, StopOnFlag, StudyObserver,
+};
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
 pub use options::RunOptions;
 pub use pool::WorkerPool;

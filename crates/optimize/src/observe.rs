@@ -28,10 +28,14 @@ pub trait StudyObserver: Send + Sync {
     fn phase(&self, _p: &PhaseProgress<'_>) {}
     /// The study's result, before it is returned (not after an interruption); an error
     /// (the report could not be written) ends the study with it.
-    fn finished(&self, _result: &StudyResult) -> Result<(), String> {
+    fn finished(&self, _result: &StudyResult) -> Result<(), ObserverError> {
         Ok(())
     }
 }
+
+/// An observer's own failure (its report that could not be written), of the observer's
+/// own type.
+pub type ObserverError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Where the work after the steps stands, as observers see it.
 #[derive(Clone, Copy, Debug)]
