@@ -32,7 +32,7 @@ impl Problem for Lift<'_> {
     fn bounds(&self) -> Vec<(f64, f64)> {
         vec![(0.2, 2.5); 2]
     }
-    fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
+    fn evaluate(&self, x: &[f64]) -> Result<f64, tb_optimize::RunError> {
         // Every parameter of the study at its initial value, the lift coefficients at x.
         let mut p: Vec<f64> = self.bench.assignment().iter().map(|a| a.1).collect();
         p[self.bench.index_of("vehicle.c_lift_front").unwrap()] = x[0];
