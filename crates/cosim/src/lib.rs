@@ -45,6 +45,20 @@ pub enum SystemError {
     Ssp(Box<ssp_import::SspImportError>),
     #[error("{context}: {message}")]
     Invalid { context: String, message: String },
+    /// A connection that cannot convert what it carries (`context`: the system file and
+    /// the connection; `hint`: how to fix a replayed column's unit, else empty).
+    #[error("{context}: {error}{hint}")]
+    Conversion {
+        context: String,
+        error: plan::ConversionError,
+        hint: String,
+    },
+    /// The units cannot be stepped in an order (`context`: the system file).
+    #[error("{context}: {error}")]
+    Order {
+        context: String,
+        error: plan::OrderError,
+    },
     #[error("replay '{name}' ({path}): {message}")]
     Replay {
         name: String,

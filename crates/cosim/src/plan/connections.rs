@@ -203,20 +203,18 @@ fn checked_conversion(
         (to_md, to_md.unit_of(to_sv)),
         to_sv.ty,
     )
-    .map_err(|m| match from {
-        // The fix for a replayed column is its unit, not a scale.
-        Endpoint::Replay { unit, column, .. } => {
-            let r = units.replay(*unit);
-            invalid(
-                ctx,
-                format!(
-                    "{m}; if the file's unit for '{a}' is wrong or missing, name it in its [[replay]]: units = {{ {} = \"{}\" }}",
-                    r.columns[*column],
-                    to_md.unit_of(to_sv).unwrap_or("1")
-                ),
-            )
-        }
-        _ => invalid(ctx, m.to_string()),
+    .map_err(|error| SystemError::Conversion {
+        context: ctx.to_string(),
+        error,
+        hint: match from {
+            // The fix for a replayed column is its unit, not a scale.
+            Endpoint::Replay { unit, column, .. } => format!(
+                "; if the file's unit for '{a}' is wrong or missing, name it in its [[replay]]: units = {{ {} = \"{}\" }}",
+                units.replay(*unit).columns[*column],
+                to_md.unit_of(to_sv).unwrap_or("1")
+            ),
+            _ => String::new(),
+        },
     })
 }
 
