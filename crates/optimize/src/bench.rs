@@ -62,10 +62,10 @@ impl Bench {
         &self,
         signals: &[S],
         compare: &CompareSettings,
-    ) -> Result<Vec<PreparedMeasurement>, OptimizeError> {
+    ) -> Result<Vec<PreparedMeasurement>, tb_compare::Error> {
         self.laps
             .iter()
-            .map(|l| Ok(PreparedMeasurement::new(&l.measurement, signals, compare)?))
+            .map(|l| PreparedMeasurement::new(&l.measurement, signals, compare))
             .collect()
     }
 

@@ -44,5 +44,5 @@ pub enum OptimizeError {
     Evaluator(crate::failure::EvaluatorError),
     /// An observer of the study failed at its end (the report could not be written).
     #[error("{0}")]
-    Observer(crate::observe::ObserverError),
+    Observer(crate::failure::ObserverError),
 }

@@ -3,6 +3,9 @@
 //! only rendered to text where it is reported (the failure reasons of a study, the CLI,
 //! Python). Across a process boundary (a Dask task) it travels as its kind and message,
 //! [`RunError::kind`] and [`RunError::from_wire`].
+//!
+//! The observers' own errors are here too ([`ObserverError`]): like a candidate's, they are
+//! the caller's kind, not the study's.
 
 use std::sync::Arc;
 use tb_cosim::SystemError;
@@ -43,7 +46,7 @@ pub enum RunError {
     },
     /// The worker cannot prepare the measurement for the candidate's signals.
     #[error("{0}")]
-    Prepare(Arc<crate::OptimizeError>),
+    Prepare(Arc<tb_compare::Error>),
     /// The evaluator of a distributed study failed for these points (not their runs).
     #[error("the evaluator failed: {0}")]
     Evaluator(Arc<EvaluatorError>),
@@ -161,6 +164,10 @@ impl From<SystemError> for RunError {
     }
 }
 
+/// An observer's own failure (its report that could not be written), of the observer's
+/// own type.
+pub type ObserverError = Box<dyn std::error::Error + Send + Sync>;
+
 /// Why an evaluator of a distributed study could not evaluate (not a candidate's failure:
 /// the study stops, its checkpoint holds the last whole generation).
 #[derive(Debug, thiserror::Error)]
@@ -175,4 +182,57 @@ pub enum EvaluatorError {
     /// caller keeps the exception itself.
     #[error("{0}")]
     Raised(String),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failure_crosses_processes_as_its_kind_and_message() {
+        let e = RunError::Lap {
+            lap: "wet".into(),
+            error: Box::new(RunError::Count {
+                given: 2,
+                expected: 3,
+            }),
+        };
+        assert_eq!(e.to_string(), "lap 'wet': 2 values for 3 parameters");
+        assert_eq!(e.kind(), FailureKind::Count);
+        let back = RunError::from_wire(e.kind().name(), e.to_string());
+        assert!(matches!(
+            &back,
+            RunError::Remote {
+                kind: FailureKind::Count,
+                ..
+            }
+        ));
+        assert_eq!(back.to_string(), e.to_string());
+        // A task of the caller's own says no kind.
+        assert!(matches!(
+            RunError::from_wire("", "it broke").kind(),
+            FailureKind::Unknown
+        ));
+        for (kind, name) in FailureKind::NAMES {
+            assert_eq!(FailureKind::from_name(name), kind);
+        }
+    }
+
+    #[test]
+    fn an_fmus_failure_says_so_and_a_hung_worker_is_the_workers() {
+        let call = SystemError::Fmu(FmuError::Instantiate {
+            instance: "v".into(),
+            message: "no".into(),
+        });
+        let e = RunError::from(call);
+        assert!(matches!(&e, RunError::Simulation(SystemError::Fmu(_))));
+        assert_eq!(e.to_string(), "FMU error: instance 'v': no");
+        let e = RunError::Setting {
+            name: "v.m".into(),
+            value: -1.0,
+            error: tb_cosim::invalid("v.m", "out of range"),
+        };
+        assert_eq!(e.to_string(), "setting v.m = -1: v.m: out of range");
+        assert_eq!(RunError::NotFinite(f64::NAN).kind(), FailureKind::NotFinite);
+    }
 }

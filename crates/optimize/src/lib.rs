@@ -12,6 +12,9 @@
 //!   pool and measurement; a candidate's cost over all of them.
 //! - [`remote`]: candidates evaluated in other processes or on other machines (the
 //!   [`Evaluator`] a distributed study uses, the [`StudyEvaluator`] a worker holds).
+//! - [`failure`]: why a candidate's run failed ([`RunError`]: the simulation's own error, a
+//!   setting, a lap, ...), kept as itself through the pool, the laps, the fits and the
+//!   evaluators, and across processes as its kind and message.
 //! - [`rng`]: the seeded generator every random draw comes from; [`exact`]: bit-exact
 //!   floats in checkpoints.
 //! - [`identifiability`]: the identifiability check (finite-difference Jacobian,
@@ -68,13 +71,11 @@ pub use cmaes::{Cmaes, CmaesSettings};
 pub use cost::StepCost;
 pub use driver::run_study;
 pub use error::OptimizeError;
-pub use failure::{EvaluatorError, FailureKind, RunError};
+pub use failure::{EvaluatorError, FailureKind, ObserverError, RunError};
 pub use ga::{Ga, GaSettings};
 pub use identifiability::Identifiability;
 pub use interval::{Intervals, ParameterInterval};
-pub use observe::{
-    GenerationDone, ObserverError, PhaseProgress, StopAfter, StopOnFlag, StudyObserver,
-};
+pub use observe::{GenerationDone, PhaseProgress, StopAfter, StopOnFlag, StudyObserver};
 pub use optimizer::{minimize, GenerationRecord, Optimizer, Problem, RunSettings, RunState};
 pub use options::RunOptions;
 pub use pool::WorkerPool;

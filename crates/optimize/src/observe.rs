@@ -4,6 +4,7 @@
 
 use super::optimizer::GenerationRecord;
 use super::results::StudyResult;
+use crate::failure::ObserverError;
 use std::ops::ControlFlow;
 use std::sync::Arc;
 
@@ -32,10 +33,6 @@ pub trait StudyObserver: Send + Sync {
         Ok(())
     }
 }
-
-/// An observer's own failure (its report that could not be written), of the observer's
-/// own type.
-pub type ObserverError = Box<dyn std::error::Error + Send + Sync>;
 
 /// Where the work after the steps stands, as observers see it.
 #[derive(Clone, Copy, Debug)]

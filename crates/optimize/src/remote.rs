@@ -165,7 +165,7 @@ pub struct StudyEvaluator {
     prepared: Mutex<HashMap<usize, Arc<Vec<PreparedMeasurement>>>>,
     /// The joint fit's signals and the measurement prepared for them, on their first use.
     /// (An error shared: every later point fails with it.)
-    joint: std::sync::OnceLock<Result<JointSignals, Arc<OptimizeError>>>,
+    joint: std::sync::OnceLock<Result<JointSignals, Arc<tb_compare::Error>>>,
 }
 
 impl StudyEvaluator {
