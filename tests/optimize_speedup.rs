@@ -91,7 +91,7 @@ fn speedup_from_1_to_2_threads() {
         walls.push(wall);
     }
     eprintln!("speedup 1 -> 2 threads: {:.2}", walls[0] / walls[1]);
-    let bits = |r: &Vec<Result<f64, String>>| -> Vec<u64> {
+    let bits = |r: &Vec<Result<f64, tb_optimize::RunError>>| -> Vec<u64> {
         r.iter().map(|c| c.as_ref().unwrap().to_bits()).collect()
     };
     assert_eq!(bits(&results[0]), bits(&results[1]));
