@@ -147,7 +147,7 @@ impl Bench {
             for s in signals {
                 out.push(
                     p.on_grid(&o.table, s.as_ref(), true, &mut ws)
-                        .map_err(RunError::Table)?,
+                        .map_err(|e| RunError::Table(Box::new(e)))?,
                 );
             }
         }

@@ -25,13 +25,13 @@ pub enum OptimizeError {
     #[error("step '{step}': the start point cannot be evaluated: {reason}")]
     Start {
         step: String,
-        reason: crate::failure::RunError,
+        reason: Box<crate::failure::RunError>,
     },
     /// The best point a step found fails when it is run again for the result.
     #[error("step '{step}': the start point cannot be evaluated: the best point cannot be re-evaluated: {reason}")]
     BestPoint {
         step: String,
-        reason: crate::failure::RunError,
+        reason: Box<crate::failure::RunError>,
     },
     /// A step that ran and found nothing (every candidate failed).
     #[error("step '{step}': {reason}")]

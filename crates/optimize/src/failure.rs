@@ -15,23 +15,23 @@ use tb_fmi::FmuError;
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
     /// The simulation failed: an FMU's call, its isolated worker (crashed, hung), the
-    /// system.
+    /// system. (Boxed: a candidate's result stays small.)
     #[error("{}", simulation_text(.0))]
-    Simulation(SystemError),
+    Simulation(Box<SystemError>),
     /// A parameter's value cannot be set.
     #[error("setting {name} = {value}: {}", simulation_text(.error))]
     Setting {
         name: String,
         value: f64,
-        error: SystemError,
+        error: Box<SystemError>,
     },
     #[error("{given} values for {expected} parameters")]
     Count { given: usize, expected: usize },
     /// The recording is no comparison table, or a signal of it cannot be put on the grid.
     #[error("{0}")]
-    Table(tb_compare::Error),
+    Table(Box<tb_compare::Error>),
     #[error("comparison: {0}")]
-    Comparison(tb_compare::Error),
+    Comparison(Box<tb_compare::Error>),
     /// One lap of several failed (the lap named).
     #[error("lap '{lap}': {error}")]
     Lap { lap: String, error: Box<RunError> },
@@ -160,7 +160,7 @@ impl RunError {
 
 impl From<SystemError> for RunError {
     fn from(e: SystemError) -> RunError {
-        RunError::Simulation(e)
+        RunError::Simulation(Box::new(e))
     }
 }
 
@@ -225,12 +225,12 @@ mod tests {
             message: "no".into(),
         });
         let e = RunError::from(call);
-        assert!(matches!(&e, RunError::Simulation(SystemError::Fmu(_))));
+        assert!(matches!(&e, RunError::Simulation(s) if matches!(**s, SystemError::Fmu(_))));
         assert_eq!(e.to_string(), "FMU error: instance 'v': no");
         let e = RunError::Setting {
             name: "v.m".into(),
             value: -1.0,
-            error: tb_cosim::invalid("v.m", "out of range"),
+            error: Box::new(tb_cosim::invalid("v.m", "out of range")),
         };
         assert_eq!(e.to_string(), "setting v.m = -1: v.m: out of range");
         assert_eq!(RunError::NotFinite(f64::NAN).kind(), FailureKind::NotFinite);

@@ -32,7 +32,7 @@ pub(crate) fn finish_step(
         .outcomes(&best)
         .map_err(|reason| OptimizeError::BestPoint {
             step: config.name.clone(),
-            reason,
+            reason: Box::new(reason),
         })?;
     let weights = config.weights();
     let bias_weight = problem.cost.bias_weight;
@@ -275,7 +275,7 @@ pub(crate) fn finish_study(
 fn report_failed(reason: crate::failure::RunError) -> OptimizeError {
     OptimizeError::Start {
         step: "report".into(),
-        reason,
+        reason: Box::new(reason),
     }
 }
 
@@ -319,7 +319,7 @@ fn fitted_comparisons(
     let compare = |table: &Table| {
         prepared[0]
             .compare(table, &mut Workspace::new())
-            .map_err(|e| report_failed(crate::RunError::Comparison(e)))
+            .map_err(|e| report_failed(crate::RunError::Comparison(Box::new(e))))
     };
     if session.bench.laps.len() == 1 {
         let before = compare(state.laps.initial.as_ref().expect("made above"))?;

@@ -162,7 +162,7 @@ pub(crate) fn signals_on_grid(
                     .map(|s| {
                         prepared
                             .on_grid(&table, s, true, &mut ws)
-                            .map_err(RunError::Table)
+                            .map_err(|e| RunError::Table(Box::new(e)))
                     })
                     .collect()
             })

@@ -208,7 +208,7 @@ pub(crate) fn at_optimum(
         .map(|s| {
             prepared
                 .on_grid(best, s, true, &mut ws)
-                .map_err(RunError::Table)
+                .map_err(|e| RunError::Table(Box::new(e)))
         })
         .collect();
     let (runs, at_best) = match (runs.into_iter().collect::<Result<Vec<_>, _>>(), at_best) {

@@ -151,7 +151,7 @@ impl WorkerPool {
             let summary = w.sim.run();
             self.runs.fetch_add(1, Ordering::Relaxed);
             summary?;
-            uniform_table(w.sim.recording()).map_err(RunError::Table)
+            uniform_table(w.sim.recording()).map_err(|e| RunError::Table(Box::new(e)))
         })
     }
 
@@ -193,7 +193,7 @@ impl WorkerPool {
             let v = slot.real(x).map_err(|error| RunError::Setting {
                 name: slot.name.clone(),
                 value: x,
-                error,
+                error: Box::new(error),
             })?;
             w.sim.set(slot, v);
         }
@@ -201,10 +201,10 @@ impl WorkerPool {
         self.runs.fetch_add(1, Ordering::Relaxed);
         let summary = summary?;
         *self.run_seconds.lock().unwrap_or_else(|e| e.into_inner()) += summary.wall_time;
-        let table = uniform_table(w.sim.recording()).map_err(RunError::Table)?;
+        let table = uniform_table(w.sim.recording()).map_err(|e| RunError::Table(Box::new(e)))?;
         let comparison = prepared
             .compare(&table, &mut w.ws)
-            .map_err(RunError::Comparison)?;
+            .map_err(|e| RunError::Comparison(Box::new(e)))?;
         Ok(Outcome { comparison, table })
     }
 }
