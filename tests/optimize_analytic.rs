@@ -5,7 +5,8 @@
 use std::ops::ControlFlow;
 use tb_optimize::optimizer::to_unit;
 use tb_optimize::{
-    minimize, Cmaes, CmaesSettings, Ga, GaSettings, Optimizer, Problem, RunSettings, RunState,
+    minimize, Cmaes, CmaesSettings, Ga, GaSettings, Optimizer, Problem, RunError, RunSettings,
+    RunState,
 };
 
 struct Sphere {
@@ -15,7 +16,7 @@ impl Problem for Sphere {
     fn bounds(&self) -> Vec<(f64, f64)> {
         vec![(-5.0, 5.0); self.centre.len()]
     }
-    fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
+    fn evaluate(&self, x: &[f64]) -> Result<f64, RunError> {
         Ok(x.iter()
             .zip(&self.centre)
             .map(|(a, b)| (a - b).powi(2))
@@ -28,7 +29,7 @@ impl Problem for Rosenbrock {
     fn bounds(&self) -> Vec<(f64, f64)> {
         vec![(-2.0, 2.0); 2]
     }
-    fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
+    fn evaluate(&self, x: &[f64]) -> Result<f64, RunError> {
         Ok(100.0 * (x[1] - x[0] * x[0]).powi(2) + (1.0 - x[0]).powi(2))
     }
 }
@@ -39,11 +40,10 @@ impl Problem for Holes {
     fn bounds(&self) -> Vec<(f64, f64)> {
         vec![(0.0, 1.0); 2]
     }
-    fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
+    fn evaluate(&self, x: &[f64]) -> Result<f64, RunError> {
         if x[0] > 0.65 {
-            return Err(format!(
-                "instance 'model' at t = 1.5 s: x0 = {} too large",
-                x[0]
+            return Err(RunError::Problem(
+                format!("instance 'model' at t = 1.5 s: x0 = {} too large", x[0]).into(),
             ));
         }
         Ok((x[0] - 0.5).powi(2) + (x[1] - 0.5).powi(2))

@@ -32,7 +32,7 @@ impl Problem for Lift<'_> {
     fn bounds(&self) -> Vec<(f64, f64)> {
         vec![(0.2, 2.5); 2]
     }
-    fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
+    fn evaluate(&self, x: &[f64]) -> Result<f64, tb_optimize::RunError> {
         // Every parameter of the study at its initial value, the lift coefficients at x.
         let mut p: Vec<f64> = self.bench.assignment().iter().map(|a| a.1).collect();
         p[self.bench.index_of("vehicle.c_lift_front").unwrap()] = x[0];
@@ -91,7 +91,7 @@ fn speedup_from_1_to_2_threads() {
         walls.push(wall);
     }
     eprintln!("speedup 1 -> 2 threads: {:.2}", walls[0] / walls[1]);
-    let bits = |r: &Vec<Result<f64, String>>| -> Vec<u64> {
+    let bits = |r: &Vec<Result<f64, tb_optimize::RunError>>| -> Vec<u64> {
         r.iter().map(|c| c.as_ref().unwrap().to_bits()).collect()
     };
     assert_eq!(bits(&results[0]), bits(&results[1]));

@@ -7,7 +7,9 @@ mod common;
 
 use std::path::Path;
 use std::sync::Arc;
-use tb_optimize::{run_study, RunOptions, StopAfter, Study, StudyOutcome, StudyResult};
+use tb_optimize::{
+    run_study, OptimizeError, RunOptions, StopAfter, Study, StudyOutcome, StudyResult,
+};
 
 fn study_text(optimizer: &str, body: &str) -> String {
     let root = twinbench::pack::workspace_root();
@@ -329,8 +331,9 @@ fn study_bounds_outside_the_declared_range_and_connected_inputs_are_refused() {
         let study = load(dir.path(), &study_text("ga", &body));
         let e = run_study(&study, &options(1, &dir.path().join("cp.json")))
             .err()
-            .unwrap()
-            .to_string();
+            .unwrap();
+        assert!(matches!(e, OptimizeError::File { .. }), "{name}: {e}");
+        let e = e.to_string();
         assert!(e.contains(expected), "{name}: {e}");
     }
 }
@@ -347,7 +350,7 @@ impl tb_optimize::StudyObserver for Watcher {
         self.seen.lock().unwrap().push((g.step, g.workers));
         std::ops::ControlFlow::Continue(())
     }
-    fn finished(&self, _result: &StudyResult) -> Result<(), String> {
+    fn finished(&self, _result: &StudyResult) -> Result<(), tb_optimize::ObserverError> {
         *self.finished.lock().unwrap() += 1;
         Ok(())
     }

@@ -9,7 +9,11 @@
 mod common;
 
 use std::path::Path;
-use tb_optimize::{run_study, RunOptions, Study, StudyOutcome};
+use std::sync::Arc;
+use tb_compare::PreparedMeasurement;
+use tb_cosim::SystemError;
+use tb_fmi::FmuCache;
+use tb_optimize::{run_study, FailureKind, RunError, RunOptions, Study, StudyOutcome, WorkerPool};
 
 /// rls_v.toml with absolute paths and the supplier instance.
 fn system_text(kind: i32, isolate: bool) -> String {
@@ -123,6 +127,58 @@ fn an_isolated_abort_is_a_penalised_candidate_with_its_reason() {
 #[test]
 fn an_isolated_hang_is_a_penalised_candidate_with_its_reason() {
     check(5, true, "no answer within 1s (watchdog)");
+}
+
+/// The worker pool's error for a candidate whose supplier fails at t = 1 s (after a check
+/// that a candidate of another length is refused before anything runs).
+fn pool_failure(kind: i32, isolate: bool) -> RunError {
+    common::fmu_dir();
+    let dir = tempfile::tempdir().unwrap();
+    let sys = dir.path().join("system.toml");
+    std::fs::write(&sys, system_text(kind, isolate)).unwrap();
+    let study_path = dir.path().join("study.toml");
+    std::fs::write(&study_path, study_text(&sys)).unwrap();
+    let study = Study::load(&study_path).unwrap();
+    let pool = WorkerPool::new(&study, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
+    let prepared =
+        PreparedMeasurement::from_path(&study.measurement_path, &["Fz_sum"], &study.file.compare)
+            .unwrap();
+    let mut x: Vec<f64> = pool.assignment().iter().map(|a| a.1).collect();
+    assert!(matches!(
+        pool.run(&x[1..], &prepared),
+        Err(RunError::Count { .. })
+    ));
+    x[pool.index_of("supplier.fault_time").unwrap()] = 1.0;
+    pool.run(&x, &prepared)
+        .err()
+        .expect("the fault fails the run")
+}
+
+#[test]
+fn a_failed_candidate_keeps_its_kind_through_the_pool_and_across_processes() {
+    let e = pool_failure(1, false);
+    assert!(
+        matches!(&e, RunError::Simulation(s) if matches!(**s, SystemError::Fmu(_))),
+        "{e}"
+    );
+    assert_eq!(e.kind(), FailureKind::Fmu);
+    let e = pool_failure(3, false);
+    assert!(
+        matches!(&e, RunError::Simulation(s) if matches!(**s, SystemError::NotFinite { .. })),
+        "{e}"
+    );
+    let e = pool_failure(4, true);
+    assert_eq!(e.kind(), FailureKind::Worker, "{e}");
+    // A Dask task's failure crosses processes as its kind and message, and comes back so.
+    let back = RunError::from_wire(e.kind().name(), e.to_string());
+    assert!(matches!(
+        &back,
+        RunError::Remote {
+            kind: FailureKind::Worker,
+            ..
+        }
+    ));
+    assert_eq!(back.to_string(), e.to_string());
 }
 
 // ---- SIGKILL and resume ----

@@ -236,9 +236,9 @@ fn replays_are_refused_with_a_clear_error() {
     let sys = Plan::load(&path, cache).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("x.ssp");
-    let e = tb_cosim::ssp::export(&sys, &out, &Default::default())
-        .unwrap_err()
-        .to_string();
+    let e = tb_cosim::ssp::export(&sys, &out, &Default::default()).unwrap_err();
+    assert!(matches!(e, tb_cosim::ssp::SspError::Unsupported(_)), "{e}");
+    let e = e.to_string();
     assert!(e.contains("replay") && e.contains("SSP 1.0"), "{e}");
     assert!(!out.exists());
     // The file itself stays usable in SSP-free form: a system without replays exports.

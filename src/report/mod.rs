@@ -157,7 +157,7 @@ impl ReportWriter {
 }
 
 impl tb_optimize::StudyObserver for ReportWriter {
-    fn finished(&self, result: &StudyResult) -> Result<(), String> {
+    fn finished(&self, result: &StudyResult) -> Result<(), tb_optimize::ObserverError> {
         let files = write_report(&self.study, result, &self.folder).map_err(|e| e.to_string())?;
         *self.written.lock().unwrap_or_else(|p| p.into_inner()) = Some(files);
         Ok(())

@@ -198,11 +198,11 @@ impl Algorithm {
     }
 
     /// The algorithm of a name; the error lists the names there are.
-    pub fn from_name(name: &str) -> Result<Algorithm, String> {
+    pub fn from_name(name: &str) -> Result<Algorithm, UnknownName> {
         Algorithm::ALL
             .into_iter()
             .find(|a| a.name() == name)
-            .ok_or_else(|| format!("unknown algorithm \"{name}\" ({})", Algorithm::names()))
+            .ok_or_else(|| UnknownName::Algorithm { name: name.into() })
     }
 
     /// `gauss-seidel, jacobi`.
@@ -241,13 +241,11 @@ impl StepConvention {
         }
     }
 
-    pub fn from_name(name: &str) -> Result<Self, String> {
+    pub fn from_name(name: &str) -> Result<Self, UnknownName> {
         Self::ALL
             .into_iter()
             .find(|c| c.name() == name)
-            .ok_or_else(|| {
-                format!("step_convention = \"{name}\" is not one of \"h\" (the step h itself) or \"grid\" (t[n+1] - t[n], as FMPy)")
-            })
+            .ok_or_else(|| UnknownName::StepConvention { name: name.into() })
     }
 }
 
@@ -256,6 +254,15 @@ impl<'de> Deserialize<'de> for StepConvention {
         let name = String::deserialize(d)?;
         StepConvention::from_name(&name).map_err(serde::de::Error::custom)
     }
+}
+
+/// A name of the system file's that names nothing: the error lists the names there are.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum UnknownName {
+    #[error("unknown algorithm \"{name}\" ({})", Algorithm::names())]
+    Algorithm { name: String },
+    #[error("step_convention = \"{name}\" is not one of \"h\" (the step h itself) or \"grid\" (t[n+1] - t[n], as FMPy)")]
+    StepConvention { name: String },
 }
 
 /// `stop = 100.0` (a time, s) or `stop = "vehicle.lap >= 1"` (a condition on a signal);

@@ -45,6 +45,20 @@ pub enum SystemError {
     Ssp(Box<ssp_import::SspImportError>),
     #[error("{context}: {message}")]
     Invalid { context: String, message: String },
+    /// A connection that cannot convert what it carries (`context`: the system file and
+    /// the connection; `hint`: how to fix a replayed column's unit, else empty).
+    #[error("{context}: {error}{hint}")]
+    Conversion {
+        context: String,
+        error: plan::ConversionError,
+        hint: String,
+    },
+    /// The units cannot be stepped in an order (`context`: the system file).
+    #[error("{context}: {error}")]
+    Order {
+        context: String,
+        error: plan::OrderError,
+    },
     #[error("replay '{name}' ({path}): {message}")]
     Replay {
         name: String,
@@ -62,6 +76,13 @@ pub enum SystemError {
     },
     #[error("{0}")]
     Stop(String),
+    /// An observer's own input or output failed (the file it writes, the pipe it reads):
+    /// the run fails with it, named by the observer.
+    #[error("observer '{observer}': {error}")]
+    Observer {
+        observer: String,
+        error: std::io::Error,
+    },
     /// An FMU asked to end the simulation (a step returned `fmi2Discard` with
     /// `fmi2Terminated` true): the run ends normally at its last successful time. Only seen
     /// between the master's step and its run loop.

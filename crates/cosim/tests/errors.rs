@@ -5,6 +5,7 @@
 mod support;
 
 use support::{assert_contains, Bench};
+use tb_cosim::plan::OrderError;
 use tb_cosim::{SystemError, SystemFile};
 
 /// A gain `g`, an integrator `int` and a sink `snk`, with `connections`.
@@ -158,7 +159,18 @@ fmu = "gain"
 step = 0.5
 stop = 1.0
 "#;
-    let e = b.error(text);
+    let e = b.plan(text).err().expect("refused");
+    assert!(
+        matches!(
+            &e,
+            SystemError::Order {
+                error: OrderError::AlgebraicLoop { .. },
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = e.to_string();
     assert_contains(
         &e,
         &["direct feed-through cycle (an algebraic loop): a.u -> a.y -> b.u -> b.y -> a.u"],
@@ -328,11 +340,32 @@ fn experiment_values_that_cannot_be_run_are_refused() {
         let e = b.error(&experiment(lines));
         assert_contains(&e, &["system.toml", expected]);
     }
-    let e = b.error(&format!(
-        "{}[[instance]]\nname = \"g\"\nfmu = \"gain\"\n",
-        experiment("step = 0.1\nstop = 1.0\norder = [\"int\"]")
+    let e = b
+        .plan(&format!(
+            "{}[[instance]]\nname = \"g\"\nfmu = \"gain\"\n",
+            experiment("step = 0.1\nstop = 1.0\norder = [\"int\"]")
+        ))
+        .err()
+        .expect("refused");
+    assert!(
+        matches!(&e, SystemError::Order { error: OrderError::Missing { name }, .. } if name == "g"),
+        "{e}"
+    );
+    let order_error = |order: &str| {
+        let lines = format!("step = 0.1\nstop = 1.0\norder = {order}");
+        match b.plan(&experiment(&lines)).err().expect("refused") {
+            SystemError::Order { error, .. } => error,
+            other => panic!("{other}"),
+        }
+    };
+    assert!(matches!(
+        order_error("[\"int\", \"int\"]"),
+        OrderError::Twice { .. }
     ));
-    assert_contains(&e, &["experiment.order: 'g' is missing"]);
+    assert!(matches!(
+        order_error("[\"nope\"]"),
+        OrderError::UnknownInstance { .. }
+    ));
     let e = b.error(&format!(
         "{}[record]\ndecimation = 0\n",
         experiment("step = 0.1\nstop = 1.0")

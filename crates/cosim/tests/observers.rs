@@ -83,7 +83,10 @@ impl RunObserver for Watcher {
         self.seen.lock().unwrap().moments.push((moment, t, x, y));
         if let (Moment::Step { k, .. }, Some(at)) = (moment, self.fail_at) {
             if k == at {
-                return Err(SystemError::Stop(format!("the watcher failed at step {k}")));
+                return Err(SystemError::Observer {
+                    observer: "watcher".into(),
+                    error: std::io::Error::other(format!("cannot write step {k}")),
+                });
             }
         }
         match self.end_at {
@@ -205,8 +208,9 @@ fn an_observers_error_fails_the_run_and_taking_it_off_runs_again() {
     let (mut failing, seen) = Watcher::new(&sim);
     failing.fail_at = Some(3);
     sim.observe(Box::new(failing));
-    let e = sim.run().unwrap_err().to_string();
-    assert_eq!(e, "the watcher failed at step 3");
+    let e = sim.run().unwrap_err();
+    assert!(matches!(&e, SystemError::Observer { observer, .. } if observer == "watcher"));
+    assert_eq!(e.to_string(), "observer 'watcher': cannot write step 3");
     assert!(seen.lock().unwrap().finished.is_empty());
     assert_eq!(sim.take_observers().len(), 1);
     let (plain, _) = b.run(&text);

@@ -7,6 +7,7 @@ use super::cost::{cost_of, StepCost};
 use super::pool::{Outcome, WorkerPool};
 use super::study::{Lap, Study};
 use crate::error::OptimizeError;
+use crate::failure::RunError;
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::Arc;
@@ -61,10 +62,10 @@ impl Bench {
         &self,
         signals: &[S],
         compare: &CompareSettings,
-    ) -> Result<Vec<PreparedMeasurement>, OptimizeError> {
+    ) -> Result<Vec<PreparedMeasurement>, tb_compare::Error> {
         self.laps
             .iter()
-            .map(|l| Ok(PreparedMeasurement::new(&l.measurement, signals, compare)?))
+            .map(|l| PreparedMeasurement::new(&l.measurement, signals, compare))
             .collect()
     }
 
@@ -88,7 +89,7 @@ impl Bench {
         cost: &StepCost,
         values: &[f64],
         prepared: &[PreparedMeasurement],
-    ) -> Result<f64, String> {
+    ) -> Result<f64, RunError> {
         if self.laps.len() == 1 {
             return cost.of(&self.laps[0].workers, values, &prepared[0]);
         }
@@ -112,8 +113,8 @@ impl Bench {
         &self,
         values: &[f64],
         prepared: &[PreparedMeasurement],
-    ) -> Result<Vec<Outcome>, String> {
-        let runs: Vec<Result<Outcome, String>> = self
+    ) -> Result<Vec<Outcome>, RunError> {
+        let runs: Vec<Result<Outcome, RunError>> = self
             .laps
             .par_iter()
             .zip(prepared)
@@ -121,7 +122,10 @@ impl Bench {
             .map(|(l, p)| {
                 l.workers.run(values, p).map_err(|e| match self.laps.len() {
                     1 => e,
-                    _ => format!("lap '{}': {e}", l.lap.name),
+                    _ => RunError::Lap {
+                        lap: l.lap.name.clone(),
+                        error: Box::new(e),
+                    },
                 })
             })
             .collect();
@@ -136,14 +140,14 @@ impl Bench {
         values: &[f64],
         prepared: &[PreparedMeasurement],
         signals: &[S],
-    ) -> Result<GridSignals, String> {
+    ) -> Result<GridSignals, RunError> {
         let mut ws = Workspace::new();
         let mut out = Vec::with_capacity(prepared.len() * signals.len());
         for (o, p) in self.outcomes(values, prepared)?.iter().zip(prepared) {
             for s in signals {
                 out.push(
                     p.on_grid(&o.table, s.as_ref(), true, &mut ws)
-                        .map_err(|e| e.to_string())?,
+                        .map_err(|e| RunError::Table(Box::new(e)))?,
                 );
             }
         }

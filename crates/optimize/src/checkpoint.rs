@@ -90,20 +90,70 @@ const CHECKPOINT_VERSION: u32 = 2;
 const HEAD: &str = "{\"sha256\":\"";
 const MIDDLE: &str = "\",\"checkpoint\":";
 
+/// Why a checkpoint file cannot be resumed from: its wrapping, or what it says against the
+/// study. `step` counts from 1.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum CheckpointProblem {
+    #[error("not a twinbench checkpoint of this version (no digest at its start)")]
+    NoDigest,
+    #[error("a truncated digest")]
+    TruncatedDigest,
+    #[error("not a twinbench checkpoint (its wrapping is damaged)")]
+    Wrapping,
+    #[error("its content does not match its SHA-256: the file was edited or damaged (start without --resume)")]
+    Digest,
+    #[error("{completed} completed steps, the study has {steps}")]
+    TooManySteps { completed: usize, steps: usize },
+    #[error("completed step {step} is '{name}' (number {number}), the study's step {step} is '{expected}'")]
+    OtherStep {
+        step: usize,
+        name: String,
+        number: usize,
+        expected: String,
+    },
+    #[error("completed step {step}: parameters {names:?}, the study's are {expected:?}")]
+    OtherParameters {
+        step: usize,
+        names: Vec<String>,
+        expected: Vec<String>,
+    },
+    #[error("completed step {step}: '{name}' = {exact:?} (printed {printed:?}) is not a value within [{min}, {max}]")]
+    OutOfBounds {
+        step: usize,
+        name: String,
+        exact: f64,
+        printed: f64,
+        min: f64,
+        max: f64,
+    },
+    #[error("completed step {step}: a cost of {cost:?}")]
+    Cost { step: usize, cost: f64 },
+    #[error("the step under way is number {step}, after {completed} completed")]
+    UnderWay { step: usize, completed: usize },
+    #[error(
+        "step {step} under way: its start {x0:?} (cost {cost:?}) is not within the step's bounds"
+    )]
+    Start {
+        step: usize,
+        x0: Vec<f64>,
+        cost: f64,
+    },
+}
+
 /// The checkpoint's JSON inside a file, its digest checked.
-fn unwrap_digest(text: &str) -> Result<&str, String> {
-    let rest = text
-        .strip_prefix(HEAD)
-        .ok_or("not a twinbench checkpoint of this version (no digest at its start)")?;
-    let (digest, rest) = rest.split_at_checked(64).ok_or("a truncated digest")?;
+fn unwrap_digest(text: &str) -> Result<&str, CheckpointProblem> {
+    let rest = text.strip_prefix(HEAD).ok_or(CheckpointProblem::NoDigest)?;
+    let (digest, rest) = rest
+        .split_at_checked(64)
+        .ok_or(CheckpointProblem::TruncatedDigest)?;
     let body = rest
         .strip_prefix(MIDDLE)
         .and_then(|b| b.trim_end().strip_suffix('}'))
-        .ok_or("not a twinbench checkpoint (its wrapping is damaged)")?;
+        .ok_or(CheckpointProblem::Wrapping)?;
     use sha2::Digest;
     let actual = format!("{:x}", sha2::Sha256::digest(body.as_bytes()));
     if actual != digest {
-        return Err("its content does not match its SHA-256: the file was edited or damaged (start without --resume)".into());
+        return Err(CheckpointProblem::Digest);
     }
     Ok(body)
 }
@@ -152,9 +202,11 @@ impl Checkpoint {
     fn read(path: &Path, study: &Study) -> Result<Checkpoint, OptimizeError> {
         let text = tb_files::input::read_to_string(path, tb_files::Limit::CONFIG)
             .map_err(|e| OptimizeError::Checkpoint(e.to_string()))?;
-        let bad = |m: String| OptimizeError::Checkpoint(format!("{}: {m}", path.display()));
-        let body = unwrap_digest(&text).map_err(bad)?;
-        let c: Checkpoint = serde_json::from_str(body).map_err(|e| bad(e.to_string()))?;
+        let bad = |m: &dyn std::fmt::Display| {
+            OptimizeError::Checkpoint(format!("{}: {m}", path.display()))
+        };
+        let body = unwrap_digest(&text).map_err(|e| bad(&e))?;
+        let c: Checkpoint = serde_json::from_str(body).map_err(|e| bad(&e))?;
         if c.version != CHECKPOINT_VERSION {
             return Err(OptimizeError::Checkpoint(format!(
                 "{}: version {} (expected {CHECKPOINT_VERSION})",
@@ -168,39 +220,38 @@ impl Checkpoint {
                 path.display()
             )));
         }
-        c.check(study).map_err(bad)?;
+        c.check(study).map_err(|e| bad(&e))?;
         Ok(c)
     }
 
     /// What the checkpoint says fits the study: the completed steps are its first steps in
     /// order, with its parameters, values within their bounds (the printed ones the exact
     /// ones), finite costs; the step under way is the next one, its start within bounds.
-    fn check(&self, study: &Study) -> Result<(), String> {
+    fn check(&self, study: &Study) -> Result<(), CheckpointProblem> {
         let steps = &study.file.steps;
         if self.completed.len() > steps.len() {
-            return Err(format!(
-                "{} completed steps, the study has {}",
-                self.completed.len(),
-                steps.len()
-            ));
+            return Err(CheckpointProblem::TooManySteps {
+                completed: self.completed.len(),
+                steps: steps.len(),
+            });
         }
         for (k, (done, step)) in self.completed.iter().zip(steps).enumerate() {
-            let at = format!("completed step {}", k + 1);
+            let at = k + 1;
             if done.step != k + 1 || done.name != step.name {
-                return Err(format!(
-                    "{at} is '{}' (number {}), the study's step {} is '{}'",
-                    done.name,
-                    done.step,
-                    k + 1,
-                    step.name
-                ));
+                return Err(CheckpointProblem::OtherStep {
+                    step: at,
+                    name: done.name.clone(),
+                    number: done.step,
+                    expected: step.name.clone(),
+                });
             }
-            let names: Vec<&str> = done.parameters.iter().map(|p| p.name.as_str()).collect();
+            let names: Vec<String> = done.parameters.iter().map(|p| p.name.clone()).collect();
             if names != step.parameter_names() || done.after_exact.len() != names.len() {
-                return Err(format!(
-                    "{at}: parameters {names:?}, the study's are {:?}",
-                    step.parameter_names()
-                ));
+                return Err(CheckpointProblem::OtherParameters {
+                    step: at,
+                    names,
+                    expected: step.parameter_names(),
+                });
             }
             for ((p, exact), bound) in done
                 .parameters
@@ -210,26 +261,29 @@ impl Checkpoint {
             {
                 if p.after.to_bits() != exact.to_bits() || !(bound.min..=bound.max).contains(exact)
                 {
-                    return Err(format!(
-                        "{at}: '{}' = {:?} (printed {:?}) is not a value within [{}, {}]",
-                        p.name, exact, p.after, bound.min, bound.max
-                    ));
+                    return Err(CheckpointProblem::OutOfBounds {
+                        step: at,
+                        name: p.name.clone(),
+                        exact: *exact,
+                        printed: p.after,
+                        min: bound.min,
+                        max: bound.max,
+                    });
                 }
             }
             for x in [done.cost_before, done.cost_after] {
                 if !(x.is_finite() && x >= 0.0) {
-                    return Err(format!("{at}: a cost of {x:?}"));
+                    return Err(CheckpointProblem::Cost { step: at, cost: x });
                 }
             }
         }
         if let Some(c) = &self.current {
             let step = steps.get(c.step).filter(|_| c.step == self.completed.len());
             let Some(step) = step else {
-                return Err(format!(
-                    "the step under way is number {}, after {} completed",
-                    c.step + 1,
-                    self.completed.len()
-                ));
+                return Err(CheckpointProblem::UnderWay {
+                    step: c.step + 1,
+                    completed: self.completed.len(),
+                });
             };
             let inside = c.start.x0.len() == step.parameters.len()
                 && c.start
@@ -238,12 +292,11 @@ impl Checkpoint {
                     .zip(&step.parameters)
                     .all(|(x, p)| (p.min..=p.max).contains(x));
             if !(inside && c.start.cost_before.is_finite() && c.start.cost_before >= 0.0) {
-                return Err(format!(
-                    "step {} under way: its start {:?} (cost {:?}) is not within the step's bounds",
-                    c.step + 1,
-                    c.start.x0,
-                    c.start.cost_before
-                ));
+                return Err(CheckpointProblem::Start {
+                    step: c.step + 1,
+                    x0: c.start.x0.clone(),
+                    cost: c.start.cost_before,
+                });
             }
         }
         Ok(())

@@ -45,7 +45,7 @@ impl StepCost {
         workers: &WorkerPool,
         values: &[f64],
         prepared: &PreparedMeasurement,
-    ) -> Result<f64, String> {
+    ) -> Result<f64, crate::RunError> {
         let o = workers.run(values, prepared)?;
         Ok(cost_of(
             &o.comparison,

@@ -23,7 +23,16 @@ pub enum OptimizeError {
     #[error("thread pool: {0}")]
     Threads(String),
     #[error("step '{step}': the start point cannot be evaluated: {reason}")]
-    Start { step: String, reason: String },
+    Start {
+        step: String,
+        reason: Box<crate::failure::RunError>,
+    },
+    /// The best point a step found fails when it is run again for the result.
+    #[error("step '{step}': the start point cannot be evaluated: the best point cannot be re-evaluated: {reason}")]
+    BestPoint {
+        step: String,
+        reason: Box<crate::failure::RunError>,
+    },
     /// A step that ran and found nothing (every candidate failed).
     #[error("step '{step}': {reason}")]
     StepFailed { step: String, reason: String },
@@ -32,8 +41,8 @@ pub enum OptimizeError {
     /// The evaluator of a distributed study failed (not a candidate: the study stops, its
     /// checkpoint holds the last whole generation).
     #[error("evaluating candidates: {0}")]
-    Evaluator(String),
+    Evaluator(crate::failure::EvaluatorError),
     /// An observer of the study failed at its end (the report could not be written).
     #[error("{0}")]
-    Observer(String),
+    Observer(crate::failure::ObserverError),
 }

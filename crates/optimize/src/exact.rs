@@ -8,10 +8,21 @@ pub fn encode(x: f64) -> String {
     format!("{:016x}", x.to_bits())
 }
 
-pub fn decode(s: &str) -> Result<f64, String> {
+/// A checkpoint's text that is no bit-exact float.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("'{text}' is not a 16-digit hex float: {error}")]
+pub struct NotHexFloat {
+    pub text: String,
+    pub error: std::num::ParseIntError,
+}
+
+pub fn decode(s: &str) -> Result<f64, NotHexFloat> {
     u64::from_str_radix(s, 16)
         .map(f64::from_bits)
-        .map_err(|e| format!("'{s}' is not a 16-digit hex float: {e}"))
+        .map_err(|error| NotHexFloat {
+            text: s.into(),
+            error,
+        })
 }
 
 pub mod f64 {

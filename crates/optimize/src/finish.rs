@@ -30,9 +30,9 @@ pub(crate) fn finish_step(
     refuse_if_nothing_found(config, &begun.run)?;
     let mut after = problem
         .outcomes(&best)
-        .map_err(|reason| OptimizeError::Start {
+        .map_err(|reason| OptimizeError::BestPoint {
             step: config.name.clone(),
-            reason: format!("the best point cannot be re-evaluated: {reason}"),
+            reason: Box::new(reason),
         })?;
     let weights = config.weights();
     let bias_weight = problem.cost.bias_weight;
@@ -272,10 +272,10 @@ pub(crate) fn finish_study(
 }
 
 /// A run or a comparison for the study's result that failed.
-fn report_failed(reason: String) -> OptimizeError {
+fn report_failed(reason: crate::failure::RunError) -> OptimizeError {
     OptimizeError::Start {
         step: "report".into(),
-        reason,
+        reason: Box::new(reason),
     }
 }
 
@@ -319,7 +319,7 @@ fn fitted_comparisons(
     let compare = |table: &Table| {
         prepared[0]
             .compare(table, &mut Workspace::new())
-            .map_err(|e| report_failed(format!("comparison: {e}")))
+            .map_err(|e| report_failed(crate::RunError::Comparison(Box::new(e))))
     };
     if session.bench.laps.len() == 1 {
         let before = compare(state.laps.initial.as_ref().expect("made above"))?;

@@ -36,6 +36,7 @@
 use super::block::Block;
 use super::cmaes::symmetric_eigen;
 use super::interval::REL_STEP;
+use crate::failure::RunError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -84,7 +85,25 @@ pub(crate) struct Series<'a> {
 }
 
 /// A lap's signals on the grid, one (covered range, values) per [`Series`].
-pub(crate) type Simulated = Result<crate::bench::GridSignals, String>;
+pub(crate) type Simulated = Result<crate::bench::GridSignals, RunError>;
+
+/// Why a fit cannot start or go on: a lap that failed, or laps that do not cover what the
+/// fit compares.
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    #[error(transparent)]
+    Run(#[from] RunError),
+    #[error("the laps and the measurement share no stretch of {signal}")]
+    NoSharedStretch { signal: String },
+    #[error("a lap does not cover the compared stretch of {signal} (grid points {start}..{end})")]
+    NotCovered {
+        signal: String,
+        start: usize,
+        end: usize,
+    },
+    #[error("the twin matches the measurement exactly (no residual to weigh the signals by)")]
+    ExactMatch,
+}
 
 /// Runs the laps at a batch of points, the results in the points' order: on this
 /// process's threads ([`on_pool`]) or on an [`crate::Evaluator`]'s workers.
@@ -199,7 +218,7 @@ impl<'a, F: Laps> Frame<'a, F> {
         bounds: Vec<(f64, f64)>,
         x0: &[f64],
         simulate: F,
-    ) -> Result<Started<'a, F>, String> {
+    ) -> Result<Started<'a, F>, FitError> {
         let p = x0.len();
         let mut points = vec![x0.to_vec()];
         points.extend(
@@ -207,8 +226,9 @@ impl<'a, F: Laps> Frame<'a, F> {
                 .into_iter()
                 .map(|(_, y)| y),
         );
-        let runs: Vec<Vec<(Range<usize>, Vec<f64>)>> =
-            simulate(&points).into_iter().collect::<Result<_, _>>()?;
+        let runs: Vec<Vec<(Range<usize>, Vec<f64>)>> = simulate(&points)
+            .into_iter()
+            .collect::<Result<_, RunError>>()?;
         let mut ranges = Vec::new();
         for (b, s) in series.iter().enumerate() {
             let lo = runs.iter().map(|r| r[b].0.start).max().unwrap_or(0);
@@ -221,10 +241,9 @@ impl<'a, F: Laps> Frame<'a, F> {
             let margin = (hi.saturating_sub(lo)) / 50;
             let (lo, hi) = (lo + margin, hi.saturating_sub(margin));
             if hi <= lo + 2 {
-                return Err(format!(
-                    "the laps and the measurement share no stretch of {}",
-                    s.name
-                ));
+                return Err(FitError::NoSharedStretch {
+                    signal: s.name.clone(),
+                });
             }
             ranges.push(lo..hi);
         }
@@ -252,10 +271,7 @@ impl<'a, F: Laps> Frame<'a, F> {
             })
             .collect();
         if frame.scale.iter().any(|c| !c.is_finite()) {
-            return Err(
-                "the twin matches the measurement exactly (no residual to weigh the signals by)"
-                    .into(),
-            );
+            return Err(FitError::ExactMatch);
         }
         let sens = frame.sensitivities(x0, &raws[1..], &vec![true; p]);
         let raw0 = raws.into_iter().next().expect("the lap at x0");
@@ -273,7 +289,7 @@ impl<'a, F: Laps> Frame<'a, F> {
     }
 
     /// A lap's residuals on the frame's ranges (an error when it does not cover them).
-    fn raw(&self, run: &[(Range<usize>, Vec<f64>)]) -> Result<Raw, String> {
+    fn raw(&self, run: &[(Range<usize>, Vec<f64>)]) -> Result<Raw, FitError> {
         self.series
             .iter()
             .zip(&self.ranges)
@@ -281,10 +297,11 @@ impl<'a, F: Laps> Frame<'a, F> {
             .enumerate()
             .map(|(b, ((s, want), (got, y)))| {
                 if got.start > want.start || got.end < want.end {
-                    return Err(format!(
-                        "a lap does not cover the compared stretch of {} (grid points {}..{})",
-                        s.name, want.start, want.end
-                    ));
+                    return Err(FitError::NotCovered {
+                        signal: s.name.clone(),
+                        start: want.start,
+                        end: want.end,
+                    });
                 }
                 let shift = self.shift.as_ref().map(|shift| &shift[b]);
                 Ok(want
@@ -347,12 +364,12 @@ impl<'a, F: Laps> Frame<'a, F> {
     }
 
     /// Runs the laps at `points` in parallel; their residuals.
-    fn run(&self, points: &[Vec<f64>]) -> Vec<Result<Raw, String>> {
+    fn run(&self, points: &[Vec<f64>]) -> Vec<Result<Raw, FitError>> {
         self.laps
             .fetch_add(points.len(), std::sync::atomic::Ordering::Relaxed);
         (self.simulate)(points)
             .into_iter()
-            .map(|r| r.and_then(|r| self.raw(&r)))
+            .map(|r| r.map_err(FitError::from).and_then(|r| self.raw(&r)))
             .collect()
     }
 
@@ -376,7 +393,7 @@ impl<'a, F: Laps> Frame<'a, F> {
     }
 
     /// The sensitivities at `x` for the `free` parameters: 2 laps each.
-    fn sensitivities_at(&self, x: &[f64], free: &[bool]) -> Result<Vec<Option<Raw>>, String> {
+    fn sensitivities_at(&self, x: &[f64], free: &[bool]) -> Result<Vec<Option<Raw>>, FitError> {
         let points: Vec<Vec<f64>> = around(x, &self.bounds, free)
             .into_iter()
             .map(|(_, y)| y)
@@ -622,7 +639,7 @@ impl<'a, F: Laps> Frame<'a, F> {
 
     /// The residuals and the forward-difference sensitivities of the `free` parameters at
     /// `x`: 1 + 1 per free parameter laps, in one batch.
-    pub fn start(&self, x: &[f64], free: &[bool]) -> Result<(Raw, Vec<Option<Raw>>), String> {
+    pub fn start(&self, x: &[f64], free: &[bool]) -> Result<(Raw, Vec<Option<Raw>>), FitError> {
         let forward = forward_points(x, &self.bounds, free);
         let mut points = vec![x.to_vec()];
         points.extend(forward.iter().map(|(_, y)| y.clone()));

@@ -16,6 +16,7 @@
 
 use super::cmaes::symmetric_eigen;
 use super::study::StepConfig;
+use crate::failure::RunError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -59,7 +60,7 @@ pub struct Identifiability {
 const REL_STEP: f64 = 0.02;
 
 /// Per run: each signal's covered grid range and filtered values on it.
-type Residuals = Result<Vec<(Range<usize>, Vec<f64>)>, String>;
+type Residuals = Result<Vec<(Range<usize>, Vec<f64>)>, RunError>;
 
 /// The check of a step around `x0`: 2 runs per parameter, in parallel on `pool`, each a
 /// lap of the twin that `run` makes with the step's parameters at a point, its signals
@@ -71,7 +72,7 @@ pub(crate) fn check(
     bounds: &[(f64, f64)],
     prepared: &PreparedMeasurement,
     pool: &rayon::ThreadPool,
-    run: impl Fn(&[f64]) -> Result<Table, String> + Sync,
+    run: impl Fn(&[f64]) -> Result<Table, RunError> + Sync,
 ) -> Identifiability {
     // A parameter's scale: its start value, or the span of its bounds when that is 0.
     let scale: Vec<f64> = x0
@@ -135,7 +136,7 @@ fn residuals(
     step: &StepConfig,
     prepared: &PreparedMeasurement,
     pool: &rayon::ThreadPool,
-    run: impl Fn(&[f64]) -> Result<Table, String> + Sync,
+    run: impl Fn(&[f64]) -> Result<Table, RunError> + Sync,
 ) -> Vec<Residuals> {
     signals_on_grid(points, &step.signals, prepared, pool, run)
 }
@@ -147,7 +148,7 @@ pub(crate) fn signals_on_grid(
     signals: &[String],
     prepared: &PreparedMeasurement,
     pool: &rayon::ThreadPool,
-    run: impl Fn(&[f64]) -> Result<Table, String> + Sync,
+    run: impl Fn(&[f64]) -> Result<Table, RunError> + Sync,
 ) -> Vec<Residuals> {
     pool.install(|| {
         points
@@ -161,7 +162,7 @@ pub(crate) fn signals_on_grid(
                     .map(|s| {
                         prepared
                             .on_grid(&table, s, true, &mut ws)
-                            .map_err(|e| e.to_string())
+                            .map_err(|e| RunError::Table(Box::new(e)))
                     })
                     .collect()
             })
@@ -210,7 +211,7 @@ fn jacobian(
         }
     } else {
         for r in residuals.into_iter().filter_map(|r| r.err()) {
-            failures.push(r);
+            failures.push(r.to_string());
         }
         for b in blocks.iter_mut() {
             for c in b.iter_mut() {

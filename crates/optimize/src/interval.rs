@@ -33,6 +33,7 @@
 //! statement in words.
 
 use crate::block::Block;
+use crate::failure::RunError;
 use crate::long_run::{scores_meat, MIN_BANDWIDTH};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -184,7 +185,7 @@ pub(crate) fn at_optimum(
     prepared: &PreparedMeasurement,
     best: &Table,
     pool: &rayon::ThreadPool,
-    run: impl Fn(&[f64]) -> Result<Table, String> + Sync,
+    run: impl Fn(&[f64]) -> Result<Table, RunError> + Sync,
 ) -> Intervals {
     let p = x.len();
     let h: Vec<f64> = x
@@ -202,12 +203,12 @@ pub(crate) fn at_optimum(
     let laps = points.len();
     let runs = super::identifiability::signals_on_grid(&points, signals, prepared, pool, run);
     let mut ws = Workspace::new();
-    let at_best: Result<Vec<_>, String> = signals
+    let at_best: Result<Vec<_>, RunError> = signals
         .iter()
         .map(|s| {
             prepared
                 .on_grid(best, s, true, &mut ws)
-                .map_err(|e| e.to_string())
+                .map_err(|e| RunError::Table(Box::new(e)))
         })
         .collect();
     let (runs, at_best) = match (runs.into_iter().collect::<Result<Vec<_>, _>>(), at_best) {

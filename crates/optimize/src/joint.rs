@@ -225,7 +225,12 @@ where
                     })
                 })
                 .collect(),
-            Err(why) => vec![Err(format!("the evaluator failed: {why}")); points.len()],
+            Err(why) => {
+                let why = std::sync::Arc::new(why);
+                (0..points.len())
+                    .map(|_| Err(crate::RunError::Evaluator(why.clone())))
+                    .collect()
+            }
         }
     }
 }

@@ -12,6 +12,9 @@
 //!   pool and measurement; a candidate's cost over all of them.
 //! - [`remote`]: candidates evaluated in other processes or on other machines (the
 //!   [`Evaluator`] a distributed study uses, the [`StudyEvaluator`] a worker holds).
+//! - [`failure`]: why a candidate's run failed ([`RunError`]: the simulation's own error, a
+//!   setting, a lap, ...), kept as itself through the pool, the laps, the fits and the
+//!   evaluators, and across processes as its kind and message.
 //! - [`rng`]: the seeded generator every random draw comes from; [`exact`]: bit-exact
 //!   floats in checkpoints.
 //! - [`identifiability`]: the identifiability check (finite-difference Jacobian,
@@ -41,6 +44,7 @@ mod cost;
 pub mod driver;
 pub mod error;
 pub mod exact;
+pub mod failure;
 mod finish;
 pub mod fit;
 pub mod ga;
@@ -67,6 +71,7 @@ pub use cmaes::{Cmaes, CmaesSettings};
 pub use cost::StepCost;
 pub use driver::run_study;
 pub use error::OptimizeError;
+pub use failure::{EvaluatorError, FailureKind, ObserverError, RunError};
 pub use ga::{Ga, GaSettings};
 pub use identifiability::Identifiability;
 pub use interval::{Intervals, ParameterInterval};

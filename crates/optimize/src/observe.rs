@@ -4,6 +4,7 @@
 
 use super::optimizer::GenerationRecord;
 use super::results::StudyResult;
+use crate::failure::ObserverError;
 use std::ops::ControlFlow;
 use std::sync::Arc;
 
@@ -28,7 +29,7 @@ pub trait StudyObserver: Send + Sync {
     fn phase(&self, _p: &PhaseProgress<'_>) {}
     /// The study's result, before it is returned (not after an interruption); an error
     /// (the report could not be written) ends the study with it.
-    fn finished(&self, _result: &StudyResult) -> Result<(), String> {
+    fn finished(&self, _result: &StudyResult) -> Result<(), ObserverError> {
         Ok(())
     }
 }

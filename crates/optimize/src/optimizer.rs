@@ -12,6 +12,7 @@
 //! progress, interruption).
 
 use crate::error::OptimizeError;
+use crate::failure::RunError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
@@ -80,7 +81,7 @@ pub(crate) fn all_finite(v: &[f64]) -> bool {
 pub trait Problem: Sync {
     /// `(lower, upper)` per parameter, in the problem's own units.
     fn bounds(&self) -> Vec<(f64, f64)>;
-    fn evaluate(&self, x: &[f64]) -> Result<f64, String>;
+    fn evaluate(&self, x: &[f64]) -> Result<f64, RunError>;
     /// A generation's candidates, results in the given order: by default on `pool`'s
     /// threads. A problem evaluated elsewhere (other processes, a cluster) overrides it;
     /// `Err` is a failure of that elsewhere, not of a candidate, and ends the run.
@@ -88,17 +89,17 @@ pub trait Problem: Sync {
         &self,
         pool: &rayon::ThreadPool,
         xs: &[Vec<f64>],
-    ) -> Result<Vec<Result<f64, String>>, OptimizeError> {
+    ) -> Result<Vec<Result<f64, RunError>>, OptimizeError> {
         Ok(evaluate_all(pool, self, xs))
     }
 }
 
 /// A candidate's result as the generation loop takes it: a cost that is not finite is a
 /// failure.
-pub fn finite(r: Result<f64, String>) -> Result<f64, String> {
+pub fn finite(r: Result<f64, RunError>) -> Result<f64, RunError> {
     match r {
         Ok(c) if c.is_finite() => Ok(c),
-        Ok(c) => Err(format!("cost is not finite ({c})")),
+        Ok(c) => Err(RunError::NotFinite(c)),
         Err(e) => Err(e),
     }
 }
@@ -185,7 +186,7 @@ pub fn evaluate_all<P: Problem + ?Sized>(
     pool: &rayon::ThreadPool,
     problem: &P,
     xs: &[Vec<f64>],
-) -> Vec<Result<f64, String>> {
+) -> Vec<Result<f64, RunError>> {
     pool.install(|| {
         xs.par_iter()
             .with_max_len(1)

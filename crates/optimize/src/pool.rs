@@ -10,6 +10,7 @@
 
 use super::study::{Lap, Study};
 use crate::error::OptimizeError;
+use crate::failure::RunError;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use tb_compare::{Comparison, PreparedMeasurement, Table, Workspace};
@@ -42,14 +43,6 @@ pub struct Outcome {
     pub comparison: Comparison,
     /// The recording on its uniform time grid (what the comparison used).
     pub table: Table,
-}
-
-/// A failed run, with where it failed.
-pub fn describe_failure(e: &SystemError) -> String {
-    match e {
-        SystemError::Fmu(f) => format!("FMU error: {f}"),
-        other => other.to_string(),
-    }
 }
 
 impl WorkerPool {
@@ -144,22 +137,21 @@ impl WorkerPool {
 
     /// Runs with `values` (one per parameter of [`WorkerPool::assignment`], in its order) and
     /// compares with the measurement.
-    pub fn run(&self, values: &[f64], prepared: &PreparedMeasurement) -> Result<Outcome, String> {
+    pub fn run(&self, values: &[f64], prepared: &PreparedMeasurement) -> Result<Outcome, RunError> {
         self.with_worker(values, |w| self.run_on(w, values, prepared))
     }
 
     /// Runs with `values` and returns the recording on its uniform grid, without comparing
     /// (a first look at a lap that may not match the measurement at all).
-    pub fn lap(&self, values: &[f64]) -> Result<Table, String> {
+    pub fn lap(&self, values: &[f64]) -> Result<Table, RunError> {
         self.with_worker(values, |w| {
             for (slot, &x) in self.slots.iter().zip(values) {
-                let v = slot.real(x).map_err(|e| describe_failure(&e))?;
-                w.sim.set(slot, v);
+                w.sim.set(slot, slot.real(x)?);
             }
             let summary = w.sim.run();
             self.runs.fetch_add(1, Ordering::Relaxed);
-            summary.map_err(|e| describe_failure(&e))?;
-            uniform_table(w.sim.recording()).map_err(|e| e.to_string())
+            summary?;
+            uniform_table(w.sim.recording()).map_err(|e| RunError::Table(Box::new(e)))
         })
     }
 
@@ -169,19 +161,18 @@ impl WorkerPool {
     fn with_worker<T>(
         &self,
         values: &[f64],
-        job: impl FnOnce(&mut Worker) -> Result<T, String>,
-    ) -> Result<T, String> {
+        job: impl FnOnce(&mut Worker) -> Result<T, RunError>,
+    ) -> Result<T, RunError> {
         if values.len() != self.slots.len() {
-            return Err(format!(
-                "{} values for {} parameters",
-                values.len(),
-                self.slots.len()
-            ));
+            return Err(RunError::Count {
+                given: values.len(),
+                expected: self.slots.len(),
+            });
         }
         let worker = self.lock_workers().pop();
         let mut worker = match worker {
             Some(w) => w,
-            None => self.new_worker().map_err(|e| describe_failure(&e))?,
+            None => self.new_worker()?,
         };
         let result = job(&mut worker);
         self.lock_workers().push(worker);
@@ -197,21 +188,23 @@ impl WorkerPool {
         w: &mut Worker,
         values: &[f64],
         prepared: &PreparedMeasurement,
-    ) -> Result<Outcome, String> {
+    ) -> Result<Outcome, RunError> {
         for (slot, &x) in self.slots.iter().zip(values) {
-            let v = slot
-                .real(x)
-                .map_err(|e| format!("setting {} = {x}: {}", slot.name, describe_failure(&e)))?;
+            let v = slot.real(x).map_err(|error| RunError::Setting {
+                name: slot.name.clone(),
+                value: x,
+                error: Box::new(error),
+            })?;
             w.sim.set(slot, v);
         }
         let summary = w.sim.run();
         self.runs.fetch_add(1, Ordering::Relaxed);
-        let summary = summary.map_err(|e| describe_failure(&e))?;
+        let summary = summary?;
         *self.run_seconds.lock().unwrap_or_else(|e| e.into_inner()) += summary.wall_time;
-        let table = uniform_table(w.sim.recording()).map_err(|e| e.to_string())?;
+        let table = uniform_table(w.sim.recording()).map_err(|e| RunError::Table(Box::new(e)))?;
         let comparison = prepared
             .compare(&table, &mut w.ws)
-            .map_err(|e| format!("comparison: {e}"))?;
+            .map_err(|e| RunError::Comparison(Box::new(e)))?;
         Ok(Outcome { comparison, table })
     }
 }

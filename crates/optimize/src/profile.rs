@@ -460,7 +460,7 @@ mod tests {
             .unwrap();
         let simulate = |x: &[f64]| -> crate::fit::Simulated {
             if x[0] > 2.1 {
-                return Err("the run failed".into());
+                return Err(crate::RunError::Problem("the run failed".into()));
             }
             Ok(vec![(
                 0..n,

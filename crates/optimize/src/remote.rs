@@ -16,6 +16,7 @@ use super::bench::Bench;
 use super::pool::WorkerPool;
 use super::study::Study;
 use crate::error::OptimizeError;
+use crate::failure::{EvaluatorError, RunError};
 use serde::{Deserialize, Serialize};
 use sha2::Digest;
 use std::collections::HashMap;
@@ -41,16 +42,22 @@ pub struct Candidate {
 /// order given; the outer `Err` is a failure of the evaluator itself (a lost cluster, an
 /// interruption), which ends the study with the checkpoint of the last whole generation.
 pub trait Evaluator: Send + Sync {
-    fn evaluate(&self, candidates: &[Candidate]) -> Result<Vec<Result<f64, String>>, String>;
+    fn evaluate(
+        &self,
+        candidates: &[Candidate],
+    ) -> Result<Vec<Result<f64, RunError>>, EvaluatorError>;
 
     /// The joint fit's laps (the refinement, the profiles) at `points` (every parameter's
     /// value, [`WorkerPool::assignment`]'s order): per point the filtered signals of
     /// [`Study::joint_signals`] on the grid, per lap and signal (laps outer) the first grid
     /// index and the values ([`StudyEvaluator::signals`]), or why its run failed. An
     /// evaluator that cannot says so (`Err`) and the fit is not made.
-    fn signals(&self, points: &[Vec<f64>]) -> Result<Vec<Result<LapSignals, String>>, String> {
+    fn signals(
+        &self,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Result<LapSignals, RunError>>, EvaluatorError> {
         let _ = points;
-        Err("this evaluator runs candidates' costs only, not the joint fit's laps".into())
+        Err(EvaluatorError::CostsOnly)
     }
 
     /// How many workers evaluate the candidates now (a cluster's: they come and go), when
@@ -157,7 +164,8 @@ pub struct StudyEvaluator {
     digest: InputDigest,
     prepared: Mutex<HashMap<usize, Arc<Vec<PreparedMeasurement>>>>,
     /// The joint fit's signals and the measurement prepared for them, on their first use.
-    joint: std::sync::OnceLock<Result<JointSignals, String>>,
+    /// (An error shared: every later point fails with it.)
+    joint: std::sync::OnceLock<Result<JointSignals, Arc<tb_compare::Error>>>,
 }
 
 impl StudyEvaluator {
@@ -205,14 +213,11 @@ impl StudyEvaluator {
     /// The candidate's cost, or why its run failed. An error of the worker itself (a step
     /// the study does not have, a measurement that cannot be prepared) is an `Err` too: the
     /// coordinator checked both before sending, so it cannot happen with the same files.
-    pub fn cost(&self, c: &Candidate) -> Result<f64, String> {
-        let cost = StepCost::of_step(&self.study, c.step).ok_or_else(|| {
-            format!(
-                "{} has {} steps, the candidate is for step {}",
-                self.study.path.display(),
-                self.study.file.steps.len(),
-                c.step + 1
-            )
+    pub fn cost(&self, c: &Candidate) -> Result<f64, RunError> {
+        let cost = StepCost::of_step(&self.study, c.step).ok_or_else(|| RunError::NoSuchStep {
+            study: self.study.path.clone(),
+            steps: self.study.file.steps.len(),
+            step: c.step + 1,
         })?;
         let prepared = self.prepared(c.step, &cost.signals)?;
         self.bench.cost(&cost, &c.values, &prepared)
@@ -221,7 +226,7 @@ impl StudyEvaluator {
     /// The joint fit's signals at `values` (every parameter's value), as
     /// [`Evaluator::signals`] returns them for one point: the same numbers to the bit as the
     /// coordinator's own laps ([`Bench::signals`] for both).
-    pub fn signals(&self, values: &[f64]) -> Result<LapSignals, String> {
+    pub fn signals(&self, values: &[f64]) -> Result<LapSignals, RunError> {
         let (signals, prepared) = self
             .joint
             .get_or_init(|| {
@@ -229,11 +234,11 @@ impl StudyEvaluator {
                 let prepared = self
                     .bench
                     .prepare(&signals, &self.study.file.compare)
-                    .map_err(|e| e.to_string())?;
+                    .map_err(Arc::new)?;
                 Ok((signals, prepared))
             })
             .as_ref()
-            .map_err(Clone::clone)?;
+            .map_err(|e| RunError::Prepare(e.clone()))?;
         let series = self.bench.signals(values, prepared, signals)?;
         Ok(series.into_iter().map(|(r, v)| (r.start, v)).collect())
     }
@@ -242,7 +247,7 @@ impl StudyEvaluator {
         &self,
         step: usize,
         signals: &[String],
-    ) -> Result<Arc<Vec<PreparedMeasurement>>, String> {
+    ) -> Result<Arc<Vec<PreparedMeasurement>>, RunError> {
         let mut map = self.prepared.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(p) = map.get(&step) {
             return Ok(p.clone());
@@ -250,7 +255,7 @@ impl StudyEvaluator {
         let p = Arc::new(
             self.bench
                 .prepare(signals, &self.study.file.compare)
-                .map_err(|e| e.to_string())?,
+                .map_err(|e| RunError::Prepare(Arc::new(e)))?,
         );
         map.insert(step, p.clone());
         Ok(p)

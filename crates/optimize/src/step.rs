@@ -13,6 +13,7 @@ use super::remote::{Candidate, Evaluator};
 use super::session::Session;
 use super::study::{OptimizerKind, StepConfig, Study};
 use crate::error::OptimizeError;
+use crate::failure::{EvaluatorError, RunError};
 use tb_compare::{Comparison, PreparedMeasurement};
 
 /// One step's cost over the bench.
@@ -51,12 +52,12 @@ impl StepProblem<'_> {
 
     /// The first lap's run (what the identifiability check and a step's own intervals
     /// look at).
-    pub(crate) fn outcome(&self, x: &[f64]) -> Result<Outcome, String> {
+    pub(crate) fn outcome(&self, x: &[f64]) -> Result<Outcome, RunError> {
         self.bench.workers().run(&self.params(x), &self.prepared[0])
     }
 
     /// Every lap's run.
-    pub(crate) fn outcomes(&self, x: &[f64]) -> Result<Vec<Outcome>, String> {
+    pub(crate) fn outcomes(&self, x: &[f64]) -> Result<Vec<Outcome>, RunError> {
         self.bench.outcomes(&self.params(x), self.prepared)
     }
 
@@ -76,7 +77,7 @@ impl Problem for StepProblem<'_> {
         self.bounds.clone()
     }
 
-    fn evaluate(&self, x: &[f64]) -> Result<f64, String> {
+    fn evaluate(&self, x: &[f64]) -> Result<f64, RunError> {
         self.bench.cost(&self.cost, &self.params(x), self.prepared)
     }
 
@@ -84,7 +85,7 @@ impl Problem for StepProblem<'_> {
         &self,
         pool: &rayon::ThreadPool,
         xs: &[Vec<f64>],
-    ) -> Result<Vec<Result<f64, String>>, OptimizeError> {
+    ) -> Result<Vec<Result<f64, RunError>>, OptimizeError> {
         let Some(remote) = self.remote else {
             return Ok(evaluate_all(pool, self, xs));
         };
@@ -99,11 +100,10 @@ impl Problem for StepProblem<'_> {
             .evaluate(&candidates)
             .map_err(OptimizeError::Evaluator)?;
         if results.len() != xs.len() {
-            return Err(OptimizeError::Evaluator(format!(
-                "{} results for {} candidates",
-                results.len(),
-                xs.len()
-            )));
+            return Err(OptimizeError::Evaluator(EvaluatorError::Results {
+                results: results.len(),
+                candidates: xs.len(),
+            }));
         }
         Ok(results.into_iter().map(finite).collect())
     }

@@ -267,7 +267,7 @@ fn start_step(
     problem.set(&x0);
     let failed = |reason| OptimizeError::Start {
         step: config.name.clone(),
-        reason,
+        reason: Box::new(reason),
     };
     if k == 0 && !options.force {
         // Before any optimising: do the measurement and the twin belong together?

@@ -6,7 +6,7 @@ use pyo3::types::PyBytes;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use tb_optimize::optimizer::{to_bounds, to_unit};
-use tb_optimize::{Candidate, Cmaes, Ga, StudyEvaluator};
+use tb_optimize::{Candidate, Cmaes, Ga, RunError, StudyEvaluator};
 
 use crate::errors::{error, TwinbenchError};
 
@@ -108,7 +108,7 @@ impl StudyEvaluatorPy {
                     .collect();
                 list.into_pyobject(py)?.into_any().unbind()
             }
-            Err(why) => why.into_pyobject(py)?.into_any().unbind(),
+            Err(why) => failure_object(py, &why)?,
         })
     }
 
@@ -124,7 +124,7 @@ impl StudyEvaluatorPy {
         let inner = self.inner.clone();
         let results = py
             .detach(
-                move || -> Result<Vec<Result<f64, String>>, tb_optimize::OptimizeError> {
+                move || -> Result<Vec<Result<f64, RunError>>, tb_optimize::OptimizeError> {
                     let pool = tb_optimize::optimizer::thread_pool(threads)?;
                     Ok(pool.install(|| {
                         use rayon::prelude::*;
@@ -147,11 +147,27 @@ impl StudyEvaluatorPy {
 }
 
 /// A cost as a float, a failure as its reason (a str).
-pub(crate) fn outcome_object(py: Python<'_>, r: Result<f64, String>) -> PyResult<Py<PyAny>> {
+pub(crate) fn outcome_object(py: Python<'_>, r: Result<f64, RunError>) -> PyResult<Py<PyAny>> {
     Ok(match r {
         Ok(c) => c.into_pyobject(py)?.into_any().unbind(),
-        Err(s) => s.into_pyobject(py)?.into_any().unbind(),
+        Err(e) => failure_object(py, &e)?,
     })
+}
+
+/// A failed run as a task returns it: its message, a str (`twinbench._failure.Failure`)
+/// that carries its kind across the processes of a distributed study.
+pub(crate) fn failure_object(py: Python<'_>, e: &RunError) -> PyResult<Py<PyAny>> {
+    let class = py.import("twinbench._failure")?.getattr("Failure")?;
+    Ok(class.call1((e.to_string(), e.kind().name()))?.unbind())
+}
+
+/// A failure a task returned (a str; its kind, when it says one) as the error it was.
+pub(crate) fn failure_of(r: &Bound<'_, PyAny>) -> PyResult<RunError> {
+    let kind = match r.getattr("kind") {
+        Ok(k) => k.extract::<String>().unwrap_or_default(),
+        Err(_) => String::new(),
+    };
+    Ok(RunError::from_wire(&kind, r.str()?.to_string()))
 }
 
 /// One of twinbench's optimisers, ask/tell, in the problem's own units (its bounds).

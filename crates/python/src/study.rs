@@ -8,11 +8,12 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use tb_optimize::{
-    Candidate, Evaluator, GenerationDone, LapSignals, OptimizerKind, StopOnFlag, Study,
-    StudyObserver,
+    Candidate, Evaluator, EvaluatorError, GenerationDone, LapSignals, OptimizerKind, RunError,
+    StopOnFlag, Study, StudyObserver,
 };
 
 use crate::errors::{error, TwinbenchError};
+use crate::remote::failure_of;
 
 /// Hands a study's generations to a `concurrent.futures.Executor`: one task per candidate,
 /// `function(study_path, digest_json, step, values)` returning the cost or the reason it
@@ -38,7 +39,7 @@ impl ExecutorEvaluator {
         function: &Py<PyAny>,
         args: Vec<Vec<Py<PyAny>>>,
         take: impl Fn(usize, &Bound<'_, PyAny>) -> PyResult<T>,
-    ) -> Result<Vec<T>, String> {
+    ) -> Result<Vec<T>, EvaluatorError> {
         Python::attach(|py| {
             let run = || -> PyResult<Vec<T>> {
                 let submit = self.executor.bind(py).getattr("submit")?;
@@ -75,7 +76,7 @@ impl ExecutorEvaluator {
             run().map_err(|e| {
                 let text = e.to_string();
                 *self.raised.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
-                text
+                EvaluatorError::Raised(text)
             })
         })
     }
@@ -94,7 +95,10 @@ impl Evaluator for ExecutorEvaluator {
         })
     }
 
-    fn evaluate(&self, candidates: &[Candidate]) -> Result<Vec<Result<f64, String>>, String> {
+    fn evaluate(
+        &self,
+        candidates: &[Candidate],
+    ) -> Result<Vec<Result<f64, RunError>>, EvaluatorError> {
         // The task's arguments after study and digest: the step and the values.
         let args = Python::attach(|py| -> PyResult<Vec<Vec<Py<PyAny>>>> {
             candidates
@@ -107,7 +111,7 @@ impl Evaluator for ExecutorEvaluator {
                 })
                 .collect()
         })
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| EvaluatorError::Raised(e.to_string()))?;
         self.tasks(&self.function, args, |k, r| match r.extract::<f64>() {
             // A cost is e plus a bias term: finite and not negative. Anything else is a
             // broken task or cluster, not a candidate's result.
@@ -116,7 +120,7 @@ impl Evaluator for ExecutorEvaluator {
                 "the executor returned {x:?} as the cost of candidate {k} of step {}: a cost is a finite number ≥ 0 (is the task or the cluster broken?)",
                 candidates[k].step + 1
             ))),
-            Err(_) if r.is_instance_of::<pyo3::types::PyString>() => Ok(Err(r.str()?.to_string())),
+            Err(_) if r.is_instance_of::<pyo3::types::PyString>() => Ok(Err(failure_of(r)?)),
             Err(_) => Err(TwinbenchError::new_err(format!(
                 "the executor returned {} for candidate {k} of step {}: a task returns a cost (a float) or why the run failed (a str)",
                 r.repr()?,
@@ -125,9 +129,12 @@ impl Evaluator for ExecutorEvaluator {
         })
     }
 
-    fn signals(&self, points: &[Vec<f64>]) -> Result<Vec<Result<LapSignals, String>>, String> {
+    fn signals(
+        &self,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Result<LapSignals, RunError>>, EvaluatorError> {
         let Some(function) = &self.signals else {
-            return Err("no signals task was given with the executor".into());
+            return Err(EvaluatorError::NoSignalsTask);
         };
         let args = Python::attach(|py| -> PyResult<Vec<Vec<Py<PyAny>>>> {
             points
@@ -135,10 +142,10 @@ impl Evaluator for ExecutorEvaluator {
                 .map(|x| Ok(vec![x.clone().into_pyobject(py)?.into_any().unbind()]))
                 .collect()
         })
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| EvaluatorError::Raised(e.to_string()))?;
         self.tasks(function, args, |k, r| {
             if r.is_instance_of::<pyo3::types::PyString>() {
-                return Ok(Err(r.str()?.to_string()));
+                return Ok(Err(failure_of(r)?));
             }
             let series: Vec<(usize, Vec<u8>)> = r.extract().map_err(|_| {
                 TwinbenchError::new_err(format!(

@@ -722,6 +722,19 @@ def test_a_study_whose_every_candidate_failed_is_an_error(tmp_path):
         twinbench.Study(STUDY).optimize(executor=_Fixed("the FMU crashed"), out=tmp_path, generations=1, report=False)
 
 
+def test_a_failed_candidate_is_its_message_with_its_kind():
+    import pickle
+
+    from twinbench._failure import Failure
+
+    f = Failure("FMU error: instance 'v': no", "fmu")
+    assert isinstance(f, str) and f == "FMU error: instance 'v': no" and f.kind == "fmu"
+    # A Dask task's result crosses processes pickled: the kind comes with it.
+    back = pickle.loads(pickle.dumps(f))
+    assert back == f and back.kind == "fmu"
+    assert Failure("it broke").kind == "unknown"
+
+
 def test_a_million_threads_are_refused():
     with pytest.raises(twinbench.TwinbenchError, match="at most 1024"):
         twinbench.Study(STUDY).optimize(threads=10**6, generations=1, report=False)

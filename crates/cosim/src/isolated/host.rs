@@ -5,7 +5,7 @@
 //! has a watchdog.
 
 use super::wire::{Enc, Failure, LibraryTarget, Request, Response, Values, MAX_FRAME};
-use super::{IsolationOptions, LibraryReport, STDERR_LINES};
+use super::{IsolationOptions, LibraryReport, WorkerLost, STDERR_LINES};
 use crate::backend::{Backend, RunAs};
 use std::collections::VecDeque;
 use std::io::Read;
@@ -134,7 +134,7 @@ impl IsolatedBackend {
             cause,
             log: Vec::new(),
         };
-        let exe = options.resolve_exe().map_err(fail)?;
+        let exe = options.resolve_exe().map_err(|e| fail(e.to_string()))?;
         let (host, worker) = UnixStream::pair().map_err(|e| fail(format!("socketpair: {e}")))?;
         let mut cmd = Command::new(&exe);
         // A process group of its own: a terminal's Ctrl-C reaches the host, which stops the
@@ -156,7 +156,7 @@ impl IsolatedBackend {
                 None
             }
             super::confine::Mode::Confined => {
-                Some(confine(&mut cmd, options, fmu_dir).map_err(fail)?)
+                Some(confine(&mut cmd, options, fmu_dir).map_err(|e| fail(e.to_string()))?)
             }
         };
         cmd.arg("worker")
@@ -316,7 +316,7 @@ impl IsolatedBackend {
     /// Send the request (the queued sets and what was queued since) and take its answer
     /// into `self.answer`; the worker killed, and why, when it fails to answer in time or
     /// in form. The next request starts empty either way.
-    fn exchange(&mut self) -> Result<(), String> {
+    fn exchange(&mut self) -> Result<(), WorkerLost> {
         let deadline = Instant::now() + self.timeout;
         let sent = send(&self.sock, self.request.finish_frame());
         self.request.start_frame();
@@ -328,9 +328,7 @@ impl IsolatedBackend {
         let n = u32::from_le_bytes(len) as usize;
         if got.is_ok() && n > MAX_FRAME {
             let end = self.bury(true);
-            return Err(format!(
-                "protocol error (answer of {n} bytes is too large, the limit is {MAX_FRAME}); killed ({end})"
-            ));
+            return Err(WorkerLost::TooLarge { size: n, end });
         }
         let got = got.and_then(|()| {
             self.answer.resize(n, 0);
@@ -340,10 +338,10 @@ impl IsolatedBackend {
             Ok(()) => Ok(()),
             Err(None) => {
                 let end = self.bury(true);
-                Err(format!(
-                    "no answer within {:?} (watchdog): the FMU hangs; killed ({end})",
-                    self.timeout
-                ))
+                Err(WorkerLost::Hung {
+                    timeout: self.timeout,
+                    end,
+                })
             }
             Err(Some(_)) => {
                 let end = self.bury(false);
@@ -354,7 +352,7 @@ impl IsolatedBackend {
                 } else {
                     String::new()
                 };
-                Err(format!("{end} (crashed){note}"))
+                Err(WorkerLost::Crashed { end, note })
             }
         }
     }
@@ -369,12 +367,12 @@ impl IsolatedBackend {
         let response = self
             .exchange()
             .and_then(|()| {
-                Response::decode(&self.answer, answered).map_err(|m| {
+                Response::decode(&self.answer, answered).map_err(|error| {
                     let end = self.bury(true);
-                    format!("protocol error ({m}); killed ({end})")
+                    WorkerLost::Protocol { error, end }
                 })
             })
-            .map_err(|cause| self.died(function, cause))?;
+            .map_err(|lost| self.died(function, lost.to_string()))?;
         match response.error {
             None => Ok(response.results),
             Some(f) => Err(self.failure(function, f)),
@@ -505,9 +503,9 @@ fn confine(
     cmd: &mut Command,
     options: &IsolationOptions,
     fmu_dir: &Path,
-) -> Result<(super::confine::Scratch, super::confine::Limits), String> {
-    let scratch = super::confine::Scratch::new()
-        .map_err(|e| format!("cannot make the worker's scratch folder: {e}"))?;
+) -> Result<(super::confine::Scratch, super::confine::Limits), super::confine::ConfineError> {
+    let scratch =
+        super::confine::Scratch::new().map_err(super::confine::ConfineError::MakeScratch)?;
     let mut read: Vec<PathBuf> = vec![fmu_dir.to_path_buf()];
     for p in &options.preload {
         // A preloaded interpreter reads its installation (libpython: its
@@ -545,8 +543,7 @@ fn confine(
         limits,
         env: env.clone(),
     };
-    let json = serde_json::to_string(&spec)
-        .map_err(|e| format!("cannot describe the confinement: {e}"))?;
+    let json = serde_json::to_string(&spec).map_err(super::confine::ConfineError::Describe)?;
     // An environment from the allowlist, never the host's (its keys, tokens,
     // agent sockets).
     cmd.env_clear()

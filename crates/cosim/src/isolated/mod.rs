@@ -20,10 +20,13 @@
 //! - [`worker`]: the server that runs in the worker process.
 
 pub mod confine;
+mod error;
 mod host;
 pub mod wire;
 pub mod worker;
 
+pub use error::IsolationError;
+pub(crate) use error::WorkerLost;
 pub use host::IsolatedBackend;
 pub use worker::serve_stdio;
 
@@ -41,13 +44,11 @@ pub const MAX_TIMEOUT_S: f64 = 86_400.0;
 /// The shortest watchdog accepted [s].
 pub const MIN_TIMEOUT_S: f64 = 1e-3;
 
-pub fn watchdog(seconds: f64) -> Result<Duration, String> {
+pub fn watchdog(seconds: f64) -> Result<Duration, IsolationError> {
     // Below a millisecond no answer arrives (a round trip to the worker takes tens of
     // microseconds, a step of a real FMU more): every call would look like a hang.
     if !(seconds.is_finite() && (MIN_TIMEOUT_S..=MAX_TIMEOUT_S).contains(&seconds)) {
-        return Err(format!(
-            "watchdog must be a number of seconds in [{MIN_TIMEOUT_S}, {MAX_TIMEOUT_S}], got {seconds:e}"
-        ));
+        return Err(IsolationError::Watchdog { seconds });
     }
     Ok(Duration::from_secs_f64(seconds))
 }
@@ -94,15 +95,14 @@ impl Default for IsolationOptions {
 }
 
 impl IsolationOptions {
-    pub fn resolve_exe(&self) -> Result<PathBuf, String> {
+    pub fn resolve_exe(&self) -> Result<PathBuf, IsolationError> {
         if let Some(p) = &self.worker_exe {
             return Ok(p.clone());
         }
         if let Some(p) = std::env::var_os(WORKER_EXE_ENV) {
             return Ok(PathBuf::from(p));
         }
-        let me =
-            std::env::current_exe().map_err(|e| format!("cannot find this executable: {e}"))?;
+        let me = std::env::current_exe().map_err(IsolationError::CurrentExe)?;
         if me.file_stem().is_some_and(|s| s == "twinbench") {
             return Ok(me);
         }
@@ -115,10 +115,7 @@ impl IsolationOptions {
         {
             return Ok(p);
         }
-        Err(format!(
-            "cannot find the twinbench executable to run the worker (this is {}); set {WORKER_EXE_ENV}",
-            me.display()
-        ))
+        Err(IsolationError::NoWorkerExe { this: me })
     }
 }
 

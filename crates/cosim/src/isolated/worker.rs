@@ -86,20 +86,22 @@ fn guard(host: libc::pid_t) {
 /// else runs in the namespace). An FMU sees its parent as the namespace's init, which
 /// ignores the signals it could send; the guard and the host are not in its namespace.
 /// Returns in the worker; `Err` before any process was started.
-fn guard_confined(host: libc::pid_t, spec: &super::confine::Spec) -> Result<(), String> {
+fn guard_confined(
+    host: libc::pid_t,
+    spec: &super::confine::Spec,
+) -> Result<(), super::confine::ConfineError> {
     super::confine::new_namespaces(&spec.scratch, &spec.limits)?;
     let mut fds = [0i32; 2];
     // SAFETY: a pipe for the worker's status, from the init to the guard.
     if unsafe { libc::pipe(fds.as_mut_ptr()) } != 0 {
-        return Err(format!("pipe: {}", std::io::Error::last_os_error()));
+        return Err(super::confine::ConfineError::last_os("pipe"));
     }
     let (read_end, write_end) = (fds[0], fds[1]);
     // SAFETY: single-threaded; the child becomes the namespace's init.
     let init = unsafe { libc::fork() };
     if init < 0 {
-        return Err(format!(
-            "cannot start the worker's init: {}",
-            std::io::Error::last_os_error()
+        return Err(super::confine::ConfineError::last_os(
+            "cannot start the worker's init",
         ));
     }
     if init > 0 {
@@ -187,11 +189,11 @@ pub fn serve_stdio() -> i32 {
         Err(e) => return cannot(format!("the host's confinement is not readable: {e}")),
     };
     if let Err(why) = guard_confined(host, &spec) {
-        return cannot(why);
+        return cannot(why.to_string());
     }
     std::env::remove_var(super::confine::SPEC_ENV);
     if let Err(why) = super::confine::confine(&spec) {
-        return cannot(why);
+        return cannot(why.to_string());
     }
     let stream = unsafe { <UnixStream as std::os::fd::FromRawFd>::from_raw_fd(fd) };
     serve(stream, Some(&spec))
@@ -357,7 +359,7 @@ impl Worker {
             let outcome = match Request::decode(&mut d) {
                 Ok(Request::Quit) => return None,
                 Ok(op) => self.run(op),
-                Err(m) => Err(protocol(m)),
+                Err(m) => Err(protocol(m.to_string())),
             };
             match outcome {
                 Ok(Some(values)) => results.push(values),

@@ -54,16 +54,37 @@ pub struct NativeFactory {
     fmi3: bool,
 }
 
+/// Why an FMU has no native twin (it then runs as an FMU).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum NoTwin {
+    /// `linked`: the names of the models linked in.
+    #[error("{}: model '{model}' is not linked into twinbench (native models: {linked})", fmu.display())]
+    NotLinked {
+        fmu: PathBuf,
+        model: String,
+        linked: String,
+    },
+    /// `what`: the GUID (FMI 2.0) or the instantiation token (FMI 3.0).
+    #[error("{}: {what} {theirs} differs from the linked '{model}' model's {ours} (the FMU was built from other sources; repack it)", fmu.display())]
+    Differs {
+        fmu: PathBuf,
+        what: &'static str,
+        theirs: String,
+        model: &'static str,
+        ours: String,
+    },
+}
+
 impl NativeFactory {
     /// The native twin of an FMU among the `linked` models, or why there is none.
-    pub fn for_fmu(fmu: &LoadedFmu, linked: &[NativeModel]) -> Result<NativeFactory, String> {
+    pub fn for_fmu(fmu: &LoadedFmu, linked: &[NativeModel]) -> Result<NativeFactory, NoTwin> {
         let name = fmu.description.model_name.as_str();
         let Some(m) = linked.iter().find(|m| m.name == name) else {
-            return Err(format!(
-                "{}: model '{name}' is not linked into twinbench (native models: {})",
-                fmu.source.display(),
-                linked.iter().map(|m| m.name).collect::<Vec<_>>().join(", ")
-            ));
+            return Err(NoTwin::NotLinked {
+                fmu: fmu.source.clone(),
+                model: name.into(),
+                linked: linked.iter().map(|m| m.name).collect::<Vec<_>>().join(", "),
+            });
         };
         // An FMI 3.0 FMU of the model has the same variables under the same value
         // references, and `time` one past them, which the native instance then exposes.
@@ -72,12 +93,13 @@ impl NativeFactory {
             false => ("GUID", (m.guid)()),
         };
         if fmu.description.guid != guid {
-            return Err(format!(
-                "{}: {what} {} differs from the linked '{}' model's {guid} (the FMU was built from other sources; repack it)",
-                fmu.source.display(),
-                fmu.description.guid,
-                m.name
-            ));
+            return Err(NoTwin::Differs {
+                fmu: fmu.source.clone(),
+                what,
+                theirs: fmu.description.guid.clone(),
+                model: m.name,
+                ours: guid.to_string(),
+            });
         }
         Ok(NativeFactory {
             model: m.name,

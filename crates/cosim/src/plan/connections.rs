@@ -3,6 +3,7 @@
 //! the inputs left unconnected.
 
 use super::instances::Units;
+use super::problems::ConversionError;
 use super::units::{self, unit_conversion, Conversion};
 use super::{ConnectionDef, Endpoint, InstanceDef, SignalTable};
 use crate::config::{ConnectionConfig, Interpolation, SystemFile};
@@ -202,20 +203,18 @@ fn checked_conversion(
         (to_md, to_md.unit_of(to_sv)),
         to_sv.ty,
     )
-    .map_err(|m| match from {
-        // The fix for a replayed column is its unit, not a scale.
-        Endpoint::Replay { unit, column, .. } => {
-            let r = units.replay(*unit);
-            invalid(
-                ctx,
-                format!(
-                    "{m}; if the file's unit for '{a}' is wrong or missing, name it in its [[replay]]: units = {{ {} = \"{}\" }}",
-                    r.columns[*column],
-                    to_md.unit_of(to_sv).unwrap_or("1")
-                ),
-            )
-        }
-        _ => invalid(ctx, m),
+    .map_err(|error| SystemError::Conversion {
+        context: ctx.to_string(),
+        error,
+        hint: match from {
+            // The fix for a replayed column is its unit, not a scale.
+            Endpoint::Replay { unit, column, .. } => format!(
+                "; if the file's unit for '{a}' is wrong or missing, name it in its [[replay]]: units = {{ {} = \"{}\" }}",
+                units.replay(*unit).columns[*column],
+                to_md.unit_of(to_sv).unwrap_or("1")
+            ),
+            _ => String::new(),
+        },
     })
 }
 
@@ -393,33 +392,29 @@ fn connection_conversion(
     from: (&ModelDescription, Option<&str>),
     to: (&ModelDescription, Option<&str>),
     to_ty: ScalarType,
-) -> Result<Conversion, String> {
+) -> Result<Conversion, ConversionError> {
     let gain = conn.scale.is_some() || conn.offset.is_some();
     let overridden = conn.from_unit.is_some() || conn.to_unit.is_some();
     if gain && overridden {
-        return Err("give either scale/offset or from_unit/to_unit, not both".into());
+        return Err(ConversionError::GainAndUnits);
     }
     if (gain || overridden) && to_ty != ScalarType::Real {
-        return Err(format!(
-            "a scale, an offset or a unit applies to Real inputs only, this one is {}",
-            to_ty.name()
-        ));
+        return Err(ConversionError::NotReal { ty: to_ty.name() });
     }
     if gain {
         return gain_conversion(conn, from.1, to.1);
     }
-    let known = |md: &ModelDescription, u: &Option<String>, end: &str| -> Result<(), String> {
-        match u {
-            Some(u) if units::definition(md, u).is_none() => Err(format!(
-                "{end} = '{u}' is defined neither by the FMU nor in twinbench's unit table ({})",
-                tb_fmi::units::UNITS
-                    .iter()
-                    .map(|d| d.name)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )),
-            _ => Ok(()),
-        }
+    let known = |md: &ModelDescription, u: &Option<String>, end: &'static str| match u {
+        Some(u) if units::definition(md, u).is_none() => Err(ConversionError::UnknownUnit {
+            end,
+            unit: u.clone(),
+            known: tb_fmi::units::UNITS
+                .iter()
+                .map(|d| d.name)
+                .collect::<Vec<_>>()
+                .join(", "),
+        }),
+        _ => Ok(()),
     };
     known(from.0, &conn.from_unit, "from_unit")?;
     known(to.0, &conn.to_unit, "to_unit")?;
@@ -447,13 +442,11 @@ fn gain_conversion(
     conn: &ConnectionConfig,
     from_unit: Option<&str>,
     to_unit: Option<&str>,
-) -> Result<Conversion, String> {
+) -> Result<Conversion, ConversionError> {
     let scale = conn.scale.unwrap_or(1.0);
     let offset = conn.offset.unwrap_or(0.0);
     if !(scale.is_finite() && scale != 0.0 && offset.is_finite()) {
-        return Err(format!(
-            "scale must be a finite non-zero number and offset a finite number, got scale = {scale}, offset = {offset}"
-        ));
+        return Err(ConversionError::BadGain { scale, offset });
     }
     let declared = |u: Option<&str>| u.map_or("none".to_string(), |u| format!("'{u}'"));
     Ok(Conversion {

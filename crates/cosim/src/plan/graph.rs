@@ -2,6 +2,7 @@
 //! order.
 
 use super::instances::Units;
+use super::problems::OrderError;
 use super::{ConnectionDef, Endpoint, InstanceDef};
 use crate::config::SystemFile;
 use crate::split_name;
@@ -26,7 +27,7 @@ pub(crate) fn check_feedthrough_cycles(
     instances: &[InstanceDef],
     connections: &[ConnectionDef],
     warnings: &mut Vec<String>,
-) -> Result<(), String> {
+) -> Result<(), OrderError> {
     let mut edges = connection_edges(connections);
     for (k, inst) in instances.iter().enumerate() {
         dependency_edges(k, inst, &mut edges);
@@ -41,9 +42,7 @@ pub(crate) fn check_feedthrough_cycles(
         .collect::<Vec<_>>();
     let text = text.join(" -> ");
     if cycle.iter().all(|c| c.1) {
-        return Err(format!(
-            "direct feed-through cycle (an algebraic loop): {text}"
-        ));
+        return Err(OrderError::AlgebraicLoop { cycle: text });
     }
     warnings.push(format!(
         "possible feed-through cycle through outputs that declare no dependencies: {text}"
@@ -186,7 +185,7 @@ pub(crate) fn stepping_order(
     file: &SystemFile,
     units: Units<'_>,
     connections: &[ConnectionDef],
-) -> Result<Vec<usize>, String> {
+) -> Result<Vec<usize>, OrderError> {
     let (instances, replays) = (units.instances, units.replays);
     let n_fmu = instances.len();
     let unit_names: Vec<&str> = instances
@@ -201,9 +200,9 @@ pub(crate) fn stepping_order(
             let k = unit_names
                 .iter()
                 .position(|u| u == name)
-                .ok_or_else(|| format!("experiment.order: unknown instance '{name}'"))?;
+                .ok_or_else(|| OrderError::UnknownInstance { name: name.clone() })?;
             if order.contains(&k) {
-                return Err(format!("experiment.order: '{name}' appears twice"));
+                return Err(OrderError::Twice { name: name.clone() });
             }
             order.push(k);
         }
@@ -212,7 +211,9 @@ pub(crate) fn stepping_order(
             .enumerate()
             .find(|(k, _)| !order.contains(k))
         {
-            return Err(format!("experiment.order: '{}' is missing", missing.1));
+            return Err(OrderError::Missing {
+                name: missing.1.to_string(),
+            });
         }
         return Ok(order);
     }

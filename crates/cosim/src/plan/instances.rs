@@ -300,8 +300,12 @@ fn backend(
         let mut iso = options.isolation.clone();
         iso.preload.extend(file.preload.iter().cloned());
         if let Some(w) = inst.watchdog {
-            iso.timeout = crate::isolated::watchdog(w)
-                .map_err(|m| invalid(format!("{ctx_file}: instance '{}'", inst.name), m))?;
+            iso.timeout = crate::isolated::watchdog(w).map_err(|m| {
+                invalid(
+                    format!("{ctx_file}: instance '{}'", inst.name),
+                    m.to_string(),
+                )
+            })?;
         }
         Arc::new(IsolatedFactory {
             fmu: fmu.clone(),

@@ -19,11 +19,13 @@ mod connections;
 mod experiment;
 mod graph;
 mod instances;
+mod problems;
 mod readers;
 mod stop;
 pub(crate) mod units;
 mod values;
 
+pub use problems::{ConversionError, OrderError};
 pub use readers::{Cadence, Reader};
 pub use stop::{Condition, Op, Stop};
 pub use values::{ParamSlot, ParamValue};
@@ -370,10 +372,18 @@ impl Plan {
         let mut warnings = native_fallback;
         warnings.extend(structure_gaps(&loaded));
         warnings.extend(connections::unconnected_inputs(&file, units, &connections));
-        graph::check_feedthrough_cycles(&instances, &connections, &mut warnings)
-            .map_err(|m| invalid(&ctx, m))?;
-        let order =
-            graph::stepping_order(&file, units, &connections).map_err(|m| invalid(&ctx, m))?;
+        graph::check_feedthrough_cycles(&instances, &connections, &mut warnings).map_err(
+            |error| SystemError::Order {
+                context: ctx.clone(),
+                error,
+            },
+        )?;
+        let order = graph::stepping_order(&file, units, &connections).map_err(|error| {
+            SystemError::Order {
+                context: ctx.clone(),
+                error,
+            }
+        })?;
         for w in &warnings {
             log::warn!("{ctx}: {w}");
         }

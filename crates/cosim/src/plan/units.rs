@@ -1,5 +1,6 @@
 //! Unit conversion across a connection, from the units both FMUs declare.
 
+use super::problems::ConversionError;
 use tb_fmi::units::UnitDef;
 use tb_fmi::ModelDescription;
 
@@ -34,7 +35,7 @@ pub(crate) fn definition(md: &ModelDescription, unit: &str) -> Option<UnitDef> {
 pub(crate) fn unit_conversion(
     from: (&ModelDescription, Option<&str>),
     to: (&ModelDescription, Option<&str>),
-) -> Result<Conversion, String> {
+) -> Result<Conversion, ConversionError> {
     let (Some(fu), Some(tu)) = (from.1, to.1) else {
         return Ok(Conversion::IDENTITY);
     };
@@ -42,10 +43,10 @@ pub(crate) fn unit_conversion(
         return Ok(Conversion::IDENTITY);
     }
     let (Some(a), Some(b)) = (definition(from.0, fu), definition(to.0, tu)) else {
-        return Err(format!(
-            "units '{fu}' and '{tu}' differ and at least one has no definition to convert by \
-             (give the connection a to_unit/from_unit or a scale)"
-        ));
+        return Err(ConversionError::NoDefinition {
+            from: fu.into(),
+            to: tu.into(),
+        });
     };
     let without_rad = |u: &UnitDef| UnitDef { rad: 0, ..*u };
     let note = if a.compatible(&b) {
@@ -59,10 +60,10 @@ pub(crate) fn unit_conversion(
             a.factor / b.factor
         ))
     } else {
-        return Err(format!(
-            "incompatible units '{fu}' and '{tu}' (different base units); a connection table \
-             with a scale converts what the units cannot"
-        ));
+        return Err(ConversionError::Incompatible {
+            from: fu.into(),
+            to: tu.into(),
+        });
     };
     // SI = factor·value + offset on both sides.
     Ok(Conversion {
@@ -103,7 +104,7 @@ mod tests {
         let c = unit_conversion((&ours, Some("rad/s")), (&ours, Some("rpm"))).unwrap();
         assert!(c.note.is_none());
         let e = unit_conversion((&ours, Some("rad/s")), (&ours, Some("m/s"))).unwrap_err();
-        assert!(e.contains("incompatible units 'rad/s' and 'm/s'"), "{e}");
+        assert!(matches!(e, ConversionError::Incompatible { .. }), "{e}");
         // rad alone against a plain number is dimensionless too.
         let c = unit_conversion((&ours, Some("deg")), (&ours, Some("1"))).unwrap();
         assert!((c.scale - std::f64::consts::PI / 180.0).abs() < 1e-15);

@@ -19,10 +19,21 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
+/// Why the system calls of a check cannot be counted.
+#[derive(Debug, thiserror::Error)]
+pub enum TrapError {
+    #[error("system calls are counted on x86-64 Linux only")]
+    Unsupported,
+    #[error("cannot handle SIGSYS: {0}")]
+    Handler(std::io::Error),
+    #[error("cannot set the system-call trap (seccomp): {0}")]
+    Seccomp(seccompiler::Error),
+}
+
 /// Why system calls cannot be counted here.
 #[cfg(not(target_arch = "x86_64"))]
-pub fn install() -> Result<(), String> {
-    Err("system calls are counted on x86-64 Linux only".into())
+pub fn install() -> Result<(), TrapError> {
+    Err(TrapError::Unsupported)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -173,7 +184,7 @@ mod x86_64 {
 
     /// Sets the trap on the calling thread (and whatever it starts). For good: a seccomp
     /// filter cannot be taken off; the worker that checks ends with the check.
-    pub fn install() -> Result<(), String> {
+    pub fn install() -> Result<(), super::TrapError> {
         if INSTALLED.load(Ordering::SeqCst) {
             return Ok(());
         }
@@ -185,15 +196,11 @@ mod x86_64 {
             sa.sa_flags = libc::SA_SIGINFO;
             libc::sigemptyset(&mut sa.sa_mask);
             if libc::sigaction(libc::SIGSYS, &sa, std::ptr::null_mut()) != 0 {
-                return Err(format!(
-                    "cannot handle SIGSYS: {}",
-                    std::io::Error::last_os_error()
-                ));
+                return Err(super::TrapError::Handler(std::io::Error::last_os_error()));
             }
             std::ptr::addr_of!(tb_rt_raw_syscall_insn) as u64
         };
-        seccompiler::apply_filter(&program(insn))
-            .map_err(|e| format!("cannot set the system-call trap (seccomp): {e}"))?;
+        seccompiler::apply_filter(&program(insn)).map_err(super::TrapError::Seccomp)?;
         INSTALLED.store(true, Ordering::SeqCst);
         Ok(())
     }

@@ -146,7 +146,7 @@ pub(super) fn connection_gain(
     ((from, fv), (to, tv)): ((&Component, &str), (&Component, &str)),
     suppress: bool,
     lt: Option<(f64, f64)>,
-) -> Result<Option<(f64, f64)>, String> {
+) -> Result<Option<(f64, f64)>, crate::plan::ConversionError> {
     let fsv = from.md.variable(fv).expect("checked with the connectors");
     let tsv = to.md.variable(tv).expect("checked with the connectors");
     let fmu_units = (from.md.unit_of(fsv), to.md.unit_of(tsv));

@@ -119,11 +119,12 @@ pub(super) fn tb_experiment(
     }
     experiment.tolerance = imp.f64_attr(f, x, "tolerance")?;
     if let Some(c) = x.attr("stepConvention") {
-        experiment.step_convention =
-            crate::config::StepConvention::from_name(c).map_err(|m| imp.invalid(f, x.line, m))?;
+        experiment.step_convention = crate::config::StepConvention::from_name(c)
+            .map_err(|m| imp.invalid(f, x.line, m.to_string()))?;
     }
     if let Some(a) = x.attr("algorithm") {
-        experiment.algorithm = Algorithm::from_name(a).map_err(|m| imp.invalid(f, x.line, m))?;
+        experiment.algorithm =
+            Algorithm::from_name(a).map_err(|m| imp.invalid(f, x.line, m.to_string()))?;
     }
     if let Some(o) = x.attr("order") {
         experiment.order = o.split_whitespace().map(str::to_string).collect();

@@ -83,13 +83,17 @@ impl<'t> Lines<'t> {
     }
 }
 
+/// A namespace prefix used without a declaration.
+#[derive(Debug)]
+pub(super) struct Undeclared(String);
+
 /// A resolved namespace (empty: none), or the undeclared prefix.
-pub(super) fn ns_uri(ns: quick_xml::name::ResolveResult<'_>) -> Result<String, String> {
+pub(super) fn ns_uri(ns: quick_xml::name::ResolveResult<'_>) -> Result<String, Undeclared> {
     use quick_xml::name::ResolveResult;
     match ns {
         ResolveResult::Bound(n) => Ok(String::from_utf8_lossy(n.as_ref()).into_owned()),
         ResolveResult::Unbound => Ok(String::new()),
-        ResolveResult::Unknown(p) => Err(String::from_utf8_lossy(&p).into_owned()),
+        ResolveResult::Unknown(p) => Err(Undeclared(String::from_utf8_lossy(&p).into_owned())),
     }
 }
 
@@ -139,7 +143,7 @@ pub(super) fn parse_xml(text: &str, ssp: &Path, file: &str) -> Result<Node, SspI
             return Err(xml_err(line, "content after the root element".into()));
         }
         let ns =
-            ns.map_err(|p| xml_err(line, format!("namespace prefix '{p}' is not declared")))?;
+            ns.map_err(|p| xml_err(line, format!("namespace prefix '{}' is not declared", p.0)))?;
         let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
         let mut attrs = Vec::new();
         for a in e.attributes() {

@@ -17,6 +17,7 @@
 //!   would pass a filter of x86-64 numbers; every such number is refused (`EPERM`, where a
 //!   kernel without x32 would say `ENOSYS`: the difference shows the filter at work).
 
+use super::ConfineError;
 use seccompiler::{
     sock_filter, BpfProgram, SeccompAction, SeccompCmpArgLen, SeccompCmpOp, SeccompCondition,
     SeccompFilter, SeccompRule,
@@ -108,32 +109,34 @@ fn refused() -> Vec<i64> {
     calls
 }
 
-fn arch() -> Result<seccompiler::TargetArch, String> {
+fn arch() -> Result<seccompiler::TargetArch, ConfineError> {
     std::env::consts::ARCH
         .try_into()
-        .map_err(|_| format!("no seccomp filter for {}", std::env::consts::ARCH))
+        .map_err(|_| ConfineError::NoFilter {
+            arch: std::env::consts::ARCH,
+        })
 }
 
-fn cond(arg: u8, op: SeccompCmpOp, v: u64) -> Result<SeccompCondition, String> {
-    SeccompCondition::new(arg, SeccompCmpArgLen::Dword, op, v).map_err(|e| e.to_string())
+fn cond(arg: u8, op: SeccompCmpOp, v: u64) -> Result<SeccompCondition, ConfineError> {
+    SeccompCondition::new(arg, SeccompCmpArgLen::Dword, op, v).map_err(ConfineError::Filter)
 }
 
-fn rule(c: Vec<SeccompCondition>) -> Result<SeccompRule, String> {
-    SeccompRule::new(c).map_err(|e| e.to_string())
+fn rule(c: Vec<SeccompCondition>) -> Result<SeccompRule, ConfineError> {
+    SeccompRule::new(c).map_err(ConfineError::Filter)
 }
 
 fn program(
     rules: BTreeMap<i64, Vec<SeccompRule>>,
     matched: SeccompAction,
-) -> Result<BpfProgram, String> {
+) -> Result<BpfProgram, ConfineError> {
     let f = SeccompFilter::new(rules, SeccompAction::Allow, matched, arch()?)
-        .map_err(|e| e.to_string())?;
-    BpfProgram::try_from(f).map_err(|e| e.to_string())
+        .map_err(ConfineError::Filter)?;
+    BpfProgram::try_from(f).map_err(ConfineError::Filter)
 }
 
 /// The filters, in the order they are installed (each call is judged by all of them; the
 /// strictest answer holds).
-pub(super) fn filters() -> Result<Vec<BpfProgram>, String> {
+pub(super) fn filters() -> Result<Vec<BpfProgram>, ConfineError> {
     let mut rules: BTreeMap<i64, Vec<SeccompRule>> =
         refused().into_iter().map(|c| (c, Vec::new())).collect();
     let namespaces = [
@@ -226,7 +229,7 @@ extern "C" fn on_sigsys(_sig: libc::c_int, _info: *mut libc::siginfo_t, ctx: *mu
 }
 
 /// Installs the SIGSYS handler of the process trap (before the filters).
-pub(super) fn install_trap() -> Result<(), String> {
+pub(super) fn install_trap() -> Result<(), ConfineError> {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: sigaction with a handler that only touches an atomic, the context and stderr.
     unsafe {
@@ -235,20 +238,17 @@ pub(super) fn install_trap() -> Result<(), String> {
         sa.sa_flags = libc::SA_SIGINFO;
         libc::sigemptyset(&mut sa.sa_mask);
         if libc::sigaction(libc::SIGSYS, &sa, std::ptr::null_mut()) != 0 {
-            return Err(format!(
-                "cannot handle SIGSYS: {}",
-                std::io::Error::last_os_error()
-            ));
+            return Err(ConfineError::last_os("cannot handle SIGSYS"));
         }
     }
     Ok(())
 }
 
 /// Applies the filters to this thread and what it starts.
-pub(super) fn apply() -> Result<(), String> {
+pub(super) fn apply() -> Result<(), ConfineError> {
     install_trap()?;
     for f in filters()? {
-        seccompiler::apply_filter(&f).map_err(|e| format!("seccomp: {e}"))?;
+        seccompiler::apply_filter(&f).map_err(ConfineError::Seccomp)?;
     }
     Ok(())
 }

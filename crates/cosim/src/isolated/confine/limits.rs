@@ -12,6 +12,7 @@
 //!   `clone` without `CLONE_THREAD`) with `EAGAIN`, and counts the attempts
 //!   ([`super::filter`]).
 
+use super::{ConfineError, LimitsError};
 use serde::{Deserialize, Serialize};
 
 /// The environment variable that sets the limits (`memory=2G,scratch=64M,files=256,threads=64`).
@@ -56,42 +57,34 @@ const KEYS: &[(&str, u64, u64, bool)] = &[
 impl Limits {
     /// The defaults with the settings of `text` (`key=value` separated by commas; sizes in
     /// bytes or with K, M, G or T: binary units).
-    pub fn parse(text: &str) -> Result<Limits, String> {
+    pub fn parse(text: &str) -> Result<Limits, LimitsError> {
         let mut l = Limits::default();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-            let (key, value) = item.split_once('=').ok_or_else(|| {
-                format!("'{item}' is not key=value (keys: memory, scratch, files, threads)")
-            })?;
+            let (key, value) = item
+                .split_once('=')
+                .ok_or_else(|| LimitsError::NotKeyValue { item: item.into() })?;
             let key = key.trim();
             let Some(&(_, lo, hi, size)) = KEYS.iter().find(|k| k.0 == key) else {
-                return Err(format!(
-                    "unknown limit '{key}' (keys: memory, scratch, files, threads)"
-                ));
+                return Err(LimitsError::UnknownKey { key: key.into() });
             };
             let v = if size {
                 parse_size(value.trim())
             } else {
                 value.trim().parse::<u64>().ok()
             }
-            .ok_or_else(|| {
-                format!(
-                    "{key} = '{}' is not {}",
-                    value.trim(),
-                    if size {
-                        "a size (bytes, or a number with K, M, G or T)"
-                    } else {
-                        "a whole number"
-                    }
-                )
+            .ok_or_else(|| LimitsError::NotANumber {
+                key: key.into(),
+                value: value.trim().into(),
+                size,
             })?;
             if !(lo..=hi).contains(&v) {
                 let shown = |x| if size { size_text(x) } else { x.to_string() };
-                return Err(format!(
-                    "{key} = {} is outside [{}, {}]",
-                    shown(v),
-                    shown(lo),
-                    shown(hi)
-                ));
+                return Err(LimitsError::OutOfRange {
+                    key: key.into(),
+                    value: shown(v),
+                    min: shown(lo),
+                    max: shown(hi),
+                });
             }
             match key {
                 "memory" => l.memory = v,
@@ -104,9 +97,9 @@ impl Limits {
     }
 
     /// The limits [`LIMITS_ENV`] sets, else the defaults.
-    pub fn from_env() -> Result<Limits, String> {
+    pub fn from_env() -> Result<Limits, LimitsError> {
         match std::env::var(LIMITS_ENV) {
-            Ok(v) => Limits::parse(&v).map_err(|e| format!("{LIMITS_ENV}: {e}")),
+            Ok(v) => Limits::parse(&v).map_err(|e| LimitsError::Environment(Box::new(e))),
             Err(_) => Ok(Limits::default()),
         }
     }
@@ -124,7 +117,7 @@ impl Limits {
 
     /// Sets this process's resource limits (in the worker, before anything is loaded). A
     /// limit is only ever lowered: where the system's own is lower, that one holds.
-    pub(crate) fn apply(&self) -> Result<(), String> {
+    pub(crate) fn apply(&self) -> Result<(), ConfineError> {
         for (resource, name, value) in [
             (libc::RLIMIT_AS, "RLIMIT_AS", self.memory),
             (libc::RLIMIT_NOFILE, "RLIMIT_NOFILE", self.files),
@@ -140,10 +133,11 @@ impl Limits {
             // SAFETY: getrlimit/setrlimit with a local structure.
             unsafe {
                 if libc::getrlimit(resource, &mut old) != 0 {
-                    return Err(format!(
-                        "getrlimit {name}: {}",
-                        std::io::Error::last_os_error()
-                    ));
+                    let error = std::io::Error::last_os_error();
+                    return Err(ConfineError::Call {
+                        what: format!("getrlimit {name}"),
+                        error,
+                    });
                 }
                 let v = value.min(old.rlim_max);
                 let new = libc::rlimit {
@@ -151,10 +145,11 @@ impl Limits {
                     rlim_max: v,
                 };
                 if libc::setrlimit(resource, &new) != 0 {
-                    return Err(format!(
-                        "cannot set {name} to {v}: {}",
-                        std::io::Error::last_os_error()
-                    ));
+                    let error = std::io::Error::last_os_error();
+                    return Err(ConfineError::Call {
+                        what: format!("cannot set {name} to {v}"),
+                        error,
+                    });
                 }
             }
         }
@@ -296,7 +291,7 @@ mod tests {
             ("scratch=18446744073709551615T", "is not a size"),
         ] {
             let e = Limits::parse(text).unwrap_err();
-            assert!(e.contains(says), "{text}: {e}");
+            assert!(e.to_string().contains(says), "{text}: {e}");
         }
     }
 

@@ -33,11 +33,13 @@
 //! and exits with [`CANNOT_CONFINE`] before loading anything; the host refuses the FMU unless
 //! the user asked for crash isolation only (`--isolate=crash-only`, [`MODE_ENV`]).
 
+mod error;
 pub mod filter;
 pub mod inherit;
 pub mod limits;
 pub(crate) mod scratch;
 
+pub use error::{ConfineError, LimitsError};
 pub use limits::{Limits, LIMITS_ENV};
 pub(crate) use scratch::Scratch;
 
@@ -122,7 +124,7 @@ const SYSTEM_READ: &[&str] = &[
 
 /// Drops every capability of this process for good (a root worker keeps uid 0 without any
 /// capability; the securebits locked so that no exec, setuid or ambient set gives one back).
-fn drop_capabilities() -> Result<(), String> {
+fn drop_capabilities() -> Result<(), ConfineError> {
     // SAFETY: prctl and capset with documented arguments; no memory is handed over but the
     // two capset structures, which live across the call.
     unsafe {
@@ -132,10 +134,11 @@ fn drop_capabilities() -> Result<(), String> {
                 if libc::prctl(libc::PR_CAPBSET_DROP, cap, 0, 0, 0) != 0
                     && libc::prctl(libc::PR_CAPBSET_READ, cap, 0, 0, 0) == 1
                 {
-                    return Err(format!(
-                        "cannot drop capability {cap} from the bounding set: {}",
-                        std::io::Error::last_os_error()
-                    ));
+                    let error = std::io::Error::last_os_error();
+                    return Err(ConfineError::Call {
+                        what: format!("cannot drop capability {cap} from the bounding set"),
+                        error,
+                    });
                 }
                 cap += 1;
             }
@@ -151,10 +154,7 @@ fn drop_capabilities() -> Result<(), String> {
         // with its lock.
         const SECURE: libc::c_ulong = 0x01 | 0x02 | 0x04 | 0x08 | 0x20 | 0x40 | 0x80;
         if libc::prctl(libc::PR_SET_SECUREBITS, SECURE, 0, 0, 0) != 0 && libc::geteuid() == 0 {
-            return Err(format!(
-                "cannot lock the securebits: {}",
-                std::io::Error::last_os_error()
-            ));
+            return Err(ConfineError::last_os("cannot lock the securebits"));
         }
         #[repr(C)]
         struct Header {
@@ -178,10 +178,7 @@ fn drop_capabilities() -> Result<(), String> {
             inheritable: 0,
         }; 2];
         if libc::syscall(libc::SYS_capset, &mut header, none.as_ptr()) != 0 {
-            return Err(format!(
-                "cannot drop the capabilities: {}",
-                std::io::Error::last_os_error()
-            ));
+            return Err(ConfineError::last_os("cannot drop the capabilities"));
         }
     }
     Ok(())
@@ -189,14 +186,12 @@ fn drop_capabilities() -> Result<(), String> {
 
 /// Confines this process (single-threaded: Landlock and seccomp hold for the calling thread
 /// and whatever it starts afterwards). Called in the worker, inside its namespaces.
-pub fn confine(spec: &Spec) -> Result<(), String> {
+pub fn confine(spec: &Spec) -> Result<(), ConfineError> {
     spec.limits.apply()?;
     drop_capabilities()?;
-    std::env::set_current_dir(&spec.scratch).map_err(|e| {
-        format!(
-            "{}: cannot enter the scratch folder: {e}",
-            spec.scratch.display()
-        )
+    std::env::set_current_dir(&spec.scratch).map_err(|error| ConfineError::EnterScratch {
+        path: spec.scratch.clone(),
+        error,
     })?;
     inherit::keep_only(&spec.env);
     for var in ["TMPDIR", "TMP", "TEMP", "HOME"] {
@@ -204,10 +199,7 @@ pub fn confine(spec: &Spec) -> Result<(), String> {
     }
     // SAFETY: prctl with documented arguments.
     if unsafe { libc::prctl(libc::PR_SET_NO_NEW_PRIVS, 1, 0, 0, 0) } != 0 {
-        return Err(format!(
-            "cannot set no_new_privs: {}",
-            std::io::Error::last_os_error()
-        ));
+        return Err(ConfineError::last_os("cannot set no_new_privs"));
     }
     // Landlock first (its rules open the paths), then seccomp.
     let latest = ABI::V6;
@@ -229,18 +221,14 @@ pub fn confine(spec: &Spec) -> Result<(), String> {
             ))
         })
         .and_then(|r| r.restrict_self())
-        .map_err(|e| format!("Landlock: {e}"))?;
+        .map_err(ConfineError::Landlock)?;
     let abi = match status.landlock {
         LandlockStatus::Available { effective_abi, .. } => effective_abi as i32,
-        LandlockStatus::NotEnabled => {
-            return Err("Landlock is disabled on this system (lsm= boot parameter)".into())
-        }
-        _ => return Err("this kernel has no Landlock".into()),
+        LandlockStatus::NotEnabled => return Err(ConfineError::LandlockDisabled),
+        _ => return Err(ConfineError::NoLandlock),
     };
     if status.ruleset == RulesetStatus::NotEnforced || abi < 3 {
-        return Err(format!(
-            "this kernel's Landlock (ABI {abi}) cannot keep the FMU from truncating files it may not write (ABI 3, Linux 6.2, is needed)"
-        ));
+        return Err(ConfineError::LandlockTooOld { abi });
     }
     filter::apply()
 }
@@ -250,9 +238,9 @@ pub fn confine(spec: &Spec) -> Result<(), String> {
 /// is not the one `getpid` gives inside the namespace (that one names another process
 /// there). A rule holds for the folder it names when made, so `/proc/self` itself would
 /// not do.
-fn own_proc_entry() -> Result<PathBuf, String> {
+fn own_proc_entry() -> Result<PathBuf, ConfineError> {
     let me = std::fs::read_link("/proc/self")
-        .map_err(|e| format!("cannot find this process's /proc entry: {e}"))?;
+        .map_err(ConfineError::call("cannot find this process's /proc entry"))?;
     Ok(Path::new("/proc").join(me))
 }
 
@@ -261,7 +249,7 @@ fn own_proc_entry() -> Result<PathBuf, String> {
 /// group to themselves). In the mount namespace, made private, a tmpfs of `limits.scratch`
 /// bytes is mounted on the scratch folder. Called in the guard before it starts the
 /// worker's init.
-pub fn new_namespaces(scratch: &Path, limits: &Limits) -> Result<(), String> {
+pub fn new_namespaces(scratch: &Path, limits: &Limits) -> Result<(), ConfineError> {
     // With the PID namespace an IPC and a network namespace of its own: the user's System
     // V shared memory, semaphores and message queues, its abstract Unix sockets and
     // every network interface (loopback included) are out of reach, whatever the
@@ -278,9 +266,8 @@ pub fn new_namespaces(scratch: &Path, limits: &Limits) -> Result<(), String> {
         }
     };
     if r != 0 {
-        return Err(format!(
-            "cannot make a PID, IPC, network and mount namespace (so that nothing the FMU starts outlives the run, it reaches no other process's shared memory or sockets, and its scratch folder has a size): {}",
-            std::io::Error::last_os_error()
+        return Err(ConfineError::last_os(
+            "cannot make a PID, IPC, network and mount namespace (so that nothing the FMU starts outlives the run, it reaches no other process's shared memory or sockets, and its scratch folder has a size)",
         ));
     }
     if uid != 0 {
@@ -289,8 +276,9 @@ pub fn new_namespaces(scratch: &Path, limits: &Limits) -> Result<(), String> {
             ("/proc/self/uid_map", format!("{uid} {uid} 1")),
             ("/proc/self/gid_map", format!("{gid} {gid} 1")),
         ] {
-            std::fs::write(file, text)
-                .map_err(|e| format!("cannot map the user in its user namespace ({file}): {e}"))?;
+            std::fs::write(file, text).map_err(ConfineError::call(format!(
+                "cannot map the user in its user namespace ({file})"
+            )))?;
         }
     }
     mount_scratch(scratch, limits.scratch)
@@ -299,11 +287,10 @@ pub fn new_namespaces(scratch: &Path, limits: &Limits) -> Result<(), String> {
 /// Makes every mount of this (new) mount namespace private, then mounts a tmpfs of `size`
 /// bytes, mode 700, on `scratch`: what the FMU writes there has that limit, and goes with
 /// the namespace.
-fn mount_scratch(scratch: &Path, size: u64) -> Result<(), String> {
+fn mount_scratch(scratch: &Path, size: u64) -> Result<(), ConfineError> {
     use std::os::unix::ffi::OsStrExt;
-    let err = |what: &str| format!("{what}: {}", std::io::Error::last_os_error());
     let target = std::ffi::CString::new(scratch.as_os_str().as_bytes())
-        .map_err(|_| "the scratch folder's path has a NUL byte".to_string())?;
+        .map_err(|_| ConfineError::NulInPath)?;
     let options =
         std::ffi::CString::new(format!("size={size},mode=0700")).expect("no NUL in the options");
     // SAFETY: mount(2) with NUL-terminated strings that live across the calls.
@@ -316,7 +303,9 @@ fn mount_scratch(scratch: &Path, size: u64) -> Result<(), String> {
             std::ptr::null(),
         ) != 0
         {
-            return Err(err("cannot make the worker's mounts private"));
+            return Err(ConfineError::last_os(
+                "cannot make the worker's mounts private",
+            ));
         }
         if libc::mount(
             c"tmpfs".as_ptr(),
@@ -326,11 +315,15 @@ fn mount_scratch(scratch: &Path, size: u64) -> Result<(), String> {
             options.as_ptr().cast(),
         ) != 0
         {
-            return Err(err(&format!(
-                "cannot mount a tmpfs of {} on the scratch folder {}",
-                limits::size_text(size),
-                scratch.display()
-            )));
+            let error = std::io::Error::last_os_error();
+            return Err(ConfineError::Call {
+                what: format!(
+                    "cannot mount a tmpfs of {} on the scratch folder {}",
+                    limits::size_text(size),
+                    scratch.display()
+                ),
+                error,
+            });
         }
     }
     Ok(())

@@ -85,6 +85,25 @@ pub fn function_of(code: u8) -> Option<Function> {
     }
 }
 
+/// Why a frame cannot be read: what the reader expected and where, never the frame's bytes.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum WireError {
+    #[error("truncated message: {needed} bytes needed at offset {offset}")]
+    Truncated { needed: usize, offset: usize },
+    #[error("count {count} exceeds the message")]
+    Count { count: usize },
+    #[error("unknown operation {0}")]
+    UnknownOperation(u8),
+    #[error("unknown function code {0}")]
+    UnknownFunction(u8),
+    #[error("unknown error kind {0}")]
+    UnknownKind(u8),
+    #[error("{results} results for {gets} gets")]
+    Results { results: usize, gets: usize },
+    #[error("trailing bytes")]
+    Trailing,
+}
+
 /// Largest frame accepted (a corrupted or forged length must not allocate gigabytes).
 /// A step's answer is a few kilobytes; 64 MiB leaves room for huge string outputs.
 pub const MAX_FRAME: usize = 64 << 20;
@@ -132,7 +151,7 @@ impl LibraryTarget {
             e.str(&c.hash);
         }
     }
-    pub fn decode(d: &mut Dec) -> Result<LibraryTarget, String> {
+    pub fn decode(d: &mut Dec) -> Result<LibraryTarget, WireError> {
         let path = d.str()?;
         let source = d.str()?;
         let model_identifier = d.str()?;
@@ -343,7 +362,7 @@ impl Request<'_> {
     }
 
     /// The next operation of a request; every count and length is checked against it.
-    pub fn decode(d: &mut Dec) -> Result<Request<'static>, String> {
+    pub fn decode(d: &mut Dec) -> Result<Request<'static>, WireError> {
         let code = d.u8()?;
         Ok(match code {
             op::INSTANTIATE => Request::Instantiate {
@@ -415,7 +434,7 @@ impl Request<'_> {
                 t: d.f64()?,
                 h: d.f64()?,
             },
-            c => return Err(format!("unknown operation {c}")),
+            c => return Err(WireError::UnknownOperation(c)),
         })
     }
 
@@ -652,12 +671,11 @@ impl Failure {
         }
     }
 
-    fn decode(d: &mut Dec) -> Result<Failure, String> {
+    fn decode(d: &mut Dec) -> Result<Failure, WireError> {
         Ok(match d.u8()? {
             kind::CALL => {
                 let code = d.u8()?;
-                let function =
-                    function_of(code).ok_or_else(|| format!("unknown function code {code}"))?;
+                let function = function_of(code).ok_or(WireError::UnknownFunction(code))?;
                 let status = fmi2Status(d.i32()?);
                 let time = d.f64()?;
                 let n = d.count(4)?;
@@ -695,7 +713,7 @@ impl Failure {
             kind::INSTANTIATE => Failure::Instantiate(d.str()?),
             kind::UNSUPPORTED => Failure::Unsupported(function_of(d.u8()?)),
             kind::OTHER => Failure::Other(d.str()?),
-            k => return Err(format!("unknown error kind {k}")),
+            k => return Err(WireError::UnknownKind(k)),
         })
     }
 }
@@ -730,7 +748,7 @@ impl Response {
 
     /// The answer to a request whose operations with an answer are among `ops`, in order
     /// (the others are skipped): each completed get's values are read as it asked for them.
-    pub fn decode(body: &[u8], ops: &[Request<'_>]) -> Result<Response, String> {
+    pub fn decode(body: &[u8], ops: &[Request<'_>]) -> Result<Response, WireError> {
         let mut d = Dec::new(body);
         let ok = d.u8()? == 0;
         let n = d.u32()? as usize;
@@ -738,7 +756,10 @@ impl Response {
         let mut answers = ops.iter().filter_map(Request::answer);
         let asked = answers.clone().count();
         if n > asked {
-            return Err(format!("{n} results for {asked} gets"));
+            return Err(WireError::Results {
+                results: n,
+                gets: asked,
+            });
         }
         let results = answers
             .by_ref()
@@ -750,13 +771,13 @@ impl Response {
                     Answer::Texts(k) => Values::Text(d.each(k, Dec::str)?),
                 })
             })
-            .collect::<Result<_, String>>()?;
+            .collect::<Result<_, WireError>>()?;
         let error = match ok {
             true => None,
             false => Some(Failure::decode(&mut d)?),
         };
         if !d.at_end() {
-            return Err("trailing bytes".into());
+            return Err(WireError::Trailing);
         }
         Ok(Response {
             time,
@@ -816,47 +837,47 @@ impl<'a> Dec<'a> {
     pub fn new(b: &'a [u8]) -> Self {
         Dec { b, pos: 0 }
     }
-    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], WireError> {
         if self.b.len() - self.pos < n {
-            return Err(format!(
-                "truncated message: {n} bytes needed at offset {}",
-                self.pos
-            ));
+            return Err(WireError::Truncated {
+                needed: n,
+                offset: self.pos,
+            });
         }
         let s = &self.b[self.pos..self.pos + n];
         self.pos += n;
         Ok(s)
     }
-    fn array<const N: usize>(&mut self) -> Result<[u8; N], String> {
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], WireError> {
         let mut a = [0u8; N];
         a.copy_from_slice(self.take(N)?);
         Ok(a)
     }
-    pub fn u8(&mut self) -> Result<u8, String> {
+    pub fn u8(&mut self) -> Result<u8, WireError> {
         Ok(self.take(1)?[0])
     }
-    pub fn u32(&mut self) -> Result<u32, String> {
+    pub fn u32(&mut self) -> Result<u32, WireError> {
         Ok(u32::from_le_bytes(self.array()?))
     }
-    pub fn f64(&mut self) -> Result<f64, String> {
+    pub fn f64(&mut self) -> Result<f64, WireError> {
         Ok(f64::from_le_bytes(self.array()?))
     }
-    pub fn i32(&mut self) -> Result<i32, String> {
+    pub fn i32(&mut self) -> Result<i32, WireError> {
         Ok(i32::from_le_bytes(self.array()?))
     }
-    pub fn str(&mut self) -> Result<String, String> {
+    pub fn str(&mut self) -> Result<String, WireError> {
         let n = self.u32()? as usize;
         Ok(String::from_utf8_lossy(self.take(n)?).into_owned())
     }
     /// A count of elements of `size` bytes each, checked against what remains.
-    pub fn count(&mut self, size: usize) -> Result<usize, String> {
+    pub fn count(&mut self, size: usize) -> Result<usize, WireError> {
         let n = self.u32()? as usize;
         if n.saturating_mul(size) > self.b.len() - self.pos {
-            return Err(format!("count {n} exceeds the message"));
+            return Err(WireError::Count { count: n });
         }
         Ok(n)
     }
-    pub fn vrs(&mut self) -> Result<Vec<u32>, String> {
+    pub fn vrs(&mut self) -> Result<Vec<u32>, WireError> {
         let n = self.count(4)?;
         self.each(n, Dec::u32)
     }
@@ -864,8 +885,8 @@ impl<'a> Dec<'a> {
     pub fn each<T>(
         &mut self,
         n: usize,
-        mut read: impl FnMut(&mut Self) -> Result<T, String>,
-    ) -> Result<Vec<T>, String> {
+        mut read: impl FnMut(&mut Self) -> Result<T, WireError>,
+    ) -> Result<Vec<T>, WireError> {
         let mut out = Vec::with_capacity(n.min(self.b.len() - self.pos));
         for _ in 0..n {
             out.push(read(self)?);

@@ -5,9 +5,9 @@ use super::*;
 #[test]
 fn decoder_refuses_truncated_and_oversized_counts() {
     let mut d = Dec::new(&[5, 0, 0, 0, 1, 2]);
-    assert!(d.count(4).unwrap_err().contains("exceeds"));
+    assert_eq!(d.count(4).unwrap_err(), WireError::Count { count: 5 });
     let mut d = Dec::new(&[1, 0]);
-    assert!(d.u32().unwrap_err().contains("truncated"));
+    assert!(matches!(d.u32().unwrap_err(), WireError::Truncated { .. }));
 }
 
 fn target() -> LibraryTarget {
@@ -198,27 +198,30 @@ fn over_long_counts_and_unknown_codes_are_refused() {
     e.u32(u32::MAX);
     e.u32(1);
     let err = Request::decode(&mut Dec::new(&e.0)).unwrap_err();
-    assert!(
-        err.contains("count 4294967295 exceeds the message"),
-        "{err}"
+    assert_eq!(
+        err,
+        WireError::Count {
+            count: u32::MAX as usize
+        }
     );
+    assert_eq!(err.to_string(), "count 4294967295 exceeds the message");
     // A set with fewer values than value references.
     let mut e = Enc::default();
     e.u8(op::SET_REAL);
     e.vrs(&[1, 2]);
     e.f64(1.0);
     let err = Request::decode(&mut Dec::new(&e.0)).unwrap_err();
-    assert!(err.contains("truncated message"), "{err}");
+    assert!(matches!(err, WireError::Truncated { .. }), "{err}");
     // A string longer than the frame.
     let mut e = Enc::default();
     e.u8(op::SET_STRING);
     e.vrs(&[1]);
     e.u32(1000);
     let err = Request::decode(&mut Dec::new(&e.0)).unwrap_err();
-    assert!(err.contains("truncated message"), "{err}");
+    assert!(matches!(err, WireError::Truncated { .. }), "{err}");
     assert_eq!(
         Request::decode(&mut Dec::new(&[150])).unwrap_err(),
-        "unknown operation 150"
+        WireError::UnknownOperation(150)
     );
 }
 
@@ -324,7 +327,7 @@ fn every_response_round_trips_and_a_cut_one_is_refused() {
         longer.push(0);
         assert_eq!(
             Response::decode(&longer, &ops).unwrap_err(),
-            "trailing bytes"
+            WireError::Trailing
         );
     }
 }
@@ -343,7 +346,10 @@ fn forged_responses_are_refused() {
     let e = head(0, 6);
     assert_eq!(
         Response::decode(&e.0, &ops).unwrap_err(),
-        "6 results for 5 gets"
+        WireError::Results {
+            results: 6,
+            gets: 5
+        }
     );
     // A function code outside the table, an unknown error kind.
     let mut e = head(1, 0);
@@ -351,13 +357,13 @@ fn forged_responses_are_refused() {
     e.u8(250);
     assert_eq!(
         Response::decode(&e.0, &ops).unwrap_err(),
-        "unknown function code 250"
+        WireError::UnknownFunction(250)
     );
     let mut e = head(1, 0);
     e.u8(9);
     assert_eq!(
         Response::decode(&e.0, &ops).unwrap_err(),
-        "unknown error kind 9"
+        WireError::UnknownKind(9)
     );
     // A log count beyond the frame.
     let mut e = head(1, 0);
@@ -367,7 +373,7 @@ fn forged_responses_are_refused() {
     e.f64(0.0);
     e.u32(u32::MAX);
     let err = Response::decode(&e.0, &ops).unwrap_err();
-    assert!(err.contains("exceeds the message"), "{err}");
+    assert!(matches!(err, WireError::Count { .. }), "{err}");
 }
 
 #[test]
