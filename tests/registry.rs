@@ -1,6 +1,6 @@
 //! The model registry is the one list of models: every model crate of the workspace (a crate
 //! with an `fmu` feature, which exports the FMI symbols) is registered (a path dependency of
-//! the root `Cargo.toml`, which build.rs reads), and every registered model is such a crate;
+//! `crates/bench/Cargo.toml`, which its build.rs reads), and every registered model is such a crate;
 //! `pack` and the native backend read the same list.
 
 use std::collections::BTreeSet;
@@ -57,7 +57,7 @@ fn the_registry_and_the_workspace_model_crates_agree() {
         .collect();
     assert_eq!(
         crates, registered,
-        "a model crate of the workspace is not registered: add `<name> = {{ path = \"...\" }}` to the root Cargo.toml's [dependencies]"
+        "a model crate of the workspace is not registered: add `<name> = {{ path = \"...\" }}` to crates/bench/Cargo.toml's [dependencies]"
     );
     let registered_tests: BTreeSet<String> = registry
         .iter()

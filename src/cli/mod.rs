@@ -22,7 +22,6 @@ pub mod progress;
 pub mod realtime_check;
 pub mod run;
 pub mod run_args;
-pub mod run_fmu;
 pub mod validate;
 pub mod worker;
 

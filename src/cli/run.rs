@@ -114,7 +114,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         .collect();
     let mut sim = Simulation::new(system.clone())?;
     if let Some(instance) = &instance {
-        super::run_fmu::own_names(sim.recording_mut(), instance)?;
+        crate::run_fmu::own_names(sim.recording_mut(), instance)?;
     }
     sim.record_events(args.record_events)?;
     apply_parameters(&args, &system, &mut sim, instance.as_deref())?;
@@ -216,15 +216,15 @@ fn load_plan(
 ) -> anyhow::Result<(Arc<Plan>, Option<String>)> {
     // One FMU on its own: a system of one instance, its recorded columns under the FMU's
     // own names and `--set` naming the FMU's variables.
-    let alone = super::run_fmu::is_fmu(&args.system);
+    let alone = crate::run_fmu::is_fmu(&args.system);
     Ok(match alone {
         true => {
-            let (file, instance) = super::run_fmu::system(args, &cache)?;
+            let (file, instance) = crate::run_fmu::system(&args.fmu_run(), &cache)?;
             let plan = Plan::compile(file, &args.system, cache, options)?;
             (Arc::new(plan), Some(instance))
         }
         false => {
-            super::run_fmu::refuse_fmu_options(args)?;
+            crate::run_fmu::refuse_fmu_options(&args.fmu_run())?;
             (
                 Arc::new(Plan::load_with(&args.system, cache, options)?),
                 None,

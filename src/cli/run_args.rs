@@ -1,6 +1,7 @@
 //! The options of `twinbench run`, shared by a system's run ([`super::run`]) and a lone
-//! FMU's ([`super::run_fmu`]).
+//! FMU's ([`crate::run_fmu`], which takes them as its own options, [`FmuRun`]).
 
+use crate::run_fmu::FmuRun;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -110,6 +111,23 @@ pub struct RunArgs {
     #[arg(long, value_name = "continue|skip|stop", default_value = "continue",
           requires = "realtime", value_parser = |s: &str| tb_cosim::pacing::OverrunPolicy::from_name(s))]
     pub overrun: tb_cosim::pacing::OverrunPolicy,
+}
+
+impl RunArgs {
+    /// The options of one FMU's run (the library's, which has no clap).
+    pub fn fmu_run(&self) -> FmuRun {
+        FmuRun {
+            system: self.system.clone(),
+            start: self.start,
+            stop: self.stop,
+            step: self.step,
+            output_interval: self.output_interval,
+            input: self.input.clone(),
+            interface: self.interface,
+            record_events: self.record_events,
+            isolated: self.isolate.is_some(),
+        }
+    }
 }
 
 /// `--realtime FACTOR`: a finite number above 0.

@@ -1,7 +1,8 @@
 //! The crate's error type. Every error about a data cell names the source (file path, or
 //! the label of an in-memory table), the row as the 1-based line in the file, and the
 //! column. Errors of the table itself (reading, parsing, its shape) are `tb-table`'s,
-//! wrapped as they are in [`Error::Table`].
+//! wrapped as they are in [`Error::Table`]; the measurement's are `tb-measurement`'s, in
+//! [`Error::Measurement`].
 
 use tb_table::TableError;
 
@@ -17,37 +18,10 @@ pub enum Error {
     #[error(transparent)]
     Table(#[from] TableError),
 
-    #[error(
-        "{file}: line {row}, column `{column}`: time does not increase ({value} after {previous})"
-    )]
-    NonIncreasingTime {
-        file: String,
-        row: u64,
-        column: String,
-        previous: f64,
-        value: f64,
-    },
-
-    #[error(
-        "{file}: line {row}, column `{column}`: distance runs backwards ({value} after {previous})"
-    )]
-    DistanceBackwards {
-        file: String,
-        row: u64,
-        column: String,
-        previous: f64,
-        value: f64,
-    },
-
-    /// A channel map names a channel the file does not have.
-    #[error("{file}: no channel `{channel}` (the channel map's name for signal `{signal}`); closest channels: {closest} (channels in the file: {available})")]
-    MissingChannel {
-        file: String,
-        signal: String,
-        channel: String,
-        closest: String,
-        available: String,
-    },
+    /// Reading or validating the measurement (`tb-measurement`), or a time or distance of a
+    /// simulation checked as a measurement's: its error, message as it is.
+    #[error(transparent)]
+    Measurement(#[from] tb_measurement::Error),
 
     #[error(
         "{file}: line {row}, column `{column}`: non-uniform sampling (step {step} s, expected {expected} s within 1 %); the zero-phase filter needs a uniform time base: resample first"
@@ -91,16 +65,6 @@ pub enum Error {
         signal: String,
         closest: String,
         available: String,
-    },
-
-    /// A measurement without one of the signals every measurement needs: the channel map
-    /// entry that would supply it is suggested.
-    #[error("{file}: missing required column `{signal}` (columns present: {available}); {hint}")]
-    MissingSignal {
-        file: String,
-        signal: String,
-        available: String,
-        hint: String,
     },
 }
 

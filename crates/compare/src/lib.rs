@@ -2,7 +2,8 @@
 //! `docs/compare.md`).
 //!
 //! - [`Table`]: the column table (from `tb-table`, shared with results, replays, analysis).
-//! - [`measurement`]: the vehicle measurement format, validated.
+//! - [`measurement`]: the vehicle measurement format, validated (the crate
+//!   `tb-measurement`, re-exported: the co-simulation's replays read it without this crate).
 //! - [`filter`]: Butterworth low-pass (bilinear transform, prewarped) as second-order
 //!   sections; zero-phase forward-backward filtering with scipy's default odd padding.
 //! - [`resample`]: linearly spaced distance grid and linear interpolation (Fig. 6).
@@ -26,7 +27,6 @@
 pub mod compare;
 pub mod error;
 pub mod filter;
-pub mod measurement;
 pub mod metrics;
 pub mod resample;
 
@@ -36,9 +36,10 @@ pub use compare::{
 };
 pub use error::{Error, Result};
 pub use filter::Butterworth;
-pub use measurement::{
-    si_unit, ChannelMap, DistanceSource, Measurement, REQUIRED_COLUMNS, SIGNALS,
-};
 pub use metrics::{error_measure, metrics, Metrics};
 pub use resample::DistanceGrid;
+pub use tb_measurement as measurement;
+pub use tb_measurement::{
+    si_unit, ChannelMap, DistanceSource, Measurement, REQUIRED_COLUMNS, SIGNALS,
+};
 pub use tb_table::Table;

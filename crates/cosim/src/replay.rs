@@ -41,11 +41,14 @@ impl ReplaySource {
             .iter()
             .zip(file_units)
             .map(|(c, declared)| {
+                // A time-based file without a unit for a column named as a measurement's
+                // signal (the bundled lap's CSV has no units row) is taken in the
+                // measurement format's unit, as it always was; see docs/design.md.
                 cfg.units
                     .get(c)
                     .cloned()
                     .or(declared)
-                    .or_else(|| tb_compare::si_unit(c).map(str::to_string))
+                    .or_else(|| tb_measurement::si_unit(c).map(str::to_string))
                     .unwrap_or_default()
             })
             .collect();
@@ -77,7 +80,7 @@ impl ReplaySource {
     fn measurement(
         cfg: &ReplayConfig,
     ) -> Result<(Vec<f64>, Vec<String>, Vec<Vec<f64>>, Vec<Option<String>>), String> {
-        let meas = tb_compare::Measurement::read_path(&cfg.file).map_err(|e| e.to_string())?;
+        let meas = tb_measurement::Measurement::read_path(&cfg.file).map_err(|e| e.to_string())?;
         if cfg.by.is_none() {
             return Err("basis = \"distance\" needs `by`, the signal giving the distance (e.g. \"vehicle.distance\")".into());
         }
@@ -85,20 +88,17 @@ impl ReplaySource {
             return Err("no columns to replay".into());
         }
         let mut data = Vec::new();
+        let mut units = Vec::new();
         for c in &cfg.columns {
             let col = meas
                 .signal(c)
                 .map_err(|e| e.to_string())?
                 .ok_or_else(|| format!("no column '{c}' in the file"))?;
             data.push(col.to_vec());
+            // The measurement declares its signals' units (SI, converted on reading).
+            units.push(meas.unit(c).map(str::to_string));
         }
-        let n = cfg.columns.len();
-        Ok((
-            meas.distance().to_vec(),
-            cfg.columns.clone(),
-            data,
-            vec![None; n],
-        ))
+        Ok((meas.distance().to_vec(), cfg.columns.clone(), data, units))
     }
 
     /// Any time-based file (CSV or MDF 4), as FMPy reads an input file: the `time` column

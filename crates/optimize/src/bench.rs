@@ -44,7 +44,9 @@ impl Bench {
             .map(|lap| {
                 Ok(LapBench {
                     workers: WorkerPool::for_lap(study, lap, cache.clone())?,
-                    measurement: Measurement::load(&lap.measurement_path, &lap.channels)?,
+                    // The measurement's error as the comparison's (it re-exports the reader).
+                    measurement: Measurement::load(&lap.measurement_path, &lap.channels)
+                        .map_err(tb_compare::Error::from)?,
                     lap: lap.clone(),
                 })
             })

@@ -16,7 +16,7 @@ create_exception!(
 
 /// An error as the command line prints it (the whole chain, `error: ` left off).
 pub(crate) fn error(e: impl Into<anyhow::Error>) -> PyErr {
-    TwinbenchError::new_err(twinbench::bench::message(&e.into()))
+    TwinbenchError::new_err(tb_bench::bench::message(&e.into()))
 }
 
 /// A Python value as the TOML value `--set` would give the same text.

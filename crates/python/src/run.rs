@@ -45,14 +45,14 @@ pub(crate) fn run(
             file.experiment.stop = s;
         }
         let options = LoadOptions {
-            native_models: twinbench::registry::native_models(),
+            native_models: tb_bench::registry::native_models(),
             ..LoadOptions::default()
         };
         let plan = Arc::new(Plan::compile(file, &system, cache, &options)?);
         let mut sim = Simulation::new(plan.clone())?;
         sim.echo_fmu_log = false;
         if let Some(instance) = &instance {
-            twinbench::cli::run_fmu::own_names(sim.recording_mut(), instance)?;
+            tb_bench::run_fmu::own_names(sim.recording_mut(), instance)?;
         }
         for (name, value) in &parameters {
             // One FMU: its own variable names, as the command line's --set takes them.
@@ -61,7 +61,7 @@ pub(crate) fn run(
                 _ => name.clone(),
             };
             let name = &name;
-            twinbench::bench::set_parameter(&plan, &mut sim, name, value)
+            tb_bench::bench::set_parameter(&plan, &mut sim, name, value)
                 .map_err(|e| e.context(format!("parameters[\"{name}\"]")))?;
         }
         // Ctrl-C while the run goes on: KeyboardInterrupt after the step under way.
@@ -80,7 +80,7 @@ pub(crate) fn run(
         let summary = sim.run();
         drop(sim.take_observers());
         let summary = summary?;
-        let lap_time = twinbench::bench::lap_time(&summary, &plan);
+        let lap_time = tb_bench::bench::lap_time(&summary, &plan);
         let order: Vec<String> = plan
             .order
             .iter()
@@ -123,14 +123,10 @@ fn system_file(
     system: &std::path::Path,
     cache: &Arc<FmuCache>,
 ) -> anyhow::Result<(tb_cosim::config::SystemFile, Option<String>)> {
-    let alone = twinbench::cli::run_fmu::is_fmu(system);
+    let alone = tb_bench::run_fmu::is_fmu(system);
     Ok(if alone {
-        use clap::{Args, FromArgMatches};
-        let path = system.to_string_lossy().into_owned();
-        let matches = twinbench::cli::run::RunArgs::augment_args(clap::Command::new("run"))
-            .try_get_matches_from(["run", path.as_str()])?;
-        let args = twinbench::cli::run::RunArgs::from_arg_matches(&matches)?;
-        let (file, instance) = twinbench::cli::run_fmu::system(&args, cache)?;
+        let options = tb_bench::run_fmu::FmuRun::new(system);
+        let (file, instance) = tb_bench::run_fmu::system(&options, cache)?;
         (file, Some(instance))
     } else {
         (Plan::read_system(system, cache)?, None)

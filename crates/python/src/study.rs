@@ -252,14 +252,14 @@ fn optimizer_kind(o: &str) -> PyResult<OptimizerKind> {
 /// and the study stops after the generation under way. The result as JSON.
 fn run_watching_signals(
     py: Python<'_>,
-    args: &twinbench::study::StudyRun,
+    args: &tb_bench::study::StudyRun,
     dyn_evaluator: Option<Arc<dyn Evaluator>>,
     observers: Vec<Arc<dyn StudyObserver>>,
     interrupt: &AtomicBool,
 ) -> anyhow::Result<String> {
     std::thread::scope(|scope| {
         let study = scope.spawn(move || {
-            twinbench::study::optimize(args, dyn_evaluator, observers)
+            tb_bench::study::optimize(args, dyn_evaluator, observers)
                 .and_then(|o| Ok(serde_json::to_string(&o.result)?))
         });
         while !study.is_finished() {
@@ -315,7 +315,7 @@ pub(crate) fn optimize(
         })),
         _ => None,
     };
-    let args = twinbench::study::StudyRun {
+    let args = tb_bench::study::StudyRun {
         study,
         resume,
         verbose: false,
@@ -356,7 +356,7 @@ pub(crate) fn optimize(
         return Err(e);
     }
     match result {
-        Err(e) => match e.downcast_ref::<twinbench::study::Interrupted>() {
+        Err(e) => match e.downcast_ref::<tb_bench::study::Interrupted>() {
             Some(i) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(format!(
                 "interrupted: checkpoint kept ({}); resume with study.optimize(..., resume=True) or `{}`",
                 i.checkpoint, i.resume

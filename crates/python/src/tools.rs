@@ -39,7 +39,7 @@ pub(crate) fn compare(
             min_coverage,
             ..tb_compare::CompareSettings::default()
         };
-        let cmp = twinbench::bench::compare_table(
+        let cmp = tb_bench::bench::compare_table(
             &sim,
             &measurement,
             channels.as_deref(),
@@ -60,9 +60,9 @@ pub(crate) fn pack(
     out: Option<PathBuf>,
     models: Option<Vec<String>>,
 ) -> PyResult<Vec<PathBuf>> {
-    let out = out.unwrap_or_else(twinbench::pack::default_fmu_dir);
+    let out = out.unwrap_or_else(tb_bench::pack::default_fmu_dir);
     let models = models.unwrap_or_default();
-    py.detach(|| twinbench::pack::pack(&models, &out))
+    py.detach(|| tb_bench::pack::pack(&models, &out))
         .map_err(error)
 }
 
@@ -80,7 +80,7 @@ pub(crate) fn export_twin(
     let mut v = Vec::new();
     for x in versions {
         v.push(
-            twinbench::pack::FmiVersion::parse(&x.to_string()).ok_or_else(|| {
+            tb_bench::pack::FmiVersion::parse(&x.to_string()).ok_or_else(|| {
                 TwinbenchError::new_err(format!("fmi: {x} is not an FMI version (2 or 3)"))
             })?,
         );
@@ -89,10 +89,10 @@ pub(crate) fn export_twin(
     v.dedup();
     let ex = py
         .detach(|| {
-            twinbench::export_twin::export_twin(
+            tb_bench::export_twin::export_twin(
                 &result,
                 &out,
-                &twinbench::export_twin::ExportOptions { versions: v },
+                &tb_bench::export_twin::ExportOptions { versions: v },
             )
         })
         .map_err(error)?;
@@ -128,7 +128,7 @@ pub(crate) fn realtime_check(
             )))
         }
     };
-    let o = twinbench::realtime_check::Options {
+    let o = tb_bench::realtime_check::Options {
         fmu: fmu.clone(),
         step,
         duration,
@@ -144,10 +144,10 @@ pub(crate) fn realtime_check(
     let json = py.detach(|| -> anyhow::Result<String> {
         if fmu.extension().is_some_and(|e| e == "toml") {
             Ok(serde_json::to_string(
-                &twinbench::realtime_check::check_bench(&fmu, &o)?,
+                &tb_bench::realtime_check::check_bench(&fmu, &o)?,
             )?)
         } else {
-            Ok(serde_json::to_string(&twinbench::realtime_check::check(
+            Ok(serde_json::to_string(&tb_bench::realtime_check::check(
                 &o,
             )?)?)
         }

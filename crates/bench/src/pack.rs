@@ -1,6 +1,7 @@
 //! Packing: write `<model>.fmu` with modelDescription.xml, the model's library, resources
 //! and documentation. The libraries are built by the build script (release, the models'
-//! `fmu` feature) and embedded in this binary, so packing needs no sources and no cargo.
+//! `fmu` feature) and embedded in this library (and so in the binary and the Python
+//! package), so packing needs no sources and no cargo.
 //! The output is deterministic: same sources, byte-identical FMUs.
 
 pub use crate::registry::ModelSpec;
@@ -30,10 +31,14 @@ pub fn models() -> Vec<ModelSpec> {
         .collect()
 }
 
-/// Where twinbench was built from (its `Cargo.toml`): the tests use it; the commands do
-/// not (an installed binary needs no sources).
+/// Where twinbench was built from (the workspace's `Cargo.toml`, two folders above this
+/// crate's): the tests use it; the commands do not (an installed binary needs no sources).
 pub fn workspace_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    here.ancestors()
+        .nth(2)
+        .expect("crates/bench is two folders below the workspace root")
+        .to_path_buf()
 }
 
 /// Default output folder of `pack`, the same for every binary wherever it was built:

@@ -33,6 +33,14 @@ pub enum ValidateError {
     },
 }
 
+/// The measurement's errors as the comparison's (`Compare`), as they were before the
+/// reader moved below it.
+impl From<tb_compare::measurement::Error> for ValidateError {
+    fn from(e: tb_compare::measurement::Error) -> Self {
+        ValidateError::Compare(e.into())
+    }
+}
+
 /// What `validate` is given.
 #[derive(Clone, Debug)]
 pub struct ValidateOptions {

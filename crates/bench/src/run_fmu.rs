@@ -6,9 +6,8 @@
 //! names (a column without a unit takes its input's). Everything else (checks, messages,
 //! the summary, `--out`, `--set`, `--isolate`, `--trace-fmi`) is `run`'s.
 
-use super::run_args::RunArgs;
 use anyhow::{bail, Context};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use tb_cosim::SystemFile;
 use tb_fmi::import::description::{ModelDescription, ScalarVariable};
 use tb_fmi::import::description3::Fmi3Type;
@@ -18,6 +17,40 @@ use tb_fmi::{Causality, FmuCache, Interface, LoadedFmu, ScalarType};
 /// identifiers, this is not one).
 const INPUT: &str = "input-file";
 
+/// The options of one FMU's run: `twinbench run model.fmu`'s (the command line's options
+/// convert into this) and the Python package's `run` (every option at its default).
+#[derive(Clone, Debug, Default)]
+pub struct FmuRun {
+    /// The FMU.
+    pub system: PathBuf,
+    /// The start time [s] (default: its DefaultExperiment's, else 0).
+    pub start: Option<f64>,
+    /// The stop time [s] (default: its DefaultExperiment's, else start + 1).
+    pub stop: Option<f64>,
+    /// The communication step [s] (default: FMPy's, [`default_step`]).
+    pub step: Option<f64>,
+    /// Record every this many seconds (a whole number of steps; alone, the step too).
+    pub output_interval: Option<f64>,
+    /// An input file (CSV or MDF 4, FMPy's format) whose columns drive the inputs.
+    pub input: Option<PathBuf>,
+    /// The interface to run it through (default: Co-Simulation when the FMU has it).
+    pub interface: Option<Interface>,
+    /// Model Exchange: a row just before and just after each event too.
+    pub record_events: bool,
+    /// The instance runs in a worker process (`--isolate`).
+    pub isolated: bool,
+}
+
+impl FmuRun {
+    /// The FMU at `system` with every option at its default.
+    pub fn new(system: impl Into<PathBuf>) -> Self {
+        FmuRun {
+            system: system.into(),
+            ..FmuRun::default()
+        }
+    }
+}
+
 /// Whether `path` names an FMU (by its extension, as FMPy decides).
 pub fn is_fmu(path: &Path) -> bool {
     path.extension()
@@ -25,7 +58,7 @@ pub fn is_fmu(path: &Path) -> bool {
 }
 
 /// The options that only a run of one FMU takes, refused with a system file.
-pub fn refuse_fmu_options(args: &RunArgs) -> anyhow::Result<()> {
+pub fn refuse_fmu_options(args: &FmuRun) -> anyhow::Result<()> {
     let given = [
         ("--start", args.start.is_some()),
         ("--stop", args.stop.is_some()),
@@ -45,14 +78,14 @@ pub fn refuse_fmu_options(args: &RunArgs) -> anyhow::Result<()> {
 }
 
 /// The system of one FMU run alone, and its instance's name.
-pub fn system(args: &RunArgs, cache: &FmuCache) -> anyhow::Result<(SystemFile, String)> {
+pub fn system(args: &FmuRun, cache: &FmuCache) -> anyhow::Result<(SystemFile, String)> {
     let fmu_path = tb_files::absolute(&args.system);
     let fmu = cache.load(&fmu_path)?;
     let md = &fmu.description;
     let interface = args.interface.unwrap_or_else(|| fmu.default_interface());
     fmu.check_interface(interface)
         .map_err(|why| anyhow::anyhow!("--interface {interface}: {}: {why}", fmu_path.display()))?;
-    if args.record_events && args.isolate.is_some() && interface == Interface::ModelExchange {
+    if args.record_events && args.isolated && interface == Interface::ModelExchange {
         bail!(
             "--record-events with --isolate: an isolated Model Exchange instance integrates in its worker and records no event rows yet; run without --isolate for event rows"
         );
@@ -158,7 +191,7 @@ fn fmpy_group(v: &ScalarVariable) -> Option<usize> {
 
 /// `[experiment]` from the options, else the FMU's default experiment, else FMPy's
 /// defaults (start 0, stop start + 1 s; the step: see [`default_step`]).
-fn experiment(args: &RunArgs, fmu: &LoadedFmu, interface: Interface) -> anyhow::Result<String> {
+fn experiment(args: &FmuRun, fmu: &LoadedFmu, interface: Interface) -> anyhow::Result<String> {
     let de = fmu.description.default_experiment.unwrap_or_default();
     let start = args.start.or(de.start_time).unwrap_or(0.0);
     let stop = args.stop.or(de.stop_time).unwrap_or(start + 1.0);
@@ -237,7 +270,7 @@ fn auto_interval(t: f64) -> f64 {
 }
 
 /// Rows recorded every `--output-interval / --step` steps (a whole number).
-fn decimation(args: &RunArgs) -> anyhow::Result<usize> {
+fn decimation(args: &FmuRun) -> anyhow::Result<usize> {
     let (Some(interval), Some(step)) = (args.output_interval, args.step) else {
         return Ok(1);
     };

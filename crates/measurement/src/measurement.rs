@@ -127,6 +127,13 @@ impl Measurement {
         Ok(self.table.column(name)?)
     }
 
+    /// The unit of a signal as the format declares it (SI, [`si_unit`]: the file's units
+    /// were converted to it); None for a column the format does not know (its file's unit,
+    /// if any, was not converted, so it is not vouched for).
+    pub fn unit(&self, signal: &str) -> Option<&'static str> {
+        si_unit(signal)
+    }
+
     /// A column by name, or a missing-column error (for callers that need e.g. the pedals).
     pub fn require(&self, name: &str) -> Result<&[f64]> {
         Ok(self.table.require(name)?)
@@ -161,7 +168,7 @@ fn missing_signal(table: &Table, signal: &str) -> Error {
 }
 
 /// Strictly increasing time, else an error naming the first offending line.
-pub(crate) fn check_increasing_time(table: &Table, col: usize) -> Result<()> {
+pub fn check_increasing_time(table: &Table, col: usize) -> Result<()> {
     let t = table.column_at(col);
     match t.windows(2).position(|w| w[1] <= w[0]) {
         None => Ok(()),
@@ -176,7 +183,7 @@ pub(crate) fn check_increasing_time(table: &Table, col: usize) -> Result<()> {
 }
 
 /// Non-decreasing distance, else an error naming the first offending line.
-pub(crate) fn check_distance_forward(table: &Table, col: usize) -> Result<()> {
+pub fn check_distance_forward(table: &Table, col: usize) -> Result<()> {
     check_forward(table.column_at(col), |i| {
         (
             table.source().into(),
@@ -186,10 +193,7 @@ pub(crate) fn check_distance_forward(table: &Table, col: usize) -> Result<()> {
     })
 }
 
-pub(crate) fn check_forward(
-    d: &[f64],
-    locate: impl Fn(usize) -> (String, u64, String),
-) -> Result<()> {
+pub fn check_forward(d: &[f64], locate: impl Fn(usize) -> (String, u64, String)) -> Result<()> {
     match d.windows(2).position(|w| w[1] < w[0]) {
         None => Ok(()),
         Some(i) => {
@@ -262,7 +266,7 @@ impl ChannelMap {
                 })
             })?;
         let f: File = toml::from_str(&text)
-            .map_err(|e| Error::Settings(format!("{}: {e}", path.display())))?;
+            .map_err(|e| Error::ChannelMap(format!("{}: {e}", path.display())))?;
         f.channels.check(&path.display().to_string())?;
         Ok(f.channels)
     }
@@ -277,7 +281,7 @@ impl ChannelMap {
                 let near = closest(key, SIGNALS, 1)
                     .into_iter()
                     .find(|c| edit_distance(key, c) <= 2.max(key.len() / 3));
-                return Err(Error::Settings(format!(
+                return Err(Error::ChannelMap(format!(
                     "{source}: channel map: unknown signal `{key}`{} (the signals a map names: {})",
                     match near {
                         Some(c) => format!(" (did you mean `{c}`?)"),
@@ -320,7 +324,7 @@ impl Measurement {
                 }
             })?;
             if let Some((_, other)) = renames.iter().find(|(k, _)| *k == i) {
-                return Err(Error::Settings(format!(
+                return Err(Error::ChannelMap(format!(
                     "{file}: the channel map gives channel `{channel}` to two signals, `{other}` and `{signal}`"
                 )));
             }
@@ -340,8 +344,7 @@ fn file_channels(mut e: Error, map: &ChannelMap) -> Error {
         Error::Table(TableError::NonFinite { column, .. })
         | Error::Table(TableError::Malformed { column, .. })
         | Error::NonIncreasingTime { column, .. }
-        | Error::DistanceBackwards { column, .. }
-        | Error::NonUniformSampling { column, .. } => {
+        | Error::DistanceBackwards { column, .. } => {
             if let Some(channel) = map.0.get(column.as_str()) {
                 *column = channel.clone();
             }
@@ -372,7 +375,7 @@ fn to_si(table: &mut Table, file: &str, map: &ChannelMap) -> Result<()> {
             format!("channel `{channel}` ({name})")
         };
         let from = tb_fmi::units::lookup(declared).ok_or_else(|| {
-            Error::Settings(format!(
+            Error::Unit(format!(
                 "{file}: {what}: unknown unit '{declared}' (known: {})",
                 tb_fmi::units::UNITS
                     .iter()
@@ -383,7 +386,7 @@ fn to_si(table: &mut Table, file: &str, map: &ChannelMap) -> Result<()> {
         })?;
         let to = tb_fmi::units::lookup(target).expect("SI units are in the table");
         if !from.compatible(to) {
-            return Err(Error::Settings(format!(
+            return Err(Error::Unit(format!(
                 "{file}: {what}: unit '{declared}' cannot be converted to '{target}'"
             )));
         }

@@ -2,10 +2,10 @@
 //! list that `pack` (what to build and package), the native backend (which models are
 //! linked) and the test suite read.
 //!
-//! A model is registered by one line in the root `Cargo.toml`'s `[dependencies]`, the path
-//! of its crate (`gain = { path = "models/gain" }`): `build.rs` takes every path dependency
-//! whose crate has an `fmu` feature, in that order, builds its FMU library and writes the
-//! entries below (`$OUT_DIR/registry.rs`). The model type is the crate's name in
+//! A model is registered by one line in this crate's `Cargo.toml` (`crates/bench`), in
+//! `[dependencies]`, the path of its crate (`gain = { path = "../../models/gain" }`):
+//! `build.rs` takes every path dependency whose crate has an `fmu` feature, in that order,
+//! builds its FMU library and writes the entries below (`$OUT_DIR/registry.rs`). The model type is the crate's name in
 //! UpperCamelCase (`gain::Gain`) unless the crate's `[package.metadata.twinbench]` names it
 //! (`model = "..."`); `test = true` there makes it a test FMU. A test checks that every
 //! workspace crate with an `fmu` feature is registered.
@@ -13,8 +13,10 @@
 use fmu_export::Model;
 use tb_cosim::native::NativeModel;
 
-const MODEL_DESCRIPTION_TEMPLATE: &str = include_str!("../fmu-templates/modelDescription.xml");
-const DOCUMENTATION_TEMPLATE: &str = include_str!("../fmu-templates/documentation/index.html");
+const MODEL_DESCRIPTION_TEMPLATE: &str =
+    include_str!("../../../fmu-templates/modelDescription.xml");
+const DOCUMENTATION_TEMPLATE: &str =
+    include_str!("../../../fmu-templates/documentation/index.html");
 
 /// What the packer needs of one model crate.
 #[derive(Clone, Copy)]

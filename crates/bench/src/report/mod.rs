@@ -671,7 +671,8 @@ pub fn write_report(
         .optimized
         .as_ref()
         .ok_or(ReportError::MissingLap("optimised"))?;
-    let measurement = Measurement::load(&study.measurement_path, &study.channels)?;
+    let measurement = Measurement::load(&study.measurement_path, &study.channels)
+        .map_err(tb_compare::Error::from)?;
     let prepared = PreparedMeasurement::new(&measurement, &["Fz_sum", "a_x"], &study.file.compare)?;
     let mut ws = Workspace::new();
     let meas: &Table = measurement.table();

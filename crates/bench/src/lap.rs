@@ -40,6 +40,14 @@ pub enum LapError {
     },
 }
 
+/// The measurement's reader is `tb-measurement` (below the comparison): its errors are
+/// `Measurement` as before, wrapped as the comparison wraps them.
+impl From<tb_compare::measurement::Error> for LapError {
+    fn from(e: tb_compare::measurement::Error) -> Self {
+        LapError::Measurement(e.into())
+    }
+}
+
 /// What `lap` is given.
 #[derive(Clone, Debug)]
 pub struct LapOptions {
@@ -56,7 +64,7 @@ pub struct LapOptions {
 }
 
 /// The vehicle model's chassis (`vehicle.chassis_model`) for a prepared lap.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub enum Chassis {
     /// The first-order low-pass (the model's default); the study fits lift and geometry.
     #[default]
@@ -447,7 +455,7 @@ fn toml_string(s: &str) -> String {
 
 /// The bench's own RLS/v system file, which `lap` edits for a lap (one copy of the bench:
 /// a connection or a recorded signal added there is in every lap's system too).
-const BENCH_SYSTEM: &str = include_str!("../systems/rls_v.toml");
+const BENCH_SYSTEM: &str = include_str!("../../../systems/rls_v.toml");
 
 /// The system file of the RLS/v bench for the lap: `systems/rls_v.toml` with the lap's
 /// FMUs, files, start values and time budget.
