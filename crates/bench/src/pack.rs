@@ -11,7 +11,10 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum PackError {
     #[error("model '{model}': inconsistent variable table: {reason}")]
-    Table { model: String, reason: String },
+    Table {
+        model: String,
+        reason: fmu_export::description::InvalidTable,
+    },
     #[error("{path}: {source}")]
     Io {
         path: PathBuf,

@@ -33,7 +33,7 @@ pub struct ModelSpec {
     pub fitted_description: fn(&fmu_export::description::Fitting) -> String,
     pub fitted_description3: fn(&fmu_export::description::Fitting) -> String,
     pub documentation: fn() -> String,
-    pub validate: fn() -> Result<(), String>,
+    pub validate: fn() -> Result<(), fmu_export::description::InvalidTable>,
     pub guid: fn() -> String,
     /// The model's FMU library (`binaries/linux64/<identifier>.so`), built by the build script.
     pub library: &'static [u8],
@@ -74,9 +74,7 @@ impl ModelSpec {
             documentation: || {
                 fmu_export::description::render_documentation::<M>(DOCUMENTATION_TEMPLATE)
             },
-            validate: || {
-                fmu_export::description::validate_table::<M::Vars>().map_err(|e| e.to_string())
-            },
+            validate: || fmu_export::description::validate_table::<M::Vars>(),
             guid: fmu_export::description::guid::<M>,
         }
     }

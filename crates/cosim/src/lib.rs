@@ -59,11 +59,11 @@ pub enum SystemError {
         context: String,
         error: plan::OrderError,
     },
-    #[error("replay '{name}' ({path}): {message}")]
+    #[error("replay '{name}' ({path}): {error}")]
     Replay {
         name: String,
         path: PathBuf,
-        message: String,
+        error: Box<replay::ReplayError>,
     },
     #[error(
         "{signal} is not finite ({value}) at t = {time} s after the step of instance '{instance}'"

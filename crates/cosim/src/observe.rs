@@ -102,6 +102,13 @@ impl<'a> RunView<'a> {
         self.ex.plan()
     }
 
+    /// Every how many steps the recording keeps a row (`[record] decimation`): an observer
+    /// that writes beside the recording keeps the same rows with it as its
+    /// [`RunObserver::step_interval`].
+    pub fn record_decimation(&self) -> u64 {
+        self.ex.plan().file.record.decimation as u64
+    }
+
     /// A value read after every step without asking any FMU: a slot a connection, the
     /// stop condition or a replay's distance basis reads ([`Plan::read_every_step`]). A
     /// record-only slot holds its value of the last moment its outputs were read.

@@ -26,12 +26,48 @@ pub struct ReplaySource {
     pub table: Table,
 }
 
+/// Why a replayed file cannot be replayed (in [`SystemError::Replay`], which names the
+/// replay and its file).
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error(transparent)]
+    Measurement(#[from] tb_measurement::Error),
+    #[error(transparent)]
+    Table(#[from] tb_table::TableError),
+    #[error("basis = \"distance\" needs `by`, the signal giving the distance (e.g. \"vehicle.distance\")")]
+    DistanceWithoutBy,
+    #[error("no columns to replay")]
+    NoColumns,
+    #[error("no column '{column}' in the file")]
+    NoSignal { column: String },
+    #[error("the time column '{column}' is not numeric")]
+    TimeNotNumeric { column: String },
+    #[error("the time column '{column}' is in '{unit}', not a unit of time (s, ms, min, h)")]
+    TimeUnit { column: String, unit: String },
+    #[error("line {line}: time {time} is not finite")]
+    TimeNotFinite { line: u64, time: f64 },
+    #[error("line {line}: time {time} after {before}: the time of an input file must not decrease (a repeated time is a step)")]
+    TimeDecreases { line: u64, time: f64, before: f64 },
+    #[error("no numeric column to replay besides the time")]
+    NoNumericColumn,
+    #[error("no column '{column}' in the file (columns: {columns})")]
+    NoColumn { column: String, columns: String },
+    #[error("column '{column}' is not numeric")]
+    ColumnNotNumeric { column: String },
+    #[error("line {line}, column '{column}': value {value} is not finite")]
+    ValueNotFinite {
+        line: u64,
+        column: String,
+        value: f64,
+    },
+}
+
 impl ReplaySource {
     pub fn load(cfg: &ReplayConfig) -> Result<ReplaySource, SystemError> {
-        let err = |m: String| SystemError::Replay {
+        let err = |error: ReplayError| SystemError::Replay {
             name: cfg.name.clone(),
             path: cfg.file.clone(),
-            message: m,
+            error: Box::new(error),
         };
         let (x, columns, data, file_units) = match cfg.basis {
             ReplayBasis::Time => Self::time_based(cfg).map_err(err)?,
@@ -61,7 +97,7 @@ impl ReplaySource {
         let mut all = vec![x];
         all.extend(data);
         let table = Table::from_columns(cfg.file.display().to_string(), names, all)
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(|e| err(ReplayError::Table(e)))?;
         Ok(ReplaySource {
             name: cfg.name.clone(),
             path: cfg.file.clone(),
@@ -79,21 +115,20 @@ impl ReplaySource {
     #[allow(clippy::type_complexity)]
     fn measurement(
         cfg: &ReplayConfig,
-    ) -> Result<(Vec<f64>, Vec<String>, Vec<Vec<f64>>, Vec<Option<String>>), String> {
-        let meas = tb_measurement::Measurement::read_path(&cfg.file).map_err(|e| e.to_string())?;
+    ) -> Result<(Vec<f64>, Vec<String>, Vec<Vec<f64>>, Vec<Option<String>>), ReplayError> {
+        let meas = tb_measurement::Measurement::read_path(&cfg.file)?;
         if cfg.by.is_none() {
-            return Err("basis = \"distance\" needs `by`, the signal giving the distance (e.g. \"vehicle.distance\")".into());
+            return Err(ReplayError::DistanceWithoutBy);
         }
         if cfg.columns.is_empty() {
-            return Err("no columns to replay".into());
+            return Err(ReplayError::NoColumns);
         }
         let mut data = Vec::new();
         let mut units = Vec::new();
         for c in &cfg.columns {
             let col = meas
-                .signal(c)
-                .map_err(|e| e.to_string())?
-                .ok_or_else(|| format!("no column '{c}' in the file"))?;
+                .signal(c)?
+                .ok_or_else(|| ReplayError::NoSignal { column: c.clone() })?;
             data.push(col.to_vec());
             // The measurement declares its signals' units (SI, converted on reading).
             units.push(meas.unit(c).map(str::to_string));
@@ -107,7 +142,7 @@ impl ReplaySource {
     #[allow(clippy::type_complexity)]
     fn time_based(
         cfg: &ReplayConfig,
-    ) -> Result<(Vec<f64>, Vec<String>, Vec<Vec<f64>>, Vec<Option<String>>), String> {
+    ) -> Result<(Vec<f64>, Vec<String>, Vec<Vec<f64>>, Vec<Option<String>>), ReplayError> {
         let wanted = |name: &str| {
             name == "time" || cfg.columns.is_empty() || cfg.columns.iter().any(|c| c == name)
         };
@@ -116,14 +151,12 @@ impl ReplaySource {
         } else {
             // Only the columns replayed and the time (named so, or the first) are parsed.
             Table::read_path_keeping(&cfg.file, &|k, n| k == 0 || wanted(n))
-        }
-        .map_err(|e| e.to_string())?;
+        }?;
         let time_index = t.names().iter().position(|n| n == "time").unwrap_or(0);
         if t.is_text(time_index) {
-            return Err(format!(
-                "the time column '{}' is not numeric",
-                t.names()[time_index]
-            ));
+            return Err(ReplayError::TimeNotNumeric {
+                column: t.names()[time_index].clone(),
+            });
         }
         let mut time = t.column_at(time_index).to_vec();
         // The time column's own unit (M8): seconds, or converted from another time unit;
@@ -137,27 +170,28 @@ impl ReplaySource {
             let second = tb_fmi::units::lookup("s").expect("the second is a known unit");
             let def = tb_fmi::units::lookup(u).filter(|d| d.compatible(second) && d.offset == 0.0);
             let Some(def) = def else {
-                return Err(format!(
-                    "the time column '{}' is in '{u}', not a unit of time (s, ms, min, h)",
-                    t.names()[time_index]
-                ));
+                return Err(ReplayError::TimeUnit {
+                    column: t.names()[time_index].clone(),
+                    unit: u.to_string(),
+                });
             };
             if def.factor != 1.0 {
                 time.iter_mut().for_each(|x| *x *= def.factor);
             }
         }
-        let row = |k: usize| format!("line {}", t.line_of(k));
         for k in 0..time.len() {
             if !time[k].is_finite() {
-                return Err(format!("{}: time {} is not finite", row(k), time[k]));
+                return Err(ReplayError::TimeNotFinite {
+                    line: t.line_of(k),
+                    time: time[k],
+                });
             }
             if k > 0 && time[k] < time[k - 1] {
-                return Err(format!(
-                    "{}: time {} after {}: the time of an input file must not decrease (a repeated time is a step)",
-                    row(k),
-                    time[k],
-                    time[k - 1]
-                ));
+                return Err(ReplayError::TimeDecreases {
+                    line: t.line_of(k),
+                    time: time[k],
+                    before: time[k - 1],
+                });
             }
         }
         let columns: Vec<String> = if cfg.columns.is_empty() {
@@ -169,27 +203,29 @@ impl ReplaySource {
             cfg.columns.clone()
         };
         if columns.is_empty() {
-            return Err("no numeric column to replay besides the time".into());
+            return Err(ReplayError::NoNumericColumn);
         }
         let mut data = Vec::new();
         let mut units = Vec::new();
         for c in &columns {
-            let k = t.names().iter().position(|n| n == c).ok_or_else(|| {
-                format!(
-                    "no column '{c}' in the file (columns: {})",
-                    t.names().join(", ")
-                )
-            })?;
+            let k = t
+                .names()
+                .iter()
+                .position(|n| n == c)
+                .ok_or_else(|| ReplayError::NoColumn {
+                    column: c.clone(),
+                    columns: t.names().join(", "),
+                })?;
             if t.is_text(k) {
-                return Err(format!("column '{c}' is not numeric"));
+                return Err(ReplayError::ColumnNotNumeric { column: c.clone() });
             }
             let col = t.column_at(k);
             if let Some(j) = col.iter().position(|x| !x.is_finite()) {
-                return Err(format!(
-                    "{}, column '{c}': value {} is not finite",
-                    row(j),
-                    col[j]
-                ));
+                return Err(ReplayError::ValueNotFinite {
+                    line: t.line_of(j),
+                    column: c.clone(),
+                    value: col[j],
+                });
             }
             data.push(col.to_vec());
             units.push(

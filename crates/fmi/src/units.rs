@@ -101,18 +101,8 @@ impl UnitDef {
     /// The same unit: name, base-unit exponents, factor and offset (a `const fn`, for the
     /// export framework's compile-time check of a model's own units).
     pub const fn same_as(&self, other: &UnitDef) -> bool {
-        let (a, b) = (self.name.as_bytes(), other.name.as_bytes());
-        if a.len() != b.len() {
-            return false;
-        }
-        let mut i = 0;
-        while i < a.len() {
-            if a[i] != b[i] {
-                return false;
-            }
-            i += 1;
-        }
-        self.kg == other.kg
+        str_eq(self.name, other.name)
+            && self.kg == other.kg
             && self.m == other.m
             && self.s == other.s
             && self.a == other.a
@@ -167,6 +157,23 @@ pub const UNITS: &[UnitDef] = &[
     unit("deg/s", 0, 0, -1, 1, std::f64::consts::PI / 180.0),
     unit("1/s", 0, 0, -1, 0, 1.0),
 ];
+
+/// Two names equal, byte for byte (`==` on `str` is not a `const fn`: the export
+/// framework's compile-time checks compare names with this).
+pub const fn str_eq(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
 
 /// The definition of `name`, if known.
 pub fn lookup(name: &str) -> Option<&'static UnitDef> {

@@ -167,7 +167,7 @@
 //! }
 //! ```
 
-use crate::units::{UnitDef, UNITS};
+use crate::units::{str_eq, UnitDef, UNITS};
 use crate::variables::{Causality, ScalarType, Value, VarInfo, Variability};
 use std::fmt;
 
@@ -373,21 +373,6 @@ impl fmt::Display for TableError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.message().as_str())
     }
-}
-
-const fn str_eq(a: &str, b: &str) -> bool {
-    let (a, b) = (a.as_bytes(), b.as_bytes());
-    if a.len() != b.len() {
-        return false;
-    }
-    let mut i = 0;
-    while i < a.len() {
-        if a[i] != b[i] {
-            return false;
-        }
-        i += 1;
-    }
-    true
 }
 
 /// The shared table's definition of `unit`.

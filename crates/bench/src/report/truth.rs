@@ -7,6 +7,17 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// Why a truth file is passed over (the report says so in a warning).
+#[derive(Debug, thiserror::Error)]
+pub enum TruthError {
+    #[error(transparent)]
+    Read(#[from] std::io::Error),
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    #[error("no object \"truth\"")]
+    NoTruth,
+}
+
 /// A lap's truth: name → value, and the file it came from (an input of the report).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Truth {
@@ -25,7 +36,7 @@ impl Truth {
             return None;
         }
         let parsed = tb_files::input::read_to_string(&path, tb_files::Limit::CONFIG)
-            .map_err(|e| e.to_string())
+            .map_err(TruthError::from)
             .and_then(|text| Truth::parse(&text, &path));
         match parsed {
             Ok(t) => Some(t),
@@ -37,12 +48,12 @@ impl Truth {
     }
 
     /// Reads the `truth` object's numbers (other entries, such as text, are not values).
-    pub fn parse(text: &str, path: &Path) -> Result<Truth, String> {
-        let json: serde_json::Value = serde_json::from_str(text).map_err(|e| e.to_string())?;
+    pub fn parse(text: &str, path: &Path) -> Result<Truth, TruthError> {
+        let json: serde_json::Value = serde_json::from_str(text)?;
         let object = json
             .get("truth")
             .and_then(|t| t.as_object())
-            .ok_or("no object \"truth\"")?;
+            .ok_or(TruthError::NoTruth)?;
         let values = object
             .iter()
             .filter_map(|(k, v)| Some((k.clone(), v.as_f64()?)))

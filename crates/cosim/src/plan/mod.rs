@@ -475,9 +475,10 @@ impl Plan {
         units.endpoint(&self.path.display().to_string(), name)
     }
 
-    /// Names and units of the recorded columns (time first).
     /// The exchange slot of a signal by name (`instance.variable` or a replay's column), for
-    /// an observer of a run: a recorded name, else a signal the plan exchanges.
+    /// an observer of a run: a recorded name, else a signal the plan exchanges. An output
+    /// that is neither recorded nor connected has no slot (the master does not read it): to
+    /// watch it, record it (`[record] signals`).
     pub fn slot_of(&self, name: &str) -> Option<usize> {
         let recorded = self.record_names.iter().position(|n| n == name);
         recorded
@@ -485,6 +486,7 @@ impl Plan {
             .or_else(|| self.signals.signals.iter().position(|s| s.name == name))
     }
 
+    /// Names and units of the recorded columns (time first).
     pub fn record_columns(&self) -> (Vec<String>, Vec<String>) {
         let mut names = vec!["time".to_string()];
         let mut units = vec!["s".to_string()];
