@@ -19,9 +19,10 @@ pub enum Error {
     Table(#[from] TableError),
 
     /// Reading or validating the measurement (`tb-measurement`), or a time or distance of a
-    /// simulation checked as a measurement's: its error, message as it is.
+    /// simulation checked as a measurement's: its error, message as it is. Boxed: it names
+    /// the file, the channel and the channels present, and every comparison returns this.
     #[error(transparent)]
-    Measurement(#[from] tb_measurement::Error),
+    Measurement(Box<tb_measurement::Error>),
 
     #[error(
         "{file}: line {row}, column `{column}`: non-uniform sampling (step {step} s, expected {expected} s within 1 %); the zero-phase filter needs a uniform time base: resample first"
@@ -66,6 +67,12 @@ pub enum Error {
         closest: String,
         available: String,
     },
+}
+
+impl From<tb_measurement::Error> for Error {
+    fn from(e: tb_measurement::Error) -> Self {
+        Error::Measurement(Box::new(e))
+    }
 }
 
 #[cfg(test)]

@@ -27,8 +27,10 @@ use tb_table::write_atomic;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
+    /// Boxed: a study's error carries a run's, and the report's functions return this
+    /// one on every path.
     #[error("{0}")]
-    Optimize(#[from] OptimizeError),
+    Optimize(Box<OptimizeError>),
     #[error("comparison: {0}")]
     Compare(#[from] tb_compare::Error),
     #[error("plot: {0}")]
@@ -40,6 +42,12 @@ pub enum ReportError {
     },
     #[error("the study result carries no {0} lap to plot")]
     MissingLap(&'static str),
+}
+
+impl From<OptimizeError> for ReportError {
+    fn from(e: OptimizeError) -> Self {
+        ReportError::Optimize(Box::new(e))
+    }
 }
 
 /// One row of Tab. 1: a validation signal of a step.
