@@ -19,6 +19,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use super::library3::{Inst, Library3, Status};
+use super::slots3::Slots;
 
 /// The FMI 3.0 logger: no format string, so it is plain Rust (panics never cross into C).
 unsafe extern "C" fn logger(
@@ -94,66 +95,6 @@ pub struct Instance3 {
 
 // One instance is used by one thread at a time.
 unsafe impl Send for Instance3 {}
-
-/// Each value reference's slot: a table indexed by the reference when they are dense (an
-/// FMU's usually are, and the elements' internal ones are the smallest free values), else
-/// a map. The master looks every exchanged value up at every step: an index, not a hash.
-enum Slots {
-    /// The slots, and for each reference the type of a scalar that is no array element
-    /// (`None` otherwise): what the one-call paths check.
-    Dense(Vec<Option<Fmi3Slot>>, Vec<Option<Fmi3Type>>),
-    Sparse(HashMap<u32, Fmi3Slot>),
-}
-
-impl Slots {
-    fn new(all: Vec<(u32, Fmi3Slot)>) -> Slots {
-        let max = all.iter().map(|(vr, _)| *vr as usize).max().unwrap_or(0);
-        if max <= 4 * all.len() + 1024 {
-            let mut t = vec![None; max + 1];
-            let mut scalar = vec![None; max + 1];
-            for (vr, s) in all {
-                t[vr as usize] = Some(s);
-                if s.len == 1 && s.vr == vr && !s.element {
-                    scalar[vr as usize] = Some(s.ty);
-                }
-            }
-            Slots::Dense(t, scalar)
-        } else {
-            Slots::Sparse(all.into_iter().collect())
-        }
-    }
-
-    #[inline]
-    fn get(&self, vr: u32) -> Option<Fmi3Slot> {
-        match self {
-            Slots::Dense(t, _) => t.get(vr as usize).copied().flatten(),
-            Slots::Sparse(m) => m.get(&vr).copied(),
-        }
-    }
-
-    /// The type of the scalar (no array element) at `vr`.
-    #[inline]
-    fn scalar_type(&self, vr: u32) -> Option<Fmi3Type> {
-        match self {
-            Slots::Dense(_, k) => k.get(vr as usize).copied().flatten(),
-            Slots::Sparse(m) => m
-                .get(&vr)
-                .filter(|s| s.len == 1 && s.vr == vr && !s.element)
-                .map(|s| s.ty),
-        }
-    }
-
-    fn iter(&self) -> Box<dyn Iterator<Item = (u32, Fmi3Slot)> + '_> {
-        match self {
-            Slots::Dense(t, _) => Box::new(
-                t.iter()
-                    .enumerate()
-                    .filter_map(|(vr, s)| s.map(|s| (vr as u32, s))),
-            ),
-            Slots::Sparse(m) => Box::new(m.iter().map(|(vr, s)| (*vr, *s))),
-        }
-    }
-}
 
 /// The `resourcePath` of FMI 3.0: a native path ending in a separator.
 fn resource_path(dir: &Path) -> String {

@@ -31,6 +31,7 @@ pub mod model;
 pub mod model_exchange;
 pub(crate) mod reader;
 pub mod sandbox;
+mod slots3;
 mod store;
 pub mod unit_trait;
 
