@@ -8,7 +8,7 @@ mod support;
 use std::io::Write;
 use std::ops::ControlFlow;
 use support::{column, Bench};
-use tb_cosim::{Ended, RunObserver, RunView, SystemError};
+use tb_cosim::{RunObserver, RunView, SystemError};
 
 /// `time,<signal>` lines of one signal on the recording's rows.
 struct LiveCsv {
@@ -29,14 +29,19 @@ impl LiveCsv {
         }
     }
 
+    /// The write failure as this observer's.
+    fn failed(&self, error: std::io::Error) -> SystemError {
+        SystemError::Observer {
+            observer: format!("live CSV of {}", self.name),
+            error,
+        }
+    }
+
     fn line(&mut self, now: &mut RunView<'_>) -> Result<(), SystemError> {
         let value = now.signals()?[self.slot];
         writeln!(self.out, "{},{value}", now.time())
             .and_then(|()| self.out.flush())
-            .map_err(|error| SystemError::Observer {
-                observer: format!("live CSV of {}", self.name),
-                error,
-            })
+            .map_err(|e| self.failed(e))
     }
 }
 
@@ -44,10 +49,7 @@ impl RunObserver for LiveCsv {
     fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError> {
         if now.moment() == tb_cosim::Moment::Start {
             self.every = now.record_decimation();
-            writeln!(self.out, "time,{}", self.name).map_err(|error| SystemError::Observer {
-                observer: format!("live CSV of {}", self.name),
-                error,
-            })?;
+            writeln!(self.out, "time,{}", self.name).map_err(|e| self.failed(e))?;
         }
         self.line(now)?;
         Ok(ControlFlow::Continue(()))
@@ -55,10 +57,6 @@ impl RunObserver for LiveCsv {
 
     fn step_interval(&self) -> u64 {
         self.every
-    }
-
-    fn finished(&mut self, _now: &mut RunView<'_>, _how: &Ended) -> Result<(), SystemError> {
-        Ok(())
     }
 }
 

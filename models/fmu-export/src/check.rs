@@ -413,11 +413,11 @@ const fn check_unit(a: &VarInfo) -> Result<(), TableError> {
     }
 }
 
-/// `a` and `b` name the same unit with different definitions.
-const fn units_conflict(a: &VarInfo, b: &VarInfo) -> bool {
+/// The unit `a` and `b` both name with different definitions, if any.
+const fn conflicting_unit(a: &VarInfo, b: &VarInfo) -> Option<&'static str> {
     match (a.unit, b.unit, unit_of(a), unit_of(b)) {
-        (Some(x), Some(y), Some(da), Some(db)) => str_eq(x, y) && !da.same_as(db),
-        _ => false,
+        (Some(x), Some(y), Some(da), Some(db)) if str_eq(x, y) && !da.same_as(db) => Some(x),
+        _ => None,
     }
 }
 
@@ -458,14 +458,11 @@ const fn check_unique(table: &[VarInfo], index: usize) -> Result<(), TableError>
         if str_eq(a.name, b.name) {
             return Err(TableError::DuplicateName { name: a.name });
         }
-        if units_conflict(a, b) {
+        if let Some(unit) = conflicting_unit(a, b) {
             return Err(TableError::UnitRedefined {
                 name: b.name,
                 first: a.name,
-                unit: match a.unit {
-                    Some(u) => u,
-                    None => "",
-                },
+                unit,
             });
         }
         if a.value_reference == b.value_reference {
