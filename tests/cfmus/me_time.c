@@ -19,7 +19,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-enum { OK = 0, ERROR = 3 };
+#define FMI2_MODEL_EXCHANGE
+#include "fmi2_common.h"
 
 typedef struct {
     double x, t, events;
@@ -32,11 +33,6 @@ typedef struct {
     double nextEventTime;
 } EventInfo;
 
-const char *fmi2GetTypesPlatform(void) { return "default"; }
-const char *fmi2GetVersion(void) { return "2.0"; }
-int fmi2SetDebugLogging(void *c, int on, size_t n, const char *const *cats) {
-    (void)c; (void)on; (void)n; (void)cats; return OK;
-}
 void *fmi2Instantiate(const char *name, int type, const char *guid, const char *res,
                       const void *cb, int visible, int logging) {
     (void)name; (void)type; (void)guid; (void)res; (void)cb; (void)visible; (void)logging;
@@ -88,16 +84,6 @@ int fmi2GetBoolean(void *c, const unsigned *vr, size_t n, int *v) { (void)c; (vo
 int fmi2SetBoolean(void *c, const unsigned *vr, size_t n, const int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
 int fmi2GetString(void *c, const unsigned *vr, size_t n, const char **v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
 int fmi2SetString(void *c, const unsigned *vr, size_t n, const char *const *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2GetFMUstate(void *c, void **s) { (void)c; (void)s; return ERROR; }
-int fmi2SetFMUstate(void *c, void *s) { (void)c; (void)s; return ERROR; }
-int fmi2FreeFMUstate(void *c, void **s) { (void)c; (void)s; return ERROR; }
-int fmi2SerializedFMUstateSize(void *c, void *s, size_t *n) { (void)c; (void)s; (void)n; return ERROR; }
-int fmi2SerializeFMUstate(void *c, void *s, char *b, size_t n) { (void)c; (void)s; (void)b; (void)n; return ERROR; }
-int fmi2DeSerializeFMUstate(void *c, const char *b, size_t n, void **s) { (void)c; (void)b; (void)n; (void)s; return ERROR; }
-int fmi2GetDirectionalDerivative(void *c, const unsigned *u, size_t nu, const unsigned *z, size_t nz,
-                                 const double *dv, double *df) {
-    (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)dv; (void)df; return ERROR;
-}
 int fmi2EnterEventMode(void *c) { (void)c; return OK; }
 int fmi2NewDiscreteStates(void *c, EventInfo *e) {
     Model *m = c;

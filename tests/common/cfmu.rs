@@ -1,8 +1,8 @@
 //! Test FMUs written in C (`tests/cfmus/<name>.c` with its `<name>.xml`), built here with gcc
 //! into `target/c-fmus/<name>.fmu` (FMI 2.0, linux64): supplier FMUs with the features
 //! other tools' FMUs have and ours do not (value references shared across types, alias
-//! sets, an internal variable-step solver). Rebuilt when a source is newer than the FMU; a
-//! lock serialises test binaries that build at the same time.
+//! sets, an internal variable-step solver), sharing `fmi2_common.h`. Rebuilt when a source is
+//! newer than the FMU; a lock serialises test binaries that build at the same time.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -23,7 +23,8 @@ pub fn fmu(name: &str) -> PathBuf {
     let lock = std::fs::File::create(out.join(".lock")).unwrap();
     use std::os::fd::AsRawFd;
     assert_eq!(unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX) }, 0);
-    let newest = [&c, &xml]
+    // The header the sources share counts too.
+    let newest = [&c, &xml, &src.join("fmi2_common.h")]
         .iter()
         .map(|p| std::fs::metadata(p).and_then(|m| m.modified()).unwrap())
         .max()

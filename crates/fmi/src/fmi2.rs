@@ -122,54 +122,20 @@ pub type fmi2EnterInitializationModeTYPE = unsafe extern "C" fn(fmi2Component) -
 pub type fmi2ExitInitializationModeTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
 pub type fmi2TerminateTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
 pub type fmi2ResetTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
-pub type fmi2GetRealTYPE = unsafe extern "C" fn(
-    fmi2Component,
-    *const fmi2ValueReference,
-    usize,
-    *mut fmi2Real,
-) -> fmi2Status;
-pub type fmi2GetIntegerTYPE = unsafe extern "C" fn(
-    fmi2Component,
-    *const fmi2ValueReference,
-    usize,
-    *mut fmi2Integer,
-) -> fmi2Status;
-pub type fmi2GetBooleanTYPE = unsafe extern "C" fn(
-    fmi2Component,
-    *const fmi2ValueReference,
-    usize,
-    *mut fmi2Boolean,
-) -> fmi2Status;
-pub type fmi2GetStringTYPE = unsafe extern "C" fn(
-    fmi2Component,
-    *const fmi2ValueReference,
-    usize,
-    *mut fmi2String,
-) -> fmi2Status;
-pub type fmi2SetRealTYPE = unsafe extern "C" fn(
-    fmi2Component,
-    *const fmi2ValueReference,
-    usize,
-    *const fmi2Real,
-) -> fmi2Status;
-pub type fmi2SetIntegerTYPE = unsafe extern "C" fn(
-    fmi2Component,
-    *const fmi2ValueReference,
-    usize,
-    *const fmi2Integer,
-) -> fmi2Status;
-pub type fmi2SetBooleanTYPE = unsafe extern "C" fn(
-    fmi2Component,
-    *const fmi2ValueReference,
-    usize,
-    *const fmi2Boolean,
-) -> fmi2Status;
-pub type fmi2SetStringTYPE = unsafe extern "C" fn(
-    fmi2Component,
-    *const fmi2ValueReference,
-    usize,
-    *const fmi2String,
-) -> fmi2Status;
+/// `fmi2Get<Type>`: the values of `nvr` value references, written to `value`.
+pub type fmi2GetTYPE<T> =
+    unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *mut T) -> fmi2Status;
+/// `fmi2Set<Type>`: the values of `nvr` value references, read from `value`.
+pub type fmi2SetTYPE<T> =
+    unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *const T) -> fmi2Status;
+pub type fmi2GetRealTYPE = fmi2GetTYPE<fmi2Real>;
+pub type fmi2GetIntegerTYPE = fmi2GetTYPE<fmi2Integer>;
+pub type fmi2GetBooleanTYPE = fmi2GetTYPE<fmi2Boolean>;
+pub type fmi2GetStringTYPE = fmi2GetTYPE<fmi2String>;
+pub type fmi2SetRealTYPE = fmi2SetTYPE<fmi2Real>;
+pub type fmi2SetIntegerTYPE = fmi2SetTYPE<fmi2Integer>;
+pub type fmi2SetBooleanTYPE = fmi2SetTYPE<fmi2Boolean>;
+pub type fmi2SetStringTYPE = fmi2SetTYPE<fmi2String>;
 pub type fmi2GetFMUstateTYPE = unsafe extern "C" fn(fmi2Component, *mut fmi2FMUstate) -> fmi2Status;
 pub type fmi2SetFMUstateTYPE = unsafe extern "C" fn(fmi2Component, fmi2FMUstate) -> fmi2Status;
 pub type fmi2FreeFMUstateTYPE =

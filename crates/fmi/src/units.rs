@@ -34,6 +34,22 @@ const fn unit(name: &'static str, kg: i32, m: i32, s: i32, rad: i32, factor: f64
     }
 }
 
+/// The builder methods of [`UnitDef`], one a field: `name: type;` sets the field of that
+/// name, `method => field: type;` names the method apart from the field.
+macro_rules! setters {
+    ($($(#[$doc:meta])* $method:ident $(=> $field:ident)?: $ty:ty;)*) => {
+        $(
+            $(#[$doc])*
+            pub const fn $method(mut self, value: $ty) -> UnitDef {
+                setters!(@set self, $method $(, $field)?) = value;
+                self
+            }
+        )*
+    };
+    (@set $self:ident, $method:ident) => { $self.$method };
+    (@set $self:ident, $method:ident, $field:ident) => { $self.$field };
+}
+
 impl UnitDef {
     /// A `<Unit>` before its `<BaseUnit>` is read: dimensionless, factor 1.
     pub const DIMENSIONLESS: UnitDef = unit("", 0, 0, 0, 0, 1.0);
@@ -47,55 +63,27 @@ impl UnitDef {
             ..UnitDef::DIMENSIONLESS
         }
     }
-    /// The exponent of the kilogram.
-    pub const fn kg(mut self, exponent: i32) -> UnitDef {
-        self.kg = exponent;
-        self
-    }
-    /// The exponent of the metre.
-    pub const fn m(mut self, exponent: i32) -> UnitDef {
-        self.m = exponent;
-        self
-    }
-    /// The exponent of the second.
-    pub const fn s(mut self, exponent: i32) -> UnitDef {
-        self.s = exponent;
-        self
-    }
-    /// The exponent of the ampere.
-    pub const fn ampere(mut self, exponent: i32) -> UnitDef {
-        self.a = exponent;
-        self
-    }
-    /// The exponent of the kelvin.
-    pub const fn kelvin(mut self, exponent: i32) -> UnitDef {
-        self.k = exponent;
-        self
-    }
-    /// The exponent of the mole.
-    pub const fn mol(mut self, exponent: i32) -> UnitDef {
-        self.mol = exponent;
-        self
-    }
-    /// The exponent of the candela.
-    pub const fn cd(mut self, exponent: i32) -> UnitDef {
-        self.cd = exponent;
-        self
-    }
-    /// The exponent of the radian.
-    pub const fn rad(mut self, exponent: i32) -> UnitDef {
-        self.rad = exponent;
-        self
-    }
-    /// value_in_SI = factor · value + offset.
-    pub const fn factor(mut self, factor: f64) -> UnitDef {
-        self.factor = factor;
-        self
-    }
-    /// value_in_SI = factor · value + offset.
-    pub const fn offset(mut self, offset: f64) -> UnitDef {
-        self.offset = offset;
-        self
+    setters! {
+        /// The exponent of the kilogram.
+        kg: i32;
+        /// The exponent of the metre.
+        m: i32;
+        /// The exponent of the second.
+        s: i32;
+        /// The exponent of the ampere.
+        ampere => a: i32;
+        /// The exponent of the kelvin.
+        kelvin => k: i32;
+        /// The exponent of the mole.
+        mol: i32;
+        /// The exponent of the candela.
+        cd: i32;
+        /// The exponent of the radian.
+        rad: i32;
+        /// value_in_SI = factor · value + offset.
+        factor: f64;
+        /// value_in_SI = factor · value + offset.
+        offset: f64;
     }
 
     /// The same unit: name, base-unit exponents, factor and offset (a `const fn`, for the
