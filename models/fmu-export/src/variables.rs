@@ -150,6 +150,13 @@ const fn base(vr: u32, causality: Causality, variability: Variability) -> VarInf
     }
 }
 
+/// A value reference left to [`variables!`](crate::variables!): the variable's position in the
+/// table (0, 1, 2, ... in declaration order), as rust-fmi and the Reference FMUs number them.
+/// For a new model, written in all of its lines: a table that mixes `AUTO` with explicit
+/// numbers is refused at compile time where a position meets an explicit number. A published
+/// model keeps its explicit numbers, because hosts and system files may hold them.
+pub const AUTO: u32 = u32::MAX;
+
 /// A fixed parameter (set before initialisation, constant during the run).
 pub const fn parameter(vr: u32) -> VarInfo {
     base(vr, Causality::Parameter, Variability::Fixed)
@@ -186,6 +193,16 @@ pub const fn local(vr: u32) -> VarInfo {
 }
 
 impl VarInfo {
+    /// The value reference [`AUTO`] resolved to the variable's `position` in its table (other
+    /// value references stay as written).
+    #[doc(hidden)]
+    pub const fn numbered(mut self, position: u32) -> Self {
+        if self.value_reference == AUTO {
+            self.value_reference = position;
+        }
+        self
+    }
+
     pub const fn unit(mut self, unit: &'static str) -> Self {
         self.unit = Some(unit);
         self
@@ -476,8 +493,10 @@ macro_rules! __fmi_real_offset {
 /// Declare a model's variables once: a typed struct plus its [`VarTable`].
 ///
 /// Each line is `name: Type = start => kind(value_reference).attributes…`. Value references
-/// are explicit numbers (a published FMU's references never change); dependencies name
-/// variables: inside the table every field name is a constant holding its value reference.
+/// are explicit numbers (a published FMU's references never change), or [`AUTO`] in every
+/// line of a new model's table: then the declaration order numbers them 0, 1, 2, ...
+/// Dependencies name variables: inside the table every field name is a constant holding its
+/// value reference.
 /// The table is checked at compile time ([`crate::check`]): a duplicate value reference, a
 /// `depends_on` naming something other than an input, a start value outside min/max, an
 /// unknown unit, a missing description, ... fail the build with a message naming the
@@ -500,6 +519,32 @@ macro_rules! __fmi_real_offset {
 /// assert_eq!(v.stiffness, 1000.0);
 /// assert_eq!(SpringVars::vr_of("force"), Some(2));
 /// assert_eq!(SpringVars::VARIABLES[2].depends_on, &[3]);
+///
+/// // A new model's table may leave the numbers to the declaration order.
+/// fmu_export::variables! {
+///     pub struct DamperVars {
+///         rate: Real = 500.0 => parameter(AUTO).unit("N.s/m").range(1.0, 1e9)
+///             .describe("Damper rate"),
+///         speed: Real = 0.0 => input(AUTO).unit("m/s").describe("Damper speed"),
+///         force: Real = 0.0 => output(AUTO).unit("N").depends_on(&[speed])
+///             .describe("Damper force"),
+///     }
+/// }
+/// assert_eq!(DamperVars::vr_of("rate"), Some(0));
+/// assert_eq!(DamperVars::vr_of("force"), Some(2));
+/// assert_eq!(DamperVars::VARIABLES[2].depends_on, &[1]);
+/// ```
+///
+/// A position that meets an explicit number fails the build, naming both variables:
+///
+/// ```compile_fail
+/// use fmu_export::variables::*;
+/// fmu_export::variables! {
+///     pub struct MixedVars {
+///         a: Real = 0.0 => input(AUTO).unit("m").describe("position 0"),
+///         b: Real = 0.0 => output(0).unit("m").describe("explicitly 0"),
+///     }
+/// }
 /// ```
 #[macro_export]
 macro_rules! variables {
@@ -526,14 +571,22 @@ macro_rules! variables {
 
         impl $crate::variables::VarTable for $name {
             const VARIABLES: &'static [$crate::variables::VarInfo] = {
+                // Each field's position in the table, for an AUTO value reference.
+                #[allow(non_camel_case_types, dead_code)]
+                #[repr(u32)]
+                enum Position { $($field),* }
                 // Every field's name as a constant holding its value reference, so that
                 // `depends_on(&[u, v])` names variables (macro_rules items are not hygienic:
                 // the names in `$info` resolve to these).
                 $(
                     #[allow(non_upper_case_globals, dead_code)]
-                    const $field: u32 = ($info).value_reference;
+                    const $field: u32 = ($info).numbered(Position::$field as u32).value_reference;
                 )*
-                &[ $( ($info).named(stringify!($field), $crate::__fmi_value!($ty, $start)), )* ]
+                &[ $(
+                    ($info)
+                        .numbered(Position::$field as u32)
+                        .named(stringify!($field), $crate::__fmi_value!($ty, $start)),
+                )* ]
             };
 
             const REAL_OFFSETS: &'static [usize] = &[
