@@ -5,7 +5,7 @@
 
 use super::error::DescriptionError;
 use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
-use super::reader::{num, walk, Attrs, Shared, Version, Visit};
+use super::reader::{num, walk, Attrs, Element, Shared, Version, Visit};
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 
 fn unknown(m: &Attrs) -> Result<Unknown, DescriptionError> {
@@ -48,24 +48,17 @@ struct Reader2 {
 }
 
 impl Visit for Reader2 {
-    fn start(
-        &mut self,
-        stack: &[String],
-        name: &str,
-        m: &Attrs,
-        empty: bool,
-    ) -> Result<(), DescriptionError> {
-        let parent = stack.last().map(String::as_str).unwrap_or("");
-        if self
-            .shared
-            .start(&mut self.md, Version::V2, parent, name, m, empty)?
-        {
-            return Ok(());
-        }
-        match (parent, name) {
+    const VERSION: Version = Version::V2;
+
+    fn shared(&mut self) -> (&mut ModelDescription, &mut Shared) {
+        (&mut self.md, &mut self.shared)
+    }
+
+    fn start(&mut self, _stack: &[String], e: Element) -> Result<(), DescriptionError> {
+        match (e.parent, e.name) {
             ("ModelVariables", "ScalarVariable") => {
-                let v = scalar_variable(m)?;
-                if empty {
+                let v = scalar_variable(e.attrs)?;
+                if e.empty {
                     return Err(DescriptionError::NoTypeElement { variable: v.name });
                 }
                 self.current = Some(v);
@@ -74,17 +67,17 @@ impl Visit for Reader2 {
                 if let Some(v) = self.current.as_mut() {
                     let ctx = format!("variable '{}'", v.name);
                     v.ty = ScalarType::parse(t).expect("matched above");
-                    v.declared_type = m.get("declaredType").cloned();
-                    v.unit = m.get("unit").cloned();
-                    v.start = m.get("start").cloned();
-                    v.min = num(m, "min", &ctx)?;
-                    v.max = num(m, "max", &ctx)?;
-                    v.nominal = num(m, "nominal", &ctx)?;
+                    v.declared_type = e.attrs.get("declaredType").cloned();
+                    v.unit = e.attrs.get("unit").cloned();
+                    v.start = e.attrs.get("start").cloned();
+                    v.min = num(e.attrs, "min", &ctx)?;
+                    v.max = num(e.attrs, "max", &ctx)?;
+                    v.nominal = num(e.attrs, "nominal", &ctx)?;
                 }
             }
-            ("Outputs", "Unknown") => self.md.outputs.push(unknown(m)?),
-            ("Derivatives", "Unknown") => self.md.derivatives.push(unknown(m)?),
-            ("InitialUnknowns", "Unknown") => self.md.initial_unknowns.push(unknown(m)?),
+            ("Outputs", "Unknown") => self.md.outputs.push(unknown(e.attrs)?),
+            ("Derivatives", "Unknown") => self.md.derivatives.push(unknown(e.attrs)?),
+            ("InitialUnknowns", "Unknown") => self.md.initial_unknowns.push(unknown(e.attrs)?),
             _ => {}
         }
         Ok(())
@@ -94,7 +87,6 @@ impl Visit for Reader2 {
         if name == "ScalarVariable" {
             self.md.variables.extend(self.current.take());
         }
-        self.shared.end(&mut self.md, Version::V2, name);
     }
 }
 

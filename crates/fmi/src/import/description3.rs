@@ -21,7 +21,7 @@
 use super::error::DescriptionError;
 use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
 pub use super::model::{Fmi3Slot, Fmi3Type};
-use super::reader::{num, walk, Attrs, Shared, Version, Visit};
+use super::reader::{num, walk, Attrs, Element, Shared, Version, Visit};
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 use std::collections::HashMap;
 
@@ -96,30 +96,23 @@ struct Reader3 {
 }
 
 impl Visit for Reader3 {
-    fn start(
-        &mut self,
-        stack: &[String],
-        name: &str,
-        m: &Attrs,
-        empty: bool,
-    ) -> Result<(), DescriptionError> {
-        let parent = stack.last().map(String::as_str).unwrap_or("");
-        if self
-            .shared
-            .start(&mut self.md, Version::V3, parent, name, m, empty)?
-        {
-            return Ok(());
-        }
+    const VERSION: Version = Version::V3;
+
+    fn shared(&mut self) -> (&mut ModelDescription, &mut Shared) {
+        (&mut self.md, &mut self.shared)
+    }
+
+    fn start(&mut self, stack: &[String], e: Element) -> Result<(), DescriptionError> {
         // A child of a variable element (Dimension, Start, Alias).
         let in_variable = stack.len() >= 2 && stack[stack.len() - 2] == "ModelVariables";
-        match (parent, name) {
+        match (e.parent, e.name) {
             ("fmiModelDescription", "ScheduledExecution") => self
                 .md
                 .unsupported
                 .push("Scheduled Execution (<ScheduledExecution>)".into()),
             ("ModelVariables", t) => {
-                if let Some(d) = self.variable(t, m)? {
-                    match empty {
+                if let Some(d) = self.variable(t, e.attrs)? {
+                    match e.empty {
                         true => self.declared.push(d),
                         false => self.current = Some(d),
                     }
@@ -127,45 +120,44 @@ impl Visit for Reader3 {
             }
             (_, "Dimension") if in_variable => {
                 if let Some(d) = self.current.as_mut() {
-                    d.dims.push(dimension(m, &d.var.name)?);
+                    d.dims.push(dimension(e.attrs, &d.var.name)?);
                 }
             }
             (_, "Start") if in_variable => {
                 if let Some(d) = self.current.as_mut() {
-                    d.starts.push(m.get("value").cloned().unwrap_or_default());
+                    d.starts
+                        .push(e.attrs.get("value").cloned().unwrap_or_default());
                 }
             }
             (_, "Alias") if in_variable => {
                 if let Some(d) = self.current.as_mut() {
-                    let a =
-                        m.get("name")
-                            .cloned()
-                            .ok_or_else(|| DescriptionError::UnnamedAlias {
-                                variable: d.var.name.clone(),
-                            })?;
+                    let a = e.attrs.get("name").cloned().ok_or_else(|| {
+                        DescriptionError::UnnamedAlias {
+                            variable: d.var.name.clone(),
+                        }
+                    })?;
                     d.aliases.push(a);
                 }
             }
-            ("ModelStructure", "Output") => self.outputs.push(unknown3(m, "Output")?),
-            ("ModelStructure", "InitialUnknown") => {
-                self.initial_unknowns.push(unknown3(m, "InitialUnknown")?)
-            }
+            ("ModelStructure", "Output") => self.outputs.push(unknown3(e.attrs, "Output")?),
+            ("ModelStructure", "InitialUnknown") => self
+                .initial_unknowns
+                .push(unknown3(e.attrs, "InitialUnknown")?),
             ("ModelStructure", "ContinuousStateDerivative") => self
                 .derivatives
-                .push(unknown3(m, "ContinuousStateDerivative")?),
-            ("ModelStructure", "EventIndicator") => {
-                self.event_indicators.push(unknown3(m, "EventIndicator")?)
-            }
+                .push(unknown3(e.attrs, "ContinuousStateDerivative")?),
+            ("ModelStructure", "EventIndicator") => self
+                .event_indicators
+                .push(unknown3(e.attrs, "EventIndicator")?),
             _ => {}
         }
         Ok(())
     }
 
-    fn end(&mut self, stack: &[String], name: &str) {
+    fn end(&mut self, stack: &[String], _name: &str) {
         if stack.last().map(String::as_str) == Some("ModelVariables") {
             self.declared.extend(self.current.take());
         }
-        self.shared.end(&mut self.md, Version::V3, name);
     }
 }
 

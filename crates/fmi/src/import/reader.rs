@@ -15,6 +15,16 @@ use std::collections::HashMap;
 /// An element's attributes by name.
 pub(crate) type Attrs = HashMap<String, String>;
 
+/// An element as it opens: its parent's name ("" for the root), its own, its attributes,
+/// and whether it is empty (`<a/>`: no end follows).
+#[derive(Clone, Copy)]
+pub(crate) struct Element<'a> {
+    pub parent: &'a str,
+    pub name: &'a str,
+    pub attrs: &'a Attrs,
+    pub empty: bool,
+}
+
 /// The FMI version of the document being read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Version {
@@ -22,24 +32,24 @@ pub(crate) enum Version {
     V3,
 }
 
-/// A reader of the elements as the walk meets them.
+/// A version's reader of the elements as the walk meets them, after [`Shared`] has read the
+/// ones both versions have.
 pub(crate) trait Visit {
-    /// An element opens: `stack` holds its ancestors (the root first), `empty` is true for
-    /// `<a/>` (no end follows).
-    fn start(
-        &mut self,
-        stack: &[String],
-        name: &str,
-        m: &Attrs,
-        empty: bool,
-    ) -> Result<(), DescriptionError>;
-    /// An element (with children) closes: `stack` holds its ancestors.
+    /// The version this reader reads.
+    const VERSION: Version;
+    /// The description being read and the reader of the shared elements.
+    fn shared(&mut self) -> (&mut ModelDescription, &mut Shared);
+    /// An element that is not a shared one opens: `stack` holds its ancestors (the root
+    /// first).
+    fn start(&mut self, stack: &[String], e: Element) -> Result<(), DescriptionError>;
+    /// An element (with children) closes: `stack` holds its ancestors. The shared reader
+    /// sees it after this one.
     fn end(&mut self, stack: &[String], name: &str);
 }
 
 /// Walks `xml`, telling `v` every element; refuses a document that ends before its root
 /// closes (a truncated file must not pass for a shorter model).
-pub(crate) fn walk(xml: &str, v: &mut impl Visit) -> Result<(), DescriptionError> {
+pub(crate) fn walk<V: Visit>(xml: &str, v: &mut V) -> Result<(), DescriptionError> {
     let mut reader = Reader::from_str(xml);
     let mut stack: Vec<String> = Vec::new();
     loop {
@@ -55,6 +65,8 @@ pub(crate) fn walk(xml: &str, v: &mut impl Visit) -> Result<(), DescriptionError
             Event::End(_) => {
                 let name = stack.pop().unwrap_or_default();
                 v.end(&stack, &name);
+                let (md, shared) = v.shared();
+                shared.end(md, V::VERSION, &name);
                 continue;
             }
             Event::Eof => break,
@@ -62,7 +74,16 @@ pub(crate) fn walk(xml: &str, v: &mut impl Visit) -> Result<(), DescriptionError
         };
         let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
         let m = attrs(e)?;
-        v.start(&stack, &name, &m, empty)?;
+        let e = Element {
+            parent: stack.last().map(String::as_str).unwrap_or(""),
+            name: &name,
+            attrs: &m,
+            empty,
+        };
+        let (md, shared) = v.shared();
+        if !shared.start(md, V::VERSION, e)? {
+            v.start(&stack, e)?;
+        }
         if !empty {
             stack.push(name);
         }
@@ -103,19 +124,16 @@ impl Shared {
         &mut self,
         md: &mut ModelDescription,
         version: Version,
-        parent: &str,
-        name: &str,
-        m: &Attrs,
-        empty: bool,
+        e: Element,
     ) -> Result<bool, DescriptionError> {
-        match (parent, name) {
+        match (e.parent, e.name) {
             ("", "fmiModelDescription") => {
                 self.saw_root = true;
                 let token = match version {
                     Version::V2 => "guid",
                     Version::V3 => "instantiationToken",
                 };
-                root_attributes(md, m, token)?;
+                root_attributes(md, e.attrs, token)?;
             }
             ("", other) => {
                 return Err(DescriptionError::Root {
@@ -123,38 +141,39 @@ impl Shared {
                 })
             }
             ("fmiModelDescription", "CoSimulation") => {
-                md.co_simulation = Some(co_simulation(m, version)?)
+                md.co_simulation = Some(co_simulation(e.attrs, version)?)
             }
             ("fmiModelDescription", "ModelExchange") => {
-                md.model_exchange = Some(model_exchange(m, version)?)
+                md.model_exchange = Some(model_exchange(e.attrs, version)?)
             }
             ("fmiModelDescription", "DefaultExperiment") => {
-                md.default_experiment = Some(default_experiment(m)?)
+                md.default_experiment = Some(default_experiment(e.attrs)?)
             }
             ("UnitDefinitions", "Unit") => {
-                let uname = m
-                    .get("name")
-                    .cloned()
-                    .ok_or_else(|| DescriptionError::Unnamed {
-                        element: "Unit".into(),
-                    })?;
+                let uname =
+                    e.attrs
+                        .get("name")
+                        .cloned()
+                        .ok_or_else(|| DescriptionError::Unnamed {
+                            element: "Unit".into(),
+                        })?;
                 self.current_unit = Some((uname, UnitDef::DIMENSIONLESS));
-                if empty {
+                if e.empty {
                     md.units.extend(self.current_unit.take());
                 }
             }
             ("Unit", "DisplayUnit") => {
                 if let Some(u) = &self.current_unit {
-                    self.display_units.extend(display_unit(m, u)?);
+                    self.display_units.extend(display_unit(e.attrs, u)?);
                 }
             }
             ("Unit", "BaseUnit") => {
                 if let Some((_, u)) = self.current_unit.as_mut() {
-                    base_unit(m, u)?;
+                    base_unit(e.attrs, u)?;
                 }
             }
-            ("LogCategories", "Category") => md.log_categories.extend(m.get("name").cloned()),
-            _ => return self.type_definition(md, version, parent, name, m, empty),
+            ("LogCategories", "Category") => md.log_categories.extend(e.attrs.get("name").cloned()),
+            _ => return self.type_definition(md, version, e),
         }
         Ok(true)
     }
@@ -166,32 +185,29 @@ impl Shared {
         &mut self,
         md: &mut ModelDescription,
         version: Version,
-        parent: &str,
-        name: &str,
-        m: &Attrs,
-        empty: bool,
+        e: Element,
     ) -> Result<bool, DescriptionError> {
-        match (version, parent, name) {
+        match (version, e.parent, e.name) {
             (Version::V2, "TypeDefinitions", "SimpleType") => {
-                self.current_type = m.get("name").cloned()
+                self.current_type = e.attrs.get("name").cloned()
             }
             (Version::V2, "SimpleType", "Real") => {
-                if let (Some(t), Some(u)) = (&self.current_type, m.get("unit")) {
+                if let (Some(t), Some(u)) = (&self.current_type, e.attrs.get("unit")) {
                     md.type_units.insert(t.clone(), u.clone());
                 }
             }
             (Version::V3, "TypeDefinitions", t) if t.ends_with("Type") => {
-                self.current_type = m.get("name").cloned();
-                if let (Some(tn), Some(u)) = (&self.current_type, m.get("unit")) {
+                self.current_type = e.attrs.get("name").cloned();
+                if let (Some(tn), Some(u)) = (&self.current_type, e.attrs.get("unit")) {
                     md.type_units.insert(tn.clone(), u.clone());
                 }
-                if empty {
+                if e.empty {
                     self.current_type = None;
                 }
             }
             (Version::V2, "Enumeration", "Item") | (Version::V3, "EnumerationType", "Item") => {
                 if let Some(t) = &self.current_type {
-                    let item = enumeration_item(m, t)?;
+                    let item = enumeration_item(e.attrs, t)?;
                     md.enumerations.entry(t.clone()).or_default().push(item);
                 }
             }
