@@ -162,18 +162,7 @@ impl FmuCache {
         // for the cache's life, released by the kernel when the process ends however it ends.
         let lock = owner_lock(&root)?;
         create_folder(&root)?;
-        Ok(FmuCache {
-            root,
-            keep,
-            store,
-            _owner: Some(lock),
-            loaded: Mutex::new(HashMap::new()),
-            loading: Mutex::new(HashMap::new()),
-            limits: Limits::default(),
-            binary_required: true,
-            verify_all: false,
-            counters: Counters::default(),
-        })
+        Ok(Self::new(root, keep, store, Some(lock)))
     }
 
     /// A cache in `dir` that is kept (reused across runs): `dir` is its folder and its store.
@@ -185,18 +174,33 @@ impl FmuCache {
     pub fn with_store(root: &Path, store: &Path) -> Result<FmuCache, FmuError> {
         create_folder(root)?;
         create_folder(store)?;
-        Ok(FmuCache {
-            root: root.to_path_buf(),
-            keep: true,
-            store: Some(store.to_path_buf()),
-            _owner: None,
+        Ok(Self::new(
+            root.to_path_buf(),
+            true,
+            Some(store.to_path_buf()),
+            None,
+        ))
+    }
+
+    /// A cache of nothing yet, with the default limits and checks.
+    fn new(
+        root: PathBuf,
+        keep: bool,
+        store: Option<PathBuf>,
+        owner: Option<OwnerLock>,
+    ) -> FmuCache {
+        FmuCache {
+            root,
+            keep,
+            store,
+            _owner: owner,
             loaded: Mutex::new(HashMap::new()),
             loading: Mutex::new(HashMap::new()),
             limits: Limits::default(),
             binary_required: true,
             verify_all: false,
             counters: Counters::default(),
-        })
+        }
     }
 
     /// The cache's own folder (SSP packages; FMUs too when it has no store).

@@ -619,17 +619,15 @@ mod tests {
         }
     }
 
+    /// x' = -x from x(0) = 1, with the root function x - 0.5.
+    fn decay_with_root() -> Cvode<Decay> {
+        let decay = Decay { k: 1.0, calls: 0 };
+        Cvode::new(decay, 0.0, &[1.0], &[1e-10], 1, settings()).unwrap()
+    }
+
     #[test]
     fn integrates_finds_roots_and_reinitialises() {
-        let mut c = Cvode::new(
-            Decay { k: 1.0, calls: 0 },
-            0.0,
-            &[1.0],
-            &[1e-10],
-            1,
-            settings(),
-        )
-        .unwrap();
+        let mut c = decay_with_root();
         let (mut x, mut found) = ([0.0], [0]);
         // The root x = 0.5 at t = ln 2.
         let r = c.advance(1.0, &mut x, &mut found).unwrap();
@@ -696,15 +694,7 @@ mod tests {
     /// release build too: CVodeGetRootInfo writes one value per root function).
     #[test]
     fn slices_of_the_wrong_length_are_refused_not_written_past() {
-        let mut c = Cvode::new(
-            Decay { k: 1.0, calls: 0 },
-            0.0,
-            &[1.0],
-            &[1e-10],
-            1,
-            settings(),
-        )
-        .unwrap();
+        let mut c = decay_with_root();
         let calls = c.system().calls;
         let e = c.advance(1.0, &mut [0.0], &mut []).unwrap_err();
         assert_eq!((e.function, flag_name(e.flag)), ("CVode", "CV_ILL_INPUT"));
