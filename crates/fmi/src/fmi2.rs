@@ -122,12 +122,12 @@ pub type fmi2EnterInitializationModeTYPE = unsafe extern "C" fn(fmi2Component) -
 pub type fmi2ExitInitializationModeTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
 pub type fmi2TerminateTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
 pub type fmi2ResetTYPE = unsafe extern "C" fn(fmi2Component) -> fmi2Status;
-/// `fmi2Get<Type>`: the values of `nvr` value references, written to `value`.
-pub type fmi2GetTYPE<T> =
-    unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *mut T) -> fmi2Status;
-/// `fmi2Set<Type>`: the values of `nvr` value references, read from `value`.
-pub type fmi2SetTYPE<T> =
-    unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, *const T) -> fmi2Status;
+/// `fmi2Get<Type>` and `fmi2Set<Type>`: the values of `nvr` value references at `value`
+/// (`*mut T` to get, `*const T` to set).
+pub type fmi2ValuesTYPE<P> =
+    unsafe extern "C" fn(fmi2Component, *const fmi2ValueReference, usize, P) -> fmi2Status;
+pub type fmi2GetTYPE<T> = fmi2ValuesTYPE<*mut T>;
+pub type fmi2SetTYPE<T> = fmi2ValuesTYPE<*const T>;
 pub type fmi2GetRealTYPE = fmi2GetTYPE<fmi2Real>;
 pub type fmi2GetIntegerTYPE = fmi2GetTYPE<fmi2Integer>;
 pub type fmi2GetBooleanTYPE = fmi2GetTYPE<fmi2Boolean>;

@@ -162,6 +162,25 @@ impl Instance {
         }
     }
 
+    /// `fmi2Get<Type>` or `fmi2Set<Type>` with `count` values at `values`, one a reference:
+    /// the lengths are checked before the FMU writes or reads.
+    #[inline]
+    fn values<P>(
+        &self,
+        call: fmi2ValuesTYPE<P>,
+        function: Function,
+        vrs: &[u32],
+        count: usize,
+        values: P,
+    ) -> Result<(), FmuError> {
+        if vrs.len() != count {
+            return Err(self.lengths(function, vrs.len(), count));
+        }
+        // SAFETY: the component is live and `values` points at one value per reference.
+        let s = unsafe { call(self.comp, vrs.as_ptr(), vrs.len(), values) };
+        self.check(function, s)
+    }
+
     #[cold]
     fn call_error(&self, function: Function, status: fmi2Status) -> FmuError {
         FmuError::call(
@@ -349,64 +368,34 @@ impl FmuInstance for Instance {
 
     #[inline]
     fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        if vrs.len() != out.len() {
-            return Err(self.lengths(Function::GetReal, vrs.len(), out.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2GetReal)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
-        };
-        self.check(Function::GetReal, s)
+        let (n, p) = (out.len(), out.as_mut_ptr());
+        self.values(self.lib.api.fmi2GetReal, Function::GetReal, vrs, n, p)
     }
 
     #[inline]
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        if vrs.len() != values.len() {
-            return Err(self.lengths(Function::SetReal, vrs.len(), values.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2SetReal)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
-        };
-        self.check(Function::SetReal, s)
+        let (n, p) = (values.len(), values.as_ptr());
+        self.values(self.lib.api.fmi2SetReal, Function::SetReal, vrs, n, p)
     }
 
     fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        if vrs.len() != out.len() {
-            return Err(self.lengths(Function::GetInteger, vrs.len(), out.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2GetInteger)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
-        };
-        self.check(Function::GetInteger, s)
+        let (n, p) = (out.len(), out.as_mut_ptr());
+        self.values(self.lib.api.fmi2GetInteger, Function::GetInteger, vrs, n, p)
     }
 
     fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        if vrs.len() != values.len() {
-            return Err(self.lengths(Function::SetInteger, vrs.len(), values.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2SetInteger)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
-        };
-        self.check(Function::SetInteger, s)
+        let (n, p) = (values.len(), values.as_ptr());
+        self.values(self.lib.api.fmi2SetInteger, Function::SetInteger, vrs, n, p)
     }
 
     fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        if vrs.len() != out.len() {
-            return Err(self.lengths(Function::GetBoolean, vrs.len(), out.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2GetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), out.as_mut_ptr())
-        };
-        self.check(Function::GetBoolean, s)
+        let (n, p) = (out.len(), out.as_mut_ptr());
+        self.values(self.lib.api.fmi2GetBoolean, Function::GetBoolean, vrs, n, p)
     }
 
     fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        if vrs.len() != values.len() {
-            return Err(self.lengths(Function::SetBoolean, vrs.len(), values.len()));
-        }
-        let s = unsafe {
-            (self.lib.api.fmi2SetBoolean)(self.comp, vrs.as_ptr(), vrs.len(), values.as_ptr())
-        };
-        self.check(Function::SetBoolean, s)
+        let (n, p) = (values.len(), values.as_ptr());
+        self.values(self.lib.api.fmi2SetBoolean, Function::SetBoolean, vrs, n, p)
     }
 
     /// Read String variables into `out` (one per value reference). The FMU's strings are
