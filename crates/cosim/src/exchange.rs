@@ -7,8 +7,7 @@ use crate::plan::{Endpoint, ParamValue, Plan};
 use crate::replay::Cursor;
 use crate::{backend::Backend, SystemError};
 use std::sync::Arc;
-use tb_fmi::fmi2::fmi2Status;
-use tb_fmi::{FmuError, Function, MeStop, ScalarType};
+use tb_fmi::{FmuError, MeStop, ScalarType};
 
 #[derive(Default)]
 pub(crate) struct Batch<T> {
@@ -160,20 +159,15 @@ impl FmuUnit {
 /// 4.2.3), and the run then ends there, normally.
 #[inline]
 fn step_error(f: &mut FmuUnit, e: FmuError) -> SystemError {
-    match e {
-        e @ FmuError::Call {
-            function: Function::DoStep,
-            status: fmi2Status::DISCARD,
-            ..
-        } => match f.backend().terminated_by_fmu() {
-            Some(time) => SystemError::EndedByFmu {
+    if e.is_discarded_fmi2_step() {
+        if let Some(time) = f.backend().terminated_by_fmu() {
+            return SystemError::EndedByFmu {
                 instance: f.name.clone(),
                 time,
-            },
-            None => e.into(),
-        },
-        e => e.into(),
+            };
+        }
     }
+    e.into()
 }
 
 /// Reads a batch of Real outputs into the exchange buffer; a value that is not finite is

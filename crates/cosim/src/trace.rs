@@ -195,7 +195,6 @@ impl Traced {
         match r {
             Ok(_) => ok.into(),
             Err(FmuError::Call { status, .. }) => status.to_string(),
-            Err(FmuError::Call3 { status, .. }) => status.clone(),
             Err(e) => format!("error ({e})"),
         }
     }

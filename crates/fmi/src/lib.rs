@@ -23,6 +23,7 @@ pub mod import;
 
 pub use functions::{Function, FunctionSpec, Phase, PhaseSet, FUNCTIONS};
 pub use schema::{Causality, Initial, ScalarType, Variability};
+pub use status::{CallStatus, FmiFunction};
 
 #[cfg(feature = "import")]
 pub use import::archive::{FmuCache, LoadedFmu};

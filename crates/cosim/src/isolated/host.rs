@@ -16,7 +16,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tb_fmi::import::log::LogSink;
-use tb_fmi::{FmuError, Function, Interface, LoadedFmu};
+use tb_fmi::{FmiFunction, FmuError, Function, Interface, LoadedFmu};
 
 /// One instance in a worker process.
 pub struct IsolatedBackend {
@@ -405,18 +405,18 @@ impl IsolatedBackend {
                 self.keep_log(&log);
                 FmuError::call(&self.name, function, status, time, log)
             }
-            Failure::Call3 {
-                function,
-                status,
+            Failure::EarlyReturn {
                 time,
+                last,
+                target,
                 log,
             } => {
                 self.keep_log(&log);
-                FmuError::Call3 {
+                FmuError::EarlyReturn {
                     instance: self.name.clone(),
-                    function,
-                    status,
                     time,
+                    last,
+                    target,
                     log,
                 }
             }
@@ -875,7 +875,7 @@ impl Backend for IsolatedBackend {
                 Ok(())
             }
             Err(e) => {
-                if let FmuError::Call { function, .. } = &e {
+                if let Some(function) = e.call_function().and_then(FmiFunction::fmi2) {
                     if !matches!(
                         function,
                         Function::DoStep

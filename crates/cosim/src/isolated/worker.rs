@@ -529,7 +529,7 @@ mod tests {
     use fmu_export::variables::*;
     use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo};
     use tb_fmi::fmi2::fmi2Status;
-    use tb_fmi::Function;
+    use tb_fmi::{CallStatus, FmiFunction, Function};
 
     fmu_export::variables! {
         pub struct TwiceVars {
@@ -685,8 +685,12 @@ mod tests {
             panic!("{r:?}")
         };
         assert_eq!(
-            (*function, *status, *time),
-            (Function::GetInteger, fmi2Status::ERROR, 0.0)
+            (function, *status, *time),
+            (
+                &FmiFunction::Fmi2(Function::GetInteger),
+                CallStatus::Fmi2(fmi2Status::ERROR),
+                0.0
+            )
         );
         assert!(
             log.iter().any(|l| l.contains("is Real, not Integer")),

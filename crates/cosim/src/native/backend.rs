@@ -10,7 +10,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::Arc;
 use tb_fmi::import::log::LogSink;
-use tb_fmi::{FmuError, Function};
+use tb_fmi::{CallStatus, FmiFunction, FmuError, Function};
 
 /// Forwards the runtime's messages to the instance's log sink.
 struct SinkLogger(Arc<LogSink>);
@@ -62,9 +62,16 @@ impl<M: Model> NativeBackend<M> {
                 self.rt.poison(function.name(), &text)
             }
         };
-        status
-            .ok()
-            .map_err(|s| FmuError::call(&self.name, function, s, self.time, self.sink.last_lines()))
+        status.ok().map_err(|s| {
+            let (function, status) = (FmiFunction::Fmi2(function), CallStatus::Fmi2(s));
+            FmuError::call(
+                &self.name,
+                function,
+                status,
+                self.time,
+                self.sink.last_lines(),
+            )
+        })
     }
 }
 

@@ -1,7 +1,7 @@
 //! The importer's errors, each naming the file or instance and what was expected.
 
-use crate::fmi2::fmi2Status;
 use crate::functions::Function;
+use crate::status::{CallStatus, FmiFunction};
 use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
@@ -12,27 +12,31 @@ pub enum FmuError {
     MissingSymbol { path: PathBuf, symbol: &'static str },
     #[error("instance '{instance}': {message}")]
     Instantiate { instance: String, message: String },
+    /// An FMI call of either version that did not return OK or Warning: the one error every
+    /// instance's calls become ([`FmuError::call`]).
     #[error(
         "instance '{instance}' at t = {time} s: {function} returned {status}{}",
         format_log(log)
     )]
     Call {
         instance: String,
-        function: Function,
-        status: fmi2Status,
+        function: FmiFunction,
+        status: CallStatus,
         time: f64,
         log: Vec<String>,
     },
-    /// An FMI 3.0 call that did not return OK or Warning.
+    /// An FMI 3.0 step that returned early although the instance was told it may not
+    /// (`earlyReturnAllowed = false`, FMI 3.0 §4.2.1): taking it as complete would be a silent
+    /// wrong result.
     #[error(
-        "instance '{instance}' at t = {time} s: {function} returned {status}{}",
+        "instance '{instance}' at t = {time} s: fmi3DoStep returned earlyReturn = true with lastSuccessfulTime = {last:?} s instead of completing the step to {target:?} s, although it was instantiated with earlyReturnAllowed = false (FMI 3.0 §4.2.1){}",
         format_log(log)
     )]
-    Call3 {
+    EarlyReturn {
         instance: String,
-        function: String,
-        status: String,
         time: f64,
+        last: f64,
+        target: f64,
         log: Vec<String>,
     },
     /// A Model Exchange instance's error: an FMI call, or the integrator (CVODE) with its
@@ -104,12 +108,13 @@ fn format_log(lines: &[String]) -> String {
 }
 
 impl FmuError {
-    /// A refused call: the one place a status becomes an error, for every backend.
+    /// A refused call: the one place a status becomes an error, for every backend and both
+    /// versions.
     #[cold]
     pub fn call(
         instance: &str,
-        function: Function,
-        status: fmi2Status,
+        function: FmiFunction,
+        status: CallStatus,
         time: f64,
         log: Vec<String>,
     ) -> FmuError {
@@ -120,6 +125,40 @@ impl FmuError {
             time,
             log,
         }
+    }
+
+    /// A step that ended the simulation, as the master expects it of any instance (FMI 3.0's
+    /// `terminateSimulation`, a Model Exchange FMU's): `fmi2DoStep` returning `fmi2Discard`
+    /// at `time`, after which the master asks `terminated_by_fmu`.
+    pub fn step_discarded(instance: &str, time: f64) -> FmuError {
+        FmuError::call(
+            instance,
+            FmiFunction::Fmi2(Function::DoStep),
+            CallStatus::Fmi2(crate::fmi2::fmi2Status::DISCARD),
+            time,
+            Vec::new(),
+        )
+    }
+
+    /// The function of a refused call (None: another error).
+    pub fn call_function(&self) -> Option<&FmiFunction> {
+        match self {
+            FmuError::Call { function, .. } => Some(function),
+            _ => None,
+        }
+    }
+
+    /// A refused `fmi2DoStep` that was discarded (FMI 2.0 §4.2.3: the FMU may end the
+    /// simulation this way).
+    pub fn is_discarded_fmi2_step(&self) -> bool {
+        matches!(
+            self,
+            FmuError::Call {
+                function: FmiFunction::Fmi2(Function::DoStep),
+                status,
+                ..
+            } if status.is_discard()
+        )
     }
 }
 

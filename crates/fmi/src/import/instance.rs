@@ -5,6 +5,7 @@ use super::library::Library;
 use super::log::{fmi2_logger, log_env, LogEnv, LogSink};
 use crate::fmi2::*;
 use crate::functions::Function;
+use crate::status::{CallStatus, FmiFunction};
 use crate::{FmuError, FmuInstance};
 use std::ffi::{c_void, CString};
 use std::path::Path;
@@ -185,8 +186,8 @@ impl Instance {
     fn call_error(&self, function: Function, status: fmi2Status) -> FmuError {
         FmuError::call(
             &self.name,
-            function,
-            status,
+            FmiFunction::Fmi2(function),
+            CallStatus::Fmi2(status),
             self.time,
             self.sink.last_lines(),
         )

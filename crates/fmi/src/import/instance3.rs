@@ -11,7 +11,7 @@
 use super::log::LogSink;
 use super::model::{Fmi3Slot, Fmi3Type, ModelDescription, ScalarVariable};
 use crate::fmi2::fmi2Status;
-use crate::functions::Function;
+use crate::status::{CallStatus, FmiFunction};
 use crate::{FmuError, FmuInstance};
 use std::collections::HashMap;
 use std::ffi::{c_char, c_void, CStr, CString};
@@ -42,17 +42,6 @@ unsafe extern "C" fn logger(
         };
         sink.push(fmi2Status(status), &text(category), &text(message));
     });
-}
-
-fn status3_name(s: Status) -> String {
-    match s {
-        0 => "fmi3OK".into(),
-        1 => "fmi3Warning".into(),
-        2 => "fmi3Discard".into(),
-        3 => "fmi3Error".into(),
-        4 => "fmi3Fatal".into(),
-        other => format!("an unknown fmi3Status ({other})"),
-    }
 }
 
 /// Hexadecimal text (FMI 3.0's notation of Binary values, spaces allowed) to bytes.
@@ -264,13 +253,13 @@ impl Instance3 {
     #[cold]
     #[inline(never)]
     fn call_error(&self, function: &'static str, status: Status) -> FmuError {
-        FmuError::Call3 {
-            instance: self.name.clone(),
-            function: function.to_string(),
-            status: status3_name(status),
-            time: self.time,
-            log: self.sink.last_lines(),
-        }
+        FmuError::call(
+            &self.name,
+            FmiFunction::Fmi3(function.into()),
+            CallStatus::Fmi3(status),
+            self.time,
+            self.sink.last_lines(),
+        )
     }
 
     fn other(&self, message: String) -> FmuError {
@@ -664,27 +653,18 @@ impl Instance3 {
         // (and does not end the run) did not reach t + h, and taking it as if it had would
         // be a silent wrong result.
         if early != 0 && terminate == 0 {
-            return Err(FmuError::Call3 {
+            return Err(FmuError::EarlyReturn {
                 instance: self.name.clone(),
-                function: "fmi3DoStep".into(),
-                status: format!(
-                    "earlyReturn = true with lastSuccessfulTime = {last:?} s instead of completing the step to {:?} s, although it was instantiated with earlyReturnAllowed = false (FMI 3.0 §4.2.1)",
-                    t + h
-                ),
                 time: t,
+                last,
+                target: t + h,
                 log: self.sink.last_lines(),
             });
         }
         self.time = reached;
         if terminate != 0 {
             self.terminate_requested = Some(reached);
-            return Err(FmuError::call(
-                &self.name,
-                Function::DoStep,
-                fmi2Status::DISCARD,
-                reached,
-                Vec::new(),
-            ));
+            return Err(FmuError::step_discarded(&self.name, reached));
         }
         Ok(())
     }

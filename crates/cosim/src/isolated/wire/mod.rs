@@ -18,7 +18,7 @@
 use std::borrow::Cow;
 use tb_fmi::fmi2::fmi2Status;
 pub use tb_fmi::import::archive::FileCheck;
-use tb_fmi::{FmuError, Function};
+use tb_fmi::{CallStatus, FmiFunction, FmuError, Function};
 
 /// Operation codes.
 pub mod op {
@@ -58,7 +58,8 @@ pub mod op {
 
 /// Error kinds in a response.
 pub mod kind {
-    /// An FMI call returned a status that stops the caller: function code, status, time, log.
+    /// An FMI call (either version) returned a status that stops the caller: the function
+    /// (FMI 2.0's code or FMI 3.0's name), the status, time, log.
     pub const CALL: u8 = 0;
     /// `fmi2Instantiate` failed: the message.
     pub const INSTANTIATE: u8 = 1;
@@ -66,9 +67,9 @@ pub mod kind {
     pub const UNSUPPORTED: u8 = 2;
     /// Anything else: a message.
     pub const OTHER: u8 = 3;
-    /// An FMI 3.0 call returned a status that stops the caller: function name, status
-    /// name, time, log.
-    pub const CALL3: u8 = 4;
+    /// An FMI 3.0 step returned early although it may not: time, last successful time,
+    /// the step's end, log.
+    pub const EARLY_RETURN: u8 = 4;
     /// A Model Exchange instance's call or its solver failed: the .fmu, the call, what
     /// went wrong, time, log.
     pub const MODEL_EXCHANGE: u8 = 5;
@@ -98,6 +99,8 @@ pub enum WireError {
     UnknownFunction(u8),
     #[error("unknown error kind {0}")]
     UnknownKind(u8),
+    #[error("unknown FMI version {0} of a failed call")]
+    UnknownVersion(u8),
     #[error("{results} results for {gets} gets")]
     Results { results: usize, gets: usize },
     #[error("trailing bytes")]
@@ -512,19 +515,19 @@ pub enum Values {
 /// Why a request stopped.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Failure {
-    /// An FMI call returned a status that stops the caller (with the instance's last log
-    /// lines).
+    /// An FMI call of either version returned a status that stops the caller (with the
+    /// instance's last log lines).
     Call {
-        function: Function,
-        status: fmi2Status,
+        function: FmiFunction,
+        status: CallStatus,
         time: f64,
         log: Vec<String>,
     },
-    /// An FMI 3.0 call did (named as the FMU's functions are, with its status's name).
-    Call3 {
-        function: String,
-        status: String,
+    /// An FMI 3.0 step returned early although the instance may not.
+    EarlyReturn {
         time: f64,
+        last: f64,
+        target: f64,
         log: Vec<String>,
     },
     /// A Model Exchange instance's FMI call or its solver (CVODE) failed.
@@ -553,7 +556,7 @@ impl Failure {
         let said = |n: &str| format!("[twinbench worker] {n}");
         match self {
             Failure::Call { log, .. }
-            | Failure::Call3 { log, .. }
+            | Failure::EarlyReturn { log, .. }
             | Failure::ModelExchange { log, .. } => log.extend(notes.iter().map(|n| said(n))),
             Failure::Instantiate(m) | Failure::Other(m) => {
                 m.push_str(&format!(" ({})", notes.join("; ")))
@@ -578,16 +581,16 @@ impl From<FmuError> for Failure {
                 time,
                 log,
             },
-            FmuError::Call3 {
-                function,
-                status,
+            FmuError::EarlyReturn {
                 time,
+                last,
+                target,
                 log,
                 ..
-            } => Failure::Call3 {
-                function,
-                status,
+            } => Failure::EarlyReturn {
                 time,
+                last,
+                target,
                 log,
             },
             FmuError::ModelExchange {
@@ -622,22 +625,35 @@ impl Failure {
                 log,
             } => {
                 e.u8(kind::CALL);
-                e.u8(*function as u8);
-                e.i32(status.0);
+                match function {
+                    FmiFunction::Fmi2(f) => {
+                        e.u8(2);
+                        e.u8(*f as u8);
+                    }
+                    FmiFunction::Fmi3(name) => {
+                        e.u8(3);
+                        e.str(name);
+                    }
+                }
+                match status {
+                    CallStatus::Fmi2(_) => e.u8(2),
+                    CallStatus::Fmi3(_) => e.u8(3),
+                }
+                e.i32(status.code());
                 e.f64(*time);
                 e.u32(log.len() as u32);
                 log.iter().for_each(|l| e.str(l));
             }
-            Failure::Call3 {
-                function,
-                status,
+            Failure::EarlyReturn {
                 time,
+                last,
+                target,
                 log,
             } => {
-                e.u8(kind::CALL3);
-                e.str(function);
-                e.str(status);
+                e.u8(kind::EARLY_RETURN);
                 e.f64(*time);
+                e.f64(*last);
+                e.f64(*target);
                 e.u32(log.len() as u32);
                 log.iter().for_each(|l| e.str(l));
             }
@@ -674,9 +690,21 @@ impl Failure {
     fn decode(d: &mut Dec) -> Result<Failure, WireError> {
         Ok(match d.u8()? {
             kind::CALL => {
-                let code = d.u8()?;
-                let function = function_of(code).ok_or(WireError::UnknownFunction(code))?;
-                let status = fmi2Status(d.i32()?);
+                let function = match d.u8()? {
+                    2 => {
+                        let code = d.u8()?;
+                        FmiFunction::Fmi2(
+                            function_of(code).ok_or(WireError::UnknownFunction(code))?,
+                        )
+                    }
+                    3 => FmiFunction::Fmi3(d.str()?.into()),
+                    v => return Err(WireError::UnknownVersion(v)),
+                };
+                let status = match (d.u8()?, d.i32()?) {
+                    (2, code) => CallStatus::Fmi2(fmi2Status(code)),
+                    (3, code) => CallStatus::Fmi3(code),
+                    (v, _) => return Err(WireError::UnknownVersion(v)),
+                };
                 let time = d.f64()?;
                 let n = d.count(4)?;
                 Failure::Call {
@@ -686,15 +714,13 @@ impl Failure {
                     log: d.each(n, Dec::str)?,
                 }
             }
-            kind::CALL3 => {
-                let function = d.str()?;
-                let status = d.str()?;
-                let time = d.f64()?;
+            kind::EARLY_RETURN => {
+                let (time, last, target) = (d.f64()?, d.f64()?, d.f64()?);
                 let n = d.count(4)?;
-                Failure::Call3 {
-                    function,
-                    status,
+                Failure::EarlyReturn {
                     time,
+                    last,
+                    target,
                     log: d.each(n, Dec::str)?,
                 }
             }

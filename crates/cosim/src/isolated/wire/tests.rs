@@ -259,22 +259,28 @@ fn every_response() -> Vec<Response> {
     ];
     let failures = [
         Failure::Call {
-            function: Function::DoStep,
-            status: fmi2Status::ERROR,
+            function: FmiFunction::Fmi2(Function::DoStep),
+            status: CallStatus::Fmi2(fmi2Status::ERROR),
             time: 0.5,
             log: vec!["[Error] it failed".into(), "".into()],
         },
         Failure::Call {
-            function: Function::GetReal,
-            status: fmi2Status(77),
+            function: FmiFunction::Fmi2(Function::GetReal),
+            status: CallStatus::Fmi2(fmi2Status(77)),
             time: 0.0,
             log: vec![],
         },
-        Failure::Call3 {
-            function: "fmi3DoStep".into(),
-            status: "fmi3Error".into(),
+        Failure::Call {
+            function: FmiFunction::Fmi3("fmi3DoStep".into()),
+            status: CallStatus::Fmi3(3),
             time: 0.25,
             log: vec!["[Error] a step of an FMI 3.0 FMU".into()],
+        },
+        Failure::EarlyReturn {
+            time: 0.25,
+            last: 0.3,
+            target: 0.5,
+            log: vec!["[Warning] returned early".into()],
         },
         Failure::ModelExchange {
             fmu: "m.fmu".into(),
@@ -351,13 +357,22 @@ fn forged_responses_are_refused() {
             gets: 5
         }
     );
-    // A function code outside the table, an unknown error kind.
+    // A function code outside the table, a version that is not FMI's, an unknown error
+    // kind.
     let mut e = head(1, 0);
     e.u8(kind::CALL);
+    e.u8(2);
     e.u8(250);
     assert_eq!(
         Response::decode(&e.0, &ops).unwrap_err(),
         WireError::UnknownFunction(250)
+    );
+    let mut e = head(1, 0);
+    e.u8(kind::CALL);
+    e.u8(7);
+    assert_eq!(
+        Response::decode(&e.0, &ops).unwrap_err(),
+        WireError::UnknownVersion(7)
     );
     let mut e = head(1, 0);
     e.u8(9);
@@ -368,7 +383,9 @@ fn forged_responses_are_refused() {
     // A log count beyond the frame.
     let mut e = head(1, 0);
     e.u8(kind::CALL);
+    e.u8(2);
     e.u8(Function::GetReal as u8);
+    e.u8(2);
     e.i32(3);
     e.f64(0.0);
     e.u32(u32::MAX);

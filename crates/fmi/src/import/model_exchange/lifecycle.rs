@@ -10,7 +10,7 @@ use crate::fmi2::{fmi2Status, fmi2Type};
 use crate::import::instance::Instance;
 use crate::import::instance3::Instance3;
 use crate::import::model::ModelDescription;
-use crate::{Causality, FmuError, Variability};
+use crate::{CallStatus, Causality, FmuError, Variability};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -104,7 +104,10 @@ impl MeInstance {
             };
             let status = match &r {
                 Ok(()) => fmi2Status::OK,
-                Err(FmuError::Call { status, .. }) => *status,
+                Err(FmuError::Call {
+                    status: CallStatus::Fmi2(status),
+                    ..
+                }) => *status,
                 Err(_) => fmi2Status::ERROR,
             };
             trace(self.inst.time(), "fmi2SetupExperiment", &args, status);

@@ -52,7 +52,6 @@ mod values;
 
 use super::model::ModelDescription;
 use crate::fmi2::*;
-use crate::functions::Function;
 use crate::FmuError;
 pub use calls::CallTrace;
 use calls::MeCalls;
@@ -251,13 +250,6 @@ impl MeInstance {
                 log,
                 ..
             } => (function.name().into(), status.to_string(), time, log),
-            FmuError::Call3 {
-                function,
-                status,
-                time,
-                log,
-                ..
-            } => (function.into(), status, time, log),
             other => return other,
         };
         FmuError::ModelExchange {
@@ -314,12 +306,9 @@ impl MeInstance {
     /// The step's error when the FMU asked to end the simulation: `fmi2Discard` as a
     /// Co-Simulation FMU would say it (the master then asks [`Self::terminated_by_fmu`]).
     fn ended(&self) -> FmuError {
-        FmuError::call(
+        FmuError::step_discarded(
             self.inst.name(),
-            Function::DoStep,
-            fmi2Status::DISCARD,
             self.terminated_at.unwrap_or(self.inst.time()),
-            Vec::new(),
         )
     }
 
