@@ -62,20 +62,7 @@ const NS_OMS: &str =
     "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd";
 const NS_TB: &str = "https://github.com/twinbench/ssp";
 
-fn esc(s: &str) -> String {
-    let mut o = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => o.push_str("&amp;"),
-            '<' => o.push_str("&lt;"),
-            '>' => o.push_str("&gt;"),
-            '"' => o.push_str("&quot;"),
-            '\'' => o.push_str("&apos;"),
-            c => o.push(c),
-        }
-    }
-    o
-}
+use tb_files::markup::xml_escape as esc;
 
 /// xs:double text that reads back to the same f64.
 fn real(x: f64) -> String {

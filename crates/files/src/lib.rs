@@ -12,8 +12,11 @@
 //!
 //! [`shown`]: what a message may show of text twinbench did not write (cut, control
 //! characters escaped).
+//!
+//! [`markup`]: text made safe for XML and HTML.
 
 pub mod input;
+pub mod markup;
 pub mod names;
 pub mod paths;
 pub mod shown;

@@ -131,24 +131,14 @@ pub struct InvalidTable {
 }
 
 /// Escape text for an XML attribute or element.
-pub fn xml_escape(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            c => out.push(c),
-        }
-    }
-    out
-}
+pub use tb_files::markup::xml_escape;
 
-fn scalar_variable(v: &VarInfo, fitting: &Fitting) -> String {
+/// A variable's element opened with the attributes both versions write, in their order:
+/// `    <{element} name=".." valueReference=".." description=".." causality=".."
+/// variability=".."` and `initial` where the table says it.
+pub(crate) fn open_variable(element: &str, v: &VarInfo) -> String {
     let mut s = format!(
-        "    <ScalarVariable name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
+        "    <{element} name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
         xml_escape(v.name),
         v.value_reference,
         xml_escape(v.description),
@@ -158,6 +148,11 @@ fn scalar_variable(v: &VarInfo, fitting: &Fitting) -> String {
     if let Some(init) = v.initial {
         s.push_str(&format!(" initial=\"{}\"", init.xml_name()));
     }
+    s
+}
+
+fn scalar_variable(v: &VarInfo, fitting: &Fitting) -> String {
+    let mut s = open_variable("ScalarVariable", v);
     s.push_str(">\n      <");
     s.push_str(v.var_type().xml_name());
     if let Some(t) = v.enumeration {

@@ -9,7 +9,8 @@
 //! same dependencies as FMI 2.0's indices.
 
 use crate::description::{
-    initial_dependencies, log_categories, type_definitions, xml_escape, Fitting, Version,
+    initial_dependencies, log_categories, open_variable, type_definitions, xml_escape, Fitting,
+    Version,
 };
 use crate::model::Model;
 use crate::variables::{format_real, Causality, Initial, ScalarType, Value, VarInfo, VarTable};
@@ -51,17 +52,7 @@ pub fn element_name(t: ScalarType) -> &'static str {
 
 fn variable(v: &VarInfo, fitting: &Fitting) -> String {
     let el = element(v);
-    let mut s = format!(
-        "    <{el} name=\"{}\" valueReference=\"{}\" description=\"{}\" causality=\"{}\" variability=\"{}\"",
-        xml_escape(v.name),
-        v.value_reference,
-        xml_escape(v.description),
-        v.causality.xml_name(),
-        v.variability.xml_name()
-    );
-    if let Some(init) = v.initial {
-        s.push_str(&format!(" initial=\"{}\"", init.xml_name()));
-    }
+    let mut s = open_variable(el, v);
     if let Some(t) = v.enumeration {
         s.push_str(&format!(" declaredType=\"{}\"", xml_escape(t.name)));
     }

@@ -19,6 +19,19 @@ impl<M: Model> Runtime<M> {
         }
     }
 
+    /// The variable of `vr`, refused (with the message) when there is none or it is not of
+    /// type `ty`.
+    fn variable_of_type(
+        &self,
+        function: &str,
+        vr: u32,
+        ty: ScalarType,
+    ) -> Result<&'static VarInfo, fmi2Status> {
+        let info = &M::Vars::VARIABLES[self.index(function, vr)?];
+        self.check_type(function, info, ty)?;
+        Ok(info)
+    }
+
     pub(super) fn check_type(
         &self,
         function: &str,
@@ -152,14 +165,10 @@ impl<M: Model> Runtime<M> {
     /// The message of a refused get (off the fast path).
     #[cold]
     pub(super) fn get_error(&self, function: &str, ty: ScalarType, vr: u32) -> fmi2Status {
-        let i = match self.index(function, vr) {
-            Ok(i) => i,
+        let info = match self.variable_of_type(function, vr, ty) {
+            Ok(info) => info,
             Err(s) => return s,
         };
-        let info = &M::Vars::VARIABLES[i];
-        if let Err(s) = self.check_type(function, info, ty) {
-            return s;
-        }
         self.error(&format!(
             "{function}: '{}' is calculated and has no value before initialization",
             info.name
@@ -288,14 +297,10 @@ impl<M: Model> Runtime<M> {
                 "{function}: the independent variable 'time' cannot be set (vr {vr})"
             ));
         }
-        let i = match self.index(function, vr) {
-            Ok(i) => i,
+        let info = match self.variable_of_type(function, vr, ty) {
+            Ok(info) => info,
             Err(s) => return s,
         };
-        let info = &M::Vars::VARIABLES[i];
-        if let Err(s) = self.check_type(function, info, ty) {
-            return s;
-        }
         if !self.slots[vr as usize].settable(self.run.initializing()) {
             return self.error(&format!(
                 "{function}: '{}' ({} {}) cannot be set in state '{}'",
