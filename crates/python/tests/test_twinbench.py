@@ -617,13 +617,7 @@ def test_ctrl_c_stops_a_study_after_its_generation_and_says_how_to_resume(tmp_pa
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     checkpoint = out / "spielberg.checkpoint.json"
-    import time
-
-    started = time.monotonic()
-    while not checkpoint.exists():
-        assert child.poll() is None, child.communicate()
-        assert time.monotonic() - started < 120, "no checkpoint after 2 minutes"
-        time.sleep(0.05)
+    wait_for(checkpoint, child)
     child.send_signal(signal.SIGINT)
     stdout, stderr = child.communicate(timeout=120)
     assert child.returncode != 0
@@ -636,6 +630,18 @@ def test_ctrl_c_stops_a_study_after_its_generation_and_says_how_to_resume(tmp_pa
     # Resumed, it finishes with the Tab. 1 of an uninterrupted study.
     result = twinbench.Study(STUDY).optimize(out=out, threads=2, resume=True)
     assert result["steps"][-1]["name"] == "geometry"
+
+
+def wait_for(checkpoint, child):
+    """Until the running optimisation `child` has written its first checkpoint (at most 2
+    minutes; the child still running)."""
+    import time
+
+    started = time.monotonic()
+    while not checkpoint.exists():
+        assert child.poll() is None, child.communicate()
+        assert time.monotonic() - started < 120, "no checkpoint after 2 minutes"
+        time.sleep(0.05)
 
 
 def sys_executable():
@@ -841,13 +847,7 @@ def test_sigterm_stops_python_m_optimize_after_its_generation_and_says_how_to_re
            "--threads", "2", "--generations", "2", "--no-report", "--quiet"]
     child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     checkpoint = out / "spielberg.checkpoint.json"
-    import time
-
-    started = time.monotonic()
-    while not checkpoint.exists():
-        assert child.poll() is None, child.communicate()
-        assert time.monotonic() - started < 120, "no checkpoint after 2 minutes"
-        time.sleep(0.05)
+    wait_for(checkpoint, child)
     child.send_signal(signal.SIGTERM)
     stdout, stderr = child.communicate(timeout=120)
     assert child.returncode == 130, stderr

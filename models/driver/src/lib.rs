@@ -91,7 +91,7 @@ fmu_export::variables! {
 fmu_export::states! {
     /// The driver's dynamic state.
     #[derive(Clone, Copy, Debug, PartialEq)]
-    pub struct DriverState {
+    pub struct DriverState for Driver.st {
         /// ∫ speed error dt [m], the PI's integral state.
         error_integral: f64,
         /// The accelerator's limit from the traction limit, 0..1.
@@ -299,15 +299,7 @@ impl Model for Driver {
     }
 }
 
-impl ModelState for Driver {
-    type State = DriverState;
-    fn state(&self) -> &DriverState {
-        &self.st
-    }
-    fn state_mut(&mut self) -> &mut DriverState {
-        &mut self.st
-    }
-}
+impl ModelState for Driver {}
 
 const DOCUMENTATION: &str = r#"
 <p>A driver for the RLS/v mode: it follows a <b>distance-based</b> target speed, so a

@@ -90,7 +90,7 @@ fmu_export::states! {
     /// The dyno's dynamic state. The tick clock's origin is in it: a deserializing host
     /// re-initialises at another time.
     #[derive(Clone, Debug, PartialEq)]
-    pub struct DynoState {
+    pub struct DynoState for Dyno.st {
         start_time: f64,
         tick: u64,
         omega: f64,
@@ -473,13 +473,6 @@ impl Model for Dyno {
 }
 
 impl ModelState for Dyno {
-    type State = DynoState;
-    fn state(&self) -> &DynoState {
-        &self.st
-    }
-    fn state_mut(&mut self) -> &mut DynoState {
-        &mut self.st
-    }
     /// The buffers' lengths follow from dead_time, jitter, cycle_time and
     /// prediction_window: a state of other ones is refused.
     fn state_loaded(&mut self) -> Result<(), ModelError> {

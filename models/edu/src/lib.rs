@@ -122,7 +122,7 @@ fmu_export::states! {
     /// Dynamic state. The differential's side gears are massless, so the two shaft torques are
     /// always equal; the twists are kept as their mean and their difference.
     #[derive(Clone, Copy, Debug, PartialEq)]
-    pub struct State {
+    pub struct State for Edu.st {
         omega_m: f64,
         torque_m: f64,
         /// Mean twist (φ_l + φ_r)/2 [rad].
@@ -235,15 +235,7 @@ impl Model for Edu {
     }
 }
 
-impl ModelState for Edu {
-    type State = State;
-    fn state(&self) -> &State {
-        &self.st
-    }
-    fn state_mut(&mut self) -> &mut State {
-        &mut self.st
-    }
-}
+impl ModelState for Edu {}
 
 const DOCUMENTATION: &str = r#"
 <h2>Reference electric drive unit</h2>

@@ -44,7 +44,7 @@ pub use tb_fmi::{fmi2, units, Function, Phase, PhaseSet};
 pub use context::{Context, ResourceCache};
 pub use model::{DefaultExperiment, Model, ModelError, ModelInfo, Resource, Severity};
 pub use runtime::{Logger, NullLogger, Runtime};
-pub use state::{ModelState, StateReader, StateWriter, Stateless};
+pub use state::{HoldsState, ModelState, StateReader, StateWriter, Stateless};
 /// A short, escaped excerpt of user text for a message (a field of a file, a value).
 pub use tb_files::excerpt;
 pub use variables::{Value, VarInfo, VarTable};

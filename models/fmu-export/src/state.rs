@@ -11,15 +11,9 @@ use crate::error::ModelError;
 /// one declaration and cannot disagree. Every model implements it, or is [`Stateless`].
 #[diagnostic::on_unimplemented(
     message = "the model `{Self}` neither declares its dynamic state nor is `Stateless`",
-    note = "declare the state with `fmu_export::states!` and implement `fmu_export::ModelState` (state and state_mut) for a model with dynamic state, or write `impl fmu_export::Stateless for {Self} {{}}` for a model without"
+    note = "declare the state with `fmu_export::states!` (`pub struct S for {Self}.field {{ ... }}`) and write `impl fmu_export::ModelState for {Self} {{}}` for a model with dynamic state, or `impl fmu_export::Stateless for {Self} {{}}` for a model without"
 )]
-pub trait ModelState {
-    /// The struct holding the dynamic state (declared with [`states!`](crate::states!)).
-    type State: Stored;
-
-    fn state(&self) -> &Self::State;
-    fn state_mut(&mut self) -> &mut Self::State;
-
+pub trait ModelState: HoldsState {
     /// After a state was read into a model initialised with the same parameters and
     /// resources: refuse one that does not fit them (a buffer of another length).
     fn state_loaded(&mut self) -> Result<(), ModelError> {
@@ -38,11 +32,22 @@ pub trait ModelState {
     }
 }
 
+/// Where a model keeps its dynamic state: the struct [`states!`](crate::states!) declares
+/// and the model's field holding it (`pub struct S for Model.field`, or `for Model` when the
+/// model is its own state); written by that macro, or nothing for a [`Stateless`] model.
+pub trait HoldsState {
+    /// The struct holding the dynamic state.
+    type State: Stored;
+
+    fn state(&self) -> &Self::State;
+    fn state_mut(&mut self) -> &mut Self::State;
+}
+
 /// A model without dynamic state (its outputs follow from parameters and inputs):
 /// `impl Stateless for MyModel {}` gives it the [`ModelState`] that saves nothing.
 pub trait Stateless {}
 
-impl<M: Stateless> ModelState for M {
+impl<M: Stateless> HoldsState for M {
     type State = [f64; 0];
 
     fn state(&self) -> &[f64; 0] {
@@ -53,6 +58,8 @@ impl<M: Stateless> ModelState for M {
         &mut []
     }
 }
+
+impl<M: Stateless> ModelState for M {}
 
 /// A value in a serialized state: how it is written and read back.
 pub trait Stored {
@@ -148,7 +155,8 @@ impl Stored for Vec<f64> {
 }
 
 /// Declare a model's dynamic state once: the struct, and its [`Stored`] implementation that
-/// writes and reads every field in declaration order.
+/// writes and reads every field in declaration order; with `for Model.field` (or `for
+/// Model`, a model that is its own state) also where the model holds it ([`HoldsState`]).
 ///
 /// ```
 /// fmu_export::states! {
@@ -169,6 +177,36 @@ impl Stored for Vec<f64> {
 /// ```
 #[macro_export]
 macro_rules! states {
+    (
+        $(#[$meta:meta])*
+        $vis:vis struct $name:ident for $model:ident $(. $held:ident)? {
+            $(
+                $(#[$fmeta:meta])*
+                $field:ident : $ty:ty
+            ),* $(,)?
+        }
+    ) => {
+        $crate::states! {
+            $(#[$meta])*
+            $vis struct $name {
+                $( $(#[$fmeta])* $field: $ty, )*
+            }
+        }
+
+        impl $crate::state::HoldsState for $model {
+            type State = $name;
+
+            #[inline]
+            fn state(&self) -> &$name {
+                &(*self) $(.$held)?
+            }
+
+            #[inline]
+            fn state_mut(&mut self) -> &mut $name {
+                &mut (*self) $(.$held)?
+            }
+        }
+    };
     (
         $(#[$meta:meta])*
         $vis:vis struct $name:ident {

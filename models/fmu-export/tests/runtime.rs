@@ -28,7 +28,7 @@ fmu_export::variables! {
 fmu_export::states! {
     /// The whole model is its dynamic state.
     #[derive(Clone, Debug)]
-    pub struct Counter {
+    pub struct Counter for Counter {
         y: f64,
     }
 }
@@ -73,15 +73,7 @@ impl Model for Counter {
     }
 }
 
-impl ModelState for Counter {
-    type State = Self;
-    fn state(&self) -> &Self {
-        self
-    }
-    fn state_mut(&mut self) -> &mut Self {
-        self
-    }
-}
+impl ModelState for Counter {}
 
 const VR_GAIN: u32 = 1;
 const VR_OFFSET: u32 = 2;

@@ -308,7 +308,7 @@ impl Params {
 fmu_export::states! {
     /// The dynamic state; `Copy`, so save/restore is a plain copy.
     #[derive(Clone, Copy, Debug, PartialEq)]
-    pub struct State {
+    pub struct State for Vehicle.st {
         v: f64,
         /// Position in `[0, lap length)`.
         s: f64,
@@ -662,13 +662,6 @@ impl Model for Vehicle {
 }
 
 impl ModelState for Vehicle {
-    type State = State;
-    fn state(&self) -> &State {
-        &self.st
-    }
-    fn state_mut(&mut self) -> &mut State {
-        &mut self.st
-    }
     /// The cursors are search hints: one past this track's end is brought back onto it.
     fn state_loaded(&mut self) -> Result<(), ModelError> {
         let n = self.track.rows();
