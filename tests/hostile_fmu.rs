@@ -357,13 +357,14 @@ fn forged_frames_are_protocol_errors_not_panics() {
         ("short", answer(0, 1, &[0, 0, 0]), "truncated message"),
         (
             "bad_function",
-            answer(1, 0, &[0, 250, 0, 0, 0, 0]),
+            answer(1, 0, &[0, 2, 250, 0, 0, 0, 0]), // kind CALL, FMI 2.0, function 250
             "unknown function code 250",
         ),
         (
             "huge_log",
             {
-                let mut rest = vec![0u8, tb_fmi::Function::GetReal as u8]; // kind CALL
+                // Kind CALL, an FMI 2.0 function and status.
+                let mut rest = vec![0u8, 2, tb_fmi::Function::GetReal as u8, 2];
                 rest.extend_from_slice(&3i32.to_le_bytes());
                 rest.extend_from_slice(&0.0f64.to_le_bytes());
                 rest.extend_from_slice(&u32::MAX.to_le_bytes()); // log lines
