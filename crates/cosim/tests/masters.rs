@@ -4,28 +4,17 @@
 
 mod support;
 
-use support::{assert_close, column, last, texts, Bench};
+use support::{assert_close, column, instances, last, texts, Bench};
 use tb_cosim::master::{algorithm, Jacobi, MasterAlgorithm};
 use tb_cosim::Algorithm;
 
 /// integrator (u = 0.5, x0 = 1) -> g1 (k = 2) -> g2 (k = 3), h = 1/8, 16 steps.
 fn chain(algorithm: &str) -> String {
+    let instances = support::chain_instances();
     format!(
         r#"connections = ["int.x -> g1.u", "g1.y -> g2.u"]
 
-[[instance]]
-name = "g2"
-fmu = "gain"
-
-[[instance]]
-name = "g1"
-fmu = "gain"
-
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[parameters]
+{instances}[parameters]
 "int.x0" = 1.0
 "int.u" = 0.5
 "g1.k" = 2.0
@@ -118,18 +107,11 @@ fn an_explicit_order_makes_gauss_seidel_see_the_last_steps_values() {
 
 /// int.x -> g.u, g.y -> int.u with k = -1: x' = -x, h = 1/2.
 fn decay(algorithm: &str) -> String {
+    let instances = instances(&[("int", "integrator"), ("g", "gain")]);
     format!(
         r#"connections = ["int.x -> g.u", {{ from = "g.y", to = "int.u", scale = 1.0 }}]
 
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[[instance]]
-name = "g"
-fmu = "gain"
-
-[parameters]
+{instances}[parameters]
 "int.x0" = 1.0
 "g.k" = -1.0
 
@@ -236,29 +218,20 @@ signals = ["src.t", "src.count"]
 #[test]
 fn integer_boolean_and_enumeration_outputs_feed_real_inputs() {
     let b = Bench::new();
-    let text = r#"connections = [
+    let instances = instances(&[
+        ("src", "source"),
+        ("gc", "gain"),
+        ("gb", "gain"),
+        ("ge", "gain"),
+    ]);
+    let text = format!(
+        r#"connections = [
     "src.count -> gc.u",
     "src.odd -> gb.u",
     "src.gear -> ge.u",
 ]
 
-[[instance]]
-name = "src"
-fmu = "source"
-
-[[instance]]
-name = "gc"
-fmu = "gain"
-
-[[instance]]
-name = "gb"
-fmu = "gain"
-
-[[instance]]
-name = "ge"
-fmu = "gain"
-
-[parameters]
+{instances}[parameters]
 "gc.k" = 0.5
 "gb.k" = 3.0
 "ge.k" = 1.0
@@ -269,8 +242,9 @@ stop = 2.0
 
 [record]
 signals = ["src.count", "src.odd", "src.gear", "gc.y", "gb.y", "ge.y"]
-"#;
-    let (sim, _) = b.run(text);
+"#
+    );
+    let (sim, _) = b.run(&text);
     for k in 0..=8 {
         let n = k as f64;
         assert_eq!(column(&sim, "src.count")[k], n);
@@ -286,17 +260,11 @@ signals = ["src.count", "src.odd", "src.gear", "gc.y", "gb.y", "ge.y"]
 #[test]
 fn strings_and_enumerations_are_exchanged_and_recorded() {
     let b = Bench::new();
-    let text = r#"connections = ["src.label -> snk.text", "src.gear -> snk.gear_in"]
+    let instances = instances(&[("src", "source"), ("snk", "sink")]);
+    let text = format!(
+        r#"connections = ["src.label -> snk.text", "src.gear -> snk.gear_in"]
 
-[[instance]]
-name = "src"
-fmu = "source"
-
-[[instance]]
-name = "snk"
-fmu = "sink"
-
-[parameters]
+{instances}[parameters]
 "src.prefix" = "lap "
 "snk.name" = "got"
 
@@ -306,8 +274,9 @@ stop = 2.0
 
 [record]
 signals = ["src.label", "snk.text_out", "snk.gear_out"]
-"#;
-    let (sim, _) = b.run(text);
+"#
+    );
+    let (sim, _) = b.run(&text);
     assert_eq!(
         texts(&sim, "src.label"),
         ["lap 0", "lap 1", "lap 2", "lap 3", "lap 4"]

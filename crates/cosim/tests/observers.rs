@@ -8,24 +8,17 @@ mod support;
 use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use support::{column, Bench};
+use support::{column, instances, Bench};
 use tb_cosim::{Ended, Moment, RunObserver, RunView, SystemError};
 
 /// integrator (u = 0.5, x0 = 1) -> g (k = 2), h = 1/8, stop 2 s, every 4th step recorded.
 /// `g.y` is read by the recording only (no connection reads it).
 fn system(experiment: &str) -> String {
+    let instances = instances(&[("int", "integrator"), ("g", "gain")]);
     format!(
         r#"connections = ["int.x -> g.u"]
 
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[[instance]]
-name = "g"
-fmu = "gain"
-
-[parameters]
+{instances}[parameters]
 "int.x0" = 1.0
 "int.u" = 0.5
 "g.k" = 2.0

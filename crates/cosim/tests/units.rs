@@ -4,22 +4,15 @@
 
 mod support;
 
-use support::{assert_close, assert_contains, last, Bench};
+use support::{assert_close, assert_contains, assert_refusals, instances, last, Bench};
 
 /// source -> sink over `connection`, one step, recording `signals`.
 fn link(connection: &str, signals: &str) -> String {
+    let instances = instances(&[("src", "source"), ("snk", "sink")]);
     format!(
         r#"connections = [{connection}]
 
-[[instance]]
-name = "src"
-fmu = "source"
-
-[[instance]]
-name = "snk"
-fmu = "sink"
-
-[experiment]
+{instances}[experiment]
 step = 0.5
 stop = 1.0
 
@@ -134,13 +127,11 @@ fn scale_and_offset_replace_the_units() {
 fn a_replayed_columns_unit_converts_too() {
     let b = Bench::new();
     b.write("speeds.csv", "time,v\ns,km/h\n0,72\n10,72\n");
-    let text = r#"connections = ["speeds.v -> snk.v"]
+    let instances = instances(&[("snk", "sink")]);
+    let text = format!(
+        r#"connections = ["speeds.v -> snk.v"]
 
-[[instance]]
-name = "snk"
-fmu = "sink"
-
-[[replay]]
+{instances}[[replay]]
 name = "speeds"
 file = "speeds.csv"
 basis = "time"
@@ -151,8 +142,9 @@ stop = 1.0
 
 [record]
 signals = ["snk.v_out", "speeds.v"]
-"#;
-    let (sim, _) = b.run(text);
+"#
+    );
+    let (sim, _) = b.run(&text);
     assert_close(last(&sim, "snk.v_out"), 20.0, 1e-14);
     // The replayed column is recorded in its own unit.
     assert_eq!(last(&sim, "speeds.v"), 72.0);
@@ -200,10 +192,8 @@ fn incompatible_or_unknown_units_are_refused() {
             "connection table: unknown field `gain`",
         ),
     ];
-    for (connection, expected) in cases {
-        let e = b.error(&link(connection, "\"snk.v_out\""));
-        assert_contains(&e, &[expected]);
-        // Each error names the system file.
-        assert_contains(&e, &["system.toml"]);
-    }
+    // Each error names the system file.
+    assert_refusals(&cases, &["system.toml"], |connection| {
+        b.error(&link(connection, "\"snk.v_out\""))
+    });
 }
