@@ -46,17 +46,17 @@ fn an_integrator_of_a_constant_is_exact_over_n_steps() {
     }
 }
 
+/// The chain run under `algorithm`: the columns int.x, g1.y and g2.y.
+fn chain_columns(algorithm: &str) -> [Vec<f64>; 3] {
+    let (sim, _) = Bench::new().run(&chain(algorithm));
+    ["int.x", "g1.y", "g2.y"].map(|name| column(&sim, name).to_vec())
+}
+
 #[test]
 fn gauss_seidel_feeds_this_steps_outputs_down_the_chain() {
-    let b = Bench::new();
-    let (sim, _) = b.run(&chain("gauss-seidel"));
     // Stepping order int, g1, g2 (the connections', not the declaration's): each gain
     // sees its source's value at the end of this step. Exact.
-    let (x, y1, y2) = (
-        column(&sim, "int.x"),
-        column(&sim, "g1.y"),
-        column(&sim, "g2.y"),
-    );
+    let [x, y1, y2] = chain_columns("gauss-seidel");
     for k in 0..x.len() {
         assert_eq!(y1[k], 2.0 * x[k], "row {k}");
         assert_eq!(y2[k], 6.0 * x[k], "row {k}");
@@ -65,13 +65,7 @@ fn gauss_seidel_feeds_this_steps_outputs_down_the_chain() {
 
 #[test]
 fn jacobi_feeds_every_unit_the_last_steps_outputs() {
-    let b = Bench::new();
-    let (sim, _) = b.run(&chain("jacobi"));
-    let (x, y1, y2) = (
-        column(&sim, "int.x"),
-        column(&sim, "g1.y"),
-        column(&sim, "g2.y"),
-    );
+    let [x, y1, y2] = chain_columns("jacobi");
     // Initialisation reaches the fixed point: the first row is consistent.
     assert_eq!((y1[0], y2[0]), (2.0, 6.0));
     // Then each gain lags its source by one step: g1 one, g2 two. Exact.
