@@ -113,39 +113,55 @@ pub fn table(r: &ModalResult) -> String {
         .max()
         .unwrap_or(9)
         .max(9);
-    let header = |s: &mut String, title: &str| {
-        let _ = write!(s, "\n{title}\n{:<width$}", "component");
-        for m in &r.modes {
-            let _ = write!(s, " {:>8}", format!("mode {}", m.number));
-        }
-        s.push('\n');
-    };
-    header(&mut s, "Mode shapes v_ki (max |v| = 1)");
-    for (k, name) in r.inertias.iter().enumerate() {
-        let _ = write!(s, "{name:<width$}");
-        for m in &r.modes {
-            let _ = write!(s, " {:>8.4}", m.shape[k]);
-        }
-        s.push('\n');
-    }
-    header(&mut s, "Mass sensitivity μ_ik (Eq. 6)");
-    for (k, name) in r.inertias.iter().enumerate() {
-        let _ = write!(s, "{name:<width$}");
-        for m in &r.modes {
-            let _ = write!(s, " {:>8.4}", m.mass_sensitivity[k]);
-        }
-        s.push('\n');
-    }
-    header(&mut s, "Stiffness sensitivity γ_ik (Eq. 7)");
-    for (k, name) in r.springs.iter().enumerate() {
-        let _ = write!(s, "{name:<width$}");
-        for m in &r.modes {
-            let v = m.stiffness_sensitivity.as_ref().map(|g| g[k]);
-            let _ = write!(s, " {:>8}", opt(v, 4));
-        }
-        s.push('\n');
-    }
+    mode_table(
+        &mut s,
+        r,
+        width,
+        "Mode shapes v_ki (max |v| = 1)",
+        &r.inertias,
+        |m, k| format!("{:.4}", m.shape[k]),
+    );
+    mode_table(
+        &mut s,
+        r,
+        width,
+        "Mass sensitivity μ_ik (Eq. 6)",
+        &r.inertias,
+        |m, k| format!("{:.4}", m.mass_sensitivity[k]),
+    );
+    mode_table(
+        &mut s,
+        r,
+        width,
+        "Stiffness sensitivity γ_ik (Eq. 7)",
+        &r.springs,
+        |m, k| opt(m.stiffness_sensitivity.as_ref().map(|g| g[k]), 4),
+    );
     s
+}
+
+/// A table under `title`: a row per component of `names` (its index `k` into the mode's
+/// values), a column per mode of `r`, each cell as `cell` writes it.
+fn mode_table(
+    s: &mut String,
+    r: &ModalResult,
+    width: usize,
+    title: &str,
+    names: &[String],
+    cell: impl Fn(&modal::Mode, usize) -> String,
+) {
+    let _ = write!(s, "\n{title}\n{:<width$}", "component");
+    for m in &r.modes {
+        let _ = write!(s, " {:>8}", format!("mode {}", m.number));
+    }
+    s.push('\n');
+    for (k, name) in names.iter().enumerate() {
+        let _ = write!(s, "{name:<width$}");
+        for m in &r.modes {
+            let _ = write!(s, " {:>8}", cell(m, k));
+        }
+        s.push('\n');
+    }
 }
 
 /// The comparison of two chains, mode by mode.

@@ -69,6 +69,33 @@ pub struct SpringPlace {
     pub right: Option<usize>,
 }
 
+/// A component's `value` (an inertia or a stiffness) positive and its `damping`
+/// non-negative, both finite: else the error `not_positive` makes (chain, component,
+/// value), or the damping's.
+fn check_component(
+    chain: &str,
+    component: &str,
+    value: f64,
+    damping: f64,
+    not_positive: impl FnOnce(String, String, f64) -> AnalysisError,
+) -> Result<()> {
+    if !(value.is_finite() && value > 0.0) {
+        return Err(not_positive(
+            chain.to_string(),
+            component.to_string(),
+            value,
+        ));
+    }
+    if !(damping.is_finite() && damping >= 0.0) {
+        return Err(AnalysisError::NegativeDamping {
+            chain: chain.to_string(),
+            component: component.to_string(),
+            value: damping,
+        });
+    }
+    Ok(())
+}
+
 impl Chain {
     /// Read and validate a chain from a TOML file.
     pub fn from_file(path: &Path) -> Result<Chain> {
@@ -113,36 +140,30 @@ impl Chain {
             });
         }
         for j in &self.inertias {
-            if !(j.inertia.is_finite() && j.inertia > 0.0) {
-                return Err(AnalysisError::NonPositiveInertia {
-                    chain: chain(),
-                    component: j.name.clone(),
-                    value: j.inertia,
-                });
-            }
-            if !(j.damping.is_finite() && j.damping >= 0.0) {
-                return Err(AnalysisError::NegativeDamping {
-                    chain: chain(),
-                    component: j.name.clone(),
-                    value: j.damping,
-                });
-            }
+            check_component(
+                &self.name,
+                &j.name,
+                j.inertia,
+                j.damping,
+                |chain, component, value| AnalysisError::NonPositiveInertia {
+                    chain,
+                    component,
+                    value,
+                },
+            )?;
         }
         for s in self.all_springs().map(|(s, _)| s) {
-            if !(s.stiffness.is_finite() && s.stiffness > 0.0) {
-                return Err(AnalysisError::NonPositiveStiffness {
-                    chain: chain(),
-                    component: s.name.clone(),
-                    value: s.stiffness,
-                });
-            }
-            if !(s.damping.is_finite() && s.damping >= 0.0) {
-                return Err(AnalysisError::NegativeDamping {
-                    chain: chain(),
-                    component: s.name.clone(),
-                    value: s.damping,
-                });
-            }
+            check_component(
+                &self.name,
+                &s.name,
+                s.stiffness,
+                s.damping,
+                |chain, component, value| AnalysisError::NonPositiveStiffness {
+                    chain,
+                    component,
+                    value,
+                },
+            )?;
         }
         let mut names: Vec<&str> = self.inertias.iter().map(|j| j.name.as_str()).collect();
         names.extend(self.all_springs().map(|(s, _)| s.name.as_str()));

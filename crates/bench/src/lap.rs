@@ -552,31 +552,70 @@ fn study_toml(o: &LapOptions, name: &str) -> String {
     )
 }
 
+/// A `[[step]]` of the paper's study: the comment above it, its name, the signals it is
+/// validated on and its parameters with their bounds (as the study file writes them).
+struct StudyStep {
+    comment: &'static str,
+    name: &'static str,
+    signals: &'static [&'static str],
+    parameters: &'static [(&'static str, &'static str, &'static str)],
+}
+
+const LIFT_STEP: StudyStep = StudyStep {
+    comment: "# Step 1: the lift coefficients, validated on the axle sums.",
+    name: "lift",
+    signals: &["Fz_front", "Fz_rear", "Fz_sum"],
+    parameters: &[
+        ("vehicle.c_lift_front", "0.2", "2.5"),
+        ("vehicle.c_lift_rear", "0.2", "2.5"),
+    ],
+};
+
+const GEOMETRY_STEP: StudyStep = StudyStep {
+    comment: "# Step 2: the virtual geometry, validated on the four wheel loads.",
+    name: "geometry",
+    signals: &["Fz_rl", "Fz_rr", "Fz_fl", "Fz_fr"],
+    parameters: &[
+        ("vehicle.l", "2.0", "4.5"),
+        ("vehicle.b_front", "0.9", "2.0"),
+        ("vehicle.b_rear", "0.9", "2.0"),
+    ],
+};
+
 /// The third step of a study on the second-order chassis: its pitch and roll modes.
-const CHASSIS_STEP: &str = r#"
-# Step 3: the second-order chassis' pitch and roll modes (system.toml sets
-# vehicle.chassis_model = "second_order"), validated on the four wheel loads and the
-# accelerations the loads follow.
-[[step]]
-name = "chassis"
-signals = ["Fz_rl", "Fz_rr", "Fz_fl", "Fz_fr"]
-[[step.parameter]]
-name = "vehicle.pitch_frequency"
-min = 0.5
-max = 8.0
-[[step.parameter]]
-name = "vehicle.pitch_damping"
-min = 0.1
-max = 1.5
-[[step.parameter]]
-name = "vehicle.roll_frequency"
-min = 0.5
-max = 8.0
-[[step.parameter]]
-name = "vehicle.roll_damping"
-min = 0.1
-max = 1.5
-"#;
+const CHASSIS_STEP: StudyStep = StudyStep {
+    comment: "# Step 3: the second-order chassis' pitch and roll modes (system.toml sets\n\
+              # vehicle.chassis_model = \"second_order\"), validated on the four wheel loads and the\n\
+              # accelerations the loads follow.",
+    name: "chassis",
+    signals: &["Fz_rl", "Fz_rr", "Fz_fl", "Fz_fr"],
+    parameters: &[
+        ("vehicle.pitch_frequency", "0.5", "8.0"),
+        ("vehicle.pitch_damping", "0.1", "1.5"),
+        ("vehicle.roll_frequency", "0.5", "8.0"),
+        ("vehicle.roll_damping", "0.1", "1.5"),
+    ],
+};
+
+impl StudyStep {
+    /// The step's text, after a blank line.
+    fn toml(&self) -> String {
+        let signals: Vec<String> = self.signals.iter().map(|s| format!("\"{s}\"")).collect();
+        let mut text = format!(
+            "\n{}\n[[step]]\nname = \"{}\"\nsignals = [{}]\n",
+            self.comment,
+            self.name,
+            signals.join(", ")
+        );
+        for (parameter, min, max) in self.parameters {
+            let _ = write!(
+                text,
+                "[[step.parameter]]\nname = \"{parameter}\"\nmin = {min}\nmax = {max}\n"
+            );
+        }
+        text
+    }
+}
 
 /// The study file's text: its measurement part given (one `[measurement]` or several
 /// `[[measurement]]`), the rest the paper's two steps, and with the second-order chassis a
@@ -617,36 +656,6 @@ generations = 22
 [optimizer.cmaes]
 population = 8
 sigma0 = 0.2
-
-# Step 1: the lift coefficients, validated on the axle sums.
-[[step]]
-name = "lift"
-signals = ["Fz_front", "Fz_rear", "Fz_sum"]
-[[step.parameter]]
-name = "vehicle.c_lift_front"
-min = 0.2
-max = 2.5
-[[step.parameter]]
-name = "vehicle.c_lift_rear"
-min = 0.2
-max = 2.5
-
-# Step 2: the virtual geometry, validated on the four wheel loads.
-[[step]]
-name = "geometry"
-signals = ["Fz_rl", "Fz_rr", "Fz_fl", "Fz_fr"]
-[[step.parameter]]
-name = "vehicle.l"
-min = 2.0
-max = 4.5
-[[step.parameter]]
-name = "vehicle.b_front"
-min = 0.9
-max = 2.0
-[[step.parameter]]
-name = "vehicle.b_rear"
-min = 0.9
-max = 2.0
 "#,
         study_path = study_path.display(),
         name = toml_string(name),
@@ -658,8 +667,10 @@ max = 2.0
             Chassis::SecondOrder => "5.0",
         },
     );
+    text.push_str(&LIFT_STEP.toml());
+    text.push_str(&GEOMETRY_STEP.toml());
     if chassis == Chassis::SecondOrder {
-        text.push_str(CHASSIS_STEP);
+        text.push_str(&CHASSIS_STEP.toml());
     }
     text
 }

@@ -20,101 +20,69 @@ fn error_of(name: &str, text: &str) -> String {
     e
 }
 
+/// Each malformed file is refused with an error that names the file (`error_of`), the
+/// 1-based line and the column; the failure names the case.
 #[test]
-fn nan_names_row_and_column() {
-    let e = error_of(
-        "nan.csv",
-        &format!("{HEADER}0,0,10,1,1,1,1\n0.1,1,10,1,NaN,1,1\n0.2,2,10,1,1,1,1\n"),
-    );
-    assert!(
-        e.contains("line 3, column `Fz_fr`: value NaN is not finite"),
-        "{e}"
-    );
-    let e = error_of(
-        "inf.csv",
-        &format!("{HEADER}0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,2,inf,1,1,1,1\n"),
-    );
-    assert!(
-        e.contains("line 4, column `v`: value inf is not finite"),
-        "{e}"
-    );
+fn malformed_files_name_line_and_column() {
+    let rows = |data: &str| format!("{HEADER}{data}");
+    let cases = [
+        (
+            "nan.csv",
+            rows("0,0,10,1,1,1,1\n0.1,1,10,1,NaN,1,1\n0.2,2,10,1,1,1,1\n"),
+            "line 3, column `Fz_fr`: value NaN is not finite",
+        ),
+        (
+            "inf.csv",
+            rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,2,inf,1,1,1,1\n"),
+            "line 4, column `v`: value inf is not finite",
+        ),
+        (
+            "time.csv",
+            rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.1,2,10,1,1,1,1\n"),
+            "line 4, column `time`: time does not increase (0.1 after 0.1)",
+        ),
+        (
+            "back.csv",
+            rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,0.5,10,1,1,1,1\n"),
+            "line 4, column `distance`: distance runs backwards (0.5 after 1)",
+        ),
+        (
+            "missing.csv",
+            "time,distance,v,Fz_fl,Fz_fr,Fz_rl\n0,0,10,1,1,1\n".to_string(),
+            "missing required column `Fz_rr`",
+        ),
+        (
+            "malformed.csv",
+            rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,2,1O,1,1,1,1\n"),
+            "line 4, column `v`: malformed number \"1O\"",
+        ),
+        ("empty.csv", String::new(), "empty file: no header row"),
+        ("header.csv", HEADER.to_string(), "no data rows"),
+        (
+            "ragged.csv",
+            rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1\n"),
+            "line 3: expected 7 fields",
+        ),
+        // A units row and blank lines keep the line numbers.
+        (
+            "units.csv",
+            rows("s,m,m/s,N,N,N,N\n0,0,10,1,1,1,1\n\n0.1,1,10,1,1,-inf,1\n"),
+            "line 5, column `Fz_rl`",
+        ),
+    ];
+    for (name, text, expected) in cases {
+        let e = error_of(name, &text);
+        assert!(e.contains(expected), "{name}: {expected:?} is not in: {e}");
+    }
 }
 
 #[test]
-fn non_increasing_time() {
-    let e = error_of(
-        "time.csv",
-        &format!("{HEADER}0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.1,2,10,1,1,1,1\n"),
-    );
-    assert!(
-        e.contains("line 4, column `time`: time does not increase (0.1 after 0.1)"),
-        "{e}"
-    );
-}
-
-#[test]
-fn distance_running_backwards() {
-    let e = error_of(
-        "back.csv",
-        &format!("{HEADER}0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,0.5,10,1,1,1,1\n"),
-    );
-    assert!(
-        e.contains("line 4, column `distance`: distance runs backwards (0.5 after 1)"),
-        "{e}"
-    );
-    // Standing still is allowed.
+fn distance_standing_still_is_not_running_backwards() {
     let (_dir, p) = write(
         "still.csv",
         &format!("{HEADER}0,0,0,1,1,1,1\n0.1,0,0,1,1,1,1\n0.2,0.5,10,1,1,1,1\n"),
     );
     Measurement::read_path(p).unwrap();
-}
-
-#[test]
-fn missing_required_column() {
-    let e = error_of(
-        "missing.csv",
-        "time,distance,v,Fz_fl,Fz_fr,Fz_rl\n0,0,10,1,1,1\n",
-    );
-    assert!(e.contains("missing required column `Fz_rr`"), "{e}");
-}
-
-#[test]
-fn malformed_number() {
-    let e = error_of(
-        "malformed.csv",
-        &format!("{HEADER}0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,2,1O,1,1,1,1\n"),
-    );
-    assert!(
-        e.contains("line 4, column `v`: malformed number \"1O\""),
-        "{e}"
-    );
-}
-
-#[test]
-fn empty_file_and_header_only() {
-    let e = error_of("empty.csv", "");
-    assert!(e.contains("empty file: no header row"), "{e}");
-    let e = error_of("header.csv", HEADER);
-    assert!(e.contains("no data rows"), "{e}");
-}
-
-#[test]
-fn ragged_row() {
-    let e = error_of(
-        "ragged.csv",
-        &format!("{HEADER}0,0,10,1,1,1,1\n0.1,1,10,1,1,1\n"),
-    );
-    assert!(e.contains("line 3: expected 7 fields"), "{e}");
-}
-
-#[test]
-fn units_row_and_blank_lines_keep_line_numbers() {
-    let e = error_of(
-        "units.csv",
-        &format!("{HEADER}s,m,m/s,N,N,N,N\n0,0,10,1,1,1,1\n\n0.1,1,10,1,1,-inf,1\n"),
-    );
-    assert!(e.contains("line 5, column `Fz_rl`"), "{e}");
 }
 
 #[test]

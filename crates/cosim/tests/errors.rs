@@ -4,63 +4,53 @@
 
 mod support;
 
-use support::{assert_contains, Bench};
+use support::{assert_contains, assert_refusals, instances, Bench};
 use tb_cosim::plan::OrderError;
 use tb_cosim::{SystemError, SystemFile};
 
 /// A gain `g`, an integrator `int` and a sink `snk`, with `connections`.
 fn wired(connections: &str) -> String {
-    format!(
-        r#"connections = [{connections}]
+    let instances = instances(&[("g", "gain"), ("int", "integrator"), ("snk", "sink")]);
+    format!("connections = [{connections}]\n\n{instances}[experiment]\nstep = 0.5\nstop = 1.0\n")
+}
 
-[[instance]]
-name = "g"
-fmu = "gain"
-
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[[instance]]
-name = "snk"
-fmu = "sink"
-
-[experiment]
-step = 0.5
-stop = 1.0
-"#
-    )
+/// The error of `wired(connections)` holds every one of `parts`.
+#[track_caller]
+fn assert_wiring_refused(b: &Bench, connections: &str, parts: &[&str]) {
+    assert_contains(&b.error(&wired(connections)), parts);
 }
 
 #[test]
 fn an_unknown_instance_is_named_with_the_instances_closest_first() {
     let b = Bench::new();
-    let e = b.error(&wired("\"itn.x -> g.u\""));
-    assert_contains(
-        &e,
+    assert_wiring_refused(
+        &b,
+        "\"itn.x -> g.u\"",
         &[
             "connection \"itn.x -> g.u\"",
             "unknown instance 'itn'; instances: int, g, snk",
         ],
     );
-    let e = b.error(&wired("\"int.x -> sink.v\""));
-    assert_contains(&e, &["unknown instance 'sink'; instances: snk,"]);
+    assert_wiring_refused(
+        &b,
+        "\"int.x -> sink.v\"",
+        &["unknown instance 'sink'; instances: snk,"],
+    );
 }
 
 #[test]
 fn an_unknown_variable_is_named_with_the_closest_names() {
     let b = Bench::new();
-    let e = b.error(&wired("\"int.x -> snk.vv\""));
-    assert_contains(
-        &e,
+    assert_wiring_refused(
+        &b,
+        "\"int.x -> snk.vv\"",
         &[
             "unknown variable 'snk.vv' (FMU",
             "sink.fmu); closest names: v, n, on",
         ],
     );
     // A swap of two letters is one edit.
-    let e = b.error(&wired("\"int.x -> snk.v_uot\""));
-    assert_contains(&e, &["closest names: v_out"]);
+    assert_wiring_refused(&b, "\"int.x -> snk.v_uot\"", &["closest names: v_out"]);
 }
 
 #[test]
@@ -92,17 +82,14 @@ fn a_connection_runs_from_an_output_to_an_input() {
             "'gu' is not of the form instance.variable",
         ),
     ];
-    for (connection, expected) in cases {
-        assert_contains(&b.error(&wired(connection)), &[expected]);
-    }
+    assert_refusals(&cases, &[], |connection| b.error(&wired(connection)));
 }
 
 #[test]
 fn an_input_is_connected_once() {
-    let b = Bench::new();
-    let e = b.error(&wired("\"int.x -> g.u\", \"snk.x_out -> g.u\""));
-    assert_contains(
-        &e,
+    assert_wiring_refused(
+        &Bench::new(),
+        "\"int.x -> g.u\", \"snk.x_out -> g.u\"",
         &[
             "connection \"snk.x_out -> g.u\"",
             "'g.u' is already connected",
@@ -135,9 +122,7 @@ fn types_must_match_or_widen_to_real() {
             "type mismatch: 'int.steps' is Integer, 'snk.on' is Boolean",
         ),
     ];
-    for (connection, expected) in cases {
-        assert_contains(&b.error(&wired(connection)), &[expected]);
-    }
+    assert_refusals(&cases, &[], |connection| b.error(&wired(connection)));
     // Integer into an Enumeration and back, and any number into a Real, pass.
     b.plan(&wired(
         "\"int.steps -> snk.gear_in\", \"snk.gear_out -> snk.n\", \"snk.on_out -> g.u\"",
@@ -145,21 +130,16 @@ fn types_must_match_or_widen_to_real() {
     .unwrap();
 }
 
+/// `a.y -> b.u`, `b.y -> a.u`: `a` of the FMU `a_fmu`, `b` a gain.
+fn gain_loop(a_fmu: &str) -> String {
+    let instances = instances(&[("a", a_fmu), ("b", "gain")]);
+    format!("connections = [\"a.y -> b.u\", \"b.y -> a.u\"]\n{instances}[experiment]\nstep = 0.5\nstop = 1.0\n")
+}
+
 #[test]
 fn a_loop_of_declared_feedthrough_is_an_algebraic_loop() {
     let b = Bench::new();
-    let text = r#"connections = ["a.y -> b.u", "b.y -> a.u"]
-[[instance]]
-name = "a"
-fmu = "gain"
-[[instance]]
-name = "b"
-fmu = "gain"
-[experiment]
-step = 0.5
-stop = 1.0
-"#;
-    let e = b.plan(text).err().expect("refused");
+    let e = b.plan(&gain_loop("gain")).err().expect("refused");
     assert!(
         matches!(
             &e,
@@ -190,18 +170,7 @@ stop = 1.0
 #[test]
 fn a_loop_through_outputs_without_declared_dependencies_is_a_warning() {
     let b = Bench::new();
-    let text = r#"connections = ["a.y -> b.u", "b.y -> a.u"]
-[[instance]]
-name = "a"
-fmu = "gain_nodeps"
-[[instance]]
-name = "b"
-fmu = "gain"
-[experiment]
-step = 0.5
-stop = 1.0
-"#;
-    let plan = b.plan(text).unwrap();
+    let plan = b.plan(&gain_loop("gain_nodeps")).unwrap();
     assert_contains(
         &plan.warnings.join("\n"),
         &[
@@ -244,12 +213,11 @@ fn instances_and_fmus_are_named_once_and_must_exist() {
         ("[[instance]]\nname = \"g.1\"\nfmu = \"gain\"\n", "instance name 'g.1' is repeated, empty, or contains a '.'"),
         ("[[instance]]\nname = \"\"\nfmu = \"gain\"\n", "instance name '' is repeated, empty"),
     ];
-    for (instances, expected) in cases {
-        let e = b.error(&format!(
+    assert_refusals(&cases, &[], |instances| {
+        b.error(&format!(
             "{instances}[experiment]\nstep = 0.5\nstop = 1.0\n"
-        ));
-        assert_contains(&e, &[expected]);
-    }
+        ))
+    });
     // An FMU file that is not there: the system file, the entry, and how to make it.
     let path = b.write(
         "lap/system.toml",
@@ -336,10 +304,9 @@ fn experiment_values_that_cannot_be_run_are_refused() {
             "unknown field `step_size`",
         ),
     ];
-    for (lines, expected) in cases {
-        let e = b.error(&experiment(lines));
-        assert_contains(&e, &["system.toml", expected]);
-    }
+    assert_refusals(&cases, &["system.toml"], |lines| {
+        b.error(&experiment(lines))
+    });
     let e = b
         .plan(&format!(
             "{}[[instance]]\nname = \"g\"\nfmu = \"gain\"\n",

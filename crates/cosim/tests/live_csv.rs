@@ -7,7 +7,7 @@ mod support;
 
 use std::io::Write;
 use std::ops::ControlFlow;
-use support::{column, Bench};
+use support::{column, instances, Bench};
 use tb_cosim::{RunObserver, RunView, SystemError};
 
 /// `time,<signal>` lines of one signal on the recording's rows.
@@ -87,12 +87,10 @@ impl Write for Full {
 }
 
 /// integrator (u = 0.5, x0 = 1), h = 1/8, stop 2 s, every 4th step recorded.
-const SYSTEM: &str = r#"
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[parameters]
+fn system() -> String {
+    let instances = instances(&[("int", "integrator")]);
+    format!(
+        r#"{instances}[parameters]
 "int.x0" = 1.0
 "int.u" = 0.5
 
@@ -103,12 +101,14 @@ stop = 2.0
 [record]
 signals = ["int.x"]
 decimation = 4
-"#;
+"#
+    )
+}
 
 #[test]
 fn the_live_csv_has_the_recordings_rows_and_values() {
     let b = Bench::new();
-    let mut sim = b.sim(SYSTEM);
+    let mut sim = b.sim(&system());
     let file = Shared::default();
     sim.observe(Box::new(LiveCsv::new(
         &sim,
@@ -130,7 +130,7 @@ fn the_live_csv_has_the_recordings_rows_and_values() {
 #[test]
 fn the_observers_write_failure_fails_the_run_naming_it() {
     let b = Bench::new();
-    let mut sim = b.sim(SYSTEM);
+    let mut sim = b.sim(&system());
     sim.observe(Box::new(LiveCsv::new(&sim, "int.x", Box::new(Full))));
     let e = sim.run().unwrap_err();
     assert!(

@@ -4,28 +4,17 @@
 
 mod support;
 
-use support::{assert_close, column, last, texts, Bench};
+use support::{assert_close, column, instances, last, texts, Bench};
 use tb_cosim::master::{algorithm, Jacobi, MasterAlgorithm};
 use tb_cosim::Algorithm;
 
 /// integrator (u = 0.5, x0 = 1) -> g1 (k = 2) -> g2 (k = 3), h = 1/8, 16 steps.
 fn chain(algorithm: &str) -> String {
+    let instances = support::chain_instances();
     format!(
         r#"connections = ["int.x -> g1.u", "g1.y -> g2.u"]
 
-[[instance]]
-name = "g2"
-fmu = "gain"
-
-[[instance]]
-name = "g1"
-fmu = "gain"
-
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[parameters]
+{instances}[parameters]
 "int.x0" = 1.0
 "int.u" = 0.5
 "g1.k" = 2.0
@@ -57,17 +46,17 @@ fn an_integrator_of_a_constant_is_exact_over_n_steps() {
     }
 }
 
+/// The chain run under `algorithm`: the columns int.x, g1.y and g2.y.
+fn chain_columns(algorithm: &str) -> [Vec<f64>; 3] {
+    let (sim, _) = Bench::new().run(&chain(algorithm));
+    ["int.x", "g1.y", "g2.y"].map(|name| column(&sim, name).to_vec())
+}
+
 #[test]
 fn gauss_seidel_feeds_this_steps_outputs_down_the_chain() {
-    let b = Bench::new();
-    let (sim, _) = b.run(&chain("gauss-seidel"));
     // Stepping order int, g1, g2 (the connections', not the declaration's): each gain
     // sees its source's value at the end of this step. Exact.
-    let (x, y1, y2) = (
-        column(&sim, "int.x"),
-        column(&sim, "g1.y"),
-        column(&sim, "g2.y"),
-    );
+    let [x, y1, y2] = chain_columns("gauss-seidel");
     for k in 0..x.len() {
         assert_eq!(y1[k], 2.0 * x[k], "row {k}");
         assert_eq!(y2[k], 6.0 * x[k], "row {k}");
@@ -76,13 +65,7 @@ fn gauss_seidel_feeds_this_steps_outputs_down_the_chain() {
 
 #[test]
 fn jacobi_feeds_every_unit_the_last_steps_outputs() {
-    let b = Bench::new();
-    let (sim, _) = b.run(&chain("jacobi"));
-    let (x, y1, y2) = (
-        column(&sim, "int.x"),
-        column(&sim, "g1.y"),
-        column(&sim, "g2.y"),
-    );
+    let [x, y1, y2] = chain_columns("jacobi");
     // Initialisation reaches the fixed point: the first row is consistent.
     assert_eq!((y1[0], y2[0]), (2.0, 6.0));
     // Then each gain lags its source by one step: g1 one, g2 two. Exact.
@@ -118,18 +101,11 @@ fn an_explicit_order_makes_gauss_seidel_see_the_last_steps_values() {
 
 /// int.x -> g.u, g.y -> int.u with k = -1: x' = -x, h = 1/2.
 fn decay(algorithm: &str) -> String {
+    let instances = instances(&[("int", "integrator"), ("g", "gain")]);
     format!(
         r#"connections = ["int.x -> g.u", {{ from = "g.y", to = "int.u", scale = 1.0 }}]
 
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[[instance]]
-name = "g"
-fmu = "gain"
-
-[parameters]
+{instances}[parameters]
 "int.x0" = 1.0
 "g.k" = -1.0
 
@@ -236,29 +212,20 @@ signals = ["src.t", "src.count"]
 #[test]
 fn integer_boolean_and_enumeration_outputs_feed_real_inputs() {
     let b = Bench::new();
-    let text = r#"connections = [
+    let instances = instances(&[
+        ("src", "source"),
+        ("gc", "gain"),
+        ("gb", "gain"),
+        ("ge", "gain"),
+    ]);
+    let text = format!(
+        r#"connections = [
     "src.count -> gc.u",
     "src.odd -> gb.u",
     "src.gear -> ge.u",
 ]
 
-[[instance]]
-name = "src"
-fmu = "source"
-
-[[instance]]
-name = "gc"
-fmu = "gain"
-
-[[instance]]
-name = "gb"
-fmu = "gain"
-
-[[instance]]
-name = "ge"
-fmu = "gain"
-
-[parameters]
+{instances}[parameters]
 "gc.k" = 0.5
 "gb.k" = 3.0
 "ge.k" = 1.0
@@ -269,8 +236,9 @@ stop = 2.0
 
 [record]
 signals = ["src.count", "src.odd", "src.gear", "gc.y", "gb.y", "ge.y"]
-"#;
-    let (sim, _) = b.run(text);
+"#
+    );
+    let (sim, _) = b.run(&text);
     for k in 0..=8 {
         let n = k as f64;
         assert_eq!(column(&sim, "src.count")[k], n);
@@ -286,17 +254,11 @@ signals = ["src.count", "src.odd", "src.gear", "gc.y", "gb.y", "ge.y"]
 #[test]
 fn strings_and_enumerations_are_exchanged_and_recorded() {
     let b = Bench::new();
-    let text = r#"connections = ["src.label -> snk.text", "src.gear -> snk.gear_in"]
+    let instances = instances(&[("src", "source"), ("snk", "sink")]);
+    let text = format!(
+        r#"connections = ["src.label -> snk.text", "src.gear -> snk.gear_in"]
 
-[[instance]]
-name = "src"
-fmu = "source"
-
-[[instance]]
-name = "snk"
-fmu = "sink"
-
-[parameters]
+{instances}[parameters]
 "src.prefix" = "lap "
 "snk.name" = "got"
 
@@ -306,8 +268,9 @@ stop = 2.0
 
 [record]
 signals = ["src.label", "snk.text_out", "snk.gear_out"]
-"#;
-    let (sim, _) = b.run(text);
+"#
+    );
+    let (sim, _) = b.run(&text);
     assert_eq!(
         texts(&sim, "src.label"),
         ["lap 0", "lap 1", "lap 2", "lap 3", "lap 4"]

@@ -8,24 +8,17 @@ mod support;
 use std::ops::ControlFlow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use support::{column, Bench};
-use tb_cosim::{Ended, Moment, RunObserver, RunView, SystemError};
+use support::{column, instances, Bench};
+use tb_cosim::{Ended, Moment, RunObserver, RunView, Simulation, SystemError};
 
 /// integrator (u = 0.5, x0 = 1) -> g (k = 2), h = 1/8, stop 2 s, every 4th step recorded.
 /// `g.y` is read by the recording only (no connection reads it).
 fn system(experiment: &str) -> String {
+    let instances = instances(&[("int", "integrator"), ("g", "gain")]);
     format!(
         r#"connections = ["int.x -> g.u"]
 
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[[instance]]
-name = "g"
-fmu = "gain"
-
-[parameters]
+{instances}[parameters]
 "int.x0" = 1.0
 "int.u" = 0.5
 "g.k" = 2.0
@@ -75,6 +68,19 @@ impl Watcher {
     }
 }
 
+/// A simulation of `text` observed by one watcher, as `set` makes it; and what it sees.
+fn watched(
+    b: &Bench,
+    text: &str,
+    set: impl FnOnce(&mut Watcher),
+) -> (Simulation, Arc<Mutex<Seen>>) {
+    let mut sim = b.sim(text);
+    let (mut watcher, seen) = Watcher::new(&sim);
+    set(&mut watcher);
+    sim.observe(Box::new(watcher));
+    (sim, seen)
+}
+
 impl RunObserver for Watcher {
     fn observe(&mut self, now: &mut RunView<'_>) -> Result<ControlFlow<String>, SystemError> {
         let (t, moment) = (now.time(), now.moment());
@@ -115,9 +121,7 @@ fn an_observer_sees_every_moment_with_its_values_and_changes_nothing() {
     let b = Bench::new();
     let text = system("stop = 2.0");
     let (plain, plain_summary) = b.run(&text);
-    let mut sim = b.sim(&text);
-    let (watcher, seen) = Watcher::new(&sim);
-    sim.observe(Box::new(watcher));
+    let (mut sim, seen) = watched(&b, &text, |_| {});
     let summary = sim.run().unwrap();
     // The recording and the summary are those of a run without the observer, bit for bit.
     assert_eq!(sim.recording().to_csv(), plain.recording().to_csv());
@@ -170,10 +174,7 @@ fn the_plans_stop_condition_is_an_observer_before_the_callers() {
     let b = Bench::new();
     // The condition holds at step 4 (x = 1.25); the caller would end the run at step 6.
     let text = system("stop = \"int.x >= 1.25\"\nmax_time = 10.0");
-    let mut sim = b.sim(&text);
-    let (mut ender, seen) = Watcher::new(&sim);
-    ender.end_at = Some(1.375);
-    sim.observe(Box::new(ender));
+    let (mut sim, seen) = watched(&b, &text, |w| w.end_at = Some(1.375));
     let summary = sim.run().unwrap();
     assert_eq!(summary.steps, 4);
     assert_eq!(summary.stopped_by, "int.x >= 1.25");
@@ -182,15 +183,11 @@ fn the_plans_stop_condition_is_an_observer_before_the_callers() {
         [(Ended::Observer("int.x >= 1.25".into()), 0.5, 1.25)]
     );
     // Both reasons at the same step: the plan's condition is told first, its reason wins.
-    let mut sim = b.sim(&text);
-    let (mut ender, _) = Watcher::new(&sim);
-    ender.end_at = Some(1.25);
-    sim.observe(Box::new(ender));
+    let (mut sim, _) = watched(&b, &text, |w| w.end_at = Some(1.25));
     assert_eq!(sim.run().unwrap().stopped_by, "int.x >= 1.25");
     // A condition that never holds still fails the run at max_time, observed or not.
-    let mut sim = b.sim(&system("stop = \"int.x < 0\"\nmax_time = 0.5"));
-    let (watcher, seen) = Watcher::new(&sim);
-    sim.observe(Box::new(watcher));
+    let text = system("stop = \"int.x < 0\"\nmax_time = 0.5");
+    let (mut sim, seen) = watched(&b, &text, |_| {});
     let e = sim.run().unwrap_err().to_string();
     assert!(
         e.contains("did not complete within max_time = 0.5 s"),
@@ -204,10 +201,7 @@ fn the_plans_stop_condition_is_an_observer_before_the_callers() {
 fn an_observers_error_fails_the_run_and_taking_it_off_runs_again() {
     let b = Bench::new();
     let text = system("stop = 2.0");
-    let mut sim = b.sim(&text);
-    let (mut failing, seen) = Watcher::new(&sim);
-    failing.fail_at = Some(3);
-    sim.observe(Box::new(failing));
+    let (mut sim, seen) = watched(&b, &text, |w| w.fail_at = Some(3));
     let e = sim.run().unwrap_err();
     assert!(matches!(&e, SystemError::Observer { observer, .. } if observer == "watcher"));
     assert_eq!(e.to_string(), "observer 'watcher': cannot write step 3");

@@ -4,18 +4,15 @@
 
 mod support;
 
-use support::{assert_contains, column, Bench};
+use support::{assert_contains, column, instances, Bench};
 
 /// A time replay `r` of `file` (with `extra` lines), `r.a -> g.u` (k = 2), h = 1/4.
 fn by_time(extra: &str, start: f64, stop: f64) -> String {
+    let instances = instances(&[("g", "gain")]);
     format!(
         r#"connections = ["r.a -> g.u"]
 
-[[instance]]
-name = "g"
-fmu = "gain"
-
-[[replay]]
+{instances}[[replay]]
 name = "r"
 file = "a.csv"
 basis = "time"
@@ -143,17 +140,11 @@ fn a_distance_replay_follows_a_signal_of_the_system() {
         "time,v,Fz_fl,Fz_fr,Fz_rl,Fz_rr,distance,accel_pedal\n\
          0,1,1,1,1,1,0,0\n1,1,1,1,1,1,1,0.5\n2,1,1,1,1,1,2,1\n3,1,1,1,1,1,4,0\n",
     );
-    let text = r#"connections = ["lap.accel_pedal -> g.u"]
+    let instances = instances(&[("g", "gain"), ("int", "integrator")]);
+    let text = format!(
+        r#"connections = ["lap.accel_pedal -> g.u"]
 
-[[instance]]
-name = "g"
-fmu = "gain"
-
-[[instance]]
-name = "int"
-fmu = "integrator"
-
-[[replay]]
+{instances}[[replay]]
 name = "lap"
 file = "lap.csv"
 basis = "distance"
@@ -170,8 +161,9 @@ stop = 4.5
 
 [record]
 signals = ["int.x", "lap.accel_pedal", "g.y"]
-"#;
-    let (sim, _) = b.run(text);
+"#
+    );
+    let (sim, _) = b.run(&text);
     let plan = sim.plan();
     let order: Vec<&str> = plan.order.iter().map(|&k| plan.unit_name(k)).collect();
     assert_eq!(order, ["int", "lap", "g"]);

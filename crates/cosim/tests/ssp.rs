@@ -107,6 +107,25 @@ fn rewrite(zip: &Path, out: &Path, edit: impl Fn(&str, Vec<u8>) -> Option<Vec<u8
     w.finish().unwrap();
 }
 
+/// `zip` rewritten to `out` with its SystemStructure.ssd as `edit` makes it.
+fn rewrite_ssd(zip: &Path, out: &Path, edit: impl Fn(Vec<u8>) -> Vec<u8>) {
+    rewrite(zip, out, |n, bytes| {
+        Some(if n == "SystemStructure.ssd" {
+            edit(bytes)
+        } else {
+            bytes
+        })
+    });
+}
+
+/// `zip` rewritten to `out` with `from` replaced by `to` in its SystemStructure.ssd.
+fn replace_in_ssd(zip: &Path, out: &Path, from: &str, to: &str) {
+    rewrite_ssd(zip, out, |ssd| {
+        let text = String::from_utf8(ssd).unwrap();
+        text.replace(from, to).into_bytes()
+    });
+}
+
 fn run(b: &Bench, path: &Path) -> (Simulation, tb_cosim::RunSummary) {
     let mut sim = support::quiet(Simulation::new(b.load(path).unwrap()).unwrap());
     let summary = sim.run().unwrap();
@@ -298,19 +317,12 @@ fn packages_the_import_cannot_run_are_refused_naming_what_is_wrong() {
     assert_contains(&e, &["nossd.ssp: the package has no SystemStructure.ssd"]);
     // A nested system, named with its line.
     let bad = b.path("nested.ssp");
-    rewrite(&out, &bad, |n, bytes| {
-        Some(if n == "SystemStructure.ssd" {
-            String::from_utf8(bytes)
-                .unwrap()
-                .replace(
-                    "    <ssd:Elements>\n",
-                    "    <ssd:Elements>\n<ssd:System name=\"inner\"/>\n",
-                )
-                .into_bytes()
-        } else {
-            bytes
-        })
-    });
+    replace_in_ssd(
+        &out,
+        &bad,
+        "    <ssd:Elements>\n",
+        "    <ssd:Elements>\n<ssd:System name=\"inner\"/>\n",
+    );
     let line = entry(&bad, "SystemStructure.ssd")
         .lines()
         .position(|l| l.contains("name=\"inner\""))
@@ -328,13 +340,7 @@ fn packages_the_import_cannot_run_are_refused_naming_what_is_wrong() {
     );
     // Malformed XML.
     let bad = b.path("malformed.ssp");
-    rewrite(&out, &bad, |n, bytes| {
-        Some(if n == "SystemStructure.ssd" {
-            bytes[..bytes.len() / 2].to_vec()
-        } else {
-            bytes
-        })
-    });
+    rewrite_ssd(&out, &bad, |ssd| ssd[..ssd.len() / 2].to_vec());
     let e = ssp_import::load(&bad, &b.cache).unwrap_err().to_string();
     assert_contains(
         &e,
@@ -352,19 +358,12 @@ fn a_parameter_of_a_package_must_name_a_variable_of_its_fmu() {
     let b = Bench::new();
     let (out, _) = exported(&b, "gauss-seidel");
     let bad = b.path("badparam.ssp");
-    rewrite(&out, &bad, |n, bytes| {
-        Some(if n == "SystemStructure.ssd" {
-            String::from_utf8(bytes)
-                .unwrap()
-                .replace(
-                    "<ssv:Parameter name=\"level\">",
-                    "<ssv:Parameter name=\"levle\">",
-                )
-                .into_bytes()
-        } else {
-            bytes
-        })
-    });
+    replace_in_ssd(
+        &out,
+        &bad,
+        "<ssv:Parameter name=\"level\">",
+        "<ssv:Parameter name=\"levle\">",
+    );
     let e = b.load(&bad).err().expect("refused").to_string();
     assert_contains(
         &e,

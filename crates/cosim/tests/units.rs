@@ -4,22 +4,16 @@
 
 mod support;
 
-use support::{assert_close, assert_contains, last, Bench};
+use support::{assert_close, assert_contains, assert_refusals, instances, last, Bench};
+use tb_cosim::Simulation;
 
 /// source -> sink over `connection`, one step, recording `signals`.
 fn link(connection: &str, signals: &str) -> String {
+    let instances = instances(&[("src", "source"), ("snk", "sink")]);
     format!(
         r#"connections = [{connection}]
 
-[[instance]]
-name = "src"
-fmu = "source"
-
-[[instance]]
-name = "snk"
-fmu = "sink"
-
-[experiment]
+{instances}[experiment]
 step = 0.5
 stop = 1.0
 
@@ -27,6 +21,13 @@ stop = 1.0
 signals = [{signals}]
 "#
     )
+}
+
+/// Runs `link(connection, signal)`: the simulation and the last value of `signal`.
+fn run_link(b: &Bench, connection: &str, signal: &str) -> (Simulation, f64) {
+    let (sim, _) = b.run(&link(connection, &format!("\"{signal}\"")));
+    let value = last(&sim, signal);
+    (sim, value)
 }
 
 #[test]
@@ -84,27 +85,30 @@ fn a_rad_exponent_on_one_side_only_converts_with_a_note() {
 fn units_an_fmu_declares_wrongly_are_overridden_in_the_system_file() {
     let b = Bench::new();
     // The source's km/h taken as m/s: no conversion, and the run's log says so.
-    let (sim, _) = b.run(&link(
+    let (sim, value) = run_link(
+        &b,
         "{ from = \"src.y_kmh\", to = \"snk.v\", from_unit = \"m/s\" }",
-        "\"snk.v_out\"",
-    ));
-    assert_eq!(last(&sim, "snk.v_out"), 36.0);
+        "snk.v_out",
+    );
+    assert_eq!(value, 36.0);
     assert_contains(
         &sim.plan().notes.join("\n"),
         &["units overridden in the system file: 'm/s' -> 'm/s', scale 1, offset 0"],
     );
     // The sink's m/s taken as km/h: the value passes as 36 (km/h).
-    let (sim, _) = b.run(&link(
+    let (_, value) = run_link(
+        &b,
         "{ from = \"src.y_kmh\", to = \"snk.v\", to_unit = \"km/h\" }",
-        "\"snk.v_out\"",
-    ));
-    assert_eq!(last(&sim, "snk.v_out"), 36.0);
+        "snk.v_out",
+    );
+    assert_eq!(value, 36.0);
     // rpm declared for a value that is in rad/s.
-    let (sim, _) = b.run(&link(
+    let (_, value) = run_link(
+        &b,
         "{ from = \"src.y_rpm\", to = \"snk.w\", from_unit = \"rad/s\" }",
-        "\"snk.w_out\"",
-    ));
-    assert_eq!(last(&sim, "snk.w_out"), 36.0);
+        "snk.w_out",
+    );
+    assert_eq!(value, 36.0);
 }
 
 #[test]
@@ -123,24 +127,23 @@ fn scale_and_offset_replace_the_units() {
         &["scale 2 and offset 1 from the system file (declared units 'km/h' and 'm/s' not used)"],
     );
     // An offset alone keeps the scale at 1.
-    let (sim, _) = b.run(&link(
+    let (_, value) = run_link(
+        &b,
         "{ from = \"src.y_kmh\", to = \"snk.v\", offset = -6.0 }",
-        "\"snk.v_out\"",
-    ));
-    assert_eq!(last(&sim, "snk.v_out"), 30.0);
+        "snk.v_out",
+    );
+    assert_eq!(value, 30.0);
 }
 
 #[test]
 fn a_replayed_columns_unit_converts_too() {
     let b = Bench::new();
     b.write("speeds.csv", "time,v\ns,km/h\n0,72\n10,72\n");
-    let text = r#"connections = ["speeds.v -> snk.v"]
+    let instances = instances(&[("snk", "sink")]);
+    let text = format!(
+        r#"connections = ["speeds.v -> snk.v"]
 
-[[instance]]
-name = "snk"
-fmu = "sink"
-
-[[replay]]
+{instances}[[replay]]
 name = "speeds"
 file = "speeds.csv"
 basis = "time"
@@ -151,8 +154,9 @@ stop = 1.0
 
 [record]
 signals = ["snk.v_out", "speeds.v"]
-"#;
-    let (sim, _) = b.run(text);
+"#
+    );
+    let (sim, _) = b.run(&text);
     assert_close(last(&sim, "snk.v_out"), 20.0, 1e-14);
     // The replayed column is recorded in its own unit.
     assert_eq!(last(&sim, "speeds.v"), 72.0);
@@ -200,10 +204,8 @@ fn incompatible_or_unknown_units_are_refused() {
             "connection table: unknown field `gain`",
         ),
     ];
-    for (connection, expected) in cases {
-        let e = b.error(&link(connection, "\"snk.v_out\""));
-        assert_contains(&e, &[expected]);
-        // Each error names the system file.
-        assert_contains(&e, &["system.toml"]);
-    }
+    // Each error names the system file.
+    assert_refusals(&cases, &["system.toml"], |connection| {
+        b.error(&link(connection, "\"snk.v_out\""))
+    });
 }

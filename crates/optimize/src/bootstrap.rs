@@ -154,7 +154,7 @@ impl Bootstrap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::{on_pool, Frame, Series, Simulated, ANSWER};
+    use crate::fit::{on_pool, Frame, Series, ANSWER};
 
     /// y = 2·exp(−0.7·t) + AR(1) noise (ρ = 0.9 per point) on 1500 points.
     fn lap(t: &[f64], seed: u64) -> Vec<f64> {
@@ -175,16 +175,8 @@ mod tests {
     fn the_bootstrap_standard_error_matches_the_spread_of_refitted_laps() {
         let n = 1500;
         let t: Vec<f64> = (0..n).map(|g| g as f64 / 300.0).collect();
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let simulate = |x: &[f64]| -> Simulated {
-            Ok(vec![(
-                0..n,
-                t.iter().map(|t| x[0] * (-x[1] * t).exp()).collect(),
-            )])
-        };
+        let pool = crate::test_curve::pool(2);
+        let simulate = |x: &[f64]| crate::test_curve::simulate_decay(&t, x);
         let (x0, bounds) = ([1.5, 0.5], vec![(0.1, 10.0), (0.01, 5.0)]);
         fn series(measured: &[f64]) -> Vec<Series<'_>> {
             vec![Series {

@@ -829,6 +829,7 @@ fn solve(a: &[Vec<f64>], g: &[f64], active: &[usize], lambda: f64) -> Option<Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_curve;
 
     /// A two-parameter curve y = a·exp(−b·t) fitted from a wrong start: the fit finds the
     /// least-squares point, which a second start reaches as well (both within 0.3 standard
@@ -840,21 +841,9 @@ mod tests {
         let noise: Vec<f64> = (0..n)
             .map(|g| 0.01 * ((g * 7919) % 13) as f64 - 0.06)
             .collect();
-        let measured: Vec<f64> = t
-            .iter()
-            .zip(&noise)
-            .map(|(t, e)| 2.0 * (-0.7 * t).exp() + e)
-            .collect();
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let simulate = |x: &[f64]| -> Simulated {
-            Ok(vec![(
-                0..n,
-                t.iter().map(|t| x[0] * (-x[1] * t).exp()).collect(),
-            )])
-        };
+        let measured = test_curve::measured_decay(&t, &noise);
+        let pool = test_curve::pool(2);
+        let simulate = |x: &[f64]| test_curve::simulate_decay(&t, x);
         let fit = |x0: [f64; 2]| {
             let series = vec![Series {
                 name: "y".into(),
@@ -895,10 +884,7 @@ mod tests {
             .enumerate()
             .map(|(g, t)| 3.0 * t + 0.01 * ((g % 5) as f64 - 2.0))
             .collect();
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
+        let pool = test_curve::pool(1);
         let simulate =
             |x: &[f64]| -> Simulated { Ok(vec![(0..n, t.iter().map(|t| x[0] * t).collect())]) };
         let series = vec![Series {

@@ -568,6 +568,18 @@ fn mul(a: &[Vec<f64>], b: &[Vec<f64>]) -> Vec<Vec<f64>> {
 mod tests {
     use super::*;
 
+    /// A block from row 0 of segment 0, weight 1 and no factor.
+    fn block_of(residual: Vec<f64>, rows: Vec<Vec<f64>>) -> Block {
+        Block {
+            start: 0,
+            residual,
+            rows,
+            weight: 1.0,
+            factor: None,
+            segment: 0,
+        }
+    }
+
     /// A standard normal number: Box–Muller from a small LCG (deterministic).
     fn gauss(seed: &mut u64) -> f64 {
         let mut u = || {
@@ -608,14 +620,10 @@ mod tests {
             let nf = n as f64;
             let b = (nf * sty - st * sy) / (nf * stt - st * st);
             let a = (sy - b * st) / nf;
-            let block = Block {
-                start: 0,
-                residual: t.iter().zip(&y).map(|(t, y)| a + b * t - y).collect(),
-                rows: t.iter().map(|&t| vec![1.0, t]).collect(),
-                weight: 1.0,
-                factor: None,
-                segment: 0,
-            };
+            let block = block_of(
+                t.iter().zip(&y).map(|(t, y)| a + b * t - y).collect(),
+                t.iter().map(|&t| vec![1.0, t]).collect(),
+            );
             let names = vec!["a".to_string(), "b".to_string()];
             let iv = sandwich(
                 &names,
@@ -696,14 +704,10 @@ mod tests {
         // y = a·t + 0·c: c is not seen; and a fit with b on its bound.
         let n = 500;
         let t: Vec<f64> = (0..n).map(|g| g as f64 / n as f64).collect();
-        let block = Block {
-            start: 0,
-            residual: t.iter().map(|t| 0.01 * (37.0 * t).sin()).collect(),
-            rows: t.iter().map(|&t| vec![t, 0.0]).collect(),
-            weight: 1.0,
-            factor: None,
-            segment: 0,
-        };
+        let block = block_of(
+            t.iter().map(|t| 0.01 * (37.0 * t).sin()).collect(),
+            t.iter().map(|&t| vec![t, 0.0]).collect(),
+        );
         let names = vec!["a".to_string(), "vehicle.l".to_string()];
         let iv = sandwich(&names, &[1.0, 3.0], &[(0.0, 2.0), (2.0, 4.5)], &[block], 4);
         assert!(iv.parameters[0].lo.is_some() && iv.parameters[0].hi.is_some());
@@ -717,14 +721,10 @@ mod tests {
             "{l:?}"
         );
         assert_eq!(l.shown(Some("m")), "3.0000 m (no interval)");
-        let block = Block {
-            start: 0,
-            residual: t.iter().map(|t| 0.01 * (37.0 * t).sin()).collect(),
-            rows: t.iter().map(|&t| vec![t, 1.0]).collect(),
-            weight: 1.0,
-            factor: None,
-            segment: 0,
-        };
+        let block = block_of(
+            t.iter().map(|t| 0.01 * (37.0 * t).sin()).collect(),
+            t.iter().map(|&t| vec![t, 1.0]).collect(),
+        );
         let iv = sandwich(&names, &[1.0, 2.0], &[(0.0, 2.0), (2.0, 4.5)], &[block], 4);
         let l = &iv.parameters[1];
         assert!(
@@ -741,27 +741,16 @@ mod tests {
     fn a_short_grid_and_a_perfect_fit_are_said_not_computed() {
         let rows: Vec<Vec<f64>> = (0..30).map(|g| vec![g as f64]).collect();
         let names = vec!["a".to_string()];
-        let short = Block {
-            start: 0,
-            residual: (0..30).map(|g| ((g / 10) as f64) - 1.0).collect(),
-            rows: rows.clone(),
-            weight: 1.0,
-            factor: None,
-            segment: 0,
-        };
+        let short = block_of(
+            (0..30).map(|g| ((g / 10) as f64) - 1.0).collect(),
+            rows.clone(),
+        );
         let iv = sandwich(&names, &[1.0], &[(0.0, 2.0)], &[short], 2);
         assert!(
             iv.notes[0].contains("too short to estimate their autocorrelation"),
             "{iv:?}"
         );
-        let exact = Block {
-            start: 0,
-            residual: vec![0.0; 30],
-            rows,
-            weight: 1.0,
-            factor: None,
-            segment: 0,
-        };
+        let exact = block_of(vec![0.0; 30], rows);
         let iv = sandwich(&names, &[1.0], &[(0.0, 2.0)], &[exact], 2);
         assert!(
             iv.notes[0].contains("matches the measurement exactly"),

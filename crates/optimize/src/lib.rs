@@ -66,6 +66,8 @@ mod session;
 mod step;
 mod step_loop;
 pub mod study;
+#[cfg(test)]
+mod test_curve;
 
 pub use cmaes::{Cmaes, CmaesSettings};
 pub use cost::StepCost;

@@ -449,15 +449,8 @@ mod tests {
         let noise: Vec<f64> = (0..n)
             .map(|g| 0.02 * (((g * 7919) % 13) as f64 - 6.0) / 6.0)
             .collect();
-        let measured: Vec<f64> = t
-            .iter()
-            .zip(&noise)
-            .map(|(t, e)| 2.0 * (-0.7 * t).exp() + e)
-            .collect();
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
+        let measured = crate::test_curve::measured_decay(&t, &noise);
+        let pool = crate::test_curve::pool(2);
         let simulate = |x: &[f64]| -> crate::fit::Simulated {
             if x[0] > 2.1 {
                 return Err(crate::RunError::Problem("the run failed".into()));

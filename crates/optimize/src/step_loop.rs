@@ -17,35 +17,42 @@ use crate::error::OptimizeError;
 use std::ops::ControlFlow;
 use tb_compare::{Comparison, PreparedMeasurement, Table, Workspace};
 
+/// The lap's `what` (in `unit`, written with `decimals`) of the twin against the
+/// measurement's, when they are more than the share `at_most` apart.
+fn apart(
+    what: &str,
+    unit: &str,
+    decimals: usize,
+    twin: f64,
+    measured: f64,
+    at_most: f64,
+) -> Option<String> {
+    let rel = (twin - measured).abs() / measured.abs().max(1e-12);
+    (rel > at_most).then(|| {
+        format!(
+            "lap {what} {twin:.decimals$} {unit} (twin) against {measured:.decimals$} {unit} (measured), {:.1} % apart (at most {} %)",
+            100.0 * rel,
+            100.0 * at_most
+        )
+    })
+}
+
 /// Do the measurement and the twin's first run belong together? Lap length, lap time and
 /// the speed over distance, each against the study's `[plausibility]` bounds.
 fn check_plausible(study: &Study, bench: &LapBench, lap: &Table) -> Result<(), OptimizeError> {
     let measurement = &bench.measurement;
     let p = &study.file.plausibility;
     let mut problems = Vec::new();
-    let rel = |a: f64, b: f64| (a - b).abs() / b.abs().max(1e-12);
     let (mt, md) = (measurement.time(), measurement.distance());
     let measured_length = md[md.len() - 1] - md[0];
     let measured_time = mt[mt.len() - 1] - mt[0];
     if let Ok(d) = lap.require("distance") {
         let twin = d[d.len() - 1] - d[0];
-        if rel(twin, measured_length) > p.lap_length {
-            problems.push(format!(
-                "lap length {twin:.1} m (twin) against {measured_length:.1} m (measured), {:.1} % apart (at most {} %)",
-                100.0 * rel(twin, measured_length),
-                100.0 * p.lap_length
-            ));
-        }
+        problems.extend(apart("length", "m", 1, twin, measured_length, p.lap_length));
     }
     let t = lap.column_at(0);
     let twin_time = t[t.len() - 1] - t[0];
-    if rel(twin_time, measured_time) > p.lap_time {
-        problems.push(format!(
-            "lap time {twin_time:.2} s (twin) against {measured_time:.2} s (measured), {:.1} % apart (at most {} %)",
-            100.0 * rel(twin_time, measured_time),
-            100.0 * p.lap_time
-        ));
-    }
+    problems.extend(apart("time", "s", 2, twin_time, measured_time, p.lap_time));
     if lap.find("v").ok().flatten().is_some() {
         let speed = PreparedMeasurement::new(measurement, &["v"], &study.file.compare)
             .and_then(|prep| prep.compare(lap, &mut Workspace::new()));

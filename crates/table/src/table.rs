@@ -41,13 +41,7 @@ impl Table {
         columns: Vec<Vec<f64>>,
     ) -> Result<Self> {
         let source = source.into();
-        if names.len() != columns.len() {
-            return Err(Error::Shape(format!(
-                "{source}: {} names for {} columns",
-                names.len(),
-                columns.len()
-            )));
-        }
+        same_count(&source, (names.len(), "names"), (columns.len(), "columns"))?;
         let len = columns.first().map_or(0, Vec::len);
         if let Some((i, c)) = columns.iter().enumerate().find(|(_, c)| c.len() != len) {
             return Err(Error::Shape(format!(
@@ -70,13 +64,7 @@ impl Table {
     /// An empty table with these columns and units (a recording to be filled row by row).
     pub fn new(source: impl Into<String>, names: Vec<String>, units: Vec<String>) -> Result<Self> {
         let source = source.into();
-        if names.len() != units.len() {
-            return Err(Error::Shape(format!(
-                "{source}: {} names for {} units",
-                names.len(),
-                units.len()
-            )));
-        }
+        same_count(&source, (names.len(), "names"), (units.len(), "units"))?;
         check_duplicates(&source, &names)?;
         Ok(Self {
             source,
@@ -90,14 +78,11 @@ impl Table {
 
     /// The same table with a units row (one unit per column).
     pub fn with_units(mut self, units: Vec<String>) -> Result<Self> {
-        if units.len() != self.names.len() {
-            return Err(Error::Shape(format!(
-                "{}: {} units for {} columns",
-                self.source,
-                units.len(),
-                self.names.len()
-            )));
-        }
+        same_count(
+            &self.source,
+            (units.len(), "units"),
+            (self.names.len(), "columns"),
+        )?;
         self.units = Some(units);
         Ok(self)
     }
@@ -703,6 +688,14 @@ fn is_units_row(fields: &[String]) -> bool {
         any_text = true;
     }
     any_text
+}
+
+/// As many of the one (count, what) as of the other, else a shape error that says both.
+fn same_count(source: &str, (n, what): (usize, &str), (m, of): (usize, &str)) -> Result<()> {
+    if n == m {
+        return Ok(());
+    }
+    Err(Error::Shape(format!("{source}: {n} {what} for {m} {of}")))
 }
 
 #[cfg(test)]

@@ -512,6 +512,16 @@ fn lap_time_difference(
     })
 }
 
+/// What the lap plots are drawn from and where they go: the laps, the comparison's cutoff
+/// [Hz], the folder, the workspace of the grid values and the list of files written.
+struct LapPlots<'a, 'l> {
+    laps: &'a Laps<'l>,
+    cutoff: f64,
+    folder: &'a Path,
+    ws: &'a mut Workspace,
+    files: &'a mut Vec<PathBuf>,
+}
+
 /// Saves a plot as `stem`.svg and .png in `folder` and lists both.
 fn save_plot(
     save: impl FnOnce(&Path) -> Result<(), tb_plot::PlotError>,
@@ -529,13 +539,8 @@ fn save_plot(
 /// The sum of the wheel loads (the lift coefficients' signal): the whole lap filtered, as
 /// the comparison sees it; unfiltered over the first stretch, where the road's excitation
 /// is readable (over a whole lap it is a band).
-fn plot_fz_sum(
-    laps: &Laps<'_>,
-    cutoff: f64,
-    folder: &Path,
-    ws: &mut Workspace,
-    files: &mut Vec<PathBuf>,
-) -> Result<(), ReportError> {
+fn plot_fz_sum(out: &mut LapPlots<'_, '_>) -> Result<(), ReportError> {
+    let (laps, cutoff, ws) = (out.laps, out.cutoff, &mut *out.ws);
     let (prepared, grid) = (laps.prepared, laps.grid());
     for (filtered, stem, title, window) in [
         (
@@ -562,19 +567,15 @@ fn plot_fz_sum(
             .styled("twin, initial parameters", &within(points(grid, ri, &i)), Style::Faint)
             .series("twin, optimised parameters", &within(points(grid, ro, &o)))
             .reference("vehicle (measured)", &within(points(grid, rm, &m)));
-        save_plot(|stem| plot.save_both(stem), folder, stem, files)?;
+        save_plot(|stem| plot.save_both(stem), out.folder, stem, out.files)?;
     }
     Ok(())
 }
 
 /// Time over distance, and below it the twin's time minus the vehicle's: the lap times'
 /// difference is a fraction of a percent, invisible on the lap's scale.
-fn plot_time_over_distance(
-    laps: &Laps<'_>,
-    folder: &Path,
-    ws: &mut Workspace,
-    files: &mut Vec<PathBuf>,
-) -> Result<(), ReportError> {
+fn plot_time_over_distance(out: &mut LapPlots<'_, '_>) -> Result<(), ReportError> {
+    let (laps, ws) = (out.laps, &mut *out.ws);
     let (prepared, grid) = (laps.prepared, laps.grid());
     let (rm, m) = prepared.on_grid(laps.meas, "time", false, ws)?;
     let (ro, o) = prepared.on_grid(laps.optimised, "time", false, ws)?;
@@ -614,20 +615,15 @@ fn plot_time_over_distance(
         );
     save_plot(
         |stem| figure.save_both(stem),
-        folder,
+        out.folder,
         "time_over_distance",
-        files,
+        out.files,
     )
 }
 
 /// a_x of twin and car.
-fn plot_a_x(
-    laps: &Laps<'_>,
-    cutoff: f64,
-    folder: &Path,
-    ws: &mut Workspace,
-    files: &mut Vec<PathBuf>,
-) -> Result<(), ReportError> {
+fn plot_a_x(out: &mut LapPlots<'_, '_>) -> Result<(), ReportError> {
+    let (laps, cutoff, ws) = (out.laps, out.cutoff, &mut *out.ws);
     let (prepared, grid) = (laps.prepared, laps.grid());
     let (rm, m) = prepared.on_grid(laps.meas, "a_x", true, ws)?;
     let (ro, o) = prepared.on_grid(laps.optimised, "a_x", true, ws)?;
@@ -640,9 +636,9 @@ fn plot_a_x(
     .reference("vehicle (measured)", &points(grid, rm, &m));
     save_plot(
         |stem| plot.save_both(stem),
-        folder,
+        out.folder,
         "a_x_over_distance",
-        files,
+        out.files,
     )
 }
 
@@ -701,10 +697,16 @@ pub fn write_report(
         &mut files,
     )?;
 
-    let cutoff = study.file.compare.cutoff_hz;
-    plot_fz_sum(&laps, cutoff, folder, &mut ws, &mut files)?;
-    plot_time_over_distance(&laps, folder, &mut ws, &mut files)?;
-    plot_a_x(&laps, cutoff, folder, &mut ws, &mut files)?;
+    let mut out = LapPlots {
+        laps: &laps,
+        cutoff: study.file.compare.cutoff_hz,
+        folder,
+        ws: &mut ws,
+        files: &mut files,
+    };
+    plot_fz_sum(&mut out)?;
+    plot_time_over_distance(&mut out)?;
+    plot_a_x(&mut out)?;
 
     // All of it on one page to hand on, with every compared signal and the parameters'
     // picture (html.rs).

@@ -125,16 +125,35 @@ fn target_input<'u>(
     }
     let to_def = &units.instances[to_unit];
     let to_sv = to_def.variable(tv, ctx)?;
-    if to_sv.causality != Causality::Input {
-        return Err(invalid(
-            ctx,
-            format!(
-                "'{b}' is {} {}, not an input: it cannot be connected to",
-                to_sv.variability, to_sv.causality
-            ),
-        ));
-    }
+    require_causality(
+        ctx,
+        b,
+        to_sv,
+        Causality::Input,
+        "an input: it cannot be connected to",
+    )?;
     Ok((to_unit, to_sv))
+}
+
+/// The variable `name` (`sv`) must be of the causality `want`, which `what` names: else
+/// the error says what it is instead.
+fn require_causality(
+    ctx: &str,
+    name: &str,
+    sv: &ScalarVariable,
+    want: Causality,
+    what: &str,
+) -> Result<(), SystemError> {
+    if sv.causality == want {
+        return Ok(());
+    }
+    Err(invalid(
+        ctx,
+        format!(
+            "'{name}' is {} {}, not {what}",
+            sv.variability, sv.causality
+        ),
+    ))
 }
 
 /// The source `a`'s unit and, for an FMU variable, the model description that defines it;
@@ -156,15 +175,7 @@ fn source_unit<'u>(
             let sv = units
                 .variable(from)
                 .expect("an FMU endpoint names a variable");
-            if sv.causality != Causality::Output {
-                return Err(invalid(
-                    ctx,
-                    format!(
-                        "'{a}' is {} {}, not an output",
-                        sv.variability, sv.causality
-                    ),
-                ));
-            }
+            require_causality(ctx, a, sv, Causality::Output, "an output")?;
             (
                 unit_name.clone(),
                 Some(units.instances[*unit].description()),

@@ -47,26 +47,19 @@ pub(super) fn check(file: &SystemFile, ctx_file: &str) -> Result<(), SystemError
         StopConfig::Word(_) => e.max_time,
     };
     let steps = span / e.step;
+    let (step_s, span_s) = (tb_files::number(e.step), tb_files::number(span));
     // The master drops a last step shorter than 1e-9 of a step (rounding): a step that
     // much longer than the whole run would run nothing and report success.
     if matches!(e.stop, StopConfig::Time(_)) && span > 0.0 && span <= e.step * 1e-9 {
         return Err(invalid(
             ctx_file,
-            format!(
-                "experiment.step = {} s is longer than the whole run ({} s): not one step would be taken",
-                tb_files::number(e.step),
-                tb_files::number(span)
-            ),
+            format!("experiment.step = {step_s} s is longer than the whole run ({span_s} s): not one step would be taken"),
         ));
     }
     if span.is_finite() && (steps.is_nan() || steps > MAX_STEPS) {
         return Err(invalid(
             ctx_file,
-            format!(
-                "experiment.step = {} s over {} s is {steps:.3e} macro steps, more than {MAX_STEPS:.0e}: a larger step",
-                tb_files::number(e.step),
-                tb_files::number(span)
-            ),
+            format!("experiment.step = {step_s} s over {span_s} s is {steps:.3e} macro steps, more than {MAX_STEPS:.0e}: a larger step"),
         ));
     }
     if let Some(t) = e.tolerance {

@@ -71,21 +71,11 @@ pub(super) fn system_parts<'n>(
         &["Connectors", "ParameterBindings", "Elements", "Connections"],
         &["ElementGeometry", "SystemGeometry", "GraphicalElements"],
     )
-    .map_err(|e| match e {
-        SspImportError::Unsupported {
-            ssp,
-            file,
-            line,
-            element,
-            supported,
-        } if element == "SignalDictionaries" => SspImportError::Unsupported {
-            ssp,
-            file,
-            line,
-            element,
-            supported: format!("signal dictionaries have no twinbench equivalent; connect the components directly ({supported})"),
-        },
-        other => other,
+    .map_err(|e| {
+        e.explained(
+            |element| element == "SignalDictionaries",
+            |supported| format!("signal dictionaries have no twinbench equivalent; connect the components directly ({supported})"),
+        )
     })
 }
 

@@ -15,21 +15,11 @@ pub(super) fn connection(
     let f = SSD;
     let transforms = imp
         .children(f, c, &["LinearTransformation"], &["ConnectionGeometry"])
-        .map_err(|e| match e {
-            SspImportError::Unsupported {
-                ssp,
-                file,
-                line,
-                element,
-                ..
-            } if element.ends_with("MappingTransformation") => SspImportError::Unsupported {
-                ssp,
-                file,
-                line,
-                element,
-                supported: "mapping transformations (Boolean, Integer, Enumeration) are not supported; a connection may have an <ssc:LinearTransformation>".into(),
-            },
-            other => other,
+        .map_err(|e| {
+            e.explained(
+                |element| element.ends_with("MappingTransformation"),
+                |_| "mapping transformations (Boolean, Integer, Enumeration) are not supported; a connection may have an <ssc:LinearTransformation>".into(),
+            )
         })?;
     let (fk, fv) = connection_end(imp, components, c, "startElement", "startConnector")?;
     let (tk, tv) = connection_end(imp, components, c, "endElement", "endConnector")?;

@@ -49,3 +49,30 @@ pub enum SspImportError {
         message: String,
     },
 }
+
+impl SspImportError {
+    /// This error, where it refuses an element that `refused` picks out, with what is
+    /// supported replaced by what `why` makes of it (why that element is refused).
+    pub(super) fn explained(
+        self,
+        refused: impl Fn(&str) -> bool,
+        why: impl FnOnce(String) -> String,
+    ) -> SspImportError {
+        match self {
+            SspImportError::Unsupported {
+                ssp,
+                file,
+                line,
+                element,
+                supported,
+            } if refused(&element) => SspImportError::Unsupported {
+                ssp,
+                file,
+                line,
+                element,
+                supported: why(supported),
+            },
+            other => other,
+        }
+    }
+}

@@ -31,21 +31,11 @@ pub(super) fn bind(
         ));
     }
     let prefix = b.attr("prefix").unwrap_or_default();
-    let inner = imp.children(f, b, &["ParameterValues"], &[]).map_err(|e| match e {
-        SspImportError::Unsupported {
-            ssp,
-            file,
-            line,
-            element,
-            ..
-        } if element == "ParameterMapping" => SspImportError::Unsupported {
-            ssp,
-            file,
-            line,
-            element,
-            supported: "parameter mappings are not supported: name the FMU's variables in the parameter set (prefix may prepend a common part)".into(),
-        },
-        other => other,
+    let inner = imp.children(f, b, &["ParameterValues"], &[]).map_err(|e| {
+        e.explained(
+            |element| element == "ParameterMapping",
+            |_| "parameter mappings are not supported: name the FMU's variables in the parameter set (prefix may prepend a common part)".into(),
+        )
     })?;
     let target = Target {
         components,

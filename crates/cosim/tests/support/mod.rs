@@ -93,9 +93,8 @@ pub fn with_units(xml: &str, units: &[(&str, &str)]) -> String {
     format!("{}{defs}{}", &xml[..at], &xml[at..])
 }
 
-/// `xml` without the output `name`'s entry in `<Outputs>` (an FMU whose ModelStructure
-/// leaves an output out: it may depend on every input).
-pub fn unlisted_output(xml: &str, name: &str) -> String {
+/// The 1-based index of the variable `name` in `xml` (as `<Unknown index=..>` counts).
+fn variable_index(xml: &str, name: &str) -> usize {
     let names: Vec<&str> = xml
         .match_indices("<ScalarVariable name=\"")
         .map(|(i, m)| {
@@ -103,10 +102,21 @@ pub fn unlisted_output(xml: &str, name: &str) -> String {
             &rest[..rest.find('"').unwrap()]
         })
         .collect();
-    let index = names.iter().position(|n| *n == name).unwrap() + 1;
+    names.iter().position(|n| *n == name).unwrap() + 1
+}
+
+/// Where `unknown` (the head of an `<Unknown>` element) starts within `<Outputs>`.
+fn output_entry(xml: &str, unknown: &str) -> usize {
     let outputs = xml.find("<Outputs>").unwrap();
+    outputs + xml[outputs..].find(unknown).unwrap()
+}
+
+/// `xml` without the output `name`'s entry in `<Outputs>` (an FMU whose ModelStructure
+/// leaves an output out: it may depend on every input).
+pub fn unlisted_output(xml: &str, name: &str) -> String {
+    let index = variable_index(xml, name);
     let unknown = format!("<Unknown index=\"{index}\"");
-    let at = outputs + xml[outputs..].find(&unknown).unwrap();
+    let at = output_entry(xml, &unknown);
     let end = at + xml[at..].find("/>").unwrap() + 2;
     format!("{}{}", &xml[..at], &xml[end..])
 }
@@ -114,17 +124,9 @@ pub fn unlisted_output(xml: &str, name: &str) -> String {
 /// `xml` without the `dependencies` attribute of the output `name` in `<Outputs>`: "may
 /// depend on every input", as the standard reads it.
 pub fn without_dependencies(xml: &str, name: &str) -> String {
-    let names: Vec<&str> = xml
-        .match_indices("<ScalarVariable name=\"")
-        .map(|(i, m)| {
-            let rest = &xml[i + m.len()..];
-            &rest[..rest.find('"').unwrap()]
-        })
-        .collect();
-    let index = names.iter().position(|n| *n == name).unwrap() + 1;
-    let outputs = xml.find("<Outputs>").unwrap();
+    let index = variable_index(xml, name);
     let unknown = format!("<Unknown index=\"{index}\" dependencies=\"");
-    let at = outputs + xml[outputs..].find(&unknown).unwrap();
+    let at = output_entry(xml, &unknown);
     let end = at + unknown.len() + xml[at + unknown.len()..].find('"').unwrap() + 1;
     format!("{}<Unknown index=\"{index}\"{}", &xml[..at], &xml[end..])
 }
@@ -269,6 +271,31 @@ impl Bench {
         let mut sim = self.sim(body);
         let summary = sim.run().unwrap_or_else(|e| panic!("{e}\n{body}"));
         (sim, summary)
+    }
+}
+
+/// `[[instance]]` tables, one for each (name, FMU stem), each followed by a blank line.
+pub fn instances(list: &[(&str, &str)]) -> String {
+    list.iter()
+        .map(|(name, fmu)| format!("[[instance]]\nname = \"{name}\"\nfmu = \"{fmu}\"\n\n"))
+        .collect()
+}
+
+/// The `[[instance]]` tables of the chain `int` (integrator) -> `g1` -> `g2` (gains),
+/// declared consumers first.
+pub fn chain_instances() -> String {
+    instances(&[("g2", "gain"), ("g1", "gain"), ("int", "integrator")])
+}
+
+/// Each case's error holds its expected text and every one of `common`: `error` gives the
+/// error for a case's input, and a failure names the case.
+#[track_caller]
+pub fn assert_refusals(cases: &[(&str, &str)], common: &[&str], error: impl Fn(&str) -> String) {
+    for (case, expected) in cases {
+        let e = error(case);
+        for part in common.iter().chain([expected]) {
+            assert!(e.contains(part), "case {case}: {part:?} is not in:\n{e}");
+        }
     }
 }
 

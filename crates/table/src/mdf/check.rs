@@ -492,18 +492,34 @@ impl Walk<'_, '_> {
         Ok(())
     }
 
+    /// The blocks `id` of the list that `parent`'s link `link` starts (each linking the next
+    /// by its link 0), each met once (`what`), each as `read` makes it, in the list's order.
+    fn linked<T>(
+        &mut self,
+        parent: &Block,
+        link: u64,
+        id: &[u8; 4],
+        what: &'static str,
+        mut read: impl FnMut(&mut Self, &Block) -> Result<T, MdfError>,
+    ) -> Result<Vec<T>, MdfError> {
+        let f = self.file;
+        let mut out = Vec::new();
+        let mut from = File::origin(parent, link);
+        let mut at = f.link(parent, link);
+        while at != 0 {
+            let block = f.expect(at, id, &from)?;
+            self.once(&block, what)?;
+            out.push(read(self, &block)?);
+            from = File::origin(&block, 0);
+            at = f.link(&block, 0);
+        }
+        Ok(out)
+    }
+
     fn run(mut self) -> Result<Costs, MdfError> {
         let f = self.file;
         let hd = f.blocks[&64];
-        let mut from = File::origin(&hd, 0);
-        let mut at = f.link(&hd, 0);
-        while at != 0 {
-            let dg = f.expect(at, b"##DG", &from)?;
-            self.once(&dg, "a data group")?;
-            self.data_group(&dg)?;
-            from = File::origin(&dg, 0);
-            at = f.link(&dg, 0);
-        }
+        self.linked(&hd, 0, b"##DG", "a data group", |w, dg| w.data_group(dg))?;
         Ok(self.costs)
     }
 
@@ -518,16 +534,9 @@ impl Walk<'_, '_> {
             });
         }
         let fragments = self.data_chain(dg)?;
-        let mut groups = Vec::new();
-        let mut from = File::origin(dg, 1);
-        let mut at = f.link(dg, 1);
-        while at != 0 {
-            let cg = f.expect(at, b"##CG", &from)?;
-            self.once(&cg, "a channel group")?;
-            groups.push(self.channel_group(&cg, rid)?);
-            from = File::origin(&cg, 0);
-            at = f.link(&cg, 0);
-        }
+        let groups = self.linked(dg, 1, b"##CG", "a channel group", |w, cg| {
+            w.channel_group(cg, rid)
+        })?;
         let sorted = rid == 0 || groups.len() <= 1;
         let records: Vec<u64> = if sorted {
             groups
@@ -586,16 +595,7 @@ impl Walk<'_, '_> {
     fn channel_group(&mut self, cg: &Block, rid: u64) -> Result<Group, MdfError> {
         let f = self.file;
         self.costs.metadata += 256;
-        let mut channels = Vec::new();
-        let mut from = File::origin(cg, 1);
-        let mut at = f.link(cg, 1);
-        while at != 0 {
-            let cn = f.expect(at, b"##CN", &from)?;
-            self.once(&cn, "a channel")?;
-            channels.push(self.channel(&cn)?);
-            from = File::origin(&cn, 0);
-            at = f.link(&cn, 0);
-        }
+        let channels = self.linked(cg, 1, b"##CN", "a channel", |w, cn| w.channel(cn))?;
         Ok(Group {
             block: *cg,
             record_id: f.u64(cg.at + 72),
