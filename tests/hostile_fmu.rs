@@ -291,6 +291,16 @@ fn answer(failed: u8, results: u32, rest: &[u8]) -> Vec<u8> {
     b
 }
 
+/// A failed call as the worker reports it (kind CALL, an FMI 2.0 function and status, at
+/// t = 0) announcing `log_lines` lines of log and carrying none.
+fn call_failure(function: tb_fmi::Function, status: i32, log_lines: u32) -> Vec<u8> {
+    let mut rest = vec![0u8, 2, function as u8, 2];
+    rest.extend_from_slice(&status.to_le_bytes());
+    rest.extend_from_slice(&0.0f64.to_le_bytes());
+    rest.extend_from_slice(&log_lines.to_le_bytes());
+    rest
+}
+
 /// A fake worker that writes `frames` onto its socket whatever it is asked, then waits.
 fn forged_worker(dir: &Path, name: &str, frames: Frames) -> PathBuf {
     let data = dir.join(format!("{name}.bin"));
@@ -362,14 +372,7 @@ fn forged_frames_are_protocol_errors_not_panics() {
         ),
         (
             "huge_log",
-            {
-                // Kind CALL, an FMI 2.0 function and status.
-                let mut rest = vec![0u8, 2, tb_fmi::Function::GetReal as u8, 2];
-                rest.extend_from_slice(&3i32.to_le_bytes());
-                rest.extend_from_slice(&0.0f64.to_le_bytes());
-                rest.extend_from_slice(&u32::MAX.to_le_bytes()); // log lines
-                answer(1, 0, &rest)
-            },
+            answer(1, 0, &call_failure(tb_fmi::Function::GetReal, 3, u32::MAX)),
             "exceeds the message",
         ),
     ];
@@ -388,10 +391,7 @@ fn forged_frames_are_protocol_errors_not_panics() {
     }
 
     // An unknown status is shown with its value.
-    let mut rest = vec![0u8, tb_fmi::Function::DoStep as u8];
-    rest.extend_from_slice(&77i32.to_le_bytes());
-    rest.extend_from_slice(&0.0f64.to_le_bytes());
-    rest.extend_from_slice(&0u32.to_le_bytes());
+    let rest = call_failure(tb_fmi::Function::DoStep, 77, 0);
     let w = forged_worker(
         dir.path(),
         "status",
