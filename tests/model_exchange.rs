@@ -196,16 +196,10 @@ fn check(model: &str, version: u8) {
     );
     // The same through `twinbench run model.fmu`.
     let csv = dir.path().join("cli.csv");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
-        .arg(&me_only)
-        .args(["--start", "0", "--stop", &stop.to_string()])
-        .args(["--step", &step.to_string()])
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (to, by) = (stop.to_string(), step.to_string());
+    common::run_ok(args![
+        "run", me_only, "--start", "0", "--stop", to, "--step", by, "--out", csv
+    ]);
     let cli = Table::read_path(&csv).unwrap();
     assert!(cli.names().len() > 1 && cli.len() == only.len());
     for name in cli.names().iter().filter(|n| *n != "time") {
@@ -598,28 +592,19 @@ fn paths_of_a_model_exchange_instance(version: u8) {
     let sys = dir.path().join("bb.toml");
     std::fs::write(&sys, &text).unwrap();
     let plain = run(&text, dir.path(), "plain").unwrap();
-    let exe = env!("CARGO_BIN_EXE_twinbench");
-    let cli = |args: &[&str]| {
-        let o = std::process::Command::new(exe)
-            .current_dir(dir.path())
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-    };
-    cli(&["export-ssp", "bb.toml", "--out", "bb.ssp"]);
-    cli(&[
-        "run",
-        "bb.ssp",
-        "--out",
-        "from_ssp.csv",
-        "--trace-fmi",
-        "trace.txt",
-    ]);
+    let d = dir.path();
+    common::ok_in(d, ["export-ssp", "bb.toml", "--out", "bb.ssp"]);
+    common::ok_in(
+        d,
+        [
+            "run",
+            "bb.ssp",
+            "--out",
+            "from_ssp.csv",
+            "--trace-fmi",
+            "trace.txt",
+        ],
+    );
     let from_ssp = Table::read_path(dir.path().join("from_ssp.csv")).unwrap();
     for c in ["m.h", "m.v"] {
         assert_eq!(

@@ -1,8 +1,13 @@
 //! Shared helpers of the integration tests: the packed FMUs and a cache to load them.
 #![allow(dead_code)]
 
+pub mod cli;
 pub mod hostile;
 pub mod synthetic;
+
+// Each test binary uses some of them.
+#[allow(unused_imports)]
+pub use cli::{fails, fails_in, ok, ok_in, run_ok, run_ok_in, twinbench, twinbench_in};
 
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
