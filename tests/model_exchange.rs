@@ -448,38 +448,28 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
         |name| Some(name.to_string()),
     );
     let exp = "[experiment]\nstep = 0.1\nstop = 1\n";
-    let e = run(
-        &system_text(
-            "",
-            &[("m", &cs_only, "interface = \"model-exchange\"")],
-            exp,
-        ),
-        dir.path(),
-        "a",
-    )
-    .unwrap_err();
+    // Instance `m` of `fmu` with `interface` in a system of its own (`tag`): refused, why.
+    let refused = |fmu: &Path, interface: &str, tag: &str| {
+        run(
+            &system_text("", &[("m", fmu, interface)], exp),
+            dir.path(),
+            tag,
+        )
+        .unwrap_err()
+    };
+    let e = refused(&cs_only, "interface = \"model-exchange\"", "a");
     assert!(
         e.contains("instance 'm'")
             && e.contains("interface = \"model-exchange\"")
             && e.contains("Dahlquist_cs.fmu: the FMU has no <ModelExchange> element (it supports co-simulation only)"),
         "{e}"
     );
-    let e = run(
-        &system_text("", &[("m", &me_only, "interface = \"co-simulation\"")], exp),
-        dir.path(),
-        "b",
-    )
-    .unwrap_err();
+    let e = refused(&me_only, "interface = \"co-simulation\"", "b");
     assert!(
         e.contains("Dahlquist_me.fmu: the FMU has no <CoSimulation> element (it supports model-exchange only)"),
         "{e}"
     );
-    let e = run(
-        &system_text("", &[("m", &both, "interface = \"me\"")], exp),
-        dir.path(),
-        "c",
-    )
-    .unwrap_err();
+    let e = refused(&both, "interface = \"me\"", "c");
     assert!(
         e.contains("unknown interface \"me\" (co-simulation, model-exchange)"),
         "{e}"

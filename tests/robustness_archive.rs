@@ -45,6 +45,16 @@ fn build(
     w.finish().unwrap().into_inner()
 }
 
+/// The test FMU's archive with what `extra` adds is refused (default limits), saying `says`.
+fn refused_with(
+    name: &str,
+    says: &str,
+    extra: impl FnOnce(&mut zip::ZipWriter<std::io::Cursor<Vec<u8>>>),
+) {
+    let e = default_refused(name, &build(&base_entries(), extra));
+    assert!(e.contains(says), "{name}: {e}");
+}
+
 /// The base entries with one replaced (or removed with `None`).
 fn with_entry(name: &str, data: Option<Vec<u8>>) -> Vec<(String, Vec<u8>)> {
     let mut e: Vec<_> = base_entries().into_iter().filter(|e| e.0 != name).collect();
@@ -190,34 +200,22 @@ fn absolute_entry_paths_are_refused() {
 
 #[test]
 fn symbolic_links_are_refused() {
-    let bytes = build(&base_entries(), |w| {
-        w.add_symlink(
-            "resources/passwd",
-            "/etc/passwd",
-            SimpleFileOptions::default(),
-        )
-        .unwrap();
+    let says = "entry 'resources/passwd' is a symbolic link";
+    refused_with("symlink.fmu", says, |w| {
+        let o = SimpleFileOptions::default();
+        w.add_symlink("resources/passwd", "/etc/passwd", o).unwrap();
     });
-    let e = default_refused("symlink.fmu", &bytes);
-    assert!(
-        e.contains("entry 'resources/passwd' is a symbolic link"),
-        "{e}"
-    );
 }
 
 #[test]
 fn too_many_entries_are_refused() {
-    let bytes = build(&base_entries(), |w| {
+    let says = "10003 entries, more than the limit of 10000";
+    refused_with("many.fmu", says, |w| {
         let opt = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
         for i in 0..tb_fmi::import::archive::MAX_ENTRIES {
             w.start_file(format!("resources/{i}"), opt).unwrap();
         }
     });
-    let e = default_refused("many.fmu", &bytes);
-    assert!(
-        e.contains("10003 entries, more than the limit of 10000"),
-        "{e}"
-    );
 }
 
 /// Overwrite the declared uncompressed size of `name` in the central directory and the

@@ -326,11 +326,7 @@ fn n13_an_edited_checkpoint_is_refused_whatever_was_edited() {
         common::twinbench_in(d, &args)
     };
     let first = run(false);
-    assert!(
-        first.status.success(),
-        "{}",
-        String::from_utf8_lossy(&first.stderr)
-    );
+    common::cli::assert_success(&first);
     let path = d.join("o/spielberg.checkpoint.json");
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(

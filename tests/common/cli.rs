@@ -101,6 +101,11 @@ pub fn succeeded(o: &Output, what: impl Display) {
     );
 }
 
+/// `o` is of a command that succeeded, else the test fails with its standard error.
+pub fn assert_success(o: &Output) {
+    succeeded(o, "the command");
+}
+
 /// `o` is of a command that failed (else the test fails naming `what`): its standard error.
 pub fn failed(o: Output, what: impl Display) -> String {
     assert!(!o.status.success(), "{what} succeeded");
