@@ -50,10 +50,10 @@ fn the_demos_fitted_twin_runs_bit_for_bit_in_fmpy_and_omsimulator() {
     common::fmu_dir();
     let dir = tb_testkit::scratch("export-twin-tools");
     let d = dir.path();
-    common::ok_in(d, &["demo", "--out", "demo"]);
+    common::ok_in(d, ["demo", "--out", "demo"]);
     common::ok_in(
         d,
-        &[
+        [
             "export-twin",
             "demo/result.json",
             "--out",

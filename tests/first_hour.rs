@@ -205,7 +205,7 @@ fn run_on_an_fmu_runs_it_and_on_another_zip_says_what_run_takes() {
     assert!(out.contains("stopped by      stop time 0.1 s"), "{out}");
     // A ZIP archive under another name: what `run` takes.
     std::fs::copy(common::fmu("vehicle"), d.join("vehicle.zip")).unwrap();
-    let e = common::fails_in(d, &["run", "vehicle.zip"]);
+    let e = common::fails_in(d, ["run", "vehicle.zip"]);
     assert!(
         e.contains("is a ZIP archive (an FMU?), not a system file"),
         "{e}"
@@ -219,7 +219,7 @@ fn a_missing_fmu_names_the_system_file_and_the_command_that_writes_it() {
     let dir = tb_testkit::scratch("first-hour-missing");
     let d = dir.path();
     std::fs::copy(root().join("systems/rls_v.toml"), d.join("copied.toml")).unwrap();
-    let e = common::fails_in(d, &["run", "copied.toml"]);
+    let e = common::fails_in(d, ["run", "copied.toml"]);
     let expected = d.parent().unwrap().join("target/fmu");
     assert!(e.contains("copied.toml: [fmus] "), "{e}");
     assert!(e.contains("does not exist"), "{e}");
@@ -237,7 +237,7 @@ fn a_channel_map_typo_names_channel_signal_and_the_closest_channels() {
     std::fs::write(d.join("map.toml"), "[channels]\nFz_rl = \"Fz_lr\"\n").unwrap();
     let e = common::fails_in(
         d,
-        &[
+        [
             "lap",
             "spielberg_lap.csv",
             "--channels",
@@ -270,15 +270,15 @@ fn os_errors_and_paths_are_said_once() {
     let d = dir.path();
     own_lap_files(d);
     std::fs::write(d.join("afile"), "x").unwrap();
-    let e = common::fails_in(d, &["lap", "nothere.csv", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "nothere.csv", "--out", "x"]);
     assert_eq!(e.matches("os error").count(), 1, "{e}");
     assert_eq!(e.matches("nothere.csv").count(), 1, "{e}");
-    let e = common::fails_in(d, &["lap", "spielberg_lap.csv", "--out", "afile"]);
+    let e = common::fails_in(d, ["lap", "spielberg_lap.csv", "--out", "afile"]);
     assert_eq!(e.matches("os error").count(), 1, "{e}");
     assert!(e.contains("afile: cannot create the output folder"), "{e}");
-    let e = common::fails_in(d, &["pack", "-o", "afile"]);
+    let e = common::fails_in(d, ["pack", "-o", "afile"]);
     assert_eq!(e.matches("afile").count(), 1, "{e}");
-    let e = common::fails_in(d, &["demo", "--out", "afile"]);
+    let e = common::fails_in(d, ["demo", "--out", "afile"]);
     assert!(e.contains("afile"), "demo names the path: {e}");
     assert_eq!(e.matches("os error").count(), 1, "{e}");
 }
@@ -295,7 +295,7 @@ fn lap_refuses_a_track_of_another_length() {
     std::fs::write(d.join("short.csv"), short).unwrap();
     let e = common::fails_in(
         d,
-        &[
+        [
             "lap",
             "spielberg_lap.csv",
             "--track",

@@ -77,7 +77,7 @@ fn an_in_process_fmus_stdout_stays_out_of_json() {
     let dir = tb_testkit::scratch("hostile");
     let fmu = hostile_fmu(dir.path(), "STDOUT_JSON");
     let sys = system(dir.path(), &fmu);
-    let (out, err, _) = twinbench(&["run", sys.to_str().unwrap(), "--json"]);
+    let (out, err, _) = twinbench(["run", sys.to_str().unwrap(), "--json"]);
     assert!(out.status.success(), "{err}");
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
         panic!(
@@ -122,7 +122,7 @@ fn a_null_version_is_refused_in_process_and_isolated() {
     );
     let dir = tb_testkit::scratch("hostile");
     let fmu = hostile_fmu(dir.path(), "VERSION_NULL");
-    let (out, err, _) = twinbench(&["run", system(dir.path(), &fmu).to_str().unwrap()]);
+    let (out, err, _) = twinbench(["run", system(dir.path(), &fmu).to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
         err.contains("hostile-VERSION_NULL.fmu: cannot load shared library: binaries/linux64/hostile.so: fmi2GetVersion returned 'NULL'"),
@@ -217,7 +217,7 @@ fn info_runs_none_of_the_fmus_code_unless_asked_and_isolates_the_check() {
         let fmu = hostile_fmu(dir.path(), fault);
         let path = fmu.to_str().unwrap();
         // Reading the description runs no code: it works whatever the library does.
-        let (out, err, _) = twinbench(&["info", path]);
+        let (out, err, _) = twinbench(["info", path]);
         assert!(out.status.success(), "{fault}: {err}");
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(
@@ -225,7 +225,7 @@ fn info_runs_none_of_the_fmus_code_unless_asked_and_isolates_the_check() {
             "{text}"
         );
         // The check in a worker: a clear error, exit code 1.
-        let (out, err, _) = twinbench(&["info", "--isolate", path]);
+        let (out, err, _) = twinbench(["info", "--isolate", path]);
         assert_eq!(out.status.code(), Some(1), "{fault}: {err}");
         assert!(
             err.contains("in the isolated worker process"),
@@ -238,7 +238,7 @@ fn info_runs_none_of_the_fmus_code_unless_asked_and_isolates_the_check() {
     assert!(err.contains("no answer within 1s (watchdog)"), "{err}");
     assert!(took < Duration::from_secs(30), "{took:?}");
     let fmu = hostile_fmu(dir.path(), "NONE");
-    let (out, err, _) = twinbench(&["info", "--isolate", fmu.to_str().unwrap()]);
+    let (out, err, _) = twinbench(["info", "--isolate", fmu.to_str().unwrap()]);
     assert!(out.status.success(), "{err}");
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(

@@ -167,7 +167,8 @@ fn a_failed_run_keeps_what_it_recorded_in_a_file_named_incomplete() {
     // A complete result from an earlier run stays where it is.
     std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
     let o = common::twinbench(args!["run", sys, "--out", out, "--json"]);
-    let e = common::cli::failed(o, "the step error");
+    assert!(!o.status.success(), "the step error is an error");
+    let e = String::from_utf8_lossy(&o.stderr);
     let partial = dir.path().join("r.incomplete.csv");
     assert!(e.contains("fault_kind = 1"), "{e}");
     assert!(

@@ -117,7 +117,7 @@ fn the_command_line_exits_with_1_and_the_message_on_stderr() {
     let root = twinbench::pack::workspace_root().join("tests/bad_files");
     for case in ["systems/unknown_variable.toml", "systems/toml_syntax.toml"] {
         let p = root.join(case);
-        let (code, err) = cli(&["run", p.to_str().unwrap()]);
+        let (code, err) = cli(["run", p.to_str().unwrap()]);
         assert_eq!(code, Some(1), "{case}: {err}");
         assert!(err.starts_with("error: "), "{err}");
         for w in expected(&p) {
@@ -185,7 +185,7 @@ fn numbers_on_the_command_line_are_checked_for_range() {
 fn an_fmu_error_is_printed_once() {
     common::fmu_dir();
     let p = twinbench::pack::workspace_root().join("tests/bad_files/systems/missing_fmu_file.toml");
-    let (code, err) = cli(&["run", p.to_str().unwrap()]);
+    let (code, err) = cli(["run", p.to_str().unwrap()]);
     assert_eq!(code, Some(1), "{err}");
     assert_eq!(
         err.matches("vehicle_v2.fmu does not exist").count(),

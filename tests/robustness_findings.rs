@@ -97,7 +97,7 @@ fn n07_an_infinite_step_count_is_refused() {
     ] {
         let p = dir.path().join("sys.toml");
         std::fs::write(&p, text.replace(what, edit)).unwrap();
-        let e = common::fails_in(dir.path(), &["run", "sys.toml"]);
+        let e = common::fails_in(dir.path(), ["run", "sys.toml"]);
         assert!(e.contains("macro steps, more than 1e12"), "{edit}: {e}");
     }
 }
@@ -108,7 +108,7 @@ fn n16_n29_lap_refuses_a_standing_measurement_and_absurd_speeds() {
     let dir = tb_testkit::scratch("n16");
     let d = dir.path();
     measurement(&d.join("standing.csv"), 200, |_| (0.0, 0.0));
-    let e = common::fails_in(d, &["lap", "standing.csv", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "standing.csv", "--out", "x"]);
     assert!(
         e.contains("the car covers 0.0 m in 2.0 s: not a lap"),
         "{e}"
@@ -117,11 +117,11 @@ fn n16_n29_lap_refuses_a_standing_measurement_and_absurd_speeds() {
     measurement(&d.join("huge.csv"), 1000, |k| {
         (k as f64 * 0.5, if k == 50 { 1e308 } else { 50.0 })
     });
-    let e = common::fails_in(d, &["lap", "huge.csv", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "huge.csv", "--out", "x"]);
     assert!(e.contains("sample 51 (t = 0.5 s) has v = 1e308 m/s"), "{e}");
     // A lap of a metre.
     measurement(&d.join("metre.csv"), 100, |k| (k as f64 * 0.01, 1.0));
-    let e = common::fails_in(d, &["lap", "metre.csv", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "metre.csv", "--out", "x"]);
     assert!(e.contains("not a lap (at least 100 m"), "{e}");
 }
 
@@ -172,10 +172,10 @@ fn n20_fifos_and_devices_are_refused_as_every_kind_of_input() {
         }
     }
     // An MDF 4 measurement: the same.
-    let e = common::fails_in(d, &["lap", "/dev/zero", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "/dev/zero", "--out", "x"]);
     assert!(e.contains("is a device"), "{e}");
     std::os::unix::fs::symlink("/dev/zero", d.join("zero.mf4")).unwrap();
-    let e = common::fails_in(d, &["lap", "zero.mf4", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "zero.mf4", "--out", "x"]);
     assert!(e.contains("is a device, not a regular file"), "{e}");
 }
 
@@ -281,7 +281,7 @@ fn n09_an_unwritable_output_folder_is_refused_before_the_run() {
     std::fs::write(d.join("sys.toml"), text).unwrap();
     // /proc takes no files, whoever we are (a read-only folder does not stop root).
     let started = std::time::Instant::now();
-    let e = common::fails_in(d, &["run", "sys.toml", "--out", "/proc/twinbench/lap.csv"]);
+    let e = common::fails_in(d, ["run", "sys.toml", "--out", "/proc/twinbench/lap.csv"]);
     assert!(e.contains("cannot write into /proc"), "{e}");
     assert!(e.contains("(checked before the run)"), "{e}");
     assert!(!e.contains("steps"), "no run happened: {e}");
@@ -392,7 +392,7 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
         (fifo.to_str().unwrap(), "is a FIFO, not a regular file"),
     ] {
         let set = format!("vehicle.track_file={file}");
-        let e = common::fails_in(d, &["run", "lap/system.toml", "--set", &set]);
+        let e = common::fails_in(d, ["run", "lap/system.toml", "--set", &set]);
         assert!(e.contains(expected), "{file}: {e}");
     }
     // A file whose first line is long and holds terminal escapes: a short excerpt, escaped.
@@ -403,7 +403,7 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
     )
     .unwrap();
     let set = format!("driver.target_speed_file={}", secret.display());
-    let e = common::fails_in(d, &["run", "lap/system.toml", "--set", &set]);
+    let e = common::fails_in(d, ["run", "lap/system.toml", "--set", &set]);
     assert!(e.contains("no column"), "{e}");
     assert!(
         e.len() < 2000,
@@ -449,7 +449,7 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
             }
         }
         w.finish().unwrap();
-        let e = common::fails_in(d, &["run", "evil.ssp"]);
+        let e = common::fails_in(d, ["run", "evil.ssp"]);
         assert!(
             e.contains("a path an SSP package sets must name a file inside the package"),
             "{escape}: {e}"
@@ -487,7 +487,7 @@ fn n29_degenerate_tracks_and_targets_are_refused() {
     ] {
         std::fs::write(d.join(name), text).unwrap();
         let set = format!("{param}={}", d.join(name).display());
-        let e = common::fails_in(d, &["run", "lap/system.toml", "--set", &set]);
+        let e = common::fails_in(d, ["run", "lap/system.toml", "--set", &set]);
         assert!(e.contains(expected), "{name}: {e}");
     }
 }
@@ -508,7 +508,7 @@ fn n28_a_byte_order_mark_is_read_and_huge_numbers_print_short() {
     common::ok_in(d, ["run", "lap/system.toml"]);
     let e = common::fails_in(
         d,
-        &[
+        [
             "run",
             "lap/system.toml",
             "--set",

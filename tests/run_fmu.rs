@@ -163,7 +163,7 @@ fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_row
             "--out",
             &ours,
         ];
-        common::ok_in(dir.path(), &args);
+        common::ok_in(dir.path(), args);
         fmpy_simulate(
             dir.path(),
             &fmu,
@@ -201,7 +201,7 @@ fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_row
             "--out",
             &plain,
         ];
-        common::ok_in(dir.path(), &args);
+        common::ok_in(dir.path(), args);
         let (_, r3) = read_ours(&dir.path().join(&plain));
         assert!(
             r3.windows(2).all(|w| w[1][0] > w[0][0]),
@@ -230,7 +230,7 @@ fn an_input_file_start_values_and_intervals_as_in_fmpy() {
     let f = fmu.to_str().unwrap();
     let o = common::twinbench_in(
         dir.path(),
-        &[
+        [
             "run",
             f,
             "--input",

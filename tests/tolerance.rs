@@ -61,7 +61,7 @@ fn the_default_experiment_tolerance_reaches_the_fmu_as_in_fmpy() {
     system(d, "sys.toml", "", "");
     ok_in(
         d,
-        &[
+        [
             "run",
             "sys.toml",
             "--out",
@@ -86,7 +86,7 @@ fn the_default_experiment_tolerance_reaches_the_fmu_as_in_fmpy() {
     // Another tolerance: another solution (fewer internal steps), again equal to FMPy's.
     ok_in(
         d,
-        &[
+        [
             "run",
             "sys.toml",
             "--tolerance",
@@ -120,11 +120,11 @@ fn the_system_file_sets_the_tolerance_per_experiment_and_per_instance_and_ssp_ke
     // [experiment] tolerance applies to every instance; an instance's own wins.
     system(d, "exp.toml", "tolerance = 1e-3", "");
     system(d, "inst.toml", "tolerance = 1e-9", "tolerance = 1e-3");
-    ok_in(d, &["run", "exp.toml", "--out", "exp.csv"]);
-    ok_in(d, &["run", "inst.toml", "--out", "inst.csv"]);
+    ok_in(d, ["run", "exp.toml", "--out", "exp.csv"]);
+    ok_in(d, ["run", "inst.toml", "--out", "inst.csv"]);
     ok_in(
         d,
-        &["run", "exp.toml", "--tolerance", "1e-3", "--out", "cli.csv"],
+        ["run", "exp.toml", "--tolerance", "1e-3", "--out", "cli.csv"],
     );
     let exp = std::fs::read(d.join("exp.csv")).unwrap();
     assert_eq!(exp, std::fs::read(d.join("inst.csv")).unwrap());
@@ -149,7 +149,7 @@ fn the_system_file_sets_the_tolerance_per_experiment_and_per_instance_and_ssp_ke
 /// The default run, for the comparisons above (1e-7 against 1e-3 must differ).
 fn ok_pair(d: &Path) {
     system(d, "default.toml", "", "");
-    ok_in(d, &["run", "default.toml", "--out", "default.csv"]);
+    ok_in(d, ["run", "default.toml", "--out", "default.csv"]);
 }
 
 #[test]
@@ -174,14 +174,14 @@ fn a_tolerance_that_is_not_one_is_refused_before_the_run() {
         ),
     ] {
         system(d, "bad.toml", extra, instance);
-        let o = common::twinbench_in(d, &["run", "bad.toml"]);
+        let o = common::twinbench_in(d, ["run", "bad.toml"]);
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{e}");
         assert!(e.contains(expected), "{expected}: {e}");
     }
     system(d, "sys.toml", "", "");
     for bad in ["nan", "0", "1"] {
-        let o = common::twinbench_in(d, &["run", "sys.toml", "--tolerance", bad]);
+        let o = common::twinbench_in(d, ["run", "sys.toml", "--tolerance", bad]);
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{e}");
         assert!(
