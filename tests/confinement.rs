@@ -127,17 +127,21 @@ fn run_into_a_limit(tag: &str, fault: &str, limits: &str) -> String {
     err
 }
 
+/// The number a line of `err` says after `prefix` (up to the next space).
+fn number_after(err: &str, prefix: &str) -> u64 {
+    err.lines()
+        .find_map(|l| l.split_once(prefix)?.1.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no number after {prefix:?}: {err}"))
+}
+
 #[test]
 fn a_disk_fill_ends_at_the_scratch_limit_and_says_so() {
     if !confinement_here() {
         return;
     }
     let err = run_into_a_limit("fill", "FILL", "scratch=8M");
-    let wrote = err
-        .lines()
-        .find_map(|l| l.split_once("hostile: fill: wrote ")?.1.split(' ').next())
-        .and_then(|n| n.parse::<u64>().ok())
-        .unwrap_or_else(|| panic!("{err}"));
+    let wrote = number_after(&err, "hostile: fill: wrote ");
     assert!(
         wrote <= 8,
         "wrote {wrote} MiB into a scratch folder of 8 MiB: {err}"
@@ -171,11 +175,7 @@ fn a_memory_bomb_ends_at_the_memory_limit_and_says_so() {
         return;
     }
     let err = run_into_a_limit("memory", "MEMORY_BOMB", "memory=512M");
-    let mib = err
-        .lines()
-        .find_map(|l| l.split_once("hostile: memory: ")?.1.split(' ').next())
-        .and_then(|n| n.parse::<u64>().ok())
-        .unwrap_or_else(|| panic!("{err}"));
+    let mib = number_after(&err, "hostile: memory: ");
     assert!(
         mib < 512,
         "allocated {mib} MiB under a limit of 512 MiB: {err}"

@@ -8,26 +8,8 @@
 
 mod common;
 
+use common::ok_in;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn twinbench(dir: &Path, args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(o: std::process::Output) -> String {
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
 
 /// The bench of `systems/rls_v.toml` over the packed FMUs, with its own track and a target
 /// speed 2 % below the bundled one (files the fitted FMUs must carry in place of their
@@ -75,18 +57,16 @@ fn bench_with_files(d: &Path) -> PathBuf {
 fn result_for(d: &Path, system: &Path) -> (PathBuf, serde_json::Value) {
     let root = twinbench::pack::workspace_root();
     let study = root.join("studies/spielberg.toml");
-    ok(twinbench(
-        d,
-        &[
-            "optimize",
-            study.to_str().unwrap(),
-            "--generations",
-            "1",
-            "--no-report",
-            "--out",
-            "opt",
-        ],
-    ));
+    let args = args![
+        "optimize",
+        study,
+        "--generations",
+        "1",
+        "--no-report",
+        "--out",
+        "opt"
+    ];
+    ok_in(d, args);
     let path = d.join("opt/result.json");
     let mut result: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
@@ -108,10 +88,7 @@ fn run_with_set(d: &Path, system: &Path, result: &serde_json::Value, out: &str) 
         ));
     }
     args.extend(["-o".into(), out.into()]);
-    ok(twinbench(
-        d,
-        &args.iter().map(String::as_str).collect::<Vec<_>>(),
-    ));
+    ok_in(d, &args);
     std::fs::read(d.join(out)).unwrap()
 }
 
@@ -143,15 +120,7 @@ fn the_fitted_twin_runs_its_lap_bit_for_bit_from_every_output() {
     let d = dir.path();
     let bench = bench_with_files(d);
     let (result_path, result) = result_for(d, &bench);
-    let log = ok(twinbench(
-        d,
-        &[
-            "export-twin",
-            result_path.to_str().unwrap(),
-            "--out",
-            "twin",
-        ],
-    ));
+    let log = ok_in(d, args!["export-twin", result_path, "--out", "twin",]);
     assert!(
         log.contains("fitted FMUs     vehicle, driver, dyno_rl, dyno_rr, edu"),
         "{log}"
@@ -187,10 +156,13 @@ fn the_fitted_twin_runs_its_lap_bit_for_bit_from_every_output() {
     ];
     for (i, (what, args)) in runs.iter().enumerate() {
         let out = format!("out{i}.csv");
-        let mut a: Vec<&str> = vec!["run"];
-        a.extend(args.iter().map(String::as_str));
-        a.extend(["-o", &out]);
-        ok(twinbench(d, &a));
+        ok_in(
+            d,
+            ["run"]
+                .into_iter()
+                .chain(args.iter().map(String::as_str))
+                .chain(["-o", &out]),
+        );
         assert!(
             std::fs::read(d.join(&out)).unwrap() == expected,
             "{what}: its lap differs from `run --set <answer>`'s"
@@ -269,30 +241,13 @@ fn the_fitted_twin_runs_its_lap_bit_for_bit_from_every_output() {
 
     // Again into the same folder: an earlier export is replaced; a folder with the user's
     // own files is refused, and they stay.
-    ok(twinbench(
+    ok_in(
         d,
-        &[
-            "export-twin",
-            result_path.to_str().unwrap(),
-            "--out",
-            "twin",
-            "--fmi",
-            "3",
-        ],
-    ));
+        args!["export-twin", result_path, "--out", "twin", "--fmi", "3",],
+    );
     std::fs::create_dir(d.join("mine")).unwrap();
     std::fs::write(d.join("mine/notes.txt"), "mine").unwrap();
-    let o = twinbench(
-        d,
-        &[
-            "export-twin",
-            result_path.to_str().unwrap(),
-            "--out",
-            "mine",
-        ],
-    );
-    assert!(!o.status.success());
-    let e = String::from_utf8_lossy(&o.stderr);
+    let e = common::fails_in(d, args!["export-twin", result_path, "--out", "mine"]);
     assert!(
         e.contains("mine") && e.contains("not an earlier export-twin output"),
         "{e}"
@@ -318,17 +273,7 @@ fn an_fmu_of_another_build_is_refused_by_name(d: &Path, bench: &Path, result_pat
     let text = std::fs::read_to_string(bench).unwrap();
     let vehicle = common::fmu("vehicle").display().to_string();
     std::fs::write(bench, text.replace(&vehicle, stale.to_str().unwrap())).unwrap();
-    let o = twinbench(
-        d,
-        &[
-            "export-twin",
-            result_path.to_str().unwrap(),
-            "--out",
-            "twin",
-        ],
-    );
-    assert!(!o.status.success());
-    let e = String::from_utf8_lossy(&o.stderr);
+    let e = common::fails_in(d, args!["export-twin", result_path, "--out", "twin"]);
     assert!(
         e.contains("vehicle_old.fmu") && e.contains("twinbench pack"),
         "{e}"
@@ -390,9 +335,8 @@ fn an_edited_start_file_refuses_the_instantiation(d: &Path, twin: &Path) {
             bare.replace("\"fmu/vehicle.fmu\"", "\"fmu/vehicle_edited.fmu\""),
         )
         .unwrap();
-        let o = twinbench(d, &["run", system.to_str().unwrap()]);
-        assert!(!o.status.success(), "{edit}: the run went on");
-        let e = String::from_utf8_lossy(&o.stderr);
+        let o = common::twinbench_in(d, args!["run", system]);
+        let e = common::cli::failed(o, format!("{edit}: the run"));
         assert!(
             e.contains("fitted_start_values.toml") && e.contains(says),
             "{edit}: {e}"

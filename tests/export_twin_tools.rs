@@ -9,20 +9,6 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn twinbench(dir: &Path, args: &[&str]) -> String {
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "twinbench {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
 fn python(args: &[&str]) -> serde_json::Value {
     let o = Command::new(common::python::python())
         .args(args)
@@ -55,15 +41,7 @@ fn bench_ssp_with_answer(d: &Path, system: &Path, answer: &[(String, f64)]) -> P
     let path = system.with_file_name("with_answer.toml");
     std::fs::write(&path, text).unwrap();
     let ssp = d.join("with_answer.ssp");
-    twinbench(
-        d,
-        &[
-            "export-ssp",
-            path.to_str().unwrap(),
-            "-o",
-            ssp.to_str().unwrap(),
-        ],
-    );
+    common::ok_in(d, args!["export-ssp", path, "-o", ssp]);
     ssp
 }
 
@@ -72,10 +50,10 @@ fn the_demos_fitted_twin_runs_bit_for_bit_in_fmpy_and_omsimulator() {
     common::fmu_dir();
     let dir = tb_testkit::scratch("export-twin-tools");
     let d = dir.path();
-    twinbench(d, &["demo", "--out", "demo"]);
-    twinbench(
+    common::ok_in(d, ["demo", "--out", "demo"]);
+    common::ok_in(
         d,
-        &[
+        [
             "export-twin",
             "demo/result.json",
             "--out",
@@ -99,7 +77,7 @@ fn the_demos_fitted_twin_runs_bit_for_bit_in_fmpy_and_omsimulator() {
         args.extend(["--set".into(), format!("{n}={v:?}")]);
     }
     args.extend(["-o".into(), "set.csv".into()]);
-    twinbench(d, &args.iter().map(String::as_str).collect::<Vec<_>>());
+    common::ok_in(d, &args);
 
     // FMPy's FMU2Slave over the fitted FMUs alone, the whole lap.
     let text = std::fs::read_to_string(d.join("twin/fitted_system.toml")).unwrap();

@@ -6,36 +6,18 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
 }
 
-/// `twinbench ARGS` run in folder `cwd`.
-fn twinbench_in(cwd: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .unwrap()
-}
-
+/// `twinbench ARGS` in folder `cwd` must succeed: what it printed, standard output and error.
 fn success(cwd: &Path, args: &[&str]) -> String {
-    let o = twinbench_in(cwd, args);
-    assert!(
-        o.status.success(),
-        "twinbench {args:?} in {} failed:\n{}",
-        cwd.display(),
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let what = format!("twinbench {args:?} in {}", cwd.display());
+    let o = common::twinbench_in(cwd, args);
+    common::cli::succeeded(&o, what);
     String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
-}
-
-fn failure(cwd: &Path, args: &[&str]) -> String {
-    let o = twinbench_in(cwd, args);
-    assert!(!o.status.success(), "twinbench {args:?} succeeded");
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// The bundled lap and its track, copied into `dir` (a user's own files, by relative name).
@@ -43,6 +25,19 @@ fn own_lap_files(dir: &Path) {
     for f in ["spielberg_lap.csv", "spielberg_lap_track.csv"] {
         std::fs::copy(root().join("data").join(f), dir.join(f)).unwrap();
     }
+}
+
+/// The bundled lap and its track copied into `dir`, and `twinbench lap` of them there with
+/// `extra`: what it printed.
+fn own_lap(dir: &Path, extra: &[&str]) -> String {
+    own_lap_files(dir);
+    let lap = [
+        "lap",
+        "spielberg_lap.csv",
+        "--track",
+        "spielberg_lap_track.csv",
+    ];
+    success(dir, &[&lap[..], extra].concat())
 }
 
 /// No `a/../b` or `a/./b` in what a command printed.
@@ -57,18 +52,7 @@ fn assert_normalised(text: &str) {
 fn a_lap_of_ones_own_is_prepared_optimised_and_run_by_relative_names_from_any_folder() {
     let dir = tb_testkit::scratch("first-hour-lap");
     let d = dir.path();
-    own_lap_files(d);
-    let out = success(
-        d,
-        &[
-            "lap",
-            "spielberg_lap.csv",
-            "--track",
-            "spielberg_lap_track.csv",
-            "--out",
-            "mylap",
-        ],
-    );
+    let out = own_lap(d, &["--out", "mylap"]);
     assert!(
         out.contains("next: twinbench optimize mylap/study.toml"),
         "{out}"
@@ -115,21 +99,8 @@ fn a_lap_of_ones_own_is_prepared_optimised_and_run_by_relative_names_from_any_fo
 fn lap_with_a_relative_fmu_folder_writes_paths_that_resolve_from_the_output_folder() {
     let dir = tb_testkit::scratch("first-hour-fmus");
     let d = dir.path();
-    own_lap_files(d);
     success(d, &["pack", "-o", "packed"]);
-    success(
-        d,
-        &[
-            "lap",
-            "spielberg_lap.csv",
-            "--track",
-            "spielberg_lap_track.csv",
-            "--fmus",
-            "packed",
-            "--out",
-            "laps/one",
-        ],
-    );
+    own_lap(d, &["--fmus", "packed", "--out", "laps/one"]);
     let system = std::fs::read_to_string(d.join("laps/one/system.toml")).unwrap();
     assert!(
         system.contains("vehicle = \"../../packed/vehicle.fmu\""),
@@ -186,7 +157,7 @@ fn pack_writes_the_shipped_fmus_to_one_documented_place_and_the_test_fmu_only_wh
         .current_dir(d)
         .output()
         .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::cli::succeeded(&o, "twinbench pack");
     let place = d.join("data/twinbench/fmu");
     let shipped: Vec<&str> = twinbench::pack::models()
         .iter()
@@ -207,7 +178,7 @@ fn pack_writes_the_shipped_fmus_to_one_documented_place_and_the_test_fmu_only_wh
         .current_dir(d)
         .output()
         .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::cli::succeeded(&o, "twinbench pack edu");
     assert!(d.join("home/.local/share/twinbench/fmu/edu.fmu").is_file());
     // The help says where.
     let help = success(d, &["pack", "--help"]);
@@ -234,7 +205,7 @@ fn run_on_an_fmu_runs_it_and_on_another_zip_says_what_run_takes() {
     assert!(out.contains("stopped by      stop time 0.1 s"), "{out}");
     // A ZIP archive under another name: what `run` takes.
     std::fs::copy(common::fmu("vehicle"), d.join("vehicle.zip")).unwrap();
-    let e = failure(d, &["run", "vehicle.zip"]);
+    let e = common::fails_in(d, ["run", "vehicle.zip"]);
     assert!(
         e.contains("is a ZIP archive (an FMU?), not a system file"),
         "{e}"
@@ -248,7 +219,7 @@ fn a_missing_fmu_names_the_system_file_and_the_command_that_writes_it() {
     let dir = tb_testkit::scratch("first-hour-missing");
     let d = dir.path();
     std::fs::copy(root().join("systems/rls_v.toml"), d.join("copied.toml")).unwrap();
-    let e = failure(d, &["run", "copied.toml"]);
+    let e = common::fails_in(d, ["run", "copied.toml"]);
     let expected = d.parent().unwrap().join("target/fmu");
     assert!(e.contains("copied.toml: [fmus] "), "{e}");
     assert!(e.contains("does not exist"), "{e}");
@@ -264,9 +235,9 @@ fn a_channel_map_typo_names_channel_signal_and_the_closest_channels() {
     let d = dir.path();
     own_lap_files(d);
     std::fs::write(d.join("map.toml"), "[channels]\nFz_rl = \"Fz_lr\"\n").unwrap();
-    let e = failure(
+    let e = common::fails_in(
         d,
-        &[
+        [
             "lap",
             "spielberg_lap.csv",
             "--channels",
@@ -299,15 +270,15 @@ fn os_errors_and_paths_are_said_once() {
     let d = dir.path();
     own_lap_files(d);
     std::fs::write(d.join("afile"), "x").unwrap();
-    let e = failure(d, &["lap", "nothere.csv", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "nothere.csv", "--out", "x"]);
     assert_eq!(e.matches("os error").count(), 1, "{e}");
     assert_eq!(e.matches("nothere.csv").count(), 1, "{e}");
-    let e = failure(d, &["lap", "spielberg_lap.csv", "--out", "afile"]);
+    let e = common::fails_in(d, ["lap", "spielberg_lap.csv", "--out", "afile"]);
     assert_eq!(e.matches("os error").count(), 1, "{e}");
     assert!(e.contains("afile: cannot create the output folder"), "{e}");
-    let e = failure(d, &["pack", "-o", "afile"]);
+    let e = common::fails_in(d, ["pack", "-o", "afile"]);
     assert_eq!(e.matches("afile").count(), 1, "{e}");
-    let e = failure(d, &["demo", "--out", "afile"]);
+    let e = common::fails_in(d, ["demo", "--out", "afile"]);
     assert!(e.contains("afile"), "demo names the path: {e}");
     assert_eq!(e.matches("os error").count(), 1, "{e}");
 }
@@ -322,9 +293,9 @@ fn lap_refuses_a_track_of_another_length() {
     let lines: Vec<&str> = track.lines().collect();
     let short = lines[..lines.len() * 7 / 10].join("\n");
     std::fs::write(d.join("short.csv"), short).unwrap();
-    let e = failure(
+    let e = common::fails_in(
         d,
-        &[
+        [
             "lap",
             "spielberg_lap.csv",
             "--track",
@@ -344,36 +315,17 @@ fn lap_refuses_a_track_of_another_length() {
 fn ctrl_c_keeps_the_checkpoint_and_says_how_to_resume() {
     let dir = tb_testkit::scratch("first-hour-ctrl-c");
     let d = dir.path();
-    own_lap_files(d);
-    success(
-        d,
-        &[
-            "lap",
-            "spielberg_lap.csv",
-            "--track",
-            "spielberg_lap_track.csv",
-            "--out",
-            "mylap",
-        ],
-    );
-    let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args([
-            "optimize",
-            "mylap/study.toml",
-            "--no-report",
-            "--out",
-            "opt",
-        ])
-        .current_dir(d)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    own_lap(d, &["--out", "mylap"]);
     // Interrupt once the first generation is checkpointed.
     let checkpoint = d.join("opt/mylap.checkpoint.json");
-    tb_testkit::wait_for_file(&checkpoint, 120);
-    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-    let o = child.wait_with_output().unwrap();
+    let args = [
+        "optimize",
+        "mylap/study.toml",
+        "--no-report",
+        "--out",
+        "opt",
+    ];
+    let o = common::cli::interrupted_in(d, args, &checkpoint);
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{e}");
     assert!(

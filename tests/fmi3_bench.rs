@@ -3,8 +3,8 @@
 
 mod common;
 
+use std::ffi::OsStr;
 use std::path::Path;
-use std::process::Command;
 
 /// `systems/rls_v.toml` with each FMU as `fmus` says (`vehicle` → `vehicle-fmi3.fmu`
 /// when it is in `fmi3`) and, when given, a stop time instead of the lap.
@@ -31,30 +31,15 @@ fn system(dir: &Path, tag: &str, fmi3: &[&str], stop: Option<f64>) -> std::path:
     path
 }
 
-/// `twinbench ARGS`, which must succeed: its standard output.
-fn twinbench<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Vec<u8> {
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "twinbench {:?}: {}",
-        args.iter().map(|a| a.as_ref()).collect::<Vec<_>>(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out.stdout
-}
-
 /// `twinbench run SYSTEM [extra]`: the CSV's bytes.
 fn run_with(system: &Path, extra: &str) -> Vec<u8> {
     let csv = system.with_extension("csv");
-    let mut args = vec![std::ffi::OsStr::new("run"), system.as_os_str()];
-    args.extend([std::ffi::OsStr::new("--out"), csv.as_os_str()]);
-    if !extra.is_empty() {
-        args.push(std::ffi::OsStr::new(extra));
-    }
-    twinbench(&args);
+    let args = args!["run", system, "--out", csv];
+    let extra = [extra]
+        .into_iter()
+        .filter(|e| !e.is_empty())
+        .map(OsStr::new);
+    common::run_ok(args.into_iter().chain(extra));
     std::fs::read(&csv).unwrap()
 }
 
@@ -144,7 +129,7 @@ fn the_fmi3_bench_isolated_gives_the_fmi2_run_bit_for_bit() {
 fn info_and_export_ssp_take_the_fmi3_fmus() {
     let dir = tb_testkit::scratch("fmi3-info-ssp");
     let vehicle = common::fmu3("vehicle");
-    let info = twinbench(&["info".as_ref(), "--json".as_ref(), vehicle.as_os_str()]);
+    let info = common::run_ok(args!["info", "--json", vehicle]).stdout;
     let j: serde_json::Value = serde_json::from_slice(&info).unwrap();
     assert_eq!(j["fmi_version"], "3.0");
     let vars = j["variables"].as_array().unwrap();
@@ -159,12 +144,7 @@ fn info_and_export_ssp_take_the_fmi3_fmus() {
         Some(1.0),
     );
     let ssp = dir.path().join("bench.ssp");
-    twinbench(&[
-        "export-ssp".as_ref(),
-        system.as_os_str(),
-        "-o".as_ref(),
-        ssp.as_os_str(),
-    ]);
+    common::run_ok(args!["export-ssp", system, "-o", ssp]);
     let csv = run(&ssp, false);
     let rows = String::from_utf8(csv).unwrap().lines().count();
     assert!(rows > 100, "{rows} rows");

@@ -5,8 +5,8 @@
 mod common;
 
 use common::reference;
+use std::ffi::OsStr;
 use std::path::Path;
-use std::process::Command;
 
 fn system(dir: &Path) -> std::path::PathBuf {
     let text = format!(
@@ -19,28 +19,13 @@ fn system(dir: &Path) -> std::path::PathBuf {
     path
 }
 
-fn twinbench(args: &[&std::ffi::OsStr]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
 #[test]
 fn the_trace_has_every_call_with_names_values_and_status() {
     let dir = tb_testkit::scratch("trace");
     let s = system(dir.path());
     let trace = dir.path().join("trace.txt");
     let out_traced = dir.path().join("traced.csv");
-    let r = twinbench(&[
-        "run".as_ref(),
-        s.as_os_str(),
-        "--trace-fmi".as_ref(),
-        trace.as_os_str(),
-        "-o".as_ref(),
-        out_traced.as_os_str(),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    common::run_ok(args!["run", s, "--trace-fmi", trace, "-o", out_traced]);
     let text = std::fs::read_to_string(&trace).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     let has = |needle: &str| lines.iter().any(|l| l.contains(needle));
@@ -73,12 +58,7 @@ fn the_trace_has_every_call_with_names_values_and_status() {
     assert_eq!(steps("f"), 44);
     // Tracing changes nothing in the results.
     let out_plain = dir.path().join("plain.csv");
-    let r = twinbench(&[
-        "run".as_ref(),
-        s.as_os_str(),
-        "-o".as_ref(),
-        out_plain.as_os_str(),
-    ]);
+    let r = common::twinbench(args!["run", s, "-o", out_plain]);
     assert!(r.status.success());
     assert_eq!(
         std::fs::read(&out_traced).unwrap(),
@@ -91,15 +71,8 @@ fn only_the_chosen_instances_are_traced_and_unknown_ones_are_named() {
     let dir = tb_testkit::scratch("trace-some");
     let s = system(dir.path());
     let trace = dir.path().join("trace.txt");
-    let r = twinbench(&[
-        "run".as_ref(),
-        s.as_os_str(),
-        "--trace-fmi".as_ref(),
-        trace.as_os_str(),
-        "--trace-instances".as_ref(),
-        "f".as_ref(),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let traced = args!["run", s, "--trace-fmi", trace];
+    common::run_ok(traced.iter().chain(&args!["--trace-instances", "f"]));
     let text = std::fs::read_to_string(&trace).unwrap();
     assert!(text.lines().count() > 100);
     assert!(
@@ -107,14 +80,7 @@ fn only_the_chosen_instances_are_traced_and_unknown_ones_are_named() {
             .all(|l| l.contains(" f: ") || l.starts_with("f: ")),
         "{text}"
     );
-    let r = twinbench(&[
-        "run".as_ref(),
-        s.as_os_str(),
-        "--trace-fmi".as_ref(),
-        trace.as_os_str(),
-        "--trace-instances".as_ref(),
-        "f,edu".as_ref(),
-    ]);
+    let r = common::twinbench(traced.iter().chain(&args!["--trace-instances", "f,edu"]));
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(
         !r.status.success()
@@ -129,12 +95,7 @@ fn a_trace_path_that_is_an_input_is_refused_and_the_input_kept() {
     let dir = tb_testkit::scratch("trace-input");
     let s = system(dir.path());
     let before = std::fs::read(&s).unwrap();
-    let r = twinbench(&[
-        "run".as_ref(),
-        s.as_os_str(),
-        "--trace-fmi".as_ref(),
-        s.as_os_str(),
-    ]);
+    let r = common::twinbench(args!["run", s, "--trace-fmi", s]);
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(!r.status.success() && err.contains("--trace-fmi"), "{err}");
     assert_eq!(std::fs::read(&s).unwrap(), before);
@@ -150,26 +111,13 @@ fn a_model_exchange_trace_has_the_calls_the_fmu_receives() {
     let fmu = reference::fmu("BouncingBall", 2);
     let trace = dir.path().join("trace.txt");
     let (traced, plain) = (dir.path().join("traced.csv"), dir.path().join("plain.csv"));
-    let r = twinbench(&[
-        "run".as_ref(),
-        fmu.as_os_str(),
-        "--interface".as_ref(),
-        "model-exchange".as_ref(),
-        "--trace-fmi".as_ref(),
-        trace.as_os_str(),
-        "-o".as_ref(),
-        traced.as_os_str(),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let r = twinbench(&[
-        "run".as_ref(),
-        fmu.as_os_str(),
-        "--interface".as_ref(),
-        "model-exchange".as_ref(),
-        "-o".as_ref(),
-        plain.as_os_str(),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    // `twinbench run FMU --interface model-exchange EXTRA`, which must succeed.
+    let run_me = |extra: &[&OsStr]| {
+        let me = args!["run", fmu, "--interface", "model-exchange"];
+        common::run_ok(me.iter().chain(extra));
+    };
+    run_me(&args!["--trace-fmi", trace, "-o", traced]);
+    run_me(&args!["-o", plain]);
     assert_eq!(
         std::fs::read(&traced).unwrap(),
         std::fs::read(&plain).unwrap()
@@ -216,17 +164,7 @@ fn a_model_exchange_trace_has_the_calls_the_fmu_receives() {
     );
     assert!(line.ends_with(") -> fmi2OK"), "{line}");
     // With a tolerance the FMU is told it.
-    let r = twinbench(&[
-        "run".as_ref(),
-        fmu.as_os_str(),
-        "--interface".as_ref(),
-        "model-exchange".as_ref(),
-        "--tolerance".as_ref(),
-        "1e-7".as_ref(),
-        "--trace-fmi".as_ref(),
-        trace.as_os_str(),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    run_me(&args!["--tolerance", "1e-7", "--trace-fmi", trace]);
     let text = std::fs::read_to_string(&trace).unwrap();
     assert!(
         text.contains("fmi2SetupExperiment(toleranceDefined=true, tolerance=1e-7, startTime=0.0"),

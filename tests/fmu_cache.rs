@@ -219,11 +219,7 @@ fn a_second_twinbench_process_uses_the_store_and_its_index() {
             .env("TMPDIR", &tmp)
             .output()
             .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        common::cli::assert_success(&out);
     };
     info();
     let unpacked = entries(&store);

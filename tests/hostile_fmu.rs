@@ -8,8 +8,9 @@
 
 mod common;
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::time::{Duration, Instant};
 use tb_cosim::backend::BackendFactory;
 use tb_cosim::isolated::{IsolatedFactory, IsolationOptions};
@@ -21,12 +22,10 @@ fn hostile_fmu(dir: &Path, fault: &str) -> PathBuf {
 
 use common::hostile::system;
 
-fn twinbench(args: &[&str]) -> (Output, String, Duration) {
+/// `twinbench ARGS`: its output, its stderr and how long it took.
+fn twinbench<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>) -> (Output, String, Duration) {
     let started = Instant::now();
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap();
+    let out = common::twinbench(args);
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     (out, err, started.elapsed())
 }
@@ -38,15 +37,16 @@ fn run_isolated(fault: &str) -> String {
     let fmu = hostile_fmu(dir.path(), fault);
     let sys = system(dir.path(), &fmu);
     let csv = dir.path().join("out.csv");
-    let (out, err, _) = twinbench(&[
+    let args = args![
         "run",
-        sys.to_str().unwrap(),
+        sys,
         "--isolate",
         "--worker-timeout",
         "2",
         "--out",
-        csv.to_str().unwrap(),
-    ]);
+        csv
+    ];
+    let (out, err, _) = twinbench(args);
     assert_eq!(out.status.code(), Some(1), "{fault}: {err}");
     assert!(
         !csv.exists(),
@@ -64,13 +64,7 @@ fn an_isolated_fmu_that_kills_its_parent_leaves_the_host_alive() {
     let fmu = hostile_fmu(dir.path(), "KILL_PARENT");
     let sys = system(dir.path(), &fmu);
     let csv = dir.path().join("out.csv");
-    let (out, err, _) = twinbench(&[
-        "run",
-        sys.to_str().unwrap(),
-        "--isolate",
-        "--out",
-        csv.to_str().unwrap(),
-    ]);
+    let (out, err, _) = twinbench(args!["run", sys, "--isolate", "--out", csv]);
     assert!(out.status.success(), "{:?}: {err}", out.status);
     let text = std::fs::read_to_string(&csv).unwrap();
     assert!(text.lines().last().unwrap().ends_with(",1"), "{text}");
@@ -83,7 +77,7 @@ fn an_in_process_fmus_stdout_stays_out_of_json() {
     let dir = tb_testkit::scratch("hostile");
     let fmu = hostile_fmu(dir.path(), "STDOUT_JSON");
     let sys = system(dir.path(), &fmu);
-    let (out, err, _) = twinbench(&["run", sys.to_str().unwrap(), "--json"]);
+    let (out, err, _) = twinbench(["run", sys.to_str().unwrap(), "--json"]);
     assert!(out.status.success(), "{err}");
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
         panic!(
@@ -128,7 +122,7 @@ fn a_null_version_is_refused_in_process_and_isolated() {
     );
     let dir = tb_testkit::scratch("hostile");
     let fmu = hostile_fmu(dir.path(), "VERSION_NULL");
-    let (out, err, _) = twinbench(&["run", system(dir.path(), &fmu).to_str().unwrap()]);
+    let (out, err, _) = twinbench(["run", system(dir.path(), &fmu).to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
         err.contains("hostile-VERSION_NULL.fmu: cannot load shared library: binaries/linux64/hostile.so: fmi2GetVersion returned 'NULL'"),
@@ -136,22 +130,41 @@ fn a_null_version_is_refused_in_process_and_isolated() {
     );
 }
 
+/// A segfault or a hang in fmi2GetVersion, and a segfault, a hang or an exit in a step,
+/// isolated: the run ends saying so and the host lives (each case the test it was).
 #[test]
-fn a_segfault_in_fmi2_get_version_leaves_the_host_alive() {
-    let err = run_isolated("VERSION_SEGV");
-    assert!(
-        err.contains("instance 'h' at t = 0 s: fmi2Instantiate in the isolated worker process: the worker process was killed by signal 11 (SIGSEGV: segmentation fault)"),
-        "{err}"
-    );
-}
-
-#[test]
-fn a_hang_in_fmi2_get_version_is_ended_by_the_watchdog() {
-    let err = run_isolated("VERSION_HANG");
-    assert!(
-        err.contains("no answer within 2s (watchdog): the FMU hangs; killed"),
-        "{err}"
-    );
+fn a_crash_or_a_hang_of_an_isolated_fmu_leaves_the_host_alive() {
+    let in_a_step = "a_segfault_a_hang_and_an_exit_in_a_step_leave_the_host_alive";
+    for (case, fault, says) in [
+        (
+            "a_segfault_in_fmi2_get_version_leaves_the_host_alive",
+            "VERSION_SEGV",
+            "instance 'h' at t = 0 s: fmi2Instantiate in the isolated worker process: the worker process was killed by signal 11 (SIGSEGV: segmentation fault)",
+        ),
+        (
+            "a_hang_in_fmi2_get_version_is_ended_by_the_watchdog",
+            "VERSION_HANG",
+            "no answer within 2s (watchdog): the FMU hangs; killed",
+        ),
+        (
+            in_a_step,
+            "STEP_SEGV",
+            "instance 'h' at t = 0.5 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 11",
+        ),
+        (
+            in_a_step,
+            "STEP_HANG",
+            "at t = 0.5 s: fmi2DoStep in the isolated worker process: no answer within 2s (watchdog)",
+        ),
+        (
+            in_a_step,
+            "STEP_EXIT",
+            "at t = 0.5 s: fmi2DoStep in the isolated worker process: the worker process exited with code 3",
+        ),
+    ] {
+        let err = run_isolated(fault);
+        assert!(err.contains(says), "{case} ({fault}): {err}");
+    }
 }
 
 #[test]
@@ -166,25 +179,6 @@ fn exit_in_the_library_load_or_fmi2_get_version_is_a_crash_not_a_success() {
             "{fault}: {err}"
         );
     }
-}
-
-#[test]
-fn a_segfault_a_hang_and_an_exit_in_a_step_leave_the_host_alive() {
-    let err = run_isolated("STEP_SEGV");
-    assert!(
-        err.contains("instance 'h' at t = 0.5 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 11"),
-        "{err}"
-    );
-    let err = run_isolated("STEP_HANG");
-    assert!(
-        err.contains("at t = 0.5 s: fmi2DoStep in the isolated worker process: no answer within 2s (watchdog)"),
-        "{err}"
-    );
-    let err = run_isolated("STEP_EXIT");
-    assert!(
-        err.contains("at t = 0.5 s: fmi2DoStep in the isolated worker process: the worker process exited with code 3"),
-        "{err}"
-    );
 }
 
 #[test]
@@ -207,7 +201,7 @@ fn exit_zero_inside_an_in_process_fmu_is_reported_with_a_failure_code() {
     let fmu = hostile_fmu(dir.path(), "STEP_EXIT");
     let sys = system(dir.path(), &fmu);
     let csv = dir.path().join("out.csv");
-    let (out, err, _) = twinbench(&["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()]);
+    let (out, err, _) = twinbench(args!["run", sys, "--out", csv]);
     assert_eq!(out.status.code(), Some(3), "{err}");
     assert!(
         err.contains("error: the process was ended by a call to exit() before the command finished, from inside an FMU's code"),
@@ -223,7 +217,7 @@ fn info_runs_none_of_the_fmus_code_unless_asked_and_isolates_the_check() {
         let fmu = hostile_fmu(dir.path(), fault);
         let path = fmu.to_str().unwrap();
         // Reading the description runs no code: it works whatever the library does.
-        let (out, err, _) = twinbench(&["info", path]);
+        let (out, err, _) = twinbench(["info", path]);
         assert!(out.status.success(), "{fault}: {err}");
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(
@@ -231,7 +225,7 @@ fn info_runs_none_of_the_fmus_code_unless_asked_and_isolates_the_check() {
             "{text}"
         );
         // The check in a worker: a clear error, exit code 1.
-        let (out, err, _) = twinbench(&["info", "--isolate", path]);
+        let (out, err, _) = twinbench(["info", "--isolate", path]);
         assert_eq!(out.status.code(), Some(1), "{fault}: {err}");
         assert!(
             err.contains("in the isolated worker process"),
@@ -239,18 +233,12 @@ fn info_runs_none_of_the_fmus_code_unless_asked_and_isolates_the_check() {
         );
     }
     let fmu = hostile_fmu(dir.path(), "VERSION_HANG");
-    let (out, err, took) = twinbench(&[
-        "info",
-        "--isolate",
-        "--worker-timeout",
-        "1",
-        fmu.to_str().unwrap(),
-    ]);
+    let (out, err, took) = twinbench(args!["info", "--isolate", "--worker-timeout", "1", fmu]);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("no answer within 1s (watchdog)"), "{err}");
     assert!(took < Duration::from_secs(30), "{took:?}");
     let fmu = hostile_fmu(dir.path(), "NONE");
-    let (out, err, _) = twinbench(&["info", "--isolate", fmu.to_str().unwrap()]);
+    let (out, err, _) = twinbench(["info", "--isolate", fmu.to_str().unwrap()]);
     assert!(out.status.success(), "{err}");
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -316,6 +304,15 @@ fn forged_worker(dir: &Path, name: &str, frames: Frames) -> PathBuf {
     script
 }
 
+/// Why an instance on the forged worker `worker` could not be created.
+fn refused(worker: PathBuf) -> String {
+    factory(worker)
+        .create("forged", false)
+        .err()
+        .unwrap()
+        .to_string()
+}
+
 fn factory(worker: PathBuf) -> IsolatedFactory {
     let fmu = common::load("dyno");
     IsolatedFactory {
@@ -338,11 +335,7 @@ fn forged_frames_are_protocol_errors_not_panics() {
         "huge",
         Frames::new().raw(&[0xff, 0xff, 0xff, 0x7f]),
     );
-    let e = factory(w)
-        .create("forged", false)
-        .err()
-        .unwrap()
-        .to_string();
+    let e = refused(w);
     assert!(
         e.contains("answer of 2147483647 bytes is too large") && e.contains("killed"),
         "{e}"
@@ -353,11 +346,7 @@ fn forged_frames_are_protocol_errors_not_panics() {
         "trailing",
         Frames::new().frame(&answer(0, 0, &[1, 2, 3])),
     );
-    let e = factory(w)
-        .create("forged", false)
-        .err()
-        .unwrap()
-        .to_string();
+    let e = refused(w);
     assert!(e.contains("protocol error (trailing bytes)"), "{e}");
 
     // Instantiated, then each forged answer to a get.
@@ -404,11 +393,7 @@ fn forged_frames_are_protocol_errors_not_panics() {
     // Half a frame, then silence: the watchdog.
     let w = forged_worker(dir.path(), "half", Frames::new().raw(&[13, 0, 0, 0, 0, 0]));
     let started = Instant::now();
-    let e = factory(w)
-        .create("forged", false)
-        .err()
-        .unwrap()
-        .to_string();
+    let e = refused(w);
     assert!(e.contains("no answer within 2s (watchdog)"), "{e}");
     assert!(started.elapsed() < Duration::from_secs(20));
 }

@@ -5,21 +5,8 @@
 
 mod common;
 
+use std::ffi::{OsStr, OsString};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn twinbench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn failure(args: &[&str]) -> String {
-    let o = twinbench(args);
-    assert!(!o.status.success(), "twinbench {args:?} succeeded");
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// The bundled lap's rows, the header replaced by `header` (same columns), the columns
 /// mapped by `row`.
@@ -43,8 +30,11 @@ fn lap_with(dir: &Path, name: &str, header: &str, row: impl Fn(&mut Vec<String>)
 const HEADER: &str =
     "time,distance,v,a_x,a_y,Fz_fl,Fz_fr,Fz_rl,Fz_rr,accel_pedal,brake_pedal,omega_rl,omega_rr";
 
-fn lap_args<'a>(measurement: &'a str, out: &'a str, fmus: &'a str) -> Vec<&'a str> {
-    vec!["lap", measurement, "--out", out, "--fmus", fmus]
+/// `lap MEASUREMENT --out OUT --fmus <the packed FMUs>`, then `extra`.
+fn lap_args(measurement: &Path, out: &Path, extra: &[&OsStr]) -> Vec<OsString> {
+    let fmus = common::fmu_dir();
+    let args = args!["lap", measurement, "--out", out, "--fmus", fmus];
+    args.iter().chain(extra).map(|a| a.to_os_string()).collect()
 }
 
 #[test]
@@ -57,13 +47,7 @@ fn a_loggers_time_column_is_named_with_the_map_entry_that_takes_it() {
         |_| {},
     );
     let out = dir.path().join("lap");
-    let fmus = common::fmu_dir();
-    let args = lap_args(
-        m.to_str().unwrap(),
-        out.to_str().unwrap(),
-        fmus.to_str().unwrap(),
-    );
-    let e = failure(&args);
+    let e = common::fails(lap_args(&m, &out, &[]));
     assert!(e.contains("missing required column `time`"), "{e}");
     assert!(
         e.contains("the column `Time` differs only in case: map it with `time = \"Time\"`"),
@@ -73,10 +57,7 @@ fn a_loggers_time_column_is_named_with_the_map_entry_that_takes_it() {
     // The map entry the message suggests works.
     let map = dir.path().join("map.toml");
     std::fs::write(&map, "[channels]\ntime = \"Time\"\n").unwrap();
-    let mut args = args.clone();
-    args.extend(["--channels", map.to_str().unwrap()]);
-    let o = twinbench(&args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::ok(lap_args(&m, &out, &args!["--channels", map]));
     assert!(out.join("study.toml").is_file());
 }
 
@@ -92,14 +73,8 @@ fn an_unknown_key_in_a_channel_map_is_refused_with_the_keys_a_map_has() {
     let map = dir.path().join("map.toml");
     std::fs::write(&map, "[channels]\nspeed = \"GPS_Speed\"\n").unwrap();
     let out = dir.path().join("lap");
-    let fmus = common::fmu_dir();
-    let mut args = lap_args(
-        m.to_str().unwrap(),
-        out.to_str().unwrap(),
-        fmus.to_str().unwrap(),
-    );
-    args.extend(["--channels", map.to_str().unwrap()]);
-    let e = failure(&args);
+    let args = lap_args(&m, &out, &args!["--channels", map]);
+    let e = common::fails(&args);
     assert!(
         e.contains(&format!(
             "{}: channel map: unknown signal `speed`",
@@ -115,7 +90,7 @@ fn an_unknown_key_in_a_channel_map_is_refused_with_the_keys_a_map_has() {
     assert!(!out.exists(), "a refused lap left {}", out.display());
     // A near miss is named.
     std::fs::write(&map, "[channels]\nFz_lf = \"LoadFL\"\n").unwrap();
-    let e = failure(&args);
+    let e = common::fails(&args);
     assert!(
         e.contains("unknown signal `Fz_lf` (did you mean `Fz_fl`?)"),
         "{e}"
@@ -133,15 +108,10 @@ fn scaled_speed(dir: &Path, name: &str, factor: f64, header: &str) -> PathBuf {
 #[test]
 fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
     let dir = tb_testkit::scratch("first-hour-4-kmh");
-    let fmus = common::fmu_dir();
     let out = dir.path().join("lap");
     // With the distance column: ∫v dt is 3.6 times the distance.
     let m = scaled_speed(dir.path(), "kmh.csv", 3.6, HEADER);
-    let e = failure(&lap_args(
-        m.to_str().unwrap(),
-        out.to_str().unwrap(),
-        fmus.to_str().unwrap(),
-    ));
+    let e = common::fails(lap_args(&m, &out, &[]));
     assert!(
         e.contains(&format!(
             "{}: v has no unit and looks like km/h, not m/s",
@@ -159,11 +129,7 @@ fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
         3600.0 / 1609.344,
         &HEADER.replacen("distance", "odometer", 1),
     );
-    let e = failure(&lap_args(
-        m.to_str().unwrap(),
-        out.to_str().unwrap(),
-        fmus.to_str().unwrap(),
-    ));
+    let e = common::fails(lap_args(&m, &out, &[]));
     assert!(
         e.contains("v has no unit and looks like mph, not m/s"),
         "{e}"
@@ -177,21 +143,12 @@ fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
         1.0,
         &HEADER.replacen("distance", "odometer", 1),
     );
-    let o = twinbench(&lap_args(
-        m.to_str().unwrap(),
-        out.to_str().unwrap(),
-        fmus.to_str().unwrap(),
-    ));
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::ok(lap_args(&m, &out, &[]));
     // A speed 2.7 times its own distance's (no unit it could be in): refused all the same,
     // declared unit or not.
     let m = scaled_speed(dir.path(), "scaled.csv", 2.7, HEADER);
     let out = dir.path().join("scaled");
-    let e = failure(&lap_args(
-        m.to_str().unwrap(),
-        out.to_str().unwrap(),
-        fmus.to_str().unwrap(),
-    ));
+    let e = common::fails(lap_args(&m, &out, &[]));
     assert!(
         e.contains("v is 2.70 times the speed the distance column implies")
             && e.contains("a wrong channel for v"),
@@ -203,16 +160,11 @@ fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
 #[test]
 fn a_refused_lap_keeps_a_folder_the_user_made_and_what_is_in_it() {
     let dir = tb_testkit::scratch("first-hour-4-keep");
-    let fmus = common::fmu_dir();
     let out = dir.path().join("mine");
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("notes.txt"), "mine").unwrap();
     let m = scaled_speed(dir.path(), "kmh.csv", 3.6, HEADER);
-    failure(&lap_args(
-        m.to_str().unwrap(),
-        out.to_str().unwrap(),
-        fmus.to_str().unwrap(),
-    ));
+    common::fails(lap_args(&m, &out, &[]));
     assert_eq!(
         std::fs::read_to_string(out.join("notes.txt")).unwrap(),
         "mine"
@@ -232,12 +184,7 @@ fn an_unknown_unit_is_said_without_a_settings_prefix() {
     let body: Vec<&str> = lines.collect();
     std::fs::write(&m, format!("{header}\n{units}\n{}\n", body.join("\n"))).unwrap();
     let out = dir.path().join("lap");
-    let fmus = common::fmu_dir();
-    let e = failure(&lap_args(
-        m.to_str().unwrap(),
-        out.to_str().unwrap(),
-        fmus.to_str().unwrap(),
-    ));
+    let e = common::fails(lap_args(&m, &out, &[]));
     assert!(
         e.contains(&format!("{}: channel `v`: unknown unit 'kph'", m.display())),
         "{e}"
@@ -247,9 +194,7 @@ fn an_unknown_unit_is_said_without_a_settings_prefix() {
 
 #[test]
 fn info_says_the_default_experiment_in_seconds() {
-    let o = twinbench(&["info", common::fmu("vehicle").to_str().unwrap()]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let text = String::from_utf8_lossy(&o.stdout);
+    let text = common::ok(args!["info", common::fmu("vehicle")]);
     let line = text
         .lines()
         .find(|l| l.starts_with("default experiment: "))
@@ -267,17 +212,8 @@ fn info_says_the_default_experiment_in_seconds() {
 fn an_interrupted_demo_says_how_to_go_on() {
     let dir = tb_testkit::scratch("first-hour-4-demo");
     let d = dir.path();
-    let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["demo", "--out", "dem"])
-        .current_dir(d)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
     let checkpoint = d.join("dem/spielberg.checkpoint.json");
-    tb_testkit::wait_for_file(&checkpoint, 120);
-    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-    let o = child.wait_with_output().unwrap();
+    let o = common::cli::interrupted_in(d, ["demo", "--out", "dem"], &checkpoint);
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{e}");
     assert!(
@@ -286,13 +222,7 @@ fn an_interrupted_demo_says_how_to_go_on() {
         ),
         "{e}"
     );
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["demo", "--resume", "--out", "dem"])
-        .current_dir(d)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = common::ok_in(d, ["demo", "--resume", "--out", "dem"]);
     assert!(text.contains("| Fz_rl |"), "{text}");
     assert!(d.join("dem/table1.md").is_file());
 }

@@ -196,16 +196,10 @@ fn check(model: &str, version: u8) {
     );
     // The same through `twinbench run model.fmu`.
     let csv = dir.path().join("cli.csv");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
-        .arg(&me_only)
-        .args(["--start", "0", "--stop", &stop.to_string()])
-        .args(["--step", &step.to_string()])
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (to, by) = (stop.to_string(), step.to_string());
+    common::run_ok(args![
+        "run", me_only, "--start", "0", "--stop", to, "--step", by, "--out", csv
+    ]);
     let cli = Table::read_path(&csv).unwrap();
     assert!(cli.names().len() > 1 && cli.len() == only.len());
     for name in cli.names().iter().filter(|n| *n != "time") {
@@ -454,38 +448,28 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
         |name| Some(name.to_string()),
     );
     let exp = "[experiment]\nstep = 0.1\nstop = 1\n";
-    let e = run(
-        &system_text(
-            "",
-            &[("m", &cs_only, "interface = \"model-exchange\"")],
-            exp,
-        ),
-        dir.path(),
-        "a",
-    )
-    .unwrap_err();
+    // Instance `m` of `fmu` with `interface` in a system of its own (`tag`): refused, why.
+    let refused = |fmu: &Path, interface: &str, tag: &str| {
+        run(
+            &system_text("", &[("m", fmu, interface)], exp),
+            dir.path(),
+            tag,
+        )
+        .unwrap_err()
+    };
+    let e = refused(&cs_only, "interface = \"model-exchange\"", "a");
     assert!(
         e.contains("instance 'm'")
             && e.contains("interface = \"model-exchange\"")
             && e.contains("Dahlquist_cs.fmu: the FMU has no <ModelExchange> element (it supports co-simulation only)"),
         "{e}"
     );
-    let e = run(
-        &system_text("", &[("m", &me_only, "interface = \"co-simulation\"")], exp),
-        dir.path(),
-        "b",
-    )
-    .unwrap_err();
+    let e = refused(&me_only, "interface = \"co-simulation\"", "b");
     assert!(
         e.contains("Dahlquist_me.fmu: the FMU has no <CoSimulation> element (it supports model-exchange only)"),
         "{e}"
     );
-    let e = run(
-        &system_text("", &[("m", &both, "interface = \"me\"")], exp),
-        dir.path(),
-        "c",
-    )
-    .unwrap_err();
+    let e = refused(&both, "interface = \"me\"", "c");
     assert!(
         e.contains("unknown interface \"me\" (co-simulation, model-exchange)"),
         "{e}"
@@ -598,28 +582,19 @@ fn paths_of_a_model_exchange_instance(version: u8) {
     let sys = dir.path().join("bb.toml");
     std::fs::write(&sys, &text).unwrap();
     let plain = run(&text, dir.path(), "plain").unwrap();
-    let exe = env!("CARGO_BIN_EXE_twinbench");
-    let cli = |args: &[&str]| {
-        let o = std::process::Command::new(exe)
-            .current_dir(dir.path())
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-    };
-    cli(&["export-ssp", "bb.toml", "--out", "bb.ssp"]);
-    cli(&[
-        "run",
-        "bb.ssp",
-        "--out",
-        "from_ssp.csv",
-        "--trace-fmi",
-        "trace.txt",
-    ]);
+    let d = dir.path();
+    common::ok_in(d, ["export-ssp", "bb.toml", "--out", "bb.ssp"]);
+    common::ok_in(
+        d,
+        [
+            "run",
+            "bb.ssp",
+            "--out",
+            "from_ssp.csv",
+            "--trace-fmi",
+            "trace.txt",
+        ],
+    );
     let from_ssp = Table::read_path(dir.path().join("from_ssp.csv")).unwrap();
     for c in ["m.h", "m.v"] {
         assert_eq!(

@@ -4,6 +4,7 @@
 
 mod common;
 
+use common::cli::{failed, succeeded};
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -80,8 +81,7 @@ fn within_a_minute(cmd: &mut Command) -> Output {
 fn m05_a_time_event_in_the_past_is_an_error_not_a_spin() {
     let dir = tb_testkit::scratch("m05");
     let (out, _) = run(dir.path(), 1, 1.0, 2.0);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = failed(out, "the run");
     assert!(
         err.contains("nextEventTime = 0.0 s lies before the current time 1.0 s"),
         "{err}"
@@ -94,23 +94,14 @@ fn m05_a_time_event_in_the_past_is_an_error_not_a_spin() {
 fn m06_an_infinite_next_event_time_is_no_event_and_minus_infinity_an_error() {
     let dir = tb_testkit::scratch("m06");
     let (out, none) = run(dir.path(), 0, 0.0, 2.0);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out, "the run");
     let (out, inf) = run(dir.path(), 2, 0.0, 2.0);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out, "the run");
     let (none, inf) = (none.unwrap(), inf.unwrap());
     assert_eq!(inf, none, "+inf changed the run");
     assert_eq!(inf[2], 1.0, "events: {inf:?}");
     let (out, _) = run(dir.path(), 3, 0.0, 2.0);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = failed(out, "the run");
     assert!(err.contains("nextEventTime = -inf is not a time"), "{err}");
 }
 
@@ -123,11 +114,7 @@ fn m07_a_large_start_time_integrates_as_a_start_at_zero() {
     let exact = (-2.0f64).exp();
     for start in [0.0, 1.7e9, 1e10] {
         let (out, last) = run(dir.path(), 0, start, start + 2.0);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        succeeded(&out, format!("start {start}"));
         let last = last.unwrap();
         assert_eq!(last[0], start + 2.0);
         // The default relative tolerance 1e-4 of the solver, and the time's own resolution
@@ -150,27 +137,19 @@ fn m08_the_time_columns_unit_is_converted_or_refused() {
         let file = dir.path().join(format!("{out}.in.csv"));
         std::fs::write(&file, input).unwrap();
         let csv = dir.path().join(format!("{out}.csv"));
-        let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-            .arg("run")
-            .arg(&fmu)
-            .arg("--input")
-            .arg(&file)
-            .args(["--stop", "1", "--step", "0.25", "--out"])
-            .arg(&csv)
-            .output()
-            .unwrap();
+        let args = args!["run", fmu, "--input", file, "--out", csv];
+        let o = common::twinbench(args.iter().chain(&args!["--stop", "1", "--step", "0.25"]));
         (o, std::fs::read_to_string(&csv).unwrap_or_default())
     };
     // u rises from 0 to 1 over 1000 ms; u_echo shows the input of the step before.
     let (o, ms) = run("time,u\nms,\n0,0\n1000,1\n", "ms");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    succeeded(&o, "in ms");
     let (o, s) = run("time,u\ns,\n0,0\n1,1\n", "s");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    succeeded(&o, "in s");
     assert_eq!(ms, s, "the same input in ms and in s");
     assert!(s.lines().any(|l| l == "0.75,1.75,0.5,3,1"), "{s}");
     let (o, _) = run("time,u\nfurlong,\n0,0\n1000,1\n", "furlong");
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
+    let err = failed(o, "in furlong");
     assert!(
         err.contains("the time column 'time' is in 'furlong', not a unit of time"),
         "{err}"
@@ -185,16 +164,9 @@ fn m17_inputs_near_the_largest_number_interpolate_without_overflow() {
     let file = dir.path().join("huge.in.csv");
     std::fs::write(&file, "time,u\n0,1e308\n1,-1e308\n").unwrap();
     let csv = dir.path().join("huge.csv");
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
-        .arg(common::cfmu::fmu("typed_vr"))
-        .arg("--input")
-        .arg(&file)
-        .args(["--stop", "1", "--step", "0.25", "--set", "gain=0", "--out"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fmu = common::cfmu::fmu("typed_vr");
+    let args = args!["run", fmu, "--input", file, "--out", csv, "--set", "gain=0"];
+    common::run_ok(args.iter().chain(&args!["--stop", "1", "--step", "0.25"]));
     let text = std::fs::read_to_string(&csv).unwrap();
     let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
     let col = header.iter().position(|h| *h == "u_echo").unwrap();
@@ -216,17 +188,15 @@ fn m09_the_incomplete_file_never_replaces_an_input() {
     let input = dir.path().join("r.incomplete.csv");
     let text = "time,u\n0,1\n1,2\n";
     std::fs::write(&input, text).unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
-        .arg(common::cfmu::fmu("typed_vr"))
-        .arg("--input")
-        .arg(&input)
-        .arg("--out")
-        .arg(dir.path().join("r.csv"))
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
+    let fmu = common::cfmu::fmu("typed_vr");
+    let err = common::fails(args![
+        "run",
+        fmu,
+        "--input",
+        input,
+        "--out",
+        dir.path().join("r.csv")
+    ]);
     assert!(
         err.contains("where a failed run would keep its rows"),
         "{err}"
@@ -235,15 +205,8 @@ fn m09_the_incomplete_file_never_replaces_an_input() {
     assert!(!dir.path().join("r.csv").exists());
     // A folder in that place: refused before the run, not a recording silently dropped.
     std::fs::create_dir(dir.path().join("d.incomplete.csv")).unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
-        .arg(common::cfmu::fmu("typed_vr"))
-        .arg("--out")
-        .arg(dir.path().join("d.csv"))
-        .output()
-        .unwrap();
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("d.incomplete.csv"));
+    let err = common::fails(args!["run", fmu, "--out", dir.path().join("d.csv")]);
+    assert!(err.contains("d.incomplete.csv"), "{err}");
 }
 
 /// M12: a Model Exchange FMU with more continuous states than the dense solver takes is
@@ -291,15 +254,8 @@ fn m12_too_many_states_for_the_dense_solver_are_refused_with_the_reason() {
     zip.start_file("binaries/linux64/me_time.so", o).unwrap();
     zip.write_all(&library).unwrap();
     zip.finish().unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
-        .arg(&fmu)
-        .args(["--stop", "0.01", "--out"])
-        .arg(dir.path().join("big.csv"))
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
+    let big = dir.path().join("big.csv");
+    let err = common::fails(args!["run", fmu, "--stop", "0.01", "--out", big]);
     assert!(
         err.contains("5000 continuous states") && err.contains("at most 4000 states"),
         "{err}"
@@ -332,18 +288,11 @@ fn m11_a_hundred_thousand_fmi3_aliases_are_read_and_run_in_linear_time() {
     let deadline =
         |args: &[&str]| within_a_minute(Command::new(env!("CARGO_BIN_EXE_twinbench")).args(args));
     let f = fmu.to_str().unwrap();
-    let out = deadline(&["info", f]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&deadline(&["info", f]), "info");
     let csv = dir.path().join("a.csv");
-    let out = deadline(&["run", f, "--stop", "0.1", "--out", csv.to_str().unwrap()]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeded(
+        &deadline(&["run", f, "--stop", "0.1", "--out", csv.to_str().unwrap()]),
+        "run",
     );
     let header = std::fs::read_to_string(&csv).unwrap();
     let header = header.lines().next().unwrap();
@@ -360,16 +309,12 @@ fn m11_a_hundred_thousand_fmi3_aliases_are_read_and_run_in_linear_time() {
 #[test]
 fn m17_a_nan_derivative_or_event_indicator_is_named_as_the_fmus() {
     let dir = tb_testkit::scratch("m17-nan");
-    let (out, _) = run(dir.path(), 4, 0.0, 2.0);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = failed(run(dir.path(), 4, 0.0, 2.0).0, "mode 4");
     assert!(
         err.contains("since fmi2GetDerivatives returned NaN for der(x) at t = 0.5"),
         "{err}"
     );
-    let (out, _) = run(dir.path(), 5, 0.0, 2.0);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let err = failed(run(dir.path(), 5, 0.0, 2.0).0, "mode 5");
     assert!(
         err.contains("fmi2GetEventIndicators returned NaN for event indicator 1 of 1"),
         "{err}"
@@ -383,15 +328,10 @@ fn m17_a_nan_derivative_or_event_indicator_is_named_as_the_fmus() {
 fn m17_a_single_fmus_instance_prefix_and_a_bad_prune_size() {
     let dir = tb_testkit::scratch("m17-set");
     let csv = dir.path().join("y.csv");
-    let twinbench = || Command::new(env!("CARGO_BIN_EXE_twinbench"));
+    let fmu = common::cfmu::fmu("typed_vr");
     let run = |set: &str| {
-        twinbench()
-            .arg("run")
-            .arg(common::cfmu::fmu("typed_vr"))
-            .args(["--stop", "0.5", "--step", "0.25", "--set", set, "--out"])
-            .arg(&csv)
-            .output()
-            .unwrap()
+        let args = args!["run", fmu, "--stop", "0.5", "--step", "0.25", "--set", set, "--out", csv];
+        common::twinbench(args)
     };
     let last_y = || {
         let text = std::fs::read_to_string(&csv).unwrap();
@@ -409,23 +349,18 @@ fn m17_a_single_fmus_instance_prefix_and_a_bad_prune_size() {
         y
     };
     // y = gain · u + t with gain 2: u = 2 makes y 4 more than u's start 0 does.
-    let o = run("u=2");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    succeeded(&run("u=2"), "u=2");
     let plain = last_y();
     assert!(plain >= 4.0, "{plain}");
-    let o = run("typed_vr.u=2");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    succeeded(&run("typed_vr.u=2"), "typed_vr.u=2");
     assert_eq!(last_y(), plain);
-    let o = run("typed_vr.nothing=3");
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
+    let err = failed(run("typed_vr.nothing=3"), "typed_vr.nothing=3");
     assert!(err.contains("unknown variable"), "{err}");
-    let o = twinbench()
+    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
         .args(["cache", "prune", "--max-size", "5X"])
         .env("TWINBENCH_CACHE", dir.path().join("no-store"))
         .output()
         .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
+    let err = failed(o, "cache prune --max-size 5X");
     assert!(err.contains("--max-size 5X: unknown unit"), "{err}");
 }

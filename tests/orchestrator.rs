@@ -85,30 +85,15 @@ fn results_are_csv_with_a_units_row_written_atomically() {
     std::fs::remove_file(out).unwrap();
 }
 
-fn twinbench_bin() -> PathBuf {
-    PathBuf::from(env!("CARGO_BIN_EXE_twinbench"))
-}
-
 #[test]
 fn run_json_summary_and_info_table() {
     common::fmu_dir();
     let root = twinbench::pack::workspace_root();
     let scratch = tb_testkit::scratch("orch-run");
     let out = scratch.path().join("lap.csv");
-    let o = std::process::Command::new(twinbench_bin())
-        .args([
-            "run",
-            "systems/rls_v.toml",
-            "--json",
-            "--set",
-            "vehicle.c_lift_front=0.9",
-            "--out",
-        ])
-        .arg(&out)
-        .current_dir(&root)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = args!["run", "systems/rls_v.toml", "--json", "--out", out];
+    let set = args!["--set", "vehicle.c_lift_front=0.9"];
+    let o = common::run_ok_in(&root, run.iter().chain(&set));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     for key in ["steps", "simulated_time", "wall_time", "lap_time"] {
         assert!(j[key].is_number(), "{key} missing in {j}");
@@ -117,16 +102,15 @@ fn run_json_summary_and_info_table() {
     assert!(out.exists());
     std::fs::remove_file(&out).unwrap();
     // A bad --set names the variable.
-    let o = std::process::Command::new(twinbench_bin())
-        .args([
+    let o = common::twinbench_in(
+        &root,
+        [
             "run",
             "systems/rls_v.toml",
             "--set",
             "vehicle.c_lift_frnt=0.9",
-        ])
-        .current_dir(&root)
-        .output()
-        .unwrap();
+        ],
+    );
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
@@ -134,11 +118,7 @@ fn run_json_summary_and_info_table() {
         "{err}"
     );
     // info lists variables with units.
-    let o = std::process::Command::new(twinbench_bin())
-        .args(["info", "target/fmu/vehicle.fmu"])
-        .current_dir(&root)
-        .output()
-        .unwrap();
+    let o = common::twinbench_in(&root, ["info", "target/fmu/vehicle.fmu"]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success());
     assert!(

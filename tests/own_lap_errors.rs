@@ -5,24 +5,12 @@
 
 mod common;
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
-}
-
-fn twinbench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn failure(args: &[&str]) -> String {
-    let o = twinbench(args);
-    assert!(!o.status.success(), "twinbench {args:?} succeeded");
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// The bundled bench with some parameters added, written beside `dir`'s files.
@@ -47,7 +35,7 @@ fn a_malformed_track_file_fails_initialisation_naming_the_users_path_row_and_col
     .unwrap();
     // A relative path in the system file is relative to the system file.
     let sys = bench_with(dir.path(), "\"vehicle.track_file\" = \"my_track.csv\"");
-    let e = failure(&["run", sys.to_str().unwrap()]);
+    let e = common::fails(args!["run", sys]);
     let user_path = dir.path().join("my_track.csv").display().to_string();
     assert!(e.contains("fmi2ExitInitializationMode"), "{e}");
     assert!(
@@ -71,7 +59,7 @@ fn a_track_and_a_target_of_different_laps_are_refused_before_the_first_step() {
     }
     std::fs::write(dir.path().join("short.csv"), target).unwrap();
     let sys = bench_with(dir.path(), "\"driver.target_speed_file\" = \"short.csv\"");
-    let e = failure(&["run", sys.to_str().unwrap()]);
+    let e = common::fails(args!["run", sys]);
     assert!(e.contains("check failed after initialisation"), "{e}");
     assert!(
         e.contains("vehicle.lap_length") && e.contains("driver.lap_length"),
@@ -87,14 +75,7 @@ fn a_missing_channel_and_an_unknown_unit_name_the_file_and_the_channel() {
     std::fs::write(&map, "[channels]\nv = \"GPS_Speed\"\n").unwrap();
     let meas = root().join("data/spielberg_lap.csv");
     let out = dir.path().join("lap");
-    let e = failure(&[
-        "lap",
-        meas.to_str().unwrap(),
-        "--channels",
-        map.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let e = common::fails(args!["lap", meas, "--channels", map, "--out", out]);
     assert!(e.contains("spielberg_lap.csv"), "{e}");
     assert!(
         e.contains("no channel `GPS_Speed` (the channel map's name for signal `v`)"),
@@ -118,7 +99,7 @@ fn a_missing_channel_and_an_unknown_unit_name_the_file_and_the_channel() {
         ),
     )
     .unwrap();
-    let e = failure(&["lap", odd.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let e = common::fails(args!["lap", odd, "--out", out]);
     assert!(
         e.contains("odd_units.csv") && e.contains("channel `v`"),
         "{e}"
@@ -164,16 +145,17 @@ fn errors_about_mapped_channels_name_the_files_own_channels() {
     )
     .unwrap();
     let track = root().join("data/spielberg_lap_track.csv");
+    let out = dir.path().join("lap");
     let lap = |meas: &Path| {
-        failure(&[
+        common::fails(args![
             "lap",
-            meas.to_str().unwrap(),
+            meas,
             "--channels",
-            map.to_str().unwrap(),
+            map,
             "--track",
-            track.to_str().unwrap(),
+            track,
             "--out",
-            dir.path().join("lap").to_str().unwrap(),
+            out
         ])
     };
     // A missing channel: the closest and the list are the file's channels, not the
@@ -242,14 +224,14 @@ fn a_measurement_of_another_circuit_is_refused_before_optimising() {
     let study_p = dir.path().join("study.toml");
     std::fs::write(&study_p, study).unwrap();
     let out = dir.path().join("out");
-    let e = failure(&[
+    let e = common::fails(args![
         "optimize",
-        study_p.to_str().unwrap(),
+        study_p,
         "--out",
-        out.to_str().unwrap(),
+        out,
         "--generations",
         "1",
-        "--no-report",
+        "--no-report"
     ]);
     assert!(e.contains("do not belong together"), "{e}");
     assert!(e.contains("lap length") && e.contains("(measured)"), "{e}");
@@ -277,8 +259,7 @@ fn fmpy_sets_the_track_file_and_reads_the_same_lap_length_as_twinbench() {
     )
     .unwrap();
     let csv = dir.path().join("tb.csv");
-    let o = twinbench(&["run", sys.to_str().unwrap(), "--out", csv.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::ok(args!["run", sys, "--out", csv]);
     let tb = tb_table::Table::read_path(&csv).unwrap();
     let ours = *tb.require("vehicle.lap_length").unwrap().last().unwrap();
     assert_eq!(ours, 1234.0);
@@ -364,20 +345,10 @@ fn wheel_loads_in_kn_dan_or_lbf_without_their_unit_are_refused_naming_it() {
         p
     };
     let track = root().join("data/spielberg_lap_track.csv");
-    let lap = |meas: &Path, out: &str, extra: &[&str]| {
-        let mut args = vec![
-            "lap",
-            meas.to_str().unwrap(),
-            "--track",
-            track.to_str().unwrap(),
-            "--out",
-        ];
+    let lap = |meas: &Path, out: &str, extra: &[&OsStr]| {
         let out = d.join(out);
-        let out_s = out.to_str().unwrap().to_string();
-        args.push(&out_s);
-        args.extend_from_slice(extra);
-        let o = twinbench(&args);
-        (o, out)
+        let args = args!["lap", meas, "--track", track, "--out", out];
+        (common::twinbench(args.iter().chain(extra)), out)
     };
     for (unit, factor) in [("kN", 1000.0), ("daN", 10.0), ("lbf", 4.448_221_615_260_5)] {
         let meas = write(&format!("lap_{unit}.csv"), factor, &[], None);
@@ -410,7 +381,7 @@ fn wheel_loads_in_kn_dan_or_lbf_without_their_unit_are_refused_naming_it() {
         "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\n",
     )
     .unwrap();
-    let (o, _) = lap(&meas, "logger", &["--channels", map.to_str().unwrap()]);
+    let (o, _) = lap(&meas, "logger", &args!["--channels", map]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
     assert!(

@@ -7,16 +7,9 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// `twinbench run SYSTEM --out OUT`.
 fn run_out(system: &Path, out: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args([
-            "run",
-            system.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap()
+    common::twinbench(args!["run", system, "--out", out])
 }
 
 /// A one-second system of the test FMU (quick), written in `dir`.
@@ -173,11 +166,7 @@ fn a_failed_run_keeps_what_it_recorded_in_a_file_named_incomplete() {
     let out = dir.path().join("r.csv");
     // A complete result from an earlier run stays where it is.
     std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["run", sys.to_str().unwrap(), "--out", out.to_str().unwrap()])
-        .arg("--json")
-        .output()
-        .unwrap();
+    let o = common::twinbench(args!["run", sys, "--out", out, "--json"]);
     assert!(!o.status.success(), "the step error is an error");
     let e = String::from_utf8_lossy(&o.stderr);
     let partial = dir.path().join("r.incomplete.csv");

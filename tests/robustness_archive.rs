@@ -45,6 +45,16 @@ fn build(
     w.finish().unwrap().into_inner()
 }
 
+/// The test FMU's archive with what `extra` adds is refused (default limits), saying `says`.
+fn refused_with(
+    name: &str,
+    says: &str,
+    extra: impl FnOnce(&mut zip::ZipWriter<std::io::Cursor<Vec<u8>>>),
+) {
+    let e = default_refused(name, &build(&base_entries(), extra));
+    assert!(e.contains(says), "{name}: {e}");
+}
+
 /// The base entries with one replaced (or removed with `None`).
 fn with_entry(name: &str, data: Option<Vec<u8>>) -> Vec<(String, Vec<u8>)> {
     let mut e: Vec<_> = base_entries().into_iter().filter(|e| e.0 != name).collect();
@@ -130,6 +140,16 @@ fn default_refused(name: &str, bytes: &[u8]) -> String {
     Scratch::new().refused(name, bytes, Limits::default())
 }
 
+/// [`default_refused`] of the archive of `entries`.
+fn refused_entries(name: &str, entries: &[(String, Vec<u8>)]) -> String {
+    default_refused(name, &build(entries, |_| {}))
+}
+
+/// The test FMU's archive with `md` as its modelDescription.xml.
+fn with_description(md: impl Into<Vec<u8>>) -> Vec<u8> {
+    build(&with_entry("modelDescription.xml", Some(md.into())), |_| {})
+}
+
 #[test]
 fn the_rebuilt_base_archive_loads() {
     // The control: the same construction without a hostile entry is accepted.
@@ -180,34 +200,22 @@ fn absolute_entry_paths_are_refused() {
 
 #[test]
 fn symbolic_links_are_refused() {
-    let bytes = build(&base_entries(), |w| {
-        w.add_symlink(
-            "resources/passwd",
-            "/etc/passwd",
-            SimpleFileOptions::default(),
-        )
-        .unwrap();
+    let says = "entry 'resources/passwd' is a symbolic link";
+    refused_with("symlink.fmu", says, |w| {
+        let o = SimpleFileOptions::default();
+        w.add_symlink("resources/passwd", "/etc/passwd", o).unwrap();
     });
-    let e = default_refused("symlink.fmu", &bytes);
-    assert!(
-        e.contains("entry 'resources/passwd' is a symbolic link"),
-        "{e}"
-    );
 }
 
 #[test]
 fn too_many_entries_are_refused() {
-    let bytes = build(&base_entries(), |w| {
+    let says = "10003 entries, more than the limit of 10000";
+    refused_with("many.fmu", says, |w| {
         let opt = SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
         for i in 0..tb_fmi::import::archive::MAX_ENTRIES {
             w.start_file(format!("resources/{i}"), opt).unwrap();
         }
     });
-    let e = default_refused("many.fmu", &bytes);
-    assert!(
-        e.contains("10003 entries, more than the limit of 10000"),
-        "{e}"
-    );
 }
 
 /// Overwrite the declared uncompressed size of `name` in the central directory and the
@@ -273,9 +281,9 @@ fn a_lying_declared_size_is_caught_while_extracting_and_nothing_stays() {
 
 #[test]
 fn a_missing_linux64_binary_is_refused() {
-    let e = default_refused(
+    let e = refused_entries(
         "nobinary.fmu",
-        &build(&with_entry("binaries/linux64/faulty.so", None), |_| {}),
+        &with_entry("binaries/linux64/faulty.so", None),
     );
     assert!(
         e.contains("no binaries/linux64/faulty.so (the FMU has no binary for this platform; it has no binaries at all)"),
@@ -284,14 +292,14 @@ fn a_missing_linux64_binary_is_refused() {
     // Only a Windows binary.
     let mut entries = with_entry("binaries/linux64/faulty.so", None);
     entries.push(("binaries/win64/faulty.dll".into(), b"MZ".to_vec()));
-    let e = default_refused("win64only.fmu", &build(&entries, |_| {}));
+    let e = refused_entries("win64only.fmu", &entries);
     assert!(
         e.contains("no binaries/linux64/faulty.so") && e.contains("it has binaries for win64"),
         "{e}"
     );
     // An empty linux64 folder beside a Windows binary: empty, not a binary for linux64.
     entries.push(("binaries/linux64/".into(), Vec::new()));
-    let e = default_refused("emptylinux.fmu", &build(&entries, |_| {}));
+    let e = refused_entries("emptylinux.fmu", &entries);
     assert!(
         e.contains("no binaries/linux64/faulty.so (the folder binaries/linux64/ is empty (the FMU has binaries for win64))"),
         "{e}"
@@ -299,7 +307,7 @@ fn a_missing_linux64_binary_is_refused() {
     // A library of another name there.
     let mut entries = with_entry("binaries/linux64/faulty.so", None);
     entries.push(("binaries/linux64/Faulty.so".into(), b"\x7fELF".to_vec()));
-    let e = default_refused("othername.fmu", &build(&entries, |_| {}));
+    let e = refused_entries("othername.fmu", &entries);
     assert!(
         e.contains("binaries/linux64/ holds Faulty.so but not the library its modelIdentifier \"faulty\" names"),
         "{e}"
@@ -308,10 +316,7 @@ fn a_missing_linux64_binary_is_refused() {
 
 #[test]
 fn a_missing_model_description_is_refused() {
-    let e = default_refused(
-        "nomd.fmu",
-        &build(&with_entry("modelDescription.xml", None), |_| {}),
-    );
+    let e = refused_entries("nomd.fmu", &with_entry("modelDescription.xml", None));
     assert!(
         e.contains("no modelDescription.xml at the archive's root"),
         "{e}"
@@ -322,7 +327,7 @@ fn a_missing_model_description_is_refused() {
         "sources/modelDescription.xml".into(),
         model_description().into_bytes(),
     ));
-    let e = default_refused("nestedmd.fmu", &build(&entries, |_| {}));
+    let e = refused_entries("nestedmd.fmu", &entries);
     assert!(e.contains("no modelDescription.xml"), "{e}");
 }
 
@@ -331,10 +336,7 @@ fn a_non_utf8_model_description_is_refused() {
     let mut md = model_description().into_bytes();
     let at = md.len() / 2;
     md.splice(at..at, [0xFF, 0xFE]);
-    let e = default_refused(
-        "latin.fmu",
-        &build(&with_entry("modelDescription.xml", Some(md)), |_| {}),
-    );
+    let e = default_refused("latin.fmu", &with_description(md));
     assert!(e.contains("modelDescription.xml is not UTF-8 (byte"), "{e}");
 }
 
@@ -344,13 +346,7 @@ fn fmi_1_is_refused_with_its_version_and_3_0_is_read_as_3_0() {
     {
         let v = "1.0";
         let md = md2.replace("fmiVersion=\"2.0\"", &format!("fmiVersion=\"{v}\""));
-        let e = default_refused(
-            &format!("fmi{v}.fmu"),
-            &build(
-                &with_entry("modelDescription.xml", Some(md.into_bytes())),
-                |_| {},
-            ),
-        );
+        let e = default_refused(&format!("fmi{v}.fmu"), &with_description(md));
         assert!(
             e.contains(&format!(
                 "fmiVersion is \"{v}\"; twinbench runs FMI 2.0 and 3.0 FMUs"
@@ -365,13 +361,7 @@ fn fmi_1_is_refused_with_its_version_and_3_0_is_read_as_3_0() {
   <ModelVariables><Float64 name="y" valueReference="1" causality="output"/></ModelVariables>
   <ModelStructure><Output valueReference="1"/></ModelStructure>
 </fmiModelDescription>"#;
-    let e = default_refused(
-        "fmi3.fmu",
-        &build(
-            &with_entry("modelDescription.xml", Some(md3.as_bytes().to_vec())),
-            |_| {},
-        ),
-    );
+    let e = default_refused("fmi3.fmu", &with_description(md3));
     // Read as FMI 3.0: its library is looked for in the 3.0 platform folder.
     assert!(
         e.contains("no binaries/x86_64-linux/faulty.so") && e.contains("binaries for linux64"),
@@ -379,13 +369,7 @@ fn fmi_1_is_refused_with_its_version_and_3_0_is_read_as_3_0() {
     );
     // An FMI 2.0 description that only claims 3.0: its variables are not 3.0 elements.
     let claimed = md2.replace("fmiVersion=\"2.0\"", "fmiVersion=\"3.0\"");
-    let e = default_refused(
-        "claims3.fmu",
-        &build(
-            &with_entry("modelDescription.xml", Some(claimed.into_bytes())),
-            |_| {},
-        ),
-    );
+    let e = default_refused("claims3.fmu", &with_description(claimed));
     assert!(
         e.contains("<ScalarVariable> is not an FMI 3.0 variable element"),
         "{e}"
@@ -396,13 +380,7 @@ fn fmi_1_is_refused_with_its_version_and_3_0_is_read_as_3_0() {
   <ModelVariables><ScalarVariable name="y" valueReference="1"><Real/></ScalarVariable></ModelVariables>
   <Implementation><CoSimulation_StandAlone><Capabilities/></CoSimulation_StandAlone></Implementation>
 </fmiModelDescription>"#;
-    let e = default_refused(
-        "fmi1.fmu",
-        &build(
-            &with_entry("modelDescription.xml", Some(md1.as_bytes().to_vec())),
-            |_| {},
-        ),
-    );
+    let e = default_refused("fmi1.fmu", &with_description(md1));
     assert!(e.contains("fmiVersion is \"1.0\""), "{e}");
 }
 
@@ -414,14 +392,7 @@ fn an_fmi2_model_exchange_only_fmu_loads_and_a_library_without_its_functions_is_
     let md = model_description().replace("CoSimulation", "ModelExchange");
     let s = Scratch::new();
     let fmu = s.dir.path().join("me.fmu");
-    std::fs::write(
-        &fmu,
-        build(
-            &with_entry("modelDescription.xml", Some(md.into_bytes())),
-            |_| {},
-        ),
-    )
-    .unwrap();
+    std::fs::write(&fmu, with_description(md)).unwrap();
     let cache = FmuCache::persistent(&s.cache_dir()).unwrap();
     let l = cache.load(&fmu).unwrap();
     assert_eq!(l.default_interface(), tb_fmi::Interface::ModelExchange);
@@ -453,7 +424,7 @@ fn a_model_identifier_that_is_a_path_is_refused() {
         );
         let mut entries = with_entry("modelDescription.xml", Some(md.into_bytes()));
         entries.push((format!("binaries/linux64/{id}.so"), b"x".to_vec()));
-        let e = default_refused("id.fmu", &build(&entries, |_| {}));
+        let e = refused_entries("id.fmu", &entries);
         assert!(
             e.contains(&format!(
                 "modelIdentifier \"{id}\" is not a valid C identifier"
@@ -500,10 +471,7 @@ fn a_model_description_over_64_mib_is_an_error_not_cut() {
         &format!("<ModelVariables>{}", " ".repeat(64 << 20)),
         1,
     );
-    let bytes = build(
-        &with_entry("modelDescription.xml", Some(padded.into_bytes())),
-        |_| {},
-    );
+    let bytes = with_description(padded);
     let err = default_refused("huge_md.fmu", &bytes);
     assert!(
         err.contains("modelDescription.xml is larger than 64 MiB"),

@@ -104,15 +104,11 @@ fn every_broken_study_file_gives_its_message() {
     });
 }
 
-fn cli(args: &[&str]) -> (Option<i32>, String) {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+/// `twinbench ARGS`: its exit code and stderr.
+fn cli<S: AsRef<std::ffi::OsStr>>(args: impl IntoIterator<Item = S>) -> (Option<i32>, String) {
+    let out = common::twinbench(args);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out.status.code(), err)
 }
 
 #[test]
@@ -121,7 +117,7 @@ fn the_command_line_exits_with_1_and_the_message_on_stderr() {
     let root = twinbench::pack::workspace_root().join("tests/bad_files");
     for case in ["systems/unknown_variable.toml", "systems/toml_syntax.toml"] {
         let p = root.join(case);
-        let (code, err) = cli(&["run", p.to_str().unwrap()]);
+        let (code, err) = cli(["run", p.to_str().unwrap()]);
         assert_eq!(code, Some(1), "{case}: {err}");
         assert!(err.starts_with("error: "), "{err}");
         for w in expected(&p) {
@@ -131,13 +127,7 @@ fn the_command_line_exits_with_1_and_the_message_on_stderr() {
     // A broken measurement given to `compare` (the simulation side is a valid file).
     let meas = twinbench::pack::workspace_root().join("data/spielberg_lap.csv");
     let bad = root.join("measurements/distance_backwards.csv");
-    let (code, err) = cli(&[
-        "compare",
-        meas.to_str().unwrap(),
-        bad.to_str().unwrap(),
-        "--signals",
-        "v",
-    ]);
+    let (code, err) = cli(args!["compare", meas, bad, "--signals", "v"]);
     assert_eq!(code, Some(1), "{err}");
     for w in expected(&bad) {
         assert!(err.contains(&w), "{w:?} not in {err}");
@@ -195,7 +185,7 @@ fn numbers_on_the_command_line_are_checked_for_range() {
 fn an_fmu_error_is_printed_once() {
     common::fmu_dir();
     let p = twinbench::pack::workspace_root().join("tests/bad_files/systems/missing_fmu_file.toml");
-    let (code, err) = cli(&["run", p.to_str().unwrap()]);
+    let (code, err) = cli(["run", p.to_str().unwrap()]);
     assert_eq!(code, Some(1), "{err}");
     assert_eq!(
         err.matches("vehicle_v2.fmu does not exist").count(),

@@ -78,44 +78,44 @@ fn in_process() -> LoadOptions {
     options(false, Duration::from_secs(10))
 }
 
+/// An error, a discard, a fatal error and a panic in a step stop the run with the
+/// instance, the time, the step's status and the reason (each case the test it was).
 #[test]
-fn an_error_stops_the_run_naming_instance_time_and_reason() {
-    let (e, s) = run_err(1, &in_process());
-    assert!(matches!(e, SystemError::Fmu(_)), "{s}");
-    assert!(
-        s.contains("instance 'supplier' at t = 1 s: fmi2DoStep returned fmi2Error"),
-        "{s}"
-    );
-    assert!(
-        s.contains("fault_kind = 1: the step fails on purpose"),
-        "{s}"
-    );
-}
-
-#[test]
-fn a_discard_stops_the_run_naming_instance_time_and_reason() {
-    let (_, s) = run_err(7, &in_process());
-    assert!(
-        s.contains("instance 'supplier' at t = 1 s: fmi2DoStep returned fmi2Discard"),
-        "{s}"
-    );
-    assert!(
-        s.contains("fault_kind = 7: the step is discarded on purpose"),
-        "{s}"
-    );
-}
-
-#[test]
-fn a_fatal_error_stops_the_run_naming_instance_time_and_reason() {
-    let (_, s) = run_err(8, &in_process());
-    assert!(
-        s.contains("instance 'supplier' at t = 1 s: fmi2DoStep returned fmi2Fatal"),
-        "{s}"
-    );
-    assert!(
-        s.contains("fault_kind = 8: a fatal error on purpose"),
-        "{s}"
-    );
+fn a_failed_step_stops_the_run_naming_instance_time_and_reason() {
+    for (case, kind, status, why) in [
+        (
+            "an_error_stops_the_run_naming_instance_time_and_reason",
+            1,
+            "fmi2Error",
+            "fault_kind = 1: the step fails on purpose",
+        ),
+        (
+            "a_discard_stops_the_run_naming_instance_time_and_reason",
+            7,
+            "fmi2Discard",
+            "fault_kind = 7: the step is discarded on purpose",
+        ),
+        (
+            "a_fatal_error_stops_the_run_naming_instance_time_and_reason",
+            8,
+            "fmi2Fatal",
+            "fault_kind = 8: a fatal error on purpose",
+        ),
+        (
+            "a_panic_is_caught_by_the_fmu_and_stops_the_run",
+            2,
+            "fmi2Error",
+            "the model panicked: fault_kind = 2: the model panics on purpose",
+        ),
+    ] {
+        let (e, s) = run_err(kind, &in_process());
+        if kind == 1 {
+            assert!(matches!(e, SystemError::Fmu(_)), "{case}: {s}");
+        }
+        let failed = format!("instance 'supplier' at t = 1 s: fmi2DoStep returned {status}");
+        assert!(s.contains(&failed), "{case}: {s}");
+        assert!(s.contains(why), "{case}: {s}");
+    }
 }
 
 #[test]
@@ -126,19 +126,6 @@ fn a_nan_output_stops_the_run_naming_instance_time_and_signal() {
         s.contains(
             "supplier.y is not finite (NaN) at t = 1.01 s after the step of instance 'supplier'"
         ),
-        "{s}"
-    );
-}
-
-#[test]
-fn a_panic_is_caught_by_the_fmu_and_stops_the_run() {
-    let (_, s) = run_err(2, &in_process());
-    assert!(
-        s.contains("instance 'supplier' at t = 1 s: fmi2DoStep returned fmi2Error"),
-        "{s}"
-    );
-    assert!(
-        s.contains("the model panicked: fault_kind = 2: the model panics on purpose"),
         "{s}"
     );
 }
@@ -289,20 +276,13 @@ fn a_hang_in_an_isolated_fmu_is_ended_by_the_watchdog() {
 
 // ---- the command line ----
 
-fn cli(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
 #[test]
 fn twinbench_run_isolate_survives_an_abort_and_a_hang() {
     let _serial = serial();
     let dir = tempfile::tempdir().unwrap();
     let sys = dir.path().join("abort.toml");
     std::fs::write(&sys, system_text(4, false)).unwrap();
-    let out = cli(&["run", sys.to_str().unwrap(), "--isolate"]);
+    let out = common::twinbench(["run", sys.to_str().unwrap(), "--isolate"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
@@ -311,13 +291,13 @@ fn twinbench_run_isolate_survives_an_abort_and_a_hang() {
     );
     // Per instance in the system file, with a short watchdog from the command line.
     std::fs::write(&sys, system_text(5, true)).unwrap();
-    let out = cli(&["run", sys.to_str().unwrap(), "--worker-timeout", "1"]);
+    let out = common::twinbench(["run", sys.to_str().unwrap(), "--worker-timeout", "1"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("no answer within 1s (watchdog)"), "{err}");
     // An error in-process is a clean stop too, with exit code 1.
     std::fs::write(&sys, system_text(7, false)).unwrap();
-    let out = cli(&["run", sys.to_str().unwrap()]);
+    let out = common::twinbench(["run", sys.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("fmi2DoStep returned fmi2Discard"), "{err}");

@@ -5,24 +5,17 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
 }
 
-fn twinbench_in(cwd: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .unwrap()
-}
-
-fn failure_in(cwd: &Path, args: &[&str]) -> String {
-    let o = twinbench_in(cwd, args);
-    assert!(!o.status.success(), "twinbench {args:?} succeeded");
-    String::from_utf8_lossy(&o.stderr).into_owned()
+/// `twinbench lap` of the bundled lap and its track, into `lap/` in `d`.
+fn bundled_lap(d: &Path) {
+    let meas = root().join("data/spielberg_lap.csv");
+    let track = root().join("data/spielberg_lap_track.csv");
+    common::ok_in(d, args!["lap", meas, "--track", track, "--out", "lap"]);
 }
 
 /// A measurement CSV of `rows` samples at 100 Hz: distance and speed from `sample(k)`.
@@ -104,7 +97,7 @@ fn n07_an_infinite_step_count_is_refused() {
     ] {
         let p = dir.path().join("sys.toml");
         std::fs::write(&p, text.replace(what, edit)).unwrap();
-        let e = failure_in(dir.path(), &["run", "sys.toml"]);
+        let e = common::fails_in(dir.path(), ["run", "sys.toml"]);
         assert!(e.contains("macro steps, more than 1e12"), "{edit}: {e}");
     }
 }
@@ -115,7 +108,7 @@ fn n16_n29_lap_refuses_a_standing_measurement_and_absurd_speeds() {
     let dir = tb_testkit::scratch("n16");
     let d = dir.path();
     measurement(&d.join("standing.csv"), 200, |_| (0.0, 0.0));
-    let e = failure_in(d, &["lap", "standing.csv", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "standing.csv", "--out", "x"]);
     assert!(
         e.contains("the car covers 0.0 m in 2.0 s: not a lap"),
         "{e}"
@@ -124,11 +117,11 @@ fn n16_n29_lap_refuses_a_standing_measurement_and_absurd_speeds() {
     measurement(&d.join("huge.csv"), 1000, |k| {
         (k as f64 * 0.5, if k == 50 { 1e308 } else { 50.0 })
     });
-    let e = failure_in(d, &["lap", "huge.csv", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "huge.csv", "--out", "x"]);
     assert!(e.contains("sample 51 (t = 0.5 s) has v = 1e308 m/s"), "{e}");
     // A lap of a metre.
     measurement(&d.join("metre.csv"), 100, |k| (k as f64 * 0.01, 1.0));
-    let e = failure_in(d, &["lap", "metre.csv", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "metre.csv", "--out", "x"]);
     assert!(e.contains("not a lap (at least 100 m"), "{e}");
 }
 
@@ -171,7 +164,7 @@ fn n20_fifos_and_devices_are_refused_as_every_kind_of_input() {
             vec!["modal", bad],
         ] {
             // A FIFO without a writer: every read must be refused at once, not wait.
-            let e = failure_in(d, &args);
+            let e = common::fails_in(d, &args);
             assert!(
                 e.contains(&format!("is {kind}, not a regular file")),
                 "{args:?}: {e}"
@@ -179,10 +172,10 @@ fn n20_fifos_and_devices_are_refused_as_every_kind_of_input() {
         }
     }
     // An MDF 4 measurement: the same.
-    let e = failure_in(d, &["lap", "/dev/zero", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "/dev/zero", "--out", "x"]);
     assert!(e.contains("is a device"), "{e}");
     std::os::unix::fs::symlink("/dev/zero", d.join("zero.mf4")).unwrap();
-    let e = failure_in(d, &["lap", "zero.mf4", "--out", "x"]);
+    let e = common::fails_in(d, ["lap", "zero.mf4", "--out", "x"]);
     assert!(e.contains("is a device, not a regular file"), "{e}");
 }
 
@@ -288,7 +281,7 @@ fn n09_an_unwritable_output_folder_is_refused_before_the_run() {
     std::fs::write(d.join("sys.toml"), text).unwrap();
     // /proc takes no files, whoever we are (a read-only folder does not stop root).
     let started = std::time::Instant::now();
-    let e = failure_in(d, &["run", "sys.toml", "--out", "/proc/twinbench/lap.csv"]);
+    let e = common::fails_in(d, ["run", "sys.toml", "--out", "/proc/twinbench/lap.csv"]);
     assert!(e.contains("cannot write into /proc"), "{e}");
     assert!(e.contains("(checked before the run)"), "{e}");
     assert!(!e.contains("steps"), "no run happened: {e}");
@@ -330,14 +323,10 @@ fn n13_an_edited_checkpoint_is_refused_whatever_was_edited() {
         if resume {
             args.push("--resume");
         }
-        twinbench_in(d, &args)
+        common::twinbench_in(d, &args)
     };
     let first = run(false);
-    assert!(
-        first.status.success(),
-        "{}",
-        String::from_utf8_lossy(&first.stderr)
-    );
+    common::cli::assert_success(&first);
     let path = d.join("o/spielberg.checkpoint.json");
     let text = std::fs::read_to_string(&path).unwrap();
     assert!(
@@ -394,24 +383,7 @@ fn n13_an_edited_checkpoint_is_refused_whatever_was_edited() {
 fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
     let dir = tb_testkit::scratch("n04");
     let d = dir.path();
-    let meas = root().join("data/spielberg_lap.csv");
-    let track = root().join("data/spielberg_lap_track.csv");
-    let lap = twinbench_in(
-        d,
-        &[
-            "lap",
-            meas.to_str().unwrap(),
-            "--track",
-            track.to_str().unwrap(),
-            "--out",
-            "lap",
-        ],
-    );
-    assert!(
-        lap.status.success(),
-        "{}",
-        String::from_utf8_lossy(&lap.stderr)
-    );
+    bundled_lap(d);
     let fifo = d.join("fifo");
     let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
     assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
@@ -420,7 +392,7 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
         (fifo.to_str().unwrap(), "is a FIFO, not a regular file"),
     ] {
         let set = format!("vehicle.track_file={file}");
-        let e = failure_in(d, &["run", "lap/system.toml", "--set", &set]);
+        let e = common::fails_in(d, ["run", "lap/system.toml", "--set", &set]);
         assert!(e.contains(expected), "{file}: {e}");
     }
     // A file whose first line is long and holds terminal escapes: a short excerpt, escaped.
@@ -431,7 +403,7 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
     )
     .unwrap();
     let set = format!("driver.target_speed_file={}", secret.display());
-    let e = failure_in(d, &["run", "lap/system.toml", "--set", &set]);
+    let e = common::fails_in(d, ["run", "lap/system.toml", "--set", &set]);
     assert!(e.contains("no column"), "{e}");
     assert!(
         e.len() < 2000,
@@ -441,18 +413,8 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
     assert!(!e.contains('\u{1b}'), "{e}");
     // An SSP package: its path parameters are packed inside it, and one that climbs out
     // (or is absolute) is refused.
-    let export = twinbench_in(d, &["export-ssp", "lap/system.toml", "-o", "lap.ssp"]);
-    assert!(
-        export.status.success(),
-        "{}",
-        String::from_utf8_lossy(&export.stderr)
-    );
-    let run = twinbench_in(d, &["run", "lap.ssp"]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    common::ok_in(d, ["export-ssp", "lap/system.toml", "-o", "lap.ssp"]);
+    common::ok_in(d, ["run", "lap.ssp"]);
     let ssd = {
         let f = std::fs::File::open(d.join("lap.ssp")).unwrap();
         let mut z = zip::ZipArchive::new(f).unwrap();
@@ -487,7 +449,7 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
             }
         }
         w.finish().unwrap();
-        let e = failure_in(d, &["run", "evil.ssp"]);
+        let e = common::fails_in(d, ["run", "evil.ssp"]);
         assert!(
             e.contains("a path an SSP package sets must name a file inside the package"),
             "{escape}: {e}"
@@ -501,24 +463,7 @@ fn n04_path_parameters_read_regular_files_inside_a_package_and_echo_little() {
 fn n29_degenerate_tracks_and_targets_are_refused() {
     let dir = tb_testkit::scratch("n29");
     let d = dir.path();
-    let meas = root().join("data/spielberg_lap.csv");
-    let track = root().join("data/spielberg_lap_track.csv");
-    let lap = twinbench_in(
-        d,
-        &[
-            "lap",
-            meas.to_str().unwrap(),
-            "--track",
-            track.to_str().unwrap(),
-            "--out",
-            "lap",
-        ],
-    );
-    assert!(
-        lap.status.success(),
-        "{}",
-        String::from_utf8_lossy(&lap.stderr)
-    );
+    bundled_lap(d);
     let header = "s,curvature,grade,z_road_left,z_road_right\n";
     for (name, text, param, expected) in [
         (
@@ -542,7 +487,7 @@ fn n29_degenerate_tracks_and_targets_are_refused() {
     ] {
         std::fs::write(d.join(name), text).unwrap();
         let set = format!("{param}={}", d.join(name).display());
-        let e = failure_in(d, &["run", "lap/system.toml", "--set", &set]);
+        let e = common::fails_in(d, ["run", "lap/system.toml", "--set", &set]);
         assert!(e.contains(expected), "{name}: {e}");
     }
 }
@@ -555,37 +500,15 @@ fn n29_degenerate_tracks_and_targets_are_refused() {
 fn n28_a_byte_order_mark_is_read_and_huge_numbers_print_short() {
     let dir = tb_testkit::scratch("n28");
     let d = dir.path();
-    let meas = root().join("data/spielberg_lap.csv");
-    let track = root().join("data/spielberg_lap_track.csv");
-    let lap = twinbench_in(
-        d,
-        &[
-            "lap",
-            meas.to_str().unwrap(),
-            "--track",
-            track.to_str().unwrap(),
-            "--out",
-            "lap",
-        ],
-    );
-    assert!(
-        lap.status.success(),
-        "{}",
-        String::from_utf8_lossy(&lap.stderr)
-    );
+    bundled_lap(d);
     for file in ["lap/track.csv", "lap/target_speed.csv"] {
         let text = std::fs::read_to_string(d.join(file)).unwrap();
         std::fs::write(d.join(file), format!("\u{feff}{text}")).unwrap();
     }
-    let run = twinbench_in(d, &["run", "lap/system.toml"]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let e = failure_in(
+    common::ok_in(d, ["run", "lap/system.toml"]);
+    let e = common::fails_in(
         d,
-        &[
+        [
             "run",
             "lap/system.toml",
             "--set",
@@ -614,7 +537,7 @@ fn n12_a_huge_string_from_an_fmu_is_refused_with_its_size() {
         if isolate {
             args.push("--isolate");
         }
-        let e = failure_in(dir.path(), &args);
+        let e = common::fails_in(dir.path(), &args);
         assert!(
             e.contains("fmi2GetString: value reference 9 holds")
                 && e.contains("more than the 1 MiB twinbench exchanges and records"),

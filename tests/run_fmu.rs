@@ -5,25 +5,10 @@
 
 mod common;
 
+use common::cli::succeeded;
 use common::reference;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn twinbench(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(o: &Output, what: &str) {
-    assert!(
-        o.status.success(),
-        "{what}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
+use std::process::Command;
 
 /// `fmpy simulate FMU --output-file OUT [extra]`.
 fn fmpy_simulate(dir: &Path, fmu: &Path, out: &str, extra: &[&str]) {
@@ -35,7 +20,7 @@ fn fmpy_simulate(dir: &Path, fmu: &Path, out: &str, extra: &[&str]) {
         .args(extra)
         .output()
         .unwrap();
-    ok(&o, "fmpy simulate");
+    succeeded(&o, "fmpy simulate");
 }
 
 /// FMPy's CSV: the header, then rows of numbers; True/False as 1/0; an array's values in
@@ -141,8 +126,8 @@ fn each_reference_fmu_alone_gives_fmpy_simulates_columns_and_values() {
             };
             let mut args = vec!["run", fmu.to_str().unwrap(), "--out", &ours];
             args.extend(stop);
-            let o = twinbench(dir.path(), &args);
-            ok(&o, model);
+            let o = common::twinbench_in(dir.path(), &args);
+            succeeded(&o, model);
             // The same summary as a system's run.
             let summary = String::from_utf8_lossy(&o.stdout);
             assert!(summary.contains("stopped by      "), "{summary}");
@@ -178,7 +163,7 @@ fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_row
             "--out",
             &ours,
         ];
-        ok(&twinbench(dir.path(), &args), model);
+        common::ok_in(dir.path(), args);
         fmpy_simulate(
             dir.path(),
             &fmu,
@@ -216,7 +201,7 @@ fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_row
             "--out",
             &plain,
         ];
-        ok(&twinbench(dir.path(), &args), model);
+        common::ok_in(dir.path(), args);
         let (_, r3) = read_ours(&dir.path().join(&plain));
         assert!(
             r3.windows(2).all(|w| w[1][0] > w[0][0]),
@@ -243,9 +228,9 @@ fn an_input_file_start_values_and_intervals_as_in_fmpy() {
     .unwrap();
     let fmu = reference::fmu("Feedthrough", 2);
     let f = fmu.to_str().unwrap();
-    let o = twinbench(
+    let o = common::twinbench_in(
         dir.path(),
-        &[
+        [
             "run",
             f,
             "--input",
@@ -260,7 +245,7 @@ fn an_input_file_start_values_and_intervals_as_in_fmpy() {
             "ours.csv",
         ],
     );
-    ok(&o, "run with --input");
+    succeeded(&o, "run with --input");
     fmpy_simulate(
         dir.path(),
         &fmu,
@@ -294,11 +279,7 @@ fn what_does_not_fit_is_refused_with_the_reason() {
     let dir = tb_testkit::scratch("run-fmu-refused");
     let fmu = reference::fmu("Feedthrough", 2);
     let f = fmu.to_str().unwrap();
-    let refused = |args: &[&str]| {
-        let o = twinbench(dir.path(), args);
-        assert!(!o.status.success(), "{args:?} accepted");
-        String::from_utf8_lossy(&o.stderr).into_owned()
-    };
+    let refused = |args: &[&str]| common::fails_in(dir.path(), args);
     // A column that is no input: the closest inputs named.
     std::fs::write(
         dir.path().join("bad.csv"),
@@ -358,11 +339,7 @@ fn arrays_are_recorded_and_connected_by_their_names() {
         p
     };
     let sys = system("a.y -> b.u");
-    let o = twinbench(
-        dir.path(),
-        &["run", sys.to_str().unwrap(), "--out", "arrays.csv"],
-    );
-    ok(&o, "arrays");
+    common::ok_in(dir.path(), args!["run", sys, "--out", "arrays.csv"]);
     let (names, rows) = read_ours(&dir.path().join("arrays.csv"));
     assert_eq!(
         names,
@@ -382,9 +359,7 @@ fn arrays_are_recorded_and_connected_by_their_names() {
         );
     }
     let sys = system("a.y[1] -> b.u");
-    let o = twinbench(dir.path(), &["run", sys.to_str().unwrap()]);
-    assert!(!o.status.success());
-    let e = String::from_utf8_lossy(&o.stderr);
+    let e = common::fails_in(dir.path(), args!["run", sys]);
     assert!(
         e.contains("'b.u' is an array of 3 elements") && e.contains("'b.u[1]' … 'b.u[3]'"),
         "{e}"

@@ -43,8 +43,10 @@ fn run_lib(system: &Path) -> (tb_cosim::RunSummary, tb_cosim::Table) {
     (s, sim.recording().clone())
 }
 
-fn empty(dir: &Path) -> bool {
-    std::fs::read_dir(dir).unwrap().next().is_none()
+/// Nothing is left in the temporary folder `tmp`.
+fn assert_empty(tmp: &Path) {
+    let left: Vec<_> = std::fs::read_dir(tmp).unwrap().collect();
+    assert!(left.is_empty(), "left in TMPDIR: {left:?}");
 }
 
 #[test]
@@ -60,11 +62,7 @@ fn exported_rls_v_runs_from_its_ssp_bit_for_bit() {
         .arg(&ssp)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::cli::assert_success(&out);
     // The binary: the same result file, byte for byte, and the same summary.
     let mut summaries = Vec::new();
     for (input, csv) in [(&system, "toml.csv"), (&ssp, "ssp.csv")] {
@@ -76,11 +74,7 @@ fn exported_rls_v_runs_from_its_ssp_bit_for_bit() {
             .arg(dir.path().join(csv))
             .output()
             .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        common::cli::assert_success(&out);
         let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         summaries.push(j);
     }
@@ -117,11 +111,7 @@ fn exported_rls_v_runs_from_its_ssp_bit_for_bit() {
         assert!(same, "column {} differs", ta.names()[k]);
     }
     // The unpacked package and FMUs went with the runs.
-    assert!(
-        empty(tmp.path()),
-        "left in TMPDIR: {:?}",
-        std::fs::read_dir(tmp.path()).unwrap().collect::<Vec<_>>()
-    );
+    assert_empty(tmp.path());
 }
 
 /// Port maps, a connection gain, Jacobi and a fixed stop time: the SSP names the FMU's own
@@ -584,11 +574,7 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         .output()
         .unwrap();
     assert!(!out.status.success());
-    assert!(
-        empty(tmp.path()),
-        "left in TMPDIR: {:?}",
-        std::fs::read_dir(tmp.path()).unwrap().collect::<Vec<_>>()
-    );
+    assert_empty(tmp.path());
 }
 
 /// Damaged SSDs (cut anywhere, a byte replaced by markup) are errors, never a panic.

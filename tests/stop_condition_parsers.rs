@@ -62,11 +62,7 @@ fn fmpy_cosim_parses_conditions_and_names_algorithms_as_twinbench_does() {
         .write_all(serde_json::to_string(CASES).unwrap().as_bytes())
         .unwrap();
     let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::cli::assert_success(&out);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let names: Vec<&str> = Algorithm::ALL.iter().map(|a| a.name()).collect();
     let theirs: Vec<&str> = v["algorithms"]

@@ -26,6 +26,19 @@ fn hostile_fmu(dir: &Path, fault: &str) -> (PathBuf, Vec<u8>) {
     common::hostile::fmu(dir, fault)
 }
 
+/// [`run`], which must succeed: its stderr and the last recorded y.
+fn ran(
+    store: &Path,
+    sys: &Path,
+    isolate: bool,
+    env: &[(&str, &str)],
+    shell: Option<&str>,
+) -> (String, Option<f64>) {
+    let (out, err, y) = run(store, sys, isolate, env, shell);
+    assert!(out.status.success(), "isolate {isolate}: {err}");
+    (err, y)
+}
+
 /// The store folder of an FMU (named by the first 32 digits of its SHA-256).
 fn folder_of(store: &Path, fmu: &Path) -> PathBuf {
     use sha2::Digest;
@@ -50,8 +63,7 @@ fn attack(tag: &str, attack_env: &[(&str, &str)]) -> (String, String) {
     let (attacker, _) = hostile_fmu(dir.path(), "PLANT");
     let (victim_sys, attacker_sys) = (system(dir.path(), &victim), system(dir.path(), &attacker));
     // The victim is in the store first.
-    let (out, err, y) = run(&store, &victim_sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    let (_, y) = ran(&store, &victim_sys, false, &[], None);
     assert_eq!(y, Some(1.0));
     let stored = folder_of(&store, &victim).join("binaries/linux64/hostile.so");
     assert_eq!(std::fs::read(&stored).unwrap(), library);
@@ -61,8 +73,7 @@ fn attack(tag: &str, attack_env: &[(&str, &str)]) -> (String, String) {
         ("TWINBENCH_WORKER_ENV", "HOSTILE_PLANT"),
     ];
     env.extend_from_slice(attack_env);
-    let (out, attack_err, y) = run(&store, &attacker_sys, true, &env, None);
-    assert!(out.status.success(), "{attack_err}");
+    let (attack_err, y) = ran(&store, &attacker_sys, true, &env, None);
     assert_eq!(y, Some(101.0), "{attack_err}");
     // Unconfined, the attack reaches the victim's library; confined, not even the store.
     assert!(
@@ -71,8 +82,7 @@ fn attack(tag: &str, attack_env: &[(&str, &str)]) -> (String, String) {
         "the attack was not tried: {attack_err}"
     );
     // The victim in-process: its own values, none of the attacker's code.
-    let (out, victim_err, y) = run(&store, &victim_sys, false, &[], None);
-    assert!(out.status.success(), "{victim_err}");
+    let (victim_err, y) = ran(&store, &victim_sys, false, &[], None);
     assert_eq!(y, Some(1.0), "{victim_err}");
     assert!(
         !victim_err.contains("PLANT code runs"),
@@ -106,8 +116,7 @@ fn victim_and_attacker(tag: &str) -> (tempfile::TempDir, PathBuf, PathBuf, PathB
     let (victim, _) = hostile_fmu(dir.path(), "NONE");
     let (attacker, _) = hostile_fmu(dir.path(), "ESCAPE");
     let (victim_sys, attacker_sys) = (system(dir.path(), &victim), system(dir.path(), &attacker));
-    let (out, err, _) = run(&store, &victim_sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    ran(&store, &victim_sys, false, &[], None);
     (dir, store, victim, victim_sys, attacker_sys)
 }
 
@@ -156,8 +165,7 @@ fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() 
         ("HOSTILE_OTHER", other.to_str().unwrap()),
         ("HOSTILE_SHM", shm_key.as_str()),
     ];
-    let (out, err, y) = run(&store, &attacker_sys, true, &env, None);
-    assert!(out.status.success(), "{err}");
+    let (err, y) = ran(&store, &attacker_sys, true, &env, None);
     assert_eq!(y, Some(1.0), "{err}");
     for what in [
         "home",
@@ -204,8 +212,7 @@ fn a_confined_fmu_can_write_only_its_scratch_folder_and_leaves_nothing_behind() 
     }
     assert_eq!(daemons(), 0, "a process of the FMU outlived the run");
     // No scratch folder is left, and the next run does not hang.
-    let (out, err, y) = run(&store, &victim_sys, true, &[], None);
-    assert!(out.status.success(), "{err}");
+    let (_, y) = ran(&store, &victim_sys, true, &[], None);
     assert_eq!(y, Some(1.0));
 }
 
@@ -233,8 +240,7 @@ fn m02_a_bind_mount_of_the_store_reaches_nothing() {
         ("HOSTILE_ALIAS", through_alias.to_str().unwrap()),
         ("TWINBENCH_WORKER_ENV", "HOSTILE_ALIAS"),
     ];
-    let (out, err, _) = run(&store, &attacker_sys, true, &env, None);
-    assert!(out.status.success(), "{err}");
+    let (err, _) = ran(&store, &attacker_sys, true, &env, None);
     let line = err
         .lines()
         .find(|l| l.contains("hostile: escape alias:"))
@@ -244,8 +250,7 @@ fn m02_a_bind_mount_of_the_store_reaches_nothing() {
         "the write through the bind mount succeeded: {err}"
     );
     assert_eq!(std::fs::read(&library).unwrap(), before);
-    let (out, err, y) = run(&store, &victim_sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    let (err, y) = ran(&store, &victim_sys, false, &[], None);
     assert_eq!(y, Some(1.0), "{err}");
 }
 
@@ -326,16 +331,14 @@ fn m03_a_changed_dependency_beside_the_library_is_found_and_repaired() {
     zip.finish().unwrap();
     drop(plain);
     let sys = system(dir.path(), &fmu);
-    let (out, err, y) = run(&store, &sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    let (_, y) = ran(&store, &sys, false, &[], None);
     assert_eq!(y, Some(1.0));
     let dep = folder_of(&store, &fmu).join("binaries/linux64/libdep.so");
     for isolate in [false, true] {
         let mut bytes = std::fs::read(&dep).unwrap();
         bytes[0] ^= 1;
         rewrite(&dep, &bytes);
-        let (out, err, y) = run(&store, &sys, isolate, &[], None);
-        assert!(out.status.success(), "isolate {isolate}: {err}");
+        let (err, y) = ran(&store, &sys, isolate, &[], None);
         assert_eq!(y, Some(1.0));
         assert!(
             err.contains("libdep.so") && err.contains("unpacking it again"),
@@ -367,8 +370,7 @@ fn n03_a_changed_byte_of_a_stored_library_is_found_and_repaired_in_process_and_i
     let store = dir.path().join("store");
     let (fmu, library) = hostile_fmu(dir.path(), "NONE");
     let sys = system(dir.path(), &fmu);
-    let (out, err, _) = run(&store, &sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    ran(&store, &sys, false, &[], None);
     let stored = folder_of(&store, &fmu).join("binaries/linux64/hostile.so");
     // "2.0" returned by fmi2GetVersion becomes "2.1": a library that loads and runs, one
     // byte changed, the size kept. Loaded, it would fail the version check.
@@ -390,8 +392,7 @@ fn n03_a_changed_byte_of_a_stored_library_is_found_and_repaired_in_process_and_i
             .unwrap()
             .set_modified(std::time::SystemTime::now())
             .unwrap();
-        let (out, err, y) = run(&store, &sys, isolate, &[], None);
-        assert!(out.status.success(), "isolate {isolate}: {err}");
+        let (err, y) = ran(&store, &sys, isolate, &[], None);
         assert_eq!(y, Some(1.0), "{err}");
         assert_eq!(err.matches("unpacking it again").count(), 1, "{err}");
         assert!(
@@ -415,14 +416,12 @@ fn n19_a_complete_folder_without_its_library_is_repaired() {
     let store = dir.path().join("store");
     let (fmu, library) = hostile_fmu(dir.path(), "NONE");
     let sys = system(dir.path(), &fmu);
-    let (out, err, _) = run(&store, &sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    ran(&store, &sys, false, &[], None);
     let folder = folder_of(&store, &fmu);
     assert!(folder.join(".complete").is_file());
     std::fs::remove_file(folder.join("binaries/linux64/hostile.so")).unwrap();
     std::fs::remove_dir_all(store.join("index")).unwrap();
-    let (out, err, y) = run(&store, &sys, false, &[], None);
-    assert!(out.status.success(), "{err}");
+    let (err, y) = ran(&store, &sys, false, &[], None);
     assert_eq!(y, Some(1.0));
     assert!(
         err.contains("hostile.so: cannot open") && err.contains("unpacking it again"),
@@ -456,8 +455,7 @@ fn n27_with_umask_000_the_store_is_private_and_a_folder_others_can_write_is_not_
     let store = dir.path().join("store");
     let (fmu, _) = hostile_fmu(dir.path(), "NONE");
     let sys = system(dir.path(), &fmu);
-    let (out, err, y) = run(&store, &sys, false, &[], Some("umask 000"));
-    assert!(out.status.success(), "{err}");
+    let (_, y) = ran(&store, &sys, false, &[], Some("umask 000"));
     assert_eq!(y, Some(1.0));
     let all = modes(&store);
     assert!(all.len() > 6, "{all:?}");
@@ -475,8 +473,7 @@ fn n27_with_umask_000_the_store_is_private_and_a_folder_others_can_write_is_not_
     for isolate in [false, true] {
         let linux64 = folder.join("binaries/linux64");
         std::fs::set_permissions(&linux64, std::fs::Permissions::from_mode(0o777)).unwrap();
-        let (out, err, y) = run(&store, &sys, isolate, &[], Some("umask 000"));
-        assert!(out.status.success(), "{err}");
+        let (err, y) = ran(&store, &sys, isolate, &[], Some("umask 000"));
         assert_eq!(y, Some(1.0));
         assert!(
             err.contains(&format!(
@@ -606,7 +603,6 @@ fn cache_prune_removes_unused_folders_and_keeps_those_in_use() {
     assert!(pruned.contains("removed  1 folders"), "{pruned}");
     assert!(!folder_of(&store, &a).exists());
     // The next run unpacks again.
-    let (out, err, y) = run(&store, &system(dir.path(), &a), false, &[], None);
-    assert!(out.status.success(), "{err}");
+    let (_, y) = ran(&store, &system(dir.path(), &a), false, &[], None);
     assert_eq!(y, Some(1.0));
 }

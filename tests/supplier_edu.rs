@@ -264,11 +264,7 @@ fn isolated_the_supplier_edu_is_preloaded_and_loaded_only_in_its_worker() {
         lib.as_os_str(),
         fmu.as_os_str(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::cli::assert_success(&out);
     assert!(String::from_utf8_lossy(&out.stdout)
         .contains("library: binaries/linux64/SupplierEdu.so loads; fmi2GetVersion \"2.0\""));
     let out = info(&["--isolate".as_ref(), fmu.as_os_str()]);

@@ -463,11 +463,7 @@ fn missing_initial_unknowns_are_warned_about_as_fmpy_flags_them() {
         .output()
         .unwrap();
     let said = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::cli::assert_success(&out);
     assert!(
         said.lines().next().unwrap().trim() != "0",
         "FMPy found nothing: {said}"

@@ -6,26 +6,10 @@
 
 mod common;
 
+use common::ok_in;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 use tb_cosim::Table;
-
-fn twinbench(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(dir: &Path, args: &[&str]) {
-    let o = twinbench(dir, args);
-    assert!(
-        o.status.success(),
-        "twinbench {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
 
 /// The FMU alone: 10 s at 0.1 s, its outputs recorded; `extra` goes into `[experiment]`,
 /// `instance` into `[[instance]]`.
@@ -75,9 +59,9 @@ fn the_default_experiment_tolerance_reaches_the_fmu_as_in_fmpy() {
     let dir = tb_testkit::scratch("tolerance");
     let d = dir.path();
     system(d, "sys.toml", "", "");
-    ok(
+    ok_in(
         d,
-        &[
+        [
             "run",
             "sys.toml",
             "--out",
@@ -100,9 +84,9 @@ fn the_default_experiment_tolerance_reaches_the_fmu_as_in_fmpy() {
     );
 
     // Another tolerance: another solution (fewer internal steps), again equal to FMPy's.
-    ok(
+    ok_in(
         d,
-        &[
+        [
             "run",
             "sys.toml",
             "--tolerance",
@@ -136,35 +120,24 @@ fn the_system_file_sets_the_tolerance_per_experiment_and_per_instance_and_ssp_ke
     // [experiment] tolerance applies to every instance; an instance's own wins.
     system(d, "exp.toml", "tolerance = 1e-3", "");
     system(d, "inst.toml", "tolerance = 1e-9", "tolerance = 1e-3");
-    ok(d, &["run", "exp.toml", "--out", "exp.csv"]);
-    ok(d, &["run", "inst.toml", "--out", "inst.csv"]);
-    ok(
+    ok_in(d, ["run", "exp.toml", "--out", "exp.csv"]);
+    ok_in(d, ["run", "inst.toml", "--out", "inst.csv"]);
+    ok_in(
         d,
-        &["run", "exp.toml", "--tolerance", "1e-3", "--out", "cli.csv"],
+        ["run", "exp.toml", "--tolerance", "1e-3", "--out", "cli.csv"],
     );
     let exp = std::fs::read(d.join("exp.csv")).unwrap();
     assert_eq!(exp, std::fs::read(d.join("inst.csv")).unwrap());
     assert_eq!(exp, std::fs::read(d.join("cli.csv")).unwrap());
     // Through SSP: the experiment's and an instance's tolerance come back.
     for name in ["exp", "inst"] {
-        ok(
-            d,
-            &[
-                "export-ssp",
-                &format!("{name}.toml"),
-                "--out",
-                &format!("{name}.ssp"),
-            ],
+        let (toml, ssp, csv) = (
+            format!("{name}.toml"),
+            format!("{name}.ssp"),
+            format!("{name}-ssp.csv"),
         );
-        ok(
-            d,
-            &[
-                "run",
-                &format!("{name}.ssp"),
-                "--out",
-                &format!("{name}-ssp.csv"),
-            ],
-        );
+        ok_in(d, ["export-ssp", &toml, "--out", &ssp]);
+        ok_in(d, ["run", &ssp, "--out", &csv]);
         assert_eq!(
             exp,
             std::fs::read(d.join(format!("{name}-ssp.csv"))).unwrap(),
@@ -176,7 +149,7 @@ fn the_system_file_sets_the_tolerance_per_experiment_and_per_instance_and_ssp_ke
 /// The default run, for the comparisons above (1e-7 against 1e-3 must differ).
 fn ok_pair(d: &Path) {
     system(d, "default.toml", "", "");
-    ok(d, &["run", "default.toml", "--out", "default.csv"]);
+    ok_in(d, ["run", "default.toml", "--out", "default.csv"]);
 }
 
 #[test]
@@ -201,14 +174,14 @@ fn a_tolerance_that_is_not_one_is_refused_before_the_run() {
         ),
     ] {
         system(d, "bad.toml", extra, instance);
-        let o = twinbench(d, &["run", "bad.toml"]);
+        let o = common::twinbench_in(d, ["run", "bad.toml"]);
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{e}");
         assert!(e.contains(expected), "{expected}: {e}");
     }
     system(d, "sys.toml", "", "");
     for bad in ["nan", "0", "1"] {
-        let o = twinbench(d, &["run", "sys.toml", "--tolerance", bad]);
+        let o = common::twinbench_in(d, ["run", "sys.toml", "--tolerance", bad]);
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{e}");
         assert!(

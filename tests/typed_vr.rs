@@ -8,23 +8,10 @@
 
 mod common;
 
+use common::run_ok_in;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use tb_cosim::Table;
-
-fn twinbench(dir: &Path, args: &[&str]) -> Output {
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "twinbench {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    o
-}
 
 /// Inputs of instance `a`: u a ramp, k and on switching at 0.5 s (two rows: the value
 /// before and the value from then on).
@@ -84,7 +71,7 @@ fn column<'a>(t: &'a Table, name: &str) -> &'a [f64] {
 fn a_real_an_integer_and_a_boolean_on_one_value_reference_are_three_signals() {
     let dir = tb_testkit::scratch("typed-vr");
     let sys = system(dir.path());
-    twinbench(dir.path(), &["run", "typed.toml", "--out", "out.csv"]);
+    run_ok_in(dir.path(), ["run", "typed.toml", "--out", "out.csv"]);
     let t = Table::read_any(&dir.path().join("out.csv")).unwrap();
     let time = column(&t, "time");
     assert_eq!(time.len(), 11);
@@ -131,9 +118,9 @@ fn a_real_an_integer_and_a_boolean_on_one_value_reference_are_three_signals() {
     }
 
     // Isolated: the same bits.
-    twinbench(
+    run_ok_in(
         dir.path(),
-        &["run", "typed.toml", "--isolate", "--out", "isolated.csv"],
+        ["run", "typed.toml", "--isolate", "--out", "isolated.csv"],
     );
     assert_eq!(
         std::fs::read(dir.path().join("out.csv")).unwrap(),
@@ -156,12 +143,12 @@ fn a_real_an_integer_and_a_boolean_on_one_value_reference_are_three_signals() {
             "\"a.flag\" = true\n\"a.u\" = 1.5\n\"a.k\" = 4\n\"a.on\" = true",
         );
     std::fs::write(dir.path().join("inputs.toml"), text).unwrap();
-    twinbench(dir.path(), &["run", "inputs.toml", "--out", "inputs.csv"]);
-    twinbench(
+    run_ok_in(dir.path(), ["run", "inputs.toml", "--out", "inputs.csv"]);
+    run_ok_in(
         dir.path(),
-        &["export-ssp", "inputs.toml", "--out", "typed.ssp"],
+        ["export-ssp", "inputs.toml", "--out", "typed.ssp"],
     );
-    twinbench(dir.path(), &["run", "typed.ssp", "--out", "ssp.csv"]);
+    run_ok_in(dir.path(), ["run", "typed.ssp", "--out", "ssp.csv"]);
     let direct = Table::read_any(&dir.path().join("inputs.csv")).unwrap();
     let ssp = Table::read_any(&dir.path().join("ssp.csv")).unwrap();
     // a.n = count·k + steps = 5·4 + k; b.n = 3·a.n + k.
@@ -176,9 +163,9 @@ fn a_real_an_integer_and_a_boolean_on_one_value_reference_are_three_signals() {
     }
 
     // The trace names each value by its own type's variable.
-    twinbench(
+    run_ok_in(
         dir.path(),
-        &[
+        [
             "run",
             "typed.toml",
             "--trace-fmi",
@@ -223,7 +210,7 @@ fn the_instance_alone_equals_fmpy_with_parameters_of_three_types_on_one_value_re
         "signals = [\"a.y\", \"a.n\", \"a.b\", \"a.u_echo\"]",
     );
     std::fs::write(&sys, text).unwrap();
-    twinbench(dir.path(), &["run", "typed.toml", "--out", "ours.csv"]);
+    run_ok_in(dir.path(), ["run", "typed.toml", "--out", "ours.csv"]);
     let ours = Table::read_any(&dir.path().join("ours.csv")).unwrap();
     let theirs = Table::read_any(&theirs).unwrap();
     assert_eq!(ours.len(), theirs.len());
@@ -246,9 +233,9 @@ fn one_value_reference_of_two_types_is_connected_twice_and_set_twice() {
     // symptoms of keying on the value reference alone.
     let dir = tb_testkit::scratch("typed-vr-set");
     system(dir.path());
-    let o = twinbench(
+    let o = run_ok_in(
         dir.path(),
-        &[
+        [
             "run",
             "typed.toml",
             "--set",

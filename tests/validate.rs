@@ -6,15 +6,7 @@
 
 mod common;
 
-use std::process::Command;
-
-fn twinbench(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap()
-}
+use common::{fails_in, ok_in, run_ok_in};
 
 #[test]
 fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
@@ -24,21 +16,12 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
     let d = dir.path();
     let study = root.join("studies/spielberg.toml");
     // A short study (one generation per step) for a result to validate.
-    let o = twinbench(
-        d,
-        &[
-            "optimize",
-            study.to_str().unwrap(),
-            "--generations",
-            "1",
-            "--out",
-            "opt",
-        ],
-    );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // Its stdout is no terminal (`optimize … > log.txt`): a plain line per generation, with
     // an ETA, before Tab. 1.
-    let log = String::from_utf8_lossy(&o.stdout);
+    let log = ok_in(
+        d,
+        args!["optimize", study, "--generations", "1", "--out", "opt"],
+    );
     for step in ["step 1 ", "step 2 "] {
         let line = log
             .lines()
@@ -72,20 +55,16 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
     the_answer_applies_to_a_run_as_set_does(d, &root, &result);
     let meas = root.join("data/spielberg_lap.csv");
     let track = root.join("data/spielberg_lap_track.csv");
-    let o = twinbench(
-        d,
-        &[
-            "validate",
-            "opt/result.json",
-            meas.to_str().unwrap(),
-            "--track",
-            track.to_str().unwrap(),
-            "--out",
-            "val",
-            "--json",
-        ],
-    );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let args = args![
+        "validate",
+        "opt/result.json",
+        meas,
+        "--track",
+        track,
+        "--out",
+        "val"
+    ];
+    let o = run_ok_in(d, args.iter().chain(&args!["--json"]));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let rows = v["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 7, "{v}");
@@ -109,18 +88,7 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
     a_result_file_never_decides_what_code_runs(d, &result, &meas, &track, rows);
     // Not a result: named, and what was expected.
     std::fs::write(d.join("bad.json"), "{\"study\": 1}").unwrap();
-    let o = twinbench(
-        d,
-        &[
-            "validate",
-            "bad.json",
-            meas.to_str().unwrap(),
-            "--out",
-            "val2",
-        ],
-    );
-    assert!(!o.status.success());
-    let e = String::from_utf8_lossy(&o.stderr);
+    let e = fails_in(d, args!["validate", "bad.json", meas, "--out", "val2"]);
     assert!(
         e.contains("bad.json: not a study result (the result.json `twinbench optimize` writes)"),
         "{e}"
@@ -137,9 +105,9 @@ fn the_answer_applies_to_a_run_as_set_does(
 ) {
     let system = root.join("systems/rls_v.toml");
     let system = system.to_str().unwrap();
-    let o = twinbench(
+    ok_in(
         d,
-        &[
+        [
             "run",
             system,
             "--params",
@@ -148,7 +116,6 @@ fn the_answer_applies_to_a_run_as_set_does(
             "params.csv",
         ],
     );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let mut args = vec!["run".to_string(), system.to_string()];
     for p in result["parameters_final"].as_array().unwrap() {
         let (name, value) = (p[0].as_str().unwrap(), p[1].as_f64().unwrap());
@@ -156,38 +123,27 @@ fn the_answer_applies_to_a_run_as_set_does(
         args.push(format!("{name}={value}"));
     }
     args.extend(["-o".to_string(), "set.csv".to_string()]);
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let o = twinbench(d, &args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    ok_in(d, &args);
     let (a, b) = (
         std::fs::read(d.join("params.csv")).unwrap(),
         std::fs::read(d.join("set.csv")).unwrap(),
     );
     assert!(a == b, "run --params and run --set differ");
     // A --set after --params wins: the lap changes.
-    let o = twinbench(
+    let params = ["run", system, "--params", "opt/result.json"];
+    ok_in(
         d,
-        &[
-            "run",
-            system,
-            "--params",
-            "opt/result.json",
-            "--set",
-            "vehicle.l=3.0",
-            "-o",
-            "params_l.csv",
-        ],
+        params
+            .iter()
+            .chain(&["--set", "vehicle.l=3.0", "-o", "params_l.csv"]),
     );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(std::fs::read(d.join("params_l.csv")).unwrap() != a);
     // A parameter the system does not have: named, with the result file.
     let text = std::fs::read_to_string(d.join("opt/result.json"))
         .unwrap()
         .replace("\"vehicle.b_rear\"", "\"vehicle.b_rearr\"");
     std::fs::write(d.join("renamed.json"), text).unwrap();
-    let o = twinbench(d, &["run", system, "--params", "renamed.json"]);
-    assert!(!o.status.success());
-    let e = String::from_utf8_lossy(&o.stderr);
+    let e = fails_in(d, ["run", system, "--params", "renamed.json"]);
     assert!(
         e.contains("--params renamed.json: vehicle.b_rearr") && e.contains("b_rear"),
         "{e}"
@@ -210,21 +166,17 @@ fn a_result_file_never_decides_what_code_runs(
     hostile["system"] = serde_json::json!(sys);
     hostile["measurement"] = serde_json::json!(d.join("no-such-lap.csv"));
     std::fs::write(d.join("hostile.json"), hostile.to_string()).unwrap();
-    let o = twinbench(
-        d,
-        &[
-            "validate",
-            "hostile.json",
-            meas.to_str().unwrap(),
-            "--track",
-            track.to_str().unwrap(),
-            "--out",
-            "val3",
-            "--json",
-        ],
-    );
+    let args = args![
+        "validate",
+        "hostile.json",
+        meas,
+        "--track",
+        track,
+        "--out",
+        "val3"
+    ];
+    let o = run_ok_in(d, args.iter().chain(&args!["--json"]));
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{e}");
     assert!(!e.contains("hostile:"), "the result's system ran: {e}");
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["rows"].as_array().unwrap(), rows);
@@ -278,22 +230,18 @@ fn the_same_lap_in_a_loggers_names_validates_alike(
         .map(|(ours, theirs)| format!("{ours} = \"{theirs}\"\n"))
         .collect();
     std::fs::write(d.join("map.toml"), format!("[channels]\n{map}")).unwrap();
-    let o = twinbench(
+    let args = args![
+        "validate",
+        "opt/result.json",
+        "logger.csv",
+        "--channels",
+        "map.toml"
+    ];
+    let o = run_ok_in(
         d,
-        &[
-            "validate",
-            "opt/result.json",
-            "logger.csv",
-            "--channels",
-            "map.toml",
-            "--track",
-            track.to_str().unwrap(),
-            "--out",
-            "val_logger",
-            "--json",
-        ],
+        args.iter()
+            .chain(&args!["--track", track, "--out", "val_logger", "--json"]),
     );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["rows"].as_array().unwrap(), rows, "{v}");
     assert!(v["notes"].as_array().unwrap().is_empty(), "{v}");

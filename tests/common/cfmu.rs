@@ -4,9 +4,9 @@
 //! sets, an internal variable-step solver), sharing `fmi2_common.h`. Rebuilt when a source is
 //! newer than the FMU; a lock serialises test binaries that build at the same time.
 
-use std::io::Write;
+use super::build;
+use crate::args;
 use std::path::PathBuf;
-use std::process::Command;
 
 /// `<name>.fmu` built from `tests/cfmus/<name>.c` and `.xml` (the model identifier is the
 /// name).
@@ -20,44 +20,23 @@ pub fn fmu(name: &str) -> PathBuf {
     let out = root.join("target/c-fmus");
     std::fs::create_dir_all(&out).unwrap();
     let fmu = out.join(format!("{name}.fmu"));
-    let lock = std::fs::File::create(out.join(".lock")).unwrap();
-    use std::os::fd::AsRawFd;
-    assert_eq!(unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX) }, 0);
+    let _lock = build::lock(&out);
     // The header the sources share counts too.
-    let newest = [&c, &xml, &src.join("fmi2_common.h")]
-        .iter()
-        .map(|p| std::fs::metadata(p).and_then(|m| m.modified()).unwrap())
-        .max()
-        .unwrap();
-    if std::fs::metadata(&fmu)
-        .and_then(|m| m.modified())
-        .is_ok_and(|t| t >= newest)
-    {
+    if build::up_to_date(&fmu, &[&c, &xml, &src.join("fmi2_common.h")]) {
         return fmu;
     }
     let so = out.join(format!("{name}.so"));
-    let built = Command::new("gcc")
-        .args(["-shared", "-fPIC", "-O2", "-Wall", "-Werror", "-o"])
-        .arg(&so)
-        .arg(&c)
-        .arg("-lm")
-        .output()
-        .expect("gcc runs");
-    assert!(
-        built.status.success(),
-        "gcc {name}: {}",
-        String::from_utf8_lossy(&built.stderr)
+    build::gcc(
+        args!["-shared", "-fPIC", "-O2", "-Wall", "-Werror", "-o", so, c, "-lm"],
+        name,
     );
     let tmp = out.join(format!(".{name}.fmu.tmp"));
-    let mut zip = zip::ZipWriter::new(std::fs::File::create(&tmp).unwrap());
-    let o = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Deflated);
-    zip.start_file("modelDescription.xml", o).unwrap();
-    zip.write_all(&std::fs::read(&xml).unwrap()).unwrap();
-    zip.start_file(format!("binaries/linux64/{name}.so"), o)
-        .unwrap();
-    zip.write_all(&std::fs::read(&so).unwrap()).unwrap();
-    zip.finish().unwrap();
+    let (md, library) = (std::fs::read(&xml).unwrap(), std::fs::read(&so).unwrap());
+    let library_entry = format!("binaries/linux64/{name}.so");
+    build::zip(
+        &tmp,
+        &[("modelDescription.xml", &md), (&library_entry, &library)],
+    );
     std::fs::rename(&tmp, &fmu).unwrap();
     std::fs::remove_file(&so).unwrap();
     fmu

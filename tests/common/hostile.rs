@@ -1,10 +1,10 @@
 //! The hostile C FMU (`tests/hostile/hostile.c`, one fault compiled in with gcc), its
 //! system file, and `twinbench run` on it with a store of the test's own.
 
-use std::io::Write;
+use super::build;
+use crate::args;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use zip::write::SimpleFileOptions;
 
 pub const MODEL_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="hostile" guid="{8c4e810f-3df3-4a00-8276-176fa3c9f000}" generationTool="twinbench tests (gcc)">
@@ -25,28 +25,19 @@ pub const MODEL_DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
 pub fn fmu(dir: &Path, fault: &str) -> (PathBuf, Vec<u8>) {
     let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hostile/hostile.c");
     let so = dir.join(format!("hostile-{fault}.so"));
-    let out = Command::new("gcc")
-        .args(["-shared", "-fPIC", "-O1", "-Wall", "-Werror"])
-        .arg(format!("-DFAULT={fault}"))
-        .arg("-o")
-        .arg(&so)
-        .arg(&source)
-        .output()
-        .expect("gcc runs");
-    assert!(
-        out.status.success(),
-        "gcc: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let define = format!("-DFAULT={fault}");
+    let flags = args!["-shared", "-fPIC", "-O1", "-Wall", "-Werror", define];
+    build::gcc(flags.iter().chain(&args!["-o", so, source]), fault);
     let library = std::fs::read(&so).unwrap();
     let fmu = dir.join(format!("hostile-{fault}.fmu"));
-    let mut zip = zip::ZipWriter::new(std::fs::File::create(&fmu).unwrap());
-    let o = SimpleFileOptions::default();
-    zip.start_file("modelDescription.xml", o).unwrap();
-    zip.write_all(MODEL_DESCRIPTION.as_bytes()).unwrap();
-    zip.start_file("binaries/linux64/hostile.so", o).unwrap();
-    zip.write_all(&library).unwrap();
-    zip.finish().unwrap();
+    let md = MODEL_DESCRIPTION.as_bytes();
+    build::zip(
+        &fmu,
+        &[
+            ("modelDescription.xml", md),
+            ("binaries/linux64/hostile.so", &library),
+        ],
+    );
     (fmu, library)
 }
 

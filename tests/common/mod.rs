@@ -1,8 +1,14 @@
 //! Shared helpers of the integration tests: the packed FMUs and a cache to load them.
 #![allow(dead_code)]
 
+pub mod build;
+pub mod cli;
 pub mod hostile;
 pub mod synthetic;
+
+// Each test binary uses some of them.
+#[allow(unused_imports)]
+pub use cli::{fails, fails_in, ok, ok_in, run_ok, run_ok_in, twinbench, twinbench_in};
 
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
@@ -101,11 +107,7 @@ pub fn omsimulator() -> PathBuf {
             )
             .output()
             .expect("tools/omsimulator.sh runs");
-            assert!(
-                out.status.success(),
-                "tools/omsimulator.sh: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
+            cli::succeeded(&out, "tools/omsimulator.sh");
             PathBuf::from(String::from_utf8_lossy(&out.stdout).trim())
         });
     assert!(exe.is_file(), "no OMSimulator at {}", exe.display());

@@ -3,9 +3,10 @@
 //! the importer's conformance suite. Built once into `target/reference-fmus/fmi<N>/`
 //! (a lock file serialises test binaries that build at the same time).
 
+use super::build;
+use crate::args;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// The models with Co-Simulation in FMI 2.0.
 pub const FMI2_MODELS: &[&str] = &[
@@ -38,24 +39,11 @@ pub fn fmu(model: &str, version: u8) -> PathBuf {
         .join(format!("fmi{version}"));
     std::fs::create_dir_all(&out).unwrap();
     let fmu = out.join(format!("{model}.fmu"));
-    // One builder at a time across test processes.
-    let lock = std::fs::File::create(out.join(".lock")).unwrap();
-    use std::os::fd::AsRawFd;
-    assert_eq!(unsafe { libc::flock(lock.as_raw_fd(), libc::LOCK_EX) }, 0);
+    let _lock = build::lock(&out);
     let xml = src.join(model).join(format!("FMI{version}.xml"));
-    let newest_source = [
-        xml.clone(),
-        src.join(model).join("model.c"),
-        src.join(model).join("config.h"),
-    ]
-    .iter()
-    .filter_map(|p| std::fs::metadata(p).and_then(|m| m.modified()).ok())
-    .max()
-    .unwrap();
-    if std::fs::metadata(&fmu)
-        .and_then(|m| m.modified())
-        .is_ok_and(|t| t >= newest_source)
-    {
+    let model_c = src.join(model).join("model.c");
+    let config = src.join(model).join("config.h");
+    if build::up_to_date(&fmu, &[&xml, &model_c, &config]) {
         return fmu;
     }
     let so = out.join(format!("{model}.so"));
@@ -64,23 +52,24 @@ pub fn fmu(model: &str, version: u8) -> PathBuf {
     } else {
         "fmi3Functions.c"
     };
-    let result = Command::new("gcc")
-        .args(["-shared", "-fPIC", "-O2", "-DDISABLE_PREFIX"])
-        .arg(format!("-DFMI_VERSION={version}"))
-        .arg(format!("-I{}", src.join("include").display()))
-        .arg(format!("-I{}", src.join(model).display()))
-        .arg("-o")
-        .arg(&so)
-        .arg(src.join(model).join("model.c"))
-        .arg(src.join("src").join(functions))
-        .arg(src.join("src/cosimulation.c"))
-        .arg("-lm")
-        .output()
-        .expect("gcc runs");
-    assert!(
-        result.status.success(),
-        "gcc {model} (FMI {version}): {}",
-        String::from_utf8_lossy(&result.stderr)
+    let define = format!("-DFMI_VERSION={version}");
+    let include = |d: &Path| format!("-I{}", d.display());
+    let (headers, own) = (include(&src.join("include")), include(&src.join(model)));
+    let functions = src.join("src").join(functions);
+    let cosimulation = src.join("src/cosimulation.c");
+    let flags = args![
+        "-shared",
+        "-fPIC",
+        "-O2",
+        "-DDISABLE_PREFIX",
+        define,
+        headers,
+        own
+    ];
+    let files = args!["-o", so, model_c, functions, cosimulation, "-lm"];
+    build::gcc(
+        flags.iter().chain(&files),
+        &format!("{model} (FMI {version})"),
     );
     let platform = if version == 2 {
         "linux64"
@@ -88,21 +77,19 @@ pub fn fmu(model: &str, version: u8) -> PathBuf {
         "x86_64-linux"
     };
     let tmp = out.join(format!(".{model}.fmu.tmp"));
-    let mut zip = zip::ZipWriter::new(std::fs::File::create(&tmp).unwrap());
-    let o = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Deflated);
-    let mut add = |name: &str, path: &Path| {
-        zip.start_file(name, o).unwrap();
-        zip.write_all(&std::fs::read(path).unwrap()).unwrap();
-    };
-    add("modelDescription.xml", &xml);
-    add(&format!("binaries/{platform}/{model}.so"), &so);
+    let (md, library) = (std::fs::read(&xml).unwrap(), std::fs::read(&so).unwrap());
+    let library_entry = format!("binaries/{platform}/{model}.so");
+    let mut entries = vec![
+        ("modelDescription.xml", &md[..]),
+        (&library_entry, &library),
+    ];
     // Resource reads resources/y.txt.
     let y = src.join(model).join("y.txt");
-    if y.exists() {
-        add("resources/y.txt", &y);
+    let resource = y.exists().then(|| std::fs::read(&y).unwrap());
+    if let Some(bytes) = &resource {
+        entries.push(("resources/y.txt", bytes));
     }
-    zip.finish().unwrap();
+    build::zip(&tmp, &entries);
     std::fs::rename(&tmp, &fmu).unwrap();
     std::fs::remove_file(&so).unwrap();
     fmu

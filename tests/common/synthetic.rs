@@ -5,7 +5,6 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 pub const WHEEL_RADIUS: f64 = 0.345;
 
@@ -20,6 +19,11 @@ pub struct Circuit {
 /// The suite's own circuit, written into `dir`.
 pub fn own_circuit(dir: &Path) -> Circuit {
     let (track, target, v0) = circuit();
+    write_circuit(dir, &track, &target, v0)
+}
+
+/// A circuit of this track and target (files written into `dir`) and start speed.
+fn write_circuit(dir: &Path, track: &str, target: &str, v0: f64) -> Circuit {
     let track_p = dir.join("circuit_track.csv");
     let target_p = dir.join("truth_target.csv");
     std::fs::write(&track_p, track).unwrap();
@@ -127,15 +131,7 @@ pub fn own_circuit_with_road(dir: &Path, rms: f64, seed: u64) -> Circuit {
             rms * half * (common + right)
         );
     }
-    let track_p = dir.join("circuit_track.csv");
-    let target_p = dir.join("truth_target.csv");
-    std::fs::write(&track_p, text).unwrap();
-    std::fs::write(&target_p, target).unwrap();
-    Circuit {
-        track: Some(track_p),
-        target: Some(target_p),
-        v0,
-    }
+    write_circuit(dir, &text, &target, v0)
 }
 
 /// The twin's lap on `circuit` with `truth` set: its recording.
@@ -192,15 +188,7 @@ pub fn truth_lap_with(
     let sys = dir.join("truth.toml");
     std::fs::write(&sys, text).unwrap();
     let raw = dir.join("truth_run.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["run", sys.to_str().unwrap(), "--out", raw.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "the truth lap failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    super::run_ok(crate::args!["run", sys, "--out", raw]);
     tb_table::Table::read_path(&raw).unwrap()
 }
 
@@ -255,16 +243,7 @@ pub fn measurement(lap: &tb_table::Table, path: &Path, noise: Option<Noise>) -> 
 /// `twinbench ARGS...` must succeed: its standard output (else the test fails with its
 /// standard error).
 pub fn twinbench(args: &[&str]) -> Vec<u8> {
-    let out = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "twinbench {args:?}:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out.stdout
+    super::run_ok(args).stdout
 }
 
 /// The driver of a system `twinbench lap` wrote follows the truth lap's own target (its

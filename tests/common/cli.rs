@@ -1,0 +1,122 @@
+//! The `twinbench` command line of this build: run with arguments (`&str`s, `String`s and
+//! paths mixed, by [`args!`](crate::args)), and what it printed.
+
+use std::ffi::{OsStr, OsString};
+use std::fmt::Display;
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+
+/// The arguments of a command line, `&str`s, `String`s and paths mixed, as `&OsStr`s:
+/// `args!["run", system, "--out", out]`.
+#[macro_export]
+macro_rules! args {
+    ($($arg:expr),* $(,)?) => {
+        [$(::std::ffi::OsStr::new(&$arg)),*]
+    };
+}
+
+/// `twinbench ARGS`: its output, whether it succeeded or not.
+pub fn twinbench<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// `twinbench ARGS` run in folder `cwd`: its output.
+pub fn twinbench_in<S: AsRef<OsStr>>(cwd: &Path, args: impl IntoIterator<Item = S>) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+/// `twinbench ARGS` must succeed (else the test fails with its standard error): its output.
+pub fn run_ok<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>) -> Output {
+    let args = collect(args);
+    let o = twinbench(&args);
+    succeeded(&o, format!("twinbench {args:?}"));
+    o
+}
+
+/// `twinbench ARGS` in folder `cwd` must succeed: its output.
+pub fn run_ok_in<S: AsRef<OsStr>>(cwd: &Path, args: impl IntoIterator<Item = S>) -> Output {
+    let args = collect(args);
+    let o = twinbench_in(cwd, &args);
+    succeeded(&o, format!("twinbench {args:?} in {}", cwd.display()));
+    o
+}
+
+/// `twinbench ARGS` must succeed: its standard output, as text.
+pub fn ok<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>) -> String {
+    stdout(&run_ok(args))
+}
+
+/// `twinbench ARGS` in folder `cwd` must succeed: its standard output, as text.
+pub fn ok_in<S: AsRef<OsStr>>(cwd: &Path, args: impl IntoIterator<Item = S>) -> String {
+    stdout(&run_ok_in(cwd, args))
+}
+
+/// `twinbench ARGS` must fail: its standard error.
+pub fn fails<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>) -> String {
+    let args = collect(args);
+    failed(twinbench(&args), format!("twinbench {args:?}"))
+}
+
+/// `twinbench ARGS` in folder `cwd` must fail: its standard error.
+pub fn fails_in<S: AsRef<OsStr>>(cwd: &Path, args: impl IntoIterator<Item = S>) -> String {
+    let args = collect(args);
+    let what = format!("twinbench {args:?} in {}", cwd.display());
+    failed(twinbench_in(cwd, &args), what)
+}
+
+/// `twinbench ARGS` in folder `cwd`, interrupted as by Ctrl-C (SIGINT) once `file` is
+/// there (within two minutes): its output.
+pub fn interrupted_in<S: AsRef<OsStr>>(
+    cwd: &Path,
+    args: impl IntoIterator<Item = S>,
+    file: &Path,
+) -> Output {
+    let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
+        .args(args)
+        .current_dir(cwd)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    tb_testkit::wait_for_file(file, 120);
+    // SAFETY: a signal to our own child process.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    child.wait_with_output().unwrap()
+}
+
+/// `o` is of a command that succeeded, else the test fails naming `what`, with its
+/// standard error.
+pub fn succeeded(o: &Output, what: impl Display) {
+    assert!(
+        o.status.success(),
+        "{what} failed:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// `o` is of a command that succeeded, else the test fails with its standard error.
+pub fn assert_success(o: &Output) {
+    succeeded(o, "the command");
+}
+
+/// `o` is of a command that failed (else the test fails naming `what`): its standard error.
+pub fn failed(o: Output, what: impl Display) -> String {
+    assert!(!o.status.success(), "{what} succeeded");
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The standard output of `o`, as text.
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn collect<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>) -> Vec<OsString> {
+    args.into_iter().map(|a| a.as_ref().to_owned()).collect()
+}
