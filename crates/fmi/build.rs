@@ -52,17 +52,22 @@ fn link_cvode() {
         .map(PathBuf::from)
         .collect(),
     };
-    for d in &dirs {
-        // A later install is found by the next build.
+    let found = dirs
+        .iter()
+        .find(|d| d.join("libsundials_cvode.a").is_file());
+    // Watched: the library found, or else every place it may be installed later (found by
+    // the next build). Never a missing path beside a found library: Cargo takes a missing
+    // path as changed, and would rebuild this crate and all above it every time.
+    for d in found
+        .into_iter()
+        .chain(if found.is_none() { &dirs[..] } else { &[] })
+    {
         println!(
             "cargo:rerun-if-changed={}",
             d.join("libsundials_cvode.a").display()
         );
     }
-    let Some(dir) = dirs
-        .iter()
-        .find(|d| d.join("libsundials_cvode.a").is_file())
-    else {
+    let Some(dir) = found else {
         println!(
             "cargo:warning=SUNDIALS CVODE (libsundials_cvode.a) not found in {}: twinbench is built without Model Exchange (Co-Simulation is unaffected); for it install libsundials-dev (apt-get install libsundials-dev) or set TWINBENCH_SUNDIALS_LIB, then rebuild",
             dirs.iter()
