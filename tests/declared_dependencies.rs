@@ -31,7 +31,7 @@ fn check(model: &str) -> usize {
     )
     .unwrap();
     inst.set_echo(false);
-    inst.setup_experiment(0.0, None, None).unwrap();
+    inst.setup_experiment(0.0.into()).unwrap();
     inst.enter_initialization_mode().unwrap();
     let index = |vr: u32| {
         md.variables

@@ -22,7 +22,7 @@ fn faulty(name: &str) -> (std::sync::Arc<tb_fmi::LoadedFmu>, Instance) {
 }
 
 fn init(i: &mut Instance) {
-    i.setup_experiment(0.0, None, None).unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     i.exit_initialization_mode().unwrap();
 }
@@ -60,7 +60,7 @@ fn illegal_call_sequences_return_error_with_a_message() {
     assert!(e.contains("not allowed in state 'instantiated'"), "{e}");
     init(&mut i);
     // Setup after initialisation, and setting a fixed parameter after it.
-    assert!(i.setup_experiment(0.0, None, None).is_err());
+    assert!(i.setup_experiment(0.0.into()).is_err());
     let e = i
         .set_integer(&[vr(&f, "fault_kind")], &[1])
         .unwrap_err()
@@ -363,7 +363,7 @@ fn missing_or_malformed_resource_is_an_error_naming_the_file() {
         false,
     )
     .unwrap();
-    i.setup_experiment(0.0, None, None).unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     let e = i.exit_initialization_mode().unwrap_err().to_string();
     assert!(
@@ -381,7 +381,7 @@ fn missing_or_malformed_resource_is_an_error_naming_the_file() {
         false,
     )
     .unwrap();
-    i.setup_experiment(0.0, None, None).unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     let e = i.exit_initialization_mode().unwrap_err().to_string();
     assert!(e.contains("target_speed.csv") && e.contains("abc"), "{e}");

@@ -155,7 +155,7 @@ fn fmi3_state_save_restore_serialize_and_reset() {
         false,
     )
     .unwrap();
-    i.setup_experiment(0.0, None, None).unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     i.exit_initialization_mode().unwrap();
     let h = 0.01;

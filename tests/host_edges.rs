@@ -27,7 +27,12 @@ fn instance(model: &str) -> Instance {
 #[test]
 fn a_host_that_sums_its_steps_reaches_the_stop_time_with_fmi2ok() {
     let mut i = instance("dyno");
-    i.setup_experiment(0.0, Some(100.0), None).unwrap();
+    i.setup_experiment(tb_fmi::Experiment {
+        start: 0.0,
+        stop: Some(100.0),
+        tolerance: None,
+    })
+    .unwrap();
     i.enter_initialization_mode().unwrap();
     i.exit_initialization_mode().unwrap();
     let mut t = 0.0f64;
@@ -51,7 +56,7 @@ fn terminate_after_a_failed_initialisation_is_a_warning() {
     let fmu = common::load("driver");
     let vr = common::vr(&fmu, "target_speed_file");
     i.set_string(&[vr], &["/nonexistent/target.csv"]).unwrap();
-    i.setup_experiment(0.0, None, None).unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     let e = i.exit_initialization_mode();
     assert!(e.is_err(), "a missing target file fails the initialisation");
@@ -74,7 +79,7 @@ fn an_input_a_rounding_outside_its_range_is_the_bound() {
     let mut i = instance("edu");
     let fmu = common::load("edu");
     let pedal = common::vr(&fmu, "accel_pedal");
-    i.setup_experiment(0.0, None, None).unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     // 1 as float32, widened: what OMSimulator's solver sent.
     i.set_real(&[pedal], &[1.0f32 as f64 + f32::EPSILON as f64 / 8.0])
@@ -195,7 +200,7 @@ fn range_check_0_uses_an_out_of_range_input_with_a_warning() {
     let pedal = common::vr(&fmu, "accel_pedal");
     let check = common::vr(&fmu, "range_check");
     i.set_integer(&[check], &[0]).unwrap();
-    i.setup_experiment(0.0, None, None).unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     i.set_real(&[pedal], &[1.5])
         .expect("accepted with a warning");
@@ -217,7 +222,7 @@ fn range_check_0_uses_an_out_of_range_input_with_a_warning() {
 #[test]
 fn values_of_another_length_than_the_references_are_refused_before_the_call() {
     let mut i = instance("dyno");
-    i.setup_experiment(0.0, None, None).unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     i.exit_initialization_mode().unwrap();
     let mut two = [f64::NAN; 2];

@@ -82,7 +82,12 @@ fn native_errors_name_the_instance_and_keep_the_log() {
     let f = NativeFactory::for_fmu(&fmu, &twinbench::registry::native_models()).unwrap();
     assert_eq!(f.model(), "dyno");
     let mut b = f.create("dyno_x", false).unwrap();
-    b.setup_experiment(0.0, Some(1.0), None).unwrap();
+    b.setup_experiment(tb_fmi::Experiment {
+        start: 0.0,
+        stop: Some(1.0),
+        tolerance: None,
+    })
+    .unwrap();
     // Stepping before initialisation is refused like the FMU refuses it.
     let e = b.do_step(0.0, 1e-3).unwrap_err().to_string();
     assert!(e.contains("dyno_x") && e.contains("fmi2DoStep"), "{e}");

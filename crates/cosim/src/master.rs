@@ -409,7 +409,11 @@ impl Simulation {
             }
             let inst = f.backend();
             inst.set_echo(echo);
-            inst.setup_experiment(start, stop, def.tolerance)?;
+            inst.setup_experiment(tb_fmi::Experiment {
+                start,
+                stop,
+                tolerance: def.tolerance,
+            })?;
             for (vr, v) in &f.params {
                 let inst = f.instance.as_deref_mut().expect("created above");
                 match v {

@@ -289,27 +289,23 @@ impl Backend for Traced {
         let f = self.name2("fmi2SetDebugLogging", "fmi3SetDebugLogging");
         self.traced(f, format!("loggingOn={on}"), |b| b.set_debug_logging(on))
     }
-    fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        tolerance: Option<f64>,
-    ) -> Result<(), FmuError> {
-        let stop_text = stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
+    fn setup_experiment(&mut self, e: tb_fmi::Experiment) -> Result<(), FmuError> {
+        let stop_text = e.stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
         if self.fmi3 || self.steps_traced_inside {
             // FMI 3.0 passes these to fmi3EnterInitializationMode; a Model Exchange instance
             // traces the call with the tolerance it tells the FMU (its own, not the master's).
-            return self.inner.setup_experiment(start, stop, tolerance);
+            return self.inner.setup_experiment(e);
         }
+        let start = e.start;
         self.traced(
             "fmi2SetupExperiment".into(),
-            match tolerance {
+            match e.tolerance {
                 Some(tol) => {
                     format!("tolerance={tol:?}, startTime={start:?}, stopTime={stop_text}")
                 }
                 None => format!("startTime={start:?}, stopTime={stop_text}"),
             },
-            |b| b.setup_experiment(start, stop, tolerance),
+            |b| b.setup_experiment(e),
         )
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {

@@ -40,4 +40,4 @@ pub use import::model::{Interface, ModelDescription, VarKey};
 #[cfg(feature = "import")]
 pub use import::model_exchange::{CallTrace, MeInstance, MeLibrary, MeSettings, MeStop};
 #[cfg(feature = "import")]
-pub use import::{FmuError, FmuInstance};
+pub use import::{Experiment, FmuError, FmuInstance};

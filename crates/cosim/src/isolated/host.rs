@@ -750,19 +750,14 @@ impl Backend for IsolatedBackend {
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError> {
         IsolatedBackend::set_debug_logging(self, on)
     }
-    fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        tolerance: Option<f64>,
-    ) -> Result<(), FmuError> {
-        self.time = start;
+    fn setup_experiment(&mut self, e: tb_fmi::Experiment) -> Result<(), FmuError> {
+        self.time = e.start;
         self.control(
             "fmi2SetupExperiment",
             Request::SetupExperiment {
-                start,
-                stop,
-                tolerance,
+                start: e.start,
+                stop: e.stop,
+                tolerance: e.tolerance,
             },
         )
     }

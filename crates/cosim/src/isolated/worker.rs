@@ -462,7 +462,11 @@ fn call(i: &mut dyn Backend, op: Request<'_>) -> Result<Option<Values>, Failure>
             start,
             stop,
             tolerance,
-        } => i.setup_experiment(start, stop, tolerance)?,
+        } => i.setup_experiment(tb_fmi::Experiment {
+            start,
+            stop,
+            tolerance,
+        })?,
         Request::EnterInit => i.enter_initialization_mode()?,
         Request::ExitInit => i.exit_initialization_mode()?,
         Request::Terminate => i.terminate()?,

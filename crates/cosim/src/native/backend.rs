@@ -93,16 +93,11 @@ impl<M: Model> Backend for NativeBackend<M> {
             rt.set_debug_logging(on, &[])
         })
     }
-    fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        _tolerance: Option<f64>,
-    ) -> Result<(), FmuError> {
+    fn setup_experiment(&mut self, e: tb_fmi::Experiment) -> Result<(), FmuError> {
         // Our models have no internal solver with a tolerance.
-        self.time = start;
+        self.time = e.start;
         self.call(Function::SetupExperiment, |rt| {
-            rt.setup_experiment(start, stop)
+            rt.setup_experiment(e.start, e.stop)
         })
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {

@@ -92,7 +92,7 @@ fn one_step(
 /// Set up, the spec's Real parameters set, and initialised at `start` with the inputs
 /// there: the host's first initialisation and every pass after a reset.
 pub fn initialise(i: &mut dyn Backend, spec: &CheckSpec) -> Result<(), FmuError> {
-    i.setup_experiment(spec.start, None, None)?;
+    i.setup_experiment(tb_fmi::Experiment::from(spec.start))?;
     let (vrs, values): (Vec<u32>, Vec<f64>) = spec.parameters.iter().copied().unzip();
     if !vrs.is_empty() {
         i.set_real(&vrs, &values)?;

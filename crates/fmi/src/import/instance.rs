@@ -6,7 +6,7 @@ use super::log::{fmi2_logger, log_env, LogEnv, LogSink};
 use crate::fmi2::*;
 use crate::functions::Function;
 use crate::status::{CallStatus, FmiFunction};
-use crate::{FmuError, FmuInstance};
+use crate::{Experiment, FmuError, FmuInstance};
 use std::ffi::{c_void, CString};
 use std::path::Path;
 use std::sync::Arc;
@@ -325,21 +325,16 @@ impl FmuInstance for Instance {
     }
 
     /// `fmi2SetupExperiment`; `tolerance` Some: `toleranceDefined = fmi2True` with it.
-    fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        tolerance: Option<f64>,
-    ) -> Result<(), FmuError> {
-        self.time = start;
+    fn setup_experiment(&mut self, e: Experiment) -> Result<(), FmuError> {
+        self.time = e.start;
         let s = unsafe {
             (self.lib.api.fmi2SetupExperiment)(
                 self.comp,
-                tolerance.is_some() as fmi2Boolean,
-                tolerance.unwrap_or(0.0),
-                start,
-                stop.is_some() as fmi2Boolean,
-                stop.unwrap_or(0.0),
+                e.tolerance.is_some() as fmi2Boolean,
+                e.tolerance.unwrap_or(0.0),
+                e.start,
+                e.stop.is_some() as fmi2Boolean,
+                e.stop.unwrap_or(0.0),
             )
         };
         self.check(Function::SetupExperiment, s)

@@ -12,7 +12,7 @@ use super::log::LogSink;
 use super::model::{Fmi3Slot, Fmi3Type, ModelDescription, ScalarVariable};
 use crate::fmi2::fmi2Status;
 use crate::status::{CallStatus, FmiFunction};
-use crate::{FmuError, FmuInstance};
+use crate::{Experiment, FmuError, FmuInstance};
 use std::collections::HashMap;
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::path::Path;
@@ -750,16 +750,11 @@ impl FmuInstance for Instance3 {
     }
 
     /// FMI 3.0 has no fmi2SetupExperiment: start and stop go with the initialization mode.
-    fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        tolerance: Option<f64>,
-    ) -> Result<(), FmuError> {
-        self.tolerance = tolerance;
-        self.start = start;
-        self.time = start;
-        self.stop = stop;
+    fn setup_experiment(&mut self, e: Experiment) -> Result<(), FmuError> {
+        self.tolerance = e.tolerance;
+        self.start = e.start;
+        self.time = e.start;
+        self.stop = e.stop;
         Ok(())
     }
 

@@ -36,7 +36,7 @@ mod store;
 pub mod unit_trait;
 
 pub use error::{DescriptionError, FileCheckError, FmuError, FolderError, InterfaceError};
-pub use unit_trait::FmuInstance;
+pub use unit_trait::{Experiment, FmuInstance};
 
 /// Whether `path` is a shared library this process can load, read from its ELF header:
 /// an x86-64 library, 64-bit, little-endian. The dynamic loader reports a library for

@@ -7,6 +7,27 @@
 use super::model_exchange::{CallTrace, MeStop};
 use super::FmuError;
 
+/// What `fmi2SetupExperiment` tells an instance, and FMI 3.0 passes to
+/// `fmi3EnterInitializationMode`: the start time, the stop time if defined, and the relative
+/// tolerance an FMU with an internal solver should use if defined (`toleranceDefined`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Experiment {
+    pub start: f64,
+    pub stop: Option<f64>,
+    pub tolerance: Option<f64>,
+}
+
+impl From<f64> for Experiment {
+    /// From `start`, without a stop time or a tolerance.
+    fn from(start: f64) -> Experiment {
+        Experiment {
+            start,
+            stop: None,
+            tolerance: None,
+        }
+    }
+}
+
 /// One running instance, in FMI 2.0 Co-Simulation terms (an FMI 3.0 or Model Exchange
 /// instance maps its calls onto these).
 pub trait FmuInstance: Send {
@@ -18,14 +39,8 @@ pub trait FmuInstance: Send {
     fn last_log_lines(&self) -> Vec<String>;
     /// Debug logging of every category on or off.
     fn set_debug_logging(&mut self, on: bool) -> Result<(), FmuError>;
-    /// `tolerance`: the relative tolerance an FMU with an internal solver should use
-    /// (`toleranceDefined` when Some).
-    fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        tolerance: Option<f64>,
-    ) -> Result<(), FmuError>;
+    /// `fmi2SetupExperiment`, or what FMI 3.0 passes to `fmi3EnterInitializationMode`.
+    fn setup_experiment(&mut self, e: Experiment) -> Result<(), FmuError>;
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError>;
     fn exit_initialization_mode(&mut self) -> Result<(), FmuError>;
     fn terminate(&mut self) -> Result<(), FmuError>;

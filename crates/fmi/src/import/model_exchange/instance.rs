@@ -2,7 +2,7 @@
 //! (a step is CVODE's integration over it, events inside it included).
 
 use super::{CallTrace, MeInstance, MeStop};
-use crate::{FmuError, FmuInstance};
+use crate::{Experiment, FmuError, FmuInstance};
 
 impl FmuInstance for MeInstance {
     fn name(&self) -> &str {
@@ -21,13 +21,8 @@ impl FmuInstance for MeInstance {
         MeInstance::set_debug_logging(self, on)
     }
     /// The tolerance was resolved when the instance was made (it is CVODE's too).
-    fn setup_experiment(
-        &mut self,
-        start: f64,
-        stop: Option<f64>,
-        _tolerance: Option<f64>,
-    ) -> Result<(), FmuError> {
-        MeInstance::setup_experiment(self, start, stop)
+    fn setup_experiment(&mut self, e: Experiment) -> Result<(), FmuError> {
+        MeInstance::setup_experiment(self, e.start, e.stop)
     }
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
         MeInstance::enter_initialization_mode(self)

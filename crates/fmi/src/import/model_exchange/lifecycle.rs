@@ -10,7 +10,7 @@ use crate::fmi2::{fmi2Status, fmi2Type};
 use crate::import::instance::Instance;
 use crate::import::instance3::Instance3;
 use crate::import::model::ModelDescription;
-use crate::{CallStatus, Causality, FmuError, Variability};
+use crate::{CallStatus, Causality, Experiment, FmuError, Variability};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -94,7 +94,11 @@ impl MeInstance {
     pub fn setup_experiment(&mut self, start: f64, stop: Option<f64>) -> Result<(), FmuError> {
         self.start = start;
         self.stop = stop;
-        let r = self.inst.setup_experiment(start, stop, self.told_tolerance);
+        let r = self.inst.setup_experiment(Experiment {
+            start,
+            stop,
+            tolerance: self.told_tolerance,
+        });
         // FMI 3.0 has no such call: its arguments go with fmi3EnterInitializationMode.
         if let (Some(trace), false) = (&self.trace, self.api.is_fmi3()) {
             let stop = stop.map_or("undefined".to_string(), |s| format!("{s:?}"));
