@@ -7,7 +7,6 @@
 
 mod common;
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
@@ -172,18 +171,6 @@ fn port_maps_gains_and_jacobi_round_trip_bit_for_bit() {
     }
 }
 
-/// A zip of (name, bytes).
-fn zip_package(path: &Path, entries: &[(&str, Vec<u8>)]) {
-    let mut zip = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
-    let options = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Deflated);
-    for (name, bytes) in entries {
-        zip.start_file(*name, options).unwrap();
-        zip.write_all(bytes).unwrap();
-    }
-    zip.finish().unwrap();
-}
-
 const HEAD: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
 <ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" version="1.0" name="hand">"#;
 
@@ -305,8 +292,9 @@ fn hand_package(dir: &Path, name: &str, ssd: &str, rotor_ssv: &str, leave_out: &
         .into_iter()
         .filter(|(n, _)| *n != leave_out)
         .collect();
+    let entries: Vec<(&str, &[u8])> = entries.iter().map(|(n, b)| (*n, &b[..])).collect();
     let p = dir.join(name);
-    zip_package(&p, &entries);
+    common::build::zip(&p, &entries);
     p
 }
 
@@ -555,11 +543,12 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
     assert!(e.contains("nested deeper than"), "{e}");
     // An entry escaping the package is refused by the archive checks before anything is written.
     let evil = dir.path().join("evil.ssp");
-    zip_package(
+    let ssd = hand_ssd("", "");
+    common::build::zip(
         &evil,
         &[
-            ("../evil.ssd", b"x".to_vec()),
-            ("SystemStructure.ssd", hand_ssd("", "").into_bytes()),
+            ("../evil.ssd", b"x"),
+            ("SystemStructure.ssd", ssd.as_bytes()),
         ],
     );
     let e = load_err(&evil);
@@ -595,7 +584,7 @@ fn damaged_ssds_are_errors_not_panics() {
         for v in variants {
             let p = dir.path().join("damaged.ssp");
             // No FMUs: the SSD is read before any component's FMU is looked for.
-            zip_package(&p, &[("SystemStructure.ssd", v)]);
+            common::build::zip(&p, &[("SystemStructure.ssd", &v)]);
             let e = Plan::load(&p, cache.clone())
                 .err()
                 .expect("a damaged package loads");
