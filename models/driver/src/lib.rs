@@ -9,7 +9,7 @@
 mod target;
 
 use fmu_export::variables::*;
-use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource};
+use fmu_export::{Context, Model, ModelError, ModelInfo, ModelState, Resource};
 use std::cell::Cell;
 use std::sync::Arc;
 pub use target::TargetSpeed;
@@ -224,18 +224,13 @@ impl Driver {
 
 impl Model for Driver {
     type Vars = DriverVars;
-    const INFO: ModelInfo = ModelInfo {
-        name: "driver",
-        identifier: "driver",
-        description: "Driver: follows a distance-based target speed with preview, feed-forward and PI, one pedal at a time",
-        version: env!("CARGO_PKG_VERSION"),
-        default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 10.0, step_size: 1e-3 },
-        documentation: DOCUMENTATION,
-        resources: &[
-            Resource { name: TARGET_FILE, content: include_bytes!("../resources/target_speed.csv"), default_of: Some("target_speed_file") },
-            Resource { name: "NOTICE", content: include_bytes!("../resources/NOTICE"), default_of: None },
-        ],
-    };
+    const INFO: ModelInfo = ModelInfo::new("driver", "Driver: follows a distance-based target speed with preview, feed-forward and PI, one pedal at a time", env!("CARGO_PKG_VERSION"))
+        .experiment(10.0, 1e-3)
+        .documentation(DOCUMENTATION)
+        .resources(&[
+            Resource::file(TARGET_FILE, include_bytes!("../resources/target_speed.csv")).default_of("target_speed_file"),
+            Resource::file("NOTICE", include_bytes!("../resources/NOTICE")),
+        ]);
 
     fn initialize(vars: &mut DriverVars, ctx: &Context) -> Result<Self, ModelError> {
         let target = if vars.target_speed_file.is_empty() {

@@ -10,7 +10,7 @@
 mod lag;
 
 use fmu_export::variables::*;
-use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState};
+use fmu_export::{Context, Model, ModelError, ModelInfo, ModelState};
 use lag::LagStep;
 
 fmu_export::variables! {
@@ -324,15 +324,9 @@ impl Dyno {
 
 impl Model for Dyno {
     type Vars = DynoVars;
-    const INFO: ModelInfo = ModelInfo {
-        name: "dyno",
-        identifier: "dyno",
-        description: "Load dynamometer: rotor inertia, controller cycle, dead time, torque lag, torque or speed control",
-        version: env!("CARGO_PKG_VERSION"),
-        default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 1.0, step_size: 1e-3 },
-        documentation: DOCUMENTATION,
-        resources: &[],
-    };
+    const INFO: ModelInfo = ModelInfo::new("dyno", "Load dynamometer: rotor inertia, controller cycle, dead time, torque lag, torque or speed control", env!("CARGO_PKG_VERSION"))
+        .experiment(1.0, 1e-3)
+        .documentation(DOCUMENTATION);
 
     fn initialize(vars: &mut DynoVars, ctx: &Context) -> Result<Self, ModelError> {
         if vars.inertia_drive_side > vars.inertia {

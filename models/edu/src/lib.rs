@@ -3,7 +3,7 @@
 //! as torsional spring-dampers. A stand-in for a supplier's EDU FMU.
 
 use fmu_export::variables::*;
-use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState};
+use fmu_export::{Context, Model, ModelError, ModelInfo, ModelState};
 
 fmu_export::variables! {
     /// Variables of the EDU model.
@@ -166,15 +166,9 @@ impl Edu {
 
 impl Model for Edu {
     type Vars = EduVars;
-    const INFO: ModelInfo = ModelInfo {
-        name: "edu",
-        identifier: "edu",
-        description: "Reference electric drive unit: motor with torque/power limit and current-loop lag, gearbox with efficiency, open differential, side shafts as spring-dampers",
-        version: env!("CARGO_PKG_VERSION"),
-        default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 10.0, step_size: 1e-3 },
-        documentation: DOCUMENTATION,
-        resources: &[],
-    };
+    const INFO: ModelInfo = ModelInfo::new("edu", "Reference electric drive unit: motor with torque/power limit and current-loop lag, gearbox with efficiency, open differential, side shafts as spring-dampers", env!("CARGO_PKG_VERSION"))
+        .experiment(10.0, 1e-3)
+        .documentation(DOCUMENTATION);
 
     fn initialize(vars: &mut EduVars, _ctx: &Context) -> Result<Self, ModelError> {
         let p = Params::from_vars(vars);

@@ -29,6 +29,52 @@ pub struct ModelInfo {
     pub resources: &'static [Resource],
 }
 
+impl ModelInfo {
+    /// A model's facts, with what most models leave as it is: the name is also the
+    /// `modelIdentifier` (the shared library's name), the default experiment runs from 0 s
+    /// to 1 s in steps of 1 ms, and there is no documentation and no resource until
+    /// [`ModelInfo::experiment`], [`ModelInfo::documentation`] and
+    /// [`ModelInfo::resources`] say otherwise. A model crate passes
+    /// `env!("CARGO_PKG_VERSION")` as its version.
+    pub const fn new(name: &'static str, description: &'static str, version: &'static str) -> Self {
+        ModelInfo {
+            name,
+            identifier: name,
+            description,
+            version,
+            default_experiment: DefaultExperiment {
+                start_time: 0.0,
+                stop_time: 1.0,
+                step_size: 1e-3,
+            },
+            documentation: "",
+            resources: &[],
+        }
+    }
+
+    /// The default experiment: from 0 s to `stop_time` in steps of `step_size` [s].
+    pub const fn experiment(mut self, stop_time: f64, step_size: f64) -> Self {
+        self.default_experiment = DefaultExperiment {
+            start_time: 0.0,
+            stop_time,
+            step_size,
+        };
+        self
+    }
+
+    /// The HTML fragment for documentation/index.html.
+    pub const fn documentation(mut self, html: &'static str) -> Self {
+        self.documentation = html;
+        self
+    }
+
+    /// The files shipped in `resources/`.
+    pub const fn resources(mut self, files: &'static [Resource]) -> Self {
+        self.resources = files;
+        self
+    }
+}
+
 /// A file shipped in `resources/`: its name there and its content.
 #[derive(Clone, Copy, Debug)]
 pub struct Resource {
@@ -38,6 +84,23 @@ pub struct Resource {
     /// `twinbench export-twin` puts a fitted twin's own file (its track, its target), so
     /// that the FMU needs no path set by any host.
     pub default_of: Option<&'static str>,
+}
+
+impl Resource {
+    /// A file shipped as it is (no parameter defaults to it).
+    pub const fn file(name: &'static str, content: &'static [u8]) -> Self {
+        Resource {
+            name,
+            content,
+            default_of: None,
+        }
+    }
+
+    /// The file that the empty value of the String parameter `parameter` means.
+    pub const fn default_of(mut self, parameter: &'static str) -> Self {
+        self.default_of = Some(parameter);
+        self
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]

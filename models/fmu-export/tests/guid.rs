@@ -2,7 +2,7 @@
 
 use fmu_export::description::{guid, render_model_description, validate_table};
 use fmu_export::variables::*;
-use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, Stateless};
+use fmu_export::{Context, Model, ModelError, ModelInfo, Stateless};
 
 macro_rules! spring_model {
     ($model:ident, $vars:ident, $unit:literal, $max:expr) => {
@@ -16,15 +16,7 @@ macro_rules! spring_model {
         struct $model;
         impl Model for $model {
             type Vars = $vars;
-            const INFO: ModelInfo = ModelInfo {
-                name: "spring",
-                identifier: "spring",
-                description: "a spring",
-                version: "1",
-                default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 1.0, step_size: 1e-3 },
-                documentation: "",
-                resources: &[],
-            };
+            const INFO: ModelInfo = ModelInfo::new("spring", "a spring", "1");
             fn initialize(_: &mut $vars, _: &Context) -> Result<Self, ModelError> {
                 Ok($model)
             }

@@ -4,8 +4,7 @@
 use fmu_export::fmi2::*;
 use fmu_export::variables::*;
 use fmu_export::{
-    Context, DefaultExperiment, Function, Model, ModelError, ModelInfo, ModelState, Phase, Runtime,
-    Value,
+    Context, Function, Model, ModelError, ModelInfo, ModelState, Phase, Runtime, Value,
 };
 use tb_testkit::Capture;
 
@@ -35,19 +34,9 @@ fmu_export::states! {
 
 impl Model for Counter {
     type Vars = CounterVars;
-    const INFO: ModelInfo = ModelInfo {
-        name: "counter",
-        identifier: "counter",
-        description: "Integrator for the runtime's tests",
-        version: "0",
-        default_experiment: DefaultExperiment {
-            start_time: 0.0,
-            stop_time: 2.0,
-            step_size: 0.1,
-        },
-        documentation: "<p>y = ∫ gain·u dt</p>",
-        resources: &[],
-    };
+    const INFO: ModelInfo = ModelInfo::new("counter", "Integrator for the runtime's tests", "0")
+        .experiment(2.0, 0.1)
+        .documentation("<p>y = ∫ gain·u dt</p>");
 
     fn initialize(vars: &mut CounterVars, _ctx: &Context) -> Result<Self, ModelError> {
         vars.y = 0.0;

@@ -8,7 +8,7 @@ pub mod physics;
 pub mod track;
 
 use fmu_export::variables::*;
-use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo, ModelState, Resource};
+use fmu_export::{Context, Model, ModelError, ModelInfo, ModelState, Resource};
 use physics::{soft_sign, wheel_loads, LoadParams, Loads, MagicFormula};
 use std::sync::Arc;
 use track::{Track, TrackPoint};
@@ -511,18 +511,13 @@ impl Vehicle {
 
 impl Model for Vehicle {
     type Vars = VehicleVars;
-    const INFO: ModelInfo = ModelInfo {
-        name: "vehicle",
-        identifier: "vehicle",
-        description: "Road-load simulation of the bench: residual vehicle, tyres (Magic Formula, relaxation length), tyre loads by Eq. 11-15, brakes, aero, track",
-        version: env!("CARGO_PKG_VERSION"),
-        default_experiment: DefaultExperiment { start_time: 0.0, stop_time: 100.0, step_size: 1e-3 },
-        documentation: DOCUMENTATION,
-        resources: &[
-            Resource { name: TRACK_FILE, content: include_bytes!("../resources/track.csv"), default_of: Some("track_file") },
-            Resource { name: "NOTICE", content: include_bytes!("../resources/NOTICE"), default_of: None },
-        ],
-    };
+    const INFO: ModelInfo = ModelInfo::new("vehicle", "Road-load simulation of the bench: residual vehicle, tyres (Magic Formula, relaxation length), tyre loads by Eq. 11-15, brakes, aero, track", env!("CARGO_PKG_VERSION"))
+        .experiment(100.0, 1e-3)
+        .documentation(DOCUMENTATION)
+        .resources(&[
+            Resource::file(TRACK_FILE, include_bytes!("../resources/track.csv")).default_of("track_file"),
+            Resource::file("NOTICE", include_bytes!("../resources/NOTICE")),
+        ]);
 
     fn initialize(vars: &mut VehicleVars, ctx: &Context) -> Result<Self, ModelError> {
         let (track, track_path) = if vars.track_file.is_empty() {

@@ -531,7 +531,7 @@ mod tests {
     use super::*;
     use crate::native::NativeBackend;
     use fmu_export::variables::*;
-    use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo};
+    use fmu_export::{Context, Model, ModelError, ModelInfo};
     use tb_fmi::fmi2::fmi2Status;
     use tb_fmi::{CallStatus, FmiFunction, Function};
 
@@ -549,19 +549,7 @@ mod tests {
 
     impl Model for Twice {
         type Vars = TwiceVars;
-        const INFO: ModelInfo = ModelInfo {
-            name: "twice",
-            identifier: "twice",
-            description: "y = 2·u",
-            version: "1",
-            default_experiment: DefaultExperiment {
-                start_time: 0.0,
-                stop_time: 1.0,
-                step_size: 0.5,
-            },
-            documentation: "",
-            resources: &[],
-        };
+        const INFO: ModelInfo = ModelInfo::new("twice", "y = 2·u", "1").experiment(1.0, 0.5);
         fn initialize(_v: &mut TwiceVars, _ctx: &Context) -> Result<Self, ModelError> {
             Ok(Twice)
         }
