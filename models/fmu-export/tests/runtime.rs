@@ -296,39 +296,46 @@ fn saved_states_restore_and_serialise_bit_for_bit() {
     assert!(rt.deserialize(&bytes[..bytes.len() - 3]).is_err());
 }
 
-/// Through the C entry points: a panic is caught, returns fmi2Error and poisons the
-/// instance until fmi2Reset; NULL pointers are errors, not crashes.
-#[test]
-fn the_c_entry_points_catch_panics_and_refuse_null_pointers() {
-    use fmu_export::ffi;
-    let callbacks = fmi2CallbackFunctions {
+/// Callbacks with no logger and no allocator: the runtime needs neither.
+fn no_callbacks() -> fmi2CallbackFunctions {
+    fmi2CallbackFunctions {
         logger: None,
         allocateMemory: None,
         freeMemory: None,
         stepFinished: None,
         componentEnvironment: std::ptr::null_mut(),
-    };
+    }
+}
+
+/// `fmi2Instantiate` of a co-simulation Counter named "counter" with this GUID.
+unsafe fn instantiate(
+    guid: *const std::ffi::c_char,
+    callbacks: &fmi2CallbackFunctions,
+) -> fmi2Component {
+    let name = c"counter".as_ptr();
+    let (visible, logging) = (fmi2False, fmi2False);
+    fmu_export::ffi::instantiate::<Counter>(
+        name,
+        fmi2Type::CO_SIMULATION,
+        guid,
+        std::ptr::null(),
+        callbacks,
+        visible,
+        logging,
+    )
+}
+
+/// Through the C entry points: a panic is caught, returns fmi2Error and poisons the
+/// instance until fmi2Reset; NULL pointers are errors, not crashes.
+#[test]
+fn the_c_entry_points_catch_panics_and_refuse_null_pointers() {
+    use fmu_export::ffi;
+    let callbacks = no_callbacks();
     let guid = std::ffi::CString::new(fmu_export::description::guid::<Counter>()).unwrap();
     unsafe {
-        let c = ffi::instantiate::<Counter>(
-            c"counter".as_ptr(),
-            fmi2Type::CO_SIMULATION,
-            guid.as_ptr(),
-            std::ptr::null(),
-            &callbacks,
-            fmi2False,
-            fmi2False,
-        );
+        let c = instantiate(guid.as_ptr(), &callbacks);
         assert!(!c.is_null());
-        let wrong = ffi::instantiate::<Counter>(
-            c"counter".as_ptr(),
-            fmi2Type::CO_SIMULATION,
-            c"{not-the-guid}".as_ptr(),
-            std::ptr::null(),
-            &callbacks,
-            fmi2False,
-            fmi2False,
-        );
+        let wrong = instantiate(c"{not-the-guid}".as_ptr(), &callbacks);
         assert!(wrong.is_null(), "another GUID is refused");
         let fault = [2];
         assert_eq!(
@@ -475,24 +482,10 @@ fn string_variables_are_in_the_model_description_and_the_guid() {
 #[test]
 fn the_c_entry_points_pass_strings_both_ways() {
     use fmu_export::ffi;
-    let callbacks = fmi2CallbackFunctions {
-        logger: None,
-        allocateMemory: None,
-        freeMemory: None,
-        stepFinished: None,
-        componentEnvironment: std::ptr::null_mut(),
-    };
+    let callbacks = no_callbacks();
     let guid = std::ffi::CString::new(fmu_export::description::guid::<Counter>()).unwrap();
     unsafe {
-        let c = ffi::instantiate::<Counter>(
-            c"counter".as_ptr(),
-            fmi2Type::CO_SIMULATION,
-            guid.as_ptr(),
-            std::ptr::null(),
-            &callbacks,
-            fmi2False,
-            fmi2False,
-        );
+        let c = instantiate(guid.as_ptr(), &callbacks);
         assert!(!c.is_null());
         let value = [c"/tmp/ä.csv".as_ptr()];
         assert_eq!(

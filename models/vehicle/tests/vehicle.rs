@@ -27,6 +27,14 @@ fn nominal() -> LoadParams {
     }
 }
 
+/// A vehicle with the bundled resources whose log the test reads.
+fn logged(name: &str) -> (Capture, fmu_export::Runtime<Vehicle>) {
+    let cap = Capture::default();
+    let rt =
+        fmu_export::Runtime::<Vehicle>::new(name, Some(bundled_resources()), cap.boxed(), true);
+    (cap, rt)
+}
+
 fn eq18(p: &LoadParams, v: f64) -> f64 {
     p.m * p.g + 0.5 * (p.c_lift_front + p.c_lift_rear) * p.area * p.rho_air * v * v
 }
@@ -273,13 +281,7 @@ fn a_second_order_chassis_overshoots_into_a_corner_and_the_first_order_does_not(
 #[test]
 fn an_unknown_chassis_model_is_refused_naming_the_two() {
     for bad in [0, 3] {
-        let cap = Capture::default();
-        let mut rt = fmu_export::Runtime::<Vehicle>::new(
-            "test",
-            Some(bundled_resources()),
-            cap.boxed(),
-            true,
-        );
+        let (cap, mut rt) = logged("test");
         assert_eq!(
             rt.set_by_name("chassis_model", Value::Integer(bad)),
             fmi2Status::ERROR
@@ -539,13 +541,7 @@ fn bad_parameters_are_refused_naming_the_variable() {
         ("chassis_time_constant", 0.0),
         ("x_cog", 1.2),
     ] {
-        let cap = Capture::default();
-        let mut rt = fmu_export::Runtime::<Vehicle>::new(
-            "bad",
-            Some(bundled_resources()),
-            cap.boxed(),
-            true,
-        );
+        let (cap, mut rt) = logged("bad");
         assert_eq!(rt.set_by_name(name, r(x)), fmi2Status::ERROR, "{name}");
         assert!(cap.text().contains(&format!("'{name}'")), "{}", cap.text());
     }
