@@ -30,11 +30,7 @@ impl TargetSpeed {
     /// names the source in errors; rows are counted as lines of the file, from 1.
     pub fn parse(text: &str, file: &str) -> Result<Self, ModelError> {
         let err = |line: usize, msg: String| ModelError::new(format!("{file}, row {line}: {msg}"));
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .map(|(i, l)| (i + 1, l.trim()))
-            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+        let mut lines = fmu_export::resources::csv_lines(text);
         let (header_line, header) = lines.next().ok_or_else(|| {
             ModelError::new(format!("{file}: empty file, expected a header 's,v'"))
         })?;

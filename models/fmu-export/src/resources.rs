@@ -22,6 +22,16 @@ pub fn wrap_distance(s: f64, length: f64) -> f64 {
     }
 }
 
+/// The data lines of a model's CSV resource (a track, a target): each as (its line number
+/// in the file, from 1; its text trimmed), blank lines and `#` comments skipped. The first
+/// is the header.
+pub fn csv_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+}
+
 /// The path a String parameter names: an absolute path or a `file://` URI. A relative path
 /// is refused: the host resolves it (the orchestrator against the system file's folder).
 pub fn parameter_path(parameter: &str, value: &str) -> Result<PathBuf, ModelError> {

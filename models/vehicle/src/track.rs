@@ -35,11 +35,7 @@ impl Track {
     /// Parse the CSV text of `file` (the name is only used in error messages).
     pub fn parse(file: &str, text: &str) -> Result<Track, ModelError> {
         let err = |line: usize, msg: String| ModelError::new(format!("{file}: row {line}: {msg}"));
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .map(|(i, l)| (i + 1, l.trim()))
-            .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+        let mut lines = fmu_export::resources::csv_lines(text);
         let (hline, header) = lines.next().ok_or_else(|| {
             ModelError::new(format!("{file}: empty track file (expected a header row)"))
         })?;
