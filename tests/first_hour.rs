@@ -146,13 +146,12 @@ fn a_system_file_named_through_dot_dot_prints_normalised_paths() {
 fn pack_writes_the_shipped_fmus_to_one_documented_place_and_the_test_fmu_only_when_named() {
     let dir = tb_testkit::scratch("first-hour-pack");
     let d = dir.path();
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("pack")
-        .env("XDG_DATA_HOME", d.join("data"))
-        .current_dir(d)
-        .output()
-        .unwrap();
-    common::cli::succeeded(&o, "twinbench pack");
+    let o = common::cli::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .arg("pack")
+            .env("XDG_DATA_HOME", d.join("data"))
+            .current_dir(d),
+    );
     let place = d.join("data/twinbench/fmu");
     let shipped: Vec<&str> = twinbench::pack::models()
         .iter()
@@ -166,14 +165,13 @@ fn pack_writes_the_shipped_fmus_to_one_documented_place_and_the_test_fmu_only_wh
     let printed = String::from_utf8_lossy(&o.stdout);
     assert_eq!(printed.lines().count(), shipped.len(), "{printed}");
     // Without XDG_DATA_HOME: below HOME.
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["pack", "edu"])
-        .env_remove("XDG_DATA_HOME")
-        .env("HOME", d.join("home"))
-        .current_dir(d)
-        .output()
-        .unwrap();
-    common::cli::succeeded(&o, "twinbench pack edu");
+    common::cli::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .args(["pack", "edu"])
+            .env_remove("XDG_DATA_HOME")
+            .env("HOME", d.join("home"))
+            .current_dir(d),
+    );
     assert!(d.join("home/.local/share/twinbench/fmu/edu.fmu").is_file());
     // The help says where.
     let help = success(d, &["pack", "--help"]);

@@ -5,6 +5,7 @@
 
 mod common;
 
+use common::study;
 use std::path::Path;
 use std::sync::Arc;
 use tb_optimize::{
@@ -13,18 +14,14 @@ use tb_optimize::{
 use tb_testkit::assert_contains;
 
 fn study_text(optimizer: &str, body: &str) -> String {
-    let root = twinbench::pack::workspace_root();
+    let head = study::head(
+        "small",
+        &study::rls_v(),
+        "seed = 17\nbias_weight = 1.0",
+        &[],
+    );
     format!(
-        r#"
-name = "small"
-system = "{sys}"
-measurement = "{meas}"
-seed = 17
-bias_weight = 1.0
-[record]
-signals = ["vehicle.distance", "vehicle.v", "vehicle.Fz_fl", "vehicle.Fz_fr", "vehicle.Fz_rl", "vehicle.Fz_rr"]
-decimation = 10
-[optimizer]
+        r#"{head}[optimizer]
 kind = "{optimizer}"
 generations = 2
 [optimizer.ga]
@@ -33,9 +30,7 @@ elites = 2
 [optimizer.cmaes]
 population = 4
 {body}
-"#,
-        sys = root.join("systems/rls_v.toml").display(),
-        meas = root.join("data/spielberg_lap.csv").display(),
+"#
     )
 }
 

@@ -56,16 +56,7 @@ fn export(system: &Path, out: &Path, stop: f64) -> serde_json::Value {
 }
 
 fn python(args: &[&str]) -> serde_json::Value {
-    let out = Command::new(common::python::python())
-        .args(args)
-        .output()
-        .expect("python");
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        String::from_utf8_lossy(&out.stdout)
-    );
+    let out = common::cli::output_ok(Command::new(common::python::python()).args(args));
     serde_json::from_slice(&out.stdout)
         .unwrap_or_else(|e| panic!("bad JSON ({e}): {}", String::from_utf8_lossy(&out.stdout)))
 }
