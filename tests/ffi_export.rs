@@ -6,7 +6,8 @@ mod common;
 use common::{load, vr};
 use fmu_export::fmi2::*;
 use std::ffi::CString;
-use tb_fmi::{FmuInstance, Instance};
+use std::path::Path;
+use tb_fmi::{FmuInstance, Instance, LoadedFmu};
 use tb_testkit::assert_contains;
 
 fn faulty(name: &str) -> (std::sync::Arc<tb_fmi::LoadedFmu>, Instance) {
@@ -344,38 +345,34 @@ fn packing_twice_gives_identical_fmus() {
     assert_eq!(before, std::fs::read(&path).unwrap());
 }
 
+/// An instance `name` of `f` with the resources in `resources`, initialised: the error its
+/// exit from initialisation mode returns.
+fn initialisation_error(f: &LoadedFmu, name: &str, resources: &Path) -> String {
+    let mut i = Instance::instantiate(
+        f.library().unwrap(),
+        name,
+        &f.description.guid,
+        Some(resources),
+        false,
+    )
+    .unwrap();
+    i.setup_experiment(0.0.into()).unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap_err().to_string()
+}
+
 #[test]
 fn missing_or_malformed_resource_is_an_error_naming_the_file() {
     let f = load("driver");
     // No resources folder at all.
     let scratch = tb_testkit::scratch("noresources");
     let empty = scratch.path().to_path_buf();
-    let mut i = Instance::instantiate(
-        f.library().unwrap(),
-        "drv",
-        &f.description.guid,
-        Some(&empty),
-        false,
-    )
-    .unwrap();
-    i.setup_experiment(0.0.into()).unwrap();
-    i.enter_initialization_mode().unwrap();
-    let e = i.exit_initialization_mode().unwrap_err().to_string();
+    let e = initialisation_error(&f, "drv", &empty);
     assert_contains(&e, &["fmi2ExitInitializationMode returned fmi2Error"]);
     assert!(e.contains("target_speed.csv"), "{e}");
     // A malformed file: the row is named.
     std::fs::write(empty.join("target_speed.csv"), "s,v\n0,10\n1,abc\n2,12\n").unwrap();
-    let mut i = Instance::instantiate(
-        f.library().unwrap(),
-        "drv2",
-        &f.description.guid,
-        Some(&empty),
-        false,
-    )
-    .unwrap();
-    i.setup_experiment(0.0.into()).unwrap();
-    i.enter_initialization_mode().unwrap();
-    let e = i.exit_initialization_mode().unwrap_err().to_string();
+    let e = initialisation_error(&f, "drv2", &empty);
     assert_contains(&e, &["target_speed.csv", "abc"]);
     std::fs::remove_dir_all(&empty).unwrap();
 }

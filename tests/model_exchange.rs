@@ -137,33 +137,10 @@ fn run_one(fmu: &Path, extra: &str, stop: f64, step: f64, dir: &Path) -> Table {
 
 /// Per column FMPy recorded: the largest difference, relative to max(1, |largest value|).
 fn differences(model: &str, ours: &Table, theirs: &Table) -> Vec<(String, f64)> {
-    assert_eq!(
-        ours.len(),
-        theirs.len(),
-        "{model}: {} rows in twinbench, {} in FMPy",
-        ours.len(),
-        theirs.len()
-    );
-    let mut out = Vec::new();
-    for name in theirs.names() {
-        let ours_name = if name == "time" {
-            "time".to_string()
-        } else {
-            format!("m.{name}")
-        };
-        let a = ours
-            .require(&ours_name)
-            .unwrap_or_else(|e| panic!("{model}: {e}"));
-        let b = theirs.require(name).unwrap();
-        let scale = b.iter().fold(1.0f64, |m, x| m.max(x.abs()));
-        let worst = a
-            .iter()
-            .zip(b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0f64, f64::max);
-        out.push((name.clone(), worst / scale));
-    }
-    out
+    reference::worst_differences(model, ours, theirs)
+        .into_iter()
+        .map(|(name, worst, largest)| (name, worst / largest.max(1.0)))
+        .collect()
 }
 
 /// Whether two recordings are equal bit for bit.
