@@ -119,6 +119,12 @@ impl Fmu3 {
         )
     }
 
+    /// fmi3FreeInstance(c).
+    unsafe fn free(&self, c: Inst) {
+        let free: unsafe extern "C" fn(Inst) = self.sym("fmi3FreeInstance");
+        free(c)
+    }
+
     unsafe fn call0(&self, name: &str, c: Inst) -> i32 {
         let f: unsafe extern "C" fn(Inst) -> i32 = self.sym(name);
         f(c)
@@ -178,8 +184,7 @@ fn instantiation_refuses_event_mode_and_a_wrong_token_naming_them() {
         assert_eq!(good, f.token);
         let c = f.instantiate(false);
         assert!(!c.is_null(), "{}", f.messages());
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
-        free(c);
+        f.free(c);
     }
 }
 
@@ -259,8 +264,7 @@ fn typed_get_and_set_time_do_step_flags_and_call_order() {
         assert_eq!(get_s(c, &f.vr("track_file"), 1, p.as_mut_ptr(), 1), 0);
         assert_eq!(CStr::from_ptr(p[0]).to_str().unwrap(), "");
         assert_eq!(f.call0("fmi3Terminate", c), 0);
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
-        free(c);
+        f.free(c);
     }
 }
 
@@ -307,8 +311,7 @@ fn a_state_serialized_and_restored_repeats_bit_for_bit() {
         assert_eq!(free_state(c, &mut state), 0);
         assert_eq!(free_state(c, &mut back), 0);
         assert!(state.is_null() && back.is_null());
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
-        free(c);
+        f.free(c);
     }
 }
 
@@ -334,8 +337,7 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
         assert!(m.contains("panicked") || m.contains("panic"), "{m}");
         // Poisoned: further steps are refused, freeing works.
         assert_eq!(f.step(c, 5.0, 1e-3).0, 3);
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
-        free(c);
+        f.free(c);
     }
 }
 
@@ -346,7 +348,6 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
 fn a_hostile_hosts_double_free_call_after_free_foreign_state_and_endless_step_are_refused() {
     let f = open("vehicle");
     unsafe {
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
         let get_state: unsafe extern "C" fn(Inst, *mut *mut c_void) -> i32 =
             f.sym("fmi3GetFMUState");
         let set_state: unsafe extern "C" fn(Inst, *mut c_void) -> i32 = f.sym("fmi3SetFMUState");
@@ -390,17 +391,17 @@ fn a_hostile_hosts_double_free_call_after_free_foreign_state_and_endless_step_ar
         assert_eq!(set_state(c, again), 3, "a freed state restored");
         f.messages();
         // The instance: a call after the free, and a second free.
-        free(c);
+        f.free(c);
         let (status, _) = f.get_f64(c, &[f.vr("v")]);
         assert_eq!(status, 3, "a call after fmi3FreeInstance");
         let m = f.messages();
         assert!(m.contains("the instance was freed"), "{m}");
-        free(c);
+        f.free(c);
         let m = f.messages();
         assert_contains(&m, &["fmi3FreeInstance", "freed"]);
         // A pointer that was never an instance.
         assert_eq!(f.get_f64(foreign, &[0]).0, 3);
         assert_eq!(f.step(std::ptr::null_mut(), 0.0, 1e-3).0, 3);
-        free(foreign);
+        f.free(foreign);
     }
 }
