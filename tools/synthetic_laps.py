@@ -163,29 +163,33 @@ def ar1(n: int, sigma: float, rho: float, rng) -> np.ndarray:
     return e
 
 
-def draw_truth(rng, ranges):
-    """The truth: each parameter drawn uniformly in its (low, high) range, in the order
-    given, to 4 digits."""
-    return {name: round(rng.uniform(lo, hi), 4) for name, (lo, hi) in ranges.items()}
+# The (low, high) ranges the truth parameters are drawn from: (the twin's lap, the car's
+# lap). For the car, l, b_front and b_rear are the effective geometry: what the loads'
+# transfer behaves as, not the drawing's.
+TRUTH_RANGES = {
+    "vehicle.c_lift_front": ((0.8, 1.1), (0.75, 1.1)),
+    "vehicle.c_lift_rear": ((1.0, 1.4), (0.95, 1.35)),
+    "vehicle.l": ((2.8, 3.3), (2.9, 3.5)),
+    "vehicle.b_front": ((1.35, 1.6), (1.2, 1.6)),
+    "vehicle.b_rear": ((1.3, 1.55), (1.25, 1.55)),
+}
+TWIN, CAR = 0, 1
+
+
+def draw_truth(rng, lap):
+    """The truth of the `lap` (TWIN or CAR): each parameter drawn uniformly in its range, in
+    the table's order, to 4 digits."""
+    return {name: round(rng.uniform(*ranges[lap]), 4) for name, ranges in TRUTH_RANGES.items()}
 
 
 # ---- the twin's own lap ----
-
-# The ranges the twin's truth parameters are drawn from.
-TWIN_RANGES = {
-    "vehicle.c_lift_front": (0.8, 1.1),
-    "vehicle.c_lift_rear": (1.0, 1.4),
-    "vehicle.l": (2.8, 3.3),
-    "vehicle.b_front": (1.35, 1.6),
-    "vehicle.b_rear": (1.3, 1.55),
-}
 
 
 def twin_lap(args, out: Path):
     """The bench's RLS/v system with truth parameters on the circuit, run by twinbench; its
     loads with AR(1) noise."""
     rng = np.random.default_rng(args.seed)
-    truth = draw_truth(rng, TWIN_RANGES)
+    truth = draw_truth(rng, TWIN)
     kappa, target, track = circuit(args.circuit)
     if args.noise_seed is not None:
         # The same truth with another draw of the noise: replicates of one lap.
@@ -272,21 +276,10 @@ def second_order(x: np.ndarray, dt: float, f: float, zeta: float) -> np.ndarray:
     return y
 
 
-# The ranges the car's truth parameters are drawn from; l, b_front and b_rear are the
-# effective geometry: what the loads' transfer behaves as, not the drawing's.
-CAR_RANGES = {
-    "vehicle.c_lift_front": (0.75, 1.1),
-    "vehicle.c_lift_rear": (0.95, 1.35),
-    "vehicle.l": (2.9, 3.5),
-    "vehicle.b_front": (1.2, 1.6),
-    "vehicle.b_rear": (1.25, 1.55),
-}
-
-
 def car_lap(args, out: Path):
     rng = np.random.default_rng(args.seed)
     p = dict(NOMINAL)
-    truth = draw_truth(rng, CAR_RANGES)
+    truth = draw_truth(rng, CAR)
     modes = dict(pitch_frequency=round(rng.uniform(1.8, 3.0), 3), pitch_damping=round(rng.uniform(0.35, 0.7), 3),
                  roll_frequency=round(rng.uniform(1.5, 2.6), 3), roll_damping=round(rng.uniform(0.35, 0.7), 3))
     kappa, _, track = circuit(args.circuit)
