@@ -7,6 +7,7 @@ use std::sync::Arc;
 use tb_cosim::plan::{ConversionError, OrderError};
 use tb_cosim::{Plan, Simulation, SystemError};
 use tb_fmi::FmuCache;
+use tb_testkit::assert_contains;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
@@ -253,21 +254,15 @@ fn unknown_variable_suggests_the_closest_names() {
     let e = load_err(&format!(
         "connections = [\"vehicle.torque_setpoint_rll -> dyno_rl.torque_setpoint\"]\n{TWO}"
     ));
-    assert!(
-        e.contains("unknown variable 'vehicle.torque_setpoint_rll'"),
-        "{e}"
-    );
-    assert!(
-        e.contains("closest names: torque_setpoint_rl, torque_setpoint_rr"),
-        "{e}"
+    assert_contains(&e, &["unknown variable 'vehicle.torque_setpoint_rll'"]);
+    assert_contains(
+        &e,
+        &["closest names: torque_setpoint_rl, torque_setpoint_rr"],
     );
     let e = load_err(&format!(
         "connections = [\"vehicle.v -> dyno_rx.shaft_torque\"]\n{TWO}"
     ));
-    assert!(
-        e.contains("unknown instance 'dyno_rx'; instances: dyno_rl"),
-        "{e}"
-    );
+    assert_contains(&e, &["unknown instance 'dyno_rx'; instances: dyno_rl"]);
 }
 
 #[test]
@@ -275,10 +270,7 @@ fn output_connected_to_an_output_is_refused() {
     let e = load_err(&format!(
         "connections = [\"vehicle.torque_setpoint_rl -> dyno_rl.omega\"]\n{TWO}"
     ));
-    assert!(
-        e.contains("'dyno_rl.omega' is continuous output, not an input"),
-        "{e}"
-    );
+    assert_contains(&e, &["'dyno_rl.omega' is continuous output, not an input"]);
 }
 
 #[test]
@@ -307,9 +299,7 @@ fn a_direct_feed_through_cycle_is_reported_with_its_variables() {
         "{e}"
     );
     let e = e.to_string();
-    for v in ["a.y_direct", "b.u", "b.y_direct", "a.u"] {
-        assert!(e.contains(v), "{v} missing in: {e}");
-    }
+    assert_contains(&e, &["a.y_direct", "b.u", "b.y_direct", "a.u"]);
     // The same wiring through a stepped output (no feed-through) is fine.
     let ok = system_text("connections = [\"a.steps -> b.u\", \"b.steps -> a.u\"]\n[[instance]]\nname = \"a\"\nfmu = \"faulty\"\n\n[[instance]]\nname = \"b\"\nfmu = \"faulty\"\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n");
     let path = std::env::temp_dir().join("tb-bench-ok.toml");
@@ -337,22 +327,19 @@ fn an_fmu_failing_at_one_second_stops_the_run_with_instance_time_and_log() {
     let e = sim.run().unwrap_err();
     assert!(matches!(e, SystemError::Fmu(_)));
     let e = e.to_string();
-    assert!(
-        e.contains("instance 'supplier' at t = 1 s: fmi2DoStep returned fmi2Error"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["instance 'supplier' at t = 1 s: fmi2DoStep returned fmi2Error"],
     );
-    assert!(
-        e.contains("fault_kind = 1: the step fails on purpose"),
-        "{e}"
-    );
+    assert_contains(&e, &["fault_kind = 1: the step fails on purpose"]);
 }
 
 #[test]
 fn bad_parameters_and_experiments_are_refused_before_the_first_step() {
     let e = load_err(&format!("[parameters]\n\"vehicle.m\" = -5.0\n{TWO}"));
-    assert!(
-        e.contains("-5 is outside the declared range [1, 100000] of 'vehicle.m'"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["-5 is outside the declared range [1, 100000] of 'vehicle.m'"],
     );
     let e = load_err(&format!("[parameters]\n\"vehicle.v\" = 5.0\n{TWO}"));
     assert!(e.contains("only parameters and inputs can be set"), "{e}");

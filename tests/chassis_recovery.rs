@@ -9,16 +9,17 @@
 
 mod common;
 
-use common::synthetic::{self, drive_truth_target, twinbench, Noise};
+use common::synthetic::{self, drive_truth_target, Noise};
 use std::path::Path;
 
-/// The car that made the lap.
-const TRUTH: [(&str, f64); 9] = [
-    ("vehicle.c_lift_front", 0.95),
-    ("vehicle.c_lift_rear", 1.25),
-    ("vehicle.l", 2.85),
-    ("vehicle.b_front", 1.45),
-    ("vehicle.b_rear", 1.40),
+/// The car that made the lap: the synthetic laps' lift coefficients and geometry
+/// ([`synthetic::TRUTH`]) and the second-order chassis' modes.
+fn truth() -> Vec<(&'static str, f64)> {
+    [synthetic::TRUTH.as_slice(), &MODES].concat()
+}
+
+/// The second-order chassis' frequencies and dampings.
+const MODES: [(&str, f64); 4] = [
     ("vehicle.pitch_frequency", 2.2),
     ("vehicle.pitch_damping", 0.45),
     ("vehicle.roll_frequency", 1.8),
@@ -28,32 +29,16 @@ const TRUTH: [(&str, f64); 9] = [
 /// `twinbench lap --chassis <chassis>` of the measurement and its study fitted: the joint
 /// answer, by name.
 fn fit(dir: &Path, meas: &Path, track: &Path, target: &Path, chassis: &str) -> Vec<(String, f64)> {
-    let fmus = common::fmu_dir();
     let out = dir.join(format!("lap-{chassis}"));
-    twinbench(&[
-        "lap",
-        meas.to_str().unwrap(),
-        "--track",
-        track.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--fmus",
-        fmus.to_str().unwrap(),
-        "--chassis",
-        chassis,
-    ]);
+    synthetic::lap(&[meas], &[track], &out, &["--chassis", chassis]);
     // The driver follows the truth lap's own target: the difference between the fits is
     // then the chassis', not the derived target's.
     drive_truth_target(&out.join("system.toml"), Some(target));
-    let text = twinbench(&[
-        "optimize",
-        out.join("study.toml").to_str().unwrap(),
-        "--json",
-        "--no-report",
-        "--out",
-        dir.join(format!("opt-{chassis}")).to_str().unwrap(),
-    ]);
-    let r: serde_json::Value = serde_json::from_slice(&text).unwrap();
+    let r = synthetic::optimize(
+        &out.join("study.toml"),
+        &dir.join(format!("opt-{chassis}")),
+        &["--no-report"],
+    );
     r["joint"]["parameters"]
         .as_array()
         .unwrap()
@@ -72,7 +57,7 @@ fn the_second_order_chassis_recovers_geometry_and_modes_on_a_lap_of_another_circ
     let dir = tb_testkit::scratch("chassis-recovery");
     let circuit = synthetic::own_circuit_with_road(dir.path(), 0.002, 11);
     let truth_lines = "\"vehicle.chassis_model\" = \"second_order\"\n";
-    let lap = synthetic::truth_lap_with(dir.path(), &circuit, &TRUTH, truth_lines);
+    let lap = synthetic::truth_lap_with(dir.path(), &circuit, &truth(), truth_lines);
     // The shipped lap's sensor noise (`data/spielberg_lap_truth.json`: 25 N on the loads).
     let noise = Noise {
         sigma: 25.0,
@@ -88,7 +73,7 @@ fn the_second_order_chassis_recovers_geometry_and_modes_on_a_lap_of_another_circ
         |fit: &[(String, f64)], name: &str| fit.iter().find(|(n, _)| n == name).map(|(_, x)| *x);
     eprintln!("\n| parameter | truth | second-order chassis | first-order chassis |");
     eprintln!("|---|---:|---:|---:|");
-    for (name, truth) in TRUTH {
+    for (name, truth) in truth() {
         let shown = |x: Option<f64>| match x {
             Some(x) => format!("{x:.3} ({:+.1} %)", 100.0 * (x / truth - 1.0)),
             None => "not fitted".into(),
@@ -100,7 +85,7 @@ fn the_second_order_chassis_recovers_geometry_and_modes_on_a_lap_of_another_circ
         );
     }
     let off = |name: &str| {
-        let truth = TRUTH.iter().find(|t| t.0 == name).unwrap().1;
+        let truth = truth().iter().find(|t| t.0 == name).unwrap().1;
         (value(&second, name).unwrap() / truth - 1.0).abs()
     };
     assert!(

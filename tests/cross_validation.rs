@@ -46,20 +46,14 @@ fn twinbench_run(
 }
 
 fn fmpy_run(system: &Path, args: &[&str], reference: &Path) -> serde_json::Value {
-    let out = Command::new(common::python::python())
-        .arg(root().join("tools/fmpy_cosim.py"))
-        .arg(system)
-        .args(args)
-        .arg("--compare")
-        .arg(reference)
-        .arg("--json")
-        .output()
-        .expect("running tools/fmpy_cosim.py");
-    assert!(
-        out.status.success(),
-        "fmpy_cosim.py failed: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        String::from_utf8_lossy(&out.stdout)
+    let out = common::cli::output_ok(
+        Command::new(common::python::python())
+            .arg(root().join("tools/fmpy_cosim.py"))
+            .arg(system)
+            .args(args)
+            .arg("--compare")
+            .arg(reference)
+            .arg("--json"),
     );
     serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
         panic!(

@@ -10,6 +10,7 @@ mod common;
 
 use common::ok_in;
 use std::path::{Path, PathBuf};
+use tb_testkit::assert_contains;
 
 /// The bench of `systems/rls_v.toml` over the packed FMUs, with its own track and a target
 /// speed 2 % below the bundled one (files the fitted FMUs must carry in place of their
@@ -121,9 +122,9 @@ fn the_fitted_twin_runs_its_lap_bit_for_bit_from_every_output() {
     let bench = bench_with_files(d);
     let (result_path, result) = result_for(d, &bench);
     let log = ok_in(d, args!["export-twin", result_path, "--out", "twin",]);
-    assert!(
-        log.contains("fitted FMUs     vehicle, driver, dyno_rl, dyno_rr, edu"),
-        "{log}"
+    assert_contains(
+        &log,
+        &["fitted FMUs     vehicle, driver, dyno_rl, dyno_rr, edu"],
     );
     let twin = d.join("twin");
     let expected = run_with_set(d, &bench, &result, "set.csv");
@@ -248,10 +249,7 @@ fn the_fitted_twin_runs_its_lap_bit_for_bit_from_every_output() {
     std::fs::create_dir(d.join("mine")).unwrap();
     std::fs::write(d.join("mine/notes.txt"), "mine").unwrap();
     let e = common::fails_in(d, args!["export-twin", result_path, "--out", "mine"]);
-    assert!(
-        e.contains("mine") && e.contains("not an earlier export-twin output"),
-        "{e}"
-    );
+    assert_contains(&e, &["mine", "not an earlier export-twin output"]);
     assert_eq!(
         std::fs::read_to_string(d.join("mine/notes.txt")).unwrap(),
         "mine"
@@ -274,10 +272,7 @@ fn an_fmu_of_another_build_is_refused_by_name(d: &Path, bench: &Path, result_pat
     let vehicle = common::fmu("vehicle").display().to_string();
     std::fs::write(bench, text.replace(&vehicle, stale.to_str().unwrap())).unwrap();
     let e = common::fails_in(d, args!["export-twin", result_path, "--out", "twin"]);
-    assert!(
-        e.contains("vehicle_old.fmu") && e.contains("twinbench pack"),
-        "{e}"
-    );
+    assert_contains(&e, &["vehicle_old.fmu", "twinbench pack"]);
 }
 
 /// A copy of the FMU `from` at `to`, each entry passed through `edit` (its name, its bytes).

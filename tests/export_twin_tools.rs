@@ -10,15 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn python(args: &[&str]) -> serde_json::Value {
-    let o = Command::new(common::python::python())
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let o = common::cli::output_ok(Command::new(common::python::python()).args(args));
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
@@ -121,16 +113,14 @@ fn the_demos_fitted_twin_runs_bit_for_bit_in_fmpy_and_omsimulator() {
         "FMPy's simulate_ssp: the fitted SSP's run differs from the bench's with the answer"
     );
     let oms = |ssp: &Path, out: &str| {
-        let o = Command::new(common::omsimulator())
-            .current_dir(d)
-            .arg(ssp)
-            .arg("--stopTime=10")
-            .arg(format!("--resultFile={}", d.join(out).display()))
-            .output()
-            .unwrap();
-        let log =
-            String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
-        assert!(o.status.success() && !log.contains("error:"), "{log}");
+        common::run_omsimulator(
+            d,
+            args![
+                ssp,
+                "--stopTime=10",
+                format!("--resultFile={}", d.join(out).display())
+            ],
+        );
         std::fs::read(d.join(out)).unwrap()
     };
     let (a, b) = (

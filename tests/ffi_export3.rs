@@ -7,6 +7,7 @@ mod common;
 
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::sync::Mutex;
+use tb_testkit::assert_contains;
 
 type Inst = *mut c_void;
 type Log = unsafe extern "C" fn(*mut c_void, i32, *const c_char, *const c_char);
@@ -118,6 +119,12 @@ impl Fmu3 {
         )
     }
 
+    /// fmi3FreeInstance(c).
+    unsafe fn free(&self, c: Inst) {
+        let free: unsafe extern "C" fn(Inst) = self.sym("fmi3FreeInstance");
+        free(c)
+    }
+
     unsafe fn call0(&self, name: &str, c: Inst) -> i32 {
         let f: unsafe extern "C" fn(Inst) -> i32 = self.sym(name);
         f(c)
@@ -167,10 +174,7 @@ fn instantiation_refuses_event_mode_and_a_wrong_token_naming_them() {
     unsafe {
         assert!(f.instantiate(true).is_null());
         let m = f.messages();
-        assert!(
-            m.contains("has no event mode (hasEventMode=\"false\")"),
-            "{m}"
-        );
+        assert_contains(&m, &["has no event mode (hasEventMode=\"false\")"]);
         let good = f.token.clone();
         let mut bad = open("vehicle");
         bad.token = CString::new("{not-the-token}").unwrap();
@@ -180,8 +184,7 @@ fn instantiation_refuses_event_mode_and_a_wrong_token_naming_them() {
         assert_eq!(good, f.token);
         let c = f.instantiate(false);
         assert!(!c.is_null(), "{}", f.messages());
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
-        free(c);
+        f.free(c);
     }
 }
 
@@ -194,10 +197,7 @@ fn typed_get_and_set_time_do_step_flags_and_call_order() {
         let (s, _, _) = f.step(c, 0.0, 1e-3);
         assert_eq!(s, 3);
         let m = f.messages();
-        assert!(
-            m.contains("fmi3DoStep is not allowed in state 'instantiated'"),
-            "{m}"
-        );
+        assert_contains(&m, &["fmi3DoStep is not allowed in state 'instantiated'"]);
         // chassis_model is an Enumeration: Int64, not Int32.
         let chassis = f.vr("chassis_model");
         let get32: unsafe extern "C" fn(Inst, *const u32, usize, *mut i32, usize) -> i32 =
@@ -205,10 +205,7 @@ fn typed_get_and_set_time_do_step_flags_and_call_order() {
         let mut i = [0i32];
         assert_eq!(get32(c, &chassis, 1, i.as_mut_ptr(), 1), 3);
         let m = f.messages();
-        assert!(
-            m.contains("'chassis_model'") && m.contains("is Enumeration, not Int32"),
-            "{m}"
-        );
+        assert_contains(&m, &["'chassis_model'", "is Enumeration, not Int32"]);
         let set64: unsafe extern "C" fn(Inst, *const u32, usize, *const i64, usize) -> i32 =
             f.sym("fmi3SetInt64");
         assert_eq!(set64(c, &chassis, 1, [3i64].as_ptr(), 1), 3);
@@ -231,10 +228,7 @@ fn typed_get_and_set_time_do_step_flags_and_call_order() {
             f.sym("fmi3SetFloat64");
         assert_eq!(set(c, &v, 1, [30.0, 1.0].as_ptr(), 2), 3);
         let m = f.messages();
-        assert!(
-            m.contains("fmi3SetFloat64: 2 values for 1 value references"),
-            "{m}"
-        );
+        assert_contains(&m, &["fmi3SetFloat64: 2 values for 1 value references"]);
         assert_eq!(set(c, &v, 1, [30.0].as_ptr(), 1), 0);
         f.init(c);
         // time (the independent variable) and v, in one call.
@@ -270,8 +264,7 @@ fn typed_get_and_set_time_do_step_flags_and_call_order() {
         assert_eq!(get_s(c, &f.vr("track_file"), 1, p.as_mut_ptr(), 1), 0);
         assert_eq!(CStr::from_ptr(p[0]).to_str().unwrap(), "");
         assert_eq!(f.call0("fmi3Terminate", c), 0);
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
-        free(c);
+        f.free(c);
     }
 }
 
@@ -318,8 +311,7 @@ fn a_state_serialized_and_restored_repeats_bit_for_bit() {
         assert_eq!(free_state(c, &mut state), 0);
         assert_eq!(free_state(c, &mut back), 0);
         assert!(state.is_null() && back.is_null());
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
-        free(c);
+        f.free(c);
     }
 }
 
@@ -345,8 +337,7 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
         assert!(m.contains("panicked") || m.contains("panic"), "{m}");
         // Poisoned: further steps are refused, freeing works.
         assert_eq!(f.step(c, 5.0, 1e-3).0, 3);
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
-        free(c);
+        f.free(c);
     }
 }
 
@@ -357,7 +348,6 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
 fn a_hostile_hosts_double_free_call_after_free_foreign_state_and_endless_step_are_refused() {
     let f = open("vehicle");
     unsafe {
-        let free: unsafe extern "C" fn(Inst) = f.sym("fmi3FreeInstance");
         let get_state: unsafe extern "C" fn(Inst, *mut *mut c_void) -> i32 =
             f.sym("fmi3GetFMUState");
         let set_state: unsafe extern "C" fn(Inst, *mut c_void) -> i32 = f.sym("fmi3SetFMUState");
@@ -374,7 +364,7 @@ fn a_hostile_hosts_double_free_call_after_free_foreign_state_and_endless_step_ar
             let (s, _, _) = f.step(c, 0.0, h);
             assert_eq!(s, 3, "a step of {h} s");
             let m = f.messages();
-            assert!(m.contains("internal steps") && m.contains("refused"), "{m}");
+            assert_contains(&m, &["internal steps", "refused"]);
         }
         assert!(started.elapsed() < std::time::Duration::from_secs(5));
         // The instance still steps afterwards (a refused call is an error, not a crash).
@@ -401,17 +391,17 @@ fn a_hostile_hosts_double_free_call_after_free_foreign_state_and_endless_step_ar
         assert_eq!(set_state(c, again), 3, "a freed state restored");
         f.messages();
         // The instance: a call after the free, and a second free.
-        free(c);
+        f.free(c);
         let (status, _) = f.get_f64(c, &[f.vr("v")]);
         assert_eq!(status, 3, "a call after fmi3FreeInstance");
         let m = f.messages();
         assert!(m.contains("the instance was freed"), "{m}");
-        free(c);
+        f.free(c);
         let m = f.messages();
-        assert!(m.contains("fmi3FreeInstance") && m.contains("freed"), "{m}");
+        assert_contains(&m, &["fmi3FreeInstance", "freed"]);
         // A pointer that was never an instance.
         assert_eq!(f.get_f64(foreign, &[0]).0, 3);
         assert_eq!(f.step(std::ptr::null_mut(), 0.0, 1e-3).0, 3);
-        free(foreign);
+        f.free(foreign);
     }
 }

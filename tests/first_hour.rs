@@ -7,6 +7,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use tb_testkit::assert_contains;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
@@ -53,10 +54,7 @@ fn a_lap_of_ones_own_is_prepared_optimised_and_run_by_relative_names_from_any_fo
     let dir = tb_testkit::scratch("first-hour-lap");
     let d = dir.path();
     let out = own_lap(d, &["--out", "mylap"]);
-    assert!(
-        out.contains("next: twinbench optimize mylap/study.toml"),
-        "{out}"
-    );
+    assert_contains(&out, &["next: twinbench optimize mylap/study.toml"]);
     // The FMUs are packed beside the lap and named relative to its system file.
     let system = std::fs::read_to_string(d.join("mylap/system.toml")).unwrap();
     assert!(system.contains("vehicle = \"fmu/vehicle.fmu\""), "{system}");
@@ -102,10 +100,7 @@ fn lap_with_a_relative_fmu_folder_writes_paths_that_resolve_from_the_output_fold
     success(d, &["pack", "-o", "packed"]);
     own_lap(d, &["--fmus", "packed", "--out", "laps/one"]);
     let system = std::fs::read_to_string(d.join("laps/one/system.toml")).unwrap();
-    assert!(
-        system.contains("vehicle = \"../../packed/vehicle.fmu\""),
-        "{system}"
-    );
+    assert_contains(&system, &["vehicle = \"../../packed/vehicle.fmu\""]);
     assert!(!d.join("laps/one/fmu").exists(), "--fmus: nothing packed");
     let out = success(&d.join("laps"), &["run", "one/system.toml"]);
     assert!(out.contains("lap time"), "{out}");
@@ -151,13 +146,12 @@ fn a_system_file_named_through_dot_dot_prints_normalised_paths() {
 fn pack_writes_the_shipped_fmus_to_one_documented_place_and_the_test_fmu_only_when_named() {
     let dir = tb_testkit::scratch("first-hour-pack");
     let d = dir.path();
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("pack")
-        .env("XDG_DATA_HOME", d.join("data"))
-        .current_dir(d)
-        .output()
-        .unwrap();
-    common::cli::succeeded(&o, "twinbench pack");
+    let o = common::cli::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .arg("pack")
+            .env("XDG_DATA_HOME", d.join("data"))
+            .current_dir(d),
+    );
     let place = d.join("data/twinbench/fmu");
     let shipped: Vec<&str> = twinbench::pack::models()
         .iter()
@@ -171,14 +165,13 @@ fn pack_writes_the_shipped_fmus_to_one_documented_place_and_the_test_fmu_only_wh
     let printed = String::from_utf8_lossy(&o.stdout);
     assert_eq!(printed.lines().count(), shipped.len(), "{printed}");
     // Without XDG_DATA_HOME: below HOME.
-    let o = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["pack", "edu"])
-        .env_remove("XDG_DATA_HOME")
-        .env("HOME", d.join("home"))
-        .current_dir(d)
-        .output()
-        .unwrap();
-    common::cli::succeeded(&o, "twinbench pack edu");
+    common::cli::output_ok(
+        Command::new(env!("CARGO_BIN_EXE_twinbench"))
+            .args(["pack", "edu"])
+            .env_remove("XDG_DATA_HOME")
+            .env("HOME", d.join("home"))
+            .current_dir(d),
+    );
     assert!(d.join("home/.local/share/twinbench/fmu/edu.fmu").is_file());
     // The help says where.
     let help = success(d, &["pack", "--help"]);
@@ -206,11 +199,8 @@ fn run_on_an_fmu_runs_it_and_on_another_zip_says_what_run_takes() {
     // A ZIP archive under another name: what `run` takes.
     std::fs::copy(common::fmu("vehicle"), d.join("vehicle.zip")).unwrap();
     let e = common::fails_in(d, ["run", "vehicle.zip"]);
-    assert!(
-        e.contains("is a ZIP archive (an FMU?), not a system file"),
-        "{e}"
-    );
-    assert!(e.contains("SSP") && e.contains(".fmu"), "{e}");
+    assert_contains(&e, &["is a ZIP archive (an FMU?), not a system file"]);
+    assert_contains(&e, &["SSP", ".fmu"]);
     assert!(!e.contains("UTF-8"), "{e}");
 }
 
@@ -223,9 +213,9 @@ fn a_missing_fmu_names_the_system_file_and_the_command_that_writes_it() {
     let expected = d.parent().unwrap().join("target/fmu");
     assert!(e.contains("copied.toml: [fmus] "), "{e}");
     assert!(e.contains("does not exist"), "{e}");
-    assert!(
-        e.contains(&format!("`twinbench pack -o {}`", expected.display())),
-        "{e}"
+    assert_contains(
+        &e,
+        &[&format!("`twinbench pack -o {}`", expected.display())],
     );
 }
 
@@ -246,9 +236,9 @@ fn a_channel_map_typo_names_channel_signal_and_the_closest_channels() {
             "x",
         ],
     );
-    assert!(
-        e.contains("no channel `Fz_lr` (the channel map's name for signal `Fz_rl`)"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["no channel `Fz_lr` (the channel map's name for signal `Fz_rl`)"],
     );
     let closest = e
         .split("closest channels: ")
@@ -328,16 +318,8 @@ fn ctrl_c_keeps_the_checkpoint_and_says_how_to_resume() {
     let o = common::cli::interrupted_in(d, args, &checkpoint);
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{e}");
-    assert!(
-        e.contains("interrupt: stopping after the generation under way"),
-        "{e}"
-    );
-    assert!(
-        e.contains(
-            "interrupted: checkpoint kept (opt/mylap.checkpoint.json); resume with `twinbench optimize mylap/study.toml --resume --out opt`"
-        ),
-        "{e}"
-    );
+    assert_contains(&e, &["interrupt: stopping after the generation under way"]);
+    assert_contains(&e, &["interrupted: checkpoint kept (opt/mylap.checkpoint.json); resume with `twinbench optimize mylap/study.toml --resume --out opt`"]);
     assert!(checkpoint.is_file());
     // The resume, as printed (one generation more, to be quick).
     let out = success(
@@ -351,8 +333,5 @@ fn ctrl_c_keeps_the_checkpoint_and_says_how_to_resume() {
             "--no-report",
         ],
     );
-    assert!(
-        out.contains("resuming step 1 'lift' from generation "),
-        "{out}"
-    );
+    assert_contains(&out, &["resuming step 1 'lift' from generation "]);
 }

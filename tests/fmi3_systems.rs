@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::{Plan, Simulation, SystemFile};
 use tb_fmi::{FmuCache, FmuInstance};
+use tb_testkit::assert_contains;
 
 /// FMI 3.0 Feedthrough as a supplier's speed sensor: its continuous Float64 input and output
 /// declared in `unit` (the C code passes the value through whatever the unit).
@@ -229,10 +230,7 @@ fn an_fmi3_fmu_that_needs_clocks_is_refused_before_the_first_step() {
         |n| Some(n.to_string()),
     );
     let e = refused(&clocked, dir.path());
-    assert!(
-        e.contains("clocks") && e.contains("'tick' is a Clock"),
-        "{e}"
-    );
+    assert_contains(&e, &["clocks", "'tick' is a Clock"]);
     // The Clocks Reference FMU: Scheduled Execution only.
     let clocks = reference::variant(
         &vdp,
@@ -242,10 +240,7 @@ fn an_fmi3_fmu_that_needs_clocks_is_refused_before_the_first_step() {
         |n| Some(n.replace("VanDerPol", "Clocks")),
     );
     let e = refused(&clocks, dir.path());
-    assert!(
-        e.contains("supports Scheduled Execution only; twinbench runs FMUs through Co-Simulation or Model Exchange"),
-        "{e}"
-    );
+    assert_contains(&e, &["supports Scheduled Execution only; twinbench runs FMUs through Co-Simulation or Model Exchange"]);
 }
 
 #[test]
@@ -265,10 +260,12 @@ fn an_fmi3_fmu_built_for_another_platform_is_refused() {
         },
     );
     let e = refused(&windows, dir.path());
-    assert!(
-        e.contains("no binaries/x86_64-linux/VanDerPol.so")
-            && e.contains("it has binaries for x86_64-windows"),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            "no binaries/x86_64-linux/VanDerPol.so",
+            "it has binaries for x86_64-windows",
+        ],
     );
 }
 
@@ -285,9 +282,9 @@ fn a_64_bit_integer_an_f64_cannot_carry_is_an_error_naming_it() {
     let Err(e) = run(dir.path(), &text) else {
         panic!("not refused")
     };
-    assert!(
-        e.contains("'m.Int64_input': 9007199254740993 cannot be carried exactly"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["'m.Int64_input': 9007199254740993 cannot be carried exactly"],
     );
 }
 
@@ -313,9 +310,9 @@ fn binary_variables_are_set_connected_and_recorded_as_hex_text() {
     let Err(e) = run(dir.path(), &text("abc")) else {
         panic!("odd hex digits accepted")
     };
-    assert!(
-        e.contains("'Binary_input' is Binary: \"abc\" is not an even number of hexadecimal digits"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["'Binary_input' is Binary: \"abc\" is not an even number of hexadecimal digits"],
     );
 }
 
@@ -335,10 +332,12 @@ fn an_fmi3_error_carries_the_fmus_log() {
     i.set_echo(false);
     // A step before initialisation is an illegal call sequence.
     let e = i.do_step(0.0, 0.1).unwrap_err().to_string();
-    assert!(
-        e.contains("instance 'd' at t = 0 s: fmi3DoStep returned fmi3Error")
-            && e.contains("the FMU's last messages"),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            "instance 'd' at t = 0 s: fmi3DoStep returned fmi3Error",
+            "the FMU's last messages",
+        ],
     );
 }
 
@@ -356,9 +355,9 @@ fn an_isolated_fmi3_error_names_the_fmi3_call_and_status() {
     let mut b = factory.create("d", true).unwrap();
     // A step before initialisation is an illegal call sequence.
     let e = b.do_step(0.0, 0.1).unwrap_err().to_string();
-    assert!(
-        e.contains("instance 'd' at t = 0 s: fmi3DoStep returned fmi3Error"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["instance 'd' at t = 0 s: fmi3DoStep returned fmi3Error"],
     );
     assert!(!e.contains("fmi2"), "{e}");
 }

@@ -2,29 +2,43 @@
 
 mod common;
 
-#[test]
-fn fmpy_validates_and_simulates_every_fmu() {
-    let names: Vec<&str> = twinbench::pack::models()
-        .iter()
-        .map(|s| s.info.name)
-        .collect();
-    let fmus: Vec<std::path::PathBuf> = names.iter().map(|n| common::fmu(n)).collect();
-    let script = twinbench::pack::workspace_root().join("tools/fmpy_check.py");
+use std::path::PathBuf;
+use std::process::Output;
+
+/// `python tools/SCRIPT FMUS...`: its output, and the JSON object it printed a line for each
+/// of `count` FMUs (else the test fails with what it printed).
+fn run_check(script: &str, fmus: &[PathBuf], count: usize) -> (Output, Vec<serde_json::Value>) {
+    let script = twinbench::pack::workspace_root().join("tools").join(script);
     let out = std::process::Command::new(common::python::python())
         .arg(&script)
-        .args(&fmus)
+        .args(fmus)
         .output()
         .expect("cannot run python");
     let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
     let lines: Vec<serde_json::Value> = stdout
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     assert_eq!(
         lines.len(),
-        fmus.len(),
-        "stdout: {stdout}\nstderr: {stderr}"
+        count,
+        "stdout: {stdout}\nstderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out, lines)
+}
+
+#[test]
+fn fmpy_validates_and_simulates_every_fmu() {
+    let names: Vec<&str> = twinbench::pack::models()
+        .iter()
+        .map(|s| s.info.name)
+        .collect();
+    let fmus: Vec<PathBuf> = names.iter().map(|n| common::fmu(n)).collect();
+    let (out, lines) = run_check("fmpy_check.py", &fmus, fmus.len());
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
     );
     for (name, r) in names.iter().zip(&lines) {
         assert_eq!(
@@ -50,23 +64,14 @@ fn fmpy_validates_each_fmi3_fmu_and_it_equals_its_fmi2_fmu_bit_for_bit() {
         .filter(|s| !s.test_only)
         .map(|s| s.info.name)
         .collect();
-    let script = twinbench::pack::workspace_root().join("tools/fmpy_fmi3_check.py");
-    let mut cmd = std::process::Command::new(common::python::python());
-    cmd.arg(&script);
-    for n in &names {
-        cmd.arg(common::fmu(n)).arg(common::fmu3(n));
-    }
-    let out = cmd.output().expect("cannot run python");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    let lines: Vec<serde_json::Value> = stdout
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
+    let fmus: Vec<PathBuf> = names
+        .iter()
+        .flat_map(|n| [common::fmu(n), common::fmu3(n)])
         .collect();
-    assert_eq!(
-        lines.len(),
-        names.len(),
-        "stdout: {stdout}\nstderr: {stderr}"
+    let (out, lines) = run_check("fmpy_fmi3_check.py", &fmus, names.len());
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
     );
     for (name, r) in names.iter().zip(&lines) {
         assert_eq!(r["fmi_version"], "3.0", "{name}: {r}");

@@ -15,15 +15,8 @@
 
 mod common;
 
-use common::synthetic::{self, twinbench, Noise};
+use common::synthetic::{self, Noise, TRUTH};
 
-const TRUTH: [(&str, f64); 5] = [
-    ("vehicle.c_lift_front", 0.95),
-    ("vehicle.c_lift_rear", 1.25),
-    ("vehicle.l", 2.85),
-    ("vehicle.b_front", 1.45),
-    ("vehicle.b_rear", 1.40),
-];
 /// Laps per circuit (20 in all).
 const LAPS: u64 = 10;
 /// Generations per step.
@@ -36,7 +29,6 @@ const RHO: f64 = 0.995;
 #[test]
 fn the_95_percent_intervals_hold_the_truth_in_90_percent_of_the_twins_own_laps_with_a_calibrated_standard_error(
 ) {
-    let fmus = common::fmu_dir();
     let dir = tb_testkit::scratch("interval-coverage");
     let per_circuit = std::env::var("TWINBENCH_COVERAGE_LAPS")
         .ok()
@@ -71,29 +63,14 @@ fn the_95_percent_intervals_hold_the_truth_in_90_percent_of_the_twins_own_laps_w
             };
             let meas = synthetic::measurement(&lap, &ldir.join("measurement.csv"), Some(noise));
             let out = ldir.join("lap");
-            twinbench(&[
-                "lap",
-                meas.to_str().unwrap(),
-                "--track",
-                track.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-                "--fmus",
-                fmus.to_str().unwrap(),
-            ]);
+            synthetic::lap(&[&meas], &[&track], &out, &[]);
             // The user's workflow: the driver follows the target `twinbench lap` derived
             // from the measured speed and acceleration, never the truth lap's own.
-            let text = twinbench(&[
-                "optimize",
-                out.join("study.toml").to_str().unwrap(),
-                "--json",
-                "--no-report",
-                "--generations",
-                GENERATIONS,
-                "--out",
-                ldir.join("opt").to_str().unwrap(),
-            ]);
-            let r: serde_json::Value = serde_json::from_slice(&text).unwrap();
+            let r = synthetic::optimize(
+                &out.join("study.toml"),
+                &ldir.join("opt"),
+                &["--no-report", "--generations", GENERATIONS],
+            );
             laps += 1;
             let check = &r["joint"]["model_check"];
             fired += usize::from(check["discrepancy"].as_bool().expect("a model check"));

@@ -7,6 +7,7 @@ mod common;
 
 use std::ffi::{OsStr, OsString};
 use std::path::{Path, PathBuf};
+use tb_testkit::assert_contains;
 
 /// The bundled lap's rows, the header replaced by `header` (same columns), the columns
 /// mapped by `row`.
@@ -49,9 +50,9 @@ fn a_loggers_time_column_is_named_with_the_map_entry_that_takes_it() {
     let out = dir.path().join("lap");
     let e = common::fails(lap_args(&m, &out, &[]));
     assert!(e.contains("missing required column `time`"), "{e}");
-    assert!(
-        e.contains("the column `Time` differs only in case: map it with `time = \"Time\"`"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["the column `Time` differs only in case: map it with `time = \"Time\"`"],
     );
     assert!(!out.exists(), "a refused lap left {}", out.display());
     // The map entry the message suggests works.
@@ -75,12 +76,12 @@ fn an_unknown_key_in_a_channel_map_is_refused_with_the_keys_a_map_has() {
     let out = dir.path().join("lap");
     let args = lap_args(&m, &out, &args!["--channels", map]);
     let e = common::fails(&args);
-    assert!(
-        e.contains(&format!(
+    assert_contains(
+        &e,
+        &[&format!(
             "{}: channel map: unknown signal `speed`",
             map.display()
-        )),
-        "{e}"
+        )],
     );
     assert!(
         e.contains("(the signals a map names: time, distance, v, a_x"),
@@ -91,10 +92,7 @@ fn an_unknown_key_in_a_channel_map_is_refused_with_the_keys_a_map_has() {
     // A near miss is named.
     std::fs::write(&map, "[channels]\nFz_lf = \"LoadFL\"\n").unwrap();
     let e = common::fails(&args);
-    assert!(
-        e.contains("unknown signal `Fz_lf` (did you mean `Fz_fl`?)"),
-        "{e}"
-    );
+    assert_contains(&e, &["unknown signal `Fz_lf` (did you mean `Fz_fl`?)"]);
 }
 
 /// The speed column times `factor` (3.6: km/h, 2.237: mph), without a units row.
@@ -112,12 +110,12 @@ fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
     // With the distance column: ∫v dt is 3.6 times the distance.
     let m = scaled_speed(dir.path(), "kmh.csv", 3.6, HEADER);
     let e = common::fails(lap_args(&m, &out, &[]));
-    assert!(
-        e.contains(&format!(
+    assert_contains(
+        &e,
+        &[&format!(
             "{}: v has no unit and looks like km/h, not m/s",
             m.display()
-        )),
-        "{e}"
+        )],
     );
     assert!(e.contains("the distance column"), "{e}");
     assert!(!out.exists());
@@ -130,10 +128,7 @@ fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
         &HEADER.replacen("distance", "odometer", 1),
     );
     let e = common::fails(lap_args(&m, &out, &[]));
-    assert!(
-        e.contains("v has no unit and looks like mph, not m/s"),
-        "{e}"
-    );
+    assert_contains(&e, &["v has no unit and looks like mph, not m/s"]);
     assert!(e.contains("implies (mph: 2.24)"), "{e}");
     assert!(!out.exists());
     // The same speed in m/s is a lap (no false alarm from a_x's noise).
@@ -149,10 +144,12 @@ fn a_speed_in_kmh_or_mph_without_a_units_row_is_named_as_such() {
     let m = scaled_speed(dir.path(), "scaled.csv", 2.7, HEADER);
     let out = dir.path().join("scaled");
     let e = common::fails(lap_args(&m, &out, &[]));
-    assert!(
-        e.contains("v is 2.70 times the speed the distance column implies")
-            && e.contains("a wrong channel for v"),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            "v is 2.70 times the speed the distance column implies",
+            "a wrong channel for v",
+        ],
     );
     assert!(!out.exists());
 }
@@ -185,9 +182,9 @@ fn an_unknown_unit_is_said_without_a_settings_prefix() {
     std::fs::write(&m, format!("{header}\n{units}\n{}\n", body.join("\n"))).unwrap();
     let out = dir.path().join("lap");
     let e = common::fails(lap_args(&m, &out, &[]));
-    assert!(
-        e.contains(&format!("{}: channel `v`: unknown unit 'kph'", m.display())),
-        "{e}"
+    assert_contains(
+        &e,
+        &[&format!("{}: channel `v`: unknown unit 'kph'", m.display())],
     );
     assert!(!e.contains("invalid settings"), "{e}");
 }
@@ -216,12 +213,7 @@ fn an_interrupted_demo_says_how_to_go_on() {
     let o = common::cli::interrupted_in(d, ["demo", "--out", "dem"], &checkpoint);
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{e}");
-    assert!(
-        e.contains(
-            "interrupted: checkpoint kept (dem/spielberg.checkpoint.json); resume with `twinbench demo --resume --out dem`"
-        ),
-        "{e}"
-    );
+    assert_contains(&e, &["interrupted: checkpoint kept (dem/spielberg.checkpoint.json); resume with `twinbench demo --resume --out dem`"]);
     let text = common::ok_in(d, ["demo", "--resume", "--out", "dem"]);
     assert!(text.contains("| Fz_rl |"), "{text}");
     assert!(d.join("dem/table1.md").is_file());

@@ -8,16 +8,8 @@
 
 mod common;
 
-use common::synthetic::{self, drive_truth_target as own_target, twinbench, Noise};
+use common::synthetic::{self, drive_truth_target as own_target, twinbench, Noise, TRUTH};
 use std::path::{Path, PathBuf};
-
-const TRUTH: [(&str, f64); 5] = [
-    ("vehicle.c_lift_front", 0.95),
-    ("vehicle.c_lift_rear", 1.25),
-    ("vehicle.l", 2.85),
-    ("vehicle.b_front", 1.45),
-    ("vehicle.b_rear", 1.40),
-];
 
 /// (value, [lo, hi]) of every parameter of the answer.
 fn answer(r: &serde_json::Value) -> Vec<(String, f64, f64, f64)> {
@@ -38,21 +30,11 @@ fn answer(r: &serde_json::Value) -> Vec<(String, f64, f64, f64)> {
 }
 
 fn optimise(study: &Path, out: &Path) -> serde_json::Value {
-    let text = twinbench(&[
-        "optimize",
-        study.to_str().unwrap(),
-        "--json",
-        "--generations",
-        "12",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    serde_json::from_slice(&text).unwrap()
+    synthetic::optimize(study, out, &["--generations", "12"])
 }
 
 #[test]
 fn two_laps_narrow_the_intervals_and_a_held_out_lap_is_predicted() {
-    let fmus = common::fmu_dir();
     let dir = tb_testkit::scratch("multi-lap");
     let d = dir.path();
     let own_dir = d.join("own");
@@ -77,33 +59,12 @@ fn two_laps_narrow_the_intervals_and_a_held_out_lap_is_predicted() {
     let own_track = own.track.clone().unwrap();
     let s = |p: &PathBuf| p.to_str().unwrap().to_string();
     let both = d.join("both");
-    twinbench(&[
-        "lap",
-        &s(&a),
-        &s(&b),
-        "--track",
-        &s(&own_track),
-        "--track",
-        &s(&spielberg_track),
-        "--out",
-        &s(&both),
-        "--fmus",
-        &s(&fmus),
-    ]);
+    synthetic::lap(&[&a, &b], &[&own_track, &spielberg_track], &both, &[]);
     own_target(&both.join("own_a/system.toml"), own.target.as_deref());
     own_target(&both.join("spielberg_b/system.toml"), None);
     // The third lap, held out: its own files from `lap`, an entry in the study.
     let held = d.join("held");
-    twinbench(&[
-        "lap",
-        &s(&c),
-        "--track",
-        &s(&own_track),
-        "--out",
-        &s(&held),
-        "--fmus",
-        &s(&fmus),
-    ]);
+    synthetic::lap(&[&c], &[&own_track], &held, &[]);
     own_target(&held.join("system.toml"), own.target.as_deref());
     let study = both.join("study.toml");
     let mut text = std::fs::read_to_string(&study).unwrap();

@@ -6,6 +6,7 @@ mod common;
 use std::sync::Arc;
 use tb_cosim::{LoadOptions, Plan, Simulation, Table};
 use tb_fmi::FmuCache;
+use tb_testkit::assert_contains;
 
 fn run(native: bool, set: &[(&str, f64)]) -> (Simulation, Table) {
     common::fmu_dir();
@@ -90,6 +91,6 @@ fn native_errors_name_the_instance_and_keep_the_log() {
     .unwrap();
     // Stepping before initialisation is refused like the FMU refuses it.
     let e = b.do_step(0.0, 1e-3).unwrap_err().to_string();
-    assert!(e.contains("dyno_x") && e.contains("fmi2DoStep"), "{e}");
+    assert_contains(&e, &["dyno_x", "fmi2DoStep"]);
     assert!(e.contains("not allowed"), "{e}");
 }

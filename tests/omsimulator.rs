@@ -4,25 +4,8 @@
 
 mod common;
 
+use common::run_omsimulator;
 use std::path::Path;
-use std::process::Command;
-
-/// Run OMSimulator in `dir` (its temporary folders go there); its log on failure.
-fn run(dir: &Path, args: &[&std::ffi::OsStr]) -> String {
-    let out = Command::new(common::omsimulator())
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap();
-    let log = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(out.status.success(), "OMSimulator {args:?}: {log}");
-    assert!(!log.contains("error:"), "{log}");
-    log
-}
 
 /// The last row of an OMSimulator CSV result: the column named `name`.
 fn last_value(csv: &Path, name: &str) -> f64 {
@@ -58,13 +41,13 @@ fn omsimulator_runs_each_fmu_alone() {
         .filter(|s| !s.test_only);
     for model in shipped.map(|s| s.info.name) {
         let out = dir.path().join(format!("{model}.csv"));
-        run(
+        run_omsimulator(
             dir.path(),
-            &[
-                common::fmu(model).as_os_str(),
-                "--mode=cs".as_ref(),
-                "--stopTime=1".as_ref(),
-                format!("--resultFile={}", out.display()).as_ref(),
+            args![
+                common::fmu(model),
+                "--mode=cs",
+                "--stopTime=1",
+                format!("--resultFile={}", out.display()),
             ],
         );
         let text = std::fs::read_to_string(&out).unwrap();
@@ -87,27 +70,21 @@ fn omsimulator_runs_the_exported_bench_lap() {
     common::fmu_dir();
     let dir = tb_testkit::scratch("oms-lap");
     let ssp = dir.path().join("rls_v.ssp");
-    let exe = env!("CARGO_BIN_EXE_twinbench");
-    let status = Command::new(exe)
-        .arg("export-ssp")
-        .arg(root.join("systems/rls_v.toml"))
-        .arg("-o")
-        .arg(&ssp)
-        .args(["--stop-time", "99"])
-        .output()
-        .unwrap();
-    assert!(
-        status.status.success(),
-        "{}",
-        String::from_utf8_lossy(&status.stderr)
-    );
+    common::run_ok(args![
+        "export-ssp",
+        root.join("systems/rls_v.toml"),
+        "-o",
+        ssp,
+        "--stop-time",
+        "99"
+    ]);
     let out = dir.path().join("lap.csv");
-    run(
+    run_omsimulator(
         dir.path(),
-        &[
-            ssp.as_os_str(),
-            "--stopTime=99".as_ref(),
-            format!("--resultFile={}", out.display()).as_ref(),
+        args![
+            ssp,
+            "--stopTime=99",
+            format!("--resultFile={}", out.display()),
         ],
     );
     let oms_lap = last_value(&out, "vehicle.lap_time");

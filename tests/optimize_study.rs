@@ -5,25 +5,23 @@
 
 mod common;
 
+use common::study;
 use std::path::Path;
 use std::sync::Arc;
 use tb_optimize::{
     run_study, OptimizeError, RunOptions, StopAfter, Study, StudyOutcome, StudyResult,
 };
+use tb_testkit::assert_contains;
 
 fn study_text(optimizer: &str, body: &str) -> String {
-    let root = twinbench::pack::workspace_root();
+    let head = study::head(
+        "small",
+        &study::rls_v(),
+        "seed = 17\nbias_weight = 1.0",
+        &[],
+    );
     format!(
-        r#"
-name = "small"
-system = "{sys}"
-measurement = "{meas}"
-seed = 17
-bias_weight = 1.0
-[record]
-signals = ["vehicle.distance", "vehicle.v", "vehicle.Fz_fl", "vehicle.Fz_fr", "vehicle.Fz_rl", "vehicle.Fz_rr"]
-decimation = 10
-[optimizer]
+        r#"{head}[optimizer]
 kind = "{optimizer}"
 generations = 2
 [optimizer.ga]
@@ -32,9 +30,7 @@ elites = 2
 [optimizer.cmaes]
 population = 4
 {body}
-"#,
-        sys = root.join("systems/rls_v.toml").display(),
-        meas = root.join("data/spielberg_lap.csv").display(),
+"#
     )
 }
 
@@ -181,10 +177,9 @@ fn same_seed_same_result_any_threads_and_after_resume() {
         let err = run_study(&study, &e)
             .err()
             .expect("an edited checkpoint is refused");
-        assert!(
-            err.to_string()
-                .contains("step 1 'lift' of the checkpoint says its cost after was 0.0"),
-            "{err}"
+        assert_contains(
+            &err.to_string(),
+            &["step 1 'lift' of the checkpoint says its cost after was 0.0"],
         );
     }
     // A caller's own observer beside the stop conditions: it sees the remaining
@@ -247,10 +242,7 @@ fn same_seed_same_result_any_threads_and_after_resume() {
     // A resume with another budget or optimiser than the checkpoint's is refused.
     o.generations = Some(7);
     let err = run_study(&study, &o).err().expect("refused").to_string();
-    assert!(
-        err.contains("was made with no overrides, this run has --generations 7: resume with the same options"),
-        "{err}"
-    );
+    assert_contains(&err, &["was made with no overrides, this run has --generations 7: resume with the same options"]);
 }
 
 #[test]
@@ -297,9 +289,9 @@ start = 300.0
     );
     assert_eq!(s.failure_reasons.len(), s.failures);
     for reason in &s.failure_reasons {
-        assert!(
-            reason.contains("instance 'probe'") && reason.contains("fmi2DoStep returned fmi2Error"),
-            "{reason}"
+        assert_contains(
+            reason,
+            &["instance 'probe'", "fmi2DoStep returned fmi2Error"],
         );
     }
     assert!(s.cost_after < 1.0, "a finite best: {}", s.cost_after);

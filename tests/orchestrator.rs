@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use tb_cosim::{Plan, Simulation, SystemFile};
 use tb_fmi::FmuCache;
+use tb_testkit::assert_contains;
 
 /// The system text parsed as if read from `<scratch>/<name>.toml` (nothing is written).
 fn faulty_system(body: &str, name: &str) -> (SystemFile, PathBuf) {
@@ -113,9 +114,9 @@ fn run_json_summary_and_info_table() {
     );
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        err.contains("unknown variable 'vehicle.c_lift_frnt'") && err.contains("c_lift_front"),
-        "{err}"
+    assert_contains(
+        &err,
+        &["unknown variable 'vehicle.c_lift_frnt'", "c_lift_front"],
     );
     // info lists variables with units.
     let o = common::twinbench_in(&root, ["info", "target/fmu/vehicle.fmu"]);

@@ -6,34 +6,10 @@
 
 mod common;
 
-use common::synthetic;
+use common::synthetic::{self, twinbench, TRUTH};
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-/// The values the "measurement" is made with (the FMUs' defaults are 1.653, 2.027, 3.10,
-/// 1.55, 1.50: the study starts there).
-const TRUTH: [(&str, f64); 5] = [
-    ("vehicle.c_lift_front", 0.95),
-    ("vehicle.c_lift_rear", 1.25),
-    ("vehicle.l", 2.85),
-    ("vehicle.b_front", 1.45),
-    ("vehicle.b_rear", 1.40),
-];
-
-fn bin() -> PathBuf {
-    PathBuf::from(env!("CARGO_BIN_EXE_twinbench"))
-}
-
-fn twinbench(args: &[&str]) -> String {
-    let out = Command::new(bin()).args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "twinbench {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
 
 /// The twin's lap with the true values, as a measurement file (CSV, SI, a units row).
 fn measurement(dir: &Path) -> (PathBuf, PathBuf) {
@@ -45,16 +21,7 @@ fn measurement(dir: &Path) -> (PathBuf, PathBuf) {
 
 fn optimise(study: &Path) -> serde_json::Value {
     let out_dir = study.parent().unwrap().join("optimize");
-    let text = twinbench(&[
-        "optimize",
-        study.to_str().unwrap(),
-        "--json",
-        "--threads",
-        "2",
-        "--out",
-        out_dir.to_str().unwrap(),
-    ]);
-    let mut j: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let mut j = synthetic::optimize(study, &out_dir, &["--threads", "2"]);
     j["table1"] =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("table1.json")).unwrap())
             .unwrap();
@@ -98,27 +65,11 @@ fn an_own_lap_recovers_its_lift_coefficients_and_geometry_with_and_without_its_t
     let (meas, track) = measurement(dir.path());
     // With the circuit's track.
     let with = dir.path().join("with_track");
-    twinbench(&[
-        "lap",
-        meas.to_str().unwrap(),
-        "--track",
-        track.to_str().unwrap(),
-        "--out",
-        with.to_str().unwrap(),
-        "--fmus",
-        common::fmu_dir().to_str().unwrap(),
-    ]);
+    synthetic::lap(&[&meas], &[&track], &with, &[]);
     assert_recovered(&optimise(&with.join("study.toml")), "with --track");
     // With a track derived from the measurement.
     let derived = dir.path().join("derived_track");
-    twinbench(&[
-        "lap",
-        meas.to_str().unwrap(),
-        "--out",
-        derived.to_str().unwrap(),
-        "--fmus",
-        common::fmu_dir().to_str().unwrap(),
-    ]);
+    synthetic::lap(&[&meas], &[], &derived, &[]);
     assert_recovered(&optimise(&derived.join("study.toml")), "derived track");
 }
 
@@ -157,19 +108,10 @@ with open(si, "w") as f:
         vals = [raw[ch][k] * si_factor[u] + 0.0 for n, ch, u, _ in logger]
         f.write(repr(float(t[k])) + "," + ",".join(repr(float(x)) for x in vals) + "\n")
 "#;
-    let out = Command::new(common::python::python())
-        .args(["-c", script])
-        .args([
-            meas.to_str().unwrap(),
-            mf4.to_str().unwrap(),
-            si.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::cli::output_ok(
+        Command::new(common::python::python())
+            .args(["-c", script])
+            .args([&meas, &mf4, &si]),
     );
     let map = dir.path().join("channels.toml");
     std::fs::write(
@@ -177,30 +119,14 @@ with open(si, "w") as f:
         "[channels]\nv = \"GPS_Speed\"\na_x = \"AccLong\"\na_y = \"AccLat\"\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\ndistance = \"Dist\"\n",
     )
     .unwrap();
-    let fmus = common::fmu_dir();
     let (a, b) = (dir.path().join("from_mdf"), dir.path().join("from_csv"));
-    twinbench(&[
-        "lap",
-        mf4.to_str().unwrap(),
-        "--channels",
-        map.to_str().unwrap(),
-        "--track",
-        track.to_str().unwrap(),
-        "--out",
-        a.to_str().unwrap(),
-        "--fmus",
-        fmus.to_str().unwrap(),
-    ]);
-    twinbench(&[
-        "lap",
-        si.to_str().unwrap(),
-        "--track",
-        track.to_str().unwrap(),
-        "--out",
-        b.to_str().unwrap(),
-        "--fmus",
-        fmus.to_str().unwrap(),
-    ]);
+    synthetic::lap(
+        &[&mf4],
+        &[&track],
+        &a,
+        &["--channels", map.to_str().unwrap()],
+    );
+    synthetic::lap(&[&si], &[&track], &b, &[]);
     let (ra, rb) = (
         optimise(&a.join("study.toml")),
         optimise(&b.join("study.toml")),
@@ -241,7 +167,7 @@ with open(si, "w") as f:
         val.to_str().unwrap(),
         "--json",
     ]);
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&text).unwrap();
     assert!(v["notes"].as_array().unwrap().is_empty(), "{v}");
     for row in v["rows"].as_array().unwrap() {
         let signal = row["signal"].as_str().unwrap();

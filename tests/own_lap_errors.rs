@@ -8,6 +8,7 @@ mod common;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use tb_testkit::assert_contains;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
@@ -38,11 +39,11 @@ fn a_malformed_track_file_fails_initialisation_naming_the_users_path_row_and_col
     let e = common::fails(args!["run", sys]);
     let user_path = dir.path().join("my_track.csv").display().to_string();
     assert!(e.contains("fmi2ExitInitializationMode"), "{e}");
-    assert!(
-        e.contains(&format!(
+    assert_contains(
+        &e,
+        &[&format!(
             "{user_path}: row 3: column 'grade': 'x' is not a number"
-        )),
-        "{e}"
+        )],
     );
     // Printed once (the FMU's message with the failed call, not echoed before it too).
     assert_eq!(e.matches("is not a number").count(), 1, "{e}");
@@ -61,10 +62,7 @@ fn a_track_and_a_target_of_different_laps_are_refused_before_the_first_step() {
     let sys = bench_with(dir.path(), "\"driver.target_speed_file\" = \"short.csv\"");
     let e = common::fails(args!["run", sys]);
     assert!(e.contains("check failed after initialisation"), "{e}");
-    assert!(
-        e.contains("vehicle.lap_length") && e.contains("driver.lap_length"),
-        "{e}"
-    );
+    assert_contains(&e, &["vehicle.lap_length", "driver.lap_length"]);
     assert!(e.contains("not the same lap"), "{e}");
 }
 
@@ -77,9 +75,9 @@ fn a_missing_channel_and_an_unknown_unit_name_the_file_and_the_channel() {
     let out = dir.path().join("lap");
     let e = common::fails(args!["lap", meas, "--channels", map, "--out", out]);
     assert!(e.contains("spielberg_lap.csv"), "{e}");
-    assert!(
-        e.contains("no channel `GPS_Speed` (the channel map's name for signal `v`)"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["no channel `GPS_Speed` (the channel map's name for signal `v`)"],
     );
     // A units row with a unit twinbench does not know.
     let text = std::fs::read_to_string(&meas).unwrap();
@@ -100,10 +98,7 @@ fn a_missing_channel_and_an_unknown_unit_name_the_file_and_the_channel() {
     )
     .unwrap();
     let e = common::fails(args!["lap", odd, "--out", out]);
-    assert!(
-        e.contains("odd_units.csv") && e.contains("channel `v`"),
-        "{e}"
-    );
+    assert_contains(&e, &["odd_units.csv", "channel `v`"]);
     assert!(e.contains("unknown unit 'furlong/fortnight'"), "{e}");
 }
 
@@ -162,22 +157,14 @@ fn errors_about_mapped_channels_name_the_files_own_channels() {
     // signals the map renamed them to.
     let e = lap(&logger_named_lap(dir.path(), "no_rr.csv", true, None));
     assert!(e.contains("no channel `LoadRR`"), "{e}");
-    assert!(
-        e.contains("closest channels: LoadFR, LoadRL, LoadFL"),
-        "{e}"
-    );
-    assert!(
-        e.contains(
-            "channels in the file: time, distance, v, a_x, a_y, LoadFL, LoadFR, LoadRL, Other"
-        ),
-        "{e}"
+    assert_contains(&e, &["closest channels: LoadFR, LoadRL, LoadFL"]);
+    assert_contains(
+        &e,
+        &["channels in the file: time, distance, v, a_x, a_y, LoadFL, LoadFR, LoadRL, Other"],
     );
     // A NaN in a mapped channel is told under the file's channel.
     let e = lap(&logger_named_lap(dir.path(), "nan.csv", false, Some(50)));
-    assert!(
-        e.contains("line 51, column `LoadFR`") && e.contains("not finite"),
-        "{e}"
-    );
+    assert_contains(&e, &["line 51, column `LoadFR`", "not finite"]);
     // Two signals given one channel are refused, both named.
     std::fs::write(&map, "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFL\"\n").unwrap();
     let e = lap(&logger_named_lap(dir.path(), "ok.csv", false, None));
@@ -234,7 +221,7 @@ fn a_measurement_of_another_circuit_is_refused_before_optimising() {
         "--no-report"
     ]);
     assert!(e.contains("do not belong together"), "{e}");
-    assert!(e.contains("lap length") && e.contains("(measured)"), "{e}");
+    assert_contains(&e, &["lap length", "(measured)"]);
     assert!(e.contains("--force"), "{e}");
 }
 
@@ -384,9 +371,9 @@ fn wheel_loads_in_kn_dan_or_lbf_without_their_unit_are_refused_naming_it() {
     let (o, _) = lap(&meas, "logger", &args!["--channels", map]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
-    assert!(
-        e.contains("looks like kN") && e.contains("channel `LoadFL` (the study's Fz_fl)"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["looks like kN", "channel `LoadFL` (the study's Fz_fl)"],
     );
     // In N, and in kN with its unit declared: accepted.
     let (o, _) = lap(&write("lap_n.csv", 1.0, &[], None), "n", &[]);

@@ -9,6 +9,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
+use tb_testkit::assert_contains;
 
 /// `systems/rls_v.toml` with the packed FMUs and a stop time of `stop` s.
 fn bench(dir: &Path, stop: f64) -> PathBuf {
@@ -71,9 +72,9 @@ fn check_attempts(j: &serde_json::Value, stderr: &str) -> Vec<serde_json::Value>
                     a["consequence"].as_str().unwrap(),
                 );
                 assert!(means.contains("deadlines may be missed"), "{means}");
-                assert!(
-                    stderr.contains(&format!("realtime: {what} refused: {why}; {means}")),
-                    "{stderr}"
+                assert_contains(
+                    stderr,
+                    &[&format!("realtime: {what} refused: {why}; {means}")],
                 );
             }
         }
@@ -221,18 +222,17 @@ fn ctrl_c_ends_a_paced_run_during_its_sleep_and_keeps_the_rows() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{e}");
     let partial = dir.path().join("r.incomplete.csv");
-    assert!(
-        e.contains("interrupted by SIGINT or SIGTERM (Ctrl-C) at t = ")
-            && e.contains(&format!("{} (incomplete)", partial.display())),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            "interrupted by SIGINT or SIGTERM (Ctrl-C) at t = ",
+            &format!("{} (incomplete)", partial.display()),
+        ],
     );
     let t = tb_table::Table::read_path(&partial).unwrap();
     assert!(!t.require("time").unwrap().is_empty());
     // Nothing asked was left unsaid: the memory lock is the only thing asked here.
-    assert!(
-        e.contains("realtime: mlockall(MCL_CURRENT|MCL_FUTURE) "),
-        "{e}"
-    );
+    assert_contains(&e, &["realtime: mlockall(MCL_CURRENT|MCL_FUTURE) "]);
     assert!(
         !e.contains("SCHED_FIFO") && !e.contains("sched_setaffinity"),
         "{e}"

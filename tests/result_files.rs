@@ -6,6 +6,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use tb_testkit::assert_contains;
 
 /// `twinbench run SYSTEM --out OUT`.
 fn run_out(system: &Path, out: &Path) -> Output {
@@ -112,9 +113,9 @@ fn two_writers_cannot_share_an_output_folder() {
         .err()
         .unwrap()
         .to_string();
-    assert!(
-        second.contains("another twinbench") && second.contains(&std::process::id().to_string()),
-        "{second}"
+    assert_contains(
+        &second,
+        &["another twinbench", &std::process::id().to_string()],
     );
     drop(first);
     tb_table::FolderLock::acquire(dir.path()).unwrap();
@@ -171,10 +172,7 @@ fn a_failed_run_keeps_what_it_recorded_in_a_file_named_incomplete() {
     let e = String::from_utf8_lossy(&o.stderr);
     let partial = dir.path().join("r.incomplete.csv");
     assert!(e.contains("fault_kind = 1"), "{e}");
-    assert!(
-        e.contains(&format!("{} (incomplete)", partial.display())),
-        "{e}"
-    );
+    assert_contains(&e, &[&format!("{} (incomplete)", partial.display())]);
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "time,a.y\n0,0\n");
     // Recorded up to the failing step at t = 0.5 s: y = t (gain 1, u 1) within rounding.
     let t = tb_table::Table::read_path(&partial).unwrap();
@@ -208,10 +206,7 @@ fn a_replayed_column_without_a_unit_takes_the_inputs_and_a_wrong_one_names_the_f
     let o = run_out(&sys, &out);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{e}");
-    assert!(
-        e.contains("'in.drive' has no unit; taken as 'a.u''s unit 1"),
-        "{e}"
-    );
+    assert_contains(&e, &["'in.drive' has no unit; taken as 'a.u''s unit 1"]);
     let t = tb_table::Table::read_path(&out).unwrap();
     let y = *t.require("a.y").unwrap().last().unwrap();
     assert!((y - 2.0).abs() < 1e-9, "y = ∫ 2 dt over 1 s = {y}");
@@ -258,11 +253,13 @@ fn interrupted_run_keeps_its_rows_as_incomplete(signal: i32) {
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{e}");
     let partial = dir.path().join("r.incomplete.csv");
-    assert!(
-        e.contains("the run ended early; the ")
-            && e.contains("interrupted by SIGINT or SIGTERM (Ctrl-C) at t = ")
-            && e.contains(&format!("{} (incomplete)", partial.display())),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            "the run ended early; the ",
+            "interrupted by SIGINT or SIGTERM (Ctrl-C) at t = ",
+            &format!("{} (incomplete)", partial.display()),
+        ],
     );
     // The earlier complete result stays; the rows go to the incomplete file, y = t each.
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "time,a.y\n0,0\n");
@@ -270,10 +267,7 @@ fn interrupted_run_keeps_its_rows_as_incomplete(signal: i32) {
     let (time, y) = (t.require("time").unwrap(), t.require("a.y").unwrap());
     let last_t = *time.last().unwrap();
     assert!(last_t > 0.0 && last_t < 1e5, "recorded until {last_t}");
-    assert!(
-        e.contains(&format!("at t = {} s", tb_files::number(last_t))),
-        "{e}"
-    );
+    assert_contains(&e, &[&format!("at t = {} s", tb_files::number(last_t))]);
     assert!((y.last().unwrap() - last_t).abs() < 1e-6 * last_t.max(1.0));
     // The trace was finished (its file complete) and no temporary file stays.
     let left: Vec<_> = std::fs::read_dir(dir.path())

@@ -8,6 +8,7 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use tb_fmi::import::archive::Limits;
 use tb_fmi::FmuCache;
+use tb_testkit::assert_contains;
 use zip::write::SimpleFileOptions;
 
 /// The entries of the packed faulty FMU (name, content).
@@ -174,10 +175,7 @@ fn zip_slip_with_parent_components_is_refused() {
             w.write_all(b"owned").unwrap();
         });
         let e = default_refused("slip.fmu", &bytes);
-        assert!(
-            e.contains(&format!("entry '{evil}' escapes the archive")),
-            "{e}"
-        );
+        assert_contains(&e, &[&format!("entry '{evil}' escapes the archive")]);
     }
 }
 
@@ -191,10 +189,7 @@ fn absolute_entry_paths_are_refused() {
         w.write_all(b"owned").unwrap();
     });
     let e = default_refused("absolute.fmu", &bytes);
-    assert!(
-        e.contains("escapes the archive (absolute path or '..')"),
-        "{e}"
-    );
+    assert_contains(&e, &["escapes the archive (absolute path or '..')"]);
     assert!(!target.exists());
 }
 
@@ -247,9 +242,9 @@ fn a_declared_size_past_the_limit_is_refused_before_extraction() {
     });
     patch_declared_size(&mut bytes, "resources/huge.bin", 0xF000_0000);
     let e = default_refused("declared.fmu", &bytes);
-    assert!(
-        e.contains("uncompressed size exceeds the limit of 2147483648 bytes"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["uncompressed size exceeds the limit of 2147483648 bytes"],
     );
 }
 
@@ -271,10 +266,7 @@ fn a_lying_declared_size_is_caught_while_extracting_and_nothing_stays() {
     };
     let s = Scratch::new();
     let e = s.refused("bomb.fmu", &bytes, limits);
-    assert!(
-        e.contains("uncompressed size exceeds the limit of 2097152 bytes while extracting 'resources/bomb.bin'"),
-        "{e}"
-    );
+    assert_contains(&e, &["uncompressed size exceeds the limit of 2097152 bytes while extracting 'resources/bomb.bin'"]);
     // The half-extracted folder was removed: the cache is empty.
     assert_eq!(list(&s.cache_dir()), Vec::<PathBuf>::new());
 }
@@ -285,42 +277,30 @@ fn a_missing_linux64_binary_is_refused() {
         "nobinary.fmu",
         &with_entry("binaries/linux64/faulty.so", None),
     );
-    assert!(
-        e.contains("no binaries/linux64/faulty.so (the FMU has no binary for this platform; it has no binaries at all)"),
-        "{e}"
-    );
+    assert_contains(&e, &["no binaries/linux64/faulty.so (the FMU has no binary for this platform; it has no binaries at all)"]);
     // Only a Windows binary.
     let mut entries = with_entry("binaries/linux64/faulty.so", None);
     entries.push(("binaries/win64/faulty.dll".into(), b"MZ".to_vec()));
     let e = refused_entries("win64only.fmu", &entries);
-    assert!(
-        e.contains("no binaries/linux64/faulty.so") && e.contains("it has binaries for win64"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["no binaries/linux64/faulty.so", "it has binaries for win64"],
     );
     // An empty linux64 folder beside a Windows binary: empty, not a binary for linux64.
     entries.push(("binaries/linux64/".into(), Vec::new()));
     let e = refused_entries("emptylinux.fmu", &entries);
-    assert!(
-        e.contains("no binaries/linux64/faulty.so (the folder binaries/linux64/ is empty (the FMU has binaries for win64))"),
-        "{e}"
-    );
+    assert_contains(&e, &["no binaries/linux64/faulty.so (the folder binaries/linux64/ is empty (the FMU has binaries for win64))"]);
     // A library of another name there.
     let mut entries = with_entry("binaries/linux64/faulty.so", None);
     entries.push(("binaries/linux64/Faulty.so".into(), b"\x7fELF".to_vec()));
     let e = refused_entries("othername.fmu", &entries);
-    assert!(
-        e.contains("binaries/linux64/ holds Faulty.so but not the library its modelIdentifier \"faulty\" names"),
-        "{e}"
-    );
+    assert_contains(&e, &["binaries/linux64/ holds Faulty.so but not the library its modelIdentifier \"faulty\" names"]);
 }
 
 #[test]
 fn a_missing_model_description_is_refused() {
     let e = refused_entries("nomd.fmu", &with_entry("modelDescription.xml", None));
-    assert!(
-        e.contains("no modelDescription.xml at the archive's root"),
-        "{e}"
-    );
+    assert_contains(&e, &["no modelDescription.xml at the archive's root"]);
     // One in a sub-folder does not count.
     let mut entries = with_entry("modelDescription.xml", None);
     entries.push((
@@ -347,11 +327,11 @@ fn fmi_1_is_refused_with_its_version_and_3_0_is_read_as_3_0() {
         let v = "1.0";
         let md = md2.replace("fmiVersion=\"2.0\"", &format!("fmiVersion=\"{v}\""));
         let e = default_refused(&format!("fmi{v}.fmu"), &with_description(md));
-        assert!(
-            e.contains(&format!(
+        assert_contains(
+            &e,
+            &[&format!(
                 "fmiVersion is \"{v}\"; twinbench runs FMI 2.0 and 3.0 FMUs"
-            )),
-            "{e}"
+            )],
         );
     }
     // A genuine FMI 3.0 description (different elements) says the same.
@@ -363,17 +343,14 @@ fn fmi_1_is_refused_with_its_version_and_3_0_is_read_as_3_0() {
 </fmiModelDescription>"#;
     let e = default_refused("fmi3.fmu", &with_description(md3));
     // Read as FMI 3.0: its library is looked for in the 3.0 platform folder.
-    assert!(
-        e.contains("no binaries/x86_64-linux/faulty.so") && e.contains("binaries for linux64"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["no binaries/x86_64-linux/faulty.so", "binaries for linux64"],
     );
     // An FMI 2.0 description that only claims 3.0: its variables are not 3.0 elements.
     let claimed = md2.replace("fmiVersion=\"2.0\"", "fmiVersion=\"3.0\"");
     let e = default_refused("claims3.fmu", &with_description(claimed));
-    assert!(
-        e.contains("<ScalarVariable> is not an FMI 3.0 variable element"),
-        "{e}"
-    );
+    assert_contains(&e, &["<ScalarVariable> is not an FMI 3.0 variable element"]);
     // FMI 1.0's CoSimulation_StandAlone description.
     let md1 = r#"<?xml version="1.0"?>
 <fmiModelDescription fmiVersion="1.0" modelName="faulty" modelIdentifier="faulty" guid="{x}">
@@ -398,10 +375,7 @@ fn an_fmi2_model_exchange_only_fmu_loads_and_a_library_without_its_functions_is_
     assert_eq!(l.default_interface(), tb_fmi::Interface::ModelExchange);
     assert_eq!(l.model_identifier(), "faulty");
     let e = l.library_me().err().unwrap().to_string();
-    assert!(
-        e.contains("me.fmu: binaries/linux64/faulty.so does not export the required FMI 2.0 Model Exchange function fmi2EnterEventMode"),
-        "{e}"
-    );
+    assert_contains(&e, &["me.fmu: binaries/linux64/faulty.so does not export the required FMI 2.0 Model Exchange function fmi2EnterEventMode"]);
     let e = l
         .check_interface(tb_fmi::Interface::CoSimulation)
         .unwrap_err();
@@ -453,10 +427,12 @@ fn a_fifo_or_a_device_given_as_an_fmu_is_refused_without_reading_it() {
     let cache = FmuCache::persistent(&s.cache_dir()).unwrap();
     for path in [fifo.as_path(), Path::new("/dev/zero")] {
         let err = cache.load(path).err().expect("refused").to_string();
-        assert!(
-            err.contains(&path.display().to_string())
-                && err.contains("not a regular file (an FMU is a zip archive)"),
-            "{err}"
+        assert_contains(
+            &err,
+            &[
+                &path.display().to_string(),
+                "not a regular file (an FMU is a zip archive)",
+            ],
         );
     }
 }
@@ -473,10 +449,7 @@ fn a_model_description_over_64_mib_is_an_error_not_cut() {
     );
     let bytes = with_description(padded);
     let err = default_refused("huge_md.fmu", &bytes);
-    assert!(
-        err.contains("modelDescription.xml is larger than 64 MiB"),
-        "{err}"
-    );
+    assert_contains(&err, &["modelDescription.xml is larger than 64 MiB"]);
 }
 
 #[test]
@@ -510,12 +483,12 @@ fn a_broken_or_foreign_binary_is_named_by_the_fmu_and_its_entry() {
         // Reading the archive runs no code: it loads; the library fails when first needed.
         let loaded = cache.load(&fmu).unwrap();
         let err = loaded.library().err().expect("refused").to_string();
-        assert!(
-            err.contains(&format!(
-                "{}: cannot load shared library: {so}: ",
-                fmu.display()
-            )) && err.contains(expected),
-            "{err}"
+        assert_contains(
+            &err,
+            &[
+                &format!("{}: cannot load shared library: {so}: ", fmu.display()),
+                expected,
+            ],
         );
         assert!(
             !err.contains(&s.cache_dir().display().to_string()),

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 use tb_cosim::isolated::IsolationOptions;
 use tb_cosim::{LoadOptions, Plan, Simulation, SystemError, SystemFile};
 use tb_fmi::FmuCache;
+use tb_testkit::assert_contains;
 
 fn cache() -> Arc<FmuCache> {
     Arc::new(FmuCache::temporary(false).unwrap())
@@ -122,11 +123,9 @@ fn a_failed_step_stops_the_run_naming_instance_time_and_reason() {
 fn a_nan_output_stops_the_run_naming_instance_time_and_signal() {
     let (e, s) = run_err(3, &in_process());
     assert!(matches!(e, SystemError::NotFinite { .. }), "{s}");
-    assert!(
-        s.contains(
-            "supplier.y is not finite (NaN) at t = 1.01 s after the step of instance 'supplier'"
-        ),
-        "{s}"
+    assert_contains(
+        &s,
+        &["supplier.y is not finite (NaN) at t = 1.01 s after the step of instance 'supplier'"],
     );
 }
 
@@ -135,19 +134,16 @@ fn an_error_in_initialization_names_the_instance() {
     let (_, s) = run_err(6, &in_process());
     // A getter in initialization mode defers a failed initialisation: the error is
     // fmi2ExitInitializationMode's, once.
-    assert!(
-        s.contains("instance 'supplier' at t = 0 s: fmi2ExitInitializationMode returned fmi2Error"),
-        "{s}"
+    assert_contains(
+        &s,
+        &["instance 'supplier' at t = 0 s: fmi2ExitInitializationMode returned fmi2Error"],
     );
     assert_eq!(
         s.matches("initialization fails on purpose").count(),
         1,
         "{s}"
     );
-    assert!(
-        s.contains("fault_kind = 6: initialization fails on purpose"),
-        "{s}"
-    );
+    assert_contains(&s, &["fault_kind = 6: initialization fails on purpose"]);
 }
 
 #[test]
@@ -226,11 +222,11 @@ fn isolated_errors_keep_their_fmi_status_and_log() {
         (2, "fmi2Error", "the model panics on purpose"),
     ] {
         let (_, s) = run_err(kind, &isolated(timeout));
-        assert!(
-            s.contains(&format!(
+        assert_contains(
+            &s,
+            &[&format!(
                 "instance 'supplier' at t = 1 s: fmi2DoStep returned {status}"
-            )),
-            "{s}"
+            )],
         );
         assert!(s.contains(why), "{s}");
     }
@@ -243,10 +239,7 @@ fn an_abort_in_an_isolated_fmu_ends_the_run_and_the_host_lives() {
     let _serial = serial();
     let mut sim = simulation(&system_text(4, true), &in_process());
     let e = sim.run().unwrap_err().to_string();
-    assert!(
-        e.contains("instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 6 (SIGABRT: abort) (crashed)"),
-        "{e}"
-    );
+    assert_contains(&e, &["instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 6 (SIGABRT: abort) (crashed)"]);
     // The host goes on: repaired, the same simulation runs (a new worker is started).
     sim.set_parameter("supplier.fault_kind", toml::Value::Integer(0))
         .unwrap();
@@ -265,10 +258,7 @@ fn a_hang_in_an_isolated_fmu_is_ended_by_the_watchdog() {
     let t0 = Instant::now();
     let e = sim.run().unwrap_err().to_string();
     let waited = t0.elapsed();
-    assert!(
-        e.contains("instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: no answer within 1.5s (watchdog): the FMU hangs; killed (the worker process was killed by signal 9 (SIGKILL))"),
-        "{e}"
-    );
+    assert_contains(&e, &["instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: no answer within 1.5s (watchdog): the FMU hangs; killed (the worker process was killed by signal 9 (SIGKILL))"]);
     assert!(waited < Duration::from_secs(5), "{waited:?}");
     drop(sim);
     assert_eq!(live_children(), Vec::<u32>::new());
@@ -285,10 +275,7 @@ fn twinbench_run_isolate_survives_an_abort_and_a_hang() {
     let out = common::twinbench(["run", sys.to_str().unwrap(), "--isolate"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains("error: instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 6"),
-        "{err}"
-    );
+    assert_contains(&err, &["error: instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 6"]);
     // Per instance in the system file, with a short watchdog from the command line.
     std::fs::write(&sys, system_text(5, true)).unwrap();
     let out = common::twinbench(["run", sys.to_str().unwrap(), "--worker-timeout", "1"]);

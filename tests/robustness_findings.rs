@@ -6,6 +6,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use tb_testkit::assert_contains;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
@@ -75,9 +76,9 @@ fn n01_the_folder_lock_follows_no_link_and_takes_no_other_users_folder() {
             .err()
             .expect("another user's folder is refused")
             .to_string();
-        assert!(
-            e.contains("the folder belongs to user id 1234, not to this user (0)"),
-            "{e}"
+        assert_contains(
+            &e,
+            &["the folder belongs to user id 1234, not to this user (0)"],
         );
     }
 }
@@ -109,10 +110,7 @@ fn n16_n29_lap_refuses_a_standing_measurement_and_absurd_speeds() {
     let d = dir.path();
     measurement(&d.join("standing.csv"), 200, |_| (0.0, 0.0));
     let e = common::fails_in(d, ["lap", "standing.csv", "--out", "x"]);
-    assert!(
-        e.contains("the car covers 0.0 m in 2.0 s: not a lap"),
-        "{e}"
-    );
+    assert_contains(&e, &["the car covers 0.0 m in 2.0 s: not a lap"]);
     assert!(!e.contains("panicked"), "{e}");
     measurement(&d.join("huge.csv"), 1000, |k| {
         (k as f64 * 0.5, if k == 50 { 1e308 } else { 50.0 })
@@ -263,10 +261,7 @@ fn n21_temporaries_are_removed_and_swept_and_a_size_limit_is_an_error() {
         .unwrap();
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{e}");
-    assert!(
-        e.contains("limited.csv") && e.contains("File too large"),
-        "{e}"
-    );
+    assert_contains(&e, &["limited.csv", "File too large"]);
 }
 
 /// N9: an output folder that cannot be written was found only after the run.

@@ -8,6 +8,7 @@
 
 mod common;
 
+use common::study;
 use std::path::Path;
 use std::sync::Arc;
 use tb_compare::PreparedMeasurement;
@@ -40,18 +41,14 @@ fn system_text(kind: i32, isolate: bool) -> String {
 }
 
 fn study_text(system: &Path) -> String {
-    let root = twinbench::pack::workspace_root();
+    let head = study::head(
+        "faults",
+        system,
+        "seed = 5\npenalty = 10.0",
+        &["supplier.y"],
+    );
     format!(
-        r#"
-name = "faults"
-system = "{sys}"
-measurement = "{meas}"
-seed = 5
-penalty = 10.0
-[record]
-signals = ["vehicle.distance", "vehicle.v", "vehicle.Fz_fl", "vehicle.Fz_fr", "vehicle.Fz_rl", "vehicle.Fz_rr", "supplier.y"]
-decimation = 10
-[optimizer]
+        r#"{head}[optimizer]
 kind = "ga"
 generations = 1
 [optimizer.ga]
@@ -65,9 +62,7 @@ name = "supplier.fault_time"
 min = 0.2
 max = 150.0
 start = 150.0
-"#,
-        sys = system.display(),
-        meas = root.join("data/spielberg_lap.csv").display(),
+"#
     )
 }
 
@@ -216,21 +211,13 @@ fn decisions(json: &[u8]) -> serde_json::Value {
 #[test]
 fn an_optimisation_killed_with_sigkill_and_resumed_ends_as_an_uninterrupted_one() {
     common::fmu_dir();
-    let root = twinbench::pack::workspace_root();
     let dir = tempfile::tempdir().unwrap();
     let study = dir.path().join("study.toml");
+    let head = study::head("killed", &study::rls_v(), "seed = 11", &[]);
     std::fs::write(
         &study,
         format!(
-            r#"
-name = "killed"
-system = "{sys}"
-measurement = "{meas}"
-seed = 11
-[record]
-signals = ["vehicle.distance", "vehicle.v", "vehicle.Fz_fl", "vehicle.Fz_fr", "vehicle.Fz_rl", "vehicle.Fz_rr"]
-decimation = 10
-[optimizer]
+            r#"{head}[optimizer]
 kind = "cmaes"
 generations = 3
 [optimizer.cmaes]
@@ -242,9 +229,7 @@ signals = ["Fz_sum"]
 name = "vehicle.c_lift_front"
 min = 0.2
 max = 2.5
-"#,
-            sys = root.join("systems/rls_v.toml").display(),
-            meas = root.join("data/spielberg_lap.csv").display(),
+"#
         ),
     )
     .unwrap();

@@ -10,6 +10,7 @@ use std::process::Command;
 use std::sync::Arc;
 use tb_cosim::{Algorithm, Plan, Simulation, StopConfig, SystemFile};
 use tb_fmi::FmuCache;
+use tb_testkit::assert_contains;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
@@ -55,16 +56,7 @@ fn export(system: &Path, out: &Path, stop: f64) -> serde_json::Value {
 }
 
 fn python(args: &[&str]) -> serde_json::Value {
-    let out = Command::new(common::python::python())
-        .args(args)
-        .output()
-        .expect("python");
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        String::from_utf8_lossy(&out.stdout)
-    );
+    let out = common::cli::output_ok(Command::new(common::python::python()).args(args));
     serde_json::from_slice(&out.stdout)
         .unwrap_or_else(|e| panic!("bad JSON ({e}): {}", String::from_utf8_lossy(&out.stdout)))
 }
@@ -239,7 +231,7 @@ fn replays_are_refused_with_a_clear_error() {
     let e = tb_cosim::ssp::export(&sys, &out, &Default::default()).unwrap_err();
     assert!(matches!(e, tb_cosim::ssp::SspError::Unsupported(_)), "{e}");
     let e = e.to_string();
-    assert!(e.contains("replay") && e.contains("SSP 1.0"), "{e}");
+    assert_contains(&e, &["replay", "SSP 1.0"]);
     assert!(!out.exists());
     // The file itself stays usable in SSP-free form: a system without replays exports.
     let mut file = SystemFile::load(&root().join("systems/rls_v.toml")).unwrap();

@@ -12,6 +12,7 @@ use std::process::Command;
 use std::sync::Arc;
 use tb_cosim::{Plan, Simulation, SystemError};
 use tb_fmi::FmuCache;
+use tb_testkit::assert_contains;
 
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
@@ -384,16 +385,8 @@ fn unsupported_elements_are_named_with_their_line() {
     let ssd = hand_ssd("\n      <ssd:System name=\"inner\"/>", "");
     let e = load_err(&hand_package(dir.path(), "nested.ssp", &ssd, ROTOR_SSV, ""));
     let line = line_of(&ssd, "name=\"inner\"");
-    assert!(
-        e.contains("nested.ssp") && e.contains("SystemStructure.ssd"),
-        "{e}"
-    );
-    assert!(
-        e.contains(&format!("line {line}"))
-            && e.contains("<System>")
-            && e.contains("nested systems"),
-        "{e}"
-    );
+    assert_contains(&e, &["nested.ssp", "SystemStructure.ssd"]);
+    assert_contains(&e, &[&format!("line {line}"), "<System>", "nested systems"]);
     // A signal dictionary.
     let ssd = hand_ssd("", "").replace(
         "    <ssd:Elements>",
@@ -401,11 +394,13 @@ fn unsupported_elements_are_named_with_their_line() {
     );
     let e = load_err(&hand_package(dir.path(), "dict.ssp", &ssd, ROTOR_SSV, ""));
     let line = line_of(&ssd, "SignalDictionaries");
-    assert!(
-        e.contains(&format!("line {line}"))
-            && e.contains("<SignalDictionaries>")
-            && e.contains("signal dictionaries"),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            &format!("line {line}"),
+            "<SignalDictionaries>",
+            "signal dictionaries",
+        ],
     );
     // A mapping transformation.
     let ssd = hand_ssd(
@@ -413,9 +408,9 @@ fn unsupported_elements_are_named_with_their_line() {
         "\n      <ssd:Connection startElement=\"speed\" startConnector=\"Boolean_output\" endElement=\"conv\" endConnector=\"Int32_input\"><ssc:BooleanMappingTransformation/></ssd:Connection>",
     );
     let e = load_err(&hand_package(dir.path(), "map.ssp", &ssd, ROTOR_SSV, ""));
-    assert!(
-        e.contains("<BooleanMappingTransformation>") && e.contains("LinearTransformation"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["<BooleanMappingTransformation>", "LinearTransformation"],
     );
     // A connection to the system's own connector.
     let ssd = hand_ssd(
@@ -436,9 +431,9 @@ fn unsupported_elements_are_named_with_their_line() {
         "<ssd:ParameterBinding source=\"resources/speed.ssv\"><ssd:ParameterMapping source=\"resources/m.ssm\"/></ssd:ParameterBinding>",
     );
     let e = load_err(&hand_package(dir.path(), "pmap.ssp", &ssd, ROTOR_SSV, ""));
-    assert!(
-        e.contains("<ParameterMapping>") && e.contains("parameter mappings are not supported"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["<ParameterMapping>", "parameter mappings are not supported"],
     );
 }
 
@@ -455,21 +450,20 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         "resources/dyno.fmu",
     );
     let e = load_err(&ssp);
-    assert!(
-        e.contains("nodyno.ssp")
-            && e.contains("component 'rotor'")
-            && e.contains("'resources/dyno.fmu' is not in the package")
-            && e.contains("resources/Feedthrough.fmu"),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            "nodyno.ssp",
+            "component 'rotor'",
+            "'resources/dyno.fmu' is not in the package",
+            "resources/Feedthrough.fmu",
+        ],
     );
     // The binary says the same, exits with an error and leaves nothing behind.
     let out = twinbench(tmp.path()).arg("run").arg(&ssp).output().unwrap();
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        stderr.contains("'resources/dyno.fmu' is not in the package"),
-        "{stderr}"
-    );
+    assert_contains(&stderr, &["'resources/dyno.fmu' is not in the package"]);
     // A malformed SSD: an end tag that does not match, on line 6.
     let mut ssd = hand_ssd("", "");
     let bad_line = ssd
@@ -480,22 +474,21 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
     ssd = ssd.replacen("<ssd:Elements>", "<ssd:Elements></ssd:Element>", 1);
     let ssp = hand_package(dir.path(), "malformed.ssp", &ssd, ROTOR_SSV, "");
     let e = load_err(&ssp);
-    assert!(
-        e.contains("malformed.ssp")
-            && e.contains("SystemStructure.ssd")
-            && e.contains(&format!("line {bad_line}"))
-            && e.contains("malformed XML"),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            "malformed.ssp",
+            "SystemStructure.ssd",
+            &format!("line {bad_line}"),
+            "malformed XML",
+        ],
     );
     let out = twinbench(tmp.path()).arg("run").arg(&ssp).output().unwrap();
     assert!(!out.status.success());
     // An unclosed document.
     let ssd = hand_ssd("", "").replace("</ssd:SystemStructureDescription>\n", "");
     let e = load_err(&hand_package(dir.path(), "cut.ssp", &ssd, ROTOR_SSV, ""));
-    assert!(
-        e.contains("not closed") && e.contains("SystemStructureDescription"),
-        "{e}"
-    );
+    assert_contains(&e, &["not closed", "SystemStructureDescription"]);
     // A parameter of the .ssv naming no variable of the FMU.
     let rotor = ROTOR_SSV.replace("name=\"inertia\"", "name=\"inertiaa\"");
     let ssp = hand_package(dir.path(), "badparam.ssp", &hand_ssd("", ""), &rotor, "");
@@ -505,13 +498,15 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         .position(|l| String::from_utf8_lossy(l).contains("inertiaa"))
         .unwrap()
         + 1;
-    assert!(
-        e.contains("badparam.ssp")
-            && e.contains("resources/rotor.ssv")
-            && e.contains(&format!("line {line}"))
-            && e.contains("no variable 'inertiaa'")
-            && e.contains("inertia"),
-        "{e}"
+    assert_contains(
+        &e,
+        &[
+            "badparam.ssp",
+            "resources/rotor.ssv",
+            &format!("line {line}"),
+            "no variable 'inertiaa'",
+            "inertia",
+        ],
     );
     // No SSD, a missing .ssv, an SSD nested too deep: named, no panic.
     let ssp = hand_package(
@@ -522,10 +517,7 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         "SystemStructure.ssd",
     );
     let e = load_err(&ssp);
-    assert!(
-        e.contains("nossd.ssp: the package has no SystemStructure.ssd"),
-        "{e}"
-    );
+    assert_contains(&e, &["nossd.ssp: the package has no SystemStructure.ssd"]);
     let ssp = hand_package(
         dir.path(),
         "nossv.ssp",
@@ -534,9 +526,9 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         "resources/speed.ssv",
     );
     let e = load_err(&ssp);
-    assert!(
-        e.contains("nossv.ssp") && e.contains("'resources/speed.ssv' is not in the package"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["nossv.ssp", "'resources/speed.ssv' is not in the package"],
     );
     let deep = format!("{HEAD}{}", "<ssd:System>".repeat(100_000));
     let e = load_err(&hand_package(dir.path(), "deep.ssp", &deep, ROTOR_SSV, ""));
@@ -552,10 +544,7 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         ],
     );
     let e = load_err(&evil);
-    assert!(
-        e.contains("evil.ssp") && e.contains("escapes the archive"),
-        "{e}"
-    );
+    assert_contains(&e, &["evil.ssp", "escapes the archive"]);
     assert!(!dir.path().parent().unwrap().join("evil.ssd").exists());
     let out = twinbench(tmp.path())
         .arg("run")
@@ -675,10 +664,7 @@ fn n29_degenerate_units_and_parameter_sets_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let zero = hand_ssd("", "").replace("factor=\"0.2777777777777778\"", "factor=\"0\"");
     let e = load_err(&hand_package(dir.path(), "zero.ssp", &zero, ROTOR_SSV, ""));
-    assert!(
-        e.contains("unit 'km/h': factor 0.0 and offset 0.0 do not define a unit (a finite, non-zero factor)"),
-        "{e}"
-    );
+    assert_contains(&e, &["unit 'km/h': factor 0.0 and offset 0.0 do not define a unit (a finite, non-zero factor)"]);
     let twice = format!(
         "{ROTOR_SSV}\n    <ssv:Parameter name=\"inertia\"><ssv:Real value=\"3.0\" unit=\"kg.m2\"/></ssv:Parameter>"
     );
@@ -713,8 +699,8 @@ fn n29_degenerate_units_and_parameter_sets_are_refused() {
         "<ssv:Real value=\"500\" unit=\"ms\"/>",
     );
     let e = load_err(&hand_package(dir.path(), "ms.ssp", &ms, ROTOR_SSV, ""));
-    assert!(
-        e.contains("parameter 'conv.Float64_fixed_parameter': incompatible units 'ms' and '1'"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["parameter 'conv.Float64_fixed_parameter': incompatible units 'ms' and '1'"],
     );
 }

@@ -17,6 +17,7 @@ use std::io::Write;
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use tb_testkit::assert_contains;
 use zip::write::SimpleFileOptions;
 
 use common::hostile::{confinement_here, run, system};
@@ -99,9 +100,9 @@ fn n02_an_isolated_fmu_cannot_write_the_store_that_a_later_in_process_run_loads_
     }
     let (attack, victim) = attack("n02-sandbox", &[]);
     // The confined worker cannot even list the store (its own FMU's folder is all it reads).
-    assert!(
-        attack.contains("hostile: cannot list the store") && attack.contains("Permission denied"),
-        "{attack}"
+    assert_contains(
+        &attack,
+        &["hostile: cannot list the store", "Permission denied"],
     );
     assert!(!attack.contains("hostile: planted into"), "{attack}");
     // Nothing to repair afterwards.
@@ -352,16 +353,13 @@ fn m03_a_changed_dependency_beside_the_library_is_found_and_repaired() {
 fn n02_without_the_sandbox_the_planted_library_is_found_and_never_loaded() {
     let (attack, victim) = attack("n02-nosandbox", &[("TWINBENCH_WORKER_SANDBOX", "off")]);
     assert!(attack.contains("hostile: planted into"), "{attack}");
-    assert!(
-        attack.contains("isolated workers are not confined (crash-only isolation)"),
-        "{attack}"
+    assert_contains(
+        &attack,
+        &["isolated workers are not confined (crash-only isolation)"],
     );
     // Found before loading, reported once naming the store folder, unpacked again.
     assert_eq!(victim.matches("unpacking it again").count(), 1, "{victim}");
-    assert!(
-        victim.contains("differs from what was unpacked") && victim.contains("/store/"),
-        "{victim}"
-    );
+    assert_contains(&victim, &["differs from what was unpacked", "/store/"]);
 }
 
 #[test]
@@ -395,10 +393,12 @@ fn n03_a_changed_byte_of_a_stored_library_is_found_and_repaired_in_process_and_i
         let (err, y) = ran(&store, &sys, isolate, &[], None);
         assert_eq!(y, Some(1.0), "{err}");
         assert_eq!(err.matches("unpacking it again").count(), 1, "{err}");
-        assert!(
-            err.contains(&folder_of(&store, &fmu).display().to_string())
-                && err.contains("its content is not the unpacked one"),
-            "{err}"
+        assert_contains(
+            &err,
+            &[
+                &folder_of(&store, &fmu).display().to_string(),
+                "its content is not the unpacked one",
+            ],
         );
         assert_eq!(std::fs::read(&stored).unwrap(), library);
         // The next run finds nothing to repair.
@@ -423,10 +423,7 @@ fn n19_a_complete_folder_without_its_library_is_repaired() {
     std::fs::remove_dir_all(store.join("index")).unwrap();
     let (err, y) = ran(&store, &sys, false, &[], None);
     assert_eq!(y, Some(1.0));
-    assert!(
-        err.contains("hostile.so: cannot open") && err.contains("unpacking it again"),
-        "{err}"
-    );
+    assert_contains(&err, &["hostile.so: cannot open", "unpacking it again"]);
     assert_eq!(
         std::fs::read(folder.join("binaries/linux64/hostile.so")).unwrap(),
         library
@@ -475,12 +472,15 @@ fn n27_with_umask_000_the_store_is_private_and_a_folder_others_can_write_is_not_
         std::fs::set_permissions(&linux64, std::fs::Permissions::from_mode(0o777)).unwrap();
         let (err, y) = ran(&store, &sys, isolate, &[], Some("umask 000"));
         assert_eq!(y, Some(1.0));
-        assert!(
-            err.contains(&format!(
-                "{}: mode 777: group or others can write it",
-                linux64.display()
-            )) && err.contains("unpacking it again"),
-            "{err}"
+        assert_contains(
+            &err,
+            &[
+                &format!(
+                    "{}: mode 777: group or others can write it",
+                    linux64.display()
+                ),
+                "unpacking it again",
+            ],
         );
         assert_eq!(mode_of(&linux64), 0o700);
         let now = std::fs::metadata(&linux64).unwrap().permissions().mode() & 0o7777;
@@ -591,9 +591,9 @@ fn cache_prune_removes_unused_folders_and_keeps_those_in_use() {
         .unwrap();
     assert!(info.contains(&format!("{name} (FMI ")), "{info}");
     let pruned = twinbench(&["cache", "prune", "--older-than", "0"]);
-    assert!(
-        pruned.contains("removed  1 folders") && pruned.contains("kept     1 folders in use"),
-        "{pruned}"
+    assert_contains(
+        &pruned,
+        &["removed  1 folders", "kept     1 folders in use"],
     );
     assert!(held.dir.join(".complete").is_file());
     assert!(!folder_of(&store, &b).exists());

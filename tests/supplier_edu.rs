@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::{Plan, RunSummary, Simulation, SystemFile, Table};
 use tb_fmi::FmuCache;
+use tb_testkit::assert_contains;
 
 const RPM: f64 = PI / 30.0;
 
@@ -270,12 +271,12 @@ fn isolated_the_supplier_edu_is_preloaded_and_loaded_only_in_its_worker() {
     let out = info(&["--isolate".as_ref(), fmu.as_os_str()]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains(&format!(
+    assert_contains(
+        &err,
+        &[&format!(
             "{}: cannot load shared library: binaries/linux64/SupplierEdu.so: undefined symbol",
             fmu.display()
-        )),
-        "{err}"
+        )],
     );
     // The same numbers as in-process.
     let isolated = Table::read_any(&csv).unwrap();

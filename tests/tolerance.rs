@@ -10,6 +10,7 @@ use common::ok_in;
 use std::path::Path;
 use std::process::Command;
 use tb_cosim::Table;
+use tb_testkit::assert_contains;
 
 /// The FMU alone: 10 s at 0.1 s, its outputs recorded; `extra` goes into `[experiment]`,
 /// `instance` into `[[instance]]`.
@@ -76,11 +77,9 @@ fn the_default_experiment_tolerance_reaches_the_fmu_as_in_fmpy() {
     eprintln!("DefaultExperiment tolerance 1e-7: largest difference to FMPy {w:e}");
     assert!(w <= 1e-12, "differs from FMPy by {w:e}");
     let trace = std::fs::read_to_string(d.join("trace.txt")).unwrap();
-    assert!(
-        trace.contains(
-            "fmi2SetupExperiment(tolerance=1e-7, startTime=0.0, stopTime=10.0) -> fmi2OK"
-        ),
-        "{trace}"
+    assert_contains(
+        &trace,
+        &["fmi2SetupExperiment(tolerance=1e-7, startTime=0.0, stopTime=10.0) -> fmi2OK"],
     );
 
     // Another tolerance: another solution (fewer internal steps), again equal to FMPy's.
@@ -184,9 +183,6 @@ fn a_tolerance_that_is_not_one_is_refused_before_the_run() {
         let o = common::twinbench_in(d, ["run", "sys.toml", "--tolerance", bad]);
         let e = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{e}");
-        assert!(
-            e.contains("--tolerance") && e.contains("between 0 and 1"),
-            "{e}"
-        );
+        assert_contains(&e, &["--tolerance", "between 0 and 1"]);
     }
 }

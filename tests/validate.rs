@@ -7,6 +7,7 @@
 mod common;
 
 use common::{fails_in, ok_in, run_ok_in};
+use tb_testkit::assert_contains;
 
 #[test]
 fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
@@ -27,7 +28,7 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
             .lines()
             .find(|l| l.starts_with(step) && l.contains("generation 1/1"))
             .unwrap_or_else(|| panic!("no generation line of {step}in {log}"));
-        assert!(line.contains("best cost") && line.contains("ETA"), "{line}");
+        assert_contains(line, &["best cost", "ETA"]);
     }
     assert!(
         log.find("generation 1/1").unwrap() < log.find("| all |").unwrap(),
@@ -89,9 +90,9 @@ fn validate_on_the_fitted_lap_gives_the_fitted_e_and_writes_its_table() {
     // Not a result: named, and what was expected.
     std::fs::write(d.join("bad.json"), "{\"study\": 1}").unwrap();
     let e = fails_in(d, args!["validate", "bad.json", meas, "--out", "val2"]);
-    assert!(
-        e.contains("bad.json: not a study result (the result.json `twinbench optimize` writes)"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["bad.json: not a study result (the result.json `twinbench optimize` writes)"],
     );
 }
 
@@ -144,10 +145,7 @@ fn the_answer_applies_to_a_run_as_set_does(
         .replace("\"vehicle.b_rear\"", "\"vehicle.b_rearr\"");
     std::fs::write(d.join("renamed.json"), text).unwrap();
     let e = fails_in(d, ["run", system, "--params", "renamed.json"]);
-    assert!(
-        e.contains("--params renamed.json: vehicle.b_rearr") && e.contains("b_rear"),
-        "{e}"
-    );
+    assert_contains(&e, &["--params renamed.json: vehicle.b_rearr", "b_rear"]);
 }
 
 /// Red team P4: a result whose "system" names a hostile FMU's system and whose

@@ -12,7 +12,9 @@ reads before changing code, counted over the tracked Rust files of the checkout.
   `assert!(... .contains(...))` on the message of an error value the test got in-process
   (`unwrap_err()`, `Err(e)`, `.err()`); the other single-line contains-asserts (a command's
   stderr, an FMU's log, a report, a file: text a user reads, where the wording is the
-  point) are counted apart;
+  point) are counted apart. A call of the phrase-list helper `assert_contains(text, &[..])`
+  (tb-testkit) counts once, as one such assert, by the same rule on its first argument.
+  The helpers' own crate (`crates/testkit`) is not counted: its tests test the helpers;
 - circles of imports between the files of one crate (`use crate::…`, `use super::…`, and
   paths written out in the code), tests excluded: files that import each other, directly or
   round a loop. A module's `mod` and `pub use` lines count as imports of the file that
@@ -119,16 +121,40 @@ def error_helpers(text):
     return helpers
 
 
-def message_of_an_error(lines, i, helpers=frozenset()):
-    """Whether the `assert!(x.contains(...))` on line i reads the message of an error value
-    the test got in-process (`unwrap_err()`, `Err(e)`, `.err()`, or a helper of the file
-    that returns one): a check of the error's kind by its text. Text a user reads (a
-    command's stderr, an FMU's log, a report, a file) is not: there the message is the
-    point."""
-    m = CONTAINS.search(lines[i])
+ASSERT_CONTAINS = re.compile(r"(?<![\w:])(?<!fn )assert_contains\(")
+
+
+def assert_contains_subject(lines, i):
+    """The first argument of the `assert_contains(` call on line i (the call may span
+    lines), or None."""
+    m = ASSERT_CONTAINS.search(lines[i])
     if not m:
-        return False
-    subject = m.group(1)
+        return None
+    rest = lines[i][m.end() :] + " " + " ".join(l.strip() for l in lines[i + 1 : i + 4])
+    depth = 0
+    for k, c in enumerate(rest):
+        if c in "([{":
+            depth += 1
+        elif c in ")]}":
+            if depth == 0:
+                return rest[:k].strip()
+            depth -= 1
+        elif c == "," and depth == 0:
+            return rest[:k].strip()
+    return None
+
+
+def message_of_an_error(lines, i, helpers=frozenset(), subject=None):
+    """Whether the `assert!(x.contains(...))` on line i (or the `assert_contains(x, ..)`
+    whose first argument is `subject`) reads the message of an error value the test got
+    in-process (`unwrap_err()`, `Err(e)`, `.err()`, or a helper of the file that returns
+    one): a check of the error's kind by its text. Text a user reads (a command's stderr,
+    an FMU's log, a report, a file) is not: there the message is the point."""
+    if subject is None:
+        m = CONTAINS.search(lines[i])
+        if not m:
+            return False
+        subject = m.group(1)
     calls = set(re.findall(r"(\w+)\(", subject))
     if ERROR_SOURCE.search(subject) or calls & helpers:
         return True
@@ -151,6 +177,8 @@ def kind_checks(files):
     contains-asserts on text)."""
     variant = message = other = 0
     for p in files:
+        if p.startswith("crates/testkit/"):
+            continue
         text = open(os.path.join(ROOT, p), encoding="utf-8").read()
         if not is_test_file(p):
             i = text.find("#[cfg(test)]")
@@ -163,6 +191,12 @@ def kind_checks(files):
         for i, l in enumerate(lines):
             if re.search(r"assert!\([^\n]*\.contains\(", l):
                 if message_of_an_error(lines, i, helpers):
+                    message += 1
+                else:
+                    other += 1
+            subject = assert_contains_subject(lines, i)
+            if subject is not None:
+                if message_of_an_error(lines, i, helpers, subject):
                     message += 1
                 else:
                     other += 1

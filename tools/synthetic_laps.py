@@ -163,6 +163,25 @@ def ar1(n: int, sigma: float, rho: float, rng) -> np.ndarray:
     return e
 
 
+# The (low, high) ranges the truth parameters are drawn from: (the twin's lap, the car's
+# lap). For the car, l, b_front and b_rear are the effective geometry: what the loads'
+# transfer behaves as, not the drawing's.
+TRUTH_RANGES = {
+    "vehicle.c_lift_front": ((0.8, 1.1), (0.75, 1.1)),
+    "vehicle.c_lift_rear": ((1.0, 1.4), (0.95, 1.35)),
+    "vehicle.l": ((2.8, 3.3), (2.9, 3.5)),
+    "vehicle.b_front": ((1.35, 1.6), (1.2, 1.6)),
+    "vehicle.b_rear": ((1.3, 1.55), (1.25, 1.55)),
+}
+TWIN, CAR = 0, 1
+
+
+def draw_truth(rng, lap):
+    """The truth of the `lap` (TWIN or CAR): each parameter drawn uniformly in its range, in
+    the table's order, to 4 digits."""
+    return {name: round(rng.uniform(*ranges[lap]), 4) for name, ranges in TRUTH_RANGES.items()}
+
+
 # ---- the twin's own lap ----
 
 
@@ -170,13 +189,7 @@ def twin_lap(args, out: Path):
     """The bench's RLS/v system with truth parameters on the circuit, run by twinbench; its
     loads with AR(1) noise."""
     rng = np.random.default_rng(args.seed)
-    truth = {
-        "vehicle.c_lift_front": round(rng.uniform(0.8, 1.1), 4),
-        "vehicle.c_lift_rear": round(rng.uniform(1.0, 1.4), 4),
-        "vehicle.l": round(rng.uniform(2.8, 3.3), 4),
-        "vehicle.b_front": round(rng.uniform(1.35, 1.6), 4),
-        "vehicle.b_rear": round(rng.uniform(1.3, 1.55), 4),
-    }
+    truth = draw_truth(rng, TWIN)
     kappa, target, track = circuit(args.circuit)
     if args.noise_seed is not None:
         # The same truth with another draw of the noise: replicates of one lap.
@@ -266,14 +279,7 @@ def second_order(x: np.ndarray, dt: float, f: float, zeta: float) -> np.ndarray:
 def car_lap(args, out: Path):
     rng = np.random.default_rng(args.seed)
     p = dict(NOMINAL)
-    truth = {
-        "vehicle.c_lift_front": round(rng.uniform(0.75, 1.1), 4),
-        "vehicle.c_lift_rear": round(rng.uniform(0.95, 1.35), 4),
-        # The effective geometry: what the loads' transfer behaves as, not the drawing's.
-        "vehicle.l": round(rng.uniform(2.9, 3.5), 4),
-        "vehicle.b_front": round(rng.uniform(1.2, 1.6), 4),
-        "vehicle.b_rear": round(rng.uniform(1.25, 1.55), 4),
-    }
+    truth = draw_truth(rng, CAR)
     modes = dict(pitch_frequency=round(rng.uniform(1.8, 3.0), 3), pitch_damping=round(rng.uniform(0.35, 0.7), 3),
                  roll_frequency=round(rng.uniform(1.5, 2.6), 3), roll_damping=round(rng.uniform(0.35, 0.7), 3))
     kappa, _, track = circuit(args.circuit)

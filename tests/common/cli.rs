@@ -101,6 +101,19 @@ pub fn succeeded(o: &Output, what: impl Display) {
     );
 }
 
+/// `cmd`, a command other than twinbench (Python, OMSimulator), must succeed (else the test
+/// fails naming it, with its standard error and output): its output.
+pub fn output_ok(cmd: &mut Command) -> Output {
+    let o = cmd.output().unwrap_or_else(|e| panic!("{cmd:?}: {e}"));
+    assert!(
+        o.status.success(),
+        "{cmd:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stderr),
+        String::from_utf8_lossy(&o.stdout)
+    );
+    o
+}
+
 /// `o` is of a command that succeeded, else the test fails with its standard error.
 pub fn assert_success(o: &Output) {
     succeeded(o, "the command");

@@ -4,6 +4,7 @@
 pub mod build;
 pub mod cli;
 pub mod hostile;
+pub mod study;
 pub mod synthetic;
 
 // Each test binary uses some of them.
@@ -112,4 +113,24 @@ pub fn omsimulator() -> PathBuf {
         });
     assert!(exe.is_file(), "no OMSimulator at {}", exe.display());
     exe
+}
+
+/// `OMSimulator ARGS` run in `dir` (its temporary folders go there) must succeed and log no
+/// error: its log (standard output and error).
+pub fn run_omsimulator<S: AsRef<std::ffi::OsStr>>(
+    dir: &std::path::Path,
+    args: impl IntoIterator<Item = S>,
+) -> String {
+    let out = cli::output_ok(
+        std::process::Command::new(omsimulator())
+            .current_dir(dir)
+            .args(args),
+    );
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!log.contains("error:"), "{log}");
+    log
 }

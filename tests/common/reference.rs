@@ -127,3 +127,40 @@ pub fn variant(
     zout.finish().unwrap();
     out
 }
+
+/// Per column FMPy recorded (`theirs`, the FMU's own names) against twinbench's recording
+/// of the instance `m` (`ours`, with as many rows, else the test fails): (name, the largest
+/// absolute difference, the largest |value| FMPy recorded).
+pub fn worst_differences(
+    model: &str,
+    ours: &tb_cosim::Table,
+    theirs: &tb_cosim::Table,
+) -> Vec<(String, f64, f64)> {
+    assert_eq!(
+        ours.len(),
+        theirs.len(),
+        "{model}: {} rows in twinbench, {} in FMPy",
+        ours.len(),
+        theirs.len()
+    );
+    let mut out = Vec::new();
+    for name in theirs.names() {
+        let ours_name = if name == "time" {
+            "time".to_string()
+        } else {
+            format!("m.{name}")
+        };
+        let a = ours
+            .require(&ours_name)
+            .unwrap_or_else(|e| panic!("{model}: {e}"));
+        let b = theirs.require(name).unwrap();
+        let largest = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let worst = a
+            .iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f64, f64::max);
+        out.push((name.clone(), worst, largest));
+    }
+    out
+}

@@ -8,6 +8,16 @@ use std::path::{Path, PathBuf};
 
 pub const WHEEL_RADIUS: f64 = 0.345;
 
+/// The car the synthetic laps are made with: lift coefficients and geometry (the FMUs'
+/// defaults are 1.653, 2.027, 3.10, 1.55, 1.50: a study starts there).
+pub const TRUTH: [(&str, f64); 5] = [
+    ("vehicle.c_lift_front", 0.95),
+    ("vehicle.c_lift_rear", 1.25),
+    ("vehicle.l", 2.85),
+    ("vehicle.b_front", 1.45),
+    ("vehicle.b_rear", 1.40),
+];
+
 /// A circuit: its track and target files (None: the bench's bundled Spielberg) and the
 /// start speed [m/s].
 pub struct Circuit {
@@ -244,6 +254,33 @@ pub fn measurement(lap: &tb_table::Table, path: &Path, noise: Option<Noise>) -> 
 /// standard error).
 pub fn twinbench(args: &[&str]) -> Vec<u8> {
     super::run_ok(args).stdout
+}
+
+/// `twinbench lap MEASUREMENT... [--track TRACK]... --out OUT --fmus <the packed FMUs>
+/// EXTRA...` must succeed.
+pub fn lap(measurements: &[&Path], tracks: &[&Path], out: &Path, extra: &[&str]) {
+    let mut args = vec!["lap".to_string()];
+    args.extend(measurements.iter().map(|m| m.display().to_string()));
+    for t in tracks {
+        args.extend(["--track".to_string(), t.display().to_string()]);
+    }
+    let fmus = super::fmu_dir();
+    args.extend([
+        "--out".to_string(),
+        out.display().to_string(),
+        "--fmus".to_string(),
+        fmus.display().to_string(),
+    ]);
+    args.extend(extra.iter().map(|a| a.to_string()));
+    super::run_ok(&args);
+}
+
+/// `twinbench optimize STUDY --json EXTRA... --out OUT` must succeed: its JSON answer.
+pub fn optimize(study: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec!["optimize", study.to_str().unwrap(), "--json"];
+    args.extend(extra);
+    args.extend(["--out", out.to_str().unwrap()]);
+    serde_json::from_slice(&twinbench(&args)).unwrap()
 }
 
 /// The driver of a system `twinbench lap` wrote follows the truth lap's own target (its

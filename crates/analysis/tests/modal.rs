@@ -3,6 +3,7 @@
 use tb_analysis::chain::{Chain, Inertia, Spring};
 use tb_analysis::modal::{self, ModeKind};
 use tb_analysis::AnalysisError;
+use tb_testkit::assert_contains;
 
 fn chain(js: &[f64], cs: &[f64], left: Option<f64>, right: Option<f64>) -> Chain {
     let spring = |name: String, c: f64| Spring {
@@ -189,15 +190,9 @@ fn bad_chains_are_refused_with_the_cause() {
     );
     assert!(e.to_string().contains("at least two"), "{e}");
     let e = modal::analyse(&chain(&[1.0, -0.5], &[1.0], None, None)).unwrap_err();
-    assert!(
-        e.to_string().contains("inertia of 'J2' must be positive"),
-        "{e}"
-    );
+    assert_contains(&e.to_string(), &["inertia of 'J2' must be positive"]);
     let e = modal::analyse(&chain(&[1.0, 0.5], &[0.0], None, None)).unwrap_err();
-    assert!(
-        e.to_string().contains("stiffness of 'c1' must be positive"),
-        "{e}"
-    );
+    assert_contains(&e.to_string(), &["stiffness of 'c1' must be positive"]);
     let e = modal::analyse(&chain(&[1.0, 0.5], &[1.0], Some(-3.0), None)).unwrap_err();
     assert!(e.to_string().contains("stiffness of 'c0'"), "{e}");
     let e = modal::analyse(&chain(&[1.0, 0.5, 2.0], &[1.0], None, None)).unwrap_err();

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use tb_compare::{
     CompareSettings, DistanceSource, Error, Measurement, PreparedMeasurement, Table, Workspace,
 };
+use tb_testkit::assert_contains;
 
 fn lap_path() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data/spielberg_lap.csv")
@@ -178,9 +179,9 @@ fn short_or_nonuniform_simulation_is_an_error() {
     }
     let sim = Table::from_columns("gap.csv", names.clone(), cols).unwrap();
     let e = prepared.compare(&sim, &mut ws).unwrap_err().to_string();
-    assert!(
-        e.contains("gap.csv: line 1002, column `time`: non-uniform sampling"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["gap.csv: line 1002, column `time`: non-uniform sampling"],
     );
 
     // NaN in a simulated load: line = index + 2 for an in-memory table.
@@ -190,9 +191,9 @@ fn short_or_nonuniform_simulation_is_an_error() {
     cols[4][500] = f64::NAN;
     let sim = Table::from_columns("nan.csv", names, cols).unwrap();
     let e = prepared.compare(&sim, &mut ws).unwrap_err().to_string();
-    assert!(
-        e.contains("nan.csv: line 502, column `vehicle.Fz_rl`: value NaN is not finite"),
-        "{e}"
+    assert_contains(
+        &e,
+        &["nan.csv: line 502, column `vehicle.Fz_rl`: value NaN is not finite"],
     );
 }
 

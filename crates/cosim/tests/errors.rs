@@ -4,9 +4,10 @@
 
 mod support;
 
-use support::{assert_contains, assert_refusals, instances, Bench};
+use support::{assert_refusals, instances, Bench};
 use tb_cosim::plan::OrderError;
 use tb_cosim::{SystemError, SystemFile};
+use tb_testkit::assert_contains;
 
 /// A gain `g`, an integrator `int` and a sink `snk`, with `connections`.
 fn wired(connections: &str) -> String {

@@ -5,9 +5,10 @@
 mod support;
 
 use std::sync::Arc;
-use support::{assert_contains, assert_refusals, column, instances, last, texts, Bench};
+use support::{assert_refusals, column, instances, last, texts, Bench};
 use tb_cosim::plan::{Cadence, Plan};
 use tb_cosim::{LoadOptions, ParamValue, Simulation, SystemError};
+use tb_testkit::assert_contains;
 
 /// integrator (u = 0.5) -> g1 -> g2, h = 1/8, four steps.
 fn chain() -> String {

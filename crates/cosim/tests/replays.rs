@@ -4,7 +4,8 @@
 
 mod support;
 
-use support::{assert_contains, column, instances, Bench};
+use support::{column, instances, Bench};
+use tb_testkit::assert_contains;
 
 /// A time replay `r` of `file` (with `extra` lines), `r.a -> g.u` (k = 2), h = 1/4.
 fn by_time(extra: &str, start: f64, stop: f64) -> String {

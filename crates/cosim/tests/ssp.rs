@@ -7,9 +7,10 @@ mod support;
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use support::{assert_contains, Bench};
+use support::Bench;
 use tb_cosim::ssp::{export, ExportOptions};
 use tb_cosim::{ssp_import, Algorithm, Simulation, StopConfig};
+use tb_testkit::assert_contains;
 
 /// Every kind of connection and parameter, a stop condition, a report and a check.
 fn system(algorithm: &str) -> String {

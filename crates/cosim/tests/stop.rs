@@ -4,9 +4,10 @@
 
 mod support;
 
-use support::{assert_contains, assert_refusals, column, instances, last, Bench};
+use support::{assert_refusals, column, instances, last, Bench};
 use tb_cosim::plan::{Cadence, Op};
 use tb_cosim::{Stop, SystemError};
+use tb_testkit::assert_contains;
 
 /// One integrator with rate `u` from 0, h = 1/8, and the given experiment lines.
 fn integrator(u: f64, experiment: &str) -> String {

@@ -4,8 +4,9 @@
 
 mod support;
 
-use support::{assert_close, assert_contains, assert_refusals, instances, last, Bench};
+use support::{assert_close, assert_refusals, instances, last, Bench};
 use tb_cosim::Simulation;
+use tb_testkit::assert_contains;
 
 /// source -> sink over `connection`, one step, recording `signals`.
 fn link(connection: &str, signals: &str) -> String {

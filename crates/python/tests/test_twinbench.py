@@ -88,17 +88,24 @@ def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
 
 
+def run_both_ways(target, out, name, value):
+    """`twinbench run TARGET --out OUT --set NAME=VALUE` and `twinbench.run` with the same
+    parameter give the same signals, bit for bit: the module's result and the command's
+    columns."""
+    cli("run", target, "--out", out, "--set", f"{name}={value}")
+    expected = read_csv(out)
+    result = twinbench.run(target, parameters={name: value})
+    assert list(result.signals) == list(expected)
+    for signal, column in expected.items():
+        assert same_bits(result.signals[signal], column), signal
+    return result, expected
+
+
 # ---- run and compare ----
 
 
 def test_run_gives_the_bits_of_run_out(tmp_path):
-    out = tmp_path / "lap.csv"
-    cli("run", SYSTEM, "--out", out, "--set", "vehicle.c_lift_front=0.9")
-    expected = read_csv(out)
-    result = twinbench.run(SYSTEM, parameters={"vehicle.c_lift_front": 0.9})
-    assert list(result.signals) == list(expected)
-    for name, column in expected.items():
-        assert same_bits(result.signals[name], column), name
+    result, expected = run_both_ways(SYSTEM, tmp_path / "lap.csv", "vehicle.c_lift_front", 0.9)
     assert result.units["vehicle.v"] == "m/s"
     # A lap of the Spielberg track: about 98 s (the bench's lap time, not a figure we fix).
     assert 95.0 < result.summary["lap_time"] < 101.0
@@ -109,13 +116,7 @@ def test_run_gives_the_bits_of_run_out(tmp_path):
 
 def test_one_fmu_runs_on_its_own_as_the_command_line_runs_it(tmp_path):
     fmu = ROOT / "target" / "fmu" / "dyno.fmu"
-    out = tmp_path / "dyno.csv"
-    cli("run", fmu, "--out", out, "--set", "time_constant=0.02")
-    expected = read_csv(out)
-    result = twinbench.run(fmu, parameters={"time_constant": 0.02})
-    assert list(result.signals) == list(expected)
-    for name, column in expected.items():
-        assert same_bits(result.signals[name], column), name
+    run_both_ways(fmu, tmp_path / "dyno.csv", "time_constant", 0.02)
 
 
 def test_stop_override_and_condition():

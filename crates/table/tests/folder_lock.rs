@@ -2,16 +2,14 @@
 //! forked while it was held (a process pool of a distributed study) still lives.
 
 use tb_table::FolderLock;
+use tb_testkit::assert_contains;
 
 #[test]
 fn a_dropped_lock_is_free_even_while_a_forked_child_lives() {
     let dir = tempfile::tempdir().unwrap();
     let lock = FolderLock::acquire(dir.path()).unwrap();
     let again = FolderLock::acquire(dir.path()).map(|_| ()).unwrap_err();
-    assert!(
-        again.to_string().contains("is writing into this folder"),
-        "{again}"
-    );
+    assert_contains(&again.to_string(), &["is writing into this folder"]);
     // SAFETY: the child only sleeps and exits (async-signal-safe calls).
     let child = unsafe { libc::fork() };
     if child == 0 {

@@ -2,7 +2,8 @@
 //! - [`Capture`]: a logger for [`fmu_export::Runtime`] that keeps every message;
 //! - [`Noise`]: reproducible Gaussian noise (SplitMix64 + Box–Muller), no dependency;
 //! - [`scratch`]: a scratch folder in the temporary directory, removed when dropped, so a
-//!   test run leaves nothing behind.
+//!   test run leaves nothing behind;
+//! - [`assert_contains`]: a text holds every one of a list of phrases.
 
 use fmu_export::fmi2::fmi2Status;
 use fmu_export::Logger;
@@ -107,6 +108,15 @@ pub fn wait_for_file(path: &std::path::Path, seconds: u64) {
     }
 }
 
+/// `text` contains every one of `parts`; otherwise the test fails naming the missing part
+/// and showing the whole text.
+#[track_caller]
+pub fn assert_contains(text: &str, parts: &[&str]) {
+    for p in parts {
+        assert!(text.contains(p), "{p:?} is not in:\n{text}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -140,5 +150,16 @@ mod tests {
         l.log(fmi2Status::OK, "logEvents", "fine");
         assert_eq!(c.messages(), ["bad", "fine"]);
         assert_eq!(c.with_status(fmi2Status::ERROR), ["bad"]);
+    }
+
+    #[test]
+    fn assert_contains_names_the_missing_part() {
+        assert_contains("a bad gain", &["bad", "gain"]);
+        let e = std::panic::catch_unwind(|| assert_contains("a bad gain", &["bad", "loss"]))
+            .unwrap_err();
+        assert_eq!(
+            e.downcast_ref::<String>().unwrap(),
+            "\"loss\" is not in:\na bad gain"
+        );
     }
 }

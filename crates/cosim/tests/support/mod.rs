@@ -336,11 +336,3 @@ pub fn assert_close(a: f64, b: f64, tol: f64) {
         "{a} differs from {b} by more than {tol}"
     );
 }
-
-/// `text` contains every one of `parts`.
-#[track_caller]
-pub fn assert_contains(text: &str, parts: &[&str]) {
-    for p in parts {
-        assert!(text.contains(p), "{p:?} is not in:\n{text}");
-    }
-}
