@@ -518,19 +518,9 @@ pub unsafe fn get_real_status<M: Model>(
     kind: fmi2StatusKind,
     value: *mut fmi2Real,
 ) -> fmi2Status {
-    guarded::<M>(c, "fmi2GetRealStatus", |rt| {
-        if value.is_null() {
-            return rt.error("fmi2GetRealStatus: value is NULL");
-        }
-        if kind == fmi2StatusKind::LAST_SUCCESSFUL_TIME {
-            *value = rt.last_successful_time();
-            fmi2Status::OK
-        } else {
-            rt.error(&format!(
-                "fmi2GetRealStatus: status kind {} not provided",
-                kind.0
-            ))
-        }
+    let provided = fmi2StatusKind::LAST_SUCCESSFUL_TIME;
+    status_query::<M, _>(c, "fmi2GetRealStatus", kind, provided, value, |rt| {
+        rt.last_successful_time()
     })
 }
 
@@ -539,18 +529,31 @@ pub unsafe fn get_boolean_status<M: Model>(
     kind: fmi2StatusKind,
     value: *mut fmi2Boolean,
 ) -> fmi2Status {
-    guarded::<M>(c, "fmi2GetBooleanStatus", |rt| {
+    let provided = fmi2StatusKind::TERMINATED;
+    status_query::<M, _>(c, "fmi2GetBooleanStatus", kind, provided, value, |_| {
+        fmi2False
+    })
+}
+
+/// A status query that answers the kind `provided` alone (with `answer`); another kind,
+/// or a NULL `value`, is an error.
+unsafe fn status_query<M: Model, T>(
+    c: fmi2Component,
+    function: &str,
+    kind: fmi2StatusKind,
+    provided: fmi2StatusKind,
+    value: *mut T,
+    answer: impl FnOnce(&mut Runtime<M>) -> T,
+) -> fmi2Status {
+    guarded::<M>(c, function, |rt| {
         if value.is_null() {
-            return rt.error("fmi2GetBooleanStatus: value is NULL");
+            return rt.error(&format!("{function}: value is NULL"));
         }
-        if kind == fmi2StatusKind::TERMINATED {
-            *value = fmi2False;
+        if kind == provided {
+            *value = answer(rt);
             fmi2Status::OK
         } else {
-            rt.error(&format!(
-                "fmi2GetBooleanStatus: status kind {} not provided",
-                kind.0
-            ))
+            rt.error(&format!("{function}: status kind {} not provided", kind.0))
         }
     })
 }
