@@ -250,6 +250,22 @@ impl Traced {
         r
     }
 
+    /// A step from `t` by `h` (the line of `fmi2DoStep`/`fmi3DoStep`), traced here unless
+    /// the backend traces its steps itself.
+    fn traced_step<T>(
+        &mut self,
+        t: f64,
+        h: f64,
+        step: impl FnOnce(&mut dyn Backend) -> Result<T, FmuError>,
+    ) -> Result<T, FmuError> {
+        if self.steps_traced_inside {
+            return step(&mut *self.inner);
+        }
+        let f = self.name2("fmi2DoStep", "fmi3DoStep");
+        let args = format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}");
+        self.traced(f, args, step)
+    }
+
     fn traced<T>(
         &mut self,
         function: String,
@@ -360,29 +376,13 @@ impl Backend for Traced {
             ["fmi2GetString", "fmi3Get*"], ["fmi2SetString", "fmi3Set*"], |s| format!("{s:?}");
     }
     fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
-        if self.steps_traced_inside {
-            return self.inner.do_step(t, h);
-        }
-        let f = self.name2("fmi2DoStep", "fmi3DoStep");
-        self.traced(
-            f,
-            format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}"),
-            |b| b.do_step(t, h),
-        )
+        self.traced_step(t, h, |b| b.do_step(t, h))
     }
     fn stops_at_events(&self) -> bool {
         self.inner.stops_at_events()
     }
     fn step_to_event(&mut self, t: f64, h: f64) -> Result<tb_fmi::MeStop, FmuError> {
-        if self.steps_traced_inside {
-            return self.inner.step_to_event(t, h);
-        }
-        let f = self.name2("fmi2DoStep", "fmi3DoStep");
-        self.traced(
-            f,
-            format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}"),
-            |b| b.step_to_event(t, h),
-        )
+        self.traced_step(t, h, |b| b.step_to_event(t, h))
     }
     fn terminated_by_fmu(&mut self) -> Option<f64> {
         let t = self.inner.time();
