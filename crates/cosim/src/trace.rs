@@ -250,22 +250,6 @@ impl Traced {
         r
     }
 
-    /// A step from `t` by `h` (the line of `fmi2DoStep`/`fmi3DoStep`), traced here unless
-    /// the backend traces its steps itself.
-    fn traced_step<T>(
-        &mut self,
-        t: f64,
-        h: f64,
-        step: impl FnOnce(&mut dyn Backend) -> Result<T, FmuError>,
-    ) -> Result<T, FmuError> {
-        if self.steps_traced_inside {
-            return step(&mut *self.inner);
-        }
-        let f = self.name2("fmi2DoStep", "fmi3DoStep");
-        let args = format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}");
-        self.traced(f, args, step)
-    }
-
     fn traced<T>(
         &mut self,
         function: String,
@@ -286,6 +270,31 @@ impl std::fmt::Display for R {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{:?}", self.0)
     }
+}
+
+/// The steps from `t` by `h` (the line of `fmi2DoStep`/`fmi3DoStep`), traced here unless
+/// the backend traces its steps itself.
+macro_rules! traced_steps {
+    ($($call:ident -> $r:ty;)*) => {$(
+        fn $call(&mut self, t: f64, h: f64) -> Result<$r, FmuError> {
+            if self.steps_traced_inside {
+                return self.inner.$call(t, h);
+            }
+            let f = self.name2("fmi2DoStep", "fmi3DoStep");
+            let args = format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}");
+            self.traced(f, args, |b| b.$call(t, h))
+        }
+    )*};
+}
+
+/// The traced calls without arguments: the names of the call in FMI 2.0 and 3.0.
+macro_rules! traced_calls {
+    ($($call:ident: $fmi2:literal, $fmi3:literal;)*) => {$(
+        fn $call(&mut self) -> Result<(), FmuError> {
+            let f = self.name2($fmi2, $fmi3);
+            self.traced(f, String::new(), |b| b.$call())
+        }
+    )*};
 }
 
 /// The traced get and set of one value type: the names of the calls in FMI 2.0 and 3.0,
@@ -349,21 +358,11 @@ impl Backend for Traced {
             |b| b.setup_experiment(e),
         )
     }
-    fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let f = self.name2("fmi2EnterInitializationMode", "fmi3EnterInitializationMode");
-        self.traced(f, String::new(), |b| b.enter_initialization_mode())
-    }
-    fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let f = self.name2("fmi2ExitInitializationMode", "fmi3ExitInitializationMode");
-        self.traced(f, String::new(), |b| b.exit_initialization_mode())
-    }
-    fn terminate(&mut self) -> Result<(), FmuError> {
-        let f = self.name2("fmi2Terminate", "fmi3Terminate");
-        self.traced(f, String::new(), |b| b.terminate())
-    }
-    fn reset(&mut self) -> Result<(), FmuError> {
-        let f = self.name2("fmi2Reset", "fmi3Reset");
-        self.traced(f, String::new(), |b| b.reset())
+    traced_calls! {
+        enter_initialization_mode: "fmi2EnterInitializationMode", "fmi3EnterInitializationMode";
+        exit_initialization_mode: "fmi2ExitInitializationMode", "fmi3ExitInitializationMode";
+        terminate: "fmi2Terminate", "fmi3Terminate";
+        reset: "fmi2Reset", "fmi3Reset";
     }
     traced_values! {
         get_real / set_real: &mut [f64], &[f64], Real,
@@ -375,14 +374,12 @@ impl Backend for Traced {
         get_string / set_string: &mut Vec<String>, &[&str], String,
             ["fmi2GetString", "fmi3Get*"], ["fmi2SetString", "fmi3Set*"], |s| format!("{s:?}");
     }
-    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
-        self.traced_step(t, h, |b| b.do_step(t, h))
+    traced_steps! {
+        do_step -> ();
+        step_to_event -> tb_fmi::MeStop;
     }
     fn stops_at_events(&self) -> bool {
         self.inner.stops_at_events()
-    }
-    fn step_to_event(&mut self, t: f64, h: f64) -> Result<tb_fmi::MeStop, FmuError> {
-        self.traced_step(t, h, |b| b.step_to_event(t, h))
     }
     fn terminated_by_fmu(&mut self) -> Option<f64> {
         let t = self.inner.time();

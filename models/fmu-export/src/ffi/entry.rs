@@ -475,49 +475,38 @@ pub unsafe fn do_step<M: Model>(
     guarded::<M>(c, "fmi2DoStep", |rt| rt.do_step(current, step))
 }
 
-pub unsafe fn get_real_status<M: Model>(
-    c: fmi2Component,
-    kind: fmi2StatusKind,
-    value: *mut fmi2Real,
-) -> fmi2Status {
-    let provided = fmi2StatusKind::LAST_SUCCESSFUL_TIME;
-    status_query::<M, _>(c, "fmi2GetRealStatus", kind, provided, value, |rt| {
-        rt.last_successful_time()
-    })
+/// The status queries `fmi2Get<Type>Status`, each answering its one status kind (with
+/// `$answer` of the runtime); another kind, or a NULL `value`, is an error.
+macro_rules! status_queries {
+    ($($fn:ident($function:literal, $t:ty) $provided:ident => $answer:expr;)*) => {$(
+        pub unsafe fn $fn<M: Model>(
+            c: fmi2Component,
+            kind: fmi2StatusKind,
+            value: *mut $t,
+        ) -> fmi2Status {
+            guarded::<M>(c, $function, |rt| {
+                if value.is_null() {
+                    return rt.error(concat!($function, ": value is NULL"));
+                }
+                if kind == fmi2StatusKind::$provided {
+                    *value = $answer(rt);
+                    fmi2Status::OK
+                } else {
+                    rt.error(&format!(
+                        concat!($function, ": status kind {} not provided"),
+                        kind.0
+                    ))
+                }
+            })
+        }
+    )*};
 }
 
-pub unsafe fn get_boolean_status<M: Model>(
-    c: fmi2Component,
-    kind: fmi2StatusKind,
-    value: *mut fmi2Boolean,
-) -> fmi2Status {
-    let provided = fmi2StatusKind::TERMINATED;
-    status_query::<M, _>(c, "fmi2GetBooleanStatus", kind, provided, value, |_| {
-        fmi2False
-    })
-}
-
-/// A status query that answers the kind `provided` alone (with `answer`); another kind,
-/// or a NULL `value`, is an error.
-unsafe fn status_query<M: Model, T>(
-    c: fmi2Component,
-    function: &str,
-    kind: fmi2StatusKind,
-    provided: fmi2StatusKind,
-    value: *mut T,
-    answer: impl FnOnce(&mut Runtime<M>) -> T,
-) -> fmi2Status {
-    guarded::<M>(c, function, |rt| {
-        if value.is_null() {
-            return rt.error(&format!("{function}: value is NULL"));
-        }
-        if kind == provided {
-            *value = answer(rt);
-            fmi2Status::OK
-        } else {
-            rt.error(&format!("{function}: status kind {} not provided", kind.0))
-        }
-    })
+status_queries! {
+    get_real_status("fmi2GetRealStatus", fmi2Real)
+        LAST_SUCCESSFUL_TIME => |rt: &mut Runtime<M>| rt.last_successful_time();
+    get_boolean_status("fmi2GetBooleanStatus", fmi2Boolean)
+        TERMINATED => |_: &mut Runtime<M>| fmi2False;
 }
 
 pub const TYPES_PLATFORM: &CStr = c"default";
