@@ -433,26 +433,24 @@ fn plots(frf: &Frf, f: &FrfFit, stem: &Path) -> anyhow::Result<()> {
     .iter()
     .map(|g| g * 1e3)
     .collect();
+    // The fitted model's curve over the measured estimate's.
+    let against = |title: &str, y_label: &str, model: &[f64], measured: &[f64]| {
+        tb_plot::LinePlot::new(title, "f [Hz]", y_label)
+            .series("fitted model", &pts(model))
+            .reference("measured (H1 estimate)", &pts(measured))
+            .log_x(true)
+    };
     let out = [
         (
-            tb_plot::LinePlot::new("Dyno loop frequency response: magnitude of the torque transfer, measured (H1) against the fitted model", "f [Hz]", "|H| [dB]")
-                .series("fitted model", &pts(&model_db))
-                .reference("measured (H1 estimate)", &pts(&db))
-                .log_x(true),
+            against("Dyno loop frequency response: magnitude of the torque transfer, measured (H1) against the fitted model", "|H| [dB]", &model_db, &db),
             with("-bode-magnitude"),
         ),
         (
-            tb_plot::LinePlot::new("Dyno loop frequency response: phase (unwrapped), measured (H1) against the fitted model", "f [Hz]", "phase [°]")
-                .series("fitted model", &pts(&model_deg))
-                .reference("measured (H1 estimate)", &pts(&deg))
-                .log_x(true),
+            against("Dyno loop frequency response: phase (unwrapped), measured (H1) against the fitted model", "phase [°]", &model_deg, &deg),
             with("-bode-phase"),
         ),
         (
-            tb_plot::LinePlot::new("Dyno loop group delay −dφ/dω: the loop's dead time plus its lag, measured (H1) against the fitted model", "f [Hz]", "τ_gr [ms]")
-                .series("fitted model", &pts(&model_gd))
-                .reference("measured (H1 estimate)", &pts(&gd))
-                .log_x(true),
+            against("Dyno loop group delay −dφ/dω: the loop's dead time plus its lag, measured (H1) against the fitted model", "τ_gr [ms]", &model_gd, &gd),
             with("-group-delay"),
         ),
         (

@@ -32,6 +32,20 @@ int fmi2GetDirectionalDerivative(void *c, const unsigned *u, size_t nu, const un
     return ERROR;
 }
 
+/* fmi2Instantiate and fmi2FreeInstance of an FMU whose instance is one zeroed `Model` set up
+ * by `reset` (a function of the Model): expanded after both are defined. */
+#define FMI2_MODEL_INSTANCE(Model, reset)                                                       \
+    void *fmi2Instantiate(const char *name, int type, const char *guid, const char *resources, \
+                          const void *callbacks, int visible, int logging) {                   \
+        (void)name; (void)type; (void)guid; (void)resources; (void)callbacks; (void)visible;   \
+        (void)logging;                                                                          \
+        Model *m = calloc(1, sizeof(Model));                                                    \
+        if (m)                                                                                  \
+            reset(m);                                                                           \
+        return m;                                                                               \
+    }                                                                                           \
+    void fmi2FreeInstance(void *c) { free(c); }
+
 #ifndef FMI2_MODEL_EXCHANGE
 int fmi2CancelStep(void *c) { (void)c; return ERROR; }
 int fmi2GetStatus(void *c, int s, int *v) { (void)c; (void)s; (void)v; return ERROR; }

@@ -36,17 +36,7 @@ static void outputs(Model *m) {
     m->b = (m->on != 0) ^ (m->flag != 0) ^ (m->t >= 0.5);
 }
 
-void *fmi2Instantiate(const char *name, int type, const char *guid, const char *resources,
-                      const void *callbacks, int visible, int logging) {
-    (void)name; (void)type; (void)guid; (void)resources; (void)callbacks; (void)visible;
-    (void)logging;
-    Model *m = calloc(1, sizeof(Model));
-    if (m)
-        reset(m);
-    return m;
-}
-
-void fmi2FreeInstance(void *c) { free(c); }
+FMI2_MODEL_INSTANCE(Model, reset)
 
 int fmi2SetupExperiment(void *c, int tol_defined, double tol, double start, int stop_defined,
                         double stop) {

@@ -67,32 +67,25 @@ impl Default for CompareSettings {
 impl CompareSettings {
     /// Checks ranges (the cutoff against the sample rate is checked when filtering).
     pub fn validate(&self) -> Result<()> {
-        if !(self.cutoff_hz.is_finite() && self.cutoff_hz > 0.0) {
-            return Err(Error::Settings(format!(
-                "cutoff_hz = {} must be positive",
-                self.cutoff_hz
-            )));
-        }
-        if !(1..=16).contains(&self.filter_order) {
-            return Err(Error::Settings(format!(
-                "filter_order = {} outside 1..=16",
-                self.filter_order
-            )));
-        }
+        let positive = self.cutoff_hz.is_finite() && self.cutoff_hz > 0.0;
+        require(positive, "cutoff_hz", self.cutoff_hz, "must be positive")?;
+        let order = (1..=16).contains(&self.filter_order);
+        require(order, "filter_order", self.filter_order, "outside 1..=16")?;
         // At least 1 mm: a finer grid of a lap is tens of millions of points per signal.
-        if !(self.distance_step_m.is_finite() && self.distance_step_m >= 1e-3) {
-            return Err(Error::Settings(format!(
-                "distance_step_m = {} must be at least 0.001 m",
-                self.distance_step_m
-            )));
-        }
-        if !(0.0..=1.0).contains(&self.min_coverage) {
-            return Err(Error::Settings(format!(
-                "min_coverage = {} outside 0..=1",
-                self.min_coverage
-            )));
-        }
+        let step = self.distance_step_m;
+        let fine = step.is_finite() && step >= 1e-3;
+        require(fine, "distance_step_m", step, "must be at least 0.001 m")?;
+        let coverage = (0.0..=1.0).contains(&self.min_coverage);
+        require(coverage, "min_coverage", self.min_coverage, "outside 0..=1")
+    }
+}
+
+/// A setting checked: when `ok` is false, the error `name = value rule`.
+fn require(ok: bool, name: &str, value: impl std::fmt::Display, rule: &str) -> Result<()> {
+    if ok {
         Ok(())
+    } else {
+        Err(Error::Settings(format!("{name} = {value} {rule}")))
     }
 }
 

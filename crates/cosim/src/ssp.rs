@@ -22,6 +22,7 @@ use crate::{split_name, Endpoint, Plan, StopConfig};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
 use std::path::Path;
+use tb_fmi::import::description::ScalarVariable;
 use tb_fmi::{Causality, ScalarType};
 
 #[derive(Debug, thiserror::Error)]
@@ -63,6 +64,26 @@ const NS_OMS: &str =
 const NS_TB: &str = "https://github.com/twinbench/ssp";
 
 use tb_files::markup::xml_escape as esc;
+
+/// The instance (its index) and the FMU variable of a system-file name `instance.variable`
+/// (`context`: the export that looks it up, for the message).
+fn instance_variable<'a>(
+    system: &'a Plan,
+    full: &str,
+    context: &str,
+) -> Result<(usize, &'a ScalarVariable), SspError> {
+    let (u, v) = split_name(full)
+        .ok_or_else(|| SspError::Unsupported(format!("'{full}' is not instance.variable")))?;
+    let k = system
+        .instances
+        .iter()
+        .position(|i| i.name == u)
+        .ok_or_else(|| SspError::Unsupported(format!("'{full}': not an FMU instance")))?;
+    let sv = system.instances[k]
+        .variable(v, context)
+        .map_err(|e| SspError::Unsupported(e.to_string()))?;
+    Ok((k, sv))
+}
 
 /// xs:double text that reads back to the same f64.
 fn real(x: f64) -> String {
@@ -283,17 +304,7 @@ impl<'a> Exporter<'a> {
 
     /// The instance and FMU variable name of a system-file name `instance.variable`.
     fn fmu_var(&self, full: &str) -> Result<(usize, String), SspError> {
-        let system = self.system;
-        let (u, v) = split_name(full)
-            .ok_or_else(|| SspError::Unsupported(format!("'{full}' is not instance.variable")))?;
-        let k = system
-            .instances
-            .iter()
-            .position(|i| i.name == u)
-            .ok_or_else(|| SspError::Unsupported(format!("'{full}': not an FMU instance")))?;
-        let sv = system.instances[k]
-            .variable(v, "ssp export")
-            .map_err(|e| SspError::Unsupported(e.to_string()))?;
+        let (k, sv) = instance_variable(self.system, full, "ssp export")?;
         Ok((k, sv.name.clone()))
     }
 
@@ -700,17 +711,9 @@ pub fn parameter_set(system: &Plan, name: &str) -> Result<String, SspError> {
     );
     let mut units = BTreeSet::new();
     for (full, value) in &system.file.parameters {
-        let (u, v) = split_name(full)
-            .ok_or_else(|| SspError::Unsupported(format!("'{full}' is not instance.variable")))?;
-        let inst = system
-            .instances
-            .iter()
-            .find(|i| i.name == u)
-            .ok_or_else(|| SspError::Unsupported(format!("'{full}': not an FMU instance")))?;
-        let sv = inst
-            .variable(v, "ssv export")
-            .map_err(|e| SspError::Unsupported(e.to_string()))?;
-        let md = inst.description();
+        let (k, sv) = instance_variable(system, full, "ssv export")?;
+        let inst = &system.instances[k];
+        let (u, md) = (inst.name.as_str(), inst.description());
         if let Some(unit) = md.unit_of(sv) {
             units.insert(unit.to_string());
         }

@@ -272,6 +272,56 @@ impl std::fmt::Display for R {
     }
 }
 
+/// The steps from `t` by `h` (the line of `fmi2DoStep`/`fmi3DoStep`), traced here unless
+/// the backend traces its steps itself.
+macro_rules! traced_steps {
+    ($($call:ident -> $r:ty;)*) => {$(
+        fn $call(&mut self, t: f64, h: f64) -> Result<$r, FmuError> {
+            if self.steps_traced_inside {
+                return self.inner.$call(t, h);
+            }
+            let f = self.name2("fmi2DoStep", "fmi3DoStep");
+            let args = format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}");
+            self.traced(f, args, |b| b.$call(t, h))
+        }
+    )*};
+}
+
+/// The traced calls without arguments: the names of the call in FMI 2.0 and 3.0.
+macro_rules! traced_calls {
+    ($($call:ident: $fmi2:literal, $fmi3:literal;)*) => {$(
+        fn $call(&mut self) -> Result<(), FmuError> {
+            let f = self.name2($fmi2, $fmi3);
+            self.traced(f, String::new(), |b| b.$call())
+        }
+    )*};
+}
+
+/// The traced get and set of one value type: the names of the calls in FMI 2.0 and 3.0,
+/// and `$show`, each value as the line shows it.
+macro_rules! traced_values {
+    ($($get:ident / $set:ident: $out:ty, $in:ty, $space:ident,
+        [$g2:literal, $g3:literal], [$s2:literal, $s3:literal], $show:expr;)*) => {$(
+        fn $get(&mut self, vrs: &[u32], out: $out) -> Result<(), FmuError> {
+            self.traced_get(
+                ScalarType::$space,
+                $g2,
+                $g3,
+                vrs,
+                out,
+                |b, o| b.$get(vrs, o),
+                |o| o.iter().map($show).collect(),
+            )
+        }
+        fn $set(&mut self, vrs: &[u32], values: $in) -> Result<(), FmuError> {
+            let shown: Vec<_> = values.iter().map($show).collect();
+            let args = self.values(ScalarType::$space, vrs, &shown);
+            let f = self.name2($s2, $s3);
+            self.traced(f, args, |b| b.$set(vrs, values))
+        }
+    )*};
+}
+
 impl Backend for Traced {
     fn name(&self) -> &str {
         self.inner.name()
@@ -308,112 +358,28 @@ impl Backend for Traced {
             |b| b.setup_experiment(e),
         )
     }
-    fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let f = self.name2("fmi2EnterInitializationMode", "fmi3EnterInitializationMode");
-        self.traced(f, String::new(), |b| b.enter_initialization_mode())
+    traced_calls! {
+        enter_initialization_mode: "fmi2EnterInitializationMode", "fmi3EnterInitializationMode";
+        exit_initialization_mode: "fmi2ExitInitializationMode", "fmi3ExitInitializationMode";
+        terminate: "fmi2Terminate", "fmi3Terminate";
+        reset: "fmi2Reset", "fmi3Reset";
     }
-    fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let f = self.name2("fmi2ExitInitializationMode", "fmi3ExitInitializationMode");
-        self.traced(f, String::new(), |b| b.exit_initialization_mode())
+    traced_values! {
+        get_real / set_real: &mut [f64], &[f64], Real,
+            ["fmi2GetReal", "fmi3Get*"], ["fmi2SetReal", "fmi3Set*"], |x| R(*x);
+        get_integer / set_integer: &mut [i32], &[i32], Integer,
+            ["fmi2GetInteger", "fmi3Get*"], ["fmi2SetInteger", "fmi3Set*"], |x| *x;
+        get_boolean / set_boolean: &mut [i32], &[i32], Boolean,
+            ["fmi2GetBoolean", "fmi3GetBoolean"], ["fmi2SetBoolean", "fmi3SetBoolean"], |x| *x;
+        get_string / set_string: &mut Vec<String>, &[&str], String,
+            ["fmi2GetString", "fmi3Get*"], ["fmi2SetString", "fmi3Set*"], |s| format!("{s:?}");
     }
-    fn terminate(&mut self) -> Result<(), FmuError> {
-        let f = self.name2("fmi2Terminate", "fmi3Terminate");
-        self.traced(f, String::new(), |b| b.terminate())
-    }
-    fn reset(&mut self) -> Result<(), FmuError> {
-        let f = self.name2("fmi2Reset", "fmi3Reset");
-        self.traced(f, String::new(), |b| b.reset())
-    }
-    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        self.traced_get(
-            ScalarType::Real,
-            "fmi2GetReal",
-            "fmi3Get*",
-            vrs,
-            out,
-            |b, o| b.get_real(vrs, o),
-            |o| o.iter().map(|x| R(*x)).collect(),
-        )
-    }
-    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        let v: Vec<R> = values.iter().map(|x| R(*x)).collect();
-        let args = self.values(ScalarType::Real, vrs, &v);
-        let f = self.name2("fmi2SetReal", "fmi3Set*");
-        self.traced(f, args, |b| b.set_real(vrs, values))
-    }
-    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        self.traced_get(
-            ScalarType::Integer,
-            "fmi2GetInteger",
-            "fmi3Get*",
-            vrs,
-            out,
-            |b, o| b.get_integer(vrs, o),
-            |o| o.to_vec(),
-        )
-    }
-    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let args = self.values(ScalarType::Integer, vrs, values);
-        let f = self.name2("fmi2SetInteger", "fmi3Set*");
-        self.traced(f, args, |b| b.set_integer(vrs, values))
-    }
-    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        self.traced_get(
-            ScalarType::Boolean,
-            "fmi2GetBoolean",
-            "fmi3GetBoolean",
-            vrs,
-            out,
-            |b, o| b.get_boolean(vrs, o),
-            |o| o.to_vec(),
-        )
-    }
-    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let args = self.values(ScalarType::Boolean, vrs, values);
-        let f = self.name2("fmi2SetBoolean", "fmi3SetBoolean");
-        self.traced(f, args, |b| b.set_boolean(vrs, values))
-    }
-    fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
-        self.traced_get(
-            ScalarType::String,
-            "fmi2GetString",
-            "fmi3Get*",
-            vrs,
-            out,
-            |b, o| b.get_string(vrs, o),
-            |o| o.iter().map(|s| format!("{s:?}")).collect(),
-        )
-    }
-    fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Result<(), FmuError> {
-        let quoted: Vec<String> = values.iter().map(|s| format!("{s:?}")).collect();
-        let args = self.values(ScalarType::String, vrs, &quoted);
-        let f = self.name2("fmi2SetString", "fmi3Set*");
-        self.traced(f, args, |b| b.set_string(vrs, values))
-    }
-    fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
-        if self.steps_traced_inside {
-            return self.inner.do_step(t, h);
-        }
-        let f = self.name2("fmi2DoStep", "fmi3DoStep");
-        self.traced(
-            f,
-            format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}"),
-            |b| b.do_step(t, h),
-        )
+    traced_steps! {
+        do_step -> ();
+        step_to_event -> tb_fmi::MeStop;
     }
     fn stops_at_events(&self) -> bool {
         self.inner.stops_at_events()
-    }
-    fn step_to_event(&mut self, t: f64, h: f64) -> Result<tb_fmi::MeStop, FmuError> {
-        if self.steps_traced_inside {
-            return self.inner.step_to_event(t, h);
-        }
-        let f = self.name2("fmi2DoStep", "fmi3DoStep");
-        self.traced(
-            f,
-            format!("currentCommunicationPoint={t:?}, communicationStepSize={h:?}"),
-            |b| b.step_to_event(t, h),
-        )
     }
     fn terminated_by_fmu(&mut self) -> Option<f64> {
         let t = self.inner.time();

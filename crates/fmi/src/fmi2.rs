@@ -22,19 +22,27 @@ pub type fmi2Byte = c_char;
 pub const fmi2True: fmi2Boolean = 1;
 pub const fmi2False: fmi2Boolean = 0;
 
-/// `fmi2Status`.
-#[repr(transparent)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct fmi2Status(pub c_int);
+/// A C enumeration of FMI 2.0: a `c_int` in a `repr(transparent)` struct, with a constant
+/// for each value the standard names.
+macro_rules! c_enum {
+    ($(#[$meta:meta])* $name:ident { $($value:ident = $n:literal,)* }) => {
+        $(#[$meta])*
+        #[repr(transparent)]
+        pub struct $name(pub c_int);
+
+        impl $name {
+            $(pub const $value: Self = Self($n);)*
+        }
+    };
+}
+
+c_enum! {
+    /// `fmi2Status`.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+    fmi2Status { OK = 0, WARNING = 1, DISCARD = 2, ERROR = 3, FATAL = 4, PENDING = 5, }
+}
 
 impl fmi2Status {
-    pub const OK: Self = Self(0);
-    pub const WARNING: Self = Self(1);
-    pub const DISCARD: Self = Self(2);
-    pub const ERROR: Self = Self(3);
-    pub const FATAL: Self = Self(4);
-    pub const PENDING: Self = Self(5);
-
     /// The name used in FMI log categories and messages.
     pub fn name(self) -> &'static str {
         match self.0 {
@@ -49,26 +57,21 @@ impl fmi2Status {
     }
 }
 
-/// `fmi2Type`.
-#[repr(transparent)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct fmi2Type(pub c_int);
-
-impl fmi2Type {
-    pub const MODEL_EXCHANGE: Self = Self(0);
-    pub const CO_SIMULATION: Self = Self(1);
+c_enum! {
+    /// `fmi2Type`.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    fmi2Type { MODEL_EXCHANGE = 0, CO_SIMULATION = 1, }
 }
 
-/// `fmi2StatusKind`.
-#[repr(transparent)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct fmi2StatusKind(pub c_int);
-
-impl fmi2StatusKind {
-    pub const DO_STEP_STATUS: Self = Self(0);
-    pub const PENDING_STATUS: Self = Self(1);
-    pub const LAST_SUCCESSFUL_TIME: Self = Self(2);
-    pub const TERMINATED: Self = Self(3);
+c_enum! {
+    /// `fmi2StatusKind`.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    fmi2StatusKind {
+        DO_STEP_STATUS = 0,
+        PENDING_STATUS = 1,
+        LAST_SUCCESSFUL_TIME = 2,
+        TERMINATED = 3,
+    }
 }
 
 /// The variadic logger; `message` is a printf format string.

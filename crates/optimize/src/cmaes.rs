@@ -6,7 +6,7 @@
 //! The covariance is decomposed every generation (cyclic Jacobi; n is small here).
 
 use super::exact;
-use super::optimizer::{all_finite, restore_state, Optimizer, SavedState};
+use super::optimizer::{all_finite, state_methods, Optimizer, SavedState};
 use super::rng::Rng;
 use crate::error::OptimizeError;
 use serde::{Deserialize, Serialize};
@@ -313,18 +313,7 @@ impl Optimizer for Cmaes {
         (!self.s.best_x.is_empty()).then_some((self.s.best_x.as_slice(), self.s.best_cost))
     }
 
-    fn generation(&self) -> usize {
-        self.s.generation
-    }
-
-    fn save(&self) -> serde_json::Value {
-        serde_json::to_value(&self.s).expect("CMA-ES state serialises")
-    }
-
-    fn restore(&mut self, state: &serde_json::Value) -> Result<(), OptimizeError> {
-        self.s = restore_state(state, self.n)?;
-        Ok(())
-    }
+    state_methods!(n);
 }
 
 impl SavedState for CmaState {

@@ -6,7 +6,7 @@
 //! generation costs `population − elites` evaluations.
 
 use super::exact;
-use super::optimizer::{all_finite, restore_state, Optimizer, SavedState};
+use super::optimizer::{all_finite, state_methods, Optimizer, SavedState};
 use super::rng::Rng;
 use crate::error::OptimizeError;
 use serde::{Deserialize, Serialize};
@@ -258,18 +258,7 @@ impl Optimizer for Ga {
         self.s.best.as_ref().map(|b| (b.x.as_slice(), b.cost))
     }
 
-    fn generation(&self) -> usize {
-        self.s.generation
-    }
-
-    fn save(&self) -> serde_json::Value {
-        serde_json::to_value(&self.s).expect("GA state serialises")
-    }
-
-    fn restore(&mut self, state: &serde_json::Value) -> Result<(), OptimizeError> {
-        self.s = restore_state(state, self.dim)?;
-        Ok(())
-    }
+    state_methods!(dim);
 }
 
 impl SavedState for GaState {

@@ -48,6 +48,31 @@ pub(crate) trait SavedState: serde::de::DeserializeOwned {
     fn damage(&self, dim: usize) -> Option<String>;
 }
 
+/// [`Optimizer`]'s `generation`, `save` and `restore` of an optimiser whose whole state is
+/// its field `s` (a [`SavedState`] with a `generation`), of `self.$dim` parameters.
+macro_rules! state_methods {
+    ($dim:ident) => {
+        fn generation(&self) -> usize {
+            self.s.generation
+        }
+
+        fn save(&self) -> serde_json::Value {
+            crate::optimizer::save_state(&self.s)
+        }
+
+        fn restore(&mut self, state: &serde_json::Value) -> Result<(), OptimizeError> {
+            self.s = crate::optimizer::restore_state(state, self.$dim)?;
+            Ok(())
+        }
+    };
+}
+pub(crate) use state_methods;
+
+/// The state as [`Optimizer::save`] writes it (it always serialises: plain numbers).
+pub(crate) fn save_state<S: SavedState + Serialize>(s: &S) -> serde_json::Value {
+    serde_json::to_value(s).unwrap_or_else(|e| panic!("{} state serialises: {e:?}", S::LABEL))
+}
+
 /// The one check of a restored optimiser state, before it replaces the running one: it
 /// parses, it has the optimiser's dimension, and nothing in it is damaged (a damaged
 /// checkpoint must not run a study of failed candidates to its end).

@@ -272,10 +272,15 @@ impl Message {
         self
     }
 
+    /// `'name'`.
+    const fn quoted(self, name: &str) -> Self {
+        self.push("'").push(name).push("'")
+    }
+
     /// A variable's name in quotes, or its value reference when no variable has it.
     const fn push_dependency(self, dependency: Option<&str>, value_reference: u32) -> Self {
         match dependency {
-            Some(d) => self.push("'").push(d).push("'"),
+            Some(d) => self.quoted(d),
             None => self.push("value reference ").push_u32(value_reference),
         }
     }
@@ -300,20 +305,18 @@ impl TableError {
                 second,
                 value_reference,
             } => m
-                .push("'")
-                .push(first)
-                .push("' and '")
+                .quoted(first)
+                .push(" and '")
                 .push(second)
                 .push("' share value reference ")
                 .push_u32(value_reference),
             TableError::UnknownUnit { name, unit } => m
-                .push("'")
-                .push(name)
-                .push("': unknown unit '")
+                .quoted(name)
+                .push(": unknown unit '")
                 .push(unit)
                 .push("' (not in fmu_export::units::UNITS; declare a unit of the model's own with .own_unit)"),
             TableError::UnitRedefined { name, first, unit } => {
-                let m = m.push("'").push(name).push("': its unit '").push(unit);
+                let m = m.quoted(name).push(": its unit '").push(unit);
                 if str_eq(name, first) {
                     m.push("' is defined otherwise in fmu_export::units::UNITS: give it a name of its own")
                 } else {
@@ -323,36 +326,30 @@ impl TableError {
                 }
             }
             TableError::NoDescription { name } => {
-                m.push("'").push(name).push("' has no description")
+                m.quoted(name).push(" has no description")
             }
             TableError::StringWithUnitOrRange { name } => m
-                .push("'")
-                .push(name)
-                .push("': a String has no unit and no range"),
+                .quoted(name)
+                .push(": a String has no unit and no range"),
             TableError::ContinuousNonReal { name } => m
-                .push("'")
-                .push(name)
-                .push("': only a Real can be continuous (FMI 2.0 §2.2.7); declare it discrete"),
+                .quoted(name)
+                .push(": only a Real can be continuous (FMI 2.0 §2.2.7); declare it discrete"),
             TableError::StartOutsideRange { name } => m
-                .push("'")
-                .push(name)
-                .push("': start value outside [min, max]"),
+                .quoted(name)
+                .push(": start value outside [min, max]"),
             TableError::DependenciesOfNonOutput { name } => m
-                .push("'")
-                .push(name)
-                .push("' declares dependencies but is not an output"),
+                .quoted(name)
+                .push(" declares dependencies but is not an output"),
             TableError::BadEnumeration { name } => m
-                .push("'")
-                .push(name)
-                .push("': an Enumeration has items valued 1, 2, … in order, a start that is one of them and no unit"),
+                .quoted(name)
+                .push(": an Enumeration has items valued 1, 2, … in order, a start that is one of them and no unit"),
             TableError::DependsOnNonInput {
                 name,
                 dependency,
                 value_reference,
             } => m
-                .push("'")
-                .push(name)
-                .push("' depends on ")
+                .quoted(name)
+                .push(" depends on ")
                 .push_dependency(dependency, value_reference)
                 .push(", which is not an input (depends_on names inputs)"),
             TableError::InitDependsOnNeitherInputNorParameter {
@@ -360,9 +357,8 @@ impl TableError {
                 dependency,
                 value_reference,
             } => m
-                .push("'")
-                .push(name)
-                .push("' depends in initialization mode on ")
+                .quoted(name)
+                .push(" depends in initialization mode on ")
                 .push_dependency(dependency, value_reference)
                 .push(", which is neither an input nor a parameter"),
         }
@@ -537,43 +533,42 @@ const fn check_dependencies(table: &[VarInfo], a: &VarInfo) -> Result<(), TableE
     if declares && !matches!(a.causality, Causality::Output) {
         return Err(TableError::DependenciesOfNonOutput { name: a.name });
     }
-    let mut k = 0;
-    while k < a.depends_on.len() {
-        let vr = a.depends_on[k];
-        match find(table, vr) {
-            Some(d) if matches!(d.causality, Causality::Input) => {}
-            other => {
-                return Err(TableError::DependsOnNonInput {
-                    name: a.name,
-                    dependency: match other {
-                        Some(d) => Some(d.name),
-                        None => None,
-                    },
-                    value_reference: vr,
-                })
-            }
-        }
-        k += 1;
+    if let Some((value_reference, dependency)) = first_other(table, a.depends_on, false) {
+        return Err(TableError::DependsOnNonInput {
+            name: a.name,
+            dependency,
+            value_reference,
+        });
     }
-    let mut k = 0;
-    while k < a.init_depends_on.len() {
-        let vr = a.init_depends_on[k];
-        match find(table, vr) {
-            Some(d) if matches!(d.causality, Causality::Input | Causality::Parameter) => {}
-            other => {
-                return Err(TableError::InitDependsOnNeitherInputNorParameter {
-                    name: a.name,
-                    dependency: match other {
-                        Some(d) => Some(d.name),
-                        None => None,
-                    },
-                    value_reference: vr,
-                })
-            }
-        }
-        k += 1;
+    if let Some((value_reference, dependency)) = first_other(table, a.init_depends_on, true) {
+        return Err(TableError::InitDependsOnNeitherInputNorParameter {
+            name: a.name,
+            dependency,
+            value_reference,
+        });
     }
     Ok(())
+}
+
+/// The first of `vrs` that is not an input (nor a parameter, with `parameters`): its value
+/// reference and the name of its variable (None: no variable has it).
+const fn first_other(
+    table: &[VarInfo],
+    vrs: &[u32],
+    parameters: bool,
+) -> Option<(u32, Option<&'static str>)> {
+    let mut k = 0;
+    while k < vrs.len() {
+        let vr = vrs[k];
+        match find(table, vr) {
+            Some(d) if matches!(d.causality, Causality::Input) => {}
+            Some(d) if parameters && matches!(d.causality, Causality::Parameter) => {}
+            Some(d) => return Some((vr, Some(d.name))),
+            None => return Some((vr, None)),
+        }
+        k += 1;
+    }
+    None
 }
 
 /// The first broken rule of the table, if any.

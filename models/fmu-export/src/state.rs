@@ -67,35 +67,22 @@ pub trait Stored {
     fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError>;
 }
 
-impl Stored for f64 {
-    fn save(&self, w: &mut StateWriter) {
-        w.f64(*self);
-    }
-    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
-        *self = r.f64()?;
-        Ok(())
-    }
+/// The numbers stored as they are, by the writer's and reader's method of their name.
+macro_rules! stored_as_is {
+    ($($t:ident),*) => {$(
+        impl Stored for $t {
+            fn save(&self, w: &mut StateWriter) {
+                w.$t(*self);
+            }
+            fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
+                *self = r.$t()?;
+                Ok(())
+            }
+        }
+    )*};
 }
 
-impl Stored for i32 {
-    fn save(&self, w: &mut StateWriter) {
-        w.i32(*self);
-    }
-    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
-        *self = r.i32()?;
-        Ok(())
-    }
-}
-
-impl Stored for u64 {
-    fn save(&self, w: &mut StateWriter) {
-        w.u64(*self);
-    }
-    fn load(&mut self, r: &mut StateReader<'_>) -> Result<(), ModelError> {
-        *self = r.u64()?;
-        Ok(())
-    }
-}
+stored_as_is!(f64, i32, u64);
 
 /// An index (a cursor, a ring buffer's head) as a u64; one that does not fit is an error.
 impl Stored for usize {

@@ -19,6 +19,24 @@ pub enum Value {
     Str(&'static str),
 }
 
+/// A field's value from a [`Value`] of its kind (`f64` from a Real, `i32` from an Integer or
+/// an Enumeration's, `bool` from a Boolean); `Err` gives back a value of another kind.
+macro_rules! field_from_value {
+    ($($t:ty: $kind:ident),*) => {$(
+        impl TryFrom<Value> for $t {
+            type Error = Value;
+            fn try_from(v: Value) -> Result<$t, Value> {
+                match v {
+                    Value::$kind(x) => Ok(x),
+                    other => Err(other),
+                }
+            }
+        }
+    )*};
+}
+
+field_from_value!(f64: Real, i32: Integer, bool: Boolean);
+
 impl Value {
     pub const fn var_type(self) -> ScalarType {
         match self {
@@ -436,47 +454,22 @@ macro_rules! __fmi_value {
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __fmi_set {
-    (Real, $place:expr, $v:expr) => {
-        match $v {
-            $crate::variables::Value::Real(x) => {
-                $place = x;
-                true
-            }
-            _ => false,
-        }
-    };
-    (Integer, $place:expr, $v:expr) => {
-        match $v {
-            $crate::variables::Value::Integer(x) => {
-                $place = x;
-                true
-            }
-            _ => false,
-        }
-    };
-    (Enumeration, $place:expr, $v:expr) => {
-        match $v {
-            $crate::variables::Value::Integer(x) => {
-                $place = x;
-                true
-            }
-            _ => false,
-        }
-    };
-    (Boolean, $place:expr, $v:expr) => {
-        match $v {
-            $crate::variables::Value::Boolean(x) => {
-                $place = x;
-                true
-            }
-            _ => false,
-        }
-    };
     (String, $place:expr, $v:expr) => {{
         let _ = &$place;
         let _ = $v;
         false
     }};
+    // A number into its field when it is of the field's kind (an Enumeration's travels as
+    // an Integer): `TryFrom<Value>` of the field's type.
+    ($t:ident, $place:expr, $v:expr) => {
+        match ::core::convert::TryFrom::try_from($v) {
+            Ok(x) => {
+                $place = x;
+                true
+            }
+            Err(_) => false,
+        }
+    };
 }
 
 #[doc(hidden)]

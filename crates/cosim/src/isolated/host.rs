@@ -734,6 +734,25 @@ fn copy_int(v: Values, out: &mut [i32]) {
     }
 }
 
+/// The typed get and set of [`Backend`] for Real, Integer and Boolean: a get is one request
+/// answered at once (its values copied out by `$copy`), a set is queued for the next frame.
+macro_rules! typed_values {
+    ($($get:ident, $set:ident, $t:ty, $g:ident, $s:ident, $copy:ident;)*) => {$(
+        fn $get(&mut self, vrs: &[u32], out: &mut [$t]) -> Result<(), FmuError> {
+            let op = Request::$g { vrs: vrs.into() };
+            $copy(self.get(concat!("fmi2", stringify!($g)), op)?, out);
+            Ok(())
+        }
+        fn $set(&mut self, vrs: &[u32], values: &[$t]) -> Result<(), FmuError> {
+            self.queue_set(Request::$s {
+                vrs: vrs.into(),
+                values: values.into(),
+            });
+            Ok(())
+        }
+    )*};
+}
+
 impl Backend for IsolatedBackend {
     fn name(&self) -> &str {
         &self.name
@@ -778,41 +797,10 @@ impl Backend for IsolatedBackend {
         self.time = 0.0;
         r
     }
-    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        let op = Request::GetReal { vrs: vrs.into() };
-        copy_real(self.get("fmi2GetReal", op)?, out);
-        Ok(())
-    }
-    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        self.queue_set(Request::SetReal {
-            vrs: vrs.into(),
-            values: values.into(),
-        });
-        Ok(())
-    }
-    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let op = Request::GetInteger { vrs: vrs.into() };
-        copy_int(self.get("fmi2GetInteger", op)?, out);
-        Ok(())
-    }
-    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        self.queue_set(Request::SetInteger {
-            vrs: vrs.into(),
-            values: values.into(),
-        });
-        Ok(())
-    }
-    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let op = Request::GetBoolean { vrs: vrs.into() };
-        copy_int(self.get("fmi2GetBoolean", op)?, out);
-        Ok(())
-    }
-    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        self.queue_set(Request::SetBoolean {
-            vrs: vrs.into(),
-            values: values.into(),
-        });
-        Ok(())
+    typed_values! {
+        get_real, set_real, f64, GetReal, SetReal, copy_real;
+        get_integer, set_integer, i32, GetInteger, SetInteger, copy_int;
+        get_boolean, set_boolean, i32, GetBoolean, SetBoolean, copy_int;
     }
     fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
         let op = Request::GetString { vrs: vrs.into() };

@@ -73,6 +73,33 @@ impl<M: Model> NativeBackend<M> {
             )
         })
     }
+
+    /// Integers or Booleans (`ty`) read as i32, as the FFI layer reads them.
+    fn get_int(
+        &mut self,
+        function: Function,
+        ty: ScalarType,
+        vrs: &[u32],
+        out: &mut [i32],
+    ) -> Result<(), FmuError> {
+        self.call(function, |rt| {
+            rt.get(function.name(), ty, vrs, out, |v| v.as_f64() as i32)
+        })
+    }
+}
+
+/// The typed sets of [`Backend`], each value made a [`Value`] by `$value` and set as the FFI
+/// layer sets it.
+macro_rules! typed_sets {
+    ($($(#[$a:meta])* $set:ident($t:ty) $function:ident, $ty:ident, $value:expr;)*) => {$(
+        $(#[$a])*
+        fn $set(&mut self, vrs: &[u32], values: &[$t]) -> Result<(), FmuError> {
+            self.call(Function::$function, |rt| {
+                let values = values.iter().map(|x| $value(*x));
+                rt.set(const { Function::$function.name() }, ScalarType::$ty, vrs, values)
+            })
+        }
+    )*};
 }
 
 impl<M: Model> Backend for NativeBackend<M> {
@@ -123,50 +150,16 @@ impl<M: Model> Backend for NativeBackend<M> {
         // The FMU's own path (fields read directly, FMI 3.0's `time` when exposed).
         self.call(Function::GetReal, |rt| rt.get_real(vrs, out))
     }
-    #[inline]
-    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        self.call(Function::SetReal, |rt| {
-            rt.set(
-                "fmi2SetReal",
-                ScalarType::Real,
-                vrs,
-                values.iter().map(|x| Value::Real(*x)),
-            )
-        })
+    typed_sets! {
+        #[inline] set_real(f64) SetReal, Real, Value::Real;
+        set_integer(i32) SetInteger, Integer, Value::Integer;
+        set_boolean(i32) SetBoolean, Boolean, |x: i32| Value::Boolean(x != 0);
     }
     fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        self.call(Function::GetInteger, |rt| {
-            rt.get("fmi2GetInteger", ScalarType::Integer, vrs, out, |v| {
-                v.as_f64() as i32
-            })
-        })
-    }
-    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        self.call(Function::SetInteger, |rt| {
-            rt.set(
-                "fmi2SetInteger",
-                ScalarType::Integer,
-                vrs,
-                values.iter().map(|x| Value::Integer(*x)),
-            )
-        })
+        self.get_int(Function::GetInteger, ScalarType::Integer, vrs, out)
     }
     fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        self.call(Function::GetBoolean, |rt| {
-            rt.get("fmi2GetBoolean", ScalarType::Boolean, vrs, out, |v| {
-                v.as_f64() as i32
-            })
-        })
-    }
-    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        self.call(Function::SetBoolean, |rt| {
-            rt.set(
-                "fmi2SetBoolean",
-                ScalarType::Boolean,
-                vrs,
-                values.iter().map(|x| Value::Boolean(*x != 0)),
-            )
-        })
+        self.get_int(Function::GetBoolean, ScalarType::Boolean, vrs, out)
     }
     fn get_string(&mut self, vrs: &[u32], out: &mut Vec<String>) -> Result<(), FmuError> {
         out.clear();

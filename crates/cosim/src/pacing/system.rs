@@ -186,20 +186,23 @@ impl Prepared {
         // SAFETY: prctl with integer arguments only.
         let old = unsafe { libc::prctl(libc::PR_GET_TIMERSLACK, 0, 0, 0, 0) };
         let r = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0) };
-        match r {
-            0 => {
-                self.timer_slack = (old > 0).then_some(old as libc::c_ulong);
-                self.attempts.push(Attempt::obtained(asked));
-            }
-            _ => {
-                let (e, _) = os_error();
-                self.attempts.push(Attempt::refused(
-                    asked,
-                    format!("prctl: {e}"),
-                    "sleeps may end up to 50 µs late: deadlines may be missed by timer slack",
-                ));
-            }
+        let means = "sleeps may end up to 50 µs late: deadlines may be missed by timer slack";
+        if self.record(r, asked, "prctl", means) {
+            self.timer_slack = (old > 0).then_some(old as libc::c_ulong);
         }
+    }
+
+    /// The outcome of a call asked for (`r`, its return: 0 when it was granted, else the
+    /// error in errno), recorded; whether it was granted.
+    fn record(&mut self, r: libc::c_int, asked: String, call: &str, means: &'static str) -> bool {
+        if r == 0 {
+            self.attempts.push(Attempt::obtained(asked));
+            return true;
+        }
+        let (e, _) = os_error();
+        let why = format!("{call}: {e}");
+        self.attempts.push(Attempt::refused(asked, why, means));
+        false
     }
 
     /// Every page locked, now and later (unless a limit would make later allocations fail).
@@ -220,19 +223,8 @@ impl Prepared {
             _ => {
                 // SAFETY: mlockall has no memory-safety preconditions.
                 let r = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
-                match r {
-                    0 => {
-                        self.locked = true;
-                        self.attempts.push(Attempt::obtained(asked));
-                    }
-                    _ => {
-                        let (e, _) = os_error();
-                        self.attempts.push(Attempt::refused(
-                            asked,
-                            format!("mlockall: {e}"),
-                            LOCK_MEANS,
-                        ))
-                    }
+                if self.record(r, asked, "mlockall", LOCK_MEANS) {
+                    self.locked = true;
                 }
             }
         }

@@ -5,7 +5,7 @@
 
 use super::error::DescriptionError;
 use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
-use super::reader::{num, walk, Attrs, Element, Shared, Version, Visit};
+use super::reader::{num, read, Attrs, Element, Shared, Version, Visit};
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 
 fn unknown(m: &Attrs) -> Result<Unknown, DescriptionError> {
@@ -33,9 +33,7 @@ fn unknown(m: &Attrs) -> Result<Unknown, DescriptionError> {
 
 /// Parse an FMI 2.0 modelDescription.xml.
 pub fn parse(xml: &str) -> Result<ModelDescription, DescriptionError> {
-    let mut r = Reader2::default();
-    walk(xml, &mut r)?;
-    r.finish()
+    read(xml, Reader2::finish)
 }
 
 /// The FMI 2.0 reader: the shared elements, then `<ScalarVariable>`s and the model

@@ -21,7 +21,7 @@
 use super::error::DescriptionError;
 use super::model::{check_names_and_aliases, ModelDescription, ScalarVariable, Unknown};
 pub use super::model::{Fmi3Slot, Fmi3Type};
-use super::reader::{num, walk, Attrs, Element, Shared, Version, Visit};
+use super::reader::{num, read, Attrs, Element, Shared, Version, Visit};
 use crate::schema::{Causality, Initial, ScalarType, Variability};
 use std::collections::HashMap;
 
@@ -74,9 +74,7 @@ fn unknown3(m: &Attrs, what: &str) -> Result<Unknown3, DescriptionError> {
 
 /// Parse an FMI 3.0 modelDescription.xml.
 pub fn parse(xml: &str) -> Result<ModelDescription, DescriptionError> {
-    let mut r = Reader3::default();
-    walk(xml, &mut r)?;
-    r.finish()
+    read(xml, Reader3::finish)
 }
 
 /// The FMI 3.0 reader: the shared elements, then the typed variables (with their

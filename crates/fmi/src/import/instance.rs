@@ -218,12 +218,23 @@ impl Instance {
         }
     }
 
+    /// An optional function of the FMU (the state functions), or the error that it has none.
+    fn optional<F>(&self, f: Option<F>, function: Function) -> Result<F, FmuError> {
+        f.ok_or_else(|| self.unsupported(function))
+    }
+
+    /// A call of the component alone (`fmi2EnterInitializationMode`, `fmi2Terminate`, …).
+    fn call(
+        &mut self,
+        f: unsafe extern "C" fn(fmi2Component) -> fmi2Status,
+        function: Function,
+    ) -> Result<(), FmuError> {
+        let s = unsafe { f(self.comp) };
+        self.check(function, s)
+    }
+
     pub fn get_state(&mut self) -> Result<FmuState, FmuError> {
-        let f = self
-            .lib
-            .api
-            .fmi2GetFMUstate
-            .ok_or_else(|| self.unsupported(Function::GetFMUstate))?;
+        let f = self.optional(self.lib.api.fmi2GetFMUstate, Function::GetFMUstate)?;
         let mut st: fmi2FMUstate = std::ptr::null_mut();
         let s = unsafe { f(self.comp, &mut st) };
         self.check(Function::GetFMUstate, s)?;
@@ -232,32 +243,20 @@ impl Instance {
 
     /// Save into an existing state (reuses its memory).
     pub fn update_state(&mut self, state: &mut FmuState) -> Result<(), FmuError> {
-        let f = self
-            .lib
-            .api
-            .fmi2GetFMUstate
-            .ok_or_else(|| self.unsupported(Function::GetFMUstate))?;
+        let f = self.optional(self.lib.api.fmi2GetFMUstate, Function::GetFMUstate)?;
         let s = unsafe { f(self.comp, &mut state.0) };
         self.check(Function::GetFMUstate, s)
     }
 
     pub fn set_state(&mut self, state: &FmuState, time: f64) -> Result<(), FmuError> {
-        let f = self
-            .lib
-            .api
-            .fmi2SetFMUstate
-            .ok_or_else(|| self.unsupported(Function::SetFMUstate))?;
+        let f = self.optional(self.lib.api.fmi2SetFMUstate, Function::SetFMUstate)?;
         let s = unsafe { f(self.comp, state.0) };
         self.time = time;
         self.check(Function::SetFMUstate, s)
     }
 
     pub fn free_state(&mut self, mut state: FmuState) -> Result<(), FmuError> {
-        let f = self
-            .lib
-            .api
-            .fmi2FreeFMUstate
-            .ok_or_else(|| self.unsupported(Function::FreeFMUstate))?;
+        let f = self.optional(self.lib.api.fmi2FreeFMUstate, Function::FreeFMUstate)?;
         let s = unsafe { f(self.comp, &mut state.0) };
         self.check(Function::FreeFMUstate, s)
     }
@@ -283,11 +282,10 @@ impl Instance {
     }
 
     pub fn deserialize_state(&mut self, bytes: &[u8]) -> Result<FmuState, FmuError> {
-        let f = self
-            .lib
-            .api
-            .fmi2DeSerializeFMUstate
-            .ok_or_else(|| self.unsupported(Function::DeSerializeFMUstate))?;
+        let f = self.optional(
+            self.lib.api.fmi2DeSerializeFMUstate,
+            Function::DeSerializeFMUstate,
+        )?;
         let mut st: fmi2FMUstate = std::ptr::null_mut();
         let s = unsafe {
             f(
@@ -300,6 +298,24 @@ impl Instance {
         self.check(Function::DeSerializeFMUstate, s)?;
         Ok(FmuState(st))
     }
+}
+
+/// The typed get and set of [`FmuInstance`] for Real, Integer and Boolean: the whole list
+/// in one `fmi2Get…`/`fmi2Set…` call (with its attributes, e.g. `#[inline]`).
+macro_rules! typed_values {
+    ($($(#[$a:meta])* $get:ident, $set:ident, $t:ty, $fget:ident, $fset:ident, $g:ident, $s:ident;)*) => {$(
+        $(#[$a])*
+        fn $get(&mut self, vrs: &[u32], out: &mut [$t]) -> Result<(), FmuError> {
+            let (n, p) = (out.len(), out.as_mut_ptr());
+            self.values(self.lib.api.$fget, Function::$g, vrs, n, p)
+        }
+
+        $(#[$a])*
+        fn $set(&mut self, vrs: &[u32], values: &[$t]) -> Result<(), FmuError> {
+            let (n, p) = (values.len(), values.as_ptr());
+            self.values(self.lib.api.$fset, Function::$s, vrs, n, p)
+        }
+    )*};
 }
 
 impl FmuInstance for Instance {
@@ -341,18 +357,21 @@ impl FmuInstance for Instance {
     }
 
     fn enter_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2EnterInitializationMode)(self.comp) };
-        self.check(Function::EnterInitializationMode, s)
+        self.call(
+            self.lib.api.fmi2EnterInitializationMode,
+            Function::EnterInitializationMode,
+        )
     }
 
     fn exit_initialization_mode(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2ExitInitializationMode)(self.comp) };
-        self.check(Function::ExitInitializationMode, s)
+        self.call(
+            self.lib.api.fmi2ExitInitializationMode,
+            Function::ExitInitializationMode,
+        )
     }
 
     fn terminate(&mut self) -> Result<(), FmuError> {
-        let s = unsafe { (self.lib.api.fmi2Terminate)(self.comp) };
-        self.check(Function::Terminate, s)
+        self.call(self.lib.api.fmi2Terminate, Function::Terminate)
     }
 
     fn reset(&mut self) -> Result<(), FmuError> {
@@ -362,36 +381,10 @@ impl FmuInstance for Instance {
         self.check(Function::Reset, s)
     }
 
-    #[inline]
-    fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        let (n, p) = (out.len(), out.as_mut_ptr());
-        self.values(self.lib.api.fmi2GetReal, Function::GetReal, vrs, n, p)
-    }
-
-    #[inline]
-    fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        let (n, p) = (values.len(), values.as_ptr());
-        self.values(self.lib.api.fmi2SetReal, Function::SetReal, vrs, n, p)
-    }
-
-    fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let (n, p) = (out.len(), out.as_mut_ptr());
-        self.values(self.lib.api.fmi2GetInteger, Function::GetInteger, vrs, n, p)
-    }
-
-    fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let (n, p) = (values.len(), values.as_ptr());
-        self.values(self.lib.api.fmi2SetInteger, Function::SetInteger, vrs, n, p)
-    }
-
-    fn get_boolean(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let (n, p) = (out.len(), out.as_mut_ptr());
-        self.values(self.lib.api.fmi2GetBoolean, Function::GetBoolean, vrs, n, p)
-    }
-
-    fn set_boolean(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let (n, p) = (values.len(), values.as_ptr());
-        self.values(self.lib.api.fmi2SetBoolean, Function::SetBoolean, vrs, n, p)
+    typed_values! {
+        #[inline] get_real, set_real, f64, fmi2GetReal, fmi2SetReal, GetReal, SetReal;
+        get_integer, set_integer, i32, fmi2GetInteger, fmi2SetInteger, GetInteger, SetInteger;
+        get_boolean, set_boolean, i32, fmi2GetBoolean, fmi2SetBoolean, GetBoolean, SetBoolean;
     }
 
     /// Read String variables into `out` (one per value reference). The FMU's strings are

@@ -60,6 +60,21 @@ fn hex_bytes(text: &str) -> Option<Vec<u8>> {
 pub struct Fmu3State(*mut c_void);
 unsafe impl Send for Fmu3State {}
 
+/// The one-call get and set of a scalar FMI 3.0 type (`fmi3GetFloat64`, `fmi3SetInt32`):
+/// the master's whole list in one call, as FMI 2.0's typed calls take it.
+macro_rules! one_call {
+    ($get:ident, $set:ident, $t:ty, $name:literal) => {
+        one_call!(@ $get, &mut [$t], as_mut_ptr, concat!("fmi3Get", $name));
+        one_call!(@ $set, &[$t], as_ptr, concat!("fmi3Set", $name));
+    };
+    (@ $f:ident, $slice:ty, $ptr:ident, $function:expr) => {
+        #[inline]
+        fn $f(&mut self, vrs: &[u32], values: $slice) -> Result<(), FmuError> {
+            self.values(self.lib.api.$f, $function, vrs, values.$ptr(), values.len())
+        }
+    };
+}
+
 pub struct Instance3 {
     lib: Arc<Library3>,
     inst: Inst,
@@ -291,37 +306,37 @@ impl Instance3 {
                     let s = unsafe {
                         (self.lib.api.$f)(self.inst, vr.as_ptr(), 1, one.as_mut_ptr(), 1)
                     };
-                    self.check($name, s)?;
+                    self.check(concat!("fmi3Get", $name), s)?;
                     one[0]
                 } else {
                     let mut buf: Vec<$t> = vec![Default::default(); n];
                     let s = unsafe {
                         (self.lib.api.$f)(self.inst, vr.as_ptr(), 1, buf.as_mut_ptr(), n)
                     };
-                    self.check($name, s)?;
+                    self.check(concat!("fmi3Get", $name), s)?;
                     buf[slot.index as usize]
                 }
             }};
         }
         Ok(match slot.ty {
-            Fmi3Type::Float32 => get!(get_float32, f32, "fmi3GetFloat32") as f64,
-            Fmi3Type::Float64 => get!(get_float64, f64, "fmi3GetFloat64"),
-            Fmi3Type::Int8 => get!(get_int8, i8, "fmi3GetInt8") as f64,
-            Fmi3Type::UInt8 => get!(get_uint8, u8, "fmi3GetUInt8") as f64,
-            Fmi3Type::Int16 => get!(get_int16, i16, "fmi3GetInt16") as f64,
-            Fmi3Type::UInt16 => get!(get_uint16, u16, "fmi3GetUInt16") as f64,
-            Fmi3Type::Int32 => get!(get_int32, i32, "fmi3GetInt32") as f64,
-            Fmi3Type::UInt32 => get!(get_uint32, u32, "fmi3GetUInt32") as f64,
-            Fmi3Type::Enumeration => get!(get_int64, i64, "fmi3GetInt64") as f64,
+            Fmi3Type::Float32 => get!(get_float32, f32, "Float32") as f64,
+            Fmi3Type::Float64 => get!(get_float64, f64, "Float64"),
+            Fmi3Type::Int8 => get!(get_int8, i8, "Int8") as f64,
+            Fmi3Type::UInt8 => get!(get_uint8, u8, "UInt8") as f64,
+            Fmi3Type::Int16 => get!(get_int16, i16, "Int16") as f64,
+            Fmi3Type::UInt16 => get!(get_uint16, u16, "UInt16") as f64,
+            Fmi3Type::Int32 => get!(get_int32, i32, "Int32") as f64,
+            Fmi3Type::UInt32 => get!(get_uint32, u32, "UInt32") as f64,
+            Fmi3Type::Enumeration => get!(get_int64, i64, "Int64") as f64,
             Fmi3Type::Int64 => {
-                let x = get!(get_int64, i64, "fmi3GetInt64");
-                self.exact_i64(slot, x)?
+                let x = get!(get_int64, i64, "Int64");
+                self.exact(slot, x, x as f64, |f| f as i64)?
             }
             Fmi3Type::UInt64 => {
-                let x = get!(get_uint64, u64, "fmi3GetUInt64");
-                self.exact_u64(slot, x)?
+                let x = get!(get_uint64, u64, "UInt64");
+                self.exact(slot, x, x as f64, |f| f as u64)?
             }
-            Fmi3Type::Boolean => (get!(get_boolean, u8, "fmi3GetBoolean") != 0) as i32 as f64,
+            Fmi3Type::Boolean => (get!(get_boolean, u8, "Boolean") != 0) as i32 as f64,
             Fmi3Type::String | Fmi3Type::Binary => {
                 return Err(self.other("a String read as a number".into()))
             }
@@ -330,18 +345,15 @@ impl Instance3 {
 
     /// A 64-bit integer as f64, when the f64 carries it exactly (it does up to 2^53, and at
     /// the type's limits, where the conversion back saturates to the same value).
-    fn exact_i64(&self, slot: Fmi3Slot, x: i64) -> Result<f64, FmuError> {
-        let f = x as f64;
-        if f as i64 == x {
-            Ok(f)
-        } else {
-            Err(self.not_exact(slot, &x.to_string()))
-        }
-    }
-
-    fn exact_u64(&self, slot: Fmi3Slot, x: u64) -> Result<f64, FmuError> {
-        let f = x as f64;
-        if f as u64 == x {
+    /// `f` is `x` as f64, `back` the conversion back to the integer type.
+    fn exact<T: PartialEq + std::fmt::Display>(
+        &self,
+        slot: Fmi3Slot,
+        x: T,
+        f: f64,
+        back: fn(f64) -> T,
+    ) -> Result<f64, FmuError> {
+        if back(f) == x {
             Ok(f)
         } else {
             Err(self.not_exact(slot, &x.to_string()))
@@ -410,77 +422,41 @@ impl Instance3 {
         let n = slot.len as usize;
         let vr = [slot.vr];
         macro_rules! set {
-            ($get:ident, $set:ident, $t:ty, $gname:literal, $sname:literal) => {{
+            ($get:ident, $set:ident, $t:ty, $name:literal) => {{
                 if n == 1 {
                     // A scalar from the stack: nothing allocated in the step loop.
                     let one: [$t; 1] = [value as $t];
                     let s =
                         unsafe { (self.lib.api.$set)(self.inst, vr.as_ptr(), 1, one.as_ptr(), 1) };
-                    return self.check($sname, s);
+                    return self.check(concat!("fmi3Set", $name), s);
                 }
                 let mut buf: Vec<$t> = vec![Default::default(); n];
                 if n > 1 {
                     let s = unsafe {
                         (self.lib.api.$get)(self.inst, vr.as_ptr(), 1, buf.as_mut_ptr(), n)
                     };
-                    self.check($gname, s)?;
+                    self.check(concat!("fmi3Get", $name), s)?;
                 }
                 buf[slot.index as usize] = value as $t;
                 let s = unsafe { (self.lib.api.$set)(self.inst, vr.as_ptr(), 1, buf.as_ptr(), n) };
-                self.check($sname, s)
+                self.check(concat!("fmi3Set", $name), s)
             }};
         }
         match slot.ty {
-            Fmi3Type::Float32 => set!(
-                get_float32,
-                set_float32,
-                f32,
-                "fmi3GetFloat32",
-                "fmi3SetFloat32"
-            ),
-            Fmi3Type::Float64 => set!(
-                get_float64,
-                set_float64,
-                f64,
-                "fmi3GetFloat64",
-                "fmi3SetFloat64"
-            ),
-            Fmi3Type::Int8 => set!(get_int8, set_int8, i8, "fmi3GetInt8", "fmi3SetInt8"),
-            Fmi3Type::UInt8 => set!(get_uint8, set_uint8, u8, "fmi3GetUInt8", "fmi3SetUInt8"),
-            Fmi3Type::Int16 => set!(get_int16, set_int16, i16, "fmi3GetInt16", "fmi3SetInt16"),
-            Fmi3Type::UInt16 => set!(
-                get_uint16,
-                set_uint16,
-                u16,
-                "fmi3GetUInt16",
-                "fmi3SetUInt16"
-            ),
-            Fmi3Type::Int32 => set!(get_int32, set_int32, i32, "fmi3GetInt32", "fmi3SetInt32"),
-            Fmi3Type::UInt32 => set!(
-                get_uint32,
-                set_uint32,
-                u32,
-                "fmi3GetUInt32",
-                "fmi3SetUInt32"
-            ),
+            Fmi3Type::Float32 => set!(get_float32, set_float32, f32, "Float32"),
+            Fmi3Type::Float64 => set!(get_float64, set_float64, f64, "Float64"),
+            Fmi3Type::Int8 => set!(get_int8, set_int8, i8, "Int8"),
+            Fmi3Type::UInt8 => set!(get_uint8, set_uint8, u8, "UInt8"),
+            Fmi3Type::Int16 => set!(get_int16, set_int16, i16, "Int16"),
+            Fmi3Type::UInt16 => set!(get_uint16, set_uint16, u16, "UInt16"),
+            Fmi3Type::Int32 => set!(get_int32, set_int32, i32, "Int32"),
+            Fmi3Type::UInt32 => set!(get_uint32, set_uint32, u32, "UInt32"),
             Fmi3Type::Int64 | Fmi3Type::Enumeration => {
-                set!(get_int64, set_int64, i64, "fmi3GetInt64", "fmi3SetInt64")
+                set!(get_int64, set_int64, i64, "Int64")
             }
-            Fmi3Type::UInt64 => set!(
-                get_uint64,
-                set_uint64,
-                u64,
-                "fmi3GetUInt64",
-                "fmi3SetUInt64"
-            ),
+            Fmi3Type::UInt64 => set!(get_uint64, set_uint64, u64, "UInt64"),
             Fmi3Type::Boolean => {
-                set!(
-                    get_boolean,
-                    set_boolean,
-                    u8,
-                    "fmi3GetBoolean",
-                    "fmi3SetBoolean"
-                )
+                set!(get_boolean, set_boolean, u8, "Boolean")
             }
             Fmi3Type::String | Fmi3Type::Binary => {
                 Err(self.other("a String set from a number".into()))
@@ -488,60 +464,66 @@ impl Instance3 {
         }
     }
 
+    /// One typed call: `values` points at `n` values for the references `vrs`.
+    #[inline]
+    fn values<P>(
+        &self,
+        call: unsafe extern "C" fn(Inst, *const u32, usize, P, usize) -> Status,
+        function: &'static str,
+        vrs: &[u32],
+        values: P,
+        n: usize,
+    ) -> Result<(), FmuError> {
+        // SAFETY: the instance is live and `values` points at `n` values.
+        let s = unsafe { call(self.inst, vrs.as_ptr(), vrs.len(), values, n) };
+        self.check(function, s)
+    }
+
+    one_call!(get_float64, set_float64, f64, "Float64");
+    one_call!(get_int32, set_int32, i32, "Int32");
+
     /// Whether every reference is a scalar of type `ty` (one call of its type then).
     #[inline]
     fn all_scalar(&self, vrs: &[u32], ty: Fmi3Type) -> bool {
         vrs.iter().all(|&vr| self.slots.scalar_type(vr) == Some(ty))
     }
 
-    #[inline]
-    fn get_float64(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        let s = unsafe {
-            (self.lib.api.get_float64)(
-                self.inst,
-                vrs.as_ptr(),
-                vrs.len(),
-                out.as_mut_ptr(),
-                out.len(),
-            )
-        };
-        self.check("fmi3GetFloat64", s)
-    }
-
-    /// Reals of other types or array elements: one call when these are all scalar
-    /// Float64 after all, else one per value.
+    /// Values exchanged as `T` (Reals of other types or array elements, Integers of other
+    /// types): one call (`one_call`) when these are all scalars of type `ty` after all,
+    /// else one per value, each converted by `from` (which refuses what `T` cannot carry).
     #[inline(never)]
-    fn get_real_mixed(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
-        if self.all_scalar(vrs, Fmi3Type::Float64) {
-            return self.get_float64(vrs, out);
+    fn get_mixed<T>(
+        &mut self,
+        vrs: &[u32],
+        out: &mut [T],
+        ty: Fmi3Type,
+        one_call: impl FnOnce(&mut Self, &[u32], &mut [T]) -> Result<(), FmuError>,
+        from: impl Fn(&Self, u32, Fmi3Slot, f64) -> Result<T, FmuError>,
+    ) -> Result<(), FmuError> {
+        if self.all_scalar(vrs, ty) {
+            return one_call(self, vrs, out);
         }
         for (vr, o) in vrs.iter().zip(out.iter_mut()) {
             let slot = self.slot(*vr)?;
-            *o = self.get_one(slot)?;
+            let x = self.get_one(slot)?;
+            *o = from(self, *vr, slot, x)?;
         }
         Ok(())
     }
 
-    #[inline]
-    fn set_float64(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        let s = unsafe {
-            (self.lib.api.set_float64)(
-                self.inst,
-                vrs.as_ptr(),
-                vrs.len(),
-                values.as_ptr(),
-                values.len(),
-            )
-        };
-        self.check("fmi3SetFloat64", s)
-    }
-
+    /// The setting side of [`Self::get_mixed`].
     #[inline(never)]
-    fn set_real_mixed(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
-        if self.all_scalar(vrs, Fmi3Type::Float64) {
-            return self.set_float64(vrs, values);
+    fn set_mixed<T: Copy + Into<f64>>(
+        &mut self,
+        vrs: &[u32],
+        values: &[T],
+        ty: Fmi3Type,
+        one_call: impl FnOnce(&mut Self, &[u32], &[T]) -> Result<(), FmuError>,
+    ) -> Result<(), FmuError> {
+        if self.all_scalar(vrs, ty) {
+            return one_call(self, vrs, values);
         }
-        self.set_each(vrs, values.iter().copied())
+        self.set_each(vrs, values.iter().map(|&v| v.into()))
     }
 
     /// Values of other types or array elements: one call per value (off the fast path).
@@ -560,74 +542,29 @@ impl Instance3 {
     #[inline]
     pub fn get_int(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
         if !self.ints_are_int32 {
-            return self.get_int_mixed(vrs, out);
+            return self.get_mixed(vrs, out, Fmi3Type::Int32, Self::get_int32, Self::int32_of);
         }
         self.get_int32(vrs, out)
     }
 
-    #[inline]
-    fn get_int32(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        let s = unsafe {
-            (self.lib.api.get_int32)(
-                self.inst,
-                vrs.as_ptr(),
-                vrs.len(),
-                out.as_mut_ptr(),
-                out.len(),
-            )
-        };
-        self.check("fmi3GetInt32", s)
-    }
-
-    /// Integers of other types: one call per value, each checked to fit 32 bits.
-    #[inline(never)]
-    fn get_int_mixed(&mut self, vrs: &[u32], out: &mut [i32]) -> Result<(), FmuError> {
-        if self.all_scalar(vrs, Fmi3Type::Int32) {
-            return self.get_int32(vrs, out);
+    /// An integer of another type as i32, checked to fit 32 bits.
+    fn int32_of(&self, vr: u32, slot: Fmi3Slot, x: f64) -> Result<i32, FmuError> {
+        if x < i32::MIN as f64 || x > i32::MAX as f64 {
+            return Err(self.other(format!(
+                "'{}' ({}) is {x}, beyond the 32-bit integers twinbench exchanges",
+                self.name_of(vr),
+                slot.ty.name()
+            )));
         }
-        for (vr, o) in vrs.iter().zip(out.iter_mut()) {
-            let slot = self.slot(*vr)?;
-            let x = self.get_one(slot)?;
-            if x < i32::MIN as f64 || x > i32::MAX as f64 {
-                return Err(self.other(format!(
-                    "'{}' ({}) is {x}, beyond the 32-bit integers twinbench exchanges",
-                    self.name_of(*vr),
-                    slot.ty.name()
-                )));
-            }
-            *o = x as i32;
-        }
-        Ok(())
+        Ok(x as i32)
     }
 
     #[inline]
     pub fn set_int(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
         if !self.ints_are_int32 {
-            return self.set_int_mixed(vrs, values);
+            return self.set_mixed(vrs, values, Fmi3Type::Int32, Self::set_int32);
         }
         self.set_int32(vrs, values)
-    }
-
-    #[inline]
-    fn set_int32(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        let s = unsafe {
-            (self.lib.api.set_int32)(
-                self.inst,
-                vrs.as_ptr(),
-                vrs.len(),
-                values.as_ptr(),
-                values.len(),
-            )
-        };
-        self.check("fmi3SetInt32", s)
-    }
-
-    #[inline(never)]
-    fn set_int_mixed(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
-        if self.all_scalar(vrs, Fmi3Type::Int32) {
-            return self.set_int32(vrs, values);
-        }
-        self.set_each(vrs, values.iter().map(|v| *v as f64))
     }
 
     /// A step that did more than complete: its error, early return or end of the run.
@@ -791,11 +728,17 @@ impl FmuInstance for Instance3 {
     }
 
     /// The usual call when every Real is a scalar Float64: as short as FMI 2.0's, the
-    /// rest (`get_real_mixed`) off the fast path.
+    /// rest (`get_mixed`) off the fast path.
     #[inline]
     fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Result<(), FmuError> {
         if !self.reals_are_float64 {
-            return self.get_real_mixed(vrs, out);
+            return self.get_mixed(
+                vrs,
+                out,
+                Fmi3Type::Float64,
+                Self::get_float64,
+                |_, _, _, x| Ok(x),
+            );
         }
         self.get_float64(vrs, out)
     }
@@ -804,7 +747,7 @@ impl FmuInstance for Instance3 {
     #[inline]
     fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Result<(), FmuError> {
         if !self.reals_are_float64 {
-            return self.set_real_mixed(vrs, values);
+            return self.set_mixed(vrs, values, Fmi3Type::Float64, Self::set_float64);
         }
         self.set_float64(vrs, values)
     }

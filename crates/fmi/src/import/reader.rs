@@ -47,6 +47,16 @@ pub(crate) trait Visit {
     fn end(&mut self, stack: &[String], name: &str);
 }
 
+/// Reads `xml` with a new `V` and `finish`es it (the parse of either version).
+pub(crate) fn read<V: Visit + Default>(
+    xml: &str,
+    finish: impl FnOnce(V) -> Result<ModelDescription, DescriptionError>,
+) -> Result<ModelDescription, DescriptionError> {
+    let mut v = V::default();
+    walk(xml, &mut v)?;
+    finish(v)
+}
+
 /// Walks `xml`, telling `v` every element; refuses a document that ends before its root
 /// closes (a truncated file must not pass for a shorter model).
 pub(crate) fn walk<V: Visit>(xml: &str, v: &mut V) -> Result<(), DescriptionError> {

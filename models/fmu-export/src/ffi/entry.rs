@@ -187,109 +187,71 @@ fn null_arrays(rt: &Runtime<impl Model>, function: &str, n: usize) -> fmi2Status
     rt.error(&format!("{function}: NULL array with nvr = {n}"))
 }
 
-/// An `fmi2Get<Type>`: the arrays checked, then `$call` with the runtime, the value
-/// references and the output slice.
-macro_rules! getter {
-    ($fn:ident, $cname:literal, $t:ty, |$rt:ident, $vrs:ident, $out:ident| $call:expr) => {
+/// The values behind `p` (none when `n` is 0: `p` may then be NULL).
+#[inline(always)]
+unsafe fn values<'a, T>(p: *const T, n: usize) -> &'a [T] {
+    if n == 0 {
+        &[]
+    } else {
+        std::slice::from_raw_parts(p, n)
+    }
+}
+
+/// The values behind `p` to fill (none when `n` is 0).
+#[inline(always)]
+unsafe fn values_mut<'a, T>(p: *const T, n: usize) -> &'a mut [T] {
+    if n == 0 {
+        &mut []
+    } else {
+        std::slice::from_raw_parts_mut(p as *mut T, n)
+    }
+}
+
+/// The `fmi2Get<Type>` and `fmi2Set<Type>` of `$t`, each `$fn("fmi2Name", $t, pointer,
+/// slice of it) |runtime, value references, values| call`: the arrays checked, then the
+/// call with the values to read (`values`) or to fill (`values_mut`).
+macro_rules! accessors {
+    ($($fn:ident($cname:literal, $t:ty, $ptr:ty, $slice:ident)
+        |$rt:ident, $vrs:ident, $vals:ident| $call:expr;)*) => {$(
         pub unsafe fn $fn<M: Model>(
             c: fmi2Component,
             vr: *const fmi2ValueReference,
             n: usize,
-            value: *mut $t,
+            value: $ptr,
         ) -> fmi2Status {
             guarded::<M>(c, $cname, |$rt| {
                 let ($vrs, ptr) = match arrays($rt, $cname, vr, n, value as *const $t) {
                     Ok(x) => x,
                     Err(s) => return s,
                 };
-                let $out: &mut [$t] = if n == 0 {
-                    &mut []
-                } else {
-                    std::slice::from_raw_parts_mut(ptr as *mut $t, n)
-                };
+                let $vals = $slice(ptr, n);
                 $call
             })
         }
-    };
+    )*};
 }
 
-/// An `fmi2Set<Type>`: the arrays checked, then `$call` with the runtime, the value
-/// references and the values.
-macro_rules! setter {
-    ($fn:ident, $cname:literal, $t:ty, |$rt:ident, $vrs:ident, $vals:ident| $call:expr) => {
-        pub unsafe fn $fn<M: Model>(
-            c: fmi2Component,
-            vr: *const fmi2ValueReference,
-            n: usize,
-            value: *const $t,
-        ) -> fmi2Status {
-            guarded::<M>(c, $cname, |$rt| {
-                let ($vrs, ptr) = match arrays($rt, $cname, vr, n, value) {
-                    Ok(x) => x,
-                    Err(s) => return s,
-                };
-                let $vals: &[$t] = if n == 0 {
-                    &[]
-                } else {
-                    std::slice::from_raw_parts(ptr, n)
-                };
-                $call
-            })
-        }
+accessors! {
+    // Reals take the runtime's direct path (each value at its field's offset).
+    get_real("fmi2GetReal", fmi2Real, *mut fmi2Real, values_mut)
+        |rt, vrs, out| rt.get_real(vrs, out);
+    set_real("fmi2SetReal", fmi2Real, *const fmi2Real, values)
+        |rt, vrs, vals| rt.set_real(vrs, vals);
+    get_integer("fmi2GetInteger", fmi2Integer, *mut fmi2Integer, values_mut) |rt, vrs, out| {
+        rt.get("fmi2GetInteger", ScalarType::Integer, vrs, out, |v| v.as_f64() as i32)
+    };
+    set_integer("fmi2SetInteger", fmi2Integer, *const fmi2Integer, values) |rt, vrs, vals| {
+        let values = vals.iter().map(|x| Value::Integer(*x));
+        rt.set("fmi2SetInteger", ScalarType::Integer, vrs, values)
+    };
+    get_boolean("fmi2GetBoolean", fmi2Boolean, *mut fmi2Boolean, values_mut) |rt, vrs, out| {
+        rt.get("fmi2GetBoolean", ScalarType::Boolean, vrs, out, |v| v.as_f64() as i32)
+    };
+    set_boolean("fmi2SetBoolean", fmi2Boolean, *const fmi2Boolean, values) |rt, vrs, vals| {
+        let values = vals.iter().map(|x| Value::Boolean(*x != 0));
+        rt.set("fmi2SetBoolean", ScalarType::Boolean, vrs, values)
     };
 }
-
-// Reals take the runtime's direct path (each value at its field's offset).
-getter!(get_real, "fmi2GetReal", fmi2Real, |rt, vrs, out| rt
-    .get_real(vrs, out));
-getter!(
-    get_integer,
-    "fmi2GetInteger",
-    fmi2Integer,
-    |rt, vrs, out| rt.get(
-        "fmi2GetInteger",
-        ScalarType::Integer,
-        vrs,
-        out,
-        |v: Value| v.as_f64() as i32
-    )
-);
-getter!(
-    get_boolean,
-    "fmi2GetBoolean",
-    fmi2Boolean,
-    |rt, vrs, out| rt.get(
-        "fmi2GetBoolean",
-        ScalarType::Boolean,
-        vrs,
-        out,
-        |v: Value| v.as_f64() as i32
-    )
-);
-setter!(set_real, "fmi2SetReal", fmi2Real, |rt, vrs, vals| rt
-    .set_real(vrs, vals));
-setter!(
-    set_integer,
-    "fmi2SetInteger",
-    fmi2Integer,
-    |rt, vrs, vals| rt.set(
-        "fmi2SetInteger",
-        ScalarType::Integer,
-        vrs,
-        vals.iter().map(|x: &i32| Value::Integer(*x))
-    )
-);
-setter!(
-    set_boolean,
-    "fmi2SetBoolean",
-    fmi2Boolean,
-    |rt, vrs, vals| rt.set(
-        "fmi2SetBoolean",
-        ScalarType::Boolean,
-        vrs,
-        vals.iter().map(|x: &i32| Value::Boolean(*x != 0))
-    )
-);
 
 pub unsafe fn get_string<M: Model>(
     c: fmi2Component,
@@ -513,46 +475,38 @@ pub unsafe fn do_step<M: Model>(
     guarded::<M>(c, "fmi2DoStep", |rt| rt.do_step(current, step))
 }
 
-pub unsafe fn get_real_status<M: Model>(
-    c: fmi2Component,
-    kind: fmi2StatusKind,
-    value: *mut fmi2Real,
-) -> fmi2Status {
-    guarded::<M>(c, "fmi2GetRealStatus", |rt| {
-        if value.is_null() {
-            return rt.error("fmi2GetRealStatus: value is NULL");
+/// The status queries `fmi2Get<Type>Status`, each answering its one status kind (with
+/// `$answer` of the runtime); another kind, or a NULL `value`, is an error.
+macro_rules! status_queries {
+    ($($fn:ident($function:literal, $t:ty) $provided:ident => $answer:expr;)*) => {$(
+        pub unsafe fn $fn<M: Model>(
+            c: fmi2Component,
+            kind: fmi2StatusKind,
+            value: *mut $t,
+        ) -> fmi2Status {
+            guarded::<M>(c, $function, |rt| {
+                if value.is_null() {
+                    return rt.error(concat!($function, ": value is NULL"));
+                }
+                if kind == fmi2StatusKind::$provided {
+                    *value = $answer(rt);
+                    fmi2Status::OK
+                } else {
+                    rt.error(&format!(
+                        concat!($function, ": status kind {} not provided"),
+                        kind.0
+                    ))
+                }
+            })
         }
-        if kind == fmi2StatusKind::LAST_SUCCESSFUL_TIME {
-            *value = rt.last_successful_time();
-            fmi2Status::OK
-        } else {
-            rt.error(&format!(
-                "fmi2GetRealStatus: status kind {} not provided",
-                kind.0
-            ))
-        }
-    })
+    )*};
 }
 
-pub unsafe fn get_boolean_status<M: Model>(
-    c: fmi2Component,
-    kind: fmi2StatusKind,
-    value: *mut fmi2Boolean,
-) -> fmi2Status {
-    guarded::<M>(c, "fmi2GetBooleanStatus", |rt| {
-        if value.is_null() {
-            return rt.error("fmi2GetBooleanStatus: value is NULL");
-        }
-        if kind == fmi2StatusKind::TERMINATED {
-            *value = fmi2False;
-            fmi2Status::OK
-        } else {
-            rt.error(&format!(
-                "fmi2GetBooleanStatus: status kind {} not provided",
-                kind.0
-            ))
-        }
-    })
+status_queries! {
+    get_real_status("fmi2GetRealStatus", fmi2Real)
+        LAST_SUCCESSFUL_TIME => |rt: &mut Runtime<M>| rt.last_successful_time();
+    get_boolean_status("fmi2GetBooleanStatus", fmi2Boolean)
+        TERMINATED => |_: &mut Runtime<M>| fmi2False;
 }
 
 pub const TYPES_PLATFORM: &CStr = c"default";

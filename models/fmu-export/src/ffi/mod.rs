@@ -154,23 +154,13 @@ pub(crate) unsafe fn guarded_instance<M: Model>(
 }
 
 /// Run `f` on the instance behind `c`, catching panics.
+#[inline]
 pub(crate) unsafe fn guarded<M: Model>(
     c: fmi2Component,
     function: &str,
     f: impl FnOnce(&mut Runtime<M>) -> fmi2Status,
 ) -> fmi2Status {
-    let inst = match instance_of::<M>(c, function) {
-        Ok(i) => i,
-        Err(s) => return s,
-    };
-    match catch_unwind(AssertUnwindSafe(|| f(&mut inst.runtime))) {
-        Ok(s) => s,
-        Err(payload) => {
-            let text = panic_text(&*payload);
-            catch_unwind(AssertUnwindSafe(|| inst.runtime.poison(function, &text)))
-                .unwrap_or(fmi2Status::ERROR)
-        }
-    }
+    guarded_instance::<M>(c, function, |inst| f(&mut inst.runtime))
 }
 
 pub(crate) unsafe fn opt_str<'a>(p: *const c_char) -> Option<std::borrow::Cow<'a, str>> {

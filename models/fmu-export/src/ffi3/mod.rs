@@ -329,252 +329,73 @@ fn not_of_type<M: Model>(rt: &Runtime<M>, function: &str, vr: u32, want: ScalarT
     ))
 }
 
-#[inline(always)]
-pub unsafe fn get_float64<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *mut f64,
-    n_values: usize,
-) -> fmi3Status {
-    const F: &str = "fmi3GetFloat64";
-    if !arrays_ok(vr, n_vr, values, n_values) {
-        return refuse_arrays::<M>(c, F, n_vr, n_values);
-    }
-    let (vrs, out) = (values_at(vr, n_vr), values_at_mut(values, n_vr));
-    // The independent variable `time` is read there too (Runtime::expose_time).
-    status(guarded::<M>(c, F, move |rt| rt.get_real(vrs, out)))
-}
-
-#[inline(always)]
-pub unsafe fn set_float64<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *const f64,
-    n_values: usize,
-) -> fmi3Status {
-    const F: &str = "fmi3SetFloat64";
-    if !arrays_ok(vr, n_vr, values, n_values) {
-        return refuse_arrays::<M>(c, F, n_vr, n_values);
-    }
-    let (vrs, vals) = (values_at(vr, n_vr), values_at(values, n_vr));
-    // The independent variable `time` is refused there (Runtime::expose_time).
-    status(guarded::<M>(c, F, move |rt| rt.set_real(vrs, vals)))
-}
-
-/// An integer get (`Int32` of Integers, `Int64` of Enumerations).
-unsafe fn get_integers<M: Model, T: Copy>(
-    c: fmi3Instance,
-    function: &str,
-    want: ScalarType,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *mut T,
-    n_values: usize,
-    conv: impl Fn(Value) -> T,
-) -> fmi3Status {
-    if !arrays_ok(vr, n_vr, values, n_values) {
-        return refuse_arrays::<M>(c, function, n_vr, n_values);
-    }
-    let (vrs, out) = (values_at(vr, n_vr), values_at_mut(values, n_vr));
-    status(guarded::<M>(c, function, move |rt| {
-        if let Err(s) = of_type(rt, function, vrs, want) {
-            return s;
-        }
-        rt.get(function, ScalarType::Integer, vrs, out, conv)
-    }))
-}
-
-pub unsafe fn get_int32<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *mut i32,
-    n_values: usize,
-) -> fmi3Status {
-    get_integers::<M, i32>(
-        c,
-        "fmi3GetInt32",
-        ScalarType::Integer,
-        vr,
-        n_vr,
-        values,
-        n_values,
-        |v| v.as_f64() as i32,
-    )
-}
-
-pub unsafe fn get_int64<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *mut i64,
-    n_values: usize,
-) -> fmi3Status {
-    get_integers::<M, i64>(
-        c,
-        "fmi3GetInt64",
-        ScalarType::Enumeration,
-        vr,
-        n_vr,
-        values,
-        n_values,
-        |v| v.as_f64() as i64,
-    )
-}
-
-/// An integer set (`Int32` of Integers, `Int64` of Enumerations), each value converted.
-#[allow(clippy::too_many_arguments)]
-unsafe fn set_integers<M: Model, T: Copy>(
-    c: fmi3Instance,
-    function: &str,
-    want: ScalarType,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *const T,
-    n_values: usize,
-    conv: impl Fn(T) -> i32,
-) -> fmi3Status {
-    if !arrays_ok(vr, n_vr, values, n_values) {
-        return refuse_arrays::<M>(c, function, n_vr, n_values);
-    }
-    let (vrs, vals) = (values_at(vr, n_vr), values_at(values, n_vr));
-    status(guarded::<M>(c, function, move |rt| {
-        if let Err(s) = of_type(rt, function, vrs, want) {
-            return s;
-        }
-        rt.set(
-            function,
-            ScalarType::Integer,
-            vrs,
-            vals.iter().map(|x| Value::Integer(conv(*x))),
-        )
-    }))
-}
-
-pub unsafe fn set_int32<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *const i32,
-    n_values: usize,
-) -> fmi3Status {
-    set_integers::<M, i32>(
-        c,
-        "fmi3SetInt32",
-        ScalarType::Integer,
-        vr,
-        n_vr,
-        values,
-        n_values,
-        |x| x,
-    )
-}
-
-pub unsafe fn set_int64<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *const i64,
-    n_values: usize,
-) -> fmi3Status {
-    // An Int64 outside i32 is no item of any Enumeration here: refused as out of range.
-    set_integers::<M, i64>(
-        c,
-        "fmi3SetInt64",
-        ScalarType::Enumeration,
-        vr,
-        n_vr,
-        values,
-        n_values,
-        |x| i32::try_from(x).unwrap_or(i32::MIN),
-    )
-}
-
-pub unsafe fn get_boolean<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *mut u8,
-    n_values: usize,
-) -> fmi3Status {
-    const F: &str = "fmi3GetBoolean";
-    if !arrays_ok(vr, n_vr, values, n_values) {
-        return refuse_arrays::<M>(c, F, n_vr, n_values);
-    }
-    let (vrs, out) = (values_at(vr, n_vr), values_at_mut(values, n_vr));
-    status(guarded::<M>(c, F, move |rt| {
-        rt.get(F, ScalarType::Boolean, vrs, out, |v| {
-            (v.as_f64() != 0.0) as u8
-        })
-    }))
-}
-
-pub unsafe fn set_boolean<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *const u8,
-    n_values: usize,
-) -> fmi3Status {
-    const F: &str = "fmi3SetBoolean";
-    if !arrays_ok(vr, n_vr, values, n_values) {
-        return refuse_arrays::<M>(c, F, n_vr, n_values);
-    }
-    let (vrs, vals) = (values_at(vr, n_vr), values_at(values, n_vr));
-    status(guarded::<M>(c, F, move |rt| {
-        rt.set(
-            F,
-            ScalarType::Boolean,
-            vrs,
-            vals.iter().map(|x| Value::Boolean(*x != 0)),
-        )
-    }))
-}
-
-pub unsafe fn get_string<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *mut *const c_char,
-    n_values: usize,
-) -> fmi3Status {
-    const F: &str = "fmi3GetString";
-    if !arrays_ok(vr, n_vr, values, n_values) {
-        return refuse_arrays::<M>(c, F, n_vr, n_values);
-    }
-    let (vrs, out) = (values_at(vr, n_vr), values_at_mut(values, n_vr));
-    status(guarded_instance::<M>(c, F, move |inst| {
-        // The host reads the strings until its next call: kept in the instance.
-        let strings = &mut inst.strings;
-        strings.clear();
-        let s = inst.runtime.get_strings(F, vrs, |_, s| {
-            strings.push(CString::new(s.replace('\0', "")).unwrap_or_default())
-        });
-        if s == fmi2Status::OK {
-            for (o, s) in out.iter_mut().zip(strings.iter()) {
-                *o = s.as_ptr();
+/// The typed gets and sets, each `fn name("fmi3Name", values pointer, slice of it) guard
+/// |runtime or instance, value references, values| call`: the arrays checked (a refusal
+/// names the function), then the call in the guard.
+macro_rules! typed_access {
+    ($($(#[$a:meta])* fn $name:ident($function:literal, $ptr:ty, $at:ident) $guard:ident
+        |$rt:ident, $vrs:ident, $vals:ident| $body:expr;)*) => {$(
+        $(#[$a])*
+        pub unsafe fn $name<M: Model>(
+            c: fmi3Instance,
+            vr: *const fmi3ValueReference,
+            n_vr: usize,
+            values: $ptr,
+            n_values: usize,
+        ) -> fmi3Status {
+            const F: &str = $function;
+            if !arrays_ok(vr, n_vr, values, n_values) {
+                return refuse_arrays::<M>(c, F, n_vr, n_values);
             }
+            let ($vrs, $vals) = (values_at(vr, n_vr), $at(values, n_vr));
+            status($guard::<M>(c, F, move |$rt| $body))
         }
-        s
-    }))
+    )*};
 }
 
-pub unsafe fn set_string<M: Model>(
-    c: fmi3Instance,
-    vr: *const fmi3ValueReference,
-    n_vr: usize,
-    values: *const *const c_char,
-    n_values: usize,
-) -> fmi3Status {
-    const F: &str = "fmi3SetString";
-    if !arrays_ok(vr, n_vr, values, n_values) {
-        return refuse_arrays::<M>(c, F, n_vr, n_values);
-    }
-    let (vrs, ptrs) = (values_at(vr, n_vr), values_at(values, n_vr));
-    status(guarded::<M>(c, F, move |rt| {
-        let mut texts = Vec::with_capacity(n_vr);
+typed_access! {
+    // The independent variable `time` is read there too (Runtime::expose_time).
+    #[inline(always)]
+    fn get_float64("fmi3GetFloat64", *mut f64, values_at_mut) guarded
+        |rt, vrs, out| rt.get_real(vrs, out);
+    // The independent variable `time` is refused there (Runtime::expose_time).
+    #[inline(always)]
+    fn set_float64("fmi3SetFloat64", *const f64, values_at) guarded
+        |rt, vrs, vals| rt.set_real(vrs, vals);
+    fn get_int32("fmi3GetInt32", *mut i32, values_at_mut) guarded
+        |rt, vrs, out| get_integers(rt, F, ScalarType::Integer, vrs, out, |v| v.as_f64() as i32);
+    fn get_int64("fmi3GetInt64", *mut i64, values_at_mut) guarded
+        |rt, vrs, out| get_integers(rt, F, ScalarType::Enumeration, vrs, out, |v| v.as_f64() as i64);
+    fn set_int32("fmi3SetInt32", *const i32, values_at) guarded
+        |rt, vrs, vals| set_integers(rt, F, ScalarType::Integer, vrs, vals, |x| x);
+    // An Int64 outside i32 is no item of any Enumeration here: refused as out of range.
+    fn set_int64("fmi3SetInt64", *const i64, values_at) guarded
+        |rt, vrs, vals| set_integers(rt, F, ScalarType::Enumeration, vrs, vals, |x| {
+            i32::try_from(x).unwrap_or(i32::MIN)
+        });
+    fn get_boolean("fmi3GetBoolean", *mut u8, values_at_mut) guarded
+        |rt, vrs, out| rt.get(F, ScalarType::Boolean, vrs, out, |v| (v.as_f64() != 0.0) as u8);
+    fn set_boolean("fmi3SetBoolean", *const u8, values_at) guarded |rt, vrs, vals| {
+        let values = vals.iter().map(|x| Value::Boolean(*x != 0));
+        rt.set(F, ScalarType::Boolean, vrs, values)
+    };
+    fn get_string("fmi3GetString", *mut *const c_char, values_at_mut) guarded_instance
+        |inst, vrs, out| {
+            // The host reads the strings until its next call: kept in the instance.
+            let strings = &mut inst.strings;
+            strings.clear();
+            let s = inst.runtime.get_strings(F, vrs, |_, s| {
+                strings.push(CString::new(s.replace('\0', "")).unwrap_or_default())
+            });
+            if s == fmi2Status::OK {
+                for (o, s) in out.iter_mut().zip(strings.iter()) {
+                    *o = s.as_ptr();
+                }
+            }
+            s
+        };
+    fn set_string("fmi3SetString", *const *const c_char, values_at) guarded |rt, vrs, ptrs| {
+        let mut texts = Vec::with_capacity(vrs.len());
         for (k, (vr, p)) in vrs.iter().zip(ptrs).enumerate() {
             match opt_str(*p) {
                 Some(t) => texts.push(t),
@@ -583,7 +404,39 @@ pub unsafe fn set_string<M: Model>(
         }
         let refs: Vec<&str> = texts.iter().map(|t| t.as_ref()).collect();
         rt.set_strings(F, vrs, &refs)
-    }))
+    };
+}
+
+/// An integer get (`Int32` of Integers, `Int64` of Enumerations) in the guard.
+fn get_integers<M: Model, T: Copy>(
+    rt: &mut Runtime<M>,
+    function: &str,
+    want: ScalarType,
+    vrs: &[u32],
+    out: &mut [T],
+    conv: impl Fn(Value) -> T,
+) -> fmi2Status {
+    if let Err(s) = of_type(rt, function, vrs, want) {
+        return s;
+    }
+    rt.get(function, ScalarType::Integer, vrs, out, conv)
+}
+
+/// An integer set (`Int32` of Integers, `Int64` of Enumerations) in the guard, each value
+/// converted.
+fn set_integers<M: Model, T: Copy>(
+    rt: &mut Runtime<M>,
+    function: &str,
+    want: ScalarType,
+    vrs: &[u32],
+    vals: &[T],
+    conv: impl Fn(T) -> i32,
+) -> fmi2Status {
+    if let Err(s) = of_type(rt, function, vrs, want) {
+        return s;
+    }
+    let values = vals.iter().map(|x| Value::Integer(conv(*x)));
+    rt.set(function, ScalarType::Integer, vrs, values)
 }
 
 /// A get or set of a type this FMU has no variable of (Float32, Int8, …, Binary, Clock):
