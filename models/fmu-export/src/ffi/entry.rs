@@ -8,7 +8,7 @@ use super::{
 };
 use crate::fmi2::*;
 use crate::model::Model;
-use crate::runtime::{Logger, Runtime, Snapshot};
+use crate::runtime::{Runtime, Snapshot};
 use crate::variables::{ScalarType, Value};
 use std::ffi::{CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -38,14 +38,7 @@ pub unsafe fn instantiate<M: Model>(
             env: callbacks.map_or(std::ptr::null_mut(), |f| f.componentEnvironment),
             instance_name: CString::new(name.clone().unwrap_or_default()).unwrap_or_default(),
         };
-        let fail = |msg: String| {
-            logger.log(
-                fmi2Status::ERROR,
-                "logStatusError",
-                &format!("fmi2Instantiate: {msg}"),
-            );
-            std::ptr::null_mut()
-        };
+        let fail = |msg: String| super::refused(&logger, "fmi2Instantiate", &msg);
         let Some(name) = name else {
             return fail("instanceName is NULL".into());
         };

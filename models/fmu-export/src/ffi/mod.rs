@@ -122,6 +122,16 @@ unsafe fn instance_of<'a, M: Model>(
     }
 }
 
+/// An instantiation refused: `message` logged as an error of `function`; no instance.
+pub(crate) fn refused<T>(logger: &impl Logger, function: &str, message: &str) -> *mut T {
+    logger.log(
+        fmi2Status::ERROR,
+        "logStatusError",
+        &format!("{function}: {message}"),
+    );
+    std::ptr::null_mut()
+}
+
 /// The fitted twin's start values among the resources (None: the description's own), once
 /// the identity the host passed (`given`: a `what`, GUID or instantiation token, in the
 /// argument `argument`) is the description's `expected` or the fitted twin's; Err: why the

@@ -102,14 +102,7 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
             callback: log_message,
             env,
         };
-        let fail = |msg: String| {
-            logger.log(
-                fmi2Status::ERROR,
-                "logStatusError",
-                &format!("fmi3InstantiateCoSimulation: {msg}"),
-            );
-            std::ptr::null_mut()
-        };
+        let fail = |msg: String| crate::ffi::refused(&logger, "fmi3InstantiateCoSimulation", &msg);
         let Some(name) = opt_str(instance_name).map(|s| s.into_owned()) else {
             return fail("instanceName is NULL".into());
         };
