@@ -2,10 +2,13 @@
 //! safe [`Runtime`] call inside [`guarded`].
 #![allow(clippy::missing_safety_doc, clippy::too_many_arguments)]
 
-use super::{guarded, guarded_instance, opt_str, resource_dir_from_uri, CLogger, Instance};
+use super::{
+    guarded, guarded_instance, opt_str, resource_dir_from_uri, values_at, values_at_mut, CLogger,
+    Instance,
+};
 use crate::fmi2::*;
 use crate::model::Model;
-use crate::runtime::{Logger, Runtime, Snapshot};
+use crate::runtime::{Runtime, Snapshot};
 use crate::variables::{ScalarType, Value};
 use std::ffi::{CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -35,14 +38,7 @@ pub unsafe fn instantiate<M: Model>(
             env: callbacks.map_or(std::ptr::null_mut(), |f| f.componentEnvironment),
             instance_name: CString::new(name.clone().unwrap_or_default()).unwrap_or_default(),
         };
-        let fail = |msg: String| {
-            logger.log(
-                fmi2Status::ERROR,
-                "logStatusError",
-                &format!("fmi2Instantiate: {msg}"),
-            );
-            std::ptr::null_mut()
-        };
+        let fail = |msg: String| super::refused(&logger, "fmi2Instantiate", &msg);
         let Some(name) = name else {
             return fail("instanceName is NULL".into());
         };
@@ -65,22 +61,13 @@ pub unsafe fn instantiate<M: Model>(
             },
         };
         // A fitted twin's start values, and the GUID its description has.
-        let fitted =
-            match crate::fitted::FittedStarts::of_instance::<M::Vars>(resource_dir.as_deref()) {
-                Ok(f) => f,
-                Err(e) => return fail(e.to_string()),
-            };
         let expected = crate::description::guid::<M>();
-        match opt_str(guid) {
-            Some(g) if crate::fitted::FittedStarts::accepts(fitted.as_ref(), &g, &expected) => {}
-            Some(g) => {
-                return fail(format!(
-                    "GUID mismatch: the host passed {g}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
-                    M::INFO.name
-                ))
-            }
-            None => return fail("fmuGUID is NULL".into()),
-        }
+        let dir = resource_dir.as_deref();
+        let what = ("GUID", "fmuGUID");
+        let fitted = match super::fitted_starts::<M>(dir, opt_str(guid), &expected, what) {
+            Ok(f) => f,
+            Err(message) => return fail(message),
+        };
         let kept = match logger.callback {
             Some(f) => super::handles::SlotLogger::Fmi2(f, logger.env),
             None => super::handles::SlotLogger::None,
@@ -187,29 +174,9 @@ fn null_arrays(rt: &Runtime<impl Model>, function: &str, n: usize) -> fmi2Status
     rt.error(&format!("{function}: NULL array with nvr = {n}"))
 }
 
-/// The values behind `p` (none when `n` is 0: `p` may then be NULL).
-#[inline(always)]
-unsafe fn values<'a, T>(p: *const T, n: usize) -> &'a [T] {
-    if n == 0 {
-        &[]
-    } else {
-        std::slice::from_raw_parts(p, n)
-    }
-}
-
-/// The values behind `p` to fill (none when `n` is 0).
-#[inline(always)]
-unsafe fn values_mut<'a, T>(p: *const T, n: usize) -> &'a mut [T] {
-    if n == 0 {
-        &mut []
-    } else {
-        std::slice::from_raw_parts_mut(p as *mut T, n)
-    }
-}
-
 /// The `fmi2Get<Type>` and `fmi2Set<Type>` of `$t`, each `$fn("fmi2Name", $t, pointer,
 /// slice of it) |runtime, value references, values| call`: the arrays checked, then the
-/// call with the values to read (`values`) or to fill (`values_mut`).
+/// call with the values to read (`values_at`) or to fill (`values_at_mut`).
 macro_rules! accessors {
     ($($fn:ident($cname:literal, $t:ty, $ptr:ty, $slice:ident)
         |$rt:ident, $vrs:ident, $vals:ident| $call:expr;)*) => {$(
@@ -220,11 +187,11 @@ macro_rules! accessors {
             value: $ptr,
         ) -> fmi2Status {
             guarded::<M>(c, $cname, |$rt| {
-                let ($vrs, ptr) = match arrays($rt, $cname, vr, n, value as *const $t) {
+                let ($vrs, _) = match arrays($rt, $cname, vr, n, value as *const $t) {
                     Ok(x) => x,
                     Err(s) => return s,
                 };
-                let $vals = $slice(ptr, n);
+                let $vals = $slice(value, n);
                 $call
             })
         }
@@ -233,21 +200,21 @@ macro_rules! accessors {
 
 accessors! {
     // Reals take the runtime's direct path (each value at its field's offset).
-    get_real("fmi2GetReal", fmi2Real, *mut fmi2Real, values_mut)
+    get_real("fmi2GetReal", fmi2Real, *mut fmi2Real, values_at_mut)
         |rt, vrs, out| rt.get_real(vrs, out);
-    set_real("fmi2SetReal", fmi2Real, *const fmi2Real, values)
+    set_real("fmi2SetReal", fmi2Real, *const fmi2Real, values_at)
         |rt, vrs, vals| rt.set_real(vrs, vals);
-    get_integer("fmi2GetInteger", fmi2Integer, *mut fmi2Integer, values_mut) |rt, vrs, out| {
+    get_integer("fmi2GetInteger", fmi2Integer, *mut fmi2Integer, values_at_mut) |rt, vrs, out| {
         rt.get("fmi2GetInteger", ScalarType::Integer, vrs, out, |v| v.as_f64() as i32)
     };
-    set_integer("fmi2SetInteger", fmi2Integer, *const fmi2Integer, values) |rt, vrs, vals| {
+    set_integer("fmi2SetInteger", fmi2Integer, *const fmi2Integer, values_at) |rt, vrs, vals| {
         let values = vals.iter().map(|x| Value::Integer(*x));
         rt.set("fmi2SetInteger", ScalarType::Integer, vrs, values)
     };
-    get_boolean("fmi2GetBoolean", fmi2Boolean, *mut fmi2Boolean, values_mut) |rt, vrs, out| {
+    get_boolean("fmi2GetBoolean", fmi2Boolean, *mut fmi2Boolean, values_at_mut) |rt, vrs, out| {
         rt.get("fmi2GetBoolean", ScalarType::Boolean, vrs, out, |v| v.as_f64() as i32)
     };
-    set_boolean("fmi2SetBoolean", fmi2Boolean, *const fmi2Boolean, values) |rt, vrs, vals| {
+    set_boolean("fmi2SetBoolean", fmi2Boolean, *const fmi2Boolean, values_at) |rt, vrs, vals| {
         let values = vals.iter().map(|x| Value::Boolean(*x != 0));
         rt.set("fmi2SetBoolean", ScalarType::Boolean, vrs, values)
     };

@@ -122,6 +122,58 @@ unsafe fn instance_of<'a, M: Model>(
     }
 }
 
+/// An instantiation refused: `message` logged as an error of `function`; no instance.
+pub(crate) fn refused<T>(logger: &impl Logger, function: &str, message: &str) -> *mut T {
+    logger.log(
+        fmi2Status::ERROR,
+        "logStatusError",
+        &format!("{function}: {message}"),
+    );
+    std::ptr::null_mut()
+}
+
+/// The fitted twin's start values among the resources (None: the description's own), once
+/// the identity the host passed (`given`: a `what`, GUID or instantiation token, in the
+/// argument `argument`) is the description's `expected` or the fitted twin's; Err: why the
+/// instance cannot be made.
+pub(crate) fn fitted_starts<M: Model>(
+    resource_dir: Option<&std::path::Path>,
+    given: Option<std::borrow::Cow<'_, str>>,
+    expected: &str,
+    (what, argument): (&str, &str),
+) -> Result<Option<crate::fitted::FittedStarts>, String> {
+    use crate::fitted::FittedStarts;
+    let fitted = FittedStarts::of_instance::<M::Vars>(resource_dir).map_err(|e| e.to_string())?;
+    match given {
+        Some(g) if FittedStarts::accepts(fitted.as_ref(), &g, expected) => Ok(fitted),
+        Some(g) => Err(format!(
+            "{what} mismatch: the host passed {g}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
+            M::INFO.name
+        )),
+        None => Err(format!("{argument} is NULL")),
+    }
+}
+
+/// `n` values at `p` (its arrays checked; none when `n` is 0, whatever `p` is).
+#[inline(always)]
+pub(crate) unsafe fn values_at<'a, T>(p: *const T, n: usize) -> &'a [T] {
+    if n == 0 {
+        &[]
+    } else {
+        std::slice::from_raw_parts(p, n)
+    }
+}
+
+/// As [`values_at`], to be written.
+#[inline(always)]
+pub(crate) unsafe fn values_at_mut<'a, T>(p: *mut T, n: usize) -> &'a mut [T] {
+    if n == 0 {
+        &mut []
+    } else {
+        std::slice::from_raw_parts_mut(p, n)
+    }
+}
+
 /// The message of a caught panic (for the log and the poisoned instance).
 pub fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
     if let Some(s) = payload.downcast_ref::<&str>() {

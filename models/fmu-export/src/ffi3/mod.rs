@@ -19,7 +19,7 @@ pub mod types;
 
 pub use types::*;
 
-use crate::ffi::{guarded, guarded_instance, opt_str, Instance};
+use crate::ffi::{guarded, guarded_instance, opt_str, values_at, values_at_mut, Instance};
 use crate::fmi2::fmi2Status;
 use crate::model::Model;
 use crate::runtime::{Logger, Runtime};
@@ -102,14 +102,7 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
             callback: log_message,
             env,
         };
-        let fail = |msg: String| {
-            logger.log(
-                fmi2Status::ERROR,
-                "logStatusError",
-                &format!("fmi3InstantiateCoSimulation: {msg}"),
-            );
-            std::ptr::null_mut()
-        };
+        let fail = |msg: String| crate::ffi::refused(&logger, "fmi3InstantiateCoSimulation", &msg);
         let Some(name) = opt_str(instance_name).map(|s| s.into_owned()) else {
             return fail("instanceName is NULL".into());
         };
@@ -131,22 +124,13 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
             .filter(|p| !p.is_empty())
             .map(|p| std::path::PathBuf::from(p.into_owned()));
         // A fitted twin's start values, and the token its description has.
-        let fitted =
-            match crate::fitted::FittedStarts::of_instance::<M::Vars>(resource_dir.as_deref()) {
-                Ok(f) => f,
-                Err(e) => return fail(e.to_string()),
-            };
         let expected = crate::description3::instantiation_token::<M>();
-        match opt_str(token) {
-            Some(t) if crate::fitted::FittedStarts::accepts(fitted.as_ref(), &t, &expected) => {}
-            Some(t) => {
-                return fail(format!(
-                    "instantiationToken mismatch: the host passed {t}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
-                    M::INFO.name
-                ))
-            }
-            None => return fail("instantiationToken is NULL".into()),
-        }
+        let dir = resource_dir.as_deref();
+        let what = ("instantiationToken", "instantiationToken");
+        let fitted = match crate::ffi::fitted_starts::<M>(dir, opt_str(token), &expected, what) {
+            Ok(f) => f,
+            Err(message) => return fail(message),
+        };
         let kept = match logger.callback {
             Some(f) => crate::ffi::handles::SlotLogger::Fmi3(f, logger.env),
             None => crate::ffi::handles::SlotLogger::None,
@@ -260,26 +244,6 @@ unsafe fn refuse_arrays<M: Model>(
     status(guarded::<M>(c, function, move |rt| {
         bad_arrays(rt, function, n_vr, n_values)
     }))
-}
-
-/// `n` values at `p` (checked by [`arrays_ok`]; none when `n` is 0, whatever `p` is).
-#[inline(always)]
-unsafe fn values_at<'a, T>(p: *const T, n: usize) -> &'a [T] {
-    if n == 0 {
-        &[]
-    } else {
-        std::slice::from_raw_parts(p, n)
-    }
-}
-
-/// As [`values_at`], to be written.
-#[inline(always)]
-unsafe fn values_at_mut<'a, T>(p: *mut T, n: usize) -> &'a mut [T] {
-    if n == 0 {
-        &mut []
-    } else {
-        std::slice::from_raw_parts_mut(p, n)
-    }
 }
 
 #[cold]
