@@ -66,7 +66,7 @@ pub unsafe fn instantiate<M: Model>(
         let what = ("GUID", "fmuGUID");
         let fitted = match super::fitted_starts::<M>(dir, opt_str(guid), &expected, what) {
             Ok(f) => f,
-            Err(message) => return fail(message),
+            Err(refusal) => return fail(refusal.to_string()),
         };
         let kept = match logger.callback {
             Some(f) => super::handles::SlotLogger::Fmi2(f, logger.env),

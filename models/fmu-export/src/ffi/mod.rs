@@ -132,25 +132,46 @@ pub(crate) fn refused<T>(logger: &impl Logger, function: &str, message: &str) ->
     std::ptr::null_mut()
 }
 
+/// Why an instantiation is refused before an instance exists.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum Refusal {
+    /// The fitted twin's start values among the resources could not be read.
+    #[error(transparent)]
+    Fitted(#[from] crate::fitted::FittedError),
+    /// The host's GUID or instantiation token is neither the description's nor the
+    /// fitted twin's.
+    #[error("{what} mismatch: the host passed {given}, this binary of '{model}' is {expected} (modelDescription.xml and binary differ)")]
+    Mismatch {
+        what: &'static str,
+        given: String,
+        model: &'static str,
+        expected: String,
+    },
+    /// The host passed no GUID or token.
+    #[error("{argument} is NULL")]
+    Null { argument: &'static str },
+}
+
 /// The fitted twin's start values among the resources (None: the description's own), once
 /// the identity the host passed (`given`: a `what`, GUID or instantiation token, in the
-/// argument `argument`) is the description's `expected` or the fitted twin's; Err: why the
-/// instance cannot be made.
+/// argument `argument`) is the description's `expected` or the fitted twin's.
 pub(crate) fn fitted_starts<M: Model>(
     resource_dir: Option<&std::path::Path>,
     given: Option<std::borrow::Cow<'_, str>>,
     expected: &str,
-    (what, argument): (&str, &str),
-) -> Result<Option<crate::fitted::FittedStarts>, String> {
+    (what, argument): (&'static str, &'static str),
+) -> Result<Option<crate::fitted::FittedStarts>, Refusal> {
     use crate::fitted::FittedStarts;
-    let fitted = FittedStarts::of_instance::<M::Vars>(resource_dir).map_err(|e| e.to_string())?;
+    let fitted = FittedStarts::of_instance::<M::Vars>(resource_dir)?;
     match given {
         Some(g) if FittedStarts::accepts(fitted.as_ref(), &g, expected) => Ok(fitted),
-        Some(g) => Err(format!(
-            "{what} mismatch: the host passed {g}, this binary of '{}' is {expected} (modelDescription.xml and binary differ)",
-            M::INFO.name
-        )),
-        None => Err(format!("{argument} is NULL")),
+        Some(g) => Err(Refusal::Mismatch {
+            what,
+            given: g.into_owned(),
+            model: M::INFO.name,
+            expected: expected.to_string(),
+        }),
+        None => Err(Refusal::Null { argument }),
     }
 }
 

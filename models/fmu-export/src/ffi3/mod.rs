@@ -129,7 +129,7 @@ pub unsafe fn instantiate_co_simulation<M: Model>(
         let what = ("instantiationToken", "instantiationToken");
         let fitted = match crate::ffi::fitted_starts::<M>(dir, opt_str(token), &expected, what) {
             Ok(f) => f,
-            Err(message) => return fail(message),
+            Err(refusal) => return fail(refusal.to_string()),
         };
         let kept = match logger.callback {
             Some(f) => crate::ffi::handles::SlotLogger::Fmi3(f, logger.env),
