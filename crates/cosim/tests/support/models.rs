@@ -8,22 +8,10 @@
 //!   every type (a range, an Enumeration, a `_file` path read at initialisation).
 
 use fmu_export::variables::*;
-use fmu_export::{Context, DefaultExperiment, Model, ModelError, ModelInfo};
+use fmu_export::{Context, Model, ModelError, ModelInfo};
 
 const fn info(name: &'static str, description: &'static str) -> ModelInfo {
-    ModelInfo {
-        name,
-        identifier: name,
-        description,
-        version: "1",
-        default_experiment: DefaultExperiment {
-            start_time: 0.0,
-            stop_time: 1.0,
-            step_size: 0.125,
-        },
-        documentation: "",
-        resources: &[],
-    }
+    ModelInfo::new(name, description, "1").experiment(1.0, 0.125)
 }
 
 fmu_export::variables! {
