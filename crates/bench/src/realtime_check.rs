@@ -303,9 +303,8 @@ fn measure_and_judge(
     }
     let md = &fmu.description;
     let outputs: Vec<u32> = md
-        .variables
-        .iter()
-        .filter(|v| v.causality == tb_fmi::Causality::Output && v.ty == tb_fmi::ScalarType::Real)
+        .variables_of(tb_fmi::Causality::Output)
+        .filter(|v| v.ty == tb_fmi::ScalarType::Real)
         .map(|v| v.value_reference)
         .collect();
     let spec = CheckSpec {
@@ -362,9 +361,8 @@ fn measure_and_judge(
 fn inputs(fmu: &LoadedFmu, file: Option<&Path>) -> anyhow::Result<(Inputs, Vec<String>)> {
     let md = &fmu.description;
     let real_inputs: Vec<&tb_fmi::import::description::ScalarVariable> = md
-        .variables
-        .iter()
-        .filter(|v| v.causality == tb_fmi::Causality::Input && v.ty == tb_fmi::ScalarType::Real)
+        .variables_of(tb_fmi::Causality::Input)
+        .filter(|v| v.ty == tb_fmi::ScalarType::Real)
         .collect();
     let Some(file) = file else {
         let starts: Vec<Vec<f64>> = real_inputs

@@ -312,9 +312,7 @@ fn input_variable<'a>(
     file: &Path,
 ) -> anyhow::Result<&'a ScalarVariable> {
     let inputs: Vec<&str> = md
-        .variables
-        .iter()
-        .filter(|v| v.causality == Causality::Input)
+        .variables_of(Causality::Input)
         .map(|v| v.name.as_str())
         .collect();
     match md.variable(column) {

@@ -330,12 +330,7 @@ impl<'a> Exporter<'a> {
     fn outputs(&mut self) {
         let system = self.system;
         for (k, inst) in system.instances.iter().enumerate() {
-            for v in inst
-                .description()
-                .variables
-                .iter()
-                .filter(|v| v.causality == Causality::Output)
-            {
+            for v in inst.description().variables_of(Causality::Output) {
                 self.connector(k, v, "output");
             }
         }

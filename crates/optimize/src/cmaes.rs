@@ -355,12 +355,9 @@ mod tests {
 
     #[test]
     fn a_damaged_checkpoint_state_is_refused() {
-        let mut es = Cmaes::new(2, CmaesSettings::default(), 7, None).unwrap();
-        let x = es.ask();
-        es.tell(&vec![1.0; x.len()]);
-        let good = es.save();
-        let mut fresh = Cmaes::new(2, CmaesSettings::default(), 7, None).unwrap();
-        fresh.restore(&good).unwrap();
+        let (good, mut fresh) = crate::optimizer::saved_after_one_generation(|| {
+            Cmaes::new(2, CmaesSettings::default(), 7, None).unwrap()
+        });
         // Floats are kept as their bits: a NaN is what a damaged file can hold.
         let bits = |x: f64| serde_json::json!(crate::exact::encode(x));
         for (edit, expected) in [

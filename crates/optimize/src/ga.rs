@@ -284,12 +284,9 @@ mod tests {
 
     #[test]
     fn a_damaged_checkpoint_state_is_refused() {
-        let mut ga = Ga::new(2, GaSettings::default(), 7, None).unwrap();
-        let x = ga.ask();
-        ga.tell(&vec![1.0; x.len()]);
-        let good = ga.save();
-        let mut fresh = Ga::new(2, GaSettings::default(), 7, None).unwrap();
-        fresh.restore(&good).unwrap();
+        let (good, mut fresh) = crate::optimizer::saved_after_one_generation(|| {
+            Ga::new(2, GaSettings::default(), 7, None).unwrap()
+        });
         let mut bad = good.clone();
         bad["population"][0]["x"][0] = serde_json::json!(crate::exact::encode(f64::NAN));
         let e = fresh.restore(&bad).unwrap_err().to_string();

@@ -68,6 +68,21 @@ macro_rules! state_methods {
 }
 pub(crate) use state_methods;
 
+/// An optimiser's state after one generation and a second optimiser that took it in: the
+/// two ends of a checkpoint, for the tests that damage one.
+#[cfg(test)]
+pub(crate) fn saved_after_one_generation<O: Optimizer>(
+    new: impl Fn() -> O,
+) -> (serde_json::Value, O) {
+    let mut first = new();
+    let x = first.ask();
+    first.tell(&vec![1.0; x.len()]);
+    let good = first.save();
+    let mut fresh = new();
+    fresh.restore(&good).unwrap();
+    (good, fresh)
+}
+
 /// The state as [`Optimizer::save`] writes it (it always serialises: plain numbers).
 pub(crate) fn save_state<S: SavedState + Serialize>(s: &S) -> serde_json::Value {
     serde_json::to_value(s).unwrap_or_else(|e| panic!("{} state serialises: {e:?}", S::LABEL))

@@ -367,12 +367,7 @@ pub(super) fn unconnected_inputs(
 ) -> Vec<String> {
     let mut warnings = Vec::new();
     for (k, inst) in units.instances.iter().enumerate() {
-        for v in inst
-            .description()
-            .variables
-            .iter()
-            .filter(|v| v.causality == Causality::Input)
-        {
+        for v in inst.description().variables_of(Causality::Input) {
             let connected = connections
                 .iter()
                 .any(|c| c.to_unit == k && c.to_key() == v.key());

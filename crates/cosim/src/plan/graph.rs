@@ -107,13 +107,7 @@ fn output_dependencies<'m>(
                 .collect(),
             true,
         ),
-        None => (
-            md.variables
-                .iter()
-                .filter(|v| v.causality == Causality::Input)
-                .collect(),
-            false,
-        ),
+        None => (md.variables_of(Causality::Input).collect(), false),
     }
 }
 

@@ -549,12 +549,7 @@ pub(crate) fn parameter_slot(
 pub(super) fn default_record(units: Units<'_>) -> Vec<String> {
     let mut names = Vec::new();
     for inst in units.instances {
-        for v in inst
-            .description()
-            .variables
-            .iter()
-            .filter(|v| v.causality == Causality::Output)
-        {
+        for v in inst.description().variables_of(Causality::Output) {
             let ours = inst
                 .ports
                 .iter()

@@ -10,11 +10,10 @@
 
 use super::log::LogSink;
 use super::model::{Fmi3Slot, Fmi3Type, ModelDescription, ScalarVariable};
-use crate::fmi2::fmi2Status;
 use crate::status::{CallStatus, FmiFunction};
 use crate::{Experiment, FmuError, FmuInstance};
 use std::collections::HashMap;
-use std::ffi::{c_char, c_void, CStr, CString};
+use std::ffi::{c_char, c_void, CString};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -28,20 +27,7 @@ unsafe extern "C" fn logger(
     category: *const c_char,
     message: *const c_char,
 ) {
-    let _ = std::panic::catch_unwind(|| {
-        if env.is_null() {
-            return;
-        }
-        let sink = &*(env as *const LogSink);
-        let text = |p: *const c_char| {
-            if p.is_null() {
-                String::new()
-            } else {
-                CStr::from_ptr(p).to_string_lossy().into_owned()
-            }
-        };
-        sink.push(fmi2Status(status), &text(category), &text(message));
-    });
+    super::log::forward(env, status, category, message);
 }
 
 /// Hexadecimal text (FMI 3.0's notation of Binary values, spaces allowed) to bytes.

@@ -131,7 +131,21 @@ unsafe extern "C" fn sink(
     category: *const c_char,
     message: *const c_char,
 ) {
-    // Never unwind into the FMU's C frames.
+    forward(ctx, status, category, message);
+}
+
+/// One message from C to the [`LogSink`] at `ctx` (nothing when it is NULL), the end of
+/// both versions' loggers. Never unwinds into the FMU's C frames.
+///
+/// # Safety
+/// `ctx` is NULL or points at a live `LogSink`; `category` and `message` are NULL or
+/// NUL-terminated.
+pub(super) unsafe fn forward(
+    ctx: *mut c_void,
+    status: c_int,
+    category: *const c_char,
+    message: *const c_char,
+) {
     let _ = std::panic::catch_unwind(|| {
         if ctx.is_null() {
             return;

@@ -340,6 +340,13 @@ impl ModelDescription {
         self.derivatives.len()
     }
 
+    /// The variables of one causality (the inputs, the outputs), in declaration order.
+    pub fn variables_of(&self, causality: Causality) -> impl Iterator<Item = &ScalarVariable> {
+        self.variables
+            .iter()
+            .filter(move |v| v.causality == causality)
+    }
+
     pub fn variable(&self, name: &str) -> Option<&ScalarVariable> {
         let (built_for, index) = self.by_name.0.get_or_init(|| {
             let mut index = HashMap::with_capacity(self.variables.len());

@@ -17,23 +17,31 @@ impl MeInstance {
         self.check_with(self.api.name(Call::Get(v)), || shown_values(out), s)
     }
 
+    /// A vector the FMU fills into one of this instance's own buffers (`buffer` picks it).
+    fn get_into(
+        &mut self,
+        v: Vector,
+        buffer: fn(&mut MeInstance) -> &mut Vec<f64>,
+    ) -> Result<(), FmuError> {
+        let mut out = std::mem::take(buffer(self));
+        let r = self.get_vector(v, &mut out);
+        *buffer(self) = out;
+        r
+    }
+
     /// The states into `self.x` and, when `nominals`, the absolute tolerances from the
     /// nominals: rtol · nominal (FMPy; a nominal that is not a positive number counts as 1).
     fn read_states(&mut self, nominals: bool) -> Result<(), FmuError> {
         if self.nx == 0 {
             return Ok(());
         }
-        let mut x = std::mem::take(&mut self.x);
-        let r = self.get_vector(Vector::States, &mut x);
-        self.x = x;
-        r?;
+        self.get_into(Vector::States, |me| &mut me.x)?;
         if nominals {
-            let mut atol = std::mem::take(&mut self.atol);
-            let r = self.get_vector(Vector::Nominals, &mut atol);
-            for a in atol.iter_mut() {
-                *a = self.rtol * if a.is_finite() && *a > 0.0 { *a } else { 1.0 };
+            let r = self.get_into(Vector::Nominals, |me| &mut me.atol);
+            let rtol = self.rtol;
+            for a in self.atol.iter_mut() {
+                *a = rtol * if a.is_finite() && *a > 0.0 { *a } else { 1.0 };
             }
-            self.atol = atol;
             r?;
         }
         Ok(())
@@ -44,10 +52,7 @@ impl MeInstance {
         if self.nz == 0 {
             return Ok(());
         }
-        let mut z = std::mem::take(&mut self.z);
-        let r = self.get_vector(Vector::EventIndicators, &mut z);
-        self.z = z;
-        r?;
+        self.get_into(Vector::EventIndicators, |me| &mut me.z)?;
         // A NaN indicator has no sign: its event could never be found.
         match self.z.iter().position(|v| v.is_nan()) {
             Some(k) => Err(self.error(

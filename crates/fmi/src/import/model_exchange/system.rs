@@ -117,6 +117,16 @@ impl FmuSystem {
         self.traced(t, call, || shown_values(out), s);
         self.status(call, s, t)
     }
+
+    /// The time and states set, then one vector got (CVODE's right-hand side, its roots):
+    /// 0, or the first call's non-zero flag.
+    fn set_then_get(&mut self, t: f64, x: &[f64], v: Vector, out: &mut [f64]) -> i32 {
+        let r = self.set(t, x);
+        if r != 0 {
+            return r;
+        }
+        self.get(t, v, out)
+    }
 }
 
 impl System for FmuSystem {
@@ -125,11 +135,7 @@ impl System for FmuSystem {
             dx.iter_mut().for_each(|d| *d = 0.0);
             return self.set_time(t);
         }
-        let r = self.set(t, x);
-        if r != 0 {
-            return r;
-        }
-        let r = self.get(t, Vector::Derivatives, dx);
+        let r = self.set_then_get(t, x, Vector::Derivatives, dx);
         if r != 0 {
             return r;
         }
@@ -146,11 +152,7 @@ impl System for FmuSystem {
     }
 
     fn roots(&mut self, t: f64, x: &[f64], g: &mut [f64]) -> i32 {
-        let r = self.set(t, x);
-        if r != 0 {
-            return r;
-        }
-        let r = self.get(t, Vector::EventIndicators, g);
+        let r = self.set_then_get(t, x, Vector::EventIndicators, g);
         if r != 0 {
             return r;
         }
