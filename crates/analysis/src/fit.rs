@@ -160,19 +160,36 @@ fn fmt_param(v: f64) -> String {
 /// Evaluates `G(jω)/K` for parameters `[T_d, T, _]` (first order) or `[T_d, ω_n, ζ]`
 /// (second order) in the chosen form; the discretisation is done once per parameter set.
 enum Evaluator {
-    Continuous {
-        order: LagOrder,
-        p: [f64; 3],
-    },
-    /// `H(z) = z^{−i} · C (zI − Φ)⁻¹ (Γ₀ + Γ₁ z⁻¹)` with `z = e^{jωh}` (n = 1 or 2 states).
-    Sampled {
-        h: f64,
-        whole: f64,
-        phi: nalgebra::Matrix2<f64>,
-        g0: nalgebra::Vector2<f64>,
-        g1: nalgebra::Vector2<f64>,
-        states: usize,
-    },
+    Continuous { order: LagOrder, p: [f64; 3] },
+    Sampled(Discrete),
+}
+
+/// `H(z) = z^{−i} · C (zI − Φ)⁻¹ (Γ₀ + Γ₁ z⁻¹)` with `z = e^{jωh}` (n = 1 or 2 states).
+struct Discrete {
+    h: f64,
+    whole: f64,
+    phi: nalgebra::Matrix2<f64>,
+    g0: nalgebra::Vector2<f64>,
+    g1: nalgebra::Vector2<f64>,
+    states: usize,
+}
+
+impl Discrete {
+    fn at(&self, w: f64) -> Complex64 {
+        let (h, phi, g0, g1) = (self.h, &self.phi, &self.g0, &self.g1);
+        let z = Complex64::from_polar(1.0, w * h);
+        let zi = 1.0 / z;
+        let v0 = Complex64::from(g0[0]) + zi * g1[0];
+        let lag = if self.states == 1 {
+            v0 / (z - phi[(0, 0)])
+        } else {
+            let v1 = Complex64::from(g0[1]) + zi * g1[1];
+            let (p00, p01, p10, p11) = (phi[(0, 0)], phi[(0, 1)], phi[(1, 0)], phi[(1, 1)]);
+            let det = (z - p00) * (z - p11) - p01 * p10;
+            ((z - p11) * v0 + p01 * v1) / det
+        };
+        Complex64::from_polar(1.0, -w * h * self.whole) * lag
+    }
 }
 
 /// `(e^{Aτ}, ∫₀^τ e^{Aσ} dσ · B)` by the exponential of the augmented matrix.
@@ -231,14 +248,14 @@ impl Evaluator {
             let (_, g1) = zoh(&a, &b, frac * h);
             (g2, phi2 * g1)
         };
-        Evaluator::Sampled {
+        Evaluator::Sampled(Discrete {
             h,
             whole,
             phi,
             g0,
             g1,
             states,
-        }
+        })
     }
 
     fn at(&self, w: f64) -> Complex64 {
@@ -255,27 +272,7 @@ impl Evaluator {
                 };
                 delay * lag
             }
-            Evaluator::Sampled {
-                h,
-                whole,
-                phi,
-                g0,
-                g1,
-                states,
-            } => {
-                let z = Complex64::from_polar(1.0, w * h);
-                let zi = 1.0 / z;
-                let v0 = Complex64::from(g0[0]) + zi * g1[0];
-                let lag = if *states == 1 {
-                    v0 / (z - phi[(0, 0)])
-                } else {
-                    let v1 = Complex64::from(g0[1]) + zi * g1[1];
-                    let (p00, p01, p10, p11) = (phi[(0, 0)], phi[(0, 1)], phi[(1, 0)], phi[(1, 1)]);
-                    let det = (z - p00) * (z - p11) - p01 * p10;
-                    ((z - p11) * v0 + p01 * v1) / det
-                };
-                Complex64::from_polar(1.0, -w * h * whole) * lag
-            }
+            Evaluator::Sampled(d) => d.at(w),
         }
     }
 }
