@@ -133,11 +133,7 @@ impl Library {
     }
 
     fn load_as(path: &Path, model_exchange: bool) -> Result<Library, FmuError> {
-        super::check_elf(path)?;
-        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let lib = super::open_library(path)?;
         let mut missing_optional = Vec::new();
         let api = Fmi2Api::resolve(|spec| {
             let symbol = format!("{}\0", spec.name);
@@ -166,14 +162,7 @@ impl Library {
             ),
             false => None,
         };
-        let version = unsafe { (api.fmi2GetVersion)() };
-        let version = if version.is_null() {
-            "NULL".to_string()
-        } else {
-            unsafe { std::ffi::CStr::from_ptr(version) }
-                .to_string_lossy()
-                .into_owned()
-        };
+        let version = unsafe { super::version_text((api.fmi2GetVersion)()) };
         if version != "2.0" {
             return Err(FmuError::Load {
                 path: path.to_path_buf(),

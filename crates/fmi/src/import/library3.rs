@@ -3,7 +3,7 @@
 //! Model Exchange, of a Model Exchange FMU ([`Me3Api`]), and the check of `fmi3GetVersion`.
 
 use crate::FmuError;
-use std::ffi::{c_char, c_void, CStr};
+use std::ffi::{c_char, c_void};
 use std::path::{Path, PathBuf};
 
 pub(crate) type Inst = *mut c_void;
@@ -190,11 +190,7 @@ impl Library3 {
     }
 
     fn load_as(path: &Path, model_exchange: bool) -> Result<Library3, FmuError> {
-        super::check_elf(path)?;
-        let lib = unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let lib = super::open_library(path)?;
         let missing = |symbol| FmuError::MissingSymbol {
             path: path.to_path_buf(),
             symbol,
@@ -211,12 +207,7 @@ impl Library3 {
             true => Some(Me3Api::resolve(&lib).map_err(missing)?),
             false => None,
         };
-        let v = unsafe { (api.get_version)() };
-        let version = if v.is_null() {
-            "NULL".to_string()
-        } else {
-            unsafe { CStr::from_ptr(v) }.to_string_lossy().into_owned()
-        };
+        let version = unsafe { super::version_text((api.get_version)()) };
         if !version.starts_with("3.") {
             return Err(FmuError::Load {
                 path: path.to_path_buf(),

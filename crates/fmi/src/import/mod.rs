@@ -72,6 +72,30 @@ pub(crate) fn check_elf(path: &std::path::Path) -> Result<(), FmuError> {
     Ok(())
 }
 
+/// The FMU's shared library at `path`, checked by [`check_elf`] first and then opened (both
+/// versions' libraries load this way).
+pub(crate) fn open_library(path: &std::path::Path) -> Result<libloading::Library, FmuError> {
+    check_elf(path)?;
+    // SAFETY: loading runs the library's initialisers: that is what importing an FMU means;
+    // a hostile one is run under `--isolate`.
+    unsafe { libloading::Library::new(path) }.map_err(|e| FmuError::Load {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// What `fmi2GetVersion` or `fmi3GetVersion` returned, as text (`NULL` for a NULL pointer).
+///
+/// # Safety
+/// `p` is NULL or a NUL-terminated string.
+pub(crate) unsafe fn version_text(p: *const std::ffi::c_char) -> String {
+    if p.is_null() {
+        "NULL".to_string()
+    } else {
+        std::ffi::CStr::from_ptr(p).to_string_lossy().into_owned()
+    }
+}
+
 /// The longest String (or Binary, in bytes) value read from an FMU: a value is copied into
 /// every recorded row, so an FMU handing out 100 MB strings would exhaust memory.
 pub const MAX_STRING_BYTES: usize = 1 << 20;
