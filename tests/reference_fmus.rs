@@ -8,7 +8,7 @@ mod common;
 use common::reference;
 use std::path::Path;
 use std::sync::Arc;
-use tb_cosim::{Plan, Simulation, SystemFile, Table};
+use tb_cosim::{Plan, Simulation, SystemError, SystemFile, Table};
 use tb_fmi::FmuCache;
 use tb_testkit::assert_contains;
 
@@ -402,15 +402,14 @@ fn strings_are_set_recorded_and_connected(version: u8) {
 }
 
 /// A plan of one Feedthrough instance `m` with `extra` lines, or the error.
-fn feedthrough_plan(dir: &Path, head: &str, extra: &str) -> Result<Plan, String> {
+fn feedthrough_plan(dir: &Path, head: &str, extra: &str) -> Result<Plan, SystemError> {
     let text = format!(
         "{head}\n[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n{extra}",
         reference::fmu("Feedthrough", 2).display()
     );
     let path = dir.join("sys.toml");
-    let file = SystemFile::parse(&text, &path).map_err(|e| e.to_string())?;
+    let file = SystemFile::parse(&text, &path)?;
     Plan::from_file(file, &path, Arc::new(FmuCache::temporary(false).unwrap()))
-        .map_err(|e| e.to_string())
 }
 
 #[test]
@@ -420,7 +419,11 @@ fn enumeration_and_integer_values_are_checked_before_the_first_step() {
     let e = feedthrough_plan(d, "", "[parameters]\n\"m.Enumeration_input\" = 3\n")
         .err()
         .unwrap();
-    assert_contains(&e, &["3 is not an item of the Enumeration 'm.Enumeration_input' (1 'Option 1', 2 'Option 2')"]);
+    assert!(
+        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("parameter \"m.Enumeration_input\"")),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["3 is not an item of the Enumeration 'm.Enumeration_input' (1 'Option 1', 2 'Option 2')"]);
     assert!(feedthrough_plan(d, "", "[parameters]\n\"m.Enumeration_input\" = 2\n").is_ok());
     // Replayed values must fit the input they drive.
     for (column, value, expected) in [
@@ -457,7 +460,12 @@ fn enumeration_and_integer_values_are_checked_before_the_first_step() {
         )
         .err()
         .unwrap_or_else(|| panic!("{column} = {value} accepted"));
-        assert_contains(&e, &[expected, "row 2"]);
+        assert!(
+            matches!(&e, SystemError::Invalid { context, .. }
+                if context.ends_with(&format!("connection \"in.{column} -> m.{column}\""))),
+            "{e}"
+        );
+        assert_contains(&e.to_string(), &[expected, "row 2"]);
     }
 }
 
