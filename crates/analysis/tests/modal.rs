@@ -3,7 +3,6 @@
 use tb_analysis::chain::{Chain, Inertia, Spring};
 use tb_analysis::modal::{self, ModeKind};
 use tb_analysis::AnalysisError;
-use tb_testkit::assert_contains;
 
 fn chain(js: &[f64], cs: &[f64], left: Option<f64>, right: Option<f64>) -> Chain {
     let spring = |name: String, c: f64| Spring {
