@@ -8,6 +8,7 @@ mod common;
 use common::reference;
 use std::path::Path;
 use std::sync::Arc;
+use tb_cosim::replay::ReplayError;
 use tb_cosim::{Plan, Simulation, SystemError, SystemFile, Table};
 use tb_fmi::FmuCache;
 use tb_testkit::assert_contains;
@@ -77,7 +78,7 @@ fn fmpy(c: &Case, fmu: &Path, dir: &Path) -> Table {
 }
 
 /// twinbench's result for a case: one instance `m`, every output recorded.
-fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String> {
+fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), SystemError> {
     let mut text = format!(
         "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\nisolate = {}\n\n[experiment]\nstep = {}\nstop = {}\n",
         fmu.display(),
@@ -127,11 +128,10 @@ fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String
         &path,
         Arc::new(FmuCache::temporary(false).unwrap()),
         &options,
-    )
-    .map_err(|e| format!("{}: {e}", c.model))?;
+    )?;
     let mut sim = Simulation::new(plan).unwrap();
     sim.echo_fmu_log = false;
-    let summary = sim.run().map_err(|e| format!("{}: {e}", c.model))?;
+    let summary = sim.run()?;
     Ok((sim.recording().clone(), summary.stopped_by))
 }
 
@@ -152,7 +152,8 @@ fn check_case(c: Case) {
     let dir = tb_testkit::scratch("reference");
     let fmu = reference::fmu(model, version);
     let theirs = fmpy(&c, &fmu, dir.path());
-    let (ours, stopped_by) = twinbench(&c, &fmu, dir.path()).unwrap();
+    let (ours, stopped_by) =
+        twinbench(&c, &fmu, dir.path()).unwrap_or_else(|e| panic!("{model}: {e}"));
     let diffs = compare(model, &ours, &theirs);
     eprintln!("{model} FMI {version}: stopped by {stopped_by}; FMPy: {diffs:?}");
     for (name, d) in diffs {
@@ -347,7 +348,12 @@ fn fmi2_feedthrough_replays_steps_holds_and_interpolates_as_fmpy() {
     };
     let fmu = reference::fmu("Feedthrough", 2);
     let e = twinbench(&c, &fmu, dir.path()).err().unwrap();
-    assert_contains(&e, &["line 7: time 1.2000000000000002 after 1.25: the time of an input file must not decrease"]);
+    assert!(
+        matches!(&e, SystemError::Replay { name, error, .. } if name == "in"
+            && matches!(**error, ReplayError::TimeDecreases { line: 7, time, before }
+                if time == 1.2000000000000002 && before == 1.25)),
+        "{e}"
+    );
     let text = std::fs::read_to_string(&input).unwrap();
     std::fs::write(
         &input,
@@ -503,12 +509,14 @@ fn fmi3_isolated_runs_equal_in_process_runs() {
     let dir = tb_testkit::scratch("fmi3-iso");
     for model in ["Feedthrough", "StateSpace", "Stair"] {
         let fmu = reference::fmu(model, 3);
-        let (a, stop_a) = twinbench(&case(model, 3), &fmu, dir.path()).unwrap();
+        let (a, stop_a) =
+            twinbench(&case(model, 3), &fmu, dir.path()).unwrap_or_else(|e| panic!("{model}: {e}"));
         let c = Case {
             isolate: true,
             ..case(model, 3)
         };
-        let (b, stop_b) = twinbench(&c, &fmu, dir.path()).unwrap();
+        let (b, stop_b) =
+            twinbench(&c, &fmu, dir.path()).unwrap_or_else(|e| panic!("{model}: {e}"));
         assert_eq!(stop_a, stop_b, "{model}");
         assert_eq!(a.names(), b.names(), "{model}");
         for k in 0..a.names().len() {
