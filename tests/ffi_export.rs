@@ -7,8 +7,12 @@ use common::{load, vr};
 use fmu_export::fmi2::*;
 use std::ffi::CString;
 use std::path::Path;
-use tb_fmi::{FmuInstance, Instance, LoadedFmu};
+use tb_fmi::FmiFunction::Fmi2;
+use tb_fmi::{CallStatus, FmuError, FmuInstance, Function, Instance, LoadedFmu};
 use tb_testkit::assert_contains;
+
+/// The status of a call the FMU refuses (its log says why).
+const REFUSED: CallStatus = CallStatus::Fmi2(fmi2Status::ERROR);
 
 fn faulty(name: &str) -> (std::sync::Arc<tb_fmi::LoadedFmu>, Instance) {
     let f = load("faulty");
@@ -50,33 +54,95 @@ fn every_co_simulation_function_is_exported() {
 #[test]
 fn illegal_call_sequences_return_error_with_a_message() {
     let (f, mut i) = faulty("order");
-    // Step before initialisation.
-    let e = i.do_step(0.0, 0.1).unwrap_err().to_string();
-    assert!(e.contains("fmi2DoStep returned fmi2Error"), "{e}");
-    assert_contains(&e, &["fmi2DoStep is not allowed in state 'instantiated'"]);
+    // Step before initialisation: refused with fmi2Error, the FMU's log says why.
+    let e = i.do_step(0.0, 0.1).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::DoStep),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_contains(
+        &e.to_string(),
+        &["fmi2DoStep is not allowed in state 'instantiated'"],
+    );
     // Exit without enter.
-    let e = i.exit_initialization_mode().unwrap_err().to_string();
-    assert!(e.contains("not allowed in state 'instantiated'"), "{e}");
+    let e = i.exit_initialization_mode().unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::ExitInitializationMode),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .contains("not allowed in state 'instantiated'"),
+        "{e}"
+    );
     init(&mut i);
     // Setup after initialisation, and setting a fixed parameter after it.
     assert!(i.setup_experiment(0.0.into()).is_err());
-    let e = i
-        .set_integer(&[vr(&f, "fault_kind")], &[1])
-        .unwrap_err()
-        .to_string();
+    let e = i.set_integer(&[vr(&f, "fault_kind")], &[1]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::SetInteger),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["'fault_kind' (fixed parameter) cannot be set in state 'step complete'"],
     );
     // Calculated output cannot be set; unknown value reference; wrong type.
     assert!(i.set_real(&[vr(&f, "y")], &[1.0]).is_err());
-    let e = i.set_real(&[9999], &[1.0]).unwrap_err().to_string();
-    assert!(e.contains("unknown value reference 9999"), "{e}");
-    let e = i
-        .get_real(&[vr(&f, "steps")], &mut [0.0])
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("'steps' (vr 6) is Integer, not Real"), "{e}");
+    let e = i.set_real(&[9999], &[1.0]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::SetReal),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("unknown value reference 9999"),
+        "{e}"
+    );
+    let e = i.get_real(&[vr(&f, "steps")], &mut [0.0]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::GetReal),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .contains("'steps' (vr 6) is Integer, not Real"),
+        "{e}"
+    );
     // Legal again: a step works, terminate, then no more steps.
     i.do_step(0.0, 0.1).unwrap();
     i.terminate().unwrap();
@@ -86,23 +152,53 @@ fn illegal_call_sequences_return_error_with_a_message() {
 #[test]
 fn bad_values_are_refused_naming_the_variable() {
     let (f, mut i) = faulty("bad");
-    let e = i
-        .set_real(&[vr(&f, "gain")], &[2e6])
-        .unwrap_err()
-        .to_string();
+    let e = i.set_real(&[vr(&f, "gain")], &[2e6]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::SetReal),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["'gain' = 2000000 is outside its range [-1000000, 1000000] 1"],
     );
-    let e = i
-        .set_real(&[vr(&f, "gain")], &[f64::NAN])
-        .unwrap_err()
-        .to_string();
-    assert_contains(&e, &["'gain' set to NaN, expected a finite number"]);
-    init(&mut i);
-    let e = i.do_step(0.0, 0.0).unwrap_err().to_string();
+    let e = i.set_real(&[vr(&f, "gain")], &[f64::NAN]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::SetReal),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
+        &["'gain' set to NaN, expected a finite number"],
+    );
+    init(&mut i);
+    let e = i.do_step(0.0, 0.0).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::DoStep),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_contains(
+        &e.to_string(),
         &["communicationStepSize must be positive and finite, got 0"],
     );
     assert!(i.do_step(0.0, -1e-3).is_err());
@@ -119,20 +215,35 @@ fn wrong_guid_is_refused_with_a_message() {
         false,
     )
     .err()
-    .unwrap()
-    .to_string();
-    assert!(e.contains("GUID mismatch"), "{e}");
-    assert!(e.contains(&f.description.guid), "{e}");
+    .unwrap();
+    // Refused by the FMU (NULL): its log, in the message, says why.
+    assert!(
+        matches!(&e, FmuError::Instantiate { instance, .. } if instance == "guid"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("GUID mismatch"), "{e}");
+    assert!(e.to_string().contains(&f.description.guid), "{e}");
 }
 
 #[test]
 fn percent_in_messages_survives_the_printf_logger() {
     let (_f, mut i) = faulty("percent");
-    let e = i
-        .set_debug_categories(true, &["100%s%d"])
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("unknown log category '100%s%d'"), "{e}");
+    let e = i.set_debug_categories(true, &["100%s%d"]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::SetDebugLogging),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("unknown log category '100%s%d'"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -144,18 +255,36 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
     for k in 0..5 {
         i.do_step(k as f64 * 0.1, 0.1).unwrap();
     }
-    let e = i.do_step(0.5, 0.1).unwrap_err().to_string();
-    assert!(e.contains("fmi2DoStep returned fmi2Error"), "{e}");
+    let e = i.do_step(0.5, 0.1).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::DoStep),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["the model panicked: fault_kind = 2: the model panics on purpose"],
     );
     // Poisoned: further calls refused, reset recovers.
-    let e = i
-        .get_real(&[vr(&f, "y")], &mut [0.0])
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("unusable until fmi2Reset"), "{e}");
+    let e = i.get_real(&[vr(&f, "y")], &mut [0.0]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::GetReal),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("unusable until fmi2Reset"), "{e}");
     i.reset().unwrap();
     init(&mut i);
     i.do_step(0.0, 0.1).unwrap();
@@ -257,18 +386,35 @@ fn restored_and_deserialized_states_repeat_bit_for_bit() {
         third.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
     );
     // Garbage is refused with a message.
-    let e = other
-        .deserialize_state(b"not a state")
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(e.contains("bad magic"), "{e}");
+    let e = other.deserialize_state(b"not a state").err().unwrap();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::DeSerializeFMUstate),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("bad magic"), "{e}");
     let e = other
         .deserialize_state(&bytes[..bytes.len() - 3])
         .err()
-        .unwrap()
-        .to_string();
-    assert!(e.contains("truncated"), "{e}");
+        .unwrap();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::DeSerializeFMUstate),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("truncated"), "{e}");
     other.free_state(st).unwrap();
     i.free_state(saved).unwrap();
 }
@@ -297,13 +443,28 @@ fn error_from_a_step_names_the_instance_and_time() {
     for k in 0..100 {
         i.do_step(k as f64 * 0.01, 0.01).unwrap();
     }
-    let e = i.do_step(1.0, 0.01).unwrap_err().to_string();
+    let e = i.do_step(1.0, 0.01).unwrap_err();
     assert!(
-        e.starts_with("instance 'fails' at t = 1 s: fmi2DoStep returned fmi2Error"),
+        matches!(
+            &e,
+            FmuError::Call {
+                instance,
+                function: Fmi2(Function::DoStep),
+                status: REFUSED,
+                time,
+                ..
+            } if instance == "fails" && *time == 1.0
+        ),
+        "{e}"
+    );
+    // The message as the user reads it: the instance and the time first, then the FMU's.
+    assert!(
+        e.to_string()
+            .starts_with("instance 'fails' at t = 1 s: fmi2DoStep returned fmi2Error"),
         "{e}"
     );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["at t = 1 s: fault_kind = 1: the step fails on purpose"],
     );
 }
@@ -347,7 +508,7 @@ fn packing_twice_gives_identical_fmus() {
 
 /// An instance `name` of `f` with the resources in `resources`, initialised: the error its
 /// exit from initialisation mode returns.
-fn initialisation_error(f: &LoadedFmu, name: &str, resources: &Path) -> String {
+fn initialisation_error(f: &LoadedFmu, name: &str, resources: &Path) -> FmuError {
     let mut i = Instance::instantiate(
         f.library().unwrap(),
         name,
@@ -358,7 +519,7 @@ fn initialisation_error(f: &LoadedFmu, name: &str, resources: &Path) -> String {
     .unwrap();
     i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
-    i.exit_initialization_mode().unwrap_err().to_string()
+    i.exit_initialization_mode().unwrap_err()
 }
 
 #[test]
@@ -368,12 +529,33 @@ fn missing_or_malformed_resource_is_an_error_naming_the_file() {
     let scratch = tb_testkit::scratch("noresources");
     let empty = scratch.path().to_path_buf();
     let e = initialisation_error(&f, "drv", &empty);
-    assert_contains(&e, &["fmi2ExitInitializationMode returned fmi2Error"]);
-    assert!(e.contains("target_speed.csv"), "{e}");
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::ExitInitializationMode),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("target_speed.csv"), "{e}");
     // A malformed file: the row is named.
     std::fs::write(empty.join("target_speed.csv"), "s,v\n0,10\n1,abc\n2,12\n").unwrap();
     let e = initialisation_error(&f, "drv2", &empty);
-    assert_contains(&e, &["target_speed.csv", "abc"]);
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::ExitInitializationMode),
+                status: REFUSED,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["target_speed.csv", "abc"]);
     std::fs::remove_dir_all(&empty).unwrap();
 }
 

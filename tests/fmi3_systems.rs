@@ -8,8 +8,8 @@ mod common;
 use common::reference;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use tb_cosim::{Plan, Simulation, SystemFile};
-use tb_fmi::{FmuCache, FmuInstance};
+use tb_cosim::{Plan, Simulation, SystemError, SystemFile};
+use tb_fmi::{CallStatus, FmiFunction, FmuCache, FmuError, FmuInstance};
 use tb_testkit::assert_contains;
 
 /// FMI 3.0 Feedthrough as a supplier's speed sensor: its continuous Float64 input and output
@@ -41,21 +41,20 @@ fn sensor(dir: &Path, name: &str, unit: &str, base: &str) -> PathBuf {
     )
 }
 
-fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), String> {
+fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), SystemError> {
     let path = dir.join("system.toml");
-    let file = SystemFile::parse(text, &path).map_err(|e| e.to_string())?;
+    let file = SystemFile::parse(text, &path)?;
     let options = common::worker_options();
     let plan = Plan::compile(
         file,
         &path,
         Arc::new(FmuCache::temporary(false).unwrap()),
         &options,
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     let notes = plan.notes.clone();
-    let mut sim = Simulation::new(plan).map_err(|e| e.to_string())?;
+    let mut sim = Simulation::new(plan)?;
     sim.echo_fmu_log = false;
-    sim.run().map_err(|e| e.to_string())?;
+    sim.run()?;
     Ok((sim.recording().clone(), notes))
 }
 
@@ -197,7 +196,7 @@ fn fmi3_state_save_restore_serialize_and_reset() {
 
 /// What twinbench cannot run is refused when the system loads, naming the .fmu and what
 /// it needs.
-fn refused(fmu: &Path, dir: &Path) -> String {
+fn refused(fmu: &Path, dir: &Path) -> SystemError {
     let text = format!(
         "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n",
         fmu.display()
@@ -206,7 +205,7 @@ fn refused(fmu: &Path, dir: &Path) -> String {
         panic!("{} was not refused", fmu.display())
     };
     assert!(
-        e.contains(&fmu.display().to_string()),
+        e.to_string().contains(&fmu.display().to_string()),
         "names the file: {e}"
     );
     e
@@ -230,7 +229,11 @@ fn an_fmi3_fmu_that_needs_clocks_is_refused_before_the_first_step() {
         |n| Some(n.to_string()),
     );
     let e = refused(&clocked, dir.path());
-    assert_contains(&e, &["clocks", "'tick' is a Clock"]);
+    assert!(
+        matches!(&e, SystemError::Fmu(FmuError::Description { path, .. }) if *path == clocked),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["clocks", "'tick' is a Clock"]);
     // The Clocks Reference FMU: Scheduled Execution only.
     let clocks = reference::variant(
         &vdp,
@@ -240,7 +243,11 @@ fn an_fmi3_fmu_that_needs_clocks_is_refused_before_the_first_step() {
         |n| Some(n.replace("VanDerPol", "Clocks")),
     );
     let e = refused(&clocks, dir.path());
-    assert_contains(&e, &["supports Scheduled Execution only; twinbench runs FMUs through Co-Simulation or Model Exchange"]);
+    assert!(
+        matches!(&e, SystemError::Fmu(FmuError::Description { path, .. }) if *path == clocks),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["supports Scheduled Execution only; twinbench runs FMUs through Co-Simulation or Model Exchange"]);
 }
 
 #[test]
@@ -260,8 +267,12 @@ fn an_fmi3_fmu_built_for_another_platform_is_refused() {
         },
     );
     let e = refused(&windows, dir.path());
+    assert!(
+        matches!(&e, SystemError::Fmu(FmuError::Archive { path, .. }) if *path == windows),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &[
             "no binaries/x86_64-linux/VanDerPol.so",
             "it has binaries for x86_64-windows",
@@ -282,8 +293,12 @@ fn a_64_bit_integer_an_f64_cannot_carry_is_an_error_naming_it() {
     let Err(e) = run(dir.path(), &text) else {
         panic!("not refused")
     };
+    assert!(
+        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("parameter \"m.Int64_input\"")),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["'m.Int64_input': 9007199254740993 cannot be carried exactly"],
     );
 }
@@ -310,8 +325,13 @@ fn binary_variables_are_set_connected_and_recorded_as_hex_text() {
     let Err(e) = run(dir.path(), &text("abc")) else {
         panic!("odd hex digits accepted")
     };
+    // Refused by twinbench before the FMU sees it.
+    assert!(
+        matches!(&e, SystemError::Fmu(FmuError::Instantiate { instance, .. }) if instance == "a"),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["'Binary_input' is Binary: \"abc\" is not an even number of hexadecimal digits"],
     );
 }
@@ -331,14 +351,21 @@ fn an_fmi3_error_carries_the_fmus_log() {
     .unwrap();
     i.set_echo(false);
     // A step before initialisation is an illegal call sequence.
-    let e = i.do_step(0.0, 0.1).unwrap_err().to_string();
-    assert_contains(
-        &e,
-        &[
-            "instance 'd' at t = 0 s: fmi3DoStep returned fmi3Error",
-            "the FMU's last messages",
-        ],
+    let e = i.do_step(0.0, 0.1).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                instance,
+                function: FmiFunction::Fmi3(f),
+                status: CallStatus::Fmi3(3),
+                time,
+                log,
+            } if instance == "d" && f == "fmi3DoStep" && *time == 0.0 && !log.is_empty()
+        ),
+        "{e}"
     );
+    assert_contains(&e.to_string(), &["the FMU's last messages"]);
 }
 
 /// Red team N28: an isolated FMI 3.0 FMU's error was named `fmi2DoStep` and `[fmi2Error]`.
@@ -354,10 +381,19 @@ fn an_isolated_fmi3_error_names_the_fmi3_call_and_status() {
     };
     let mut b = factory.create("d", true).unwrap();
     // A step before initialisation is an illegal call sequence.
-    let e = b.do_step(0.0, 0.1).unwrap_err().to_string();
-    assert_contains(
-        &e,
-        &["instance 'd' at t = 0 s: fmi3DoStep returned fmi3Error"],
+    let e = b.do_step(0.0, 0.1).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                instance,
+                function: FmiFunction::Fmi3(f),
+                status: CallStatus::Fmi3(3),
+                time,
+                ..
+            } if instance == "d" && f == "fmi3DoStep" && *time == 0.0
+        ),
+        "{e}"
     );
-    assert!(!e.contains("fmi2"), "{e}");
+    assert!(!e.to_string().contains("fmi2"), "{e}");
 }

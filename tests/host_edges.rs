@@ -4,8 +4,9 @@
 
 mod common;
 
-use tb_fmi::FmuInstance;
-use tb_fmi::Instance;
+use tb_fmi::fmi2::fmi2Status;
+use tb_fmi::FmiFunction::Fmi2;
+use tb_fmi::{CallStatus, FmuError, FmuInstance, Function, Instance};
 use tb_testkit::assert_contains;
 
 fn instance(model: &str) -> Instance {
@@ -44,8 +45,19 @@ fn a_host_that_sums_its_steps_reaches_the_stop_time_with_fmi2ok() {
     }
     assert!(t > 100.0 && t - 100.0 < 1e-9, "t = {t}");
     // Well past the stop time is still refused.
-    let e = i.do_step(t, 0.001).unwrap_err().to_string();
-    assert!(e.contains("ends after stopTime 100"), "{e}");
+    let e = i.do_step(t, 0.001).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::DoStep),
+                status: CallStatus::Fmi2(fmi2Status::ERROR),
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("ends after stopTime 100"), "{e}");
     i.terminate().ok();
 }
 
@@ -94,8 +106,18 @@ fn an_input_a_rounding_outside_its_range_is_the_bound() {
     i.set_real(&[pedal], &[-1.0000009]).unwrap();
     i.get_real(&[pedal], &mut x).unwrap();
     assert_eq!(x[0], -1.0);
-    let e = i.set_real(&[pedal], &[1.01]).unwrap_err().to_string();
-    assert!(e.contains("fmi2Error"), "{e}");
+    let e = i.set_real(&[pedal], &[1.01]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: Fmi2(Function::SetReal),
+                status: CallStatus::Fmi2(fmi2Status::ERROR),
+                ..
+            }
+        ),
+        "{e}"
+    );
     let log = i.last_log_lines().join("\n");
     assert_contains(&log, &["'accel_pedal' = 1.01 is outside its range [-1, 1]"]);
 }
@@ -169,11 +191,21 @@ fn a_diverging_coupling_is_stopped_early_and_named() {
         sim.echo_fmu_log = false;
         sim.run()
     };
-    let e = run("jacobi").unwrap_err().to_string();
-    assert_contains(
-        &e,
-        &["instance 'edu'", "the EDU-dyno coupling is diverging"],
+    let e = run("jacobi").unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            tb_cosim::SystemError::Fmu(FmuError::Call {
+                instance,
+                function: Fmi2(Function::DoStep),
+                ..
+            }) if instance == "edu"
+        ),
+        "{e}"
     );
+    // Why, in the FMU's words.
+    assert_contains(&e.to_string(), &["the EDU-dyno coupling is diverging"]);
+    let e = e.to_string();
     let t: f64 = e
         .split("at t = ")
         .nth(1)
@@ -224,17 +256,38 @@ fn values_of_another_length_than_the_references_are_refused_before_the_call() {
     i.enter_initialization_mode().unwrap();
     i.exit_initialization_mode().unwrap();
     let mut two = [f64::NAN; 2];
-    let e = i.get_real(&[1, 2, 3], &mut two).unwrap_err().to_string();
+    let e = i.get_real(&[1, 2, 3], &mut two).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Lengths {
+                function: Function::GetReal,
+                references: 3,
+                values: 2,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = e.to_string();
     assert_eq!(
         e,
         "instance 'host': fmi2GetReal was given 3 value references and 2 values"
     );
     // Nothing was written.
     assert!(two.iter().all(|x| x.is_nan()));
-    let e = i.set_integer(&[1], &[1, 2]).unwrap_err().to_string();
-    assert_contains(
-        &e,
-        &["fmi2SetInteger was given 1 value references and 2 values"],
+    let e = i.set_integer(&[1], &[1, 2]).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Lengths {
+                function: Function::SetInteger,
+                references: 1,
+                values: 2,
+                ..
+            }
+        ),
+        "{e}"
     );
     let mut one = [0];
     assert!(i.get_boolean(&[1, 2], &mut one).is_err());

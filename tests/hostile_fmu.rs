@@ -14,6 +14,8 @@ use std::process::Output;
 use std::time::{Duration, Instant};
 use tb_cosim::backend::BackendFactory;
 use tb_cosim::isolated::{IsolatedFactory, IsolationOptions};
+use tb_fmi::fmi2::fmi2Status;
+use tb_fmi::{CallStatus, FmiFunction, FmuError};
 use tb_testkit::assert_contains;
 
 /// `hostile.fmu` built with `-DFAULT=<fault>` in `dir`.
@@ -299,12 +301,14 @@ fn forged_worker(dir: &Path, name: &str, frames: Frames) -> PathBuf {
 }
 
 /// Why an instance on the forged worker `worker` could not be created.
-fn refused(worker: PathBuf) -> String {
-    factory(worker)
-        .create("forged", false)
-        .err()
-        .unwrap()
-        .to_string()
+/// The error creating an instance on `worker` gives: the worker's, lost (why: in its cause).
+fn refused(worker: PathBuf) -> FmuError {
+    let e = factory(worker).create("forged", false).err().unwrap();
+    assert!(
+        matches!(&e, FmuError::Isolated { instance, .. } if instance == "forged"),
+        "{e}"
+    );
+    e
 }
 
 fn factory(worker: PathBuf) -> IsolatedFactory {
@@ -330,7 +334,10 @@ fn forged_frames_are_protocol_errors_not_panics() {
         Frames::new().raw(&[0xff, 0xff, 0xff, 0x7f]),
     );
     let e = refused(w);
-    assert_contains(&e, &["answer of 2147483647 bytes is too large", "killed"]);
+    assert_contains(
+        &e.to_string(),
+        &["answer of 2147483647 bytes is too large", "killed"],
+    );
     // Trailing bytes after an ok answer.
     let w = forged_worker(
         dir.path(),
@@ -338,7 +345,10 @@ fn forged_frames_are_protocol_errors_not_panics() {
         Frames::new().frame(&answer(0, 0, &[1, 2, 3])),
     );
     let e = refused(w);
-    assert!(e.contains("protocol error (trailing bytes)"), "{e}");
+    assert!(
+        e.to_string().contains("protocol error (trailing bytes)"),
+        "{e}"
+    );
 
     // Instantiated, then each forged answer to a get.
     let get_answers: [(&str, Vec<u8>, &str); 5] = [
@@ -360,14 +370,19 @@ fn forged_frames_are_protocol_errors_not_panics() {
         let w = forged_worker(dir.path(), name, Frames::new().ok().frame(&body));
         let mut b = factory(w).create("forged", false).unwrap();
         let mut out = [0.0];
-        let e = b.get_real(&[0], &mut out).unwrap_err().to_string();
+        let e = b.get_real(&[0], &mut out).unwrap_err();
         assert!(
-            e.contains("protocol error") && e.contains(expected),
+            matches!(&e, FmuError::Isolated { instance, .. } if instance == "forged"),
             "{name}: {e}"
         );
+        assert_contains(&e.to_string(), &["protocol error", expected]);
         // The worker is gone; the next call fails at once with the same cause.
-        let again = b.do_step(0.0, 0.1).unwrap_err().to_string();
-        assert!(again.contains(expected), "{name}: {again}");
+        let again = b.do_step(0.0, 0.1).unwrap_err();
+        assert!(
+            matches!(&again, FmuError::Isolated { instance, .. } if instance == "forged"),
+            "{name}: {again}"
+        );
+        assert!(again.to_string().contains(expected), "{name}: {again}");
     }
 
     // An unknown status is shown with its value.
@@ -378,13 +393,27 @@ fn forged_frames_are_protocol_errors_not_panics() {
         Frames::new().ok().frame(&answer(1, 0, &rest)),
     );
     let mut b = factory(w).create("forged", false).unwrap();
-    let e = b.do_step(0.0, 0.1).unwrap_err().to_string();
-    assert!(e.contains("an unknown fmi2Status (77)"), "{e}");
+    let e = b.do_step(0.0, 0.1).unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            FmuError::Call {
+                function: FmiFunction::Fmi2(tb_fmi::Function::DoStep),
+                status: CallStatus::Fmi2(fmi2Status(77)),
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("an unknown fmi2Status (77)"), "{e}");
 
     // Half a frame, then silence: the watchdog.
     let w = forged_worker(dir.path(), "half", Frames::new().raw(&[13, 0, 0, 0, 0, 0]));
     let started = Instant::now();
     let e = refused(w);
-    assert!(e.contains("no answer within 2s (watchdog)"), "{e}");
+    assert!(
+        e.to_string().contains("no answer within 2s (watchdog)"),
+        "{e}"
+    );
     assert!(started.elapsed() < Duration::from_secs(20));
 }

@@ -177,6 +177,7 @@ fn same_seed_same_result_any_threads_and_after_resume() {
         let err = run_study(&study, &e)
             .err()
             .expect("an edited checkpoint is refused");
+        assert!(matches!(err, OptimizeError::Checkpoint(_)), "{err}");
         assert_contains(
             &err.to_string(),
             &["step 1 'lift' of the checkpoint says its cost after was 0.0"],
@@ -238,11 +239,13 @@ fn same_seed_same_result_any_threads_and_after_resume() {
     // A checkpoint of another study is refused.
     let other = load(dir.path(), &study_text("cmaes", TWO_STEPS));
     let err = run_study(&other, &o).err().expect("refused");
+    assert!(matches!(err, OptimizeError::Checkpoint(_)), "{err}");
     assert!(err.to_string().contains("another study"), "{err}");
     // A resume with another budget or optimiser than the checkpoint's is refused.
     o.generations = Some(7);
-    let err = run_study(&study, &o).err().expect("refused").to_string();
-    assert_contains(&err, &["was made with no overrides, this run has --generations 7: resume with the same options"]);
+    let err = run_study(&study, &o).err().expect("refused");
+    assert!(matches!(err, OptimizeError::Checkpoint(_)), "{err}");
+    assert_contains(&err.to_string(), &["was made with no overrides, this run has --generations 7: resume with the same options"]);
 }
 
 #[test]

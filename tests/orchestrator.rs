@@ -173,7 +173,14 @@ fn strings_are_set_connected_recorded_and_quoted_in_the_csv() {
     let (f, p) = faulty_system(&bad, "strings-bad");
     let e = Plan::from_file(f, &p, Arc::new(FmuCache::temporary(false).unwrap()))
         .err()
-        .unwrap()
-        .to_string();
-    assert!(e.contains("'a.tag' is String, the value 3 is not"), "{e}");
+        .unwrap();
+    assert!(
+        matches!(&e, tb_cosim::SystemError::Invalid { context, .. } if context.ends_with("parameter \"a.tag\"")),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .contains("'a.tag' is String, the value 3 is not"),
+        "{e}"
+    );
 }

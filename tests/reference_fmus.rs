@@ -8,7 +8,8 @@ mod common;
 use common::reference;
 use std::path::Path;
 use std::sync::Arc;
-use tb_cosim::{Plan, Simulation, SystemFile, Table};
+use tb_cosim::replay::ReplayError;
+use tb_cosim::{Plan, Simulation, SystemError, SystemFile, Table};
 use tb_fmi::FmuCache;
 use tb_testkit::assert_contains;
 
@@ -77,7 +78,7 @@ fn fmpy(c: &Case, fmu: &Path, dir: &Path) -> Table {
 }
 
 /// twinbench's result for a case: one instance `m`, every output recorded.
-fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String> {
+fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), SystemError> {
     let mut text = format!(
         "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\nisolate = {}\n\n[experiment]\nstep = {}\nstop = {}\n",
         fmu.display(),
@@ -127,11 +128,10 @@ fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String
         &path,
         Arc::new(FmuCache::temporary(false).unwrap()),
         &options,
-    )
-    .map_err(|e| format!("{}: {e}", c.model))?;
+    )?;
     let mut sim = Simulation::new(plan).unwrap();
     sim.echo_fmu_log = false;
-    let summary = sim.run().map_err(|e| format!("{}: {e}", c.model))?;
+    let summary = sim.run()?;
     Ok((sim.recording().clone(), summary.stopped_by))
 }
 
@@ -152,7 +152,8 @@ fn check_case(c: Case) {
     let dir = tb_testkit::scratch("reference");
     let fmu = reference::fmu(model, version);
     let theirs = fmpy(&c, &fmu, dir.path());
-    let (ours, stopped_by) = twinbench(&c, &fmu, dir.path()).unwrap();
+    let (ours, stopped_by) =
+        twinbench(&c, &fmu, dir.path()).unwrap_or_else(|e| panic!("{model}: {e}"));
     let diffs = compare(model, &ours, &theirs);
     eprintln!("{model} FMI {version}: stopped by {stopped_by}; FMPy: {diffs:?}");
     for (name, d) in diffs {
@@ -347,7 +348,12 @@ fn fmi2_feedthrough_replays_steps_holds_and_interpolates_as_fmpy() {
     };
     let fmu = reference::fmu("Feedthrough", 2);
     let e = twinbench(&c, &fmu, dir.path()).err().unwrap();
-    assert_contains(&e, &["line 7: time 1.2000000000000002 after 1.25: the time of an input file must not decrease"]);
+    assert!(
+        matches!(&e, SystemError::Replay { name, error, .. } if name == "in"
+            && matches!(**error, ReplayError::TimeDecreases { line: 7, time, before }
+                if time == 1.2000000000000002 && before == 1.25)),
+        "{e}"
+    );
     let text = std::fs::read_to_string(&input).unwrap();
     std::fs::write(
         &input,
@@ -402,15 +408,14 @@ fn strings_are_set_recorded_and_connected(version: u8) {
 }
 
 /// A plan of one Feedthrough instance `m` with `extra` lines, or the error.
-fn feedthrough_plan(dir: &Path, head: &str, extra: &str) -> Result<Plan, String> {
+fn feedthrough_plan(dir: &Path, head: &str, extra: &str) -> Result<Plan, SystemError> {
     let text = format!(
         "{head}\n[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n{extra}",
         reference::fmu("Feedthrough", 2).display()
     );
     let path = dir.join("sys.toml");
-    let file = SystemFile::parse(&text, &path).map_err(|e| e.to_string())?;
+    let file = SystemFile::parse(&text, &path)?;
     Plan::from_file(file, &path, Arc::new(FmuCache::temporary(false).unwrap()))
-        .map_err(|e| e.to_string())
 }
 
 #[test]
@@ -420,7 +425,11 @@ fn enumeration_and_integer_values_are_checked_before_the_first_step() {
     let e = feedthrough_plan(d, "", "[parameters]\n\"m.Enumeration_input\" = 3\n")
         .err()
         .unwrap();
-    assert_contains(&e, &["3 is not an item of the Enumeration 'm.Enumeration_input' (1 'Option 1', 2 'Option 2')"]);
+    assert!(
+        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("parameter \"m.Enumeration_input\"")),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["3 is not an item of the Enumeration 'm.Enumeration_input' (1 'Option 1', 2 'Option 2')"]);
     assert!(feedthrough_plan(d, "", "[parameters]\n\"m.Enumeration_input\" = 2\n").is_ok());
     // Replayed values must fit the input they drive.
     for (column, value, expected) in [
@@ -457,7 +466,12 @@ fn enumeration_and_integer_values_are_checked_before_the_first_step() {
         )
         .err()
         .unwrap_or_else(|| panic!("{column} = {value} accepted"));
-        assert_contains(&e, &[expected, "row 2"]);
+        assert!(
+            matches!(&e, SystemError::Invalid { context, .. }
+                if context.ends_with(&format!("connection \"in.{column} -> m.{column}\""))),
+            "{e}"
+        );
+        assert_contains(&e.to_string(), &[expected, "row 2"]);
     }
 }
 
@@ -495,12 +509,14 @@ fn fmi3_isolated_runs_equal_in_process_runs() {
     let dir = tb_testkit::scratch("fmi3-iso");
     for model in ["Feedthrough", "StateSpace", "Stair"] {
         let fmu = reference::fmu(model, 3);
-        let (a, stop_a) = twinbench(&case(model, 3), &fmu, dir.path()).unwrap();
+        let (a, stop_a) =
+            twinbench(&case(model, 3), &fmu, dir.path()).unwrap_or_else(|e| panic!("{model}: {e}"));
         let c = Case {
             isolate: true,
             ..case(model, 3)
         };
-        let (b, stop_b) = twinbench(&c, &fmu, dir.path()).unwrap();
+        let (b, stop_b) =
+            twinbench(&c, &fmu, dir.path()).unwrap_or_else(|e| panic!("{model}: {e}"));
         assert_eq!(stop_a, stop_b, "{model}");
         assert_eq!(a.names(), b.names(), "{model}");
         for k in 0..a.names().len() {

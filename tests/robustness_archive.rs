@@ -7,7 +7,7 @@ mod common;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use tb_fmi::import::archive::Limits;
-use tb_fmi::FmuCache;
+use tb_fmi::{FmuCache, FmuError};
 use tb_testkit::assert_contains;
 use zip::write::SimpleFileOptions;
 
@@ -92,7 +92,16 @@ impl Scratch {
             .with_limits(limits);
         let err = match cache.load(&fmu) {
             Ok(_) => panic!("{name} was accepted"),
-            Err(e) => e.to_string(),
+            Err(e) => {
+                // Refused as an archive or a description, of this file.
+                assert!(
+                    matches!(&e, FmuError::Archive { path, .. }
+                        | FmuError::Description { path, .. }
+                        | FmuError::DescriptionParse { path, .. } if *path == fmu),
+                    "{name}: {e:?}"
+                );
+                e.to_string()
+            }
         };
         assert!(
             err.contains(&fmu.display().to_string()),
@@ -374,8 +383,12 @@ fn an_fmi2_model_exchange_only_fmu_loads_and_a_library_without_its_functions_is_
     let l = cache.load(&fmu).unwrap();
     assert_eq!(l.default_interface(), tb_fmi::Interface::ModelExchange);
     assert_eq!(l.model_identifier(), "faulty");
-    let e = l.library_me().err().unwrap().to_string();
-    assert_contains(&e, &["me.fmu: binaries/linux64/faulty.so does not export the required FMI 2.0 Model Exchange function fmi2EnterEventMode"]);
+    let e = l.library_me().err().unwrap();
+    assert!(
+        matches!(&e, FmuError::Archive { path, .. } if *path == fmu),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["me.fmu: binaries/linux64/faulty.so does not export the required FMI 2.0 Model Exchange function fmi2EnterEventMode"]);
     let e = l
         .check_interface(tb_fmi::Interface::CoSimulation)
         .unwrap_err();
@@ -426,9 +439,13 @@ fn a_fifo_or_a_device_given_as_an_fmu_is_refused_without_reading_it() {
     assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
     let cache = FmuCache::persistent(&s.cache_dir()).unwrap();
     for path in [fifo.as_path(), Path::new("/dev/zero")] {
-        let err = cache.load(path).err().expect("refused").to_string();
+        let err = cache.load(path).err().expect("refused");
+        assert!(
+            matches!(&err, FmuError::Archive { path: p, .. } if p == path),
+            "{err}"
+        );
         assert_contains(
-            &err,
+            &err.to_string(),
             &[
                 &path.display().to_string(),
                 "not a regular file (an FMU is a zip archive)",
@@ -482,16 +499,21 @@ fn a_broken_or_foreign_binary_is_named_by_the_fmu_and_its_entry() {
         let cache = FmuCache::persistent(&s.cache_dir()).unwrap();
         // Reading the archive runs no code: it loads; the library fails when first needed.
         let loaded = cache.load(&fmu).unwrap();
-        let err = loaded.library().err().expect("refused").to_string();
+        let err = loaded.library().err().expect("refused");
+        assert!(
+            matches!(&err, FmuError::Load { path, .. } if *path == fmu),
+            "{err}"
+        );
         assert_contains(
-            &err,
+            &err.to_string(),
             &[
                 &format!("{}: cannot load shared library: {so}: ", fmu.display()),
                 expected,
             ],
         );
         assert!(
-            !err.contains(&s.cache_dir().display().to_string()),
+            !err.to_string()
+                .contains(&s.cache_dir().display().to_string()),
             "the message names the unpacked copy: {err}"
         );
     }

@@ -10,7 +10,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tb_cosim::isolated::IsolationOptions;
 use tb_cosim::{LoadOptions, Plan, Simulation, SystemError, SystemFile};
-use tb_fmi::FmuCache;
+use tb_fmi::fmi2::fmi2Status;
+use tb_fmi::FmiFunction::Fmi2;
+use tb_fmi::{CallStatus, FmuCache, FmuError, Function};
 use tb_testkit::assert_contains;
 
 fn cache() -> Arc<FmuCache> {
@@ -87,34 +89,43 @@ fn a_failed_step_stops_the_run_naming_instance_time_and_reason() {
         (
             "an_error_stops_the_run_naming_instance_time_and_reason",
             1,
-            "fmi2Error",
+            fmi2Status::ERROR,
             "fault_kind = 1: the step fails on purpose",
         ),
         (
             "a_discard_stops_the_run_naming_instance_time_and_reason",
             7,
-            "fmi2Discard",
+            fmi2Status::DISCARD,
             "fault_kind = 7: the step is discarded on purpose",
         ),
         (
             "a_fatal_error_stops_the_run_naming_instance_time_and_reason",
             8,
-            "fmi2Fatal",
+            fmi2Status::FATAL,
             "fault_kind = 8: a fatal error on purpose",
         ),
         (
             "a_panic_is_caught_by_the_fmu_and_stops_the_run",
             2,
-            "fmi2Error",
+            fmi2Status::ERROR,
             "the model panicked: fault_kind = 2: the model panics on purpose",
         ),
     ] {
         let (e, s) = run_err(kind, &in_process());
-        if kind == 1 {
-            assert!(matches!(e, SystemError::Fmu(_)), "{case}: {s}");
-        }
-        let failed = format!("instance 'supplier' at t = 1 s: fmi2DoStep returned {status}");
-        assert!(s.contains(&failed), "{case}: {s}");
+        assert!(
+            matches!(
+                &e,
+                SystemError::Fmu(FmuError::Call {
+                    instance,
+                    function: Fmi2(Function::DoStep),
+                    status: CallStatus::Fmi2(st),
+                    time,
+                    ..
+                }) if instance == "supplier" && *st == status && *time == 1.0
+            ),
+            "{case}: {s}"
+        );
+        // The FMU's reason, from its log.
         assert!(s.contains(why), "{case}: {s}");
     }
 }
@@ -122,7 +133,11 @@ fn a_failed_step_stops_the_run_naming_instance_time_and_reason() {
 #[test]
 fn a_nan_output_stops_the_run_naming_instance_time_and_signal() {
     let (e, s) = run_err(3, &in_process());
-    assert!(matches!(e, SystemError::NotFinite { .. }), "{s}");
+    assert!(
+        matches!(&e, SystemError::NotFinite { instance, signal, value, .. }
+            if instance == "supplier" && signal == "supplier.y" && value.is_nan()),
+        "{s}"
+    );
     assert_contains(
         &s,
         &["supplier.y is not finite (NaN) at t = 1.01 s after the step of instance 'supplier'"],
@@ -131,12 +146,21 @@ fn a_nan_output_stops_the_run_naming_instance_time_and_signal() {
 
 #[test]
 fn an_error_in_initialization_names_the_instance() {
-    let (_, s) = run_err(6, &in_process());
+    let (e, s) = run_err(6, &in_process());
     // A getter in initialization mode defers a failed initialisation: the error is
     // fmi2ExitInitializationMode's, once.
-    assert_contains(
-        &s,
-        &["instance 'supplier' at t = 0 s: fmi2ExitInitializationMode returned fmi2Error"],
+    assert!(
+        matches!(
+            &e,
+            SystemError::Fmu(FmuError::Call {
+                instance,
+                function: Fmi2(Function::ExitInitializationMode),
+                status: CallStatus::Fmi2(fmi2Status::ERROR),
+                time,
+                ..
+            }) if instance == "supplier" && *time == 0.0
+        ),
+        "{s}"
     );
     assert_eq!(
         s.matches("initialization fails on purpose").count(),
@@ -216,17 +240,25 @@ fn isolated_errors_keep_their_fmi_status_and_log() {
     let _serial = serial();
     let timeout = Duration::from_secs(10);
     for (kind, status, why) in [
-        (1, "fmi2Error", "the step fails on purpose"),
-        (7, "fmi2Discard", "the step is discarded on purpose"),
-        (8, "fmi2Fatal", "a fatal error on purpose"),
-        (2, "fmi2Error", "the model panics on purpose"),
+        (1, fmi2Status::ERROR, "the step fails on purpose"),
+        (7, fmi2Status::DISCARD, "the step is discarded on purpose"),
+        (8, fmi2Status::FATAL, "a fatal error on purpose"),
+        (2, fmi2Status::ERROR, "the model panics on purpose"),
     ] {
-        let (_, s) = run_err(kind, &isolated(timeout));
-        assert_contains(
-            &s,
-            &[&format!(
-                "instance 'supplier' at t = 1 s: fmi2DoStep returned {status}"
-            )],
+        let (e, s) = run_err(kind, &isolated(timeout));
+        // The worker's error as the in-process one: the call, its status, the time.
+        assert!(
+            matches!(
+                &e,
+                SystemError::Fmu(FmuError::Call {
+                    instance,
+                    function: Fmi2(Function::DoStep),
+                    status: CallStatus::Fmi2(st),
+                    time,
+                    ..
+                }) if instance == "supplier" && *st == status && *time == 1.0
+            ),
+            "{s}"
         );
         assert!(s.contains(why), "{s}");
     }
@@ -238,8 +270,16 @@ fn isolated_errors_keep_their_fmi_status_and_log() {
 fn an_abort_in_an_isolated_fmu_ends_the_run_and_the_host_lives() {
     let _serial = serial();
     let mut sim = simulation(&system_text(4, true), &in_process());
-    let e = sim.run().unwrap_err().to_string();
-    assert_contains(&e, &["instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 6 (SIGABRT: abort) (crashed)"]);
+    let e = sim.run().unwrap_err();
+    assert!(
+        matches!(
+            &e,
+            SystemError::Fmu(FmuError::Isolated { instance, function, time, .. })
+                if instance == "supplier" && function == "fmi2DoStep" && *time == 1.0
+        ),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 6 (SIGABRT: abort) (crashed)"]);
     // The host goes on: repaired, the same simulation runs (a new worker is started).
     sim.set_parameter("supplier.fault_kind", toml::Value::Integer(0))
         .unwrap();
@@ -256,9 +296,17 @@ fn a_hang_in_an_isolated_fmu_is_ended_by_the_watchdog() {
         &isolated(Duration::from_millis(1500)),
     );
     let t0 = Instant::now();
-    let e = sim.run().unwrap_err().to_string();
+    let e = sim.run().unwrap_err();
     let waited = t0.elapsed();
-    assert_contains(&e, &["instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: no answer within 1.5s (watchdog): the FMU hangs; killed (the worker process was killed by signal 9 (SIGKILL))"]);
+    assert!(
+        matches!(
+            &e,
+            SystemError::Fmu(FmuError::Isolated { instance, function, time, .. })
+                if instance == "supplier" && function == "fmi2DoStep" && *time == 1.0
+        ),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: no answer within 1.5s (watchdog): the FMU hangs; killed (the worker process was killed by signal 9 (SIGKILL))"]);
     assert!(waited < Duration::from_secs(5), "{waited:?}");
     drop(sim);
     assert_eq!(live_children(), Vec::<u32>::new());

@@ -44,9 +44,13 @@ fn n01_the_folder_lock_follows_no_link_and_takes_no_other_users_folder() {
     std::os::unix::fs::symlink(&victim, d.join("out/.twinbench.lock")).unwrap();
     let e = tb_table::FolderLock::acquire(&d.join("out"))
         .err()
-        .expect("a linked lock is refused")
-        .to_string();
-    assert!(e.contains(".twinbench.lock: is a symbolic link"), "{e}");
+        .expect("a linked lock is refused");
+    assert!(matches!(e.kind(), std::io::ErrorKind::InvalidInput), "{e}");
+    assert!(
+        e.to_string()
+            .contains(".twinbench.lock: is a symbolic link"),
+        "{e}"
+    );
     assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
     // A FIFO as the lock: refused, not waited on.
     std::fs::create_dir(d.join("out2")).unwrap();
@@ -54,17 +58,17 @@ fn n01_the_folder_lock_follows_no_link_and_takes_no_other_users_folder() {
     assert_eq!(unsafe { libc::mkfifo(fifo.as_ptr(), 0o600) }, 0);
     let e = tb_table::FolderLock::acquire(&d.join("out2"))
         .err()
-        .expect("a FIFO lock is refused")
-        .to_string();
-    assert!(e.contains("is not a regular file"), "{e}");
+        .expect("a FIFO lock is refused");
+    assert!(matches!(e.kind(), std::io::ErrorKind::InvalidInput), "{e}");
+    assert!(e.to_string().contains("is not a regular file"), "{e}");
     // A hard link to a file of the user's (M18): refused, nothing written through it.
     std::fs::create_dir(d.join("out3")).unwrap();
     std::fs::hard_link(&victim, d.join("out3/.twinbench.lock")).unwrap();
     let e = tb_table::FolderLock::acquire(&d.join("out3"))
         .err()
-        .expect("a hard-linked lock is refused")
-        .to_string();
-    assert!(e.contains("has 2 hard links"), "{e}");
+        .expect("a hard-linked lock is refused");
+    assert!(matches!(e.kind(), std::io::ErrorKind::InvalidInput), "{e}");
+    assert!(e.to_string().contains("has 2 hard links"), "{e}");
     assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
     // Another user's folder (only root can make one here).
     if unsafe { libc::geteuid() } == 0 {
@@ -74,10 +78,10 @@ fn n01_the_folder_lock_follows_no_link_and_takes_no_other_users_folder() {
         assert_eq!(unsafe { libc::chown(c.as_ptr(), 1234, 1234) }, 0);
         let e = tb_table::FolderLock::acquire(&other)
             .err()
-            .expect("another user's folder is refused")
-            .to_string();
+            .expect("another user's folder is refused");
+        assert!(matches!(e.kind(), std::io::ErrorKind::InvalidInput), "{e}");
         assert_contains(
-            &e,
+            &e.to_string(),
             &["the folder belongs to user id 1234, not to this user (0)"],
         );
     }

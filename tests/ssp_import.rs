@@ -10,6 +10,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
+use tb_cosim::ssp_import::SspImportError;
 use tb_cosim::{Plan, Simulation, SystemError};
 use tb_fmi::FmuCache;
 use tb_testkit::assert_contains;
@@ -299,20 +300,22 @@ fn hand_package(dir: &Path, name: &str, ssd: &str, rotor_ssv: &str, leave_out: &
     p
 }
 
-fn load_err(ssp: &Path) -> String {
+/// The error loading `ssp` gives: the package's own (an SSP import error), the test fails
+/// on any other.
+fn load_err(ssp: &Path) -> SspImportError {
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
     match Plan::load(ssp, cache) {
         Ok(_) => panic!("{} loaded", ssp.display()),
-        Err(e) => {
-            assert!(
-                matches!(e, SystemError::Ssp(_) | SystemError::Invalid { .. }),
-                "{e:?}"
-            );
+        Err(SystemError::Ssp(e)) => {
             eprintln!("{e}");
-            e.to_string()
+            *e
         }
+        Err(e) => panic!("{}: not an SSP import error: {e:?}", ssp.display()),
     }
 }
+
+/// The SSD's name inside a package.
+const SSD: &str = "SystemStructure.ssd";
 
 #[test]
 fn hand_written_ssp_gives_what_physics_says() {
@@ -385,8 +388,12 @@ fn unsupported_elements_are_named_with_their_line() {
     let ssd = hand_ssd("\n      <ssd:System name=\"inner\"/>", "");
     let e = load_err(&hand_package(dir.path(), "nested.ssp", &ssd, ROTOR_SSV, ""));
     let line = line_of(&ssd, "name=\"inner\"");
-    assert_contains(&e, &["nested.ssp", "SystemStructure.ssd"]);
-    assert_contains(&e, &[&format!("line {line}"), "<System>", "nested systems"]);
+    assert!(
+        matches!(&e, SspImportError::Unsupported { ssp, file, line: l, element, .. }
+            if ssp.ends_with("nested.ssp") && file == SSD && *l == line && element == "System"),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["nested systems"]);
     // A signal dictionary.
     let ssd = hand_ssd("", "").replace(
         "    <ssd:Elements>",
@@ -394,24 +401,25 @@ fn unsupported_elements_are_named_with_their_line() {
     );
     let e = load_err(&hand_package(dir.path(), "dict.ssp", &ssd, ROTOR_SSV, ""));
     let line = line_of(&ssd, "SignalDictionaries");
-    assert_contains(
-        &e,
-        &[
-            &format!("line {line}"),
-            "<SignalDictionaries>",
-            "signal dictionaries",
-        ],
+    assert!(
+        matches!(&e, SspImportError::Unsupported { line: l, element, .. }
+            if *l == line && element == "SignalDictionaries"),
+        "{e}"
     );
+    assert_contains(&e.to_string(), &["signal dictionaries"]);
     // A mapping transformation.
     let ssd = hand_ssd(
         "",
         "\n      <ssd:Connection startElement=\"speed\" startConnector=\"Boolean_output\" endElement=\"conv\" endConnector=\"Int32_input\"><ssc:BooleanMappingTransformation/></ssd:Connection>",
     );
     let e = load_err(&hand_package(dir.path(), "map.ssp", &ssd, ROTOR_SSV, ""));
-    assert_contains(
-        &e,
-        &["<BooleanMappingTransformation>", "LinearTransformation"],
+    assert!(
+        matches!(&e, SspImportError::Unsupported { element, .. }
+            if element == "BooleanMappingTransformation"),
+        "{e}"
     );
+    // What is supported instead.
+    assert_contains(&e.to_string(), &["LinearTransformation"]);
     // A connection to the system's own connector.
     let ssd = hand_ssd(
         "",
@@ -424,17 +432,22 @@ fn unsupported_elements_are_named_with_their_line() {
         ROTOR_SSV,
         "",
     ));
-    assert!(e.contains("system's own connectors"), "{e}");
+    assert!(
+        matches!(&e, SspImportError::Unsupported { element, .. } if element == "Connection"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("system's own connectors"), "{e}");
     // A parameter mapping.
     let ssd = hand_ssd("", "").replace(
         "<ssd:ParameterBinding source=\"resources/speed.ssv\"/>",
         "<ssd:ParameterBinding source=\"resources/speed.ssv\"><ssd:ParameterMapping source=\"resources/m.ssm\"/></ssd:ParameterBinding>",
     );
     let e = load_err(&hand_package(dir.path(), "pmap.ssp", &ssd, ROTOR_SSV, ""));
-    assert_contains(
-        &e,
-        &["<ParameterMapping>", "parameter mappings are not supported"],
+    assert!(
+        matches!(&e, SspImportError::Unsupported { element, .. } if element == "ParameterMapping"),
+        "{e}"
     );
+    assert_contains(&e.to_string(), &["parameter mappings are not supported"]);
 }
 
 #[test]
@@ -450,14 +463,11 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         "resources/dyno.fmu",
     );
     let e = load_err(&ssp);
-    assert_contains(
-        &e,
-        &[
-            "nodyno.ssp",
-            "component 'rotor'",
-            "'resources/dyno.fmu' is not in the package",
-            "resources/Feedthrough.fmu",
-        ],
+    assert!(
+        matches!(&e, SspImportError::MissingFmu { ssp, component, fmu, available }
+            if ssp.ends_with("nodyno.ssp") && component == "rotor" && fmu == "resources/dyno.fmu"
+                && available.contains("resources/Feedthrough.fmu")),
+        "{e}"
     );
     // The binary says the same, exits with an error and leaves nothing behind.
     let out = twinbench(tmp.path()).arg("run").arg(&ssp).output().unwrap();
@@ -474,21 +484,25 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
     ssd = ssd.replacen("<ssd:Elements>", "<ssd:Elements></ssd:Element>", 1);
     let ssp = hand_package(dir.path(), "malformed.ssp", &ssd, ROTOR_SSV, "");
     let e = load_err(&ssp);
-    assert_contains(
-        &e,
-        &[
-            "malformed.ssp",
-            "SystemStructure.ssd",
-            &format!("line {bad_line}"),
-            "malformed XML",
-        ],
+    assert!(
+        matches!(&e, SspImportError::Xml { ssp, file, line, .. }
+            if ssp.ends_with("malformed.ssp") && file == SSD && *line == bad_line),
+        "{e}"
     );
     let out = twinbench(tmp.path()).arg("run").arg(&ssp).output().unwrap();
     assert!(!out.status.success());
     // An unclosed document.
     let ssd = hand_ssd("", "").replace("</ssd:SystemStructureDescription>\n", "");
     let e = load_err(&hand_package(dir.path(), "cut.ssp", &ssd, ROTOR_SSV, ""));
-    assert_contains(&e, &["not closed", "SystemStructureDescription"]);
+    assert!(
+        matches!(&e, SspImportError::Xml { file, .. } if file == SSD),
+        "{e}"
+    );
+    // The element left open.
+    assert_contains(
+        &e.to_string(),
+        &["not closed", "SystemStructureDescription"],
+    );
     // A parameter of the .ssv naming no variable of the FMU.
     let rotor = ROTOR_SSV.replace("name=\"inertia\"", "name=\"inertiaa\"");
     let ssp = hand_package(dir.path(), "badparam.ssp", &hand_ssd("", ""), &rotor, "");
@@ -498,16 +512,13 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         .position(|l| String::from_utf8_lossy(l).contains("inertiaa"))
         .unwrap()
         + 1;
-    assert_contains(
-        &e,
-        &[
-            "badparam.ssp",
-            "resources/rotor.ssv",
-            &format!("line {line}"),
-            "no variable 'inertiaa'",
-            "inertia",
-        ],
+    assert!(
+        matches!(&e, SspImportError::Invalid { ssp, file, line: l, .. }
+            if ssp.ends_with("badparam.ssp") && file == "resources/rotor.ssv" && *l == line),
+        "{e}"
     );
+    // The name, and the closest one the FMU has.
+    assert_contains(&e.to_string(), &["no variable 'inertiaa'", "inertia"]);
     // No SSD, a missing .ssv, an SSD nested too deep: named, no panic.
     let ssp = hand_package(
         dir.path(),
@@ -517,7 +528,11 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         "SystemStructure.ssd",
     );
     let e = load_err(&ssp);
-    assert_contains(&e, &["nossd.ssp: the package has no SystemStructure.ssd"]);
+    assert!(matches!(&e, SspImportError::Package { .. }), "{e}");
+    assert_contains(
+        &e.to_string(),
+        &["nossd.ssp: the package has no SystemStructure.ssd"],
+    );
     let ssp = hand_package(
         dir.path(),
         "nossv.ssp",
@@ -526,13 +541,22 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         "resources/speed.ssv",
     );
     let e = load_err(&ssp);
+    assert!(
+        matches!(&e, SspImportError::Invalid { ssp, file, .. }
+            if ssp.ends_with("nossv.ssp") && file == SSD),
+        "{e}"
+    );
     assert_contains(
-        &e,
-        &["nossv.ssp", "'resources/speed.ssv' is not in the package"],
+        &e.to_string(),
+        &["'resources/speed.ssv' is not in the package"],
     );
     let deep = format!("{HEAD}{}", "<ssd:System>".repeat(100_000));
     let e = load_err(&hand_package(dir.path(), "deep.ssp", &deep, ROTOR_SSV, ""));
-    assert!(e.contains("nested deeper than"), "{e}");
+    assert!(
+        matches!(&e, SspImportError::Xml { file, .. } if file == SSD),
+        "{e}"
+    );
+    assert!(e.to_string().contains("nested deeper than"), "{e}");
     // An entry escaping the package is refused by the archive checks before anything is written.
     let evil = dir.path().join("evil.ssp");
     let ssd = hand_ssd("", "");
@@ -544,7 +568,13 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         ],
     );
     let e = load_err(&evil);
-    assert_contains(&e, &["evil.ssp", "escapes the archive"]);
+    assert!(
+        matches!(&e, SspImportError::Archive(a)
+            if matches!(&**a, tb_fmi::FmuError::Archive { path, .. }
+                if path.ends_with("evil.ssp"))),
+        "{e}"
+    );
+    assert!(e.to_string().contains("escapes the archive"), "{e}");
     assert!(!dir.path().parent().unwrap().join("evil.ssd").exists());
     let out = twinbench(tmp.path())
         .arg("run")
@@ -577,6 +607,8 @@ fn damaged_ssds_are_errors_not_panics() {
             let e = Plan::load(&p, cache.clone())
                 .err()
                 .expect("a damaged package loads");
+            // The package's own error, never another kind (an FMU's, a panic's).
+            assert!(matches!(e, SystemError::Ssp(_)), "{e:?}");
             assert!(e.to_string().contains("damaged.ssp"), "{e}");
             cases += 1;
         }
@@ -664,7 +696,11 @@ fn n29_degenerate_units_and_parameter_sets_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let zero = hand_ssd("", "").replace("factor=\"0.2777777777777778\"", "factor=\"0\"");
     let e = load_err(&hand_package(dir.path(), "zero.ssp", &zero, ROTOR_SSV, ""));
-    assert_contains(&e, &["unit 'km/h': factor 0.0 and offset 0.0 do not define a unit (a finite, non-zero factor)"]);
+    assert!(
+        matches!(&e, SspImportError::Invalid { file, .. } if file == SSD),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["unit 'km/h': factor 0.0 and offset 0.0 do not define a unit (a finite, non-zero factor)"]);
     let twice = format!(
         "{ROTOR_SSV}\n    <ssv:Parameter name=\"inertia\"><ssv:Real value=\"3.0\" unit=\"kg.m2\"/></ssv:Parameter>"
     );
@@ -676,7 +712,12 @@ fn n29_degenerate_units_and_parameter_sets_are_refused() {
         "",
     ));
     assert!(
-        e.contains("is set twice in this parameter set (first at line"),
+        matches!(&e, SspImportError::Invalid { file, .. } if file == "resources/rotor.ssv"),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .contains("is set twice in this parameter set (first at line"),
         "{e}"
     );
     // The Feedthrough's unitless parameter given in percent: converted (150 % = 1.5).
@@ -699,8 +740,12 @@ fn n29_degenerate_units_and_parameter_sets_are_refused() {
         "<ssv:Real value=\"500\" unit=\"ms\"/>",
     );
     let e = load_err(&hand_package(dir.path(), "ms.ssp", &ms, ROTOR_SSV, ""));
+    assert!(
+        matches!(&e, SspImportError::Invalid { file, .. } if file == SSD),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["parameter 'conv.Float64_fixed_parameter': incompatible units 'ms' and '1'"],
     );
 }

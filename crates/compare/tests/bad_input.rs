@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 use tb_compare::{DistanceSource, Measurement};
+use tb_measurement::Error;
+use tb_table::TableError;
 
 const HEADER: &str = "time,distance,v,Fz_fl,Fz_fr,Fz_rl,Fz_rr\n";
 
@@ -13,66 +15,100 @@ fn write(name: &str, text: &str) -> (tempfile::TempDir, PathBuf) {
     (dir, p)
 }
 
-fn error_of(name: &str, text: &str) -> String {
+fn error_of(name: &str, text: &str) -> Error {
     let (_dir, p) = write(name, text);
-    let e = Measurement::read_path(&p).unwrap_err().to_string();
-    assert!(e.contains(name), "message names the file: {e}");
+    let e = Measurement::read_path(&p).unwrap_err();
+    assert!(e.to_string().contains(name), "message names the file: {e}");
     e
 }
 
-/// Each malformed file is refused with an error that names the file (`error_of`), the
-/// 1-based line and the column; the failure names the case.
+/// Whether an error is of the kind a case expects.
+type Kind = fn(&Error) -> bool;
+
+/// Each malformed file is refused with an error of its kind that names the file
+/// (`error_of`), the 1-based line and the column; the failure names the case.
 #[test]
 fn malformed_files_name_line_and_column() {
     let rows = |data: &str| format!("{HEADER}{data}");
-    let cases = [
+    let cases: [(&str, String, Kind, &str); 10] = [
         (
             "nan.csv",
             rows("0,0,10,1,1,1,1\n0.1,1,10,1,NaN,1,1\n0.2,2,10,1,1,1,1\n"),
+            |e| matches!(e, Error::Table(TableError::NonFinite { row: 3, column, .. }) if column == "Fz_fr"),
             "line 3, column `Fz_fr`: value NaN is not finite",
         ),
         (
             "inf.csv",
             rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,2,inf,1,1,1,1\n"),
+            |e| matches!(e, Error::Table(TableError::NonFinite { row: 4, column, .. }) if column == "v"),
             "line 4, column `v`: value inf is not finite",
         ),
         (
             "time.csv",
             rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.1,2,10,1,1,1,1\n"),
+            |e| matches!(e, Error::NonIncreasingTime { row: 4, column, .. } if column == "time"),
             "line 4, column `time`: time does not increase (0.1 after 0.1)",
         ),
         (
             "back.csv",
             rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,0.5,10,1,1,1,1\n"),
+            |e| matches!(e, Error::DistanceBackwards { row: 4, column, .. } if column == "distance"),
             "line 4, column `distance`: distance runs backwards (0.5 after 1)",
         ),
         (
             "missing.csv",
             "time,distance,v,Fz_fl,Fz_fr,Fz_rl\n0,0,10,1,1,1\n".to_string(),
+            |e| matches!(e, Error::MissingSignal { signal, .. } if signal == "Fz_rr"),
             "missing required column `Fz_rr`",
         ),
         (
             "malformed.csv",
             rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1,1\n0.2,2,1O,1,1,1,1\n"),
+            |e| matches!(e, Error::Table(TableError::Malformed { row: 4, column, .. }) if column == "v"),
             "line 4, column `v`: malformed number \"1O\"",
         ),
-        ("empty.csv", String::new(), "empty file: no header row"),
-        ("header.csv", HEADER.to_string(), "no data rows"),
+        (
+            "empty.csv",
+            String::new(),
+            |e| matches!(e, Error::Table(TableError::Empty { .. })),
+            "empty file: no header row",
+        ),
+        (
+            "header.csv",
+            HEADER.to_string(),
+            |e| matches!(e, Error::Table(TableError::Empty { .. })),
+            "no data rows",
+        ),
         (
             "ragged.csv",
             rows("0,0,10,1,1,1,1\n0.1,1,10,1,1,1\n"),
+            |e| {
+                matches!(
+                    e,
+                    Error::Table(TableError::RaggedRow {
+                        row: 3,
+                        expected: 7,
+                        ..
+                    })
+                )
+            },
             "line 3: expected 7 fields",
         ),
         // A units row and blank lines keep the line numbers.
         (
             "units.csv",
             rows("s,m,m/s,N,N,N,N\n0,0,10,1,1,1,1\n\n0.1,1,10,1,1,-inf,1\n"),
+            |e| matches!(e, Error::Table(TableError::NonFinite { row: 5, column, .. }) if column == "Fz_rl"),
             "line 5, column `Fz_rl`",
         ),
     ];
-    for (name, text, expected) in cases {
+    for (name, text, kind, expected) in cases {
         let e = error_of(name, &text);
-        assert!(e.contains(expected), "{name}: {expected:?} is not in: {e}");
+        assert!(kind(&e), "{name}: not of the expected kind: {e:?}");
+        assert!(
+            e.to_string().contains(expected),
+            "{name}: {expected:?} is not in: {e}"
+        );
     }
 }
 

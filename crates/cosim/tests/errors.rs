@@ -224,9 +224,13 @@ fn instances_and_fmus_are_named_once_and_must_exist() {
         "lap/system.toml",
         "[fmus]\ngain = \"fmu/gain.fmu\"\n[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[experiment]\nstep = 0.5\nstop = 1.0\n",
     );
-    let e = b.load(&path).err().expect("refused").to_string();
+    let e = b.load(&path).err().expect("refused");
+    assert!(
+        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("lap/system.toml")),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &[
             "lap/system.toml: [fmus] gain: ",
             "lap/fmu/gain.fmu does not exist (paths in a system file are relative to its folder)",
@@ -344,24 +348,32 @@ fn experiment_values_that_cannot_be_run_are_refused() {
 #[test]
 fn a_file_that_is_not_a_system_file_says_what_it_is() {
     let b = Bench::new();
-    let e = SystemFile::load(&b.path("fmu/gain.fmu"))
-        .unwrap_err()
-        .to_string();
+    let e = SystemFile::load(&b.path("fmu/gain.fmu")).unwrap_err();
+    assert!(
+        matches!(&e, SystemError::File { path, .. } if path.ends_with("fmu/gain.fmu")),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["gain.fmu: is a ZIP archive (an FMU?), not a system file: `run` takes a system file (TOML), an SSP 1.0 package (.ssp) or an FMU named .fmu"],
     );
     let bin = b.path("bin.toml");
     std::fs::write(&bin, [b'a', 0xff, b'b']).unwrap();
-    let e = SystemFile::load(&bin).unwrap_err().to_string();
+    let e = SystemFile::load(&bin).unwrap_err();
+    assert!(
+        matches!(&e, SystemError::File { path, .. } if *path == bin),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &["is not a text file (byte 1 is not UTF-8): a system file is TOML"],
     );
-    let e = SystemFile::load(&b.path("none.toml"))
-        .unwrap_err()
-        .to_string();
-    assert_contains(&e, &["none.toml: cannot read:"]);
+    let e = SystemFile::load(&b.path("none.toml")).unwrap_err();
+    assert!(
+        matches!(&e, SystemError::File { path, .. } if path.ends_with("none.toml")),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["none.toml: cannot read:"]);
     let e = b.error(
         "[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[experiment]\nstep = 0.5\nstop = true\n",
     );

@@ -189,8 +189,12 @@ fn the_plans_stop_condition_is_an_observer_before_the_callers() {
     // A condition that never holds still fails the run at max_time, observed or not.
     let text = system("stop = \"int.x < 0\"\nmax_time = 0.5");
     let (mut sim, seen) = watched(&b, &text, |_| {});
-    let e = sim.run().unwrap_err().to_string();
-    assert_contains(&e, &["did not complete within max_time = 0.5 s"]);
+    let e = sim.run().unwrap_err();
+    assert!(matches!(e, SystemError::Stop(_)), "{e:?}");
+    assert_contains(
+        &e.to_string(),
+        &["did not complete within max_time = 0.5 s"],
+    );
     // The caller's observer was not told of a finish: the run failed.
     assert!(seen.lock().unwrap().finished.is_empty());
 }

@@ -8,8 +8,10 @@ mod support;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use support::Bench;
-use tb_cosim::ssp::{export, ExportOptions};
-use tb_cosim::{ssp_import, Algorithm, Simulation, StopConfig};
+use tb_cosim::ssp::{export, ExportOptions, SspError};
+use tb_cosim::ssp_import::SspImportError;
+use tb_cosim::{ssp_import, Algorithm, Simulation, StopConfig, SystemError};
+use tb_fmi::FmuError;
 use tb_testkit::assert_contains;
 
 /// Every kind of connection and parameter, a stop condition, a report and a check.
@@ -272,11 +274,10 @@ fn a_system_with_replays_has_no_ssp_equivalent() {
     let plan = b
         .plan("connections = [\"r.a -> g.u\"]\n[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[[replay]]\nname = \"r\"\nfile = \"a.csv\"\nbasis = \"time\"\n[experiment]\nstep = 0.5\nstop = 1.0\n")
         .unwrap();
-    let e = export(&plan, &b.path("r.ssp"), &ExportOptions::default())
-        .unwrap_err()
-        .to_string();
+    let e = export(&plan, &b.path("r.ssp"), &ExportOptions::default()).unwrap_err();
+    assert!(matches!(e, SspError::Unsupported(_)), "{e}");
     assert_contains(
-        &e,
+        &e.to_string(),
         &[
             "replayed measurement channels (replay 'r',",
             "cannot be expressed in SSP 1.0",
@@ -289,6 +290,7 @@ fn a_system_with_replays_has_no_ssp_equivalent() {
         stop_time: Some(-1.0),
     };
     let e = export(&plan, &b.path("r.ssp"), &options).unwrap_err();
+    assert!(matches!(e, SspError::Unsupported(_)), "{e}");
     assert_contains(
         &e.to_string(),
         &["stop time -1 is not after the start time 0"],
@@ -304,18 +306,24 @@ fn packages_the_import_cannot_run_are_refused_naming_what_is_wrong() {
     rewrite(&out, &bad, |n, bytes| {
         (n != "resources/gain.fmu").then_some(bytes)
     });
-    let e = ssp_import::load(&bad, &b.cache).unwrap_err().to_string();
-    assert_contains(
-        &e,
-        &["nofmu.ssp: component 'g': its FMU 'resources/gain.fmu' is not in the package (FMUs in it: resources/integrator.fmu, resources/sink.fmu, resources/source.fmu)"],
+    let e = ssp_import::load(&bad, &b.cache).unwrap_err();
+    assert!(
+        matches!(&e, SspImportError::MissingFmu { ssp, component, fmu, available }
+            if ssp.ends_with("nofmu.ssp") && component == "g" && fmu == "resources/gain.fmu"
+                && available == "resources/integrator.fmu, resources/sink.fmu, resources/source.fmu"),
+        "{e}"
     );
     // No SSD.
     let bad = b.path("nossd.ssp");
     rewrite(&out, &bad, |n, bytes| {
         (n != "SystemStructure.ssd").then_some(bytes)
     });
-    let e = ssp_import::load(&bad, &b.cache).unwrap_err().to_string();
-    assert_contains(&e, &["nossd.ssp: the package has no SystemStructure.ssd"]);
+    let e = ssp_import::load(&bad, &b.cache).unwrap_err();
+    assert!(matches!(e, SspImportError::Package { .. }), "{e}");
+    assert_contains(
+        &e.to_string(),
+        &["nossd.ssp: the package has no SystemStructure.ssd"],
+    );
     // A nested system, named with its line.
     let bad = b.path("nested.ssp");
     replace_in_ssd(
@@ -329,28 +337,32 @@ fn packages_the_import_cannot_run_are_refused_naming_what_is_wrong() {
         .position(|l| l.contains("name=\"inner\""))
         .unwrap()
         + 1;
-    let e = ssp_import::load(&bad, &b.cache).unwrap_err().to_string();
-    assert_contains(
-        &e,
-        &[
-            "nested.ssp: SystemStructure.ssd, line ",
-            &format!("line {line}"),
-            "<System>",
-            "nested systems",
-        ],
+    let e = ssp_import::load(&bad, &b.cache).unwrap_err();
+    assert!(
+        matches!(&e, SspImportError::Unsupported { ssp, file, line: l, element, .. }
+            if ssp.ends_with("nested.ssp") && file == "SystemStructure.ssd" && *l == line
+                && element == "System"),
+        "{e}"
     );
+    assert_contains(&e.to_string(), &["nested systems"]);
     // Malformed XML.
     let bad = b.path("malformed.ssp");
     rewrite_ssd(&out, &bad, |ssd| ssd[..ssd.len() / 2].to_vec());
-    let e = ssp_import::load(&bad, &b.cache).unwrap_err().to_string();
-    assert_contains(
-        &e,
-        &["malformed.ssp: SystemStructure.ssd, line", "malformed XML"],
+    let e = ssp_import::load(&bad, &b.cache).unwrap_err();
+    assert!(
+        matches!(&e, SspImportError::Xml { ssp, file, .. }
+            if ssp.ends_with("malformed.ssp") && file == "SystemStructure.ssd"),
+        "{e}"
     );
     // Not a zip at all.
     let bad = b.write("text.ssp", "not a package");
-    let e = ssp_import::load(&bad, &b.cache).unwrap_err().to_string();
-    assert_contains(&e, &["text.ssp", "not a valid zip archive"]);
+    let e = ssp_import::load(&bad, &b.cache).unwrap_err();
+    assert!(
+        matches!(&e, SspImportError::Archive(a)
+            if matches!(&**a, FmuError::Archive { path, .. } if path.ends_with("text.ssp"))),
+        "{e}"
+    );
+    assert_contains(&e.to_string(), &["not a valid zip archive"]);
     assert!(ssp_import::is_ssp(&bad) && !ssp_import::is_ssp(&b.path("system.toml")));
 }
 
@@ -365,9 +377,15 @@ fn a_parameter_of_a_package_must_name_a_variable_of_its_fmu() {
         "<ssv:Parameter name=\"level\">",
         "<ssv:Parameter name=\"levle\">",
     );
-    let e = b.load(&bad).err().expect("refused").to_string();
+    let e = b.load(&bad).err().expect("refused");
+    assert!(
+        matches!(&e, SystemError::Ssp(s)
+            if matches!(&**s, SspImportError::Invalid { file, .. }
+                if file == "SystemStructure.ssd")),
+        "{e}"
+    );
     assert_contains(
-        &e,
+        &e.to_string(),
         &[
             "badparam.ssp: SystemStructure.ssd, line ",
             "parameter 'levle' of component 'snk': the FMU resources/sink.fmu has no variable 'levle' (closest: level, limit, mode)",

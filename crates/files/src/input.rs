@@ -160,15 +160,19 @@ mod tests {
         std::fs::write(&p, "\u{feff}12345").unwrap();
         assert_eq!(read_to_string(&p, SMALL).unwrap(), "12345");
         std::fs::write(&p, "123456789").unwrap();
-        let e = read(&p, SMALL).unwrap_err().to_string();
+        let e = read(&p, SMALL).unwrap_err();
+        assert!(matches!(e.kind(), ErrorKind::InvalidData), "{e}");
         assert!(
-            e.contains("9 bytes is more than the 8 bytes a test file may have"),
+            e.to_string()
+                .contains("9 bytes is more than the 8 bytes a test file may have"),
             "{e}"
         );
         std::fs::write(&p, b"ab\xffcd").unwrap();
-        let e = read_to_string(&p, SMALL).unwrap_err().to_string();
+        let e = read_to_string(&p, SMALL).unwrap_err();
+        assert!(matches!(e.kind(), ErrorKind::InvalidData), "{e}");
         assert!(
-            e.contains("is not a text file (byte 2 is not UTF-8)"),
+            e.to_string()
+                .contains("is not a text file (byte 2 is not UTF-8)"),
             "{e}"
         );
     }
@@ -180,21 +184,28 @@ mod tests {
         let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
         assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
         // No writer: a plain open would block here for ever.
-        let e = read(&fifo, Limit::CONFIG).unwrap_err().to_string();
-        assert!(e.contains("is a FIFO, not a regular file"), "{e}");
-        let e = read(Path::new("/dev/zero"), Limit::DATA)
-            .unwrap_err()
-            .to_string();
+        let e = read(&fifo, Limit::CONFIG).unwrap_err();
+        assert!(matches!(e.kind(), ErrorKind::InvalidInput), "{e}");
         assert!(
-            e.contains("/dev/zero: is a device, not a regular file"),
+            e.to_string().contains("is a FIFO, not a regular file"),
             "{e}"
         );
-        let e = read(dir.path(), Limit::CONFIG).unwrap_err().to_string();
-        assert!(e.contains("is a folder"), "{e}");
-        let e = read(&dir.path().join("missing"), Limit::CONFIG)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("missing: cannot read: No such file"), "{e}");
+        let e = read(Path::new("/dev/zero"), Limit::DATA).unwrap_err();
+        assert!(matches!(e.kind(), ErrorKind::InvalidInput), "{e}");
+        assert!(
+            e.to_string()
+                .contains("/dev/zero: is a device, not a regular file"),
+            "{e}"
+        );
+        let e = read(dir.path(), Limit::CONFIG).unwrap_err();
+        assert!(matches!(e.kind(), ErrorKind::InvalidInput), "{e}");
+        assert!(e.to_string().contains("is a folder"), "{e}");
+        let e = read(&dir.path().join("missing"), Limit::CONFIG).unwrap_err();
+        assert!(matches!(e.kind(), ErrorKind::NotFound), "{e}");
+        assert!(
+            e.to_string().contains("missing: cannot read: No such file"),
+            "{e}"
+        );
     }
 
     #[test]

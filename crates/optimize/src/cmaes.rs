@@ -371,8 +371,9 @@ mod tests {
         ] {
             let mut bad = good.clone();
             bad["sigma"] = edit;
-            let e = fresh.restore(&bad).unwrap_err().to_string();
-            assert!(e.contains(expected), "{e}");
+            let e = fresh.restore(&bad).unwrap_err();
+            assert!(matches!(e, OptimizeError::Checkpoint(_)), "{e}");
+            assert!(e.to_string().contains(expected), "{e}");
         }
         let mut bad = good.clone();
         bad["mean"][0] = bits(f64::INFINITY);

@@ -140,6 +140,8 @@ pub(crate) fn too_long(
 
 #[cfg(test)]
 mod tests {
+    use super::FmuError;
+
     #[test]
     fn a_library_for_another_machine_is_named_as_such() {
         let dir = std::env::temp_dir().join(format!("tb-elf-{}", std::process::id()));
@@ -151,11 +153,23 @@ mod tests {
         head[18..20].copy_from_slice(&183u16.to_le_bytes()); // aarch64
         let so = dir.join("arm.so");
         std::fs::write(&so, &head).unwrap();
-        let e = super::check_elf(&so).unwrap_err().to_string();
-        assert!(e.contains("a library for aarch64 (ELF machine 183)"), "{e}");
+        let e = super::check_elf(&so).unwrap_err();
+        assert!(
+            matches!(&e, FmuError::Load { path, .. } if *path == so),
+            "{e}"
+        );
+        assert!(
+            e.to_string()
+                .contains("a library for aarch64 (ELF machine 183)"),
+            "{e}"
+        );
         std::fs::write(&so, b"not a library at all, just text").unwrap();
-        let e = super::check_elf(&so).unwrap_err().to_string();
-        assert!(e.contains("not an ELF shared library"), "{e}");
+        let e = super::check_elf(&so).unwrap_err();
+        assert!(
+            matches!(&e, FmuError::Load { path, .. } if *path == so),
+            "{e}"
+        );
+        assert!(e.to_string().contains("not an ELF shared library"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -280,17 +280,53 @@ mod tests {
 
     #[test]
     fn bad_settings_name_the_key_and_what_was_expected() {
-        for (text, says) in [
-            ("memory", "is not key=value"),
-            ("disk=1G", "unknown limit 'disk'"),
-            ("memory=lots", "memory = 'lots' is not a size"),
-            ("files=1.5", "files = '1.5' is not a whole number"),
-            ("memory=1K", "memory = 1 KiB is outside [64 MiB, 64 TiB]"),
-            ("threads=0", "threads = 0 is outside [1, 65536]"),
-            ("scratch=99999999999999999999", "is not a size"),
-            ("scratch=18446744073709551615T", "is not a size"),
-        ] {
+        // Each case: the setting, its kind of error, what the message says.
+        type Kind = fn(&LimitsError) -> bool;
+        let cases: [(&str, Kind, &str); 8] = [
+            (
+                "memory",
+                |e| matches!(e, LimitsError::NotKeyValue { item } if item == "memory"),
+                "is not key=value",
+            ),
+            (
+                "disk=1G",
+                |e| matches!(e, LimitsError::UnknownKey { key } if key == "disk"),
+                "unknown limit 'disk'",
+            ),
+            (
+                "memory=lots",
+                |e| matches!(e, LimitsError::NotANumber { key, size: true, .. } if key == "memory"),
+                "memory = 'lots' is not a size",
+            ),
+            (
+                "files=1.5",
+                |e| matches!(e, LimitsError::NotANumber { key, size: false, .. } if key == "files"),
+                "files = '1.5' is not a whole number",
+            ),
+            (
+                "memory=1K",
+                |e| matches!(e, LimitsError::OutOfRange { key, .. } if key == "memory"),
+                "memory = 1 KiB is outside [64 MiB, 64 TiB]",
+            ),
+            (
+                "threads=0",
+                |e| matches!(e, LimitsError::OutOfRange { key, .. } if key == "threads"),
+                "threads = 0 is outside [1, 65536]",
+            ),
+            (
+                "scratch=99999999999999999999",
+                |e| matches!(e, LimitsError::NotANumber { key, size: true, .. } if key == "scratch"),
+                "is not a size",
+            ),
+            (
+                "scratch=18446744073709551615T",
+                |e| matches!(e, LimitsError::NotANumber { key, size: true, .. } if key == "scratch"),
+                "is not a size",
+            ),
+        ];
+        for (text, kind, says) in cases {
             let e = Limits::parse(text).unwrap_err();
+            assert!(kind(&e), "{text}: {e:?}");
             assert!(e.to_string().contains(says), "{text}: {e}");
         }
     }

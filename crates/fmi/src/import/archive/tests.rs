@@ -360,9 +360,13 @@ mod cache_and_checks {
         // and the mode.
         std::fs::set_permissions(s.store(), std::fs::Permissions::from_mode(0o775)).unwrap();
         let l = s.cache().load(&fmu).unwrap();
-        let e = l.checked_library().unwrap_err().to_string();
+        let e = l.checked_library().unwrap_err();
         assert!(
-            e.contains(&format!(
+            matches!(&e, FmuError::Archive { path, .. } if *path == fmu),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains(&format!(
                 "{}: mode 775: group or others can write it",
                 s.store().display()
             )),
@@ -379,10 +383,14 @@ mod cache_and_checks {
             max_entries: 2,
             max_total_bytes: MAX_TOTAL_BYTES,
         });
-        let e = few.load(&fmu).err().expect("refused").to_string();
+        let e = few.load(&fmu).err().expect("refused");
         assert!(
-            e.contains(&fmu.display().to_string())
-                && e.contains("3 entries, more than the limit of 2"),
+            matches!(&e, FmuError::Archive { path, .. } if *path == fmu),
+            "{e}"
+        );
+        assert!(
+            e.to_string()
+                .contains("3 entries, more than the limit of 2"),
             "{e}"
         );
         assert_eq!(few.stats(), stats(0, 1, 0));
@@ -408,9 +416,13 @@ mod cache_and_checks {
         let fmu = s.dir.path().join("m.fmu");
         std::fs::write(&fmu, fmu_bytes_with("first", false)).unwrap();
         let refused = |c: &FmuCache| {
-            let e = c.load(&fmu).err().expect("refused").to_string();
+            let e = c.load(&fmu).err().expect("refused");
             assert!(
-                e.contains("no binaries/linux64/m.so (the FMU has no binary for this platform; it has no binaries at all)"),
+                matches!(&e, FmuError::Archive { path, .. } if *path == fmu),
+                "{e}"
+            );
+            assert!(
+                e.to_string().contains("no binaries/linux64/m.so (the FMU has no binary for this platform; it has no binaries at all)"),
                 "{e}"
             );
         };
@@ -418,8 +430,12 @@ mod cache_and_checks {
         let l = s.cache().description_only().load(&fmu).unwrap();
         assert_eq!(l.description.model_name, "m");
         // Its library is not there to load, and the error says which.
-        let e = l.library().err().expect("no library").to_string();
-        assert!(e.contains("binaries/linux64/m.so"), "{e}");
+        let e = l.library().err().expect("no library");
+        assert!(
+            matches!(&e, FmuError::Load { path, .. } if *path == fmu),
+            "{e}"
+        );
+        assert!(e.to_string().contains("binaries/linux64/m.so"), "{e}");
         // The store now indexes it: an ordinary cache on the same store still refuses it.
         assert_eq!(s.index_entries(), 1);
         refused(&s.cache());
