@@ -2,13 +2,14 @@
 
 mod common;
 
+use common::kinds::stopped_by;
+
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::plan::{ConversionError, OrderError};
 use tb_cosim::{Plan, Simulation, SystemError};
 use tb_fmi::fmi2::fmi2Status;
-use tb_fmi::FmiFunction::Fmi2;
-use tb_fmi::{CallStatus, FmuCache, FmuError, Function};
+use tb_fmi::{FmuCache, Function};
 use tb_testkit::assert_contains;
 
 fn root() -> PathBuf {
@@ -345,16 +346,7 @@ fn an_fmu_failing_at_one_second_stops_the_run_with_instance_time_and_log() {
     sim.echo_fmu_log = false;
     let e = sim.run().unwrap_err();
     assert!(
-        matches!(
-            &e,
-            SystemError::Fmu(FmuError::Call {
-                instance,
-                function: Fmi2(Function::DoStep),
-                status: CallStatus::Fmi2(fmi2Status::ERROR),
-                time,
-                ..
-            }) if instance == "supplier" && *time == 1.0
-        ),
+        stopped_by(&e, "supplier", Function::DoStep, fmi2Status::ERROR, 1.0),
         "{e}"
     );
     // The FMU's log: why.

@@ -3,16 +3,14 @@
 
 mod common;
 
+use common::kinds::{refused, refused_at};
+
 use common::{load, vr};
 use fmu_export::fmi2::*;
 use std::ffi::CString;
 use std::path::Path;
-use tb_fmi::FmiFunction::Fmi2;
-use tb_fmi::{CallStatus, FmuError, FmuInstance, Function, Instance, LoadedFmu};
+use tb_fmi::{FmuError, FmuInstance, Function, Instance, LoadedFmu};
 use tb_testkit::assert_contains;
-
-/// The status of a call the FMU refuses (its log says why).
-const REFUSED: CallStatus = CallStatus::Fmi2(fmi2Status::ERROR);
 
 fn faulty(name: &str) -> (std::sync::Arc<tb_fmi::LoadedFmu>, Instance) {
     let f = load("faulty");
@@ -56,17 +54,7 @@ fn illegal_call_sequences_return_error_with_a_message() {
     let (f, mut i) = faulty("order");
     // Step before initialisation: refused with fmi2Error, the FMU's log says why.
     let e = i.do_step(0.0, 0.1).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::DoStep),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::DoStep, fmi2Status::ERROR), "{e}");
     assert_contains(
         &e.to_string(),
         &["fmi2DoStep is not allowed in state 'instantiated'"],
@@ -74,14 +62,7 @@ fn illegal_call_sequences_return_error_with_a_message() {
     // Exit without enter.
     let e = i.exit_initialization_mode().unwrap_err();
     assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::ExitInitializationMode),
-                status: REFUSED,
-                ..
-            }
-        ),
+        refused(&e, Function::ExitInitializationMode, fmi2Status::ERROR),
         "{e}"
     );
     assert!(
@@ -93,17 +74,7 @@ fn illegal_call_sequences_return_error_with_a_message() {
     // Setup after initialisation, and setting a fixed parameter after it.
     assert!(i.setup_experiment(0.0.into()).is_err());
     let e = i.set_integer(&[vr(&f, "fault_kind")], &[1]).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::SetInteger),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::SetInteger, fmi2Status::ERROR), "{e}");
     assert_contains(
         &e.to_string(),
         &["'fault_kind' (fixed parameter) cannot be set in state 'step complete'"],
@@ -111,33 +82,13 @@ fn illegal_call_sequences_return_error_with_a_message() {
     // Calculated output cannot be set; unknown value reference; wrong type.
     assert!(i.set_real(&[vr(&f, "y")], &[1.0]).is_err());
     let e = i.set_real(&[9999], &[1.0]).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::SetReal),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::SetReal, fmi2Status::ERROR), "{e}");
     assert!(
         e.to_string().contains("unknown value reference 9999"),
         "{e}"
     );
     let e = i.get_real(&[vr(&f, "steps")], &mut [0.0]).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::GetReal),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::GetReal, fmi2Status::ERROR), "{e}");
     assert!(
         e.to_string()
             .contains("'steps' (vr 6) is Integer, not Real"),
@@ -153,50 +104,20 @@ fn illegal_call_sequences_return_error_with_a_message() {
 fn bad_values_are_refused_naming_the_variable() {
     let (f, mut i) = faulty("bad");
     let e = i.set_real(&[vr(&f, "gain")], &[2e6]).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::SetReal),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::SetReal, fmi2Status::ERROR), "{e}");
     assert_contains(
         &e.to_string(),
         &["'gain' = 2000000 is outside its range [-1000000, 1000000] 1"],
     );
     let e = i.set_real(&[vr(&f, "gain")], &[f64::NAN]).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::SetReal),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::SetReal, fmi2Status::ERROR), "{e}");
     assert_contains(
         &e.to_string(),
         &["'gain' set to NaN, expected a finite number"],
     );
     init(&mut i);
     let e = i.do_step(0.0, 0.0).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::DoStep),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::DoStep, fmi2Status::ERROR), "{e}");
     assert_contains(
         &e.to_string(),
         &["communicationStepSize must be positive and finite, got 0"],
@@ -230,14 +151,7 @@ fn percent_in_messages_survives_the_printf_logger() {
     let (_f, mut i) = faulty("percent");
     let e = i.set_debug_categories(true, &["100%s%d"]).unwrap_err();
     assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::SetDebugLogging),
-                status: REFUSED,
-                ..
-            }
-        ),
+        refused(&e, Function::SetDebugLogging, fmi2Status::ERROR),
         "{e}"
     );
     assert!(
@@ -256,34 +170,14 @@ fn a_panicking_model_returns_error_and_the_host_lives() {
         i.do_step(k as f64 * 0.1, 0.1).unwrap();
     }
     let e = i.do_step(0.5, 0.1).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::DoStep),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::DoStep, fmi2Status::ERROR), "{e}");
     assert_contains(
         &e.to_string(),
         &["the model panicked: fault_kind = 2: the model panics on purpose"],
     );
     // Poisoned: further calls refused, reset recovers.
     let e = i.get_real(&[vr(&f, "y")], &mut [0.0]).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::GetReal),
-                status: REFUSED,
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(refused(&e, Function::GetReal, fmi2Status::ERROR), "{e}");
     assert!(e.to_string().contains("unusable until fmi2Reset"), "{e}");
     i.reset().unwrap();
     init(&mut i);
@@ -388,14 +282,7 @@ fn restored_and_deserialized_states_repeat_bit_for_bit() {
     // Garbage is refused with a message.
     let e = other.deserialize_state(b"not a state").err().unwrap();
     assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::DeSerializeFMUstate),
-                status: REFUSED,
-                ..
-            }
-        ),
+        refused(&e, Function::DeSerializeFMUstate, fmi2Status::ERROR),
         "{e}"
     );
     assert!(e.to_string().contains("bad magic"), "{e}");
@@ -404,14 +291,7 @@ fn restored_and_deserialized_states_repeat_bit_for_bit() {
         .err()
         .unwrap();
     assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::DeSerializeFMUstate),
-                status: REFUSED,
-                ..
-            }
-        ),
+        refused(&e, Function::DeSerializeFMUstate, fmi2Status::ERROR),
         "{e}"
     );
     assert!(e.to_string().contains("truncated"), "{e}");
@@ -445,16 +325,7 @@ fn error_from_a_step_names_the_instance_and_time() {
     }
     let e = i.do_step(1.0, 0.01).unwrap_err();
     assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                instance,
-                function: Fmi2(Function::DoStep),
-                status: REFUSED,
-                time,
-                ..
-            } if instance == "fails" && *time == 1.0
-        ),
+        refused_at(&e, "fails", Function::DoStep, fmi2Status::ERROR, 1.0),
         "{e}"
     );
     // The message as the user reads it: the instance and the time first, then the FMU's.
@@ -530,14 +401,7 @@ fn missing_or_malformed_resource_is_an_error_naming_the_file() {
     let empty = scratch.path().to_path_buf();
     let e = initialisation_error(&f, "drv", &empty);
     assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::ExitInitializationMode),
-                status: REFUSED,
-                ..
-            }
-        ),
+        refused(&e, Function::ExitInitializationMode, fmi2Status::ERROR),
         "{e}"
     );
     assert!(e.to_string().contains("target_speed.csv"), "{e}");
@@ -545,14 +409,7 @@ fn missing_or_malformed_resource_is_an_error_naming_the_file() {
     std::fs::write(empty.join("target_speed.csv"), "s,v\n0,10\n1,abc\n2,12\n").unwrap();
     let e = initialisation_error(&f, "drv2", &empty);
     assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                function: Fmi2(Function::ExitInitializationMode),
-                status: REFUSED,
-                ..
-            }
-        ),
+        refused(&e, Function::ExitInitializationMode, fmi2Status::ERROR),
         "{e}"
     );
     assert_contains(&e.to_string(), &["target_speed.csv", "abc"]);

@@ -5,11 +5,13 @@
 
 mod common;
 
+use common::kinds::refused3;
+
 use common::reference;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::{Plan, Simulation, SystemError, SystemFile};
-use tb_fmi::{CallStatus, FmiFunction, FmuCache, FmuError, FmuInstance};
+use tb_fmi::{FmuCache, FmuError, FmuInstance};
 use tb_testkit::assert_contains;
 
 /// FMI 3.0 Feedthrough as a supplier's speed sensor: its continuous Float64 input and output
@@ -352,17 +354,9 @@ fn an_fmi3_error_carries_the_fmus_log() {
     i.set_echo(false);
     // A step before initialisation is an illegal call sequence.
     let e = i.do_step(0.0, 0.1).unwrap_err();
+    assert!(refused3(&e, "d", "fmi3DoStep", 3, 0.0), "{e}");
     assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                instance,
-                function: FmiFunction::Fmi3(f),
-                status: CallStatus::Fmi3(3),
-                time,
-                log,
-            } if instance == "d" && f == "fmi3DoStep" && *time == 0.0 && !log.is_empty()
-        ),
+        matches!(&e, FmuError::Call { log, .. } if !log.is_empty()),
         "{e}"
     );
     assert_contains(&e.to_string(), &["the FMU's last messages"]);
@@ -382,18 +376,6 @@ fn an_isolated_fmi3_error_names_the_fmi3_call_and_status() {
     let mut b = factory.create("d", true).unwrap();
     // A step before initialisation is an illegal call sequence.
     let e = b.do_step(0.0, 0.1).unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            FmuError::Call {
-                instance,
-                function: FmiFunction::Fmi3(f),
-                status: CallStatus::Fmi3(3),
-                time,
-                ..
-            } if instance == "d" && f == "fmi3DoStep" && *time == 0.0
-        ),
-        "{e}"
-    );
+    assert!(refused3(&e, "d", "fmi3DoStep", 3, 0.0), "{e}");
     assert!(!e.to_string().contains("fmi2"), "{e}");
 }

@@ -5,14 +5,15 @@
 
 mod common;
 
+use common::kinds::{stopped_by, worker_failed};
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tb_cosim::isolated::IsolationOptions;
 use tb_cosim::{LoadOptions, Plan, Simulation, SystemError, SystemFile};
 use tb_fmi::fmi2::fmi2Status;
-use tb_fmi::FmiFunction::Fmi2;
-use tb_fmi::{CallStatus, FmuCache, FmuError, Function};
+use tb_fmi::{FmuCache, Function};
 use tb_testkit::assert_contains;
 
 fn cache() -> Arc<FmuCache> {
@@ -113,16 +114,7 @@ fn a_failed_step_stops_the_run_naming_instance_time_and_reason() {
     ] {
         let (e, s) = run_err(kind, &in_process());
         assert!(
-            matches!(
-                &e,
-                SystemError::Fmu(FmuError::Call {
-                    instance,
-                    function: Fmi2(Function::DoStep),
-                    status: CallStatus::Fmi2(st),
-                    time,
-                    ..
-                }) if instance == "supplier" && *st == status && *time == 1.0
-            ),
+            stopped_by(&e, "supplier", Function::DoStep, status, 1.0),
             "{case}: {s}"
         );
         // The FMU's reason, from its log.
@@ -150,15 +142,12 @@ fn an_error_in_initialization_names_the_instance() {
     // A getter in initialization mode defers a failed initialisation: the error is
     // fmi2ExitInitializationMode's, once.
     assert!(
-        matches!(
+        stopped_by(
             &e,
-            SystemError::Fmu(FmuError::Call {
-                instance,
-                function: Fmi2(Function::ExitInitializationMode),
-                status: CallStatus::Fmi2(fmi2Status::ERROR),
-                time,
-                ..
-            }) if instance == "supplier" && *time == 0.0
+            "supplier",
+            Function::ExitInitializationMode,
+            fmi2Status::ERROR,
+            0.0
         ),
         "{s}"
     );
@@ -248,16 +237,7 @@ fn isolated_errors_keep_their_fmi_status_and_log() {
         let (e, s) = run_err(kind, &isolated(timeout));
         // The worker's error as the in-process one: the call, its status, the time.
         assert!(
-            matches!(
-                &e,
-                SystemError::Fmu(FmuError::Call {
-                    instance,
-                    function: Fmi2(Function::DoStep),
-                    status: CallStatus::Fmi2(st),
-                    time,
-                    ..
-                }) if instance == "supplier" && *st == status && *time == 1.0
-            ),
+            stopped_by(&e, "supplier", Function::DoStep, status, 1.0),
             "{s}"
         );
         assert!(s.contains(why), "{s}");
@@ -271,14 +251,7 @@ fn an_abort_in_an_isolated_fmu_ends_the_run_and_the_host_lives() {
     let _serial = serial();
     let mut sim = simulation(&system_text(4, true), &in_process());
     let e = sim.run().unwrap_err();
-    assert!(
-        matches!(
-            &e,
-            SystemError::Fmu(FmuError::Isolated { instance, function, time, .. })
-                if instance == "supplier" && function == "fmi2DoStep" && *time == 1.0
-        ),
-        "{e}"
-    );
+    assert!(worker_failed(&e, "supplier", "fmi2DoStep", 1.0), "{e}");
     assert_contains(&e.to_string(), &["instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: the worker process was killed by signal 6 (SIGABRT: abort) (crashed)"]);
     // The host goes on: repaired, the same simulation runs (a new worker is started).
     sim.set_parameter("supplier.fault_kind", toml::Value::Integer(0))
@@ -298,14 +271,7 @@ fn a_hang_in_an_isolated_fmu_is_ended_by_the_watchdog() {
     let t0 = Instant::now();
     let e = sim.run().unwrap_err();
     let waited = t0.elapsed();
-    assert!(
-        matches!(
-            &e,
-            SystemError::Fmu(FmuError::Isolated { instance, function, time, .. })
-                if instance == "supplier" && function == "fmi2DoStep" && *time == 1.0
-        ),
-        "{e}"
-    );
+    assert!(worker_failed(&e, "supplier", "fmi2DoStep", 1.0), "{e}");
     assert_contains(&e.to_string(), &["instance 'supplier' at t = 1 s: fmi2DoStep in the isolated worker process: no answer within 1.5s (watchdog): the FMU hangs; killed (the worker process was killed by signal 9 (SIGKILL))"]);
     assert!(waited < Duration::from_secs(5), "{waited:?}");
     drop(sim);

@@ -187,18 +187,23 @@ def assert_statement(lines, i):
 VARIANT_HELPER = re.compile(r"\n\s*(?:pub(?:\([a-z]+\))? )?fn (\w+)\([^)]*\)\s*->\s*bool\s*\{")
 
 
-def variant_helpers(text):
+def variant_helper_bodies(text):
     """The helpers of a test file that check an error's kind (`fn refused(e: &E, …) -> bool
-    { matches!(…) }`): {name: the `matches!(` in their bodies}."""
-    helpers = {}
+    { matches!(…) }`): (name, start, end) of each, the span from `fn` to its closing
+    brace."""
+    out = []
     for m in VARIANT_HELPER.finditer(text):
         body = text[m.end() : m.end() + 2000]
         end = re.search(r"\n\s*\}\n", body)
-        body = body[: end.start()] if end else body
-        n = len(re.findall(r"matches!\(", body))
-        if n:
-            helpers[m.group(1)] = n
-    return helpers
+        stop = m.end() + (end.end() if end else len(body))
+        if re.search(r"matches!\(", text[m.end() : stop]):
+            out.append((m.group(1), m.start(), stop))
+    return out
+
+
+def variant_helpers(text):
+    """{name: 1} for each variant helper of the file (a call counts as one check)."""
+    return {name: 1 for name, _, _ in variant_helper_bodies(text)}
 
 
 def shared_test_helpers(files):
@@ -213,12 +218,14 @@ def shared_test_helpers(files):
 
 
 def variant_checks(text, helpers):
-    """`matches!(` in `text` outside the bodies of `helpers` it defines, plus a call of a
-    helper each."""
+    """`matches!(` in `text` outside the bodies of the variant helpers it defines, plus a
+    call of a helper (its own or a shared one) each, also outside those bodies: a helper
+    built on another counts once, where a test calls it."""
+    spans = variant_helper_bodies(text)
+    for _, start, stop in reversed(spans):
+        text = text[:start] + text[stop:]
     n = len(re.findall(r"matches!\(", text))
-    for name, inside in helpers.items():
-        if re.search(r"\bfn %s\(" % re.escape(name), text):
-            n -= inside
+    for name in helpers:
         n += len(re.findall(r"(?<![\w:])(?<!fn )%s\(" % re.escape(name), text))
     return n
 

@@ -4,6 +4,7 @@
 pub mod build;
 pub mod cli;
 pub mod hostile;
+pub mod kinds;
 pub mod study;
 pub mod synthetic;
 
