@@ -2,6 +2,8 @@
 
 mod common;
 
+use common::kinds::invalid;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use tb_cosim::{Plan, Simulation, SystemFile};
@@ -174,10 +176,7 @@ fn strings_are_set_connected_recorded_and_quoted_in_the_csv() {
     let e = Plan::from_file(f, &p, Arc::new(FmuCache::temporary(false).unwrap()))
         .err()
         .unwrap();
-    assert!(
-        matches!(&e, tb_cosim::SystemError::Invalid { context, .. } if context.ends_with("parameter \"a.tag\"")),
-        "{e}"
-    );
+    assert!(invalid(&e, "parameter \"a.tag\""), "{e}");
     assert!(
         e.to_string()
             .contains("'a.tag' is String, the value 3 is not"),

@@ -71,3 +71,9 @@ pub fn refused3(e: &FmuError, instance: &str, function: &str, status: i32, time:
         } if i == instance && f == function && *s == status && *t == time
     )
 }
+
+/// A system file or a plan refused, at the place `context` ends with (a connection, a
+/// parameter, the file).
+pub fn invalid(e: &SystemError, context_end: &str) -> bool {
+    matches!(e, SystemError::Invalid { context, .. } if context.ends_with(context_end))
+}
