@@ -208,13 +208,28 @@ def variant_helpers(text):
 
 def shared_test_helpers(files):
     """The variant helpers of the test support modules (`tests/common/`, a crate's
-    `tests/support/`), callable from every test file beside them."""
+    `tests/support/`): {module name: {helper name: 1}}, for the test files that import
+    them."""
     helpers = {}
     for p in files:
-        if "/common/" in "/" + p or "/support/" in p:
-            if is_test_file(p):
-                helpers.update(variant_helpers(open(os.path.join(ROOT, p), encoding="utf-8").read()))
+        if ("/common/" in "/" + p or "/support/" in p) and is_test_file(p):
+            found = variant_helpers(open(os.path.join(ROOT, p), encoding="utf-8").read())
+            if found:
+                module = os.path.splitext(os.path.basename(p))[0]
+                helpers.setdefault(module, {}).update(found)
     return helpers
+
+
+def imported(text, shared):
+    """The shared variant helpers `text` imports (`use …::kinds::{refused, …}`) or calls by
+    their module (`kinds::refused(`)."""
+    out = {}
+    for module, names in shared.items():
+        uses = " ".join(re.findall(r"use [\w:]*\b%s::([^;]*);" % re.escape(module), text))
+        for name in names:
+            if re.search(r"\b%s\b" % re.escape(name), uses) or "%s::%s(" % (module, name) in text:
+                out[name] = 1
+    return out
 
 
 def variant_checks(text, helpers):
@@ -226,7 +241,7 @@ def variant_checks(text, helpers):
         text = text[:start] + text[stop:]
     n = len(re.findall(r"matches!\(", text))
     for name in helpers:
-        n += len(re.findall(r"(?<![\w:])(?<!fn )%s\(" % re.escape(name), text))
+        n += len(re.findall(r"(?<![\w.])(?<!fn )%s\(" % re.escape(name), text))
     return n
 
 
@@ -246,7 +261,7 @@ def kind_checks(files):
             if i < 0:
                 continue
             text = text[i:]
-        variant += variant_checks(text, {**shared, **variant_helpers(text)})
+        variant += variant_checks(text, {**imported(text, shared), **variant_helpers(text)})
         lines = text.split("\n")
         helpers = error_helpers(open(os.path.join(ROOT, p), encoding="utf-8").read())
         for i, l in enumerate(lines):
