@@ -7,7 +7,7 @@ mod common;
 
 use common::cli::succeeded;
 use common::reference;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use tb_testkit::assert_contains;
 
@@ -322,16 +322,12 @@ fn arrays_are_recorded_and_connected_by_their_names() {
     let dir = tb_testkit::scratch("arrays");
     let fmu = reference::fmu("StateSpace", 3);
     let system = |connection: &str| {
-        let p: PathBuf = dir.path().join("ss.toml");
-        std::fs::write(
-            &p,
-            format!(
-                "connections = [{connection:?}]\n\n[fmus]\nss = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"ss\"\n\n[[instance]]\nname = \"b\"\nfmu = \"ss\"\n\n[experiment]\nstep = 0.1\nstop = 1\n\n[record]\nsignals = [\"a.y\", \"b.y\"]\n",
-                fmu.display().to_string()
-            ),
+        common::system_file(
+            &dir.path().join("ss.toml"),
+            &format!("connections = [{connection:?}]\n"),
+            &[("ss", &fmu)],
+            "[[instance]]\nname = \"a\"\nfmu = \"ss\"\n\n[[instance]]\nname = \"b\"\nfmu = \"ss\"\n\n[experiment]\nstep = 0.1\nstop = 1\n\n[record]\nsignals = [\"a.y\", \"b.y\"]\n",
         )
-        .unwrap();
-        p
     };
     let sys = system("a.y -> b.u");
     common::ok_in(dir.path(), args!["run", sys, "--out", "arrays.csv"]);

@@ -11,7 +11,7 @@ pub mod synthetic;
 #[allow(unused_imports)]
 pub use cli::{fails, fails_in, ok, ok_in, run_ok, run_ok_in, twinbench, twinbench_in};
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 use tb_fmi::{FmuCache, LoadedFmu};
 
@@ -81,6 +81,19 @@ pub fn vr(fmu: &LoadedFmu, name: &str) -> u32 {
         .variable(name)
         .unwrap_or_else(|| panic!("{}: no variable {name}", fmu.description.model_name))
         .value_reference
+}
+
+/// Write the system file `path`: the top-level keys `top`, `[fmus]` naming each (name, FMU
+/// file), then the tables `body`.
+pub fn system_file(path: &Path, top: &str, fmus: &[(&str, &Path)], body: &str) -> PathBuf {
+    let mut text = format!("{top}\n[fmus]\n");
+    for (name, fmu) in fmus {
+        text.push_str(&format!("{name} = {:?}\n", fmu.display().to_string()));
+    }
+    text.push('\n');
+    text.push_str(body);
+    std::fs::write(path, text).unwrap();
+    path.to_path_buf()
 }
 
 /// Load options whose isolated instances run in this build's `twinbench worker`.
