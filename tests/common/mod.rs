@@ -96,6 +96,36 @@ pub fn system_file(path: &Path, top: &str, fmus: &[(&str, &Path)], body: &str) -
     path.to_path_buf()
 }
 
+/// `systems/rls_v.toml` with its FMUs those [`fmu_dir`] packs, edited by `edit`, written as
+/// `path` and run in process (the FMUs unpacked anew, their messages kept for errors).
+pub fn run_bench(
+    path: &Path,
+    edit: impl FnOnce(String) -> String,
+) -> Result<tb_cosim::RunSummary, tb_cosim::SystemError> {
+    let root = twinbench::pack::workspace_root();
+    let text = std::fs::read_to_string(root.join("systems/rls_v.toml"))
+        .unwrap()
+        .replace("../target/fmu", &fmu_dir().display().to_string());
+    std::fs::write(path, edit(text)).unwrap();
+    let cache = Arc::new(FmuCache::temporary(false).unwrap());
+    let mut sim = tb_cosim::Simulation::new(tb_cosim::Plan::load(path, cache).unwrap()).unwrap();
+    sim.echo_fmu_log = false;
+    sim.run()
+}
+
+/// An instance `name` of `fmu` through its C API, with its resources (`logging`: the
+/// FMU's debug logging on).
+pub fn instantiate(fmu: &LoadedFmu, name: &str, logging: bool) -> tb_fmi::Instance {
+    tb_fmi::Instance::instantiate(
+        fmu.library().unwrap(),
+        name,
+        &fmu.description.guid,
+        Some(&fmu.resource_dir()),
+        logging,
+    )
+    .unwrap()
+}
+
 /// Load options whose isolated instances run in this build's `twinbench worker`.
 pub fn worker_options() -> tb_cosim::LoadOptions {
     tb_cosim::LoadOptions {
