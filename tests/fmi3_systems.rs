@@ -7,8 +7,7 @@ mod common;
 
 use common::reference;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use tb_cosim::{Plan, Simulation, SystemFile};
+use tb_cosim::{Simulation, SystemFile};
 use tb_fmi::{FmuCache, FmuInstance};
 use tb_testkit::assert_contains;
 
@@ -44,14 +43,7 @@ fn sensor(dir: &Path, name: &str, unit: &str, base: &str) -> PathBuf {
 fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), String> {
     let path = dir.join("system.toml");
     let file = SystemFile::parse(text, &path).map_err(|e| e.to_string())?;
-    let options = common::worker_options();
-    let plan = Plan::compile(
-        file,
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &options,
-    )
-    .map_err(|e| e.to_string())?;
+    let plan = common::compile(file, &path).map_err(|e| e.to_string())?;
     let notes = plan.notes.clone();
     let mut sim = Simulation::new(plan).map_err(|e| e.to_string())?;
     sim.echo_fmu_log = false;

@@ -14,8 +14,7 @@ mod common;
 
 use common::reference;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use tb_cosim::{Plan, Simulation, SystemFile, Table};
+use tb_cosim::{Simulation, SystemFile, Table};
 use tb_fmi::FmuCache;
 use tb_testkit::assert_contains;
 
@@ -112,13 +111,7 @@ fn system_text(top: &str, instances: &[(&str, &Path, &str)], rest: &str) -> Stri
 fn run(text: &str, dir: &Path, name: &str) -> Result<Table, String> {
     let path = dir.join(format!("{name}.toml"));
     let file = SystemFile::parse(text, &path).map_err(|e| e.to_string())?;
-    let plan = Plan::compile(
-        file,
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &common::worker_options(),
-    )
-    .map_err(|e| format!("{e}"))?;
+    let plan = common::compile(file, &path).map_err(|e| format!("{e}"))?;
     let mut sim = Simulation::new(plan).map_err(|e| e.to_string())?;
     sim.echo_fmu_log = false;
     sim.run().map_err(|e| format!("{e}"))?;
@@ -133,6 +126,12 @@ fn run_one(fmu: &Path, extra: &str, stop: f64, step: f64, dir: &Path) -> Table {
         &format!("[experiment]\nstep = {step}\nstop = {stop}\n"),
     );
     run(&text, dir, "m").unwrap_or_else(|e| panic!("{}: {e}", fmu.display()))
+}
+
+/// [`run_one`] in `model`'s experiment.
+fn run_model(model: &str, fmu: &Path, extra: &str, dir: &Path) -> Table {
+    let (stop, step) = experiment(model);
+    run_one(fmu, extra, stop, step, dir)
 }
 
 /// Per column FMPy recorded: the largest difference, relative to max(1, |largest value|).
@@ -160,14 +159,8 @@ fn check(model: &str, version: u8) {
     let dir = tb_testkit::scratch(&format!("me-{model}-fmi{version}"));
     let (stop, step) = experiment(model);
     let (both, me_only) = fmus(model, version, dir.path());
-    let forced = run_one(
-        &both,
-        "interface = \"model-exchange\"",
-        stop,
-        step,
-        dir.path(),
-    );
-    let only = run_one(&me_only, "", stop, step, dir.path());
+    let forced = run_model(model, &both, "interface = \"model-exchange\"", dir.path());
+    let only = run_model(model, &me_only, "", dir.path());
     assert!(
         same_bits(&forced, &only),
         "{model}: the Model Exchange only archive gives another result"
@@ -361,22 +354,10 @@ fn an_isolated_instance_equals_the_in_process_one_bit_for_bit() {
         ("BouncingBall", 3),
         ("StateSpace", 3),
     ] {
-        let (stop, step) = experiment(model);
         let (both, _) = fmus(model, version, dir.path());
-        let inside = run_one(
-            &both,
-            "interface = \"model-exchange\"",
-            stop,
-            step,
-            dir.path(),
-        );
-        let isolated = run_one(
-            &both,
-            "interface = \"model-exchange\"\nisolate = true",
-            stop,
-            step,
-            dir.path(),
-        );
+        let inside = run_model(model, &both, "interface = \"model-exchange\"", dir.path());
+        let me_isolated = "interface = \"model-exchange\"\nisolate = true";
+        let isolated = run_model(model, &both, me_isolated, dir.path());
         assert!(same_bits(&inside, &isolated), "{model} (FMI {version})");
     }
 }
@@ -597,13 +578,7 @@ fn paths_of_a_model_exchange_instance(version: u8) {
     // candidates reuse it).
     let path = dir.path().join("again.toml");
     let file = SystemFile::parse(&text, &path).unwrap();
-    let plan = Plan::compile(
-        file,
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &common::worker_options(),
-    )
-    .unwrap();
+    let plan = common::compile(file, &path).unwrap();
     let mut sim = Simulation::new(plan).unwrap();
     sim.echo_fmu_log = false;
     sim.run().unwrap();

@@ -121,14 +121,7 @@ fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), String
     }
     let path = dir.join(format!("{}-fmi{}.toml", c.model, c.version));
     let file = SystemFile::parse(&text, &path).unwrap();
-    let options = common::worker_options();
-    let plan = Plan::compile(
-        file,
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &options,
-    )
-    .map_err(|e| format!("{}: {e}", c.model))?;
+    let plan = common::compile(file, &path).map_err(|e| format!("{}: {e}", c.model))?;
     let mut sim = Simulation::new(plan).unwrap();
     sim.echo_fmu_log = false;
     let summary = sim.run().map_err(|e| format!("{}: {e}", c.model))?;
@@ -472,14 +465,7 @@ fn fmi2_stair_isolated_ends_where_in_process_does() {
         fmu.display()
     );
     let path = dir.path().join("iso.toml");
-    let options = common::worker_options();
-    let plan = Plan::compile(
-        SystemFile::parse(&text, &path).unwrap(),
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &options,
-    )
-    .unwrap();
+    let plan = common::compile(SystemFile::parse(&text, &path).unwrap(), &path).unwrap();
     let mut sim = Simulation::new(plan).unwrap();
     let s = sim.run().unwrap();
     assert_eq!(s.stopped_by, stopped);

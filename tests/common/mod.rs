@@ -126,6 +126,16 @@ pub fn instantiate(fmu: &LoadedFmu, name: &str, logging: bool) -> tb_fmi::Instan
     .unwrap()
 }
 
+/// The plan of the system file `file` read from `path`: its FMUs unpacked anew, its
+/// isolated instances run in this build's `twinbench worker`.
+pub fn compile(
+    file: tb_cosim::SystemFile,
+    path: &Path,
+) -> Result<tb_cosim::Plan, tb_cosim::SystemError> {
+    let cache = Arc::new(FmuCache::temporary(false).unwrap());
+    tb_cosim::Plan::compile(file, path, cache, &worker_options())
+}
+
 /// Load options whose isolated instances run in this build's `twinbench worker`.
 pub fn worker_options() -> tb_cosim::LoadOptions {
     tb_cosim::LoadOptions {
