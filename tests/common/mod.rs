@@ -96,17 +96,24 @@ pub fn system_file(path: &Path, top: &str, fmus: &[(&str, &Path)], body: &str) -
     path.to_path_buf()
 }
 
-/// `systems/rls_v.toml` with its FMUs those [`fmu_dir`] packs, edited by `edit`, written as
-/// `path` and run in process (the FMUs unpacked anew, their messages kept for errors).
-pub fn run_bench(
-    path: &Path,
-    edit: impl FnOnce(String) -> String,
-) -> Result<tb_cosim::RunSummary, tb_cosim::SystemError> {
+/// `systems/rls_v.toml` with its FMUs those [`fmu_dir`] packs (by absolute path), edited by
+/// `edit`, written as `path`.
+pub fn bench_file(path: &Path, edit: impl FnOnce(String) -> String) -> PathBuf {
     let root = twinbench::pack::workspace_root();
     let text = std::fs::read_to_string(root.join("systems/rls_v.toml"))
         .unwrap()
         .replace("../target/fmu", &fmu_dir().display().to_string());
     std::fs::write(path, edit(text)).unwrap();
+    path.to_path_buf()
+}
+
+/// The [`bench_file`] `path` run in process (the FMUs unpacked anew, their messages kept for
+/// errors).
+pub fn run_bench(
+    path: &Path,
+    edit: impl FnOnce(String) -> String,
+) -> Result<tb_cosim::RunSummary, tb_cosim::SystemError> {
+    bench_file(path, edit);
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
     let mut sim = tb_cosim::Simulation::new(tb_cosim::Plan::load(path, cache).unwrap()).unwrap();
     sim.echo_fmu_log = false;
