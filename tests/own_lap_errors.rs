@@ -16,14 +16,9 @@ fn root() -> PathBuf {
 
 /// The bundled bench with some parameters added, written beside `dir`'s files.
 fn bench_with(dir: &Path, extra: &str) -> PathBuf {
-    let fmu_dir = common::fmu_dir();
-    let text = std::fs::read_to_string(root().join("systems/rls_v.toml"))
-        .unwrap()
-        .replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()))
-        .replace("[parameters]\n", &format!("[parameters]\n{extra}\n"));
-    let p = dir.join("bench.toml");
-    std::fs::write(&p, text).unwrap();
-    p
+    common::bench_file(&dir.join("bench.toml"), |text| {
+        text.replace("[parameters]\n", &format!("[parameters]\n{extra}\n"))
+    })
 }
 
 /// `dir/name`: the CSV header `header`, then `row(s)` for each `s` of `metres`.
