@@ -30,11 +30,8 @@ fn own_lap_files(dir: &Path) {
 
 /// A scratch folder `tag` with [`own_lap_files`] and the `files` (name, text) in it.
 fn own_lap_folder(tag: &str, files: &[(&str, &str)]) -> tempfile::TempDir {
-    let dir = tb_testkit::scratch(tag);
+    let dir = common::scratch_with(tag, files);
     own_lap_files(dir.path());
-    for (name, text) in files {
-        std::fs::write(dir.path().join(name), text).unwrap();
-    }
     dir
 }
 

@@ -41,12 +41,8 @@ fn by_metre(
 
 #[test]
 fn a_malformed_track_file_fails_initialisation_naming_the_users_path_row_and_column() {
-    let dir = tb_testkit::scratch("bad-track");
-    std::fs::write(
-        dir.path().join("my_track.csv"),
-        "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,0.01,x,0,0\n2,0,0,0,0\n",
-    )
-    .unwrap();
+    let track = "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,0.01,x,0,0\n2,0,0,0,0\n";
+    let dir = common::scratch_with("bad-track", &[("my_track.csv", track)]);
     // A relative path in the system file is relative to the system file.
     let sys = bench_with(dir.path(), "\"vehicle.track_file\" = \"my_track.csv\"");
     let e = common::fails(args!["run", sys]);

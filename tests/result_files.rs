@@ -225,23 +225,10 @@ fn interrupted_run_keeps_its_rows_as_incomplete(signal: i32) {
     let sys = faulty_system(dir.path(), "", "1e5");
     let (out, trace) = (dir.path().join("r.csv"), dir.path().join("calls.txt"));
     std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["run", sys.to_str().unwrap(), "--out", out.to_str().unwrap()])
-        .args(["--trace-fmi", trace.to_str().unwrap()])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // The run is under way once the trace shows steps (no race with the start-up).
-    let started = std::time::Instant::now();
-    while !std::fs::read_to_string(&trace).is_ok_and(|t| t.contains("fmi2DoStep")) {
-        assert!(started.elapsed().as_secs() < 60, "the run did not start");
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    // SAFETY: a signal to our own child process.
-    unsafe { libc::kill(child.id() as i32, signal) };
-    let o = child.wait_with_output().unwrap();
-    let e = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{e}");
+    let mut run = Command::new(env!("CARGO_BIN_EXE_twinbench"));
+    run.args(["run", sys.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args(["--trace-fmi", trace.to_str().unwrap()]);
+    let e = common::cli::interrupted_while_stepping(&mut run, &trace, signal);
     let partial = dir.path().join("r.incomplete.csv");
     assert_contains(
         &e,

@@ -216,12 +216,8 @@ fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_row
 /// their own (FMPy's communication step, as alone it is twinbench's).
 #[test]
 fn an_input_file_start_values_and_intervals_as_in_fmpy() {
-    let dir = tb_testkit::scratch("run-fmu-input");
-    std::fs::write(
-        dir.path().join("in.csv"),
-        "time,Float64_continuous_input,Int32_input,Boolean_input\n0,0,1,0\n0.5,1,1,0\n0.5,1,3,1\n1,-2,3,1\n",
-    )
-    .unwrap();
+    let input = "time,Float64_continuous_input,Int32_input,Boolean_input\n0,0,1,0\n0.5,1,1,0\n0.5,1,3,1\n1,-2,3,1\n";
+    let dir = common::scratch_with("run-fmu-input", &[("in.csv", input)]);
     let fmu = reference::fmu("Feedthrough", 2);
     let f = fmu.to_str().unwrap();
     let o = common::twinbench_in(

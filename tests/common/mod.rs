@@ -83,6 +83,15 @@ pub fn vr(fmu: &LoadedFmu, name: &str) -> u32 {
         .value_reference
 }
 
+/// A scratch folder `tag` holding the `files` (name, text).
+pub fn scratch_with(tag: &str, files: &[(&str, &str)]) -> tempfile::TempDir {
+    let dir = tb_testkit::scratch(tag);
+    for (name, text) in files {
+        std::fs::write(dir.path().join(name), text).unwrap();
+    }
+    dir
+}
+
 /// Write the system file `path`: the top-level keys `top`, `[fmus]` naming each (name, FMU
 /// file), then the tables `body`.
 pub fn system_file(path: &Path, top: &str, fmus: &[(&str, &Path)], body: &str) -> PathBuf {
