@@ -12,15 +12,14 @@ use tb_fmi::{FmuCache, FmuInstance};
 use tb_testkit::assert_contains;
 
 /// FMI 3.0 Feedthrough as a supplier's speed sensor: its continuous Float64 input and output
-/// declared in `unit` (the C code passes the value through whatever the unit).
-fn sensor(dir: &Path, name: &str, unit: &str, base: &str) -> PathBuf {
+/// declared in `unit`, an angular speed of `factor` (else 1) rad/s (the C code passes the
+/// value through whatever the unit).
+fn sensor(dir: &Path, name: &str, unit: &str, factor: Option<&str>) -> PathBuf {
+    let factor = factor.map_or(String::new(), |f| format!(" factor=\"{f}\""));
+    let base = format!("s=\"-1\" rad=\"1\"{factor}");
     let fmu = reference::fmu("Feedthrough", 3);
-    reference::variant(
-        &fmu,
-        dir,
-        name,
-        |xml| {
-            xml.replacen(
+    reference::with_description(&fmu, dir, name, |xml| {
+        xml.replacen(
                 "<TypeDefinitions>",
                 &format!(
                     "<UnitDefinitions><Unit name=\"{unit}\"><BaseUnit {base}/></Unit></UnitDefinitions>\n  <TypeDefinitions>"
@@ -35,9 +34,7 @@ fn sensor(dir: &Path, name: &str, unit: &str, base: &str) -> PathBuf {
                 "name=\"Float64_continuous_output\"",
                 &format!("name=\"Float64_continuous_output\" unit=\"{unit}\""),
             )
-        },
-        |n| Some(n.to_string()),
-    )
+    })
 }
 
 fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), String> {
@@ -57,13 +54,8 @@ fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), String>
 #[test]
 fn fmi3_and_fmi2_in_one_system_with_unit_conversion() {
     let dir = tb_testkit::scratch("fmi3-mixed");
-    let rpm = sensor(
-        dir.path(),
-        "sensor_rpm",
-        "rpm",
-        "s=\"-1\" rad=\"1\" factor=\"0.10471975511965977\"",
-    );
-    let rad_s = sensor(dir.path(), "sensor_rad_s", "rad/s", "s=\"-1\" rad=\"1\"");
+    let rpm = sensor(dir.path(), "sensor_rpm", "rpm", Some("0.10471975511965977"));
+    let rad_s = sensor(dir.path(), "sensor_rad_s", "rad/s", None);
     for isolate in [false, true] {
         let text = format!(
             r#"connections = [
@@ -208,19 +200,13 @@ fn refused(fmu: &Path, dir: &Path) -> String {
 fn an_fmi3_fmu_that_needs_clocks_is_refused_before_the_first_step() {
     let dir = tb_testkit::scratch("fmi3-clocks");
     let vdp = reference::fmu("VanDerPol", 3);
-    let clocked = reference::variant(
-        &vdp,
-        dir.path(),
-        "clocked",
-        |xml| {
-            xml.replacen(
+    let clocked = reference::with_description(&vdp, dir.path(), "clocked", |xml| {
+        xml.replacen(
                 "</ModelVariables>",
                 "  <Clock name=\"tick\" valueReference=\"1001\" causality=\"input\" intervalVariability=\"constant\" intervalDecimal=\"0.1\"/>\n  </ModelVariables>",
                 1,
             )
-        },
-        |n| Some(n.to_string()),
-    );
+    });
     let e = refused(&clocked, dir.path());
     assert_contains(&e, &["clocks", "'tick' is a Clock"]);
     // The Clocks Reference FMU: Scheduled Execution only.

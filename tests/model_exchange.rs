@@ -57,13 +57,9 @@ fn without(xml: &str, element: &str) -> String {
 /// of FMI `version`.
 fn fmus(model: &str, version: u8, dir: &Path) -> (PathBuf, PathBuf) {
     let both = reference::fmu(model, version);
-    let me_only = reference::variant(
-        &both,
-        dir,
-        &format!("{model}_me"),
-        |xml| without(xml, "CoSimulation"),
-        |name| Some(name.to_string()),
-    );
+    let me_only = reference::with_description(&both, dir, &format!("{model}_me"), |xml| {
+        without(xml, "CoSimulation")
+    });
     (both, me_only)
 }
 
@@ -399,13 +395,9 @@ fn model_exchange_and_co_simulation_instances_connect() {
 fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
     let dir = tb_testkit::scratch("me-refused");
     let (both, me_only) = fmus("Dahlquist", 2, dir.path());
-    let cs_only = reference::variant(
-        &both,
-        dir.path(),
-        "Dahlquist_cs",
-        |xml| without(xml, "ModelExchange"),
-        |name| Some(name.to_string()),
-    );
+    let cs_only = reference::with_description(&both, dir.path(), "Dahlquist_cs", |xml| {
+        without(xml, "ModelExchange")
+    });
     let exp = "[experiment]\nstep = 0.1\nstop = 1\n";
     // Instance `m` of `fmu` with `interface` in a system of its own (`tag`): refused, why.
     let refused = |fmu: &Path, interface: &str, tag: &str| {
@@ -428,7 +420,7 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
     // FMI 3.0 declares no counts: a description whose state vector (its
     // ContinuousStateDerivative elements) is not the FMU's is refused before the first
     // step, with both counts.
-    let v3 = reference::variant(
+    let v3 = reference::with_description(
         &reference::fmu("Dahlquist", 3),
         dir.path(),
         "Dahlquist3_two_states",
@@ -438,7 +430,6 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
                 "<ContinuousStateDerivative valueReference=\"1\"/>\n    <ContinuousStateDerivative valueReference=\"2\"",
             )
         },
-        |name| Some(name.to_string()),
     );
     let e = run(
         &system_text("", &[("m", &v3, "interface = \"model-exchange\"")], exp),

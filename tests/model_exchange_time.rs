@@ -280,19 +280,13 @@ fn m11_a_hundred_thousand_fmi3_aliases_are_read_and_run_in_linear_time() {
     let aliases: String = (0..100_000)
         .map(|i| format!("<Alias name=\"x0_{i}\"/>"))
         .collect();
-    let fmu = common::reference::variant(
-        &vdp,
-        dir.path(),
-        "vdp_aliases",
-        |xml| {
-            xml.replacen(
-                "initial=\"exact\" start=\"2\"/>",
-                &format!("initial=\"exact\" start=\"2\">{aliases}</Float64>"),
-                1,
-            )
-        },
-        |n| Some(n.to_string()),
-    );
+    let fmu = common::reference::with_description(&vdp, dir.path(), "vdp_aliases", |xml| {
+        xml.replacen(
+            "initial=\"exact\" start=\"2\"/>",
+            &format!("initial=\"exact\" start=\"2\">{aliases}</Float64>"),
+            1,
+        )
+    });
     let deadline =
         |args: &[&str]| within_a_minute(Command::new(env!("CARGO_BIN_EXE_twinbench")).args(args));
     let f = fmu.to_str().unwrap();
