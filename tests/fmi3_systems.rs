@@ -253,9 +253,10 @@ fn an_fmi3_fmu_built_for_another_platform_is_refused() {
 fn a_64_bit_integer_an_f64_cannot_carry_is_an_error_naming_it() {
     let dir = tb_testkit::scratch("fmi3-int64");
     let fmu = reference::fmu("Feedthrough", 3);
-    let text = format!(
-        "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[parameters]\n\"m.Int64_input\" = 9007199254740993\n\n[experiment]\nstep = 0.1\nstop = 1.0\n\n[record]\nsignals = [\"m.Int64_output\"]\n",
-        fmu.display()
+    let text = common::system_text(
+        "",
+        &[("m", &fmu)],
+        "[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[parameters]\n\"m.Int64_input\" = 9007199254740993\n\n[experiment]\nstep = 0.1\nstop = 1.0\n\n[record]\nsignals = [\"m.Int64_output\"]\n",
     );
     let Err(e) = run(dir.path(), &text) else {
         panic!("not refused")

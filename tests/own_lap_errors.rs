@@ -139,13 +139,10 @@ fn logger_named_lap(dir: &Path, name: &str, drop_rr: bool, nan_row: Option<usize
 
 #[test]
 fn errors_about_mapped_channels_name_the_files_own_channels() {
-    let dir = tb_testkit::scratch("mapped-channels");
+    let channels =
+        "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\n";
+    let dir = common::scratch_with("mapped-channels", &[("map.toml", channels)]);
     let map = dir.path().join("map.toml");
-    std::fs::write(
-        &map,
-        "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\n",
-    )
-    .unwrap();
     let track = root().join("data/spielberg_lap_track.csv");
     let out = dir.path().join("lap");
     let lap = |meas: &Path| {

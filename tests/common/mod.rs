@@ -92,16 +92,21 @@ pub fn scratch_with(tag: &str, files: &[(&str, &str)]) -> tempfile::TempDir {
     dir
 }
 
-/// Write the system file `path`: the top-level keys `top`, `[fmus]` naming each (name, FMU
-/// file), then the tables `body`.
-pub fn system_file(path: &Path, top: &str, fmus: &[(&str, &Path)], body: &str) -> PathBuf {
+/// A system file's text: the top-level keys `top`, `[fmus]` naming each (name, FMU file),
+/// then the tables `body`.
+pub fn system_text(top: &str, fmus: &[(&str, &Path)], body: &str) -> String {
     let mut text = format!("{top}\n[fmus]\n");
     for (name, fmu) in fmus {
         text.push_str(&format!("{name} = {:?}\n", fmu.display().to_string()));
     }
     text.push('\n');
     text.push_str(body);
-    std::fs::write(path, text).unwrap();
+    text
+}
+
+/// The [`system_text`] written as the system file `path`.
+pub fn system_file(path: &Path, top: &str, fmus: &[(&str, &Path)], body: &str) -> PathBuf {
+    std::fs::write(path, system_text(top, fmus, body)).unwrap();
     path.to_path_buf()
 }
 
