@@ -98,6 +98,23 @@ fn check(j: &serde_json::Value, order: &[String], steps: u64, what: &str) {
     );
 }
 
+/// The bench with `from` replaced by `to`, written as `name` in `dir`, run for `stop` seconds
+/// by twinbench and by FMPy's master: they agree ([`check`], as `what`). Twinbench's order.
+fn edited_bench_matches(
+    dir: &Path,
+    name: &str,
+    (from, to): (&str, &str),
+    stop: &str,
+    what: &str,
+) -> Vec<String> {
+    let system = common::bench_file(&dir.join(name), |text| text.replace(from, to));
+    let csv = dir.join("twinbench.csv");
+    let (order, steps) = twinbench_run(&system, Some(stop.parse().unwrap()), None, &csv);
+    let j = fmpy_run(&system, &["--stop", stop], &csv);
+    check(&j, &order, steps, what);
+    order
+}
+
 #[test]
 fn fmpy_master_gauss_seidel_whole_lap_matches() {
     let dir = tempfile::tempdir().unwrap();
@@ -124,21 +141,17 @@ fn fmpy_master_explicit_order_and_fractional_stop_match() {
     // A non-default stepping order and a stop time that is not a whole number of steps
     // (the last step is shortened) exercise the same rules on both sides.
     let dir = tempfile::tempdir().unwrap();
-    let src = root().join("systems/rls_v.toml");
-    let text = std::fs::read_to_string(&src).unwrap().replace(
-        "algorithm = \"gauss-seidel\"",
-        "algorithm = \"gauss-seidel\"\norder = [\"edu\", \"dyno_rr\", \"dyno_rl\", \"driver\", \"vehicle\"]",
+    let order = edited_bench_matches(
+        dir.path(),
+        "reordered.toml",
+        (
+            "algorithm = \"gauss-seidel\"",
+            "algorithm = \"gauss-seidel\"\norder = [\"edu\", \"dyno_rr\", \"dyno_rl\", \"driver\", \"vehicle\"]",
+        ),
+        "3.0005",
+        "explicit order, stop 3.0005 s",
     );
-    // Keep the FMU paths valid: absolute paths to the packed FMUs.
-    let fmu_dir = common::fmu_dir();
-    let text = text.replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()));
-    let system = dir.path().join("reordered.toml");
-    std::fs::write(&system, text).unwrap();
-    let csv = dir.path().join("twinbench.csv");
-    let (order, steps) = twinbench_run(&system, Some(3.0005), None, &csv);
     assert_eq!(order[0], "edu");
-    let j = fmpy_run(&system, &["--stop", "3.0005"], &csv);
-    check(&j, &order, steps, "explicit order, stop 3.0005 s");
 }
 
 /// The second-order chassis (named by its item in the system file, as FMPy's master is told
@@ -147,18 +160,17 @@ fn fmpy_master_explicit_order_and_fractional_stop_match() {
 fn fmpy_master_second_order_chassis_matches() {
     let dir = tempfile::tempdir().unwrap();
     let src = root().join("systems/rls_v.toml");
-    let text = std::fs::read_to_string(&src).unwrap().replace(
-        "\"vehicle.v_start\" = 52.43",
-        "\"vehicle.v_start\" = 52.43\n\"vehicle.chassis_model\" = \"second_order\"\n\"vehicle.pitch_damping\" = 0.3",
+    edited_bench_matches(
+        dir.path(),
+        "second_order.toml",
+        (
+            "\"vehicle.v_start\" = 52.43",
+            "\"vehicle.v_start\" = 52.43\n\"vehicle.chassis_model\" = \"second_order\"\n\"vehicle.pitch_damping\" = 0.3",
+        ),
+        "8.0",
+        "second-order chassis, 8 s",
     );
-    let fmu_dir = common::fmu_dir();
-    let text = text.replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()));
-    let system = dir.path().join("second_order.toml");
-    std::fs::write(&system, text).unwrap();
     let csv = dir.path().join("twinbench.csv");
-    let (order, steps) = twinbench_run(&system, Some(8.0), None, &csv);
-    let j = fmpy_run(&system, &["--stop", "8.0"], &csv);
-    check(&j, &order, steps, "second-order chassis, 8 s");
     // The chassis was in force: a_x differs from the first-order lap's.
     let first = dir.path().join("first.csv");
     twinbench_run(&src, Some(8.0), None, &first);

@@ -22,14 +22,7 @@ fn perturbed(v: &tb_fmi::import::description::ScalarVariable) -> f64 {
 fn check(model: &str) -> usize {
     let fmu = common::load(model);
     let md = &fmu.description;
-    let mut inst = Instance::instantiate(
-        fmu.library().unwrap(),
-        "dep",
-        &md.guid,
-        Some(&fmu.resource_dir()),
-        false,
-    )
-    .unwrap();
+    let mut inst = common::instantiate(&fmu, "dep", false);
     inst.set_echo(false);
     inst.setup_experiment(0.0.into()).unwrap();
     inst.enter_initialization_mode().unwrap();

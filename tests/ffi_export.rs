@@ -14,14 +14,7 @@ use tb_testkit::assert_contains;
 
 fn faulty(name: &str) -> (std::sync::Arc<tb_fmi::LoadedFmu>, Instance) {
     let f = load("faulty");
-    let i = Instance::instantiate(
-        f.library().unwrap(),
-        name,
-        &f.description.guid,
-        Some(&f.resource_dir()),
-        true,
-    )
-    .unwrap();
+    let i = common::instantiate(&f, name, true);
     (f, i)
 }
 
@@ -473,14 +466,7 @@ fn every_fmu_ships_its_documentation_and_notices() {
 #[test]
 fn a_hostile_hosts_double_free_call_after_free_foreign_state_and_endless_step_are_refused() {
     let f = load("vehicle");
-    let mut i = Instance::instantiate(
-        f.library().unwrap(),
-        "hostile-host",
-        &f.description.guid,
-        Some(&f.resource_dir()),
-        true,
-    )
-    .unwrap();
+    let mut i = common::instantiate(&f, "hostile-host", true);
     init(&mut i);
     let library = f.library().unwrap();
     let api = &library.api;

@@ -28,6 +28,13 @@ fn own_lap_files(dir: &Path) {
     }
 }
 
+/// A scratch folder `tag` with [`own_lap_files`] and the `files` (name, text) in it.
+fn own_lap_folder(tag: &str, files: &[(&str, &str)]) -> tempfile::TempDir {
+    let dir = common::scratch_with(tag, files);
+    own_lap_files(dir.path());
+    dir
+}
+
 /// The bundled lap and its track copied into `dir`, and `twinbench lap` of them there with
 /// `extra`: what it printed.
 fn own_lap(dir: &Path, extra: &[&str]) -> String {
@@ -221,10 +228,9 @@ fn a_missing_fmu_names_the_system_file_and_the_command_that_writes_it() {
 
 #[test]
 fn a_channel_map_typo_names_channel_signal_and_the_closest_channels() {
-    let dir = tb_testkit::scratch("first-hour-map");
+    let map = "[channels]\nFz_rl = \"Fz_lr\"\n";
+    let dir = own_lap_folder("first-hour-map", &[("map.toml", map)]);
     let d = dir.path();
-    own_lap_files(d);
-    std::fs::write(d.join("map.toml"), "[channels]\nFz_rl = \"Fz_lr\"\n").unwrap();
     let e = common::fails_in(
         d,
         [
@@ -256,10 +262,8 @@ fn a_channel_map_typo_names_channel_signal_and_the_closest_channels() {
 
 #[test]
 fn os_errors_and_paths_are_said_once() {
-    let dir = tb_testkit::scratch("first-hour-once");
+    let dir = own_lap_folder("first-hour-once", &[("afile", "x")]);
     let d = dir.path();
-    own_lap_files(d);
-    std::fs::write(d.join("afile"), "x").unwrap();
     let e = common::fails_in(d, ["lap", "nothere.csv", "--out", "x"]);
     assert_eq!(e.matches("os error").count(), 1, "{e}");
     assert_eq!(e.matches("nothere.csv").count(), 1, "{e}");
@@ -275,9 +279,8 @@ fn os_errors_and_paths_are_said_once() {
 
 #[test]
 fn lap_refuses_a_track_of_another_length() {
-    let dir = tb_testkit::scratch("first-hour-track");
+    let dir = own_lap_folder("first-hour-track", &[]);
     let d = dir.path();
-    own_lap_files(d);
     // The circuit's track with its last 30 % cut off.
     let track = std::fs::read_to_string(d.join("spielberg_lap_track.csv")).unwrap();
     let lines: Vec<&str> = track.lines().collect();

@@ -6,6 +6,9 @@ mod common;
 use std::ffi::OsStr;
 use std::path::Path;
 
+/// The bench's models, each of which can run as FMI 3.0.
+const ALL: [&str; 4] = ["vehicle", "driver", "dyno", "edu"];
+
 /// `systems/rls_v.toml` with each FMU as `fmus` says (`vehicle` → `vehicle-fmi3.fmu`
 /// when it is in `fmi3`) and, when given, a stop time instead of the lap.
 fn system(dir: &Path, tag: &str, fmi3: &[&str], stop: Option<f64>) -> std::path::PathBuf {
@@ -13,7 +16,7 @@ fn system(dir: &Path, tag: &str, fmi3: &[&str], stop: Option<f64>) -> std::path:
     let mut text =
         std::fs::read_to_string(twinbench::pack::workspace_root().join("systems/rls_v.toml"))
             .unwrap();
-    for m in ["vehicle", "driver", "dyno", "edu"] {
+    for m in ALL {
         let file = match fmi3.contains(&m) {
             true => format!("{m}-fmi3.fmu"),
             false => format!("{m}.fmu"),
@@ -50,15 +53,27 @@ fn run(system: &Path, isolate: bool) -> Vec<u8> {
 
 /// `run --native` takes the FMI 3.0 FMUs as it takes the FMI 2.0 ones (their models linked
 /// into the binary, checked by the instantiation token): the same lap.
+/// The FMI 2.0 bench's CSV, run in process for `stop` seconds (or the lap) in `dir`, which
+/// the FMI 3.0 bench run by `three` must give bit for bit (`differs` says what failed).
+fn fmi3_gives_fmi2(
+    dir: &Path,
+    stop: Option<f64>,
+    three: impl Fn(&Path) -> Vec<u8>,
+    differs: &str,
+) -> Vec<u8> {
+    let two = run(&system(dir, "fmi2", &[], stop), false);
+    assert!(two == three(&system(dir, "fmi3", &ALL, stop)), "{differs}");
+    two
+}
+
 #[test]
 fn the_fmi3_bench_runs_native_to_the_same_lap() {
     let dir = tb_testkit::scratch("fmi3-native");
-    let all = ["vehicle", "driver", "dyno", "edu"];
-    let two = run(&system(dir.path(), "fmi2", &[], Some(20.0)), false);
-    let native = run_with(&system(dir.path(), "fmi3", &all, Some(20.0)), "--native");
-    assert!(
-        two == native,
-        "the native run of the FMI 3.0 system differs"
+    fmi3_gives_fmi2(
+        dir.path(),
+        Some(20.0),
+        |s| run_with(s, "--native"),
+        "the native run of the FMI 3.0 system differs",
     );
 }
 
@@ -68,8 +83,7 @@ fn the_fmi3_bench_runs_native_to_the_same_lap() {
 #[test]
 fn the_fmi3_time_variable_runs_native_as_in_the_fmu() {
     let dir = tb_testkit::scratch("fmi3-native-time");
-    let all = ["vehicle", "driver", "dyno", "edu"];
-    let path = system(dir.path(), "fmi3-time", &all, Some(2.0));
+    let path = system(dir.path(), "fmi3-time", &ALL, Some(2.0));
     let text = std::fs::read_to_string(&path).unwrap().replace(
         "signals = [\n",
         "signals = [\n    \"vehicle.time\", \"edu.time\",\n",
@@ -93,11 +107,13 @@ fn the_fmi3_time_variable_runs_native_as_in_the_fmu() {
 #[test]
 fn the_fmi3_bench_gives_the_fmi2_lap_bit_for_bit_in_process_and_mixed() {
     let dir = tb_testkit::scratch("fmi3-bench");
-    let all = ["vehicle", "driver", "dyno", "edu"];
-    let two = run(&system(dir.path(), "fmi2", &[], None), false);
+    let two = fmi3_gives_fmi2(
+        dir.path(),
+        None,
+        |s| run(s, false),
+        "the FMI 3.0 lap differs from the FMI 2.0 lap",
+    );
     assert!(two.len() > 1_000_000, "a whole lap");
-    let three = run(&system(dir.path(), "fmi3", &all, None), false);
-    assert!(two == three, "the FMI 3.0 lap differs from the FMI 2.0 lap");
     let mixed = run(
         &system(dir.path(), "mixed", &["vehicle", "dyno"], None),
         false,
@@ -112,13 +128,12 @@ fn the_fmi3_bench_isolated_gives_the_fmi2_run_bit_for_bit() {
         return;
     }
     let dir = tb_testkit::scratch("fmi3-bench-isolated");
-    let all = ["vehicle", "driver", "dyno", "edu"];
     // 3 s of the lap: every isolated step is a round trip per instance.
-    let two = run(&system(dir.path(), "fmi2", &[], Some(3.0)), false);
-    let three = run(&system(dir.path(), "fmi3", &all, Some(3.0)), true);
-    assert!(
-        two == three,
-        "the isolated FMI 3.0 run differs from the FMI 2.0 run"
+    fmi3_gives_fmi2(
+        dir.path(),
+        Some(3.0),
+        |s| run(s, true),
+        "the isolated FMI 3.0 run differs from the FMI 2.0 run",
     );
 }
 

@@ -9,21 +9,19 @@ use common::kinds::refused3;
 
 use common::reference;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use tb_cosim::{Plan, Simulation, SystemError, SystemFile};
+use tb_cosim::{Simulation, SystemError, SystemFile};
 use tb_fmi::{FmuCache, FmuError, FmuInstance};
 use tb_testkit::assert_contains;
 
 /// FMI 3.0 Feedthrough as a supplier's speed sensor: its continuous Float64 input and output
-/// declared in `unit` (the C code passes the value through whatever the unit).
-fn sensor(dir: &Path, name: &str, unit: &str, base: &str) -> PathBuf {
+/// declared in `unit`, an angular speed of `factor` (else 1) rad/s (the C code passes the
+/// value through whatever the unit).
+fn sensor(dir: &Path, name: &str, unit: &str, factor: Option<&str>) -> PathBuf {
+    let factor = factor.map_or(String::new(), |f| format!(" factor=\"{f}\""));
+    let base = format!("s=\"-1\" rad=\"1\"{factor}");
     let fmu = reference::fmu("Feedthrough", 3);
-    reference::variant(
-        &fmu,
-        dir,
-        name,
-        |xml| {
-            xml.replacen(
+    reference::with_description(&fmu, dir, name, |xml| {
+        xml.replacen(
                 "<TypeDefinitions>",
                 &format!(
                     "<UnitDefinitions><Unit name=\"{unit}\"><BaseUnit {base}/></Unit></UnitDefinitions>\n  <TypeDefinitions>"
@@ -38,21 +36,13 @@ fn sensor(dir: &Path, name: &str, unit: &str, base: &str) -> PathBuf {
                 "name=\"Float64_continuous_output\"",
                 &format!("name=\"Float64_continuous_output\" unit=\"{unit}\""),
             )
-        },
-        |n| Some(n.to_string()),
-    )
+    })
 }
 
 fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), SystemError> {
     let path = dir.join("system.toml");
     let file = SystemFile::parse(text, &path)?;
-    let options = common::worker_options();
-    let plan = Plan::compile(
-        file,
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &options,
-    )?;
+    let plan = common::compile(file, &path)?;
     let notes = plan.notes.clone();
     let mut sim = Simulation::new(plan)?;
     sim.echo_fmu_log = false;
@@ -66,13 +56,8 @@ fn run(dir: &Path, text: &str) -> Result<(tb_cosim::Table, Vec<String>), SystemE
 #[test]
 fn fmi3_and_fmi2_in_one_system_with_unit_conversion() {
     let dir = tb_testkit::scratch("fmi3-mixed");
-    let rpm = sensor(
-        dir.path(),
-        "sensor_rpm",
-        "rpm",
-        "s=\"-1\" rad=\"1\" factor=\"0.10471975511965977\"",
-    );
-    let rad_s = sensor(dir.path(), "sensor_rad_s", "rad/s", "s=\"-1\" rad=\"1\"");
+    let rpm = sensor(dir.path(), "sensor_rpm", "rpm", Some("0.10471975511965977"));
+    let rad_s = sensor(dir.path(), "sensor_rad_s", "rad/s", None);
     for isolate in [false, true] {
         let text = format!(
             r#"connections = [
@@ -217,19 +202,13 @@ fn refused(fmu: &Path, dir: &Path) -> SystemError {
 fn an_fmi3_fmu_that_needs_clocks_is_refused_before_the_first_step() {
     let dir = tb_testkit::scratch("fmi3-clocks");
     let vdp = reference::fmu("VanDerPol", 3);
-    let clocked = reference::variant(
-        &vdp,
-        dir.path(),
-        "clocked",
-        |xml| {
-            xml.replacen(
+    let clocked = reference::with_description(&vdp, dir.path(), "clocked", |xml| {
+        xml.replacen(
                 "</ModelVariables>",
                 "  <Clock name=\"tick\" valueReference=\"1001\" causality=\"input\" intervalVariability=\"constant\" intervalDecimal=\"0.1\"/>\n  </ModelVariables>",
                 1,
             )
-        },
-        |n| Some(n.to_string()),
-    );
+    });
     let e = refused(&clocked, dir.path());
     assert!(
         matches!(&e, SystemError::Fmu(FmuError::Description { path, .. }) if *path == clocked),
@@ -288,9 +267,10 @@ fn an_fmi3_fmu_built_for_another_platform_is_refused() {
 fn a_64_bit_integer_an_f64_cannot_carry_is_an_error_naming_it() {
     let dir = tb_testkit::scratch("fmi3-int64");
     let fmu = reference::fmu("Feedthrough", 3);
-    let text = format!(
-        "[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[parameters]\n\"m.Int64_input\" = 9007199254740993\n\n[experiment]\nstep = 0.1\nstop = 1.0\n\n[record]\nsignals = [\"m.Int64_output\"]\n",
-        fmu.display()
+    let text = common::system_text(
+        "",
+        &[("m", &fmu)],
+        "[[instance]]\nname = \"m\"\nfmu = \"m\"\n\n[parameters]\n\"m.Int64_input\" = 9007199254740993\n\n[experiment]\nstep = 0.1\nstop = 1.0\n\n[record]\nsignals = [\"m.Int64_output\"]\n",
     );
     let Err(e) = run(dir.path(), &text) else {
         panic!("not refused")

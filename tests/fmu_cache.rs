@@ -25,25 +25,41 @@ fn entries(root: &Path) -> Vec<String> {
     v
 }
 
+/// Eight threads, each `prepare`s, waits for the others, then `act`s on what it prepared:
+/// what they acted to, in thread order.
+fn eight_at_once<P, T: Send>(
+    prepare: impl Fn() -> P + Sync,
+    act: impl Fn(P) -> T + Sync,
+) -> Vec<T> {
+    let barrier = Barrier::new(8);
+    std::thread::scope(|s| {
+        let handles: Vec<_> = (0..8)
+            .map(|_| {
+                s.spawn(|| {
+                    let p = prepare();
+                    barrier.wait();
+                    act(p)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    })
+}
+
+/// `round(k, cache)` for each k of `0..rounds`, each with a cache folder of its own.
+fn in_fresh_folders(rounds: usize, tag: &str, round: impl Fn(usize, &Path)) {
+    for k in 0..rounds {
+        let dir = tb_testkit::scratch(tag);
+        round(k, &dir.path().join("cache"));
+    }
+}
+
 #[test]
 fn eight_threads_load_the_same_fmu_into_one_cache_a_hundred_times() {
     let fmu = common::fmu("faulty");
-    for round in 0..100 {
-        let dir = tb_testkit::scratch("cache-race");
-        let root = dir.path().join("cache");
-        let cache = FmuCache::persistent(&root).unwrap();
-        let barrier = Barrier::new(8);
-        let loaded: Vec<_> = std::thread::scope(|s| {
-            let handles: Vec<_> = (0..8)
-                .map(|_| {
-                    s.spawn(|| {
-                        barrier.wait();
-                        cache.load(&fmu)
-                    })
-                })
-                .collect();
-            handles.into_iter().map(|h| h.join().unwrap()).collect()
-        });
+    in_fresh_folders(100, "cache-race", |round, root| {
+        let cache = FmuCache::persistent(root).unwrap();
+        let loaded = eight_at_once(|| (), |()| cache.load(&fmu));
         let loaded: Vec<_> = loaded
             .into_iter()
             .map(|r| r.unwrap_or_else(|e| panic!("round {round}: {e}")))
@@ -53,11 +69,11 @@ fn eight_threads_load_the_same_fmu_into_one_cache_a_hundred_times() {
             loaded.iter().all(|l| Arc::ptr_eq(l, &loaded[0])),
             "round {round}: several loads of one content"
         );
-        let e = entries(&root);
+        let e = entries(root);
         assert_eq!(e.len(), 1, "round {round}: {e:?}");
         assert!(!e[0].contains("tmp"), "round {round}: {e:?}");
         assert!(loaded[0].dir.join(".complete").exists());
-    }
+    });
 }
 
 #[test]
@@ -66,33 +82,24 @@ fn caches_of_several_processes_share_one_folder_without_losing_an_unpacking() {
     // unpack lock), the others wait and use its folder; none unpacks a copy of its own
     // (eight used to, briefly taking several times the FMU's size on disk).
     let fmu = common::fmu("faulty");
-    for round in 0..20 {
-        let dir = tb_testkit::scratch("cache-procs");
-        let root = dir.path().join("cache");
-        let barrier = Barrier::new(8);
-        let dirs: Vec<_> = std::thread::scope(|s| {
-            let handles: Vec<_> = (0..8)
-                .map(|_| {
-                    s.spawn(|| {
-                        let cache = FmuCache::persistent(&root).unwrap();
-                        barrier.wait();
-                        let l = cache
-                            .load(&fmu)
-                            .unwrap_or_else(|e| panic!("round {round}: {e}"));
-                        (l.dir.clone(), cache.stats().extractions)
-                    })
-                })
-                .collect();
-            handles.into_iter().map(|h| h.join().unwrap()).collect()
-        });
+    in_fresh_folders(20, "cache-procs", |round, root| {
+        let dirs = eight_at_once(
+            || FmuCache::persistent(root).unwrap(),
+            |cache| {
+                let l = cache
+                    .load(&fmu)
+                    .unwrap_or_else(|e| panic!("round {round}: {e}"));
+                (l.dir.clone(), cache.stats().extractions)
+            },
+        );
         let unpackings: usize = dirs.iter().map(|d| d.1).sum();
         assert_eq!(unpackings, 1, "round {round}");
         let dirs: Vec<PathBuf> = dirs.into_iter().map(|d| d.0).collect();
         assert!(dirs.iter().all(|d| *d == dirs[0]), "round {round}");
-        let e = entries(&root);
+        let e = entries(root);
         assert_eq!(e.len(), 1, "round {round}: {e:?}");
         assert!(dirs[0].join(".complete").exists());
-    }
+    });
 }
 
 /// The faulty FMU rebuilt stored (not deflated) with a fixed time, its GUID's first digit

@@ -13,17 +13,16 @@ use tb_testkit::assert_contains;
 
 fn instance(model: &str) -> Instance {
     let fmu = common::load(model);
-    let mut i = Instance::instantiate(
-        fmu.library().unwrap(),
-        "host",
-        &fmu.description.guid,
-        Some(&fmu.resource_dir()),
-        true,
-    )
-    .unwrap();
+    let mut i = common::instantiate(&fmu, "host", true);
     i.set_echo(false);
     i.set_debug_categories(true, &[]).unwrap();
     i
+}
+
+/// [`instance`] of `model`, and the value references of its variables `names`.
+fn instance_with<const N: usize>(model: &str, names: [&str; N]) -> (Instance, [u32; N]) {
+    let fmu = common::load(model);
+    (instance(model), names.map(|n| common::vr(&fmu, n)))
 }
 
 /// 100,000 steps of 1 ms summed as a host does end 1.1e-10 s past stopTime = 100 s: every
@@ -57,9 +56,7 @@ fn a_host_that_sums_its_steps_reaches_the_stop_time_with_fmi2ok() {
 /// there, not an error; the instance is then freed cleanly.
 #[test]
 fn terminate_after_a_failed_initialisation_is_a_warning() {
-    let mut i = instance("driver");
-    let fmu = common::load("driver");
-    let vr = common::vr(&fmu, "target_speed_file");
+    let (mut i, [vr]) = instance_with("driver", ["target_speed_file"]);
     i.set_string(&[vr], &["/nonexistent/target.csv"]).unwrap();
     i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
@@ -83,9 +80,7 @@ fn terminate_after_a_failed_initialisation_is_a_warning() {
 /// is refused as before.
 #[test]
 fn an_input_a_rounding_outside_its_range_is_the_bound() {
-    let mut i = instance("edu");
-    let fmu = common::load("edu");
-    let pedal = common::vr(&fmu, "accel_pedal");
+    let (mut i, [pedal]) = instance_with("edu", ["accel_pedal"]);
     i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();
     // 1 as float32, widened: what OMSimulator's solver sent.
@@ -147,31 +142,14 @@ fn fmpy_the_vehicle_with_locked_wheels_ends_at_rest() {
 /// coupling; the sequential master still drives the lap.
 #[test]
 fn a_diverging_coupling_is_stopped_early_and_named() {
-    let root = twinbench::pack::workspace_root();
-    common::fmu_dir();
-    let text = std::fs::read_to_string(root.join("systems/rls_v.toml")).unwrap();
     let dir = tb_testkit::scratch("diverge");
     let run = |algorithm: &str| {
-        let t = text
-            .replace(
-                "../target/fmu",
-                &root.join("target/fmu").display().to_string(),
-            )
-            .replace("step = 1e-3", "step = 5e-3")
-            .replace(
+        common::run_bench(&dir.path().join(format!("{algorithm}.toml")), |text| {
+            text.replace("step = 1e-3", "step = 5e-3").replace(
                 "algorithm = \"gauss-seidel\"",
                 &format!("algorithm = \"{algorithm}\""),
-            );
-        let path = dir.path().join(format!("{algorithm}.toml"));
-        std::fs::write(&path, t).unwrap();
-        let plan = tb_cosim::Plan::load(
-            &path,
-            std::sync::Arc::new(tb_fmi::FmuCache::temporary(false).unwrap()),
-        )
-        .unwrap();
-        let mut sim = tb_cosim::Simulation::new(plan).unwrap();
-        sim.echo_fmu_log = false;
-        sim.run()
+            )
+        })
     };
     let e = run("jacobi").unwrap_err();
     assert!(
@@ -196,12 +174,7 @@ fn a_diverging_coupling_is_stopped_early_and_named() {
         .unwrap();
     assert!(t < 1.0, "stopped at {t} s");
     let lap = run("gauss-seidel").unwrap();
-    let lap_time = lap
-        .reported
-        .iter()
-        .find(|(n, _)| n == "vehicle.lap_time")
-        .unwrap()
-        .1;
+    let lap_time = lap.value("vehicle.lap_time").unwrap();
     // The lap at a 5 ms step: 97.54 s measured (the 1 ms bench 97.56 s, the car 97.49 s).
     assert!((lap_time - 97.54).abs() < 0.2, "lap {lap_time} s");
 }
@@ -209,10 +182,7 @@ fn a_diverging_coupling_is_stopped_early_and_named() {
 /// `range_check = 0`: an input outside its range is used as it is, with a warning.
 #[test]
 fn range_check_0_uses_an_out_of_range_input_with_a_warning() {
-    let mut i = instance("edu");
-    let fmu = common::load("edu");
-    let pedal = common::vr(&fmu, "accel_pedal");
-    let check = common::vr(&fmu, "range_check");
+    let (mut i, [pedal, check]) = instance_with("edu", ["accel_pedal", "range_check"]);
     i.set_integer(&[check], &[0]).unwrap();
     i.setup_experiment(0.0.into()).unwrap();
     i.enter_initialization_mode().unwrap();

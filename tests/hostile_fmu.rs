@@ -33,23 +33,24 @@ fn twinbench<S: AsRef<OsStr>>(args: impl IntoIterator<Item = S>) -> (Output, Str
     (out, err, started.elapsed())
 }
 
-/// `twinbench run SYSTEM --isolate` on the FMU built with `fault`: exit code 1 (twinbench
-/// reported it: not a signal, not the FMU's exit code) and the message.
-fn run_isolated(fault: &str) -> String {
+/// `twinbench run SYSTEM EXTRA --out CSV` on the FMU built with `fault`, in a scratch folder:
+/// the folder, the CSV's path, the output and its stderr.
+fn run_fault(fault: &str, extra: &[&str]) -> (tempfile::TempDir, PathBuf, Output, String) {
     let dir = tb_testkit::scratch("hostile");
     let fmu = hostile_fmu(dir.path(), fault);
     let sys = system(dir.path(), &fmu);
     let csv = dir.path().join("out.csv");
-    let args = args![
-        "run",
-        sys,
-        "--isolate",
-        "--worker-timeout",
-        "2",
-        "--out",
-        csv
-    ];
+    let mut args = args!["run", sys].to_vec();
+    args.extend(extra.iter().map(OsStr::new));
+    args.extend(args!["--out", csv]);
     let (out, err, _) = twinbench(args);
+    (dir, csv, out, err)
+}
+
+/// `twinbench run SYSTEM --isolate` on the FMU built with `fault`: exit code 1 (twinbench
+/// reported it: not a signal, not the FMU's exit code) and the message.
+fn run_isolated(fault: &str) -> String {
+    let (_dir, csv, out, err) = run_fault(fault, &["--isolate", "--worker-timeout", "2"]);
     assert_eq!(out.status.code(), Some(1), "{fault}: {err}");
     assert!(
         !csv.exists(),
@@ -63,11 +64,7 @@ fn run_isolated(fault: &str) -> String {
 /// worker's guard, not twinbench: the run completes with the right values.
 #[test]
 fn an_isolated_fmu_that_kills_its_parent_leaves_the_host_alive() {
-    let dir = tb_testkit::scratch("hostile");
-    let fmu = hostile_fmu(dir.path(), "KILL_PARENT");
-    let sys = system(dir.path(), &fmu);
-    let csv = dir.path().join("out.csv");
-    let (out, err, _) = twinbench(args!["run", sys, "--isolate", "--out", csv]);
+    let (_dir, csv, out, err) = run_fault("KILL_PARENT", &["--isolate"]);
     assert!(out.status.success(), "{:?}: {err}", out.status);
     let text = std::fs::read_to_string(&csv).unwrap();
     assert!(text.lines().last().unwrap().ends_with(",1"), "{text}");
@@ -199,11 +196,7 @@ fn endless_stderr_without_newlines_keeps_the_host_bounded() {
 
 #[test]
 fn exit_zero_inside_an_in_process_fmu_is_reported_with_a_failure_code() {
-    let dir = tb_testkit::scratch("hostile");
-    let fmu = hostile_fmu(dir.path(), "STEP_EXIT");
-    let sys = system(dir.path(), &fmu);
-    let csv = dir.path().join("out.csv");
-    let (out, err, _) = twinbench(args!["run", sys, "--out", csv]);
+    let (_dir, csv, out, err) = run_fault("STEP_EXIT", &[]);
     assert_eq!(out.status.code(), Some(3), "{err}");
     assert_contains(&err, &["error: the process was ended by a call to exit() before the command finished, from inside an FMU's code"]);
     assert!(!csv.exists());

@@ -31,6 +31,11 @@ fn lap_with(dir: &Path, name: &str, header: &str, row: impl Fn(&mut Vec<String>)
 const HEADER: &str =
     "time,distance,v,a_x,a_y,Fz_fl,Fz_fr,Fz_rl,Fz_rr,accel_pedal,brake_pedal,omega_rl,omega_rr";
 
+/// The bundled lap as `logger.csv` in `dir`, the header's first `column` named `name`.
+fn renamed_column(dir: &Path, column: &str, name: &str) -> PathBuf {
+    lap_with(dir, "logger.csv", &HEADER.replacen(column, name, 1), |_| {})
+}
+
 /// `lap MEASUREMENT --out OUT --fmus <the packed FMUs>`, then `extra`.
 fn lap_args(measurement: &Path, out: &Path, extra: &[&OsStr]) -> Vec<OsString> {
     let fmus = common::fmu_dir();
@@ -41,12 +46,7 @@ fn lap_args(measurement: &Path, out: &Path, extra: &[&OsStr]) -> Vec<OsString> {
 #[test]
 fn a_loggers_time_column_is_named_with_the_map_entry_that_takes_it() {
     let dir = tb_testkit::scratch("first-hour-4-time");
-    let m = lap_with(
-        dir.path(),
-        "logger.csv",
-        &HEADER.replacen("time", "Time", 1),
-        |_| {},
-    );
+    let m = renamed_column(dir.path(), "time", "Time");
     let out = dir.path().join("lap");
     let e = common::fails(lap_args(&m, &out, &[]));
     assert!(e.contains("missing required column `time`"), "{e}");
@@ -65,12 +65,7 @@ fn a_loggers_time_column_is_named_with_the_map_entry_that_takes_it() {
 #[test]
 fn an_unknown_key_in_a_channel_map_is_refused_with_the_keys_a_map_has() {
     let dir = tb_testkit::scratch("first-hour-4-map");
-    let m = lap_with(
-        dir.path(),
-        "logger.csv",
-        &HEADER.replacen(",v,", ",GPS_Speed,", 1),
-        |_| {},
-    );
+    let m = renamed_column(dir.path(), ",v,", ",GPS_Speed,");
     let map = dir.path().join("map.toml");
     std::fs::write(&map, "[channels]\nspeed = \"GPS_Speed\"\n").unwrap();
     let out = dir.path().join("lap");

@@ -14,8 +14,7 @@ mod common;
 
 use common::reference;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use tb_cosim::{Plan, Simulation, SystemError, SystemFile, Table};
+use tb_cosim::{Simulation, SystemError, SystemFile, Table};
 use tb_fmi::{FmuCache, FmuError};
 use tb_testkit::assert_contains;
 
@@ -58,13 +57,9 @@ fn without(xml: &str, element: &str) -> String {
 /// of FMI `version`.
 fn fmus(model: &str, version: u8, dir: &Path) -> (PathBuf, PathBuf) {
     let both = reference::fmu(model, version);
-    let me_only = reference::variant(
-        &both,
-        dir,
-        &format!("{model}_me"),
-        |xml| without(xml, "CoSimulation"),
-        |name| Some(name.to_string()),
-    );
+    let me_only = reference::with_description(&both, dir, &format!("{model}_me"), |xml| {
+        without(xml, "CoSimulation")
+    });
     (both, me_only)
 }
 
@@ -112,12 +107,7 @@ fn system_text(top: &str, instances: &[(&str, &Path, &str)], rest: &str) -> Stri
 fn run(text: &str, dir: &Path, name: &str) -> Result<Table, SystemError> {
     let path = dir.join(format!("{name}.toml"));
     let file = SystemFile::parse(text, &path)?;
-    let plan = Plan::compile(
-        file,
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &common::worker_options(),
-    )?;
+    let plan = common::compile(file, &path)?;
     let mut sim = Simulation::new(plan)?;
     sim.echo_fmu_log = false;
     sim.run()?;
@@ -132,6 +122,12 @@ fn run_one(fmu: &Path, extra: &str, stop: f64, step: f64, dir: &Path) -> Table {
         &format!("[experiment]\nstep = {step}\nstop = {stop}\n"),
     );
     run(&text, dir, "m").unwrap_or_else(|e| panic!("{}: {e}", fmu.display()))
+}
+
+/// [`run_one`] in `model`'s experiment.
+fn run_model(model: &str, fmu: &Path, extra: &str, dir: &Path) -> Table {
+    let (stop, step) = experiment(model);
+    run_one(fmu, extra, stop, step, dir)
 }
 
 /// Per column FMPy recorded: the largest difference, relative to max(1, |largest value|).
@@ -159,14 +155,8 @@ fn check(model: &str, version: u8) {
     let dir = tb_testkit::scratch(&format!("me-{model}-fmi{version}"));
     let (stop, step) = experiment(model);
     let (both, me_only) = fmus(model, version, dir.path());
-    let forced = run_one(
-        &both,
-        "interface = \"model-exchange\"",
-        stop,
-        step,
-        dir.path(),
-    );
-    let only = run_one(&me_only, "", stop, step, dir.path());
+    let forced = run_model(model, &both, "interface = \"model-exchange\"", dir.path());
+    let only = run_model(model, &me_only, "", dir.path());
     assert!(
         same_bits(&forced, &only),
         "{model}: the Model Exchange only archive gives another result"
@@ -360,22 +350,10 @@ fn an_isolated_instance_equals_the_in_process_one_bit_for_bit() {
         ("BouncingBall", 3),
         ("StateSpace", 3),
     ] {
-        let (stop, step) = experiment(model);
         let (both, _) = fmus(model, version, dir.path());
-        let inside = run_one(
-            &both,
-            "interface = \"model-exchange\"",
-            stop,
-            step,
-            dir.path(),
-        );
-        let isolated = run_one(
-            &both,
-            "interface = \"model-exchange\"\nisolate = true",
-            stop,
-            step,
-            dir.path(),
-        );
+        let inside = run_model(model, &both, "interface = \"model-exchange\"", dir.path());
+        let me_isolated = "interface = \"model-exchange\"\nisolate = true";
+        let isolated = run_model(model, &both, me_isolated, dir.path());
         assert!(same_bits(&inside, &isolated), "{model} (FMI {version})");
     }
 }
@@ -417,13 +395,9 @@ fn model_exchange_and_co_simulation_instances_connect() {
 fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
     let dir = tb_testkit::scratch("me-refused");
     let (both, me_only) = fmus("Dahlquist", 2, dir.path());
-    let cs_only = reference::variant(
-        &both,
-        dir.path(),
-        "Dahlquist_cs",
-        |xml| without(xml, "ModelExchange"),
-        |name| Some(name.to_string()),
-    );
+    let cs_only = reference::with_description(&both, dir.path(), "Dahlquist_cs", |xml| {
+        without(xml, "ModelExchange")
+    });
     let exp = "[experiment]\nstep = 0.1\nstop = 1\n";
     // Instance `m` of `fmu` with `interface` in a system of its own (`tag`): refused, why.
     let refused = |fmu: &Path, interface: &str, tag: &str| {
@@ -447,7 +421,7 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
     // FMI 3.0 declares no counts: a description whose state vector (its
     // ContinuousStateDerivative elements) is not the FMU's is refused before the first
     // step, with both counts.
-    let v3 = reference::variant(
+    let v3 = reference::with_description(
         &reference::fmu("Dahlquist", 3),
         dir.path(),
         "Dahlquist3_two_states",
@@ -457,7 +431,6 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
                 "<ContinuousStateDerivative valueReference=\"1\"/>\n    <ContinuousStateDerivative valueReference=\"2\"",
             )
         },
-        |name| Some(name.to_string()),
     );
     let e = run(
         &system_text("", &[("m", &v3, "interface = \"model-exchange\"")], exp),
@@ -608,13 +581,7 @@ fn paths_of_a_model_exchange_instance(version: u8) {
     // candidates reuse it).
     let path = dir.path().join("again.toml");
     let file = SystemFile::parse(&text, &path).unwrap();
-    let plan = Plan::compile(
-        file,
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &common::worker_options(),
-    )
-    .unwrap();
+    let plan = common::compile(file, &path).unwrap();
     let mut sim = Simulation::new(plan).unwrap();
     sim.echo_fmu_log = false;
     sim.run().unwrap();

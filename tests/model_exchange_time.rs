@@ -5,6 +5,7 @@
 mod common;
 
 use common::cli::{failed, succeeded};
+use std::ffi::OsStr;
 use std::path::Path;
 use std::process::{Command, Output};
 use tb_testkit::assert_contains;
@@ -36,6 +37,26 @@ fn run(dir: &Path, mode: i32, start: f64, stop: f64) -> (Output, Option<Vec<f64>
         Some(vec![at("time")?, at("y")?, at("events")?])
     });
     (out, last)
+}
+
+/// `twinbench run <the typed_vr FMU> --out OUT` and `more`: its output.
+fn run_typed_vr(out: &Path, more: &[&OsStr]) -> Output {
+    let fmu = common::cfmu::fmu("typed_vr");
+    common::twinbench(args!["run", fmu, "--out", out].iter().chain(more))
+}
+
+/// The CSV twinbench wrote at `csv` and the values of its column `name` (the rows after
+/// the header and units rows).
+fn column(csv: &Path, name: &str) -> (String, Vec<f64>) {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == name).unwrap();
+    let values = text
+        .lines()
+        .skip(2)
+        .map(|l| l.split(',').nth(col).unwrap().parse().unwrap())
+        .collect();
+    (text, values)
 }
 
 /// `cmd`'s output; a failure when it still runs after 60 s (a hang, not a benchmark: what
@@ -165,18 +186,10 @@ fn m17_inputs_near_the_largest_number_interpolate_without_overflow() {
     let file = dir.path().join("huge.in.csv");
     std::fs::write(&file, "time,u\n0,1e308\n1,-1e308\n").unwrap();
     let csv = dir.path().join("huge.csv");
-    let fmu = common::cfmu::fmu("typed_vr");
-    let args = args!["run", fmu, "--input", file, "--out", csv, "--set", "gain=0"];
-    common::run_ok(args.iter().chain(&args!["--stop", "1", "--step", "0.25"]));
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
-    let col = header.iter().position(|h| *h == "u_echo").unwrap();
+    let more = args!["--input", file, "--set", "gain=0", "--stop", "1", "--step", "0.25"];
+    succeeded(&run_typed_vr(&csv, &more), "the input of ±1e308");
     // u_echo is the input of the step before: 1e308 at 0.25 s, then 5e307, 0, -5e307.
-    let echoed: Vec<f64> = text
-        .lines()
-        .skip(2)
-        .map(|l| l.split(',').nth(col).unwrap().parse().unwrap())
-        .collect();
+    let (text, echoed) = column(&csv, "u_echo");
     assert_eq!(echoed[1..], [1e308, 5e307, 0.0, -5e307], "{text}");
 }
 
@@ -267,19 +280,13 @@ fn m11_a_hundred_thousand_fmi3_aliases_are_read_and_run_in_linear_time() {
     let aliases: String = (0..100_000)
         .map(|i| format!("<Alias name=\"x0_{i}\"/>"))
         .collect();
-    let fmu = common::reference::variant(
-        &vdp,
-        dir.path(),
-        "vdp_aliases",
-        |xml| {
-            xml.replacen(
-                "initial=\"exact\" start=\"2\"/>",
-                &format!("initial=\"exact\" start=\"2\">{aliases}</Float64>"),
-                1,
-            )
-        },
-        |n| Some(n.to_string()),
-    );
+    let fmu = common::reference::with_description(&vdp, dir.path(), "vdp_aliases", |xml| {
+        xml.replacen(
+            "initial=\"exact\" start=\"2\"/>",
+            &format!("initial=\"exact\" start=\"2\">{aliases}</Float64>"),
+            1,
+        )
+    });
     let deadline =
         |args: &[&str]| within_a_minute(Command::new(env!("CARGO_BIN_EXE_twinbench")).args(args));
     let f = fmu.to_str().unwrap();
@@ -323,26 +330,13 @@ fn m17_a_nan_derivative_or_event_indicator_is_named_as_the_fmus() {
 fn m17_a_single_fmus_instance_prefix_and_a_bad_prune_size() {
     let dir = tb_testkit::scratch("m17-set");
     let csv = dir.path().join("y.csv");
-    let fmu = common::cfmu::fmu("typed_vr");
     let run = |set: &str| {
-        let args = args!["run", fmu, "--stop", "0.5", "--step", "0.25", "--set", set, "--out", csv];
-        common::twinbench(args)
+        run_typed_vr(
+            &csv,
+            &args!["--stop", "0.5", "--step", "0.25", "--set", set],
+        )
     };
-    let last_y = || {
-        let text = std::fs::read_to_string(&csv).unwrap();
-        let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
-        let col = header.iter().position(|h| *h == "y").unwrap();
-        let y: f64 = text
-            .lines()
-            .last()
-            .unwrap()
-            .split(',')
-            .nth(col)
-            .unwrap()
-            .parse()
-            .unwrap();
-        y
-    };
+    let last_y = || *column(&csv, "y").1.last().unwrap();
     // y = gain · u + t with gain 2: u = 2 makes y 4 more than u's start 0 does.
     succeeded(&run("u=2"), "u=2");
     let plain = last_y();

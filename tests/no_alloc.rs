@@ -84,49 +84,51 @@ fn allocations_while_stepping<M: Model>(
     allocations() - before
 }
 
+/// [`allocations_while_stepping`] for 3000 steps counts none.
+fn steps_without_allocating<M: Model>(name: &str, resources: Option<&str>, inputs: &[(&str, f64)]) {
+    let n = allocations_while_stepping::<M>(resources, inputs, 3000);
+    assert_eq!(n, 0, "{name} allocated {n} times in 3000 steps");
+}
+
 #[test]
 fn vehicle_steps_without_allocating() {
     let w = 52.43 / 0.345;
-    let n = allocations_while_stepping::<vehicle::Vehicle>(
+    steps_without_allocating::<vehicle::Vehicle>(
+        "vehicle",
         Some("models/vehicle/resources"),
         &[("omega_rl", w), ("omega_rr", w), ("brake_pedal", 0.0)],
-        3000,
     );
-    assert_eq!(n, 0, "vehicle allocated {n} times in 3000 steps");
 }
 
 #[test]
 fn driver_steps_without_allocating() {
-    let n = allocations_while_stepping::<driver::Driver>(
+    steps_without_allocating::<driver::Driver>(
+        "driver",
         Some("models/driver/resources"),
         &[("v", 50.0), ("s", 10.0)],
-        3000,
     );
-    assert_eq!(n, 0, "driver allocated {n} times");
 }
 
 #[test]
 fn dyno_steps_without_allocating() {
-    let n = allocations_while_stepping::<dyno::Dyno>(
+    steps_without_allocating::<dyno::Dyno>(
+        "dyno",
         None,
         &[("shaft_torque", 100.0), ("torque_setpoint", 80.0)],
-        3000,
     );
-    assert_eq!(n, 0, "dyno allocated {n} times");
 }
 
 #[test]
 fn edu_steps_without_allocating() {
-    let n = allocations_while_stepping::<edu::Edu>(
+    steps_without_allocating::<edu::Edu>(
+        "edu",
         None,
         &[
             ("accel_pedal", 0.5),
             ("omega_left", 150.0),
             ("omega_right", 150.0),
         ],
-        3000,
     );
-    assert_eq!(n, 0, "edu allocated {n} times");
 }
 
 #[test]

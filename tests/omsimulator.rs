@@ -90,28 +90,11 @@ fn omsimulator_runs_the_exported_bench_lap() {
     let oms_lap = last_value(&out, "vehicle.lap_time");
     std::fs::remove_file(&out).unwrap(); // 190 MB
                                          // twinbench, Jacobi, the same system.
-    let text = std::fs::read_to_string(root.join("systems/rls_v.toml"))
-        .unwrap()
-        .replace(
-            "../target/fmu",
-            &root.join("target/fmu").display().to_string(),
-        )
-        .replace("algorithm = \"gauss-seidel\"", "algorithm = \"jacobi\"");
-    let path = dir.path().join("jacobi.toml");
-    std::fs::write(&path, text).unwrap();
-    let plan = tb_cosim::Plan::load(
-        &path,
-        std::sync::Arc::new(tb_fmi::FmuCache::temporary(false).unwrap()),
-    )
+    let s = common::run_bench(&dir.path().join("jacobi.toml"), |text| {
+        text.replace("algorithm = \"gauss-seidel\"", "algorithm = \"jacobi\"")
+    })
     .unwrap();
-    let mut sim = tb_cosim::Simulation::new(plan).unwrap();
-    let s = sim.run().unwrap();
-    let ours = s
-        .reported
-        .iter()
-        .find(|(n, _)| n == "vehicle.lap_time")
-        .unwrap()
-        .1;
+    let ours = s.value("vehicle.lap_time").unwrap();
     eprintln!("lap time: OMSimulator {oms_lap} s, twinbench Jacobi {ours} s");
     assert!(
         (oms_lap - ours).abs() < 0.010,

@@ -16,24 +16,33 @@ fn root() -> PathBuf {
 
 /// The bundled bench with some parameters added, written beside `dir`'s files.
 fn bench_with(dir: &Path, extra: &str) -> PathBuf {
-    let fmu_dir = common::fmu_dir();
-    let text = std::fs::read_to_string(root().join("systems/rls_v.toml"))
-        .unwrap()
-        .replace("\"../target/fmu/", &format!("\"{}/", fmu_dir.display()))
-        .replace("[parameters]\n", &format!("[parameters]\n{extra}\n"));
-    let p = dir.join("bench.toml");
-    std::fs::write(&p, text).unwrap();
-    p
+    common::bench_file(&dir.join("bench.toml"), |text| {
+        text.replace("[parameters]\n", &format!("[parameters]\n{extra}\n"))
+    })
+}
+
+/// `dir/name`: the CSV header `header`, then `row(s)` for each `s` of `metres`.
+fn by_metre(
+    dir: &Path,
+    name: &str,
+    header: &str,
+    metres: impl Iterator<Item = u32>,
+    row: impl Fn(u32) -> String,
+) -> PathBuf {
+    let mut text = format!("{header}\n");
+    for s in metres {
+        text.push_str(&row(s));
+        text.push('\n');
+    }
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
 }
 
 #[test]
 fn a_malformed_track_file_fails_initialisation_naming_the_users_path_row_and_column() {
-    let dir = tb_testkit::scratch("bad-track");
-    std::fs::write(
-        dir.path().join("my_track.csv"),
-        "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,0.01,x,0,0\n2,0,0,0,0\n",
-    )
-    .unwrap();
+    let track = "s,curvature,grade,z_road_left,z_road_right\n0,0,0,0,0\n1,0.01,x,0,0\n2,0,0,0,0\n";
+    let dir = common::scratch_with("bad-track", &[("my_track.csv", track)]);
     // A relative path in the system file is relative to the system file.
     let sys = bench_with(dir.path(), "\"vehicle.track_file\" = \"my_track.csv\"");
     let e = common::fails(args!["run", sys]);
@@ -54,11 +63,9 @@ fn a_malformed_track_file_fails_initialisation_naming_the_users_path_row_and_col
 #[test]
 fn a_track_and_a_target_of_different_laps_are_refused_before_the_first_step() {
     let dir = tb_testkit::scratch("other-target");
-    let mut target = String::from("s,v\n");
-    for s in 0..=3000 {
-        target.push_str(&format!("{s},40\n"));
-    }
-    std::fs::write(dir.path().join("short.csv"), target).unwrap();
+    by_metre(dir.path(), "short.csv", "s,v", 0..=3000, |s| {
+        format!("{s},40")
+    });
     let sys = bench_with(dir.path(), "\"driver.target_speed_file\" = \"short.csv\"");
     let e = common::fails(args!["run", sys]);
     assert!(e.contains("check failed after initialisation"), "{e}");
@@ -132,13 +139,10 @@ fn logger_named_lap(dir: &Path, name: &str, drop_rr: bool, nan_row: Option<usize
 
 #[test]
 fn errors_about_mapped_channels_name_the_files_own_channels() {
-    let dir = tb_testkit::scratch("mapped-channels");
+    let channels =
+        "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\n";
+    let dir = common::scratch_with("mapped-channels", &[("map.toml", channels)]);
     let map = dir.path().join("map.toml");
-    std::fs::write(
-        &map,
-        "[channels]\nFz_fl = \"LoadFL\"\nFz_fr = \"LoadFR\"\nFz_rl = \"LoadRL\"\nFz_rr = \"LoadRR\"\n",
-    )
-    .unwrap();
     let track = root().join("data/spielberg_lap_track.csv");
     let out = dir.path().join("lap");
     let lap = |meas: &Path| {
@@ -228,23 +232,18 @@ fn a_measurement_of_another_circuit_is_refused_before_optimising() {
 #[test]
 fn fmpy_sets_the_track_file_and_reads_the_same_lap_length_as_twinbench() {
     let dir = tb_testkit::scratch("fmpy-track");
-    let mut track = String::from("s,curvature,grade,z_road_left,z_road_right\n");
-    for s in 0..1234 {
-        track.push_str(&format!("{s},0.002,0,0,0\n"));
-    }
-    let track_p = dir.path().join("oval.csv");
-    std::fs::write(&track_p, track).unwrap();
+    let header = "s,curvature,grade,z_road_left,z_road_right";
+    let track_p = by_metre(dir.path(), "oval.csv", header, 0..1234, |s| {
+        format!("{s},0.002,0,0,0")
+    });
     // twinbench: the vehicle alone, track_file set.
     let fmu = common::fmu("vehicle");
-    let sys = dir.path().join("vehicle.toml");
-    std::fs::write(
-        &sys,
-        format!(
-            "[fmus]\nvehicle = {:?}\n\n[[instance]]\nname = \"vehicle\"\nfmu = \"vehicle\"\n\n[parameters]\n\"vehicle.track_file\" = \"oval.csv\"\n\"vehicle.v_start\" = 20.0\n\"vehicle.omega_rl\" = 57.97\n\"vehicle.omega_rr\" = 57.97\n\n[experiment]\nstep = 1e-3\nstop = 0.01\n\n[record]\nsignals = [\"vehicle.lap_length\"]\n",
-            fmu.display().to_string()
-        ),
-    )
-    .unwrap();
+    let sys = common::system_file(
+        &dir.path().join("vehicle.toml"),
+        "",
+        &[("vehicle", &fmu)],
+        "[[instance]]\nname = \"vehicle\"\nfmu = \"vehicle\"\n\n[parameters]\n\"vehicle.track_file\" = \"oval.csv\"\n\"vehicle.v_start\" = 20.0\n\"vehicle.omega_rl\" = 57.97\n\"vehicle.omega_rr\" = 57.97\n\n[experiment]\nstep = 1e-3\nstop = 0.01\n\n[record]\nsignals = [\"vehicle.lap_length\"]\n",
+    );
     let csv = dir.path().join("tb.csv");
     common::ok(args!["run", sys, "--out", csv]);
     let tb = tb_table::Table::read_path(&csv).unwrap();

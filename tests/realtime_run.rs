@@ -8,7 +8,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 use tb_testkit::assert_contains;
 
 /// `systems/rls_v.toml` with the packed FMUs and a stop time of `stop` s.
@@ -189,38 +189,17 @@ fn ctrl_c_ends_a_paced_run_during_its_sleep_and_keeps_the_rows() {
     let dir = tb_testkit::scratch("realtime-ctrl-c");
     let system = bench(dir.path(), 3.0);
     let (out, trace) = (dir.path().join("r.csv"), dir.path().join("calls.txt"));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .arg("run")
+    let mut run = Command::new(env!("CARGO_BIN_EXE_twinbench"));
+    run.arg("run")
         .arg(&system)
         .arg("--out")
         .arg(&out)
         .args(["--realtime", "0.001", "--realtime-priority", "0"])
         .args(["--realtime-cpu", "none", "--trace-fmi"])
-        .arg(&trace)
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Under way once the trace shows a step: the run then sleeps to its first deadline.
-    let started = Instant::now();
-    while !std::fs::read_to_string(&trace).is_ok_and(|t| t.contains("fmi2DoStep")) {
-        assert!(started.elapsed().as_secs() < 60, "the run did not start");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    // SAFETY: a signal to our own child process.
-    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-    // A watchdog for a sleep that would not end (the run's schedule is 3000 s), not a
-    // measure of how promptly it ends.
-    let waited = Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if waited.elapsed().as_secs() > 60 {
-            let _ = child.kill();
-            panic!("a paced run did not end on Ctrl-C");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let o = child.wait_with_output().unwrap();
-    let e = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{e}");
+        .arg(&trace);
+    // Under way once the trace shows a step: the run then sleeps to its first deadline (its
+    // schedule is 3000 s), and Ctrl-C ends it there.
+    let e = common::cli::interrupted_while_stepping(&mut run, &trace, libc::SIGINT);
     let partial = dir.path().join("r.incomplete.csv");
     assert_contains(
         &e,

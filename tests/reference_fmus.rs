@@ -122,13 +122,7 @@ fn twinbench(c: &Case, fmu: &Path, dir: &Path) -> Result<(Table, String), System
     }
     let path = dir.join(format!("{}-fmi{}.toml", c.model, c.version));
     let file = SystemFile::parse(&text, &path).unwrap();
-    let options = common::worker_options();
-    let plan = Plan::compile(
-        file,
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &options,
-    )?;
+    let plan = common::compile(file, &path)?;
     let mut sim = Simulation::new(plan).unwrap();
     sim.echo_fmu_log = false;
     let summary = sim.run()?;
@@ -328,19 +322,15 @@ fn fmi2_feedthrough_replays_steps_holds_and_interpolates_as_fmpy() {
     // Every input type; a repeated time is a step; a Real row between the grid points is
     // interpolated for the continuous input and held for the discrete one; a text column
     // nobody uses.
-    let dir = tb_testkit::scratch("feedthrough-in");
-    let input = dir.path().join("in.csv");
-    std::fs::write(
-        &input,
-        "time,Float64_continuous_input,Float64_discrete_input,Int32_input,Boolean_input,Enumeration_input,comment\n\
+    let rows = "time,Float64_continuous_input,Float64_discrete_input,Int32_input,Boolean_input,Enumeration_input,comment\n\
          0,0,0,0,0,1,start\n\
          0.3,1,2.5,3,1,2,x\n\
          0.3,2,-1,4,0,1,\"a step, here\"\n\
          0.7,-1,7,-5,1,2,y\n\
          1.25,3,7,-5,1,2,between\n\
-         1.2000000000000002,3,7,-5,1,2,not sorted\n",
-    )
-    .unwrap();
+         1.2000000000000002,3,7,-5,1,2,not sorted\n";
+    let dir = common::scratch_with("feedthrough-in", &[("in.csv", rows)]);
+    let input = dir.path().join("in.csv");
     // The last row goes back in time: refused with the line.
     let c = Case {
         input: Some(input.clone()),
@@ -486,14 +476,7 @@ fn fmi2_stair_isolated_ends_where_in_process_does() {
         fmu.display()
     );
     let path = dir.path().join("iso.toml");
-    let options = common::worker_options();
-    let plan = Plan::compile(
-        SystemFile::parse(&text, &path).unwrap(),
-        &path,
-        Arc::new(FmuCache::temporary(false).unwrap()),
-        &options,
-    )
-    .unwrap();
+    let plan = common::compile(SystemFile::parse(&text, &path).unwrap(), &path).unwrap();
     let mut sim = Simulation::new(plan).unwrap();
     let s = sim.run().unwrap();
     assert_eq!(s.stopped_by, stopped);
@@ -537,12 +520,12 @@ fn fmi3_isolated_runs_equal_in_process_runs() {
 fn export_ssp_types_strings_and_enumerations_as_ssp_does() {
     let dir = tb_testkit::scratch("ssp-types");
     let fmu = reference::fmu("Feedthrough", 2);
-    let text = format!(
-        "connections = [\"a.String_output -> b.String_input\", \"a.Enumeration_output -> b.Enumeration_input\"]\n[fmus]\nm = \"{}\"\n\n[[instance]]\nname = \"a\"\nfmu = \"m\"\n\n[[instance]]\nname = \"b\"\nfmu = \"m\"\n\n[parameters]\n\"a.String_input\" = \"<&>\"\n\"a.Enumeration_input\" = 2\n\"a.Int32_input\" = 7\n\n[experiment]\nstep = 0.5\nstop = 1.0\n",
-        fmu.display()
+    let path = common::system_file(
+        &dir.path().join("types.toml"),
+        "connections = [\"a.String_output -> b.String_input\", \"a.Enumeration_output -> b.Enumeration_input\"]",
+        &[("m", &fmu)],
+        "[[instance]]\nname = \"a\"\nfmu = \"m\"\n\n[[instance]]\nname = \"b\"\nfmu = \"m\"\n\n[parameters]\n\"a.String_input\" = \"<&>\"\n\"a.Enumeration_input\" = 2\n\"a.Int32_input\" = 7\n\n[experiment]\nstep = 0.5\nstop = 1.0\n",
     );
-    let path = dir.path().join("types.toml");
-    std::fs::write(&path, &text).unwrap();
     let plan = Plan::load(&path, Arc::new(FmuCache::temporary(false).unwrap())).unwrap();
     let ssp = dir.path().join("types.ssp");
     let summary = tb_cosim::ssp::export(

@@ -16,16 +16,12 @@ fn run_out(system: &Path, out: &Path) -> Output {
 /// A one-second system of the test FMU (quick), written in `dir`.
 fn small_system(dir: &Path) -> PathBuf {
     let fmu = common::fmu("faulty");
-    let p = dir.join("small.toml");
-    std::fs::write(
-        &p,
-        format!(
-            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n",
-            fmu.display().to_string()
-        ),
+    common::system_file(
+        &dir.join("small.toml"),
+        "",
+        &[("f", &fmu)],
+        "[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n\n[experiment]\nstep = 1e-3\nstop = 1.0\n",
     )
-    .unwrap();
-    p
 }
 
 fn refused(o: &Output, what: &str) -> String {
@@ -39,16 +35,18 @@ fn refused(o: &Output, what: &str) -> String {
 /// A system of the `faulty` test FMU as instance `a` (u = 1: y = t), with more parameter
 /// lines and the stop time, in `dir`.
 fn faulty_system(dir: &Path, parameters: &str, stop: &str) -> PathBuf {
-    let sys = dir.join("t.toml");
-    std::fs::write(
-        &sys,
-        format!(
-            "[fmus]\nf = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n{parameters}\n[experiment]\nstep = 1e-3\nstop = {stop}\n",
-            common::fmu("faulty").display().to_string()
-        ),
+    common::system_file(
+        &dir.join("t.toml"),
+        "",
+        &[("f", &common::fmu("faulty"))],
+        &format!("[[instance]]\nname = \"a\"\nfmu = \"f\"\n\n[parameters]\n\"a.u\" = 1.0\n{parameters}\n[experiment]\nstep = 1e-3\nstop = {stop}\n"),
     )
-    .unwrap();
-    sys
+}
+
+/// A one-second [`faulty_system`] whose instance `a` fails with `fault_kind` at `fault_time`.
+fn fault_at(dir: &Path, fault_kind: u32, fault_time: &str) -> PathBuf {
+    let parameters = format!("\"a.fault_kind\" = {fault_kind}\n\"a.fault_time\" = {fault_time}\n");
+    faulty_system(dir, &parameters, "1.0")
 }
 
 #[test]
@@ -137,11 +135,7 @@ impl FifoLike for std::fs::FileType {
 #[test]
 fn a_complete_run_keeps_its_results_when_an_instance_fails_to_end() {
     let dir = tb_testkit::scratch("terminate");
-    let sys = faulty_system(
-        dir.path(),
-        "\"a.fault_kind\" = 9\n\"a.fault_time\" = 100.0\n",
-        "1.0",
-    );
+    let sys = fault_at(dir.path(), 9, "100.0");
     let out = dir.path().join("r.csv");
     let o = run_out(&sys, &out);
     assert!(!o.status.success(), "the terminate error is an error");
@@ -161,11 +155,7 @@ fn a_complete_run_keeps_its_results_when_an_instance_fails_to_end() {
 #[test]
 fn a_failed_run_keeps_what_it_recorded_in_a_file_named_incomplete() {
     let dir = tb_testkit::scratch("incomplete");
-    let sys = faulty_system(
-        dir.path(),
-        "\"a.fault_kind\" = 1\n\"a.fault_time\" = 0.5\n",
-        "1.0",
-    );
+    let sys = fault_at(dir.path(), 1, "0.5");
     let out = dir.path().join("r.csv");
     // A complete result from an earlier run stays where it is.
     std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
@@ -237,23 +227,10 @@ fn interrupted_run_keeps_its_rows_as_incomplete(signal: i32) {
     let sys = faulty_system(dir.path(), "", "1e5");
     let (out, trace) = (dir.path().join("r.csv"), dir.path().join("calls.txt"));
     std::fs::write(&out, "time,a.y\n0,0\n").unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_twinbench"))
-        .args(["run", sys.to_str().unwrap(), "--out", out.to_str().unwrap()])
-        .args(["--trace-fmi", trace.to_str().unwrap()])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // The run is under way once the trace shows steps (no race with the start-up).
-    let started = std::time::Instant::now();
-    while !std::fs::read_to_string(&trace).is_ok_and(|t| t.contains("fmi2DoStep")) {
-        assert!(started.elapsed().as_secs() < 60, "the run did not start");
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    // SAFETY: a signal to our own child process.
-    unsafe { libc::kill(child.id() as i32, signal) };
-    let o = child.wait_with_output().unwrap();
-    let e = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{e}");
+    let mut run = Command::new(env!("CARGO_BIN_EXE_twinbench"));
+    run.args(["run", sys.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args(["--trace-fmi", trace.to_str().unwrap()]);
+    let e = common::cli::interrupted_while_stepping(&mut run, &trace, signal);
     let partial = dir.path().join("r.incomplete.csv");
     assert_contains(
         &e,

@@ -140,15 +140,12 @@ fn numbers_on_the_command_line_are_checked_for_range() {
     let root = twinbench::pack::workspace_root();
     // A valid system to run with bad numbers: the faulty FMU alone.
     let dir = tb_testkit::scratch("cli-numbers");
-    let sys = dir.path().join("sys.toml");
-    std::fs::write(
-        &sys,
-        format!(
-            "[fmus]\nf = \"{}\"\n\n[[instance]]\nname = \"f\"\nfmu = \"f\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n",
-            common::fmu("faulty").display()
-        ),
-    )
-    .unwrap();
+    let sys = common::system_file(
+        &dir.path().join("sys.toml"),
+        "",
+        &[("f", &common::fmu("faulty"))],
+        "[[instance]]\nname = \"f\"\nfmu = \"f\"\n\n[experiment]\nstep = 0.1\nstop = 1.0\n",
+    );
     let sys = sys.to_str().unwrap();
     let meas = root.join("data/spielberg_lap.csv");
     let meas = meas.to_str().unwrap();

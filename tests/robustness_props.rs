@@ -74,6 +74,11 @@ fn apply(seed: &[u8], edits: &[Edit]) -> Vec<u8> {
     v
 }
 
+/// `edits` applied to the seed `k` of `seeds` (counted round).
+fn edited(seeds: &[Vec<u8>], k: usize, edits: &[Edit]) -> Vec<u8> {
+    apply(&seeds[k % seeds.len()], edits)
+}
+
 fn root() -> PathBuf {
     twinbench::pack::workspace_root()
 }
@@ -109,8 +114,7 @@ proptest! {
 
     #[test]
     fn model_description_never_panics_on_edits(k in 0..64usize, edits in prop::collection::vec(edit(), 1..6)) {
-        let s = md_seeds();
-        let text = apply(&s[k % s.len()], &edits);
+        let text = edited(md_seeds(), k, &edits);
         let _ = tb_fmi::import::description::parse(&String::from_utf8_lossy(&text));
     }
 
@@ -159,8 +163,7 @@ proptest! {
 
     #[test]
     fn system_file_never_panics_on_edits(k in 0..64usize, edits in prop::collection::vec(edit(), 1..5)) {
-        let s = system_seeds();
-        let text = apply(&s[k % s.len()], &edits);
+        let text = edited(system_seeds(), k, &edits);
         check_system(&String::from_utf8_lossy(&text));
     }
 
@@ -188,8 +191,7 @@ proptest! {
 
     #[test]
     fn measurement_csv_never_panics_on_edits(k in 0..64usize, edits in prop::collection::vec(edit(), 1..8)) {
-        let s = csv_seeds();
-        check_csv(&apply(&s[k % s.len()], &edits));
+        check_csv(&edited(csv_seeds(), k, &edits));
     }
 
     #[test]
@@ -247,8 +249,7 @@ proptest! {
         k in 0..64usize,
         edits in prop::collection::vec(prop_oneof![edit(), word()], 1..6),
     ) {
-        let s = mdf_seeds();
-        if let Err(e) = tb_table::mdf::read_bytes(&apply(&s[k % s.len()], &edits), "edited.mf4") {
+        if let Err(e) = tb_table::mdf::read_bytes(&edited(mdf_seeds(), k, &edits), "edited.mf4") {
             prop_assert!(!e.to_string().contains("the MDF reader (mdf4-rs) failed"), "{e}");
         }
     }

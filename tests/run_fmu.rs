@@ -7,7 +7,7 @@ mod common;
 
 use common::cli::succeeded;
 use common::reference;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use tb_testkit::assert_contains;
 
@@ -72,9 +72,15 @@ fn read_ours(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
     (names, rows)
 }
 
-/// The same columns, rows and values (Float32 values to a float's precision: FMPy writes
-/// them as float32, twinbench as the double they widen to).
-fn assert_same(model: &str, ours: &Path, theirs: &Path) -> f64 {
+/// Our CSV `ours` against FMPy's `theirs` of `model`: the same columns and rows, each value
+/// within `tol(column)` relative (to a magnitude of at least 1). Our rows and the largest
+/// relative difference.
+fn compare(
+    model: &str,
+    ours: &Path,
+    theirs: &Path,
+    tol: impl Fn(&str) -> f64,
+) -> (Vec<Vec<f64>>, f64) {
     let (n1, r1) = read_ours(ours);
     let (n2, r2) = read_fmpy(theirs);
     assert_eq!(n1, n2, "{model}: columns");
@@ -82,21 +88,29 @@ fn assert_same(model: &str, ours: &Path, theirs: &Path) -> f64 {
     let mut worst: f64 = 0.0;
     for (k, (a, b)) in r1.iter().zip(&r2).enumerate() {
         for (c, (x, y)) in a.iter().zip(b).enumerate() {
-            let tol = if n1[c].starts_with("Float32") {
-                1e-7
-            } else {
-                1e-13
-            };
             let d = (x - y).abs() / y.abs().max(1.0);
             worst = worst.max(d);
             assert!(
-                d <= tol,
+                d <= tol(&n1[c]),
                 "{model}: row {k}, {}: twinbench {x}, FMPy {y}",
                 n1[c]
             );
         }
     }
-    worst
+    (r1, worst)
+}
+
+/// The same columns, rows and values (Float32 values to a float's precision: FMPy writes
+/// them as float32, twinbench as the double they widen to).
+fn assert_same(model: &str, ours: &Path, theirs: &Path) -> f64 {
+    let tol = |column: &str| {
+        if column.starts_with("Float32") {
+            1e-7
+        } else {
+            1e-13
+        }
+    };
+    compare(model, ours, theirs, tol).1
 }
 
 fn models(version: u8) -> Vec<&'static str> {
@@ -155,38 +169,27 @@ fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_row
         let fmu = reference::fmu(model, 2);
         let ours = format!("{model}.me.csv");
         let theirs = format!("{model}.me.fmpy.csv");
-        let args = [
-            "run",
-            fmu.to_str().unwrap(),
-            "--interface",
-            "model-exchange",
-            "--record-events",
-            "--out",
-            &ours,
-        ];
-        common::ok_in(dir.path(), args);
+        // `twinbench run FMU --interface model-exchange [--record-events] --out OUT`.
+        let run_me = |record_events: &[&str], out: &str| {
+            let fmu = fmu.to_str().unwrap();
+            let mut args = vec!["run", fmu, "--interface", "model-exchange"];
+            args.extend(record_events);
+            args.extend(["--out", out]);
+            common::ok_in(dir.path(), args);
+        };
+        run_me(&["--record-events"], &ours);
         fmpy_simulate(
             dir.path(),
             &fmu,
             &theirs,
             &["--interface-type", "ModelExchange"],
         );
-        let (n1, r1) = read_ours(&dir.path().join(&ours));
-        let (n2, r2) = read_fmpy(&dir.path().join(&theirs));
-        assert_eq!(n1, n2, "{model}: columns");
-        assert_eq!(r1.len(), r2.len(), "{model}: rows");
-        let mut worst: f64 = 0.0;
-        for (k, (a, b)) in r1.iter().zip(&r2).enumerate() {
-            for (c, (x, y)) in a.iter().zip(b).enumerate() {
-                let d = (x - y).abs() / y.abs().max(1.0);
-                worst = worst.max(d);
-                assert!(
-                    d <= 1e-11,
-                    "{model}: row {k}, {}: twinbench {x}, FMPy {y}",
-                    n1[c]
-                );
-            }
-        }
+        let (r1, worst) = compare(
+            model,
+            &dir.path().join(&ours),
+            &dir.path().join(&theirs),
+            |_| 1e-11,
+        );
         // Rows at one time twice: an event's left and right limits.
         let times: Vec<f64> = r1.iter().map(|r| r[0]).collect();
         let events = times.windows(2).filter(|w| w[0] == w[1]).count();
@@ -194,15 +197,7 @@ fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_row
         println!("{model} (Model Exchange, event rows): {} rows, {events} at events, largest relative difference from FMPy {worst:e}", r1.len());
         // Without --record-events: the output points only.
         let plain = format!("{model}.me.plain.csv");
-        let args = [
-            "run",
-            fmu.to_str().unwrap(),
-            "--interface",
-            "model-exchange",
-            "--out",
-            &plain,
-        ];
-        common::ok_in(dir.path(), args);
+        run_me(&[], &plain);
         let (_, r3) = read_ours(&dir.path().join(&plain));
         assert!(
             r3.windows(2).all(|w| w[1][0] > w[0][0]),
@@ -221,12 +216,8 @@ fn each_reference_fmu_as_model_exchange_with_event_rows_gives_fmpy_simulates_row
 /// their own (FMPy's communication step, as alone it is twinbench's).
 #[test]
 fn an_input_file_start_values_and_intervals_as_in_fmpy() {
-    let dir = tb_testkit::scratch("run-fmu-input");
-    std::fs::write(
-        dir.path().join("in.csv"),
-        "time,Float64_continuous_input,Int32_input,Boolean_input\n0,0,1,0\n0.5,1,1,0\n0.5,1,3,1\n1,-2,3,1\n",
-    )
-    .unwrap();
+    let input = "time,Float64_continuous_input,Int32_input,Boolean_input\n0,0,1,0\n0.5,1,1,0\n0.5,1,3,1\n1,-2,3,1\n";
+    let dir = common::scratch_with("run-fmu-input", &[("in.csv", input)]);
     let fmu = reference::fmu("Feedthrough", 2);
     let f = fmu.to_str().unwrap();
     let o = common::twinbench_in(
@@ -322,16 +313,12 @@ fn arrays_are_recorded_and_connected_by_their_names() {
     let dir = tb_testkit::scratch("arrays");
     let fmu = reference::fmu("StateSpace", 3);
     let system = |connection: &str| {
-        let p: PathBuf = dir.path().join("ss.toml");
-        std::fs::write(
-            &p,
-            format!(
-                "connections = [{connection:?}]\n\n[fmus]\nss = {:?}\n\n[[instance]]\nname = \"a\"\nfmu = \"ss\"\n\n[[instance]]\nname = \"b\"\nfmu = \"ss\"\n\n[experiment]\nstep = 0.1\nstop = 1\n\n[record]\nsignals = [\"a.y\", \"b.y\"]\n",
-                fmu.display().to_string()
-            ),
+        common::system_file(
+            &dir.path().join("ss.toml"),
+            &format!("connections = [{connection:?}]\n"),
+            &[("ss", &fmu)],
+            "[[instance]]\nname = \"a\"\nfmu = \"ss\"\n\n[[instance]]\nname = \"b\"\nfmu = \"ss\"\n\n[experiment]\nstep = 0.1\nstop = 1\n\n[record]\nsignals = [\"a.y\", \"b.y\"]\n",
         )
-        .unwrap();
-        p
     };
     let sys = system("a.y -> b.u");
     common::ok_in(dir.path(), args!["run", sys, "--out", "arrays.csv"]);

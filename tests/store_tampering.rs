@@ -362,13 +362,20 @@ fn n02_without_the_sandbox_the_planted_library_is_found_and_never_loaded() {
     assert_contains(&victim, &["differs from what was unpacked", "/store/"]);
 }
 
-#[test]
-fn n03_a_changed_byte_of_a_stored_library_is_found_and_repaired_in_process_and_isolated() {
-    let dir = tb_testkit::scratch("n03");
+/// A scratch folder `tag` with the FMU without a fault, its system file, and a store it ran
+/// on once in process: the folder, the store, the FMU, its library's bytes, the system.
+fn stored_once(tag: &str) -> (tempfile::TempDir, PathBuf, PathBuf, Vec<u8>, PathBuf) {
+    let dir = tb_testkit::scratch(tag);
     let store = dir.path().join("store");
     let (fmu, library) = hostile_fmu(dir.path(), "NONE");
     let sys = system(dir.path(), &fmu);
     ran(&store, &sys, false, &[], None);
+    (dir, store, fmu, library, sys)
+}
+
+#[test]
+fn n03_a_changed_byte_of_a_stored_library_is_found_and_repaired_in_process_and_isolated() {
+    let (_dir, store, fmu, library, sys) = stored_once("n03");
     let stored = folder_of(&store, &fmu).join("binaries/linux64/hostile.so");
     // "2.0" returned by fmi2GetVersion becomes "2.1": a library that loads and runs, one
     // byte changed, the size kept. Loaded, it would fail the version check.
@@ -412,11 +419,7 @@ fn n03_a_changed_byte_of_a_stored_library_is_found_and_repaired_in_process_and_i
 
 #[test]
 fn n19_a_complete_folder_without_its_library_is_repaired() {
-    let dir = tb_testkit::scratch("n19");
-    let store = dir.path().join("store");
-    let (fmu, library) = hostile_fmu(dir.path(), "NONE");
-    let sys = system(dir.path(), &fmu);
-    ran(&store, &sys, false, &[], None);
+    let (_dir, store, fmu, library, sys) = stored_once("n19");
     let folder = folder_of(&store, &fmu);
     assert!(folder.join(".complete").is_file());
     std::fs::remove_file(folder.join("binaries/linux64/hostile.so")).unwrap();

@@ -8,7 +8,7 @@
 
 mod common;
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::plan::ConversionError;
@@ -29,29 +29,7 @@ fn faulty_xml() -> String {
 
 /// `faulty.fmu` with its modelDescription.xml replaced by `xml`, written to `dir/name.fmu`.
 fn repack(dir: &Path, name: &str, xml: &str) -> PathBuf {
-    let src = common::fmu("faulty");
-    let mut zin = zip::ZipArchive::new(std::fs::File::open(&src).unwrap()).unwrap();
-    let out = dir.join(format!("{name}.fmu"));
-    let mut zout = zip::ZipWriter::new(std::fs::File::create(&out).unwrap());
-    let opts = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Deflated);
-    for k in 0..zin.len() {
-        let mut entry = zin.by_index(k).unwrap();
-        let entry_name = entry.name().to_string();
-        if entry.is_dir() {
-            zout.add_directory(entry_name, opts).unwrap();
-            continue;
-        }
-        let mut bytes = Vec::new();
-        entry.read_to_end(&mut bytes).unwrap();
-        if entry_name == "modelDescription.xml" {
-            bytes = xml.as_bytes().to_vec();
-        }
-        zout.start_file(entry_name, opts).unwrap();
-        zout.write_all(&bytes).unwrap();
-    }
-    zout.finish().unwrap();
-    out
+    common::reference::with_description(&common::fmu("faulty"), dir, name, |_| xml.to_string())
 }
 
 /// Replace exactly one occurrence of `from` (the rewrite must hit the intended place).

@@ -100,36 +100,13 @@ int fmi2ExitInitializationMode(void *c) { (void)c; return OK; }
 int fmi2Terminate(void *c) { (void)c; return OK; }
 int fmi2Reset(void *c) { reset(c); return OK; }
 
-int fmi2GetReal(void *c, const unsigned *vr, size_t n, double *value) {
-    Model *m = c;
-    for (size_t i = 0; i < n; i++) {
-        switch (vr[i]) {
-        case 0: value[i] = m->x1; break;
-        case 1: value[i] = m->x2; break;
-        case 2: value[i] = m->mu; break;
-        case 3: value[i] = m->steps; break;
-        default: return ERROR;
-        }
-    }
-    return OK;
-}
+/* Only mu (value reference 2) is set. */
+static int is_mu(unsigned vr) { return vr == 2; }
 
-int fmi2SetReal(void *c, const unsigned *vr, size_t n, const double *value) {
-    Model *m = c;
-    for (size_t i = 0; i < n; i++) {
-        if (vr[i] != 2)
-            return ERROR;
-        m->mu = value[i];
-    }
-    return OK;
-}
-
-int fmi2GetInteger(void *c, const unsigned *vr, size_t n, int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2SetInteger(void *c, const unsigned *vr, size_t n, const int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2GetBoolean(void *c, const unsigned *vr, size_t n, int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2SetBoolean(void *c, const unsigned *vr, size_t n, const int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2GetString(void *c, const unsigned *vr, size_t n, const char **v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2SetString(void *c, const unsigned *vr, size_t n, const char *const *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
+FMI2_FIELDS(Real, double, Model, FMI2_NO_UPDATE, is_mu, FMI2_AS_IS, &m->x1, &m->x2, &m->mu, &m->steps)
+FMI2_NO_VARIABLES(Integer, int)
+FMI2_NO_VARIABLES(Boolean, int)
+FMI2_NO_VARIABLES(String, fmi2_string)
 
 int fmi2DoStep(void *c, double t, double h, int no_prior) {
     Model *m = c;

@@ -41,11 +41,7 @@ void *fmi2Instantiate(const char *name, int type, const char *guid, const char *
     return m;
 }
 void fmi2FreeInstance(void *c) { free(c); }
-int fmi2SetupExperiment(void *c, int tdef, double tol, double start, int sdef, double stop) {
-    Model *m = c; (void)tdef; (void)tol; (void)sdef; (void)stop;
-    m->t = start;
-    return OK;
-}
+FMI2_SETUP_TAKES_START(Model)
 int fmi2EnterInitializationMode(void *c) { (void)c; return OK; }
 int fmi2ExitInitializationMode(void *c) { (void)c; return OK; }
 int fmi2Terminate(void *c) { (void)c; return OK; }
@@ -80,10 +76,8 @@ int fmi2SetInteger(void *c, const unsigned *vr, size_t n, const int *v) {
     for (size_t k = 0; k < n; k++) { if (vr[k] != 3) return ERROR; m->mode = v[k]; }
     return OK;
 }
-int fmi2GetBoolean(void *c, const unsigned *vr, size_t n, int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2SetBoolean(void *c, const unsigned *vr, size_t n, const int *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2GetString(void *c, const unsigned *vr, size_t n, const char **v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
-int fmi2SetString(void *c, const unsigned *vr, size_t n, const char *const *v) { (void)c; (void)vr; (void)v; return n ? ERROR : OK; }
+FMI2_NO_VARIABLES(Boolean, int)
+FMI2_NO_VARIABLES(String, fmi2_string)
 int fmi2EnterEventMode(void *c) { (void)c; return OK; }
 int fmi2NewDiscreteStates(void *c, EventInfo *e) {
     Model *m = c;

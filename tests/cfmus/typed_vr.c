@@ -38,104 +38,20 @@ static void outputs(Model *m) {
 
 FMI2_MODEL_INSTANCE(Model, reset)
 
-int fmi2SetupExperiment(void *c, int tol_defined, double tol, double start, int stop_defined,
-                        double stop) {
-    (void)tol_defined; (void)tol; (void)stop_defined; (void)stop;
-    ((Model *)c)->t = start;
-    return OK;
-}
+FMI2_SETUP_TAKES_START(Model)
 
 int fmi2EnterInitializationMode(void *c) { (void)c; return OK; }
 int fmi2ExitInitializationMode(void *c) { outputs(c); return OK; }
 int fmi2Terminate(void *c) { (void)c; return OK; }
 int fmi2Reset(void *c) { reset(c); return OK; }
 
-int fmi2GetReal(void *c, const unsigned *vr, size_t n, double *value) {
-    Model *m = c;
-    outputs(m);
-    for (size_t i = 0; i < n; i++) {
-        switch (vr[i]) {
-        case 0: value[i] = m->y; break;
-        case 1: value[i] = m->u; break;
-        case 2: value[i] = m->gain; break;
-        default: return ERROR;
-        }
-    }
-    return OK;
-}
+/* Value reference 0 is an output, 1 an input, 2 a parameter (of each type). */
+static int input_or_parameter(unsigned vr) { return vr == 1 || vr == 2; }
 
-int fmi2SetReal(void *c, const unsigned *vr, size_t n, const double *value) {
-    Model *m = c;
-    for (size_t i = 0; i < n; i++) {
-        switch (vr[i]) {
-        case 1: m->u = value[i]; break;
-        case 2: m->gain = value[i]; break;
-        default: return ERROR;
-        }
-    }
-    return OK;
-}
-
-int fmi2GetInteger(void *c, const unsigned *vr, size_t n, int *value) {
-    Model *m = c;
-    outputs(m);
-    for (size_t i = 0; i < n; i++) {
-        switch (vr[i]) {
-        case 0: value[i] = m->n; break;
-        case 1: value[i] = m->k; break;
-        case 2: value[i] = m->count; break;
-        default: return ERROR;
-        }
-    }
-    return OK;
-}
-
-int fmi2SetInteger(void *c, const unsigned *vr, size_t n, const int *value) {
-    Model *m = c;
-    for (size_t i = 0; i < n; i++) {
-        switch (vr[i]) {
-        case 1: m->k = value[i]; break;
-        case 2: m->count = value[i]; break;
-        default: return ERROR;
-        }
-    }
-    return OK;
-}
-
-int fmi2GetBoolean(void *c, const unsigned *vr, size_t n, int *value) {
-    Model *m = c;
-    outputs(m);
-    for (size_t i = 0; i < n; i++) {
-        switch (vr[i]) {
-        case 0: value[i] = m->b; break;
-        case 1: value[i] = m->on; break;
-        case 2: value[i] = m->flag; break;
-        default: return ERROR;
-        }
-    }
-    return OK;
-}
-
-int fmi2SetBoolean(void *c, const unsigned *vr, size_t n, const int *value) {
-    Model *m = c;
-    for (size_t i = 0; i < n; i++) {
-        switch (vr[i]) {
-        case 1: m->on = value[i] != 0; break;
-        case 2: m->flag = value[i] != 0; break;
-        default: return ERROR;
-        }
-    }
-    return OK;
-}
-
-int fmi2GetString(void *c, const unsigned *vr, size_t n, const char **v) {
-    (void)c; (void)vr; (void)v;
-    return n ? ERROR : OK;
-}
-int fmi2SetString(void *c, const unsigned *vr, size_t n, const char *const *v) {
-    (void)c; (void)vr; (void)v;
-    return n ? ERROR : OK;
-}
+FMI2_FIELDS(Real, double, Model, outputs, input_or_parameter, FMI2_AS_IS, &m->y, &m->u, &m->gain)
+FMI2_FIELDS(Integer, int, Model, outputs, input_or_parameter, FMI2_AS_IS, &m->n, &m->k, &m->count)
+FMI2_FIELDS(Boolean, int, Model, outputs, input_or_parameter, FMI2_TRUTH, &m->b, &m->on, &m->flag)
+FMI2_NO_VARIABLES(String, fmi2_string)
 
 int fmi2DoStep(void *c, double t, double h, int no_prior) {
     Model *m = c;

@@ -5,6 +5,7 @@ use std::ffi::{OsStr, OsString};
 use std::fmt::Display;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
 /// The arguments of a command line, `&str`s, `String`s and paths mixed, as `&OsStr`s:
 /// `args!["run", system, "--out", out]`.
@@ -89,6 +90,35 @@ pub fn interrupted_in<S: AsRef<OsStr>>(
     // SAFETY: a signal to our own child process.
     unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
     child.wait_with_output().unwrap()
+}
+
+/// `cmd` (a run with `--trace-fmi TRACE`) started, sent `signal` once `trace` shows a step
+/// (within a minute), and ended within a minute after it with exit code 130 (else the test
+/// fails): its standard error.
+pub fn interrupted_while_stepping(cmd: &mut Command, trace: &Path, signal: i32) -> String {
+    let mut child = cmd.stderr(Stdio::piped()).spawn().unwrap();
+    // The run is under way once the trace shows steps (no race with the start-up).
+    let started = Instant::now();
+    while !std::fs::read_to_string(trace).is_ok_and(|t| t.contains("fmi2DoStep")) {
+        assert!(started.elapsed().as_secs() < 60, "the run did not start");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // SAFETY: a signal to our own child process.
+    unsafe { libc::kill(child.id() as i32, signal) };
+    // A watchdog for a run that would not end (a sleep of a paced run, say), not a measure
+    // of how promptly it ends.
+    let waited = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if waited.elapsed().as_secs() > 60 {
+            let _ = child.kill();
+            panic!("the run did not end on signal {signal}");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let o = child.wait_with_output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(130), "{e}");
+    e
 }
 
 /// `o` is of a command that succeeded, else the test fails naming `what`, with its

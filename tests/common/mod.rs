@@ -12,7 +12,7 @@ pub mod synthetic;
 #[allow(unused_imports)]
 pub use cli::{fails, fails_in, ok, ok_in, run_ok, run_ok_in, twinbench, twinbench_in};
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 use tb_fmi::{FmuCache, LoadedFmu};
 
@@ -82,6 +82,80 @@ pub fn vr(fmu: &LoadedFmu, name: &str) -> u32 {
         .variable(name)
         .unwrap_or_else(|| panic!("{}: no variable {name}", fmu.description.model_name))
         .value_reference
+}
+
+/// A scratch folder `tag` holding the `files` (name, text).
+pub fn scratch_with(tag: &str, files: &[(&str, &str)]) -> tempfile::TempDir {
+    let dir = tb_testkit::scratch(tag);
+    for (name, text) in files {
+        std::fs::write(dir.path().join(name), text).unwrap();
+    }
+    dir
+}
+
+/// A system file's text: the top-level keys `top`, `[fmus]` naming each (name, FMU file),
+/// then the tables `body`.
+pub fn system_text(top: &str, fmus: &[(&str, &Path)], body: &str) -> String {
+    let mut text = format!("{top}\n[fmus]\n");
+    for (name, fmu) in fmus {
+        text.push_str(&format!("{name} = {:?}\n", fmu.display().to_string()));
+    }
+    text.push('\n');
+    text.push_str(body);
+    text
+}
+
+/// The [`system_text`] written as the system file `path`.
+pub fn system_file(path: &Path, top: &str, fmus: &[(&str, &Path)], body: &str) -> PathBuf {
+    std::fs::write(path, system_text(top, fmus, body)).unwrap();
+    path.to_path_buf()
+}
+
+/// `systems/rls_v.toml` with its FMUs those [`fmu_dir`] packs (by absolute path), edited by
+/// `edit`, written as `path`.
+pub fn bench_file(path: &Path, edit: impl FnOnce(String) -> String) -> PathBuf {
+    let root = twinbench::pack::workspace_root();
+    let text = std::fs::read_to_string(root.join("systems/rls_v.toml"))
+        .unwrap()
+        .replace("../target/fmu", &fmu_dir().display().to_string());
+    std::fs::write(path, edit(text)).unwrap();
+    path.to_path_buf()
+}
+
+/// The [`bench_file`] `path` run in process (the FMUs unpacked anew, their messages kept for
+/// errors).
+pub fn run_bench(
+    path: &Path,
+    edit: impl FnOnce(String) -> String,
+) -> Result<tb_cosim::RunSummary, tb_cosim::SystemError> {
+    bench_file(path, edit);
+    let cache = Arc::new(FmuCache::temporary(false).unwrap());
+    let mut sim = tb_cosim::Simulation::new(tb_cosim::Plan::load(path, cache).unwrap()).unwrap();
+    sim.echo_fmu_log = false;
+    sim.run()
+}
+
+/// An instance `name` of `fmu` through its C API, with its resources (`logging`: the
+/// FMU's debug logging on).
+pub fn instantiate(fmu: &LoadedFmu, name: &str, logging: bool) -> tb_fmi::Instance {
+    tb_fmi::Instance::instantiate(
+        fmu.library().unwrap(),
+        name,
+        &fmu.description.guid,
+        Some(&fmu.resource_dir()),
+        logging,
+    )
+    .unwrap()
+}
+
+/// The plan of the system file `file` read from `path`: its FMUs unpacked anew, its
+/// isolated instances run in this build's `twinbench worker`.
+pub fn compile(
+    file: tb_cosim::SystemFile,
+    path: &Path,
+) -> Result<tb_cosim::Plan, tb_cosim::SystemError> {
+    let cache = Arc::new(FmuCache::temporary(false).unwrap());
+    tb_cosim::Plan::compile(file, path, cache, &worker_options())
 }
 
 /// Load options whose isolated instances run in this build's `twinbench worker`.

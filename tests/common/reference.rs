@@ -128,6 +128,17 @@ pub fn variant(
     out
 }
 
+/// A copy of `fmu` as `dir/<name>.fmu` with its modelDescription.xml edited by `xml`, every
+/// other entry as it is ([`variant`]).
+pub fn with_description(
+    fmu: &Path,
+    dir: &Path,
+    name: &str,
+    xml: impl Fn(&str) -> String,
+) -> PathBuf {
+    variant(fmu, dir, name, xml, |entry| Some(entry.to_string()))
+}
+
 /// Per column FMPy recorded (`theirs`, the FMU's own names) against twinbench's recording
 /// of the instance `m` (`ours`, with as many rows, else the test fails): (name, the largest
 /// absolute difference, the largest |value| FMPy recorded).

@@ -4,7 +4,7 @@
 
 mod support;
 
-use support::{assert_refusals, instances, Bench};
+use support::{instances, Bench};
 use tb_cosim::plan::OrderError;
 use tb_cosim::{SystemError, SystemFile};
 use tb_testkit::assert_contains;
@@ -56,7 +56,6 @@ fn an_unknown_variable_is_named_with_the_closest_names() {
 
 #[test]
 fn a_connection_runs_from_an_output_to_an_input() {
-    let b = Bench::new();
     let cases = [
         (
             "\"int.x -> snk.v_out\"",
@@ -83,7 +82,7 @@ fn a_connection_runs_from_an_output_to_an_input() {
             "'gu' is not of the form instance.variable",
         ),
     ];
-    assert_refusals(&cases, &[], |connection| b.error(&wired(connection)));
+    Bench::new().refuses(&cases, &[], wired);
 }
 
 #[test]
@@ -100,7 +99,6 @@ fn an_input_is_connected_once() {
 
 #[test]
 fn types_must_match_or_widen_to_real() {
-    let b = Bench::new();
     let cases = [
         (
             "\"snk.text_out -> g.u\"",
@@ -123,7 +121,8 @@ fn types_must_match_or_widen_to_real() {
             "type mismatch: 'int.steps' is Integer, 'snk.on' is Boolean",
         ),
     ];
-    assert_refusals(&cases, &[], |connection| b.error(&wired(connection)));
+    let b = Bench::new();
+    b.refuses(&cases, &[], wired);
     // Integer into an Enumeration and back, and any number into a Real, pass.
     b.plan(&wired(
         "\"int.steps -> snk.gear_in\", \"snk.gear_out -> snk.n\", \"snk.on_out -> g.u\"",
@@ -201,7 +200,6 @@ fn a_loop_through_an_output_missing_from_the_model_structure_is_a_warning() {
 
 #[test]
 fn instances_and_fmus_are_named_once_and_must_exist() {
-    let b = Bench::new();
     let cases = [
         (
             "[[instance]]\nname = \"g\"\nfmu = \"gian\"\n",
@@ -214,10 +212,9 @@ fn instances_and_fmus_are_named_once_and_must_exist() {
         ("[[instance]]\nname = \"g.1\"\nfmu = \"gain\"\n", "instance name 'g.1' is repeated, empty, or contains a '.'"),
         ("[[instance]]\nname = \"\"\nfmu = \"gain\"\n", "instance name '' is repeated, empty"),
     ];
-    assert_refusals(&cases, &[], |instances| {
-        b.error(&format!(
-            "{instances}[experiment]\nstep = 0.5\nstop = 1.0\n"
-        ))
+    let b = Bench::new();
+    b.refuses(&cases, &[], |instances| {
+        format!("{instances}[experiment]\nstep = 0.5\nstop = 1.0\n")
     });
     // An FMU file that is not there: the system file, the entry, and how to make it.
     let path = b.write(
@@ -246,7 +243,6 @@ fn experiment(lines: &str) -> String {
 
 #[test]
 fn experiment_values_that_cannot_be_run_are_refused() {
-    let b = Bench::new();
     let cases = [
         (
             "step = 0.0\nstop = 1.0",
@@ -309,9 +305,8 @@ fn experiment_values_that_cannot_be_run_are_refused() {
             "unknown field `step_size`",
         ),
     ];
-    assert_refusals(&cases, &["system.toml"], |lines| {
-        b.error(&experiment(lines))
-    });
+    let b = Bench::new();
+    b.refuses(&cases, &["system.toml"], experiment);
     let e = b
         .plan(&format!(
             "{}[[instance]]\nname = \"g\"\nfmu = \"gain\"\n",

@@ -5,7 +5,7 @@
 mod support;
 
 use std::sync::Arc;
-use support::{assert_refusals, column, instances, last, texts, Bench};
+use support::{column, instances, last, texts, Bench};
 use tb_cosim::plan::{Cadence, Plan};
 use tb_cosim::{LoadOptions, ParamValue, Simulation, SystemError};
 use tb_fmi::FmuError;
@@ -169,7 +169,6 @@ fn parameters_are_typed_once_and_reach_the_model() {
 
 #[test]
 fn parameter_values_are_checked_against_type_range_and_items() {
-    let b = Bench::new();
     let cases = [
         (
             "\"snk.limit\" = 10.5",
@@ -212,14 +211,11 @@ fn parameter_values_are_checked_against_type_range_and_items() {
             "9007199254740993 cannot be carried exactly as a double",
         ),
     ];
-    assert_refusals(&cases, &["parameter \"snk."], |parameter| {
-        b.error(&sink(parameter))
-    });
+    Bench::new().refuses(&cases, &["parameter \"snk."], sink);
 }
 
 #[test]
 fn only_parameters_and_inputs_of_known_variables_can_be_set() {
-    let b = Bench::new();
     let cases = [
         (
             "\"snk.v_out\" = 1.0",
@@ -232,7 +228,8 @@ fn only_parameters_and_inputs_of_known_variables_can_be_set() {
         ),
         ("\"limit\" = 1.0", "expected \"instance.variable\""),
     ];
-    assert_refusals(&cases, &[], |parameter| b.error(&sink(parameter)));
+    let b = Bench::new();
+    b.refuses(&cases, &[], sink);
     // The closest names are offered.
     assert_contains(
         &b.error(&sink("\"snk.limt\" = 1.0")),
@@ -471,7 +468,6 @@ fn a_failed_check_stops_the_run_before_the_first_step() {
 
 #[test]
 fn checks_that_cannot_be_evaluated_are_refused() {
-    let b = Bench::new();
     let cases = [
         ("equal = [\"a.y_kmh\"]", "`equal` needs two or more signals"),
         (
@@ -487,5 +483,5 @@ fn checks_that_cannot_be_evaluated_are_refused() {
             "unknown instance 'c'; instances: a, b",
         ),
     ];
-    assert_refusals(&cases, &["check 1"], |check| b.error(&checked(check)));
+    Bench::new().refuses(&cases, &["check 1"], checked);
 }

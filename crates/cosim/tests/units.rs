@@ -4,7 +4,7 @@
 
 mod support;
 
-use support::{assert_close, assert_refusals, instances, last, Bench};
+use support::{assert_close, instances, last, Bench};
 use tb_cosim::Simulation;
 use tb_testkit::assert_contains;
 
@@ -166,7 +166,6 @@ signals = ["snk.v_out", "speeds.v"]
 
 #[test]
 fn incompatible_or_unknown_units_are_refused() {
-    let b = Bench::new();
     let cases = [
         (
             "\"src.y_kmh -> snk.w\"",
@@ -206,7 +205,7 @@ fn incompatible_or_unknown_units_are_refused() {
         ),
     ];
     // Each error names the system file.
-    assert_refusals(&cases, &["system.toml"], |connection| {
-        b.error(&link(connection, "\"snk.v_out\""))
+    Bench::new().refuses(&cases, &["system.toml"], |connection| {
+        link(connection, "\"snk.v_out\"")
     });
 }

@@ -24,16 +24,21 @@ fn set(rt: &mut Runtime<Dyno>, name: &str, x: f64) {
     assert_eq!(rt.set_by_name(name, Value::Real(x)).0, OK, "setting {name}");
 }
 
+/// `n` macro steps of `h` from t = 0: (time, `name`) after each.
+fn after_each_step(rt: &mut Runtime<Dyno>, name: &str, h: f64, n: usize) -> Vec<(f64, f64)> {
+    (0..n)
+        .map(|k| {
+            assert_eq!(rt.do_step(k as f64 * h, h).0, OK);
+            ((k + 1) as f64 * h, get(rt, name))
+        })
+        .collect()
+}
+
 /// Torque step of `size` at t = 0; returns (time, torque_dyno) after each macro step.
 fn step_response(settings: &[(&str, Value)], size: f64, h: f64, n: usize) -> Vec<(f64, f64)> {
     let mut rt = dyno(settings);
     set(&mut rt, "torque_setpoint", size);
-    (0..n)
-        .map(|k| {
-            assert_eq!(rt.do_step(k as f64 * h, h).0, OK);
-            ((k + 1) as f64 * h, get(&mut rt, "torque_dyno"))
-        })
-        .collect()
+    after_each_step(&mut rt, "torque_dyno", h, n)
 }
 
 /// Dead time (last sample still at the old value) and time constant (63.2% crossing,
@@ -174,12 +179,7 @@ fn speed_control_tracks_a_speed_step() {
         ("shaft_torque", Value::Real(150.0)),
     ]);
     set(&mut rt, "speed_setpoint", 50.0);
-    let h = 1e-3;
-    let mut trace = Vec::new();
-    for k in 0..1000 {
-        assert_eq!(rt.do_step(k as f64 * h, h).0, OK);
-        trace.push(((k + 1) as f64 * h, get(&mut rt, "omega")));
-    }
+    let trace = after_each_step(&mut rt, "omega", 1e-3, 1000);
     let peak = trace.iter().map(|p| p.1).fold(f64::MIN, f64::max);
     let settle = trace
         .iter()
@@ -285,12 +285,8 @@ fn inertia_compensation_emulates_the_wheel_inertia() {
     ]);
     set(&mut rt, "shaft_torque", 40.0);
     let h = 1e-3;
-    let mut omega = Vec::new();
-    for k in 0..300 {
-        assert_eq!(rt.do_step(k as f64 * h, h).0, OK);
-        omega.push(get(&mut rt, "omega"));
-    }
-    let alpha = (omega[299] - omega[199]) / (100.0 * h);
+    let omega = after_each_step(&mut rt, "omega", h, 300);
+    let alpha = (omega[299].1 - omega[199].1) / (100.0 * h);
     assert!(
         (alpha / 100.0 - 1.0).abs() < 0.01,
         "acceleration {alpha} rad/s², expected 100"
@@ -341,25 +337,24 @@ fn restored_state_repeats_the_trajectory_bit_for_bit() {
             let bits = |x: &[[f64; 3]]| -> Vec<[u64; 3]> {
                 x.iter().map(|a| a.map(f64::to_bits)).collect()
             };
+            // Steps 100 to 300 of `rt` give `first` bit for bit.
+            let repeats = |rt: &mut Runtime<Dyno>| {
+                let again = drive(rt, 100, 300);
+                assert_eq!(
+                    bits(&first),
+                    bits(&again),
+                    "lag {lag_order}, {compensation}"
+                );
+            };
 
             assert_eq!(rt.restore(&snap).0, OK);
-            let again = drive(&mut rt, 100, 300);
-            assert_eq!(
-                bits(&first),
-                bits(&again),
-                "lag {lag_order}, {compensation}"
-            );
+            repeats(&mut rt);
 
             // Serialized state into another instance with the same parameters.
             let mut other = dyno(&settings);
             let restored = other.deserialize(&bytes).ok().unwrap();
             assert_eq!(other.restore(&restored).0, OK);
-            let third = drive(&mut other, 100, 300);
-            assert_eq!(
-                bits(&first),
-                bits(&third),
-                "lag {lag_order}, {compensation}"
-            );
+            repeats(&mut other);
             // And the trajectory is not trivially constant.
             assert!(first.iter().any(|a| (a[0] - first[0][0]).abs() > 1.0));
         }

@@ -65,18 +65,14 @@ fn model_description_carries_the_table() {
     let tpl =
         "<x guid=\"{{guid}}\">\n{{unitDefinitions}}\n{{modelVariables}}\n{{modelStructure}}\n</x>";
     let xml = render_model_description::<A>(tpl, "test");
-    assert!(xml.contains(&guid::<A>()));
-    assert!(
-        xml.contains("<Unit name=\"N/m\">\n      <BaseUnit kg=\"1\" s=\"-2\"/>"),
-        "{xml}"
-    );
-    assert!(xml.contains("name=\"stiffness\" valueReference=\"1\" description=\"Spring rate\" causality=\"parameter\" variability=\"fixed\""), "{xml}");
-    assert!(
-        xml.contains("<Real unit=\"N/m\" min=\"1\" max=\"1000000000\" start=\"1000\"/>"),
-        "{xml}"
-    );
-    assert!(
-        xml.contains("<Unknown index=\"2\" dependencies=\"\"/>"),
-        "{xml}"
+    tb_testkit::assert_contains(
+        &xml,
+        &[
+            &guid::<A>(),
+            "<Unit name=\"N/m\">\n      <BaseUnit kg=\"1\" s=\"-2\"/>",
+            "name=\"stiffness\" valueReference=\"1\" description=\"Spring rate\" causality=\"parameter\" variability=\"fixed\"",
+            "<Real unit=\"N/m\" min=\"1\" max=\"1000000000\" start=\"1000\"/>",
+            "<Unknown index=\"2\" dependencies=\"\"/>",
+        ],
     );
 }

@@ -325,16 +325,22 @@ unsafe fn instantiate(
     )
 }
 
+/// `fmi2Instantiate` of a co-simulation Counter with its own GUID: the instance (not NULL).
+unsafe fn counter(callbacks: &fmi2CallbackFunctions) -> fmi2Component {
+    let guid = std::ffi::CString::new(fmu_export::description::guid::<Counter>()).unwrap();
+    let c = instantiate(guid.as_ptr(), callbacks);
+    assert!(!c.is_null());
+    c
+}
+
 /// Through the C entry points: a panic is caught, returns fmi2Error and poisons the
 /// instance until fmi2Reset; NULL pointers are errors, not crashes.
 #[test]
 fn the_c_entry_points_catch_panics_and_refuse_null_pointers() {
     use fmu_export::ffi;
     let callbacks = no_callbacks();
-    let guid = std::ffi::CString::new(fmu_export::description::guid::<Counter>()).unwrap();
     unsafe {
-        let c = instantiate(guid.as_ptr(), &callbacks);
-        assert!(!c.is_null());
+        let c = counter(&callbacks);
         let wrong = instantiate(c"{not-the-guid}".as_ptr(), &callbacks);
         assert!(wrong.is_null(), "another GUID is refused");
         let fault = [2];
@@ -483,10 +489,8 @@ fn string_variables_are_in_the_model_description_and_the_guid() {
 fn the_c_entry_points_pass_strings_both_ways() {
     use fmu_export::ffi;
     let callbacks = no_callbacks();
-    let guid = std::ffi::CString::new(fmu_export::description::guid::<Counter>()).unwrap();
     unsafe {
-        let c = instantiate(guid.as_ptr(), &callbacks);
-        assert!(!c.is_null());
+        let c = counter(&callbacks);
         let value = [c"/tmp/ä.csv".as_ptr()];
         assert_eq!(
             ffi::set_string::<Counter>(c, [VR_SOURCE].as_ptr(), 1, value.as_ptr()),

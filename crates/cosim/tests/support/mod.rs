@@ -272,6 +272,17 @@ impl Bench {
         let summary = sim.run().unwrap_or_else(|e| panic!("{e}\n{body}"));
         (sim, summary)
     }
+
+    /// Each case's system file, `system(case)`, is refused with an error that holds every
+    /// part of `common` and the case's own (see [`assert_refusals`]).
+    pub fn refuses(
+        &self,
+        cases: &[(&str, &str)],
+        common: &[&str],
+        system: impl Fn(&str) -> String,
+    ) {
+        assert_refusals(cases, common, |case| self.error(&system(case)));
+    }
 }
 
 /// `[[instance]]` tables, one for each (name, FMU stem), each followed by a blank line.
