@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::kinds::refused3;
+use common::kinds::{invalid, refused3};
 
 use common::reference;
 use std::path::{Path, PathBuf};
@@ -275,10 +275,7 @@ fn a_64_bit_integer_an_f64_cannot_carry_is_an_error_naming_it() {
     let Err(e) = run(dir.path(), &text) else {
         panic!("not refused")
     };
-    assert!(
-        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("parameter \"m.Int64_input\"")),
-        "{e}"
-    );
+    assert!(invalid(&e, "parameter \"m.Int64_input\""), "{e}");
     assert_contains(
         &e.to_string(),
         &["'m.Int64_input': 9007199254740993 cannot be carried exactly"],

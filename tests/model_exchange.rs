@@ -12,6 +12,8 @@
 
 mod common;
 
+use common::kinds::invalid;
+
 use common::reference;
 use std::path::{Path, PathBuf};
 use tb_cosim::{Simulation, SystemError, SystemFile, Table};
@@ -454,10 +456,7 @@ fn interfaces_an_fmu_lacks_are_refused_with_the_reason() {
         "e",
     )
     .unwrap_err();
-    assert!(
-        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("experiment.tolerance")),
-        "{e}"
-    );
+    assert!(invalid(&e, "experiment.tolerance"), "{e}");
     assert_contains(&e.to_string(), &["experiment.tolerance: 0 is not a relative tolerance: expected a number between 0 and 1"]);
 }
 

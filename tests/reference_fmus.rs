@@ -5,6 +5,8 @@
 
 mod common;
 
+use common::kinds::invalid;
+
 use common::reference;
 use std::path::Path;
 use std::sync::Arc;
@@ -415,10 +417,7 @@ fn enumeration_and_integer_values_are_checked_before_the_first_step() {
     let e = feedthrough_plan(d, "", "[parameters]\n\"m.Enumeration_input\" = 3\n")
         .err()
         .unwrap();
-    assert!(
-        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("parameter \"m.Enumeration_input\"")),
-        "{e}"
-    );
+    assert!(invalid(&e, "parameter \"m.Enumeration_input\""), "{e}");
     assert_contains(&e.to_string(), &["3 is not an item of the Enumeration 'm.Enumeration_input' (1 'Option 1', 2 'Option 2')"]);
     assert!(feedthrough_plan(d, "", "[parameters]\n\"m.Enumeration_input\" = 2\n").is_ok());
     // Replayed values must fit the input they drive.

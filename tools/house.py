@@ -216,6 +216,8 @@ def shared_test_helpers(files):
             found = variant_helpers(open(os.path.join(ROOT, p), encoding="utf-8").read())
             if found:
                 module = os.path.splitext(os.path.basename(p))[0]
+                if module == "mod":
+                    module = os.path.basename(os.path.dirname(p))
                 helpers.setdefault(module, {}).update(found)
     return helpers
 

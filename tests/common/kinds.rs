@@ -1,6 +1,7 @@
 //! The errors the tests expect, each checked by its variant and the fields that say which
 //! one it is (the call, its status, the instance, the time): one line in a test.
 
+use tb_cosim::plan::OrderError;
 use tb_cosim::SystemError;
 use tb_fmi::fmi2::fmi2Status;
 use tb_fmi::{CallStatus, FmiFunction, FmuError, Function};
@@ -76,4 +77,15 @@ pub fn refused3(e: &FmuError, instance: &str, function: &str, status: i32, time:
 /// parameter, the file).
 pub fn invalid(e: &SystemError, context_end: &str) -> bool {
     matches!(e, SystemError::Invalid { context, .. } if context.ends_with(context_end))
+}
+
+/// A plan refused for an algebraic loop among its instances' direct feedthroughs.
+pub fn algebraic_loop(e: &SystemError) -> bool {
+    matches!(
+        e,
+        SystemError::Order {
+            error: OrderError::AlgebraicLoop { .. },
+            ..
+        }
+    )
 }

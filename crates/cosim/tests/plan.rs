@@ -5,7 +5,7 @@
 mod support;
 
 use std::sync::Arc;
-use support::{column, instances, last, texts, Bench};
+use support::{column, instances, invalid, last, texts, Bench};
 use tb_cosim::plan::{Cadence, Plan};
 use tb_cosim::{LoadOptions, ParamValue, Simulation, SystemError};
 use tb_fmi::FmuError;
@@ -282,18 +282,12 @@ fn a_parameter_set_between_runs_is_checked_and_used() {
     let e = sim
         .set_parameter("snk.limit", toml::Value::Float(11.0))
         .unwrap_err();
-    assert!(
-        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("parameter \"snk.limit\"")),
-        "{e}"
-    );
+    assert!(invalid(&e, "parameter \"snk.limit\""), "{e}");
     assert_contains(&e.to_string(), &["outside the declared range"]);
     let e = sim
         .set_parameter("snk.mode", toml::Value::Integer(9))
         .unwrap_err();
-    assert!(
-        matches!(&e, SystemError::Invalid { context, .. } if context.ends_with("parameter \"snk.mode\"")),
-        "{e}"
-    );
+    assert!(invalid(&e, "parameter \"snk.mode\""), "{e}");
     assert_contains(
         &e.to_string(),
         &["9 is not an item of the Enumeration 'snk.mode'"],

@@ -11,6 +11,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::native::NativeModel;
+use tb_cosim::plan::OrderError;
 use tb_cosim::{LoadOptions, Plan, RunSummary, Simulation, SystemError};
 use tb_fmi::FmuCache;
 
@@ -346,4 +347,21 @@ pub fn assert_close(a: f64, b: f64, tol: f64) {
         (a - b).abs() <= tol,
         "{a} differs from {b} by more than {tol}"
     );
+}
+
+/// A system file or a plan refused, at the place its context ends with (a connection, a
+/// parameter, the file).
+pub fn invalid(e: &SystemError, context_end: &str) -> bool {
+    matches!(e, SystemError::Invalid { context, .. } if context.ends_with(context_end))
+}
+
+/// A plan refused for an algebraic loop among its instances' direct feedthroughs.
+pub fn algebraic_loop(e: &SystemError) -> bool {
+    matches!(
+        e,
+        SystemError::Order {
+            error: OrderError::AlgebraicLoop { .. },
+            ..
+        }
+    )
 }
