@@ -4,7 +4,8 @@
 
 mod support;
 
-use support::{algebraic_loop, instances, invalid, Bench};
+use support::kinds::{algebraic_loop, invalid};
+use support::{instances, Bench};
 use tb_cosim::plan::OrderError;
 use tb_cosim::{SystemError, SystemFile};
 use tb_testkit::assert_contains;

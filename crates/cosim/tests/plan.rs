@@ -5,7 +5,8 @@
 mod support;
 
 use std::sync::Arc;
-use support::{column, instances, invalid, last, texts, Bench};
+use support::kinds::invalid;
+use support::{column, instances, last, texts, Bench};
 use tb_cosim::plan::{Cadence, Plan};
 use tb_cosim::{LoadOptions, ParamValue, Simulation, SystemError};
 use tb_fmi::FmuError;

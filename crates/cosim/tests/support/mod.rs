@@ -3,6 +3,7 @@
 //! and a scratch bench that writes system files next to them and compiles them.
 #![allow(dead_code)]
 
+pub mod kinds;
 pub mod models;
 
 use fmu_export::Model;
@@ -11,7 +12,6 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tb_cosim::native::NativeModel;
-use tb_cosim::plan::OrderError;
 use tb_cosim::{LoadOptions, Plan, RunSummary, Simulation, SystemError};
 use tb_fmi::FmuCache;
 
@@ -347,21 +347,4 @@ pub fn assert_close(a: f64, b: f64, tol: f64) {
         (a - b).abs() <= tol,
         "{a} differs from {b} by more than {tol}"
     );
-}
-
-/// A system file or a plan refused, at the place its context ends with (a connection, a
-/// parameter, the file).
-pub fn invalid(e: &SystemError, context_end: &str) -> bool {
-    matches!(e, SystemError::Invalid { context, .. } if context.ends_with(context_end))
-}
-
-/// A plan refused for an algebraic loop among its instances' direct feedthroughs.
-pub fn algebraic_loop(e: &SystemError) -> bool {
-    matches!(
-        e,
-        SystemError::Order {
-            error: OrderError::AlgebraicLoop { .. },
-            ..
-        }
-    )
 }
