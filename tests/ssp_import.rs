@@ -302,6 +302,14 @@ fn hand_package(dir: &Path, name: &str, ssd: &str, rotor_ssv: &str, leave_out: &
 
 /// The error loading `ssp` gives: the package's own (an SSP import error), the test fails
 /// on any other.
+/// The hand-made package written as `name` without the entry `left_out`, and why it does
+/// not load.
+fn refused_without(dir: &Path, name: &str, left_out: &str) -> (PathBuf, SspImportError) {
+    let ssp = hand_package(dir, name, &hand_ssd("", ""), ROTOR_SSV, left_out);
+    let e = load_err(&ssp);
+    (ssp, e)
+}
+
 fn load_err(ssp: &Path) -> SspImportError {
     let cache = Arc::new(FmuCache::temporary(false).unwrap());
     match Plan::load(ssp, cache) {
@@ -455,14 +463,7 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
     let dir = tempfile::tempdir().unwrap();
     let tmp = tempfile::tempdir().unwrap();
     // The dyno is not in the package.
-    let ssp = hand_package(
-        dir.path(),
-        "nodyno.ssp",
-        &hand_ssd("", ""),
-        ROTOR_SSV,
-        "resources/dyno.fmu",
-    );
-    let e = load_err(&ssp);
+    let (ssp, e) = refused_without(dir.path(), "nodyno.ssp", "resources/dyno.fmu");
     assert!(
         matches!(&e, SspImportError::MissingFmu { ssp, component, fmu, available }
             if ssp.ends_with("nodyno.ssp") && component == "rotor" && fmu == "resources/dyno.fmu"
@@ -533,14 +534,7 @@ fn missing_fmu_malformed_ssd_and_unknown_parameter_are_named() {
         &e.to_string(),
         &["nossd.ssp: the package has no SystemStructure.ssd"],
     );
-    let ssp = hand_package(
-        dir.path(),
-        "nossv.ssp",
-        &hand_ssd("", ""),
-        ROTOR_SSV,
-        "resources/speed.ssv",
-    );
-    let e = load_err(&ssp);
+    let (_, e) = refused_without(dir.path(), "nossv.ssp", "resources/speed.ssv");
     assert!(
         matches!(&e, SspImportError::Invalid { ssp, file, .. }
             if ssp.ends_with("nossv.ssp") && file == SSD),

@@ -225,18 +225,10 @@ pub(crate) fn at_optimum(
     // Per signal: the grid points every lap covers, the residual there and J's rows.
     let mut blocks = Vec::new();
     for (s, name) in signals.iter().enumerate() {
-        let lo = runs
-            .iter()
-            .map(|r| r[s].0.start)
-            .chain([at_best[s].0.start])
-            .max()
-            .unwrap_or(0);
-        let hi = runs
-            .iter()
-            .map(|r| r[s].0.end)
-            .chain([at_best[s].0.end])
-            .min()
-            .unwrap_or(0);
+        // The stretch every lap covers: the latest start to the earliest end.
+        let covered = runs.iter().map(|r| &r[s].0).chain([&at_best[s].0]);
+        let lo = covered.clone().map(|c| c.start).max().unwrap_or(0);
+        let hi = covered.map(|c| c.end).min().unwrap_or(0);
         let meas = prepared.measured(name).unwrap_or(&[]);
         let hi = hi.min(meas.len());
         if hi <= lo + 2 {

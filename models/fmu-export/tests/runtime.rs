@@ -6,6 +6,7 @@ use fmu_export::variables::*;
 use fmu_export::{
     Context, Function, Model, ModelError, ModelInfo, ModelState, Phase, Runtime, Value,
 };
+use tb_testkit::assert_contains;
 use tb_testkit::Capture;
 
 fmu_export::variables! {
@@ -207,35 +208,23 @@ fn sets_are_checked_for_range_finiteness_causality_and_type() {
         )
     };
     assert_eq!(set(&mut rt, VR_U, 101.0), fmi2Status::ERROR);
-    assert!(
-        cap.text()
-            .contains("'u' = 101 is outside its range [-100, 100] 1"),
-        "{}",
-        cap.text()
+    assert_contains(
+        &cap.text(),
+        &["'u' = 101 is outside its range [-100, 100] 1"],
     );
     assert_eq!(set(&mut rt, VR_U, f64::NAN), fmi2Status::ERROR);
-    assert!(
-        cap.text().contains("expected a finite number"),
-        "{}",
-        cap.text()
-    );
+    assert_contains(&cap.text(), &["expected a finite number"]);
     // A fixed parameter cannot change after initialisation; a tunable one can.
     assert_eq!(set(&mut rt, VR_OFFSET, 1.0), fmi2Status::ERROR);
-    assert!(
-        cap.text()
-            .contains("'offset' (fixed parameter) cannot be set in state 'step complete'"),
-        "{}",
-        cap.text()
+    assert_contains(
+        &cap.text(),
+        &["'offset' (fixed parameter) cannot be set in state 'step complete'"],
     );
     assert_eq!(set(&mut rt, VR_GAIN, 2.0), fmi2Status::OK);
     // Outputs are never set; an unknown value reference and a wrong type are named.
     assert_eq!(set(&mut rt, VR_Y, 1.0), fmi2Status::ERROR);
     assert_eq!(set(&mut rt, 99, 1.0), fmi2Status::ERROR);
-    assert!(
-        cap.text().contains("unknown value reference 99"),
-        "{}",
-        cap.text()
-    );
+    assert_contains(&cap.text(), &["unknown value reference 99"]);
     let mut i = [0];
     let s = rt.get(
         "fmi2GetInteger",
@@ -245,11 +234,7 @@ fn sets_are_checked_for_range_finiteness_causality_and_type() {
         |v| v.as_f64() as i32,
     );
     assert_eq!(s, fmi2Status::ERROR);
-    assert!(
-        cap.text().contains("'u' (vr 3) is Real, not Integer"),
-        "{}",
-        cap.text()
-    );
+    assert_contains(&cap.text(), &["'u' (vr 3) is Real, not Integer"]);
 }
 
 #[test]
@@ -429,11 +414,9 @@ fn string_parameters_are_read_set_checked_and_saved() {
         rt.set_strings("fmi2SetString", &[VR_SOURCE], &["other"]),
         fmi2Status::ERROR
     );
-    assert!(
-        cap.text()
-            .contains("'source_file' (fixed parameter) cannot be set in state 'step complete'"),
-        "{}",
-        cap.text()
+    assert_contains(
+        &cap.text(),
+        &["'source_file' (fixed parameter) cannot be set in state 'step complete'"],
     );
     assert_eq!(
         rt.set_strings("fmi2SetString", &[VR_LABEL], &["lap 2"]),
@@ -444,11 +427,7 @@ fn string_parameters_are_read_set_checked_and_saved() {
         rt.set_strings("fmi2SetString", &[VR_GAIN], &["x"]),
         fmi2Status::ERROR
     );
-    assert!(
-        cap.text().contains("'gain' (vr 1) is Real, not String"),
-        "{}",
-        cap.text()
-    );
+    assert_contains(&cap.text(), &["'gain' (vr 1) is Real, not String"]);
     let mut x = [0.0];
     assert_eq!(
         rt.get("fmi2GetReal", ScalarType::Real, &[VR_LABEL], &mut x, |v| v

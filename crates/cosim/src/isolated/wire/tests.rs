@@ -358,28 +358,18 @@ fn forged_responses_are_refused() {
         }
     );
     // A function code outside the table, a version that is not FMI's, an unknown error
-    // kind.
-    let mut e = head(1, 0);
-    e.u8(kind::CALL);
-    e.u8(2);
-    e.u8(250);
+    // kind: a failure whose bytes after the head are `tail`.
+    let failure = |tail: &[u8]| {
+        let mut e = head(1, 0);
+        tail.iter().for_each(|&b| e.u8(b));
+        Response::decode(&e.0, &ops).unwrap_err()
+    };
     assert_eq!(
-        Response::decode(&e.0, &ops).unwrap_err(),
+        failure(&[kind::CALL, 2, 250]),
         WireError::UnknownFunction(250)
     );
-    let mut e = head(1, 0);
-    e.u8(kind::CALL);
-    e.u8(7);
-    assert_eq!(
-        Response::decode(&e.0, &ops).unwrap_err(),
-        WireError::UnknownVersion(7)
-    );
-    let mut e = head(1, 0);
-    e.u8(9);
-    assert_eq!(
-        Response::decode(&e.0, &ops).unwrap_err(),
-        WireError::UnknownKind(9)
-    );
+    assert_eq!(failure(&[kind::CALL, 7]), WireError::UnknownVersion(7));
+    assert_eq!(failure(&[9]), WireError::UnknownKind(9));
     // A log count beyond the frame.
     let mut e = head(1, 0);
     e.u8(kind::CALL);
