@@ -172,11 +172,12 @@ mod tests {
         ))
         .unwrap();
         assert_eq!(md.variables.len(), 4);
+        // A description `with` these variables that does not parse.
+        let refused = |variables: &str| parse(&with(variables)).unwrap_err();
         // Two variables that can be set in one set: refused, naming both and the clause.
-        let e = parse(&with(
+        let e = refused(
             r#"<ScalarVariable name="q" valueReference="4" causality="parameter" variability="fixed"><Integer start="2"/></ScalarVariable>"#,
-        ))
-        .unwrap_err();
+        );
         assert!(
             matches!(
                 &e,
@@ -193,10 +194,9 @@ mod tests {
             "{e}"
         );
         // An Enumeration is in the Integers' space: an alias of an Integer.
-        let e = parse(&with(
+        let e = refused(
             r#"<ScalarVariable name="e" valueReference="4" causality="input"><Enumeration declaredType="E" start="2"/></ScalarVariable>"#,
-        ))
-        .unwrap_err();
+        );
         assert!(
             matches!(
                 &e,
@@ -206,10 +206,9 @@ mod tests {
             "{e}"
         );
         // Start values that contradict each other: refused; the same value twice: one start.
-        let e = parse(&with(
+        let e = refused(
             r#"<ScalarVariable name="p_copy" valueReference="4" causality="local" variability="fixed" initial="exact"><Integer start="3"/></ScalarVariable>"#,
-        ))
-        .unwrap_err();
+        );
         assert!(
             matches!(
                 &e,
@@ -236,11 +235,12 @@ mod tests {
 
     #[test]
     fn combinations_of_causality_and_variability_the_standard_forbids_are_refused() {
-        let e = parse(&XML.replace(
+        // The description with one attribute text replaced, which does not parse.
+        let refused = |from: &str, to: &str| parse(&XML.replace(from, to)).unwrap_err();
+        let e = refused(
             "causality=\"parameter\" variability=\"fixed\"",
             "causality=\"parameter\" variability=\"constant\"",
-        ))
-        .unwrap_err();
+        );
         assert!(
             matches!(
                 &e,
@@ -253,11 +253,10 @@ mod tests {
             ),
             "{e}"
         );
-        let e = parse(&XML.replace(
+        let e = refused(
             "causality=\"output\" myAttr",
             "causality=\"output\" variability=\"tunable\" myAttr",
-        ))
-        .unwrap_err();
+        );
         assert!(
             matches!(
                 &e,
