@@ -358,6 +358,8 @@ fn a_file_that_is_not_a_system_file_says_what_it_is() {
         "{e}"
     );
     assert_contains(&e.to_string(), &["none.toml: cannot read:"]);
+    // The path is said once, not once by the reader and again by the system file.
+    assert_eq!(e.to_string().matches("none.toml").count(), 1, "{e}");
     let e = b.error(
         "[[instance]]\nname = \"g\"\nfmu = \"gain\"\n[experiment]\nstep = 0.5\nstop = true\n",
     );
