@@ -385,13 +385,10 @@ impl SystemFile {
     /// Read and parse; relative paths are resolved against the file's folder.
     pub fn load(path: &Path) -> Result<SystemFile, super::SystemError> {
         // A regular file within the limit of a configuration file.
-        // The reader's error already begins with the path, which `File` prints itself.
         let bytes = tb_files::input::read(path, tb_files::Limit::CONFIG).map_err(|e| {
-            let text = e.to_string();
-            let prefix = format!("{}: ", path.display());
             super::SystemError::File {
                 path: path.to_path_buf(),
-                message: text.strip_prefix(&prefix).unwrap_or(&text).to_string(),
+                message: tb_files::input::reason(&e, path),
             }
         })?;
         let text = String::from_utf8(bytes).map_err(|e| super::SystemError::File {

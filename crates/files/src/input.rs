@@ -96,6 +96,16 @@ fn too_large(path: &Path, size: u64, limit: Limit) -> Error {
     )
 }
 
+/// What is wrong, without the path every error of this module begins with: for an error
+/// type that prints the path itself (`path: reason`), so that the path is said once.
+pub fn reason(e: &Error, path: &Path) -> String {
+    let text = e.to_string();
+    match text.strip_prefix(&format!("{}: ", path.display())) {
+        Some(rest) => rest.to_string(),
+        None => text,
+    }
+}
+
 /// A size for messages: `16 MiB`, `2.5 GiB`, `512 bytes`.
 pub fn bytes(n: u64) -> String {
     const UNITS: [(&str, u64); 3] = [("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)];
@@ -206,6 +216,8 @@ mod tests {
             e.to_string().contains("missing: cannot read: No such file"),
             "{e}"
         );
+        let why = reason(&e, &dir.path().join("missing"));
+        assert!(why.starts_with("cannot read: No such file"), "{why}");
     }
 
     #[test]

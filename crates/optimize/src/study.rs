@@ -366,7 +366,7 @@ impl Study {
         let text = tb_files::input::read_to_string(path, tb_files::Limit::CONFIG).map_err(|e| {
             OptimizeError::File {
                 path: path.to_path_buf(),
-                message: e.to_string(),
+                message: tb_files::input::reason(&e, path),
             }
         })?;
         Self::parse(&text, path)
@@ -663,5 +663,27 @@ impl Study {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_study_file_that_cannot_be_read_is_named_once() {
+        let path = std::env::temp_dir().join("tb-optimize-no-such-study.toml");
+        let e = Study::load(&path).unwrap_err();
+        assert!(
+            matches!(&e, OptimizeError::File { path: p, .. } if *p == path),
+            "{e}"
+        );
+        let text = e.to_string();
+        assert!(text.contains(": cannot read: "), "{text}");
+        assert_eq!(
+            text.matches("tb-optimize-no-such-study.toml").count(),
+            1,
+            "{text}"
+        );
     }
 }
